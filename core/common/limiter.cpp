@@ -1,0 +1,68 @@
+#include "core/common/limiter.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+namespace nccomp::core {
+
+namespace {
+void require_positive(double v, const char* name) {
+  if (!std::isfinite(v) || v <= 0.0) {
+    throw std::invalid_argument(std::string("limiter: ") + name +
+                                " must be a positive finite number, got " + std::to_string(v));
+  }
+}
+}  // namespace
+
+void OffsetLimiter::configure(const LimiterConfig& config) {
+  require_positive(config.max_abs_um, "max_abs_um");
+  require_positive(config.max_step_um, "max_step_um");
+  require_positive(config.max_rate_um_per_s, "max_rate_um_per_s");
+  config_ = config;
+  // A reconfiguration must not let a held value escape the new absolute limit silently: it is
+  // kept (the NC holds it) but the next write can only move it inward.
+}
+
+void OffsetLimiter::reset(double current_um, TimeNs now_ns) noexcept {
+  output_um_ = std::isfinite(current_um) ? current_um : 0.0;
+  last_ns_ = now_ns;
+  has_time_ = true;
+}
+
+bool OffsetLimiter::admissible(double target_um) const noexcept {
+  return std::isfinite(target_um) && std::fabs(target_um) <= config_.max_abs_um;
+}
+
+LimitResult OffsetLimiter::apply(double target_um, TimeNs now_ns) noexcept {
+  if (!std::isfinite(target_um)) {
+    ++counters_.rejected_non_finite;
+    return {output_um_, LimitVerdict::kRejectedNonFinite};
+  }
+  if (std::fabs(target_um) > config_.max_abs_um) {
+    ++counters_.rejected_absolute;
+    return {output_um_, LimitVerdict::kRejectedAbsolute};
+  }
+  double allowed = config_.max_step_um;
+  if (has_time_) {
+    const double dt_s = std::max(0.0, seconds(now_ns - last_ns_));
+    allowed = std::min(allowed, config_.max_rate_um_per_s * dt_s);
+  }
+  const double change = target_um - output_um_;
+  LimitVerdict verdict = LimitVerdict::kPassed;
+  double out = target_um;
+  if (std::fabs(change) > allowed) {
+    out = output_um_ + std::copysign(allowed, change);
+    verdict = LimitVerdict::kSlewed;
+    ++counters_.slewed;
+  } else {
+    ++counters_.passed;
+  }
+  output_um_ = out;
+  last_ns_ = now_ns;
+  has_time_ = true;
+  return {out, verdict};
+}
+
+}  // namespace nccomp::core

@@ -1,0 +1,107 @@
+#include "core/common/limiter.hpp"
+
+#include <gtest/gtest.h>
+
+#include <limits>
+
+#include "tests/support/alloc_counter.hpp"
+
+namespace nccomp::core {
+namespace {
+
+constexpr TimeNs kMs = 1'000'000;
+
+OffsetLimiter make(double abs_um = 100.0, double step_um = 5.0, double rate = 50.0) {
+  OffsetLimiter l;
+  l.configure({abs_um, step_um, rate});
+  l.reset(0.0, 0);
+  return l;
+}
+
+TEST(OffsetLimiter, GivenBadLimits_WhenConfigured_ThenThrowsNamingTheField) {
+  OffsetLimiter l;
+  try {
+    l.configure({-1.0, 5.0, 50.0});
+    FAIL() << "expected throw";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("max_abs_um"), std::string::npos);
+  }
+  EXPECT_THROW(l.configure({100.0, 0.0, 50.0}), std::invalid_argument);
+  EXPECT_THROW(l.configure({100.0, 5.0, std::numeric_limits<double>::infinity()}),
+               std::invalid_argument);
+}
+
+TEST(OffsetLimiter, GivenSmallChange_WhenApplied_ThenPassedUnchanged) {
+  auto l = make();
+  const auto r = l.apply(2.0, 100 * kMs);
+  EXPECT_EQ(r.verdict, LimitVerdict::kPassed);
+  EXPECT_DOUBLE_EQ(r.value_um, 2.0);
+}
+
+TEST(OffsetLimiter, GivenNaNOrInf_WhenApplied_ThenRejectedAndHeld) {
+  auto l = make();
+  ASSERT_DOUBLE_EQ(l.apply(3.0, 100 * kMs).value_um, 3.0);
+  auto r = l.apply(std::numeric_limits<double>::quiet_NaN(), 200 * kMs);
+  EXPECT_EQ(r.verdict, LimitVerdict::kRejectedNonFinite);
+  EXPECT_DOUBLE_EQ(r.value_um, 3.0);
+  r = l.apply(-std::numeric_limits<double>::infinity(), 300 * kMs);
+  EXPECT_TRUE(r.rejected());
+  EXPECT_DOUBLE_EQ(l.output_um(), 3.0);
+  EXPECT_EQ(l.counters().rejected_non_finite, 2U);
+}
+
+TEST(OffsetLimiter, GivenBeyondAbsolute_WhenApplied_ThenRejectedAndHeld) {
+  auto l = make(100.0);
+  EXPECT_FALSE(l.admissible(100.5));
+  EXPECT_TRUE(l.admissible(-100.0));
+  const auto r = l.apply(150.0, 1000 * kMs);
+  EXPECT_EQ(r.verdict, LimitVerdict::kRejectedAbsolute);
+  EXPECT_DOUBLE_EQ(r.value_um, 0.0);
+}
+
+TEST(OffsetLimiter, GivenBigStep_WhenApplied_ThenSlewedByPerWriteLimit) {
+  auto l = make(100.0, 5.0, 1000.0);
+  auto r = l.apply(12.0, 1000 * kMs);
+  EXPECT_EQ(r.verdict, LimitVerdict::kSlewed);
+  EXPECT_DOUBLE_EQ(r.value_um, 5.0);
+  r = l.apply(12.0, 2000 * kMs);
+  EXPECT_DOUBLE_EQ(r.value_um, 10.0);
+  r = l.apply(12.0, 3000 * kMs);
+  EXPECT_EQ(r.verdict, LimitVerdict::kPassed);
+  EXPECT_DOUBLE_EQ(r.value_um, 12.0);
+  r = l.apply(-12.0, 4000 * kMs);
+  EXPECT_DOUBLE_EQ(r.value_um, 7.0);
+}
+
+TEST(OffsetLimiter, GivenFastWrites_WhenApplied_ThenSlewedByPerSecondLimit) {
+  auto l = make(100.0, 5.0, 50.0);  // 50 µm/s = 0.05 µm per 1 ms cycle
+  double out = 0.0;
+  for (int i = 1; i <= 1000; ++i) {
+    out = l.apply(30.0, i * kMs).value_um;
+  }
+  EXPECT_NEAR(out, 30.0, 1e-9);  // 1 s at 50 µm/s reaches 30 µm
+  auto l2 = make(100.0, 5.0, 50.0);
+  for (int i = 1; i <= 200; ++i) {
+    out = l2.apply(30.0, i * kMs).value_um;
+  }
+  EXPECT_NEAR(out, 10.0, 1e-9);  // 0.2 s at 50 µm/s
+}
+
+TEST(OffsetLimiter, GivenRestartWithNcValue_WhenReset_ThenContinuesFromIt) {
+  auto l = make();
+  l.reset(42.0, 5000 * kMs);
+  const auto r = l.apply(43.0, 6000 * kMs);
+  EXPECT_DOUBLE_EQ(r.value_um, 43.0);
+}
+
+TEST(OffsetLimiter, ApplyAllocatesNothing) {
+  auto l = make();
+  test::AllocationScope scope;
+  for (int i = 0; i < 10000; ++i) {
+    (void)l.apply(i % 7, i * kMs);
+  }
+  EXPECT_EQ(scope.count(), 0U);
+}
+
+}  // namespace
+}  // namespace nccomp::core
