@@ -1,0 +1,64 @@
+// The small interface every bus driver implements (style.md: one driver per folder behind a small
+// interface; chrony's refclock table, libmodbus's backend table).
+//
+// Threads: a driver owns its I/O thread(s). The loop thread only touches the two rings and never
+// blocks: it drains decoded events from rx() and queues absolute offset writes into tx(). Status
+// is published through a seqlock snapshot that any thread may read.
+#pragma once
+
+#include <cstdint>
+
+#include "core/common/types.hpp"
+#include "core/rt/seqlock.hpp"
+#include "core/rt/spsc_ring.hpp"
+
+namespace nccomp::drivers {
+
+enum class LinkState : std::uint8_t {
+  kStopped = 0,
+  kConnecting = 1,
+  kUp = 2,
+  kDegraded = 3,  // up but with faults (error-passive, retries)
+  kDown = 4,      // bus-off, interface down, connection lost: recovering
+};
+
+/// Counters every driver keeps; drivers add their own in their own status struct.
+struct BusCounters {
+  std::uint64_t frames_rx{0};         // frames / responses received
+  std::uint64_t frames_tx{0};         // frames / requests sent
+  std::uint64_t events_decoded{0};    // core events pushed to rx()
+  std::uint64_t events_dropped{0};    // rx() ring full: events lost (the loop is too slow)
+  std::uint64_t malformed{0};         // rejected input, all reasons
+  std::uint64_t offsets_written{0};   // offset writes confirmed (acknowledged / echoed)
+  std::uint64_t offsets_retried{0};
+  std::uint64_t offsets_failed{0};    // gave up after retries: alarm raised
+  std::uint64_t reconnects{0};
+  std::uint64_t faults{0};            // bus faults of any kind
+};
+
+struct BusStatus {
+  LinkState state{LinkState::kStopped};
+  bool alarm{false};  // a write could not be delivered, or the link is down beyond tolerance
+  core::TimeNs last_rx_ns{0};
+  BusCounters counters{};
+};
+
+class Bus {
+ public:
+  virtual ~Bus() = default;
+
+  /// Opens the bus and starts the I/O thread(s). Not real-time; may throw with a clear message.
+  virtual void start() = 0;
+  /// Stops the I/O thread(s) and closes the bus. Not real-time. Idempotent.
+  virtual void stop() = 0;
+
+  /// Loop thread (consumer): decoded events, oldest first.
+  virtual core::rt::SpscRing<core::Event>& rx() = 0;
+  /// Loop thread (producer): absolute offset writes to deliver. A write for a register replaces
+  /// an older pending write for the same register (offsets are absolute).
+  virtual core::rt::SpscRing<core::OffsetWrite>& tx() = 0;
+  /// Any thread: a consistent snapshot of the driver's state and counters.
+  [[nodiscard]] virtual BusStatus status() const = 0;
+};
+
+}  // namespace nccomp::drivers
