@@ -156,6 +156,8 @@ enum class AlarmCode : std::uint16_t {
   // engine / state
   kStateCorrupt = 50,
   kEventInvalid = 51,
+  kRegisterUnknown = 52,     // a module wrote a register index the engine does not have
+  kOffsetWriteDropped = 53,  // the bus TX ring was full or no bus takes the register
 };
 
 struct AlarmEvent {
