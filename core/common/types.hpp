@@ -150,6 +150,8 @@ enum class AlarmCode : std::uint16_t {
   kProbeImplausible = 30,
   kProbeOutlier = 31,
   kProbeInvalidInput = 32,
+  kCheckpointRegisterMismatch = 33,  // NC registers read back differ from the learned table
+  kCheckpointMissed = 34,            // a checkpoint was passed without its trigger
   // S3 calibration
   kRecalibrationImplausible = 40,
   kTouchScatter = 41,
