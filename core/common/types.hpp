@@ -155,6 +155,14 @@ enum class AlarmCode : std::uint16_t {
   // S3 calibration
   kRecalibrationImplausible = 40,
   kTouchScatter = 41,
+  kRecalibrationDue = 42,
+  kTouchSetIncomplete = 43,
+  kCalibrationOutOfRange = 44,
+  kTouchUnexpected = 45,
+  kTestGrindNotConverging = 46,
+  kRecalibrationApplied = 47,
+  kCalibrationComplete = 48,
+  kCalibrationInvalidInput = 49,
   // engine / state
   kStateCorrupt = 50,
   kEventInvalid = 51,
