@@ -1,0 +1,473 @@
+#include "core/engine/engine.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <set>
+#include <stdexcept>
+#include <type_traits>
+#include <utility>
+
+namespace nccomp::core::engine {
+
+namespace {
+
+constexpr std::uint32_t kStateMagic = 0x4e45434eU;  // "NCEN"
+constexpr std::uint32_t kStateVersion = 1;
+constexpr std::size_t kMaxNameLength = 255;
+
+// Little helpers for the state bytes. Native byte order: the state never leaves the machine.
+class Writer {
+ public:
+  explicit Writer(std::span<std::byte> buf) noexcept : buf_(buf) {}
+  template <typename T>
+  void put(const T& v) noexcept {
+    static_assert(std::is_trivially_copyable_v<T>);
+    if (ok_ && pos_ + sizeof(T) <= buf_.size()) {
+      std::memcpy(buf_.data() + pos_, &v, sizeof(T));
+      pos_ += sizeof(T);
+    } else {
+      ok_ = false;
+    }
+  }
+  void put_bytes(const void* p, std::size_t n) noexcept {
+    if (ok_ && pos_ + n <= buf_.size()) {
+      if (n > 0) {
+        std::memcpy(buf_.data() + pos_, p, n);
+      }
+      pos_ += n;
+    } else {
+      ok_ = false;
+    }
+  }
+  void put_name(std::string_view s) noexcept {
+    put(static_cast<std::uint16_t>(s.size()));
+    put_bytes(s.data(), s.size());
+  }
+  [[nodiscard]] std::span<std::byte> rest() const noexcept { return buf_.subspan(pos_); }
+  void skip(std::size_t n) noexcept {
+    if (ok_ && pos_ + n <= buf_.size()) {
+      pos_ += n;
+    } else {
+      ok_ = false;
+    }
+  }
+  [[nodiscard]] bool ok() const noexcept { return ok_; }
+  [[nodiscard]] std::size_t size() const noexcept { return pos_; }
+
+ private:
+  std::span<std::byte> buf_;
+  std::size_t pos_{0};
+  bool ok_{true};
+};
+
+class Reader {
+ public:
+  explicit Reader(std::span<const std::byte> bytes) noexcept : bytes_(bytes) {}
+  template <typename T>
+  bool get(T& v) noexcept {
+    static_assert(std::is_trivially_copyable_v<T>);
+    if (pos_ + sizeof(T) > bytes_.size()) {
+      return false;
+    }
+    std::memcpy(&v, bytes_.data() + pos_, sizeof(T));
+    pos_ += sizeof(T);
+    return true;
+  }
+  bool get_span(std::size_t n, std::span<const std::byte>& out) noexcept {
+    if (n > bytes_.size() - pos_) {
+      return false;
+    }
+    out = bytes_.subspan(pos_, n);
+    pos_ += n;
+    return true;
+  }
+  bool get_name(std::string_view& out) noexcept {
+    std::uint16_t n = 0;
+    std::span<const std::byte> s;
+    if (!get(n) || !get_span(n, s)) {
+      return false;
+    }
+    out = std::string_view(reinterpret_cast<const char*>(s.data()), s.size());
+    return true;
+  }
+  [[nodiscard]] bool at_end() const noexcept { return pos_ == bytes_.size(); }
+
+ private:
+  std::span<const std::byte> bytes_;
+  std::size_t pos_{0};
+};
+
+bool finite_or_nan(double v) { return std::isfinite(v) || std::isnan(v); }
+
+template <std::size_t N>
+bool all_finite(const std::array<double, N>& a, std::size_t n) {
+  for (std::size_t i = 0; i < n && i < N; ++i) {
+    if (!std::isfinite(a[i])) {
+      return false;
+    }
+  }
+  return true;
+}
+
+}  // namespace
+
+std::string_view to_string(RegisterKind kind) noexcept {
+  switch (kind) {
+    case RegisterKind::kToolLengthWear:
+      return "tool_length_wear";
+    case RegisterKind::kToolRadiusWear:
+      return "tool_radius_wear";
+    case RegisterKind::kCheckpoint:
+      return "checkpoint";
+    case RegisterKind::kAxisOffset:
+      return "axis_offset";
+  }
+  return "unknown";
+}
+
+bool parse_register_kind(std::string_view name, RegisterKind& out) noexcept {
+  for (auto k : {RegisterKind::kToolLengthWear, RegisterKind::kToolRadiusWear,
+                 RegisterKind::kCheckpoint, RegisterKind::kAxisOffset}) {
+    if (to_string(k) == name) {
+      out = k;
+      return true;
+    }
+  }
+  return false;
+}
+
+int RegisterTable::find(std::string_view name) const noexcept {
+  for (std::size_t i = 0; i < specs_->size(); ++i) {
+    if ((*specs_)[i].name == name) {
+      return static_cast<int>(i);
+    }
+  }
+  return -1;
+}
+
+void Engine::configure(std::vector<RegisterSpec> registers,
+                       std::vector<std::unique_ptr<Module>> modules, EngineOptions options) {
+  if (registers.size() > 0xFFFFU) {
+    throw std::invalid_argument("engine: more than 65535 registers");
+  }
+  if (options.max_events_per_step == 0) {
+    throw std::invalid_argument("engine: max_events_per_step must be at least 1");
+  }
+  std::set<std::string, std::less<>> names;
+  std::vector<Reg> regs(registers.size());
+  for (std::size_t i = 0; i < registers.size(); ++i) {
+    const auto& r = registers[i];
+    if (r.name.empty() || r.name.size() > kMaxNameLength) {
+      throw std::invalid_argument("engine: register " + std::to_string(i) +
+                                  ": name must have 1 to 255 characters");
+    }
+    if (!names.insert(r.name).second) {
+      throw std::invalid_argument("engine: register name '" + r.name + "' is used twice");
+    }
+    try {
+      regs[i].limiter.configure(r.limits);
+    } catch (const std::invalid_argument& e) {
+      throw std::invalid_argument("engine: register '" + r.name + "': " + e.what());
+    }
+  }
+  specs_ = std::move(registers);
+  const RegisterTable table(specs_);
+  std::set<std::string, std::less<>> module_names;
+  std::size_t capacity = sizeof(std::uint32_t) * 3;
+  for (const auto& s : specs_) {
+    capacity += sizeof(std::uint16_t) + s.name.size() + 2 * sizeof(double) + 1;
+  }
+  capacity += sizeof(std::uint32_t);
+  for (auto& m : modules) {
+    if (!m) {
+      throw std::invalid_argument("engine: null module");
+    }
+    const std::string name(m->name());
+    if (name.empty() || name.size() > kMaxNameLength) {
+      throw std::invalid_argument("engine: module name must have 1 to 255 characters");
+    }
+    if (!module_names.insert(name).second) {
+      throw std::invalid_argument("engine: module name '" + name + "' is used twice");
+    }
+    m->attach(table);
+    capacity += sizeof(std::uint16_t) + name.size() + sizeof(std::uint32_t) + m->state_capacity();
+  }
+  regs_ = std::move(regs);
+  modules_ = std::move(modules);
+  options_ = options;
+  valid_.clear();
+  valid_.reserve(options.max_events_per_step);
+  state_capacity_ = capacity;
+  counters_ = {};
+  register_generation_ = 0;
+}
+
+bool Engine::validate(const Event& e) const noexcept {
+  return std::visit(
+      [](const auto& ev) -> bool {
+        using T = std::decay_t<decltype(ev)>;
+        if constexpr (std::is_same_v<T, AxisSample>) {
+          if (ev.axis_count > kMaxAxes || !all_finite(ev.position_mm, ev.axis_count) ||
+              !finite_or_nan(ev.program_path_mm)) {
+            return false;
+          }
+          return !ev.has_normal || all_finite(ev.normal, 3);
+        } else if constexpr (std::is_same_v<T, ToolMeasurement>) {
+          if (ev.broken) {
+            return true;  // the wear values of a broken-tool report are meaningless
+          }
+          return ev.point_count >= 1 && ev.point_count <= kMaxEdgePoints &&
+                 all_finite(ev.wear_um, ev.point_count);
+        } else if constexpr (std::is_same_v<T, ProbeMeasurement>) {
+          return std::isfinite(ev.raw_deviation_um) && std::isfinite(ev.wall_angle_deg) &&
+                 std::isfinite(ev.ball_radius_mm) && ev.ball_radius_mm >= 0.0 &&
+                 all_finite(ev.position_mm, 3);
+        } else if constexpr (std::is_same_v<T, CalibrationTouch>) {
+          return std::isfinite(ev.trigger_position_mm) && ev.axis <= 2 &&
+                 (ev.direction == 1 || ev.direction == -1) &&
+                 static_cast<std::uint8_t>(ev.probe) <= 1;
+        } else if constexpr (std::is_same_v<T, ProgramEvent>) {
+          return static_cast<std::uint8_t>(ev.kind) <= 3;
+        } else if constexpr (std::is_same_v<T, TemperatureSample>) {
+          return std::isfinite(ev.temperature_c);
+        } else {
+          return true;  // ToolChange: every field is valid
+        }
+      },
+      e);
+}
+
+void Engine::accept_target(const OffsetWrite& w, TimeNs now_ns, StepOutput& out) noexcept {
+  if (w.register_index >= regs_.size()) {
+    ++counters_.writes_unknown_register;
+    out.alarm(now_ns, Severity::kAlarm, AlarmCode::kRegisterUnknown, w.register_index,
+              w.value_um);
+    return;
+  }
+  Reg& r = regs_[w.register_index];
+  if (!r.limiter.admissible(w.value_um)) {
+    ++counters_.writes_rejected;
+    const AlarmCode code = std::isfinite(w.value_um) ? AlarmCode::kOffsetBeyondAbsoluteLimit
+                                                     : AlarmCode::kOffsetNonFinite;
+    out.alarm(now_ns, Severity::kAlarm, code, w.register_index, w.value_um);
+    return;
+  }
+  if (!r.has_target || std::memcmp(&r.target_um, &w.value_um, sizeof(double)) != 0) {
+    ++register_generation_;
+  }
+  r.target_um = w.value_um;
+  r.has_target = true;
+}
+
+void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out) noexcept {
+  out.clear();
+  ++counters_.steps;
+  valid_.clear();
+  for (const Event& e : events) {
+    if (!validate(e)) {
+      ++counters_.events_invalid;
+      out.alarm(now_ns, Severity::kWarning, AlarmCode::kEventInvalid,
+                static_cast<std::int32_t>(e.index()), 0.0);
+      continue;
+    }
+    if (valid_.size() == options_.max_events_per_step) {
+      ++counters_.events_overflow;
+      continue;
+    }
+    valid_.push_back(e);  // capacity reserved in configure(): no allocation
+    ++counters_.events_accepted;
+  }
+  const std::span<const Event> accepted(valid_.data(), valid_.size());
+
+  for (auto& m : modules_) {
+    scratch_.clear();
+    m->step(now_ns, accepted, scratch_);
+    for (const auto& w : scratch_.writes) {
+      accept_target(w, now_ns, out);
+    }
+    for (const auto& a : scratch_.alarms) {
+      out.alarms.push(a);
+    }
+    for (const auto& rec : scratch_.records) {
+      out.records.push(rec);
+    }
+  }
+
+  // Every register with a target converges through its limiter, whether or not a module wrote
+  // this cycle: a slewed target keeps moving without the module repeating it.
+  for (std::size_t i = 0; i < regs_.size(); ++i) {
+    Reg& r = regs_[i];
+    if (!r.has_target) {
+      continue;
+    }
+    const bool at_target = r.sent && std::memcmp(&r.sent_um, &r.target_um, sizeof(double)) == 0;
+    if (at_target) {
+      continue;
+    }
+    if (hold_) {
+      ++counters_.writes_held;
+      continue;
+    }
+    const LimitResult res = r.limiter.apply(r.target_um, now_ns);
+    const bool slewed = res.verdict == LimitVerdict::kSlewed;
+    if (slewed && !r.slewing) {
+      // One warning when slewing starts, not one per cycle.
+      out.alarm(now_ns, Severity::kWarning, AlarmCode::kOffsetSlewLimited,
+                static_cast<std::int32_t>(i), r.target_um);
+    }
+    r.slewing = slewed;
+    if (r.sent && std::memcmp(&r.sent_um, &res.value_um, sizeof(double)) == 0) {
+      continue;  // the rate limit allows no movement yet this cycle
+    }
+    if (out.writes.push(OffsetWrite{now_ns, static_cast<std::uint16_t>(i), res.value_um})) {
+      r.sent_um = res.value_um;
+      r.sent = true;
+      ++counters_.writes_forwarded;
+      ++register_generation_;
+    }
+  }
+  counters_.output_overflows = out.writes.overflows() + out.alarms.overflows() +
+                               out.records.overflows() + scratch_.writes.overflows() +
+                               scratch_.alarms.overflows() + scratch_.records.overflows();
+}
+
+void Engine::resend_all() noexcept {
+  for (auto& r : regs_) {
+    if (r.sent) {
+      // Forget what was sent; the next step writes the limiter's output (or the target) again.
+      r.sent = false;
+      if (!r.has_target) {
+        r.target_um = r.limiter.output_um();
+        r.has_target = true;
+      }
+    }
+  }
+}
+
+RegisterState Engine::register_state(std::size_t i) const noexcept {
+  const Reg& r = regs_[i];
+  return RegisterState{r.limiter.output_um(), r.target_um, r.has_target, r.slewing};
+}
+
+std::uint64_t Engine::state_generation() const noexcept {
+  std::uint64_t g = register_generation_;
+  for (const auto& m : modules_) {
+    g += m->state_generation();
+  }
+  return g;
+}
+
+std::size_t Engine::export_state(std::span<std::byte> buf) const noexcept {
+  Writer w(buf);
+  w.put(kStateMagic);
+  w.put(kStateVersion);
+  w.put(static_cast<std::uint32_t>(regs_.size()));
+  for (std::size_t i = 0; i < regs_.size(); ++i) {
+    const Reg& r = regs_[i];
+    w.put_name(specs_[i].name);
+    w.put(r.limiter.output_um());
+    w.put(r.target_um);
+    w.put(static_cast<std::uint8_t>(r.has_target ? 1 : 0));
+  }
+  w.put(static_cast<std::uint32_t>(modules_.size()));
+  for (const auto& m : modules_) {
+    w.put_name(m->name());
+    const std::span<std::byte> len_at = w.rest();
+    w.put(std::uint32_t{0});
+    if (!w.ok()) {
+      return 0;
+    }
+    const std::span<std::byte> room = w.rest();
+    if (room.size() < m->state_capacity()) {
+      return 0;  // a module must never be handed less than it declared
+    }
+    const std::size_t n = m->save_state(room);
+    if (n > room.size()) {
+      return 0;
+    }
+    const auto n32 = static_cast<std::uint32_t>(n);
+    std::memcpy(len_at.data(), &n32, sizeof(n32));
+    w.skip(n);
+  }
+  return w.ok() ? w.size() : 0;
+}
+
+bool Engine::import_state(std::span<const std::byte> bytes, TimeNs now_ns,
+                          std::size_t* skipped) noexcept {
+  // Pass 1 validates the structure without touching anything; pass 2 applies. A module may still
+  // refuse its bytes in pass 2: it then keeps its fresh state and the refusal is counted.
+  for (int pass = 0; pass < 2; ++pass) {
+    Reader rd(bytes);
+    std::uint32_t magic = 0;
+    std::uint32_t version = 0;
+    std::uint32_t nregs = 0;
+    if (!rd.get(magic) || magic != kStateMagic || !rd.get(version) || version != kStateVersion ||
+        !rd.get(nregs)) {
+      return false;
+    }
+    std::size_t skip_count = 0;
+    for (std::uint32_t k = 0; k < nregs; ++k) {
+      std::string_view name;
+      double output_um = 0.0;
+      double target_um = 0.0;
+      std::uint8_t has_target = 0;
+      if (!rd.get_name(name) || !rd.get(output_um) || !rd.get(target_um) ||
+          !rd.get(has_target) || has_target > 1 || !std::isfinite(output_um) ||
+          !std::isfinite(target_um)) {
+        return false;
+      }
+      const int idx = RegisterTable(specs_).find(name);
+      if (idx < 0) {
+        ++skip_count;
+        continue;
+      }
+      if (pass == 1) {
+        Reg& r = regs_[static_cast<std::size_t>(idx)];
+        r.limiter.reset(output_um, now_ns);
+        r.sent_um = output_um;
+        r.sent = true;
+        r.target_um = target_um;
+        r.has_target = has_target == 1;
+        r.slewing = false;
+      }
+    }
+    std::uint32_t nmods = 0;
+    if (!rd.get(nmods)) {
+      return false;
+    }
+    for (std::uint32_t k = 0; k < nmods; ++k) {
+      std::string_view name;
+      std::uint32_t len = 0;
+      std::span<const std::byte> blob;
+      if (!rd.get_name(name) || !rd.get(len) || !rd.get_span(len, blob)) {
+        return false;
+      }
+      Module* target = nullptr;
+      for (auto& m : modules_) {
+        if (m->name() == name) {
+          target = m.get();
+        }
+      }
+      if (target == nullptr) {
+        ++skip_count;
+        continue;
+      }
+      if (pass == 1 && !target->load_state(blob)) {
+        ++skip_count;
+      }
+    }
+    if (!rd.at_end()) {
+      return false;
+    }
+    if (pass == 1) {
+      ++register_generation_;
+      if (skipped != nullptr) {
+        *skipped = skip_count;
+      }
+    }
+  }
+  return true;
+}
+
+}  // namespace nccomp::core::engine

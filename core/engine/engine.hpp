@@ -1,0 +1,198 @@
+// The engine: the one object the loop thread steps (architecture.md, "Data flow").
+//
+// It owns the register table (logical register index → name, kind, limiter), the compensation
+// modules (S0 creep, S1 checkpoints, ... behind the small Module interface), and turns the
+// modules' absolute offset targets into limited offset writes:
+//
+//   events ──validate──▶ modules ──targets──▶ per-register OffsetLimiter ──▶ writes (changed only)
+//
+// - Invalid events (non-finite positions, wear, deviations) are counted, raise kEventInvalid and
+//   never reach a module.
+// - A target the limiter rejects (NaN, beyond the absolute limit) raises an alarm and is not
+//   forwarded: the register holds its value. A slewed target keeps converging on later cycles
+//   without the module writing it again (targets are absolute and remembered per register).
+// - In hold mode (state file corrupt, operator request) modules still run and alarms still flow,
+//   but no offset write leaves the engine: the NC keeps the offsets it has.
+//
+// Lifecycle: configure() allocates and validates (throws std::invalid_argument naming what is
+// wrong); step(), export_state(), import_state() are real-time safe: no allocation, no locks, no
+// I/O. core/ is pure: time comes in as an argument.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "core/common/limiter.hpp"
+#include "core/common/output.hpp"
+#include "core/common/types.hpp"
+
+namespace nccomp::core::engine {
+
+/// What an NC register holds; the config names it, drivers map it to bus addresses.
+enum class RegisterKind : std::uint8_t {
+  kToolLengthWear = 0,
+  kToolRadiusWear = 1,
+  kCheckpoint = 2,
+  kAxisOffset = 3,
+};
+
+/// "tool_length_wear", "tool_radius_wear", "checkpoint", "axis_offset".
+[[nodiscard]] std::string_view to_string(RegisterKind kind) noexcept;
+/// Inverse of to_string(); false if the name is unknown.
+[[nodiscard]] bool parse_register_kind(std::string_view name, RegisterKind& out) noexcept;
+
+struct RegisterSpec {
+  /// Unique name (config key `name`), used to match state across restarts and reloads.
+  std::string name;
+  RegisterKind kind{RegisterKind::kToolLengthWear};
+  LimiterConfig limits{};
+};
+
+/// Read-only view of the configured registers, given to modules when they attach.
+class RegisterTable {
+ public:
+  explicit RegisterTable(const std::vector<RegisterSpec>& specs) : specs_(&specs) {}
+  [[nodiscard]] std::size_t size() const noexcept { return specs_->size(); }
+  [[nodiscard]] const RegisterSpec& operator[](std::size_t i) const { return (*specs_)[i]; }
+  /// Index of the register called name, or -1.
+  [[nodiscard]] int find(std::string_view name) const noexcept;
+
+ private:
+  const std::vector<RegisterSpec>* specs_;
+};
+
+/// A compensation module (S0 creep, S1 checkpoints, S2, S3, a model). Modules write absolute
+/// targets (OffsetWrite) for registers they were given at attach(); the engine limits them.
+class Module {
+ public:
+  virtual ~Module() = default;
+
+  /// Stable name: matches a module's state across restarts and reloads.
+  [[nodiscard]] virtual std::string_view name() const noexcept = 0;
+
+  /// Not real-time. Validates the register indices the module uses against the table and
+  /// allocates everything step() needs. Throws std::invalid_argument with a clear message.
+  virtual void attach(const RegisterTable& registers) = 0;
+
+  /// Real-time safe: no allocation, no locks, no I/O. Consumes the cycle's validated events,
+  /// appends targets / alarms / measurement records to out.
+  virtual void step(TimeNs now_ns, std::span<const Event> events, StepOutput& out) noexcept = 0;
+
+  /// Upper bound [bytes] of save_state()'s output; fixed after attach().
+  [[nodiscard]] virtual std::size_t state_capacity() const noexcept { return 0; }
+  /// Real-time safe. Serialises the state that must survive a restart; returns bytes written
+  /// (≤ state_capacity(), ≤ buf.size()).
+  virtual std::size_t save_state(std::span<std::byte> buf) const noexcept {
+    (void)buf;
+    return 0;
+  }
+  /// Real-time safe (storage sized in attach()). Restores save_state()'s output; false if the
+  /// bytes are not a valid state of this module (the module then keeps its fresh state).
+  virtual bool load_state(std::span<const std::byte> bytes) noexcept { return bytes.empty(); }
+  /// Real-time safe. Advances whenever the state changed in a way worth persisting.
+  [[nodiscard]] virtual std::uint64_t state_generation() const noexcept { return 0; }
+};
+
+struct EngineOptions {
+  /// Largest number of events one step accepts; extra events are counted and dropped.
+  std::size_t max_events_per_step{256};
+};
+
+struct EngineCounters {
+  std::uint64_t steps{0};
+  std::uint64_t events_accepted{0};
+  std::uint64_t events_invalid{0};
+  std::uint64_t events_overflow{0};    // beyond max_events_per_step
+  std::uint64_t writes_forwarded{0};
+  std::uint64_t writes_rejected{0};    // limiter rejected (NaN / absolute limit)
+  std::uint64_t writes_unknown_register{0};
+  std::uint64_t writes_held{0};        // suppressed by hold mode
+  std::uint64_t output_overflows{0};   // StepOutput full: writes/alarms/records lost
+};
+
+/// One register's state as status shows it.
+struct RegisterState {
+  double output_um{0.0};  // last value forwarded (or restored)
+  double target_um{0.0};  // last accepted target
+  bool has_target{false};
+  bool slewing{false};
+};
+
+class Engine {
+ public:
+  Engine() = default;
+  Engine(const Engine&) = delete;
+  Engine& operator=(const Engine&) = delete;
+
+  /// Not real-time. Validates registers (unique non-empty names, limits), attaches the modules
+  /// (unique names) and sizes every buffer. Throws std::invalid_argument naming the problem.
+  void configure(std::vector<RegisterSpec> registers,
+                 std::vector<std::unique_ptr<Module>> modules, EngineOptions options = {});
+
+  /// Real-time safe: no allocation, no locks, no I/O. `out` is cleared first; it receives the
+  /// limited writes, the alarms and the measurement records of this cycle.
+  void step(TimeNs now_ns, std::span<const Event> events, StepOutput& out) noexcept;
+
+  /// Hold mode: nothing is forwarded to the NC (modules and alarms keep running). Real-time safe.
+  void set_hold(bool hold) noexcept { hold_ = hold; }
+  [[nodiscard]] bool hold() const noexcept { return hold_; }
+
+  /// Marks every register with a known value to be written again on the next step (after a
+  /// bus reconnect, at start-up). Real-time safe.
+  void resend_all() noexcept;
+
+  /// Upper bound [bytes] of export_state(); fixed after configure().
+  [[nodiscard]] std::size_t state_capacity() const noexcept { return state_capacity_; }
+  /// Real-time safe. Serialises registers and module states into buf; returns bytes written, or
+  /// 0 if buf is smaller than needed.
+  [[nodiscard]] std::size_t export_state(std::span<std::byte> buf) const noexcept;
+  /// Real-time safe. Restores a state exported by this or an earlier configuration: registers and
+  /// modules are matched by name (unknown ones in the bytes are skipped and counted in
+  /// `skipped`). Limiters restart from the restored outputs at now_ns. Returns false if the bytes
+  /// are malformed; the engine is then unchanged.
+  bool import_state(std::span<const std::byte> bytes, TimeNs now_ns,
+                    std::size_t* skipped = nullptr) noexcept;
+  /// Real-time safe. Advances when registers or module states changed.
+  [[nodiscard]] std::uint64_t state_generation() const noexcept;
+
+  [[nodiscard]] std::size_t register_count() const noexcept { return specs_.size(); }
+  [[nodiscard]] const RegisterSpec& register_spec(std::size_t i) const { return specs_[i]; }
+  [[nodiscard]] RegisterState register_state(std::size_t i) const noexcept;
+  [[nodiscard]] const LimiterCounters& limiter_counters(std::size_t i) const noexcept {
+    return regs_[i].limiter.counters();
+  }
+  [[nodiscard]] std::size_t module_count() const noexcept { return modules_.size(); }
+  [[nodiscard]] const Module& module(std::size_t i) const { return *modules_[i]; }
+  [[nodiscard]] const EngineCounters& counters() const noexcept { return counters_; }
+
+ private:
+  struct Reg {
+    OffsetLimiter limiter;
+    double target_um{0.0};
+    double sent_um{0.0};
+    bool has_target{false};
+    bool sent{false};
+    bool slewing{false};
+  };
+
+  bool validate(const Event& e) const noexcept;
+  void accept_target(const OffsetWrite& w, TimeNs now_ns, StepOutput& out) noexcept;
+
+  std::vector<RegisterSpec> specs_;
+  std::vector<Reg> regs_;
+  std::vector<std::unique_ptr<Module>> modules_;
+  std::vector<Event> valid_;
+  StepOutput scratch_{};
+  EngineOptions options_{};
+  EngineCounters counters_{};
+  std::size_t state_capacity_{0};
+  std::uint64_t register_generation_{0};
+  bool hold_{false};
+};
+
+}  // namespace nccomp::core::engine

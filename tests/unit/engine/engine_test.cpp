@@ -1,0 +1,344 @@
+// GIVEN an engine with registers and test modules, WHEN it is stepped, THEN every target passes
+// the register's limiter, invalid input is counted and alarmed, and nothing allocates.
+#include "core/engine/engine.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <vector>
+
+#include "core/engine/ramp_module.hpp"
+#include "tests/support/alloc_counter.hpp"
+
+namespace nccomp::core::engine {
+namespace {
+
+constexpr TimeNs kMs = 1'000'000;
+
+RegisterSpec reg(const char* name, double max_abs = 100.0, double max_step = 5.0,
+                 double max_rate = 1000.0) {
+  return RegisterSpec{name, RegisterKind::kToolLengthWear, LimiterConfig{max_abs, max_step, max_rate}};
+}
+
+// Writes a fixed value to one register every cycle; counts the events it sees.
+class ConstantModule final : public Module {
+ public:
+  ConstantModule(const char* name, std::uint16_t reg_index, double value)
+      : value_(value), name_(name), reg_(reg_index) {}
+  std::string_view name() const noexcept override { return name_; }
+  void attach(const RegisterTable& /*registers*/) override {}
+  void step(TimeNs now_ns, std::span<const Event> events, StepOutput& out) noexcept override {
+    events_seen += events.size();
+    out.writes.push(OffsetWrite{now_ns, reg_, value_});
+  }
+  std::size_t events_seen{0};
+  double value_;
+
+ private:
+  const char* name_;
+  std::uint16_t reg_;
+};
+
+struct Fixture {
+  Engine engine;
+  StepOutput out;
+  std::vector<ConstantModule*> mods;
+
+  void configure(std::vector<RegisterSpec> regs, std::vector<std::pair<std::uint16_t, double>> c) {
+    std::vector<std::unique_ptr<Module>> m;
+    int k = 0;
+    static const char* names[] = {"m0", "m1", "m2", "m3"};
+    for (auto [r, v] : c) {
+      auto p = std::make_unique<ConstantModule>(names[k++], r, v);
+      mods.push_back(p.get());
+      m.push_back(std::move(p));
+    }
+    engine.configure(std::move(regs), std::move(m));
+  }
+  void step(TimeNs t, std::span<const Event> ev = {}) { engine.step(t, ev, out); }
+};
+
+TEST(Engine, PassesAnAdmissibleTargetOnceAndThenStaysQuiet) {
+  Fixture f;
+  f.configure({reg("a")}, {{0, 2.5}});
+  f.step(1 * kMs);
+  ASSERT_EQ(f.out.writes.size(), 1U);
+  EXPECT_EQ(f.out.writes[0].register_index, 0);
+  EXPECT_DOUBLE_EQ(f.out.writes[0].value_um, 2.5);
+  // Same target again: the NC already holds it, nothing is written.
+  f.step(2 * kMs);
+  EXPECT_EQ(f.out.writes.size(), 0U);
+  EXPECT_EQ(f.engine.counters().writes_forwarded, 1U);
+  EXPECT_DOUBLE_EQ(f.engine.register_state(0).output_um, 2.5);
+}
+
+TEST(Engine, RejectsNonFiniteTargetWithAlarmAndHoldsTheRegister) {
+  Fixture f;
+  f.configure({reg("a")}, {{0, 1.0}});
+  f.step(1 * kMs);
+  f.mods[0]->value_ = std::numeric_limits<double>::quiet_NaN();
+  f.step(2 * kMs);
+  EXPECT_EQ(f.out.writes.size(), 0U);
+  ASSERT_EQ(f.out.alarms.size(), 1U);
+  EXPECT_EQ(f.out.alarms[0].code, AlarmCode::kOffsetNonFinite);
+  EXPECT_EQ(f.out.alarms[0].severity, Severity::kAlarm);
+  EXPECT_EQ(f.out.alarms[0].subject, 0);
+  EXPECT_DOUBLE_EQ(f.engine.register_state(0).output_um, 1.0);
+  EXPECT_DOUBLE_EQ(f.engine.register_state(0).target_um, 1.0);
+  EXPECT_EQ(f.engine.counters().writes_rejected, 1U);
+}
+
+TEST(Engine, RejectsTargetBeyondAbsoluteLimit) {
+  Fixture f;
+  f.configure({reg("a", 10.0)}, {{0, 10.5}});
+  f.step(1 * kMs);
+  EXPECT_EQ(f.out.writes.size(), 0U);
+  ASSERT_EQ(f.out.alarms.size(), 1U);
+  EXPECT_EQ(f.out.alarms[0].code, AlarmCode::kOffsetBeyondAbsoluteLimit);
+  EXPECT_DOUBLE_EQ(f.out.alarms[0].value, 10.5);
+  EXPECT_FALSE(f.engine.register_state(0).has_target);
+}
+
+TEST(Engine, SlewedTargetKeepsConvergingWithOneWarning) {
+  Fixture f;
+  // 5 µm per write, 1000 µm/s → 1 µm per 1 ms cycle.
+  f.configure({reg("a", 100.0, 5.0, 1000.0)}, {{0, 4.0}});
+  f.step(0);
+  ASSERT_EQ(f.out.writes.size(), 1U);
+  EXPECT_DOUBLE_EQ(f.out.writes[0].value_um, 4.0);  // first write: only the step cap applies
+  f.mods[0]->value_ = 10.0;
+  int warnings = 0;
+  std::vector<double> values;
+  for (int k = 1; k <= 10; ++k) {
+    f.step(k * kMs);
+    for (const auto& a : f.out.alarms) {
+      warnings += a.code == AlarmCode::kOffsetSlewLimited ? 1 : 0;
+    }
+    for (const auto& w : f.out.writes) {
+      values.push_back(w.value_um);
+    }
+  }
+  EXPECT_EQ(warnings, 1);
+  ASSERT_EQ(values.size(), 6U);  // 5, 6, 7, 8, 9, 10
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    EXPECT_NEAR(values[i], 5.0 + static_cast<double>(i), 1e-9);
+  }
+  EXPECT_FALSE(f.engine.register_state(0).slewing);
+}
+
+TEST(Engine, InvalidEventsAreCountedAlarmedAndNotForwarded) {
+  Fixture f;
+  f.configure({reg("a")}, {{0, 0.0}});
+  AxisSample good;
+  good.position_mm = {1.0, 2.0, 3.0};
+  AxisSample bad = good;
+  bad.position_mm[1] = std::numeric_limits<double>::infinity();
+  ToolMeasurement bad_wear;
+  bad_wear.wear_um[0] = std::numeric_limits<double>::quiet_NaN();
+  ToolMeasurement broken = bad_wear;
+  broken.broken = true;  // wear values of a broken report are not looked at
+  TemperatureSample bad_temp;
+  bad_temp.temperature_c = std::numeric_limits<double>::quiet_NaN();
+  CalibrationTouch bad_dir;
+  bad_dir.direction = 0;
+  const std::vector<Event> ev{good, bad, bad_wear, broken, bad_temp, bad_dir};
+  f.step(kMs, ev);
+  EXPECT_EQ(f.mods[0]->events_seen, 2U);
+  EXPECT_EQ(f.engine.counters().events_invalid, 4U);
+  EXPECT_EQ(f.engine.counters().events_accepted, 2U);
+  int invalid_alarms = 0;
+  for (const auto& a : f.out.alarms) {
+    invalid_alarms += a.code == AlarmCode::kEventInvalid ? 1 : 0;
+  }
+  EXPECT_EQ(invalid_alarms, 4);
+}
+
+TEST(Engine, EventsBeyondCapacityAreCountedNotForwarded) {
+  Engine e;
+  std::vector<std::unique_ptr<Module>> m;
+  auto c = std::make_unique<ConstantModule>("c", 0, 0.0);
+  auto* cp = c.get();
+  m.push_back(std::move(c));
+  e.configure({reg("a")}, std::move(m), EngineOptions{3});
+  const std::vector<Event> ev(5, Event{AxisSample{}});
+  StepOutput out;
+  e.step(0, ev, out);
+  EXPECT_EQ(cp->events_seen, 3U);
+  EXPECT_EQ(e.counters().events_overflow, 2U);
+}
+
+TEST(Engine, UnknownRegisterRaisesAlarm) {
+  Fixture f;
+  f.configure({reg("a")}, {{7, 1.0}});
+  f.step(kMs);
+  EXPECT_EQ(f.out.writes.size(), 0U);
+  ASSERT_EQ(f.out.alarms.size(), 1U);
+  EXPECT_EQ(f.out.alarms[0].code, AlarmCode::kRegisterUnknown);
+  EXPECT_EQ(f.out.alarms[0].subject, 7);
+}
+
+TEST(Engine, HoldModeWritesNothingButKeepsTargets) {
+  Fixture f;
+  f.configure({reg("a")}, {{0, 3.0}});
+  f.engine.set_hold(true);
+  f.step(kMs);
+  EXPECT_EQ(f.out.writes.size(), 0U);
+  EXPECT_EQ(f.engine.counters().writes_held, 1U);
+  f.engine.set_hold(false);
+  f.step(2 * kMs);
+  ASSERT_EQ(f.out.writes.size(), 1U);
+  EXPECT_DOUBLE_EQ(f.out.writes[0].value_um, 3.0);
+}
+
+TEST(Engine, ResendAllWritesKnownValuesAgain) {
+  Fixture f;
+  f.configure({reg("a"), reg("b")}, {{0, 3.0}});
+  f.step(kMs);
+  f.engine.resend_all();
+  f.step(2 * kMs);
+  ASSERT_EQ(f.out.writes.size(), 1U);  // b was never written: nothing to resend
+  EXPECT_EQ(f.out.writes[0].register_index, 0);
+  EXPECT_DOUBLE_EQ(f.out.writes[0].value_um, 3.0);
+}
+
+TEST(Engine, ConfigureRejectsBadTables) {
+  Engine e;
+  EXPECT_THROW(e.configure({reg("a"), reg("a")}, {}), std::invalid_argument);
+  EXPECT_THROW(e.configure({reg("")}, {}), std::invalid_argument);
+  EXPECT_THROW(e.configure({reg("a", -1.0)}, {}), std::invalid_argument);
+  std::vector<std::unique_ptr<Module>> m;
+  m.push_back(std::make_unique<ConstantModule>("x", 0, 0.0));
+  m.push_back(std::make_unique<ConstantModule>("x", 0, 0.0));
+  EXPECT_THROW(e.configure({reg("a")}, std::move(m)), std::invalid_argument);
+  std::vector<std::unique_ptr<Module>> r;
+  r.push_back(std::make_unique<RampModule>(RampConfig{"ramp", "missing", 0.0, 1.0, 1.0}));
+  try {
+    e.configure({reg("a")}, std::move(r));
+    FAIL() << "expected a throw";
+  } catch (const std::invalid_argument& ex) {
+    EXPECT_NE(std::string(ex.what()).find("missing"), std::string::npos);
+  }
+}
+
+std::unique_ptr<Engine> ramp_engine(double target_um, double rate_um_per_s) {
+  auto e = std::make_unique<Engine>();
+  std::vector<std::unique_ptr<Module>> m;
+  m.push_back(std::make_unique<RampModule>(RampConfig{"ramp", "a", 0.0, target_um, rate_um_per_s}));
+  e->configure({reg("b"), reg("a")}, std::move(m));
+  return e;
+}
+
+TEST(EngineState, ExportImportResumesRampWithoutDoubling) {
+  auto e1 = ramp_engine(10.0, 100.0);  // 0.1 µm per ms
+  StepOutput out;
+  for (int k = 0; k <= 40; ++k) {
+    e1->step(k * kMs, {}, out);
+  }
+  EXPECT_NEAR(e1->register_state(1).output_um, 4.0, 1e-9);
+  std::vector<std::byte> buf(e1->state_capacity());
+  const std::size_t n = e1->export_state(buf);
+  ASSERT_GT(n, 0U);
+
+  // A restart: a fresh engine, a clock far away (the time the daemon was down is not made up).
+  auto e2 = ramp_engine(10.0, 100.0);
+  std::size_t skipped = 99;
+  ASSERT_TRUE(e2->import_state(std::span<const std::byte>(buf.data(), n), 5'000 * kMs, &skipped));
+  EXPECT_EQ(skipped, 0U);
+  EXPECT_NEAR(e2->register_state(1).output_um, 4.0, 1e-9);
+  e2->step(5'000 * kMs, {}, out);
+  EXPECT_EQ(out.writes.size(), 0U);  // the NC already holds 4.0
+  double last = 4.0;
+  for (int k = 1; k <= 100; ++k) {
+    e2->step(5'000 * kMs + k * kMs, {}, out);
+    for (const auto& w : out.writes) {
+      EXPECT_GE(w.value_um, last);
+      EXPECT_LE(w.value_um - last, 0.1 + 1e-9);
+      last = w.value_um;
+    }
+  }
+  EXPECT_NEAR(e2->register_state(1).output_um, 10.0, 1e-9);
+}
+
+TEST(EngineState, EveryTruncationIsRejectedAndLeavesTheEngineUnchanged) {
+  auto e1 = ramp_engine(10.0, 100.0);
+  StepOutput out;
+  for (int k = 0; k <= 20; ++k) {
+    e1->step(k * kMs, {}, out);
+  }
+  std::vector<std::byte> buf(e1->state_capacity());
+  const std::size_t n = e1->export_state(buf);
+  auto e2 = ramp_engine(10.0, 100.0);
+  for (std::size_t len = 0; len < n; ++len) {
+    EXPECT_FALSE(e2->import_state(std::span<const std::byte>(buf.data(), len), 0)) << len;
+  }
+  EXPECT_DOUBLE_EQ(e2->register_state(1).output_um, 0.0);
+  // A flipped magic byte and a NaN value are rejected too.
+  auto bad = buf;
+  bad[0] = std::byte{0};
+  EXPECT_FALSE(e2->import_state(std::span<const std::byte>(bad.data(), n), 0));
+  EXPECT_TRUE(e2->import_state(std::span<const std::byte>(buf.data(), n), 0));
+  EXPECT_NEAR(e2->register_state(1).output_um, 2.0, 1e-9);
+}
+
+TEST(EngineState, ImportSkipsRegistersAndModulesTheConfigNoLongerHas) {
+  auto e1 = ramp_engine(10.0, 100.0);
+  StepOutput out;
+  e1->step(0, {}, out);
+  e1->step(kMs, {}, out);
+  std::vector<std::byte> buf(e1->state_capacity());
+  const std::size_t n = e1->export_state(buf);
+  Engine e2;
+  e2.configure({reg("a")}, {});
+  std::size_t skipped = 0;
+  ASSERT_TRUE(e2.import_state(std::span<const std::byte>(buf.data(), n), 0, &skipped));
+  EXPECT_EQ(skipped, 2U);  // register b and module ramp
+  EXPECT_NEAR(e2.register_state(0).output_um, 0.1, 1e-9);
+}
+
+TEST(EngineState, ExportIntoTooSmallBufferReturnsZero) {
+  auto e = ramp_engine(10.0, 100.0);
+  std::vector<std::byte> buf(e->state_capacity() - 1);
+  EXPECT_EQ(e->export_state(buf), 0U);
+}
+
+TEST(EngineRealtime, StepExportImportAllocateNothing) {
+  auto e = ramp_engine(10.0, 100.0);
+  StepOutput out;
+  std::vector<std::byte> buf(e->state_capacity());
+  AxisSample s;
+  AxisSample bad;
+  bad.position_mm[0] = std::numeric_limits<double>::quiet_NaN();
+  const std::vector<Event> ev{s, bad, ToolChange{}, ProgramEvent{}};
+  e->step(0, ev, out);  // warm-up
+  nccomp::test::AllocationScope scope;
+  std::size_t n = 0;
+  for (int k = 1; k < 2000; ++k) {
+    e->step(k * kMs, ev, out);
+    if (k % 100 == 0) {
+      n = e->export_state(buf);
+      (void)e->import_state(std::span<const std::byte>(buf.data(), n), k * kMs);
+    }
+  }
+  EXPECT_EQ(scope.count(), 0U);
+  EXPECT_GT(n, 0U);
+  EXPECT_NEAR(e->register_state(1).output_um, 10.0, 1e-9);
+}
+
+TEST(EngineState, GenerationAdvancesOnChangeOnly) {
+  auto e = ramp_engine(0.2, 100.0);
+  StepOutput out;
+  e->step(0, {}, out);
+  const auto g0 = e->state_generation();
+  e->step(kMs, {}, out);
+  EXPECT_GT(e->state_generation(), g0);
+  for (int k = 2; k < 10; ++k) {
+    e->step(k * kMs, {}, out);
+  }
+  const auto g1 = e->state_generation();
+  e->step(10 * kMs, {}, out);  // ramp done, output at target
+  EXPECT_EQ(e->state_generation(), g1);
+}
+
+}  // namespace
+}  // namespace nccomp::core::engine
