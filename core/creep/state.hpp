@@ -1,0 +1,95 @@
+// Plain-data state of the creeping wear correction, for persistence across restarts and for
+// carrying state over a config reload. Offsets are absolute values computed from this state, so
+// resuming from it never applies a correction twice.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <type_traits>
+
+#include "core/common/types.hpp"
+#include "core/creep/config.hpp"
+
+namespace nccomp::core::creep {
+
+/// One wear increment creeping in, per edge support point.
+struct CreepSlot {
+  bool active{false};
+  /// Progress is counted in cut path [mm] (path, rate-per-path bases) or cutting time [s].
+  bool path_based{true};
+  /// Order of creation (the oldest is folded first when all slots are busy).
+  std::uint64_t seq{0};
+  /// Creep clock (path [mm] or time [s]) when the creep began.
+  double start{0.0};
+  /// Increment to feed in [µm] and the clock span over which it is fed [mm or s], per point.
+  std::array<double, kMaxEdgePoints> delta_um{};
+  std::array<double, kMaxEdgePoints> span{};
+};
+
+/// A scalar offset away from the surface that creeps to zero along the path: sister-tool entry
+/// or retract / re-feed.
+struct EntrySlot {
+  bool active{false};
+  double start_path_mm{0.0};
+  double offset_um{0.0};
+  double length_mm{0.0};
+};
+
+/// One accepted measurement kept for fitting the wear rate.
+struct HistoryEntry {
+  double cut_path_mm{0.0};
+  std::array<double, kMaxEdgePoints> wear_um{};
+};
+
+struct CreepState {
+  static constexpr std::uint32_t kVersion = 1;
+  std::uint32_t version{kVersion};
+  /// Edge support points the state was built with (must match the config on import).
+  std::uint32_t edge_points{1};
+  std::int32_t tool{0};
+  std::int32_t part{0};
+
+  /// Cut path [mm] and cutting time [s] of this tool since it was loaded (logs, intervals).
+  double cut_path_mm{0.0};
+  double cut_time_s{0.0};
+  /// The same, but frozen while halted: the clocks that drive creeps and the prediction.
+  double creep_path_mm{0.0};
+  double creep_time_s{0.0};
+
+  /// Wear fully in force [µm] (finished creeps, committed predictions), per point.
+  std::array<double, kMaxEdgePoints> committed_um{};
+  /// Last accepted measured total wear [µm], per point.
+  std::array<double, kMaxEdgePoints> measured_um{};
+  /// Fitted wear rate [µm/mm of cut path], per point; valid if rate_known.
+  std::array<double, kMaxEdgePoints> rate_um_per_mm{};
+  bool rate_known{false};
+
+  std::array<HistoryEntry, kMaxRateWindow> history{};
+  std::uint32_t history_count{0};
+
+  std::array<CreepSlot, kMaxCreeps> creeps{};
+  std::uint64_t next_seq{1};
+  EntrySlot entry{};
+
+  /// Clocks at the last accepted measurement.
+  double last_measurement_cut_path_mm{0.0};
+  double last_measurement_cut_time_s{0.0};
+  double last_measurement_creep_path_mm{0.0};
+  /// Program path position at the last accepted measurement [mm] (NaN if unknown).
+  double last_measurement_program_path_mm{kNaN};
+  std::uint32_t measurements{0};
+
+  bool halted{false};
+  bool warning_flag{false};
+  bool alarm_flag{false};
+  bool measurement_due_flag{false};
+  bool tool_change_flag{false};
+
+  /// Last value sent per channel X, Y, Z, radius, length [µm] (what the NC holds).
+  std::array<double, kChannelCount> channel_output_um{};
+};
+
+static_assert(std::is_trivially_copyable_v<CreepState>);
+
+}  // namespace nccomp::core::creep

@@ -1,0 +1,821 @@
+#include "core/creep/wear_compensator.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <stdexcept>
+#include <string>
+#include <variant>
+
+namespace nccomp::core::creep {
+
+namespace {
+
+constexpr double kRadToDeg = 180.0 / std::numbers::pi;
+constexpr double kTiny = 1e-9;
+
+void check_finite(double v, const std::string& field) {
+  if (!std::isfinite(v)) {
+    throw std::invalid_argument("creep state: " + field + " is not finite");
+  }
+}
+
+}  // namespace
+
+void WearCompensator::configure(const CreepConfig& config) {
+  validate(config);
+  for (auto& l : limiters_) l.configure(config.limiter);
+  config_ = config;
+  table_ = ProfileTable{};
+  if (config_.profile == ProfileShape::kTable) {
+    std::copy(config_.profile_table.begin(), config_.profile_table.end(), table_.f.begin());
+    table_.n = config_.profile_table.size();
+  }
+  points_ = config_.edge.edge_points;
+  s_ = CreepState{};
+  s_.edge_points = static_cast<std::uint32_t>(points_);
+  s_.history_count = 1;  // a new tool: zero wear at zero path, the first point of the rate fit
+  counters_ = CreepCounters{};
+  have_sample_ = false;
+  cutting_ = false;
+  interrupted_ = false;
+  have_now_ = false;
+  written_once_.fill(false);
+  flag_written_once_.fill(false);
+  last_verdict_.fill(LimitVerdict::kPassed);
+  target_um_.fill(0.0);
+  select_tool_tables();
+}
+
+void WearCompensator::import_state(const CreepState& st) {
+  if (st.version != CreepState::kVersion) {
+    throw std::invalid_argument("creep state: version " + std::to_string(st.version) +
+                                " is not " + std::to_string(CreepState::kVersion));
+  }
+  if (st.edge_points != points_) {
+    throw std::invalid_argument("creep state: edge_points " + std::to_string(st.edge_points) +
+                                " does not match creep.edge.edge_points " +
+                                std::to_string(points_));
+  }
+  check_finite(st.cut_path_mm, "cut_path_mm");
+  check_finite(st.cut_time_s, "cut_time_s");
+  check_finite(st.creep_path_mm, "creep_path_mm");
+  check_finite(st.creep_time_s, "creep_time_s");
+  check_finite(st.last_measurement_cut_path_mm, "last_measurement_cut_path_mm");
+  check_finite(st.last_measurement_cut_time_s, "last_measurement_cut_time_s");
+  check_finite(st.last_measurement_creep_path_mm, "last_measurement_creep_path_mm");
+  if (st.history_count < 1 || st.history_count > kMaxRateWindow) {
+    throw std::invalid_argument("creep state: history_count " +
+                                std::to_string(st.history_count) + " out of 1.." +
+                                std::to_string(kMaxRateWindow));
+  }
+  for (std::size_t i = 0; i < points_; ++i) {
+    const std::string p = "[" + std::to_string(i) + "]";
+    check_finite(st.committed_um[i], "committed_um" + p);
+    check_finite(st.measured_um[i], "measured_um" + p);
+    check_finite(st.rate_um_per_mm[i], "rate_um_per_mm" + p);
+    for (std::size_t h = 0; h < st.history_count; ++h) {
+      check_finite(st.history[h].wear_um[i], "history[" + std::to_string(h) + "].wear_um" + p);
+    }
+  }
+  for (std::size_t k = 0; k < kMaxCreeps; ++k) {
+    const auto& c = st.creeps[k];
+    if (!c.active) continue;
+    if (k >= config_.max_creeps) {
+      throw std::invalid_argument("creep state: creeps[" + std::to_string(k) +
+                                  "] is active beyond creep.max_creeps");
+    }
+    const std::string pre = "creeps[" + std::to_string(k) + "]";
+    check_finite(c.start, pre + ".start");
+    for (std::size_t i = 0; i < points_; ++i) {
+      check_finite(c.delta_um[i], pre + ".delta_um[" + std::to_string(i) + "]");
+      if (!std::isfinite(c.span[i]) || c.span[i] < 0.0) {
+        throw std::invalid_argument("creep state: " + pre + ".span[" + std::to_string(i) +
+                                    "] must be finite and >= 0");
+      }
+    }
+  }
+  if (st.entry.active) {
+    check_finite(st.entry.start_path_mm, "entry.start_path_mm");
+    check_finite(st.entry.offset_um, "entry.offset_um");
+    if (!(st.entry.length_mm > 0.0) || !std::isfinite(st.entry.length_mm)) {
+      throw std::invalid_argument("creep state: entry.length_mm must be > 0");
+    }
+  }
+  for (std::size_t ch = 0; ch < kChannelCount; ++ch) {
+    check_finite(st.channel_output_um[ch], "channel_output_um[" + std::to_string(ch) + "]");
+  }
+  s_ = st;
+  // Kinematics re-anchor on the first sample; every value is re-sent on the next step.
+  have_sample_ = false;
+  cutting_ = false;
+  interrupted_ = false;
+  have_now_ = false;
+  written_once_.fill(false);
+  flag_written_once_.fill(false);
+  select_tool_tables();
+}
+
+void WearCompensator::clear_alarm() noexcept {
+  s_.halted = false;
+  s_.alarm_flag = false;
+  s_.warning_flag = false;
+}
+
+void WearCompensator::select_tool_tables() noexcept {
+  deflection_index_ = -1;
+  for (std::size_t k = 0; k < config_.deflection.size(); ++k) {
+    if (config_.deflection[k].tool == s_.tool) {
+      deflection_index_ = static_cast<int>(k);
+      break;
+    }
+    if (config_.deflection[k].tool == 0 && deflection_index_ < 0) {
+      deflection_index_ = static_cast<int>(k);
+    }
+  }
+  transition_count_ = 0;
+  for (std::size_t k = 0; k < config_.transitions.size(); ++k) {
+    if (config_.transitions[k].tool == s_.tool) {
+      transition_index_[transition_count_++] = static_cast<std::uint8_t>(k);
+    }
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+
+void WearCompensator::step(TimeNs now_ns, std::span<const Event> events,
+                           StepOutput& out) noexcept {
+  if (!have_now_) {
+    // Start-up or resume: the limiters continue from what the NC holds.
+    for (std::size_t ch = 0; ch < kChannelCount; ++ch) {
+      limiters_[ch].reset(s_.channel_output_um[ch], now_ns);
+    }
+  } else if (cutting_ && !interrupted_) {
+    const double dt_s = std::max(0.0, seconds(now_ns - last_now_ns_));
+    s_.cut_time_s += dt_s;
+    if (!s_.halted) s_.creep_time_s += dt_s;
+  }
+  last_now_ns_ = now_ns;
+  have_now_ = true;
+
+  for (const Event& e : events) {
+    if (const auto* a = std::get_if<AxisSample>(&e)) {
+      on_axis_sample(*a);
+    } else if (const auto* m = std::get_if<ToolMeasurement>(&e)) {
+      on_measurement(now_ns, *m, out);
+    } else if (const auto* c = std::get_if<ToolChange>(&e)) {
+      on_tool_change(now_ns, *c, out);
+    } else if (const auto* p = std::get_if<ProgramEvent>(&e)) {
+      switch (p->kind) {
+        case ProgramEventKind::kPartStart:
+          s_.part = p->part;
+          break;
+        case ProgramEventKind::kPartEnd:
+          break;
+        case ProgramEventKind::kInterruption:
+          interrupted_ = true;
+          cutting_ = false;
+          break;
+        case ProgramEventKind::kResume:
+          interrupted_ = false;
+          break;
+      }
+    }
+  }
+  retire_finished_creeps();
+  check_measurement_due(now_ns, out);
+  compute_targets();
+  write_outputs(now_ns, out);
+}
+
+void WearCompensator::on_axis_sample(const AxisSample& a) noexcept {
+  const bool cut = a.cutting && !interrupted_;
+  if (have_sample_ && cut && cutting_) {
+    // Only motion between two cutting samples is cut path: the trip to the laser and back, and
+    // a program restart further back (sister tool), are not.
+    double d = 0.0;
+    if (std::isfinite(a.program_path_mm) && std::isfinite(last_sample_.program_path_mm)) {
+      d = a.program_path_mm - last_sample_.program_path_mm;
+    } else {
+      const std::size_t n = std::min<std::size_t>(
+          {static_cast<std::size_t>(a.axis_count),
+           static_cast<std::size_t>(last_sample_.axis_count), std::size_t{3}});
+      double sq = 0.0;
+      for (std::size_t k = 0; k < n; ++k) {
+        const double dk = a.position_mm[k] - last_sample_.position_mm[k];
+        sq += dk * dk;
+      }
+      d = std::sqrt(sq);
+    }
+    if (std::isfinite(d) && d > 0.0) {
+      s_.cut_path_mm += d;
+      if (!s_.halted) s_.creep_path_mm += d;
+    }
+  }
+  last_sample_ = a;
+  have_sample_ = true;
+  cutting_ = cut;
+  if (s_.tool == 0 && a.tool != 0) {
+    s_.tool = a.tool;
+    select_tool_tables();
+  }
+}
+
+double WearCompensator::creep_fraction(const CreepSlot& c, std::size_t i) const noexcept {
+  const double span = c.span[i];
+  if (!(span > 0.0)) return 1.0;
+  const double clock = c.path_based ? s_.creep_path_mm : s_.creep_time_s;
+  return profile_fraction(config_.profile, (clock - c.start) / span, &table_);
+}
+
+double WearCompensator::predicted_um(std::size_t i) const noexcept {
+  if (!config_.predict.enabled || !s_.rate_known) return 0.0;
+  const double grown =
+      s_.rate_um_per_mm[i] * (s_.creep_path_mm - s_.last_measurement_creep_path_mm);
+  return std::clamp(grown, 0.0, config_.predict.max_um);
+}
+
+double WearCompensator::applied_wear_um(std::size_t i) const noexcept {
+  if (i >= points_) return 0.0;
+  double w = s_.committed_um[i] + predicted_um(i);
+  for (std::size_t k = 0; k < config_.max_creeps; ++k) {
+    const auto& c = s_.creeps[k];
+    if (c.active) w += c.delta_um[i] * creep_fraction(c, i);
+  }
+  return w;
+}
+
+std::size_t WearCompensator::creeps_in_progress() const noexcept {
+  std::size_t n = 0;
+  for (std::size_t k = 0; k < config_.max_creeps; ++k) n += s_.creeps[k].active ? 1U : 0U;
+  return n;
+}
+
+void WearCompensator::retire_finished_creeps() noexcept {
+  for (std::size_t k = 0; k < config_.max_creeps; ++k) {
+    auto& c = s_.creeps[k];
+    if (!c.active) continue;
+    const double clock = c.path_based ? s_.creep_path_mm : s_.creep_time_s;
+    bool done = true;
+    for (std::size_t i = 0; i < points_ && done; ++i) {
+      done = !(c.span[i] > 0.0) || clock - c.start >= c.span[i];
+    }
+    if (done) {
+      for (std::size_t i = 0; i < points_; ++i) s_.committed_um[i] += c.delta_um[i];
+      c.active = false;
+    }
+  }
+  if (s_.entry.active && s_.creep_path_mm - s_.entry.start_path_mm >= s_.entry.length_mm) {
+    s_.entry.active = false;
+  }
+}
+
+void WearCompensator::start_creep(const std::array<double, kMaxEdgePoints>& delta_um,
+                                  StepOutput& out, TimeNs now_ns) noexcept {
+  std::array<double, kMaxEdgePoints> delta = delta_um;
+  double largest = 0.0;
+  for (std::size_t i = 0; i < points_; ++i) largest = std::max(largest, std::fabs(delta[i]));
+  if (largest < kTiny) return;
+
+  CreepSlot* slot = nullptr;
+  CreepSlot* oldest = nullptr;
+  for (std::size_t k = 0; k < config_.max_creeps; ++k) {
+    auto& c = s_.creeps[k];
+    if (!c.active) {
+      slot = &c;
+      break;
+    }
+    if (oldest == nullptr || c.seq < oldest->seq) oldest = &c;
+  }
+  if (slot == nullptr) {
+    // All slots busy: what the oldest creep has fed in stays in force, its remainder joins the
+    // new creep, so the offset keeps its value (no step) and nothing is lost.
+    for (std::size_t i = 0; i < points_; ++i) {
+      const double f = creep_fraction(*oldest, i);
+      s_.committed_um[i] += oldest->delta_um[i] * f;
+      delta[i] += oldest->delta_um[i] * (1.0 - f);
+    }
+    slot = oldest;
+    ++counters_.creeps_folded;
+    out.alarm(now_ns, Severity::kInfo, AlarmCode::kCreepUnfinished, s_.tool,
+              static_cast<double>(config_.max_creeps));
+  }
+  *slot = CreepSlot{};
+  slot->active = true;
+  slot->seq = s_.next_seq++;
+  const bool path_based = config_.creep_basis == CreepBasis::kPath ||
+                          config_.creep_basis == CreepBasis::kRatePath;
+  slot->path_based = path_based;
+  slot->start = path_based ? s_.creep_path_mm : s_.creep_time_s;
+  for (std::size_t i = 0; i < points_; ++i) {
+    slot->delta_um[i] = delta[i];
+    switch (config_.creep_basis) {
+      case CreepBasis::kPath:
+        slot->span[i] = config_.creep_length_mm;
+        break;
+      case CreepBasis::kTime:
+        slot->span[i] = config_.creep_time_s;
+        break;
+      case CreepBasis::kRateTime:
+        slot->span[i] = std::fabs(delta[i]) / config_.creep_rate_um_per_min * 60.0;
+        break;
+      case CreepBasis::kRatePath:
+        slot->span[i] = std::fabs(delta[i]) / config_.creep_rate_um_per_mm;
+        break;
+    }
+  }
+}
+
+void WearCompensator::start_entry(double offset_um, double length_mm) noexcept {
+  if (offset_um >= entry_offset_um()) {
+    s_.entry = EntrySlot{true, s_.creep_path_mm, offset_um, length_mm};
+  }
+}
+
+double WearCompensator::entry_offset_um() const noexcept {
+  const auto& e = s_.entry;
+  if (!e.active) return 0.0;
+  const double u = (s_.creep_path_mm - e.start_path_mm) / e.length_mm;
+  return e.offset_um * (1.0 - profile_fraction(config_.profile, u, &table_));
+}
+
+double WearCompensator::transition_offset_um() const noexcept {
+  if (!have_sample_ || !std::isfinite(last_sample_.program_path_mm)) return 0.0;
+  const double p = last_sample_.program_path_mm;
+  for (std::size_t k = 0; k < transition_count_; ++k) {
+    const auto& t = config_.transitions[transition_index_[k]];
+    if (p < t.start_path_mm || p > t.end_path_mm) continue;
+    double v = 0.0;
+    if (t.in_offset_um > 0.0 && p < t.start_path_mm + t.in_length_mm) {
+      const double u = (p - t.start_path_mm) / t.in_length_mm;
+      v += t.in_offset_um * (1.0 - profile_fraction(config_.profile, u, &table_));
+    }
+    if (t.out_offset_um > 0.0 && p > t.end_path_mm - t.out_length_mm) {
+      const double u = (p - (t.end_path_mm - t.out_length_mm)) / t.out_length_mm;
+      v += t.out_offset_um * profile_fraction(config_.profile, u, &table_);
+    }
+    return v;
+  }
+  return 0.0;
+}
+
+double WearCompensator::deflection(double wear_um, bool lateral) const noexcept {
+  if (deflection_index_ < 0) return 0.0;
+  const auto& d = config_.deflection[static_cast<std::size_t>(deflection_index_)];
+  const auto& y = lateral ? d.lateral_um : d.normal_um;
+  const auto& x = d.wear_um;
+  if (!(wear_um > x.front())) return y.front();  // also NaN
+  if (wear_um >= x.back()) return y.back();
+  const auto it = std::upper_bound(x.begin(), x.end(), wear_um);
+  const auto j = static_cast<std::size_t>(it - x.begin());
+  const double t = (wear_um - x[j - 1]) / (x[j] - x[j - 1]);
+  return y[j - 1] + t * (y[j] - y[j - 1]);
+}
+
+bool WearCompensator::normal_now(std::array<double, 3>& n) const noexcept {
+  switch (config_.edge.normal_source) {
+    case NormalSource::kNone:
+      return false;
+    case NormalSource::kAxisSample:
+      if (!have_sample_ || !last_sample_.has_normal) return false;
+      n = last_sample_.normal;
+      break;
+    case NormalSource::kToolpath: {
+      if (!have_sample_ || !std::isfinite(last_sample_.program_path_mm)) return false;
+      const auto& tp = config_.toolpath_normals;
+      const double p = last_sample_.program_path_mm;
+      const auto it = std::upper_bound(tp.begin(), tp.end(), p, [](double v, const auto& r) {
+        return v < r.path_mm;
+      });
+      if (it == tp.begin()) {
+        n = tp.front().normal;
+      } else if (it == tp.end()) {
+        n = tp.back().normal;
+      } else {
+        const auto& b = *it;
+        const auto& a = *(it - 1);
+        const double t = (p - a.path_mm) / (b.path_mm - a.path_mm);
+        for (std::size_t k = 0; k < 3; ++k) n[k] = a.normal[k] + t * (b.normal[k] - a.normal[k]);
+      }
+      break;
+    }
+  }
+  const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+  if (!std::isfinite(len) || len < 1e-9) return false;
+  for (auto& v : n) v /= len;
+  return true;
+}
+
+void WearCompensator::compute_targets() noexcept {
+  const double away_um = entry_offset_um() + transition_offset_um();
+  const bool axes = config_.output.mode == OutputMode::kAxes;
+  std::array<double, kChannelCount> target{};
+  std::array<double, 3> n{};
+  double c = 0.0;
+  double l = 0.0;
+  if (normal_now(n)) {
+    const auto& ax = config_.edge.tool_axis;
+    // A normal against the tool axis (undercut) cannot be reached by the edge: clamp to 90°.
+    const double dot = std::clamp(n[0] * ax[0] + n[1] * ax[1] + n[2] * ax[2], 0.0, 1.0);
+    const double theta_deg = std::acos(dot) * kRadToDeg;
+    engagement_deg_ = theta_deg;
+    double w = 0.0;
+    if (points_ < 2) {
+      w = applied_wear_um(0);
+    } else {
+      // Only the two support points around the engagement angle are evaluated (cost).
+      const double x = theta_deg / 90.0 * static_cast<double>(points_ - 1);
+      const auto i0 = std::min(static_cast<std::size_t>(x), points_ - 2);
+      const double t = x - static_cast<double>(i0);
+      const double w0 = applied_wear_um(i0);
+      w = w0 + t * (applied_wear_um(i0 + 1) - w0);
+    }
+    c = w + deflection(w, false) - away_um;
+    l = deflection(w, true);
+    // Lateral = the bending direction of the tool: the normal's part across the tool axis.
+    std::array<double, 3> lat{n[0] - dot * ax[0], n[1] - dot * ax[1], n[2] - dot * ax[2]};
+    const double lat_len = std::sqrt(lat[0] * lat[0] + lat[1] * lat[1] + lat[2] * lat[2]);
+    if (lat_len > 1e-6) {
+      for (auto& v : lat) v /= lat_len;
+    } else {
+      lat = {0.0, 0.0, 0.0};
+    }
+    if (axes) {
+      for (std::size_t k = 0; k < 3; ++k) target[k] = -c * n[k] - l * lat[k];
+    } else {
+      const double sin_t = std::sqrt(std::max(0.0, 1.0 - dot * dot));
+      const double sgn = config_.output.tool_register_sign;
+      target[static_cast<std::size_t>(Channel::kRadius)] = sgn * (c * sin_t + l);
+      target[static_cast<std::size_t>(Channel::kLength)] = sgn * (c * dot);
+    }
+  } else {
+    engagement_deg_ = kNaN;
+    double mean = 0.0;
+    for (std::size_t i = 0; i < points_; ++i) mean += applied_wear_um(i);
+    mean /= static_cast<double>(points_);
+    c = mean + deflection(mean, false) - away_um;
+    const double sgn = axes ? config_.edge.fallback_sign : config_.output.tool_register_sign;
+    target[static_cast<std::size_t>(config_.edge.fallback_channel)] = sgn * c;
+  }
+  correction_um_ = c;
+  lateral_um_ = l;
+  if (s_.halted) {
+    target = s_.channel_output_um;  // stop applying: hold what the NC has
+  }
+  target_um_ = target;
+}
+
+void WearCompensator::write_outputs(TimeNs now_ns, StepOutput& out) noexcept {
+  const auto& o = config_.output;
+  const auto refresh_ns = from_seconds(o.refresh_interval_s);
+  for (std::size_t ch = 0; ch < kChannelCount; ++ch) {
+    const std::int32_t reg = o.channel_register[ch];
+    if (reg < 0) continue;
+    const LimitResult r = limiters_[ch].apply(target_um_[ch], now_ns);
+    if (r.verdict != last_verdict_[ch]) {
+      // Edge-triggered, so a held limit does not flood the alarm ring every cycle.
+      switch (r.verdict) {
+        case LimitVerdict::kPassed:
+          break;
+        case LimitVerdict::kSlewed:
+          out.alarm(now_ns, Severity::kWarning, AlarmCode::kOffsetSlewLimited, reg,
+                    target_um_[ch]);
+          break;
+        case LimitVerdict::kRejectedNonFinite:
+          out.alarm(now_ns, Severity::kAlarm, AlarmCode::kOffsetNonFinite, reg, target_um_[ch]);
+          break;
+        case LimitVerdict::kRejectedAbsolute:
+          out.alarm(now_ns, Severity::kAlarm, AlarmCode::kOffsetBeyondAbsoluteLimit, reg,
+                    target_um_[ch]);
+          break;
+      }
+      last_verdict_[ch] = r.verdict;
+    }
+    s_.channel_output_um[ch] = r.value_um;
+    const double diff = std::fabs(r.value_um - written_um_[ch]);
+    const bool reached = std::fabs(r.value_um - target_um_[ch]) < kTiny;
+    const bool due = !written_once_[ch] || diff >= o.write_resolution_um ||
+                     (reached && diff > kTiny) ||
+                     (refresh_ns > 0 && now_ns - written_ns_[ch] >= refresh_ns);
+    if (due) {
+      out.writes.push(OffsetWrite{now_ns, static_cast<std::uint16_t>(reg), r.value_um});
+      written_um_[ch] = r.value_um;
+      written_ns_[ch] = now_ns;
+      written_once_[ch] = true;
+    }
+  }
+  write_flag(now_ns, o.warning_register, s_.warning_flag, 0, out);
+  write_flag(now_ns, o.alarm_register, s_.alarm_flag, 1, out);
+  write_flag(now_ns, o.measurement_due_register, s_.measurement_due_flag, 2, out);
+  write_flag(now_ns, o.tool_change_register, s_.tool_change_flag, 3, out);
+  const double restart_mm = restart_program_path_mm();
+  if (o.restart_path_register >= 0 && std::isfinite(restart_mm)) {
+    const double v = restart_mm * kUmPerMm;
+    const bool due = !flag_written_once_[4] || std::fabs(v - flag_written_[4]) > kTiny ||
+                     (refresh_ns > 0 && now_ns - flag_written_ns_[4] >= refresh_ns);
+    if (due) {
+      out.writes.push(
+          OffsetWrite{now_ns, static_cast<std::uint16_t>(o.restart_path_register), v});
+      flag_written_[4] = v;
+      flag_written_ns_[4] = now_ns;
+      flag_written_once_[4] = true;
+    }
+  }
+}
+
+void WearCompensator::write_flag(TimeNs now_ns, std::int32_t reg, bool value, std::size_t slot,
+                                 StepOutput& out) noexcept {
+  if (reg < 0) return;
+  const double v = value ? 1.0 : 0.0;
+  const auto refresh_ns = from_seconds(config_.output.refresh_interval_s);
+  const bool due = !flag_written_once_[slot] || std::fabs(v - flag_written_[slot]) > 0.5 ||
+                   (refresh_ns > 0 && now_ns - flag_written_ns_[slot] >= refresh_ns);
+  if (!due) return;
+  out.writes.push(OffsetWrite{now_ns, static_cast<std::uint16_t>(reg), v});
+  flag_written_[slot] = v;
+  flag_written_ns_[slot] = now_ns;
+  flag_written_once_[slot] = true;
+}
+
+// ---------------------------------------------------------------------------------------------
+
+void WearCompensator::halt(TimeNs now_ns, AlarmCode code, double value, StepOutput& out) noexcept {
+  s_.halted = true;
+  s_.alarm_flag = true;
+  ++counters_.measurements_refused;
+  out.alarm(now_ns, Severity::kAlarm, code, s_.tool, value);
+}
+
+void WearCompensator::on_measurement(TimeNs now_ns, const ToolMeasurement& m,
+                                     StepOutput& out) noexcept {
+  const std::size_t n_meas = m.point_count;
+  if (n_meas != points_ && n_meas != 1) {
+    ++counters_.events_invalid;
+    ++counters_.measurements_refused;
+    out.alarm(now_ns, Severity::kWarning, AlarmCode::kEventInvalid, m.tool,
+              static_cast<double>(n_meas));
+    return;
+  }
+  std::array<double, kMaxEdgePoints> w{};
+  for (std::size_t i = 0; i < points_; ++i) {
+    w[i] = m.broken ? kNaN : m.wear_um[n_meas == 1 ? 0 : i];
+  }
+  // Every measurement is logged, one row per support point, whatever is decided below.
+  for (std::size_t i = 0; i < points_; ++i) {
+    MeasurementRecord r{};
+    r.time_ns = m.time_ns;
+    r.part = s_.part;
+    r.tool = m.tool;
+    r.kind = MeasurementKind::kToolWear;
+    r.point = static_cast<std::int32_t>(i);
+    for (std::size_t k = 0; k < 3; ++k) r.position_mm[k] = last_sample_.position_mm[k];
+    r.angle_deg = support_angle_deg(i, points_);
+    r.path_mm = s_.cut_path_mm;
+    r.measured_um = w[i];
+    r.applied_um = 0.0;
+    out.records.push(r);
+  }
+  if (s_.tool != 0 && m.tool != s_.tool) {
+    ++counters_.events_invalid;
+    ++counters_.measurements_refused;
+    out.alarm(now_ns, Severity::kWarning, AlarmCode::kEventInvalid, m.tool,
+              static_cast<double>(s_.tool));
+    return;
+  }
+  if (s_.tool == 0) {
+    s_.tool = m.tool;
+    select_tool_tables();
+  }
+  s_.measurement_due_flag = false;
+  if (s_.halted) {
+    // Halted: logged above, applied only after the operator clears the alarm or changes tool.
+    ++counters_.measurements_refused;
+    out.alarm(now_ns, Severity::kWarning, AlarmCode::kEventInvalid, m.tool, 0.0);
+    return;
+  }
+
+  // Plausibility: broken, NaN, shrinking beyond the noise, a jump many times the expected one.
+  double max_inc = -std::numeric_limits<double>::infinity();
+  double min_inc = std::numeric_limits<double>::infinity();
+  double max_wear = 0.0;
+  for (std::size_t i = 0; i < points_; ++i) {
+    if (!std::isfinite(w[i])) {
+      halt(now_ns, AlarmCode::kToolBrokenOrMismeasured, w[i], out);
+      return;
+    }
+    const double inc = w[i] - s_.measured_um[i];
+    max_inc = std::max(max_inc, inc);
+    min_inc = std::min(min_inc, inc);
+    max_wear = std::max(max_wear, std::fabs(w[i]));
+  }
+  const auto& tl = config_.tool_life;
+  if (min_inc < -tl.noise_um) {
+    halt(now_ns, AlarmCode::kToolBrokenOrMismeasured, min_inc, out);
+    return;
+  }
+  double max_rate = 0.0;
+  if (s_.rate_known) {
+    for (std::size_t i = 0; i < points_; ++i) max_rate = std::max(max_rate, s_.rate_um_per_mm[i]);
+  }
+  const double since_mm = s_.cut_path_mm - s_.last_measurement_cut_path_mm;
+  const double expected_um = std::max(tl.min_expected_increment_um, max_rate * since_mm);
+  if (max_inc > tl.implausible_factor * expected_um) {
+    halt(now_ns, AlarmCode::kToolBrokenOrMismeasured, max_inc, out);
+    return;
+  }
+  if (tl.excessive_increment_um > 0.0 && max_inc > tl.excessive_increment_um) {
+    if (tl.on_excessive == ExcessivePolicy::kStop) {
+      halt(now_ns, AlarmCode::kToolExcessivelyWorn, max_inc, out);
+    } else {
+      ++counters_.measurements_refused;
+      s_.warning_flag = true;
+      s_.tool_change_flag = true;
+      out.alarm(now_ns, Severity::kWarning, AlarmCode::kToolExcessivelyWorn, s_.tool, max_inc);
+    }
+    return;
+  }
+  // The limiter's absolute bound, checked before any state changes: a tool worn beyond what
+  // may be compensated is reported, not compensated.
+  const double worst_um =
+      max_wear + std::fabs(deflection(max_wear, false)) + std::fabs(deflection(max_wear, true));
+  if (!limiters_[0].admissible(worst_um)) {
+    ++counters_.measurements_refused;
+    s_.alarm_flag = true;
+    out.alarm(now_ns, Severity::kAlarm, AlarmCode::kOffsetBeyondAbsoluteLimit, s_.tool,
+              worst_um);
+    return;
+  }
+
+  if (creeps_in_progress() > 0) {
+    double remaining = 0.0;
+    for (std::size_t i = 0; i < points_; ++i) {
+      double r = 0.0;
+      for (std::size_t k = 0; k < config_.max_creeps; ++k) {
+        const auto& c = s_.creeps[k];
+        if (c.active) r += c.delta_um[i] * (1.0 - creep_fraction(c, i));
+      }
+      remaining = std::max(remaining, std::fabs(r));
+    }
+    switch (config_.on_unfinished) {
+      case UnfinishedPolicy::kSuperpose:
+        out.alarm(now_ns, Severity::kInfo, AlarmCode::kCreepUnfinished, s_.tool, remaining);
+        break;
+      case UnfinishedPolicy::kWarn:
+        s_.warning_flag = true;
+        out.alarm(now_ns, Severity::kWarning, AlarmCode::kCreepUnfinished, s_.tool, remaining);
+        break;
+      case UnfinishedPolicy::kAlarm:
+        halt(now_ns, AlarmCode::kCreepUnfinished, remaining, out);
+        return;
+    }
+    ++counters_.creeps_superposed;
+  }
+
+  // Accept. The prediction made so far becomes committed; the new creep corrects it.
+  std::array<double, kMaxEdgePoints> delta{};
+  for (std::size_t i = 0; i < points_; ++i) {
+    s_.committed_um[i] += predicted_um(i);
+    double target = s_.committed_um[i];
+    for (std::size_t k = 0; k < config_.max_creeps; ++k) {
+      const auto& c = s_.creeps[k];
+      if (c.active) target += c.delta_um[i];
+    }
+    delta[i] = w[i] - target;
+    s_.measured_um[i] = w[i];
+  }
+  s_.last_measurement_cut_path_mm = s_.cut_path_mm;
+  s_.last_measurement_cut_time_s = s_.cut_time_s;
+  s_.last_measurement_creep_path_mm = s_.creep_path_mm;
+  if (have_sample_) s_.last_measurement_program_path_mm = last_sample_.program_path_mm;
+  ++s_.measurements;
+  ++counters_.measurements_accepted;
+
+  if (s_.history_count == kMaxRateWindow) {
+    std::copy(s_.history.begin() + 1, s_.history.end(), s_.history.begin());
+    --s_.history_count;
+  }
+  auto& h = s_.history[s_.history_count++];
+  h.cut_path_mm = s_.cut_path_mm;
+  h.wear_um = w;
+  fit_rates();
+
+  start_creep(delta, out, now_ns);
+  if (config_.entry.retract_um > 0.0) {
+    start_entry(config_.entry.retract_um, config_.entry.refeed_length_mm);
+  }
+  if (tl.wear_limit_um > 0.0 && max_wear >= tl.wear_limit_um) {
+    s_.tool_change_flag = true;
+    out.alarm(now_ns, Severity::kWarning, AlarmCode::kToolLifeReached, s_.tool, max_wear);
+  }
+}
+
+void WearCompensator::fit_rates() noexcept {
+  const std::size_t window = config_.predict.enabled ? config_.predict.window : 2;
+  const std::size_t n = std::min<std::size_t>(window, s_.history_count);
+  const std::size_t first = s_.history_count - n;
+  double mean_x = 0.0;
+  for (std::size_t h = first; h < s_.history_count; ++h) mean_x += s_.history[h].cut_path_mm;
+  mean_x /= static_cast<double>(n);
+  double sxx = 0.0;
+  for (std::size_t h = first; h < s_.history_count; ++h) {
+    const double dx = s_.history[h].cut_path_mm - mean_x;
+    sxx += dx * dx;
+  }
+  if (n < 2 || !(sxx > 1e-12)) {
+    s_.rate_known = false;
+    return;
+  }
+  for (std::size_t i = 0; i < points_; ++i) {
+    double mean_y = 0.0;
+    for (std::size_t h = first; h < s_.history_count; ++h) mean_y += s_.history[h].wear_um[i];
+    mean_y /= static_cast<double>(n);
+    double sxy = 0.0;
+    for (std::size_t h = first; h < s_.history_count; ++h) {
+      sxy += (s_.history[h].cut_path_mm - mean_x) * (s_.history[h].wear_um[i] - mean_y);
+    }
+    // Wear does not heal: a negative fitted rate is noise.
+    s_.rate_um_per_mm[i] = std::max(0.0, sxy / sxx);
+  }
+  s_.rate_known = true;
+}
+
+double WearCompensator::next_measurement_path_mm() const noexcept {
+  const auto& iv = config_.interval;
+  const double last = s_.last_measurement_cut_path_mm;
+  switch (iv.basis) {
+    case IntervalBasis::kPath:
+      return last + iv.interval_mm;
+    case IntervalBasis::kMaterial:
+      return last + iv.interval_mm3 / iv.removal_mm3_per_mm;
+    case IntervalBasis::kAdaptive: {
+      double max_rate = 0.0;
+      if (s_.rate_known) {
+        for (std::size_t i = 0; i < points_; ++i) {
+          max_rate = std::max(max_rate, s_.rate_um_per_mm[i]);
+        }
+      }
+      // Before a rate is known (new tool, break-in wear is fastest) measure at the minimum.
+      if (!s_.rate_known) return last + iv.min_interval_mm;
+      if (!(max_rate > 0.0)) return last + iv.max_interval_mm;
+      return last + std::clamp(iv.target_increment_um / max_rate, iv.min_interval_mm,
+                               iv.max_interval_mm);
+    }
+    case IntervalBasis::kOff:
+    case IntervalBasis::kTime:
+      break;
+  }
+  return std::numeric_limits<double>::infinity();
+}
+
+void WearCompensator::check_measurement_due(TimeNs now_ns, StepOutput& out) noexcept {
+  const auto& iv = config_.interval;
+  if (iv.basis == IntervalBasis::kOff || s_.measurement_due_flag) return;
+  bool due = false;
+  if (iv.basis == IntervalBasis::kTime) {
+    due = s_.cut_time_s - s_.last_measurement_cut_time_s >= iv.interval_s;
+  } else {
+    due = s_.cut_path_mm >= next_measurement_path_mm();
+  }
+  if (due) {
+    s_.measurement_due_flag = true;
+    out.alarm(now_ns, Severity::kInfo, AlarmCode::kMeasurementDue, s_.tool,
+              s_.cut_path_mm - s_.last_measurement_cut_path_mm);
+  }
+}
+
+double WearCompensator::restart_program_path_mm() const noexcept {
+  const double p = s_.last_measurement_program_path_mm;
+  if (!std::isfinite(p)) return kNaN;
+  return std::max(0.0, p - config_.entry.sister_restart_back_mm);
+}
+
+void WearCompensator::on_tool_change(TimeNs /*now_ns*/, const ToolChange& c,
+                                     StepOutput& /*out*/) noexcept {
+  const bool new_tool = c.tool != s_.tool || c.sister;
+  if (!new_tool) {
+    // The same tool back in the spindle (e.g. after a measurement outside the machine).
+    if (config_.entry.retract_um > 0.0) {
+      start_entry(config_.entry.retract_um, config_.entry.refeed_length_mm);
+    }
+    return;
+  }
+  CreepState fresh{};
+  fresh.edge_points = s_.edge_points;
+  fresh.tool = c.tool;
+  fresh.part = s_.part;
+  fresh.history_count = 1;
+  // Kept across the change: where the sister restarts, and what the NC holds now.
+  fresh.last_measurement_program_path_mm = s_.last_measurement_program_path_mm;
+  fresh.channel_output_um = s_.channel_output_um;
+  fresh.next_seq = s_.next_seq;
+  s_ = fresh;
+  select_tool_tables();
+  if (c.sister && config_.entry.sister_offset_um > 0.0) {
+    start_entry(config_.entry.sister_offset_um, config_.entry.sister_length_mm);
+  } else if (config_.entry.retract_um > 0.0) {
+    start_entry(config_.entry.retract_um, config_.entry.refeed_length_mm);
+  }
+}
+
+}  // namespace nccomp::core::creep

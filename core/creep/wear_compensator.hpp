@@ -1,0 +1,149 @@
+// Creeping wear correction (seeds.md S0, CN1835822): a measured tool wear is not applied as one
+// step but fed in gradually along the cut path (or over time, or at a rate), per support point
+// of the cutting edge, at the current engagement angle, along the surface normal.
+//
+// Lifecycle: configure() (not real-time: validates, may allocate, throws) → step() every loop
+// cycle (real-time) → export_state() / import_state() for persistence and config reload.
+//
+// Sign conventions (see docs/creep.md):
+// - wear and the correction c along the normal are positive when the tool must move INTO the
+//   material (a worn tool is smaller);
+// - axis offsets are −c·n (n = outward unit surface normal), so X/Y/Z offsets move the tool
+//   toward the surface;
+// - radius / length wear registers get tool_register_sign · (c·sinθ, c·cosθ), θ = engagement
+//   angle from the tool axis;
+// - entry, retract and transition offsets hold the tool AWAY from the surface (reduce c).
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <span>
+
+#include "core/common/limiter.hpp"
+#include "core/common/output.hpp"
+#include "core/common/types.hpp"
+#include "core/creep/config.hpp"
+#include "core/creep/state.hpp"
+
+namespace nccomp::core::creep {
+
+struct CreepCounters {
+  std::uint64_t measurements_accepted{0};
+  std::uint64_t measurements_refused{0};
+  std::uint64_t creeps_folded{0};
+  std::uint64_t creeps_superposed{0};
+  std::uint64_t events_invalid{0};
+};
+
+class WearCompensator {
+ public:
+  WearCompensator() = default;
+
+  /// Validates (std::invalid_argument naming the TOML key) and stores the config; resets the
+  /// state to a new tool with no wear. Not real-time.
+  void configure(const CreepConfig& config);
+
+  /// One loop cycle at time now_ns: consumes the events that arrived since the last cycle
+  /// (AxisSample, ToolMeasurement, ToolChange, ProgramEvent; others are ignored) and appends
+  /// offset writes, alarms and measurement records to out. Real-time safe: no allocation, no
+  /// locks, no I/O; bounded work (events × support points × creeps).
+  void step(TimeNs now_ns, std::span<const Event> events, StepOutput& out) noexcept;
+
+  /// Plain-data copy of the state. Real-time safe.
+  [[nodiscard]] CreepState export_state() const noexcept { return s_; }
+
+  /// Resumes from a persisted state: validates it against the config (std::invalid_argument
+  /// naming the field) and re-sends every offset on the next step. Not real-time.
+  void import_state(const CreepState& state);
+
+  /// Operator acknowledgement: clears the halt, the alarm and the warning flags. Creeps resume
+  /// where they were frozen. Real-time safe.
+  void clear_alarm() noexcept;
+
+  // Observers (real-time safe), for status and tests.
+  /// Wear in force at support point i now [µm] (committed + creeping + predicted).
+  [[nodiscard]] double applied_wear_um(std::size_t i) const noexcept;
+  /// Correction along the surface normal computed in the last step [µm] (positive = into part).
+  [[nodiscard]] double correction_um() const noexcept { return correction_um_; }
+  /// Lateral deflection compensation of the last step [µm].
+  [[nodiscard]] double lateral_um() const noexcept { return lateral_um_; }
+  /// Engagement angle used in the last step [deg]; NaN when the fallback (mean wear) was used.
+  [[nodiscard]] double engagement_angle_deg() const noexcept { return engagement_deg_; }
+  /// Target of a channel before the limiter in the last step [µm].
+  [[nodiscard]] double channel_target_um(Channel c) const noexcept {
+    return target_um_[static_cast<std::size_t>(c)];
+  }
+  /// Value the limiter let through in the last step [µm].
+  [[nodiscard]] double channel_output_um(Channel c) const noexcept {
+    return s_.channel_output_um[static_cast<std::size_t>(c)];
+  }
+  [[nodiscard]] std::size_t creeps_in_progress() const noexcept;
+  [[nodiscard]] double cut_path_mm() const noexcept { return s_.cut_path_mm; }
+  /// Cut path at which the next measurement falls due [mm] (path-like bases; +inf if off).
+  [[nodiscard]] double next_measurement_path_mm() const noexcept;
+  /// Program path where a sister tool should restart [mm] (NaN if unknown).
+  [[nodiscard]] double restart_program_path_mm() const noexcept;
+  [[nodiscard]] bool halted() const noexcept { return s_.halted; }
+  [[nodiscard]] const CreepState& state() const noexcept { return s_; }
+  [[nodiscard]] const CreepCounters& counters() const noexcept { return counters_; }
+  [[nodiscard]] const CreepConfig& config() const noexcept { return config_; }
+
+ private:
+  void on_axis_sample(const AxisSample& a) noexcept;
+  void on_measurement(TimeNs now_ns, const ToolMeasurement& m, StepOutput& out) noexcept;
+  void on_tool_change(TimeNs now_ns, const ToolChange& c, StepOutput& out) noexcept;
+  void start_creep(const std::array<double, kMaxEdgePoints>& delta_um, StepOutput& out,
+                   TimeNs now_ns) noexcept;
+  void start_entry(double offset_um, double length_mm) noexcept;
+  void retire_finished_creeps() noexcept;
+  void fit_rates() noexcept;
+  void check_measurement_due(TimeNs now_ns, StepOutput& out) noexcept;
+  void compute_targets() noexcept;
+  void write_outputs(TimeNs now_ns, StepOutput& out) noexcept;
+  void write_flag(TimeNs now_ns, std::int32_t reg, bool value, std::size_t slot,
+                  StepOutput& out) noexcept;
+  void halt(TimeNs now_ns, AlarmCode code, double value, StepOutput& out) noexcept;
+  [[nodiscard]] double creep_fraction(const CreepSlot& c, std::size_t i) const noexcept;
+  [[nodiscard]] double predicted_um(std::size_t i) const noexcept;
+  [[nodiscard]] double entry_offset_um() const noexcept;
+  [[nodiscard]] double transition_offset_um() const noexcept;
+  [[nodiscard]] double deflection(double wear_um, bool lateral) const noexcept;
+  [[nodiscard]] bool normal_now(std::array<double, 3>& n) const noexcept;
+  void select_tool_tables() noexcept;
+
+  CreepConfig config_{};
+  ProfileTable table_{};
+  std::size_t points_{1};
+  CreepState s_{};
+  CreepCounters counters_{};
+  std::array<OffsetLimiter, kChannelCount> limiters_{};
+
+  // Kinematics of the last axis sample (not persisted: re-anchored by the first sample).
+  bool have_sample_{false};
+  bool cutting_{false};
+  bool interrupted_{false};
+  AxisSample last_sample_{};
+  TimeNs last_now_ns_{0};
+  bool have_now_{false};
+  int deflection_index_{-1};
+  std::array<std::uint8_t, kMaxTransitions> transition_index_{};
+  std::size_t transition_count_{0};
+
+  // Results of the last step.
+  double correction_um_{0.0};
+  double lateral_um_{0.0};
+  double engagement_deg_{kNaN};
+  std::array<double, kChannelCount> target_um_{};
+  std::array<double, kChannelCount> written_um_{};
+  std::array<TimeNs, kChannelCount> written_ns_{};
+  std::array<bool, kChannelCount> written_once_{};
+  std::array<LimitVerdict, kChannelCount> last_verdict_{};
+  // Flag registers: warning, alarm, measurement due, tool change, restart path.
+  static constexpr std::size_t kFlagSlots = 5;
+  std::array<double, kFlagSlots> flag_written_{};
+  std::array<bool, kFlagSlots> flag_written_once_{};
+  std::array<TimeNs, kFlagSlots> flag_written_ns_{};
+};
+
+}  // namespace nccomp::core::creep
