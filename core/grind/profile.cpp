@@ -1,0 +1,285 @@
+#include "core/grind/profile.hpp"
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <numbers>
+#include <stdexcept>
+#include <string>
+#include <system_error>
+
+namespace nccomp::core::grind {
+namespace {
+
+std::string where(std::string_view source, std::size_t line) {
+  return std::string(source) + ":" + std::to_string(line) + ": ";
+}
+
+std::string_view trim(std::string_view s) {
+  while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) {
+    s.remove_prefix(1);
+  }
+  while (!s.empty() && (s.back() == ' ' || s.back() == '\t' || s.back() == '\r')) {
+    s.remove_suffix(1);
+  }
+  return s;
+}
+
+// from_chars rejects a leading '+', which spreadsheets write; accept it explicitly.
+bool parse_number(std::string_view field, double& out) {
+  if (!field.empty() && field.front() == '+') {
+    field.remove_prefix(1);
+  }
+  if (field.empty()) {
+    return false;
+  }
+  const auto* first = field.data();
+  const auto* last = first + field.size();
+  const auto [ptr, ec] = std::from_chars(first, last, out);
+  return ec == std::errc() && ptr == last;
+}
+
+std::string show(std::string_view field) {
+  constexpr std::size_t kMax = 40;
+  std::string s(field.substr(0, kMax));
+  for (char& c : s) {
+    if (static_cast<unsigned char>(c) < 0x20 || static_cast<unsigned char>(c) >= 0x7f) {
+      c = '?';
+    }
+  }
+  return "'" + s + (field.size() > kMax ? "...'" : "'");
+}
+
+}  // namespace
+
+double UniformProfile::interpolate(double z_mm) const noexcept {
+  const double x = (z_mm - z0_mm) / spacing_mm;
+  if (!(x > 0.0)) {
+    return u_mm.front();
+  }
+  const auto n = u_mm.size();
+  if (x >= static_cast<double>(n - 1)) {
+    return u_mm.back();
+  }
+  const auto i = static_cast<std::size_t>(x);
+  const double f = x - static_cast<double>(i);
+  return u_mm[i] + f * (u_mm[i + 1] - u_mm[i]);
+}
+
+SampledProfile parse_profile_csv(std::string_view text, std::string_view source) {
+  SampledProfile out;
+  std::size_t line_no = 0;
+  bool first_content = true;
+  while (!text.empty()) {
+    const auto eol = text.find('\n');
+    std::string_view line = text.substr(0, eol);
+    text.remove_prefix(eol == std::string_view::npos ? text.size() : eol + 1);
+    ++line_no;
+    line = trim(line);
+    if (line.empty() || line.front() == '#') {
+      continue;
+    }
+    const auto comma = line.find(',');
+    if (comma == std::string_view::npos) {
+      throw std::invalid_argument(where(source, line_no) +
+                                  "expected two fields 'z_mm,u_mm', got " + show(line));
+    }
+    const auto zf = trim(line.substr(0, comma));
+    const auto uf = trim(line.substr(comma + 1));
+    if (uf.find(',') != std::string_view::npos) {
+      throw std::invalid_argument(where(source, line_no) +
+                                  "expected two fields 'z_mm,u_mm', got more: " + show(line));
+    }
+    if (first_content && zf == "z_mm" && uf == "u_mm") {
+      first_content = false;
+      continue;
+    }
+    first_content = false;
+    double z = 0.0;
+    double u = 0.0;
+    if (!parse_number(zf, z)) {
+      throw std::invalid_argument(where(source, line_no) + "z_mm is not a number: " + show(zf));
+    }
+    if (!parse_number(uf, u)) {
+      throw std::invalid_argument(where(source, line_no) + "u_mm is not a number: " + show(uf));
+    }
+    if (!std::isfinite(z) || !std::isfinite(u)) {
+      throw std::invalid_argument(where(source, line_no) + "value is not finite (NaN or inf)");
+    }
+    if (!out.z_mm.empty() && !(z > out.z_mm.back())) {
+      throw std::invalid_argument(where(source, line_no) + "z_mm must increase strictly: " +
+                                  std::to_string(z) + " after " +
+                                  std::to_string(out.z_mm.back()));
+    }
+    if (out.z_mm.size() >= kMaxProfileSamples) {
+      throw std::invalid_argument(where(source, line_no) + "more than " +
+                                  std::to_string(kMaxProfileSamples) + " samples");
+    }
+    out.z_mm.push_back(z);
+    out.u_mm.push_back(u);
+    out.line.push_back(line_no);
+  }
+  if (out.z_mm.size() < 2) {
+    throw std::invalid_argument(std::string(source) + ": needs at least 2 samples, got " +
+                                std::to_string(out.z_mm.size()));
+  }
+  return out;
+}
+
+UniformProfile to_uniform(const SampledProfile& s, double resample_spacing_mm,
+                          std::string_view source) {
+  const std::size_t n = s.z_mm.size();
+  if (n < 2 || s.u_mm.size() != n) {
+    throw std::invalid_argument(std::string(source) + ": needs at least 2 samples");
+  }
+  const double span = s.z_mm.back() - s.z_mm.front();
+  if (!(span > 0.0)) {
+    throw std::invalid_argument(std::string(source) + ": z range is empty");
+  }
+  const double dz = span / static_cast<double>(n - 1);
+  std::size_t bad = n;
+  for (std::size_t i = 0; i < n; ++i) {
+    const double expect = s.z_mm.front() + static_cast<double>(i) * dz;
+    if (std::abs(s.z_mm[i] - expect) > 1e-6 * dz) {
+      bad = i;
+      break;
+    }
+  }
+  if (bad == n) {
+    return UniformProfile{s.z_mm.front(), dz, s.u_mm};
+  }
+  if (!(resample_spacing_mm > 0.0) || !std::isfinite(resample_spacing_mm)) {
+    const std::size_t line = s.line.size() == n ? s.line[bad] : bad + 1;
+    throw std::invalid_argument(
+        where(source, line) + "samples are not uniformly spaced (z = " +
+        std::to_string(s.z_mm[bad]) + ", uniform spacing would put it at " +
+        std::to_string(s.z_mm.front() + static_cast<double>(bad) * dz) +
+        "); give a resampling spacing");
+  }
+  const double count = std::floor(span / resample_spacing_mm * (1.0 + 1e-12)) + 1.0;
+  if (count > static_cast<double>(kMaxProfileSamples)) {
+    throw std::invalid_argument(std::string(source) + ": resampling would give more than " +
+                                std::to_string(kMaxProfileSamples) + " samples");
+  }
+  UniformProfile out{s.z_mm.front(), resample_spacing_mm, {}};
+  const auto m = static_cast<std::size_t>(count);
+  out.u_mm.resize(m);
+  std::size_t j = 0;
+  for (std::size_t i = 0; i < m; ++i) {
+    const double z = out.z_at(static_cast<std::ptrdiff_t>(i));
+    while (j + 2 < n && s.z_mm[j + 1] < z) {
+      ++j;
+    }
+    const double f = std::clamp((z - s.z_mm[j]) / (s.z_mm[j + 1] - s.z_mm[j]), 0.0, 1.0);
+    out.u_mm[i] = s.u_mm[j] + f * (s.u_mm[j + 1] - s.u_mm[j]);
+  }
+  return out;
+}
+
+Family parse_family(std::string_view name) {
+  if (name == "straight") return Family::kStraight;
+  if (name == "convex") return Family::kConvexCrown;
+  if (name == "concave") return Family::kConcaveCrown;
+  if (name == "cvc") return Family::kCvc;
+  if (name == "sine") return Family::kSine;
+  if (name == "poly") return Family::kPolynomial;
+  throw std::invalid_argument("unknown profile family " + show(name) +
+                              " (straight, convex, concave, cvc, sine, poly)");
+}
+
+UniformProfile generate_profile(const FamilySpec& spec) {
+  const auto finite = [](double v, const char* what) {
+    if (!std::isfinite(v)) {
+      throw std::invalid_argument(std::string("profile family: ") + what + " must be finite");
+    }
+  };
+  finite(spec.z_from_mm, "z_from_mm");
+  finite(spec.z_to_mm, "z_to_mm");
+  finite(spec.offset_mm, "offset_mm");
+  finite(spec.slope, "slope");
+  finite(spec.height_mm, "height_mm");
+  finite(spec.amplitude_mm, "amplitude_mm");
+  finite(spec.phase_rad, "phase");
+  for (double c : spec.coef) {
+    finite(c, "every coefficient");
+  }
+  if (!(spec.z_to_mm > spec.z_from_mm)) {
+    throw std::invalid_argument("profile family: z_to_mm must be greater than z_from_mm");
+  }
+  if (!(spec.spacing_mm > 0.0) || !std::isfinite(spec.spacing_mm)) {
+    throw std::invalid_argument("profile family: spacing_mm must be > 0");
+  }
+  const double count =
+      std::floor((spec.z_to_mm - spec.z_from_mm) / spec.spacing_mm * (1.0 + 1e-12)) + 1.0;
+  if (count > static_cast<double>(kMaxProfileSamples)) {
+    throw std::invalid_argument("profile family: more than " +
+                                std::to_string(kMaxProfileSamples) + " samples");
+  }
+  if (count < 2.0) {
+    throw std::invalid_argument("profile family: the range holds fewer than 2 samples");
+  }
+  const double mid = 0.5 * (spec.z_from_mm + spec.z_to_mm);
+  const double half = 0.5 * (spec.z_to_mm - spec.z_from_mm);
+  const double ref = spec.z_ref_given ? spec.z_ref_mm : mid;
+  finite(ref, "z_ref_mm");
+  switch (spec.family) {
+    case Family::kCvc:
+      if (spec.coef.size() != 4) {
+        throw std::invalid_argument("profile family cvc: needs exactly 4 coefficients c0..c3, got " +
+                                    std::to_string(spec.coef.size()));
+      }
+      break;
+    case Family::kPolynomial:
+      if (spec.coef.empty() || spec.coef.size() > 16) {
+        throw std::invalid_argument("profile family poly: needs 1 to 16 coefficients, got " +
+                                    std::to_string(spec.coef.size()));
+      }
+      break;
+    case Family::kSine:
+      if (!(spec.wavelength_mm > 0.0) || !std::isfinite(spec.wavelength_mm)) {
+        throw std::invalid_argument("profile family sine: wavelength_mm must be > 0");
+      }
+      break;
+    default:
+      break;
+  }
+  UniformProfile out{spec.z_from_mm, spec.spacing_mm, {}};
+  const auto n = static_cast<std::size_t>(count);
+  out.u_mm.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const double z = out.z_at(static_cast<std::ptrdiff_t>(i));
+    const double x = z - ref;
+    double u = 0.0;
+    switch (spec.family) {
+      case Family::kStraight:
+        u = spec.offset_mm + spec.slope * x;
+        break;
+      case Family::kConvexCrown:
+      case Family::kConcaveCrown: {
+        const double q = (z - mid) / half;
+        const double c = spec.height_mm * (1.0 - q * q);
+        u = spec.offset_mm + (spec.family == Family::kConvexCrown ? c : -c);
+        break;
+      }
+      case Family::kSine:
+        u = spec.offset_mm +
+            spec.amplitude_mm * std::sin(2.0 * std::numbers::pi * x / spec.wavelength_mm +
+                                         spec.phase_rad);
+        break;
+      case Family::kCvc:
+      case Family::kPolynomial:
+        for (auto k = spec.coef.size(); k-- > 0;) {  // Horner
+          u = u * x + spec.coef[k];
+        }
+        break;
+    }
+    if (!std::isfinite(u)) {
+      throw std::invalid_argument("profile family: value at z = " + std::to_string(z) +
+                                  " mm is not finite");
+    }
+    out.u_mm[i] = u;
+  }
+  return out;
+}
+
+}  // namespace nccomp::core::grind

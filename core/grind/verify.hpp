@@ -1,0 +1,37 @@
+// Independent verification of a trajectory (seeds.md S2, last paragraph): the profile a wheel
+// grinds when T follows the polyline Q, B(z) = min over Q of [U + g(z − Z)], compared with P.
+//
+// Deliberately a different algorithm from envelope.cpp: brute force over every segment of the
+// polyline within the wheel's reach, each minimised in closed form (U is linear along a segment
+// and g convex, so U(Z) + g(z − Z) has one stationary point where g'(z − Z) equals the segment's
+// slope). It evaluates the polyline itself — the path the NC interpolates — not grid values, and
+// accepts any point order (the local rule's trajectory doubles back in concave regions).
+// Cost: O(E·S_w) for E evaluation points and S_w segments within W of each; not real-time.
+#pragma once
+
+#include <cstddef>
+#include <span>
+#include <vector>
+
+#include "core/grind/local_rule.hpp"
+#include "core/grind/wheel.hpp"
+
+namespace nccomp::core::grind {
+
+/// B at every z of z_eval (+inf where no part of Q is within W/2 of z).
+std::vector<double> ground_by_polyline(std::span<const TrajectoryPoint> q, const Wheel& wheel,
+                                       std::span<const double> z_eval);
+
+struct GroundError {
+  std::size_t points{0};        ///< evaluation points compared
+  std::size_t unreached{0};     ///< points no wheel position reaches (B = +inf), left out
+  double max_abs_mm{0.0};       ///< max |B − P|
+  double z_at_max_mm{0.0};
+  double rms_mm{0.0};
+  double max_gouge_mm{0.0};     ///< max (P − B): material removed below the target
+  double max_left_mm{0.0};      ///< max (B − P): material left above the target
+};
+GroundError compare_ground(std::span<const double> z_mm, std::span<const double> b_mm,
+                           std::span<const double> p_mm);
+
+}  // namespace nccomp::core::grind
