@@ -1,0 +1,642 @@
+#include "drivers/modbus/config.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <limits>
+#include <sstream>
+#include <string>
+
+#include <toml++/toml.h>
+
+namespace nccomp::drivers::modbus {
+namespace {
+
+constexpr std::array<std::string_view, kGroupCount> kGroupKeys = {
+    "axis", "tool_measurement", "probe_measurement", "calibration_touch", "tool_change",
+    "program_event"};
+
+constexpr std::array<std::array<std::string_view, kMaxFields>, kGroupCount> kFieldKeys = {{
+    {"x_mm", "y_mm", "z_mm", "a_deg", "b_deg", "c_deg", "program_path_mm", "tool", "normal_x",
+     "normal_y", "normal_z", "cutting"},
+    {"sequence", "tool", "wear_um", "broken"},
+    {"sequence", "part", "checkpoint", "raw_deviation_um", "wall_angle_deg", "ball_radius_mm",
+     "x_mm", "y_mm", "z_mm"},
+    {"sequence", "probe", "axis", "direction", "variant", "trigger_position_mm"},
+    {"sequence", "tool", "sister"},
+    {"sequence", "kind", "part"},
+}};
+constexpr std::array<std::size_t, kGroupCount> kFieldCounts = {
+    axis_field::kCount,  tool_meas_field::kCount,   probe_field::kCount,
+    touch_field::kCount, tool_change_field::kCount, program_field::kCount};
+
+/// Fields an event group cannot do without (besides the sequence counter).
+bool required(Group g, std::size_t f) {
+  switch (g) {
+    case Group::kAxis:
+      return f == axis_field::kX;
+    case Group::kToolMeasurement:
+      return f == tool_meas_field::kSeq || f == tool_meas_field::kTool ||
+             f == tool_meas_field::kWear;
+    case Group::kProbeMeasurement:
+      return f == probe_field::kSeq || f == probe_field::kCheckpoint ||
+             f == probe_field::kDeviation;
+    case Group::kCalibrationTouch:
+      return f == touch_field::kSeq || f == touch_field::kAxis || f == touch_field::kDirection ||
+             f == touch_field::kPosition;
+    case Group::kToolChange:
+      return f == tool_change_field::kSeq || f == tool_change_field::kTool;
+    case Group::kProgramEvent:
+      return f == program_field::kSeq || f == program_field::kKind;
+  }
+  return false;
+}
+
+constexpr std::uint16_t kMaxReadRegisters = 125;  // Modbus spec, function 3/4
+constexpr std::uint16_t kMaxReadBits = 2000;       // function 1/2
+
+std::string table_name(Table t) {
+  switch (t) {
+    case Table::kCoil:
+      return "coil";
+    case Table::kDiscreteInput:
+      return "discrete_input";
+    case Table::kHolding:
+      return "holding";
+    case Table::kInput:
+      return "input";
+  }
+  return "?";
+}
+
+class Reader {
+ public:
+  explicit Reader(std::string_view file) : file_(file) {}
+
+  [[noreturn]] void fail(const toml::node* where, const std::string& path,
+                         const std::string& what) const {
+    std::ostringstream s;
+    s << file_;
+    if (where != nullptr && where->source().begin.line > 0) {
+      s << ':' << where->source().begin.line;
+    }
+    s << ": " << path << ": " << what;
+    throw ConfigError(s.str());
+  }
+
+  /// Refuses keys of `t` not in `allowed`.
+  template <std::size_t N>
+  void check_keys(const toml::table& t, const std::string& path,
+                  const std::array<std::string_view, N>& allowed) const {
+    for (auto&& [k, v] : t) {
+      if (std::find(allowed.begin(), allowed.end(), k.str()) == allowed.end()) {
+        fail(&v, join(path, k.str()), "unknown key");
+      }
+    }
+  }
+
+  static std::string join(const std::string& path, std::string_view key) {
+    return path.empty() ? std::string(key) : path + "." + std::string(key);
+  }
+
+  std::string str(const toml::table& t, const std::string& path, std::string_view key,
+                  const std::string& dflt) const {
+    const toml::node* n = t.get(key);
+    if (n == nullptr) {
+      return dflt;
+    }
+    if (!n->is_string()) {
+      fail(n, join(path, key), "expected a string");
+    }
+    return std::string(*n->value<std::string_view>());
+  }
+
+  bool boolean(const toml::table& t, const std::string& path, std::string_view key,
+               bool dflt) const {
+    const toml::node* n = t.get(key);
+    if (n == nullptr) {
+      return dflt;
+    }
+    if (!n->is_boolean()) {
+      fail(n, join(path, key), "expected true or false");
+    }
+    return *n->value<bool>();
+  }
+
+  std::int64_t integer(const toml::table& t, const std::string& path, std::string_view key,
+                       std::int64_t dflt, std::int64_t lo, std::int64_t hi) const {
+    const toml::node* n = t.get(key);
+    if (n == nullptr) {
+      return dflt;
+    }
+    if (!n->is_integer()) {
+      fail(n, join(path, key), "expected an integer");
+    }
+    const std::int64_t v = *n->value<std::int64_t>();
+    if (v < lo || v > hi) {
+      fail(n, join(path, key),
+           "value " + std::to_string(v) + " outside " + std::to_string(lo) + ".." +
+               std::to_string(hi));
+    }
+    return v;
+  }
+
+  double number(const toml::table& t, const std::string& path, std::string_view key, double dflt,
+                double lo, double hi) const {
+    const toml::node* n = t.get(key);
+    if (n == nullptr) {
+      return dflt;
+    }
+    double v = 0.0;
+    if (n->is_integer()) {
+      v = static_cast<double>(*n->value<std::int64_t>());
+    } else if (n->is_floating_point()) {
+      v = *n->value<double>();
+    } else {
+      fail(n, join(path, key), "expected a number");
+    }
+    if (!std::isfinite(v) || v < lo || v > hi) {
+      std::ostringstream s;
+      s << "value " << v << " outside " << lo << ".." << hi;
+      fail(n, join(path, key), s.str());
+    }
+    return v;
+  }
+
+  const toml::table* sub_table(const toml::table& t, const std::string& path,
+                               std::string_view key) const {
+    const toml::node* n = t.get(key);
+    if (n == nullptr) {
+      return nullptr;
+    }
+    if (!n->is_table()) {
+      fail(n, join(path, key), "expected a table");
+    }
+    return n->as_table();
+  }
+
+  template <typename E, std::size_t N>
+  E choice(const toml::table& t, const std::string& path, std::string_view key, E dflt,
+           const std::array<std::pair<std::string_view, E>, N>& options) const {
+    const toml::node* n = t.get(key);
+    if (n == nullptr) {
+      return dflt;
+    }
+    if (!n->is_string()) {
+      fail(n, join(path, key), "expected a string");
+    }
+    const std::string_view v = *n->value<std::string_view>();
+    std::string list;
+    for (const auto& [name, e] : options) {
+      if (name == v) {
+        return e;
+      }
+      list += (list.empty() ? "" : ", ") + std::string(name);
+    }
+    fail(n, join(path, key), "unknown value '" + std::string(v) + "' (expected " + list + ")");
+  }
+
+  std::string_view file() const { return file_; }
+
+ private:
+  std::string file_;
+};
+
+constexpr std::array<std::pair<std::string_view, Table>, 4> kTables = {{
+    {"coil", Table::kCoil},
+    {"discrete_input", Table::kDiscreteInput},
+    {"holding", Table::kHolding},
+    {"input", Table::kInput},
+}};
+constexpr std::array<std::pair<std::string_view, ValueType>, 6> kTypes = {{
+    {"bool", ValueType::kBool},
+    {"int16", ValueType::kInt16},
+    {"uint16", ValueType::kUint16},
+    {"int32", ValueType::kInt32},
+    {"uint32", ValueType::kUint32},
+    {"float32", ValueType::kFloat32},
+}};
+constexpr std::array<std::pair<std::string_view, WordOrder>, 2> kWordOrders = {{
+    {"high_first", WordOrder::kHighFirst},
+    {"low_first", WordOrder::kLowFirst},
+}};
+constexpr std::array<std::pair<std::string_view, ByteOrder>, 2> kByteOrders = {{
+    {"big", ByteOrder::kBigEndian},
+    {"swapped", ByteOrder::kSwapped},
+}};
+
+/// Encoding keys shared by signals and offsets. `bits_allowed`: coils / discrete inputs.
+Encoding read_encoding(const Reader& r, const toml::table& t, const std::string& path,
+                       Table table) {
+  Encoding e;
+  const ValueType dflt = is_bit_table(table) ? ValueType::kBool : ValueType::kInt16;
+  e.type = r.choice(t, path, "type", dflt, kTypes);
+  if (is_bit_table(table) && e.type != ValueType::kBool) {
+    r.fail(t.get("type"), Reader::join(path, "type"),
+           "a " + table_name(table) + " is one bit: type must be bool");
+  }
+  if (!is_bit_table(table) && e.type == ValueType::kBool) {
+    r.fail(t.get("type"), Reader::join(path, "type"),
+           "bool is for coil / discrete_input; use uint16 (non-zero = true) for registers");
+  }
+  e.word_order = r.choice(t, path, "word_order", WordOrder::kHighFirst, kWordOrders);
+  e.byte_order = r.choice(t, path, "byte_order", ByteOrder::kBigEndian, kByteOrders);
+  e.scale = r.number(t, path, "scale", 1.0, -1e12, 1e12);
+  if (std::fabs(e.scale) < 1e-12) {
+    r.fail(t.get("scale"), Reader::join(path, "scale"), "scale must not be 0");
+  }
+  e.offset = r.number(t, path, "offset", 0.0, -1e12, 1e12);
+  return e;
+}
+
+constexpr std::array<std::string_view, 7> kSignalKeys = {
+    "table", "address", "type", "word_order", "byte_order", "scale", "offset"};
+
+SignalMap read_signal(const Reader& r, const toml::node& n, const std::string& path,
+                      const toml::table* flat_parent = nullptr) {
+  const toml::table* t = flat_parent != nullptr ? flat_parent : n.as_table();
+  if (t == nullptr) {
+    r.fail(&n, path, "expected a table { table = ..., address = ..., type = ... }");
+  }
+  if (flat_parent == nullptr) {
+    r.check_keys(*t, path, kSignalKeys);
+  }
+  SignalMap s;
+  s.mapped = true;
+  s.table = r.choice(*t, path, "table", Table::kHolding, kTables);
+  if (t->get("address") == nullptr) {
+    r.fail(&n, Reader::join(path, "address"), "missing");
+  }
+  s.address = static_cast<std::uint16_t>(r.integer(*t, path, "address", 0, 0, 65535));
+  s.encoding = read_encoding(r, *t, path, s.table);
+  if (static_cast<std::uint32_t>(s.address) + width(s.encoding.type) > 65536U) {
+    r.fail(t->get("address"), Reader::join(path, "address"),
+           "value does not fit below address 65535");
+  }
+  return s;
+}
+
+struct Claim {
+  Table table;
+  std::uint32_t first;
+  std::uint32_t last;
+  std::string path;
+  int line;
+};
+
+}  // namespace
+
+std::string_view group_key(Group g) noexcept { return kGroupKeys[static_cast<std::size_t>(g)]; }
+std::size_t field_count(Group g) noexcept { return kFieldCounts[static_cast<std::size_t>(g)]; }
+std::string_view field_key(Group g, std::size_t field) noexcept {
+  return kFieldKeys[static_cast<std::size_t>(g)][field];
+}
+
+double rtu_char_time_s(const ModbusConfig& c) noexcept {
+  const double bits = 1.0 + c.data_bits + (c.parity == Parity::kNone ? 0.0 : 1.0) + c.stop_bits;
+  return bits / static_cast<double>(c.baud);
+}
+
+double rtu_frame_gap_s(const ModbusConfig& c) noexcept {
+  return c.baud > 19200 ? 0.00175 : 3.5 * rtu_char_time_s(c);
+}
+
+ModbusConfig parse_modbus_config(std::string_view toml_text, std::string_view file) {
+  toml::table root;
+  try {
+    root = toml::parse(toml_text, file);
+  } catch (const toml::parse_error& e) {
+    std::ostringstream s;
+    s << file << ':' << e.source().begin.line << ": " << e.description();
+    throw ConfigError(s.str());
+  }
+  const Reader r(file);
+  const toml::node* mnode = root.get("modbus");
+  if (mnode == nullptr || !mnode->is_table()) {
+    r.fail(mnode, "modbus", "missing [modbus] table");
+  }
+  const toml::table& m = *mnode->as_table();
+  const std::string mp = "modbus";
+  static constexpr std::array<std::string_view, 29> kTopKeys = {
+      "transport", "host", "port", "device", "baud", "parity", "data_bits", "stop_bits",
+      "rs485", "unit_id", "response_timeout_s", "byte_timeout_s", "poll_rate_hz",
+      "offset_write_rate_hz", "reconnect_min_s", "reconnect_max_s", "dead_after_failures",
+      "verify_writes", "alarm_after_s", "rx_capacity", "tx_capacity", "axis",
+      "tool_measurement", "probe_measurement", "calibration_touch", "tool_change",
+      "program_event", "temperature", "offset"};
+  r.check_keys(m, mp, kTopKeys);
+
+  ModbusConfig c;
+  static constexpr std::array<std::pair<std::string_view, Transport>, 2> kTransports = {{
+      {"tcp", Transport::kTcp},
+      {"rtu", Transport::kRtu},
+  }};
+  c.transport = r.choice(m, mp, "transport", Transport::kTcp, kTransports);
+  if (m.get("transport") == nullptr) {
+    r.fail(mnode, "modbus.transport", "missing (tcp or rtu)");
+  }
+  c.host = r.str(m, mp, "host", c.host);
+  c.port = static_cast<std::uint16_t>(r.integer(m, mp, "port", 502, 1, 65535));
+  c.device = r.str(m, mp, "device", "");
+  c.baud = static_cast<std::uint32_t>(r.integer(m, mp, "baud", 19200, 300, 4000000));
+  static constexpr std::array<std::pair<std::string_view, Parity>, 3> kParities = {{
+      {"none", Parity::kNone},
+      {"even", Parity::kEven},
+      {"odd", Parity::kOdd},
+  }};
+  c.parity = r.choice(m, mp, "parity", Parity::kEven, kParities);
+  c.data_bits = static_cast<std::uint8_t>(r.integer(m, mp, "data_bits", 8, 7, 8));
+  c.stop_bits = static_cast<std::uint8_t>(r.integer(m, mp, "stop_bits", 1, 1, 2));
+  c.rs485 = r.boolean(m, mp, "rs485", false);
+  if (c.transport == Transport::kRtu && c.device.empty()) {
+    r.fail(mnode, "modbus.device", "missing: RTU needs a serial device path");
+  }
+  if (c.transport == Transport::kTcp && c.host.empty()) {
+    r.fail(m.get("host"), "modbus.host", "must not be empty");
+  }
+  c.unit_id = static_cast<std::uint8_t>(r.integer(m, mp, "unit_id", 1, 0, 247));
+  c.response_timeout_s = r.number(m, mp, "response_timeout_s", 0.5, 0.001, 60.0);
+  c.byte_timeout_s = r.number(m, mp, "byte_timeout_s", 0.5, 0.0001, 60.0);
+  c.poll_rate_hz = r.number(m, mp, "poll_rate_hz", 100.0, 0.01, 10000.0);
+  c.offset_write_rate_hz = r.number(m, mp, "offset_write_rate_hz", 0.0, 0.0, 10000.0);
+  c.reconnect_min_s = r.number(m, mp, "reconnect_min_s", 0.1, 0.001, 600.0);
+  c.reconnect_max_s = r.number(m, mp, "reconnect_max_s", 5.0, 0.001, 600.0);
+  if (c.reconnect_max_s < c.reconnect_min_s) {
+    r.fail(m.get("reconnect_max_s"), "modbus.reconnect_max_s", "smaller than reconnect_min_s");
+  }
+  c.dead_after_failures =
+      static_cast<std::uint32_t>(r.integer(m, mp, "dead_after_failures", 3, 1, 1000));
+  c.verify_writes = r.boolean(m, mp, "verify_writes", false);
+  c.alarm_after_s = r.number(m, mp, "alarm_after_s", 1.0, 0.0, 3600.0);
+  const auto pow2 = [&](std::string_view key, std::int64_t dflt) {
+    const std::int64_t v = r.integer(m, mp, key, dflt, 2, 1 << 20);
+    if ((v & (v - 1)) != 0) {
+      r.fail(m.get(key), Reader::join(mp, key), "must be a power of two");
+    }
+    return static_cast<std::size_t>(v);
+  };
+  c.rx_capacity = pow2("rx_capacity", 1024);
+  c.tx_capacity = pow2("tx_capacity", 256);
+
+  std::vector<Claim> claims;
+  const auto claim = [&](const SignalMap& s, const std::string& path, const toml::node* n) {
+    const std::uint32_t first = s.address;
+    claims.push_back({s.table, first, first + width(s.encoding.type) - 1U, path,
+                      n != nullptr ? static_cast<int>(n->source().begin.line) : 0});
+  };
+
+  // Signal groups.
+  for (std::size_t gi = 0; gi < kGroupCount; ++gi) {
+    const auto g = static_cast<Group>(gi);
+    const std::string gp = mp + "." + std::string(kGroupKeys[gi]);
+    const toml::table* gt = r.sub_table(m, mp, kGroupKeys[gi]);
+    if (gt == nullptr) {
+      continue;
+    }
+    GroupMap& gm = c.groups[gi];
+    gm.present = true;
+    for (auto&& [k, v] : *gt) {
+      const auto& keys = kFieldKeys[gi];
+      const auto it = std::find(keys.begin(), keys.begin() + static_cast<std::ptrdiff_t>(kFieldCounts[gi]), k.str());
+      if (it == keys.begin() + static_cast<std::ptrdiff_t>(kFieldCounts[gi])) {
+        r.fail(&v, Reader::join(gp, k.str()), "unknown signal");
+      }
+      const auto fi = static_cast<std::size_t>(it - keys.begin());
+      const std::string fp = Reader::join(gp, k.str());
+      gm.fields[fi] = read_signal(r, v, fp);
+      claim(gm.fields[fi], fp, &v);
+    }
+    for (std::size_t fi = 0; fi < kFieldCounts[gi]; ++fi) {
+      if (required(g, fi) && !gm.fields[fi].mapped) {
+        r.fail(gt, Reader::join(gp, kFieldKeys[gi][fi]), "missing (required for this group)");
+      }
+    }
+    if (g == Group::kAxis) {
+      // Axes fill AxisSample.position_mm from X on: a gap would leave an axis undefined.
+      bool gap = false;
+      for (std::size_t a = axis_field::kX; a <= axis_field::kC; ++a) {
+        if (!gm.fields[a].mapped) {
+          gap = true;
+        } else if (gap) {
+          r.fail(gt->get(kFieldKeys[gi][a]), Reader::join(gp, kFieldKeys[gi][a]),
+                 "axes must be mapped in order x, y, z, a, b, c without gaps");
+        }
+      }
+      const bool nx = gm.fields[axis_field::kNormalX].mapped;
+      if (nx != gm.fields[axis_field::kNormalY].mapped ||
+          nx != gm.fields[axis_field::kNormalZ].mapped) {
+        r.fail(gt, gp + ".normal_x", "normal_x, normal_y and normal_z go together");
+      }
+    } else {
+      const SignalMap& seq = gm.fields[0];
+      const std::string sp = gp + ".sequence";
+      if (seq.encoding.type != ValueType::kUint16 && seq.encoding.type != ValueType::kUint32) {
+        r.fail(gt->get("sequence"), sp, "a sequence counter must be uint16 or uint32");
+      }
+      if (is_bit_table(seq.table)) {
+        r.fail(gt->get("sequence"), sp, "a sequence counter must be in holding or input");
+      }
+      for (std::size_t fi = 1; fi < kFieldCounts[gi]; ++fi) {
+        if (gm.fields[fi].mapped && gm.fields[fi].table != seq.table) {
+          r.fail(gt->get(kFieldKeys[gi][fi]), Reader::join(gp, kFieldKeys[gi][fi]),
+                 "must be in the same table as sequence (" + table_name(seq.table) +
+                     ") so that the event is read in one request");
+        }
+      }
+    }
+  }
+
+  // Temperatures.
+  if (const toml::node* tn = m.get("temperature")) {
+    const toml::array* arr = tn->as_array();
+    if (arr == nullptr) {
+      r.fail(tn, "modbus.temperature", "expected an array of tables [[modbus.temperature]]");
+    }
+    for (std::size_t i = 0; i < arr->size(); ++i) {
+      const std::string tp = "modbus.temperature[" + std::to_string(i) + "]";
+      const toml::table* t = (*arr)[i].as_table();
+      if (t == nullptr) {
+        r.fail(&(*arr)[i], tp, "expected a table");
+      }
+      static constexpr std::array<std::string_view, 8> kTempKeys = {
+          "sensor", "table", "address", "type", "word_order", "byte_order", "scale", "offset"};
+      r.check_keys(*t, tp, kTempKeys);
+      TemperatureMap tm;
+      if (t->get("sensor") == nullptr) {
+        r.fail(t, tp + ".sensor", "missing");
+      }
+      tm.sensor = static_cast<std::uint8_t>(r.integer(*t, tp, "sensor", 0, 0, 255));
+      for (const auto& other : c.temperatures) {
+        if (other.sensor == tm.sensor) {
+          r.fail(t->get("sensor"), tp + ".sensor", "sensor mapped twice");
+        }
+      }
+      tm.value = read_signal(r, *t, tp, t);
+      claim(tm.value, tp, t);
+      c.temperatures.push_back(tm);
+    }
+  }
+
+  // Offsets.
+  if (const toml::node* on = m.get("offset")) {
+    const toml::array* arr = on->as_array();
+    if (arr == nullptr) {
+      r.fail(on, "modbus.offset", "expected an array of tables [[modbus.offset]]");
+    }
+    for (std::size_t i = 0; i < arr->size(); ++i) {
+      const std::string op = "modbus.offset[" + std::to_string(i) + "]";
+      const toml::table* t = (*arr)[i].as_table();
+      if (t == nullptr) {
+        r.fail(&(*arr)[i], op, "expected a table");
+      }
+      static constexpr std::array<std::string_view, 7> kOffsetKeys = {
+          "register_index", "address", "type", "word_order", "byte_order", "scale", "offset"};
+      r.check_keys(*t, op, kOffsetKeys);
+      for (std::string_view req : {"register_index", "address"}) {
+        if (t->get(req) == nullptr) {
+          r.fail(t, Reader::join(op, req), "missing");
+        }
+      }
+      OffsetMap om;
+      om.register_index =
+          static_cast<std::uint16_t>(r.integer(*t, op, "register_index", 0, 0, 65535));
+      for (const auto& other : c.offsets) {
+        if (other.register_index == om.register_index) {
+          r.fail(t->get("register_index"), op + ".register_index", "register_index mapped twice");
+        }
+      }
+      om.address = static_cast<std::uint16_t>(r.integer(*t, op, "address", 0, 0, 65535));
+      om.encoding = read_encoding(r, *t, op, Table::kHolding);
+      if (static_cast<std::uint32_t>(om.address) + width(om.encoding.type) > 65536U) {
+        r.fail(t->get("address"), op + ".address", "value does not fit below address 65535");
+      }
+      SignalMap as_signal;
+      as_signal.table = Table::kHolding;
+      as_signal.address = om.address;
+      as_signal.encoding = om.encoding;
+      claim(as_signal, op, t);
+      c.offsets.push_back(om);
+    }
+  }
+
+  // Overlaps: sort the claimed ranges per table and compare neighbours.
+  std::sort(claims.begin(), claims.end(), [](const Claim& a, const Claim& b) {
+    return a.table != b.table ? a.table < b.table : a.first < b.first;
+  });
+  for (std::size_t i = 1; i < claims.size(); ++i) {
+    const Claim& a = claims[i - 1];
+    const Claim& b = claims[i];
+    if (a.table == b.table && b.first <= a.last) {
+      std::ostringstream s;
+      s << r.file() << ':' << b.line << ": " << b.path << ": " << table_name(b.table)
+        << " address " << b.first << " overlaps " << a.path << " (line " << a.line << ")";
+      throw ConfigError(s.str());
+    }
+  }
+
+  // Read blocks: one per (group, table); an event group has exactly one.
+  const auto plan = [&](std::vector<SignalMap*> signals, const std::string& path) {
+    for (std::size_t ti = 0; ti < kTableCount; ++ti) {
+      const auto table = static_cast<Table>(ti);
+      std::uint32_t lo = 65536;
+      std::uint32_t hi = 0;
+      for (const SignalMap* s : signals) {
+        if (s->table == table) {
+          lo = std::min<std::uint32_t>(lo, s->address);
+          hi = std::max<std::uint32_t>(hi, s->address + width(s->encoding.type));
+        }
+      }
+      if (lo > hi) {
+        continue;
+      }
+      const std::uint32_t span = hi - lo;
+      const std::uint32_t max = is_bit_table(table) ? kMaxReadBits : kMaxReadRegisters;
+      if (span > max) {
+        std::ostringstream s;
+        s << r.file() << ": " << path << ": its " << table_name(table) << " signals span " << span
+          << " addresses, more than one read request carries (" << max
+          << "); place them closer together";
+        throw ConfigError(s.str());
+      }
+      const std::size_t bi = c.blocks.size();
+      c.blocks.push_back({table, static_cast<std::uint16_t>(lo), static_cast<std::uint16_t>(span)});
+      for (SignalMap* s : signals) {
+        if (s->table == table) {
+          s->block = bi;
+          s->block_offset = static_cast<std::uint16_t>(s->address - lo);
+        }
+      }
+    }
+  };
+  for (std::size_t gi = 0; gi < kGroupCount; ++gi) {
+    if (!c.groups[gi].present) {
+      continue;
+    }
+    std::vector<SignalMap*> sigs;
+    for (std::size_t fi = 0; fi < kFieldCounts[gi]; ++fi) {
+      if (c.groups[gi].fields[fi].mapped) {
+        sigs.push_back(&c.groups[gi].fields[fi]);
+      }
+    }
+    plan(sigs, mp + "." + std::string(kGroupKeys[gi]));
+  }
+  {
+    std::vector<SignalMap*> sigs;
+    for (auto& t : c.temperatures) {
+      sigs.push_back(&t.value);
+    }
+    plan(sigs, "modbus.temperature");
+  }
+  if (c.blocks.empty()) {
+    r.fail(mnode, "modbus", "no signal mapped: nothing to poll");
+  }
+
+  // Bus time (RTU): request 8 bytes; response 5 + data; each frame followed by the 3.5-char gap.
+  if (c.transport == Transport::kRtu) {
+    const double ch = rtu_char_time_s(c);
+    const double gap = rtu_frame_gap_s(c);
+    for (const ReadBlock& b : c.blocks) {
+      const double data = is_bit_table(b.table) ? std::ceil(b.count / 8.0) : 2.0 * b.count;
+      c.poll_bus_time_s += (8.0 + 5.0 + data) * ch + 2.0 * gap;
+    }
+    for (const OffsetMap& o : c.offsets) {
+      const double n = width(o.encoding.type);
+      c.write_bus_time_s += (9.0 + 2.0 * n + 8.0) * ch + 2.0 * gap;
+    }
+    const double load = c.poll_bus_time_s * c.poll_rate_hz;
+    if (load > 0.9) {
+      std::ostringstream s;
+      s << r.file() << ": modbus.poll_rate_hz: " << c.poll_rate_hz << " Hz needs "
+        << load * 100.0 << " % of the bus at " << c.baud << " baud (" << c.poll_bus_time_s * 1e3
+        << " ms per poll for " << c.blocks.size() << " read requests); at most "
+        << 0.9 / c.poll_bus_time_s << " Hz";
+      throw ConfigError(s.str());
+    }
+    const double budget_hz =
+        c.write_bus_time_s > 0.0 ? (0.9 - load) / c.write_bus_time_s : c.poll_rate_hz;
+    if (c.offset_write_rate_hz <= 0.0) {
+      c.offset_write_rate_hz = std::min(c.poll_rate_hz, budget_hz);
+    } else if (c.offset_write_rate_hz > budget_hz + 1e-9) {
+      std::ostringstream s;
+      s << r.file() << ": modbus.offset_write_rate_hz: " << c.offset_write_rate_hz
+        << " Hz does not fit the bus time the polls leave at " << c.baud << " baud; at most "
+        << budget_hz << " Hz";
+      throw ConfigError(s.str());
+    }
+  } else if (c.offset_write_rate_hz <= 0.0) {
+    c.offset_write_rate_hz = c.poll_rate_hz;
+  }
+  return c;
+}
+
+ModbusConfig load_modbus_config(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) {
+    throw ConfigError(path + ": cannot open");
+  }
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  return parse_modbus_config(ss.str(), path);
+}
+
+}  // namespace nccomp::drivers::modbus

@@ -1,0 +1,168 @@
+// The [modbus] section of an nccomp config: the connection (TCP or RTU), timing and fault
+// handling, and the register map as data (which table / address / encoding carries each signal,
+// which holding registers take which offset).
+//
+// Parsing and validation are not real-time (they allocate); the driver uses the validated
+// result, whose read blocks and field positions are precomputed so that a poll only indexes.
+//
+// Rules enforced here (each refusal names file, line and key path):
+// - unknown keys and unknown signals are errors;
+// - addresses + width must fit 0..65535; no two mapped items may share a register or bit;
+// - an event group (sequence counter + its value registers) must lie in one table and within
+//   one read request (125 registers), so it is read atomically: the server answers one request
+//   from one state, and the counter and the values cannot tear;
+// - on RTU, the map's bus time per poll must fit the poll period at the configured baud rate.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <stdexcept>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "drivers/modbus/encoding.hpp"
+
+namespace nccomp::drivers::modbus {
+
+/// A refused config: the message names file, line and key path.
+class ConfigError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+enum class Transport : std::uint8_t { kTcp, kRtu };
+
+/// Signal groups. kAxis is state (one AxisSample per poll); the others are events carried by a
+/// sequence counter; temperatures are listed separately.
+enum class Group : std::uint8_t {
+  kAxis = 0,
+  kToolMeasurement,
+  kProbeMeasurement,
+  kCalibrationTouch,
+  kToolChange,
+  kProgramEvent,
+};
+inline constexpr std::size_t kGroupCount = 6;
+
+// Field indices per group (the order of the names in config.cpp's tables).
+namespace axis_field {
+inline constexpr std::size_t kX = 0, kY = 1, kZ = 2, kA = 3, kB = 4, kC = 5, kPath = 6,
+                             kTool = 7, kNormalX = 8, kNormalY = 9, kNormalZ = 10,
+                             kCutting = 11, kCount = 12;
+}
+namespace tool_meas_field {
+inline constexpr std::size_t kSeq = 0, kTool = 1, kWear = 2, kBroken = 3, kCount = 4;
+}
+namespace probe_field {
+inline constexpr std::size_t kSeq = 0, kPart = 1, kCheckpoint = 2, kDeviation = 3, kAngle = 4,
+                             kBallRadius = 5, kX = 6, kY = 7, kZ = 8, kCount = 9;
+}
+namespace touch_field {
+inline constexpr std::size_t kSeq = 0, kProbe = 1, kAxis = 2, kDirection = 3, kVariant = 4,
+                             kPosition = 5, kCount = 6;
+}
+namespace tool_change_field {
+inline constexpr std::size_t kSeq = 0, kTool = 1, kSister = 2, kCount = 3;
+}
+namespace program_field {
+inline constexpr std::size_t kSeq = 0, kKind = 1, kPart = 2, kCount = 3;
+}
+inline constexpr std::size_t kMaxFields = 12;
+
+/// The config key names of a group and of its fields (for messages and docs).
+std::string_view group_key(Group g) noexcept;
+std::size_t field_count(Group g) noexcept;
+std::string_view field_key(Group g, std::size_t field) noexcept;
+
+/// One contiguous read request.
+struct ReadBlock {
+  Table table{Table::kHolding};
+  std::uint16_t start{0};
+  std::uint16_t count{0};
+};
+
+struct SignalMap {
+  bool mapped{false};
+  Table table{Table::kHolding};
+  std::uint16_t address{0};
+  Encoding encoding{};
+  /// Position in the poll: read block index and the value's first register within it.
+  std::size_t block{0};
+  std::uint16_t block_offset{0};
+};
+
+struct GroupMap {
+  bool present{false};
+  std::array<SignalMap, kMaxFields> fields{};
+};
+
+struct TemperatureMap {
+  std::uint8_t sensor{0};
+  SignalMap value{};
+};
+
+struct OffsetMap {
+  std::uint16_t register_index{0};
+  /// Holding register(s), written with function 16.
+  std::uint16_t address{0};
+  Encoding encoding{};
+};
+
+enum class Parity : std::uint8_t { kNone, kEven, kOdd };
+
+struct ModbusConfig {
+  Transport transport{Transport::kTcp};
+  // TCP
+  std::string host{"127.0.0.1"};
+  std::uint16_t port{502};
+  // RTU
+  std::string device{};
+  std::uint32_t baud{19200};
+  Parity parity{Parity::kEven};
+  std::uint8_t data_bits{8};
+  std::uint8_t stop_bits{1};
+  bool rs485{false};
+
+  std::uint8_t unit_id{1};
+  double response_timeout_s{0.5};
+  double byte_timeout_s{0.5};
+  double poll_rate_hz{100.0};
+  /// Offsets are written at most this often (latest value wins in between). 0 in the file means
+  /// "derive": the poll rate on TCP, the bus budget left by the polls on RTU.
+  double offset_write_rate_hz{0.0};
+  double reconnect_min_s{0.1};
+  double reconnect_max_s{5.0};
+  /// Consecutive failed transactions (timeouts, garbage) after which the link is declared dead
+  /// and reconnected: detects a silently dead TCP connection (cable pull).
+  std::uint32_t dead_after_failures{3};
+  /// Read every written offset back and re-write on mismatch.
+  bool verify_writes{false};
+  /// An offset still undelivered, or the link down, for this long raises the status alarm.
+  double alarm_after_s{1.0};
+  std::size_t rx_capacity{1024};
+  std::size_t tx_capacity{256};
+
+  std::array<GroupMap, kGroupCount> groups{};
+  std::vector<TemperatureMap> temperatures{};
+  std::vector<OffsetMap> offsets{};
+  /// Precomputed read requests of one poll, in order.
+  std::vector<ReadBlock> blocks{};
+  /// Estimated bus time of one poll and of writing every offset once [s] (RTU; 0 on TCP).
+  double poll_bus_time_s{0.0};
+  double write_bus_time_s{0.0};
+};
+
+/// Parses the [modbus] table of a TOML document. `file` names the source in messages.
+/// Throws ConfigError. Not real-time.
+ModbusConfig parse_modbus_config(std::string_view toml_text, std::string_view file);
+/// Reads and parses a file. Throws ConfigError.
+ModbusConfig load_modbus_config(const std::string& path);
+
+/// RTU character time [s]: start + data + parity + stop bits at the baud rate.
+double rtu_char_time_s(const ModbusConfig& c) noexcept;
+/// RTU inter-frame silence [s]: 3.5 character times, fixed 1.75 ms above 19200 baud (spec).
+double rtu_frame_gap_s(const ModbusConfig& c) noexcept;
+
+}  // namespace nccomp::drivers::modbus

@@ -1,0 +1,262 @@
+#include "drivers/modbus/decoder.hpp"
+
+#include <cmath>
+#include <limits>
+
+namespace nccomp::drivers::modbus {
+namespace {
+
+/// An integral value within [lo, hi], else false.
+bool to_int(double v, double lo, double hi, std::int32_t& out) noexcept {
+  if (!std::isfinite(v) || v < lo || v > hi) {
+    return false;
+  }
+  const double r = std::nearbyint(v);
+  if (std::fabs(v - r) > 1e-6) {
+    return false;
+  }
+  out = static_cast<std::int32_t>(r);
+  return true;
+}
+
+constexpr double kIntMin = std::numeric_limits<std::int32_t>::min();
+constexpr double kIntMax = std::numeric_limits<std::int32_t>::max();
+
+}  // namespace
+
+PollDecoder::PollDecoder(const ModbusConfig& config) : config_(config) {
+  blocks_.reserve(config.blocks.size());
+  for (const ReadBlock& b : config.blocks) {
+    blocks_.emplace_back(b.count, std::uint16_t{0});
+  }
+  out_.reserve(1 + kGroupCount + config.temperatures.size());
+  last_temperature_.assign(config.temperatures.size(), core::kNaN);
+}
+
+double PollDecoder::value(const SignalMap& s) const noexcept {
+  const std::vector<std::uint16_t>& b = blocks_[s.block];
+  return modbus::decode(std::span<const std::uint16_t>(b.data() + s.block_offset, width(s.encoding.type)),
+                s.encoding);
+}
+
+void PollDecoder::emit(const core::Event& e) noexcept {
+  // Capacity reserved in the constructor for every group and sensor: never reallocates.
+  if (out_.size() < out_.capacity()) {
+    out_.push_back(e);
+  }
+}
+
+std::span<const core::Event> PollDecoder::decode(core::TimeNs t_ns,
+                                                 std::span<const std::uint8_t> block_ok) {
+  out_.clear();
+  const auto group_read = [&](const GroupMap& g, std::size_t n) {
+    for (std::size_t f = 0; f < n; ++f) {
+      if (g.fields[f].mapped && block_ok[g.fields[f].block] == 0) {
+        return false;
+      }
+    }
+    return true;
+  };
+  for (std::size_t gi = 0; gi < kGroupCount; ++gi) {
+    const auto g = static_cast<Group>(gi);
+    const GroupMap& gm = config_.groups[gi];
+    if (!gm.present || !group_read(gm, field_count(g))) {
+      continue;
+    }
+    if (g == Group::kAxis) {
+      decode_axis(t_ns);
+    } else {
+      decode_event(g, t_ns);
+    }
+  }
+  decode_temperatures(t_ns, block_ok);
+  return out_;
+}
+
+void PollDecoder::decode_axis(core::TimeNs t_ns) {
+  const GroupMap& g = config_.groups[static_cast<std::size_t>(Group::kAxis)];
+  core::AxisSample s;
+  s.time_ns = t_ns;
+  s.axis_count = 0;
+  bool ok = true;
+  for (std::size_t a = axis_field::kX; a <= axis_field::kC; ++a) {
+    if (!g.fields[a].mapped) {
+      break;
+    }
+    const double v = value(g.fields[a]);
+    ok = ok && std::isfinite(v);
+    s.position_mm[a] = v;
+    ++s.axis_count;
+  }
+  if (g.fields[axis_field::kPath].mapped) {
+    // NaN is the core's "path unknown" (e.g. no program active); inf is garbage.
+    s.program_path_mm = value(g.fields[axis_field::kPath]);
+    ok = ok && !std::isinf(s.program_path_mm);
+  }
+  if (g.fields[axis_field::kTool].mapped) {
+    ok = ok && to_int(value(g.fields[axis_field::kTool]), 0, kIntMax, s.tool);
+  }
+  if (g.fields[axis_field::kNormalX].mapped) {
+    const double nx = value(g.fields[axis_field::kNormalX]);
+    const double ny = value(g.fields[axis_field::kNormalY]);
+    const double nz = value(g.fields[axis_field::kNormalZ]);
+    const double norm = std::sqrt(nx * nx + ny * ny + nz * nz);
+    // Scaled integers carry a little rounding; anything far from unit length is not a normal.
+    if (std::isfinite(norm) && std::fabs(norm - 1.0) < 0.01) {
+      s.has_normal = true;
+      s.normal = {nx / norm, ny / norm, nz / norm};
+    } else {
+      ok = false;
+    }
+  }
+  if (g.fields[axis_field::kCutting].mapped) {
+    s.cutting = value(g.fields[axis_field::kCutting]) > 0.5;
+  }
+  if (!ok) {
+    ++counters_.values_invalid;
+    return;
+  }
+  emit(s);
+}
+
+void PollDecoder::decode_event(Group g, core::TimeNs t_ns) {
+  const auto gi = static_cast<std::size_t>(g);
+  const GroupMap& gm = config_.groups[gi];
+  const SignalMap& seq_map = gm.fields[0];
+  const bool wide = seq_map.encoding.type == ValueType::kUint32;
+  // The counter is read raw: scale and offset make no sense for it.
+  const std::vector<std::uint16_t>& b = blocks_[seq_map.block];
+  const auto seq = static_cast<std::uint32_t>(decode_raw(
+      std::span<const std::uint16_t>(b.data() + seq_map.block_offset, wide ? 2U : 1U),
+      seq_map.encoding));
+  SeqState& st = seq_[gi];
+  if (!st.baseline) {
+    st.baseline = true;
+    st.last = seq;
+    return;
+  }
+  const std::uint32_t mask = wide ? 0xFFFFFFFFU : 0xFFFFU;
+  const std::uint32_t delta = (seq - st.last) & mask;
+  if (delta == 0) {
+    return;
+  }
+  st.last = seq;
+  if (delta > mask / 2) {
+    ++counters_.sequence_resets;
+    return;
+  }
+  counters_.events_lost += delta - 1U;
+
+  const auto f = [&](std::size_t i, double dflt) {
+    return gm.fields[i].mapped ? value(gm.fields[i]) : dflt;
+  };
+  bool ok = true;
+  switch (g) {
+    case Group::kToolMeasurement: {
+      core::ToolMeasurement e;
+      e.time_ns = t_ns;
+      ok = to_int(f(tool_meas_field::kTool, 0), 0, kIntMax, e.tool);
+      e.wear_um[0] = f(tool_meas_field::kWear, 0.0);
+      e.point_count = 1;
+      e.broken = f(tool_meas_field::kBroken, 0.0) > 0.5;
+      ok = ok && std::isfinite(e.wear_um[0]);
+      if (ok) {
+        emit(e);
+      }
+      break;
+    }
+    case Group::kProbeMeasurement: {
+      core::ProbeMeasurement e;
+      e.time_ns = t_ns;
+      ok = to_int(f(probe_field::kPart, 0), kIntMin, kIntMax, e.part) &&
+           to_int(f(probe_field::kCheckpoint, 0), kIntMin, kIntMax, e.checkpoint);
+      e.raw_deviation_um = f(probe_field::kDeviation, 0.0);
+      e.wall_angle_deg = f(probe_field::kAngle, 0.0);
+      e.ball_radius_mm = f(probe_field::kBallRadius, 0.0);
+      e.position_mm = {f(probe_field::kX, 0.0), f(probe_field::kY, 0.0), f(probe_field::kZ, 0.0)};
+      ok = ok && std::isfinite(e.raw_deviation_um) && std::isfinite(e.wall_angle_deg) &&
+           std::isfinite(e.ball_radius_mm) && std::isfinite(e.position_mm[0]) &&
+           std::isfinite(e.position_mm[1]) && std::isfinite(e.position_mm[2]);
+      if (ok) {
+        emit(e);
+      }
+      break;
+    }
+    case Group::kCalibrationTouch: {
+      core::CalibrationTouch e;
+      e.time_ns = t_ns;
+      std::int32_t probe = 0;
+      std::int32_t axis = 0;
+      std::int32_t dir = 0;
+      std::int32_t variant = 0;
+      ok = to_int(f(touch_field::kProbe, 0), 0, 1, probe) &&
+           to_int(f(touch_field::kAxis, 0), 0, 2, axis) &&
+           to_int(f(touch_field::kDirection, 0), -1, 1, dir) && dir != 0 &&
+           to_int(f(touch_field::kVariant, 0), 0, 1, variant);
+      e.probe = static_cast<core::ProbeKind>(probe);
+      e.axis = static_cast<std::uint8_t>(axis);
+      e.direction = static_cast<std::int8_t>(dir);
+      e.variant = static_cast<std::uint8_t>(variant);
+      e.trigger_position_mm = f(touch_field::kPosition, 0.0);
+      ok = ok && std::isfinite(e.trigger_position_mm);
+      if (ok) {
+        emit(e);
+      }
+      break;
+    }
+    case Group::kToolChange: {
+      core::ToolChange e;
+      e.time_ns = t_ns;
+      ok = to_int(f(tool_change_field::kTool, 0), 0, kIntMax, e.tool);
+      e.sister = f(tool_change_field::kSister, 0.0) > 0.5;
+      if (ok) {
+        emit(e);
+      }
+      break;
+    }
+    case Group::kProgramEvent: {
+      core::ProgramEvent e;
+      e.time_ns = t_ns;
+      std::int32_t kind = 0;
+      ok = to_int(f(program_field::kKind, 0), 0, 3, kind) &&
+           to_int(f(program_field::kPart, 0), kIntMin, kIntMax, e.part);
+      e.kind = static_cast<core::ProgramEventKind>(kind);
+      if (ok) {
+        emit(e);
+      }
+      break;
+    }
+    case Group::kAxis:
+      break;
+  }
+  if (!ok) {
+    ++counters_.values_invalid;
+  }
+}
+
+void PollDecoder::decode_temperatures(core::TimeNs t_ns, std::span<const std::uint8_t> block_ok) {
+  // Temperatures change slowly: a sample is emitted when the value changed, not every poll.
+  for (std::size_t i = 0; i < config_.temperatures.size(); ++i) {
+    const TemperatureMap& tm = config_.temperatures[i];
+    if (block_ok[tm.value.block] == 0) {
+      continue;
+    }
+    const double v = value(tm.value);
+    if (!std::isfinite(v)) {
+      ++counters_.values_invalid;
+      continue;
+    }
+    const double last = last_temperature_[i];
+    if (!std::isnan(last) && !(v < last) && !(v > last)) {
+      continue;
+    }
+    last_temperature_[i] = v;
+    core::TemperatureSample e;
+    e.time_ns = t_ns;
+    e.sensor = tm.sensor;
+    e.temperature_c = v;
+    emit(e);
+  }
+}
+
+}  // namespace nccomp::drivers::modbus

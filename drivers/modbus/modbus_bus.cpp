@@ -1,0 +1,436 @@
+#include "drivers/modbus/modbus_bus.hpp"
+
+#include <modbus/modbus.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <ctime>
+#include <stdexcept>
+#include <string>
+
+namespace nccomp::drivers::modbus {
+namespace {
+
+modbus_t* mb(const std::unique_ptr<void, ModbusBus::ModbusDeleter>& p) {
+  return static_cast<modbus_t*>(p.get());
+}
+
+constexpr core::TimeNs kNsPerS = 1'000'000'000;
+
+core::TimeNs to_ns(double s) { return static_cast<core::TimeNs>(std::llround(s * 1e9)); }
+
+void set_timeout(modbus_t* ctx, double s, bool response) {
+  const auto us = static_cast<std::uint64_t>(std::llround(s * 1e6));
+  const auto sec = static_cast<std::uint32_t>(us / 1'000'000U);
+  const auto usec = static_cast<std::uint32_t>(us % 1'000'000U);
+  if (response) {
+    modbus_set_response_timeout(ctx, sec, usec);
+  } else {
+    modbus_set_byte_timeout(ctx, sec, usec);
+  }
+}
+
+}  // namespace
+
+core::TimeNs monotonic_now_ns() noexcept {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<core::TimeNs>(ts.tv_sec) * kNsPerS + ts.tv_nsec;
+}
+
+void ModbusBus::ModbusDeleter::operator()(void* ctx) const noexcept {
+  auto* m = static_cast<modbus_t*>(ctx);
+  modbus_close(m);
+  modbus_free(m);
+}
+
+ModbusBus::ModbusBus(ModbusConfig config)
+    : config_(std::move(config)),
+      rx_(config_.rx_capacity),
+      tx_(config_.tx_capacity),
+      decoder_(config_),
+      block_ok_(config_.blocks.size(), 0),
+      bits_(2000, 0),
+      slot_of_register_(65536, -1),
+      slots_(config_.offsets.size()) {
+  for (std::size_t i = 0; i < config_.offsets.size(); ++i) {
+    slot_of_register_[config_.offsets[i].register_index] = static_cast<std::int32_t>(i);
+  }
+}
+
+ModbusBus::~ModbusBus() { stop(); }
+
+void ModbusBus::start() {
+  if (io_.joinable()) {
+    throw std::logic_error("ModbusBus::start: already started");
+  }
+  running_.store(true, std::memory_order_release);
+  io_ = std::thread([this] { run(); });
+}
+
+void ModbusBus::stop() {
+  running_.store(false, std::memory_order_release);
+  if (io_.joinable()) {
+    io_.join();
+  }
+}
+
+void ModbusBus::sleep_until(core::TimeNs t_ns) const {
+  // In slices, so that stop() is honoured within 20 ms even during a long back-off.
+  constexpr core::TimeNs kSliceNs = 20'000'000;
+  for (;;) {
+    const core::TimeNs now = monotonic_now_ns();
+    if (now >= t_ns || !running_.load(std::memory_order_acquire)) {
+      return;
+    }
+    const core::TimeNs until = std::min(t_ns, now + kSliceNs);
+    timespec ts{};
+    ts.tv_sec = until / kNsPerS;
+    ts.tv_nsec = until % kNsPerS;
+    clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr);
+  }
+}
+
+bool ModbusBus::connect() {
+  modbus_t* ctx = nullptr;
+  if (config_.transport == Transport::kTcp) {
+    const std::string service = std::to_string(config_.port);
+    ctx = modbus_new_tcp_pi(config_.host.c_str(), service.c_str());
+  } else {
+    const char parity = config_.parity == Parity::kNone   ? 'N'
+                        : config_.parity == Parity::kEven ? 'E'
+                                                          : 'O';
+    ctx = modbus_new_rtu(config_.device.c_str(), static_cast<int>(config_.baud), parity,
+                         config_.data_bits, config_.stop_bits);
+  }
+  if (ctx == nullptr) {
+    st_.last_errno = errno;
+    return false;
+  }
+  std::unique_ptr<void, ModbusDeleter> holder(ctx);
+  modbus_set_slave(ctx, config_.unit_id);
+  set_timeout(ctx, config_.response_timeout_s, true);
+  set_timeout(ctx, config_.byte_timeout_s, false);
+  // Recovery is ours (flush, reconnect, back-off): libmodbus' own would sleep and reconnect
+  // inside a call.
+  modbus_set_error_recovery(ctx, MODBUS_ERROR_RECOVERY_NONE);
+  if (modbus_connect(ctx) == -1) {
+    st_.last_errno = errno;
+    // modbus_close on a failed connect is harmless; the deleter frees the context.
+    return false;
+  }
+  if (config_.transport == Transport::kRtu && config_.rs485 &&
+      modbus_rtu_set_serial_mode(ctx, MODBUS_RTU_RS485) == -1) {
+    st_.last_errno = errno;
+    return false;
+  }
+  ctx_ = std::move(holder);
+  consecutive_failures_ = 0;
+  last_frame_end_ns_ = 0;
+  return true;
+}
+
+void ModbusBus::disconnect() {
+  ctx_.reset();
+  consecutive_failures_ = 0;
+}
+
+void ModbusBus::rtu_gap() {
+  // RTU frames are delimited by 3.5 character times of silence: keep it before each request.
+  if (config_.transport != Transport::kRtu || last_frame_end_ns_ == 0) {
+    return;
+  }
+  const core::TimeNs until = last_frame_end_ns_ + to_ns(rtu_frame_gap_s(config_));
+  if (monotonic_now_ns() < until) {
+    timespec ts{};
+    ts.tv_sec = until / kNsPerS;
+    ts.tv_nsec = until % kNsPerS;
+    clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr);
+  }
+}
+
+void ModbusBus::after_transaction() {
+  ++st_.bus.counters.frames_tx;
+  last_frame_end_ns_ = monotonic_now_ns();
+}
+
+bool ModbusBus::fail(int err) {
+  ++st_.bus.counters.faults;
+  st_.last_errno = err;
+  modbus_t* ctx = mb(ctx_);
+  if (err > MODBUS_ENOBASE && err <= MODBUS_ENOBASE + 11) {
+    // An exception response: the server is alive and answered.
+    ++st_.exceptions[static_cast<std::size_t>(err - MODBUS_ENOBASE)];
+    ++st_.bus.counters.frames_rx;
+    consecutive_failures_ = 0;
+    return true;
+  }
+  if (err == ETIMEDOUT) {
+    ++st_.timeouts;
+  } else if (err == EMBBADCRC) {
+    ++st_.crc_errors;
+    ++st_.bus.counters.malformed;
+  } else if (err == EMBBADDATA || err == EMBBADEXC || err == EMBUNKEXC || err == EMBMDATA ||
+             err == EMBBADSLAVE) {
+    ++st_.bad_responses;
+    ++st_.bus.counters.malformed;
+    if (err == EMBUNKEXC) {
+      ++st_.exceptions[0];
+    }
+  } else {
+    // Socket / device error (ECONNRESET, EPIPE, EIO ...): the connection is gone.
+    ++st_.connection_errors;
+    disconnect();
+    return false;
+  }
+  // A late or garbled answer must not be taken for the next one.
+  modbus_flush(ctx);
+  if (++consecutive_failures_ >= config_.dead_after_failures) {
+    // Silence or garbage for this long: a dead peer, a pulled cable or a desynchronised stream.
+    disconnect();
+    return false;
+  }
+  return true;
+}
+
+void ModbusBus::poll(core::TimeNs now_ns) {
+  (void)now_ns;
+  std::fill(block_ok_.begin(), block_ok_.end(), std::uint8_t{0});
+  bool any = false;
+  for (std::size_t i = 0; i < config_.blocks.size() && ctx_; ++i) {
+    const ReadBlock& b = config_.blocks[i];
+    std::span<std::uint16_t> buf = decoder_.block(i);
+    rtu_gap();
+    modbus_t* ctx = mb(ctx_);
+    int rc = -1;
+    switch (b.table) {
+      case Table::kHolding:
+        rc = modbus_read_registers(ctx, b.start, b.count, buf.data());
+        break;
+      case Table::kInput:
+        rc = modbus_read_input_registers(ctx, b.start, b.count, buf.data());
+        break;
+      case Table::kCoil:
+        rc = modbus_read_bits(ctx, b.start, b.count, bits_.data());
+        break;
+      case Table::kDiscreteInput:
+        rc = modbus_read_input_bits(ctx, b.start, b.count, bits_.data());
+        break;
+    }
+    const int err = errno;
+    after_transaction();
+    if (rc != b.count) {
+      if (!fail(rc == -1 ? err : EMBBADDATA)) {
+        break;
+      }
+      continue;
+    }
+    if (is_bit_table(b.table)) {
+      for (std::size_t k = 0; k < b.count; ++k) {
+        buf[k] = bits_[k] != 0 ? 1 : 0;
+      }
+    }
+    ++st_.bus.counters.frames_rx;
+    consecutive_failures_ = 0;
+    block_ok_[i] = 1;
+    any = true;
+  }
+  ++st_.polls;
+  if (!any) {
+    return;
+  }
+  const core::TimeNs t = monotonic_now_ns();
+  st_.bus.last_rx_ns = t;
+  for (const core::Event& e : decoder_.decode(t, block_ok_)) {
+    if (rx_.try_push(e)) {
+      ++st_.bus.counters.events_decoded;
+    } else {
+      ++st_.bus.counters.events_dropped;
+    }
+  }
+  const DecodeCounters& dc = decoder_.counters();
+  st_.events_lost = dc.events_lost;
+  st_.sequence_resets = dc.sequence_resets;
+  st_.values_invalid = dc.values_invalid;
+}
+
+void ModbusBus::drain_tx(core::TimeNs now_ns) {
+  core::OffsetWrite w;
+  while (tx_.try_pop(w)) {
+    const std::int32_t idx = slot_of_register_[w.register_index];
+    if (idx < 0) {
+      ++st_.offsets_rejected;
+      ++st_.bus.counters.offsets_failed;
+      continue;
+    }
+    OffsetSlot& s = slots_[static_cast<std::size_t>(idx)];
+    // Latest value wins: an older pending value for this register is simply replaced.
+    if (!s.dirty) {
+      s.dirty_since_ns = now_ns;
+    }
+    s.value_um = w.value_um;
+    s.has_value = true;
+    s.dirty = true;
+  }
+}
+
+bool ModbusBus::write_one(const OffsetMap& map, OffsetSlot& slot) {
+  std::array<std::uint16_t, 2> regs{};
+  const int n = width(map.encoding.type);
+  if (encode(slot.value_um, map.encoding, regs) != EncodeResult::kOk) {
+    // Not representable on the NC (NaN, beyond the register's range): the NC keeps its last
+    // value and the status alarm says so. Never clamp silently.
+    ++st_.offsets_rejected;
+    ++st_.bus.counters.offsets_failed;
+    slot.rejected = true;
+    slot.dirty = false;
+    return true;
+  }
+  if (slot.resend) {
+    ++st_.bus.counters.offsets_retried;
+  }
+  rtu_gap();
+  int rc = modbus_write_registers(mb(ctx_), map.address, n, regs.data());
+  int err = errno;
+  after_transaction();
+  if (rc != n) {
+    slot.resend = true;
+    return fail(rc == -1 ? err : EMBBADDATA);
+  }
+  ++st_.bus.counters.frames_rx;
+  consecutive_failures_ = 0;
+  if (config_.verify_writes) {
+    std::array<std::uint16_t, 2> back{};
+    rtu_gap();
+    rc = modbus_read_registers(mb(ctx_), map.address, n, back.data());
+    err = errno;
+    after_transaction();
+    if (rc != n) {
+      slot.resend = true;
+      return fail(rc == -1 ? err : EMBBADDATA);
+    }
+    ++st_.bus.counters.frames_rx;
+    if (back[0] != regs[0] || (n == 2 && back[1] != regs[1])) {
+      ++st_.verify_mismatches;
+      ++st_.bus.counters.faults;
+      slot.resend = true;
+      return true;
+    }
+  }
+  ++st_.bus.counters.offsets_written;
+  slot.dirty = false;
+  slot.rejected = false;
+  slot.resend = false;
+  return true;
+}
+
+void ModbusBus::write_offsets() {
+  for (std::size_t i = 0; i < slots_.size() && ctx_; ++i) {
+    if (slots_[i].dirty && !write_one(config_.offsets[i], slots_[i])) {
+      break;
+    }
+  }
+}
+
+void ModbusBus::publish(core::TimeNs now_ns) {
+  std::uint32_t pending = 0;
+  bool alarm = false;
+  const core::TimeNs tolerance = to_ns(config_.alarm_after_s);
+  for (const OffsetSlot& s : slots_) {
+    pending += s.dirty ? 1U : 0U;
+    alarm = alarm || s.rejected || (s.dirty && now_ns - s.dirty_since_ns > tolerance);
+  }
+  if (!ctx_ && down_since_ns_ != 0 && now_ns - down_since_ns_ > tolerance) {
+    alarm = true;
+  }
+  st_.offsets_pending = pending;
+  st_.bus.alarm = alarm;
+  status_.store(st_);
+}
+
+void ModbusBus::run() {
+  const core::TimeNs period = to_ns(1.0 / config_.poll_rate_hz);
+  const core::TimeNs write_period = to_ns(1.0 / config_.offset_write_rate_hz);
+  double backoff_s = config_.reconnect_min_s;
+  bool ever_connected = false;
+  core::TimeNs next = monotonic_now_ns();
+  core::TimeNs next_write = next;
+  down_since_ns_ = next;
+  st_.bus.state = LinkState::kConnecting;
+  publish(next);
+  while (running_.load(std::memory_order_acquire)) {
+    core::TimeNs now = monotonic_now_ns();
+    drain_tx(now);
+    if (!ctx_) {
+      if (down_since_ns_ == 0) {
+        down_since_ns_ = now;
+      }
+      if (!connect()) {
+        ++st_.connection_errors;
+        ++st_.bus.counters.faults;
+        st_.bus.state = ever_connected ? LinkState::kDown : LinkState::kConnecting;
+        publish(monotonic_now_ns());
+        sleep_until(monotonic_now_ns() + to_ns(backoff_s));
+        backoff_s = std::min(backoff_s * 2.0, config_.reconnect_max_s);
+        continue;
+      }
+      if (ever_connected) {
+        ++st_.bus.counters.reconnects;
+      }
+      ever_connected = true;
+      backoff_s = config_.reconnect_min_s;
+      down_since_ns_ = 0;
+      // The NC may have restarted and lost what it had: every known offset is written again.
+      for (OffsetSlot& s : slots_) {
+        if (s.has_value && !s.rejected) {
+          if (!s.dirty) {
+            s.dirty_since_ns = now;
+          }
+          s.dirty = true;
+          s.resend = true;
+        }
+      }
+      next = monotonic_now_ns();
+      next_write = next;
+    }
+    const core::TimeNs cycle_start = monotonic_now_ns();
+    const std::uint64_t faults_before = st_.bus.counters.faults;
+    poll(cycle_start);
+    drain_tx(monotonic_now_ns());
+    if (ctx_ && monotonic_now_ns() >= next_write) {
+      write_offsets();
+      next_write += write_period;
+      if (next_write < monotonic_now_ns()) {
+        next_write = monotonic_now_ns();
+      }
+    }
+    now = monotonic_now_ns();
+    st_.last_cycle_ns = now - cycle_start;
+    st_.max_cycle_ns = std::max(st_.max_cycle_ns, st_.last_cycle_ns);
+    if (!ctx_) {
+      st_.bus.state = LinkState::kDown;
+      down_since_ns_ = now;
+    } else {
+      st_.bus.state =
+          st_.bus.counters.faults != faults_before ? LinkState::kDegraded : LinkState::kUp;
+    }
+    publish(now);
+    if (!ctx_) {
+      continue;  // reconnect right away; the back-off applies from the second attempt on
+    }
+    next += period;
+    if (now > next) {
+      // Overrun: count it and restart the schedule from now instead of bursting to catch up.
+      ++st_.poll_overruns;
+      next = now;
+      continue;
+    }
+    sleep_until(next);
+  }
+  disconnect();
+  st_.bus.state = LinkState::kStopped;
+  publish(monotonic_now_ns());
+}
+
+}  // namespace nccomp::drivers::modbus

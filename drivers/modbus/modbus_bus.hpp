@@ -1,0 +1,135 @@
+// The Modbus driver: a libmodbus client (TCP or RTU) on its own I/O thread.
+//
+// Per period (1 / poll_rate_hz) the I/O thread reads the config's read blocks, decodes them
+// (decoder.hpp) into core events for rx(), takes the offset writes the loop queued in tx() and,
+// at most offset_write_rate_hz, writes every changed offset with function 16.
+//
+// Offsets are absolute: the latest value per register wins, an undelivered one stays pending
+// and is re-sent until acknowledged (and, with verify_writes, read back equal); after every
+// reconnect all known offsets are written again. A repeated write of an absolute value cannot
+// double a correction, so none is lost and none is applied twice.
+//
+// Faults: response and byte timeouts from the config; exception responses are counted per code;
+// garbage (bad CRC, wrong transaction id, wrong length) is counted and the input flushed;
+// dead_after_failures consecutive timeouts / garbage, or a socket error, drop the connection and
+// reconnect with exponential back-off between reconnect_min_s and reconnect_max_s.
+//
+// libmodbus blocks in select() up to its timeouts, which is why none of this runs on the loop
+// thread: the loop thread only uses rx(), tx() and status(), all wait-free.
+#pragma once
+
+#include <array>
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <thread>
+#include <vector>
+
+#include "core/rt/seqlock.hpp"
+#include "core/rt/spsc_ring.hpp"
+#include "drivers/bus.hpp"
+#include "drivers/modbus/config.hpp"
+#include "drivers/modbus/decoder.hpp"
+
+namespace nccomp::drivers::modbus {
+
+/// Modbus exception codes 1..11 (illegal function, illegal data address, illegal data value,
+/// server failure, acknowledge, server busy, negative acknowledge, memory parity, 9 = unused,
+/// gateway path unavailable, gateway target failed); index 0 counts unknown codes.
+inline constexpr std::size_t kExceptionKinds = 12;
+
+/// The driver's own counters, published with the common BusStatus.
+struct ModbusStatus {
+  BusStatus bus{};
+  std::array<std::uint64_t, kExceptionKinds> exceptions{};
+  std::uint64_t timeouts{0};
+  std::uint64_t crc_errors{0};
+  std::uint64_t bad_responses{0};       // wrong transaction id / length / unit / function
+  std::uint64_t connection_errors{0};   // socket / device errors, failed connects
+  std::uint64_t polls{0};
+  std::uint64_t poll_overruns{0};       // a poll period ended before the poll and writes did
+  std::uint64_t events_lost{0};         // sequence counter jumps > 1
+  std::uint64_t sequence_resets{0};
+  std::uint64_t values_invalid{0};      // NaN / out of range values from the NC: dropped
+  std::uint64_t offsets_rejected{0};    // not encodable (NaN, out of range) or unmapped register
+  std::uint64_t verify_mismatches{0};
+  std::uint32_t offsets_pending{0};     // written by the loop, not yet confirmed on the NC
+  core::TimeNs last_cycle_ns{0};        // duration of the last poll + write cycle
+  core::TimeNs max_cycle_ns{0};
+  int last_errno{0};                    // errno of the last fault (libmodbus EMB* codes too)
+};
+
+class ModbusBus final : public Bus {
+ public:
+  /// Frees a libmodbus context (kept opaque here so that users need not see libmodbus).
+  struct ModbusDeleter {
+    void operator()(void* ctx) const noexcept;
+  };
+
+  /// Sizes the rings and buffers (not real-time). The config must come from parse_modbus_config.
+  explicit ModbusBus(ModbusConfig config);
+  ~ModbusBus() override;
+  ModbusBus(const ModbusBus&) = delete;
+  ModbusBus& operator=(const ModbusBus&) = delete;
+
+  /// Starts the I/O thread; the connection is made (and re-made) there, so an unreachable NC is
+  /// not an error here but a kConnecting / kDown state. Throws if already started.
+  void start() override;
+  /// Stops the I/O thread (waits at most one response timeout) and closes the connection.
+  void stop() override;
+
+  core::rt::SpscRing<core::Event>& rx() override { return rx_; }
+  core::rt::SpscRing<core::OffsetWrite>& tx() override { return tx_; }
+  [[nodiscard]] BusStatus status() const override { return status_.load().bus; }
+  /// Any thread: the full status with the Modbus counters.
+  [[nodiscard]] ModbusStatus modbus_status() const { return status_.load(); }
+  [[nodiscard]] const ModbusConfig& config() const noexcept { return config_; }
+
+ private:
+  struct OffsetSlot {
+    bool has_value{false};
+    bool dirty{false};
+    bool rejected{false};
+    bool resend{false};  // a re-send (after a failure or a reconnect), counted as a retry
+    double value_um{0.0};
+    core::TimeNs dirty_since_ns{0};
+  };
+
+  void run();
+  bool connect();
+  void disconnect();
+  void poll(core::TimeNs now_ns);
+  void drain_tx(core::TimeNs now_ns);
+  void write_offsets();
+  bool write_one(const OffsetMap& map, OffsetSlot& slot);
+  /// Classifies a failed libmodbus call. Returns false when the connection was dropped.
+  bool fail(int err);
+  void rtu_gap();
+  void after_transaction();
+  void publish(core::TimeNs now_ns);
+  void sleep_until(core::TimeNs t_ns) const;
+
+  const ModbusConfig config_;
+  core::rt::SpscRing<core::Event> rx_;
+  core::rt::SpscRing<core::OffsetWrite> tx_;
+  core::rt::Seqlock<ModbusStatus> status_;
+  std::atomic<bool> running_{false};
+  std::thread io_;
+
+  // I/O thread only.
+  std::unique_ptr<void, ModbusDeleter> ctx_;
+  PollDecoder decoder_;
+  std::vector<std::uint8_t> block_ok_;
+  std::vector<std::uint8_t> bits_;
+  std::vector<std::int32_t> slot_of_register_;  // register_index → offsets index, -1 = unmapped
+  std::vector<OffsetSlot> slots_;
+  ModbusStatus st_{};
+  std::uint32_t consecutive_failures_{0};
+  core::TimeNs down_since_ns_{0};
+  core::TimeNs last_frame_end_ns_{0};
+};
+
+/// CLOCK_MONOTONIC [ns] (the driver time-stamps events on reception).
+core::TimeNs monotonic_now_ns() noexcept;
+
+}  // namespace nccomp::drivers::modbus

@@ -1,0 +1,253 @@
+#include "drivers/modbus/config.hpp"
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <string>
+
+namespace nccomp::drivers::modbus {
+namespace {
+
+using ::testing::HasSubstr;
+
+std::string error_of(const std::string& text) {
+  try {
+    (void)parse_modbus_config(text, "t.toml");
+  } catch (const ConfigError& e) {
+    return e.what();
+  }
+  return "(accepted)";
+}
+
+const char* const kMinimal = R"(
+[modbus]
+transport = "tcp"
+[modbus.axis]
+x_mm = { table = "input", address = 0, type = "int32", scale = 0.001 }
+)";
+
+TEST(ModbusConfig, ReferenceProfileParsesIntoOneRequestPerGroup) {
+  const ModbusConfig c = load_modbus_config(NCCOMP_SOURCE_DIR "/config/reference-nc-modbus.toml");
+  EXPECT_EQ(c.transport, Transport::kTcp);
+  EXPECT_EQ(c.port, 1502);
+  EXPECT_TRUE(c.verify_writes);
+  // axis: input 0..11 + discrete input 0; 5 event groups; temperatures input 160..161.
+  ASSERT_EQ(c.blocks.size(), 8U);
+  EXPECT_EQ(c.blocks[0].table, Table::kDiscreteInput);
+  EXPECT_EQ(c.blocks[1].table, Table::kInput);
+  EXPECT_EQ(c.blocks[1].start, 0);
+  EXPECT_EQ(c.blocks[1].count, 12);
+  EXPECT_EQ(c.blocks[2].start, 100);  // tool measurement: counter + values in one request
+  EXPECT_EQ(c.blocks[2].count, 5);
+  EXPECT_EQ(c.blocks[3].start, 110);
+  EXPECT_EQ(c.blocks[3].count, 13);
+  EXPECT_EQ(c.blocks[7].start, 160);
+  EXPECT_EQ(c.blocks[7].count, 2);
+  ASSERT_EQ(c.offsets.size(), 9U);
+  EXPECT_EQ(c.offsets[8].register_index, 22);
+  EXPECT_EQ(c.offsets[8].encoding.word_order, WordOrder::kLowFirst);
+  EXPECT_DOUBLE_EQ(c.offset_write_rate_hz, c.poll_rate_hz);  // TCP: derived = poll rate
+  const SignalMap& wear =
+      c.groups[static_cast<std::size_t>(Group::kToolMeasurement)].fields[tool_meas_field::kWear];
+  EXPECT_EQ(wear.block, 2U);
+  EXPECT_EQ(wear.block_offset, 2);
+}
+
+TEST(ModbusConfig, MinimalDefaults) {
+  const ModbusConfig c = parse_modbus_config(kMinimal, "t.toml");
+  EXPECT_EQ(c.host, "127.0.0.1");
+  EXPECT_EQ(c.port, 502);
+  EXPECT_DOUBLE_EQ(c.response_timeout_s, 0.5);
+  EXPECT_DOUBLE_EQ(c.byte_timeout_s, 0.5);
+  EXPECT_EQ(c.dead_after_failures, 3U);
+  ASSERT_EQ(c.blocks.size(), 1U);
+  EXPECT_EQ(c.blocks[0].count, 2);
+}
+
+TEST(ModbusConfig, UnknownKeyNamesFileLineAndPath) {
+  EXPECT_EQ(error_of(std::string(kMinimal) + "pol_rate_hz = 5\n"),
+            "t.toml:6: modbus.axis.pol_rate_hz: unknown signal");
+  EXPECT_EQ(error_of("[modbus]\ntransport = \"tcp\"\npol_rate_hz = 5\n"),
+            "t.toml:3: modbus.pol_rate_hz: unknown key");
+  EXPECT_THAT(error_of(R"([modbus]
+transport = "tcp"
+[modbus.axis]
+x_mm = { table = "input", address = 0, typ = "int32" }
+)"),
+              "t.toml:4: modbus.axis.x_mm.typ: unknown key");
+}
+
+TEST(ModbusConfig, RefusesOverlapsWithBothKeyPaths) {
+  EXPECT_EQ(error_of(R"([modbus]
+transport = "tcp"
+[modbus.axis]
+x_mm = { table = "input", address = 0, type = "int32" }
+y_mm = { table = "input", address = 1, type = "int16" }
+)"),
+            "t.toml:5: modbus.axis.y_mm: input address 1 overlaps modbus.axis.x_mm (line 4)");
+  // An offset register on top of a holding signal.
+  EXPECT_THAT(error_of(R"([modbus]
+transport = "tcp"
+[modbus.axis]
+x_mm = { address = 200, type = "int32" }
+[[modbus.offset]]
+register_index = 0
+address = 201
+)"),
+              HasSubstr("modbus.offset[0]: holding address 201 overlaps modbus.axis.x_mm"));
+  // Same address in different tables is fine.
+  EXPECT_EQ(error_of(R"([modbus]
+transport = "tcp"
+[modbus.axis]
+x_mm = { table = "input", address = 0 }
+cutting = { table = "coil", address = 0 }
+)"),
+            "(accepted)");
+}
+
+TEST(ModbusConfig, RefusesOutOfRangeAddressesAndBadTypes) {
+  EXPECT_EQ(error_of(R"([modbus]
+transport = "tcp"
+[modbus.axis]
+x_mm = { address = 65535, type = "int32" }
+)"),
+            "t.toml:4: modbus.axis.x_mm.address: value does not fit below address 65535");
+  EXPECT_EQ(error_of(R"([modbus]
+transport = "tcp"
+[modbus.axis]
+x_mm = { address = 70000 }
+)"),
+            "t.toml:4: modbus.axis.x_mm.address: value 70000 outside 0..65535");
+  EXPECT_THAT(error_of(R"([modbus]
+transport = "tcp"
+[modbus.axis]
+x_mm = { address = 0, type = "int8" }
+)"),
+              HasSubstr("modbus.axis.x_mm.type: unknown value 'int8' (expected bool, int16"));
+  EXPECT_THAT(error_of(R"([modbus]
+transport = "tcp"
+[modbus.axis]
+x_mm = { address = 0 }
+cutting = { table = "coil", address = 0, type = "int16" }
+)"),
+              HasSubstr("modbus.axis.cutting.type: a coil is one bit: type must be bool"));
+  EXPECT_THAT(error_of(R"([modbus]
+transport = "tcp"
+[modbus.axis]
+x_mm = { address = 0, scale = 0 }
+)"),
+              HasSubstr("modbus.axis.x_mm.scale: scale must not be 0"));
+}
+
+TEST(ModbusConfig, EventGroupMustBeOneRequest) {
+  EXPECT_THAT(error_of(R"([modbus]
+transport = "tcp"
+[modbus.tool_change]
+sequence = { table = "input", address = 10, type = "uint16" }
+tool = { table = "holding", address = 11 }
+)"),
+              HasSubstr("modbus.tool_change.tool: must be in the same table as sequence (input)"));
+  EXPECT_THAT(error_of(R"([modbus]
+transport = "tcp"
+[modbus.tool_change]
+sequence = { address = 10, type = "uint16" }
+tool = { address = 200 }
+)"),
+              HasSubstr("modbus.tool_change: its holding signals span 191 addresses"));
+  EXPECT_THAT(error_of(R"([modbus]
+transport = "tcp"
+[modbus.tool_change]
+sequence = { address = 10, type = "int16" }
+tool = { address = 11 }
+)"),
+              HasSubstr("modbus.tool_change.sequence: a sequence counter must be uint16 or uint32"));
+  EXPECT_THAT(error_of(R"([modbus]
+transport = "tcp"
+[modbus.tool_change]
+sequence = { address = 10, type = "uint16" }
+)"),
+              HasSubstr("modbus.tool_change.tool: missing (required for this group)"));
+}
+
+TEST(ModbusConfig, AxesInOrderAndNormalsTogether) {
+  EXPECT_THAT(error_of(R"([modbus]
+transport = "tcp"
+[modbus.axis]
+x_mm = { address = 0 }
+z_mm = { address = 2 }
+)"),
+              HasSubstr("modbus.axis.z_mm: axes must be mapped in order"));
+  EXPECT_THAT(error_of(R"([modbus]
+transport = "tcp"
+[modbus.axis]
+x_mm = { address = 0 }
+normal_x = { address = 2 }
+)"),
+              HasSubstr("normal_x, normal_y and normal_z go together"));
+}
+
+TEST(ModbusConfig, MissingOrDuplicateItems) {
+  EXPECT_THAT(error_of("[modbus]\n[modbus.axis]\nx_mm = { address = 0 }\n"),
+              HasSubstr("modbus.transport: missing"));
+  EXPECT_THAT(error_of("[other]\n"), HasSubstr("modbus: missing [modbus] table"));
+  EXPECT_THAT(error_of("[modbus]\ntransport = \"tcp\"\n"), HasSubstr("no signal mapped"));
+  EXPECT_THAT(error_of(std::string(kMinimal) + R"(
+[[modbus.offset]]
+register_index = 3
+address = 10
+[[modbus.offset]]
+register_index = 3
+address = 20
+)"),
+              HasSubstr("t.toml:11: modbus.offset[1].register_index: register_index mapped twice"));
+  EXPECT_THAT(error_of("[modbus]\ntransport = \"rtu\"\n[modbus.axis]\nx_mm = { address = 0 }\n"),
+              HasSubstr("modbus.device: missing: RTU needs a serial device path"));
+  EXPECT_THAT(error_of("[modbus]\ntransport = \"tcp\"\nrx_capacity = 1000\n"),
+              HasSubstr("modbus.rx_capacity: must be a power of two"));
+  EXPECT_THAT(error_of("[modbus]\ntransport = [\n"), HasSubstr("t.toml:"));
+}
+
+TEST(ModbusConfig, RtuRateBudget) {
+  // GIVEN 9600 baud 8E1 (11 bits per char): one read of 2 registers = 8 + 9 bytes + 2 gaps of
+  // 3.5 chars = 24 chars = 27.5 ms
+  const auto base = [](const std::string& top) {
+    return R"([modbus]
+transport = "rtu"
+device = "/dev/null"
+baud = 9600
+parity = "even"
+)" + top + R"(
+[modbus.axis]
+x_mm = { address = 0, type = "int32" }
+)";
+  };
+  const ModbusConfig c = parse_modbus_config(base("poll_rate_hz = 10"), "t.toml");
+  // (8 + 5 + 4) chars + 7 chars of gap = 24 chars * 11 bits / 9600
+  EXPECT_NEAR(c.poll_bus_time_s, 24.0 * 11.0 / 9600.0, 1e-9);
+  EXPECT_NEAR(rtu_frame_gap_s(c), 3.5 * 11.0 / 9600.0, 1e-12);
+  // Above 19200 baud the gap is fixed at 1.75 ms.
+  const ModbusConfig fast = parse_modbus_config(
+      std::string(R"([modbus]
+transport = "rtu"
+device = "/dev/null"
+baud = 115200
+[modbus.axis]
+x_mm = { address = 0, type = "int32" }
+)"),
+      "t.toml");
+  EXPECT_DOUBLE_EQ(rtu_frame_gap_s(fast), 0.00175);
+  // WHEN 100 Hz is asked of 9600 baud THEN it is refused with the achievable rate.
+  EXPECT_THAT(error_of(base("poll_rate_hz = 100")),
+              HasSubstr("t.toml: modbus.poll_rate_hz: 100 Hz needs"));
+  // An explicit offset write rate beyond the bus budget is refused too.
+  EXPECT_THAT(error_of(base("poll_rate_hz = 10\noffset_write_rate_hz = 50") + R"(
+[[modbus.offset]]
+register_index = 0
+address = 100
+type = "int32"
+)"),
+              HasSubstr("modbus.offset_write_rate_hz: 50 Hz does not fit"));
+}
+
+}  // namespace
+}  // namespace nccomp::drivers::modbus

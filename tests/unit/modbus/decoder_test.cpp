@@ -1,0 +1,217 @@
+#include "drivers/modbus/decoder.hpp"
+
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cmath>
+#include <cstring>
+#include <variant>
+#include <vector>
+
+#include "tests/support/alloc_counter.hpp"
+
+namespace nccomp::drivers::modbus {
+namespace {
+
+const char* const kMap = R"([modbus]
+transport = "tcp"
+[modbus.axis]
+x_mm = { table = "input", address = 0, type = "int32", scale = 0.001 }
+y_mm = { table = "input", address = 2, type = "float32", word_order = "low_first" }
+tool = { table = "input", address = 4, type = "uint16" }
+program_path_mm = { table = "input", address = 5, type = "float32" }
+cutting = { table = "coil", address = 3 }
+[modbus.tool_measurement]
+sequence = { table = "holding", address = 100, type = "uint16" }
+tool = { table = "holding", address = 101, type = "uint16" }
+wear_um = { table = "holding", address = 102, type = "float32" }
+broken = { table = "holding", address = 104, type = "uint16" }
+[modbus.calibration_touch]
+sequence = { table = "holding", address = 110, type = "uint32" }
+axis = { table = "holding", address = 112, type = "uint16" }
+direction = { table = "holding", address = 113, type = "int16" }
+trigger_position_mm = { table = "holding", address = 114, type = "int32", scale = 0.0001 }
+[[modbus.temperature]]
+sensor = 2
+table = "input"
+address = 50
+type = "int16"
+scale = 0.01
+)";
+
+void put_float(std::span<std::uint16_t> b, std::size_t at, float v, bool low_first) {
+  std::uint32_t u = 0;
+  std::memcpy(&u, &v, 4);
+  const auto hi = static_cast<std::uint16_t>(u >> 16U);
+  const auto lo = static_cast<std::uint16_t>(u & 0xFFFFU);
+  b[at] = low_first ? lo : hi;
+  b[at + 1] = low_first ? hi : lo;
+}
+
+struct ModbusDecoder : ::testing::Test {
+  ModbusConfig config = parse_modbus_config(kMap, "t.toml");
+  PollDecoder dec{config};
+  std::vector<std::uint8_t> ok = std::vector<std::uint8_t>(config.blocks.size(), 1);
+
+  // Blocks: 0 = coil (axis), 1 = input (axis), 2 = holding (tool meas), 3 = holding (touch),
+  // 4 = input (temperature).
+  std::span<std::uint16_t> axis() { return dec.block(1); }
+  std::span<std::uint16_t> meas() { return dec.block(2); }
+  std::span<std::uint16_t> touch() { return dec.block(3); }
+
+  template <typename T>
+  std::vector<T> events_of(std::span<const core::Event> ev) {
+    std::vector<T> out;
+    for (const auto& e : ev) {
+      if (const auto* p = std::get_if<T>(&e)) {
+        out.push_back(*p);
+      }
+    }
+    return out;
+  }
+};
+
+TEST_F(ModbusDecoder, BlockLayout) {
+  ASSERT_EQ(config.blocks.size(), 5U);
+  EXPECT_EQ(config.blocks[0].table, Table::kCoil);
+  EXPECT_EQ(config.blocks[0].start, 3);
+  EXPECT_EQ(config.blocks[1].count, 7);
+  EXPECT_EQ(config.blocks[3].count, 6);
+}
+
+TEST_F(ModbusDecoder, AxisSampleEveryPollWithAllEncodings) {
+  // GIVEN x = -12.345 mm (int32, 0.001), y = 2.5 mm (float, low word first), tool 7, path 100.25
+  axis()[0] = 0xFFFF;
+  axis()[1] = static_cast<std::uint16_t>(-12345 & 0xFFFF);
+  put_float(axis(), 2, 2.5F, true);
+  axis()[4] = 7;
+  put_float(axis(), 5, 100.25F, false);
+  dec.block(0)[0] = 0;  // not cutting
+  const auto samples = events_of<core::AxisSample>(dec.decode(42, ok));
+  ASSERT_EQ(samples.size(), 1U);
+  const core::AxisSample& s = samples[0];
+  EXPECT_EQ(s.time_ns, 42);
+  EXPECT_EQ(s.axis_count, 2);
+  EXPECT_NEAR(s.position_mm[0], -12.345, 1e-9);
+  EXPECT_DOUBLE_EQ(s.position_mm[1], 2.5);
+  EXPECT_EQ(s.tool, 7);
+  EXPECT_DOUBLE_EQ(s.program_path_mm, 100.25);
+  EXPECT_FALSE(s.cutting);
+  EXPECT_FALSE(s.has_normal);
+  // A second poll gives a second sample (state, not an event).
+  EXPECT_EQ(events_of<core::AxisSample>(dec.decode(43, ok)).size(), 1U);
+}
+
+TEST_F(ModbusDecoder, NaNPositionDropsTheSampleAndCountsIt) {
+  put_float(axis(), 2, std::nanf(""), true);
+  EXPECT_TRUE(events_of<core::AxisSample>(dec.decode(1, ok)).empty());
+  EXPECT_EQ(dec.counters().values_invalid, 1U);
+  // NaN program path means "unknown" and is passed on.
+  put_float(axis(), 2, 1.0F, true);
+  put_float(axis(), 5, std::nanf(""), false);
+  const auto s = events_of<core::AxisSample>(dec.decode(2, ok));
+  ASSERT_EQ(s.size(), 1U);
+  EXPECT_TRUE(std::isnan(s[0].program_path_mm));
+}
+
+TEST_F(ModbusDecoder, SequenceCounterBaselineOnceJumpAndWrap) {
+  meas()[0] = 65534;
+  meas()[1] = 5;
+  put_float(meas(), 2, 12.5F, false);
+  // WHEN the first poll sees counter 65534 THEN it is only a baseline
+  EXPECT_TRUE(events_of<core::ToolMeasurement>(dec.decode(1, ok)).empty());
+  // WHEN the counter does not move THEN nothing, however often polled
+  EXPECT_TRUE(events_of<core::ToolMeasurement>(dec.decode(2, ok)).empty());
+  // WHEN it advances by one THEN one event with the values read in the same request
+  meas()[0] = 65535;
+  put_float(meas(), 2, 13.0F, false);
+  auto tm = events_of<core::ToolMeasurement>(dec.decode(3, ok));
+  ASSERT_EQ(tm.size(), 1U);
+  EXPECT_EQ(tm[0].tool, 5);
+  EXPECT_DOUBLE_EQ(tm[0].wear_um[0], 13.0);
+  EXPECT_FALSE(tm[0].broken);
+  EXPECT_TRUE(events_of<core::ToolMeasurement>(dec.decode(4, ok)).empty());
+  // WHEN it wraps 65535 -> 2 (3 steps) THEN the latest event is emitted and 2 are lost
+  meas()[0] = 2;
+  meas()[4] = 1;
+  tm = events_of<core::ToolMeasurement>(dec.decode(5, ok));
+  ASSERT_EQ(tm.size(), 1U);
+  EXPECT_TRUE(tm[0].broken);
+  EXPECT_EQ(dec.counters().events_lost, 2U);
+  // WHEN the NC restarts its counter (backwards) THEN re-baseline, no event
+  meas()[0] = 0;
+  EXPECT_TRUE(events_of<core::ToolMeasurement>(dec.decode(6, ok)).empty());
+  EXPECT_EQ(dec.counters().sequence_resets, 1U);
+  meas()[0] = 1;
+  EXPECT_EQ(events_of<core::ToolMeasurement>(dec.decode(7, ok)).size(), 1U);
+}
+
+TEST_F(ModbusDecoder, UnreadBlockSkipsItsGroupAndKeepsTheCounter) {
+  dec.decode(1, ok);  // baselines (counter 0)
+  meas()[0] = 1;
+  ok[2] = 0;  // the tool measurement request failed this poll
+  auto ev = dec.decode(2, ok);
+  EXPECT_TRUE(events_of<core::ToolMeasurement>(ev).empty());
+  EXPECT_EQ(events_of<core::AxisSample>(ev).size(), 1U);
+  ok[2] = 1;
+  EXPECT_EQ(events_of<core::ToolMeasurement>(dec.decode(3, ok)).size(), 1U);
+  EXPECT_EQ(dec.counters().events_lost, 0U);
+}
+
+TEST_F(ModbusDecoder, Uint32CounterAndRangeChecks) {
+  touch()[0] = 0x0001;
+  touch()[1] = 0xFFFF;  // 0x0001FFFF
+  dec.decode(1, ok);
+  // +1 across the word boundary: 0x00020000
+  touch()[0] = 0x0002;
+  touch()[1] = 0x0000;
+  touch()[2] = 2;                                       // axis Z
+  touch()[3] = static_cast<std::uint16_t>(-1 & 0xFFFF);  // direction -1
+  touch()[4] = 0x0001;
+  touch()[5] = 0x86A0;  // 100000 * 0.0001 = 10 mm
+  auto t = events_of<core::CalibrationTouch>(dec.decode(2, ok));
+  ASSERT_EQ(t.size(), 1U);
+  EXPECT_EQ(t[0].axis, 2);
+  EXPECT_EQ(t[0].direction, -1);
+  EXPECT_NEAR(t[0].trigger_position_mm, 10.0, 1e-12);
+  EXPECT_EQ(dec.counters().events_lost, 0U);
+  // WHEN the NC sends axis 5 (no such axis) THEN the event is consumed and counted invalid
+  touch()[1] = 0x0001;
+  touch()[2] = 5;
+  EXPECT_TRUE(events_of<core::CalibrationTouch>(dec.decode(3, ok)).empty());
+  EXPECT_EQ(dec.counters().values_invalid, 1U);
+  // and direction 0 is invalid too
+  touch()[1] = 0x0002;
+  touch()[2] = 0;
+  touch()[3] = 0;
+  EXPECT_TRUE(events_of<core::CalibrationTouch>(dec.decode(4, ok)).empty());
+  EXPECT_EQ(dec.counters().values_invalid, 2U);
+}
+
+TEST_F(ModbusDecoder, TemperatureOnChangeOnly) {
+  dec.block(4)[0] = 2150;  // 21.50 °C
+  auto t = events_of<core::TemperatureSample>(dec.decode(1, ok));
+  ASSERT_EQ(t.size(), 1U);
+  EXPECT_EQ(t[0].sensor, 2);
+  EXPECT_DOUBLE_EQ(t[0].temperature_c, 21.5);
+  EXPECT_TRUE(events_of<core::TemperatureSample>(dec.decode(2, ok)).empty());
+  dec.block(4)[0] = static_cast<std::uint16_t>(-125 & 0xFFFF);
+  t = events_of<core::TemperatureSample>(dec.decode(3, ok));
+  ASSERT_EQ(t.size(), 1U);
+  EXPECT_DOUBLE_EQ(t[0].temperature_c, -1.25);
+}
+
+TEST_F(ModbusDecoder, DecodeIsAllocationFree) {
+  dec.decode(1, ok);
+  meas()[0] = 1;
+  touch()[1] = 1;
+  touch()[3] = 1;
+  dec.block(4)[0] = 7;
+  const nccomp::test::AllocationScope scope;
+  const auto ev = dec.decode(2, ok);
+  EXPECT_EQ(scope.count(), 0U);
+  EXPECT_EQ(ev.size(), 4U);  // axis sample, tool measurement, touch, temperature
+}
+
+}  // namespace
+}  // namespace nccomp::drivers::modbus
