@@ -1,0 +1,313 @@
+#include "daemon/config/builtin_sections.hpp"
+
+#include <set>
+#include <stdexcept>
+#include <utility>
+
+#include "daemon/loopback_bus.hpp"
+
+namespace nccomp::daemon::config {
+
+namespace {
+
+const toml::table* as_table(const toml::node& node, std::string_view name, Diagnostics& diag) {
+  const auto* t = node.as_table();
+  if (t == nullptr) {
+    diag.error(&node, std::string(name), "expected a table ([" + std::string(name) + "])");
+  }
+  return t;
+}
+
+template <typename T>
+const T& typed(const Config& c, std::string_view name) {
+  static const T fallback{};
+  const T* p = c.find<T>(name);
+  return p != nullptr ? *p : fallback;
+}
+
+class DaemonParser final : public SectionParser {
+ public:
+  std::string_view name() const noexcept override { return "daemon"; }
+  std::unique_ptr<Section> absent() const override { return std::make_unique<DaemonSection>(); }
+  std::unique_ptr<Section> parse(const toml::node& node, Diagnostics& diag) const override {
+    auto s = std::make_unique<DaemonSection>();
+    const auto* t = as_table(node, name(), diag);
+    if (t == nullptr) {
+      return s;
+    }
+    TableReader r(*t, "daemon", diag);
+    s->rate_hz = r.number("rate_hz", 1000.0, 1.0, 10000.0);
+    s->dry_run = r.boolean("dry_run", false);
+    s->max_events_per_cycle =
+        static_cast<std::size_t>(r.integer("max_events_per_cycle", 256, 1, 65536));
+    s->overrun_policy = r.choice("overrun_policy", "skip_missed", {"skip_missed", "restart"}) ==
+                                "restart"
+                            ? OverrunPolicy::kRestart
+                            : OverrunPolicy::kSkipMissed;
+    if (const auto* rt = r.table("realtime")) {
+      TableReader q(*rt, "daemon.realtime", diag);
+      s->sched_fifo_priority = static_cast<int>(q.integer("sched_fifo_priority", 0, 0, 99));
+      for (auto c : q.integer_list("cpu_affinity", 0, 1023)) {
+        s->cpu_affinity.push_back(static_cast<int>(c));
+      }
+      s->lock_memory = q.boolean("lock_memory", false);
+      s->prefault_stack_kib =
+          static_cast<std::size_t>(q.integer("prefault_stack_kib", 0, 0, 65536));
+    }
+    return s;
+  }
+};
+
+class StateParser final : public SectionParser {
+ public:
+  std::string_view name() const noexcept override { return "state"; }
+  std::unique_ptr<Section> absent() const override { return std::make_unique<StateSection>(); }
+  std::unique_ptr<Section> parse(const toml::node& node, Diagnostics& diag) const override {
+    auto s = std::make_unique<StateSection>();
+    if (const auto* t = as_table(node, name(), diag)) {
+      TableReader r(*t, "state", diag);
+      s->directory = r.string("directory", "");
+      s->min_interval_s = r.number("min_interval_s", 0.5, 0.001, 3600.0);
+    }
+    return s;
+  }
+};
+
+class LogParser final : public SectionParser {
+ public:
+  std::string_view name() const noexcept override { return "log"; }
+  std::unique_ptr<Section> absent() const override { return std::make_unique<LogSection>(); }
+  std::unique_ptr<Section> parse(const toml::node& node, Diagnostics& diag) const override {
+    auto s = std::make_unique<LogSection>();
+    if (const auto* t = as_table(node, name(), diag)) {
+      TableReader r(*t, "log", diag);
+      s->level = r.choice("level", "info", {"trace", "debug", "info", "warning", "error"});
+      s->target = r.choice("target", "auto", {"auto", "journal", "terminal"});
+    }
+    return s;
+  }
+};
+
+class MeasurementLogParser final : public SectionParser {
+ public:
+  std::string_view name() const noexcept override { return "measurement_log"; }
+  std::unique_ptr<Section> absent() const override {
+    return std::make_unique<MeasurementLogSection>();
+  }
+  std::unique_ptr<Section> parse(const toml::node& node, Diagnostics& diag) const override {
+    auto s = std::make_unique<MeasurementLogSection>();
+    if (const auto* t = as_table(node, name(), diag)) {
+      TableReader r(*t, "measurement_log", diag);
+      s->enabled = r.boolean("enabled", true);
+      s->directory = r.string("directory", "");
+      s->max_file_bytes = static_cast<std::uint64_t>(
+          r.integer("max_file_bytes", 16 * 1024 * 1024, 4096, std::int64_t{1} << 40));
+      s->keep_files = static_cast<int>(r.integer("keep_files", 8, 1, 1000));
+    }
+    return s;
+  }
+};
+
+class StatusParser final : public SectionParser {
+ public:
+  std::string_view name() const noexcept override { return "status"; }
+  std::unique_ptr<Section> absent() const override { return std::make_unique<StatusSection>(); }
+  std::unique_ptr<Section> parse(const toml::node& node, Diagnostics& diag) const override {
+    auto s = std::make_unique<StatusSection>();
+    if (const auto* t = as_table(node, name(), diag)) {
+      TableReader r(*t, "status", diag);
+      s->socket_path = r.string("socket_path", "");
+      if (s->socket_path.size() >= 100) {
+        diag.error(r.where("socket_path"), "a Unix socket path must be shorter than 100 bytes");
+      }
+      s->prometheus_port = static_cast<int>(r.integer("prometheus_port", 0, 0, 65535));
+      s->prometheus_address = r.choice("prometheus_address", "127.0.0.1", {"127.0.0.1", "::1"});
+    }
+    return s;
+  }
+};
+
+class RegistersParser final : public SectionParser {
+ public:
+  std::string_view name() const noexcept override { return "registers"; }
+  std::unique_ptr<Section> absent() const override { return std::make_unique<RegistersSection>(); }
+  std::unique_ptr<Section> parse(const toml::node& node, Diagnostics& diag) const override {
+    auto s = std::make_unique<RegistersSection>();
+    const auto* arr = node.as_array();
+    if (arr == nullptr || !arr->is_array_of_tables()) {
+      diag.error(&node, "registers", "expected an array of tables ([[registers]])");
+      return s;
+    }
+    std::set<std::string> names;
+    for (std::size_t i = 0; i < arr->size(); ++i) {
+      const auto& t = *arr->get(i)->as_table();
+      const std::string path = "registers[" + std::to_string(i) + "]";
+      TableReader r(t, path, diag);
+      RegisterEntry e;
+      e.where = where_of(&t, path);
+      e.spec.name = r.string("name", std::nullopt);
+      if (!e.spec.name.empty() && !names.insert(e.spec.name).second) {
+        diag.error(r.where("name"), "register name '" + e.spec.name + "' is used twice");
+      }
+      if (e.spec.name.size() > 255) {
+        diag.error(r.where("name"), "longer than 255 characters");
+      }
+      const std::string kind =
+          r.choice("kind", std::nullopt,
+                   {"tool_length_wear", "tool_radius_wear", "checkpoint", "axis_offset"});
+      (void)core::engine::parse_register_kind(kind, e.spec.kind);
+      e.bus = r.string("bus", std::nullopt);
+      e.spec.limits.max_abs_um = r.number("max_abs_um", std::nullopt, 1e-3, 1e6);
+      e.spec.limits.max_step_um = r.number("max_step_um", std::nullopt, 1e-3, 1e6);
+      e.spec.limits.max_rate_um_per_s = r.number("max_rate_um_per_s", std::nullopt, 1e-3, 1e6);
+      e.where.key_path = path;
+      s->registers.push_back(std::move(e));
+    }
+    return s;
+  }
+  void cross_check(const Config& config, Diagnostics& diag) const override {
+    for (const auto& e : registers_section(config).registers) {
+      const SectionParser* p = find_section_parser(e.bus);
+      if (p == nullptr || !p->provides_bus() || !config.has(e.bus)) {
+        std::string buses;
+        for (const auto* q : section_parsers()) {
+          if (q->provides_bus() && config.has(q->name())) {
+            buses += (buses.empty() ? "" : ", ") + std::string(q->name());
+          }
+        }
+        Where w = e.where;
+        w.key_path += ".bus";
+        diag.error(std::move(w), "no bus section '" + e.bus + "' in the config (buses: " +
+                                     (buses.empty() ? "none" : buses) + ")");
+      }
+    }
+  }
+};
+
+class RampParser final : public SectionParser {
+ public:
+  std::string_view name() const noexcept override { return "ramp"; }
+  std::unique_ptr<Section> parse(const toml::node& node, Diagnostics& diag) const override {
+    auto s = std::make_unique<RampSection>();
+    const auto* arr = node.as_array();
+    if (arr == nullptr || !arr->is_array_of_tables()) {
+      diag.error(&node, "ramp", "expected an array of tables ([[ramp]])");
+      return s;
+    }
+    std::set<std::string> names;
+    for (std::size_t i = 0; i < arr->size(); ++i) {
+      const auto& t = *arr->get(i)->as_table();
+      const std::string path = "ramp[" + std::to_string(i) + "]";
+      TableReader r(t, path, diag);
+      RampEntry e;
+      e.where = where_of(&t, path);
+      e.config.name = "ramp/" + r.string("name", std::nullopt);
+      if (!names.insert(e.config.name).second) {
+        diag.error(r.where("name"), "ramp name is used twice");
+      }
+      e.config.register_name = r.string("register", std::nullopt);
+      e.config.start_um = r.number("start_um", 0.0, -1e6, 1e6);
+      e.config.target_um = r.number("target_um", std::nullopt, -1e6, 1e6);
+      e.config.rate_um_per_s = r.number("rate_um_per_s", std::nullopt, 1e-6, 1e6);
+      s->ramps.push_back(std::move(e));
+    }
+    return s;
+  }
+  void cross_check(const Config& config, Diagnostics& diag) const override {
+    const auto* s = config.find<RampSection>("ramp");
+    if (s == nullptr) {
+      return;
+    }
+    const auto& regs = registers_section(config).registers;
+    for (const auto& e : s->ramps) {
+      bool found = false;
+      for (const auto& r : regs) {
+        found = found || r.spec.name == e.config.register_name;
+      }
+      if (!found) {
+        Where w = e.where;
+        w.key_path += ".register";
+        diag.error(std::move(w), "no register named '" + e.config.register_name +
+                                     "' in [[registers]]");
+      }
+    }
+  }
+  void add_modules(const Config& config,
+                   std::vector<std::unique_ptr<core::engine::Module>>& modules) const override {
+    if (const auto* s = config.find<RampSection>("ramp")) {
+      for (const auto& e : s->ramps) {
+        modules.push_back(std::make_unique<core::engine::RampModule>(e.config));
+      }
+    }
+  }
+};
+
+class LoopbackParser final : public SectionParser {
+ public:
+  std::string_view name() const noexcept override { return "loopback"; }
+  std::unique_ptr<Section> parse(const toml::node& node, Diagnostics& diag) const override {
+    auto s = std::make_unique<LoopbackSection>();
+    if (const auto* t = as_table(node, name(), diag)) {
+      TableReader r(*t, "loopback", diag);
+      const auto pow2 = [&](std::string_view key, std::int64_t def) {
+        const auto v = r.integer(key, def, 2, 1 << 20);
+        if ((v & (v - 1)) != 0) {
+          diag.error(r.where(key), "must be a power of two");
+          return static_cast<std::size_t>(def);
+        }
+        return static_cast<std::size_t>(v);
+      };
+      s->rx_capacity = pow2("rx_capacity", 1024);
+      s->tx_capacity = pow2("tx_capacity", 1024);
+    }
+    return s;
+  }
+  bool provides_bus() const noexcept override { return true; }
+  std::unique_ptr<drivers::Bus> make_bus(const Config& config) const override {
+    const auto& s = typed<LoopbackSection>(config, "loopback");
+    return std::make_unique<LoopbackBus>(s.rx_capacity, s.tx_capacity);
+  }
+};
+
+}  // namespace
+
+void register_builtin_sections() {
+  register_section(std::make_unique<DaemonParser>());
+  register_section(std::make_unique<StateParser>());
+  register_section(std::make_unique<LogParser>());
+  register_section(std::make_unique<MeasurementLogParser>());
+  register_section(std::make_unique<StatusParser>());
+  register_section(std::make_unique<RegistersParser>());
+  register_section(std::make_unique<RampParser>());
+  register_section(std::make_unique<LoopbackParser>());
+}
+
+const DaemonSection& daemon_section(const Config& c) { return typed<DaemonSection>(c, "daemon"); }
+const StateSection& state_section(const Config& c) { return typed<StateSection>(c, "state"); }
+const LogSection& log_section(const Config& c) { return typed<LogSection>(c, "log"); }
+const MeasurementLogSection& measurement_log_section(const Config& c) {
+  return typed<MeasurementLogSection>(c, "measurement_log");
+}
+const StatusSection& status_section(const Config& c) { return typed<StatusSection>(c, "status"); }
+const RegistersSection& registers_section(const Config& c) {
+  return typed<RegistersSection>(c, "registers");
+}
+
+std::unique_ptr<core::engine::Engine> build_engine(const Config& c) {
+  std::vector<core::engine::RegisterSpec> regs;
+  for (const auto& e : registers_section(c).registers) {
+    regs.push_back(e.spec);
+  }
+  std::vector<std::unique_ptr<core::engine::Module>> modules;
+  for (const auto* p : section_parsers()) {
+    if (c.has(p->name())) {
+      p->add_modules(c, modules);
+    }
+  }
+  auto engine = std::make_unique<core::engine::Engine>();
+  engine->configure(std::move(regs), std::move(modules),
+                    core::engine::EngineOptions{daemon_section(c).max_events_per_cycle});
+  return engine;
+}
+
+}  // namespace nccomp::daemon::config
