@@ -132,7 +132,7 @@ mount -t tmpfs run /host/run 2>/dev/null
 ip link set lo up
 ip link add vcan0 type vcan || fail "ip link add vcan0"
 ip link set vcan0 up || fail "ip link set vcan0 up"
-chroot /host /bin/sh "$out/vm_cmd.sh"
+chroot /host /bin/bash "$out/vm_cmd.sh"
 rc=$?
 echo "NCCOMP_VM_EXIT=$rc"
 sync
@@ -146,7 +146,7 @@ fi
 
 # The command, as a script in the shared directory (quoted so arguments survive).
 {
-  echo '#!/bin/sh'
+  echo "#!/bin/bash"
   echo "cd $(printf '%q' "$PWD") 2>/dev/null || cd /"
   echo 'export HOME=/tmp LANG=C.UTF-8'
   printf 'export PATH=%q\n' "$PATH"

@@ -1,0 +1,597 @@
+#include "drivers/can/can_bus.hpp"
+
+#include <linux/can.h>
+#include <linux/can/error.h>
+#include <linux/can/netlink.h>
+#include <linux/can/raw.h>
+#include <linux/if_link.h>
+#include <linux/netlink.h>
+#include <linux/rtnetlink.h>
+#include <net/if.h>
+#include <poll.h>
+#include <sys/eventfd.h>
+#include <sys/ioctl.h>
+#include <sys/socket.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+#include <stdexcept>
+#include <string>
+
+namespace nccomp::drivers::can {
+namespace {
+
+constexpr std::int64_t kIdlePollNs = 1'000'000;  // bounds tx latency when nobody calls wake()
+constexpr int kMaxRxBatch = 512;                 // frames per wake-up before tx gets a turn
+
+std::int64_t mono_ns() noexcept {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+std::int64_t to_ns(double s) noexcept { return static_cast<std::int64_t>(s * 1e9); }
+
+std::string errno_text(int e) { return std::string(std::strerror(e)); }
+
+}  // namespace
+
+CanBus::CanBus(CanConfig config)
+    : config_(std::move(config)),
+      decoder_(config_.mapping),
+      rx_ring_(config_.rx_ring_events),
+      tx_ring_(config_.tx_ring_writes) {
+  for (const auto& r : config_.mapping.offsets) {
+    Slot s;
+    s.reg = &r;
+    slots_.push_back(s);
+  }
+  std::sort(slots_.begin(), slots_.end(), [](const Slot& a, const Slot& b) {
+    return a.reg->register_index < b.reg->register_index;
+  });
+  for (std::size_t i = 0; i < slots_.size(); ++i) {
+    if (slots_[i].reg->ack) {
+      ack_index_.emplace_back(id_key(slots_[i].reg->ack->id, slots_[i].reg->ack->extended), i);
+    }
+  }
+  std::sort(ack_index_.begin(), ack_index_.end());
+}
+
+CanBus::~CanBus() { stop(); }
+
+void CanBus::open_socket() {
+  const std::string& ifname = config_.interface;
+  const int s = ::socket(PF_CAN, SOCK_RAW | SOCK_CLOEXEC | SOCK_NONBLOCK, CAN_RAW);
+  if (s < 0) {
+    throw std::runtime_error("can: socket(PF_CAN, CAN_RAW) failed: " + errno_text(errno) +
+                             " (kernel without CAN? modprobe can-raw)");
+  }
+  const auto fail = [&](const std::string& what) {
+    const int e = errno;
+    ::close(s);
+    throw std::runtime_error("can: " + ifname + ": " + what + ": " + errno_text(e));
+  };
+  ifreq ifr{};
+  std::strncpy(ifr.ifr_name, ifname.c_str(), IFNAMSIZ - 1);
+  if (::ioctl(s, SIOCGIFINDEX, &ifr) < 0) {
+    fail("no such interface");
+  }
+  const int index = ifr.ifr_ifindex;
+  if (config_.mapping.fd) {
+    // FD frames only make sense where the interface carries them: its MTU says so.
+    if (::ioctl(s, SIOCGIFMTU, &ifr) < 0) {
+      fail("SIOCGIFMTU");
+    }
+    if (ifr.ifr_mtu != static_cast<int>(CANFD_MTU)) {
+      ::close(s);
+      throw std::runtime_error("can: " + ifname + ": can.fd = true but the interface MTU is " +
+                               std::to_string(ifr.ifr_mtu) + " (not CAN FD: " +
+                               std::to_string(CANFD_MTU) + ")");
+    }
+    const int on = 1;
+    if (::setsockopt(s, SOL_CAN_RAW, CAN_RAW_FD_FRAMES, &on, sizeof on) < 0) {
+      fail("CAN_RAW_FD_FRAMES");
+    }
+  }
+  // Kernel filters: only mapped IDs and acknowledges reach user space.
+  std::vector<can_filter> filters;
+  const auto add = [&](std::uint32_t id, bool ext) {
+    can_filter f{};
+    f.can_id = ext ? (id | CAN_EFF_FLAG) : id;
+    f.can_mask = (ext ? CAN_EFF_MASK : CAN_SFF_MASK) | CAN_EFF_FLAG | CAN_RTR_FLAG;
+    filters.push_back(f);
+  };
+  for (const auto& f : config_.mapping.rx) {
+    add(f.id, f.extended);
+  }
+  for (const auto& r : config_.mapping.offsets) {
+    if (r.ack) {
+      add(r.ack->id, r.ack->extended);
+    }
+  }
+  if (::setsockopt(s, SOL_CAN_RAW, CAN_RAW_FILTER, filters.empty() ? nullptr : filters.data(),
+                   static_cast<socklen_t>(filters.size() * sizeof(can_filter))) < 0) {
+    fail("CAN_RAW_FILTER");
+  }
+  const can_err_mask_t err_mask = CAN_ERR_MASK;
+  if (::setsockopt(s, SOL_CAN_RAW, CAN_RAW_ERR_FILTER, &err_mask, sizeof err_mask) < 0) {
+    fail("CAN_RAW_ERR_FILTER");
+  }
+  const int on = 1;
+  if (::setsockopt(s, SOL_SOCKET, SO_RXQ_OVFL, &on, sizeof on) < 0) {
+    fail("SO_RXQ_OVFL");
+  }
+  if (config_.socket_rcvbuf_bytes > 0) {
+    const int bytes = static_cast<int>(config_.socket_rcvbuf_bytes);
+    // SO_RCVBUFFORCE needs CAP_NET_ADMIN; fall back to the capped SO_RCVBUF.
+    if (::setsockopt(s, SOL_SOCKET, SO_RCVBUFFORCE, &bytes, sizeof bytes) < 0) {
+      (void)::setsockopt(s, SOL_SOCKET, SO_RCVBUF, &bytes, sizeof bytes);
+    }
+  }
+  sockaddr_can addr{};
+  addr.can_family = AF_CAN;
+  addr.can_ifindex = index;
+  if (::bind(s, reinterpret_cast<sockaddr*>(&addr), sizeof addr) < 0) {
+    fail("bind");
+  }
+  sock_ = s;
+  ifindex_ = index;
+  fd_frames_ = config_.mapping.fd;
+  ovfl_base_ += ovfl_last_;
+  ovfl_last_ = 0;
+}
+
+void CanBus::close_socket() noexcept {
+  if (sock_ >= 0) {
+    ::close(sock_);
+    sock_ = -1;
+  }
+}
+
+void CanBus::start() {
+  if (running_.load()) {
+    return;
+  }
+  open_socket();
+  event_fd_ = ::eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK);
+  if (event_fd_ < 0) {
+    close_socket();
+    throw std::runtime_error("can: eventfd: " + errno_text(errno));
+  }
+  st_.bus.state = LinkState::kUp;
+  publish();
+  running_.store(true);
+  thread_ = std::thread([this] { run(); });
+}
+
+void CanBus::stop() {
+  if (!running_.exchange(false)) {
+    return;
+  }
+  wake();
+  if (thread_.joinable()) {
+    thread_.join();
+  }
+  close_socket();
+  if (event_fd_ >= 0) {
+    ::close(event_fd_);
+    event_fd_ = -1;
+  }
+  st_.bus.state = LinkState::kStopped;
+  publish();
+}
+
+void CanBus::wake() noexcept {
+  if (event_fd_ >= 0) {
+    const std::uint64_t one = 1;
+    (void)!::write(event_fd_, &one, sizeof one);
+  }
+}
+
+void CanBus::publish() noexcept {
+  auto& b = st_.bus;
+  auto& c = st_.can;
+  b.counters.malformed =
+      c.rejected_unknown_id + c.rejected_wrong_length + c.rejected_out_of_range +
+      c.rejected_not_finite;
+  b.counters.faults = c.error_passive + c.bus_off + c.interface_down + c.controller_overflow;
+  c.rx_overflow = ovfl_base_ + ovfl_last_;
+  b.alarm = std::any_of(slots_.begin(), slots_.end(),
+                        [](const Slot& s) { return s.state == WriteState::kFailed; });
+  if (b.state != LinkState::kStopped) {
+    if (if_down_ || bus_off_) {
+      b.state = LinkState::kDown;
+    }
+  }
+  status_.store(st_);
+}
+
+CanBus::Slot* CanBus::slot_for(std::uint16_t register_index) noexcept {
+  const auto it = std::lower_bound(
+      slots_.begin(), slots_.end(), register_index,
+      [](const Slot& s, std::uint16_t r) { return s.reg->register_index < r; });
+  return (it != slots_.end() && it->reg->register_index == register_index) ? &*it : nullptr;
+}
+
+void CanBus::run() noexcept {
+  std::int64_t now = mono_ns();
+  while (running_.load(std::memory_order_acquire)) {
+    // Sleep until the next thing to do: a frame, a wake(), an ack deadline, a link check.
+    std::int64_t wait_ns = kIdlePollNs;
+    for (const auto& s : slots_) {
+      if (s.state == WriteState::kAwaitAck) {
+        wait_ns = std::min(wait_ns, s.deadline_ns - now);
+      }
+    }
+    if (backoff_until_ns_ > now) {
+      wait_ns = std::min(wait_ns, backoff_until_ns_ - now);
+    }
+    if (if_down_) {
+      wait_ns = std::min(wait_ns, next_link_check_ns_ - now);
+    }
+    if (bus_off_ && config_.restart == RestartMode::kDaemon) {
+      wait_ns = std::min(wait_ns, next_restart_ns_ - now);
+    }
+    wait_ns = std::max<std::int64_t>(wait_ns, 0);
+    pollfd fds[2]{};
+    fds[0].fd = event_fd_;
+    fds[0].events = POLLIN;
+    fds[1].fd = sock_;
+    fds[1].events = POLLIN;
+    const timespec ts{static_cast<time_t>(wait_ns / 1'000'000'000),
+                      static_cast<long>(wait_ns % 1'000'000'000)};
+    const int n = ::ppoll(fds, sock_ >= 0 ? 2 : 1, &ts, nullptr);
+    now = mono_ns();
+    if (n > 0 && (fds[0].revents & POLLIN) != 0) {
+      std::uint64_t v = 0;
+      (void)!::read(event_fd_, &v, sizeof v);
+    }
+    if (n > 0 && sock_ >= 0 && (fds[1].revents & (POLLIN | POLLERR)) != 0) {
+      receive_all(now);
+    }
+    if (if_down_ && now >= next_link_check_ns_) {
+      check_link(now);
+    }
+    if (bus_off_ && config_.restart == RestartMode::kDaemon && now >= next_restart_ns_) {
+      ++st_.can.restart_requests;
+      if (request_can_restart(ifindex_) != 0) {
+        ++st_.can.restart_failures;
+      }
+      next_restart_ns_ = now + to_ns(config_.restart_delay_s);
+    }
+    take_writes();
+    check_acks(now);
+    send_pending(now);
+    publish();
+  }
+}
+
+void CanBus::receive_all(std::int64_t now_ns) noexcept {
+  for (int i = 0; i < kMaxRxBatch && sock_ >= 0; ++i) {
+    canfd_frame frame{};
+    iovec iov{&frame, sizeof frame};
+    alignas(cmsghdr) char ctrl[CMSG_SPACE(sizeof(std::uint32_t))];
+    msghdr msg{};
+    msg.msg_iov = &iov;
+    msg.msg_iovlen = 1;
+    msg.msg_control = ctrl;
+    msg.msg_controllen = sizeof ctrl;
+    const ssize_t got = ::recvmsg(sock_, &msg, MSG_DONTWAIT);
+    if (got < 0) {
+      if (errno == EAGAIN || errno == EINTR) {
+        return;
+      }
+      // The socket reports the interface going down (ENETDOWN) or away (ENODEV) as an error.
+      link_down(now_ns);
+      return;
+    }
+    for (cmsghdr* c = CMSG_FIRSTHDR(&msg); c != nullptr; c = CMSG_NXTHDR(&msg, c)) {
+      if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SO_RXQ_OVFL) {
+        std::memcpy(&ovfl_last_, CMSG_DATA(c), sizeof ovfl_last_);
+      }
+    }
+    if (got != static_cast<ssize_t>(CAN_MTU) && got != static_cast<ssize_t>(CANFD_MTU)) {
+      continue;  // not a CAN frame; cannot happen on CAN_RAW
+    }
+    ++st_.bus.counters.frames_rx;
+    st_.bus.last_rx_ns = now_ns;
+    const std::uint32_t can_id = frame.can_id;
+    if ((can_id & CAN_ERR_FLAG) != 0) {
+      handle_error_frame(can_id, frame.data, now_ns);
+      continue;
+    }
+    if (bus_off_) {
+      // Traffic again: the controller was restarted (restart-ms or our request).
+      bus_off_ = false;
+      ++st_.can.bus_recoveries;
+      recovered();
+    }
+    const bool ext = (can_id & CAN_EFF_FLAG) != 0;
+    const std::uint32_t id = can_id & (ext ? CAN_EFF_MASK : CAN_SFF_MASK);
+    const std::size_t len = std::min<std::size_t>(frame.len, kMaxPayloadBytes);
+    const std::uint32_t key = id_key(id, ext);
+    if (!ack_index_.empty()) {
+      const auto it = std::lower_bound(ack_index_.begin(), ack_index_.end(),
+                                       std::make_pair(key, std::size_t{0}));
+      if (it != ack_index_.end() && it->first == key) {
+        handle_ack(key, frame.data, len);
+        continue;
+      }
+    }
+    core::Event ev;
+    const auto r = decoder_.decode(id, ext, std::span<const std::uint8_t>(frame.data, len),
+                                   now_ns, ev);
+    switch (r.reject) {
+      case RejectReason::kNone: break;
+      case RejectReason::kUnknownId: ++st_.can.rejected_unknown_id; break;
+      case RejectReason::kWrongLength: ++st_.can.rejected_wrong_length; break;
+      case RejectReason::kOutOfRange: ++st_.can.rejected_out_of_range; break;
+      case RejectReason::kNotFinite: ++st_.can.rejected_not_finite; break;
+    }
+    if (r.emitted) {
+      if (rx_ring_.try_push(ev)) {
+        ++st_.bus.counters.events_decoded;
+      } else {
+        ++st_.bus.counters.events_dropped;
+      }
+    }
+  }
+}
+
+void CanBus::handle_error_frame(std::uint32_t can_id, const std::uint8_t* data,
+                                std::int64_t now_ns) noexcept {
+  ++st_.can.error_frames;
+  if ((can_id & CAN_ERR_CRTL) != 0) {
+    const std::uint8_t c = data[1];
+    if ((c & (CAN_ERR_CRTL_RX_OVERFLOW | CAN_ERR_CRTL_TX_OVERFLOW)) != 0) {
+      ++st_.can.controller_overflow;
+    }
+    if ((c & (CAN_ERR_CRTL_RX_WARNING | CAN_ERR_CRTL_TX_WARNING)) != 0) {
+      ++st_.can.error_warning;
+    }
+    if ((c & (CAN_ERR_CRTL_RX_PASSIVE | CAN_ERR_CRTL_TX_PASSIVE)) != 0) {
+      ++st_.can.error_passive;
+      if (st_.bus.state == LinkState::kUp) {
+        st_.bus.state = LinkState::kDegraded;
+      }
+    }
+    if ((c & CAN_ERR_CRTL_ACTIVE) != 0 && st_.bus.state == LinkState::kDegraded) {
+      st_.bus.state = LinkState::kUp;
+    }
+  }
+  if ((can_id & CAN_ERR_BUSOFF) != 0 && !bus_off_) {
+    bus_off_ = true;
+    ++st_.can.bus_off;
+    st_.bus.state = LinkState::kDown;
+    next_restart_ns_ = now_ns + to_ns(config_.restart_delay_s);
+  }
+  if ((can_id & CAN_ERR_RESTARTED) != 0 && bus_off_) {
+    bus_off_ = false;
+    ++st_.can.bus_recoveries;
+    recovered();
+  }
+}
+
+void CanBus::handle_ack(std::uint32_t key, const std::uint8_t* data, std::size_t len) noexcept {
+  for (auto it = std::lower_bound(ack_index_.begin(), ack_index_.end(),
+                                  std::make_pair(key, std::size_t{0}));
+       it != ack_index_.end() && it->first == key; ++it) {
+    Slot& s = slots_[it->second];
+    // The NC echoes the written payload: an ack of an older value does not confirm a newer one.
+    if (s.state == WriteState::kAwaitAck && len == s.reg->length_bytes &&
+        std::memcmp(data, s.payload.data(), len) == 0) {
+      s.state = WriteState::kIdle;
+      ++st_.bus.counters.offsets_written;
+    }
+  }
+}
+
+void CanBus::take_writes() noexcept {
+  core::OffsetWrite w;
+  while (tx_ring_.try_pop(w)) {
+    Slot* s = slot_for(w.register_index);
+    if (s == nullptr) {
+      ++st_.can.tx_unmapped;
+      ++st_.bus.counters.offsets_failed;
+      continue;
+    }
+    if (!encode_offset(*s->reg, w.value_um, s->payload)) {
+      ++st_.can.tx_unencodable;
+      ++st_.bus.counters.offsets_failed;
+      s->state = WriteState::kFailed;
+      continue;
+    }
+    // Absolute values: a newer write replaces whatever was pending for the register.
+    s->value_um = w.value_um;
+    s->state = WriteState::kPending;
+    s->attempts = 0;
+  }
+}
+
+void CanBus::send_pending(std::int64_t now_ns) noexcept {
+  if (sock_ < 0 || if_down_ || bus_off_ || now_ns < backoff_until_ns_) {
+    return;
+  }
+  for (auto& s : slots_) {
+    if (s.state != WriteState::kPending) {
+      continue;
+    }
+    canfd_frame f{};
+    f.can_id = s.reg->extended ? (s.reg->id | CAN_EFF_FLAG) : s.reg->id;
+    f.len = s.reg->length_bytes;
+    std::memcpy(f.data, s.payload.data(), s.reg->length_bytes);
+    const bool fd = s.reg->length_bytes > CAN_MAX_DLEN;
+    const std::size_t size = fd ? CANFD_MTU : CAN_MTU;
+    const ssize_t put = ::send(sock_, &f, size, MSG_DONTWAIT);
+    if (put < 0) {
+      const int e = errno;
+      if (e == ENOBUFS || e == EAGAIN) {
+        // Transmit queue full: back off exponentially, the write stays pending.
+        ++st_.can.enobufs;
+        backoff_ns_ = backoff_ns_ == 0 ? to_ns(config_.enobufs_backoff_s)
+                                       : std::min(backoff_ns_ * 2,
+                                                  64 * to_ns(config_.enobufs_backoff_s));
+        backoff_until_ns_ = now_ns + backoff_ns_;
+        return;
+      }
+      if (e == ENETDOWN || e == ENODEV || e == ENXIO) {
+        link_down(now_ns);
+        return;
+      }
+      ++st_.bus.counters.offsets_failed;
+      s.state = WriteState::kFailed;
+      continue;
+    }
+    backoff_ns_ = 0;
+    ++st_.bus.counters.frames_tx;
+    ++s.attempts;
+    if (s.reg->ack) {
+      s.state = WriteState::kAwaitAck;
+      s.deadline_ns = now_ns + to_ns(config_.ack_timeout_s);
+    } else {
+      s.state = WriteState::kIdle;
+      ++st_.bus.counters.offsets_written;
+    }
+  }
+}
+
+void CanBus::check_acks(std::int64_t now_ns) noexcept {
+  for (auto& s : slots_) {
+    if (s.state != WriteState::kAwaitAck || now_ns < s.deadline_ns) {
+      continue;
+    }
+    ++st_.can.ack_timeouts;
+    if (s.attempts <= config_.ack_retries) {
+      ++st_.bus.counters.offsets_retried;
+      s.state = WriteState::kPending;
+    } else {
+      ++st_.bus.counters.offsets_failed;
+      s.state = WriteState::kFailed;
+    }
+  }
+}
+
+void CanBus::link_down(std::int64_t now_ns) noexcept {
+  if (!if_down_) {
+    if_down_ = true;
+    ++st_.can.interface_down;
+    st_.bus.state = LinkState::kDown;
+  }
+  next_link_check_ns_ = now_ns + to_ns(config_.link_check_s);
+  // Consume the pending socket error so poll() does not spin on POLLERR.
+  int err = 0;
+  socklen_t len = sizeof err;
+  if (sock_ >= 0) {
+    (void)::getsockopt(sock_, SOL_SOCKET, SO_ERROR, &err, &len);
+  }
+  if (err == ENODEV) {
+    close_socket();  // the interface is gone; a new one needs a new bind
+  }
+}
+
+void CanBus::check_link(std::int64_t now_ns) noexcept {
+  next_link_check_ns_ = now_ns + to_ns(config_.link_check_s);
+  const int probe = sock_ >= 0 ? sock_ : ::socket(PF_CAN, SOCK_RAW | SOCK_CLOEXEC, CAN_RAW);
+  if (probe < 0) {
+    return;
+  }
+  ifreq ifr{};
+  std::strncpy(ifr.ifr_name, config_.interface.c_str(), IFNAMSIZ - 1);
+  const bool up = ::ioctl(probe, SIOCGIFFLAGS, &ifr) == 0 &&
+                  (ifr.ifr_flags & IFF_UP) != 0 && (ifr.ifr_flags & IFF_RUNNING) != 0;
+  if (probe != sock_) {
+    ::close(probe);
+  }
+  if (!up) {
+    return;
+  }
+  if (sock_ < 0) {
+    try {
+      open_socket();
+    } catch (...) {
+      return;  // try again at the next check
+    }
+  }
+  if_down_ = false;
+  recovered();
+}
+
+void CanBus::recovered() noexcept {
+  if (if_down_ || bus_off_) {
+    return;
+  }
+  ++st_.bus.counters.reconnects;
+  st_.bus.state = LinkState::kUp;
+  // Writes that may not have reached the NC go out again (they are absolute values).
+  for (auto& s : slots_) {
+    if (s.state == WriteState::kAwaitAck) {
+      s.state = WriteState::kPending;
+    }
+  }
+  backoff_until_ns_ = 0;
+  backoff_ns_ = 0;
+}
+
+int request_can_restart(int ifindex) noexcept {
+  const int nl = ::socket(AF_NETLINK, SOCK_RAW | SOCK_CLOEXEC, NETLINK_ROUTE);
+  if (nl < 0) {
+    return errno;
+  }
+  struct {
+    nlmsghdr nh;
+    ifinfomsg ifi;
+    char attrs[128];
+  } req{};
+  req.nh.nlmsg_len = NLMSG_LENGTH(sizeof(ifinfomsg));
+  req.nh.nlmsg_type = RTM_NEWLINK;
+  req.nh.nlmsg_flags = NLM_F_REQUEST | NLM_F_ACK;
+  req.nh.nlmsg_seq = 1;
+  req.ifi.ifi_family = AF_UNSPEC;
+  req.ifi.ifi_index = ifindex;
+  const auto put = [&req](std::uint16_t type, const void* data, std::size_t len) {
+    auto* rta = reinterpret_cast<rtattr*>(reinterpret_cast<char*>(&req) +
+                                          NLMSG_ALIGN(req.nh.nlmsg_len));
+    rta->rta_type = type;
+    rta->rta_len = static_cast<std::uint16_t>(RTA_LENGTH(len));
+    if (len > 0) {
+      std::memcpy(reinterpret_cast<char*>(rta) + RTA_LENGTH(0), data, len);
+    }
+    req.nh.nlmsg_len = NLMSG_ALIGN(req.nh.nlmsg_len) + RTA_ALIGN(rta->rta_len);
+    return rta;
+  };
+  rtattr* linkinfo = put(IFLA_LINKINFO, nullptr, 0);
+  put(IFLA_INFO_KIND, "can", 3);
+  rtattr* data = put(IFLA_INFO_DATA, nullptr, 0);
+  const std::uint32_t one = 1;
+  put(IFLA_CAN_RESTART, &one, sizeof one);
+  const auto end = reinterpret_cast<char*>(&req) + req.nh.nlmsg_len;
+  data->rta_len = static_cast<std::uint16_t>(end - reinterpret_cast<char*>(data));
+  linkinfo->rta_len = static_cast<std::uint16_t>(end - reinterpret_cast<char*>(linkinfo));
+  sockaddr_nl sa{};
+  sa.nl_family = AF_NETLINK;
+  int rc = 0;
+  if (::sendto(nl, &req, req.nh.nlmsg_len, 0, reinterpret_cast<sockaddr*>(&sa), sizeof sa) < 0) {
+    rc = errno;
+  } else {
+    alignas(nlmsghdr) char buf[512];
+    timeval tv{0, 200'000};
+    (void)::setsockopt(nl, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+    const ssize_t got = ::recv(nl, buf, sizeof buf, 0);
+    if (got < 0) {
+      rc = errno;
+    } else if (static_cast<std::size_t>(got) >= NLMSG_LENGTH(sizeof(nlmsgerr))) {
+      const auto* h = reinterpret_cast<const nlmsghdr*>(buf);
+      if (h->nlmsg_type == NLMSG_ERROR) {
+        const auto* e = reinterpret_cast<const nlmsgerr*>(buf + NLMSG_HDRLEN);
+        rc = -e->error;
+      }
+    }
+  }
+  ::close(nl);
+  return rc;
+}
+
+}  // namespace nccomp::drivers::can

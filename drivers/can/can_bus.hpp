@@ -1,0 +1,137 @@
+// The SocketCAN driver: one CAN_RAW socket and one I/O thread per interface.
+//
+// The I/O thread receives (kernel filters from the mapped IDs, error frames on), decodes frames
+// with FrameDecoder into core events pushed to rx(), takes offset writes from tx(), sends them and
+// waits for the NC's acknowledge where the mapping has one (timeout → re-send → alarm). It rides
+// out bus faults without stopping: error-passive (degraded), bus-off (kernel restart-ms or a
+// restart it requests over netlink), the interface going down and up (writes held and re-sent).
+// Every fault is counted in CanStatus.
+//
+// Threads: the loop thread is rx()'s only consumer and tx()'s only producer; it never blocks on
+// the driver. After pushing into tx() it may call wake() so the write goes out at once (without
+// it, the I/O thread notices within 1 ms). status()/can_status() are lock-free from any thread.
+#pragma once
+
+#include <array>
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <thread>
+#include <vector>
+
+#include "core/rt/seqlock.hpp"
+#include "core/rt/spsc_ring.hpp"
+#include "drivers/bus.hpp"
+#include "drivers/can/can_config.hpp"
+#include "drivers/can/can_mapping.hpp"
+
+namespace nccomp::drivers::can {
+
+/// The CAN driver's own counters, beside the common BusCounters.
+struct CanCounters {
+  std::uint64_t error_frames{0};      // error frames of any class received
+  std::uint64_t error_warning{0};     // controller reached the warning level
+  std::uint64_t error_passive{0};     // controller went error-passive
+  std::uint64_t bus_off{0};           // bus-off entered
+  std::uint64_t bus_recoveries{0};    // bus-off left (restarted frame or traffic again)
+  std::uint64_t restart_requests{0};  // netlink restarts asked for (restart = "daemon")
+  std::uint64_t restart_failures{0};  // ... refused by the kernel (e.g. vcan: not supported)
+  std::uint64_t interface_down{0};    // the interface went down (ENETDOWN / ENODEV)
+  std::uint64_t controller_overflow{0};  // CAN_ERR_CRTL_RX/TX_OVERFLOW reported by the controller
+  std::uint64_t rx_overflow{0};       // frames the kernel dropped: socket queue full (SO_RXQ_OVFL)
+  std::uint64_t enobufs{0};           // ENOBUFS on send: transmit queue full, backed off
+  std::uint64_t ack_timeouts{0};      // acknowledge not seen in time (each attempt)
+  std::uint64_t tx_unencodable{0};    // offset value does not fit its register's signal
+  std::uint64_t tx_unmapped{0};       // offset write for a register without a mapping
+  std::uint64_t rejected_unknown_id{0};
+  std::uint64_t rejected_wrong_length{0};
+  std::uint64_t rejected_out_of_range{0};
+  std::uint64_t rejected_not_finite{0};
+};
+
+struct CanStatus {
+  BusStatus bus{};
+  CanCounters can{};
+};
+
+class CanBus final : public Bus {
+ public:
+  /// Validates nothing more than parse_can_config() did; allocates the rings (not real-time).
+  explicit CanBus(CanConfig config);
+  ~CanBus() override;
+  CanBus(const CanBus&) = delete;
+  CanBus& operator=(const CanBus&) = delete;
+
+  /// Opens the socket (throws std::runtime_error naming the interface if it cannot: no such
+  /// interface, no AF_CAN, FD mapping on a classic interface) and starts the I/O thread.
+  void start() override;
+  void stop() override;
+
+  core::rt::SpscRing<core::Event>& rx() override { return rx_ring_; }
+  core::rt::SpscRing<core::OffsetWrite>& tx() override { return tx_ring_; }
+  [[nodiscard]] BusStatus status() const override { return status_.load().bus; }
+  [[nodiscard]] CanStatus can_status() const { return status_.load(); }
+
+  /// Loop thread, after pushing into tx(): wakes the I/O thread (one eventfd write; no
+  /// allocation, no lock, never blocks).
+  void wake() noexcept;
+
+ private:
+  enum class WriteState : std::uint8_t { kIdle, kPending, kAwaitAck, kFailed };
+  struct Slot {
+    const TxRegister* reg{nullptr};
+    WriteState state{WriteState::kIdle};
+    double value_um{0.0};
+    std::uint32_t attempts{0};
+    std::int64_t deadline_ns{0};
+    std::array<std::uint8_t, kMaxPayloadBytes> payload{};
+  };
+
+  void open_socket();
+  void close_socket() noexcept;
+  void run() noexcept;
+  void receive_all(std::int64_t now_ns) noexcept;
+  void handle_error_frame(std::uint32_t can_id, const std::uint8_t* data,
+                          std::int64_t now_ns) noexcept;
+  void handle_ack(std::uint32_t key, const std::uint8_t* data, std::size_t len) noexcept;
+  void take_writes() noexcept;
+  void send_pending(std::int64_t now_ns) noexcept;
+  void check_acks(std::int64_t now_ns) noexcept;
+  void link_down(std::int64_t now_ns) noexcept;
+  void check_link(std::int64_t now_ns) noexcept;
+  void recovered() noexcept;
+  void publish() noexcept;
+  Slot* slot_for(std::uint16_t register_index) noexcept;
+
+  CanConfig config_;
+  FrameDecoder decoder_;
+  core::rt::SpscRing<core::Event> rx_ring_;
+  core::rt::SpscRing<core::OffsetWrite> tx_ring_;
+  core::rt::Seqlock<CanStatus> status_;
+
+  // I/O thread state (touched only by it once started).
+  CanStatus st_{};
+  std::vector<Slot> slots_;                  // one per mapped register, sorted by index
+  std::vector<std::pair<std::uint32_t, std::size_t>> ack_index_;  // ack key → slot
+  int sock_{-1};
+  int event_fd_{-1};
+  int ifindex_{0};
+  bool fd_frames_{false};
+  bool bus_off_{false};
+  bool if_down_{false};
+  std::int64_t next_link_check_ns_{0};
+  std::int64_t next_restart_ns_{0};
+  std::int64_t backoff_until_ns_{0};
+  std::int64_t backoff_ns_{0};
+  std::uint64_t ovfl_base_{0};   // drops counted by sockets closed before
+  std::uint32_t ovfl_last_{0};   // the current socket's cumulative drop count
+
+  std::atomic<bool> running_{false};
+  std::thread thread_;
+};
+
+/// Asks the kernel to restart a CAN controller out of bus-off (netlink IFLA_CAN_RESTART, as
+/// `ip link set canX type can restart`). Returns 0 or the errno. Not real-time.
+int request_can_restart(int ifindex) noexcept;
+
+}  // namespace nccomp::drivers::can

@@ -1,0 +1,48 @@
+// The [can] section of a config file: interface, timing and the signal map (can_mapping.hpp).
+// Parsed with toml++; unknown keys are errors; every error names file, line and key path.
+// Not real-time (allocates, throws MappingError).
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <string_view>
+
+#include "drivers/can/can_mapping.hpp"
+
+namespace nccomp::drivers::can {
+
+/// How the daemon gets out of bus-off.
+enum class RestartMode : std::uint8_t {
+  kKernel = 0,  // the interface's restart-ms does it; the driver waits for the restart frame
+  kDaemon = 1,  // the driver asks for a restart (netlink IFLA_CAN_RESTART) after restart_delay_s
+};
+
+struct CanConfig {
+  /// Network interface, e.g. "can0" or "vcan0".
+  std::string interface{"can0"};
+  RestartMode restart{RestartMode::kKernel};
+  /// Bus-off → daemon restart request delay, and retry period of failed requests [s].
+  double restart_delay_s{0.1};
+  /// Time to wait for an offset write's acknowledge before re-sending it [s].
+  double ack_timeout_s{0.05};
+  /// Re-sends after the first attempt before the write is given up (alarm).
+  std::uint32_t ack_retries{3};
+  /// First back-off after ENOBUFS (transmit queue full); doubles up to 64 × [s].
+  double enobufs_backoff_s{0.0005};
+  /// While the interface is down: how often its state is checked [s].
+  double link_check_s{0.05};
+  /// Capacity of the decoded-event ring (power of two) and of the offset-write ring.
+  std::uint32_t rx_ring_events{4096};
+  std::uint32_t tx_ring_writes{256};
+  /// Kernel socket receive buffer [bytes]; 0 keeps the system default.
+  std::uint32_t socket_rcvbuf_bytes{0};
+  CanMapping mapping;
+};
+
+/// Parses the [can] table of TOML text (other top-level tables are ignored: they belong to
+/// other parts of the daemon). file names the source in error messages. Validates the mapping.
+CanConfig parse_can_config(std::string_view toml_text, const std::string& file);
+/// Reads and parses a file (error if it cannot be read).
+CanConfig load_can_config(const std::string& path);
+
+}  // namespace nccomp::drivers::can

@@ -1,0 +1,323 @@
+// Unit tests of the CAN signal codec, the mapping validation and the TOML parser (no sockets).
+#include <gtest/gtest.h>
+
+#include <array>
+#include <bit>
+#include <cmath>
+#include <cstdint>
+#include <fstream>
+#include <limits>
+#include <sstream>
+#include <string>
+
+#include "drivers/can/can_config.hpp"
+#include "drivers/can/can_mapping.hpp"
+#include "tests/support/alloc_counter.hpp"
+
+namespace nccomp::drivers::can {
+namespace {
+
+std::string reference_path() { return std::string(NCCOMP_SOURCE_DIR) + "/config/reference-nc-can.toml"; }
+
+// The error message of parsing text, or "" if it parsed.
+std::string parse_error(const std::string& text) {
+  try {
+    (void)parse_can_config(text, "test.toml");
+  } catch (const MappingError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+const std::string kHead = "[can]\ninterface = \"vcan0\"\n";
+
+TEST(CanCodec, LittleEndianSixteenBitsLandLowByteFirst) {
+  // GIVEN a 16-bit Intel signal at bit 8 WHEN 0x1234 is inserted THEN bytes 1,2 = 34 12.
+  SignalLayout l{8, 16, ByteOrder::kLittleEndian, ValueType::kUnsigned, 1.0, 0.0};
+  std::array<std::uint8_t, 4> d{};
+  insert_raw(l, 0x1234, d);
+  EXPECT_EQ(d[0], 0x00);
+  EXPECT_EQ(d[1], 0x34);
+  EXPECT_EQ(d[2], 0x12);
+  EXPECT_EQ(d[3], 0x00);
+  EXPECT_EQ(extract_raw(l, d), 0x1234U);
+}
+
+TEST(CanCodec, BigEndianMotorolaStartBitIsTheMsb) {
+  // DBC Motorola: start bit 7 = MSB of byte 0, 16 bits → byte 0 is the high byte.
+  SignalLayout l{7, 16, ByteOrder::kBigEndian, ValueType::kUnsigned, 1.0, 0.0};
+  std::array<std::uint8_t, 8> d{};
+  insert_raw(l, 0x1234, d);
+  EXPECT_EQ(d[0], 0x12);
+  EXPECT_EQ(d[1], 0x34);
+  EXPECT_EQ(extract_raw(l, d), 0x1234U);
+  // A 12-bit Motorola signal starting mid-byte: bit 3 of byte 0 down, then byte 1.
+  SignalLayout m{3, 12, ByteOrder::kBigEndian, ValueType::kUnsigned, 1.0, 0.0};
+  std::array<std::uint8_t, 8> e{};
+  insert_raw(m, 0xABC, e);
+  EXPECT_EQ(e[0], 0x0A);
+  EXPECT_EQ(e[1], 0xBC);
+  EXPECT_EQ(extract_raw(m, e), 0xABCU);
+}
+
+TEST(CanCodec, SignedValuesAreSignExtendedAndScaled) {
+  SignalLayout l{0, 12, ByteOrder::kLittleEndian, ValueType::kSigned, 0.5, 10.0};
+  EXPECT_DOUBLE_EQ(raw_to_physical(l, 0xFFF), -1.0 * 0.5 + 10.0);
+  EXPECT_DOUBLE_EQ(raw_to_physical(l, 0x800), -2048.0 * 0.5 + 10.0);
+  EXPECT_DOUBLE_EQ(raw_to_physical(l, 0x7FF), 2047.0 * 0.5 + 10.0);
+  EXPECT_EQ(physical_to_raw(l, 9.5).value(), 0xFFFU);
+  EXPECT_FALSE(physical_to_raw(l, 2048.0 * 0.5 + 10.0).has_value());  // one past the max
+  EXPECT_TRUE(physical_to_raw(l, -2048.0 * 0.5 + 10.0).has_value());
+  EXPECT_FALSE(physical_to_raw(l, -2049.0 * 0.5 + 10.0).has_value());
+}
+
+TEST(CanCodec, UnsignedRangeAndNonFiniteRefused) {
+  SignalLayout l{0, 8, ByteOrder::kLittleEndian, ValueType::kUnsigned, 1.0, 0.0};
+  EXPECT_EQ(physical_to_raw(l, 255.0).value(), 255U);
+  EXPECT_FALSE(physical_to_raw(l, 256.0).has_value());
+  EXPECT_FALSE(physical_to_raw(l, -1.0).has_value());
+  EXPECT_FALSE(physical_to_raw(l, core::kNaN).has_value());
+  EXPECT_FALSE(physical_to_raw(l, std::numeric_limits<double>::infinity()).has_value());
+}
+
+TEST(CanCodec, Float32RoundTripsAndNaNDecodesAsNaN) {
+  SignalLayout l{0, 32, ByteOrder::kLittleEndian, ValueType::kFloat, 1.0, 0.0};
+  const auto raw = physical_to_raw(l, -12.25);
+  ASSERT_TRUE(raw.has_value());
+  EXPECT_EQ(*raw, std::bit_cast<std::uint32_t>(-12.25F));
+  EXPECT_DOUBLE_EQ(raw_to_physical(l, *raw), -12.25);
+  EXPECT_TRUE(std::isnan(raw_to_physical(l, 0x7FC00000U)));
+}
+
+TEST(CanCodec, OverflowingLayoutHasNoPositions) {
+  std::array<std::uint16_t, 64> pos{};
+  EXPECT_EQ(signal_bit_positions({60, 8, ByteOrder::kLittleEndian, ValueType::kUnsigned, 1, 0},
+                                 64, pos),
+            0U);
+  EXPECT_EQ(signal_bit_positions({56, 8, ByteOrder::kLittleEndian, ValueType::kUnsigned, 1, 0},
+                                 64, pos),
+            8U);
+  // Motorola from bit 56 (byte 7's LSB) with 2 bits walks to byte 8: overflow in 8 bytes.
+  EXPECT_EQ(signal_bit_positions({56, 2, ByteOrder::kBigEndian, ValueType::kUnsigned, 1, 0},
+                                 64, pos),
+            0U);
+}
+
+TEST(CanConfig, ReferenceProfileParses) {
+  const CanConfig c = load_can_config(reference_path());
+  EXPECT_EQ(c.interface, "vcan0");
+  EXPECT_EQ(c.mapping.rx.size(), 11U);
+  EXPECT_EQ(c.mapping.offsets.size(), 4U);
+  EXPECT_EQ(c.mapping.axis_count, 3);
+  EXPECT_DOUBLE_EQ(c.ack_timeout_s, 0.05);
+  EXPECT_EQ(c.ack_retries, 3U);
+  ASSERT_TRUE(c.mapping.offsets[0].ack.has_value());
+  EXPECT_EQ(c.mapping.offsets[0].ack->id, 0x380U);
+  EXPECT_FALSE(c.mapping.offsets[3].ack.has_value());
+}
+
+TEST(CanConfig, OverlapRefusedWithKeyPathAndLine) {
+  const std::string text = kHead +
+                           "[[can.rx]]\nid = 0x10\nevent = \"tool_change\"\n"
+                           "[[can.rx.signal]]\nname = \"tool\"\nstart_bit = 0\nlength_bits = 16\n"
+                           "[[can.rx.signal]]\nname = \"sister\"\nstart_bit = 15\nlength_bits = 1\n";
+  const std::string e = parse_error(text);
+  EXPECT_NE(e.find("test.toml:10: can.rx[0].signal[1].start_bit: overlaps another signal"),
+            std::string::npos)
+      << e;
+}
+
+TEST(CanConfig, FrameOverflowRefused) {
+  const std::string text = kHead +
+                           "[[can.rx]]\nid = 0x10\nlength_bytes = 2\nevent = \"tool_change\"\n"
+                           "[[can.rx.signal]]\nname = \"tool\"\nstart_bit = 8\nlength_bits = 16\n";
+  const std::string e = parse_error(text);
+  EXPECT_NE(e.find("can.rx[0].signal[0].start_bit: signal (start_bit 8, length_bits 16) "
+                   "overflows the 2-byte frame"),
+            std::string::npos)
+      << e;
+}
+
+TEST(CanConfig, UnknownSignalNameRefusedListingKnownOnes) {
+  const std::string text = kHead +
+                           "[[can.rx]]\nid = 0x10\nevent = \"tool_change\"\n"
+                           "[[can.rx.signal]]\nname = \"tool_number\"\nstart_bit = 0\n"
+                           "length_bits = 16\n";
+  const std::string e = parse_error(text);
+  EXPECT_NE(e.find("test.toml:6: can.rx[0].signal[0].name: unknown signal 'tool_number' for "
+                   "event tool_change (known: tool, sister)"),
+            std::string::npos)
+      << e;
+}
+
+TEST(CanConfig, UnknownKeyRefused) {
+  const std::string e = parse_error(kHead + "ack_timout_s = 0.1\n");
+  EXPECT_NE(e.find("test.toml:3: can.ack_timout_s: unknown key"), std::string::npos) << e;
+}
+
+TEST(CanConfig, DuplicateIdsAndRegistersRefused) {
+  const std::string frame = "[[can.rx]]\nid = 0x10\nevent = \"temperature\"\n"
+                            "[[can.rx.signal]]\nname = \"sensor\"\nstart_bit = 0\nlength_bits = 8\n";
+  const std::string frame2 = "[[can.rx]]\nid = 0x10\nevent = \"tool_change\"\n"
+                             "[[can.rx.signal]]\nname = \"tool\"\nstart_bit = 0\nlength_bits = 8\n";
+  EXPECT_NE(parse_error(kHead + frame + frame2).find("can.rx[1].id: frame ID 0x10 is mapped twice"),
+            std::string::npos);
+  const std::string off = "[[can.offset]]\nregister = 0\nid = 0x10\n[can.offset.value]\n"
+                          "start_bit = 0\nlength_bits = 32\ntype = \"signed\"\n";
+  EXPECT_NE(parse_error(kHead + frame + off).find("can.offset[0].id: frame ID 0x10 is already used"),
+            std::string::npos);
+}
+
+TEST(CanConfig, FdLengthsNeedFdAndValidLengths) {
+  const std::string frame = "[[can.rx]]\nid = 0x10\nlength_bytes = 12\nevent = \"temperature\"\n"
+                            "[[can.rx.signal]]\nname = \"sensor\"\nstart_bit = 0\nlength_bits = 8\n";
+  EXPECT_NE(parse_error(kHead + frame).find("can.rx[0].length_bytes: 12 exceeds 8 bytes"),
+            std::string::npos);
+  EXPECT_EQ(parse_error(kHead + "fd = true\n" + frame), "");
+  std::string bad = frame;
+  bad.replace(bad.find("12"), 2, "10");
+  EXPECT_NE(parse_error(kHead + "fd = true\n" + bad).find("10 is not a CAN FD payload length"),
+            std::string::npos);
+}
+
+TEST(CanConfig, BadValuesNameTheirKey) {
+  EXPECT_NE(parse_error("[can]\n").find("test.toml:1: can.interface: required key missing"),
+            std::string::npos);
+  EXPECT_NE(parse_error(kHead + "rx_ring_events = 1000\n").find("can.rx_ring_events: must be a power of two"),
+            std::string::npos);
+  EXPECT_NE(parse_error(kHead + "restart = \"never\"\n").find("can.restart: must be"),
+            std::string::npos);
+  EXPECT_NE(parse_error(kHead + "[[can.rx]]\nid = 0x800\nevent = \"temperature\"\n"
+                                "[[can.rx.signal]]\nname = \"sensor\"\nstart_bit = 0\nlength_bits = 8\n")
+                .find("can.rx[0].id: 0x800 exceeds the 11-bit ID range"),
+            std::string::npos);
+  EXPECT_NE(parse_error(kHead + "[[can.rx]]\nid = 1\nevent = \"spindle\"\n").find("can.rx[0].event: unknown event"),
+            std::string::npos);
+  EXPECT_NE(parse_error("[can\n").find("test.toml:1:"), std::string::npos);
+  EXPECT_NE(parse_error(kHead + "[[can.rx]]\nid = 1\nevent = \"temperature\"\n"
+                                "[[can.rx.signal]]\nname = \"temperature_c\"\nstart_bit = 0\n"
+                                "length_bits = 16\ntype = \"float\"\n")
+                .find("a float signal is 32 or 64 bits"),
+            std::string::npos);
+}
+
+class DecoderTest : public ::testing::Test {
+ protected:
+  DecoderTest() : config_(load_can_config(reference_path())), decoder_(config_.mapping) {}
+
+  FrameDecoder::Result feed(std::uint32_t id, std::initializer_list<std::uint8_t> bytes,
+                            core::TimeNs t = 1000) {
+    std::array<std::uint8_t, 64> d{};
+    std::size_t n = 0;
+    for (auto b : bytes) {
+      d[n++] = b;
+    }
+    return decoder_.decode(id, false, std::span<const std::uint8_t>(d.data(), n), t, out_);
+  }
+
+  CanConfig config_;
+  FrameDecoder decoder_;
+  core::Event out_;
+};
+
+TEST_F(DecoderTest, AxisSampleAssembledFromFourFramesEmittedByTheLast) {
+  // X = 123.4567 mm = 1234567 counts; Y = -1 mm = -10000 counts.
+  EXPECT_FALSE(feed(0x100, {0x87, 0xD6, 0x12, 0x00, 0xF0, 0xD8, 0xFF, 0xFF}).emitted);
+  // Path 2.5 m = 2500000 µm counts; normal (0.6, 0, ) = 6000.
+  EXPECT_FALSE(feed(0x101, {0xA0, 0x25, 0x26, 0x00, 0x70, 0x17, 0x00, 0x00}).emitted);
+  EXPECT_FALSE(feed(0x103, {0x40, 0x1F}).emitted);  // normal_z 0.8 = 8000
+  // Z = 10 mm = 100000 counts, tool 7, cutting.
+  const auto r = feed(0x102, {0xA0, 0x86, 0x01, 0x00, 0x07, 0x00, 0x01, 0x00}, 5000);
+  ASSERT_TRUE(r.emitted);
+  ASSERT_TRUE(std::holds_alternative<core::AxisSample>(out_));
+  const auto& s = std::get<core::AxisSample>(out_);
+  EXPECT_EQ(s.time_ns, 5000);
+  EXPECT_EQ(s.axis_count, 3);
+  EXPECT_NEAR(s.position_mm[0], 123.4567, 1e-9);
+  EXPECT_NEAR(s.position_mm[1], -1.0, 1e-9);
+  EXPECT_NEAR(s.position_mm[2], 10.0, 1e-9);
+  EXPECT_NEAR(s.program_path_mm, 2500.0, 1e-9);
+  EXPECT_TRUE(s.has_normal);
+  EXPECT_NEAR(s.normal[0], 0.6, 1e-12);
+  EXPECT_NEAR(s.normal[1], 0.0, 1e-12);
+  EXPECT_NEAR(s.normal[2], 0.8, 1e-12);
+  EXPECT_EQ(s.tool, 7);
+  EXPECT_TRUE(s.cutting);
+}
+
+TEST_F(DecoderTest, RejectsWrongLengthOutOfRangeAndNaNWithoutChangingState) {
+  EXPECT_EQ(feed(0x102, {0xA0, 0x86, 0x01}).reject, RejectReason::kWrongLength);
+  EXPECT_EQ(feed(0x7FF, {0x00}).reject, RejectReason::kUnknownId);
+  // temperature 200 °C = 20000 counts > max 150.
+  EXPECT_EQ(feed(0x160, {0x01, 0x00, 0x20, 0x4E}).reject, RejectReason::kOutOfRange);
+  // program event kind 4 (only 0..3 exist).
+  EXPECT_EQ(feed(0x150, {0x04, 0, 0, 0, 1, 0, 0, 0}).reject, RejectReason::kOutOfRange);
+  // Calibration touch: axis 2, direction +1 is fine; axis 3 does not exist; direction 0 neither.
+  EXPECT_EQ(feed(0x130, {0x04 | 0x08, 0, 0, 0, 0, 0, 0, 0}).reject, RejectReason::kNone);
+  EXPECT_EQ(feed(0x130, {0x07 | 0x08, 0, 0, 0, 0, 0, 0, 0}).reject, RejectReason::kOutOfRange);
+  EXPECT_EQ(feed(0x130, {0x04, 0, 0, 0, 0, 0, 0, 0}).reject, RejectReason::kOutOfRange);
+  // NaN deviation in the float signal.
+  EXPECT_EQ(feed(0x121, {0x00, 0x00, 0xC0, 0x7F, 0, 0, 0, 0}).reject, RejectReason::kNotFinite);
+  // After all that, a good temperature frame decodes to exactly its own values.
+  const auto r = feed(0x160, {0x02, 0x00, 0xD2, 0x04});  // 12.34 °C
+  ASSERT_TRUE(r.emitted);
+  const auto& t = std::get<core::TemperatureSample>(out_);
+  EXPECT_EQ(t.sensor, 2);
+  EXPECT_NEAR(t.temperature_c, 12.34, 1e-9);
+}
+
+TEST_F(DecoderTest, RejectedFrameLeavesLatestValuesAlone) {
+  ASSERT_FALSE(feed(0x120, {0x05, 0, 0, 0, 0x03, 0x00, 0xB8, 0x0B}).emitted);  // part 5, cp 3, r 3 mm
+  // A bad second part frame: angle 100° > 90 → rejected; the next good one completes.
+  EXPECT_EQ(feed(0x121, {0x00, 0x00, 0x20, 0x41, 0x10, 0x27, 0, 0}).reject,
+            RejectReason::kOutOfRange);
+  const float dev = -7.5F;
+  const auto b = std::bit_cast<std::array<std::uint8_t, 4>>(dev);
+  const auto r = feed(0x121, {b[0], b[1], b[2], b[3], 0xA0, 0x0F, 0, 0});  // 40.00°
+  ASSERT_TRUE(r.emitted);
+  const auto& p = std::get<core::ProbeMeasurement>(out_);
+  EXPECT_EQ(p.part, 5);
+  EXPECT_EQ(p.checkpoint, 3);
+  EXPECT_NEAR(p.ball_radius_mm, 3.0, 1e-12);
+  EXPECT_NEAR(p.raw_deviation_um, -7.5, 1e-12);
+  EXPECT_NEAR(p.wall_angle_deg, 40.0, 1e-9);
+}
+
+TEST_F(DecoderTest, BigEndianTriggerPosition) {
+  // -12.5 mm = -125000 counts = 0xFFFE17B8, big-endian in bytes 4..7; axis Z(2), dir -1, probe 1.
+  const std::uint8_t flags = 0x01 | (2 << 1) | (0x3 << 3);
+  const auto r = feed(0x130, {flags, 0, 0, 0, 0xFF, 0xFE, 0x17, 0xB8});
+  ASSERT_TRUE(r.emitted);
+  const auto& c = std::get<core::CalibrationTouch>(out_);
+  EXPECT_EQ(c.probe, core::ProbeKind::kReferenceProbe);
+  EXPECT_EQ(c.axis, 2);
+  EXPECT_EQ(c.direction, -1);
+  EXPECT_NEAR(c.trigger_position_mm, -12.5, 1e-9);
+}
+
+TEST_F(DecoderTest, DecodeAndEncodeAllocateNothing) {
+  std::array<std::uint8_t, 64> d{0x02, 0x00, 0xD2, 0x04};
+  std::array<std::uint8_t, kMaxPayloadBytes> payload{};
+  test::AllocationScope scope;
+  for (int i = 0; i < 100; ++i) {
+    (void)decoder_.decode(0x160, false, std::span<const std::uint8_t>(d.data(), 4), i, out_);
+    (void)encode_offset(config_.mapping.offsets[0], 12.3 * i, payload);
+  }
+  EXPECT_EQ(scope.count(), 0U);
+}
+
+TEST(CanEncode, OffsetWriteBytesAndRangeRefusal) {
+  const CanConfig c = load_can_config(reference_path());
+  std::array<std::uint8_t, kMaxPayloadBytes> p{};
+  // -12.3 µm at 0.1 µm per count = -123 = 0xFFFFFF85.
+  ASSERT_TRUE(encode_offset(c.mapping.offsets[0], -12.3, p));
+  EXPECT_EQ(p[0], 0x85);
+  EXPECT_EQ(p[1], 0xFF);
+  EXPECT_EQ(p[2], 0xFF);
+  EXPECT_EQ(p[3], 0xFF);
+  EXPECT_FALSE(encode_offset(c.mapping.offsets[0], 1e12, p));
+  EXPECT_FALSE(encode_offset(c.mapping.offsets[0], core::kNaN, p));
+}
+
+}  // namespace
+}  // namespace nccomp::drivers::can
