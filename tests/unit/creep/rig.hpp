@@ -101,6 +101,7 @@ struct Rig {
     m.point_count = static_cast<std::uint8_t>(wear_um.size());
     for (std::size_t i = 0; i < wear_um.size(); ++i) m.wear_um[i] = wear_um[i];
     events.emplace_back(m);
+    now_ns += 1'000'000;  // a cycle later than the last sample
     step();
   }
   void tool_change(std::int32_t t, bool sister) {

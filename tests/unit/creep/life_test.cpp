@@ -1,0 +1,213 @@
+// Items 4 and 5 of issue 3: measurement interval (path, time, adaptive, material) and tool life
+// (limit → sister requested, excessive increment, broken or mis-measured → nothing applied).
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "tests/unit/creep/rig.hpp"
+
+namespace nccomp::core::creep {
+namespace {
+
+using testing::base_config;
+using testing::Rig;
+
+TEST(Interval, ByPathRaisesMeasurementDueAndAMeasurementClearsIt) {
+  auto c = base_config();
+  c.interval.basis = IntervalBasis::kPath;
+  c.interval.interval_mm = 100.0;
+  Rig r(c);
+  r.run_to(99.5);
+  EXPECT_EQ(r.count(AlarmCode::kMeasurementDue), 0U);
+  EXPECT_NEAR(r.last_write(12), 0.0, 0.0);
+  r.run_to(100.0);
+  EXPECT_EQ(r.count(AlarmCode::kMeasurementDue), 1U);
+  EXPECT_NEAR(r.last_write(12), 1.0, 0.0);
+  r.run_to(150.0);
+  EXPECT_EQ(r.count(AlarmCode::kMeasurementDue), 1U);  // raised once
+  r.measure({5.0});
+  EXPECT_NEAR(r.last_write(12), 0.0, 0.0);
+  EXPECT_NEAR(r.comp.next_measurement_path_mm(), 250.0, 1e-9);
+  r.run_to(250.0);
+  EXPECT_EQ(r.count(AlarmCode::kMeasurementDue), 2U);
+}
+
+TEST(Interval, ByCuttingTime) {
+  auto c = base_config();
+  c.interval.basis = IntervalBasis::kTime;
+  c.interval.interval_s = 60.0;
+  Rig r(c);
+  for (int i = 0; i < 5990; ++i) r.advance(0.1, 0.01);  // 59.9 s
+  EXPECT_EQ(r.count(AlarmCode::kMeasurementDue), 0U);
+  for (int i = 0; i < 20; ++i) r.advance(0.1, 0.01);
+  EXPECT_EQ(r.count(AlarmCode::kMeasurementDue), 1U);
+}
+
+TEST(Interval, AdaptiveShortensWhenWearGrowsFaster) {
+  auto c = base_config();
+  c.interval.basis = IntervalBasis::kAdaptive;
+  c.interval.target_increment_um = 5.0;
+  c.interval.min_interval_mm = 20.0;
+  c.interval.max_interval_mm = 500.0;
+  Rig r(c);
+  // New tool, no rate yet: the minimum interval.
+  EXPECT_NEAR(r.comp.next_measurement_path_mm(), 20.0, 1e-9);
+  r.run_to(100.0);
+  r.measure({10.0});  // 0.1 µm/mm from the new tool's zero
+  EXPECT_NEAR(r.comp.next_measurement_path_mm(), 100.0 + 5.0 / 0.1, 1e-9);
+  r.run_to(150.0);
+  r.measure({20.0});  // last rate 0.2 µm/mm
+  EXPECT_NEAR(r.comp.next_measurement_path_mm(), 150.0 + 25.0, 1e-9);
+  r.run_to(175.0);
+  r.measure({20.5});  // slow: 0.02 µm/mm → 250 mm
+  EXPECT_NEAR(r.comp.next_measurement_path_mm(), 175.0 + 250.0, 1e-9);
+  r.run_to(425.0);
+  r.measure({20.5});  // no growth: the maximum
+  EXPECT_NEAR(r.comp.next_measurement_path_mm(), 425.0 + 500.0, 1e-9);
+}
+
+TEST(Interval, ByMaterialRemoved) {
+  auto c = base_config();
+  c.interval.basis = IntervalBasis::kMaterial;
+  c.interval.removal_mm3_per_mm = 0.5;
+  c.interval.interval_mm3 = 25.0;
+  Rig r(c);
+  r.run_to(49.5);
+  EXPECT_EQ(r.count(AlarmCode::kMeasurementDue), 0U);
+  r.run_to(50.0);
+  EXPECT_EQ(r.count(AlarmCode::kMeasurementDue), 1U);
+}
+
+// ---- item 5 ------------------------------------------------------------------------------
+
+TEST(ToolLife, BeyondTheLimitTheSisterIsRequested) {
+  auto c = base_config();
+  c.tool_life.wear_limit_um = 30.0;
+  Rig r(c);
+  r.measure({20.0});
+  EXPECT_NEAR(r.last_write(13), 0.0, 0.0);
+  r.run_to(100.0);
+  r.measure({31.0});
+  EXPECT_NEAR(r.last_write(13), 1.0, 0.0);
+  EXPECT_EQ(r.count(AlarmCode::kToolLifeReached), 1U);
+  r.run_to(200.0);
+  EXPECT_NEAR(r.z(), -31.0, 1e-9);  // still compensated until the change
+  r.tool_change(2, true);
+  EXPECT_NEAR(r.last_write(13), 0.0, 0.0);
+}
+
+TEST(ToolLife, ExcessiveIncrementStopsAndAppliesNothing) {
+  auto c = base_config();
+  c.tool_life.excessive_increment_um = 15.0;
+  c.tool_life.on_excessive = ExcessivePolicy::kStop;
+  Rig r(c);
+  r.measure({10.0});
+  r.run_to(100.0);
+  r.measure({26.0});
+  EXPECT_TRUE(r.comp.halted());
+  EXPECT_EQ(r.count(AlarmCode::kToolExcessivelyWorn), 1U);
+  EXPECT_EQ(r.alarms.back().severity, Severity::kAlarm);
+  EXPECT_NEAR(r.last_write(11), 1.0, 0.0);
+  r.run_to(200.0);
+  EXPECT_NEAR(r.z(), -10.0, 1e-9);
+}
+
+TEST(ToolLife, ExcessiveIncrementCanContinueWithTheSister) {
+  auto c = base_config();
+  c.tool_life.excessive_increment_um = 15.0;
+  c.tool_life.on_excessive = ExcessivePolicy::kSister;
+  Rig r(c);
+  r.measure({10.0});
+  r.run_to(100.0);
+  r.measure({26.0});
+  EXPECT_FALSE(r.comp.halted());
+  EXPECT_EQ(r.alarms.back().severity, Severity::kWarning);
+  EXPECT_NEAR(r.last_write(13), 1.0, 0.0);
+  EXPECT_NEAR(r.last_write(10), 1.0, 0.0);
+  r.run_to(200.0);
+  EXPECT_NEAR(r.z(), -10.0, 1e-9);  // the excessive value is not applied
+}
+
+TEST(ToolLife, BrokenNanShrinkingOrAJumpIsAlarmedAndNothingApplied) {
+  struct Case {
+    std::vector<double> wear;
+    bool broken;
+  };
+  const Case cases[] = {{{12.0}, true},           // the laser says broken
+                        {{std::nan("")}, false},  // NaN
+                        {{6.0}, false},           // shrank by 4 > noise 2
+                        {{400.0}, false}};        // 390 ≫ 5 × expected
+  for (const auto& k : cases) {
+    auto c = base_config();
+    c.tool_life.noise_um = 2.0;
+    c.tool_life.implausible_factor = 5.0;
+    c.tool_life.min_expected_increment_um = 10.0;
+    Rig r(c);
+    r.measure({10.0});
+    r.run_to(100.0);
+    r.measure(k.wear, k.broken);
+    EXPECT_TRUE(r.comp.halted());
+    ASSERT_EQ(r.count(AlarmCode::kToolBrokenOrMismeasured), 1U);
+    EXPECT_EQ(r.alarms.back().severity, Severity::kAlarm);
+    r.run_to(200.0);
+    EXPECT_NEAR(r.z(), -10.0, 1e-9);
+    EXPECT_NEAR(r.comp.state().measured_um[0], 10.0, 0.0);
+  }
+}
+
+TEST(ToolLife, ShrinkingWithinTheNoiseIsAccepted) {
+  auto c = base_config();
+  c.tool_life.noise_um = 2.0;
+  Rig r(c);
+  r.measure({10.0});
+  r.run_to(100.0);
+  r.measure({8.5});
+  EXPECT_FALSE(r.comp.halted());
+  r.run_to(200.0);
+  EXPECT_NEAR(r.z(), -8.5, 1e-9);
+}
+
+TEST(ToolLife, TheExpectedIncrementFollowsTheFittedRate) {
+  auto c = base_config();
+  c.tool_life.min_expected_increment_um = 1.0;
+  c.tool_life.implausible_factor = 3.0;
+  Rig r(c);
+  r.run_to(100.0);
+  r.measure({2.0});  // 0.02 µm/mm
+  r.run_to(600.0);
+  r.measure({12.0});  // expected 10, 3× = 30: fine
+  EXPECT_FALSE(r.comp.halted());
+  r.run_to(700.0);
+  r.measure({20.0});  // rate 0.02 → expected 2 → limit 6 < 8
+  EXPECT_TRUE(r.comp.halted());
+}
+
+TEST(ToolLife, AWearBeyondTheAbsoluteLimitIsRefusedAndChangesNothing) {
+  auto c = base_config();
+  c.limiter.max_abs_um = 50.0;
+  c.tool_life.min_expected_increment_um = 100.0;
+  Rig r(c);
+  r.measure({20.0});
+  r.run_to(100.0);
+  r.measure({60.0});
+  EXPECT_EQ(r.count(AlarmCode::kOffsetBeyondAbsoluteLimit), 1U);
+  EXPECT_NEAR(r.last_write(11), 1.0, 0.0);
+  r.run_to(200.0);
+  EXPECT_NEAR(r.z(), -20.0, 1e-9);
+}
+
+TEST(ToolLife, AMeasurementOfAnotherToolIsLoggedNotApplied) {
+  Rig r(base_config());
+  ToolMeasurement m;
+  m.tool = 9;
+  m.wear_um[0] = 5.0;
+  r.events.emplace_back(m);
+  r.step();
+  EXPECT_EQ(r.records.size(), 1U);
+  EXPECT_EQ(r.count(AlarmCode::kEventInvalid), 1U);
+  r.run_to(100.0);
+  EXPECT_NEAR(r.z(), 0.0, 0.0);
+}
+
+}  // namespace
+}  // namespace nccomp::core::creep
