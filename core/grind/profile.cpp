@@ -137,11 +137,23 @@ UniformProfile to_uniform(const SampledProfile& s, double resample_spacing_mm,
     throw std::invalid_argument(std::string(source) + ": z range is empty");
   }
   const double dz = span / static_cast<double>(n - 1);
+  // Uniform: every step equals the first (the operator's view: "line 4 breaks the spacing")
+  // and the samples do not drift from the mean grid the computation uses.
+  const double step0 = s.z_mm[1] - s.z_mm[0];
   std::size_t bad = n;
-  for (std::size_t i = 0; i < n; ++i) {
-    const double expect = s.z_mm.front() + static_cast<double>(i) * dz;
-    if (std::abs(s.z_mm[i] - expect) > 1e-6 * dz) {
+  double expect_z = 0.0;
+  for (std::size_t i = 1; i < n; ++i) {
+    if (std::abs(s.z_mm[i] - s.z_mm[i - 1] - step0) > 1e-6 * step0) {
       bad = i;
+      expect_z = s.z_mm[i - 1] + step0;
+      break;
+    }
+  }
+  for (std::size_t i = 1; i < n && bad == n; ++i) {
+    const double on_grid = s.z_mm.front() + static_cast<double>(i) * dz;
+    if (std::abs(s.z_mm[i] - on_grid) > 1e-6 * dz) {
+      bad = i;
+      expect_z = on_grid;
       break;
     }
   }
@@ -153,7 +165,7 @@ UniformProfile to_uniform(const SampledProfile& s, double resample_spacing_mm,
     throw std::invalid_argument(
         where(source, line) + "samples are not uniformly spaced (z = " +
         std::to_string(s.z_mm[bad]) + ", uniform spacing would put it at " +
-        std::to_string(s.z_mm.front() + static_cast<double>(bad) * dz) +
+        std::to_string(expect_z) +
         "); give a resampling spacing");
   }
   const double count = std::floor(span / resample_spacing_mm * (1.0 + 1e-12)) + 1.0;

@@ -1,1 +1,146 @@
+#include "core/grind/local_rule.hpp"
+
 #include <gtest/gtest.h>
+
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "core/grind/compare.hpp"
+#include "core/grind/envelope.hpp"
+
+namespace nccomp::core::grind {
+namespace {
+
+UniformProfile sampled(double z0, double dz, std::size_t n, auto&& fn) {
+  UniformProfile p{z0, dz, std::vector<double>(n)};
+  for (std::size_t i = 0; i < n; ++i) {
+    p.u_mm[i] = fn(p.z_at(static_cast<std::ptrdiff_t>(i)));
+  }
+  return p;
+}
+
+TEST(LocalRule, GivenPolynomialOfFitDegree_ThenSlopeAndCurvatureAreExactEverywhere) {
+  const auto p = sampled(-3.0, 0.25, 25, [](double z) { return 0.5 - 0.2 * z + 0.03 * z * z; });
+  for (const FitSpec fit : {FitSpec{2, 0}, FitSpec{2, 5}, FitSpec{3, 0}, FitSpec{4, 9}}) {
+    const auto d = local_derivatives(p, fit);
+    for (std::size_t i = 0; i < p.size(); ++i) {  // ends too: the stencil shifts inward
+      const double z = p.z_at(static_cast<std::ptrdiff_t>(i));
+      ASSERT_NEAR(d.slope[i], -0.2 + 0.06 * z, 1e-10) << fit.degree << "/" << fit.points;
+      ASSERT_NEAR(d.curvature[i], 0.06, 1e-8) << fit.degree << "/" << fit.points;
+    }
+  }
+  // Degree 1 through 2 points: the forward/backward difference, no curvature.
+  const auto d1 = local_derivatives(p, FitSpec{1, 0});
+  EXPECT_NEAR(d1.slope[0], (p.u_mm[1] - p.u_mm[0]) / 0.25, 1e-12);
+  EXPECT_EQ(d1.curvature[3], 0.0);
+}
+
+TEST(LocalRule, GivenBadFit_ThenClearErrors) {
+  const auto p = sampled(0.0, 1.0, 3, [](double z) { return z; });
+  EXPECT_THROW(local_derivatives(p, FitSpec{0, 0}), std::invalid_argument);
+  EXPECT_THROW(local_derivatives(p, FitSpec{9, 0}), std::invalid_argument);
+  EXPECT_THROW(local_derivatives(p, FitSpec{2, 2}), std::invalid_argument);  // points < n + 1
+  try {
+    local_derivatives(p, FitSpec{3, 0});  // 4 points needed, 3 given
+    FAIL();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("needs at least 4 samples"), std::string::npos)
+        << e.what();
+  }
+  auto bad = p;
+  bad.u_mm[1] = std::nan("");
+  EXPECT_THROW(local_derivatives(bad, FitSpec{2, 0}), std::invalid_argument);
+}
+
+// The seed's three cases on a straight line: slope below the arc's end slope → tangent,
+// above → an arc end rides; h = 0 → always an end.
+TEST(LocalRule, GivenStraightLines_ThenTheThreeCases) {
+  const auto wheel = Wheel::from_arc_height(150.0, 0.5);
+  const double end = wheel.end_slope();  // ≈ 0.01333
+  for (const double b : {0.5 * end, -0.5 * end, 2.0 * end, -2.0 * end}) {
+    const auto p = sampled(0.0, 1.0, 11, [&](double z) { return b * z; });
+    const auto d = local_derivatives(p, FitSpec{});
+    const auto t = local_rule_trajectory(p, d, wheel);
+    const double a = std::atan(b);
+    if (std::abs(b) < end) {
+      EXPECT_EQ(t.contact[5], ContactCase::kTangent);
+      EXPECT_NEAR(t.point[5].z_mm, 5.0 - wheel.radius_mm() * std::sin(a), 1e-9);
+      EXPECT_NEAR(t.point[5].u_mm, 5.0 * b - wheel.radius_mm() * (1 - std::cos(a)), 1e-9);
+    } else {
+      EXPECT_EQ(t.contact[5], b > 0 ? ContactCase::kFrontEnd : ContactCase::kRearEnd);
+      EXPECT_NEAR(t.point[5].z_mm, b > 0 ? 5.0 - 75.0 : 5.0 + 75.0, 1e-12);
+      EXPECT_NEAR(t.point[5].u_mm, 5.0 * b - 0.5, 1e-12);
+    }
+  }
+  const auto flat = Wheel::from_arc_height(150.0, 0.0);
+  const auto p = sampled(0.0, 1.0, 11, [](double z) { return 0.001 * z; });
+  const auto t = local_rule_trajectory(p, local_derivatives(p, FitSpec{}), flat);
+  EXPECT_EQ(t.contact[4], ContactCase::kFrontEnd);
+  EXPECT_NEAR(t.point[4].z_mm, 4.0 - 75.0, 1e-12);
+  EXPECT_NEAR(t.point[4].u_mm, 0.004, 1e-12);
+}
+
+// GIVEN a convex, gentle crown, THEN the local rule is exact: it equals the envelope wherever
+// both define the trajectory (seeds.md: the rule is local, the envelope global).
+TEST(LocalRule, GivenConvexGentleCrown_ThenEqualsEnvelope) {
+  const auto wheel = Wheel::from_arc_height(150.0, 0.5);
+  const auto p = sampled(-500.0, 0.5, 2001, [](double z) { return 0.6 * (1 - z * z / 2.5e5); });
+  const auto exact = exact_trajectory(p, wheel);
+  const auto local = local_rule_trajectory(p, local_derivatives(p, FitSpec{}), wheel);
+  const auto on_grid =
+      lowest_pass_on_grid(local.point, exact.z0_mm, exact.spacing_mm, exact.u_mm.size());
+  std::size_t compared = 0;
+  double worst = 0.0;
+  for (std::size_t i = 0; i < on_grid.size(); ++i) {
+    if (!std::isnan(on_grid[i])) {
+      ++compared;
+      worst = std::max(worst, std::abs(on_grid[i] - exact.u_mm[i]));
+    }
+  }
+  EXPECT_GT(compared, 2000U);
+  // Sampling only: linear interpolation between T points, κΔ²/8 ≈ 1.8e-4·0.25/8.
+  EXPECT_LT(worst, 1e-5);
+  for (auto c : local.contact) {
+    EXPECT_EQ(c, ContactCase::kTangent);
+  }
+}
+
+// GIVEN a concave dip of radius < R, THEN the local rule cuts below the gouge-free envelope
+// there, and the region is reported with its cause.
+TEST(LocalRule, GivenTightConcaveDip_ThenGougesAndTheRegionIsClassified) {
+  const auto wheel = Wheel::from_arc_height(150.0, 0.5);  // R ≈ 5625 mm
+  // Dip of curvature radius 1/(2·2e-4) = 2500 mm < R in |z| < 20.
+  const auto p = sampled(-300.0, 0.5, 1201, [](double z) {
+    return std::abs(z) < 20.0 ? -0.08 + 2e-4 * z * z : 0.0;
+  });
+  const auto d = local_derivatives(p, FitSpec{});
+  const auto exact = exact_trajectory(p, wheel);
+  const auto local = local_rule_trajectory(p, d, wheel);
+  const auto on_grid =
+      lowest_pass_on_grid(local.point, exact.z0_mm, exact.spacing_mm, exact.u_mm.size());
+  std::vector<double> gouge(on_grid.size());
+  for (std::size_t i = 0; i < gouge.size(); ++i) {
+    gouge[i] = exact.u_mm[i] - on_grid[i];  // NaN where the local rule has no T
+  }
+  auto regions = regions_above(gouge, exact.z0_mm, exact.spacing_mm, 1e-4);
+  std::vector<double> key(p.size());
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    key[i] = local.point[i].z_mm;
+  }
+  classify_regions(regions, key, p, d, &local, wheel);
+  ASSERT_FALSE(regions.empty());
+  bool found = false;
+  for (const auto& r : regions) {
+    if (r.z_from_mm < 0.0 && r.z_to_mm > 0.0) {
+      found = true;
+      EXPECT_TRUE(r.concave_below_radius);
+      EXPECT_NEAR(r.min_concave_radius_mm, 2500.0, 5.0);
+      EXPECT_GT(r.worst_mm, 1e-3);  // tens of µm: the rule's tangent wheel cuts the dip's rims
+    }
+  }
+  EXPECT_TRUE(found);
+}
+
+}  // namespace
+}  // namespace nccomp::core::grind
