@@ -1,0 +1,507 @@
+#include "core/checkpoint/compensator.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <utility>
+
+#include "core/checkpoint/probe.hpp"
+
+namespace nccomp::core::checkpoint {
+
+namespace {
+
+[[noreturn]] void fail(const std::string& key, const std::string& reason) {
+  throw std::invalid_argument("checkpoints." + key + ": " + reason);
+}
+
+std::string num(double v) {
+  std::ostringstream s;
+  s << v;
+  return s.str();
+}
+
+void require_range(double v, double lo, double hi, bool lo_open, const std::string& key) {
+  const bool ok = std::isfinite(v) && (lo_open ? v > lo : v >= lo) && v <= hi;
+  if (!ok) {
+    fail(key, std::string("must be in ") + (lo_open ? "(" : "[") + num(lo) + ", " + num(hi) +
+                  "], got " + num(v));
+  }
+}
+
+constexpr double kHuge = 1e300;
+
+}  // namespace
+
+const char* learning_mode_name(LearningMode m) noexcept {
+  return m == LearningMode::kPreviousPart ? "previous_part" : "semi_finishing";
+}
+const char* apply_mode_name(ApplyMode m) noexcept {
+  return m == ApplyMode::kStep ? "step" : "creep";
+}
+const char* trigger_mode_name(TriggerMode m) noexcept {
+  return m == TriggerMode::kPath ? "path" : "position";
+}
+
+void CheckpointCompensator::configure(const CompensatorConfig& c, std::vector<Checkpoint> plan,
+                                      const LimiterConfig& limits) {
+  require_range(c.ewma_weight, 1.0, 1e6, false, "ewma_weight");
+  require_range(c.dead_band_um, 0.0, kHuge, false, "dead_band_um");
+  require_range(c.feedback, 0.0, 1.0, true, "feedback");
+  require_range(c.plausible_um, 0.0, kHuge, true, "plausible_um");
+  require_range(c.outlier_sigma, 0.0, kHuge, true, "outlier_sigma");
+  if (c.outlier_min_history < 2 || c.outlier_min_history > kHistoryDepth) {
+    fail("outlier_min_history", "must be in [2, " + std::to_string(kHistoryDepth) + "], got " +
+                                    std::to_string(c.outlier_min_history));
+  }
+  require_range(c.probe_repeatability_um, 0.0, kHuge, false, "probe_repeatability_um");
+  require_range(c.write_threshold_um, 0.0, kHuge, false, "write_threshold_um");
+  require_range(c.reconcile_tolerance_um, 0.0, kHuge, false, "reconcile_tolerance_um");
+  require_range(c.xy_tolerance_mm, 0.0, kHuge, true, "xy_tolerance_mm");
+  require_range(c.z_band_mm, 0.0, kHuge, true, "z_band_mm");
+  if (c.creep_shape == ProfileShape::kTable) {
+    fail("creep_shape", "\"table\" is not available for checkpoints; use linear, cosine or "
+                        "smoothstep");
+  }
+  if (plan.empty() || plan.size() > kMaxCheckpoints) {
+    fail("plan", "needs 1 to " + std::to_string(kMaxCheckpoints) + " checkpoints, got " +
+                     std::to_string(plan.size()));
+  }
+  const std::size_t last_register = c.register_base + plan.size() - 1;
+  if (last_register > 0xFFFF) {
+    fail("register_base", std::to_string(c.register_base) + " + " + std::to_string(plan.size()) +
+                              " checkpoints exceeds the register range 0..65535");
+  }
+  if (c.active_register < -1 || c.active_register > 0xFFFF) {
+    fail("active_register", "must be -1 (table only) or 0..65535, got " +
+                                std::to_string(c.active_register));
+  }
+  if (c.active_register >= c.register_base &&
+      static_cast<std::size_t>(c.active_register) <= last_register) {
+    fail("active_register", std::to_string(c.active_register) +
+                                " lies inside the checkpoint table (registers " +
+                                std::to_string(c.register_base) + ".." +
+                                std::to_string(last_register) + ")");
+  }
+  for (std::size_t i = 0; i < plan.size(); ++i) {
+    const Checkpoint& p = plan[i];
+    if (p.id != static_cast<std::int32_t>(i)) {
+      fail("plan", "checkpoint " + std::to_string(i) + " has id " + std::to_string(p.id) +
+                       " (ids must be the machining order 0, 1, 2, ...)");
+    }
+    if (!std::isfinite(p.path_mm) || !std::isfinite(p.tool_x_mm) ||
+        !std::isfinite(p.tool_y_mm) || !std::isfinite(p.z_mm)) {
+      fail("plan", "checkpoint " + std::to_string(i) + " has a non-finite position");
+    }
+    if (i > 0 && !(p.path_mm > plan[i - 1].path_mm)) {
+      fail("plan", "checkpoint " + std::to_string(i) + " path_mm " + num(p.path_mm) +
+                       " does not increase (machining order)");
+    }
+  }
+  OffsetLimiter limiter;
+  limiter.configure(limits);  // throws naming the limiter field
+
+  // Commit only after everything validated: a refused config leaves the old one intact.
+  config_ = c;
+  plan_ = std::move(plan);
+  points_.assign(plan_.size(), LearnedPoint{});
+  dirty_.assign(plan_.size(), 0);
+  dirty_count_ = 0;
+  dirty_cursor_ = 0;
+  limiter_ = limiter;
+  limiter_.reset(0.0, 0);
+  part_counter_ = 0;
+  part_ = 0;
+  tool_ = 0;
+  next_ = 0;
+  have_prev_ = false;
+  travel_since_mm_ = 0.0;
+  live_target_um_ = kNaN;
+  live_written_um_ = kNaN;
+  pending_mismatch_ = 0;
+  counters_ = {};
+}
+
+double CheckpointCompensator::register_value_um(std::size_t i) const noexcept {
+  const double c = points_[i].offset_um;
+  // An offset the probe cannot resolve would only move the wall by noise.
+  return std::fabs(c) < config_.probe_repeatability_um ? 0.0 : c;
+}
+
+void CheckpointCompensator::mark_dirty(std::size_t i) noexcept {
+  if (dirty_[i] == 0) {
+    dirty_[i] = 1;
+    ++dirty_count_;
+  }
+}
+
+void CheckpointCompensator::step(TimeNs now_ns, std::span<const Event> events,
+                                 StepOutput& out) noexcept {
+  if (plan_.empty()) {
+    return;
+  }
+  if (pending_mismatch_ > 0) {
+    out.alarm(now_ns, Severity::kWarning, AlarmCode::kCheckpointRegisterMismatch,
+              static_cast<std::int32_t>(pending_mismatch_), 0.0);
+    pending_mismatch_ = 0;
+  }
+  for (const Event& ev : events) {
+    if (const auto* s = std::get_if<AxisSample>(&ev)) {
+      on_sample(*s, out);
+    } else if (const auto* m = std::get_if<ProbeMeasurement>(&ev)) {
+      on_probe(*m, out);
+    } else if (const auto* p = std::get_if<ProgramEvent>(&ev)) {
+      if (p->kind == ProgramEventKind::kPartStart) {
+        on_part_start(p->time_ns, *p);
+      }
+    } else if (const auto* t = std::get_if<ToolChange>(&ev)) {
+      tool_ = t->tool;
+      have_prev_ = false;
+    }
+  }
+  flush_table(now_ns, out);
+}
+
+void CheckpointCompensator::on_part_start(TimeNs /*now_ns*/, const ProgramEvent& ev) noexcept {
+  part_ = ev.part;
+  ++part_counter_;
+  for (std::size_t i = 0; i < plan_.size(); ++i) {
+    points_[i].applied_um = register_value_um(i);
+    mark_dirty(i);  // every learned value is written at part start
+  }
+  next_ = 0;
+  have_prev_ = false;
+  travel_since_mm_ = 0.0;
+  live_target_um_ = kNaN;
+}
+
+void CheckpointCompensator::flush_table(TimeNs now_ns, StepOutput& out) noexcept {
+  std::size_t written = 0;
+  std::size_t scanned = 0;
+  while (dirty_count_ > 0 && written < kTableWritesPerStep && scanned < plan_.size() &&
+         out.writes.size() < out.writes.capacity()) {
+    const std::size_t i = dirty_cursor_;
+    dirty_cursor_ = (dirty_cursor_ + 1) % plan_.size();
+    ++scanned;
+    if (dirty_[i] == 0) {
+      continue;
+    }
+    const auto reg = static_cast<std::uint16_t>(config_.register_base + i);
+    out.writes.push(OffsetWrite{now_ns, reg, register_value_um(i)});
+    dirty_[i] = 0;
+    --dirty_count_;
+    ++written;
+    ++counters_.table_writes;
+  }
+}
+
+void CheckpointCompensator::on_probe(const ProbeMeasurement& m, StepOutput& out) noexcept {
+  ++counters_.measurements;
+  if (m.checkpoint < 0 || static_cast<std::size_t>(m.checkpoint) >= plan_.size()) {
+    ++counters_.invalid;
+    out.alarm(m.time_ns, Severity::kAlarm, AlarmCode::kProbeInvalidInput, m.checkpoint,
+              m.raw_deviation_um);
+    return;
+  }
+  const ProbeCorrection corr = correct_probe(m.raw_deviation_um, m.wall_angle_deg,
+                                             m.ball_radius_mm);
+  if (corr.status != ProbeStatus::kOk) {
+    ++counters_.invalid;
+    out.alarm(m.time_ns, Severity::kAlarm, AlarmCode::kProbeInvalidInput, m.checkpoint,
+              m.raw_deviation_um);
+    return;
+  }
+  const auto i = static_cast<std::size_t>(m.checkpoint);
+  const bool mode_a = config_.learning_mode == LearningMode::kPreviousPart;
+  // Mode B probes the semi-finished wall, which was cut without per-checkpoint offsets.
+  const double applied = mode_a ? points_[i].applied_um : 0.0;
+  MeasurementRecord rec;
+  rec.time_ns = m.time_ns;
+  rec.part = m.part;
+  rec.tool = mode_a ? config_.finishing_tool : config_.semi_finishing_tool;
+  rec.kind = MeasurementKind::kContour;
+  rec.point = m.checkpoint;
+  rec.position_mm = m.position_mm;
+  rec.angle_deg = m.wall_angle_deg;
+  rec.measured_um = corr.corrected_um;
+  rec.applied_um = applied;
+  out.records.push(rec);  // logged whatever is decided below: outliers are data too
+
+  if (std::fabs(corr.corrected_um) > config_.plausible_um) {
+    ++counters_.implausible;
+    out.alarm(m.time_ns, Severity::kAlarm, AlarmCode::kProbeImplausible, m.checkpoint,
+              corr.corrected_um);
+    return;
+  }
+  const double e = corr.corrected_um - applied;
+  LearnedPoint& p = points_[i];
+  if (p.history_n >= config_.outlier_min_history) {
+    double mean = 0.0;
+    for (std::uint32_t k = 0; k < p.history_n; ++k) mean += p.history[k];
+    mean /= static_cast<double>(p.history_n);
+    double var = 0.0;
+    for (std::uint32_t k = 0; k < p.history_n; ++k) {
+      var += (p.history[k] - mean) * (p.history[k] - mean);
+    }
+    const double sigma = std::sqrt(var / static_cast<double>(p.history_n - 1));
+    // A perfectly repeating history would make every new reading an outlier: floor σ at what
+    // the probe can resolve.
+    const double sigma_eff = std::max(sigma, config_.probe_repeatability_um);
+    if (std::fabs(e - mean) > config_.outlier_sigma * sigma_eff) {
+      ++counters_.outliers;
+      out.alarm(m.time_ns, Severity::kWarning, AlarmCode::kProbeOutlier, m.checkpoint, e);
+      return;
+    }
+  }
+  const double learned = p.count == 0 ? e : p.learned_um + (e - p.learned_um) / config_.ewma_weight;
+  const double target = -learned;
+  const double candidate = p.offset_um + config_.feedback * (target - p.offset_um);
+  const bool in_dead_band = std::fabs(candidate - p.offset_um) < config_.dead_band_um;
+  if (!in_dead_band && !limiter_.admissible(candidate)) {
+    ++counters_.beyond_limit;
+    out.alarm(m.time_ns, Severity::kAlarm, AlarmCode::kOffsetBeyondAbsoluteLimit,
+              static_cast<std::int32_t>(config_.register_base + i), candidate);
+    return;  // nothing changes: a broken wall is reported, not compensated
+  }
+  p.learned_um = learned;
+  ++p.count;
+  if (p.history_n < kHistoryDepth) {
+    p.history[p.history_n++] = e;
+  } else {
+    std::rotate(p.history.begin(), p.history.begin() + 1, p.history.end());
+    p.history[kHistoryDepth - 1] = e;
+  }
+  if (in_dead_band) {
+    ++counters_.dead_band_skips;
+    return;
+  }
+  p.offset_um = candidate;
+  ++counters_.updates;
+  if (!mode_a) {
+    mark_dirty(i);  // mode B: the finishing of this very part needs it
+  }
+}
+
+bool CheckpointCompensator::passes(std::size_t i, const AxisSample& s) const noexcept {
+  const Checkpoint& c = plan_[i];
+  const double x0 = prev_.position_mm[0];
+  const double y0 = prev_.position_mm[1];
+  const double z0 = prev_.position_mm[2];
+  const double dx = s.position_mm[0] - x0;
+  const double dy = s.position_mm[1] - y0;
+  const double dz = s.position_mm[2] - z0;
+  const double len2 = dx * dx + dy * dy;
+  if (!(len2 > 1e-18)) {
+    return false;  // no XY motion: nothing passed
+  }
+  // The foot of the perpendicular from the checkpoint onto this motion: the tool passes the
+  // checkpoint between the two samples when it lies in (0, 1], whatever the sample spacing.
+  const double t = ((c.tool_x_mm - x0) * dx + (c.tool_y_mm - y0) * dy) / len2;
+  if (!(t > 0.0 && t <= 1.0)) {
+    return false;
+  }
+  const double ex = x0 + t * dx - c.tool_x_mm;
+  const double ey = y0 + t * dy - c.tool_y_mm;
+  const double z = z0 + t * dz;
+  return ex * ex + ey * ey <= config_.xy_tolerance_mm * config_.xy_tolerance_mm &&
+         std::fabs(z - c.z_mm) <= config_.z_band_mm;
+}
+
+bool CheckpointCompensator::detect_path(const AxisSample& s) noexcept {
+  const double p = s.program_path_mm;
+  if (!std::isfinite(p)) {
+    return false;
+  }
+  const bool jumped_back = have_prev_ && p < prev_.program_path_mm;
+  if (!have_prev_ || jumped_back) {
+    // First sample of the part, or the program was restarted further back: every checkpoint
+    // at or before p counts as passed (its value is in force from here on).
+    const auto it = std::upper_bound(plan_.begin(), plan_.end(), p,
+                                     [](double v, const Checkpoint& c) { return v < c.path_mm; });
+    next_ = static_cast<std::size_t>(it - plan_.begin());
+    return true;
+  }
+  while (next_ < plan_.size() && plan_[next_].path_mm <= p) {
+    ++next_;
+    ++counters_.triggers;
+  }
+  return true;
+}
+
+bool CheckpointCompensator::detect_position(const AxisSample& s, StepOutput& out) noexcept {
+  if (!have_prev_) {
+    return true;
+  }
+  travel_since_mm_ += std::hypot(s.position_mm[0] - prev_.position_mm[0],
+                                 s.position_mm[1] - prev_.position_mm[1],
+                                 s.position_mm[2] - prev_.position_mm[2]);
+  // Several checkpoints may fall into one sample interval at low loop rates: test in order.
+  while (next_ < plan_.size()) {
+    if (passes(next_, s)) {
+      ++next_;
+      ++counters_.triggers;
+      travel_since_mm_ = 0.0;
+      continue;
+    }
+    // One-ahead: if the following checkpoint triggers, this one was missed (tolerance too tight
+    // or the program deviates from the plan). Report it and carry on in order.
+    if (next_ + 1 < plan_.size() && passes(next_ + 1, s)) {
+      ++counters_.missed;
+      out.alarm(s.time_ns, Severity::kWarning, AlarmCode::kCheckpointMissed,
+                static_cast<std::int32_t>(next_), 0.0);
+      next_ += 2;
+      ++counters_.triggers;
+      travel_since_mm_ = 0.0;
+      continue;
+    }
+    break;
+  }
+  return true;
+}
+
+double CheckpointCompensator::target_value_um(const AxisSample& s) const noexcept {
+  const std::size_t n = plan_.size();
+  if (next_ == 0) {
+    return register_value_um(0);
+  }
+  if (next_ >= n || config_.apply == ApplyMode::kStep) {
+    return register_value_um(next_ - 1);
+  }
+  const std::size_t a = next_ - 1;
+  const std::size_t b = next_;
+  const double span_mm = plan_[b].path_mm - plan_[a].path_mm;
+  const double done_mm = config_.trigger == TriggerMode::kPath
+                             ? s.program_path_mm - plan_[a].path_mm
+                             : travel_since_mm_;
+  const double f = profile_fraction(config_.creep_shape, done_mm / span_mm);
+  const double va = register_value_um(a);
+  return va + f * (register_value_um(b) - va);
+}
+
+void CheckpointCompensator::on_sample(const AxisSample& s, StepOutput& out) noexcept {
+  const std::int32_t tool = s.tool != 0 ? s.tool : tool_;
+  if (tool != config_.finishing_tool) {
+    have_prev_ = false;
+    return;
+  }
+  const bool ok = config_.trigger == TriggerMode::kPath ? detect_path(s)
+                                                        : detect_position(s, out);
+  if (!ok) {
+    return;  // no program path published: nothing is known about where the tool is
+  }
+  prev_ = s;
+  have_prev_ = true;
+  live_target_um_ = target_value_um(s);
+  if (config_.active_register < 0) {
+    return;
+  }
+  if (std::isfinite(live_written_um_) &&
+      std::fabs(live_target_um_ - live_written_um_) < config_.write_threshold_um) {
+    return;
+  }
+  const LimitResult r = limiter_.apply(live_target_um_, s.time_ns);
+  const auto reg = static_cast<std::uint16_t>(config_.active_register);
+  if (r.rejected()) {
+    out.alarm(s.time_ns, Severity::kAlarm, AlarmCode::kOffsetBeyondAbsoluteLimit, reg,
+              live_target_um_);
+    return;
+  }
+  if (std::isfinite(live_written_um_) && !(std::fabs(r.value_um - live_written_um_) > 0.0)) {
+    return;  // the rate limit allowed no movement in this interval: nothing new to send
+  }
+  out.writes.push(OffsetWrite{s.time_ns, reg, r.value_um});
+  live_written_um_ = r.value_um;
+  ++counters_.live_writes;
+}
+
+void CheckpointCompensator::export_state(CheckpointState& out) const {
+  out.version = 1;
+  out.part_counter = part_counter_;
+  out.part = part_;
+  out.points.assign(points_.begin(), points_.end());
+}
+
+void CheckpointCompensator::import_state(const CheckpointState& st) {
+  if (st.version != 1) {
+    throw std::invalid_argument("checkpoint state: unknown version " +
+                                std::to_string(st.version));
+  }
+  if (st.points.size() != plan_.size()) {
+    throw std::invalid_argument("checkpoint state: holds " + std::to_string(st.points.size()) +
+                                " checkpoints, the plan has " + std::to_string(plan_.size()) +
+                                " (the plan changed: learned values do not fit it)");
+  }
+  for (std::size_t i = 0; i < st.points.size(); ++i) {
+    const LearnedPoint& p = st.points[i];
+    const std::string where = "checkpoint state: checkpoint " + std::to_string(i) + ": ";
+    if (!std::isfinite(p.learned_um) || !std::isfinite(p.offset_um)) {
+      throw std::invalid_argument(where + "non-finite value");
+    }
+    if (p.history_n > kHistoryDepth) {
+      throw std::invalid_argument(where + "history length " + std::to_string(p.history_n) +
+                                  " exceeds " + std::to_string(kHistoryDepth));
+    }
+    for (std::uint32_t k = 0; k < p.history_n; ++k) {
+      if (!std::isfinite(p.history[k])) {
+        throw std::invalid_argument(where + "non-finite history entry");
+      }
+    }
+    if (!limiter_.admissible(p.offset_um)) {
+      throw std::invalid_argument(where + "offset " + num(p.offset_um) +
+                                  " um is beyond the absolute limit");
+    }
+    if (!std::isfinite(p.applied_um)) {
+      throw std::invalid_argument(where + "non-finite applied value");
+    }
+  }
+  points_ = st.points;
+  part_counter_ = st.part_counter;
+  part_ = st.part;
+  for (std::size_t i = 0; i < plan_.size(); ++i) {
+    mark_dirty(i);
+  }
+}
+
+ReconcileReport CheckpointCompensator::reconcile(std::span<const double> nc_values_um) {
+  if (nc_values_um.size() != plan_.size()) {
+    throw std::invalid_argument("checkpoint reconcile: read " +
+                                std::to_string(nc_values_um.size()) + " registers, the plan has " +
+                                std::to_string(plan_.size()));
+  }
+  ReconcileReport rep;
+  rep.adopted_nc = config_.reconcile_prefer == ReconcilePrefer::kNc;
+  for (std::size_t i = 0; i < plan_.size(); ++i) {
+    ++rep.compared;
+    const double nc = nc_values_um[i];
+    const double mine = register_value_um(i);
+    const double diff = std::isfinite(nc) ? std::fabs(nc - mine) : kHuge;
+    if (diff <= config_.reconcile_tolerance_um) {
+      continue;
+    }
+    ++rep.mismatched;
+    rep.max_difference_um = std::max(rep.max_difference_um, diff);
+    if (rep.mismatched_ids.size() < 32) {
+      rep.mismatched_ids.push_back(static_cast<std::int32_t>(i));
+    }
+    // An operator may have edited the NC's table on purpose (prefer = nc); a value the limiter
+    // would refuse is never adopted.
+    // Whatever wins, the part in the machine was cut with what the NC holds.
+    if (std::isfinite(nc)) {
+      points_[i].applied_um = nc;
+    }
+    if (rep.adopted_nc && limiter_.admissible(nc)) {
+      points_[i].offset_um = nc;
+      if (std::fabs(register_value_um(i) - nc) > config_.reconcile_tolerance_um) {
+        mark_dirty(i);  // below the repeatability: the register gets the 0 we would write
+      }
+    } else {
+      mark_dirty(i);
+    }
+  }
+  pending_mismatch_ = rep.mismatched;
+  return rep;
+}
+
+}  // namespace nccomp::core::checkpoint

@@ -1,0 +1,209 @@
+// Per-checkpoint compensation of side-wall finishing (S1): learned probe errors per checkpoint,
+// written in machining order into consecutive NC offset registers, and applied to the finishing
+// tool's radius wear when the tool reaches each checkpoint — as a step (the seed) or creeping
+// along the path between checkpoints (S0's profiles), so the checkpoints leave no steps.
+//
+// Sign convention (µm, along the wall's air-side normal):
+//   δ'  > 0: the wall stands proud of nominal (material left, e.g. push-off).
+//   c   > 0: radius wear that moves the tool away from the wall (leaves c more material).
+// A surface cut with offset c shows δ' = e + c, where e is the error without compensation, so
+// each measurement estimates e = δ' − c_applied, and the offset that cancels it is c = −e.
+//
+// Lifecycle: configure() validates and allocates (not real-time); step() is real-time;
+// export_state() / import_state() / reconcile() are for persistence and start-up (not real-time).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "core/checkpoint/plan.hpp"
+#include "core/common/limiter.hpp"
+#include "core/common/output.hpp"
+#include "core/common/profile.hpp"
+#include "core/common/types.hpp"
+
+namespace nccomp::core::checkpoint {
+
+/// (A) learn from the previous part's finishing (push-off) → next part;
+/// (B) learn from semi-finishing with the paired tool → finishing of the same part.
+enum class LearningMode : std::uint8_t { kPreviousPart = 0, kSemiFinishing = 1 };
+enum class ApplyMode : std::uint8_t { kStep = 0, kCreep = 1 };
+/// How a checkpoint is recognised while finishing: by the program path position the NC
+/// publishes, or by the tool centre passing within xy_tolerance_mm in XY and z_band_mm in Z.
+enum class TriggerMode : std::uint8_t { kPath = 0, kPosition = 1 };
+/// After a restart, which side wins where the NC's registers and the learned table differ.
+enum class ReconcilePrefer : std::uint8_t { kDaemon = 0, kNc = 1 };
+
+/// Depth of the per-checkpoint history used by the k·σ outlier rule.
+inline constexpr std::size_t kHistoryDepth = 16;
+/// Table registers written per step at most (StepOutput holds 128 writes shared with others).
+inline constexpr std::size_t kTableWritesPerStep = 32;
+
+/// The `[checkpoints]` keys of the daemon's config, one member per key (docs/checkpoints.md).
+/// The plan keys (contour, levels, …) are in PlanConfig.
+struct CompensatorConfig {
+  LearningMode learning_mode{LearningMode::kPreviousPart};
+  /// Tool numbers: the finishing tool (offsets applied while it is active) and, for mode B, the
+  /// paired semi-finishing tool (informational: its probing is what the measurements are).
+  std::int32_t finishing_tool{1};
+  std::int32_t semi_finishing_tool{0};
+  /// Logical register index of checkpoint 0's value; checkpoint i goes to register_base + i.
+  std::uint16_t register_base{20};
+  /// Logical register of the finishing tool's radius wear written live while finishing, or −1:
+  /// table only (the NC program selects the offset number at each checkpoint itself).
+  std::int32_t active_register{-1};
+  ApplyMode apply{ApplyMode::kCreep};
+  ProfileShape creep_shape{ProfileShape::kLinear};
+  TriggerMode trigger{TriggerMode::kPath};
+  double xy_tolerance_mm{0.5};
+  double z_band_mm{1.0};
+  /// EWMA weight k ≥ 1 of M_i = M_{i−1} + (E_i − M_{i−1})/k (k = 1: the last part only).
+  double ewma_weight{3.0};
+  /// No offset change smaller than this [µm].
+  double dead_band_um{1.0};
+  /// Fraction of the remaining error applied per update, (0, 1].
+  double feedback{1.0};
+  /// |δ'| above this [µm] is implausible: alarm, nothing learned.
+  double plausible_um{200.0};
+  /// A measurement deviating more than outlier_sigma·σ from its checkpoint's history (with at
+  /// least outlier_min_history entries) is logged, not learned. σ is floored at the repeatability.
+  double outlier_sigma{3.0};
+  std::uint32_t outlier_min_history{4};
+  /// Offsets smaller in magnitude than the probe's repeatability [µm] are written as 0.
+  double probe_repeatability_um{1.0};
+  /// Smallest change of the live register that is sent [µm] (bounds the bus load at 1 kHz).
+  double write_threshold_um{0.1};
+  /// Read-back agreement tolerance [µm] and the winner on disagreement.
+  double reconcile_tolerance_um{0.5};
+  ReconcilePrefer reconcile_prefer{ReconcilePrefer::kDaemon};
+};
+
+/// Learned values of one checkpoint (plain data, for persistence).
+struct LearnedPoint {
+  /// EWMA M of the uncompensated error e [µm] and the number of measurements in it.
+  double learned_um{0.0};
+  std::uint32_t count{0};
+  /// Offset c [µm] (before the repeatability rule).
+  double offset_um{0.0};
+  /// Register value in force while the current part was cut (snapshot at part start) [µm]: a
+  /// restart between finishing and probing must still subtract what that part was cut with.
+  double applied_um{0.0};
+  /// Accepted e values, oldest first; history_n valid entries.
+  std::array<double, kHistoryDepth> history{};
+  std::uint32_t history_n{0};
+};
+
+/// Persisted state. version guards the layout; checkpoint_count guards against a changed plan.
+struct CheckpointState {
+  std::uint32_t version{1};
+  std::int64_t part_counter{0};
+  std::int32_t part{0};
+  std::vector<LearnedPoint> points;
+};
+
+struct ReconcileReport {
+  std::size_t compared{0};
+  std::size_t mismatched{0};
+  double max_difference_um{0.0};
+  /// Checkpoint ids that differed (first 32).
+  std::vector<std::int32_t> mismatched_ids;
+  /// True when the NC's values were adopted, false when the daemon's will be rewritten.
+  bool adopted_nc{false};
+};
+
+struct CompensatorCounters {
+  std::uint64_t measurements{0};
+  std::uint64_t updates{0};
+  std::uint64_t dead_band_skips{0};
+  std::uint64_t implausible{0};
+  std::uint64_t outliers{0};
+  std::uint64_t invalid{0};
+  std::uint64_t beyond_limit{0};
+  std::uint64_t triggers{0};
+  std::uint64_t missed{0};
+  std::uint64_t table_writes{0};
+  std::uint64_t live_writes{0};
+};
+
+class CheckpointCompensator {
+ public:
+  CheckpointCompensator() = default;
+
+  /// Validates the config (throws std::invalid_argument naming the key, "checkpoints.<key>")
+  /// and allocates all state for the plan's checkpoints. Learned values start at zero. Not
+  /// real-time.
+  void configure(const CompensatorConfig& config, std::vector<Checkpoint> plan,
+                 const LimiterConfig& limits);
+
+  /// Processes the events of one cycle at time now_ns and appends offset writes, alarms and
+  /// contour measurement records to out. Real-time safe: no allocation, no locks, no I/O.
+  void step(TimeNs now_ns, std::span<const Event> events, StepOutput& out) noexcept;
+
+  /// Copies the learned state into out (reuses out's capacity). Not real-time.
+  void export_state(CheckpointState& out) const;
+  /// Replaces the learned state; throws std::invalid_argument when it does not fit the plan or
+  /// holds non-finite values (nothing changes then). Marks the table for rewriting. Not real-time.
+  void import_state(const CheckpointState& state);
+  /// Compares the values read back from the NC's registers (machining order, one per
+  /// checkpoint) with the table. Differences beyond reconcile_tolerance_um: with prefer = daemon
+  /// the table is rewritten on the next step; with prefer = nc the NC's values become the
+  /// offsets. Either way an alarm 33 is raised on the next step. Not real-time.
+  ReconcileReport reconcile(std::span<const double> nc_values_um);
+
+  /// The value of checkpoint i's register [µm] (after the repeatability rule).
+  [[nodiscard]] double register_value_um(std::size_t i) const noexcept;
+  [[nodiscard]] double learned_um(std::size_t i) const noexcept { return points_[i].learned_um; }
+  [[nodiscard]] std::uint32_t learned_count(std::size_t i) const noexcept {
+    return points_[i].count;
+  }
+  [[nodiscard]] std::size_t size() const noexcept { return plan_.size(); }
+  /// Checkpoints passed by the finishing tool in the current part.
+  [[nodiscard]] std::size_t passed() const noexcept { return next_; }
+  /// The live radius wear target [µm] of the last sample (NaN before finishing started).
+  [[nodiscard]] double live_target_um() const noexcept { return live_target_um_; }
+  [[nodiscard]] bool table_pending() const noexcept { return dirty_count_ > 0; }
+  [[nodiscard]] const CompensatorCounters& counters() const noexcept { return counters_; }
+  [[nodiscard]] const CompensatorConfig& config() const noexcept { return config_; }
+  [[nodiscard]] const std::vector<Checkpoint>& plan() const noexcept { return plan_; }
+  [[nodiscard]] std::int64_t part_counter() const noexcept { return part_counter_; }
+
+ private:
+  void on_part_start(TimeNs now_ns, const ProgramEvent& ev) noexcept;
+  void on_probe(const ProbeMeasurement& m, StepOutput& out) noexcept;
+  void on_sample(const AxisSample& s, StepOutput& out) noexcept;
+  bool detect_path(const AxisSample& s) noexcept;
+  bool detect_position(const AxisSample& s, StepOutput& out) noexcept;
+  [[nodiscard]] bool passes(std::size_t i, const AxisSample& s) const noexcept;
+  [[nodiscard]] double target_value_um(const AxisSample& s) const noexcept;
+  void flush_table(TimeNs now_ns, StepOutput& out) noexcept;
+  void mark_dirty(std::size_t i) noexcept;
+
+  CompensatorConfig config_{};
+  std::vector<Checkpoint> plan_;
+  std::vector<LearnedPoint> points_;
+  std::vector<std::uint8_t> dirty_;
+  std::size_t dirty_count_{0};
+  std::size_t dirty_cursor_{0};
+  OffsetLimiter limiter_;
+  std::int64_t part_counter_{0};
+  std::int32_t part_{0};
+  std::int32_t tool_{0};
+  // Trigger tracking for the current part.
+  std::size_t next_{0};
+  bool have_prev_{false};
+  AxisSample prev_{};
+  /// Path travelled since the last trigger [mm] (trigger = position: the creep's progress).
+  double travel_since_mm_{0.0};
+  double live_target_um_{kNaN};
+  double live_written_um_{kNaN};
+  std::size_t pending_mismatch_{0};
+  CompensatorCounters counters_{};
+};
+
+const char* learning_mode_name(LearningMode m) noexcept;
+const char* apply_mode_name(ApplyMode m) noexcept;
+const char* trigger_mode_name(TriggerMode m) noexcept;
+
+}  // namespace nccomp::core::checkpoint
