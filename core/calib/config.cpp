@@ -1,0 +1,169 @@
+#include "core/calib/config.hpp"
+
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+
+namespace nccomp::core::calib {
+
+namespace {
+
+[[noreturn]] void fail(const char* key, const std::string& why, double value) {
+  std::ostringstream s;
+  s << "calibration." << key << ": " << why << ", got " << value;
+  throw std::invalid_argument(s.str());
+}
+
+void finite(double v, const char* key) {
+  if (!std::isfinite(v)) {
+    fail(key, "must be a finite number", v);
+  }
+}
+void positive(double v, const char* key) {
+  if (!std::isfinite(v) || v <= 0.0) {
+    fail(key, "must be a positive finite number", v);
+  }
+}
+void non_negative(double v, const char* key) {
+  if (!std::isfinite(v) || v < 0.0) {
+    fail(key, "must be a finite number >= 0", v);
+  }
+}
+
+}  // namespace
+
+void validate(const CalibrationConfig& c) {
+  if (c.register_x == c.register_y || c.register_x == c.register_z ||
+      c.register_y == c.register_z) {
+    fail("register_x", "register_x, register_y and register_z must differ", c.register_x);
+  }
+  finite(c.reference_x_lateral_mm, "reference_x_lateral_mm");
+  finite(c.reference_x_axial_mm, "reference_x_axial_mm");
+  finite(c.reference_y_mm, "reference_y_mm");
+  finite(c.reference_z_mm, "reference_z_mm");
+  non_negative(c.reference_contact_mm, "reference_contact_mm");
+  non_negative(c.reference_axial_contact_mm, "reference_axial_contact_mm");
+  if (c.touches_per_axis < 1 || c.touches_per_axis > 8) {
+    fail("touches_per_axis", "must be 1..8", c.touches_per_axis);
+  }
+  positive(c.max_scatter_um, "max_scatter_um");
+  positive(c.touch_set_timeout_s, "touch_set_timeout_s");
+  positive(c.blank_radius_mm, "blank_radius_mm");
+  positive(c.facet_gain_um_per_um, "facet_gain_um_per_um");
+  positive(c.facet_tolerance_um, "facet_tolerance_um");
+  if (c.max_test_grinds < 1 || c.max_test_grinds > 50) {
+    fail("max_test_grinds", "must be 1..50", c.max_test_grinds);
+  }
+  positive(c.plausibility_um, "plausibility_um");
+  non_negative(c.recalibration_interval_s, "recalibration_interval_s");
+  if (c.creep_shape == ProfileShape::kTable) {
+    fail("creep_shape", "must be linear, cosine, smoothstep or step",
+         static_cast<double>(c.creep_shape));
+  }
+  if (c.creep_shape != ProfileShape::kStep) {
+    positive(c.creep_duration_s, "creep_duration_s");
+  } else {
+    non_negative(c.creep_duration_s, "creep_duration_s");
+  }
+  positive(c.thermal_time_constant_s, "thermal_time_constant_s");
+  if (c.temperature_sensor < -1 || c.temperature_sensor > 255) {
+    fail("temperature_sensor", "must be -1 (none) or a sensor index 0..255",
+         c.temperature_sensor);
+  }
+  if (c.prediction == Prediction::kTemperature && c.temperature_sensor < 0) {
+    fail("temperature_sensor", "prediction = \"temperature\" needs a mapped sensor",
+         c.temperature_sensor);
+  }
+  if (!std::isfinite(c.temperature_forgetting) || c.temperature_forgetting <= 0.0 ||
+      c.temperature_forgetting > 1.0) {
+    fail("temperature_forgetting", "must be in (0, 1]", c.temperature_forgetting);
+  }
+  positive(c.max_temperature_slope_um_per_c, "max_temperature_slope_um_per_c");
+  positive(c.write_period_s, "write_period_s");
+  non_negative(c.write_deadband_um, "write_deadband_um");
+  positive(c.max_abs_um, "max_abs_um");
+  positive(c.max_step_um, "max_step_um");
+  positive(c.max_rate_um_per_s, "max_rate_um_per_s");
+  if (c.plausibility_um > c.max_abs_um) {
+    fail("plausibility_um", "must not exceed max_abs_um", c.plausibility_um);
+  }
+}
+
+const char* to_string(FacetRule rule) noexcept {
+  switch (rule) {
+    case FacetRule::kExact:
+      return "exact";
+    case FacetRule::kProportional:
+      return "proportional";
+  }
+  return "?";
+}
+
+const char* to_string(Prediction prediction) noexcept {
+  switch (prediction) {
+    case Prediction::kNone:
+      return "none";
+    case Prediction::kTime:
+      return "time";
+    case Prediction::kTemperature:
+      return "temperature";
+  }
+  return "?";
+}
+
+const char* to_string(ProfileShape shape) noexcept {
+  switch (shape) {
+    case ProfileShape::kLinear:
+      return "linear";
+    case ProfileShape::kCosine:
+      return "cosine";
+    case ProfileShape::kSmoothstep:
+      return "smoothstep";
+    case ProfileShape::kTable:
+      return "table";
+    case ProfileShape::kStep:
+      return "step";
+  }
+  return "?";
+}
+
+bool parse_facet_rule(const std::string& s, FacetRule& out) noexcept {
+  if (s == "exact") {
+    out = FacetRule::kExact;
+  } else if (s == "proportional") {
+    out = FacetRule::kProportional;
+  } else {
+    return false;
+  }
+  return true;
+}
+
+bool parse_prediction(const std::string& s, Prediction& out) noexcept {
+  if (s == "none") {
+    out = Prediction::kNone;
+  } else if (s == "time") {
+    out = Prediction::kTime;
+  } else if (s == "temperature") {
+    out = Prediction::kTemperature;
+  } else {
+    return false;
+  }
+  return true;
+}
+
+bool parse_creep_shape(const std::string& s, ProfileShape& out) noexcept {
+  if (s == "linear") {
+    out = ProfileShape::kLinear;
+  } else if (s == "cosine") {
+    out = ProfileShape::kCosine;
+  } else if (s == "smoothstep") {
+    out = ProfileShape::kSmoothstep;
+  } else if (s == "step") {
+    out = ProfileShape::kStep;
+  } else {
+    return false;
+  }
+  return true;
+}
+
+}  // namespace nccomp::core::calib

@@ -1,0 +1,108 @@
+// Configuration of calibration and thermal recalibration (S3). CalibrationConfig maps 1:1 onto
+// the `[calibration]` TOML table documented in docs/calibration.md: one field per key, same
+// name, units in the names. validate() is the single place where a config is judged; it names
+// the offending key by its TOML path ("calibration.blank_radius_mm").
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include "core/common/profile.hpp"
+
+namespace nccomp::core::calib {
+
+/// How a test grind's two facet chords are turned into a correction of Δx.
+enum class FacetRule : std::uint8_t {
+  kExact = 0,         // depth from chord on a cylinder: d = ρ − sqrt(ρ² − c²/4), e = (d₊ − d₋)/2
+  kProportional = 1,  // the seed's controller: e = gain · (c₊ − c₋)
+};
+
+/// How the drift is predicted between recalibrations.
+enum class Prediction : std::uint8_t {
+  kNone = 0,         // hold the last measured drift (the seed: corrections lag the drift)
+  kTime = 1,         // first-order thermal model in time (time constant configured)
+  kTemperature = 2,  // drift linear in the mapped temperature, slope learned from the touches
+};
+
+struct CalibrationConfig {
+  // --- NC registers (logical indices of the config's register map) -------------------------
+  /// Axis offset registers that take the X / Y / Z correction [µm].
+  std::uint16_t register_x{0};
+  std::uint16_t register_y{1};
+  std::uint16_t register_z{2};
+
+  // --- reference-probe touches of the reference disk (initial calibration) ------------------
+  /// Axis positions [mm] at which, on an error-free machine, the centres of reference disk and
+  /// probe ball coincide: X with the stylus across X (lateral) and along X (axial), Y, Z.
+  double reference_x_lateral_mm{0.0};
+  double reference_x_axial_mm{0.0};
+  double reference_y_mm{0.0};
+  double reference_z_mm{0.0};
+  /// Nominal centre distance at the trigger [mm] for lateral touches (disk half-thickness +
+  /// ball radius) and for the axial touch (disk half-thickness + ball radius along the stylus).
+  /// A touch approaching in direction s triggers nominally at centre − s · contact.
+  double reference_contact_mm{0.0};
+  double reference_axial_contact_mm{0.0};
+  /// Touches per axis (and variant) in one set; their scatter is checked.
+  std::int32_t touches_per_axis{1};
+  /// Largest spread (max − min) of the repeated touches of one axis [µm].
+  double max_scatter_um{5.0};
+  /// A set not completed within this time is discarded [s].
+  double touch_set_timeout_s{900.0};
+
+  // --- test grinding ----------------------------------------------------------------------
+  /// "exact" or "proportional".
+  FacetRule facet_rule{FacetRule::kExact};
+  /// Radius ρ of the cylindrical test blank [mm].
+  double blank_radius_mm{5.0};
+  /// Gain of the proportional rule [µm of Δx per µm of chord difference].
+  double facet_gain_um_per_um{0.05};
+  /// Facets agree when their chord lengths differ by at most this [µm].
+  double facet_tolerance_um{2.0};
+  /// Test grinds per face before the calibration is abandoned.
+  std::int32_t max_test_grinds{6};
+  /// Also grind the end face from ±X (ΔxA); false: ΔxA is taken from the axial touch.
+  bool end_face_test_grind{true};
+
+  // --- recalibration ------------------------------------------------------------------------
+  /// Largest change of a correction a recalibration may make [µm] (Heidenhain MP6600: 50 µm).
+  double plausibility_um{50.0};
+  /// "Recalibration due" is raised this long after the last touch set [s]; 0 = no schedule.
+  double recalibration_interval_s{3600.0};
+  /// How a new drift correction is fed in, and over how long [s].
+  ProfileShape creep_shape{ProfileShape::kCosine};
+  double creep_duration_s{600.0};
+  /// Drift prediction between recalibrations.
+  Prediction prediction{Prediction::kTime};
+  /// Time constant of the first-order thermal model [s].
+  double thermal_time_constant_s{3600.0};
+  /// Sensor index of the TemperatureSample events that drive the temperature model; −1 = none.
+  std::int32_t temperature_sensor{-1};
+  /// Weight kept per touch by the temperature fit (exponential forgetting), in (0, 1].
+  double temperature_forgetting{0.8};
+  /// Slopes learned beyond ± this are clamped [µm/°C].
+  double max_temperature_slope_um_per_c{20.0};
+
+  // --- output -------------------------------------------------------------------------------
+  /// A correction is re-sent at most this often [s] and only when it moved by the dead band.
+  double write_period_s{1.0};
+  double write_deadband_um{0.1};
+  /// Limiter of the three axis registers (every write passes it).
+  double max_abs_um{200.0};
+  double max_step_um{5.0};
+  double max_rate_um_per_s{50.0};
+};
+
+/// Throws std::invalid_argument naming the offending key ("calibration.<key>") and its value.
+void validate(const CalibrationConfig& config);
+
+/// Name ↔ enum for the TOML strings (nullptr / false for an unknown name).
+const char* to_string(FacetRule rule) noexcept;
+const char* to_string(Prediction prediction) noexcept;
+const char* to_string(ProfileShape shape) noexcept;
+bool parse_facet_rule(const std::string& s, FacetRule& out) noexcept;
+bool parse_prediction(const std::string& s, Prediction& out) noexcept;
+/// The analytic shapes only: linear, cosine, smoothstep, step.
+bool parse_creep_shape(const std::string& s, ProfileShape& out) noexcept;
+
+}  // namespace nccomp::core::calib

@@ -1,0 +1,305 @@
+#include <charconv>
+#include <cmath>
+#include <cstdlib>
+#include <map>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+
+#include "core/calib/state.hpp"
+
+namespace nccomp::core::calib {
+
+namespace {
+
+constexpr std::string_view kHeader = "nccomp_calib_state";
+
+// One walk over every field, shared by writer and reader, so they cannot drift apart.
+template <typename State, typename F>
+void visit_fields(State& s, F&& f) {
+  f(std::string("phase"), s.phase);
+  auto& r = s.result;
+  f(std::string("result.dx_touch_lateral_um"), r.dx_touch_lateral_um);
+  f(std::string("result.dx_touch_axial_um"), r.dx_touch_axial_um);
+  f(std::string("result.dy_touch_um"), r.dy_touch_um);
+  f(std::string("result.dz_touch_um"), r.dz_touch_um);
+  f(std::string("result.dx_r_um"), r.dx_r_um);
+  f(std::string("result.dx_a_um"), r.dx_a_um);
+  f(std::string("result.dy_um"), r.dy_um);
+  f(std::string("result.dz_um"), r.dz_um);
+  f(std::string("result.probe_lateral_um"), r.probe_lateral_um);
+  f(std::string("result.probe_axial_um"), r.probe_axial_um);
+  f(std::string("result.pivot_um"), r.pivot_um);
+  f(std::string("result.lateral_grinds"), r.lateral_grinds);
+  f(std::string("result.end_face_grinds"), r.end_face_grinds);
+  f(std::string("result.time_s"), r.time_s);
+  f(std::string("grind_correction_um"), s.grind_correction_um);
+  f(std::string("grinds"), s.grinds);
+  for (std::size_t i = 0; i < kSlotCount; ++i) {
+    const std::string n = "nominal." + std::to_string(i) + ".";
+    auto& nom = s.nominals[i];
+    f(n + "valid", nom.valid);
+    f(n + "direction", nom.direction);
+    f(n + "position_mm", nom.position_mm);
+    f(n + "time_s", nom.time_s);
+    f(n + "temp_c", nom.temp_c);
+  }
+  for (std::size_t i = 0; i < kSlotCount; ++i) {
+    const std::string n = "model." + std::to_string(i) + ".";
+    auto& m = s.models[i];
+    f(n + "anchored", m.anchored);
+    f(n + "touch_sets", m.touch_sets);
+    f(n + "anchor_time_s", m.anchor_time_s);
+    f(n + "anchor_drift_um", m.anchor_drift_um);
+    f(n + "anchor_temp_c", m.anchor_temp_c);
+    f(n + "asymptote_um", m.asymptote_um);
+    f(n + "slope_um_per_c", m.slope_um_per_c);
+    f(n + "sum_w", m.sum_w);
+    f(n + "sum_t", m.sum_t);
+    f(n + "sum_d", m.sum_d);
+    f(n + "sum_tt", m.sum_tt);
+    f(n + "sum_td", m.sum_td);
+  }
+  for (std::size_t i = 0; i < kSlotCount; ++i) {
+    const std::string n = "creep." + std::to_string(i) + ".";
+    f(n + "start_time_s", s.creeps[i].start_time_s);
+    f(n + "offset_um", s.creeps[i].offset_um);
+  }
+  f(std::string("history_count"), s.history_count);
+  f(std::string("history_next"), s.history_next);
+  for (std::size_t i = 0; i < kHistorySize; ++i) {
+    const std::string n = "history." + std::to_string(i) + ".";
+    auto& h = s.history[i];
+    f(n + "time_s", h.time_s);
+    f(n + "temp_c", h.temp_c);
+    for (std::size_t k = 0; k < kSlotCount; ++k) {
+      f(n + "drift_um." + std::to_string(k), h.drift_um[k]);
+    }
+  }
+  f(std::string("last_set_time_s"), s.last_set_time_s);
+}
+
+std::string format_double(double v) {
+  if (std::isnan(v)) {
+    return "nan";
+  }
+  char buf[64];
+  const auto res = std::to_chars(buf, buf + sizeof buf, v);  // shortest round-trip form
+  return std::string(buf, res.ptr);
+}
+
+[[noreturn]] void fail(std::size_t line, const std::string& key, const std::string& why) {
+  std::ostringstream s;
+  s << "calibration state, line " << line;
+  if (!key.empty()) {
+    s << ", key " << key;
+  }
+  s << ": " << why;
+  throw std::invalid_argument(s.str());
+}
+
+double parse_double(std::string_view v, std::size_t line, const std::string& key) {
+  if (v == "nan") {
+    return kNaN;
+  }
+  double out = 0.0;
+  const auto res = std::from_chars(v.data(), v.data() + v.size(), out);
+  if (res.ec != std::errc() || res.ptr != v.data() + v.size() || !std::isfinite(out)) {
+    fail(line, key, "not a finite number or nan: '" + std::string(v) + "'");
+  }
+  return out;
+}
+
+std::int64_t parse_int(std::string_view v, std::size_t line, const std::string& key) {
+  std::int64_t out = 0;
+  const auto res = std::from_chars(v.data(), v.data() + v.size(), out);
+  if (res.ec != std::errc() || res.ptr != v.data() + v.size()) {
+    fail(line, key, "not an integer: '" + std::string(v) + "'");
+  }
+  return out;
+}
+
+void require(bool ok, const std::string& key, const std::string& why) {
+  if (!ok) {
+    throw std::invalid_argument("calibration state, key " + key + ": " + why);
+  }
+}
+
+}  // namespace
+
+const char* to_string(Phase phase) noexcept {
+  switch (phase) {
+    case Phase::kUncalibrated:
+      return "uncalibrated";
+    case Phase::kReferenceTouches:
+      return "reference-touches";
+    case Phase::kTestGrindLateral:
+      return "test-grind-lateral";
+    case Phase::kTestGrindEndFace:
+      return "test-grind-end-face";
+    case Phase::kNominalTouches:
+      return "nominal-touches";
+    case Phase::kReady:
+      return "ready";
+  }
+  return "?";
+}
+
+void shift_times(CalibState& s, double delta_s) noexcept {
+  s.result.time_s += delta_s;
+  for (auto& n : s.nominals) {
+    n.time_s += delta_s;
+  }
+  for (auto& m : s.models) {
+    m.anchor_time_s += delta_s;
+  }
+  for (auto& c : s.creeps) {
+    c.start_time_s += delta_s;
+  }
+  for (auto& h : s.history) {
+    h.time_s += delta_s;
+  }
+  s.last_set_time_s += delta_s;
+}
+
+std::string to_text(const CalibState& state) {
+  std::ostringstream out;
+  out << kHeader << ' ' << CalibState::kVersion << '\n';
+  visit_fields(state, [&](const std::string& key, const auto& v) {
+    using T = std::decay_t<decltype(v)>;
+    out << key << ' ';
+    if constexpr (std::is_same_v<T, Phase>) {
+      out << static_cast<int>(v);
+    } else if constexpr (std::is_same_v<T, double>) {
+      out << format_double(v);
+    } else {
+      out << v;
+    }
+    out << '\n';
+  });
+  return out.str();
+}
+
+CalibState from_text(std::string_view text) {
+  std::map<std::string, std::pair<std::string, std::size_t>> values;
+  std::size_t line_no = 0;
+  bool header = false;
+  while (!text.empty()) {
+    const auto nl = text.find('\n');
+    std::string_view line = text.substr(0, nl);
+    text = nl == std::string_view::npos ? std::string_view{} : text.substr(nl + 1);
+    ++line_no;
+    if (!line.empty() && line.back() == '\r') {
+      line.remove_suffix(1);
+    }
+    if (line.empty() || line.front() == '#') {
+      continue;
+    }
+    const auto sp = line.find(' ');
+    if (sp == std::string_view::npos) {
+      fail(line_no, "", "expected 'key value'");
+    }
+    const std::string key(line.substr(0, sp));
+    const std::string_view value = line.substr(sp + 1);
+    if (!header) {
+      if (key != kHeader) {
+        fail(line_no, key, "not a calibration state (expected header 'nccomp_calib_state')");
+      }
+      if (parse_int(value, line_no, key) != CalibState::kVersion) {
+        fail(line_no, key, "unsupported version '" + std::string(value) + "'");
+      }
+      header = true;
+      continue;
+    }
+    if (!values.emplace(key, std::make_pair(std::string(value), line_no)).second) {
+      fail(line_no, key, "duplicate key");
+    }
+  }
+  if (!header) {
+    fail(line_no, "", "empty (no header)");
+  }
+  CalibState s;
+  std::size_t used = 0;
+  visit_fields(s, [&](const std::string& key, auto& v) {
+    using T = std::decay_t<decltype(v)>;
+    const auto it = values.find(key);
+    if (it == values.end()) {
+      fail(line_no, key, "missing");
+    }
+    ++used;
+    const auto& [text_value, line] = it->second;
+    if constexpr (std::is_same_v<T, double>) {
+      v = parse_double(text_value, line, key);
+    } else {
+      const std::int64_t i = parse_int(text_value, line, key);
+      if (i < -1000000 || i > 1000000) {
+        fail(line, key, "out of range");
+      }
+      if constexpr (std::is_same_v<T, Phase>) {
+        if (i < 0 || i > static_cast<int>(Phase::kReady)) {
+          fail(line, key, "unknown phase");
+        }
+        v = static_cast<Phase>(i);
+      } else {
+        v = static_cast<T>(i);
+      }
+    }
+  });
+  if (used != values.size()) {
+    for (const auto& [key, value] : values) {
+      bool known = false;
+      visit_fields(s, [&](const std::string& k, const auto&) { known = known || k == key; });
+      if (!known) {
+        fail(value.second, key, "unknown key");
+      }
+    }
+  }
+  validate(s);
+  return s;
+}
+
+void validate(const CalibState& s) {
+  require(s.version == CalibState::kVersion, "version", "unsupported");
+  require(static_cast<int>(s.phase) <= static_cast<int>(Phase::kReady), "phase", "unknown");
+  require(s.history_count >= 0 && s.history_count <= static_cast<std::int32_t>(kHistorySize),
+          "history_count", "must be 0..64");
+  require(s.history_next >= 0 && s.history_next < static_cast<std::int32_t>(kHistorySize),
+          "history_next", "must be 0..63");
+  require(s.grinds >= 0 && s.result.lateral_grinds >= 0 && s.result.end_face_grinds >= 0,
+          "grinds", "must be >= 0");
+  const bool calibrated = s.phase == Phase::kNominalTouches || s.phase == Phase::kReady;
+  if (calibrated) {
+    require(std::isfinite(s.result.dx_r_um) && std::isfinite(s.result.dy_um) &&
+                std::isfinite(s.result.dz_um),
+            "result", "a calibrated state needs finite dx_r_um, dy_um, dz_um");
+  }
+  if (s.phase == Phase::kTestGrindLateral || s.phase == Phase::kTestGrindEndFace) {
+    require(std::isfinite(s.grind_correction_um), "grind_correction_um",
+            "a test grind in progress needs a finite correction");
+  }
+  for (std::size_t i = 0; i < kSlotCount; ++i) {
+    const auto& n = s.nominals[i];
+    const std::string k = "nominal." + std::to_string(i);
+    require(n.valid == 0 || n.valid == 1, k + ".valid", "must be 0 or 1");
+    require(n.direction == 1 || n.direction == -1, k + ".direction", "must be 1 or -1");
+    if (s.phase == Phase::kReady) {
+      require(n.valid == 1 && std::isfinite(n.position_mm) && std::isfinite(n.time_s), k,
+              "phase ready needs a valid nominal with position and time");
+    }
+    const auto& m = s.models[i];
+    const std::string mk = "model." + std::to_string(i);
+    require(m.anchored == 0 || m.anchored == 1, mk + ".anchored", "must be 0 or 1");
+    if (m.anchored == 1) {
+      require(std::isfinite(m.anchor_time_s) && std::isfinite(m.anchor_drift_um) &&
+                  std::isfinite(m.asymptote_um) && std::isfinite(m.slope_um_per_c),
+              mk, "an anchored model needs finite anchor, asymptote and slope");
+      require(std::isfinite(s.creeps[i].start_time_s) && std::isfinite(s.creeps[i].offset_um),
+              "creep." + std::to_string(i), "an anchored model needs a finite creep");
+    }
+    require(std::isfinite(m.sum_w) && std::isfinite(m.sum_t) && std::isfinite(m.sum_d) &&
+                std::isfinite(m.sum_tt) && std::isfinite(m.sum_td) && m.sum_w >= 0.0,
+            mk, "fit sums must be finite (sum_w >= 0)");
+  }
+}
+
+}  // namespace nccomp::core::calib
