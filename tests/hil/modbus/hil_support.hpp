@@ -1,0 +1,247 @@
+// Helpers of the Modbus HIL tests: a pseudo-terminal pair with a byte relay (a serial "null
+// modem" without socat), a child process for the python peer, a raw TCP server with scripted
+// answers, and polling waits. Everything binds to 127.0.0.1 and is torn down by destructors.
+#pragma once
+
+#include <arpa/inet.h>
+#include <fcntl.h>
+#include <netinet/in.h>
+#include <poll.h>
+#include <signal.h>
+#include <stdlib.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <termios.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <stdexcept>
+#include <string>
+#include <thread>
+#include <vector>
+
+namespace nccomp::test::modbus {
+
+/// Polls pred every 5 ms until it holds or timeout_s passed. Returns pred's last value.
+inline bool wait_until(const std::function<bool()>& pred, double timeout_s = 5.0) {
+  const auto end = std::chrono::steady_clock::now() +
+                   std::chrono::microseconds(static_cast<std::int64_t>(timeout_s * 1e6));
+  while (std::chrono::steady_clock::now() < end) {
+    if (pred()) {
+      return true;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  return pred();
+}
+
+/// Two pseudo-terminals whose master sides are relayed to each other: a() and b() are serial
+/// device paths connected like a null-modem cable.
+class PtyPair {
+ public:
+  PtyPair() {
+    for (int i = 0; i < 2; ++i) {
+      master_[i] = posix_openpt(O_RDWR | O_NOCTTY);
+      if (master_[i] < 0 || grantpt(master_[i]) != 0 || unlockpt(master_[i]) != 0) {
+        throw std::runtime_error("posix_openpt failed");
+      }
+      path_[i] = ptsname(master_[i]);
+      termios t{};
+      tcgetattr(master_[i], &t);
+      cfmakeraw(&t);
+      tcsetattr(master_[i], TCSANOW, &t);
+      // Keep the slave open so the master never sees EIO while a side reopens the device.
+      keep_[i] = open(path_[i].c_str(), O_RDWR | O_NOCTTY);
+      tcgetattr(keep_[i], &t);
+      cfmakeraw(&t);
+      tcsetattr(keep_[i], TCSANOW, &t);
+    }
+    if (pipe(stop_) != 0) {
+      throw std::runtime_error("pipe failed");
+    }
+    relay_ = std::thread([this] { run(); });
+  }
+  ~PtyPair() {
+    const char c = 'x';
+    (void)!write(stop_[1], &c, 1);
+    relay_.join();
+    for (int fd : {master_[0], master_[1], keep_[0], keep_[1], stop_[0], stop_[1]}) {
+      close(fd);
+    }
+  }
+  PtyPair(const PtyPair&) = delete;
+  PtyPair& operator=(const PtyPair&) = delete;
+  [[nodiscard]] const std::string& a() const { return path_[0]; }
+  [[nodiscard]] const std::string& b() const { return path_[1]; }
+
+ private:
+  void run() {
+    char buf[512];
+    for (;;) {
+      pollfd p[3] = {{master_[0], POLLIN, 0}, {master_[1], POLLIN, 0}, {stop_[0], POLLIN, 0}};
+      if (::poll(p, 3, -1) < 0) {
+        continue;
+      }
+      if (p[2].revents != 0) {
+        return;
+      }
+      for (int i = 0; i < 2; ++i) {
+        if ((p[i].revents & POLLIN) != 0) {
+          const ssize_t n = read(master_[i], buf, sizeof(buf));
+          if (n > 0) {
+            (void)!write(master_[1 - i], buf, static_cast<std::size_t>(n));
+          }
+        }
+      }
+    }
+  }
+  int master_[2]{-1, -1};
+  int keep_[2]{-1, -1};
+  int stop_[2]{-1, -1};
+  std::string path_[2];
+  std::thread relay_;
+};
+
+/// A child process (the python peer); its first stdout line is returned by start().
+class PeerProcess {
+ public:
+  PeerProcess() = default;
+  ~PeerProcess() { kill_now(); }
+  PeerProcess(const PeerProcess&) = delete;
+  PeerProcess& operator=(const PeerProcess&) = delete;
+
+  std::string start(const std::vector<std::string>& argv, double timeout_s = 15.0) {
+    int out[2];
+    if (pipe(out) != 0) {
+      throw std::runtime_error("pipe failed");
+    }
+    pid_ = fork();
+    if (pid_ == 0) {
+      dup2(out[1], 1);
+      close(out[0]);
+      close(out[1]);
+      std::vector<char*> args;
+      for (const auto& a : argv) {
+        args.push_back(const_cast<char*>(a.c_str()));
+      }
+      args.push_back(nullptr);
+      execv(args[0], args.data());
+      _exit(127);
+    }
+    close(out[1]);
+    std::string line;
+    pollfd p{out[0], POLLIN, 0};
+    const auto end = std::chrono::steady_clock::now() +
+                     std::chrono::milliseconds(static_cast<int>(timeout_s * 1000));
+    char c = 0;
+    while (std::chrono::steady_clock::now() < end) {
+      if (::poll(&p, 1, 50) > 0) {
+        if (read(out[0], &c, 1) != 1 || c == '\n') {
+          break;
+        }
+        line += c;
+      }
+    }
+    close(out[0]);
+    return line;
+  }
+  void kill_now() {
+    if (pid_ > 0) {
+      ::kill(pid_, SIGKILL);
+      waitpid(pid_, nullptr, 0);
+      pid_ = -1;
+    }
+  }
+
+ private:
+  pid_t pid_{-1};
+};
+
+/// A raw TCP server on 127.0.0.1 (ephemeral port): each received request (bytes as read) is
+/// passed to `respond`, whose returned bytes are sent back (empty = no answer).
+class RawTcpServer {
+ public:
+  using Responder = std::function<std::vector<std::uint8_t>(const std::vector<std::uint8_t>&)>;
+  explicit RawTcpServer(Responder respond) : respond_(std::move(respond)) {
+    listen_ = socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    a.sin_port = 0;
+    if (bind(listen_, reinterpret_cast<sockaddr*>(&a), sizeof(a)) != 0 || listen(listen_, 4) != 0) {
+      throw std::runtime_error("raw server: bind/listen failed");
+    }
+    socklen_t len = sizeof(a);
+    getsockname(listen_, reinterpret_cast<sockaddr*>(&a), &len);
+    port_ = ntohs(a.sin_port);
+    if (pipe(stop_) != 0) {
+      throw std::runtime_error("pipe failed");
+    }
+    thread_ = std::thread([this] { run(); });
+  }
+  ~RawTcpServer() {
+    const char c = 'x';
+    (void)!write(stop_[1], &c, 1);
+    thread_.join();
+    for (int fd : {listen_, stop_[0], stop_[1]}) {
+      close(fd);
+    }
+  }
+  RawTcpServer(const RawTcpServer&) = delete;
+  RawTcpServer& operator=(const RawTcpServer&) = delete;
+  [[nodiscard]] std::uint16_t port() const { return port_; }
+  [[nodiscard]] int requests() const { return requests_.load(); }
+
+ private:
+  void run() {
+    std::vector<int> clients;
+    for (;;) {
+      std::vector<pollfd> p{{stop_[0], POLLIN, 0}, {listen_, POLLIN, 0}};
+      for (int c : clients) {
+        p.push_back({c, POLLIN, 0});
+      }
+      if (::poll(p.data(), p.size(), -1) < 0) {
+        continue;
+      }
+      if (p[0].revents != 0) {
+        break;
+      }
+      if (p[1].revents != 0) {
+        clients.push_back(accept(listen_, nullptr, nullptr));
+      }
+      for (std::size_t i = 2; i < p.size(); ++i) {
+        if (p[i].revents == 0) {
+          continue;
+        }
+        std::vector<std::uint8_t> req(260);
+        const ssize_t n = recv(p[i].fd, req.data(), req.size(), 0);
+        if (n <= 0) {
+          close(p[i].fd);
+          clients.erase(std::find(clients.begin(), clients.end(), p[i].fd));
+          break;
+        }
+        req.resize(static_cast<std::size_t>(n));
+        ++requests_;
+        const std::vector<std::uint8_t> rsp = respond_(req);
+        if (!rsp.empty()) {
+          (void)!send(p[i].fd, rsp.data(), rsp.size(), MSG_NOSIGNAL);
+        }
+      }
+    }
+    for (int c : clients) {
+      close(c);
+    }
+  }
+  Responder respond_;
+  int listen_{-1};
+  int stop_[2]{-1, -1};
+  std::uint16_t port_{0};
+  std::atomic<int> requests_{0};
+  std::thread thread_;
+};
+
+}  // namespace nccomp::test::modbus

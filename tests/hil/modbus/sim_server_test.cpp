@@ -1,0 +1,401 @@
+// The driver against the project's libmodbus NC server (sim/modbus_nc) on loopback TCP and on
+// a pseudo-terminal pair (RTU).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+
+#include "sim/modbus_nc/nc_server.hpp"
+#include "tests/hil/modbus/hil_common.hpp"
+
+namespace nccomp::test::modbus {
+namespace {
+
+using sim::modbus_nc::NcServer;
+using sim::modbus_nc::ServerConfig;
+using sim::modbus_nc::Tables;
+
+const char* const kEveryEncoding = R"(
+[modbus.axis]
+x_mm = { table = "input", address = 0, type = "int32", scale = 0.0001 }
+y_mm = { table = "holding", address = 0, type = "float32", word_order = "low_first", byte_order = "swapped" }
+z_mm = { table = "input", address = 2, type = "int16", scale = 0.01, offset = 100 }
+a_deg = { table = "input", address = 3, type = "uint16", byte_order = "swapped" }
+b_deg = { table = "input", address = 4, type = "uint32", word_order = "low_first" }
+c_deg = { table = "input", address = 6, type = "float32" }
+tool = { table = "holding", address = 2, type = "uint16" }
+cutting = { table = "coil", address = 5 }
+[[modbus.temperature]]
+sensor = 3
+table = "discrete_input"
+address = 7
+)";
+
+void fill_every_encoding(Tables& t) {
+  t.input[0] = 0xFFED;  // -1234567 * 0.0001 = -123.4567 mm
+  t.input[1] = 0x2979;
+  t.holding[0] = 0x0000;  // 2.5f = 0x40200000, low word first, bytes swapped
+  t.holding[1] = 0x2040;
+  t.input[2] = 0xFE0C;  // -500 * 0.01 + 100 = 95 mm
+  t.input[3] = 0x2C01;  // 300 with swapped bytes
+  t.input[4] = 0x1170;  // 70000 = 0x00011170, low word first
+  t.input[5] = 0x0001;
+  t.input[6] = 0xBF00;  // -0.5f
+  t.input[7] = 0x0000;
+  t.holding[2] = 12;
+  t.coils[5] = 1;
+  t.discrete_inputs[7] = 1;
+}
+
+TEST(ModbusHilSim, EveryRegisterTypeAndEncodingOverTcp) {
+  NcServer server(ServerConfig{});
+  server.update(fill_every_encoding);
+  server.start();
+  auto bus = make_bus(tcp_header(server.port()) + kEveryEncoding);
+  bus->start();
+  Collected got;
+  ASSERT_TRUE(wait_until([&] {
+    got.drain(*bus);
+    return got.axis.size() >= 3 && !got.temperatures.empty();
+  }));
+  const core::AxisSample& s = got.axis.back();
+  EXPECT_EQ(s.axis_count, 6);
+  EXPECT_NEAR(s.position_mm[0], -123.4567, 1e-9);
+  EXPECT_DOUBLE_EQ(s.position_mm[1], 2.5);
+  EXPECT_NEAR(s.position_mm[2], 95.0, 1e-12);
+  EXPECT_DOUBLE_EQ(s.position_mm[3], 300.0);
+  EXPECT_DOUBLE_EQ(s.position_mm[4], 70000.0);
+  EXPECT_DOUBLE_EQ(s.position_mm[5], -0.5);
+  EXPECT_EQ(s.tool, 12);
+  EXPECT_TRUE(s.cutting);
+  EXPECT_EQ(got.temperatures[0].sensor, 3);
+  EXPECT_DOUBLE_EQ(got.temperatures[0].temperature_c, 1.0);
+  // WHEN the coil drops THEN the next samples say so.
+  server.update([](Tables& t) { t.coils[5] = 0; });
+  ASSERT_TRUE(wait_until([&] {
+    got.drain(*bus);
+    return !got.axis.back().cutting;
+  }));
+  bus->stop();
+  const mb::ModbusStatus st = bus->modbus_status();
+  EXPECT_EQ(st.bus.state, drivers::LinkState::kStopped);
+  EXPECT_EQ(st.bus.counters.faults, 0U);
+  EXPECT_EQ(st.bus.counters.events_dropped, 0U);
+  EXPECT_GE(st.bus.counters.frames_rx, 3U * 4U);  // 4 read requests per poll
+}
+
+const char* const kEventsAndOffsets = R"(
+[modbus.axis]
+x_mm = { table = "input", address = 0, type = "int32", scale = 0.001 }
+[modbus.tool_measurement]
+sequence = { table = "holding", address = 100, type = "uint16" }
+tool = { table = "holding", address = 101, type = "uint16" }
+wear_um = { table = "holding", address = 102, type = "float32" }
+broken = { table = "holding", address = 104, type = "uint16" }
+[[modbus.offset]]
+register_index = 0
+address = 200
+type = "int32"
+scale = 0.1
+[[modbus.offset]]
+register_index = 1
+address = 202
+type = "float32"
+word_order = "low_first"
+[[modbus.offset]]
+register_index = 2
+address = 204
+type = "int16"
+)";
+
+/// The NC side of a tool measurement: values first, then the counter, in one atomic update.
+void nc_measure(NcServer& s, std::uint16_t tool, float wear_um, int increments = 1) {
+  s.update([&](Tables& t) {
+    std::uint32_t u = 0;
+    std::memcpy(&u, &wear_um, 4);
+    t.holding[101] = tool;
+    t.holding[102] = static_cast<std::uint16_t>(u >> 16U);
+    t.holding[103] = static_cast<std::uint16_t>(u & 0xFFFFU);
+    t.holding[100] = static_cast<std::uint16_t>(t.holding[100] + increments);
+  });
+}
+
+std::int32_t holding_i32(NcServer& s, std::uint16_t address) {
+  const auto r = s.holding(address, 2);
+  return static_cast<std::int32_t>((static_cast<std::uint32_t>(r[0]) << 16U) | r[1]);
+}
+
+TEST(ModbusHilSim, EventsExactlyOnceLostCountedOffsetsLatestWinsAcrossRestart) {
+  NcServer server(ServerConfig{});
+  server.update([](Tables& t) { t.holding[100] = 41; });  // an old event before the daemon
+  server.start();
+  auto bus = make_bus(tcp_header(server.port(), "verify_writes = true") + kEventsAndOffsets);
+  bus->start();
+  Collected got;
+  ASSERT_TRUE(wait_until([&] {
+    got.drain(*bus);
+    return got.axis.size() >= 2;
+  }));
+  EXPECT_TRUE(got.tool_measurements.empty()) << "the counter found at start is a baseline";
+
+  // One event: delivered once, with its own values.
+  nc_measure(server, 5, 12.5F);
+  ASSERT_TRUE(wait_until([&] {
+    got.drain(*bus);
+    return !got.tool_measurements.empty();
+  }));
+  const std::size_t axis_before = got.axis.size();
+  ASSERT_TRUE(wait_until([&] {
+    got.drain(*bus);
+    return got.axis.size() > axis_before + 10;  // many polls later ...
+  }));
+  ASSERT_EQ(got.tool_measurements.size(), 1U);  // ... still exactly one
+  EXPECT_EQ(got.tool_measurements[0].tool, 5);
+  EXPECT_DOUBLE_EQ(got.tool_measurements[0].wear_um[0], 12.5);
+
+  // Three events between two polls: the latest is delivered, two are counted lost.
+  nc_measure(server, 6, 20.0F, 3);
+  ASSERT_TRUE(wait_until([&] {
+    got.drain(*bus);
+    return got.tool_measurements.size() == 2;
+  }));
+  EXPECT_EQ(got.tool_measurements[1].tool, 6);
+  EXPECT_EQ(bus->modbus_status().events_lost, 2U);
+
+  // Offsets: the latest value per register wins; verified by read-back.
+  push_offset(*bus, 0, 12.3);
+  push_offset(*bus, 0, 15.0);
+  push_offset(*bus, 1, -7.25);
+  ASSERT_TRUE(wait_until([&] {
+    return holding_i32(server, 200) == 150 && server.holding(202, 2)[1] == 0xC0E8;
+  }));
+  const auto f = server.holding(202, 2);
+  EXPECT_EQ(f[0], 0x0000);  // -7.25f = 0xC0E80000, low word first
+  EXPECT_EQ(f[1], 0xC0E8);
+
+  // NaN and out-of-range are refused (never clamped) and raise the alarm; the NC keeps its value.
+  push_offset(*bus, 1, core::kNaN);
+  push_offset(*bus, 2, 40000.0);  // int16
+  push_offset(*bus, 9, 1.0);      // no such register
+  ASSERT_TRUE(wait_until([&] { return bus->modbus_status().offsets_rejected == 3; }));
+  EXPECT_TRUE(bus->status().alarm);
+  EXPECT_EQ(server.holding(202, 2)[1], 0xC0E8);
+  EXPECT_EQ(server.holding(204, 1)[0], 0);
+  push_offset(*bus, 1, 1.5);
+  push_offset(*bus, 2, -3.0);
+  ASSERT_TRUE(wait_until([&] { return !bus->status().alarm; }));
+  EXPECT_EQ(server.holding(204, 1)[0], 0xFFFD);
+
+  // The NC restarts: while it is down the loop moves the offset on, the NC produces 2 events.
+  const std::uint64_t written_before = bus->status().counters.offsets_written;
+  server.stop();
+  ASSERT_TRUE(wait_until(
+      [&] { return bus->status().state == drivers::LinkState::kDown; }));
+  push_offset(*bus, 0, 20.0);
+  nc_measure(server, 7, 30.0F, 2);
+  ASSERT_TRUE(wait_until([&] { return bus->status().alarm; }));  // link down > alarm_after_s
+  server.start();
+  ASSERT_TRUE(wait_until([&] {
+    got.drain(*bus);
+    return holding_i32(server, 200) == 200 && got.tool_measurements.size() == 3;
+  }));
+  ASSERT_TRUE(wait_until([&] { return bus->modbus_status().offsets_pending == 0; }));
+  const mb::ModbusStatus st = bus->modbus_status();
+  EXPECT_GE(st.bus.counters.reconnects, 1U);
+  EXPECT_EQ(st.events_lost, 3U);
+  EXPECT_EQ(got.tool_measurements[2].tool, 7);
+  // Every known offset was written again after the reconnect (absolute values).
+  EXPECT_GE(st.bus.counters.offsets_written, written_before + 3);
+  EXPECT_GE(st.bus.counters.offsets_retried, 3U);
+  EXPECT_FALSE(st.bus.alarm);
+
+  // Never an older value after a newer one: register 200 saw 150 (maybe 123 first), then 200.
+  std::vector<std::int32_t> seq;
+  for (const auto& w : server.writes()) {
+    if (w.address == 200 && w.values.size() == 2) {
+      seq.push_back(static_cast<std::int32_t>((std::uint32_t{w.values[0]} << 16U) | w.values[1]));
+    }
+  }
+  ASSERT_FALSE(seq.empty());
+  EXPECT_TRUE(std::is_sorted(seq.begin(), seq.end()));
+  EXPECT_EQ(seq.back(), 200);
+  bus->stop();
+}
+
+TEST(ModbusHilSim, ServerThatStopsAnsweringIsDetectedAndOffsetsArriveAfterwards) {
+  NcServer server(ServerConfig{});
+  server.start();
+  auto bus = make_bus(tcp_header(server.port()) + kEventsAndOffsets);
+  bus->start();
+  ASSERT_TRUE(wait_until([&] { return bus->status().state == drivers::LinkState::kUp; }));
+  // A hung NC: the connection stays open, nothing is answered (a pulled cable looks the same).
+  server.set_silent(true);
+  push_offset(*bus, 0, 42.0);
+  ASSERT_TRUE(wait_until([&] {
+    const auto st = bus->modbus_status();
+    return st.timeouts >= 3 && st.bus.counters.reconnects >= 1 && st.bus.alarm;
+  }));
+  EXPECT_EQ(bus->modbus_status().offsets_pending, 1U);
+  server.set_silent(false);
+  ASSERT_TRUE(wait_until([&] { return holding_i32(server, 200) == 420; }));
+  ASSERT_TRUE(wait_until([&] { return !bus->status().alarm; }));
+  EXPECT_EQ(bus->modbus_status().offsets_pending, 0U);
+  bus->stop();
+}
+
+TEST(ModbusHilSim, ExceptionResponsesCountedPerKindOthersKeepFlowing) {
+  using sim::modbus_nc::kExceptionBase;
+  NcServer server(ServerConfig{});
+  server.update([](Tables& t) { t.input[1] = 1000; });
+  server.start();
+  const std::string map = R"(
+[modbus.axis]
+x_mm = { table = "input", address = 0, type = "int32", scale = 0.001 }
+[modbus.tool_change]
+sequence = { table = "holding", address = 65302, type = "uint16" }
+tool = { table = "holding", address = 65303 }
+[[modbus.temperature]]
+sensor = 0
+table = "input"
+address = 65298
+[[modbus.temperature]]
+sensor = 1
+table = "coil"
+address = 65306
+[[modbus.temperature]]
+sensor = 2
+table = "discrete_input"
+address = 65307
+[[modbus.offset]]
+register_index = 0
+address = 65299
+)";
+  static_assert(kExceptionBase + 2 == 65298 && kExceptionBase + 3 == 65299 &&
+                kExceptionBase + 6 == 65302 && kExceptionBase + 10 == 65306);
+  auto bus = make_bus(tcp_header(server.port()) + map);
+  bus->start();
+  push_offset(*bus, 0, 5.0);
+  Collected got;
+  ASSERT_TRUE(wait_until([&] {
+    got.drain(*bus);
+    const auto st = bus->modbus_status();
+    return got.axis.size() >= 5 && st.exceptions[2] >= 5 && st.exceptions[3] >= 2 &&
+           st.exceptions[6] >= 5 && st.exceptions[10] >= 5 && st.exceptions[11] >= 5 &&
+           st.bus.alarm;
+  }));
+  const auto st = bus->modbus_status();
+  EXPECT_DOUBLE_EQ(got.axis.back().position_mm[0], 1.0);
+  EXPECT_EQ(st.bus.counters.reconnects, 0U) << "an exception is an answer, not a dead link";
+  EXPECT_EQ(st.timeouts, 0U);
+  EXPECT_EQ(st.offsets_pending, 1U);  // illegal value: kept, retried, alarmed
+  EXPECT_TRUE(got.temperatures.empty());
+  EXPECT_TRUE(got.tool_changes.empty());
+  bus->stop();
+}
+
+TEST(ModbusHilSim, LateAndWrongTransactionAnswersAreNeverTakenForData) {
+  using sim::modbus_nc::kDelayAddress;
+  using sim::modbus_nc::kWrongTidAddress;
+  NcServer server(ServerConfig{});
+  server.set_delay_ms(150);  // > response_timeout_s = 0.1
+  server.update([](Tables& t) {
+    t.input[1] = 777;
+    t.input[kDelayAddress] = 9999;
+    t.holding[kWrongTidAddress] = 8888;
+  });
+  server.start();
+  const std::string map = R"(
+dead_after_failures = 100
+[modbus.axis]
+x_mm = { table = "input", address = 0, type = "int32" }
+[[modbus.temperature]]
+sensor = 0
+table = "input"
+address = 65280
+[[modbus.temperature]]
+sensor = 1
+table = "holding"
+address = 65312
+)";
+  auto bus = make_bus(tcp_header(server.port()) + map);
+  bus->start();
+  Collected got;
+  // A single-threaded NC that needs 150 ms per delayed request falls behind for good, so the
+  // delay is lifted once it has produced timeouts; its late answers are still in flight then.
+  ASSERT_TRUE(wait_until([&] {
+    got.drain(*bus);
+    return bus->modbus_status().timeouts >= 2;
+  }));
+  server.set_delay_ms(0);
+  const std::size_t before = got.axis.size();
+  ASSERT_TRUE(wait_until([&] {
+    got.drain(*bus);
+    return got.axis.size() >= before + 5 && bus->modbus_status().bad_responses >= 3;
+  })) << "timeouts " << bus->modbus_status().timeouts << " bad "
+      << bus->modbus_status().bad_responses << " samples " << got.axis.size();
+  bus->stop();
+  got.drain(*bus);
+  for (const auto& s : got.axis) {
+    ASSERT_DOUBLE_EQ(s.position_mm[0], 777.0);  // never 9999 or 8888 from a stray answer
+  }
+  // Sensor 0 reads 9999 once its answers come in time; sensor 1 (wrong transaction id) never.
+  for (const auto& t : got.temperatures) {
+    EXPECT_EQ(t.sensor, 0) << "temperature " << t.temperature_c << " from a foreign answer";
+    EXPECT_DOUBLE_EQ(t.temperature_c, 9999.0);
+  }
+}
+
+TEST(ModbusHilSim, RtuOverPtyPairWithFrameTiming) {
+  PtyPair pty;
+  ServerConfig sc;
+  sc.rtu = true;
+  sc.device = pty.b();
+  sc.unit_id = 1;
+  NcServer server(sc);
+  server.update([](Tables& t) {
+    t.input[0] = 0xFFFF;  // x = -1 * 0.001
+    t.input[1] = 0xFFFF;
+    t.holding[100] = 3;
+  });
+  server.start();
+  using sim::modbus_nc::kExceptionBase;
+  using sim::modbus_nc::kWrongTidAddress;
+  const std::string map = std::string(kEventsAndOffsets) + R"(
+[[modbus.temperature]]
+sensor = 0
+table = "input"
+address = 65298
+[[modbus.temperature]]
+sensor = 1
+table = "coil"
+address = 65312
+)";
+  static_assert(kExceptionBase + 2 == 65298 && kWrongTidAddress == 65312);
+  auto bus = make_bus(rtu_header(pty.a(), "verify_writes = true\ndead_after_failures = 100") + map);
+  bus->start();
+  Collected got;
+  ASSERT_TRUE(wait_until([&] {
+    got.drain(*bus);
+    return got.axis.size() >= 2;
+  }));
+  EXPECT_NEAR(got.axis.back().position_mm[0], -0.001, 1e-12);
+  nc_measure(server, 9, 4.0F);
+  push_offset(*bus, 0, -1.2);
+  ASSERT_TRUE(wait_until([&] {
+    got.drain(*bus);
+    return got.tool_measurements.size() == 1 && holding_i32(server, 200) == -12 &&
+           bus->modbus_status().bus.counters.offsets_written >= 1;
+  }));
+  EXPECT_EQ(got.tool_measurements[0].tool, 9);
+  const auto st = bus->modbus_status();
+  EXPECT_GE(st.exceptions[2], 1U);
+  EXPECT_GE(st.bad_responses, 1U);  // an answer from another unit id
+  EXPECT_GE(st.bus.counters.offsets_written, 1U);
+  bus->stop();
+  EXPECT_TRUE(got.temperatures.empty());
+}
+
+}  // namespace
+}  // namespace nccomp::test::modbus
