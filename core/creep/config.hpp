@@ -147,8 +147,9 @@ struct ToolLifeConfig {
 /// [creep.predict]: predictive creeping (beyond the seed).
 struct PredictConfig {
   bool enabled{false};
-  /// Measurements used to fit the wear rate (2..kMaxRateWindow).
-  std::size_t window{3};
+  /// Measurements used to fit the wear rate (2..kMaxRateWindow): more averages the measuring
+  /// noise, fewer follows a changing wear rate sooner.
+  std::size_t window{5};
   /// Cap on the predicted growth between two measurements [µm].
   double max_um{20.0};
 };

@@ -65,8 +65,11 @@ struct CreepState {
   std::array<double, kMaxEdgePoints> rate_um_per_mm{};
   bool rate_known{false};
 
+  /// Accepted measurements, oldest first; history[0] is the new tool's origin (zero wear at
+  /// zero path) while history_has_origin.
   std::array<HistoryEntry, kMaxRateWindow> history{};
-  std::uint32_t history_count{0};
+  std::uint32_t history_count{1};
+  bool history_has_origin{true};
 
   std::array<CreepSlot, kMaxCreeps> creeps{};
   std::uint64_t next_seq{1};

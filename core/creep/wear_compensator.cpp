@@ -21,6 +21,16 @@ void check_finite(double v, const std::string& field) {
   }
 }
 
+// Built by appending: GCC 12 reports a false -Wrestrict on `"literal" + std::string` at -O3.
+std::string indexed(const char* name, std::size_t i, const char* suffix = "") {
+  std::string s(name);
+  s += '[';
+  s += std::to_string(i);
+  s += ']';
+  s += suffix;
+  return s;
+}
+
 }  // namespace
 
 void WearCompensator::configure(const CreepConfig& config) {
@@ -71,28 +81,27 @@ void WearCompensator::import_state(const CreepState& st) {
                                 std::to_string(kMaxRateWindow));
   }
   for (std::size_t i = 0; i < points_; ++i) {
-    const std::string p = "[" + std::to_string(i) + "]";
-    check_finite(st.committed_um[i], "committed_um" + p);
-    check_finite(st.measured_um[i], "measured_um" + p);
-    check_finite(st.rate_um_per_mm[i], "rate_um_per_mm" + p);
+    check_finite(st.committed_um[i], indexed("committed_um", i));
+    check_finite(st.measured_um[i], indexed("measured_um", i));
+    check_finite(st.rate_um_per_mm[i], indexed("rate_um_per_mm", i));
     for (std::size_t h = 0; h < st.history_count; ++h) {
-      check_finite(st.history[h].wear_um[i], "history[" + std::to_string(h) + "].wear_um" + p);
+      check_finite(st.history[h].wear_um[i], indexed(indexed("history", h, ".wear_um").c_str(), i));
     }
   }
   for (std::size_t k = 0; k < kMaxCreeps; ++k) {
     const auto& c = st.creeps[k];
     if (!c.active) continue;
     if (k >= config_.max_creeps) {
-      throw std::invalid_argument("creep state: creeps[" + std::to_string(k) +
-                                  "] is active beyond creep.max_creeps");
+      throw std::invalid_argument("creep state: " + indexed("creeps", k) +
+                                  " is active beyond creep.max_creeps");
     }
-    const std::string pre = "creeps[" + std::to_string(k) + "]";
+    const std::string pre = indexed("creeps", k);
     check_finite(c.start, pre + ".start");
     for (std::size_t i = 0; i < points_; ++i) {
-      check_finite(c.delta_um[i], pre + ".delta_um[" + std::to_string(i) + "]");
+      check_finite(c.delta_um[i], indexed((pre + ".delta_um").c_str(), i));
       if (!std::isfinite(c.span[i]) || c.span[i] < 0.0) {
-        throw std::invalid_argument("creep state: " + pre + ".span[" + std::to_string(i) +
-                                    "] must be finite and >= 0");
+        throw std::invalid_argument("creep state: " + indexed((pre + ".span").c_str(), i) +
+                                    " must be finite and >= 0");
       }
     }
   }
@@ -104,7 +113,7 @@ void WearCompensator::import_state(const CreepState& st) {
     }
   }
   for (std::size_t ch = 0; ch < kChannelCount; ++ch) {
-    check_finite(st.channel_output_um[ch], "channel_output_um[" + std::to_string(ch) + "]");
+    check_finite(st.channel_output_um[ch], indexed("channel_output_um", ch));
   }
   s_ = st;
   // Kinematics re-anchor on the first sample; every value is re-sent on the next step.
@@ -230,7 +239,7 @@ double WearCompensator::creep_fraction(const CreepSlot& c, std::size_t i) const 
 }
 
 double WearCompensator::predicted_um(std::size_t i) const noexcept {
-  if (!config_.predict.enabled || !s_.rate_known) return 0.0;
+  if (!config_.predict.enabled || !s_.rate_known || s_.measurements < 2) return 0.0;
   const double grown =
       s_.rate_um_per_mm[i] * (s_.creep_path_mm - s_.last_measurement_creep_path_mm);
   return std::clamp(grown, 0.0, config_.predict.max_um);
@@ -694,6 +703,7 @@ void WearCompensator::on_measurement(TimeNs now_ns, const ToolMeasurement& m,
   if (s_.history_count == kMaxRateWindow) {
     std::copy(s_.history.begin() + 1, s_.history.end(), s_.history.begin());
     --s_.history_count;
+    s_.history_has_origin = false;
   }
   auto& h = s_.history[s_.history_count++];
   h.cut_path_mm = s_.cut_path_mm;
@@ -712,8 +722,14 @@ void WearCompensator::on_measurement(TimeNs now_ns, const ToolMeasurement& m,
 
 void WearCompensator::fit_rates() noexcept {
   const std::size_t window = config_.predict.enabled ? config_.predict.window : 2;
-  const std::size_t n = std::min<std::size_t>(window, s_.history_count);
-  const std::size_t first = s_.history_count - n;
+  std::size_t n = std::min<std::size_t>(window, s_.history_count);
+  std::size_t first = s_.history_count - n;
+  // The new tool's origin (zero wear at zero path) stands in only until two real measurements
+  // exist: break-in wear is fastest at the start, so a secant from the origin over-predicts.
+  if (first == 0 && s_.history_has_origin && s_.history_count >= 3) {
+    first = 1;
+    --n;
+  }
   double mean_x = 0.0;
   for (std::size_t h = first; h < s_.history_count; ++h) mean_x += s_.history[h].cut_path_mm;
   mean_x /= static_cast<double>(n);
@@ -805,6 +821,7 @@ void WearCompensator::on_tool_change(TimeNs /*now_ns*/, const ToolChange& c,
   fresh.tool = c.tool;
   fresh.part = s_.part;
   fresh.history_count = 1;
+  fresh.history_has_origin = true;
   // Kept across the change: where the sister restarts, and what the NC holds now.
   fresh.last_measurement_program_path_mm = s_.last_measurement_program_path_mm;
   fresh.channel_output_um = s_.channel_output_um;

@@ -209,6 +209,51 @@ TEST(Unfinished, BeyondTheSlotsTheOldestIsFoldedWithoutAStep) {
   EXPECT_NEAR(r.z(), -30.0, 1e-9);
 }
 
+// ---- predictive creeping (beyond the seed) ------------------------------------------------
+
+TEST(Predict, FeedsTheFittedWearRateBetweenMeasurementsAndEachMeasurementCorrectsIt) {
+  auto c = base_config();
+  c.predict.enabled = true;
+  c.predict.window = 2;
+  Rig r(c);
+  r.run_to(100.0);
+  r.measure({2.0});  // true wear 0.02 µm/mm of path
+  r.run_to(180.0);
+  EXPECT_NEAR(r.z(), -2.0, 1e-9);  // one measurement: no prediction yet (break-in)
+  r.run_to(200.0);
+  r.measure({4.0});
+  r.run_to(250.0);
+  EXPECT_NEAR(r.z(), -(4.0 + 0.02 * 50.0), 1e-9);  // the creep is done, the prediction grows
+  r.run_to(300.0);
+  const double z = r.z();
+  EXPECT_NEAR(z, -6.0, 1e-9);
+  r.measure({6.0});  // exactly as predicted: nothing left to creep
+  EXPECT_NEAR(r.z(), z, 1e-12);
+  EXPECT_EQ(r.comp.creeps_in_progress(), 0U);
+  r.run_to(325.0);
+  EXPECT_NEAR(r.z(), -6.5, 1e-9);
+  r.run_to(400.0);
+  r.measure({7.0});  // slower than predicted (8): the difference creeps out
+  EXPECT_NEAR(r.z(), -8.0, 1e-9);
+  r.run_to(425.0);
+  // Half of the −1 µm correction, and the new rate (6 → 7 over 100 mm) predicts 0.25 µm.
+  EXPECT_NEAR(r.z(), -(8.0 - 0.5 + 0.25), 1e-9);
+}
+
+TEST(Predict, ThePredictionIsCapped) {
+  auto c = base_config();
+  c.predict.enabled = true;
+  c.predict.window = 2;
+  c.predict.max_um = 1.5;
+  Rig r(c);
+  r.run_to(100.0);
+  r.measure({2.0});
+  r.run_to(200.0);
+  r.measure({4.0});
+  r.run_to(500.0);
+  EXPECT_NEAR(r.z(), -5.5, 1e-9);
+}
+
 TEST(Records, OneToolWearRowPerSupportPoint) {
   auto c = base_config();
   c.edge.tool_shape = ToolShape::kBall;

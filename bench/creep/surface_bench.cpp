@@ -1,0 +1,212 @@
+// Surface quality of creeping wear correction (issue 3, "Measured"): a synthetic flat face and a
+// curved face, and the real PHM 2010 milling wear curves, each finished while the tool wears and
+// corrected by the real core with five strategies. Prints markdown tables.
+//
+//   bench_creep_surface [PHM_DIR]
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <map>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "bench/creep/surface_model.hpp"
+
+namespace {
+
+using namespace nccomp::bench::creep;
+
+void print_header(const Scenario& sc) {
+  std::printf("\n### %s\n\n", sc.name.c_str());
+  std::printf("%d passes of %.0f mm, path sample spacing Δs = %.2f mm, measured every %d passes "
+              "(mid-pass), creep length L = %.0f mm, measurement noise σ = %.2f µm, %zu edge "
+              "support point(s)\n\n",
+              sc.passes, sc.pass_length_mm, sc.ds_mm, sc.measure_every_passes,
+              sc.creep_length_mm, sc.noise_um, sc.edge_points);
+  std::printf("| strategy | max step along a pass [µm] | max step between passes [µm] | RMS form "
+              "error [µm] | RMS, second half [µm] | max form error [µm] |\n"
+              "| --- | --- | --- | --- | --- | --- |\n");
+}
+
+Result print_rows(const Scenario& sc) {
+  Result first{};
+  for (const auto& st : strategies()) {
+    const Result r = run(sc, st);
+    if (&st == &strategies().front()) first = r;
+    std::printf("| %s | %.4f | %.3f | %.3f | %.3f | %.3f |\n", st.name.c_str(),
+                r.max_step_along_um, r.max_step_across_um, r.rms_um, r.rms_second_half_um,
+                r.max_abs_um);
+  }
+  std::printf("\n%d measurements; measured increment between measurements h: mean %.3f µm, "
+              "max %.3f µm; h·Δs/L with the max h = %.4f µm\n",
+              first.measurements, first.mean_increment_um, first.max_increment_um,
+              first.max_increment_um * sc.ds_mm / sc.creep_length_mm);
+  return first;
+}
+
+std::vector<std::string> split(const std::string& line) {
+  std::vector<std::string> out;
+  std::stringstream ss(line);
+  std::string f;
+  while (std::getline(ss, f, ',')) {
+    while (!f.empty() && (f.back() == '\r' || f.back() == ' ')) f.pop_back();
+    out.push_back(f);
+  }
+  return out;
+}
+
+double to_double(const std::string& s, const std::string& where) {
+  std::size_t used = 0;
+  double v = 0.0;
+  try {
+    v = std::stod(s, &used);
+  } catch (const std::exception&) {
+    throw std::runtime_error(where + ": not a number: '" + s + "'");
+  }
+  if (used != s.size() || !std::isfinite(v)) {
+    throw std::runtime_error(where + ": not a finite number: '" + s + "'");
+  }
+  return v;
+}
+
+/// VB of the rotating envelope (max over flutes) per cut, from a per-flute table.
+std::vector<double> read_flutes(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error(path + ": cannot open");
+  std::string line;
+  std::getline(in, line);
+  if (split(line) != std::vector<std::string>{"cut", "flute_1", "flute_2", "flute_3"}) {
+    throw std::runtime_error(path + ":1: unexpected header '" + line + "'");
+  }
+  std::vector<double> vb;
+  int lineno = 1;
+  while (std::getline(in, line)) {
+    ++lineno;
+    if (line.empty() || line == "\r") continue;
+    const auto f = split(line);
+    const std::string where = path + ":" + std::to_string(lineno);
+    if (f.size() != 4) throw std::runtime_error(where + ": expected 4 columns");
+    if (static_cast<int>(to_double(f[0], where)) != static_cast<int>(vb.size()) + 1) {
+      throw std::runtime_error(where + ": cuts must be 1, 2, 3, ...");
+    }
+    vb.push_back(std::max({to_double(f[1], where), to_double(f[2], where),
+                           to_double(f[3], where)}));
+  }
+  return vb;
+}
+
+std::map<std::string, std::vector<double>> read_percut(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error(path + ": cannot open");
+  std::string line;
+  std::getline(in, line);
+  if (split(line) != std::vector<std::string>{"cutter", "cut", "max_wear"}) {
+    throw std::runtime_error(path + ":1: unexpected header '" + line + "'");
+  }
+  std::map<std::string, std::vector<double>> out;
+  int lineno = 1;
+  while (std::getline(in, line)) {
+    ++lineno;
+    if (line.empty() || line == "\r") continue;
+    const auto f = split(line);
+    const std::string where = path + ":" + std::to_string(lineno);
+    if (f.size() != 3) throw std::runtime_error(where + ": expected 3 columns");
+    auto& v = out[f[0]];
+    if (static_cast<int>(to_double(f[1], where)) != static_cast<int>(v.size()) + 1) {
+      throw std::runtime_error(where + ": cuts must be 1, 2, 3, ... per cutter");
+    }
+    v.push_back(to_double(f[2], where));
+  }
+  return out;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const std::string phm_dir = argc > 1 ? argv[1] : NCCOMP_PHM_DIR;
+  std::printf("## Synthetic faces\n\nTrue wear g(s) = 8·(1 − exp(−s/300 mm)) + 0.004·s µm "
+              "(break-in, then linear); on the curved face w(θ, s) = g(s)·(0.6 + 0.8·sin θ) at "
+              "engagement angle θ.\n");
+  Scenario flat;
+  flat.name = "Flat face (tool axis normal to the face, wear at the tip, Z offset)";
+  flat.wear_um = [](double, double s) { return 8.0 * (1.0 - std::exp(-s / 300.0)) + 0.004 * s; };
+  print_header(flat);
+  print_rows(flat);
+
+  Scenario flat_long = flat;
+  flat_long.name = "Flat face, creep length = measurement interval (L = 600 mm)";
+  flat_long.creep_length_mm = 600.0;
+  print_header(flat_long);
+  print_rows(flat_long);
+
+  Scenario flat_exact = flat;
+  flat_exact.name = "Flat face, noise-free measurement (σ = 0)";
+  flat_exact.noise_um = 0.0;
+  print_header(flat_exact);
+  print_rows(flat_exact);
+
+  Scenario curved = flat;
+  curved.name = "Curved face (cylinder R 50 mm, normal ±60°, ball-end mill, 7 support points "
+                "0–90°, X/Z along the normal)";
+  curved.curved = true;
+  curved.edge_points = 7;
+  curved.wear_um = [](double theta_deg, double s) {
+    const double g = 8.0 * (1.0 - std::exp(-s / 300.0)) + 0.004 * s;
+    return g * (0.6 + 0.8 * std::sin(theta_deg * std::numbers::pi / 180.0));
+  };
+  print_header(curved);
+  print_rows(curved);
+
+  // ---- PHM 2010 -------------------------------------------------------------------------
+  const double gamma_deg = 10.0;
+  const double tan_g = std::tan(gamma_deg * std::numbers::pi / 180.0);
+  const auto percut = read_percut(phm_dir + "/phm2010_wear_percut.csv");
+  std::map<std::string, std::vector<double>> vb;
+  vb["c1"] = percut.at("c1");
+  vb["c4"] = read_flutes(phm_dir + "/c4_wear.csv");
+  vb["c6"] = read_flutes(phm_dir + "/c6_wear.csv");
+  for (const char* c : {"c4", "c6"}) {
+    const auto& a = vb[c];
+    const auto& b = percut.at(c);
+    if (a.size() != b.size()) throw std::runtime_error(std::string(c) + ": cut counts differ");
+    for (std::size_t i = 0; i < a.size(); ++i) {
+      if (std::fabs(a[i] - b[i]) > 1e-6) {
+        throw std::runtime_error(std::string(c) + ": max over flutes differs from percut at cut " +
+                                 std::to_string(i + 1));
+      }
+    }
+  }
+  std::printf("\n## PHM 2010 milling wear (real)\n\nVB of the rotating envelope (max over the "
+              "three flutes; c4/c6 from the per-flute tables, checked equal to "
+              "phm2010_wear_percut.csv; c1 from that file). Radial wear = (VB − VB at cut 1)·tan γ "
+              "with clearance angle γ = %.0f° (tan γ = %.4f), linear in path within a cut; one "
+              "cut = one pass of 108 mm; radius-wear register (one support point).\n",
+              gamma_deg, tan_g);
+  for (int k : {5, 10, 20}) {
+    for (const char* name : {"c1", "c4", "c6"}) {
+      const std::vector<double> v = vb[name];
+      Scenario sc;
+      sc.name = std::string("PHM 2010 ") + name + ", measured every " + std::to_string(k) +
+                " cuts";
+      sc.passes = static_cast<int>(v.size()) - 1;
+      sc.pass_length_mm = 108.0;
+      sc.ds_mm = 0.5;
+      sc.measure_every_passes = k;
+      sc.creep_length_mm = 108.0;
+      sc.tool_registers = true;
+      sc.noise_um = 1.0;
+      sc.seed = 2010;
+      sc.wear_um = [v, tan_g](double, double s) {
+        const double c = s / 108.0;  // cuts done since cut 1
+        const auto i = std::min(static_cast<std::size_t>(c), v.size() - 2);
+        const double t = std::min(1.0, c - static_cast<double>(i));
+        return (v[i] + t * (v[i + 1] - v[i]) - v[0]) * tan_g;
+      };
+      print_header(sc);
+      print_rows(sc);
+    }
+  }
+  return 0;
+}

@@ -1,0 +1,206 @@
+// A model of the cut for the creeping-correction benchmarks: a face finished in raster passes
+// while the tool wears, the tool measured every N passes (mid-pass, as when the NC interrupts a
+// long surface), and the real core (WearCompensator) computing the offsets the NC would apply.
+// The surface error at a point is the true wear at the engagement point minus the correction in
+// force when that point was cut, along the surface normal.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <functional>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "core/common/output.hpp"
+#include "core/creep/wear_compensator.hpp"
+
+namespace nccomp::bench::creep {
+
+using namespace nccomp::core;
+using namespace nccomp::core::creep;
+
+struct Scenario {
+  std::string name;
+  int passes{60};
+  double pass_length_mm{100.0};
+  double ds_mm{0.5};
+  double feed_mm_per_s{1555.0 / 60.0};
+  int measure_every_passes{6};
+  double creep_length_mm{200.0};
+  std::size_t edge_points{1};
+  /// Curved face: a cylinder of radius_mm about Y, passes along X over ±max_angle_deg; the
+  /// surface normal (and so the engagement angle on a ball-end mill) changes along each pass.
+  bool curved{false};
+  double radius_mm{50.0};
+  double max_angle_deg{60.0};
+  /// Correction through the radius-wear register (mean wear) instead of X/Y/Z along the normal.
+  bool tool_registers{false};
+  /// True wear [µm] at engagement angle θ [deg] after s [mm] of cut path.
+  std::function<double(double, double)> wear_um;
+  double noise_um{0.5};
+  std::uint64_t seed{1};
+  /// Measurements the predictive strategy fits its wear rate to.
+  std::size_t predict_window{5};
+};
+
+struct Strategy {
+  std::string name;
+  bool apply{true};
+  ProfileShape profile{ProfileShape::kLinear};
+  bool predict{false};
+};
+
+struct Result {
+  double max_step_along_um{0.0};   // largest jump between neighbouring points of one pass
+  double max_step_across_um{0.0};  // largest jump between neighbouring passes (same x)
+  double rms_um{0.0};
+  double rms_second_half_um{0.0};  // RMS over the second half of the path (steady state)
+  double max_abs_um{0.0};
+  double mean_increment_um{0.0};   // h: mean measured increment between measurements
+  double max_increment_um{0.0};
+  int measurements{0};
+};
+
+inline const std::vector<Strategy>& strategies() {
+  static const std::vector<Strategy> s{
+      {"no correction", false, ProfileShape::kStep, false},
+      {"prior art: step", true, ProfileShape::kStep, false},
+      {"creeping, linear", true, ProfileShape::kLinear, false},
+      {"creeping, cosine", true, ProfileShape::kCosine, false},
+      {"predictive creeping, linear", true, ProfileShape::kLinear, true},
+  };
+  return s;
+}
+
+inline Result run(const Scenario& sc, const Strategy& st) {
+  CreepConfig c;
+  c.creep_basis = CreepBasis::kPath;
+  c.creep_length_mm = sc.creep_length_mm;
+  c.profile = st.profile;
+  c.on_unfinished = UnfinishedPolicy::kSuperpose;
+  c.edge.edge_points = sc.edge_points;
+  c.edge.tool_shape = sc.edge_points > 1 ? ToolShape::kBall : ToolShape::kTip;
+  if (sc.tool_registers) {
+    c.output.mode = OutputMode::kToolRegisters;
+    c.output.channel_register = {-1, -1, -1, 0, -1};
+    c.edge.normal_source = NormalSource::kNone;
+    c.edge.fallback_channel = Channel::kRadius;
+  } else {
+    c.output.mode = OutputMode::kAxes;
+    c.output.channel_register = {0, 1, 2, -1, -1};
+    c.edge.normal_source = NormalSource::kAxisSample;
+  }
+  // The prior art is a true step: the limiter must not turn it into a ramp here.
+  c.limiter = {1000.0, 1000.0, 1e9};
+  c.tool_life.min_expected_increment_um = 1000.0;
+  c.tool_life.noise_um = 6.0 * sc.noise_um + 1.0;
+  c.predict.enabled = st.predict;
+  c.predict.window = sc.predict_window;
+  c.predict.max_um = 50.0;
+  WearCompensator comp;
+  comp.configure(c);
+  StepOutput out;
+  std::vector<Event> ev;
+  TimeNs now = 0;
+  ev.emplace_back(ToolChange{now, 1, false});
+  comp.step(now, ev, out);
+
+  std::mt19937_64 rng(sc.seed);
+  std::normal_distribution<double> noise(0.0, sc.noise_um);
+  const int n = static_cast<int>(std::lround(sc.pass_length_mm / sc.ds_mm));
+  const double interval_mm = sc.measure_every_passes * sc.pass_length_mm;
+  double next_meas = interval_mm - 0.5 * sc.pass_length_mm;
+  std::vector<double> prev_pass(static_cast<std::size_t>(n), 0.0);
+  std::vector<double> this_pass(static_cast<std::size_t>(n), 0.0);
+  std::vector<double> last_measured(sc.edge_points, 0.0);
+  Result r;
+  double sum_sq = 0.0;
+  std::size_t count = 0;
+  double sum_sq_after = 0.0;
+  std::size_t count_after = 0;
+  double inc_sum = 0.0;
+  for (int j = 0; j < sc.passes; ++j) {
+    for (int i = 0; i < n; ++i) {
+      const double x_local = (i + 0.5) * sc.ds_mm;
+      const double s = j * sc.pass_length_mm + x_local;
+      // Raster: every other pass runs backward; x is the position across the face.
+      const double x = (j % 2 == 0) ? x_local : sc.pass_length_mm - x_local;
+      std::array<double, 3> nrm{0.0, 0.0, 1.0};
+      if (sc.curved) {
+        const double a_deg = -sc.max_angle_deg + 2.0 * sc.max_angle_deg * x / sc.pass_length_mm;
+        const double a = a_deg * std::numbers::pi / 180.0;
+        nrm = {std::sin(a), 0.0, std::cos(a)};
+      }
+      const double theta_deg = std::acos(std::clamp(nrm[2], 0.0, 1.0)) * 180.0 / std::numbers::pi;
+      ev.clear();
+      now += from_seconds(sc.ds_mm / sc.feed_mm_per_s);
+      if (s >= next_meas) {
+        // The NC interrupts here; the laser measures; machining resumes at the same position.
+        next_meas += interval_mm;
+        ToolMeasurement m;
+        m.time_ns = now;
+        m.tool = 1;
+        m.point_count = static_cast<std::uint8_t>(sc.edge_points);
+        double inc_max = 0.0;
+        for (std::size_t p = 0; p < sc.edge_points; ++p) {
+          const double w = sc.wear_um(support_angle_deg(p, sc.edge_points), s) + noise(rng);
+          m.wear_um[p] = w;
+          inc_max = std::max(inc_max, w - last_measured[p]);
+          last_measured[p] = w;
+        }
+        ++r.measurements;
+        inc_sum += inc_max;
+        r.max_increment_um = std::max(r.max_increment_um, inc_max);
+        if (st.apply) ev.emplace_back(m);
+      }
+      AxisSample a;
+      a.time_ns = now;
+      a.position_mm = {x, j * 1.0, 0.0, 0.0, 0.0, 0.0};
+      a.program_path_mm = s;
+      a.tool = 1;
+      a.has_normal = true;
+      a.normal = nrm;
+      ev.emplace_back(a);
+      out.clear();
+      comp.step(now, ev, out);
+      double applied = 0.0;
+      if (sc.tool_registers) {
+        applied = -comp.channel_output_um(Channel::kRadius);
+      } else {
+        applied = -(comp.channel_output_um(Channel::kX) * nrm[0] +
+                    comp.channel_output_um(Channel::kY) * nrm[1] +
+                    comp.channel_output_um(Channel::kZ) * nrm[2]);
+      }
+      const double e = sc.wear_um(theta_deg, s) - applied;
+      // Index by position across the face, so neighbouring passes compare the same x.
+      const auto xi = static_cast<std::size_t>(j % 2 == 0 ? i : n - 1 - i);
+      this_pass[xi] = e;
+      sum_sq += e * e;
+      ++count;
+      if (j >= sc.passes / 2) {
+        sum_sq_after += e * e;
+        ++count_after;
+      }
+      r.max_abs_um = std::max(r.max_abs_um, std::fabs(e));
+    }
+    for (int i = 1; i < n; ++i) {
+      const auto k = static_cast<std::size_t>(i);
+      r.max_step_along_um = std::max(r.max_step_along_um, std::fabs(this_pass[k] - this_pass[k - 1]));
+    }
+    if (j > 0) {
+      for (std::size_t k = 0; k < this_pass.size(); ++k) {
+        r.max_step_across_um = std::max(r.max_step_across_um, std::fabs(this_pass[k] - prev_pass[k]));
+      }
+    }
+    prev_pass.swap(this_pass);
+  }
+  r.rms_um = std::sqrt(sum_sq / static_cast<double>(count));
+  r.rms_second_half_um =
+      count_after > 0 ? std::sqrt(sum_sq_after / static_cast<double>(count_after)) : 0.0;
+  r.mean_increment_um = r.measurements > 0 ? inc_sum / r.measurements : 0.0;
+  return r;
+}
+
+}  // namespace nccomp::bench::creep
