@@ -1,0 +1,424 @@
+#include "daemon/daemon.hpp"
+
+#include <signal.h>
+#include <sys/mman.h>
+#include <sys/signalfd.h>
+#include <poll.h>
+#include <unistd.h>
+#include <systemd/sd-daemon.h>
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <iostream>
+#include <memory>
+#include <mutex>
+#include <optional>
+
+#include "daemon/config/builtin_sections.hpp"
+#include "daemon/config/config.hpp"
+#include "daemon/logging.hpp"
+#include "daemon/loop.hpp"
+#include "daemon/measurement_log.hpp"
+#include "daemon/state_store.hpp"
+#include "daemon/status.hpp"
+
+namespace nccomp::daemon {
+
+namespace {
+
+namespace fs = std::filesystem;
+namespace cfg = config;
+
+core::TimeNs monotonic_ns() {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<core::TimeNs>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+// A directory from the config, else systemd's environment variable, else the FHS default.
+std::string pick_dir(const cfg::Config& c, const std::string& configured, const char* env,
+                     const char* fallback) {
+  if (!configured.empty()) {
+    return c.resolve(configured);
+  }
+  if (const char* e = std::getenv(env); e != nullptr && *e != '\0') {
+    // systemd may list several directories separated by ':'; the first is ours.
+    std::string s(e);
+    return s.substr(0, s.find(':'));
+  }
+  return fallback;
+}
+
+struct BusEntry {
+  std::string name;
+  std::unique_ptr<drivers::Bus> bus;
+};
+
+std::vector<BusEntry> make_buses(const cfg::Config& c) {
+  std::vector<BusEntry> out;
+  for (const auto* p : cfg::section_parsers()) {
+    if (p->provides_bus() && c.has(p->name())) {
+      out.push_back(BusEntry{std::string(p->name()), p->make_bus(c)});
+    }
+  }
+  return out;
+}
+
+/// Builds a Runtime for the buses that run. Throws std::invalid_argument.
+std::unique_ptr<Runtime> make_runtime(const cfg::Config& c, const std::vector<BusEntry>& buses,
+                                      bool dry_run_cli, std::uint64_t generation) {
+  auto rt = std::make_unique<Runtime>();
+  rt->engine = cfg::build_engine(c);
+  for (const auto& r : cfg::registers_section(c).registers) {
+    int idx = -1;
+    for (std::size_t b = 0; b < buses.size(); ++b) {
+      if (buses[b].name == r.bus) {
+        idx = static_cast<int>(b);
+      }
+    }
+    if (idx < 0) {
+      throw std::invalid_argument("register '" + r.spec.name + "' needs bus '" + r.bus +
+                                  "', which is not running (bus changes need a restart)");
+    }
+    rt->register_bus.push_back(idx);
+  }
+  rt->dry_run = dry_run_cli || cfg::daemon_section(c).dry_run;
+  rt->generation = generation;
+  return rt;
+}
+
+std::vector<std::string> register_names(const cfg::Config& c) {
+  std::vector<std::string> names;
+  for (const auto& r : cfg::registers_section(c).registers) {
+    names.push_back(r.spec.name);
+  }
+  return names;
+}
+
+void notify(const std::string& s) { (void)sd_notify(0, s.c_str()); }
+
+}  // namespace
+
+int run_daemon(const DaemonOptions& options) {
+  // Signals are blocked before any thread exists, so every thread inherits the mask and the main
+  // thread alone receives them through the signalfd.
+  sigset_t mask;
+  sigemptyset(&mask);
+  sigaddset(&mask, SIGTERM);
+  sigaddset(&mask, SIGINT);
+  sigaddset(&mask, SIGHUP);
+  pthread_sigmask(SIG_BLOCK, &mask, nullptr);
+  const int sfd = signalfd(-1, &mask, SFD_CLOEXEC);
+  if (sfd < 0) {
+    std::cerr << "nccompd: signalfd: " << std::strerror(errno) << "\n";
+    return 1;
+  }
+
+  auto loaded = cfg::load_file(options.config_path);
+  if (!loaded.config) {
+    std::cerr << loaded.diagnostics.to_string() << "nccompd: " << loaded.diagnostics.items().size()
+              << " error(s) in " << options.config_path << "\n";
+    return 3;
+  }
+  std::shared_ptr<const cfg::Config> config = std::move(loaded.config);
+  const std::string log_target = setup_logging(cfg::log_section(*config));
+  spdlog::info("nccompd starting: config {}, logging to {}", options.config_path, log_target);
+
+  std::vector<BusEntry> buses;
+  std::unique_ptr<Runtime> runtime;
+  try {
+    buses = make_buses(*config);
+    runtime = make_runtime(*config, buses, options.dry_run, 1);
+  } catch (const std::exception& e) {
+    spdlog::error("configuration refused: {}", e.what());
+    return 3;
+  }
+  if (runtime->dry_run) {
+    spdlog::warn("DRY RUN: offsets are computed and logged, nothing is written to the NC");
+  }
+  std::mutex names_mu;
+  auto names = std::make_shared<const std::vector<std::string>>(register_names(*config));
+
+  const auto& dsec = cfg::daemon_section(*config);
+  const auto& ssec = cfg::state_section(*config);
+
+  // State: absent → fresh; valid → resumed; corrupt or unusable → hold (offsets stay as the NC
+  // has them) and an alarm, never a guess.
+  const std::string state_dir = pick_dir(*config, ssec.directory, "STATE_DIRECTORY", "/var/lib/nccompd");
+  const std::string state_path = state_dir + "/state.bin";
+  std::error_code ec;
+  fs::create_directories(state_dir, ec);
+  std::string state_problem;
+  std::uint64_t sequence = 0;
+  {
+    const StateFile sf = read_state_file(state_path);
+    if (sf.status == StateFileStatus::kAbsent) {
+      spdlog::info("no state file at {}: starting fresh", state_path);
+    } else if (sf.status == StateFileStatus::kCorrupt) {
+      state_problem = "state file " + state_path + " is corrupt: " + sf.reason;
+    } else {
+      std::size_t skipped = 0;
+      if (runtime->engine->import_state(sf.payload, monotonic_ns(), &skipped)) {
+        sequence = sf.sequence;
+        spdlog::info("state resumed from {} (write #{}, {} bytes, {} unknown entries skipped)",
+                     state_path, sf.sequence, sf.payload.size(), skipped);
+      } else {
+        state_problem = "state file " + state_path + " has a valid checksum but does not parse";
+      }
+    }
+  }
+  if (!state_problem.empty()) {
+    spdlog::error("{}; offsets are HELD (nothing is written to the NC). Restore or remove the file "
+                  "and restart nccompd.", state_problem);
+  }
+
+  if (dsec.lock_memory) {
+    if (mlockall(MCL_CURRENT | MCL_FUTURE) == 0) {
+      spdlog::info("memory locked (mlockall)");
+    } else {
+      spdlog::warn("mlockall failed: {} (loop may page-fault; grant CAP_IPC_LOCK or raise "
+                   "LimitMEMLOCK)", std::strerror(errno));
+    }
+  }
+
+  for (auto& b : buses) {
+    try {
+      b.bus->start();
+      spdlog::info("bus {} started", b.name);
+    } catch (const std::exception& e) {
+      spdlog::error("bus {} failed to start: {}", b.name, e.what());
+      for (auto& o : buses) {
+        o.bus->stop();
+      }
+      return 1;
+    }
+  }
+
+  const std::size_t blob_bytes = std::max<std::size_t>(64 * 1024, 4 * runtime->engine->state_capacity());
+  StatePersister persister(state_path, blob_bytes);
+  persister.start(sequence);
+
+  std::unique_ptr<MeasurementLogWriter> mlog;
+  const auto& msec = cfg::measurement_log_section(*config);
+  if (msec.enabled) {
+    const std::string dir = pick_dir(*config, msec.directory, "LOGS_DIRECTORY", "/var/log/nccompd");
+    mlog = std::make_unique<MeasurementLogWriter>(dir, msec.max_file_bytes, msec.keep_files);
+    try {
+      mlog->start();
+      spdlog::info("measurement log: {}", mlog->current_path());
+    } catch (const std::exception& e) {
+      spdlog::warn("measurement log disabled: {}", e.what());
+      mlog.reset();
+    }
+  }
+
+  core::rt::ConfigSwap<Runtime> swap(std::move(runtime));
+  LoopOptions lo;
+  lo.rate_hz = dsec.rate_hz;
+  lo.overrun_policy = dsec.overrun_policy;
+  lo.max_events_per_cycle = dsec.max_events_per_cycle;
+  lo.sched_fifo_priority = dsec.sched_fifo_priority;
+  lo.cpu_affinity = dsec.cpu_affinity;
+  lo.prefault_stack_kib = dsec.prefault_stack_kib;
+  lo.state_min_interval_s = ssec.min_interval_s;
+  lo.state_buffer_bytes = blob_bytes;
+  std::vector<drivers::Bus*> bus_ptrs;
+  for (auto& b : buses) {
+    bus_ptrs.push_back(b.bus.get());
+  }
+  Loop loop(lo, swap, bus_ptrs, &persister, mlog.get());
+  loop.set_hold(!state_problem.empty());
+  EventLogger logger(loop);
+  logger.start();
+  if (!state_problem.empty()) {
+    logger.raise(core::AlarmEvent{monotonic_ns(), core::Severity::kAlarm,
+                                  core::AlarmCode::kStateCorrupt, -1, 0.0});
+  }
+
+  StatusContext sc;
+  sc.loop = &loop;
+  for (auto& b : buses) {
+    sc.buses.emplace_back(b.name, b.bus.get());
+  }
+  sc.logger = &logger;
+  sc.persister = &persister;
+  sc.measurement_log = mlog.get();
+  sc.register_names = [&names_mu, &names] {
+    std::lock_guard<std::mutex> lock(names_mu);
+    return *names;
+  };
+  sc.state_problem = [state_problem] { return state_problem; };
+  sc.config_path = options.config_path;
+  sc.state_path = state_path;
+  StatusServer status(sc);
+  const auto& stsec = cfg::status_section(*config);
+  const std::string sock = stsec.socket_path.empty()
+                               ? pick_dir(*config, "", "RUNTIME_DIRECTORY", "/run/nccompd") +
+                                     "/status.sock"
+                               : config->resolve(stsec.socket_path);
+  fs::create_directories(fs::path(sock).parent_path(), ec);
+  try {
+    status.start(sock, stsec.prometheus_address, stsec.prometheus_port);
+    spdlog::info("status socket {}{}", sock,
+                 status.prometheus_port() > 0
+                     ? fmt::format(", Prometheus on {}:{}", stsec.prometheus_address,
+                                   status.prometheus_port())
+                     : std::string{});
+  } catch (const std::exception& e) {
+    spdlog::error("status: {}", e.what());
+    logger.stop();
+    persister.stop();
+    for (auto& b : buses) {
+      b.bus->stop();
+    }
+    return 1;
+  }
+
+  const LoopSetupReport rep = loop.start();
+  spdlog::info("loop running at {} Hz, overrun policy {}", dsec.rate_hz,
+               dsec.overrun_policy == cfg::OverrunPolicy::kRestart ? "restart" : "skip_missed");
+  if (rep.sched_requested) {
+    if (rep.sched_errno == 0) {
+      spdlog::info("loop thread: SCHED_FIFO priority {}", dsec.sched_fifo_priority);
+    } else {
+      spdlog::warn("loop thread: SCHED_FIFO priority {} refused: {} (running SCHED_OTHER)",
+                   dsec.sched_fifo_priority, std::strerror(rep.sched_errno));
+    }
+  }
+  if (rep.affinity_requested) {
+    if (rep.affinity_errno == 0) {
+      spdlog::info("loop thread: pinned to CPU(s) {}", fmt::join(dsec.cpu_affinity, ","));
+    } else {
+      spdlog::warn("loop thread: CPU affinity refused: {}", std::strerror(rep.affinity_errno));
+    }
+  }
+  if (rep.prefaulted_kib > 0) {
+    spdlog::info("loop thread: {} KiB of stack pre-faulted", rep.prefaulted_kib);
+  }
+
+  notify("READY=1\nSTATUS=running: loop " + std::to_string(static_cast<int>(dsec.rate_hz)) +
+         " Hz" + (state_problem.empty() ? "" : ", OFFSETS HELD (state corrupt)"));
+  std::uint64_t watchdog_usec = 0;
+  const bool watchdog = sd_watchdog_enabled(0, &watchdog_usec) > 0 && watchdog_usec > 0;
+  if (watchdog) {
+    spdlog::info("systemd watchdog: {} ms; fed while the loop heartbeat advances",
+                 watchdog_usec / 1000);
+  }
+
+  std::uint64_t generation = 1;
+  std::uint64_t last_beat = loop.heartbeat();
+  auto last_feed = std::chrono::steady_clock::now();
+  auto last_status = last_feed;
+  bool stalled_logged = false;
+  for (;;) {
+    pollfd pfd{sfd, POLLIN, 0};
+    const int pr = poll(&pfd, 1, 100);
+    if (pr > 0 && (pfd.revents & POLLIN) != 0) {
+      signalfd_siginfo si{};
+      if (read(sfd, &si, sizeof si) == static_cast<ssize_t>(sizeof si)) {
+        if (si.ssi_signo == SIGTERM || si.ssi_signo == SIGINT) {
+          spdlog::info("signal {}: stopping", si.ssi_signo == SIGTERM ? "SIGTERM" : "SIGINT");
+          break;
+        }
+        if (si.ssi_signo == SIGHUP) {
+          notify("RELOADING=1\nSTATUS=reloading " + options.config_path);
+          spdlog::info("SIGHUP: reloading {}", options.config_path);
+          auto next = cfg::load_file(options.config_path);
+          std::string refused;
+          if (!next.config) {
+            for (const auto& d : next.diagnostics.items()) {
+              spdlog::error("reload: {}", cfg::format(d));
+            }
+            refused = std::to_string(next.diagnostics.items().size()) + " error(s)";
+          } else {
+            try {
+              auto rt = make_runtime(*next.config, buses, options.dry_run, generation + 1);
+              if (rt->engine->state_capacity() > blob_bytes) {
+                throw std::invalid_argument("the new engine's state needs " +
+                                            std::to_string(rt->engine->state_capacity()) +
+                                            " bytes, more than this process reserved; restart");
+              }
+              ++generation;
+              {
+                std::lock_guard<std::mutex> lock(names_mu);
+                names = std::make_shared<const std::vector<std::string>>(
+                    register_names(*next.config));
+              }
+              swap.publish(std::move(rt));
+              spdlog::info("reload: configuration {} accepted (loop settings, buses, state, log "
+                           "and status settings take effect at the next restart)", generation);
+            } catch (const std::exception& e) {
+              refused = e.what();
+            }
+          }
+          if (!refused.empty()) {
+            spdlog::error("reload refused ({}); configuration {} keeps running", refused,
+                          generation);
+          }
+          notify("READY=1\nSTATUS=running: configuration " + std::to_string(generation) +
+                 (refused.empty() ? "" : " (last reload refused)"));
+        }
+      }
+    }
+    swap.reclaim();
+    const auto now = std::chrono::steady_clock::now();
+    if (watchdog && now - last_feed >= std::chrono::microseconds(watchdog_usec / 2)) {
+      const std::uint64_t beat = loop.heartbeat();
+      if (beat != last_beat) {
+        notify("WATCHDOG=1");
+        last_beat = beat;
+        stalled_logged = false;
+      } else if (!stalled_logged) {
+        // No feed: systemd restarts the daemon when WatchdogSec runs out.
+        spdlog::error("loop heartbeat stalled at {}: not feeding the systemd watchdog", beat);
+        stalled_logged = true;
+      }
+      last_feed = now;
+    }
+    if (now - last_status >= std::chrono::seconds(10)) {
+      const LoopStats s = loop.stats();
+      char buf[200];
+      std::snprintf(buf, sizeof buf,
+                    "STATUS=running: %llu cycles, %llu overruns, latency p99 %.0f us%s%s",
+                    static_cast<unsigned long long>(s.cycles),
+                    static_cast<unsigned long long>(s.overruns), loop.latency().quantile_us(0.99),
+                    s.dry_run ? ", dry run" : "", s.hold ? ", OFFSETS HELD" : "");
+      notify(buf);
+      last_status = now;
+    }
+  }
+
+  notify("STOPPING=1\nSTATUS=stopping");
+  loop.stop();
+  // The loop is stopped: its engine can be read from this thread. Persist the final state (not in
+  // hold mode: the corrupt file stays for inspection). The NC keeps its offsets as they are.
+  if (state_problem.empty()) {
+    std::vector<std::byte> buf(swap.current().engine->state_capacity());
+    const std::size_t n = swap.current().engine->export_state(buf);
+    if (n > 0) {
+      persister.write_now(std::span<const std::byte>(buf.data(), n));
+    }
+  }
+  persister.stop();
+  const auto ps = persister.stats();
+  status.stop();
+  logger.stop();
+  if (mlog) {
+    mlog->stop();
+  }
+  for (auto& b : buses) {
+    b.bus->stop();
+  }
+  const LoopStats s = loop.stats();
+  spdlog::info("stopped after {} cycles ({} overruns); state written {} times, last #{}{}",
+               s.cycles, s.overruns, ps.writes, ps.sequence,
+               ps.failures > 0 ? fmt::format(", {} failures: {}", ps.failures, ps.last_error)
+                               : std::string{});
+  close(sfd);
+  return 0;
+}
+
+}  // namespace nccomp::daemon

@@ -1,0 +1,171 @@
+#include "daemon/logging.hpp"
+
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/sinks/systemd_sink.h>
+#include <spdlog/spdlog.h>
+#include <sys/stat.h>
+#include <systemd/sd-daemon.h>
+
+#include <chrono>
+#include <cstdlib>
+#include <cstdio>
+
+namespace nccomp::daemon {
+
+bool stderr_is_journal() {
+  const char* js = std::getenv("JOURNAL_STREAM");
+  if (js == nullptr || sd_booted() <= 0) {
+    return false;
+  }
+  unsigned long long dev = 0;
+  unsigned long long ino = 0;
+  if (std::sscanf(js, "%llu:%llu", &dev, &ino) != 2) {
+    return false;
+  }
+  struct stat st {};
+  if (fstat(2, &st) != 0) {
+    return false;
+  }
+  return static_cast<unsigned long long>(st.st_dev) == dev &&
+         static_cast<unsigned long long>(st.st_ino) == ino;
+}
+
+std::string setup_logging(const config::LogSection& section) {
+  const bool journal =
+      section.target == "journal" || (section.target == "auto" && stderr_is_journal());
+  std::shared_ptr<spdlog::logger> logger;
+  if (journal) {
+    auto sink = std::make_shared<spdlog::sinks::systemd_sink_mt>("nccompd");
+    logger = std::make_shared<spdlog::logger>("nccompd", sink);
+    logger->set_pattern("%v");  // journald stamps time, priority and unit itself
+  } else {
+    logger = std::make_shared<spdlog::logger>(
+        "nccompd", std::make_shared<spdlog::sinks::stderr_color_sink_mt>());
+    logger->set_pattern("%Y-%m-%d %H:%M:%S.%e %^%l%$ %v");
+  }
+  logger->set_level(spdlog::level::from_str(section.level == "warning" ? "warn" : section.level));
+  logger->flush_on(spdlog::level::info);
+  spdlog::set_default_logger(logger);
+  return journal ? "journal" : "terminal";
+}
+
+std::string alarm_name(core::AlarmCode code) {
+  using core::AlarmCode;
+  switch (code) {
+    case AlarmCode::kNone: return "none";
+    case AlarmCode::kOffsetNonFinite: return "offset_non_finite";
+    case AlarmCode::kOffsetBeyondAbsoluteLimit: return "offset_beyond_absolute_limit";
+    case AlarmCode::kOffsetSlewLimited: return "offset_slew_limited";
+    case AlarmCode::kCreepUnfinished: return "creep_unfinished";
+    case AlarmCode::kToolLifeReached: return "tool_life_reached";
+    case AlarmCode::kToolExcessivelyWorn: return "tool_excessively_worn";
+    case AlarmCode::kToolBrokenOrMismeasured: return "tool_broken_or_mismeasured";
+    case AlarmCode::kMeasurementDue: return "measurement_due";
+    case AlarmCode::kProbeImplausible: return "probe_implausible";
+    case AlarmCode::kProbeOutlier: return "probe_outlier";
+    case AlarmCode::kProbeInvalidInput: return "probe_invalid_input";
+    case AlarmCode::kRecalibrationImplausible: return "recalibration_implausible";
+    case AlarmCode::kTouchScatter: return "touch_scatter";
+    case AlarmCode::kStateCorrupt: return "state_corrupt";
+    case AlarmCode::kEventInvalid: return "event_invalid";
+    case AlarmCode::kRegisterUnknown: return "register_unknown";
+    case AlarmCode::kOffsetWriteDropped: return "offset_write_dropped";
+    default: break;
+  }
+  // Codes added by other modules after this list was written still print usefully.
+  return "code_" + std::to_string(static_cast<unsigned>(code));
+}
+
+const char* severity_name(core::Severity s) {
+  switch (s) {
+    case core::Severity::kInfo: return "info";
+    case core::Severity::kWarning: return "warning";
+    case core::Severity::kAlarm: return "alarm";
+  }
+  return "unknown";
+}
+
+EventLogger::~EventLogger() { stop(); }
+
+void EventLogger::start() {
+  stop_.store(false);
+  thread_ = std::thread([this] { run(); });
+}
+
+void EventLogger::stop() {
+  stop_.store(true, std::memory_order_release);
+  if (thread_.joinable()) {
+    thread_.join();
+  }
+}
+
+std::vector<core::AlarmEvent> EventLogger::last_alarms() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return {last_.begin(), last_.end()};
+}
+
+void EventLogger::raise(const core::AlarmEvent& a) { log_alarm(a); }
+
+void EventLogger::log_alarm(const core::AlarmEvent& a) {
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    last_.push_back(a);
+    while (last_.size() > kKeepAlarms) {
+      last_.pop_front();
+    }
+  }
+  const auto level = a.severity == core::Severity::kAlarm     ? spdlog::level::err
+                     : a.severity == core::Severity::kWarning ? spdlog::level::warn
+                                                              : spdlog::level::info;
+  spdlog::log(level, "{} {} (code {}) subject {} value {}", severity_name(a.severity),
+              alarm_name(a.code), static_cast<unsigned>(a.code), a.subject, a.value);
+}
+
+void EventLogger::drain() {
+  core::AlarmEvent a;
+  while (loop_.alarms().try_pop(a)) {
+    log_alarm(a);
+  }
+  LoopNote n;
+  while (loop_.notes().try_pop(n)) {
+    switch (n.code) {
+      case NoteCode::kOverrun:
+        ++overruns_unlogged_;
+        if (n.time_ns - overrun_log_ns_ >= 1'000'000'000) {
+          spdlog::warn("loop overrun: woke {:.0f} us late, {} deadline(s) skipped ({} overrun(s) "
+                       "since the last message)",
+                       n.b, n.a, overruns_unlogged_);
+          overrun_log_ns_ = n.time_ns;
+          overruns_unlogged_ = 0;
+        }
+        break;
+      case NoteCode::kConfigSwapped:
+        spdlog::info("configuration {} is running (swapped in at a cycle boundary)", n.a);
+        break;
+      case NoteCode::kStateCarryFailed:
+        spdlog::error("configuration {} could not take over the running state; it starts fresh",
+                      n.a);
+        break;
+      case NoteCode::kStateExportFailed:
+        spdlog::error("state export failed: the engine needs {} bytes", n.a);
+        break;
+      case NoteCode::kWriteDropped:
+        spdlog::warn("offset write to register {} ({} um) dropped: bus TX ring full or no bus",
+                     n.a, n.b);
+        break;
+    }
+  }
+}
+
+void EventLogger::run() {
+  for (;;) {
+    const bool stopping = stop_.load(std::memory_order_acquire);
+    drain();
+    if (stopping) {
+      return;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+}
+
+}  // namespace nccomp::daemon

@@ -1,0 +1,293 @@
+#include "daemon/loop.hpp"
+
+#include <pthread.h>
+#include <sched.h>
+#include <sys/resource.h>
+#include <time.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+
+namespace nccomp::daemon {
+
+namespace {
+
+core::TimeNs now_ns() noexcept {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<core::TimeNs>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+timespec to_timespec(core::TimeNs t) noexcept {
+  timespec ts{};
+  ts.tv_sec = static_cast<time_t>(t / 1'000'000'000);
+  ts.tv_nsec = static_cast<long>(t % 1'000'000'000);
+  return ts;
+}
+
+// Touches `kib` KiB of this thread's stack so its pages exist before the first cycle (with
+// mlockall(MCL_FUTURE) they then stay resident). Recursion keeps each frame's array live.
+std::size_t prefault_stack(std::size_t kib) noexcept {
+  constexpr std::size_t kChunk = 16 * 1024;
+  std::size_t done = 0;
+  struct Local {
+    static std::size_t touch(std::size_t left) noexcept {
+      volatile unsigned char buf[kChunk];
+      for (std::size_t i = 0; i < kChunk; i += 4096) {
+        buf[i] = 0;
+      }
+      buf[kChunk - 1] = 0;
+      // Keep the compiler from dropping the stores (the pages must really be touched).
+      __asm__ __volatile__("" : : "r"(&buf[0]) : "memory");
+      return left <= kChunk ? kChunk : kChunk + touch(left - kChunk);
+    }
+  };
+  if (kib > 0) {
+    done = Local::touch(kib * 1024) / 1024;
+  }
+  return done;
+}
+
+void thread_faults(std::int64_t& minflt, std::int64_t& majflt) noexcept {
+  rusage ru{};
+  if (getrusage(RUSAGE_THREAD, &ru) == 0) {
+    minflt = ru.ru_minflt;
+    majflt = ru.ru_majflt;
+  }
+}
+
+}  // namespace
+
+Loop::Loop(LoopOptions options, core::rt::ConfigSwap<Runtime>& swap,
+           std::vector<drivers::Bus*> buses, StatePersister* persister,
+           MeasurementLogWriter* measurement_log)
+    : options_(std::move(options)),
+      swap_(swap),
+      buses_(std::move(buses)),
+      persister_(persister),
+      measurement_log_(measurement_log),
+      period_ns_(static_cast<core::TimeNs>(std::llround(1e9 / options_.rate_hz))),
+      carry_(options_.state_buffer_bytes),
+      alarms_(1024),
+      notes_(1024) {
+  events_.reserve(options_.max_events_per_cycle);
+}
+
+Loop::~Loop() { stop(); }
+
+LoopSetupReport Loop::start() {
+  stop_.store(false);
+  setup_done_.store(false);
+  thread_ = std::thread([this] { run(); });
+  while (!setup_done_.load(std::memory_order_acquire)) {
+    std::this_thread::yield();
+  }
+  return report_;
+}
+
+void Loop::stop() {
+  stop_.store(true, std::memory_order_release);
+  if (thread_.joinable()) {
+    thread_.join();
+  }
+}
+
+void Loop::note(core::TimeNs t, NoteCode code, std::int64_t a, double b) noexcept {
+  if (!notes_.try_push(LoopNote{t, code, a, b})) {
+    ++local_.notes_dropped;
+  }
+}
+
+void Loop::run() {
+  // Set-up on the thread itself (before the first deadline): results go to the report, which
+  // the starting thread logs. Failure is not fatal: the loop runs with what it got.
+  if (options_.sched_fifo_priority > 0) {
+    report_.sched_requested = true;
+    sched_param sp{};
+    sp.sched_priority = options_.sched_fifo_priority;
+    report_.sched_errno = pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp);
+  }
+  if (!options_.cpu_affinity.empty()) {
+    report_.affinity_requested = true;
+    cpu_set_t set;
+    CPU_ZERO(&set);
+    for (int c : options_.cpu_affinity) {
+      if (c >= 0 && c < CPU_SETSIZE) {
+        CPU_SET(static_cast<std::size_t>(c), &set);
+      }
+    }
+    report_.affinity_errno = pthread_setaffinity_np(pthread_self(), sizeof(set), &set);
+  }
+  report_.prefaulted_kib = prefault_stack(options_.prefault_stack_kib);
+  local_.period_ns = period_ns_;
+  local_.config_generation = swap_.current().generation;
+  setup_done_.store(true, std::memory_order_release);
+
+  core::TimeNs deadline = now_ns() + period_ns_;
+  local_.started_ns = deadline;
+  while (!stop_.load(std::memory_order_acquire)) {
+    const timespec ts = to_timespec(deadline);
+    while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
+    }
+    const core::TimeNs wake = now_ns();
+    const core::TimeNs latency = wake - deadline;
+    latency_.record(latency);
+    local_.last_latency_ns = latency;
+    local_.last_wake_ns = wake;
+    cycle(wake);
+    const core::TimeNs done = now_ns();
+    local_.max_step_ns = std::max(local_.max_step_ns, done - wake);
+    const Deadline next = advance_deadline(deadline, done, period_ns_, options_.overrun_policy);
+    if (next.missed > 0) {
+      ++local_.overruns;
+      local_.missed_deadlines += next.missed;
+      note(done, NoteCode::kOverrun, static_cast<std::int64_t>(next.missed),
+           static_cast<double>(done - deadline) / 1000.0);
+    }
+    deadline = next.next_ns;
+
+    // Baselines after warm-up; then every 1000 cycles (getrusage is a cheap syscall, not I/O).
+    if (local_.cycles == options_.warmup_cycles) {
+      thread_faults(minflt_base_, majflt_base_);
+      local_.minor_faults_after_warmup = 0;
+      local_.major_faults_after_warmup = 0;
+      if (options_.thread_allocations != nullptr) {
+        alloc_base_ = options_.thread_allocations();
+        local_.allocations_after_warmup = 0;
+      }
+    } else if (local_.cycles > options_.warmup_cycles && local_.cycles % 1000 == 0) {
+      std::int64_t mn = 0;
+      std::int64_t mj = 0;
+      thread_faults(mn, mj);
+      local_.minor_faults_after_warmup = mn - minflt_base_;
+      local_.major_faults_after_warmup = mj - majflt_base_;
+    }
+    if (options_.thread_allocations != nullptr && local_.cycles > options_.warmup_cycles) {
+      local_.allocations_after_warmup =
+          static_cast<std::int64_t>(options_.thread_allocations() - alloc_base_);
+    }
+    stats_.store(local_);
+    heartbeat_.fetch_add(1, std::memory_order_release);
+  }
+  // Final fault count for whoever reads the statistics after stop().
+  if (local_.cycles > options_.warmup_cycles) {
+    std::int64_t mn = 0;
+    std::int64_t mj = 0;
+    thread_faults(mn, mj);
+    local_.minor_faults_after_warmup = mn - minflt_base_;
+    local_.major_faults_after_warmup = mj - majflt_base_;
+    stats_.store(local_);
+  }
+}
+
+void Loop::cycle(core::TimeNs wake_ns) {
+  ++local_.cycles;
+  // A reload: export the running engine's state first (the retired configuration may be freed
+  // by the reclaiming thread as soon as pickup() returns), then hand it to the new engine.
+  if (swap_.pending()) {
+    const std::size_t n = swap_.current().engine->export_state(carry_);
+    if (n == 0 && swap_.current().engine->state_capacity() > 0) {
+      note(wake_ns, NoteCode::kStateExportFailed,
+           static_cast<std::int64_t>(swap_.current().engine->state_capacity()), 0.0);
+    } else if (swap_.pickup()) {
+      const Runtime& rt = swap_.current();
+      if (!rt.engine->import_state(std::span<const std::byte>(carry_.data(), n), wake_ns)) {
+        note(wake_ns, NoteCode::kStateCarryFailed, static_cast<std::int64_t>(rt.generation), 0.0);
+      }
+      ++local_.reloads;
+      local_.config_generation = rt.generation;
+      persisted_generation_ = ~std::uint64_t{0};  // persist under the new configuration soon
+      note(wake_ns, NoteCode::kConfigSwapped, static_cast<std::int64_t>(rt.generation), 0.0);
+    }
+  }
+  const Runtime& rt = swap_.current();
+  core::engine::Engine& engine = *rt.engine;
+  const bool hold = hold_.load(std::memory_order_relaxed);
+  engine.set_hold(hold);
+  local_.hold = hold;
+  local_.dry_run = rt.dry_run;
+
+  events_.clear();
+  for (drivers::Bus* bus : buses_) {
+    core::Event e;
+    while (events_.size() < options_.max_events_per_cycle && bus->rx().try_pop(e)) {
+      events_.push_back(e);  // capacity reserved: no allocation
+    }
+  }
+  local_.events_in += events_.size();
+
+  engine.step(wake_ns, std::span<const core::Event>(events_.data(), events_.size()), out_);
+
+  bool dropped = false;
+  for (const core::OffsetWrite& w : out_.writes) {
+    if (rt.dry_run) {
+      ++local_.writes_dry_run;
+      continue;
+    }
+    const int b = w.register_index < rt.register_bus.size() ? rt.register_bus[w.register_index] : -1;
+    if (b >= 0 && static_cast<std::size_t>(b) < buses_.size() &&
+        buses_[static_cast<std::size_t>(b)]->tx().try_push(w)) {
+      ++local_.writes_sent;
+    } else {
+      ++local_.writes_dropped;
+      dropped = true;
+      note(wake_ns, NoteCode::kWriteDropped, w.register_index, w.value_um);
+    }
+  }
+  if (dropped) {
+    // The engine believes those values were sent: make it send every known value again.
+    engine.resend_all();
+  }
+  for (const core::AlarmEvent& a : out_.alarms) {
+    ++local_.alarms;
+    if (!alarms_.try_push(a)) {
+      ++local_.alarms_dropped;
+    }
+  }
+  for (const core::MeasurementRecord& r : out_.records) {
+    ++local_.records;
+    if (measurement_log_ == nullptr || !measurement_log_->ring().try_push(r)) {
+      ++local_.records_dropped;
+    }
+  }
+
+  // State: export when it changed, at most every state_min_interval_s, never in hold mode (the
+  // corrupt file stays for the operator to inspect).
+  if (persister_ != nullptr && !hold) {
+    const std::uint64_t gen = engine.state_generation();
+    const double since_s = core::seconds(wake_ns - last_export_ns_);
+    if (gen != persisted_generation_ && since_s >= options_.state_min_interval_s) {
+      if (StatePersister::Blob* blob = persister_->acquire()) {
+        const std::size_t n = engine.export_state(blob->data);
+        if (n > 0) {
+          blob->size = n;
+          persister_->submit(blob);
+          ++local_.state_exports;
+          persisted_generation_ = gen;
+          last_export_ns_ = wake_ns;
+        } else {
+          persister_->release(blob);
+          ++local_.state_export_failed;
+          last_export_ns_ = wake_ns;  // do not retry every cycle
+        }
+      } else {
+        ++local_.state_export_busy;
+      }
+    }
+  }
+
+  local_.engine = engine.counters();
+  if (local_.cycles % 10 == 1) {
+    RegisterSnapshot snap;
+    snap.config_generation = rt.generation;
+    snap.count = static_cast<std::uint32_t>(std::min(engine.register_count(), kMaxSnapshotRegisters));
+    for (std::size_t i = 0; i < snap.count; ++i) {
+      snap.regs[i] = engine.register_state(i);
+    }
+    registers_.store(snap);
+  }
+}
+
+}  // namespace nccomp::daemon

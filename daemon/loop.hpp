@@ -1,0 +1,190 @@
+// The fixed-rate loop thread (architecture.md, "Data flow"; style.md: absolute deadlines, no
+// logging, no allocation, no locks, no I/O per cycle).
+//
+// Each cycle: sleep to the absolute deadline (clock_nanosleep TIMER_ABSTIME) → record the
+// wake-up latency → pick up a new configuration at the cycle boundary (state carried over) →
+// drain events from every bus's RX ring → engine.step() → offset writes to the buses' TX rings
+// (nothing in dry-run) → alarms, notes and measurement records to their SPSC rings → state
+// export into a pre-allocated blob when it changed → heartbeat and statistics (seqlock).
+// Overruns are counted and handled by advance_deadline()'s policy.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "core/common/output.hpp"
+#include "core/engine/engine.hpp"
+#include "core/rt/config_swap.hpp"
+#include "core/rt/seqlock.hpp"
+#include "core/rt/spsc_ring.hpp"
+#include "daemon/config/builtin_sections.hpp"
+#include "daemon/measurement_log.hpp"
+#include "daemon/state_store.hpp"
+#include "daemon/timing.hpp"
+#include "drivers/bus.hpp"
+
+namespace nccomp::daemon {
+
+/// What the loop steps; swapped as a whole on reload (core::rt::ConfigSwap).
+struct Runtime {
+  std::unique_ptr<core::engine::Engine> engine;
+  /// Per register index: which bus (index into the loop's bus list) takes its writes; -1 none.
+  std::vector<int> register_bus;
+  bool dry_run{false};
+  /// Counts configurations: 1 at start, +1 per accepted reload.
+  std::uint64_t generation{1};
+};
+
+/// Things the loop wants logged; the logger thread turns them into messages.
+enum class NoteCode : std::uint8_t {
+  kOverrun = 0,            // a = missed deadlines, b = lateness [µs]
+  kConfigSwapped = 1,      // a = new generation
+  kStateCarryFailed = 2,   // a = new generation: the new config could not take the old state
+  kStateExportFailed = 3,  // a = bytes needed
+  kWriteDropped = 4,       // a = register index (TX ring full or no bus)
+};
+
+struct LoopNote {
+  core::TimeNs time_ns{0};
+  NoteCode code{NoteCode::kOverrun};
+  std::int64_t a{0};
+  double b{0.0};
+};
+
+struct LoopOptions {
+  double rate_hz{1000.0};
+  config::OverrunPolicy overrun_policy{config::OverrunPolicy::kSkipMissed};
+  std::size_t max_events_per_cycle{256};
+  int sched_fifo_priority{0};
+  std::vector<int> cpu_affinity;
+  std::size_t prefault_stack_kib{0};
+  /// Shortest time between two state exports [s].
+  double state_min_interval_s{0.5};
+  /// Bytes of the carry-over buffer used on reload (≥ every engine's state_capacity()).
+  std::size_t state_buffer_bytes{64 * 1024};
+  /// Cycles after start before the page-fault / allocation baselines are taken.
+  std::uint64_t warmup_cycles{100};
+  /// Optional: the calling thread's allocation count (tests and benchmarks link a counting
+  /// operator new and pass nccomp::test::thread_allocations). Must be real-time safe.
+  std::uint64_t (*thread_allocations)() noexcept {nullptr};
+};
+
+/// What the loop thread got from the OS at start (logged by the caller: the loop never logs).
+struct LoopSetupReport {
+  bool sched_requested{false};
+  int sched_errno{0};
+  bool affinity_requested{false};
+  int affinity_errno{0};
+  std::size_t prefaulted_kib{0};
+};
+
+struct LoopStats {
+  core::TimeNs period_ns{0};
+  core::TimeNs started_ns{0};
+  core::TimeNs last_wake_ns{0};
+  std::uint64_t cycles{0};
+  std::uint64_t overruns{0};
+  std::uint64_t missed_deadlines{0};
+  core::TimeNs last_latency_ns{0};
+  core::TimeNs max_step_ns{0};          // longest cycle body (wake → done)
+  std::uint64_t events_in{0};
+  std::uint64_t writes_sent{0};
+  std::uint64_t writes_dry_run{0};
+  std::uint64_t writes_dropped{0};
+  std::uint64_t alarms{0};
+  std::uint64_t alarms_dropped{0};      // alarm ring full
+  std::uint64_t notes_dropped{0};
+  std::uint64_t records{0};
+  std::uint64_t records_dropped{0};     // measurement ring full or no writer
+  std::uint64_t state_exports{0};
+  std::uint64_t state_export_busy{0};   // persister behind: export postponed
+  std::uint64_t state_export_failed{0};
+  std::uint64_t config_generation{0};
+  std::uint64_t reloads{0};
+  std::int64_t minor_faults_after_warmup{-1};  // -1 until the baseline is taken
+  std::int64_t major_faults_after_warmup{-1};
+  std::int64_t allocations_after_warmup{-1};   // -1 = not measured
+  bool hold{false};
+  bool dry_run{false};
+  core::engine::EngineCounters engine{};
+};
+
+inline constexpr std::size_t kMaxSnapshotRegisters = 64;
+
+struct RegisterSnapshot {
+  std::uint64_t config_generation{0};
+  std::uint32_t count{0};
+  std::array<core::engine::RegisterState, kMaxSnapshotRegisters> regs{};
+};
+
+class Loop {
+ public:
+  /// Not real-time: sizes every ring and buffer. buses, persister, measurement_log must outlive
+  /// the loop; persister and measurement_log may be null.
+  Loop(LoopOptions options, core::rt::ConfigSwap<Runtime>& swap, std::vector<drivers::Bus*> buses,
+       StatePersister* persister, MeasurementLogWriter* measurement_log);
+  ~Loop();
+  Loop(const Loop&) = delete;
+  Loop& operator=(const Loop&) = delete;
+
+  /// Starts the thread and waits until it has applied its scheduling setup.
+  LoopSetupReport start();
+  /// Asks the thread to finish its cycle and joins it. Idempotent.
+  void stop();
+  [[nodiscard]] bool running() const noexcept { return thread_.joinable(); }
+
+  /// Hold mode (state corrupt): applied to every engine at the next cycle. Any thread.
+  void set_hold(bool hold) noexcept { hold_.store(hold, std::memory_order_relaxed); }
+
+  /// Advances once per cycle: the watchdog's proof of life. Any thread.
+  [[nodiscard]] std::uint64_t heartbeat() const noexcept {
+    return heartbeat_.load(std::memory_order_acquire);
+  }
+  [[nodiscard]] LoopStats stats() const noexcept { return stats_.load(); }
+  [[nodiscard]] RegisterSnapshot registers() const noexcept { return registers_.load(); }
+  [[nodiscard]] const LatencyHistogram& latency() const noexcept { return latency_; }
+
+  /// Consumers (the logger thread).
+  core::rt::SpscRing<core::AlarmEvent>& alarms() noexcept { return alarms_; }
+  core::rt::SpscRing<LoopNote>& notes() noexcept { return notes_; }
+
+ private:
+  void run();
+  void cycle(core::TimeNs wake_ns);
+  void note(core::TimeNs t, NoteCode code, std::int64_t a, double b) noexcept;
+
+  LoopOptions options_;
+  core::rt::ConfigSwap<Runtime>& swap_;
+  std::vector<drivers::Bus*> buses_;
+  StatePersister* persister_;
+  MeasurementLogWriter* measurement_log_;
+  core::TimeNs period_ns_;
+
+  std::vector<core::Event> events_;
+  core::StepOutput out_{};
+  std::vector<std::byte> carry_;
+  core::rt::SpscRing<core::AlarmEvent> alarms_;
+  core::rt::SpscRing<LoopNote> notes_;
+  LatencyHistogram latency_;
+  core::rt::Seqlock<LoopStats> stats_;
+  core::rt::Seqlock<RegisterSnapshot> registers_;
+  LoopStats local_{};
+  std::uint64_t persisted_generation_{~std::uint64_t{0}};
+  core::TimeNs last_export_ns_{0};
+  std::int64_t minflt_base_{0};
+  std::int64_t majflt_base_{0};
+  std::uint64_t alloc_base_{0};
+
+  std::atomic<bool> stop_{false};
+  std::atomic<bool> hold_{false};
+  std::atomic<bool> setup_done_{false};
+  std::atomic<std::uint64_t> heartbeat_{0};
+  LoopSetupReport report_{};
+  std::thread thread_;
+};
+
+}  // namespace nccomp::daemon

@@ -1,0 +1,16 @@
+// nccompd — the compensation daemon. See docs/daemon.md.
+#include <CLI/CLI.hpp>
+
+#include "daemon/daemon.hpp"
+
+int main(int argc, char** argv) {
+  CLI::App app{"nccompd — real-time compensation daemon for CNC machine tools"};
+  nccomp::daemon::DaemonOptions options;
+  app.add_option("-c,--config", options.config_path, "Configuration file (TOML)")
+      ->capture_default_str();
+  app.add_flag("--dry-run", options.dry_run,
+               "Compute and log everything, write nothing to the NC");
+  app.set_version_flag("--version", "nccompd 0.1.0");
+  CLI11_PARSE(app, argc, argv);
+  return nccomp::daemon::run_daemon(options);
+}

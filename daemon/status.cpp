@@ -1,0 +1,509 @@
+#include "daemon/status.hpp"
+
+#include <arpa/inet.h>
+#include <fcntl.h>
+#include <netinet/in.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <sstream>
+#include <system_error>
+
+namespace nccomp::daemon {
+
+namespace {
+
+[[noreturn]] void sys_fail(const std::string& what) {
+  throw std::system_error(errno, std::generic_category(), what);
+}
+
+std::string json_escape(const std::string& s) {
+  std::string o;
+  for (char ch : s) {
+    const auto c = static_cast<unsigned char>(ch);
+    if (c == '"' || c == '\\') {
+      o += '\\';
+      o += ch;
+    } else if (c < 0x20) {
+      char buf[8];
+      std::snprintf(buf, sizeof buf, "\\u%04x", c);
+      o += buf;
+    } else {
+      o += ch;
+    }
+  }
+  return o;
+}
+
+std::string num(double v) {
+  if (!std::isfinite(v)) {
+    return "null";
+  }
+  char buf[40];
+  std::snprintf(buf, sizeof buf, "%.6g", v);
+  return buf;
+}
+
+struct View {
+  LoopStats s;
+  RegisterSnapshot r;
+  std::vector<std::string> names;
+  double rate_hz{0.0};
+  double measured_rate_hz{0.0};
+  double p50{0}, p99{0}, p999{0}, max_us{0};
+  std::string problem;
+};
+
+View gather(const StatusContext& c) {
+  View v;
+  v.s = c.loop->stats();
+  v.r = c.loop->registers();
+  v.names = c.register_names ? c.register_names() : std::vector<std::string>{};
+  v.rate_hz = v.s.period_ns > 0 ? 1e9 / static_cast<double>(v.s.period_ns) : 0.0;
+  const double span_s = core::seconds(v.s.last_wake_ns - v.s.started_ns);
+  v.measured_rate_hz = span_s > 0 ? static_cast<double>(v.s.cycles - 1) / span_s : 0.0;
+  const auto& h = c.loop->latency();
+  v.p50 = h.quantile_us(0.5);
+  v.p99 = h.quantile_us(0.99);
+  v.p999 = h.quantile_us(0.999);
+  v.max_us = static_cast<double>(h.max_ns()) / 1000.0;
+  v.problem = c.state_problem ? c.state_problem() : std::string{};
+  return v;
+}
+
+std::string reg_name(const View& v, std::size_t i) {
+  return i < v.names.size() ? v.names[i] : "register_" + std::to_string(i);
+}
+
+}  // namespace
+
+const char* link_state_name(drivers::LinkState s) {
+  switch (s) {
+    case drivers::LinkState::kStopped: return "stopped";
+    case drivers::LinkState::kConnecting: return "connecting";
+    case drivers::LinkState::kUp: return "up";
+    case drivers::LinkState::kDegraded: return "degraded";
+    case drivers::LinkState::kDown: return "down";
+  }
+  return "unknown";
+}
+
+std::string render_json(const StatusContext& c) {
+  const View v = gather(c);
+  const auto& s = v.s;
+  std::ostringstream o;
+  o << "{\"daemon\":{\"pid\":" << ::getpid() << ",\"config\":\"" << json_escape(c.config_path)
+    << "\",\"config_generation\":" << s.config_generation << ",\"reloads\":" << s.reloads
+    << ",\"dry_run\":" << (s.dry_run ? "true" : "false")
+    << ",\"hold\":" << (s.hold ? "true" : "false") << ",\"state_problem\":"
+    << (v.problem.empty() ? "null" : "\"" + json_escape(v.problem) + "\"") << "},";
+  o << "\"loop\":{\"rate_hz\":" << num(v.rate_hz) << ",\"measured_rate_hz\":"
+    << num(v.measured_rate_hz) << ",\"cycles\":" << s.cycles << ",\"overruns\":" << s.overruns
+    << ",\"missed_deadlines\":" << s.missed_deadlines << ",\"latency_us\":{\"p50\":" << num(v.p50)
+    << ",\"p99\":" << num(v.p99) << ",\"p99_9\":" << num(v.p999) << ",\"max\":" << num(v.max_us)
+    << ",\"last\":" << num(static_cast<double>(s.last_latency_ns) / 1000.0)
+    << "},\"max_cycle_us\":" << num(static_cast<double>(s.max_step_ns) / 1000.0)
+    << ",\"minor_faults_after_warmup\":" << s.minor_faults_after_warmup
+    << ",\"major_faults_after_warmup\":" << s.major_faults_after_warmup
+    << ",\"events_in\":" << s.events_in << ",\"writes_sent\":" << s.writes_sent
+    << ",\"writes_dry_run\":" << s.writes_dry_run << ",\"writes_dropped\":" << s.writes_dropped
+    << ",\"alarms\":" << s.alarms << ",\"alarms_dropped\":" << s.alarms_dropped
+    << ",\"records\":" << s.records << ",\"records_dropped\":" << s.records_dropped
+    << ",\"state_exports\":" << s.state_exports << ",\"state_export_busy\":"
+    << s.state_export_busy << ",\"state_export_failed\":" << s.state_export_failed << "},";
+  const auto& e = s.engine;
+  o << "\"engine\":{\"events_accepted\":" << e.events_accepted << ",\"events_invalid\":"
+    << e.events_invalid << ",\"events_overflow\":" << e.events_overflow
+    << ",\"writes_forwarded\":" << e.writes_forwarded << ",\"writes_rejected\":"
+    << e.writes_rejected << ",\"writes_unknown_register\":" << e.writes_unknown_register
+    << ",\"writes_held\":" << e.writes_held << ",\"output_overflows\":" << e.output_overflows
+    << "},";
+  o << "\"registers\":[";
+  for (std::size_t i = 0; i < v.r.count; ++i) {
+    const auto& r = v.r.regs[i];
+    o << (i ? "," : "") << "{\"index\":" << i << ",\"name\":\"" << json_escape(reg_name(v, i))
+      << "\",\"output_um\":" << num(r.output_um) << ",\"target_um\":"
+      << (r.has_target ? num(r.target_um) : "null")
+      << ",\"slewing\":" << (r.slewing ? "true" : "false") << "}";
+  }
+  o << "],\"buses\":[";
+  for (std::size_t i = 0; i < c.buses.size(); ++i) {
+    const auto st = c.buses[i].second->status();
+    const auto& k = st.counters;
+    o << (i ? "," : "") << "{\"name\":\"" << json_escape(c.buses[i].first) << "\",\"state\":\""
+      << link_state_name(st.state) << "\",\"alarm\":" << (st.alarm ? "true" : "false")
+      << ",\"frames_rx\":" << k.frames_rx << ",\"frames_tx\":" << k.frames_tx
+      << ",\"events_decoded\":" << k.events_decoded << ",\"events_dropped\":" << k.events_dropped
+      << ",\"malformed\":" << k.malformed << ",\"offsets_written\":" << k.offsets_written
+      << ",\"offsets_retried\":" << k.offsets_retried << ",\"offsets_failed\":"
+      << k.offsets_failed << ",\"reconnects\":" << k.reconnects << ",\"faults\":" << k.faults
+      << "}";
+  }
+  o << "],\"state\":{\"path\":\"" << json_escape(c.state_path) << "\"";
+  if (c.persister != nullptr) {
+    const auto ps = c.persister->stats();
+    o << ",\"writes\":" << ps.writes << ",\"failures\":" << ps.failures
+      << ",\"sequence\":" << ps.sequence << ",\"last_error\":"
+      << (ps.last_error.empty() ? "null" : "\"" + json_escape(ps.last_error) + "\"");
+  }
+  o << "},\"measurement_log\":";
+  if (c.measurement_log != nullptr) {
+    o << "{\"path\":\"" << json_escape(c.measurement_log->current_path())
+      << "\",\"rows\":" << c.measurement_log->rows() << ",\"rotations\":"
+      << c.measurement_log->rotations() << ",\"errors\":" << c.measurement_log->errors() << "}";
+  } else {
+    o << "null";
+  }
+  o << ",\"alarms\":[";
+  if (c.logger != nullptr) {
+    const auto alarms = c.logger->last_alarms();
+    for (std::size_t i = 0; i < alarms.size(); ++i) {
+      const auto& a = alarms[i];
+      o << (i ? "," : "") << "{\"time_s\":" << num(core::seconds(a.time_ns)) << ",\"severity\":\""
+        << severity_name(a.severity) << "\",\"code\":" << static_cast<unsigned>(a.code)
+        << ",\"name\":\"" << alarm_name(a.code) << "\",\"subject\":" << a.subject
+        << ",\"value\":" << num(a.value) << "}";
+    }
+  }
+  o << "]}\n";
+  return o.str();
+}
+
+std::string render_text(const StatusContext& c) {
+  const View v = gather(c);
+  const auto& s = v.s;
+  std::ostringstream o;
+  char buf[256];
+  o << "nccompd pid " << ::getpid() << ", config " << c.config_path << " (generation "
+    << s.config_generation << ", " << s.reloads << " reload(s))" << (s.dry_run ? ", DRY RUN" : "")
+    << "\n";
+  if (s.hold) {
+    o << "HOLD: offsets are held, nothing is written to the NC"
+      << (v.problem.empty() ? "" : ": " + v.problem) << "\n";
+  }
+  std::snprintf(buf, sizeof buf,
+                "loop:    %.1f Hz configured, %.1f Hz measured, %llu cycles, %llu overruns "
+                "(%llu deadlines missed)\n",
+                v.rate_hz, v.measured_rate_hz, static_cast<unsigned long long>(s.cycles),
+                static_cast<unsigned long long>(s.overruns),
+                static_cast<unsigned long long>(s.missed_deadlines));
+  o << buf;
+  std::snprintf(buf, sizeof buf,
+                "latency: p50 %.0f us, p99 %.0f us, p99.9 %.0f us, max %.0f us; longest cycle "
+                "%.0f us\n",
+                v.p50, v.p99, v.p999, v.max_us, static_cast<double>(s.max_step_ns) / 1000.0);
+  o << buf;
+  o << "faults:  " << s.minor_faults_after_warmup << " minor, " << s.major_faults_after_warmup
+    << " major page faults on the loop thread after warm-up\n";
+  o << "engine:  " << s.engine.events_accepted << " events (" << s.engine.events_invalid
+    << " invalid), " << s.engine.writes_forwarded << " writes (" << s.engine.writes_rejected
+    << " rejected, " << s.engine.writes_held << " held), " << s.writes_dropped
+    << " dropped at the bus\n";
+  o << "registers:\n";
+  for (std::size_t i = 0; i < v.r.count; ++i) {
+    const auto& r = v.r.regs[i];
+    std::snprintf(buf, sizeof buf, "  %2zu %-24s %10.3f um", i, reg_name(v, i).c_str(),
+                  r.output_um);
+    o << buf;
+    if (r.has_target) {
+      std::snprintf(buf, sizeof buf, "  target %10.3f um%s", r.target_um,
+                    r.slewing ? "  (slewing)" : "");
+      o << buf;
+    }
+    o << "\n";
+  }
+  o << "buses:\n";
+  for (const auto& [name, bus] : c.buses) {
+    const auto st = bus->status();
+    const auto& k = st.counters;
+    std::snprintf(buf, sizeof buf,
+                  "  %-10s %-10s%s rx %llu, tx %llu, events %llu (dropped %llu, malformed "
+                  "%llu), offsets %llu (failed %llu), reconnects %llu, faults %llu\n",
+                  name.c_str(), link_state_name(st.state), st.alarm ? " ALARM" : "",
+                  static_cast<unsigned long long>(k.frames_rx),
+                  static_cast<unsigned long long>(k.frames_tx),
+                  static_cast<unsigned long long>(k.events_decoded),
+                  static_cast<unsigned long long>(k.events_dropped),
+                  static_cast<unsigned long long>(k.malformed),
+                  static_cast<unsigned long long>(k.offsets_written),
+                  static_cast<unsigned long long>(k.offsets_failed),
+                  static_cast<unsigned long long>(k.reconnects),
+                  static_cast<unsigned long long>(k.faults));
+    o << buf;
+  }
+  o << "state:   " << c.state_path;
+  if (c.persister != nullptr) {
+    const auto ps = c.persister->stats();
+    o << ", " << ps.writes << " writes, " << ps.failures << " failures"
+      << (ps.last_error.empty() ? "" : " (last: " + ps.last_error + ")");
+  }
+  o << "\n";
+  if (c.measurement_log != nullptr) {
+    o << "measurements: " << c.measurement_log->current_path() << ", "
+      << c.measurement_log->rows() << " rows, " << s.records_dropped << " dropped\n";
+  }
+  o << "alarms (last " << EventLogger::kKeepAlarms << "):\n";
+  if (c.logger != nullptr) {
+    const auto alarms = c.logger->last_alarms();
+    if (alarms.empty()) {
+      o << "  none\n";
+    }
+    for (const auto& a : alarms) {
+      std::snprintf(buf, sizeof buf, "  %12.3f s  %-7s %-30s subject %d value %g\n",
+                    core::seconds(a.time_ns), severity_name(a.severity),
+                    alarm_name(a.code).c_str(), a.subject, a.value);
+      o << buf;
+    }
+  }
+  return o.str();
+}
+
+std::string render_prometheus(const StatusContext& c) {
+  const View v = gather(c);
+  const auto& s = v.s;
+  std::ostringstream o;
+  auto counter = [&](const char* name, const char* help, std::uint64_t value) {
+    o << "# HELP nccompd_" << name << " " << help << "\n# TYPE nccompd_" << name
+      << " counter\nnccompd_" << name << " " << value << "\n";
+  };
+  counter("loop_cycles_total", "Loop cycles run.", s.cycles);
+  counter("loop_overruns_total", "Cycles that finished after the next deadline.", s.overruns);
+  counter("loop_missed_deadlines_total", "Deadlines skipped after overruns.", s.missed_deadlines);
+  counter("offset_writes_total", "Offset writes queued to a bus.", s.writes_sent);
+  counter("offset_writes_dropped_total", "Offset writes the bus could not take.", s.writes_dropped);
+  counter("engine_events_invalid_total", "Events rejected by validation.", s.engine.events_invalid);
+  counter("engine_writes_rejected_total", "Targets refused by a limiter.", s.engine.writes_rejected);
+  counter("alarms_total", "Alarms and warnings raised.", s.alarms);
+  o << "# HELP nccompd_loop_rate_hz Measured loop rate.\n# TYPE nccompd_loop_rate_hz gauge\n"
+    << "nccompd_loop_rate_hz " << num(v.measured_rate_hz) << "\n";
+  o << "# HELP nccompd_loop_latency_us Wake-up latency quantiles since start.\n"
+       "# TYPE nccompd_loop_latency_us gauge\n"
+    << "nccompd_loop_latency_us{quantile=\"0.5\"} " << num(v.p50) << "\n"
+    << "nccompd_loop_latency_us{quantile=\"0.99\"} " << num(v.p99) << "\n"
+    << "nccompd_loop_latency_us{quantile=\"0.999\"} " << num(v.p999) << "\n"
+    << "nccompd_loop_latency_us{quantile=\"1\"} " << num(v.max_us) << "\n";
+  o << "# HELP nccompd_hold 1 while offsets are held (state corrupt).\n# TYPE nccompd_hold gauge\n"
+    << "nccompd_hold " << (s.hold ? 1 : 0) << "\n";
+  o << "# HELP nccompd_register_output_um Offset last sent per register.\n"
+       "# TYPE nccompd_register_output_um gauge\n";
+  for (std::size_t i = 0; i < v.r.count; ++i) {
+    o << "nccompd_register_output_um{register=\"" << reg_name(v, i) << "\"} "
+      << num(v.r.regs[i].output_um) << "\n";
+  }
+  o << "# HELP nccompd_bus_up 1 while the bus link is up.\n# TYPE nccompd_bus_up gauge\n";
+  for (const auto& [name, bus] : c.buses) {
+    o << "nccompd_bus_up{bus=\"" << name << "\"} "
+      << (bus->status().state == drivers::LinkState::kUp ? 1 : 0) << "\n";
+  }
+  o << "# HELP nccompd_bus_faults_total Bus faults.\n# TYPE nccompd_bus_faults_total counter\n";
+  for (const auto& [name, bus] : c.buses) {
+    o << "nccompd_bus_faults_total{bus=\"" << name << "\"} " << bus->status().counters.faults
+      << "\n";
+  }
+  return o.str();
+}
+
+StatusServer::~StatusServer() { stop(); }
+
+void StatusServer::start(const std::string& socket_path, const std::string& prometheus_address,
+                         int prometheus_port) {
+  socket_path_ = socket_path;
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  if (socket_path.size() >= sizeof(addr.sun_path)) {
+    throw std::system_error(ENAMETOOLONG, std::generic_category(),
+                            "status socket path '" + socket_path + "'");
+  }
+  std::memcpy(addr.sun_path, socket_path.c_str(), socket_path.size() + 1);
+  ::unlink(socket_path.c_str());  // a stale socket of a crashed daemon
+  unix_fd_ = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  if (unix_fd_ < 0) {
+    sys_fail("status socket");
+  }
+  if (::bind(unix_fd_, reinterpret_cast<const sockaddr*>(&addr), sizeof(addr)) != 0) {
+    sys_fail("cannot bind status socket '" + socket_path + "'");
+  }
+  if (::chmod(socket_path.c_str(), 0660) != 0) {
+    sys_fail("cannot chmod status socket '" + socket_path + "'");
+  }
+  if (::listen(unix_fd_, 8) != 0) {
+    sys_fail("cannot listen on '" + socket_path + "'");
+  }
+  if (prometheus_port > 0 || prometheus_port == -1) {
+    const bool v6 = prometheus_address == "::1";
+    tcp_fd_ = ::socket(v6 ? AF_INET6 : AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    if (tcp_fd_ < 0) {
+      sys_fail("prometheus socket");
+    }
+    const int one = 1;
+    ::setsockopt(tcp_fd_, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
+    const auto port = static_cast<std::uint16_t>(prometheus_port < 0 ? 0 : prometheus_port);
+    int rc = 0;
+    if (v6) {
+      sockaddr_in6 a{};
+      a.sin6_family = AF_INET6;
+      a.sin6_port = htons(port);
+      a.sin6_addr = in6addr_loopback;
+      rc = ::bind(tcp_fd_, reinterpret_cast<const sockaddr*>(&a), sizeof a);
+    } else {
+      sockaddr_in a{};
+      a.sin_family = AF_INET;
+      a.sin_port = htons(port);
+      a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+      rc = ::bind(tcp_fd_, reinterpret_cast<const sockaddr*>(&a), sizeof a);
+    }
+    if (rc != 0 || ::listen(tcp_fd_, 8) != 0) {
+      sys_fail("cannot listen on " + prometheus_address + ":" + std::to_string(port));
+    }
+    sockaddr_storage got{};
+    socklen_t len = sizeof got;
+    ::getsockname(tcp_fd_, reinterpret_cast<sockaddr*>(&got), &len);
+    bound_port_ = ntohs(v6 ? reinterpret_cast<sockaddr_in6*>(&got)->sin6_port
+                           : reinterpret_cast<sockaddr_in*>(&got)->sin_port);
+  }
+  stop_.store(false);
+  thread_ = std::thread([this] { run(); });
+}
+
+void StatusServer::stop() {
+  stop_.store(true);
+  if (thread_.joinable()) {
+    thread_.join();
+  }
+  if (unix_fd_ >= 0) {
+    ::close(unix_fd_);
+    ::unlink(socket_path_.c_str());
+    unix_fd_ = -1;
+  }
+  if (tcp_fd_ >= 0) {
+    ::close(tcp_fd_);
+    tcp_fd_ = -1;
+  }
+}
+
+namespace {
+std::string read_request(int fd, std::size_t limit, const char* terminator) {
+  timeval tv{1, 0};
+  ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+  std::string req;
+  char buf[512];
+  while (req.size() < limit && req.find(terminator) == std::string::npos) {
+    const ssize_t n = ::recv(fd, buf, sizeof buf, 0);
+    if (n <= 0) {
+      break;
+    }
+    req.append(buf, static_cast<std::size_t>(n));
+  }
+  return req;
+}
+void send_all(int fd, const std::string& s) {
+  std::size_t off = 0;
+  while (off < s.size()) {
+    const ssize_t n = ::send(fd, s.data() + off, s.size() - off, MSG_NOSIGNAL);
+    if (n <= 0) {
+      return;
+    }
+    off += static_cast<std::size_t>(n);
+  }
+}
+}  // namespace
+
+void StatusServer::serve_unix(int fd) {
+  std::string req = read_request(fd, 64, "\n");
+  while (!req.empty() && (req.back() == '\n' || req.back() == '\r' || req.back() == ' ')) {
+    req.pop_back();
+  }
+  std::string answer;
+  if (req == "json") {
+    answer = render_json(context_);
+  } else if (req == "metrics") {
+    answer = render_prometheus(context_);
+  } else if (req == "text" || req.empty()) {
+    answer = render_text(context_);
+  } else {
+    answer = "error: unknown request '" + req.substr(0, 32) + "' (text, json, metrics)\n";
+  }
+  send_all(fd, answer);
+}
+
+void StatusServer::serve_http(int fd) {
+  const std::string req = read_request(fd, 4096, "\r\n\r\n");
+  std::string body;
+  std::string status = "200 OK";
+  if (req.rfind("GET /metrics", 0) == 0 || req.rfind("GET / ", 0) == 0) {
+    body = render_prometheus(context_);
+  } else {
+    status = "404 Not Found";
+    body = "GET /metrics\n";
+  }
+  send_all(fd, "HTTP/1.0 " + status +
+                   "\r\nContent-Type: text/plain; version=0.0.4\r\nContent-Length: " +
+                   std::to_string(body.size()) + "\r\nConnection: close\r\n\r\n" + body);
+}
+
+void StatusServer::run() {
+  while (!stop_.load()) {
+    pollfd fds[2] = {{unix_fd_, POLLIN, 0}, {tcp_fd_, POLLIN, 0}};
+    const int n = ::poll(fds, tcp_fd_ >= 0 ? 2 : 1, 200);
+    if (n <= 0) {
+      continue;
+    }
+    for (int i = 0; i < 2; ++i) {
+      if (fds[i].fd < 0 || (fds[i].revents & POLLIN) == 0) {
+        continue;
+      }
+      const int c = ::accept4(fds[i].fd, nullptr, nullptr, SOCK_CLOEXEC);
+      if (c < 0) {
+        continue;
+      }
+      if (i == 0) {
+        serve_unix(c);
+      } else {
+        serve_http(c);
+      }
+      ::close(c);
+    }
+  }
+}
+
+std::string query_status(const std::string& socket_path, const std::string& request) {
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  if (socket_path.size() >= sizeof(addr.sun_path)) {
+    throw std::system_error(ENAMETOOLONG, std::generic_category(), "socket path");
+  }
+  std::memcpy(addr.sun_path, socket_path.c_str(), socket_path.size() + 1);
+  const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  if (fd < 0) {
+    sys_fail("socket");
+  }
+  if (::connect(fd, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) != 0) {
+    const int e = errno;
+    ::close(fd);
+    throw std::system_error(e, std::generic_category(),
+                            "cannot connect to '" + socket_path + "' (is nccompd running?)");
+  }
+  send_all(fd, request + "\n");
+  ::shutdown(fd, SHUT_WR);
+  timeval tv{5, 0};
+  ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+  std::string out;
+  char buf[4096];
+  for (;;) {
+    const ssize_t n = ::recv(fd, buf, sizeof buf, 0);
+    if (n <= 0) {
+      break;
+    }
+    out.append(buf, static_cast<std::size_t>(n));
+  }
+  ::close(fd);
+  return out;
+}
+
+}  // namespace nccomp::daemon

@@ -1,0 +1,66 @@
+// `nccomp status [--json|--metrics] [--socket PATH | --config FILE]`: asks a running nccompd for
+// its status over the Unix socket (loop statistics, registers, buses, state, last alarms).
+#include <cstdlib>
+#include <iostream>
+#include <memory>
+#include <string>
+
+#include "daemon/config/builtin_sections.hpp"
+#include "daemon/config/config.hpp"
+#include "daemon/status.hpp"
+#include "tools/nccomp/command.hpp"
+
+namespace {
+
+struct Options {
+  std::string socket;
+  std::string config;
+  bool json{false};
+  bool metrics{false};
+};
+
+std::string socket_path(const Options& o) {
+  if (!o.socket.empty()) {
+    return o.socket;
+  }
+  if (!o.config.empty()) {
+    namespace cfg = nccomp::daemon::config;
+    auto r = cfg::load_file(o.config);
+    if (!r.config) {
+      throw nccomp::tools::CommandError(nccomp::tools::kExitInvalidInput,
+                                        r.diagnostics.to_string() + "cannot read " + o.config);
+    }
+    const auto& s = cfg::status_section(*r.config);
+    if (!s.socket_path.empty()) {
+      return r.config->resolve(s.socket_path);
+    }
+  }
+  return "/run/nccompd/status.sock";
+}
+
+void setup(CLI::App& app) {
+  auto* sub = app.add_subcommand("status", "Show the status of the running nccompd");
+  auto o = std::make_shared<Options>();
+  sub->add_option("-s,--socket", o->socket, "Status socket (default /run/nccompd/status.sock)");
+  sub->add_option("-c,--config", o->config, "Take the socket path from this configuration");
+  sub->add_flag("--json", o->json, "Machine-readable JSON");
+  sub->add_flag("--metrics", o->metrics, "Prometheus text format");
+  sub->callback([o] {
+    std::string answer;
+    const std::string path = socket_path(*o);
+    try {
+      answer = nccomp::daemon::query_status(path, o->json ? "json" : o->metrics ? "metrics" : "text");
+    } catch (const std::exception& e) {
+      throw nccomp::tools::CommandError(nccomp::tools::kExitFailure, e.what());
+    }
+    if (answer.empty()) {
+      throw nccomp::tools::CommandError(nccomp::tools::kExitFailure,
+                                        "no answer from " + path);
+    }
+    std::cout << answer;
+  });
+}
+
+}  // namespace
+
+NCCOMP_REGISTER_COMMAND(status, setup);
