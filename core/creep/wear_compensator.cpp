@@ -15,22 +15,6 @@ namespace {
 constexpr double kRadToDeg = 180.0 / std::numbers::pi;
 constexpr double kTiny = 1e-9;
 
-void check_finite(double v, const std::string& field) {
-  if (!std::isfinite(v)) {
-    throw std::invalid_argument("creep state: " + field + " is not finite");
-  }
-}
-
-// Built by appending: GCC 12 reports a false -Wrestrict on `"literal" + std::string` at -O3.
-std::string indexed(const char* name, std::size_t i, const char* suffix = "") {
-  std::string s(name);
-  s += '[';
-  s += std::to_string(i);
-  s += ']';
-  s += suffix;
-  return s;
-}
-
 }  // namespace
 
 void WearCompensator::configure(const CreepConfig& config) {
@@ -58,63 +42,51 @@ void WearCompensator::configure(const CreepConfig& config) {
   select_tool_tables();
 }
 
-void WearCompensator::import_state(const CreepState& st) {
-  if (st.version != CreepState::kVersion) {
-    throw std::invalid_argument("creep state: version " + std::to_string(st.version) +
-                                " is not " + std::to_string(CreepState::kVersion));
-  }
-  if (st.edge_points != points_) {
-    throw std::invalid_argument("creep state: edge_points " + std::to_string(st.edge_points) +
-                                " does not match creep.edge.edge_points " +
-                                std::to_string(points_));
-  }
-  check_finite(st.cut_path_mm, "cut_path_mm");
-  check_finite(st.cut_time_s, "cut_time_s");
-  check_finite(st.creep_path_mm, "creep_path_mm");
-  check_finite(st.creep_time_s, "creep_time_s");
-  check_finite(st.last_measurement_cut_path_mm, "last_measurement_cut_path_mm");
-  check_finite(st.last_measurement_cut_time_s, "last_measurement_cut_time_s");
-  check_finite(st.last_measurement_creep_path_mm, "last_measurement_creep_path_mm");
-  if (st.history_count < 1 || st.history_count > kMaxRateWindow) {
-    throw std::invalid_argument("creep state: history_count " +
-                                std::to_string(st.history_count) + " out of 1.." +
-                                std::to_string(kMaxRateWindow));
-  }
+StateProblem WearCompensator::check_state(const CreepState& st) const noexcept {
+  const auto bad = [](double v) { return !std::isfinite(v); };
+  if (st.version != CreepState::kVersion) return {"version", -1};
+  if (st.edge_points != points_) return {"edge_points (differs from creep.edge.edge_points)", -1};
+  if (bad(st.cut_path_mm)) return {"cut_path_mm", -1};
+  if (bad(st.cut_time_s)) return {"cut_time_s", -1};
+  if (bad(st.creep_path_mm)) return {"creep_path_mm", -1};
+  if (bad(st.creep_time_s)) return {"creep_time_s", -1};
+  if (bad(st.last_measurement_cut_path_mm)) return {"last_measurement_cut_path_mm", -1};
+  if (bad(st.last_measurement_cut_time_s)) return {"last_measurement_cut_time_s", -1};
+  if (bad(st.last_measurement_creep_path_mm)) return {"last_measurement_creep_path_mm", -1};
+  if (st.history_count < 1 || st.history_count > kMaxRateWindow) return {"history_count", -1};
   for (std::size_t i = 0; i < points_; ++i) {
-    check_finite(st.committed_um[i], indexed("committed_um", i));
-    check_finite(st.measured_um[i], indexed("measured_um", i));
-    check_finite(st.rate_um_per_mm[i], indexed("rate_um_per_mm", i));
+    const int ii = static_cast<int>(i);
+    if (bad(st.committed_um[i])) return {"committed_um", ii};
+    if (bad(st.measured_um[i])) return {"measured_um", ii};
+    if (bad(st.rate_um_per_mm[i])) return {"rate_um_per_mm", ii};
     for (std::size_t h = 0; h < st.history_count; ++h) {
-      check_finite(st.history[h].wear_um[i], indexed(indexed("history", h, ".wear_um").c_str(), i));
+      if (bad(st.history[h].wear_um[i]) || bad(st.history[h].cut_path_mm)) {
+        return {"history", static_cast<int>(h)};
+      }
     }
   }
   for (std::size_t k = 0; k < kMaxCreeps; ++k) {
     const auto& c = st.creeps[k];
     if (!c.active) continue;
-    if (k >= config_.max_creeps) {
-      throw std::invalid_argument("creep state: " + indexed("creeps", k) +
-                                  " is active beyond creep.max_creeps");
-    }
-    const std::string pre = indexed("creeps", k);
-    check_finite(c.start, pre + ".start");
+    const int kk = static_cast<int>(k);
+    if (k >= config_.max_creeps) return {"creeps (active beyond creep.max_creeps)", kk};
+    if (bad(c.start)) return {"creeps", kk};
     for (std::size_t i = 0; i < points_; ++i) {
-      check_finite(c.delta_um[i], indexed((pre + ".delta_um").c_str(), i));
-      if (!std::isfinite(c.span[i]) || c.span[i] < 0.0) {
-        throw std::invalid_argument("creep state: " + indexed((pre + ".span").c_str(), i) +
-                                    " must be finite and >= 0");
-      }
+      if (bad(c.delta_um[i]) || bad(c.span[i]) || c.span[i] < 0.0) return {"creeps", kk};
     }
   }
-  if (st.entry.active) {
-    check_finite(st.entry.start_path_mm, "entry.start_path_mm");
-    check_finite(st.entry.offset_um, "entry.offset_um");
-    if (!(st.entry.length_mm > 0.0) || !std::isfinite(st.entry.length_mm)) {
-      throw std::invalid_argument("creep state: entry.length_mm must be > 0");
-    }
+  if (st.entry.active && (bad(st.entry.start_path_mm) || bad(st.entry.offset_um) ||
+                          bad(st.entry.length_mm) || !(st.entry.length_mm > 0.0))) {
+    return {"entry", -1};
   }
   for (std::size_t ch = 0; ch < kChannelCount; ++ch) {
-    check_finite(st.channel_output_um[ch], indexed("channel_output_um", ch));
+    if (bad(st.channel_output_um[ch])) return {"channel_output_um", static_cast<int>(ch)};
   }
+  return {};
+}
+
+bool WearCompensator::restore_state(const CreepState& st) noexcept {
+  if (check_state(st).field != nullptr) return false;
   s_ = st;
   // Kinematics re-anchor on the first sample; every value is re-sent on the next step.
   have_sample_ = false;
@@ -124,6 +96,23 @@ void WearCompensator::import_state(const CreepState& st) {
   written_once_.fill(false);
   flag_written_once_.fill(false);
   select_tool_tables();
+  return true;
+}
+
+void WearCompensator::import_state(const CreepState& st) {
+  const StateProblem p = check_state(st);
+  if (p.field != nullptr) {
+    std::string what("creep state: ");
+    what += p.field;
+    if (p.index >= 0) {
+      what += '[';
+      what += std::to_string(p.index);
+      what += ']';
+    }
+    what += " is invalid (not finite, out of range, or from another config)";
+    throw std::invalid_argument(what);
+  }
+  restore_state(st);
 }
 
 void WearCompensator::clear_alarm() noexcept {

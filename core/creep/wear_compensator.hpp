@@ -28,6 +28,13 @@
 
 namespace nccomp::core::creep {
 
+/// What is wrong with a state (field == nullptr: nothing). Plain data, so that checking a state
+/// is real-time safe.
+struct StateProblem {
+  const char* field{nullptr};
+  int index{-1};
+};
+
 struct CreepCounters {
   std::uint64_t measurements_accepted{0};
   std::uint64_t measurements_refused{0};
@@ -56,6 +63,13 @@ class WearCompensator {
   /// Resumes from a persisted state: validates it against the config (std::invalid_argument
   /// naming the field) and re-sends every offset on the next step. Not real-time.
   void import_state(const CreepState& state);
+
+  /// The same without exceptions: false (and the state unchanged) if check_state() finds a
+  /// problem. Real-time safe.
+  bool restore_state(const CreepState& state) noexcept;
+
+  /// Checks a state against the current config. Real-time safe.
+  [[nodiscard]] StateProblem check_state(const CreepState& state) const noexcept;
 
   /// Operator acknowledgement: clears the halt, the alarm and the warning flags. Creeps resume
   /// where they were frozen. Real-time safe.

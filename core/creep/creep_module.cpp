@@ -1,0 +1,113 @@
+#include "core/creep/creep_module.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <stdexcept>
+#include <string>
+#include <utility>
+
+namespace nccomp::core::creep {
+
+namespace {
+
+constexpr std::array<const char*, kChannelCount> kChannelKeys{
+    "creep.output.x_register", "creep.output.y_register", "creep.output.z_register",
+    "creep.output.radius_register", "creep.output.length_register"};
+
+engine::RegisterKind kind_for(std::size_t channel) {
+  switch (static_cast<Channel>(channel)) {
+    case Channel::kX:
+    case Channel::kY:
+    case Channel::kZ:
+      return engine::RegisterKind::kAxisOffset;
+    case Channel::kRadius:
+      return engine::RegisterKind::kToolRadiusWear;
+    case Channel::kLength:
+      break;
+  }
+  return engine::RegisterKind::kToolLengthWear;
+}
+
+void check_index(std::int32_t index, const char* key, const engine::RegisterTable& t) {
+  if (index >= 0 && static_cast<std::size_t>(index) >= t.size()) {
+    throw std::invalid_argument(std::string(key) + ": register index " + std::to_string(index) +
+                                " does not exist (" + std::to_string(t.size()) +
+                                " [[registers]] configured)");
+  }
+}
+
+}  // namespace
+
+CreepModule::CreepModule(CreepModuleConfig config) : config_(std::move(config)) {
+  if (config_.name.empty()) throw std::invalid_argument("creep: module name must not be empty");
+  validate(config_.creep);
+}
+
+void CreepModule::attach(const engine::RegisterTable& registers) {
+  CreepConfig c = config_.creep;
+  bool first = true;
+  for (std::size_t ch = 0; ch < kChannelCount; ++ch) {
+    const std::int32_t r = c.output.channel_register[ch];
+    check_index(r, kChannelKeys[ch], registers);
+    if (r < 0) continue;
+    const auto& spec = registers[static_cast<std::size_t>(r)];
+    if (spec.kind != kind_for(ch)) {
+      throw std::invalid_argument(std::string(kChannelKeys[ch]) + ": register '" + spec.name +
+                                  "' is of kind " + std::string(engine::to_string(spec.kind)) +
+                                  ", expected " +
+                                  std::string(engine::to_string(kind_for(ch))));
+    }
+    if (first) {
+      c.limiter = spec.limits;
+      first = false;
+    } else {
+      c.limiter.max_abs_um = std::min(c.limiter.max_abs_um, spec.limits.max_abs_um);
+      c.limiter.max_step_um = std::min(c.limiter.max_step_um, spec.limits.max_step_um);
+      c.limiter.max_rate_um_per_s =
+          std::min(c.limiter.max_rate_um_per_s, spec.limits.max_rate_um_per_s);
+    }
+  }
+  check_index(c.output.warning_register, "creep.output.warning_register", registers);
+  check_index(c.output.alarm_register, "creep.output.alarm_register", registers);
+  check_index(c.output.measurement_due_register, "creep.output.measurement_due_register",
+              registers);
+  check_index(c.output.tool_change_register, "creep.output.tool_change_register", registers);
+  check_index(c.output.restart_path_register, "creep.output.restart_path_register", registers);
+  comp_.configure(c);
+  ++generation_;
+}
+
+void CreepModule::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out) noexcept {
+  comp_.step(now_ns, events, out);
+  const auto& k = comp_.counters();
+  const std::uint64_t n = k.measurements_accepted + k.measurements_refused + k.events_invalid;
+  const auto& s = comp_.state();
+  const bool moving = comp_.creeps_in_progress() > 0 || s.entry.active || s.rate_known;
+  if (n != last_events_ || s.tool != last_tool_ || s.halted != last_halted_ ||
+      (moving && std::fabs(s.cut_path_mm - last_path_mm_) >= 1.0)) {
+    ++generation_;
+    last_events_ = n;
+    last_tool_ = s.tool;
+    last_halted_ = s.halted;
+    last_path_mm_ = s.cut_path_mm;
+  }
+}
+
+std::size_t CreepModule::save_state(std::span<std::byte> buf) const noexcept {
+  if (buf.size() < sizeof(CreepState)) return 0;
+  const CreepState st = comp_.export_state();
+  std::memcpy(buf.data(), &st, sizeof(CreepState));
+  return sizeof(CreepState);
+}
+
+bool CreepModule::load_state(std::span<const std::byte> bytes) noexcept {
+  if (bytes.size() != sizeof(CreepState)) return false;
+  CreepState st;
+  std::memcpy(&st, bytes.data(), sizeof(CreepState));
+  if (!comp_.restore_state(st)) return false;
+  ++generation_;
+  return true;
+}
+
+}  // namespace nccomp::core::creep

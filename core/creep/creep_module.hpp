@@ -1,0 +1,64 @@
+// The creeping wear correction as an engine module (core/engine/engine.hpp): the daemon builds
+// one from the `[creep]` config section, the engine steps it with the validated events, limits
+// its absolute targets per register and persists its state with the rest of the engine's.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include "core/creep/config.hpp"
+#include "core/creep/wear_compensator.hpp"
+#include "core/engine/engine.hpp"
+
+namespace nccomp::core::creep {
+
+struct CreepModuleConfig {
+  /// Module name (state key); unique among modules.
+  std::string name{"creep"};
+  /// Register indices in creep.output are positions in the engine's [[registers]] list.
+  CreepConfig creep{};
+};
+
+class CreepModule final : public engine::Module {
+ public:
+  /// Not real-time. Validates the creep config (std::invalid_argument naming the key).
+  explicit CreepModule(CreepModuleConfig config);
+
+  [[nodiscard]] std::string_view name() const noexcept override { return config_.name; }
+
+  /// Not real-time. Checks every register index against the table and its kind (x/y/z →
+  /// axis_offset, radius → tool_radius_wear, length → tool_length_wear); takes the most
+  /// restrictive limits of the offset registers it drives as its own limiter (so a measurement
+  /// the engine would reject is refused before it changes any state); configures the core.
+  void attach(const engine::RegisterTable& registers) override;
+
+  /// Real-time safe.
+  void step(TimeNs now_ns, std::span<const Event> events, StepOutput& out) noexcept override;
+
+  [[nodiscard]] std::size_t state_capacity() const noexcept override { return sizeof(CreepState); }
+  /// Real-time safe: the plain-data CreepState, byte for byte.
+  std::size_t save_state(std::span<std::byte> buf) const noexcept override;
+  /// Real-time safe: false if the bytes are not a CreepState valid for this config.
+  bool load_state(std::span<const std::byte> bytes) noexcept override;
+  /// Advances on every discrete change (measurement, tool change, halt) and every 1 mm of cut
+  /// path while creeps, entries or predictions are in progress.
+  [[nodiscard]] std::uint64_t state_generation() const noexcept override { return generation_; }
+
+  /// Operator acknowledgement (status socket / command). Real-time safe.
+  void clear_alarm() noexcept {
+    comp_.clear_alarm();
+    ++generation_;
+  }
+  [[nodiscard]] const WearCompensator& compensator() const noexcept { return comp_; }
+
+ private:
+  CreepModuleConfig config_;
+  WearCompensator comp_;
+  std::uint64_t generation_{0};
+  std::uint64_t last_events_{0};
+  std::int32_t last_tool_{0};
+  bool last_halted_{false};
+  double last_path_mm_{0.0};
+};
+
+}  // namespace nccomp::core::creep
