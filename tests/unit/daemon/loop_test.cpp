@@ -1,0 +1,214 @@
+// GIVEN the loop thread wired to a loopback bus, WHEN it runs at 1 kHz, THEN events reach the
+// engine, writes reach the bus, records reach the measurement log, a reload carries the state
+// over at a cycle boundary, and nothing allocates on the loop thread after warm-up.
+#include "daemon/loop.hpp"
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <filesystem>
+#include <limits>
+#include <thread>
+
+#include "core/engine/ramp_module.hpp"
+#include "daemon/loopback_bus.hpp"
+#include "tests/support/alloc_counter.hpp"
+
+namespace nccomp::daemon {
+namespace {
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+
+// Turns each tool measurement into a measurement record (what S0 will do for real).
+class RecordModule final : public core::engine::Module {
+ public:
+  std::string_view name() const noexcept override { return "records"; }
+  void attach(const core::engine::RegisterTable& /*registers*/) override {}
+  void step(core::TimeNs now_ns, std::span<const core::Event> events,
+            core::StepOutput& out) noexcept override {
+    for (const auto& e : events) {
+      if (const auto* m = std::get_if<core::ToolMeasurement>(&e)) {
+        core::MeasurementRecord r;
+        r.time_ns = now_ns;
+        r.tool = m->tool;
+        r.measured_um = m->wear_um[0];
+        out.records.push(r);
+      }
+    }
+  }
+};
+
+std::unique_ptr<Runtime> make_runtime(double target_um, double rate_um_per_s, bool dry_run,
+                                      std::uint64_t generation) {
+  auto rt = std::make_unique<Runtime>();
+  rt->engine = std::make_unique<core::engine::Engine>();
+  std::vector<std::unique_ptr<core::engine::Module>> m;
+  m.push_back(std::make_unique<core::engine::RampModule>(
+      core::engine::RampConfig{"ramp", "T1", 0.0, target_um, rate_um_per_s}));
+  m.push_back(std::make_unique<RecordModule>());
+  rt->engine->configure({{"T1", core::engine::RegisterKind::kToolLengthWear, {200.0, 5.0, 500.0}}},
+                        std::move(m));
+  rt->register_bus = {0};
+  rt->dry_run = dry_run;
+  rt->generation = generation;
+  return rt;
+}
+
+struct Rig {
+  explicit Rig(bool dry_run = false)
+      : dir(fs::temp_directory_path() / ("nccomp_loop_" + std::to_string(::getpid()) + "_" +
+                                         std::to_string(counter++))),
+        bus(256, 256),
+        swap(make_runtime(100.0, 100.0, dry_run, 1)) {
+    fs::create_directories(dir);
+    persister = std::make_unique<StatePersister>((dir / "state.bin").string(), 4096);
+    mlog = std::make_unique<MeasurementLogWriter>(dir.string(), 1 << 20, 2, 256);
+    LoopOptions o;
+    o.rate_hz = 1000.0;
+    o.state_min_interval_s = 0.02;
+    o.state_buffer_bytes = 4096;
+    o.warmup_cycles = 20;
+    o.thread_allocations = [] () noexcept { return nccomp::test::thread_allocations(); };
+    loop = std::make_unique<Loop>(o, swap, std::vector<drivers::Bus*>{&bus}, persister.get(),
+                                  mlog.get());
+    bus.start();
+    persister->start(0);
+    mlog->start();
+  }
+  ~Rig() {
+    loop->stop();
+    persister->stop();
+    mlog->stop();
+    bus.stop();
+    fs::remove_all(dir);
+  }
+  // Waits (bounded) until pred holds; the loop runs on its own thread.
+  template <typename P>
+  bool wait_for(P pred, std::chrono::milliseconds limit = 5000ms) {
+    const auto end = std::chrono::steady_clock::now() + limit;
+    while (!pred()) {
+      if (std::chrono::steady_clock::now() > end) {
+        return false;
+      }
+      std::this_thread::sleep_for(2ms);
+    }
+    return true;
+  }
+  static inline int counter = 0;
+  fs::path dir;
+  LoopbackBus bus;
+  core::rt::ConfigSwap<Runtime> swap;
+  std::unique_ptr<StatePersister> persister;
+  std::unique_ptr<MeasurementLogWriter> mlog;
+  std::unique_ptr<Loop> loop;
+};
+
+TEST(Loop, RampReachesTheBusAndStateIsPersisted) {
+  Rig rig;
+  rig.loop->start();
+  ASSERT_TRUE(rig.wait_for([&] { return rig.loop->stats().cycles >= 300; }));
+  rig.loop->stop();
+  const double out = rig.swap.current().engine->register_state(0).output_um;
+  EXPECT_GT(out, 5.0);  // 100 µm/s for ≥ 0.3 s of cycles (minus start-up)
+  ASSERT_TRUE(rig.wait_for([&] {
+    auto d = rig.bus.delivered(0);
+    return d && !(*d < out) && !(*d > out);  // exactly equal
+  })) << "the bus must receive exactly the engine's last output";
+  const auto s = rig.loop->stats();
+  EXPECT_EQ(s.writes_dropped, 0U);
+  EXPECT_EQ(s.writes_sent, s.engine.writes_forwarded);
+  EXPECT_GT(s.state_exports, 0U);
+  EXPECT_EQ(s.allocations_after_warmup, 0) << "the loop thread allocated after warm-up";
+  rig.persister->stop();
+  const auto f = read_state_file((rig.dir / "state.bin").string());
+  ASSERT_EQ(f.status, StateFileStatus::kOk) << f.reason;
+  auto fresh = make_runtime(100.0, 100.0, false, 1);
+  ASSERT_TRUE(fresh->engine->import_state(f.payload, 0));
+  EXPECT_GT(fresh->engine->register_state(0).output_um, 0.0);
+  EXPECT_LE(fresh->engine->register_state(0).output_um, out);
+}
+
+TEST(Loop, EventsAreValidatedAndRecordsReachTheMeasurementLog) {
+  Rig rig;
+  rig.loop->start();
+  for (int i = 0; i < 5; ++i) {
+    core::ToolMeasurement m;
+    m.tool = 7;
+    m.wear_um[0] = 1.5 * i;
+    ASSERT_TRUE(rig.bus.inject(m));
+  }
+  core::AxisSample bad;
+  bad.position_mm[0] = std::numeric_limits<double>::quiet_NaN();
+  ASSERT_TRUE(rig.bus.inject(bad));
+  ASSERT_TRUE(rig.wait_for([&] { return rig.mlog->rows() >= 5; }));
+  ASSERT_TRUE(rig.wait_for([&] { return rig.loop->stats().engine.events_invalid >= 1; }));
+  rig.loop->stop();
+  const auto s = rig.loop->stats();
+  EXPECT_EQ(s.events_in, 6U);
+  EXPECT_EQ(s.engine.events_accepted, 5U);
+  EXPECT_EQ(s.engine.events_invalid, 1U);
+  EXPECT_EQ(s.records, 5U);
+  EXPECT_EQ(rig.mlog->rows(), 5U);
+  bool invalid_alarm = false;
+  core::AlarmEvent a;
+  while (rig.loop->alarms().try_pop(a)) {
+    invalid_alarm = invalid_alarm || a.code == core::AlarmCode::kEventInvalid;
+  }
+  EXPECT_TRUE(invalid_alarm);
+}
+
+TEST(Loop, ReloadSwapsAtACycleBoundaryAndCarriesTheState) {
+  Rig rig;
+  rig.loop->start();
+  ASSERT_TRUE(rig.wait_for([&] { return rig.loop->registers().regs[0].output_um > 3.0; }));
+  const double before = rig.loop->registers().regs[0].output_um;
+  // New configuration: same register, the ramp heads for -50 µm instead.
+  rig.swap.publish(make_runtime(-50.0, 100.0, false, 2));
+  ASSERT_TRUE(rig.wait_for([&] { return rig.loop->stats().config_generation == 2; }));
+  rig.loop->stop();
+  EXPECT_EQ(rig.swap.reclaim(), 1U);
+  const auto s = rig.loop->stats();
+  EXPECT_EQ(s.reloads, 1U);
+  // The new engine started from the old one's value (no jump back to 0) and moved toward -50.
+  const auto& e = *rig.swap.current().engine;
+  EXPECT_TRUE(e.register_state(0).has_target);
+  EXPECT_LT(e.register_state(0).output_um, before + 1.0);
+  LoopNote n;
+  bool swapped = false;
+  bool carry_failed = false;
+  while (rig.loop->notes().try_pop(n)) {
+    swapped = swapped || (n.code == NoteCode::kConfigSwapped && n.a == 2);
+    carry_failed = carry_failed || n.code == NoteCode::kStateCarryFailed;
+  }
+  EXPECT_TRUE(swapped);
+  EXPECT_FALSE(carry_failed);
+  EXPECT_EQ(s.allocations_after_warmup, 0);
+}
+
+TEST(Loop, DryRunWritesNothingToTheBus) {
+  Rig rig(true);
+  rig.loop->start();
+  ASSERT_TRUE(rig.wait_for([&] { return rig.loop->stats().writes_dry_run >= 50; }));
+  rig.loop->stop();
+  std::this_thread::sleep_for(5ms);
+  EXPECT_FALSE(rig.bus.delivered(0).has_value());
+  EXPECT_EQ(rig.loop->stats().writes_sent, 0U);
+}
+
+TEST(Loop, HoldWritesNothingAndPersistsNothing) {
+  Rig rig;
+  rig.loop->set_hold(true);
+  rig.loop->start();
+  ASSERT_TRUE(rig.wait_for([&] { return rig.loop->stats().cycles >= 100; }));
+  rig.loop->stop();
+  const auto s = rig.loop->stats();
+  EXPECT_TRUE(s.hold);
+  EXPECT_EQ(s.writes_sent, 0U);
+  EXPECT_GT(s.engine.writes_held, 0U);
+  EXPECT_EQ(s.state_exports, 0U);
+  EXPECT_FALSE(rig.bus.delivered(0).has_value());
+}
+
+}  // namespace
+}  // namespace nccomp::daemon

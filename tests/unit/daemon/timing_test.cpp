@@ -1,0 +1,104 @@
+// GIVEN the loop's deadline policy and latency histogram, WHEN fed with a fake clock, THEN the
+// loop recovers from an overrun without a burst and the quantiles are the data's.
+#include "daemon/timing.hpp"
+
+#include <gtest/gtest.h>
+
+#include <vector>
+
+namespace nccomp::daemon {
+namespace {
+
+using config::OverrunPolicy;
+constexpr TimeNs kP = 1'000'000;  // 1 ms
+
+TEST(AdvanceDeadline, OnTimeStaysOnTheGrid) {
+  const auto d = advance_deadline(10 * kP, 10 * kP + 300'000, kP, OverrunPolicy::kSkipMissed);
+  EXPECT_EQ(d.next_ns, 11 * kP);
+  EXPECT_EQ(d.missed, 0U);
+}
+
+TEST(AdvanceDeadline, SkipMissedKeepsThePhase) {
+  // Cycle for deadline 10 ms finished at 13.4 ms: 11, 12, 13 are past; next is 14.
+  const auto d = advance_deadline(10 * kP, 13 * kP + 400'000, kP, OverrunPolicy::kSkipMissed);
+  EXPECT_EQ(d.next_ns, 14 * kP);
+  EXPECT_EQ(d.missed, 3U);
+  // Finishing exactly on the next deadline is an overrun of one.
+  const auto e = advance_deadline(10 * kP, 11 * kP, kP, OverrunPolicy::kSkipMissed);
+  EXPECT_EQ(e.next_ns, 12 * kP);
+  EXPECT_EQ(e.missed, 1U);
+}
+
+TEST(AdvanceDeadline, RestartStartsANewGridAfterTheLateWakeUp) {
+  const auto d = advance_deadline(10 * kP, 13 * kP + 400'000, kP, OverrunPolicy::kRestart);
+  EXPECT_EQ(d.next_ns, 14 * kP + 400'000);
+  EXPECT_EQ(d.missed, 3U);
+}
+
+// ros2_control's recovers_from_overrun, for both policies: one cycle takes 3.5 periods; the loop
+// must not run a burst of back-to-back cycles afterwards, and must be on a regular period again.
+class RecoversFromOverrun : public ::testing::TestWithParam<OverrunPolicy> {};
+
+TEST_P(RecoversFromOverrun, NoBurstAndRegularAfterwards) {
+  TimeNs deadline = kP;
+  std::vector<TimeNs> wakes;
+  std::uint64_t overruns = 0;
+  for (int cycle = 0; cycle < 20; ++cycle) {
+    const TimeNs wake = deadline + 50'000;  // 50 µs latency
+    wakes.push_back(wake);
+    const TimeNs work = cycle == 5 ? 3 * kP + kP / 2 : 200'000;
+    const TimeNs done = wake + work;
+    const auto next = advance_deadline(deadline, done, kP, GetParam());
+    if (next.missed > 0) {
+      ++overruns;
+    }
+    ASSERT_GT(next.next_ns, done) << "a deadline in the past would start a catch-up burst";
+    deadline = next.next_ns;
+  }
+  EXPECT_EQ(overruns, 1U);
+  // After the overrun, the gaps between wake-ups are one period again.
+  for (std::size_t i = 8; i < wakes.size(); ++i) {
+    EXPECT_EQ(wakes[i] - wakes[i - 1], kP) << i;
+  }
+  // The gap across the overrun covers the long cycle: no wake-up was squeezed in.
+  EXPECT_GE(wakes[6] - wakes[5], 3 * kP + kP / 2);
+}
+
+INSTANTIATE_TEST_SUITE_P(Policies, RecoversFromOverrun,
+                         ::testing::Values(OverrunPolicy::kSkipMissed, OverrunPolicy::kRestart));
+
+TEST(LatencyHistogram, BucketsAreContiguousAndContainTheirValues) {
+  std::uint64_t prev_edge = 0;
+  for (std::size_t b = 0; b < LatencyHistogram::kBuckets - 1; ++b) {
+    const std::uint64_t edge = LatencyHistogram::upper_edge_us(b);
+    ASSERT_GT(edge, prev_edge) << b;
+    // The last value below the edge maps to this bucket, the edge to the next.
+    ASSERT_EQ(LatencyHistogram::bucket_of(edge - 1), b) << b;
+    ASSERT_EQ(LatencyHistogram::bucket_of(edge), b + 1) << b;
+    prev_edge = edge;
+  }
+  // Resolution: 1 µs below 1024 µs, ≤ 1/64 relative above.
+  EXPECT_EQ(LatencyHistogram::upper_edge_us(LatencyHistogram::bucket_of(5000)), 5056U);
+}
+
+TEST(LatencyHistogram, QuantilesOfKnownData) {
+  LatencyHistogram h;
+  EXPECT_DOUBLE_EQ(h.quantile_us(0.5), 0.0);
+  // 900 samples at 10 µs, 90 at 100 µs, 9 at 2000 µs, 1 at 50 ms.
+  for (int i = 0; i < 900; ++i) h.record(10'500);
+  for (int i = 0; i < 90; ++i) h.record(100'200);
+  for (int i = 0; i < 9; ++i) h.record(2'000'000);
+  h.record(50'000'000);
+  EXPECT_EQ(h.count(), 1000U);
+  EXPECT_DOUBLE_EQ(h.quantile_us(0.5), 11.0);
+  EXPECT_DOUBLE_EQ(h.quantile_us(0.99), 101.0);
+  EXPECT_DOUBLE_EQ(h.quantile_us(0.999), 2016.0);  // 2000 µs bucket [2000, 2016)
+  EXPECT_EQ(h.max_ns(), 50'000'000);
+  h.record(-5);  // a clock oddity counts as 0, not as a huge unsigned value
+  EXPECT_EQ(h.count(), 1001U);
+  h.reset();
+  EXPECT_EQ(h.count(), 0U);
+}
+
+}  // namespace
+}  // namespace nccomp::daemon
