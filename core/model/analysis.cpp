@@ -1,0 +1,769 @@
+#include "core/model/analysis.hpp"
+
+#include <Eigen/Dense>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <numeric>
+#include <tuple>
+#include <utility>
+
+namespace nccomp::core::model {
+
+namespace {
+
+constexpr std::size_t kMaxParameters = 600;
+constexpr std::size_t kMaxGroupsPerTerm = 512;
+constexpr std::size_t kRefitPerStep = 3;
+
+std::size_t uz(int i) { return static_cast<std::size_t>(i); }
+double dz(std::size_t n) { return static_cast<double>(n); }
+
+// Regularized incomplete beta I_x(a, b) by Lentz's continued fraction (Numerical Recipes §6.4).
+double beta_cf(double a, double b, double x) {
+  constexpr double kTiny = 1e-300;
+  const double qab = a + b;
+  const double qap = a + 1.0;
+  const double qam = a - 1.0;
+  double c = 1.0;
+  double d = 1.0 - qab * x / qap;
+  if (std::fabs(d) < kTiny) d = kTiny;
+  d = 1.0 / d;
+  double h = d;
+  for (int m = 1; m <= 500; ++m) {
+    const double md = m;
+    const double m2 = 2.0 * md;
+    double aa = md * (b - md) * x / ((qam + m2) * (a + m2));
+    d = 1.0 + aa * d;
+    if (std::fabs(d) < kTiny) d = kTiny;
+    c = 1.0 + aa / c;
+    if (std::fabs(c) < kTiny) c = kTiny;
+    d = 1.0 / d;
+    h *= d * c;
+    aa = -(a + md) * (qab + md) * x / ((a + m2) * (qap + m2));
+    d = 1.0 + aa * d;
+    if (std::fabs(d) < kTiny) d = kTiny;
+    c = 1.0 + aa / c;
+    if (std::fabs(c) < kTiny) c = kTiny;
+    d = 1.0 / d;
+    const double del = d * c;
+    h *= del;
+    if (std::fabs(del - 1.0) < 1e-14) break;
+  }
+  return h;
+}
+
+double incomplete_beta(double a, double b, double x) {
+  if (x <= 0.0) return 0.0;
+  if (x >= 1.0) return 1.0;
+  const double ln_front =
+      std::lgamma(a + b) - std::lgamma(a) - std::lgamma(b) + a * std::log(x) + b * std::log1p(-x);
+  const double front = std::exp(ln_front);
+  if (x < (a + 1.0) / (a + b + 2.0)) return front * beta_cf(a, b, x) / a;
+  return 1.0 - front * beta_cf(b, a, 1.0 - x) / b;
+}
+
+struct Entry {
+  std::size_t index;
+  double value;
+};
+
+// Per-term layout of the coefficient vector during a fit.
+struct Layout {
+  std::vector<std::vector<std::array<double, 2>>> groups;
+  std::vector<std::size_t> offset;
+  std::size_t parameters{0};
+};
+
+std::array<double, 2> group_key(const TermSpec& s, const Row& row, bool& ok) {
+  std::array<double, 2> key{0.0, 0.0};
+  ok = true;
+  for (std::size_t k = 0; k < 2; ++k) {
+    if (s.per[k] >= 0) {
+      key[k] = row[uz(s.per[k])];
+      if (!std::isfinite(key[k])) ok = false;
+    }
+  }
+  return key;
+}
+
+Layout discover_groups(const Dataset& data, const std::vector<TermSpec>& specs,
+                       const std::vector<std::uint8_t>& use) {
+  Layout layout;
+  layout.groups.resize(specs.size());
+  std::vector<std::map<std::array<double, 2>, int>> seen(specs.size());
+  EvalState state;
+  state.lag_value.assign(specs.size(), kUnknown);
+  state.lag_input.assign(specs.size(), kUnknown);
+  std::array<double, kMaxBasis> b{};
+  for (std::size_t i = 0; i < data.rows(); ++i) {
+    const Row row = data.row(i);
+    advance_state(specs, row, state);
+    if (use[i] == 0U) continue;
+    for (std::size_t t = 0; t < specs.size(); ++t) {
+      if (term_basis(specs[t], row, state.lag_value[t], b) == 0) continue;
+      bool ok = false;
+      const auto key = group_key(specs[t], row, ok);
+      if (!ok) continue;
+      if (seen[t].emplace(key, 0).second) {
+        if (seen[t].size() > kMaxGroupsPerTerm) {
+          throw AnalysisError("term '" + specs[t].name + "' has more than " +
+                              std::to_string(kMaxGroupsPerTerm) + " groups");
+        }
+      }
+    }
+  }
+  for (std::size_t t = 0; t < specs.size(); ++t) {
+    for (const auto& [key, unused] : seen[t]) layout.groups[t].push_back(key);
+    layout.offset.push_back(layout.parameters);
+    layout.parameters += layout.groups[t].size() * basis_count(specs[t].form, specs[t].degree);
+  }
+  if (layout.parameters > kMaxParameters) {
+    throw AnalysisError("the model has " + std::to_string(layout.parameters) +
+                        " coefficients; at most " + std::to_string(kMaxParameters) +
+                        " are supported (fewer groups per term)");
+  }
+  return layout;
+}
+
+// The non-zero design-matrix entries of one row under `layout` (state already advanced).
+std::size_t row_entries(const std::vector<TermSpec>& specs, const Layout& layout, const Row& row,
+                        const EvalState& state, std::vector<Entry>& out) {
+  out.clear();
+  std::array<double, kMaxBasis> b{};
+  for (std::size_t t = 0; t < specs.size(); ++t) {
+    const std::size_t n = term_basis(specs[t], row, state.lag_value[t], b);
+    if (n == 0) continue;
+    const int g = find_group(specs[t], layout.groups[t], row);
+    if (g < 0) continue;
+    const std::size_t stride = basis_count(specs[t].form, specs[t].degree);
+    for (std::size_t k = 0; k < n; ++k) {
+      out.push_back({layout.offset[t] + uz(g) * stride + k, b[k]});
+    }
+  }
+  return out.size();
+}
+
+// Minimum-norm least squares of the normal equations after equilibration (columns of very
+// different scale: seconds since warm start next to a constant).
+Eigen::VectorXd solve_normal(const Eigen::MatrixXd& a, const Eigen::VectorXd& rhs) {
+  const Eigen::Index p = a.rows();
+  Eigen::VectorXd d(p);
+  for (Eigen::Index i = 0; i < p; ++i) {
+    d(i) = a(i, i) > 0.0 ? 1.0 / std::sqrt(a(i, i)) : 0.0;
+  }
+  const Eigen::MatrixXd as = d.asDiagonal() * a * d.asDiagonal();
+  Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(as);
+  cod.setThreshold(1e-11);
+  const Eigen::VectorXd z = cod.solve(d.asDiagonal() * rhs);
+  return d.asDiagonal() * z;
+}
+
+ErrorStats error_stats(const std::vector<double>& r, const std::vector<std::uint8_t>& mask,
+                       std::uint8_t want) {
+  ErrorStats s;
+  double ss = 0.0;
+  for (std::size_t i = 0; i < r.size(); ++i) {
+    if (mask[i] != want || !std::isfinite(r[i])) continue;
+    ss += r[i] * r[i];
+    s.max_um = std::max(s.max_um, std::fabs(r[i]));
+    ++s.rows;
+  }
+  s.rms_um = s.rows > 0 ? std::sqrt(ss / dz(s.rows)) : 0.0;
+  return s;
+}
+
+std::size_t parameter_count(const Model& m) {
+  std::size_t p = 0;
+  for (const Term& t : m.terms()) p += t.coef.size();
+  return p;
+}
+
+FitStats stats_of(const Dataset& data, const Model& model, const std::vector<std::uint8_t>& heldout,
+                  std::vector<double>* residual_out) {
+  std::vector<double> r = residuals(data, model);
+  FitStats s;
+  s.fitted = error_stats(r, heldout, 0);
+  s.heldout = error_stats(r, heldout, 1);
+  s.rss = s.fitted.rms_um * s.fitted.rms_um * dz(s.fitted.rows);
+  s.parameters = parameter_count(model);
+  if (residual_out != nullptr) *residual_out = std::move(r);
+  return s;
+}
+
+std::vector<double> log_grid(double lo, double hi, std::size_t n) {
+  std::vector<double> g;
+  if (!(lo > 0.0) || !(hi > lo)) return g;
+  for (std::size_t i = 0; i < n; ++i) {
+    g.push_back(lo * std::pow(hi / lo, dz(i) / dz(n - 1)));
+  }
+  return g;
+}
+
+struct Range {
+  double lo{std::numeric_limits<double>::infinity()};
+  double hi{-std::numeric_limits<double>::infinity()};
+  double mean{0.0};
+  double sd{0.0};
+  std::size_t n{0};
+  std::size_t positive{0};
+  [[nodiscard]] double span() const { return n > 0 ? hi - lo : 0.0; }
+};
+
+Range column_range(const Dataset& data, int column, const std::vector<std::uint8_t>& use,
+                   std::uint8_t kind_mask) {
+  Range r;
+  const auto& c = data.column(column);
+  const auto& kind = data.column(static_cast<int>(Column::kKind));
+  if (c.empty()) return r;
+  double sum = 0.0;
+  double ss = 0.0;
+  for (std::size_t i = 0; i < c.size(); ++i) {
+    if (use[i] == 0U || !std::isfinite(c[i])) continue;
+    if (!kind.empty() && std::isfinite(kind[i]) && kind[i] >= 0.0 && kind[i] < 8.0 &&
+        (kind_mask & (1U << static_cast<unsigned>(kind[i]))) == 0U) {
+      continue;
+    }
+    r.lo = std::min(r.lo, c[i]);
+    r.hi = std::max(r.hi, c[i]);
+    sum += c[i];
+    ss += c[i] * c[i];
+    ++r.n;
+    if (c[i] > 0.0) ++r.positive;
+  }
+  if (r.n > 0) {
+    r.mean = sum / dz(r.n);
+    r.sd = std::sqrt(std::max(0.0, ss / dz(r.n) - r.mean * r.mean));
+  }
+  return r;
+}
+
+bool same_term(const TermSpec& a, const TermSpec& b) {
+  return a.name == b.name && a.form == b.form && a.column == b.column;
+}
+
+// Subsample of the fitted rows for the non-linear search: design matrix of the current model,
+// its orthonormal basis, and the current residual projected off it.
+struct SearchSet {
+  std::vector<std::size_t> rows;
+  Eigen::MatrixXd q;  // n_sub × rank, orthonormal
+  Eigen::VectorXd r;  // residual ⟂ q
+  double rss{0.0};
+};
+
+SearchSet make_search_set(const Dataset& data, const Model& model,
+                          const std::vector<std::uint8_t>& use, const std::vector<double>& residual,
+                          std::size_t max_rows) {
+  SearchSet s;
+  std::size_t n_use = 0;
+  for (auto u : use) n_use += u != 0U ? 1U : 0U;
+  const std::size_t stride = std::max<std::size_t>(1, (n_use + max_rows - 1) / max_rows);
+  std::size_t k = 0;
+  for (std::size_t i = 0; i < data.rows(); ++i) {
+    if (use[i] == 0U || !std::isfinite(residual[i])) continue;
+    if (k++ % stride == 0) s.rows.push_back(i);
+  }
+  const auto n = static_cast<Eigen::Index>(s.rows.size());
+  const std::vector<TermSpec>& specs = model.specs();
+  Layout layout;
+  layout.groups.resize(specs.size());
+  for (std::size_t t = 0; t < specs.size(); ++t) {
+    layout.groups[t] = model.terms()[t].groups;
+    layout.offset.push_back(layout.parameters);
+    layout.parameters += layout.groups[t].size() * basis_count(specs[t].form, specs[t].degree);
+  }
+  Eigen::MatrixXd x = Eigen::MatrixXd::Zero(n, static_cast<Eigen::Index>(layout.parameters));
+  EvalState state = model.make_state();
+  std::vector<Entry> entries;
+  std::size_t j = 0;
+  for (std::size_t i = 0; i < data.rows() && j < s.rows.size(); ++i) {
+    const Row row = data.row(i);
+    advance_state(specs, row, state);
+    if (i != s.rows[j]) continue;
+    row_entries(specs, layout, row, state, entries);
+    for (const Entry& e : entries) x(static_cast<Eigen::Index>(j), static_cast<Eigen::Index>(e.index)) = e.value;
+    ++j;
+  }
+  // Orthonormal basis of the design's column space (rank-revealing: groups may be collinear).
+  Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(x);
+  qr.setThreshold(1e-10);
+  const Eigen::Index rank = x.cols() > 0 ? qr.rank() : 0;
+  Eigen::MatrixXd q_full = qr.householderQ() * Eigen::MatrixXd::Identity(n, rank);
+  s.q = std::move(q_full);
+  s.r.resize(n);
+  for (Eigen::Index i = 0; i < n; ++i) s.r(i) = residual[s.rows[static_cast<std::size_t>(i)]];
+  s.r -= s.q * (s.q.transpose() * s.r);
+  s.rss = s.r.squaredNorm();
+  return s;
+}
+
+// Basis of a candidate over the search rows (lag: filter run over every row in order).
+Eigen::MatrixXd candidate_basis(const Dataset& data, const SearchSet& set, const TermSpec& spec) {
+  const auto n = static_cast<Eigen::Index>(set.rows.size());
+  const auto k = static_cast<Eigen::Index>(basis_count(spec.form, spec.degree));
+  Eigen::MatrixXd b = Eigen::MatrixXd::Zero(n, k);
+  std::array<double, kMaxBasis> v{};
+  if (spec.form == Form::kLag) {
+    const std::vector<TermSpec> one{spec};
+    EvalState state;
+    state.lag_value.assign(1, kUnknown);
+    state.lag_input.assign(1, kUnknown);
+    std::size_t j = 0;
+    for (std::size_t i = 0; i < data.rows() && j < set.rows.size(); ++i) {
+      const Row row = data.row(i);
+      advance_state(one, row, state);
+      if (i != set.rows[j]) continue;
+      if (term_basis(spec, row, state.lag_value[0], v) > 0) b(static_cast<Eigen::Index>(j), 0) = v[0];
+      ++j;
+    }
+    return b;
+  }
+  for (Eigen::Index j = 0; j < n; ++j) {
+    const Row row = data.row(set.rows[static_cast<std::size_t>(j)]);
+    const std::size_t m = term_basis(spec, row, kUnknown, v);
+    for (std::size_t c = 0; c < m; ++c) b(j, static_cast<Eigen::Index>(c)) = v[c];
+  }
+  return b;
+}
+
+// RSS reduction on the search rows when the candidate joins the model (exact: the candidate's
+// basis is orthogonalised against the model's columns first).
+double exact_reduction(const SearchSet& set, Eigen::MatrixXd b) {
+  if (set.q.cols() > 0) b -= set.q * (set.q.transpose() * b);
+  const Eigen::MatrixXd btb = b.transpose() * b;
+  const Eigen::VectorXd btr = b.transpose() * set.r;
+  if (btb.trace() <= 1e-12 * dz(set.rows.size())) return 0.0;
+  Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(btb);
+  cod.setThreshold(1e-9);
+  const Eigen::VectorXd c = cod.solve(btr);
+  return std::max(0.0, c.dot(btr));
+}
+
+// Cheap score for wide grids: projection of the residual on the centred candidate basis alone.
+double cheap_reduction(const SearchSet& set, Eigen::MatrixXd b) {
+  b.rowwise() -= b.colwise().mean();
+  const Eigen::MatrixXd btb = b.transpose() * b;
+  const Eigen::VectorXd btr = b.transpose() * set.r;
+  if (btb.trace() <= 1e-12 * dz(set.rows.size())) return 0.0;
+  Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(btb);
+  cod.setThreshold(1e-9);
+  return std::max(0.0, cod.solve(btr).dot(btr));
+}
+
+void set_parameter(TermSpec& s, double v) {
+  if (s.form == Form::kStep) {
+    s.center = v;
+  } else {
+    s.scale = v;
+  }
+}
+
+// Best non-linear parameter of a candidate on the search rows, and its RSS reduction there.
+std::pair<double, double> search_candidate(const Dataset& data, const SearchSet& set,
+                                           Candidate& cand) {
+  if (cand.grid.empty()) return {0.0, exact_reduction(set, candidate_basis(data, set, cand.spec))};
+  const bool wide = cand.grid.size() > 60;
+  std::vector<std::pair<double, std::size_t>> scored;
+  for (std::size_t i = 0; i < cand.grid.size(); ++i) {
+    TermSpec s = cand.spec;
+    set_parameter(s, cand.grid[i]);
+    const Eigen::MatrixXd b = candidate_basis(data, set, s);
+    scored.emplace_back(wide ? cheap_reduction(set, b) : exact_reduction(set, b), i);
+  }
+  std::sort(scored.begin(), scored.end(), std::greater<>());
+  // The best few grid points scored exactly, then a golden-section refinement between the
+  // neighbours of the best (steps are piecewise constant: their grid is already fine).
+  double best_v = cand.grid[scored[0].second];
+  double best_score = -1.0;
+  std::size_t best_i = scored[0].second;
+  for (std::size_t k = 0; k < std::min<std::size_t>(wide ? 5 : 1, scored.size()); ++k) {
+    TermSpec s = cand.spec;
+    const std::size_t i = scored[k].second;
+    set_parameter(s, cand.grid[i]);
+    const double score = wide ? exact_reduction(set, candidate_basis(data, set, s)) : scored[k].first;
+    if (score > best_score) {
+      best_score = score;
+      best_v = cand.grid[i];
+      best_i = i;
+    }
+  }
+  if (cand.spec.form != Form::kStep) {
+    double lo = cand.grid[best_i > 0 ? best_i - 1 : 0];
+    double hi = cand.grid[std::min(best_i + 1, cand.grid.size() - 1)];
+    const double phi = 0.5 * (std::sqrt(5.0) - 1.0);
+    auto eval = [&](double v) {
+      TermSpec s = cand.spec;
+      set_parameter(s, v);
+      return exact_reduction(set, candidate_basis(data, set, s));
+    };
+    double a = hi - phi * (hi - lo);
+    double b = lo + phi * (hi - lo);
+    double fa = eval(a);
+    double fb = eval(b);
+    for (int it = 0; it < 16; ++it) {
+      if (fa > fb) {
+        hi = b;
+        b = a;
+        fb = fa;
+        a = hi - phi * (hi - lo);
+        fa = eval(a);
+      } else {
+        lo = a;
+        a = b;
+        fa = fb;
+        b = lo + phi * (hi - lo);
+        fb = eval(b);
+      }
+    }
+    const double v = fa > fb ? a : b;
+    const double f = std::max(fa, fb);
+    if (f > best_score) {
+      best_score = f;
+      best_v = v;
+    }
+  }
+  return {best_v, best_score};
+}
+
+}  // namespace
+
+Dataset::Dataset() : columns(kStandardColumns) {}
+
+Row Dataset::row(std::size_t i) const {
+  Row r = unknown_row();
+  for (std::size_t c = 0; c < columns.size() && c < kMaxColumns; ++c) {
+    if (!columns[c].empty()) r[c] = columns[c][i];
+  }
+  return r;
+}
+
+const std::vector<double>& Dataset::column(int index) const {
+  static const std::vector<double> kEmpty;
+  if (index < 0 || uz(index) >= columns.size()) return kEmpty;
+  return columns[uz(index)];
+}
+
+double f_distribution_upper_tail(double f, double d1, double d2) {
+  if (!(f > 0.0)) return 1.0;
+  if (!std::isfinite(f)) return 0.0;
+  const double x = d2 / (d2 + d1 * f);
+  return incomplete_beta(0.5 * d2, 0.5 * d1, x);
+}
+
+Model fit_terms(const Dataset& data, const std::vector<TermSpec>& specs,
+                const std::vector<std::uint8_t>& use) {
+  const Layout layout = discover_groups(data, specs, use);
+  const auto p = static_cast<Eigen::Index>(layout.parameters);
+  if (p == 0) throw AnalysisError("no term applies to any fitted row");
+  Eigen::MatrixXd a = Eigen::MatrixXd::Zero(p, p);
+  Eigen::VectorXd rhs = Eigen::VectorXd::Zero(p);
+  EvalState state;
+  state.lag_value.assign(specs.size(), kUnknown);
+  state.lag_input.assign(specs.size(), kUnknown);
+  std::vector<Entry> entries;
+  entries.reserve(specs.size() * kMaxBasis);
+  for (std::size_t i = 0; i < data.rows(); ++i) {
+    const Row row = data.row(i);
+    advance_state(specs, row, state);
+    if (use[i] == 0U || !std::isfinite(data.target_um[i])) continue;
+    row_entries(specs, layout, row, state, entries);
+    const double y = data.target_um[i];
+    for (std::size_t u = 0; u < entries.size(); ++u) {
+      const auto iu = static_cast<Eigen::Index>(entries[u].index);
+      rhs(iu) += entries[u].value * y;
+      for (std::size_t v = u; v < entries.size(); ++v) {
+        const auto iv = static_cast<Eigen::Index>(entries[v].index);
+        const double w = entries[u].value * entries[v].value;
+        // Entries of one row are distinct indices; the upper triangle is mirrored below.
+        if (iu <= iv) {
+          a(iu, iv) += w;
+        } else {
+          a(iv, iu) += w;
+        }
+      }
+    }
+  }
+  a.triangularView<Eigen::StrictlyLower>() = a.transpose().triangularView<Eigen::StrictlyLower>();
+  const Eigen::VectorXd beta = solve_normal(a, rhs);
+  std::vector<Term> terms;
+  for (std::size_t t = 0; t < specs.size(); ++t) {
+    Term term;
+    term.spec = specs[t];
+    term.groups = layout.groups[t];
+    const std::size_t n = layout.groups[t].size() * basis_count(specs[t].form, specs[t].degree);
+    for (std::size_t k = 0; k < n; ++k) {
+      term.coef.push_back(beta(static_cast<Eigen::Index>(layout.offset[t] + k)));
+    }
+    terms.push_back(std::move(term));
+  }
+  return Model(data.extra_columns, std::move(terms));
+}
+
+std::vector<double> residuals(const Dataset& data, const Model& model) {
+  std::vector<double> r(data.rows());
+  EvalState state = model.make_state();
+  for (std::size_t i = 0; i < data.rows(); ++i) {
+    r[i] = data.target_um[i] - model.evaluate(data.row(i), state);
+  }
+  return r;
+}
+
+double noise_floor_um(const Dataset& data, const std::vector<double>& residual,
+                      const std::vector<std::uint8_t>& use) {
+  std::map<std::tuple<double, double, double>, double> last;
+  double ss = 0.0;
+  std::size_t n = 0;
+  const auto& kind = data.column(static_cast<int>(Column::kKind));
+  const auto& point = data.column(static_cast<int>(Column::kPoint));
+  const auto& tool = data.column(static_cast<int>(Column::kTool));
+  for (std::size_t i = 0; i < data.rows(); ++i) {
+    if (use[i] == 0U || !std::isfinite(residual[i])) continue;
+    const auto key = std::make_tuple(kind.empty() ? 0.0 : kind[i], point.empty() ? 0.0 : point[i],
+                                     tool.empty() ? 0.0 : tool[i]);
+    auto it = last.find(key);
+    if (it != last.end()) {
+      const double d = residual[i] - it->second;
+      ss += d * d;
+      ++n;
+      it->second = residual[i];
+    } else {
+      last.emplace(key, residual[i]);
+    }
+  }
+  // E[(e_i − e_{i−1})²] = 2σ² for independent noise.
+  return n > 0 ? std::sqrt(ss / (2.0 * dz(n))) : 0.0;
+}
+
+std::vector<Candidate> make_candidates(const Dataset& data, const std::vector<std::uint8_t>& use,
+                                       const SearchOptions& options) {
+  std::vector<Candidate> out;
+  auto excluded = [&](const std::string& name) {
+    return std::find(options.exclude.begin(), options.exclude.end(), name) != options.exclude.end();
+  };
+  auto add = [&](const std::string& name, Form form, int column, int degree, Candidate c) {
+    if (excluded(name)) return;
+    c.spec.name = name;
+    c.spec.form = form;
+    c.spec.column = column;
+    c.spec.degree = degree;
+    c.spec.kind_mask = options.kind_mask;
+    out.push_back(std::move(c));
+  };
+  auto varies = [](const Range& r) { return r.n >= 8 && r.span() > 0.0; };
+  const std::uint8_t km = options.kind_mask;
+  const Range time = column_range(data, static_cast<int>(Column::kTime), use, km);
+  const std::size_t n_fit = time.n;
+
+  // Time: warm-up, level change.
+  if (varies(time) && time.hi > 0.0) {
+    Candidate c;
+    c.grid = log_grid(time.hi / 200.0, time.hi * 2.0, 40);
+    c.multiplicity = 1.0 + 3.0 * std::log10(400.0);
+    add("thermal_drift", Form::kExpRise, static_cast<int>(Column::kTime), 1, c);
+    Candidate s;
+    // Change points between the 3 % and 97 % time quantiles of the fitted rows.
+    std::vector<double> t;
+    const auto& tc = data.column(static_cast<int>(Column::kTime));
+    for (std::size_t i = 0; i < tc.size(); ++i) {
+      if (use[i] != 0U && std::isfinite(tc[i])) t.push_back(tc[i]);
+    }
+    std::sort(t.begin(), t.end());
+    for (std::size_t q = 3; q <= 97; ++q) {
+      const double v = t[std::min(t.size() - 1, t.size() * q / 100)];
+      if (s.grid.empty() || v > s.grid.back()) s.grid.push_back(v);
+    }
+    // Sup-F over change points: about 2 ln(n) effectively independent tests.
+    s.multiplicity = std::max(1.0, 2.0 * std::log(dz(std::max<std::size_t>(n_fit, 3))));
+    if (s.grid.size() >= 2) add("level_change", Form::kStep, static_cast<int>(Column::kTime), 1, s);
+  }
+  const Range temp = column_range(data, static_cast<int>(Column::kTemp), use, km);
+  if (varies(temp)) add("thermal_drift", Form::kLinear, static_cast<int>(Column::kTemp), 1, {});
+  for (int col : options.linear_columns) {
+    if (varies(column_range(data, col, use, km))) add("thermal_drift", Form::kLinear, col, 1, {});
+  }
+  for (int col : options.lag_columns) {
+    if (varies(column_range(data, col, use, km)) && varies(time)) {
+      Candidate c;
+      c.grid = log_grid(time.span() / 500.0, time.span(), 40);
+      c.multiplicity = 1.0 + 3.0 * std::log10(500.0);
+      add("thermal_drift", Form::kLag, col, 1, c);
+    }
+  }
+  // Position: polynomial and periodic in each coordinate.
+  const std::array<std::pair<Column, std::string>, 3> axes = {
+      std::pair{Column::kX, std::string("x")}, std::pair{Column::kY, std::string("y")},
+      std::pair{Column::kZ, std::string("z")}};
+  for (const auto& [col, axis] : axes) {
+    const Range r = column_range(data, static_cast<int>(col), use, km);
+    if (!varies(r) || r.sd <= 0.0) continue;
+    Candidate poly;
+    poly.spec.center = r.mean;
+    poly.spec.scale = r.sd;
+    add("position_" + axis, Form::kPoly, static_cast<int>(col), 2, poly);
+    const double f_lo = 2.0 / r.span();
+    const double f_hi = 1.0 / std::max(options.period_min_mm, 1e-6);
+    if (f_hi > f_lo) {
+      Candidate c;
+      // Frequencies 4× finer than the Fourier spacing 1/span, so no peak falls between points.
+      const double df = 1.0 / (4.0 * r.span());
+      const std::size_t count = std::min<std::size_t>(4000, static_cast<std::size_t>((f_hi - f_lo) / df) + 1);
+      for (std::size_t i = 0; i < count; ++i) c.grid.push_back(1.0 / (f_hi - dz(i) * df));
+      c.multiplicity = std::max(1.0, (f_hi - f_lo) * r.span());
+      add("periodic_" + axis, Form::kSine, static_cast<int>(col), 1, c);
+    }
+  }
+  // Path: wear linear and non-linear (break-in, acceleration).
+  const Range path = column_range(data, static_cast<int>(Column::kPath), use, km);
+  if (varies(path)) {
+    add("tool_wear", Form::kLinear, static_cast<int>(Column::kPath), 1, {});
+    if (path.hi > 0.0) {
+      Candidate c;
+      c.grid = log_grid(path.hi / 200.0, path.hi * 2.0, 40);
+      c.multiplicity = 1.0 + 3.0 * std::log10(400.0);
+      add("wear_nonlinear", Form::kExpRise, static_cast<int>(Column::kPath), 1, c);
+    }
+    if (path.sd > 0.0) {
+      Candidate q;
+      q.spec.center = path.mean;
+      q.spec.scale = path.sd;
+      add("wear_nonlinear", Form::kPoly, static_cast<int>(Column::kPath), 2, q);
+    }
+  }
+  if (varies(column_range(data, static_cast<int>(Column::kPart), use, km))) {
+    add("part_trend", Form::kLinear, static_cast<int>(Column::kPart), 1, {});
+  }
+  const Range angle = column_range(data, static_cast<int>(Column::kAngle), use, km);
+  if (varies(angle) && angle.sd > 0.0) {
+    Candidate c;
+    c.spec.center = angle.mean;
+    c.spec.scale = angle.sd;
+    add("contact_angle", Form::kPoly, static_cast<int>(Column::kAngle), 2, c);
+  }
+  return out;
+}
+
+AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
+  const std::size_t n = data.rows();
+  if (n < 10) throw AnalysisError("the log has " + std::to_string(n) + " rows; at least 10 needed");
+  AnalysisResult result;
+  // Time-ordered split: the latest rows are held out of every fit.
+  std::vector<double> t;
+  const auto& tc = data.column(static_cast<int>(Column::kTime));
+  for (double v : tc) {
+    if (std::isfinite(v)) t.push_back(v);
+  }
+  result.heldout.assign(n, 0);
+  if (!t.empty() && config.heldout_fraction > 0.0) {
+    std::sort(t.begin(), t.end());
+    const auto k = static_cast<std::size_t>(dz(t.size()) * (1.0 - config.heldout_fraction));
+    result.split_time_s = t[std::min(k, t.size() - 1)];
+    for (std::size_t i = 0; i < n; ++i) {
+      if (std::isfinite(tc[i]) && tc[i] >= result.split_time_s) result.heldout[i] = 1;
+    }
+  }
+  std::vector<std::uint8_t> use(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    use[i] = result.heldout[i] == 0U && std::isfinite(data.target_um[i]) ? 1 : 0;
+  }
+
+  std::vector<TermSpec> specs = config.declared;
+  Model model = fit_terms(data, specs, use);
+  std::vector<double> residual;
+  FitStats current = stats_of(data, model, result.heldout, &residual);
+  result.declared = current;
+  result.declared_residual_um = residual;
+
+  std::vector<Candidate> all = make_candidates(data, use, config.search);
+  for (std::size_t step = 0; step < config.max_effects; ++step) {
+    std::vector<Candidate> cands;
+    for (const Candidate& c : all) {
+      const bool present = std::any_of(specs.begin(), specs.end(),
+                                       [&](const TermSpec& s) { return same_term(s, c.spec); });
+      if (!present) cands.push_back(c);
+    }
+    if (cands.empty()) break;
+    const SearchSet set = make_search_set(data, model, use, residual, config.search_rows);
+    const double n_sub = dz(set.rows.size());
+    if (set.rss <= 0.0 || n_sub < 8.0) break;
+    struct Ranked {
+      double bic;
+      std::size_t index;
+      double reduction;
+    };
+    std::vector<Ranked> ranked;
+    for (std::size_t c = 0; c < cands.size(); ++c) {
+      const auto [v, red] = search_candidate(data, set, cands[c]);
+      if (!cands[c].grid.empty()) set_parameter(cands[c].spec, v);
+      const double df = dz(basis_count(cands[c].spec.form, cands[c].spec.degree)) +
+                        (cands[c].grid.empty() ? 0.0 : 1.0);
+      const double rss1 = std::max(set.rss - red, 1e-300);
+      ranked.push_back({n_sub * std::log(rss1 / n_sub) + df * std::log(n_sub), c, red});
+    }
+    std::sort(ranked.begin(), ranked.end(),
+              [](const Ranked& a, const Ranked& b) { return a.bic < b.bic; });
+    std::vector<TriedCandidate> tried;
+    for (const Ranked& rk : ranked) {
+      const Candidate& c = cands[rk.index];
+      TriedCandidate tc_out;
+      tc_out.name = c.spec.name;
+      tc_out.column = column_name(c.spec.column, data.extra_columns);
+      tc_out.form = c.spec.form;
+      tc_out.parameter = c.spec.form == Form::kStep ? c.spec.center : c.spec.scale;
+      tc_out.rss_reduction_fraction = rk.reduction / set.rss;
+      tried.push_back(tc_out);
+    }
+    bool added = false;
+    for (std::size_t k = 0; k < std::min(kRefitPerStep, ranked.size()) && !added; ++k) {
+      const Candidate& c = cands[ranked[k].index];
+      std::vector<TermSpec> next = specs;
+      next.push_back(c.spec);
+      Model m1 = fit_terms(data, next, use);
+      std::vector<double> r1;
+      const FitStats s1 = stats_of(data, m1, result.heldout, &r1);
+      const double df1 = dz(s1.parameters > current.parameters ? s1.parameters - current.parameters
+                                                               : 1) +
+                         (c.grid.empty() ? 0.0 : 1.0);
+      const double df2 = dz(s1.fitted.rows) - dz(s1.parameters) - (c.grid.empty() ? 0.0 : 1.0);
+      double p_adj = 1.0;
+      double f = 0.0;
+      if (df2 > 0.0 && s1.rss < current.rss) {
+        f = ((current.rss - s1.rss) / df1) / (std::max(s1.rss, 1e-300) / df2);
+        const double p = f_distribution_upper_tail(f, df1, df2);
+        p_adj = std::min(1.0, p * c.multiplicity * dz(cands.size()));
+      }
+      const bool heldout_ok =
+          current.heldout.rows == 0 || s1.heldout.rms_um < current.heldout.rms_um;
+      tried[k].p_value = p_adj;
+      tried[k].heldout_improved = heldout_ok;
+      tried[k].refitted = true;
+      if (p_adj < config.alpha && heldout_ok) {
+        AddedEffect e;
+        e.spec = c.spec;
+        e.before = current;
+        e.after = s1;
+        e.p_value = p_adj;
+        e.f_statistic = f;
+        result.effects.push_back(e);
+        specs = std::move(next);
+        model = std::move(m1);
+        residual = std::move(r1);
+        current = s1;
+        added = true;
+      }
+    }
+    result.steps.push_back(std::move(tried));
+    if (!added) break;
+  }
+  result.final_stats = current;
+  result.final_residual_um = residual;
+  result.noise_floor_um = noise_floor_um(data, residual, use);
+  result.fitted_model = model;
+  std::vector<std::uint8_t> all_rows(n);
+  for (std::size_t i = 0; i < n; ++i) all_rows[i] = std::isfinite(data.target_um[i]) ? 1 : 0;
+  result.final_model = fit_terms(data, specs, all_rows);
+  return result;
+}
+
+}  // namespace nccomp::core::model

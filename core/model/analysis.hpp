@@ -1,0 +1,161 @@
+// Offline analysis of the measurement log (`nccomp analyze`): fit the declared terms, search the
+// residual for an effect the model lacks, add the best supported one, refit, repeat while it is
+// significant. Pure: data in, numbers out (the tool reads the CSV and writes the reports).
+//
+// Significance, so that noise does not become an "effect":
+//   1. nested-model F-test on the fitted (earlier, time-ordered) rows, the non-linear parameter
+//      counted as one more degree of freedom;
+//   2. the p-value multiplied by the number of candidates and by the candidate's search
+//      multiplicity (independent frequencies of a period search, decades of a time-constant grid,
+//      change points): Bonferroni over everything that was tried;
+//   3. the held-out (later) rows' RMS must drop as well.
+// An effect is added only when the adjusted p-value is below `alpha` and the held-out check holds.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <exception>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "core/model/model.hpp"
+
+namespace nccomp::core::model {
+
+/// The log's rows, column-wise (1e6 rows fit in memory as doubles: 8 MB per column).
+struct Dataset {
+  std::vector<std::string> extra_columns;
+  /// kStandardColumns + extra_columns.size() columns; an empty vector = column all unknown.
+  std::vector<std::vector<double>> columns;
+  /// The deviation the model must explain [µm]: measured_um + applied_um (the error the machine
+  /// made before the active compensation took its share).
+  std::vector<double> target_um;
+
+  Dataset();
+  [[nodiscard]] std::size_t rows() const { return target_um.size(); }
+  [[nodiscard]] Row row(std::size_t i) const;
+  /// Values of one column (empty if the column is absent).
+  [[nodiscard]] const std::vector<double>& column(int index) const;
+};
+
+/// One term the search may add.
+struct Candidate {
+  TermSpec spec;
+  /// Values of the non-linear parameter to try (empty for linear / polynomial forms).
+  std::vector<double> grid;
+  /// Number of effectively independent trials of the grid (for the multiplicity correction).
+  double multiplicity{1.0};
+};
+
+struct SearchOptions {
+  /// Kinds the added effects apply to (bit per kind).
+  std::uint8_t kind_mask{0x7};
+  /// Effect names never to try (e.g. "periodic_y").
+  std::vector<std::string> exclude;
+  /// Extra columns tried as thermal_drift linear in that column (temperatures).
+  std::vector<int> linear_columns;
+  /// Extra columns tried as thermal_drift, first-order lag of that column (speed, power).
+  std::vector<int> lag_columns;
+  /// Shortest period tried for periodic_x|y|z [mm].
+  double period_min_mm{2.0};
+};
+
+struct AnalysisConfig {
+  std::vector<TermSpec> declared;
+  SearchOptions search;
+  /// Latest fraction of the rows (by time_s) held out of every fit.
+  double heldout_fraction{0.2};
+  /// Family-wise false-discovery level per search step.
+  double alpha{0.01};
+  std::size_t max_effects{4};
+  /// Rows used for the non-linear grid search (the fits use all rows).
+  std::size_t search_rows{20000};
+};
+
+struct ErrorStats {
+  double rms_um{0.0};
+  double max_um{0.0};
+  std::size_t rows{0};
+};
+
+struct FitStats {
+  ErrorStats fitted;
+  ErrorStats heldout;
+  double rss{0.0};
+  std::size_t parameters{0};
+};
+
+/// One effect added by the search.
+struct AddedEffect {
+  TermSpec spec;
+  FitStats before;
+  FitStats after;
+  double p_value{1.0};  // adjusted (see file comment)
+  double f_statistic{0.0};
+};
+
+/// A candidate tried at one search step, for the report.
+struct TriedCandidate {
+  std::string name;
+  std::string column;
+  Form form{Form::kLinear};
+  double parameter{0.0};
+  double rss_reduction_fraction{0.0};  // on the search rows
+  double p_value{1.0};                 // adjusted; 1 when not refitted
+  bool heldout_improved{false};
+  bool refitted{false};
+};
+
+struct AnalysisResult {
+  FitStats declared;
+  std::vector<AddedEffect> effects;
+  /// Per search step (one more than effects when the search stopped on its own).
+  std::vector<std::vector<TriedCandidate>> steps;
+  FitStats final_stats;
+  double noise_floor_um{0.0};
+  /// Model fitted on the fitted rows only (the numbers above).
+  Model fitted_model;
+  /// The same terms refitted on all rows: what the daemon should load.
+  Model final_model;
+  /// Residuals [µm] of every row: declared model, final model (both fitted on the fitted rows).
+  std::vector<double> declared_residual_um;
+  std::vector<double> final_residual_um;
+  std::vector<std::uint8_t> heldout;  // 1 = held-out row
+  double split_time_s{0.0};
+};
+
+/// Raised for inputs the analysis cannot work with (too few rows, too many groups, …).
+class AnalysisError : public std::exception {
+ public:
+  explicit AnalysisError(std::string what) : what_(std::move(what)) {}
+  [[nodiscard]] const char* what() const noexcept override { return what_.c_str(); }
+
+ private:
+  std::string what_;
+};
+
+/// Upper tail P(F > f) of the F distribution with (d1, d2) degrees of freedom.
+double f_distribution_upper_tail(double f, double d1, double d2);
+
+/// Least-squares fit of `specs` on the rows where use[i] != 0. Groups are discovered from those
+/// rows. Throws AnalysisError if nothing can be fitted.
+Model fit_terms(const Dataset& data, const std::vector<TermSpec>& specs,
+                const std::vector<std::uint8_t>& use);
+
+/// Residual target − prediction of every row (rows in order; lag filters run over all rows).
+std::vector<double> residuals(const Dataset& data, const Model& model);
+
+/// Noise floor [µm]: from successive differences of the residual within each (kind, point, tool)
+/// series in time order; smooth effects cancel in the differences, the noise does not.
+double noise_floor_um(const Dataset& data, const std::vector<double>& residual,
+                      const std::vector<std::uint8_t>& use);
+
+/// The candidate effects for this data set (the effect names of issue 11).
+std::vector<Candidate> make_candidates(const Dataset& data, const std::vector<std::uint8_t>& use,
+                                       const SearchOptions& options);
+
+/// The whole analysis.
+AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config);
+
+}  // namespace nccomp::core::model

@@ -1,0 +1,199 @@
+#include "core/model/model.hpp"
+
+#include <cmath>
+#include <numbers>
+#include <utility>
+
+namespace nccomp::core::model {
+
+namespace {
+constexpr std::array<std::string_view, 7> kFormNames = {"constant", "linear", "poly", "exp_rise",
+                                                        "sine",     "step",   "lag"};
+
+bool same(double a, double b) noexcept {
+  // Group keys are integers (tool, point, kind) stored as doubles; exact equality is intended.
+  return !(a < b) && !(b < a);
+}
+}  // namespace
+
+Row unknown_row() noexcept {
+  Row r;
+  r.fill(kUnknown);
+  return r;
+}
+
+std::string_view form_name(Form f) noexcept { return kFormNames[static_cast<std::size_t>(f)]; }
+
+bool parse_form(std::string_view name, Form& out) noexcept {
+  for (std::size_t i = 0; i < kFormNames.size(); ++i) {
+    if (kFormNames[i] == name) {
+      out = static_cast<Form>(i);
+      return true;
+    }
+  }
+  return false;
+}
+
+std::size_t basis_count(Form f, int degree) noexcept {
+  switch (f) {
+    case Form::kSine:
+      return 2;
+    case Form::kPoly:
+      return degree < 1 ? 1 : (degree > 3 ? 3 : static_cast<std::size_t>(degree));
+    default:
+      return 1;
+  }
+}
+
+bool has_nonlinear_parameter(Form f) noexcept {
+  return f == Form::kExpRise || f == Form::kSine || f == Form::kStep || f == Form::kLag;
+}
+
+std::size_t term_basis(const TermSpec& spec, const Row& row, double lag_value,
+                       std::span<double, kMaxBasis> out) noexcept {
+  const double kind = row[static_cast<std::size_t>(Column::kKind)];
+  if (!std::isfinite(kind) || kind < 0.0 || kind > 7.0) return 0;
+  if ((spec.kind_mask & (1U << static_cast<unsigned>(kind))) == 0U) return 0;
+  if (spec.form == Form::kConstant) {
+    out[0] = 1.0;
+    return 1;
+  }
+  if (spec.column < 0 || static_cast<std::size_t>(spec.column) >= kMaxColumns) return 0;
+  const double v = row[static_cast<std::size_t>(spec.column)];
+  if (!std::isfinite(v)) return 0;
+  switch (spec.form) {
+    case Form::kConstant:
+      break;
+    case Form::kLinear:
+      out[0] = v;
+      return 1;
+    case Form::kPoly: {
+      const double u = (v - spec.center) / spec.scale;
+      const std::size_t n = basis_count(Form::kPoly, spec.degree);
+      double p = 1.0;
+      for (std::size_t i = 0; i < n; ++i) {
+        p *= u;
+        out[i] = p;
+      }
+      return n;
+    }
+    case Form::kExpRise:
+      out[0] = v > 0.0 ? -std::expm1(-v / spec.scale) : 0.0;
+      return 1;
+    case Form::kSine: {
+      const double phase = 2.0 * std::numbers::pi * v / spec.scale;
+      out[0] = std::sin(phase);
+      out[1] = std::cos(phase);
+      return 2;
+    }
+    case Form::kStep:
+      out[0] = v >= spec.center ? 1.0 : 0.0;
+      return 1;
+    case Form::kLag:
+      if (!std::isfinite(lag_value)) return 0;
+      out[0] = lag_value;
+      return 1;
+  }
+  return 0;
+}
+
+int find_group(const TermSpec& spec, const std::vector<std::array<double, 2>>& groups,
+               const Row& row) noexcept {
+  std::array<double, 2> key{0.0, 0.0};
+  for (std::size_t k = 0; k < 2; ++k) {
+    if (spec.per[k] >= 0) {
+      key[k] = row[static_cast<std::size_t>(spec.per[k])];
+      if (!std::isfinite(key[k])) return -1;
+    }
+  }
+  for (std::size_t g = 0; g < groups.size(); ++g) {
+    if (same(groups[g][0], key[0]) && same(groups[g][1], key[1])) return static_cast<int>(g);
+  }
+  return -1;
+}
+
+void advance_state(std::span<const TermSpec> specs, const Row& row, EvalState& state) noexcept {
+  const double t_s = row[static_cast<std::size_t>(Column::kTime)];
+  const bool restart = !state.started || (std::isfinite(t_s) && t_s < state.last_time_s);
+  const double dt_s = restart || !std::isfinite(t_s) ? 0.0 : t_s - state.last_time_s;
+  for (std::size_t i = 0; i < specs.size() && i < state.lag_value.size(); ++i) {
+    const TermSpec& s = specs[i];
+    if (s.form != Form::kLag || s.column < 0) continue;
+    const double u = row[static_cast<std::size_t>(s.column)];
+    if (restart) {
+      // Start in equilibrium with the first known input: the machine was at rest before.
+      state.lag_value[i] = u;
+      state.lag_input[i] = u;
+      continue;
+    }
+    if (!std::isfinite(state.lag_value[i])) state.lag_value[i] = u;
+    if (!std::isfinite(state.lag_input[i])) state.lag_input[i] = u;
+    const double held = state.lag_input[i];
+    if (std::isfinite(held) && dt_s > 0.0) {
+      const double decay = std::exp(-dt_s / s.scale);
+      state.lag_value[i] = held + (state.lag_value[i] - held) * decay;
+    }
+    if (std::isfinite(u)) state.lag_input[i] = u;
+  }
+  if (std::isfinite(t_s)) {
+    state.last_time_s = t_s;
+    state.started = true;
+  }
+}
+
+Model::Model(std::vector<std::string> extra_columns, std::vector<Term> terms)
+    : extra_columns_(std::move(extra_columns)), terms_(std::move(terms)) {
+  specs_.reserve(terms_.size());
+  for (const Term& t : terms_) specs_.push_back(t.spec);
+}
+
+EvalState Model::make_state() const {
+  EvalState s;
+  s.lag_value.assign(terms_.size(), kUnknown);
+  s.lag_input.assign(terms_.size(), kUnknown);
+  return s;
+}
+
+double Model::evaluate_term(std::size_t index, const Row& row,
+                            const EvalState& state) const noexcept {
+  const Term& t = terms_[index];
+  std::array<double, kMaxBasis> b{};
+  const double lag = index < state.lag_value.size() ? state.lag_value[index] : kUnknown;
+  const std::size_t n = term_basis(t.spec, row, lag, b);
+  if (n == 0) return 0.0;
+  const int g = find_group(t.spec, t.groups, row);
+  if (g < 0) return 0.0;
+  const std::size_t stride = basis_count(t.spec.form, t.spec.degree);
+  const double* c = t.coef.data() + static_cast<std::size_t>(g) * stride;
+  double sum = 0.0;
+  for (std::size_t i = 0; i < n; ++i) sum += c[i] * b[i];
+  return sum;
+}
+
+double Model::evaluate(const Row& row, EvalState& state) const noexcept {
+  advance_state(specs_, row, state);
+  double sum = 0.0;
+  for (std::size_t i = 0; i < terms_.size(); ++i) sum += evaluate_term(i, row, state);
+  return sum;
+}
+
+int column_index(std::string_view name, const std::vector<std::string>& extras) noexcept {
+  for (std::size_t i = 0; i < kStandardColumnNames.size(); ++i) {
+    if (kStandardColumnNames[i] == name) return static_cast<int>(i);
+  }
+  for (std::size_t i = 0; i < extras.size(); ++i) {
+    if (extras[i] == name) return static_cast<int>(kStandardColumns + i);
+  }
+  return -1;
+}
+
+std::string column_name(int index, const std::vector<std::string>& extras) {
+  if (index >= 0 && static_cast<std::size_t>(index) < kStandardColumns) {
+    return std::string(kStandardColumnNames[static_cast<std::size_t>(index)]);
+  }
+  const std::size_t e = static_cast<std::size_t>(index) - kStandardColumns;
+  if (index >= 0 && e < extras.size()) return extras[e];
+  return "?";
+}
+
+}  // namespace nccomp::core::model

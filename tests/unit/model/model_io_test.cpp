@@ -1,0 +1,153 @@
+// GIVEN logs, mappings and model files WHEN read THEN values arrive in their columns, and every
+// bad input is refused with its file, line and column named.
+#include <gtest/gtest.h>
+
+#include <sstream>
+
+#include "tests/unit/model/synth.hpp"
+#include "tools/analyze/model_io.hpp"
+
+namespace cm = nccomp::core::model;
+namespace io = nccomp::tools::model_io;
+
+namespace {
+
+const char* kHeader =
+    "time_s,part,tool,kind,point,x_mm,y_mm,z_mm,angle_deg,path_mm,temp_c,measured_um,applied_um";
+
+std::string error_of(const std::string& csv, const io::Mapping& m = {}) {
+  std::istringstream in(csv);
+  cm::Dataset d;
+  try {
+    io::read_log(in, "log.csv", m, d);
+  } catch (const io::ModelIoError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+}  // namespace
+
+TEST(ReadLog, ReadsV1RowsIgnoringExtraColumnsAndEmptyAsUnknown) {
+  std::istringstream in(std::string(kHeader) + ",operator\n" +
+                        "1.5,3,2,contour,4,10,20,-5,30,1200,,2.5,0.5,anna\n"
+                        "2,3,2,tool_wear,1,,,,45,1300,21.5,7,0,bob\r\n");
+  cm::Dataset d;
+  io::read_log(in, "log.csv", {}, d);
+  ASSERT_EQ(d.rows(), 2U);
+  EXPECT_DOUBLE_EQ(d.column(0)[0], 1.5);
+  EXPECT_DOUBLE_EQ(d.column(3)[0], 1.0);  // contour
+  EXPECT_DOUBLE_EQ(d.column(3)[1], 0.0);  // tool_wear
+  EXPECT_TRUE(std::isnan(d.column(10)[0]));
+  EXPECT_TRUE(std::isnan(d.column(5)[1]));
+  EXPECT_DOUBLE_EQ(d.target_um[0], 3.0);  // measured + applied
+  EXPECT_DOUBLE_EQ(d.target_um[1], 7.0);
+}
+
+TEST(ReadLog, NamesFileLineAndColumnOfBadInput) {
+  const std::string h = std::string(kHeader) + "\n";
+  EXPECT_EQ(error_of(h + "1,1,1,contour,1,x,0,0,0,0,,1,0\n"),
+            "log.csv:2: column 'x_mm': 'x' is not a finite number");
+  EXPECT_EQ(error_of(h + "1,1,1,probe,1,0,0,0,0,0,,1,0\n"),
+            "log.csv:2: column 'kind': 'probe' is not tool_wear, contour or calib");
+  EXPECT_EQ(error_of(h + "5,1,1,contour,1,0,0,0,0,0,,1,0\n4,1,1,contour,1,0,0,0,0,0,,1,0\n")
+                .substr(0, 38),
+            "log.csv:3: column 'time_s': goes backw");
+  EXPECT_EQ(error_of(h + "1,1.5,1,contour,1,0,0,0,0,0,,1,0\n"),
+            "log.csv:2: column 'part': must be an integer");
+  EXPECT_EQ(error_of(h + "1,1,1,contour\n").substr(0, 33), "log.csv:2: column 'point': missin");
+  EXPECT_EQ(error_of("time_s,part\n1,2\n"), "log.csv:1: column 'tool': required column missing");
+  EXPECT_EQ(error_of(h), "log.csv:1: no data rows");
+  EXPECT_EQ(error_of(h + "1,1,1,contour,1,0,0,0,0,0,,inf,0\n"),
+            "log.csv:2: column 'measured_um': 'inf' is not a finite number");
+}
+
+TEST(ReadLog, MapsAForeignUtf8WideCsv) {
+  const io::Mapping m = io::read_mapping_text(R"toml(
+[columns]
+time_s = "時間(s)"
+path_mm = "cut"
+[scale]
+path_mm = 108.0
+[constant]
+kind = "tool_wear"
+tool = 4
+[extra]
+t1 = "t1(°C)"
+[wide]
+measured_um = ["flute_1", "flute_2"]
+points = [1, 2]
+)toml",
+                                              "map.toml");
+  std::istringstream in("\xEF\xBB\xBF時間(s) ,cut,flute_1,flute_2,t1(°C)\n0,1,10,11,20.5\n15,2,12,,21\n");
+  cm::Dataset d;
+  d.extra_columns = {"t1"};
+  io::read_log(in, "phm.csv", m, d);
+  ASSERT_EQ(d.rows(), 4U);
+  EXPECT_DOUBLE_EQ(d.column(9)[2], 216.0);
+  EXPECT_DOUBLE_EQ(d.column(4)[1], 2.0);
+  EXPECT_DOUBLE_EQ(d.column(2)[3], 4.0);
+  EXPECT_DOUBLE_EQ(d.column(11)[3], 21.0);
+  EXPECT_DOUBLE_EQ(d.target_um[1], 11.0);
+  EXPECT_TRUE(std::isnan(d.target_um[3]));
+}
+
+TEST(ReadMapping, RefusesUnknownKeysAndColumns) {
+  auto err = [](const char* text) {
+    try {
+      io::read_mapping_text(text, "map.toml");
+    } catch (const io::ModelIoError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  EXPECT_EQ(err("[columns]\nspeed = \"x\"\n"), "map.toml:2:9: columns.speed: not a measurement-log column");
+  EXPECT_EQ(err("[colums]\n").substr(0, 26), "map.toml:1:1: .colums: unk");
+  EXPECT_EQ(err("[constant]\nkind = \"probe\"\n"), "map.toml:2:8: constant.kind: unknown kind 'probe'");
+  EXPECT_EQ(err("[columns\n").substr(0, 11), "map.toml:1:");
+}
+
+TEST(ModelFile, RoundTripsThroughTomlAndEvaluatesTheSame) {
+  nccomp::test::synth::Options opt;
+  opt.parts = 20;
+  opt.effects = {"periodic_x", "thermal_drift"};
+  const cm::Dataset d = nccomp::test::synth::generate(opt);
+  const cm::AnalysisResult r = cm::analyze(d, nccomp::test::synth::config());
+  ASSERT_FALSE(r.effects.empty());
+  const std::string text = io::write_model_toml(r.final_model, nccomp::test::synth::config(), {"t"});
+  const io::ModelFile f = io::read_model_text(text, "model.toml", true);
+  const cm::Model back(f.extra_columns, f.fitted_terms);
+  cm::EvalState s1 = r.final_model.make_state();
+  cm::EvalState s2 = back.make_state();
+  for (std::size_t i = 0; i < d.rows(); ++i) {
+    const cm::Row row = d.row(i);
+    ASSERT_NEAR(r.final_model.evaluate(row, s1), back.evaluate(row, s2), 1e-9) << i;
+  }
+}
+
+TEST(ModelFile, RefusesBadTerms) {
+  auto err = [](const char* text, bool fitted = false) {
+    try {
+      io::read_model_text(text, "c.toml", fitted);
+    } catch (const io::ModelIoError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  EXPECT_EQ(err("[model]\n"), "c.toml: model.term: declare at least one [[model.term]]");
+  EXPECT_EQ(err("[[model.term]]\nname = \"a\"\nform = \"cubic\"\n"),
+            "c.toml:3:8: model.term[0].form: unknown form 'cubic' (constant, linear, poly, "
+            "exp_rise, sine, step, lag)");
+  EXPECT_EQ(err("[[model.term]]\nname = \"a\"\nform = \"sine\"\ncolumn = \"x_mm\"\n"),
+            "c.toml:1:1: model.term[0].scale: missing (form sine needs its scale / period / time "
+            "constant)");
+  EXPECT_EQ(err("[[model.term]]\nname = \"a\"\nform = \"constant\"\nkinds = [\"probe\"]\n"),
+            "c.toml:4:9: model.term[0].kinds: unknown kind 'probe' (tool_wear, contour, calib)");
+  EXPECT_EQ(err("[[model.term]]\nname = \"a\"\nform = \"constant\"\n", true),
+            "c.toml:1:1: model.term[0]: no groups / coef_um: not a fitted model");
+  EXPECT_EQ(err("[[model.term]]\nname = \"a\"\nform = \"constant\"\ngroups = [[0, 0]]\n"
+                "coef_um = [1, 2]\n"),
+            "c.toml:5:11: model.term[0].coef_um: expected 1 values (groups × basis functions), got 2");
+  EXPECT_EQ(err("[model]\nalpha = 0.9\n[[model.term]]\nname = \"a\"\nform = \"constant\"\n"),
+            "c.toml:2:9: model.alpha: must be within (0, 0.5)");
+}

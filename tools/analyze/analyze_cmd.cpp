@@ -1,0 +1,129 @@
+// `nccomp analyze --log LOG.csv --config CONF.toml --out DIR [--map MAP.toml]`: fits the declared
+// model to the measurement log, searches the residual for the effect the model lacks, and writes
+// DIR/summary.json, DIR/report.md (+ DIR/plots/*.svg) and DIR/model.toml (issue 11).
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "core/model/analysis.hpp"
+#include "tools/analyze/model_io.hpp"
+#include "tools/analyze/report.hpp"
+#include "tools/nccomp/command.hpp"
+
+namespace {
+
+namespace cm = nccomp::core::model;
+namespace io = nccomp::tools::model_io;
+using nccomp::tools::CommandError;
+
+struct Options {
+  std::vector<std::string> logs;
+  std::vector<std::string> maps;
+  std::string config;
+  std::string out = "analysis";
+};
+
+void write_file(const std::filesystem::path& p, const std::string& text) {
+  std::ofstream f(p, std::ios::binary | std::ios::trunc);
+  f << text;
+  f.close();
+  if (!f) throw CommandError(nccomp::tools::kExitFailure, p.string() + ": cannot write");
+}
+
+std::string read_text(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw CommandError(nccomp::tools::kExitInvalidInput, path + ": cannot open");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+void run(const Options& opt) {
+  if (!opt.maps.empty() && opt.maps.size() != 1 && opt.maps.size() != opt.logs.size()) {
+    throw CommandError(nccomp::tools::kExitUsage,
+                       "--map: give one mapping for all logs or one per --log");
+  }
+  io::ModelFile cfg;
+  std::vector<io::Mapping> maps;
+  cm::Dataset data;
+  try {
+    cfg = io::read_model_text(read_text(opt.config), opt.config, false);
+    for (const auto& m : opt.maps) maps.push_back(io::read_mapping_file(m));
+    data.extra_columns = cfg.extra_columns;
+    for (std::size_t i = 0; i < opt.logs.size(); ++i) {
+      std::ifstream in(opt.logs[i], std::ios::binary);
+      if (!in) throw io::ModelIoError(opt.logs[i] + ": cannot open");
+      const io::Mapping none;
+      const io::Mapping& m = maps.empty() ? none : maps[maps.size() == 1 ? 0 : i];
+      io::read_log(in, opt.logs[i], m, data);
+    }
+  } catch (const io::ModelIoError& e) {
+    throw CommandError(nccomp::tools::kExitInvalidInput, e.what());
+  }
+  cm::AnalysisResult result;
+  try {
+    result = cm::analyze(data, cfg.config);
+  } catch (const cm::AnalysisError& e) {
+    throw CommandError(nccomp::tools::kExitInvalidInput, std::string("analysis: ") + e.what());
+  }
+  const std::filesystem::path out(opt.out);
+  std::filesystem::create_directories(out / "plots");
+  write_file(out / "summary.json", nccomp::tools::analyze::summary_json(data, result));
+  const auto plotted = nccomp::tools::analyze::plotted_columns(data);
+  for (int c : plotted) {
+    const std::string name = cm::column_name(c, data.extra_columns);
+    write_file(out / "plots" / ("residual_" + nccomp::tools::analyze::safe_name(name) + ".svg"),
+               nccomp::tools::analyze::residual_svg(data, result, c));
+  }
+  std::vector<std::string> inputs = opt.logs;
+  inputs.push_back(opt.config);
+  for (const auto& m : opt.maps) inputs.push_back(m);
+  write_file(out / "report.md",
+             nccomp::tools::analyze::report_markdown(data, result, inputs, plotted));
+  std::vector<std::string> header = {
+      "Compensation model fitted by `nccomp analyze` on all " + std::to_string(data.rows()) +
+          " rows of:"};
+  for (const auto& l : opt.logs) header.push_back("  " + l);
+  header.push_back("Load it in nccompd as an include; use it as --config to analyze again.");
+  write_file(out / "model.toml", io::write_model_toml(result.final_model, cfg.config, header));
+
+  std::cout << "rows: " << data.rows() << " (fitted " << result.declared.fitted.rows
+            << ", held out " << result.declared.heldout.rows << ")\n";
+  std::cout << "declared model: RMS " << result.declared.fitted.rms_um << " µm, held-out RMS "
+            << result.declared.heldout.rms_um << " µm\n";
+  for (const auto& e : result.effects) {
+    std::cout << "added " << e.spec.name << " ("
+              << cm::column_name(e.spec.column, data.extra_columns) << ", "
+              << cm::form_name(e.spec.form) << "): RMS " << e.before.fitted.rms_um << " -> "
+              << e.after.fitted.rms_um << " µm, held-out " << e.before.heldout.rms_um << " -> "
+              << e.after.heldout.rms_um << " µm, p = " << e.p_value << "\n";
+  }
+  std::cout << "final RMS " << result.final_stats.fitted.rms_um << " µm (held-out "
+            << result.final_stats.heldout.rms_um << " µm), noise floor " << result.noise_floor_um
+            << " µm\n";
+  std::cout << "wrote " << (out / "summary.json").string() << ", " << (out / "report.md").string()
+            << ", " << (out / "model.toml").string() << "\n";
+}
+
+void setup(CLI::App& app) {
+  auto opt = std::make_shared<Options>();
+  auto* sub = app.add_subcommand(
+      "analyze",
+      "Fit the declared model to a measurement log, find and add the effect it lacks, report the "
+      "error before and after");
+  sub->add_option("--log", opt->logs, "measurement log CSV (repeat for several files)")
+      ->required();
+  sub->add_option("--config", opt->config, "TOML file with the [model] table")->required();
+  sub->add_option("--map", opt->maps,
+                  "column mapping TOML for a foreign CSV (one for all logs, or one per --log)");
+  sub->add_option("--out", opt->out, "output directory")->capture_default_str();
+  sub->callback([opt] { run(*opt); });
+}
+
+}  // namespace
+
+NCCOMP_REGISTER_COMMAND(analyze, setup);

@@ -1,0 +1,734 @@
+#include "tools/analyze/model_io.hpp"
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+#include <utility>
+
+namespace nccomp::tools::model_io {
+
+namespace cm = core::model;
+
+namespace {
+
+constexpr std::array<std::string_view, 3> kKindNames = {"tool_wear", "contour", "calib"};
+
+std::string where(std::string_view source, const toml::node& node, std::string_view key) {
+  std::ostringstream s;
+  s << source;
+  const auto& src = node.source();
+  if (src.begin.line > 0) s << ":" << src.begin.line << ":" << src.begin.column;
+  s << ": " << key;
+  return s.str();
+}
+
+[[noreturn]] void fail(const std::string& msg) { throw ModelIoError(msg); }
+
+void check_keys(const toml::table& t, std::string_view source, std::string_view path,
+                std::initializer_list<std::string_view> allowed) {
+  for (const auto& [k, v] : t) {
+    if (std::find(allowed.begin(), allowed.end(), k.str()) == allowed.end()) {
+      fail(where(source, v, std::string(path) + "." + std::string(k.str())) +
+           ": unknown key (allowed: " + [&] {
+             std::string a;
+             for (auto x : allowed) a += (a.empty() ? "" : ", ") + std::string(x);
+             return a;
+           }() + ")");
+    }
+  }
+}
+
+double get_number(const toml::node& n, std::string_view source, const std::string& key) {
+  if (auto d = n.value<double>(); d && (n.is_floating_point() || n.is_integer())) {
+    if (!std::isfinite(*d)) fail(where(source, n, key) + ": must be a finite number");
+    return *d;
+  }
+  fail(where(source, n, key) + ": must be a number");
+}
+
+std::string get_string(const toml::node& n, std::string_view source, const std::string& key) {
+  if (auto s = n.value<std::string>(); s && n.is_string()) return *s;
+  fail(where(source, n, key) + ": must be a string");
+}
+
+std::vector<std::string> get_strings(const toml::node& n, std::string_view source,
+                                     const std::string& key) {
+  const auto* arr = n.as_array();
+  if (arr == nullptr) fail(where(source, n, key) + ": must be an array of strings");
+  std::vector<std::string> out;
+  for (std::size_t i = 0; i < arr->size(); ++i) {
+    out.push_back(get_string(*arr->get(i), source, key + "[" + std::to_string(i) + "]"));
+  }
+  return out;
+}
+
+std::vector<double> get_numbers(const toml::node& n, std::string_view source,
+                                const std::string& key) {
+  const auto* arr = n.as_array();
+  if (arr == nullptr) fail(where(source, n, key) + ": must be an array of numbers");
+  std::vector<double> out;
+  for (std::size_t i = 0; i < arr->size(); ++i) {
+    out.push_back(get_number(*arr->get(i), source, key + "[" + std::to_string(i) + "]"));
+  }
+  return out;
+}
+
+std::uint8_t kinds_mask(const toml::node& n, std::string_view source, const std::string& key) {
+  std::uint8_t mask = 0;
+  for (const auto& k : get_strings(n, source, key)) {
+    const int i = kind_from_name(k);
+    if (i < 0) fail(where(source, n, key) + ": unknown kind '" + k + "' (tool_wear, contour, calib)");
+    mask = static_cast<std::uint8_t>(mask | (1U << static_cast<unsigned>(i)));
+  }
+  if (mask == 0) fail(where(source, n, key) + ": names no kind");
+  return mask;
+}
+
+int resolve_column(const std::string& name, std::vector<std::string>& extras, const toml::node& n,
+                   std::string_view source, const std::string& key) {
+  int c = cm::column_index(name, extras);
+  if (c >= 0) return c;
+  if (name == "measured_um" || name == "applied_um" || name.empty()) {
+    fail(where(source, n, key) + ": '" + name + "' cannot be a term's column");
+  }
+  if (extras.size() >= cm::kMaxExtraColumns) {
+    fail(where(source, n, key) + ": more than " + std::to_string(cm::kMaxExtraColumns) +
+         " extra columns");
+  }
+  extras.push_back(name);
+  return cm::column_index(name, extras);
+}
+
+std::string fmt_double(double v) {
+  char buf[40];
+  std::snprintf(buf, sizeof buf, "%.17g", v);
+  std::string s(buf);
+  if (s.find_first_of(".eEn") == std::string::npos) s += ".0";
+  return s;
+}
+
+std::string quote(std::string_view s) {
+  std::string out = "\"";
+  for (char c : s) {
+    if (c == '"' || c == '\\') out += '\\';
+    out += c;
+  }
+  return out + "\"";
+}
+
+std::string_view trim_view(std::string_view s) {
+  std::size_t b = 0;
+  std::size_t e = s.size();
+  while (b < e && (s[b] == ' ' || s[b] == '\t' || s[b] == '\r')) ++b;
+  while (e > b && (s[e - 1] == ' ' || s[e - 1] == '\t' || s[e - 1] == '\r')) --e;
+  return s.substr(b, e - b);
+}
+
+std::string trim(std::string_view s) { return std::string(trim_view(s)); }
+
+}  // namespace
+
+int kind_from_name(std::string_view name) noexcept {
+  for (std::size_t i = 0; i < kKindNames.size(); ++i) {
+    if (kKindNames[i] == name) return static_cast<int>(i);
+  }
+  return -1;
+}
+
+ModelFile read_model_table(const toml::table& root, std::string_view source, bool require_fitted) {
+  const auto* model = root["model"].as_table();
+  if (model == nullptr) fail(std::string(source) + ": no [model] table");
+  check_keys(*model, source, "model",
+             {"heldout_fraction", "alpha", "max_effects", "search_rows", "term", "search"});
+  ModelFile out;
+  cm::AnalysisConfig& cfg = out.config;
+  if (const auto* n = model->get("heldout_fraction")) {
+    cfg.heldout_fraction = get_number(*n, source, "model.heldout_fraction");
+    if (cfg.heldout_fraction < 0.0 || cfg.heldout_fraction > 0.5) {
+      fail(where(source, *n, "model.heldout_fraction") + ": must be within [0, 0.5]");
+    }
+  }
+  if (const auto* n = model->get("alpha")) {
+    cfg.alpha = get_number(*n, source, "model.alpha");
+    if (!(cfg.alpha > 0.0 && cfg.alpha < 0.5)) {
+      fail(where(source, *n, "model.alpha") + ": must be within (0, 0.5)");
+    }
+  }
+  if (const auto* n = model->get("max_effects")) {
+    const double v = get_number(*n, source, "model.max_effects");
+    if (v < 0.0 || v > 16.0 || std::floor(v) < v) {
+      fail(where(source, *n, "model.max_effects") + ": must be an integer within [0, 16]");
+    }
+    cfg.max_effects = static_cast<std::size_t>(v);
+  }
+  if (const auto* n = model->get("search_rows")) {
+    const double v = get_number(*n, source, "model.search_rows");
+    if (v < 100.0 || v > 1e6 || std::floor(v) < v) {
+      fail(where(source, *n, "model.search_rows") + ": must be an integer within [100, 1e6]");
+    }
+    cfg.search_rows = static_cast<std::size_t>(v);
+  }
+  const auto* terms = model->get("term");
+  if (terms == nullptr || !terms->is_array_of_tables()) {
+    fail(std::string(source) + ": model.term: declare at least one [[model.term]]");
+  }
+  const auto& arr = *terms->as_array();
+  for (std::size_t i = 0; i < arr.size(); ++i) {
+    const auto& t = *arr.get(i)->as_table();
+    const std::string key = "model.term[" + std::to_string(i) + "]";
+    check_keys(t, source, key,
+               {"name", "form", "column", "per", "kinds", "degree", "center", "scale", "groups",
+                "coef_um"});
+    cm::TermSpec s;
+    const auto* name = t.get("name");
+    if (name == nullptr) fail(where(source, t, key) + ".name: missing");
+    s.name = get_string(*name, source, key + ".name");
+    if (s.name.empty()) fail(where(source, *name, key + ".name") + ": must not be empty");
+    const auto* form = t.get("form");
+    if (form == nullptr) fail(where(source, t, key) + ".form: missing");
+    const std::string fname = get_string(*form, source, key + ".form");
+    if (!cm::parse_form(fname, s.form)) {
+      fail(where(source, *form, key + ".form") + ": unknown form '" + fname +
+           "' (constant, linear, poly, exp_rise, sine, step, lag)");
+    }
+    if (const auto* c = t.get("column")) {
+      s.column = resolve_column(get_string(*c, source, key + ".column"), out.extra_columns, *c,
+                                source, key + ".column");
+    } else if (s.form != cm::Form::kConstant) {
+      fail(where(source, t, key) + ".column: missing (form " + fname + " needs a column)");
+    }
+    if (const auto* p = t.get("per")) {
+      const auto names = get_strings(*p, source, key + ".per");
+      if (names.size() > 2) fail(where(source, *p, key + ".per") + ": at most two columns");
+      for (std::size_t k = 0; k < names.size(); ++k) {
+        s.per[k] = resolve_column(names[k], out.extra_columns, *p, source, key + ".per");
+      }
+    }
+    if (const auto* k = t.get("kinds")) s.kind_mask = kinds_mask(*k, source, key + ".kinds");
+    if (const auto* d = t.get("degree")) {
+      const double v = get_number(*d, source, key + ".degree");
+      if (v < 1.0 || v > 3.0 || std::floor(v) < v) {
+        fail(where(source, *d, key + ".degree") + ": must be 1, 2 or 3");
+      }
+      s.degree = static_cast<int>(v);
+    }
+    if (const auto* c = t.get("center")) s.center = get_number(*c, source, key + ".center");
+    if (const auto* c = t.get("scale")) {
+      s.scale = get_number(*c, source, key + ".scale");
+      if (!(s.scale > 0.0)) fail(where(source, *c, key + ".scale") + ": must be > 0");
+    } else if (s.form == cm::Form::kExpRise || s.form == cm::Form::kSine ||
+               s.form == cm::Form::kLag || s.form == cm::Form::kPoly) {
+      fail(where(source, t, key) + ".scale: missing (form " + fname +
+           " needs its scale / period / time constant)");
+    }
+    if (s.form == cm::Form::kStep && t.get("center") == nullptr) {
+      fail(where(source, t, key) + ".center: missing (form step needs the change point)");
+    }
+    const auto* g = t.get("groups");
+    const auto* c = t.get("coef_um");
+    if ((g == nullptr) != (c == nullptr)) {
+      fail(where(source, t, key) + ": groups and coef_um go together");
+    }
+    if (g != nullptr) {
+      cm::Term term;
+      term.spec = s;
+      const auto* ga = g->as_array();
+      if (ga == nullptr) fail(where(source, *g, key + ".groups") + ": must be an array of [a, b]");
+      for (std::size_t j = 0; j < ga->size(); ++j) {
+        const auto v = get_numbers(*ga->get(j), source, key + ".groups[" + std::to_string(j) + "]");
+        if (v.size() != 2) {
+          fail(where(source, *ga->get(j), key + ".groups[" + std::to_string(j) + "]") +
+               ": must have two numbers");
+        }
+        term.groups.push_back({v[0], v[1]});
+      }
+      term.coef = get_numbers(*c, source, key + ".coef_um");
+      if (term.coef.size() != term.groups.size() * cm::basis_count(s.form, s.degree)) {
+        fail(where(source, *c, key + ".coef_um") + ": expected " +
+             std::to_string(term.groups.size() * cm::basis_count(s.form, s.degree)) +
+             " values (groups × basis functions), got " + std::to_string(term.coef.size()));
+      }
+      out.fitted_terms.push_back(std::move(term));
+    } else if (require_fitted) {
+      fail(where(source, t, key) + ": no groups / coef_um: not a fitted model");
+    }
+    cfg.declared.push_back(s);
+  }
+  if (!out.fitted_terms.empty() && out.fitted_terms.size() != cfg.declared.size()) {
+    fail(std::string(source) + ": model.term: either every term or none carries coefficients");
+  }
+  if (const auto* sn = model->get("search")) {
+    const auto* st = sn->as_table();
+    if (st == nullptr) fail(where(source, *sn, "model.search") + ": must be a table");
+    check_keys(*st, source, "model.search",
+               {"kinds", "exclude", "linear_columns", "lag_columns", "period_min_mm"});
+    cm::SearchOptions& so = cfg.search;
+    if (const auto* n = st->get("kinds")) so.kind_mask = kinds_mask(*n, source, "model.search.kinds");
+    if (const auto* n = st->get("exclude")) so.exclude = get_strings(*n, source, "model.search.exclude");
+    for (const auto* list : {"linear_columns", "lag_columns"}) {
+      if (const auto* n = st->get(list)) {
+        const std::string key = std::string("model.search.") + list;
+        for (const auto& name : get_strings(*n, source, key)) {
+          const int c = resolve_column(name, out.extra_columns, *n, source, key);
+          (std::string_view(list) == "linear_columns" ? so.linear_columns : so.lag_columns)
+              .push_back(c);
+        }
+      }
+    }
+    if (const auto* n = st->get("period_min_mm")) {
+      so.period_min_mm = get_number(*n, source, "model.search.period_min_mm");
+      if (!(so.period_min_mm > 0.0)) {
+        fail(where(source, *n, "model.search.period_min_mm") + ": must be > 0");
+      }
+    }
+  }
+  return out;
+}
+
+ModelFile read_model_text(std::string_view text, std::string_view source, bool require_fitted) {
+  toml::table root;
+  try {
+    root = toml::parse(text, source);
+  } catch (const toml::parse_error& e) {
+    std::ostringstream s;
+    s << source << ":" << e.source().begin.line << ":" << e.source().begin.column << ": "
+      << e.description();
+    throw ModelIoError(s.str());
+  }
+  return read_model_table(root, source, require_fitted);
+}
+
+core::model::Model load_model_file(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw ModelIoError(path + ": cannot open");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  ModelFile f = read_model_text(ss.str(), path, true);
+  return cm::Model(f.extra_columns, std::move(f.fitted_terms));
+}
+
+std::string write_model_toml(const core::model::Model& model,
+                             const core::model::AnalysisConfig& config,
+                             const std::vector<std::string>& header) {
+  std::ostringstream o;
+  for (const auto& h : header) o << "# " << h << "\n";
+  const auto& ex = model.extra_columns();
+  o << "[model]\n";
+  o << "heldout_fraction = " << fmt_double(config.heldout_fraction) << "\n";
+  o << "alpha = " << fmt_double(config.alpha) << "\n";
+  o << "max_effects = " << config.max_effects << "\n";
+  o << "search_rows = " << config.search_rows << "\n";
+  for (const cm::Term& t : model.terms()) {
+    const cm::TermSpec& s = t.spec;
+    o << "\n[[model.term]]\n";
+    o << "name = " << quote(s.name) << "\n";
+    o << "form = " << quote(cm::form_name(s.form)) << "\n";
+    if (s.form != cm::Form::kConstant) o << "column = " << quote(cm::column_name(s.column, ex)) << "\n";
+    if (s.per[0] >= 0) {
+      o << "per = [" << quote(cm::column_name(s.per[0], ex));
+      if (s.per[1] >= 0) o << ", " << quote(cm::column_name(s.per[1], ex));
+      o << "]\n";
+    }
+    if (s.kind_mask != 0x7) {
+      o << "kinds = [";
+      bool first = true;
+      for (std::size_t k = 0; k < kKindNames.size(); ++k) {
+        if ((s.kind_mask & (1U << k)) == 0U) continue;
+        o << (first ? "" : ", ") << quote(kKindNames[k]);
+        first = false;
+      }
+      o << "]\n";
+    }
+    if (s.form == cm::Form::kPoly) o << "degree = " << s.degree << "\n";
+    if (s.form == cm::Form::kPoly || s.form == cm::Form::kStep) {
+      o << "center = " << fmt_double(s.center) << "\n";
+    }
+    if (s.form == cm::Form::kPoly || cm::has_nonlinear_parameter(s.form)) {
+      if (s.form != cm::Form::kStep) o << "scale = " << fmt_double(s.scale) << "\n";
+    }
+    o << "groups = [";
+    for (std::size_t g = 0; g < t.groups.size(); ++g) {
+      o << (g ? ", " : "") << "[" << fmt_double(t.groups[g][0]) << ", "
+        << fmt_double(t.groups[g][1]) << "]";
+    }
+    o << "]\ncoef_um = [";
+    for (std::size_t c = 0; c < t.coef.size(); ++c) o << (c ? ", " : "") << fmt_double(t.coef[c]);
+    o << "]\n";
+  }
+  const cm::SearchOptions& so = config.search;
+  o << "\n[model.search]\n";
+  o << "period_min_mm = " << fmt_double(so.period_min_mm) << "\n";
+  auto list = [&](const char* key, const std::vector<int>& cols) {
+    if (cols.empty()) return;
+    o << key << " = [";
+    for (std::size_t i = 0; i < cols.size(); ++i) o << (i ? ", " : "") << quote(cm::column_name(cols[i], ex));
+    o << "]\n";
+  };
+  list("linear_columns", so.linear_columns);
+  list("lag_columns", so.lag_columns);
+  if (!so.exclude.empty()) {
+    o << "exclude = [";
+    for (std::size_t i = 0; i < so.exclude.size(); ++i) o << (i ? ", " : "") << quote(so.exclude[i]);
+    o << "]\n";
+  }
+  return o.str();
+}
+
+// ---------------------------------------------------------------------------------------------
+// Mapping files.
+
+Mapping read_mapping_text(std::string_view text, std::string_view source) {
+  toml::table root;
+  try {
+    root = toml::parse(text, source);
+  } catch (const toml::parse_error& e) {
+    std::ostringstream s;
+    s << source << ":" << e.source().begin.line << ":" << e.source().begin.column << ": "
+      << e.description();
+    throw ModelIoError(s.str());
+  }
+  check_keys(root, source, "", {"columns", "extra", "scale", "constant", "wide"});
+  Mapping m;
+  auto table = [&](const char* name) -> const toml::table* {
+    const auto* n = root.get(name);
+    if (n == nullptr) return nullptr;
+    if (!n->is_table()) fail(where(source, *n, name) + ": must be a table");
+    return n->as_table();
+  };
+  auto is_target = [](const std::string& k) {
+    return cm::column_index(k, {}) >= 0 || k == "measured_um" || k == "applied_um";
+  };
+  if (const auto* t = table("columns")) {
+    for (const auto& [k, v] : *t) {
+      const std::string key = "columns." + std::string(k.str());
+      if (!is_target(std::string(k.str()))) {
+        fail(where(source, v, key) + ": not a measurement-log column");
+      }
+      m.columns.emplace_back(std::string(k.str()), trim(get_string(v, source, key)));
+    }
+  }
+  if (const auto* t = table("extra")) {
+    for (const auto& [k, v] : *t) {
+      const std::string key = "extra." + std::string(k.str());
+      if (is_target(std::string(k.str()))) fail(where(source, v, key) + ": a standard column name");
+      m.extra.emplace_back(std::string(k.str()), trim(get_string(v, source, key)));
+    }
+  }
+  if (const auto* t = table("scale")) {
+    for (const auto& [k, v] : *t) {
+      m.scale.emplace_back(std::string(k.str()), get_number(v, source, "scale." + std::string(k.str())));
+    }
+  }
+  if (const auto* t = table("constant")) {
+    for (const auto& [k, v] : *t) {
+      const std::string name(k.str());
+      const std::string key = "constant." + name;
+      if (!is_target(name)) fail(where(source, v, key) + ": not a measurement-log column");
+      if (name == "kind") {
+        const std::string kind = get_string(v, source, key);
+        const int i = kind_from_name(kind);
+        if (i < 0) fail(where(source, v, key) + ": unknown kind '" + kind + "'");
+        m.constant.emplace_back(name, static_cast<double>(i));
+      } else {
+        m.constant.emplace_back(name, get_number(v, source, key));
+      }
+    }
+  }
+  if (const auto* t = table("wide")) {
+    check_keys(*t, source, "wide", {"measured_um", "points"});
+    const auto* mu = t->get("measured_um");
+    const auto* pts = t->get("points");
+    if (mu == nullptr || pts == nullptr) {
+      fail(where(source, *t, "wide") + ": needs measured_um and points");
+    }
+    m.wide_measured = get_strings(*mu, source, "wide.measured_um");
+    for (auto& s : m.wide_measured) s = trim(s);
+    m.wide_points = get_numbers(*pts, source, "wide.points");
+    if (m.wide_measured.size() != m.wide_points.size() || m.wide_measured.empty()) {
+      fail(where(source, *t, "wide") + ": measured_um and points must have the same, non-zero length");
+    }
+  }
+  for (const auto& [k, v] : m.scale) {
+    const bool known = is_target(k) || std::any_of(m.extra.begin(), m.extra.end(),
+                                                   [&](const auto& e) { return e.first == k; });
+    if (!known) fail(std::string(source) + ": scale." + k + ": no such mapped column");
+  }
+  return m;
+}
+
+Mapping read_mapping_file(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw ModelIoError(path + ": cannot open");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return read_mapping_text(ss.str(), path);
+}
+
+// ---------------------------------------------------------------------------------------------
+// CSV.
+
+namespace {
+
+// Splits one CSV line (RFC 4180 quotes, no embedded newlines) into `fields`, reusing their
+// storage from line to line. Returns the field count, or 0 on a bad quote.
+std::size_t split_csv(std::string_view line, std::vector<std::string>& fields) {
+  std::size_t n = 0;
+  std::size_t i = 0;
+  while (true) {
+    if (fields.size() <= n) fields.emplace_back();
+    std::string& f = fields[n++];
+    f.clear();
+    if (i < line.size() && line[i] == '"') {
+      ++i;
+      while (true) {
+        if (i >= line.size()) return 0;
+        if (line[i] == '"') {
+          if (i + 1 < line.size() && line[i + 1] == '"') {
+            f += '"';
+            i += 2;
+            continue;
+          }
+          ++i;
+          break;
+        }
+        f += line[i++];
+      }
+      if (i < line.size() && line[i] != ',') return 0;
+    } else {
+      const std::size_t e = std::min(line.find(',', i), line.size());
+      f.assign(line.substr(i, e - i));
+      i = e;
+    }
+    if (i >= line.size()) break;
+    ++i;  // the comma
+  }
+  return n;
+}
+
+struct Target {
+  int column{-1};        // Row / Dataset column index, or -1 for measured/applied
+  int special{0};        // 1 measured_um, 2 applied_um
+  int source_field{-1};  // CSV field index
+  double scale{1.0};
+  std::string name;
+};
+
+[[noreturn]] void csv_fail(std::string_view source, std::size_t line, const std::string& column,
+                           const std::string& msg) {
+  std::ostringstream s;
+  s << source << ":" << line;
+  if (!column.empty()) s << ": column '" << column << "'";
+  s << ": " << msg;
+  throw ModelIoError(s.str());
+}
+
+}  // namespace
+
+void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
+              core::model::Dataset& data) {
+  std::string line;
+  std::size_t line_no = 1;
+  if (!std::getline(in, line)) csv_fail(source, 1, "", "empty file (no header row)");
+  if (line.size() >= 3 && line.compare(0, 3, "\xEF\xBB\xBF") == 0) line.erase(0, 3);
+  std::vector<std::string> fields;
+  std::size_t nf = split_csv(line, fields);
+  if (nf == 0) csv_fail(source, 1, "", "bad quoting in the header row");
+  std::vector<std::string> header;
+  for (std::size_t i = 0; i < nf; ++i) header.push_back(trim(fields[i]));
+  auto find = [&](const std::string& h) -> int {
+    for (std::size_t i = 0; i < header.size(); ++i) {
+      if (header[i] == h) return static_cast<int>(i);
+    }
+    return -1;
+  };
+  const bool mapped = !mapping.empty();
+  std::vector<Target> targets;
+  std::vector<std::pair<int, double>> constants;  // column (or -1/-2 special), value
+  auto scale_of = [&](const std::string& name) {
+    for (const auto& [k, v] : mapping.scale) {
+      if (k == name) return v;
+    }
+    return 1.0;
+  };
+  auto add_target = [&](const std::string& name, const std::string& header_name, int column,
+                        int special) {
+    const int f = find(header_name);
+    if (f < 0) {
+      csv_fail(source, 1, header_name,
+               mapped ? "not in the header (mapped to '" + name + "')" : "required column missing");
+    }
+    targets.push_back({column, special, f, scale_of(name), header_name});
+  };
+  if (data.columns.size() < cm::kStandardColumns + data.extra_columns.size()) {
+    data.columns.resize(cm::kStandardColumns + data.extra_columns.size());
+  }
+  if (!mapped) {
+    for (std::size_t c = 0; c < cm::kStandardColumns; ++c) {
+      add_target(std::string(cm::kStandardColumnNames[c]), std::string(cm::kStandardColumnNames[c]),
+                 static_cast<int>(c), 0);
+    }
+    add_target("measured_um", "measured_um", -1, 1);
+    add_target("applied_um", "applied_um", -1, 2);
+    for (std::size_t e = 0; e < data.extra_columns.size(); ++e) {
+      add_target(data.extra_columns[e], data.extra_columns[e],
+                 static_cast<int>(cm::kStandardColumns + e), 0);
+    }
+  } else {
+    bool have_measured = !mapping.wide_measured.empty();
+    for (const auto& [name, h] : mapping.columns) {
+      if (name == "measured_um") {
+        if (have_measured) csv_fail(source, 1, h, "measured_um mapped twice (columns and wide)");
+        have_measured = true;
+        add_target(name, h, -1, 1);
+      } else if (name == "applied_um") {
+        add_target(name, h, -1, 2);
+      } else {
+        add_target(name, h, cm::column_index(name, {}), 0);
+      }
+    }
+    if (!have_measured) csv_fail(source, 1, "", "the mapping names no measured_um column");
+    for (std::size_t e = 0; e < data.extra_columns.size(); ++e) {
+      bool found = false;
+      for (const auto& [name, h] : mapping.extra) {
+        if (name == data.extra_columns[e]) {
+          add_target(name, h, static_cast<int>(cm::kStandardColumns + e), 0);
+          found = true;
+        }
+      }
+      if (!found) {
+        csv_fail(source, 1, data.extra_columns[e],
+                 "the model uses this extra column but the mapping's [extra] does not name it");
+      }
+    }
+    for (const auto& [name, v] : mapping.constant) {
+      if (name == "measured_um" || name == "applied_um") {
+        constants.emplace_back(name == "measured_um" ? -1 : -2, v);
+      } else {
+        constants.emplace_back(cm::column_index(name, {}), v);
+      }
+    }
+  }
+  std::vector<int> wide_fields;
+  for (const auto& h : mapping.wide_measured) {
+    const int f = find(h);
+    if (f < 0) csv_fail(source, 1, h, "not in the header (mapping [wide])");
+    wide_fields.push_back(f);
+  }
+  const double measured_scale = scale_of("measured_um");
+  const std::size_t time_col = static_cast<std::size_t>(cm::Column::kTime);
+  double last_time = -std::numeric_limits<double>::infinity();
+  const std::size_t start_rows = data.rows();
+  auto& cols = data.columns;
+  // Columns this file provides; the others keep their length and are padded with "unknown".
+  std::vector<std::size_t> present;
+  for (const Target& t : targets) {
+    if (t.column >= 0) present.push_back(static_cast<std::size_t>(t.column));
+  }
+  for (const auto& [c, v] : constants) {
+    if (c >= 0) present.push_back(static_cast<std::size_t>(c));
+  }
+  if (!wide_fields.empty()) present.push_back(static_cast<std::size_t>(cm::Column::kPoint));
+  std::sort(present.begin(), present.end());
+  present.erase(std::unique(present.begin(), present.end()), present.end());
+  for (std::size_t c : present) cols[c].resize(start_rows, cm::kUnknown);
+  cm::Row values;
+  while (std::getline(in, line)) {
+    ++line_no;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (trim(line).empty()) continue;
+    nf = split_csv(line, fields);
+    if (nf == 0) csv_fail(source, line_no, "", "bad quoting");
+    values.fill(cm::kUnknown);
+    double measured = cm::kUnknown;
+    double applied = mapped ? 0.0 : cm::kUnknown;
+    for (const auto& [c, v] : constants) {
+      if (c == -1) {
+        measured = v;
+      } else if (c == -2) {
+        applied = v;
+      } else {
+        values[static_cast<std::size_t>(c)] = v;
+      }
+    }
+    for (const Target& t : targets) {
+      if (static_cast<std::size_t>(t.source_field) >= nf) {
+        csv_fail(source, line_no, t.name,
+                 "missing (the row has " + std::to_string(nf) + " fields, the header " +
+                     std::to_string(header.size()) + ")");
+      }
+      const std::string_view cell = trim_view(fields[static_cast<std::size_t>(t.source_field)]);
+      double v = cm::kUnknown;
+      if (!cell.empty()) {
+        if (!mapped && t.column == static_cast<int>(cm::Column::kKind)) {
+          const int k = kind_from_name(cell);
+          if (k < 0) csv_fail(source, line_no, t.name, "'" + std::string(cell) + "' is not tool_wear, contour or calib");
+          v = k;
+        } else {
+          const char* b = cell.data();
+          const char* e = b + cell.size();
+          if (*b == '+') ++b;
+          auto [p, ec] = std::from_chars(b, e, v);
+          if (ec != std::errc() || p != e || !std::isfinite(v)) {
+            csv_fail(source, line_no, t.name, "'" + std::string(cell) + "' is not a finite number");
+          }
+          v *= t.scale;
+        }
+      }
+      if (t.special == 1) {
+        measured = v;
+      } else if (t.special == 2) {
+        applied = v;
+      } else {
+        values[static_cast<std::size_t>(t.column)] = v;
+      }
+    }
+    for (std::size_t c : {static_cast<std::size_t>(cm::Column::kPart),
+                          static_cast<std::size_t>(cm::Column::kTool),
+                          static_cast<std::size_t>(cm::Column::kPoint)}) {
+      if (std::isfinite(values[c]) && std::floor(values[c]) < values[c]) {
+        csv_fail(source, line_no, std::string(cm::kStandardColumnNames[c]),
+                 "must be an integer");
+      }
+    }
+    if (!std::isfinite(values[static_cast<std::size_t>(cm::Column::kKind)])) {
+      csv_fail(source, line_no, "kind", mapped ? "no kind (map it or set [constant] kind)" : "empty");
+    }
+    const double t_s = values[time_col];
+    if (std::isfinite(t_s)) {
+      if (t_s < last_time) {
+        csv_fail(source, line_no, "time_s", "goes backwards (" + std::to_string(t_s) + " after " +
+                                                std::to_string(last_time) + "); the log must be in time order");
+      }
+      last_time = t_s;
+    }
+    const std::size_t copies = wide_fields.empty() ? 1 : wide_fields.size();
+    for (std::size_t w = 0; w < copies; ++w) {
+      double y = measured;
+      if (!wide_fields.empty()) {
+        const auto f = static_cast<std::size_t>(wide_fields[w]);
+        if (f >= nf) csv_fail(source, line_no, mapping.wide_measured[w], "missing");
+        const std::string_view cell = trim_view(fields[f]);
+        y = cm::kUnknown;
+        if (!cell.empty()) {
+          auto [p, ec] = std::from_chars(cell.data(), cell.data() + cell.size(), y);
+          if (ec != std::errc() || p != cell.data() + cell.size() || !std::isfinite(y)) {
+            csv_fail(source, line_no, mapping.wide_measured[w], "'" + std::string(cell) + "' is not a finite number");
+          }
+        }
+        values[static_cast<std::size_t>(cm::Column::kPoint)] = mapping.wide_points[w];
+      }
+      if (std::isfinite(y)) y *= measured_scale;
+      for (std::size_t c : present) cols[c].push_back(values[c]);
+      data.target_um.push_back(y + (std::isfinite(applied) ? applied : 0.0));
+    }
+  }
+  for (auto& c : cols) {
+    if (!c.empty()) c.resize(data.target_um.size(), cm::kUnknown);
+  }
+  if (data.rows() == start_rows) csv_fail(source, line_no, "", "no data rows");
+}
+
+}  // namespace nccomp::tools::model_io

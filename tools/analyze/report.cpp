@@ -1,0 +1,284 @@
+#include "tools/analyze/report.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <sstream>
+
+namespace nccomp::tools::analyze {
+
+namespace cm = core::model;
+
+namespace {
+
+std::string num(double v, int digits = 6) {
+  if (!std::isfinite(v)) return "null";
+  char buf[48];
+  std::snprintf(buf, sizeof buf, "%.*g", digits, v);
+  return buf;
+}
+
+std::string json_string(const std::string& s) {
+  std::string o = "\"";
+  for (char c : s) {
+    if (c == '"' || c == '\\') {
+      o += '\\';
+      o += c;
+    } else if (static_cast<unsigned char>(c) < 0x20) {
+      char buf[8];
+      std::snprintf(buf, sizeof buf, "\\u%04x", static_cast<unsigned>(static_cast<unsigned char>(c)));
+      o += buf;
+    } else {
+      o += c;
+    }
+  }
+  return o + "\"";
+}
+
+std::string unit_suffix(const std::string& column) {
+  const auto u = column.rfind('_');
+  if (u == std::string::npos || u + 1 >= column.size()) return "";
+  const std::string s = column.substr(u + 1);
+  if (s == "s" || s == "mm" || s == "c" || s == "deg" || s == "um" || s == "rpm") return "_" + s;
+  return "";
+}
+
+std::string xml(const std::string& s) {
+  std::string o;
+  for (char c : s) {
+    if (c == '<') {
+      o += "&lt;";
+    } else if (c == '>') {
+      o += "&gt;";
+    } else if (c == '&') {
+      o += "&amp;";
+    } else {
+      o += c;
+    }
+  }
+  return o;
+}
+
+const cm::Term* find_term(const cm::Model& model, const cm::TermSpec& spec) {
+  for (const auto& t : model.terms()) {
+    if (t.spec.name == spec.name && t.spec.form == spec.form && t.spec.column == spec.column) {
+      return &t;
+    }
+  }
+  return nullptr;
+}
+
+}  // namespace
+
+std::string safe_name(const std::string& column) {
+  std::string o;
+  for (char c : column) {
+    const bool ok = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') ||
+                    c == '_' || c == '-';
+    o += ok ? c : '_';
+  }
+  return o;
+}
+
+std::string params_json(const cm::TermSpec& spec, const cm::Model& model,
+                        const std::vector<std::string>& extras) {
+  const std::string col = cm::column_name(spec.column, extras);
+  const std::string unit = unit_suffix(col);
+  std::ostringstream o;
+  o << "{";
+  switch (spec.form) {
+    case cm::Form::kExpRise:
+      o << (col == "time_s" ? "\"time_constant_s\": " : "\"scale_length" + unit + "\": ")
+        << num(spec.scale);
+      break;
+    case cm::Form::kLag:
+      o << "\"time_constant_s\": " << num(spec.scale);
+      break;
+    case cm::Form::kSine:
+      o << "\"period" << unit << "\": " << num(spec.scale);
+      break;
+    case cm::Form::kStep:
+      o << "\"change_at" << unit << "\": " << num(spec.center);
+      break;
+    case cm::Form::kPoly:
+      o << "\"degree\": " << spec.degree << ", \"center" << unit << "\": " << num(spec.center)
+        << ", \"scale" << unit << "\": " << num(spec.scale);
+      break;
+    default:
+      break;
+  }
+  const cm::Term* t = find_term(model, spec);
+  if (t != nullptr) {
+    const bool first = spec.form == cm::Form::kConstant || spec.form == cm::Form::kLinear;
+    o << (first ? "" : ", ") << "\"coef_um\": [";
+    for (std::size_t i = 0; i < t->coef.size(); ++i) o << (i ? ", " : "") << num(t->coef[i], 8);
+    o << "]";
+  }
+  o << "}";
+  return o.str();
+}
+
+std::string summary_json(const cm::Dataset& data, const cm::AnalysisResult& result) {
+  std::ostringstream o;
+  o << "{\n  \"declared_rms_um\": " << num(result.declared.fitted.rms_um) << ",\n";
+  o << "  \"effects\": [";
+  for (std::size_t i = 0; i < result.effects.size(); ++i) {
+    const auto& e = result.effects[i];
+    o << (i ? "," : "") << "\n    {\"name\": " << json_string(e.spec.name)
+      << ", \"column\": " << json_string(cm::column_name(e.spec.column, data.extra_columns))
+      << ", \"form\": " << json_string(std::string(cm::form_name(e.spec.form)))
+      << ", \"params\": " << params_json(e.spec, result.fitted_model, data.extra_columns)
+      << ", \"rms_before_um\": " << num(e.before.fitted.rms_um)
+      << ", \"rms_after_um\": " << num(e.after.fitted.rms_um)
+      << ", \"heldout_rms_before_um\": " << num(e.before.heldout.rms_um)
+      << ", \"heldout_rms_after_um\": " << num(e.after.heldout.rms_um)
+      << ", \"p_value\": " << num(e.p_value, 4) << "}";
+  }
+  o << (result.effects.empty() ? "" : "\n  ") << "],\n";
+  o << "  \"final_rms_um\": " << num(result.final_stats.fitted.rms_um) << ",\n";
+  o << "  \"noise_floor_um\": " << num(result.noise_floor_um) << "\n}\n";
+  return o.str();
+}
+
+std::vector<int> plotted_columns(const cm::Dataset& data) {
+  std::vector<int> out;
+  for (std::size_t c = 0; c < data.columns.size(); ++c) {
+    if (c == static_cast<std::size_t>(cm::Column::kKind)) continue;
+    const auto& v = data.columns[c];
+    double lo = INFINITY;
+    double hi = -INFINITY;
+    for (double x : v) {
+      if (std::isfinite(x)) {
+        lo = std::min(lo, x);
+        hi = std::max(hi, x);
+      }
+    }
+    if (hi > lo) out.push_back(static_cast<int>(c));
+  }
+  return out;
+}
+
+std::string residual_svg(const cm::Dataset& data, const cm::AnalysisResult& result, int column) {
+  const auto& x = data.column(column);
+  const std::string name = cm::column_name(column, data.extra_columns);
+  constexpr double kW = 900.0;
+  constexpr double kH = 320.0;
+  constexpr double kPanelW = 400.0;
+  constexpr double kPanelH = 240.0;
+  constexpr double kTop = 40.0;
+  constexpr std::size_t kMaxPoints = 3000;
+  double xlo = INFINITY;
+  double xhi = -INFINITY;
+  double ymax = 0.0;
+  for (std::size_t i = 0; i < x.size(); ++i) {
+    if (!std::isfinite(x[i])) continue;
+    xlo = std::min(xlo, x[i]);
+    xhi = std::max(xhi, x[i]);
+    for (double r : {result.declared_residual_um[i], result.final_residual_um[i]}) {
+      if (std::isfinite(r)) ymax = std::max(ymax, std::fabs(r));
+    }
+  }
+  if (!(xhi > xlo)) xhi = xlo + 1.0;
+  if (!(ymax > 0.0)) ymax = 1.0;
+  ymax *= 1.05;
+  const std::size_t stride = std::max<std::size_t>(1, x.size() / kMaxPoints);
+  std::ostringstream o;
+  o << "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" << kW << "\" height=\"" << kH
+    << "\" font-family=\"sans-serif\" font-size=\"12\">\n";
+  o << "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n";
+  const std::array<std::pair<const std::vector<double>*, const char*>, 2> panels = {
+      std::pair{&result.declared_residual_um, "declared model"},
+      std::pair{&result.final_residual_um, "after the added effects"}};
+  for (std::size_t p = 0; p < 2; ++p) {
+    const double ox = 60.0 + static_cast<double>(p) * (kPanelW + 60.0);
+    const auto& r = *panels[p].first;
+    o << "<g>\n<text x=\"" << ox << "\" y=\"20\" font-weight=\"bold\">residual [µm] vs "
+      << xml(name) << " — " << panels[p].second << "</text>\n";
+    o << "<rect x=\"" << ox << "\" y=\"" << kTop << "\" width=\"" << kPanelW << "\" height=\""
+      << kPanelH << "\" fill=\"none\" stroke=\"#444\"/>\n";
+    const double y0 = kTop + kPanelH / 2.0;
+    o << "<line x1=\"" << ox << "\" y1=\"" << y0 << "\" x2=\"" << ox + kPanelW << "\" y2=\"" << y0
+      << "\" stroke=\"#aaa\" stroke-dasharray=\"4 3\"/>\n";
+    o << "<text x=\"" << ox - 5 << "\" y=\"" << kTop + 10 << "\" text-anchor=\"end\">"
+      << num(ymax, 3) << "</text>\n";
+    o << "<text x=\"" << ox - 5 << "\" y=\"" << y0 + 4 << "\" text-anchor=\"end\">0</text>\n";
+    o << "<text x=\"" << ox - 5 << "\" y=\"" << kTop + kPanelH << "\" text-anchor=\"end\">"
+      << num(-ymax, 3) << "</text>\n";
+    o << "<text x=\"" << ox << "\" y=\"" << kTop + kPanelH + 16 << "\">" << num(xlo, 5)
+      << "</text>\n";
+    o << "<text x=\"" << ox + kPanelW << "\" y=\"" << kTop + kPanelH + 16
+      << "\" text-anchor=\"end\">" << num(xhi, 5) << "</text>\n";
+    o << "<text x=\"" << ox + kPanelW / 2 << "\" y=\"" << kTop + kPanelH + 32
+      << "\" text-anchor=\"middle\">" << xml(name) << "</text>\n";
+    for (std::size_t i = 0; i < x.size(); i += stride) {
+      if (!std::isfinite(x[i]) || !std::isfinite(r[i])) continue;
+      const double px = ox + (x[i] - xlo) / (xhi - xlo) * kPanelW;
+      const double py = y0 - r[i] / ymax * (kPanelH / 2.0);
+      o << "<circle cx=\"" << num(px, 5) << "\" cy=\"" << num(py, 5) << "\" r=\"1.6\" fill=\""
+        << (result.heldout[i] != 0U ? "#e07000" : "#1f5fa8") << "\" fill-opacity=\"0.6\"/>\n";
+    }
+    o << "</g>\n";
+  }
+  o << "<text x=\"60\" y=\"" << kH - 8
+    << "\"><tspan fill=\"#1f5fa8\">● fitted rows</tspan>  <tspan fill=\"#e07000\">● held-out "
+       "rows</tspan></text>\n";
+  o << "</svg>\n";
+  return o.str();
+}
+
+std::string report_markdown(const cm::Dataset& data, const cm::AnalysisResult& result,
+                            const std::vector<std::string>& inputs,
+                            const std::vector<int>& plotted) {
+  std::ostringstream o;
+  const auto& ex = data.extra_columns;
+  o << "# nccomp analyze — report\n\n";
+  o << "Inputs: ";
+  for (std::size_t i = 0; i < inputs.size(); ++i) o << (i ? ", " : "") << "`" << inputs[i] << "`";
+  o << "\n\nRows: " << data.rows() << " (fitted " << result.declared.fitted.rows << ", held out "
+    << result.declared.heldout.rows << ": time_s ≥ " << num(result.split_time_s, 8) << ").\n\n";
+  o << "Noise floor (successive differences of the final residual per series): **"
+    << num(result.noise_floor_um, 3) << " µm**.\n\n";
+  o << "## Error before and after each step\n\n";
+  o << "| step | effect | column | form | parameter | fitted RMS [µm] | fitted max [µm] | held-out "
+       "RMS [µm] | held-out max [µm] | p (adjusted) |\n";
+  o << "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n";
+  auto row = [&](const std::string& step, const std::string& eff, const std::string& col,
+                 const std::string& form, const std::string& par, const cm::FitStats& s,
+                 const std::string& p) {
+    o << "| " << step << " | " << eff << " | " << col << " | " << form << " | " << par << " | "
+      << num(s.fitted.rms_um, 4) << " | " << num(s.fitted.max_um, 4) << " | "
+      << num(s.heldout.rms_um, 4) << " | " << num(s.heldout.max_um, 4) << " | " << p << " |\n";
+  };
+  row("0", "declared model", "", "", "", result.declared, "");
+  for (std::size_t i = 0; i < result.effects.size(); ++i) {
+    const auto& e = result.effects[i];
+    row(std::to_string(i + 1), "+ " + e.spec.name, cm::column_name(e.spec.column, ex),
+        std::string(cm::form_name(e.spec.form)),
+        "`" + params_json(e.spec, result.fitted_model, ex) + "`", e.after, num(e.p_value, 3));
+  }
+  o << "\nAn effect is added when its nested-model F-test p-value, multiplied by the number of "
+       "candidates and by its search multiplicity, is below alpha, and the held-out RMS drops.\n";
+  o << "\n## Candidates tried at each step (best first)\n\n";
+  for (std::size_t s = 0; s < result.steps.size(); ++s) {
+    o << "Step " << s + 1 << ":\n\n| candidate | column | form | parameter | share of residual "
+                             "SS removed | p (adjusted) | held-out better |\n| --- | --- | --- | "
+                             "--- | --- | --- | --- |\n";
+    for (const auto& c : result.steps[s]) {
+      o << "| " << c.name << " | " << c.column << " | " << cm::form_name(c.form) << " | "
+        << num(c.parameter, 5) << " | " << num(c.rss_reduction_fraction, 3) << " | "
+        << (c.refitted ? num(c.p_value, 3) : "—") << " | "
+        << (c.refitted ? (c.heldout_improved ? "yes" : "no") : "—") << " |\n";
+    }
+    o << "\n";
+  }
+  o << "## Residual against each context column\n\n";
+  o << "Left: the declared model; right: after the added effects. Blue: fitted rows; orange: "
+       "held-out rows.\n\n";
+  for (int c : plotted) {
+    const std::string name = cm::column_name(c, ex);
+    o << "![residual vs " << name << "](plots/residual_" << safe_name(name) << ".svg)\n\n";
+  }
+  return o.str();
+}
+
+}  // namespace nccomp::tools::analyze
