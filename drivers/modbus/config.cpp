@@ -317,11 +317,12 @@ ModbusConfig parse_modbus_config(std::string_view toml_text, std::string_view fi
   }
   const toml::table& m = *mnode->as_table();
   const std::string mp = "modbus";
-  static constexpr std::array<std::string_view, 29> kTopKeys = {
+  static constexpr std::array<std::string_view, 30> kTopKeys = {
       "transport", "host", "port", "device", "baud", "parity", "data_bits", "stop_bits",
       "rs485", "unit_id", "response_timeout_s", "byte_timeout_s", "poll_rate_hz",
       "offset_write_rate_hz", "reconnect_min_s", "reconnect_max_s", "dead_after_failures",
-      "verify_writes", "alarm_after_s", "rx_capacity", "tx_capacity", "axis",
+      "verify_writes", "alarm_after_s", "rx_capacity", "tx_capacity", "merge_gap_registers",
+      "axis",
       "tool_measurement", "probe_measurement", "calibration_touch", "tool_change",
       "program_event", "temperature", "offset"};
   r.check_keys(m, mp, kTopKeys);
@@ -377,6 +378,8 @@ ModbusConfig parse_modbus_config(std::string_view toml_text, std::string_view fi
   };
   c.rx_capacity = pow2("rx_capacity", 1024);
   c.tx_capacity = pow2("tx_capacity", 256);
+  c.merge_gap_registers =
+      static_cast<std::uint32_t>(r.integer(m, mp, "merge_gap_registers", 0, 0, 125));
 
   std::vector<Claim> claims;
   const auto claim = [&](const SignalMap& s, const std::string& path, const toml::node* n) {
@@ -589,6 +592,58 @@ ModbusConfig parse_modbus_config(std::string_view toml_text, std::string_view fi
   }
   if (c.blocks.empty()) {
     r.fail(mnode, "modbus", "no signal mapped: nothing to poll");
+  }
+
+  // Merge close blocks of one table (fewer requests: on RTU each costs two frame gaps). Every
+  // group stays inside one request, so event groups remain atomic.
+  {
+    std::vector<std::size_t> order(c.blocks.size());
+    for (std::size_t i = 0; i < order.size(); ++i) {
+      order[i] = i;
+    }
+    std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+      const ReadBlock& x = c.blocks[a];
+      const ReadBlock& y = c.blocks[b];
+      return x.table != y.table ? x.table < y.table : x.start < y.start;
+    });
+    std::vector<ReadBlock> merged;
+    std::vector<std::size_t> new_index(c.blocks.size());
+    std::vector<std::uint16_t> shift(c.blocks.size());
+    for (std::size_t i : order) {
+      const ReadBlock& b = c.blocks[i];
+      const std::uint32_t bits = is_bit_table(b.table) ? 8U : 1U;
+      const std::uint32_t max = is_bit_table(b.table) ? kMaxReadBits : kMaxReadRegisters;
+      if (!merged.empty() && merged.back().table == b.table) {
+        ReadBlock& m_last = merged.back();
+        const std::uint32_t last_end = std::uint32_t{m_last.start} + m_last.count;
+        const std::uint32_t end = std::max(last_end, std::uint32_t{b.start} + b.count);
+        const std::uint32_t gap = b.start > last_end ? b.start - last_end : 0U;
+        if (gap <= c.merge_gap_registers * bits && end - m_last.start <= max) {
+          m_last.count = static_cast<std::uint16_t>(end - m_last.start);
+          new_index[i] = merged.size() - 1;
+          shift[i] = static_cast<std::uint16_t>(b.start - m_last.start);
+          continue;
+        }
+      }
+      merged.push_back(b);
+      new_index[i] = merged.size() - 1;
+      shift[i] = 0;
+    }
+    const auto remap = [&](SignalMap& s) {
+      if (s.mapped) {
+        s.block_offset = static_cast<std::uint16_t>(s.block_offset + shift[s.block]);
+        s.block = new_index[s.block];
+      }
+    };
+    for (GroupMap& g : c.groups) {
+      for (SignalMap& s : g.fields) {
+        remap(s);
+      }
+    }
+    for (TemperatureMap& t : c.temperatures) {
+      remap(t.value);
+    }
+    c.blocks = std::move(merged);
   }
 
   // Bus time (RTU): request 8 bytes; response 5 + data; each frame followed by the 3.5-char gap.

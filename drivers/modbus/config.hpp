@@ -143,6 +143,11 @@ struct ModbusConfig {
   double alarm_after_s{1.0};
   std::size_t rx_capacity{1024};
   std::size_t tx_capacity{256};
+  /// Read blocks of one table whose gap is at most this many registers (8x as many bits) are
+  /// merged into one request, if the result still fits one request. 0 merges only adjacent
+  /// blocks. A gap is read too, so raise it only for NCs that answer every address in the gap
+  /// (many answer unmapped addresses with exception 2, which would fail the merged request).
+  std::uint32_t merge_gap_registers{0};
 
   std::array<GroupMap, kGroupCount> groups{};
   std::vector<TemperatureMap> temperatures{};

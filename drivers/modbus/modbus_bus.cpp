@@ -408,6 +408,9 @@ void ModbusBus::run() {
     now = monotonic_now_ns();
     st_.last_cycle_ns = now - cycle_start;
     st_.max_cycle_ns = std::max(st_.max_cycle_ns, st_.last_cycle_ns);
+    if (cycle_log_ != nullptr && ctx_) {
+      (void)cycle_log_->try_push(st_.last_cycle_ns);
+    }
     if (!ctx_) {
       st_.bus.state = LinkState::kDown;
       down_since_ns_ = now;

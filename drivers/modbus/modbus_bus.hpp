@@ -85,6 +85,11 @@ class ModbusBus final : public Bus {
   [[nodiscard]] ModbusStatus modbus_status() const { return status_.load(); }
   [[nodiscard]] const ModbusConfig& config() const noexcept { return config_; }
 
+  /// Diagnostics: before start(), a ring that receives the duration [ns] of every poll + write
+  /// cycle (dropped when full; the I/O thread never waits for it). For benchmarks and latency
+  /// statistics; the ring must outlive the driver's I/O thread.
+  void attach_cycle_log(core::rt::SpscRing<core::TimeNs>* ring) noexcept { cycle_log_ = ring; }
+
  private:
   struct OffsetSlot {
     bool has_value{false};
@@ -127,6 +132,7 @@ class ModbusBus final : public Bus {
   std::uint32_t consecutive_failures_{0};
   core::TimeNs down_since_ns_{0};
   core::TimeNs last_frame_end_ns_{0};
+  core::rt::SpscRing<core::TimeNs>* cycle_log_{nullptr};
 };
 
 /// CLOCK_MONOTONIC [ns] (the driver time-stamps events on reception).

@@ -31,18 +31,15 @@ TEST(ModbusConfig, ReferenceProfileParsesIntoOneRequestPerGroup) {
   EXPECT_EQ(c.transport, Transport::kTcp);
   EXPECT_EQ(c.port, 1502);
   EXPECT_TRUE(c.verify_writes);
-  // axis: input 0..11 + discrete input 0; 5 event groups; temperatures input 160..161.
-  ASSERT_EQ(c.blocks.size(), 8U);
+  // discrete input 0; input 0..11 (axis); the five event groups and the temperatures at input
+  // 100..161 merged (merge_gap_registers = 16) into one 62-register request.
+  ASSERT_EQ(c.blocks.size(), 3U);
   EXPECT_EQ(c.blocks[0].table, Table::kDiscreteInput);
   EXPECT_EQ(c.blocks[1].table, Table::kInput);
   EXPECT_EQ(c.blocks[1].start, 0);
   EXPECT_EQ(c.blocks[1].count, 12);
-  EXPECT_EQ(c.blocks[2].start, 100);  // tool measurement: counter + values in one request
-  EXPECT_EQ(c.blocks[2].count, 5);
-  EXPECT_EQ(c.blocks[3].start, 110);
-  EXPECT_EQ(c.blocks[3].count, 13);
-  EXPECT_EQ(c.blocks[7].start, 160);
-  EXPECT_EQ(c.blocks[7].count, 2);
+  EXPECT_EQ(c.blocks[2].start, 100);
+  EXPECT_EQ(c.blocks[2].count, 62);
   ASSERT_EQ(c.offsets.size(), 9U);
   EXPECT_EQ(c.offsets[8].register_index, 22);
   EXPECT_EQ(c.offsets[8].encoding.word_order, WordOrder::kLowFirst);
@@ -51,6 +48,45 @@ TEST(ModbusConfig, ReferenceProfileParsesIntoOneRequestPerGroup) {
       c.groups[static_cast<std::size_t>(Group::kToolMeasurement)].fields[tool_meas_field::kWear];
   EXPECT_EQ(wear.block, 2U);
   EXPECT_EQ(wear.block_offset, 2);
+  const SignalMap& kind =
+      c.groups[static_cast<std::size_t>(Group::kProgramEvent)].fields[program_field::kKind];
+  EXPECT_EQ(kind.block, 2U);
+  EXPECT_EQ(kind.block_offset, 51);
+  EXPECT_EQ(c.temperatures[1].value.block, 2U);
+  EXPECT_EQ(c.temperatures[1].value.block_offset, 61);
+}
+
+TEST(ModbusConfig, AdjacentBlocksMergeGapsOnlyWhenAllowed) {
+  const std::string groups = R"(
+[modbus.tool_change]
+sequence = { address = 10, type = "uint16" }
+tool = { address = 11 }
+[modbus.program_event]
+sequence = { address = 12, type = "uint16" }
+kind = { address = 13 }
+[modbus.tool_measurement]
+sequence = { address = 20, type = "uint16" }
+tool = { address = 21 }
+wear_um = { address = 22, type = "float32" }
+)";
+  // Default: 10..11 and 12..13 are adjacent -> one request; 20..23 after a gap of 6 -> its own.
+  ModbusConfig c = parse_modbus_config("[modbus]\ntransport = \"tcp\"\n" + groups, "t.toml");
+  ASSERT_EQ(c.blocks.size(), 2U);
+  EXPECT_EQ(c.blocks[0].start, 10);
+  EXPECT_EQ(c.blocks[0].count, 4);
+  const auto& kind =
+      c.groups[static_cast<std::size_t>(Group::kProgramEvent)].fields[program_field::kKind];
+  EXPECT_EQ(kind.block, 0U);
+  EXPECT_EQ(kind.block_offset, 3);
+  // With a gap allowance of 6 everything is one request.
+  c = parse_modbus_config("[modbus]\ntransport = \"tcp\"\nmerge_gap_registers = 6\n" + groups,
+                          "t.toml");
+  ASSERT_EQ(c.blocks.size(), 1U);
+  EXPECT_EQ(c.blocks[0].count, 14);
+  const auto& wear =
+      c.groups[static_cast<std::size_t>(Group::kToolMeasurement)].fields[tool_meas_field::kWear];
+  EXPECT_EQ(wear.block, 0U);
+  EXPECT_EQ(wear.block_offset, 12);
 }
 
 TEST(ModbusConfig, MinimalDefaults) {

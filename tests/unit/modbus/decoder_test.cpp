@@ -53,11 +53,11 @@ struct ModbusDecoder : ::testing::Test {
   PollDecoder dec{config};
   std::vector<std::uint8_t> ok = std::vector<std::uint8_t>(config.blocks.size(), 1);
 
-  // Blocks: 0 = coil (axis), 1 = input (axis), 2 = holding (tool meas), 3 = holding (touch),
-  // 4 = input (temperature).
-  std::span<std::uint16_t> axis() { return dec.block(1); }
-  std::span<std::uint16_t> meas() { return dec.block(2); }
-  std::span<std::uint16_t> touch() { return dec.block(3); }
+  // Blocks, sorted by table and address: 0 = coil (axis), 1 = holding (tool measurement),
+  // 2 = holding (touch), 3 = input (axis), 4 = input (temperature).
+  std::span<std::uint16_t> axis() { return dec.block(3); }
+  std::span<std::uint16_t> meas() { return dec.block(1); }
+  std::span<std::uint16_t> touch() { return dec.block(2); }
 
   template <typename T>
   std::vector<T> events_of(std::span<const core::Event> ev) {
@@ -75,8 +75,8 @@ TEST_F(ModbusDecoder, BlockLayout) {
   ASSERT_EQ(config.blocks.size(), 5U);
   EXPECT_EQ(config.blocks[0].table, Table::kCoil);
   EXPECT_EQ(config.blocks[0].start, 3);
-  EXPECT_EQ(config.blocks[1].count, 7);
-  EXPECT_EQ(config.blocks[3].count, 6);
+  EXPECT_EQ(config.blocks[3].count, 7);
+  EXPECT_EQ(config.blocks[2].count, 6);
 }
 
 TEST_F(ModbusDecoder, AxisSampleEveryPollWithAllEncodings) {
@@ -149,11 +149,11 @@ TEST_F(ModbusDecoder, SequenceCounterBaselineOnceJumpAndWrap) {
 TEST_F(ModbusDecoder, UnreadBlockSkipsItsGroupAndKeepsTheCounter) {
   dec.decode(1, ok);  // baselines (counter 0)
   meas()[0] = 1;
-  ok[2] = 0;  // the tool measurement request failed this poll
+  ok[1] = 0;  // the tool measurement request failed this poll
   auto ev = dec.decode(2, ok);
   EXPECT_TRUE(events_of<core::ToolMeasurement>(ev).empty());
   EXPECT_EQ(events_of<core::AxisSample>(ev).size(), 1U);
-  ok[2] = 1;
+  ok[1] = 1;
   EXPECT_EQ(events_of<core::ToolMeasurement>(dec.decode(3, ok)).size(), 1U);
   EXPECT_EQ(dec.counters().events_lost, 0U);
 }
