@@ -12,8 +12,11 @@
 // 3. RTU: bus time per poll of the reference profile at common baud rates (from the frame
 //    timing model in config.cpp) and the poll rate it allows.
 //
-// Usage: bench_modbus [cycles_per_round] [seconds_per_rate]
+// Usage: bench_modbus [cycles_per_round] [seconds_per_rate] [--fifo]
+// --fifo: SCHED_FIFO priority 50 for every thread of the bench (the NC server, the driver's I/O
+// thread and the loop inherit it), as the daemon's loop may run; reported on stdout.
 #include <modbus/modbus.h>
+#include <sched.h>
 #include <time.h>
 
 #include <algorithm>
@@ -168,6 +171,17 @@ DriverRun driver_round(std::uint16_t port, double rate_hz, TimeNs duration) {
 
 int main(int argc, char** argv) {
   std::setvbuf(stdout, nullptr, _IOLBF, 0);
+  if (argc > 3 && std::string(argv[3]) == "--fifo") {
+    sched_param p{};
+    p.sched_priority = 50;
+    if (sched_setscheduler(0, SCHED_FIFO, &p) != 0) {
+      std::perror("sched_setscheduler(SCHED_FIFO)");
+      return 1;
+    }
+    std::printf("scheduling: SCHED_FIFO priority 50 (inherited by all threads)\n");
+  } else {
+    std::printf("scheduling: SCHED_OTHER\n");
+  }
   const int cycles = argc > 1 ? std::atoi(argv[1]) : 5000;
   const double seconds = argc > 2 ? std::atof(argv[2]) : 2.0;
   nccomp::sim::modbus_nc::NcServer server(nccomp::sim::modbus_nc::ServerConfig{});
@@ -224,10 +238,11 @@ int main(int argc, char** argv) {
   server.stop();
 
   // 3. RTU budget of the reference profile.
-  std::printf("| RTU baud | frame gap [ms] | reference profile: bus time per poll [ms] | max poll rate [Hz] |\n|---|---|---|---|\n");
+  std::printf("| RTU baud | merge_gap_registers | frame gap [ms] | reference profile: bus time per poll [ms] | max poll rate [Hz] |\n|---|---|---|---|---|\n");
+  for (int merge : {0, 16}) {
   for (int baud : {9600, 19200, 38400, 115200}) {
     std::string text = "[modbus]\ntransport = \"rtu\"\ndevice = \"/dev/null\"\nbaud = " +
-                       std::to_string(baud) + "\npoll_rate_hz = 0.01\n";
+                       std::to_string(baud) + "\npoll_rate_hz = 0.01\nmerge_gap_registers = " + std::to_string(merge) + "\n";
     // The reference map below [modbus]'s own keys.
     FILE* f = std::fopen(NCCOMP_REFERENCE_PROFILE, "r");
     std::string ref;
@@ -239,8 +254,10 @@ int main(int argc, char** argv) {
     std::fclose(f);
     text += ref.substr(ref.find("[modbus.axis]"));
     const mb::ModbusConfig c = mb::parse_modbus_config(text, "reference");
-    std::printf("| %d | %.3f | %.2f (%zu requests) | %.1f |\n", baud, mb::rtu_frame_gap_s(c) * 1e3,
-                c.poll_bus_time_s * 1e3, c.blocks.size(), 0.9 / c.poll_bus_time_s);
+    std::printf("| %d | %d | %.3f | %.2f (%zu requests) | %.1f |\n", baud, merge,
+                mb::rtu_frame_gap_s(c) * 1e3, c.poll_bus_time_s * 1e3, c.blocks.size(),
+                0.9 / c.poll_bus_time_s);
+  }
   }
   return 0;
 }
