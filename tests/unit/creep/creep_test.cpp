@@ -118,7 +118,7 @@ TEST(Creep, AtARatePerMinuteAndPerMillimetre) {
 
 // ---- item 2 ------------------------------------------------------------------------------
 
-TEST(Unfinished, SuperposeContinuesOnTheSumWithoutAKink) {
+TEST(CreepUnfinished, SuperposeContinuesOnTheSumWithoutAKink) {
   auto c = base_config();
   c.profile = ProfileShape::kCosine;
   c.on_unfinished = UnfinishedPolicy::kSuperpose;
@@ -145,7 +145,7 @@ TEST(Unfinished, SuperposeContinuesOnTheSumWithoutAKink) {
   EXPECT_NEAR(r.last_write(10), 0.0, 0.0);  // no warning raised
 }
 
-TEST(Unfinished, LinearSuperposeAddsTheSlopes) {
+TEST(CreepUnfinished, LinearSuperposeAddsTheSlopes) {
   Rig r(base_config());
   r.measure({10.0});
   r.run_to(20.0);
@@ -157,7 +157,7 @@ TEST(Unfinished, LinearSuperposeAddsTheSlopes) {
   EXPECT_NEAR(r.z(), -30.0, 1e-9);
 }
 
-TEST(Unfinished, WarnRaisesTheWarningRegister) {
+TEST(CreepUnfinished, WarnRaisesTheWarningRegister) {
   auto c = base_config();
   c.on_unfinished = UnfinishedPolicy::kWarn;
   Rig r(c);
@@ -172,7 +172,7 @@ TEST(Unfinished, WarnRaisesTheWarningRegister) {
   EXPECT_NEAR(r.z(), -15.0, 1e-9);  // still applied
 }
 
-TEST(Unfinished, AlarmStopsApplyingAndFreezesTheOffset) {
+TEST(CreepUnfinished, AlarmStopsApplyingAndFreezesTheOffset) {
   auto c = base_config();
   c.on_unfinished = UnfinishedPolicy::kAlarm;
   Rig r(c);
@@ -192,7 +192,7 @@ TEST(Unfinished, AlarmStopsApplyingAndFreezesTheOffset) {
   EXPECT_NEAR(r.last_write(11), 0.0, 0.0);
 }
 
-TEST(Unfinished, BeyondTheSlotsTheOldestIsFoldedWithoutAStep) {
+TEST(CreepUnfinished, BeyondTheSlotsTheOldestIsFoldedWithoutAStep) {
   auto c = base_config();
   c.max_creeps = 2;
   Rig r(c);
@@ -211,7 +211,7 @@ TEST(Unfinished, BeyondTheSlotsTheOldestIsFoldedWithoutAStep) {
 
 // ---- predictive creeping (beyond the seed) ------------------------------------------------
 
-TEST(Predict, FeedsTheFittedWearRateBetweenMeasurementsAndEachMeasurementCorrectsIt) {
+TEST(CreepPredict, FeedsTheFittedWearRateBetweenMeasurementsAndEachMeasurementCorrectsIt) {
   auto c = base_config();
   c.predict.enabled = true;
   c.predict.window = 2;
@@ -240,7 +240,7 @@ TEST(Predict, FeedsTheFittedWearRateBetweenMeasurementsAndEachMeasurementCorrect
   EXPECT_NEAR(r.z(), -(8.0 - 0.5 + 0.25), 1e-9);
 }
 
-TEST(Predict, ThePredictionIsCapped) {
+TEST(CreepPredict, ThePredictionIsCapped) {
   auto c = base_config();
   c.predict.enabled = true;
   c.predict.window = 2;
@@ -254,7 +254,7 @@ TEST(Predict, ThePredictionIsCapped) {
   EXPECT_NEAR(r.z(), -5.5, 1e-9);
 }
 
-TEST(Records, OneToolWearRowPerSupportPoint) {
+TEST(CreepRecords, OneToolWearRowPerSupportPoint) {
   auto c = base_config();
   c.edge.tool_shape = ToolShape::kBall;
   c.edge.edge_points = 4;

@@ -25,7 +25,7 @@ CreepConfig ball_config() {
   return c;
 }
 
-TEST(Edge, WearAtTheEngagementAngleAlongTheNormalSplitIntoAxes) {
+TEST(CreepEdge, WearAtTheEngagementAngleAlongTheNormalSplitIntoAxes) {
   Rig r(ball_config());
   r.has_normal = true;
   r.normal = {kS45, 0.0, kS45};  // 45° wall in XZ
@@ -48,7 +48,7 @@ TEST(Edge, WearAtTheEngagementAngleAlongTheNormalSplitIntoAxes) {
   EXPECT_NEAR(r.z(), 0.0, 1e-9);
 }
 
-TEST(Edge, ToolRegistersTakeRadiusAndLengthComponents) {
+TEST(CreepEdge, ToolRegistersTakeRadiusAndLengthComponents) {
   auto c = ball_config();
   c.output.mode = OutputMode::kToolRegisters;
   c.output.channel_register = {-1, -1, -1, 3, 4};
@@ -64,7 +64,7 @@ TEST(Edge, ToolRegistersTakeRadiusAndLengthComponents) {
   EXPECT_NEAR(r.last_write(3), -4.0, 1e-9);
 }
 
-TEST(Edge, WithoutANormalTheMeanWearGoesOnTheFallbackAxis) {
+TEST(CreepEdge, WithoutANormalTheMeanWearGoesOnTheFallbackAxis) {
   Rig r(ball_config());
   r.has_normal = false;
   r.measure({4.0, 8.0, 12.0, 16.0});
@@ -74,7 +74,7 @@ TEST(Edge, WithoutANormalTheMeanWearGoesOnTheFallbackAxis) {
   EXPECT_NEAR(r.x(), 0.0, 1e-12);
 }
 
-TEST(Edge, NormalFromAToolpathTableByProgramPosition) {
+TEST(CreepEdge, NormalFromAToolpathTableByProgramPosition) {
   auto c = ball_config();
   c.edge.normal_source = NormalSource::kToolpath;
   c.toolpath_normals = {{0.0, {0.0, 0.0, 1.0}}, {100.0, {1.0, 0.0, 0.0}}};
@@ -87,7 +87,7 @@ TEST(Edge, NormalFromAToolpathTableByProgramPosition) {
   EXPECT_NEAR(r.x(), -16.0, 1e-9);
 }
 
-TEST(Edge, ANewProfileCreepsInPerSupportPoint) {
+TEST(CreepEdge, ANewProfileCreepsInPerSupportPoint) {
   Rig r(ball_config());
   r.measure({4.0, 8.0, 12.0, 16.0});
   r.run_to(20.0);
@@ -99,7 +99,7 @@ TEST(Edge, ANewProfileCreepsInPerSupportPoint) {
   EXPECT_NEAR(r.comp.applied_wear_um(3), 21.0, 1e-9);
 }
 
-TEST(Edge, AtARateEachSupportPointCreepsOverItsOwnLength) {
+TEST(CreepEdge, AtARateEachSupportPointCreepsOverItsOwnLength) {
   auto c = ball_config();
   c.creep_basis = CreepBasis::kRatePath;
   c.creep_rate_um_per_mm = 1.0;
@@ -114,14 +114,14 @@ TEST(Edge, AtARateEachSupportPointCreepsOverItsOwnLength) {
   EXPECT_EQ(r.comp.creeps_in_progress(), 0U);
 }
 
-TEST(Edge, ASinglePointMeasurementAppliesAlongTheWholeEdge) {
+TEST(CreepEdge, ASinglePointMeasurementAppliesAlongTheWholeEdge) {
   Rig r(ball_config());
   r.measure({7.0});
   r.run_to(20.0);
   for (std::size_t i = 0; i < 4; ++i) EXPECT_NEAR(r.comp.applied_wear_um(i), 7.0, 1e-9);
 }
 
-TEST(Edge, AMeasurementWithTheWrongPointCountIsRefused) {
+TEST(CreepEdge, AMeasurementWithTheWrongPointCountIsRefused) {
   Rig r(ball_config());
   r.measure({1.0, 2.0});
   EXPECT_EQ(r.count(AlarmCode::kEventInvalid), 1U);
@@ -130,7 +130,7 @@ TEST(Edge, AMeasurementWithTheWrongPointCountIsRefused) {
 
 // ---- item 6 ------------------------------------------------------------------------------
 
-TEST(Deflection, OverCompensationGrowsWithWearInNormalAndLateralDirections) {
+TEST(CreepDeflection, OverCompensationGrowsWithWearInNormalAndLateralDirections) {
   auto c = ball_config();
   c.deflection = {{0, {0.0, 20.0}, {0.0, 4.0}, {0.0, 10.0}}};
   Rig r(c);
@@ -150,7 +150,7 @@ TEST(Deflection, OverCompensationGrowsWithWearInNormalAndLateralDirections) {
   EXPECT_NEAR(r.comp.lateral_um(), 10.0, 1e-9);
 }
 
-TEST(Deflection, APerToolTableWinsOverTheDefault) {
+TEST(CreepDeflection, APerToolTableWinsOverTheDefault) {
   auto c = base_config();
   c.deflection = {{0, {0.0, 10.0}, {0.0, 1.0}, {0.0, 0.0}}, {5, {0.0, 10.0}, {0.0, 3.0}, {0.0, 0.0}}};
   Rig r(c);

@@ -15,7 +15,7 @@ namespace {
 using testing::base_config;
 using testing::Rig;
 
-TEST(Entry, SisterRestartsBeforeTheLastMeasurementWithAPositiveOffsetCreepingToZero) {
+TEST(CreepEntry, SisterRestartsBeforeTheLastMeasurementWithAPositiveOffsetCreepingToZero) {
   auto c = base_config();
   c.entry.sister_offset_um = 10.0;
   c.entry.sister_length_mm = 20.0;
@@ -43,7 +43,7 @@ TEST(Entry, SisterRestartsBeforeTheLastMeasurementWithAPositiveOffsetCreepingToZ
   EXPECT_NEAR(r.z(), 0.0, 1e-9);
 }
 
-TEST(Entry, SmoothProfileEntersTangentially) {
+TEST(CreepEntry, SmoothProfileEntersTangentially) {
   auto c = base_config();
   c.profile = ProfileShape::kCosine;
   c.entry.sister_offset_um = 10.0;
@@ -60,7 +60,7 @@ TEST(Entry, SmoothProfileEntersTangentially) {
   EXPECT_NEAR(r.z(), 0.0, 1e-9);
 }
 
-TEST(Entry, RetractAfterAMeasurementAndReFeed) {
+TEST(CreepEntry, RetractAfterAMeasurementAndReFeed) {
   auto c = base_config();
   c.entry.retract_um = 5.0;
   c.entry.refeed_length_mm = 10.0;
@@ -74,7 +74,7 @@ TEST(Entry, RetractAfterAMeasurementAndReFeed) {
   EXPECT_NEAR(r.z(), -20.0, 1e-9);
 }
 
-TEST(Entry, SmallerToolCreepsInAndOutAtTheLargerToolsSurface) {
+TEST(CreepEntry, SmallerToolCreepsInAndOutAtTheLargerToolsSurface) {
   auto c = base_config();
   c.transitions = {{7, 100.0, 200.0, 8.0, 10.0, 6.0, 20.0}};
   Rig r(c);
@@ -102,7 +102,7 @@ TEST(Entry, SmallerToolCreepsInAndOutAtTheLargerToolsSurface) {
 
 // ---- item 8 ------------------------------------------------------------------------------
 
-TEST(Limiter, AStepCorrectionIsSlewedAndEveryWriteIsAbsolute) {
+TEST(CreepLimiter, AStepCorrectionIsSlewedAndEveryWriteIsAbsolute) {
   auto c = base_config();
   c.profile = ProfileShape::kStep;
   c.limiter = {100.0, 5.0, 1e6};
@@ -122,7 +122,7 @@ TEST(Limiter, AStepCorrectionIsSlewedAndEveryWriteIsAbsolute) {
   EXPECT_EQ(r.count(AlarmCode::kOffsetSlewLimited), 1U);  // edge-triggered, not every cycle
 }
 
-TEST(Limiter, RateLimitPerSecond) {
+TEST(CreepLimiter, RateLimitPerSecond) {
   auto c = base_config();
   c.profile = ProfileShape::kStep;
   c.limiter = {100.0, 100.0, 10.0};  // 10 µm/s
@@ -132,7 +132,7 @@ TEST(Limiter, RateLimitPerSecond) {
   EXPECT_NEAR(r.z(), -10.0, 1e-6);
 }
 
-TEST(Limiter, UnchangedValuesAreNotRewrittenButRefreshedPeriodically) {
+TEST(CreepLimiter, UnchangedValuesAreNotRewrittenButRefreshedPeriodically) {
   auto c = base_config();
   c.output.refresh_interval_s = 1.0;
   Rig r(c);
@@ -145,7 +145,7 @@ TEST(Limiter, UnchangedValuesAreNotRewrittenButRefreshedPeriodically) {
 
 // ---- state -------------------------------------------------------------------------------
 
-TEST(State, AResumedCompensatorContinuesExactlyWhereItWas) {
+TEST(CreepStateIo, AResumedCompensatorContinuesExactlyWhereItWas) {
   auto c = base_config();
   c.edge.tool_shape = ToolShape::kBall;
   c.edge.edge_points = 4;
@@ -176,7 +176,7 @@ TEST(State, AResumedCompensatorContinuesExactlyWhereItWas) {
   EXPECT_GT(a.comp.creeps_in_progress() + 1, 0U);
 }
 
-TEST(State, ImportRefusesAMismatchedOrCorruptState) {
+TEST(CreepStateIo, ImportRefusesAMismatchedOrCorruptState) {
   auto c = base_config();
   WearCompensator w;
   w.configure(c);
@@ -208,7 +208,7 @@ std::string error_of(const CreepConfig& c) {
   return "";
 }
 
-TEST(Config, ErrorsNameTheTomlKey) {
+TEST(CreepConfigCheck, ErrorsNameTheTomlKey) {
   EXPECT_EQ(error_of(base_config()), "");
   auto c = base_config();
   c.creep_length_mm = 0.0;
@@ -245,7 +245,7 @@ TEST(Config, ErrorsNameTheTomlKey) {
 
 // ---- real time ---------------------------------------------------------------------------
 
-TEST(RealTime, StepAllocatesNothingWith16PointsAnd4Creeps) {
+TEST(CreepRealTime, StepAllocatesNothingWith16PointsAnd4Creeps) {
   auto c = base_config();
   c.edge.tool_shape = ToolShape::kBall;
   c.edge.edge_points = 16;

@@ -12,7 +12,7 @@ namespace {
 using testing::base_config;
 using testing::Rig;
 
-TEST(Interval, ByPathRaisesMeasurementDueAndAMeasurementClearsIt) {
+TEST(CreepInterval, ByPathRaisesMeasurementDueAndAMeasurementClearsIt) {
   auto c = base_config();
   c.interval.basis = IntervalBasis::kPath;
   c.interval.interval_mm = 100.0;
@@ -32,7 +32,7 @@ TEST(Interval, ByPathRaisesMeasurementDueAndAMeasurementClearsIt) {
   EXPECT_EQ(r.count(AlarmCode::kMeasurementDue), 2U);
 }
 
-TEST(Interval, ByCuttingTime) {
+TEST(CreepInterval, ByCuttingTime) {
   auto c = base_config();
   c.interval.basis = IntervalBasis::kTime;
   c.interval.interval_s = 60.0;
@@ -43,7 +43,7 @@ TEST(Interval, ByCuttingTime) {
   EXPECT_EQ(r.count(AlarmCode::kMeasurementDue), 1U);
 }
 
-TEST(Interval, AdaptiveShortensWhenWearGrowsFaster) {
+TEST(CreepInterval, AdaptiveShortensWhenWearGrowsFaster) {
   auto c = base_config();
   c.interval.basis = IntervalBasis::kAdaptive;
   c.interval.target_increment_um = 5.0;
@@ -66,7 +66,7 @@ TEST(Interval, AdaptiveShortensWhenWearGrowsFaster) {
   EXPECT_NEAR(r.comp.next_measurement_path_mm(), 425.0 + 500.0, 1e-9);
 }
 
-TEST(Interval, ByMaterialRemoved) {
+TEST(CreepInterval, ByMaterialRemoved) {
   auto c = base_config();
   c.interval.basis = IntervalBasis::kMaterial;
   c.interval.removal_mm3_per_mm = 0.5;
@@ -80,7 +80,7 @@ TEST(Interval, ByMaterialRemoved) {
 
 // ---- item 5 ------------------------------------------------------------------------------
 
-TEST(ToolLife, BeyondTheLimitTheSisterIsRequested) {
+TEST(CreepToolLife, BeyondTheLimitTheSisterIsRequested) {
   auto c = base_config();
   c.tool_life.wear_limit_um = 30.0;
   Rig r(c);
@@ -96,7 +96,7 @@ TEST(ToolLife, BeyondTheLimitTheSisterIsRequested) {
   EXPECT_NEAR(r.last_write(13), 0.0, 0.0);
 }
 
-TEST(ToolLife, ExcessiveIncrementStopsAndAppliesNothing) {
+TEST(CreepToolLife, ExcessiveIncrementStopsAndAppliesNothing) {
   auto c = base_config();
   c.tool_life.excessive_increment_um = 15.0;
   c.tool_life.on_excessive = ExcessivePolicy::kStop;
@@ -112,7 +112,7 @@ TEST(ToolLife, ExcessiveIncrementStopsAndAppliesNothing) {
   EXPECT_NEAR(r.z(), -10.0, 1e-9);
 }
 
-TEST(ToolLife, ExcessiveIncrementCanContinueWithTheSister) {
+TEST(CreepToolLife, ExcessiveIncrementCanContinueWithTheSister) {
   auto c = base_config();
   c.tool_life.excessive_increment_um = 15.0;
   c.tool_life.on_excessive = ExcessivePolicy::kSister;
@@ -128,7 +128,7 @@ TEST(ToolLife, ExcessiveIncrementCanContinueWithTheSister) {
   EXPECT_NEAR(r.z(), -10.0, 1e-9);  // the excessive value is not applied
 }
 
-TEST(ToolLife, BrokenNanShrinkingOrAJumpIsAlarmedAndNothingApplied) {
+TEST(CreepToolLife, BrokenNanShrinkingOrAJumpIsAlarmedAndNothingApplied) {
   struct Case {
     std::vector<double> wear;
     bool broken;
@@ -155,7 +155,7 @@ TEST(ToolLife, BrokenNanShrinkingOrAJumpIsAlarmedAndNothingApplied) {
   }
 }
 
-TEST(ToolLife, ShrinkingWithinTheNoiseIsAccepted) {
+TEST(CreepToolLife, ShrinkingWithinTheNoiseIsAccepted) {
   auto c = base_config();
   c.tool_life.noise_um = 2.0;
   Rig r(c);
@@ -167,7 +167,7 @@ TEST(ToolLife, ShrinkingWithinTheNoiseIsAccepted) {
   EXPECT_NEAR(r.z(), -8.5, 1e-9);
 }
 
-TEST(ToolLife, TheExpectedIncrementFollowsTheFittedRate) {
+TEST(CreepToolLife, TheExpectedIncrementFollowsTheFittedRate) {
   auto c = base_config();
   c.tool_life.min_expected_increment_um = 1.0;
   c.tool_life.implausible_factor = 3.0;
@@ -182,7 +182,7 @@ TEST(ToolLife, TheExpectedIncrementFollowsTheFittedRate) {
   EXPECT_TRUE(r.comp.halted());
 }
 
-TEST(ToolLife, AWearBeyondTheAbsoluteLimitIsRefusedAndChangesNothing) {
+TEST(CreepToolLife, AWearBeyondTheAbsoluteLimitIsRefusedAndChangesNothing) {
   auto c = base_config();
   c.limiter.max_abs_um = 50.0;
   c.tool_life.min_expected_increment_um = 100.0;
@@ -196,7 +196,7 @@ TEST(ToolLife, AWearBeyondTheAbsoluteLimitIsRefusedAndChangesNothing) {
   EXPECT_NEAR(r.z(), -20.0, 1e-9);
 }
 
-TEST(ToolLife, AMeasurementOfAnotherToolIsLoggedNotApplied) {
+TEST(CreepToolLife, AMeasurementOfAnotherToolIsLoggedNotApplied) {
   Rig r(base_config());
   ToolMeasurement m;
   m.tool = 9;

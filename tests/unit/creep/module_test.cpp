@@ -85,7 +85,7 @@ struct EngineRig {
   }
 };
 
-TEST(Module, CreepsThroughTheEngine) {
+TEST(CreepEngineModule, CreepsThroughTheEngine) {
   EngineRig r(module_config());
   r.advance(0.0);
   r.measure(20.0);
@@ -96,7 +96,7 @@ TEST(Module, CreepsThroughTheEngine) {
   EXPECT_NEAR(comp.config().limiter.max_abs_um, 80.0, 0.0);
 }
 
-TEST(Module, StateSurvivesARestartThroughTheEngine) {
+TEST(CreepEngineModule, StateSurvivesARestartThroughTheEngine) {
   EngineRig a(module_config());
   a.advance(0.0);
   a.measure(20.0);
@@ -118,7 +118,7 @@ TEST(Module, StateSurvivesARestartThroughTheEngine) {
   EXPECT_NEAR(b.last(2), -8.0, 1e-9);
 }
 
-TEST(Module, LoadStateRefusesForeignBytes) {
+TEST(CreepEngineModule, LoadStateRefusesForeignBytes) {
   CreepModule m(module_config());
   std::vector<RegisterSpec> regs = registers();
   m.attach(engine::RegisterTable(regs));
@@ -136,7 +136,7 @@ TEST(Module, LoadStateRefusesForeignBytes) {
   EXPECT_EQ(scope.count(), 0U);
 }
 
-TEST(Module, AttachChecksIndicesAndKinds) {
+TEST(CreepEngineModule, AttachChecksIndicesAndKinds) {
   std::vector<RegisterSpec> regs = registers();
   auto c = module_config();
   c.creep.output.channel_register = {0, 1, 7, -1, -1};
