@@ -1,0 +1,373 @@
+// S3 figures: how many test grinds each facet rule needs, and the axis error over an 8-hour
+// shift for: no recalibration; hourly recalibration with step corrections; hourly with creeping;
+// hourly with creeping and prediction (time model, temperature model). Two drifts: a simulated
+// first-order warm-up, and the real FL_THERMAL spindle drift (../shared/data/
+// fl_thermal_spindle_drift, see its SOURCE.md).
+//
+//   bench_calib_shift [--data /work/shared/data/fl_thermal_spindle_drift/data.csv]
+//
+// Prints markdown tables (bench/results/calib.md).
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <functional>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "core/calib/calibrator.hpp"
+#include "core/calib/facet.hpp"
+#include "tests/unit/calib/sim_machine.hpp"
+#include "tests/unit/calib/test_config.hpp"
+
+namespace {
+
+using nccomp::core::Event;
+using nccomp::core::StepOutput;
+using nccomp::core::TimeNs;
+using nccomp::core::from_seconds;
+using nccomp::core::calib::CalibrationConfig;
+using nccomp::core::calib::Calibrator;
+using nccomp::core::calib::FacetRule;
+using nccomp::core::calib::Prediction;
+using nccomp::core::calib::Slot;
+using nccomp::test::calib::MachineErrors;
+using nccomp::test::calib::SimMachine;
+
+constexpr double kTouchNoiseUm = 0.5;
+constexpr double kChordNoiseUm = 0.5;
+
+// ---------------------------------------------------------------------------------------------
+// Facet rules.
+
+void facet_table() {
+  std::printf("## Test grinds to convergence (blank radius 5 mm, tolerance 2 um of chord, "
+              "chord noise %.1f um, touch noise %.1f um)\n\n",
+              kChordNoiseUm, kTouchNoiseUm);
+  std::printf("The first grind's error is the reference probe's lateral pretravel (the touches "
+              "cannot see it). Grinds include the final, confirming one; 'x' = not converged in "
+              "30. Mean over 20 seeds; in brackets the worst seed.\n\n");
+  const double matched_01 = nccomp::core::calib::matched_proportional_gain(5.0, 0.1);
+  std::printf("| first-grind error | facet depth | exact | proportional, gain matched at 0.1 mm "
+              "(%.4f) | proportional, 0.5x | proportional, 2x | residual dxR - Ex, exact |\n",
+              matched_01);
+  std::printf("|---|---|---|---|---|---|---|\n");
+  for (const double depth : {0.1, 0.05}) {
+    for (const double err : {4.0, 15.0, 30.0, 60.0}) {
+      std::printf("| %.0f um | %.2f mm |", err, depth);
+      double worst_residual = 0.0;
+      for (int variant = 0; variant < 4; ++variant) {
+        double sum = 0.0;
+        int worst = 0;
+        int failed = 0;
+        for (std::uint64_t seed = 1; seed <= 20; ++seed) {
+          auto cfg = nccomp::test::calib::test_config();
+          cfg.facet_rule = variant == 0 ? FacetRule::kExact : FacetRule::kProportional;
+          cfg.facet_gain_um_per_um =
+              matched_01 * (variant == 2 ? 0.5 : (variant == 3 ? 2.0 : 1.0));
+          cfg.max_test_grinds = 30;
+          cfg.end_face_test_grind = false;
+          MachineErrors e = nccomp::test::calib::test_errors();
+          e.pretravel_lateral_um = err;
+          Calibrator c;
+          c.configure(cfg);
+          SimMachine m(cfg, e, kTouchNoiseUm, kChordNoiseUm, depth, seed);
+          TimeNs now = 0;
+          StepOutput out;
+          if (!nccomp::test::calib::run_initial_calibration(c, m, now, out)) {
+            ++failed;
+            continue;
+          }
+          const int g = c.result().lateral_grinds;
+          sum += g;
+          worst = std::max(worst, g);
+          if (variant == 0) {
+            worst_residual = std::max(worst_residual, std::fabs(c.result().dx_r_um - e.ex_um));
+          }
+        }
+        if (failed > 0) {
+          std::printf(" x (%d/20 failed) |", failed);
+        } else {
+          std::printf(" %.2f (%d) |", sum / 20.0, worst);
+        }
+      }
+      std::printf(" %.2f um |\n", worst_residual);
+    }
+  }
+  std::printf("\n");
+}
+
+// ---------------------------------------------------------------------------------------------
+// Shift simulation.
+
+struct Strategy {
+  const char* name;
+  bool recalibrate;
+  nccomp::core::ProfileShape shape;
+  Prediction prediction;
+};
+
+const std::array<Strategy, 5> kStrategies{{
+    {"none", false, nccomp::core::ProfileShape::kStep, Prediction::kNone},
+    {"hourly, step", true, nccomp::core::ProfileShape::kStep, Prediction::kNone},
+    {"hourly, creep", true, nccomp::core::ProfileShape::kCosine, Prediction::kNone},
+    {"hourly, creep + time model", true, nccomp::core::ProfileShape::kCosine, Prediction::kTime},
+    {"hourly, creep + temperature model", true, nccomp::core::ProfileShape::kCosine,
+     Prediction::kTemperature},
+}};
+
+struct AxisStats {
+  double rms_um{0.0};
+  double max_um{0.0};
+  double max_jump_um{0.0};  // largest change of the correction within one second
+};
+
+using DriftFn = std::function<std::array<double, 4>(double t_s)>;  // from shift start
+using TempFn = std::function<double(double t_s)>;
+
+std::array<AxisStats, 3> run_shift(const Strategy& s, const DriftFn& drift, const TempFn& temp,
+                                   double tau_s, double hours) {
+  auto cfg = nccomp::test::calib::test_config();
+  cfg.touches_per_axis = 1;
+  cfg.creep_shape = s.shape;
+  cfg.creep_duration_s = 600.0;
+  cfg.prediction = s.prediction;
+  cfg.thermal_time_constant_s = tau_s;
+  cfg.temperature_sensor = temp ? 0 : -1;
+  cfg.recalibration_interval_s = 3600.0;
+  cfg.plausibility_um = 50.0;
+  Calibrator c;
+  c.configure(cfg);
+  SimMachine m(cfg, nccomp::test::calib::test_errors(), kTouchNoiseUm, kChordNoiseUm, 0.1, 42);
+  StepOutput out;
+  // Calibrate (and take the nominals) at the start of the shift, on the machine as it is then.
+  TimeNs now = 0;
+  const auto feed_temp = [&](double t_shift_s) {
+    if (temp) {
+      const Event e = nccomp::core::TemperatureSample{now, 0, temp(t_shift_s)};
+      out.clear();
+      c.step(now, {&e, 1}, out);
+    }
+  };
+  feed_temp(0.0);
+  m.set_drift([](double) { return std::array<double, 4>{}; });
+  if (!nccomp::test::calib::run_initial_calibration(c, m, now, out)) {
+    throw std::runtime_error("calibration failed");
+  }
+  const double t0 = nccomp::core::seconds(now);
+  m.set_drift([&drift, t0](double t) { return drift(t - t0); });
+  std::array<double, 3> sum2{};
+  std::array<AxisStats, 3> st{};
+  std::array<double, 3> prev{};
+  const auto steps = static_cast<long>(hours * 3600.0);
+  for (long k = 0; k < steps; ++k) {
+    const double t = static_cast<double>(k);
+    now = from_seconds(t0 + t);
+    if (temp && k % 15 == 0) {
+      feed_temp(t);  // the sensor is sampled like the data set: every 15 s
+    }
+    out.clear();
+    if (s.recalibrate && k > 0 && k % 3600 == 0) {
+      nccomp::test::calib::run_touch_set(c, m, now, out);
+      for (const auto& a : out.alarms) {
+        if (a.severity == nccomp::core::Severity::kAlarm) {
+          std::fprintf(stderr, "alarm %d at %.0f s value %.2f\n", static_cast<int>(a.code), t,
+                       a.value);
+        }
+      }
+    } else {
+      c.step(now, {}, out);
+    }
+    const auto truth = drift(t);
+    for (std::size_t a = 0; a < 3; ++a) {
+      const auto slot = static_cast<Slot>(nccomp::core::calib::kAxisSlot[a]);
+      const double corr = c.drift_correction_um(slot, now);
+      const double err = truth[nccomp::core::calib::kAxisSlot[a]] - corr;
+      sum2[a] += err * err;
+      st[a].max_um = std::max(st[a].max_um, std::fabs(err));
+      if (k > 0) {
+        st[a].max_jump_um = std::max(st[a].max_jump_um, std::fabs(corr - prev[a]));
+      }
+      prev[a] = corr;
+    }
+  }
+  for (std::size_t a = 0; a < 3; ++a) {
+    st[a].rms_um = std::sqrt(sum2[a] / static_cast<double>(steps));
+  }
+  return st;
+}
+
+void first_order_table() {
+  const double tau_true = 5400.0;
+  const DriftFn drift = [tau_true](double t) {
+    const double f = 1.0 - std::exp(-std::max(0.0, t) / tau_true);
+    return std::array<double, 4>{30.0 * f, 34.0 * f, -12.0 * f, 18.0 * f};
+  };
+  std::printf("## 8-hour shift, simulated first-order warm-up (X: 30 um, tau 1.5 h; touch noise "
+              "%.1f um; touches every hour; creep 600 s cosine)\n\n",
+              kTouchNoiseUm);
+  std::printf("| strategy | model tau | X RMS error | X max error | largest 1-s change of the X "
+              "correction |\n|---|---|---|---|---|\n");
+  for (const auto& s : kStrategies) {
+    if (s.prediction == Prediction::kTemperature) {
+      continue;  // no temperature in this simulation
+    }
+    const std::array<double, 3> taus{5400.0, 3600.0, 10800.0};
+    const std::array<const char*, 3> tau_names{"1.5 h (true)", "1 h", "3 h"};
+    for (std::size_t i = 0; i < taus.size(); ++i) {
+      if (s.prediction != Prediction::kTime && i > 0) {
+        continue;
+      }
+      const auto st = run_shift(s, drift, nullptr, taus[i], 8.0);
+      std::printf("| %s | %s | %.2f um | %.2f um | %.2f um |\n", s.name,
+                  s.prediction == Prediction::kTime ? tau_names[i] : "-", st[0].rms_um,
+                  st[0].max_um, st[0].max_jump_um);
+    }
+  }
+  std::printf("\n");
+}
+
+// ---------------------------------------------------------------------------------------------
+// FL_THERMAL.
+
+struct Thermal {
+  std::vector<double> t_s, ch1, ch3, ch5, t5, rpm;
+};
+
+Thermal load_thermal(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) {
+    throw std::runtime_error(path + ": cannot be read");
+  }
+  Thermal d;
+  std::string line;
+  std::size_t line_no = 0;
+  while (std::getline(in, line)) {
+    ++line_no;
+    if (line_no == 1) {
+      if (line.find("spindle(RPM)") == std::string::npos || line.find("ch5(um)") == std::string::npos) {
+        throw std::runtime_error(path + ":1: not the FL_THERMAL header");
+      }
+      continue;
+    }
+    std::vector<double> v;
+    std::stringstream ss(line);
+    std::string cell;
+    while (std::getline(ss, cell, ',')) {
+      std::size_t used = 0;
+      double x = 0.0;
+      try {
+        x = std::stod(cell, &used);
+      } catch (const std::exception&) {
+        used = 0;
+      }
+      if (used == 0 || !std::isfinite(x)) {
+        throw std::runtime_error(path + ":" + std::to_string(line_no) + ": column " +
+                                 std::to_string(v.size() + 1) + " is not a number: '" + cell + "'");
+      }
+      v.push_back(x);
+    }
+    if (v.size() != 23) {
+      throw std::runtime_error(path + ":" + std::to_string(line_no) + ": expected 23 columns, got " +
+                               std::to_string(v.size()));
+    }
+    if (!d.t_s.empty() && v[0] <= d.t_s.back()) {
+      throw std::runtime_error(path + ":" + std::to_string(line_no) + ": time not increasing");
+    }
+    d.t_s.push_back(v[0]);
+    d.rpm.push_back(v[1]);
+    d.ch1.push_back(v[2]);
+    d.ch3.push_back(v[4]);
+    d.ch5.push_back(v[6]);
+    d.t5.push_back(v[11]);  // t5(°C): column 12 (time, rpm, ch1..ch5, t1..t16)
+  }
+  return d;
+}
+
+double interp(const std::vector<double>& t, const std::vector<double>& y, double x) {
+  if (x <= t.front()) {
+    return y.front();
+  }
+  if (x >= t.back()) {
+    return y.back();
+  }
+  const auto it = std::upper_bound(t.begin(), t.end(), x);
+  const auto i = static_cast<std::size_t>(it - t.begin());
+  const double f = (x - t[i - 1]) / (t[i] - t[i - 1]);
+  return y[i - 1] + f * (y[i] - y[i - 1]);
+}
+
+void thermal_tables(const std::string& path) {
+  const Thermal d = load_thermal(path);
+  std::printf("## 8-hour shifts driven by the FL_THERMAL spindle drift\n\n");
+  std::printf("X <- ch3 (radial, largest), Y <- ch1 (radial), Z <- ch5 (axial growth), each "
+              "relative to its value at the shift start (the nominals are taken then); "
+              "temperature sensor <- t5 (spindle bearing / motor area, follows the speed). "
+              "Touch noise %.1f um, touches every hour, creep 600 s cosine, time model tau 1 h.\n\n",
+              kTouchNoiseUm);
+  const std::array<double, 5> starts{0.0, 8.0, 16.0, 24.0, 32.0};
+  std::printf("| strategy | axis |");
+  for (const double s : starts) {
+    std::printf(" shift %.0f-%.0f h RMS / max |", s, s + 8.0);
+  }
+  std::printf(" mean RMS |\n|---|---|");
+  for (std::size_t i = 0; i <= starts.size(); ++i) {
+    std::printf("---|");
+  }
+  std::printf("\n");
+  for (const auto& s : kStrategies) {
+    std::array<std::array<AxisStats, 3>, 5> res{};
+    for (std::size_t k = 0; k < starts.size(); ++k) {
+      const double t_start = starts[k] * 3600.0;
+      const std::array<double, 3> zero{interp(d.t_s, d.ch3, t_start), interp(d.t_s, d.ch1, t_start),
+                                       interp(d.t_s, d.ch5, t_start)};
+      const DriftFn drift = [&d, t_start, zero](double t) {
+        const double x = t_start + std::max(0.0, t);
+        const double dx = interp(d.t_s, d.ch3, x) - zero[0];
+        return std::array<double, 4>{dx, dx, interp(d.t_s, d.ch1, x) - zero[1],
+                                     interp(d.t_s, d.ch5, x) - zero[2]};
+      };
+      const TempFn temp = [&d, t_start](double t) {
+        return interp(d.t_s, d.t5, t_start + std::max(0.0, t));
+      };
+      res[k] = run_shift(s, drift, temp, 3600.0, 8.0);
+    }
+    for (std::size_t a = 0; a < 3; ++a) {
+      std::printf("| %s | %s |", s.name, a == 0 ? "X (ch3)" : (a == 1 ? "Y (ch1)" : "Z (ch5)"));
+      double mean = 0.0;
+      for (std::size_t k = 0; k < starts.size(); ++k) {
+        std::printf(" %.2f / %.2f |", res[k][a].rms_um, res[k][a].max_um);
+        mean += res[k][a].rms_um / static_cast<double>(starts.size());
+      }
+      std::printf(" %.2f |\n", mean);
+    }
+  }
+  std::printf("\n");
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string data = "/work/shared/data/fl_thermal_spindle_drift/data.csv";
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--data" && i + 1 < argc) {
+      data = argv[++i];
+    } else {
+      std::fprintf(stderr, "usage: bench_calib_shift [--data FL_THERMAL/data.csv]\n");
+      return 2;
+    }
+  }
+  try {
+    facet_table();
+    first_order_table();
+    thermal_tables(data);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bench_calib_shift: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,162 @@
+// `nccomp calibrate`'s parts: the [calibration] TOML loader, the script parser and a session run
+// on the documented example files.
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+
+#include "tools/calibrate/config_toml.hpp"
+#include "tools/calibrate/script.hpp"
+#include "tools/calibrate/session.hpp"
+
+namespace nccomp::tools::calibrate {
+namespace {
+
+std::string error_of(const std::string& toml) {
+  try {
+    (void)load_calibration_config_text(toml, "m.toml");
+  } catch (const std::invalid_argument& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(CalibrationToml, KeysMapOneToOne) {
+  const auto c = load_calibration_config_text(R"(
+[other]
+ignored = 1
+[calibration]
+register_x = 7
+register_y = 8
+register_z = 9
+reference_x_lateral_mm = 250
+facet_rule = "proportional"
+facet_gain_um_per_um = 0.025
+creep_shape = "smoothstep"
+prediction = "temperature"
+temperature_sensor = 4
+end_face_test_grind = false
+touches_per_axis = 3
+)",
+                                              "m.toml");
+  EXPECT_EQ(c.register_x, 7);
+  EXPECT_EQ(c.register_z, 9);
+  EXPECT_DOUBLE_EQ(c.reference_x_lateral_mm, 250.0);
+  EXPECT_EQ(c.facet_rule, core::calib::FacetRule::kProportional);
+  EXPECT_DOUBLE_EQ(c.facet_gain_um_per_um, 0.025);
+  EXPECT_EQ(c.creep_shape, core::ProfileShape::kSmoothstep);
+  EXPECT_EQ(c.prediction, core::calib::Prediction::kTemperature);
+  EXPECT_EQ(c.temperature_sensor, 4);
+  EXPECT_FALSE(c.end_face_test_grind);
+  EXPECT_EQ(c.touches_per_axis, 3);
+  // Defaults where a key is absent.
+  EXPECT_DOUBLE_EQ(c.plausibility_um, 50.0);
+}
+
+TEST(CalibrationToml, ErrorsNameFileLineAndKey) {
+  EXPECT_EQ(error_of("[calibration]\n\nplausibilty_um = 5\n"),
+            "m.toml:3: calibration.plausibilty_um: unknown key");
+  EXPECT_EQ(error_of("[calibration]\nfacet_rule = \"guess\"\n"),
+            "m.toml:2: calibration.facet_rule: must be \"exact\" or \"proportional\"");
+  EXPECT_EQ(error_of("[calibration]\nregister_x = 70000\n"),
+            "m.toml:2: calibration.register_x: must be in 0..65535, got 70000");
+  EXPECT_EQ(error_of("[calibration]\nblank_radius_mm = \"5\"\n"),
+            "m.toml:2: calibration.blank_radius_mm: must be a number");
+  EXPECT_NE(error_of("[calibration]\nblank_radius_mm = -5.0\n").find("calibration.blank_radius_mm"),
+            std::string::npos);
+  EXPECT_NE(error_of("[calibration]\nprediction = \"temperature\"\n")
+                .find("calibration.temperature_sensor"),
+            std::string::npos);
+  EXPECT_NE(error_of("calibration = 3\n").find("m.toml:1: calibration: must be a table"),
+            std::string::npos);
+  EXPECT_NE(error_of("[calibration\n").find("m.toml:1"), std::string::npos);
+}
+
+TEST(Script, ParsesEveryCommand) {
+  const auto touch = std::get<CmdTouch>(parse_line("touch Reference X + axial 258.0379 # c", 1));
+  EXPECT_EQ(touch.touch.probe, core::ProbeKind::kReferenceProbe);
+  EXPECT_EQ(touch.touch.axis, 0);
+  EXPECT_EQ(touch.touch.variant, 1);
+  EXPECT_EQ(touch.touch.direction, 1);
+  EXPECT_DOUBLE_EQ(touch.touch.trigger_position_mm, 258.0379);
+  const auto y = std::get<CmdTouch>(parse_line("touch machine y - -42.5", 2));
+  EXPECT_EQ(y.touch.axis, 1);
+  EXPECT_EQ(y.touch.direction, -1);
+  EXPECT_EQ(y.touch.variant, 0);
+  const auto f = std::get<CmdFacets>(parse_line("facets end-face 1.9216 +2.0557", 3));
+  EXPECT_EQ(f.face, core::calib::Face::kEndFace);
+  EXPECT_DOUBLE_EQ(f.chord_minus_mm, 2.0557);
+  EXPECT_DOUBLE_EQ(std::get<CmdWait>(parse_line("  wait\t60 ", 4)).duration_s, 60.0);
+  EXPECT_EQ(std::get<CmdTemperature>(parse_line("temperature 3 21.5", 5)).sensor, 3);
+  EXPECT_TRUE(std::holds_alternative<CmdEmpty>(parse_line("   # only a comment", 6)));
+  EXPECT_TRUE(std::holds_alternative<CmdBegin>(parse_line("begin", 7)));
+}
+
+TEST(Script, ErrorsNameLineAndWord) {
+  const auto msg = [](const std::string& line) -> std::string {
+    try {
+      (void)parse_line(line, 12);
+    } catch (const ScriptError& e) {
+      return e.what();
+    }
+    return "";
+  };
+  EXPECT_EQ(msg("touch machine w + 1.0"), "line 12: axis must be x, y or z, got 'w'");
+  EXPECT_EQ(msg("touch machine y + axial 1.0"), "line 12: only X is touched axially (along the stylus)");
+  EXPECT_EQ(msg("touch machine x + 1.0x"), "line 12: trigger position must be a finite number, got '1.0x'");
+  EXPECT_EQ(msg("facets lateral 1.9 nan"), "line 12: chord_minus_mm must be a finite number, got 'nan'");
+  EXPECT_EQ(msg("facets lateral 1.9 -2"), "line 12: chords must be positive [mm]");
+  EXPECT_EQ(msg("temperature 300 20"), "line 12: sensor must be an integer 0..255, got '300'");
+  EXPECT_EQ(msg("grind"), "line 12: unknown command 'grind' (try 'help')");
+  EXPECT_NE(msg("touch machine x +").find("usage: touch"), std::string::npos);
+}
+
+std::string run_script(Session& s, const std::string& path) {
+  std::ifstream in(path);
+  EXPECT_TRUE(in.good()) << path;
+  std::string line;
+  std::size_t n = 0;
+  while (std::getline(in, line)) {
+    ++n;
+    s.run(parse_line(line, n), n);
+  }
+  return s.export_state_text();
+}
+
+TEST(Session, ExampleScriptsCalibrateAndRecalibrate) {
+  const std::string dir = std::string(NCCOMP_SOURCE_DIR) + "/tools/calibrate/examples/";
+  const auto cfg = load_calibration_config_file(dir + "machine.toml");
+  std::ostringstream log1;
+  Session a(cfg, 1795766400.0, log1);
+  const std::string state = run_script(a, dir + "initial.calib");
+  ASSERT_EQ(a.calibrator().phase(), core::calib::Phase::kReady) << log1.str();
+  // The simulated machine behind the example has Ex = +23, Exa = +31, Ey = −12, Ez = +8 µm.
+  EXPECT_NEAR(a.calibrator().result().dx_r_um, 23.0, 0.3);
+  EXPECT_NEAR(a.calibrator().result().dx_a_um, 31.0, 0.3);
+  EXPECT_NEAR(a.calibrator().result().dy_um, -12.0, 2.0);
+  EXPECT_NEAR(a.calibrator().result().dz_um, 8.0, 2.0);
+  EXPECT_EQ(a.alarm_count(), 0u);
+
+  std::ostringstream log2;
+  Session b(cfg, 1795766400.0 + 2700.0 + 3600.0, log2);
+  b.import_state_text(state);
+  run_script(b, dir + "recalibrate.calib");
+  EXPECT_EQ(b.alarm_count(), 1u);  // the dirty sphere
+  EXPECT_NE(log2.str().find("ALARM 40 recalibration-implausible axis Y"), std::string::npos);
+  EXPECT_EQ(b.calibrator().model(core::calib::Slot::kXLateral).touch_sets, 3);
+  // No slewing from zero after the import: the registers resume at the saved corrections.
+  EXPECT_EQ(log2.str().find("offset-slew-limited"), std::string::npos) << log2.str();
+}
+
+TEST(Session, TimeCannotGoBack) {
+  const std::string dir = std::string(NCCOMP_SOURCE_DIR) + "/tools/calibrate/examples/";
+  std::ostringstream log;
+  Session s(load_calibration_config_file(dir + "machine.toml"), 0.0, log);
+  s.run(parse_line("time 100", 1), 1);
+  EXPECT_THROW(s.run(parse_line("time 50", 2), 2), ScriptError);
+}
+
+}  // namespace
+}  // namespace nccomp::tools::calibrate

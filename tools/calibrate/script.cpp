@@ -1,0 +1,205 @@
+#include "tools/calibrate/script.hpp"
+
+#include <charconv>
+#include <cmath>
+#include <vector>
+
+namespace nccomp::tools::calibrate {
+
+namespace {
+
+std::vector<std::string_view> split(std::string_view line) {
+  std::vector<std::string_view> words;
+  std::size_t i = 0;
+  while (i < line.size()) {
+    while (i < line.size() && (line[i] == ' ' || line[i] == '\t' || line[i] == '\r')) {
+      ++i;
+    }
+    std::size_t j = i;
+    while (j < line.size() && line[j] != ' ' && line[j] != '\t' && line[j] != '\r') {
+      ++j;
+    }
+    if (j > i) {
+      words.push_back(line.substr(i, j - i));
+    }
+    i = j;
+  }
+  return words;
+}
+
+double number(std::string_view w, std::size_t line, const char* what) {
+  double v = 0.0;
+  const char* first = w.data();
+  if (!w.empty() && w.front() == '+') {
+    ++first;  // from_chars refuses a leading '+', operators write it
+  }
+  const auto res = std::from_chars(first, w.data() + w.size(), v);
+  if (res.ec != std::errc() || res.ptr != w.data() + w.size() || !std::isfinite(v)) {
+    throw ScriptError(line, std::string(what) + " must be a finite number, got '" +
+                                std::string(w) + "'");
+  }
+  return v;
+}
+
+void expect_words(const std::vector<std::string_view>& w, std::size_t lo, std::size_t hi,
+                  std::size_t line, const char* usage) {
+  if (w.size() < lo || w.size() > hi) {
+    throw ScriptError(line, std::string("usage: ") + usage);
+  }
+}
+
+std::string lower(std::string_view w) {
+  std::string s(w);
+  for (auto& ch : s) {
+    if (ch >= 'A' && ch <= 'Z') {
+      ch = static_cast<char>(ch - 'A' + 'a');
+    }
+  }
+  return s;
+}
+
+}  // namespace
+
+const char* script_help() noexcept {
+  return "commands:\n"
+         "  time <s>                 set the clock [s]\n"
+         "  wait <s>                 let time pass (registers creep), one step per second\n"
+         "  temperature <sensor> <degC>\n"
+         "  begin                    start an initial calibration\n"
+         "  touch reference|machine x|y|z +|- [lateral|axial] <trigger_mm>\n"
+         "  facets lateral|end-face <chord_plus_mm> <chord_minus_mm>\n"
+         "  status | discard | help | quit\n";
+}
+
+Command parse_line(std::string_view line, std::size_t line_no) {
+  const auto hash = line.find('#');
+  if (hash != std::string_view::npos) {
+    line = line.substr(0, hash);
+  }
+  const auto w = split(line);
+  if (w.empty()) {
+    return CmdEmpty{};
+  }
+  const std::string verb = lower(w[0]);
+  if (verb == "time") {
+    expect_words(w, 2, 2, line_no, "time <s>");
+    const double t = number(w[1], line_no, "time");
+    if (t < 0.0 || t > 1e9) {
+      throw ScriptError(line_no, "time must be in 0..1e9 s");
+    }
+    return CmdTime{t};
+  }
+  if (verb == "wait") {
+    expect_words(w, 2, 2, line_no, "wait <s>");
+    const double d = number(w[1], line_no, "wait");
+    if (d < 0.0 || d > 7.0 * 86400.0) {
+      throw ScriptError(line_no, "wait must be in 0..604800 s");
+    }
+    return CmdWait{d};
+  }
+  if (verb == "temperature") {
+    expect_words(w, 3, 3, line_no, "temperature <sensor> <degC>");
+    int s = -1;
+    const auto res = std::from_chars(w[1].data(), w[1].data() + w[1].size(), s);
+    if (res.ec != std::errc() || res.ptr != w[1].data() + w[1].size() || s < 0 || s > 255) {
+      throw ScriptError(line_no, "sensor must be an integer 0..255, got '" + std::string(w[1]) + "'");
+    }
+    const double t = number(w[2], line_no, "temperature");
+    if (t < -50.0 || t > 200.0) {
+      throw ScriptError(line_no, "temperature must be in -50..200 degC");
+    }
+    return CmdTemperature{static_cast<std::uint8_t>(s), t};
+  }
+  if (verb == "begin") {
+    expect_words(w, 1, 1, line_no, "begin");
+    return CmdBegin{};
+  }
+  if (verb == "touch") {
+    const char* usage = "touch reference|machine x|y|z +|- [lateral|axial] <trigger_mm>";
+    expect_words(w, 5, 6, line_no, usage);
+    CmdTouch c;
+    const std::string probe = lower(w[1]);
+    if (probe == "reference") {
+      c.touch.probe = core::ProbeKind::kReferenceProbe;
+    } else if (probe == "machine") {
+      c.touch.probe = core::ProbeKind::kMachineProbe;
+    } else {
+      throw ScriptError(line_no, "probe must be 'reference' or 'machine', got '" +
+                                     std::string(w[1]) + "'");
+    }
+    const std::string axis = lower(w[2]);
+    if (axis == "x") {
+      c.touch.axis = 0;
+    } else if (axis == "y") {
+      c.touch.axis = 1;
+    } else if (axis == "z") {
+      c.touch.axis = 2;
+    } else {
+      throw ScriptError(line_no, "axis must be x, y or z, got '" + std::string(w[2]) + "'");
+    }
+    if (w[3] == "+") {
+      c.touch.direction = 1;
+    } else if (w[3] == "-") {
+      c.touch.direction = -1;
+    } else {
+      throw ScriptError(line_no, "direction must be + or -, got '" + std::string(w[3]) + "'");
+    }
+    std::size_t pos = 4;
+    if (w.size() == 6) {
+      const std::string variant = lower(w[4]);
+      if (variant == "lateral") {
+        c.touch.variant = 0;
+      } else if (variant == "axial") {
+        if (c.touch.axis != 0) {
+          throw ScriptError(line_no, "only X is touched axially (along the stylus)");
+        }
+        c.touch.variant = 1;
+      } else {
+        throw ScriptError(line_no,
+                          "variant must be lateral or axial, got '" + std::string(w[4]) + "'");
+      }
+      pos = 5;
+    }
+    c.touch.trigger_position_mm = number(w[pos], line_no, "trigger position");
+    if (std::fabs(c.touch.trigger_position_mm) > 1e5) {
+      throw ScriptError(line_no, "trigger position beyond +-100000 mm");
+    }
+    return c;
+  }
+  if (verb == "facets") {
+    expect_words(w, 4, 4, line_no, "facets lateral|end-face <chord_plus_mm> <chord_minus_mm>");
+    CmdFacets c;
+    const std::string face = lower(w[1]);
+    if (face == "lateral") {
+      c.face = core::calib::Face::kLateral;
+    } else if (face == "end-face") {
+      c.face = core::calib::Face::kEndFace;
+    } else {
+      throw ScriptError(line_no,
+                        "face must be lateral or end-face, got '" + std::string(w[1]) + "'");
+    }
+    c.chord_plus_mm = number(w[2], line_no, "chord_plus_mm");
+    c.chord_minus_mm = number(w[3], line_no, "chord_minus_mm");
+    if (c.chord_plus_mm <= 0.0 || c.chord_minus_mm <= 0.0) {
+      throw ScriptError(line_no, "chords must be positive [mm]");
+    }
+    return c;
+  }
+  if (verb == "status") {
+    expect_words(w, 1, 1, line_no, "status");
+    return CmdStatus{};
+  }
+  if (verb == "discard") {
+    expect_words(w, 1, 1, line_no, "discard");
+    return CmdDiscard{};
+  }
+  if (verb == "help") {
+    return CmdHelp{};
+  }
+  if (verb == "quit" || verb == "exit") {
+    return CmdQuit{};
+  }
+  throw ScriptError(line_no, "unknown command '" + std::string(w[0]) + "' (try 'help')");
+}
+
+}  // namespace nccomp::tools::calibrate

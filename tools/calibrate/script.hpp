@@ -1,0 +1,72 @@
+// The `nccomp calibrate` command language: one command per line, the same typed at the
+// interactive prompt or read from a script file (docs/calibration.md, "Script commands").
+//
+//   time <s>                                    set the clock [s] (never backwards)
+//   wait <s>                                    let time pass, stepping once per second
+//   temperature <sensor> <°C>                   a temperature sample
+//   begin                                       start an initial calibration
+//   touch reference|machine x|y|z +|- [lateral|axial] <trigger_mm>
+//   facets lateral|end-face <chord_plus_mm> <chord_minus_mm>
+//   status | discard | help | quit
+//
+// '#' starts a comment; blank lines are ignored.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <stdexcept>
+#include <string>
+#include <string_view>
+#include <variant>
+
+#include "core/calib/calibrator.hpp"
+#include "core/common/types.hpp"
+
+namespace nccomp::tools::calibrate {
+
+struct CmdTime {
+  double time_s{0.0};
+};
+struct CmdWait {
+  double duration_s{0.0};
+};
+struct CmdTemperature {
+  std::uint8_t sensor{0};
+  double temperature_c{0.0};
+};
+struct CmdBegin {};
+struct CmdTouch {
+  core::CalibrationTouch touch{};
+};
+struct CmdFacets {
+  core::calib::Face face{core::calib::Face::kLateral};
+  double chord_plus_mm{0.0};
+  double chord_minus_mm{0.0};
+};
+struct CmdStatus {};
+struct CmdDiscard {};
+struct CmdHelp {};
+struct CmdQuit {};
+struct CmdEmpty {};
+
+using Command = std::variant<CmdEmpty, CmdTime, CmdWait, CmdTemperature, CmdBegin, CmdTouch,
+                             CmdFacets, CmdStatus, CmdDiscard, CmdHelp, CmdQuit>;
+
+/// A malformed line: what() is "line N: <why>".
+class ScriptError : public std::invalid_argument {
+ public:
+  ScriptError(std::size_t line, const std::string& why)
+      : std::invalid_argument("line " + std::to_string(line) + ": " + why), line_(line) {}
+  [[nodiscard]] std::size_t line() const noexcept { return line_; }
+
+ private:
+  std::size_t line_;
+};
+
+/// Parses one line; throws ScriptError naming the line and the offending word.
+Command parse_line(std::string_view line, std::size_t line_no);
+
+/// The help text listing the commands.
+const char* script_help() noexcept;
+
+}  // namespace nccomp::tools::calibrate
