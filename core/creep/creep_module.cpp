@@ -37,15 +37,37 @@ void check_index(std::int32_t index, const char* key, const engine::RegisterTabl
   }
 }
 
+void resolve(const std::string& name, std::int32_t& index, const char* key,
+             const engine::RegisterTable& t) {
+  if (name.empty()) return;
+  const int i = t.find(name);
+  if (i < 0) {
+    throw std::invalid_argument(std::string(key) + ": no register named '" + name +
+                                "' in [[registers]]");
+  }
+  index = i;
+}
+
 }  // namespace
 
 CreepModule::CreepModule(CreepModuleConfig config) : config_(std::move(config)) {
   if (config_.name.empty()) throw std::invalid_argument("creep: module name must not be empty");
-  validate(config_.creep);
 }
 
 void CreepModule::attach(const engine::RegisterTable& registers) {
   CreepConfig c = config_.creep;
+  const auto& n = config_.registers;
+  for (std::size_t ch = 0; ch < kChannelCount; ++ch) {
+    resolve(n.channel[ch], c.output.channel_register[ch], kChannelKeys[ch], registers);
+  }
+  resolve(n.warning, c.output.warning_register, "creep.output.warning_register", registers);
+  resolve(n.alarm, c.output.alarm_register, "creep.output.alarm_register", registers);
+  resolve(n.measurement_due, c.output.measurement_due_register,
+          "creep.output.measurement_due_register", registers);
+  resolve(n.tool_change, c.output.tool_change_register, "creep.output.tool_change_register",
+          registers);
+  resolve(n.restart_path, c.output.restart_path_register, "creep.output.restart_path_register",
+          registers);
   bool first = true;
   for (std::size_t ch = 0; ch < kChannelCount; ++ch) {
     const std::int32_t r = c.output.channel_register[ch];
@@ -74,7 +96,7 @@ void CreepModule::attach(const engine::RegisterTable& registers) {
               registers);
   check_index(c.output.tool_change_register, "creep.output.tool_change_register", registers);
   check_index(c.output.restart_path_register, "creep.output.restart_path_register", registers);
-  comp_.configure(c);
+  comp_.configure(c);  // validates: std::invalid_argument naming the key
   ++generation_;
 }
 

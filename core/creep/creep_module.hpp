@@ -12,24 +12,39 @@
 
 namespace nccomp::core::creep {
 
+/// The registers of [creep.output] by name (TOML: `x_register = "X_offset"` etc.), resolved at
+/// attach() to indices in the engine's [[registers]] list. Empty = use the index already in
+/// CreepConfig::output (or none).
+struct CreepRegisterNames {
+  std::array<std::string, kChannelCount> channel;  // x, y, z, radius, length
+  std::string warning;
+  std::string alarm;
+  std::string measurement_due;
+  std::string tool_change;
+  std::string restart_path;
+};
+
 struct CreepModuleConfig {
   /// Module name (state key); unique among modules.
   std::string name{"creep"};
-  /// Register indices in creep.output are positions in the engine's [[registers]] list.
+  CreepRegisterNames registers{};
   CreepConfig creep{};
 };
 
 class CreepModule final : public engine::Module {
  public:
-  /// Not real-time. Validates the creep config (std::invalid_argument naming the key).
+  /// Not real-time. Stores the config; everything is validated at attach(), when the register
+  /// names can be resolved.
   explicit CreepModule(CreepModuleConfig config);
 
   [[nodiscard]] std::string_view name() const noexcept override { return config_.name; }
 
-  /// Not real-time. Checks every register index against the table and its kind (x/y/z →
+  /// Not real-time. Resolves register names, checks every index against the table and its
+  /// kind (x/y/z →
   /// axis_offset, radius → tool_radius_wear, length → tool_length_wear); takes the most
   /// restrictive limits of the offset registers it drives as its own limiter (so a measurement
-  /// the engine would reject is refused before it changes any state); configures the core.
+  /// the engine would reject is refused before it changes any state); validates and configures
+  /// the core. Throws std::invalid_argument naming the key.
   void attach(const engine::RegisterTable& registers) override;
 
   /// Real-time safe.

@@ -136,6 +136,30 @@ TEST(CreepEngineModule, LoadStateRefusesForeignBytes) {
   EXPECT_EQ(scope.count(), 0U);
 }
 
+TEST(CreepEngineModule, RegistersByName) {
+  auto c = module_config();
+  c.creep.output.channel_register = {-1, -1, -1, -1, -1};
+  c.registers.channel = {"X_offset", "", "Z_offset", "", ""};
+  EngineRig r(c);
+  r.advance(0.0);
+  r.measure(10.0);
+  for (int i = 0; i < 100; ++i) r.advance(0.5);
+  EXPECT_NEAR(r.last(2), -10.0, 1e-9);
+  c.registers.channel[2] = "Z_offst";
+  CreepModule typo(c);
+  std::vector<RegisterSpec> regs = registers();
+  try {
+    typo.attach(engine::RegisterTable(regs));
+    FAIL();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("creep.output.z_register: no register named 'Z_offst'"),
+              std::string::npos);
+  }
+  c.registers.channel = {"", "", "", "", ""};
+  CreepModule none(c);
+  EXPECT_THROW(none.attach(engine::RegisterTable(regs)), std::invalid_argument);
+}
+
 TEST(CreepEngineModule, AttachChecksIndicesAndKinds) {
   std::vector<RegisterSpec> regs = registers();
   auto c = module_config();
