@@ -78,6 +78,22 @@ TEST(ModbusHilSim, EveryRegisterTypeAndEncodingOverTcp) {
     got.drain(*bus);
     return !got.axis.back().cutting;
   }));
+  // WHEN the NC publishes NaN for Y (float32 0x7FC00000) THEN no sample carries it: dropped and
+  // counted; a finite value again brings the samples back.
+  server.update([](Tables& t) {
+    t.holding[0] = 0x0000;
+    t.holding[1] = 0xC07F;  // low word first, bytes swapped
+  });
+  ASSERT_TRUE(wait_until([&] { return bus->modbus_status().values_invalid >= 3; }));
+  server.update(fill_every_encoding);
+  const std::size_t n = got.axis.size();
+  ASSERT_TRUE(wait_until([&] {
+    got.drain(*bus);
+    return got.axis.size() > n + 2;
+  }));
+  for (const auto& a : got.axis) {
+    ASSERT_TRUE(std::isfinite(a.position_mm[1]));
+  }
   bus->stop();
   const mb::ModbusStatus st = bus->modbus_status();
   EXPECT_EQ(st.bus.state, drivers::LinkState::kStopped);
