@@ -18,6 +18,7 @@ constexpr double kDegToRad = std::numbers::pi / 180.0;
 // Points closer than this along the contour are one checkpoint (a corner point and an extra
 // point at the same place must not be probed twice).
 constexpr double kMergeDistanceMm = 1e-3;
+constexpr double kMaxCoordinateMm = 1e6;
 
 [[noreturn]] void fail(const std::string& key, const std::string& reason) {
   throw std::invalid_argument("checkpoints." + key + ": " + reason);
@@ -109,6 +110,12 @@ Plan make_plan(const PlanConfig& c) {
     if (!std::isfinite(c.contour[i].x_mm) || !std::isfinite(c.contour[i].y_mm)) {
       fail("contour", "point " + std::to_string(i) + " is not finite");
     }
+    // Beyond any machine's travel; also keeps lengths and path positions exact to 1 µm.
+    if (std::fabs(c.contour[i].x_mm) > kMaxCoordinateMm ||
+        std::fabs(c.contour[i].y_mm) > kMaxCoordinateMm) {
+      fail("contour", "point " + std::to_string(i) + " is farther than " +
+                          num(kMaxCoordinateMm) + " mm from the origin");
+    }
   }
   if (!c.closed && (c.material == MaterialSide::kInside || c.material == MaterialSide::kOutside)) {
     fail("material", "\"inside\"/\"outside\" need a closed contour; use \"left\" or \"right\"");
@@ -118,6 +125,9 @@ Plan make_plan(const PlanConfig& c) {
         std::pair{c.z_end_mm, "z_end_mm"}, std::pair{c.program_path_start_mm, "program_path_start_mm"},
         std::pair{c.level_link_mm, "level_link_mm"}}) {
     require_finite(v, key);
+    if (std::fabs(v) > kMaxCoordinateMm) {
+      fail(key, "magnitude above " + num(kMaxCoordinateMm) + " mm");
+    }
   }
   if (!(c.depth_step_mm > 0.0) || !std::isfinite(c.depth_step_mm)) {
     fail("depth_step_mm", "must be a positive finite number, got " + num(c.depth_step_mm));
@@ -320,6 +330,11 @@ Plan make_plan(const PlanConfig& c) {
       cp.tool_y_mm = cp.y_mm + ny * c.tool_radius_mm;
       cp.start_x_mm = cp.x_mm + nx * (c.ball_radius_mm + c.probe_approach_mm);
       cp.start_y_mm = cp.y_mm + ny * (c.ball_radius_mm + c.probe_approach_mm);
+      if (!plan.checkpoints.empty() && !(cp.path_mm > plan.checkpoints.back().path_mm)) {
+        fail("level_link_mm", "levels " + std::to_string(l - 1) + " and " + std::to_string(l) +
+                                  " share a program path position (an open contour's end and "
+                                  "start): make level_link_mm > 0");
+      }
       plan.checkpoints.push_back(cp);
     }
   }

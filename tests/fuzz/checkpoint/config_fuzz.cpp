@@ -1,0 +1,37 @@
+// TOML bytes → the [checkpoints] loader → (if valid) the plan outputs.
+#include <toml++/toml.h>
+
+#include <cstddef>
+#include <cstdint>
+#include <sstream>
+#include <string_view>
+#include <vector>
+
+#include "tools/plan/checkpoints_toml.hpp"
+#include "tools/plan/plan_output.hpp"
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+  namespace ck = nccomp::tools::checkpoints;
+  const std::string_view text(reinterpret_cast<const char*>(data), size);
+  toml::table root;
+  try {
+    root = toml::parse(text, std::string_view("fuzz.toml"));
+  } catch (const toml::parse_error&) {
+    return 0;
+  }
+  const toml::table* t = root["checkpoints"].as_table();
+  if (t == nullptr) return 0;
+  std::vector<ck::ConfigIssue> issues;
+  // A base directory without files: contour_csv can only fail cleanly.
+  const ck::CheckpointsConfig c = ck::parse_checkpoints(*t, "fuzz.toml", "/nonexistent", issues);
+  if (!issues.empty()) {
+    for (const auto& i : issues) (void)ck::format_issue(i);
+    return 0;
+  }
+  const auto plan = nccomp::core::checkpoint::make_plan(c.plan);  // validated: must not throw
+  std::ostringstream os;
+  ck::write_plan_summary(os, plan, c);
+  ck::write_plan_csv(os, plan, c);
+  ck::write_probing_gcode(os, plan, c);
+  return 0;
+}

@@ -1,0 +1,102 @@
+// Arbitrary event streams into CheckpointCompensator::step: no crash, no UB, offsets always
+// finite and inside the limiter's absolute limit.
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+#include <vector>
+
+#include "core/checkpoint/compensator.hpp"
+
+namespace {
+
+namespace cp = nccomp::core::checkpoint;
+using namespace nccomp::core;
+
+double take_double(const std::uint8_t*& p, const std::uint8_t* end) {
+  double v = 0.0;
+  if (end - p >= 8) {
+    std::memcpy(&v, p, 8);
+    p += 8;
+  } else if (p < end) {
+    v = static_cast<double>(*p++) - 128.0;
+  }
+  return v;
+}
+
+}  // namespace
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+  static cp::CheckpointCompensator* comp = nullptr;
+  static LimiterConfig limits{};
+  if (comp == nullptr) {
+    comp = new cp::CheckpointCompensator();
+  }
+  std::vector<cp::Checkpoint> plan;
+  for (int i = 0; i < 6; ++i) {
+    cp::Checkpoint c;
+    c.id = i;
+    c.path_mm = 10.0 * (i + 1);
+    c.tool_x_mm = c.path_mm;
+    c.z_mm = -5.0;
+    plan.push_back(c);
+  }
+  cp::CompensatorConfig cfg;
+  cfg.active_register = 3;
+  cfg.finishing_tool = 1;
+  const std::uint8_t* p = data;
+  const std::uint8_t* end = data + size;
+  if (p < end) {
+    const std::uint8_t mode = *p++;
+    cfg.apply = (mode & 1) ? cp::ApplyMode::kStep : cp::ApplyMode::kCreep;
+    cfg.trigger = (mode & 2) ? cp::TriggerMode::kPosition : cp::TriggerMode::kPath;
+    cfg.learning_mode = (mode & 4) ? cp::LearningMode::kSemiFinishing
+                                   : cp::LearningMode::kPreviousPart;
+  }
+  comp->configure(cfg, plan, limits);
+  StepOutput out;
+  std::vector<Event> events;
+  while (p < end) {
+    const std::uint8_t kind = *p++;
+    switch (kind % 5) {
+      case 0: {
+        AxisSample s;
+        s.tool = (kind & 0x80) ? 1 : 2;
+        s.position_mm[0] = take_double(p, end);
+        s.position_mm[1] = take_double(p, end);
+        s.position_mm[2] = take_double(p, end);
+        s.program_path_mm = take_double(p, end);
+        events.emplace_back(s);
+        break;
+      }
+      case 1: {
+        ProbeMeasurement m;
+        m.checkpoint = (p < end) ? static_cast<std::int8_t>(*p++) : 0;
+        m.raw_deviation_um = take_double(p, end);
+        m.wall_angle_deg = take_double(p, end);
+        m.ball_radius_mm = take_double(p, end);
+        events.emplace_back(m);
+        break;
+      }
+      case 2:
+        events.emplace_back(ProgramEvent{0, ProgramEventKind::kPartStart, 1});
+        break;
+      case 3:
+        events.emplace_back(ToolChange{0, (kind & 0x80) ? 1 : 2, false});
+        break;
+      default: {
+        out.clear();
+        comp->step(static_cast<TimeNs>(p - data) * 1000, events, out);
+        events.clear();
+        for (const OffsetWrite& w : out.writes) {
+          if (!std::isfinite(w.value_um) || std::fabs(w.value_um) > limits.max_abs_um) {
+            __builtin_trap();
+          }
+        }
+      }
+    }
+  }
+  out.clear();
+  comp->step(0, events, out);
+  return 0;
+}
