@@ -39,10 +39,10 @@ std::ptrdiff_t crossing(std::span<const double> f, std::ptrdiff_t j, std::ptrdif
       const double z_rel = 0.5 * dz - dp * t / d;  // from j's centre, mm
       const double x = static_cast<double>(j) + z_rel / dz_mm;
       const double c = std::ceil(x);
-      if (c <= static_cast<double>(lo)) {
+      if (!(c > static_cast<double>(lo))) {  // NaN too: never cast it
         return lo;
       }
-      if (c >= static_cast<double>(end)) {
+      if (!(c < static_cast<double>(end))) {
         return end;
       }
       return static_cast<std::ptrdiff_t>(c);
