@@ -124,7 +124,7 @@ std::size_t CreepModule::save_state(std::span<std::byte> buf) const noexcept {
 }
 
 bool CreepModule::load_state(std::span<const std::byte> bytes) noexcept {
-  if (bytes.size() != sizeof(CreepState)) return false;
+  if (!state_bytes_loadable(bytes.data(), bytes.size())) return false;
   CreepState st;
   std::memcpy(&st, bytes.data(), sizeof(CreepState));
   if (!comp_.restore_state(st)) return false;

@@ -94,5 +94,31 @@ struct CreepState {
 };
 
 static_assert(std::is_trivially_copyable_v<CreepState>);
+static_assert(std::is_standard_layout_v<CreepState>);
+
+/// True if bytes can be copied into a CreepState: the right size and every bool byte 0 or 1
+/// (loading any other value into a bool is undefined behaviour, and a corrupt state file can
+/// hold anything). Values are checked afterwards by WearCompensator::check_state(). Real-time
+/// safe.
+inline bool state_bytes_loadable(const std::byte* bytes, std::size_t size) noexcept {
+  if (size != sizeof(CreepState)) return false;
+  const auto is_bool = [bytes](std::size_t offset) {
+    return std::to_integer<unsigned>(bytes[offset]) <= 1U;
+  };
+  for (std::size_t k = 0; k < kMaxCreeps; ++k) {
+    const std::size_t slot = offsetof(CreepState, creeps) + k * sizeof(CreepSlot);
+    if (!is_bool(slot + offsetof(CreepSlot, active)) ||
+        !is_bool(slot + offsetof(CreepSlot, path_based))) {
+      return false;
+    }
+  }
+  return is_bool(offsetof(CreepState, entry) + offsetof(EntrySlot, active)) &&
+         is_bool(offsetof(CreepState, rate_known)) &&
+         is_bool(offsetof(CreepState, history_has_origin)) &&
+         is_bool(offsetof(CreepState, halted)) && is_bool(offsetof(CreepState, warning_flag)) &&
+         is_bool(offsetof(CreepState, alarm_flag)) &&
+         is_bool(offsetof(CreepState, measurement_due_flag)) &&
+         is_bool(offsetof(CreepState, tool_change_flag));
+}
 
 }  // namespace nccomp::core::creep

@@ -131,6 +131,10 @@ TEST(CreepEngineModule, LoadStateRefusesForeignBytes) {
   EXPECT_FALSE(m.load_state(bytes));
   s.committed_um[0] = 3.0;
   std::memcpy(bytes.data(), &s, sizeof(s));
+  // A bool byte that is neither 0 nor 1 (corrupt file) is refused before it is loaded.
+  bytes[offsetof(CreepState, halted)] = std::byte{7};
+  EXPECT_FALSE(m.load_state(bytes));
+  bytes[offsetof(CreepState, halted)] = std::byte{0};
   nccomp::test::AllocationScope scope;
   EXPECT_TRUE(m.load_state(bytes));
   EXPECT_EQ(scope.count(), 0U);
