@@ -543,13 +543,11 @@ FrameDecoder::Result FrameDecoder::decode(std::uint32_t id, bool extended,
     if (s.field == Field::kDirection && std::fabs(v) < 0.5) {
       return {RejectReason::kOutOfRange, false};  // an approach direction is +1 or -1
     }
-    values[i] = v;
+    values[i] = (info != nullptr && info->integral) ? std::nearbyint(v) : v;
   }
   core::Event& ev = latest_[static_cast<std::size_t>(f.event)];
   for (std::size_t i = 0; i < f.signals.size(); ++i) {
-    const Field field = f.signals[i].field;
-    const double v = (field_info(f.event, field)->integral) ? std::nearbyint(values[i]) : values[i];
-    apply(ev, field, v);
+    apply(ev, f.signals[i].field, values[i]);
   }
   set_time(ev, now_ns);
   if (!f.emit) {

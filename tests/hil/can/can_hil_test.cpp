@@ -300,6 +300,7 @@ TEST_F(CanHil, AcknowledgedByPythonCanPeer) {
                            "print('acked', m.data.hex(), flush=True)\n"
                            "bus.shutdown()\n";
   const std::string ready = out_dir() + "/ack_peer.out";
+  std::remove(ready.c_str());  // a "ready" left by an earlier run must not count
   Peer py("/usr/bin/python3 " + script + " > " + ready);
   // python3-can imports slowly in a TCG VM.
   ASSERT_TRUE(wait_until([&] { return slurp(ready).find("ready") != std::string::npos; }, 90s));
