@@ -8,11 +8,13 @@
 // 2. Highest loop rate with zero overruns: a minimal fixed-rate loop thread (absolute deadlines)
 //    drains rx(), computes an offset from the latest sample and queues it in tx(); the driver
 //    polls at the same rate. A rate is sustained when, over the run, neither the loop nor the
-//    driver overran and the loop got a fresh sample in >= 99 % of its cycles.
+//    driver overran and no event was dropped. (The share of loop cycles that found a new sample
+//    is printed too; at equal rates it depends on the phase of the two clocks, so it is not a
+//    criterion.)
 // 3. RTU: bus time per poll of the reference profile at common baud rates (from the frame
 //    timing model in config.cpp) and the poll rate it allows.
 //
-// Usage: bench_modbus [cycles_per_round] [seconds_per_rate] [--fifo]
+// Usage: bench_modbus [cycles_per_round] [seconds_per_rate] [--fifo]   (4 rounds of each path)
 // --fifo: SCHED_FIFO priority 50 for every thread of the bench (the NC server, the driver's I/O
 // thread and the loop inherit it), as the daemon's loop may run; reported on stdout.
 #include <modbus/modbus.h>
@@ -84,7 +86,9 @@ std::vector<TimeNs> bare_round(std::uint16_t port, int cycles, TimeNs period) {
   out.reserve(static_cast<std::size_t>(cycles));
   std::uint16_t regs[kReadRegisters];
   TimeNs next = mb::monotonic_now_ns();
-  for (int i = 0; i < cycles; ++i) {
+  // The same 200 ms warm-up the driver rounds get (connection, caches), not measured.
+  const int warmup = static_cast<int>(200'000'000 / period);
+  for (int i = -warmup; i < cycles; ++i) {
     const TimeNs t0 = mb::monotonic_now_ns();
     if (modbus_read_input_registers(ctx, 0, kReadRegisters, regs) != kReadRegisters) {
       std::fprintf(stderr, "bare: read failed\n");
@@ -96,7 +100,9 @@ std::vector<TimeNs> bare_round(std::uint16_t port, int cycles, TimeNs period) {
       std::fprintf(stderr, "bare: write failed\n");
       std::exit(1);
     }
-    out.push_back(mb::monotonic_now_ns() - t0);
+    if (i >= 0) {
+      out.push_back(mb::monotonic_now_ns() - t0);
+    }
     next += period;
     sleep_until(next);
   }
@@ -201,7 +207,7 @@ int main(int argc, char** argv) {
   const double rate = 1000.0;
   std::vector<TimeNs> bare;
   std::vector<TimeNs> drv;
-  for (int round = 0; round < 2; ++round) {
+  for (int round = 0; round < 4; ++round) {
     const auto b = bare_round(port, cycles, static_cast<TimeNs>(1e9 / rate));
     bare.insert(bare.end(), b.begin(), b.end());
     const auto d = driver_round(port, rate, static_cast<TimeNs>(cycles * 1e9 / rate));
@@ -224,7 +230,8 @@ int main(int argc, char** argv) {
   for (double r : {500.0, 1000.0, 2000.0, 4000.0, 8000.0, 10000.0}) {
     const DriverRun d = driver_round(port, r, static_cast<TimeNs>(seconds * 1e9));
     const double fresh = static_cast<double>(d.fresh) / static_cast<double>(d.loop_cycles);
-    const bool ok = d.loop_overruns == 0 && d.status.poll_overruns == 0 && fresh >= 0.99;
+    const bool ok = d.loop_overruns == 0 && d.status.poll_overruns == 0 &&
+                    d.status.bus.counters.events_dropped == 0 && d.loop_cycles > 0;
     std::printf("| %.0f | %llu | %llu | %llu | %.1f %% | %.1f |%s\n", r,
                 static_cast<unsigned long long>(d.loop_cycles),
                 static_cast<unsigned long long>(d.loop_overruns),
