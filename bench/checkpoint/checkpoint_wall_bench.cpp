@@ -123,11 +123,21 @@ WallResult finish(cp::CheckpointCompensator& comp, const cp::Plan& plan, const G
   comp.step(0, {&start, 1}, out);
   WallResult r;
   double applied = std::nan("");
+  // Roughing and semi-finishing take time before the finishing tool arrives: 2 s of cycles
+  // without samples, in which the live register is pre-positioned to checkpoint 0's value.
+  TimeNs t = 0;
+  for (int k = 0; k < 2000; ++k) {
+    t += static_cast<TimeNs>(1e9 / kRateHz);
+    out.clear();
+    comp.step(t, {}, out);
+    for (const auto& w : out.writes) {
+      if (w.register_index == kRegister) applied = w.value_um;
+    }
+  }
   double sum2 = 0.0;
   std::size_t n = 0;
   const double ds = kFeedMmPerS / kRateHz;
   const double link = pc.depth_step_mm;
-  TimeNs t = 0;
   std::size_t next_cp = 0;
   if (wall_at_cp) wall_at_cp->assign(plan.checkpoints.size(), 0.0);
   for (std::size_t l = 0; l < plan.levels_z_mm.size(); ++l) {
@@ -231,6 +241,8 @@ int main() {
        LimiterConfig{}},
       {"creep linear", cp::ApplyMode::kCreep, nccomp::core::ProfileShape::kLinear, seed_limits()},
       {"creep cosine", cp::ApplyMode::kCreep, nccomp::core::ProfileShape::kCosine, seed_limits()},
+      {"creep linear through default limiter", cp::ApplyMode::kCreep,
+       nccomp::core::ProfileShape::kLinear, LimiterConfig{}},
   };
   {
     cp::CheckpointCompensator none;

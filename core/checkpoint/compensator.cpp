@@ -119,6 +119,7 @@ void CheckpointCompensator::configure(const CompensatorConfig& c, std::vector<Ch
   have_prev_ = false;
   travel_since_mm_ = 0.0;
   live_target_um_ = kNaN;
+  awaiting_finish_ = false;
   live_written_um_ = kNaN;
   pending_mismatch_ = 0;
   counters_ = {};
@@ -162,6 +163,36 @@ void CheckpointCompensator::step(TimeNs now_ns, std::span<const Event> events,
     }
   }
   flush_table(now_ns, out);
+  preposition(now_ns, out);
+}
+
+void CheckpointCompensator::preposition(TimeNs now_ns, StepOutput& out) noexcept {
+  // Between part start and the finishing tool's first sample the live register is brought to
+  // the first checkpoint's value, so a rate-limited register is there before the tool cuts.
+  if (config_.active_register < 0 || !awaiting_finish_) {
+    return;
+  }
+  write_live(register_value_um(0), now_ns, out);
+}
+
+void CheckpointCompensator::write_live(double target_um, TimeNs now_ns, StepOutput& out) noexcept {
+  live_target_um_ = target_um;
+  if (std::isfinite(live_written_um_) &&
+      std::fabs(target_um - live_written_um_) < config_.write_threshold_um) {
+    return;
+  }
+  const LimitResult r = limiter_.apply(target_um, now_ns);
+  const auto reg = static_cast<std::uint16_t>(config_.active_register);
+  if (r.rejected()) {
+    out.alarm(now_ns, Severity::kAlarm, AlarmCode::kOffsetBeyondAbsoluteLimit, reg, target_um);
+    return;
+  }
+  if (std::isfinite(live_written_um_) && !(std::fabs(r.value_um - live_written_um_) > 0.0)) {
+    return;  // the rate limit allowed no movement in this interval: nothing new to send
+  }
+  out.writes.push(OffsetWrite{now_ns, reg, r.value_um});
+  live_written_um_ = r.value_um;
+  ++counters_.live_writes;
 }
 
 void CheckpointCompensator::on_part_start(TimeNs /*now_ns*/, const ProgramEvent& ev) noexcept {
@@ -175,6 +206,7 @@ void CheckpointCompensator::on_part_start(TimeNs /*now_ns*/, const ProgramEvent&
   have_prev_ = false;
   travel_since_mm_ = 0.0;
   live_target_um_ = kNaN;
+  awaiting_finish_ = true;
 }
 
 void CheckpointCompensator::flush_table(TimeNs now_ns, StepOutput& out) noexcept {
@@ -393,27 +425,17 @@ void CheckpointCompensator::on_sample(const AxisSample& s, StepOutput& out) noex
   }
   prev_ = s;
   have_prev_ = true;
-  live_target_um_ = target_value_um(s);
+  awaiting_finish_ = false;
   if (config_.active_register < 0) {
+    live_target_um_ = target_value_um(s);
     return;
   }
-  if (std::isfinite(live_written_um_) &&
-      std::fabs(live_target_um_ - live_written_um_) < config_.write_threshold_um) {
-    return;
-  }
-  const LimitResult r = limiter_.apply(live_target_um_, s.time_ns);
-  const auto reg = static_cast<std::uint16_t>(config_.active_register);
-  if (r.rejected()) {
-    out.alarm(s.time_ns, Severity::kAlarm, AlarmCode::kOffsetBeyondAbsoluteLimit, reg,
-              live_target_um_);
-    return;
-  }
-  if (std::isfinite(live_written_um_) && !(std::fabs(r.value_um - live_written_um_) > 0.0)) {
-    return;  // the rate limit allowed no movement in this interval: nothing new to send
-  }
-  out.writes.push(OffsetWrite{s.time_ns, reg, r.value_um});
-  live_written_um_ = r.value_um;
-  ++counters_.live_writes;
+  write_live(target_value_um(s), s.time_ns, out);
+}
+
+void CheckpointCompensator::reset_live(double nc_value_um, TimeNs now_ns) noexcept {
+  limiter_.reset(nc_value_um, now_ns);
+  live_written_um_ = limiter_.output_um();
 }
 
 void CheckpointCompensator::export_state(CheckpointState& out) const {

@@ -152,6 +152,10 @@ class CheckpointCompensator {
   /// offsets. Either way an alarm 33 is raised on the next step. Not real-time.
   ReconcileReport reconcile(std::span<const double> nc_values_um);
 
+  /// Starts the live register's limiter from the value the NC holds (read back at start-up or
+  /// after a reconnect) instead of 0. Not real-time.
+  void reset_live(double nc_value_um, TimeNs now_ns) noexcept;
+
   /// The value of checkpoint i's register [µm] (after the repeatability rule).
   [[nodiscard]] double register_value_um(std::size_t i) const noexcept;
   [[nodiscard]] double learned_um(std::size_t i) const noexcept { return points_[i].learned_um; }
@@ -178,6 +182,8 @@ class CheckpointCompensator {
   [[nodiscard]] bool passes(std::size_t i, const AxisSample& s) const noexcept;
   [[nodiscard]] double target_value_um(const AxisSample& s) const noexcept;
   void flush_table(TimeNs now_ns, StepOutput& out) noexcept;
+  void preposition(TimeNs now_ns, StepOutput& out) noexcept;
+  void write_live(double target_um, TimeNs now_ns, StepOutput& out) noexcept;
   void mark_dirty(std::size_t i) noexcept;
 
   CompensatorConfig config_{};
@@ -198,6 +204,8 @@ class CheckpointCompensator {
   double travel_since_mm_{0.0};
   double live_target_um_{kNaN};
   double live_written_um_{kNaN};
+  /// Part started, finishing not yet: the live register is pre-positioned to checkpoint 0.
+  bool awaiting_finish_{false};
   std::size_t pending_mismatch_{0};
   CompensatorCounters counters_{};
 };

@@ -376,6 +376,42 @@ TEST(Apply, LiveRegisterWritesPassTheLimiterAndOnlyTheFinishingToolIsCompensated
   EXPECT_DOUBLE_EQ(written[4], 9.0);  // then nothing: the target is reached
 }
 
+TEST(Apply, LiveRegisterIsPrepositionedToTheFirstValueBeforeFinishing) {
+  CheckpointCompensator comp;
+  CompensatorConfig cfg = live_config(ApplyMode::kCreep, TriggerMode::kPath);
+  LimiterConfig lim = wide_limits();
+  lim.max_rate_um_per_s = 50.0;
+  lim.max_step_um = 5.0;
+  comp.configure(cfg, line_plan(2), lim);
+  learn_values(comp, {-12.0, 3.0});
+  // Part start at t = 0; the loop steps every 100 ms without the finishing tool.
+  std::vector<double> live;
+  for (int k = 0; k <= 4; ++k) {
+    std::vector<Event> ev;
+    if (k == 0) ev.emplace_back(part_start(1));
+    const StepOutput out = run(comp, ev, static_cast<TimeNs>(k) * 100'000'000);
+    for (const OffsetWrite& w : out.writes) {
+      if (w.register_index == 5) live.push_back(w.value_um);
+    }
+  }
+  // The register is first set to what the limiter holds (0: nothing read back), then moves by
+  // 50 µm/s · 0.1 s = 5 µm per cycle until it holds checkpoint 0's −12.
+  ASSERT_EQ(live.size(), 4U) << ::testing::PrintToString(live);
+  EXPECT_DOUBLE_EQ(live[0], 0.0);
+  EXPECT_DOUBLE_EQ(live[1], -5.0);
+  EXPECT_DOUBLE_EQ(live[2], -10.0);
+  EXPECT_DOUBLE_EQ(live[3], -12.0);
+  // After a restart the value read back from the NC is where the limiter starts.
+  CheckpointCompensator restarted;
+  restarted.configure(cfg, line_plan(2), lim);
+  learn_values(restarted, {-12.0, 3.0});
+  restarted.reset_live(-11.0, 0);
+  const StepOutput out = run(restarted, {part_start(2)}, 100'000'000);
+  ASSERT_EQ(out.writes.size(), 3U);  // two table registers, then the live one
+  EXPECT_EQ(out.writes[2].register_index, 5U);
+  EXPECT_DOUBLE_EQ(out.writes[2].value_um, -12.0);
+}
+
 // --- no missed checkpoint at 10 m/min -------------------------------------------------------
 
 struct Motion {
