@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <chrono>
+#include <thread>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -361,6 +363,41 @@ address = 65312
     EXPECT_EQ(t.sensor, 0) << "temperature " << t.temperature_c << " from a foreign answer";
     EXPECT_DOUBLE_EQ(t.temperature_c, 9999.0);
   }
+}
+
+TEST(ModbusHilSim, UnreachableNcBacksOffRaisesTheAlarmAndStopsPromptly) {
+  // A port nobody listens on (the server is stopped right after binding it).
+  std::uint16_t port = 0;
+  {
+    NcServer probe(ServerConfig{});
+    probe.start();
+    port = probe.port();
+  }
+  auto bus = make_bus(tcp_header(port) + kEventsAndOffsets);
+  bus->start();
+  push_offset(*bus, 0, 1.0);
+  ASSERT_TRUE(wait_until([&] {
+    const auto st = bus->modbus_status();
+    return st.connection_errors >= 3 && st.bus.alarm;
+  }));
+  const auto st = bus->modbus_status();
+  EXPECT_EQ(st.bus.state, drivers::LinkState::kConnecting);
+  EXPECT_EQ(st.bus.counters.reconnects, 0U);
+  EXPECT_EQ(st.polls, 0U);
+  // Back-off: from 20 ms doubling to 100 ms, so about 10 attempts per second, not thousands.
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  EXPECT_LT(bus->modbus_status().connection_errors, 30U);
+  const auto t0 = std::chrono::steady_clock::now();
+  bus->stop();
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::milliseconds(300));
+  // The NC appears: a new driver connects and delivers the offset the loop queued.
+  NcServer server(ServerConfig{.port = port});
+  server.start();
+  auto bus2 = make_bus(tcp_header(port) + kEventsAndOffsets);
+  bus2->start();
+  push_offset(*bus2, 0, 1.0);
+  ASSERT_TRUE(wait_until([&] { return holding_i32(server, 200) == 10; }));
+  bus2->stop();
 }
 
 TEST(ModbusHilSim, RtuOverPtyPairWithFrameTiming) {
