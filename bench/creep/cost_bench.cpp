@@ -26,7 +26,9 @@ struct Stats {
 
 Stats stats(std::vector<double>& v) {
   std::sort(v.begin(), v.end());
-  auto at = [&](double q) { return v[static_cast<std::size_t>(q * static_cast<double>(v.size() - 1))]; };
+  auto at = [&](double q) {
+    return v[static_cast<std::size_t>(q * static_cast<double>(v.size() - 1))];
+  };
   return {at(0.5), at(0.99), at(0.999), v.back()};
 }
 
@@ -128,10 +130,12 @@ int main(int argc, char** argv) {
   const Stats m = stats(t_meas);
   std::printf("| cycle | n | median [ns] | p99 [ns] | p99.9 [ns] | max [ns] |\n");
   std::printf("| --- | --- | --- | --- | --- | --- |\n");
-  std::printf("| step(): 1 axis sample, 3 axes, 16 points, 4 creeps | %zu | %.0f | %.0f | %.0f | %.0f |\n",
-              cycles, s.median_ns, s.p99_ns, s.p999_ns, s.max_ns);
-  std::printf("| step() + 16-point measurement (fold, 16 records) | %zu | %.0f | %.0f | %.0f | %.0f |\n",
-              t_meas.size(), m.median_ns, m.p99_ns, m.p999_ns, m.max_ns);
+  std::printf(
+      "| step(): 1 axis sample, 3 axes, 16 points, 4 creeps | %zu | %.0f | %.0f | %.0f | %.0f |\n",
+      cycles, s.median_ns, s.p99_ns, s.p999_ns, s.max_ns);
+  std::printf(
+      "| step() + 16-point measurement (fold, 16 records) | %zu | %.0f | %.0f | %.0f | %.0f |\n",
+      t_meas.size(), m.median_ns, m.p99_ns, m.p999_ns, m.max_ns);
   std::printf("| timer alone (steady_clock pair) | %zu | %.0f | %.0f | %.0f | %.0f |\n", cycles,
               t.median_ns, t.p99_ns, t.p999_ns, t.max_ns);
   return 0;

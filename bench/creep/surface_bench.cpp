@@ -20,14 +20,16 @@ using namespace nccomp::bench::creep;
 
 void print_header(const Scenario& sc) {
   std::printf("\n### %s\n\n", sc.name.c_str());
-  std::printf("%d passes of %.0f mm, path sample spacing Δs = %.2f mm, measured every %d passes "
-              "(mid-pass), creep length L = %.0f mm, measurement noise σ = %.2f µm, %zu edge "
-              "support point(s)\n\n",
-              sc.passes, sc.pass_length_mm, sc.ds_mm, sc.measure_every_passes,
-              sc.creep_length_mm, sc.noise_um, sc.edge_points);
-  std::printf("| strategy | max step along a pass [µm] | max step between passes [µm] | RMS form "
-              "error [µm] | RMS, second half [µm] | max form error [µm] |\n"
-              "| --- | --- | --- | --- | --- | --- |\n");
+  std::printf(
+      "%d passes of %.0f mm, path sample spacing Δs = %.2f mm, measured every %d passes "
+      "(mid-pass), creep length L = %.0f mm, measurement noise σ = %.2f µm, %zu edge "
+      "support point(s)\n\n",
+      sc.passes, sc.pass_length_mm, sc.ds_mm, sc.measure_every_passes, sc.creep_length_mm,
+      sc.noise_um, sc.edge_points);
+  std::printf(
+      "| strategy | max step along a pass [µm] | max step between passes [µm] | RMS form "
+      "error [µm] | RMS, second half [µm] | max form error [µm] |\n"
+      "| --- | --- | --- | --- | --- | --- |\n");
 }
 
 Result print_rows(const Scenario& sc) {
@@ -35,14 +37,14 @@ Result print_rows(const Scenario& sc) {
   for (const auto& st : strategies()) {
     const Result r = run(sc, st);
     if (&st == &strategies().front()) first = r;
-    std::printf("| %s | %.4f | %.3f | %.3f | %.3f | %.3f |\n", st.name.c_str(),
-                r.max_step_along_um, r.max_step_across_um, r.rms_um, r.rms_second_half_um,
-                r.max_abs_um);
+    std::printf("| %s | %.4f | %.3f | %.3f | %.3f | %.3f |\n", st.name.c_str(), r.max_step_along_um,
+                r.max_step_across_um, r.rms_um, r.rms_second_half_um, r.max_abs_um);
   }
-  std::printf("\n%d measurements; measured increment between measurements h: mean %.3f µm, "
-              "max %.3f µm; h·Δs/L with the max h = %.4f µm\n",
-              first.measurements, first.mean_increment_um, first.max_increment_um,
-              first.max_increment_um * sc.ds_mm / sc.creep_length_mm);
+  std::printf(
+      "\n%d measurements; measured increment between measurements h: mean %.3f µm, "
+      "max %.3f µm; h·Δs/L with the max h = %.4f µm\n",
+      first.measurements, first.mean_increment_um, first.max_increment_um,
+      first.max_increment_um * sc.ds_mm / sc.creep_length_mm);
   return first;
 }
 
@@ -91,8 +93,8 @@ std::vector<double> read_flutes(const std::string& path) {
     if (static_cast<int>(to_double(f[0], where)) != static_cast<int>(vb.size()) + 1) {
       throw std::runtime_error(where + ": cuts must be 1, 2, 3, ...");
     }
-    vb.push_back(std::max({to_double(f[1], where), to_double(f[2], where),
-                           to_double(f[3], where)}));
+    vb.push_back(
+        std::max({to_double(f[1], where), to_double(f[2], where), to_double(f[3], where)}));
   }
   return vb;
 }
@@ -126,9 +128,10 @@ std::map<std::string, std::vector<double>> read_percut(const std::string& path) 
 
 int main(int argc, char** argv) {
   const std::string phm_dir = argc > 1 ? argv[1] : NCCOMP_PHM_DIR;
-  std::printf("## Synthetic faces\n\nTrue wear g(s) = 8·(1 − exp(−s/300 mm)) + 0.004·s µm "
-              "(break-in, then linear); on the curved face w(θ, s) = g(s)·(0.6 + 0.8·sin θ) at "
-              "engagement angle θ.\n");
+  std::printf(
+      "## Synthetic faces\n\nTrue wear g(s) = 8·(1 − exp(−s/300 mm)) + 0.004·s µm "
+      "(break-in, then linear); on the curved face w(θ, s) = g(s)·(0.6 + 0.8·sin θ) at "
+      "engagement angle θ.\n");
   Scenario flat;
   flat.name = "Flat face (tool axis normal to the face, wear at the tip, Z offset)";
   flat.wear_um = [](double, double s) { return 8.0 * (1.0 - std::exp(-s / 300.0)) + 0.004 * s; };
@@ -148,8 +151,9 @@ int main(int argc, char** argv) {
   print_rows(flat_exact);
 
   Scenario curved = flat;
-  curved.name = "Curved face (cylinder R 50 mm, normal ±60°, ball-end mill, 7 support points "
-                "0–90°, X/Z along the normal)";
+  curved.name =
+      "Curved face (cylinder R 50 mm, normal ±60°, ball-end mill, 7 support points "
+      "0–90°, X/Z along the normal)";
   curved.curved = true;
   curved.edge_points = 7;
   curved.wear_um = [](double theta_deg, double s) {
@@ -178,18 +182,18 @@ int main(int argc, char** argv) {
       }
     }
   }
-  std::printf("\n## PHM 2010 milling wear (real)\n\nVB of the rotating envelope (max over the "
-              "three flutes; c4/c6 from the per-flute tables, checked equal to "
-              "phm2010_wear_percut.csv; c1 from that file). Radial wear = (VB − VB at cut 1)·tan γ "
-              "with clearance angle γ = %.0f° (tan γ = %.4f), linear in path within a cut; one "
-              "cut = one pass of 108 mm; radius-wear register (one support point).\n",
-              gamma_deg, tan_g);
+  std::printf(
+      "\n## PHM 2010 milling wear (real)\n\nVB of the rotating envelope (max over the "
+      "three flutes; c4/c6 from the per-flute tables, checked equal to "
+      "phm2010_wear_percut.csv; c1 from that file). Radial wear = (VB − VB at cut 1)·tan γ "
+      "with clearance angle γ = %.0f° (tan γ = %.4f), linear in path within a cut; one "
+      "cut = one pass of 108 mm; radius-wear register (one support point).\n",
+      gamma_deg, tan_g);
   for (int k : {5, 10, 20}) {
     for (const char* name : {"c1", "c4", "c6"}) {
       const std::vector<double> v = vb[name];
       Scenario sc;
-      sc.name = std::string("PHM 2010 ") + name + ", measured every " + std::to_string(k) +
-                " cuts";
+      sc.name = std::string("PHM 2010 ") + name + ", measured every " + std::to_string(k) + " cuts";
       sc.passes = static_cast<int>(v.size()) - 1;
       sc.pass_length_mm = 108.0;
       sc.ds_mm = 0.5;

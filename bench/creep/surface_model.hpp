@@ -58,7 +58,7 @@ struct Result {
   double rms_um{0.0};
   double rms_second_half_um{0.0};  // RMS over the second half of the path (steady state)
   double max_abs_um{0.0};
-  double mean_increment_um{0.0};   // h: mean measured increment between measurements
+  double mean_increment_um{0.0};  // h: mean measured increment between measurements
   double max_increment_um{0.0};
   int measurements{0};
 };
@@ -187,11 +187,13 @@ inline Result run(const Scenario& sc, const Strategy& st) {
     }
     for (int i = 1; i < n; ++i) {
       const auto k = static_cast<std::size_t>(i);
-      r.max_step_along_um = std::max(r.max_step_along_um, std::fabs(this_pass[k] - this_pass[k - 1]));
+      r.max_step_along_um =
+          std::max(r.max_step_along_um, std::fabs(this_pass[k] - this_pass[k - 1]));
     }
     if (j > 0) {
       for (std::size_t k = 0; k < this_pass.size(); ++k) {
-        r.max_step_across_um = std::max(r.max_step_across_um, std::fabs(this_pass[k] - prev_pass[k]));
+        r.max_step_across_um =
+            std::max(r.max_step_across_um, std::fabs(this_pass[k] - prev_pass[k]));
       }
     }
     prev_pass.swap(this_pass);

@@ -40,8 +40,8 @@ void increasing_table(const std::vector<double>& x, const std::string& key) {
   for (std::size_t i = 0; i < x.size(); ++i) {
     finite(x[i], key + "[" + std::to_string(i) + "]");
     if (i > 0 && !(x[i] > x[i - 1])) {
-      fail(key + "[" + std::to_string(i) + "]", "must be strictly increasing, got " + num(x[i]) +
-                                                    " after " + num(x[i - 1]));
+      fail(key + "[" + std::to_string(i) + "]",
+           "must be strictly increasing, got " + num(x[i]) + " after " + num(x[i - 1]));
     }
   }
 }
@@ -71,21 +71,21 @@ void validate(const CreepConfig& c) {
     }
   }
   if (c.max_creeps < 1 || c.max_creeps > kMaxCreeps) {
-    fail("creep.max_creeps", "must be 1.." + std::to_string(kMaxCreeps) + ", got " +
-                                 std::to_string(c.max_creeps));
+    fail("creep.max_creeps",
+         "must be 1.." + std::to_string(kMaxCreeps) + ", got " + std::to_string(c.max_creeps));
   }
 
   const auto& e = c.edge;
   if (e.edge_points < 1 || e.edge_points > kMaxEdgePoints) {
-    fail("creep.edge.edge_points", "must be 1.." + std::to_string(kMaxEdgePoints) + ", got " +
-                                       std::to_string(e.edge_points));
+    fail("creep.edge.edge_points",
+         "must be 1.." + std::to_string(kMaxEdgePoints) + ", got " + std::to_string(e.edge_points));
   }
   if (e.tool_shape == ToolShape::kTip && e.edge_points != 1) {
     fail("creep.edge.edge_points", "must be 1 for tool_shape = \"tip\"");
   }
-  const double axis_norm = std::sqrt(e.tool_axis[0] * e.tool_axis[0] +
-                                     e.tool_axis[1] * e.tool_axis[1] +
-                                     e.tool_axis[2] * e.tool_axis[2]);
+  const double axis_norm =
+      std::sqrt(e.tool_axis[0] * e.tool_axis[0] + e.tool_axis[1] * e.tool_axis[1] +
+                e.tool_axis[2] * e.tool_axis[2]);
   if (!std::isfinite(axis_norm) || std::fabs(axis_norm - 1.0) > 1e-6) {
     fail("creep.edge.tool_axis", "must be a unit vector, |axis| = " + num(axis_norm));
   }
@@ -130,8 +130,9 @@ void validate(const CreepConfig& c) {
                                 e.fallback_channel == Channel::kY ||
                                 e.fallback_channel == Channel::kZ;
   if (fallback_is_axis != (o.mode == OutputMode::kAxes)) {
-    fail("creep.edge.fallback_channel", "must be an axis (x/y/z) in mode \"axes\" and "
-                                        "radius/length in mode \"tool_registers\"");
+    fail("creep.edge.fallback_channel",
+         "must be an axis (x/y/z) in mode \"axes\" and "
+         "radius/length in mode \"tool_registers\"");
   }
   sign(o.tool_register_sign, "creep.output.tool_register_sign");
   register_index(o.warning_register, "creep.output.warning_register");
@@ -198,12 +199,14 @@ void validate(const CreepConfig& c) {
     const std::string key = "creep.deflection[" + std::to_string(k) + "]";
     if (d.tool < 0) fail(key + ".tool", "must be >= 0 (0 = every tool)");
     for (std::size_t j = 0; j < k; ++j) {
-      if (c.deflection[j].tool == d.tool) fail(key + ".tool", "repeats tool " + std::to_string(d.tool));
+      if (c.deflection[j].tool == d.tool)
+        fail(key + ".tool", "repeats tool " + std::to_string(d.tool));
     }
     if (d.wear_um.empty() || d.wear_um.size() > kMaxDeflectionRows) {
       fail(key + ".wear_um", "must have 1.." + std::to_string(kMaxDeflectionRows) + " values");
     }
-    if (d.normal_um.size() != d.wear_um.size()) fail(key + ".normal_um", "must match wear_um in length");
+    if (d.normal_um.size() != d.wear_um.size())
+      fail(key + ".normal_um", "must match wear_um in length");
     if (d.lateral_um.size() != d.wear_um.size()) {
       fail(key + ".lateral_um", "must match wear_um in length");
     }

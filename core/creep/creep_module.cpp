@@ -77,8 +77,7 @@ void CreepModule::attach(const engine::RegisterTable& registers) {
     if (spec.kind != kind_for(ch)) {
       throw std::invalid_argument(std::string(kChannelKeys[ch]) + ": register '" + spec.name +
                                   "' is of kind " + std::string(engine::to_string(spec.kind)) +
-                                  ", expected " +
-                                  std::string(engine::to_string(kind_for(ch))));
+                                  ", expected " + std::string(engine::to_string(kind_for(ch))));
     }
     if (first) {
       c.limiter = spec.limits;

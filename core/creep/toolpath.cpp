@@ -35,9 +35,8 @@ bool split(std::string_view line, std::array<std::string_view, N>& out, std::siz
   std::size_t start = 0;
   while (true) {
     const std::size_t comma = line.find(',', start);
-    const std::string_view f =
-        trim(line.substr(start, comma == std::string_view::npos ? std::string_view::npos
-                                                                : comma - start));
+    const std::string_view f = trim(line.substr(
+        start, comma == std::string_view::npos ? std::string_view::npos : comma - start));
     if (count < N) out[count] = f;
     ++count;
     if (comma == std::string_view::npos) break;
@@ -58,8 +57,7 @@ double number(std::string_view f, std::string_view source, std::size_t line, con
 
 }  // namespace
 
-std::vector<ToolpathNormal> parse_toolpath_normals(std::string_view text,
-                                                   std::string_view source) {
+std::vector<ToolpathNormal> parse_toolpath_normals(std::string_view text, std::string_view source) {
   std::vector<ToolpathNormal> rows;
   bool header = false;
   std::size_t line_no = 0;
@@ -90,15 +88,16 @@ std::vector<ToolpathNormal> parse_toolpath_normals(std::string_view text,
     r.path_mm = number(f[0], source, line_no, "path_mm");
     r.normal = {number(f[1], source, line_no, "nx"), number(f[2], source, line_no, "ny"),
                 number(f[3], source, line_no, "nz")};
-    const double len =
-        std::sqrt(r.normal[0] * r.normal[0] + r.normal[1] * r.normal[1] + r.normal[2] * r.normal[2]);
+    const double len = std::sqrt(r.normal[0] * r.normal[0] + r.normal[1] * r.normal[1] +
+                                 r.normal[2] * r.normal[2]);
     if (!(std::fabs(len - 1.0) <= 0.01)) {
       fail(source, line_no, "normal is not a unit vector (|n| = " + std::to_string(len) + ")");
     }
     for (auto& v : r.normal) v /= len;
     if (!rows.empty() && !(r.path_mm > rows.back().path_mm)) {
-      fail(source, line_no, "path_mm must be strictly increasing (" + std::to_string(r.path_mm) +
-                                " after " + std::to_string(rows.back().path_mm) + ")");
+      fail(source, line_no,
+           "path_mm must be strictly increasing (" + std::to_string(r.path_mm) + " after " +
+               std::to_string(rows.back().path_mm) + ")");
     }
     rows.push_back(r);
   }

@@ -20,7 +20,6 @@ inline constexpr std::size_t kMaxToolpathRows = 1'000'000;
 
 /// Parses the text of a toolpath normal file. Throws std::invalid_argument "<source>:<line>:
 /// <what>" on the first problem. Not real-time (core stays pure: the caller reads the file).
-std::vector<ToolpathNormal> parse_toolpath_normals(std::string_view text,
-                                                   std::string_view source);
+std::vector<ToolpathNormal> parse_toolpath_normals(std::string_view text, std::string_view source);
 
 }  // namespace nccomp::core::creep

@@ -142,8 +142,7 @@ void WearCompensator::select_tool_tables() noexcept {
 
 // ---------------------------------------------------------------------------------------------
 
-void WearCompensator::step(TimeNs now_ns, std::span<const Event> events,
-                           StepOutput& out) noexcept {
+void WearCompensator::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out) noexcept {
   if (!have_now_) {
     // Start-up or resume: the limiters continue from what the NC holds.
     for (std::size_t ch = 0; ch < kChannelCount; ++ch) {
@@ -302,8 +301,8 @@ void WearCompensator::start_creep(const std::array<double, kMaxEdgePoints>& delt
   *slot = CreepSlot{};
   slot->active = true;
   slot->seq = s_.next_seq++;
-  const bool path_based = config_.creep_basis == CreepBasis::kPath ||
-                          config_.creep_basis == CreepBasis::kRatePath;
+  const bool path_based =
+      config_.creep_basis == CreepBasis::kPath || config_.creep_basis == CreepBasis::kRatePath;
   slot->path_based = path_based;
   slot->start = path_based ? s_.creep_path_mm : s_.creep_time_s;
   for (std::size_t i = 0; i < points_; ++i) {
@@ -383,9 +382,8 @@ bool WearCompensator::normal_now(std::array<double, 3>& n) const noexcept {
       if (!have_sample_ || !std::isfinite(last_sample_.program_path_mm)) return false;
       const auto& tp = config_.toolpath_normals;
       const double p = last_sample_.program_path_mm;
-      const auto it = std::upper_bound(tp.begin(), tp.end(), p, [](double v, const auto& r) {
-        return v < r.path_mm;
-      });
+      const auto it = std::upper_bound(tp.begin(), tp.end(), p,
+                                       [](double v, const auto& r) { return v < r.path_mm; });
       if (it == tp.begin()) {
         n = tp.front().normal;
       } else if (it == tp.end()) {
@@ -477,8 +475,7 @@ void WearCompensator::write_outputs(TimeNs now_ns, StepOutput& out) noexcept {
         case LimitVerdict::kPassed:
           break;
         case LimitVerdict::kSlewed:
-          out.alarm(now_ns, Severity::kWarning, AlarmCode::kOffsetSlewLimited, reg,
-                    target_um_[ch]);
+          out.alarm(now_ns, Severity::kWarning, AlarmCode::kOffsetSlewLimited, reg, target_um_[ch]);
           break;
         case LimitVerdict::kRejectedNonFinite:
           out.alarm(now_ns, Severity::kAlarm, AlarmCode::kOffsetNonFinite, reg, target_um_[ch]);
@@ -513,8 +510,7 @@ void WearCompensator::write_outputs(TimeNs now_ns, StepOutput& out) noexcept {
     const bool due = !flag_written_once_[4] || std::fabs(v - flag_written_[4]) > kTiny ||
                      (refresh_ns > 0 && now_ns - flag_written_ns_[4] >= refresh_ns);
     if (due) {
-      out.writes.push(
-          OffsetWrite{now_ns, static_cast<std::uint16_t>(o.restart_path_register), v});
+      out.writes.push(OffsetWrite{now_ns, static_cast<std::uint16_t>(o.restart_path_register), v});
       flag_written_[4] = v;
       flag_written_ns_[4] = now_ns;
       flag_written_once_[4] = true;
@@ -640,8 +636,7 @@ void WearCompensator::on_measurement(TimeNs now_ns, const ToolMeasurement& m,
   if (!limiters_[0].admissible(worst_um)) {
     ++counters_.measurements_refused;
     s_.alarm_flag = true;
-    out.alarm(now_ns, Severity::kAlarm, AlarmCode::kOffsetBeyondAbsoluteLimit, s_.tool,
-              worst_um);
+    out.alarm(now_ns, Severity::kAlarm, AlarmCode::kOffsetBeyondAbsoluteLimit, s_.tool, worst_um);
     return;
   }
 
@@ -763,8 +758,8 @@ double WearCompensator::next_measurement_path_mm() const noexcept {
       // Before a rate is known (new tool, break-in wear is fastest) measure at the minimum.
       if (!s_.rate_known) return last + iv.min_interval_mm;
       if (!(max_rate > 0.0)) return last + iv.max_interval_mm;
-      return last + std::clamp(iv.target_increment_um / max_rate, iv.min_interval_mm,
-                               iv.max_interval_mm);
+      return last +
+             std::clamp(iv.target_increment_um / max_rate, iv.min_interval_mm, iv.max_interval_mm);
     }
     case IntervalBasis::kOff:
     case IntervalBasis::kTime:

@@ -28,9 +28,12 @@ struct Reader {
     // Mostly small numbers, sometimes the awkward ones.
     const std::uint8_t k = byte();
     switch (k % 16) {
-      case 0: return std::numeric_limits<double>::quiet_NaN();
-      case 1: return std::numeric_limits<double>::infinity();
-      case 2: return -1e300;
+      case 0:
+        return std::numeric_limits<double>::quiet_NaN();
+      case 1:
+        return std::numeric_limits<double>::infinity();
+      case 2:
+        return -1e300;
       case 3: {
         double d = 0.0;
         std::uint8_t b[8];
@@ -38,7 +41,8 @@ struct Reader {
         std::memcpy(&d, b, sizeof d);
         return d;
       }
-      default: return (static_cast<double>(byte()) - 64.0) * 0.5 + static_cast<double>(k) * 0.01;
+      default:
+        return (static_cast<double>(byte()) - 64.0) * 0.5 + static_cast<double>(k) * 0.01;
     }
   }
 };
@@ -129,7 +133,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
           break;
         }
         case 3:
-          ev.emplace_back(ToolChange{now, static_cast<std::int32_t>(r.byte() % 3), (r.byte() & 1) != 0});
+          ev.emplace_back(
+              ToolChange{now, static_cast<std::int32_t>(r.byte() % 3), (r.byte() & 1) != 0});
           break;
         default:
           ev.emplace_back(ProgramEvent{now, static_cast<ProgramEventKind>(r.byte() % 4), 1});

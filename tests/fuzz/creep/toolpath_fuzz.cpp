@@ -27,7 +27,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   if (rows.size() < 2) std::abort();
   for (std::size_t i = 0; i < rows.size(); ++i) {
     const auto& n = rows[i].normal;
-    if (!std::isfinite(rows[i].path_mm) || std::fabs(std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]) - 1.0) > 1e-9) std::abort();
+    if (!std::isfinite(rows[i].path_mm) ||
+        std::fabs(std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]) - 1.0) > 1e-9)
+      std::abort();
     if (i > 0 && !(rows[i].path_mm > rows[i - 1].path_mm)) std::abort();
   }
   CreepConfig c;
@@ -59,7 +61,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     out.clear();
     w.step((k + 1) * 1'000'000, ev, out);
     for (const auto& wr : out.writes) {
-      if (!std::isfinite(wr.value_um) || std::fabs(wr.value_um) > c.limiter.max_abs_um) std::abort();
+      if (!std::isfinite(wr.value_um) || std::fabs(wr.value_um) > c.limiter.max_abs_um)
+        std::abort();
     }
   }
   return 0;

@@ -182,7 +182,7 @@ TEST(CreepUnfinished, AlarmStopsApplyingAndFreezesTheOffset) {
   EXPECT_TRUE(r.comp.halted());
   EXPECT_NEAR(r.last_write(11), 1.0, 0.0);
   r.run_to(80.0);
-  EXPECT_NEAR(r.z(), -4.0, 1e-9);  // frozen where it was
+  EXPECT_NEAR(r.z(), -4.0, 1e-9);                         // frozen where it was
   EXPECT_NEAR(r.comp.state().measured_um[0], 10.0, 0.0);  // the new one was not applied
   ASSERT_FALSE(r.records.empty());
   EXPECT_NEAR(r.records.back().measured_um, 15.0, 0.0);  // but logged

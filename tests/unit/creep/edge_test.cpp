@@ -152,7 +152,8 @@ TEST(CreepDeflection, OverCompensationGrowsWithWearInNormalAndLateralDirections)
 
 TEST(CreepDeflection, APerToolTableWinsOverTheDefault) {
   auto c = base_config();
-  c.deflection = {{0, {0.0, 10.0}, {0.0, 1.0}, {0.0, 0.0}}, {5, {0.0, 10.0}, {0.0, 3.0}, {0.0, 0.0}}};
+  c.deflection = {{0, {0.0, 10.0}, {0.0, 1.0}, {0.0, 0.0}},
+                  {5, {0.0, 10.0}, {0.0, 3.0}, {0.0, 0.0}}};
   Rig r(c);
   r.measure({10.0});
   r.run_to(60.0);

@@ -262,7 +262,9 @@ TEST(CreepRealTime, StepAllocatesNothingWith16PointsAnd4Creeps) {
   std::vector<double> wear(16);
   std::vector<Event> events;
   for (int m = 0; m < 4; ++m) {
-    for (std::size_t i = 0; i < 16; ++i) wear[i] = 2.0 * (m + 1) * (m + 1) + 0.1 * static_cast<double>(i);  // not linear: no perfect prediction
+    for (std::size_t i = 0; i < 16; ++i)
+      wear[i] = 2.0 * (m + 1) * (m + 1) +
+                0.1 * static_cast<double>(i);  // not linear: no perfect prediction
     r.run_to(r.program_path_mm + 10.0);
     r.measure(wear);
   }

@@ -32,13 +32,15 @@ TEST(CreepToolpath, ParsesRowsCommentsAndCrlfAndNormalises) {
 TEST(CreepToolpath, ErrorsNameFileAndLine) {
   EXPECT_EQ(error_of("path,nx,ny,nz\n0,0,0,1\n1,0,0,1\n"),
             "part.csv:1: expected the header 'path_mm,nx,ny,nz'");
-  EXPECT_EQ(error_of("path_mm,nx,ny,nz\n0,0,0,1\n1,0,0\n"), "part.csv:3: expected 4 columns, got 3");
+  EXPECT_EQ(error_of("path_mm,nx,ny,nz\n0,0,0,1\n1,0,0\n"),
+            "part.csv:3: expected 4 columns, got 3");
   EXPECT_EQ(error_of("path_mm,nx,ny,nz\n0,0,0,1\n1,0,x,1\n"),
             "part.csv:3: ny is not a finite number: 'x'");
   EXPECT_EQ(error_of("path_mm,nx,ny,nz\n0,0,0,1\n1,0,0,nan\n"),
             "part.csv:3: nz is not a finite number: 'nan'");
-  EXPECT_NE(error_of("path_mm,nx,ny,nz\n0,0,0,1\n1,0,0,2\n").find("part.csv:3: normal is not a unit"),
-            std::string::npos);
+  EXPECT_NE(
+      error_of("path_mm,nx,ny,nz\n0,0,0,1\n1,0,0,2\n").find("part.csv:3: normal is not a unit"),
+      std::string::npos);
   EXPECT_NE(error_of("path_mm,nx,ny,nz\n5,0,0,1\n5,0,0,1\n").find("part.csv:3: path_mm must be"),
             std::string::npos);
   EXPECT_EQ(error_of("path_mm,nx,ny,nz\n0,0,0,1\n"), "part.csv:3: needs at least 2 rows");
