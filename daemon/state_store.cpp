@@ -56,8 +56,8 @@ void write_all(int fd, const std::byte* p, std::size_t n, const std::string& pat
 
 }  // namespace
 
-std::uint32_t crc32(std::span<const std::byte> bytes) noexcept {
-  std::uint32_t c = 0xFFFFFFFFU;
+std::uint32_t crc32(std::span<const std::byte> bytes, std::uint32_t previous) noexcept {
+  std::uint32_t c = previous ^ 0xFFFFFFFFU;
   for (std::byte b : bytes) {
     c = kCrcTable[(c ^ static_cast<std::uint32_t>(b)) & 0xFFU] ^ (c >> 8);
   }
@@ -118,18 +118,16 @@ StateFile read_state_file(const std::string& path) {
 
 void write_state_file(const std::string& path, std::span<const std::byte> payload,
                       std::uint64_t sequence) {
-  std::vector<std::byte> file(kHeaderBytes + payload.size());
-  std::memcpy(file.data(), kMagic.data(), kMagic.size());
-  std::memcpy(file.data() + 8, &kFormatVersion, 4);
+  // Header and payload are written separately: the payload is never copied.
+  std::array<std::byte, kHeaderBytes> header{};
+  std::memcpy(header.data(), kMagic.data(), kMagic.size());
+  std::memcpy(header.data() + 8, &kFormatVersion, 4);
   const std::uint64_t size = payload.size();
-  std::memcpy(file.data() + 16, &size, 8);
-  std::memcpy(file.data() + 24, &sequence, 8);
-  if (!payload.empty()) {
-    std::memcpy(file.data() + kHeaderBytes, payload.data(), payload.size());
-  }
+  std::memcpy(header.data() + 16, &size, 8);
+  std::memcpy(header.data() + 24, &sequence, 8);
   const std::uint32_t crc =
-      crc32(std::span<const std::byte>(file.data() + kCrcFrom, file.size() - kCrcFrom));
-  std::memcpy(file.data() + 12, &crc, 4);
+      crc32(payload, crc32(std::span<const std::byte>(header.data() + kCrcFrom, kHeaderBytes - kCrcFrom)));
+  std::memcpy(header.data() + 12, &crc, 4);
 
   const std::string tmp = path + ".tmp";
   const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0640);
@@ -137,7 +135,8 @@ void write_state_file(const std::string& path, std::span<const std::byte> payloa
     fail("cannot create", tmp);
   }
   try {
-    write_all(fd, file.data(), file.size(), tmp);
+    write_all(fd, header.data(), header.size(), tmp);
+    write_all(fd, payload.data(), payload.size(), tmp);
     if (::fsync(fd) != 0) {
       fail("cannot fsync", tmp);
     }
@@ -152,10 +151,8 @@ void write_state_file(const std::string& path, std::span<const std::byte> payloa
     fail("cannot rename over", path);
   }
   // The rename is durable only once the directory entry is on disk.
-  std::string dir = std::filesystem::path(path).parent_path().string();
-  if (dir.empty()) {
-    dir = ".";
-  }
+  const std::filesystem::path parent = std::filesystem::path(path).parent_path();
+  const std::string dir = parent.empty() ? std::string(".") : parent.string();
   const int dfd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
   if (dfd < 0) {
     fail("cannot open directory", dir);

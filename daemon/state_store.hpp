@@ -25,7 +25,9 @@
 
 namespace nccomp::daemon {
 
-[[nodiscard]] std::uint32_t crc32(std::span<const std::byte> bytes) noexcept;
+/// CRC-32 (IEEE 802.3). Chains: crc32(b, crc32(a)) == crc32(a followed by b).
+[[nodiscard]] std::uint32_t crc32(std::span<const std::byte> bytes,
+                                  std::uint32_t previous = 0) noexcept;
 
 enum class StateFileStatus : std::uint8_t { kAbsent = 0, kOk = 1, kCorrupt = 2 };
 

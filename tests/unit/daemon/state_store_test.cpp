@@ -45,6 +45,7 @@ void write_raw(const fs::path& p, const std::vector<char>& raw) {
 TEST(Crc32, MatchesTheStandardCheckValue) {
   EXPECT_EQ(crc32(bytes_of("123456789")), 0xCBF43926U);
   EXPECT_EQ(crc32({}), 0U);
+  EXPECT_EQ(crc32(bytes_of("56789"), crc32(bytes_of("1234"))), 0xCBF43926U);
 }
 
 TEST(StateFile, RoundTripAndAbsent) {
