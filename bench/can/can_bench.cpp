@@ -162,11 +162,12 @@ int rate(dc::CanConfig cfg, double rate_hz, int n) {
     }
   });
   const int peer = open_peer("vcan0", 0x7FF);
-  const auto period_ns = static_cast<std::int64_t>(1e9 / rate_hz);
+  // rate_hz <= 0: unpaced, as fast as the sender's write() goes (cangen -g 0).
+  const auto period_ns = rate_hz > 0 ? static_cast<std::int64_t>(1e9 / rate_hz) : 0;
   const std::int64_t t0 = now_ns();
   for (int i = 0; i < n; ++i) {
     const std::int64_t due = t0 + i * period_ns;
-    while (now_ns() < due) {
+    while (period_ns > 0 && now_ns() < due) {
     }
     const std::uint8_t d[4] = {static_cast<std::uint8_t>(i & 0xFF), 0, 0xD2, 0x04};
     send_frame(peer, 0x160, d, 4);
@@ -179,7 +180,7 @@ int rate(dc::CanConfig cfg, double rate_hz, int n) {
   bus.stop();
   ::close(peer);
   const auto lost = static_cast<long long>(n) - static_cast<long long>(consumed.load());
-  std::printf("rate %.0f frames/s requested, %.0f achieved: sent %d decoded %llu consumed %llu "
+  std::printf("rate %.0f frames/s requested (0 = unpaced), %.0f achieved: sent %d decoded %llu consumed %llu "
               "kernel_drops %llu ring_drops %llu lost %lld\n",
               rate_hz, n / sent_s, n,
               static_cast<unsigned long long>(st.bus.counters.events_decoded),
@@ -197,6 +198,10 @@ int main(int argc, char** argv) {
     return 2;
   }
   dc::CanConfig cfg = dc::load_can_config(argv[1]);
+  if (const char* rcvbuf = std::getenv("NCCOMP_BENCH_RCVBUF_BYTES"); rcvbuf != nullptr && *rcvbuf != 0) {
+    cfg.socket_rcvbuf_bytes = static_cast<std::uint32_t>(std::strtoul(rcvbuf, nullptr, 10));
+  }
+  std::printf("socket_rcvbuf_bytes %u (0 = system default)\n", cfg.socket_rcvbuf_bytes);
   const std::string mode = argv[2];
   if (mode == "latency" && argc == 4) {
     return latency(std::move(cfg), std::atoi(argv[3]));
