@@ -94,7 +94,11 @@ void facet_table() {
           std::printf(" %.2f (%d) |", sum / 20.0, worst);
         }
       }
-      std::printf(" %.2f um |\n", worst_residual);
+      if (worst_residual > 0.0) {
+        std::printf(" %.2f um |\n", worst_residual);
+      } else {
+        std::printf(" - |\n");
+      }
     }
   }
   std::printf("\n");
@@ -122,7 +126,8 @@ const std::array<Strategy, 5> kStrategies{{
 struct AxisStats {
   double rms_um{0.0};
   double max_um{0.0};
-  double max_jump_um{0.0};  // largest change of the correction within one second
+  double max_jump_um{0.0};  // largest change of the applied correction within one second
+  double rms_after_first_touch_um{0.0};
 };
 
 using DriftFn = std::function<std::array<double, 4>(double t_s)>;  // from shift start
@@ -157,9 +162,16 @@ std::array<AxisStats, 3> run_shift(const Strategy& s, const DriftFn& drift, cons
   if (!nccomp::test::calib::run_initial_calibration(c, m, now, out)) {
     throw std::runtime_error("calibration failed");
   }
+  for (int i = 0; i < 60; ++i) {  // the limiter slews the registers to the calibration values
+    out.clear();
+    c.step(now, {}, out);
+    now += from_seconds(1.0);
+  }
+  const std::array<double, 3> base{c.result().dx_r_um, c.result().dy_um, c.result().dz_um};
   const double t0 = nccomp::core::seconds(now);
   m.set_drift([&drift, t0](double t) { return drift(t - t0); });
   std::array<double, 3> sum2{};
+  std::array<double, 3> sum2_late{};
   std::array<AxisStats, 3> st{};
   std::array<double, 3> prev{};
   const auto steps = static_cast<long>(hours * 3600.0);
@@ -183,11 +195,14 @@ std::array<AxisStats, 3> run_shift(const Strategy& s, const DriftFn& drift, cons
     }
     const auto truth = drift(t);
     for (std::size_t a = 0; a < 3; ++a) {
-      const auto slot = static_cast<Slot>(nccomp::core::calib::kAxisSlot[a]);
-      const double corr = c.drift_correction_um(slot, now);
+      // What the NC applies: the register value after the limiter, minus the calibration.
+      const double corr = c.written_um(a) - base[a];
       const double err = truth[nccomp::core::calib::kAxisSlot[a]] - corr;
       sum2[a] += err * err;
       st[a].max_um = std::max(st[a].max_um, std::fabs(err));
+      if (k >= 3600) {
+        sum2_late[a] += err * err;
+      }
       if (k > 0) {
         st[a].max_jump_um = std::max(st[a].max_jump_um, std::fabs(corr - prev[a]));
       }
@@ -196,6 +211,7 @@ std::array<AxisStats, 3> run_shift(const Strategy& s, const DriftFn& drift, cons
   }
   for (std::size_t a = 0; a < 3; ++a) {
     st[a].rms_um = std::sqrt(sum2[a] / static_cast<double>(steps));
+    st[a].rms_after_first_touch_um = std::sqrt(sum2_late[a] / static_cast<double>(steps - 3600));
   }
   return st;
 }
@@ -209,8 +225,9 @@ void first_order_table() {
   std::printf("## 8-hour shift, simulated first-order warm-up (X: 30 um, tau 1.5 h; touch noise "
               "%.1f um; touches every hour; creep 600 s cosine)\n\n",
               kTouchNoiseUm);
-  std::printf("| strategy | model tau | X RMS error | X max error | largest 1-s change of the X "
-              "correction |\n|---|---|---|---|---|\n");
+  std::printf("| strategy | model tau | X RMS error | X RMS error after the first touch (1-8 h) "
+              "| X max error | largest 1-s change of the applied X correction |\n"
+              "|---|---|---|---|---|---|\n");
   for (const auto& s : kStrategies) {
     if (s.prediction == Prediction::kTemperature) {
       continue;  // no temperature in this simulation
@@ -222,9 +239,9 @@ void first_order_table() {
         continue;
       }
       const auto st = run_shift(s, drift, nullptr, taus[i], 8.0);
-      std::printf("| %s | %s | %.2f um | %.2f um | %.2f um |\n", s.name,
+      std::printf("| %s | %s | %.2f um | %.2f um | %.2f um | %.2f um |\n", s.name,
                   s.prediction == Prediction::kTime ? tau_names[i] : "-", st[0].rms_um,
-                  st[0].max_um, st[0].max_jump_um);
+                  st[0].rms_after_first_touch_um, st[0].max_um, st[0].max_jump_um);
     }
   }
   std::printf("\n");

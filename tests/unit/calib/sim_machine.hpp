@@ -142,8 +142,14 @@ inline bool run_initial_calibration(core::calib::Calibrator& c, SimMachine& m, T
     while (c.phase() == want) {
       const auto [plus, minus] = m.test_grind(end_face, c.grind_correction_um());
       out.clear();
-      c.enter_facets(end_face ? Face::kEndFace : Face::kLateral, plus, minus, now_ns, out);
+      const auto r =
+          c.enter_facets(end_face ? Face::kEndFace : Face::kLateral, plus, minus, now_ns, out);
       now_ns += core::from_seconds(600.0);  // a test grind and its measurement take a while
+      if (r.status != core::calib::FacetStatus::kGrindAgain &&
+          r.status != core::calib::FacetStatus::kConverged) {
+        // No facet to measure (error deeper than the nominal depth) or given up.
+        return false;
+      }
     }
   }
   for (std::size_t slot = 0; slot < kSlotCount; ++slot) {
