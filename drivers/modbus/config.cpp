@@ -252,14 +252,22 @@ Encoding read_encoding(const Reader& r, const toml::table& t, const std::string&
 constexpr std::array<std::string_view, 7> kSignalKeys = {
     "table", "address", "type", "word_order", "byte_order", "scale", "offset"};
 
+constexpr std::array<std::string_view, 8> kProfileSignalKeys = {
+    "table", "address", "type", "word_order", "byte_order", "scale", "offset", "count"};
+
+/// `allow_count`: the signal may be a run of `count` consecutive values (a wear profile).
 SignalMap read_signal(const Reader& r, const toml::node& n, const std::string& path,
-                      const toml::table* flat_parent = nullptr) {
+                      const toml::table* flat_parent = nullptr, bool allow_count = false) {
   const toml::table* t = flat_parent != nullptr ? flat_parent : n.as_table();
   if (t == nullptr) {
     r.fail(&n, path, "expected a table { table = ..., address = ..., type = ... }");
   }
   if (flat_parent == nullptr) {
-    r.check_keys(*t, path, kSignalKeys);
+    if (allow_count) {
+      r.check_keys(*t, path, kProfileSignalKeys);
+    } else {
+      r.check_keys(*t, path, kSignalKeys);
+    }
   }
   SignalMap s;
   s.mapped = true;
@@ -269,7 +277,11 @@ SignalMap read_signal(const Reader& r, const toml::node& n, const std::string& p
   }
   s.address = static_cast<std::uint16_t>(r.integer(*t, path, "address", 0, 0, 65535));
   s.encoding = read_encoding(r, *t, path, s.table);
-  if (static_cast<std::uint32_t>(s.address) + width(s.encoding.type) > 65536U) {
+  if (allow_count) {
+    s.count = static_cast<std::uint8_t>(
+        r.integer(*t, path, "count", 1, 1, static_cast<std::int64_t>(core::kMaxEdgePoints)));
+  }
+  if (static_cast<std::uint32_t>(s.address) + span(s) > 65536U) {
     r.fail(t->get("address"), Reader::join(path, "address"),
            "value does not fit below address 65535");
   }
@@ -384,7 +396,7 @@ ModbusConfig parse_modbus_config(std::string_view toml_text, std::string_view fi
   std::vector<Claim> claims;
   const auto claim = [&](const SignalMap& s, const std::string& path, const toml::node* n) {
     const std::uint32_t first = s.address;
-    claims.push_back({s.table, first, first + width(s.encoding.type) - 1U, path,
+    claims.push_back({s.table, first, first + span(s) - 1U, path,
                       n != nullptr ? static_cast<int>(n->source().begin.line) : 0});
   };
 
@@ -406,7 +418,8 @@ ModbusConfig parse_modbus_config(std::string_view toml_text, std::string_view fi
       }
       const auto fi = static_cast<std::size_t>(it - keys.begin());
       const std::string fp = Reader::join(gp, k.str());
-      gm.fields[fi] = read_signal(r, v, fp);
+      gm.fields[fi] = read_signal(r, v, fp, nullptr,
+                                  g == Group::kToolMeasurement && fi == tool_meas_field::kWear);
       claim(gm.fields[fi], fp, &v);
     }
     for (std::size_t fi = 0; fi < kFieldCounts[gi]; ++fi) {
@@ -546,7 +559,7 @@ ModbusConfig parse_modbus_config(std::string_view toml_text, std::string_view fi
       for (const SignalMap* s : signals) {
         if (s->table == table) {
           lo = std::min<std::uint32_t>(lo, s->address);
-          hi = std::max<std::uint32_t>(hi, s->address + width(s->encoding.type));
+          hi = std::max<std::uint32_t>(hi, s->address + span(*s));
         }
       }
       if (lo > hi) {

@@ -22,6 +22,7 @@
 #include <string_view>
 #include <vector>
 
+#include "core/common/types.hpp"
 #include "drivers/modbus/encoding.hpp"
 
 namespace nccomp::drivers::modbus {
@@ -88,10 +89,18 @@ struct SignalMap {
   Table table{Table::kHolding};
   std::uint16_t address{0};
   Encoding encoding{};
+  /// Consecutive values of this encoding (only tool_measurement.wear_um: a wear profile over
+  /// the edge's support points); 1 for every other signal.
+  std::uint8_t count{1};
   /// Position in the poll: read block index and the value's first register within it.
   std::size_t block{0};
   std::uint16_t block_offset{0};
 };
+
+/// Registers (or bits) a mapped signal occupies.
+constexpr std::uint32_t span(const SignalMap& s) noexcept {
+  return std::uint32_t{width(s.encoding.type)} * s.count;
+}
 
 struct GroupMap {
   bool present{false};

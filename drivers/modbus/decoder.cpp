@@ -156,10 +156,17 @@ void PollDecoder::decode_event(Group g, core::TimeNs t_ns) {
       core::ToolMeasurement e;
       e.time_ns = t_ns;
       ok = to_int(f(tool_meas_field::kTool, 0), 0, kIntMax, e.tool);
-      e.wear_um[0] = f(tool_meas_field::kWear, 0.0);
-      e.point_count = 1;
+      const SignalMap& wear = gm.fields[tool_meas_field::kWear];
+      e.point_count = wear.count;
+      const std::vector<std::uint16_t>& wb = blocks_[wear.block];
+      for (std::size_t i = 0; i < wear.count; ++i) {
+        const std::size_t at = wear.block_offset + i * width(wear.encoding.type);
+        e.wear_um[i] = modbus::decode(
+            std::span<const std::uint16_t>(wb.data() + at, width(wear.encoding.type)),
+            wear.encoding);
+        ok = ok && std::isfinite(e.wear_um[i]);
+      }
       e.broken = f(tool_meas_field::kBroken, 0.0) > 0.5;
-      ok = ok && std::isfinite(e.wear_um[0]);
       if (ok) {
         emit(e);
       }

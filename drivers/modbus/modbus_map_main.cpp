@@ -98,9 +98,10 @@ void print_plan(const mb::ModbusConfig& c) {
       for (std::size_t f = 0; f < mb::field_count(group); ++f) {
         const mb::SignalMap& s = c.groups[g].fields[f];
         if (s.mapped && s.block == b) {
-          std::printf("      %-6u %s.%s  %s\n", s.address,
+          std::printf("      %-6u %s.%s  %s%s\n", s.address,
                       std::string(mb::group_key(group)).c_str(),
-                      std::string(mb::field_key(group, f)).c_str(), describe(s.encoding).c_str());
+                      std::string(mb::field_key(group, f)).c_str(), describe(s.encoding).c_str(),
+                      s.count > 1 ? (" x" + std::to_string(s.count)).c_str() : "");
         }
       }
     }

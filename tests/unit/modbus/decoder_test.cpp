@@ -215,3 +215,79 @@ TEST_F(ModbusDecoder, DecodeIsAllocationFree) {
 
 }  // namespace
 }  // namespace nccomp::drivers::modbus
+
+namespace nccomp::drivers::modbus {
+namespace {
+
+TEST(ModbusDecoderProfile, WearProfileOverEdgeSupportPoints) {
+  // GIVEN a laser that publishes wear at 4 support points along the edge, int16 in 0.1 µm
+  const ModbusConfig c = parse_modbus_config(R"([modbus]
+transport = "tcp"
+[modbus.tool_measurement]
+sequence = { address = 0, type = "uint16" }
+tool = { address = 1 }
+wear_um = { address = 2, type = "int16", scale = 0.1, count = 4 }
+broken = { address = 6, type = "uint16" }
+)",
+                                             "t.toml");
+  ASSERT_EQ(c.blocks.size(), 1U);
+  EXPECT_EQ(c.blocks[0].count, 7);
+  PollDecoder dec(c);
+  std::vector<std::uint8_t> ok(1, 1);
+  dec.decode(1, ok);  // baseline
+  auto b = dec.block(0);
+  b[0] = 1;
+  b[1] = 3;
+  b[2] = 10;
+  b[3] = 25;
+  b[4] = static_cast<std::uint16_t>(-5 & 0xFFFF);
+  b[5] = 120;
+  const auto ev = dec.decode(2, ok);
+  ASSERT_EQ(ev.size(), 1U);
+  const auto& m = std::get<core::ToolMeasurement>(ev[0]);
+  EXPECT_EQ(m.tool, 3);
+  ASSERT_EQ(m.point_count, 4);
+  EXPECT_DOUBLE_EQ(m.wear_um[0], 1.0);
+  EXPECT_DOUBLE_EQ(m.wear_um[1], 2.5);
+  EXPECT_DOUBLE_EQ(m.wear_um[2], -0.5);
+  EXPECT_DOUBLE_EQ(m.wear_um[3], 12.0);
+}
+
+TEST(ModbusDecoderProfile, CountOnlyOnTheWearProfileAndWithinLimits) {
+  const auto err = [](const std::string& t) {
+    try {
+      (void)parse_modbus_config(t, "t.toml");
+    } catch (const ConfigError& e) {
+      return std::string(e.what());
+    }
+    return std::string("(accepted)");
+  };
+  EXPECT_EQ(err(R"([modbus]
+transport = "tcp"
+[modbus.axis]
+x_mm = { address = 0, count = 2 }
+)"),
+            "t.toml:4: modbus.axis.x_mm.count: unknown key");
+  EXPECT_EQ(err(R"([modbus]
+transport = "tcp"
+[modbus.tool_measurement]
+sequence = { address = 0, type = "uint16" }
+tool = { address = 1 }
+wear_um = { address = 2, count = 33 }
+)"),
+            "t.toml:6: modbus.tool_measurement.wear_um.count: value 33 outside 1..32");
+  // The profile's registers are claimed: a signal inside it overlaps.
+  EXPECT_EQ(err(R"([modbus]
+transport = "tcp"
+[modbus.tool_measurement]
+sequence = { address = 0, type = "uint16" }
+tool = { address = 1 }
+wear_um = { address = 2, type = "float32", count = 3 }
+broken = { address = 7 }
+)"),
+            "t.toml:7: modbus.tool_measurement.broken: holding address 7 overlaps "
+            "modbus.tool_measurement.wear_um (line 6)");
+}
+
+}  // namespace
+}  // namespace nccomp::drivers::modbus
