@@ -122,6 +122,7 @@ void CheckpointCompensator::configure(const CompensatorConfig& c, std::vector<Ch
   awaiting_finish_ = false;
   live_written_um_ = kNaN;
   pending_mismatch_ = 0;
+  generation_ = 0;
   counters_ = {};
 }
 
@@ -198,6 +199,7 @@ void CheckpointCompensator::write_live(double target_um, TimeNs now_ns, StepOutp
 void CheckpointCompensator::on_part_start(TimeNs /*now_ns*/, const ProgramEvent& ev) noexcept {
   part_ = ev.part;
   ++part_counter_;
+  ++generation_;
   for (std::size_t i = 0; i < plan_.size(); ++i) {
     points_[i].applied_um = register_value_um(i);
     mark_dirty(i);  // every learned value is written at part start
@@ -299,6 +301,7 @@ void CheckpointCompensator::on_probe(const ProbeMeasurement& m, StepOutput& out)
   }
   p.learned_um = learned;
   ++p.count;
+  ++generation_;
   if (p.history_n < kHistoryDepth) {
     p.history[p.history_n++] = e;
   } else {
@@ -445,6 +448,45 @@ void CheckpointCompensator::export_state(CheckpointState& out) const {
   out.points.assign(points_.begin(), points_.end());
 }
 
+const char* CheckpointCompensator::invalid_point_reason(const LearnedPoint& p) const noexcept {
+  if (!std::isfinite(p.learned_um) || !std::isfinite(p.offset_um) ||
+      !std::isfinite(p.applied_um)) {
+    return "non-finite value";
+  }
+  if (p.history_n > kHistoryDepth) {
+    return "history longer than its capacity";
+  }
+  for (std::uint32_t k = 0; k < p.history_n; ++k) {
+    if (!std::isfinite(p.history[k])) {
+      return "non-finite history entry";
+    }
+  }
+  if (!limiter_.admissible(p.offset_um)) {
+    return "offset beyond the absolute limit";
+  }
+  return nullptr;
+}
+
+bool CheckpointCompensator::restore_point(std::size_t i, const LearnedPoint& point) noexcept {
+  if (i >= points_.size() || invalid_point_reason(point) != nullptr) {
+    return false;
+  }
+  points_[i] = point;
+  mark_dirty(i);
+  ++generation_;
+  return true;
+}
+
+void CheckpointCompensator::restore_counters(std::int64_t part_counter,
+                                             std::int32_t part) noexcept {
+  part_counter_ = part_counter;
+  part_ = part;
+  for (std::size_t i = 0; i < plan_.size(); ++i) {
+    mark_dirty(i);
+  }
+  ++generation_;
+}
+
 void CheckpointCompensator::import_state(const CheckpointState& st) {
   if (st.version != 1) {
     throw std::invalid_argument("checkpoint state: unknown version " +
@@ -456,34 +498,15 @@ void CheckpointCompensator::import_state(const CheckpointState& st) {
                                 " (the plan changed: learned values do not fit it)");
   }
   for (std::size_t i = 0; i < st.points.size(); ++i) {
-    const LearnedPoint& p = st.points[i];
-    const std::string where = "checkpoint state: checkpoint " + std::to_string(i) + ": ";
-    if (!std::isfinite(p.learned_um) || !std::isfinite(p.offset_um)) {
-      throw std::invalid_argument(where + "non-finite value");
-    }
-    if (p.history_n > kHistoryDepth) {
-      throw std::invalid_argument(where + "history length " + std::to_string(p.history_n) +
-                                  " exceeds " + std::to_string(kHistoryDepth));
-    }
-    for (std::uint32_t k = 0; k < p.history_n; ++k) {
-      if (!std::isfinite(p.history[k])) {
-        throw std::invalid_argument(where + "non-finite history entry");
-      }
-    }
-    if (!limiter_.admissible(p.offset_um)) {
-      throw std::invalid_argument(where + "offset " + num(p.offset_um) +
-                                  " um is beyond the absolute limit");
-    }
-    if (!std::isfinite(p.applied_um)) {
-      throw std::invalid_argument(where + "non-finite applied value");
+    if (const char* why = invalid_point_reason(st.points[i])) {
+      throw std::invalid_argument("checkpoint state: checkpoint " + std::to_string(i) + ": " +
+                                  why);
     }
   }
-  points_ = st.points;
-  part_counter_ = st.part_counter;
-  part_ = st.part;
-  for (std::size_t i = 0; i < plan_.size(); ++i) {
-    mark_dirty(i);
+  for (std::size_t i = 0; i < st.points.size(); ++i) {
+    (void)restore_point(i, st.points[i]);
   }
+  restore_counters(st.part_counter, st.part);
 }
 
 ReconcileReport CheckpointCompensator::reconcile(std::span<const double> nc_values_um) {
@@ -523,6 +546,7 @@ ReconcileReport CheckpointCompensator::reconcile(std::span<const double> nc_valu
     }
   }
   pending_mismatch_ = rep.mismatched;
+  ++generation_;
   return rep;
 }
 

@@ -146,6 +146,16 @@ class CheckpointCompensator {
   /// Replaces the learned state; throws std::invalid_argument when it does not fit the plan or
   /// holds non-finite values (nothing changes then). Marks the table for rewriting. Not real-time.
   void import_state(const CheckpointState& state);
+  /// Real-time safe form of import_state for binary state (core/checkpoint/module.hpp): checks
+  /// and copies without allocating; false (nothing changed) if a point is not valid.
+  bool restore_point(std::size_t i, const LearnedPoint& point) noexcept;
+  /// Why a point cannot be restored (nullptr = it can). Real-time safe.
+  [[nodiscard]] const char* invalid_point_reason(const LearnedPoint& point) const noexcept;
+  /// Sets the part counters and marks the whole table for rewriting. Real-time safe.
+  void restore_counters(std::int64_t part_counter, std::int32_t part) noexcept;
+  /// Advances whenever learned values, offsets or the part changed. Real-time safe.
+  [[nodiscard]] std::uint64_t generation() const noexcept { return generation_; }
+
   /// Compares the values read back from the NC's registers (machining order, one per
   /// checkpoint) with the table. Differences beyond reconcile_tolerance_um: with prefer = daemon
   /// the table is rewritten on the next step; with prefer = nc the NC's values become the
@@ -172,6 +182,8 @@ class CheckpointCompensator {
   [[nodiscard]] const CompensatorConfig& config() const noexcept { return config_; }
   [[nodiscard]] const std::vector<Checkpoint>& plan() const noexcept { return plan_; }
   [[nodiscard]] std::int64_t part_counter() const noexcept { return part_counter_; }
+  [[nodiscard]] std::int32_t part() const noexcept { return part_; }
+  [[nodiscard]] const LearnedPoint& point(std::size_t i) const noexcept { return points_[i]; }
 
  private:
   void on_part_start(TimeNs now_ns, const ProgramEvent& ev) noexcept;
@@ -207,6 +219,7 @@ class CheckpointCompensator {
   /// Part started, finishing not yet: the live register is pre-positioned to checkpoint 0.
   bool awaiting_finish_{false};
   std::size_t pending_mismatch_{0};
+  std::uint64_t generation_{0};
   CompensatorCounters counters_{};
 };
 

@@ -1,0 +1,138 @@
+#include "core/checkpoint/module.hpp"
+
+#include <cstring>
+#include <type_traits>
+#include <stdexcept>
+#include <utility>
+
+namespace nccomp::core::checkpoint {
+
+namespace {
+
+constexpr std::uint32_t kMagic = 0x31504B43;  // "CKP1"
+constexpr std::uint32_t kVersion = 1;
+
+struct Header {
+  std::uint32_t magic;
+  std::uint32_t version;
+  std::uint32_t count;
+  std::int32_t part;
+  std::int64_t part_counter;
+};
+
+struct Record {
+  double learned_um;
+  double offset_um;
+  double applied_um;
+  std::uint32_t count;
+  std::uint32_t history_n;
+  double history[kHistoryDepth];
+};
+
+static_assert(std::is_trivially_copyable_v<Header> && std::is_trivially_copyable_v<Record>);
+
+}  // namespace
+
+CheckpointModule::CheckpointModule(CompensatorConfig config, std::vector<Checkpoint> plan,
+                                   std::string name)
+    : config_(config), plan_(std::move(plan)), name_(std::move(name)) {}
+
+void CheckpointModule::attach(const engine::RegisterTable& registers) {
+  const std::size_t n = plan_.size();
+  const std::size_t first = config_.register_base;
+  if (n == 0 || first + n > registers.size()) {
+    throw std::invalid_argument("checkpoints: registers " + std::to_string(first) + ".." +
+                                std::to_string(first + n - 1) + " are needed for " +
+                                std::to_string(n) + " checkpoints, the register table has " +
+                                std::to_string(registers.size()));
+  }
+  for (std::size_t i = first; i < first + n; ++i) {
+    if (registers[i].kind != engine::RegisterKind::kCheckpoint) {
+      throw std::invalid_argument("checkpoints: register " + std::to_string(i) + " (\"" +
+                                  registers[i].name + "\") must be of kind checkpoint");
+    }
+  }
+  LimiterConfig limits = registers[first].limits;
+  if (config_.active_register >= 0) {
+    const auto a = static_cast<std::size_t>(config_.active_register);
+    if (a >= registers.size() || registers[a].kind != engine::RegisterKind::kToolRadiusWear) {
+      throw std::invalid_argument("checkpoints: active_register " + std::to_string(a) +
+                                  " must be a register of kind tool_radius_wear");
+    }
+    limits = registers[a].limits;
+  }
+  compensator_.configure(config_, plan_, limits);
+}
+
+void CheckpointModule::step(TimeNs now_ns, std::span<const Event> events,
+                            StepOutput& out) noexcept {
+  compensator_.step(now_ns, events, out);
+}
+
+std::size_t CheckpointModule::state_capacity() const noexcept {
+  return sizeof(Header) + plan_.size() * sizeof(Record);
+}
+
+std::size_t CheckpointModule::save_state(std::span<std::byte> buf) const noexcept {
+  const std::size_t need = state_capacity();
+  if (buf.size() < need || compensator_.size() != plan_.size()) {
+    return 0;
+  }
+  // Records are copied field by field: export_state() would allocate.
+  Header h{kMagic, kVersion, static_cast<std::uint32_t>(plan_.size()), compensator_.part(),
+           compensator_.part_counter()};
+  std::memcpy(buf.data(), &h, sizeof h);
+  std::byte* p = buf.data() + sizeof h;
+  for (std::size_t i = 0; i < plan_.size(); ++i) {
+    const LearnedPoint& lp = compensator_.point(i);
+    Record r{};
+    r.learned_um = lp.learned_um;
+    r.offset_um = lp.offset_um;
+    r.applied_um = lp.applied_um;
+    r.count = lp.count;
+    r.history_n = lp.history_n;
+    for (std::size_t k = 0; k < kHistoryDepth; ++k) r.history[k] = lp.history[k];
+    std::memcpy(p, &r, sizeof r);
+    p += sizeof r;
+  }
+  return need;
+}
+
+bool CheckpointModule::load_state(std::span<const std::byte> bytes) noexcept {
+  if (bytes.empty()) {
+    return true;  // no state yet: start fresh
+  }
+  if (bytes.size() != state_capacity()) {
+    return false;
+  }
+  Header h{};
+  std::memcpy(&h, bytes.data(), sizeof h);
+  if (h.magic != kMagic || h.version != kVersion || h.count != plan_.size()) {
+    return false;
+  }
+  const auto record = [&](std::size_t i) {
+    Record r{};
+    std::memcpy(&r, bytes.data() + sizeof h + i * sizeof(Record), sizeof r);
+    LearnedPoint lp;
+    lp.learned_um = r.learned_um;
+    lp.offset_um = r.offset_um;
+    lp.applied_um = r.applied_um;
+    lp.count = r.count;
+    lp.history_n = r.history_n;
+    for (std::size_t k = 0; k < kHistoryDepth; ++k) lp.history[k] = r.history[k];
+    return lp;
+  };
+  // All or nothing: check every record before changing anything.
+  for (std::size_t i = 0; i < plan_.size(); ++i) {
+    if (compensator_.invalid_point_reason(record(i)) != nullptr) {
+      return false;
+    }
+  }
+  for (std::size_t i = 0; i < plan_.size(); ++i) {
+    (void)compensator_.restore_point(i, record(i));
+  }
+  compensator_.restore_counters(h.part_counter, h.part);
+  return true;
+}
+
+}  // namespace nccomp::core::checkpoint

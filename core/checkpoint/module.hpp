@@ -1,0 +1,53 @@
+// The S1 compensator as an engine module (core/engine/engine.hpp): the engine steps it with the
+// cycle's validated events, limits its targets per register and persists its state as bytes.
+//
+// Register use (logical indices = indices into the engine's register table):
+//   register_base … register_base + N − 1: kind "checkpoint", one per checkpoint in machining
+//   order; active_register (if ≥ 0): kind "tool_radius_wear", the finishing tool's live wear.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "core/checkpoint/compensator.hpp"
+#include "core/engine/engine.hpp"
+
+namespace nccomp::core::checkpoint {
+
+class CheckpointModule final : public engine::Module {
+ public:
+  /// Not real-time. The plan and config are validated in attach().
+  CheckpointModule(CompensatorConfig config, std::vector<Checkpoint> plan,
+                   std::string name = "checkpoints");
+
+  [[nodiscard]] std::string_view name() const noexcept override { return name_; }
+  /// Checks that the table has the registers of the right kinds and configures the compensator
+  /// with the limits of the register it writes live (or of the first checkpoint register).
+  void attach(const engine::RegisterTable& registers) override;
+  /// Real-time safe.
+  void step(TimeNs now_ns, std::span<const Event> events, StepOutput& out) noexcept override;
+  [[nodiscard]] std::size_t state_capacity() const noexcept override;
+  /// Real-time safe: header (magic, version, count, part counter, part) + one fixed-size record
+  /// per checkpoint, little-endian host layout (the state file never leaves the machine).
+  std::size_t save_state(std::span<std::byte> buf) const noexcept override;
+  /// Real-time safe: refuses bytes of another plan size or with invalid values (all or nothing).
+  bool load_state(std::span<const std::byte> bytes) noexcept override;
+  [[nodiscard]] std::uint64_t state_generation() const noexcept override {
+    return compensator_.generation();
+  }
+
+  [[nodiscard]] CheckpointCompensator& compensator() noexcept { return compensator_; }
+  [[nodiscard]] const CheckpointCompensator& compensator() const noexcept { return compensator_; }
+
+ private:
+  CompensatorConfig config_;
+  std::vector<Checkpoint> plan_;
+  std::string name_;
+  CheckpointCompensator compensator_;
+};
+
+}  // namespace nccomp::core::checkpoint

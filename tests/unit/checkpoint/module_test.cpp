@@ -1,0 +1,161 @@
+#include "core/checkpoint/module.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstddef>
+#include <cstring>
+#include <memory>
+#include <stdexcept>
+#include <vector>
+
+#include "core/engine/engine.hpp"
+#include "tests/support/alloc_counter.hpp"
+#include "tests/unit/checkpoint/helpers.hpp"
+
+namespace nccomp::core::checkpoint {
+namespace {
+
+using test::line_plan;
+using test::part_start;
+using test::probe;
+using test::sample;
+
+std::vector<engine::RegisterSpec> registers(std::size_t n) {
+  std::vector<engine::RegisterSpec> r;
+  LimiterConfig lim;
+  lim.max_abs_um = 100.0;
+  lim.max_step_um = 50.0;
+  lim.max_rate_um_per_s = 1e6;
+  r.push_back({"d19_radius_wear", engine::RegisterKind::kToolRadiusWear, lim});
+  for (std::size_t i = 0; i < n; ++i) {
+    r.push_back({"cp" + std::to_string(i), engine::RegisterKind::kCheckpoint, lim});
+  }
+  return r;
+}
+
+CompensatorConfig module_config() {
+  CompensatorConfig c;
+  c.finishing_tool = 12;
+  c.register_base = 1;
+  c.active_register = 0;
+  c.ewma_weight = 1.0;
+  c.dead_band_um = 0.0;
+  c.probe_repeatability_um = 0.0;
+  c.write_threshold_um = 0.0;
+  c.apply = ApplyMode::kStep;
+  return c;
+}
+
+std::unique_ptr<engine::Engine> make_engine(std::size_t n) {
+  auto e = std::make_unique<engine::Engine>();
+  std::vector<std::unique_ptr<engine::Module>> mods;
+  mods.push_back(std::make_unique<CheckpointModule>(module_config(), line_plan(n)));
+  e->configure(registers(n), std::move(mods));
+  return e;
+}
+
+TEST(Module, TheEngineForwardsTheTableAndTheLiveRegister) {
+  auto eng = make_engine(3);
+  StepOutput out;
+  std::vector<Event> ev = {probe(1, 0, 6.0), probe(1, 1, -4.0), probe(1, 2, 2.0)};
+  eng->step(0, ev, out);
+  ev = {part_start(2)};
+  eng->step(1'000'000, ev, out);
+  // Registers 1..3 = −6, 4, −2 and the live register pre-positioned to −6.
+  std::vector<double> reg(4, 99.0);
+  for (const OffsetWrite& w : out.writes) reg[w.register_index] = w.value_um;
+  EXPECT_DOUBLE_EQ(reg[1], -6.0);
+  EXPECT_DOUBLE_EQ(reg[2], 4.0);
+  EXPECT_DOUBLE_EQ(reg[3], -2.0);
+  EXPECT_DOUBLE_EQ(reg[0], -6.0);
+  // The finishing tool past checkpoint 1 (path 20): the live register becomes 4.
+  ev = {sample(21, 0, -5, 21, 12, 2'000'000)};
+  eng->step(2'000'000, ev, out);
+  ASSERT_EQ(out.writes.size(), 1U);
+  EXPECT_EQ(out.writes[0].register_index, 0U);
+  EXPECT_DOUBLE_EQ(out.writes[0].value_um, 4.0);
+}
+
+TEST(Module, StateSurvivesARestartThroughTheEnginesBytes) {
+  auto a = make_engine(3);
+  StepOutput out;
+  std::vector<Event> ev = {part_start(1), probe(1, 0, 6.0), probe(1, 2, 2.5)};
+  a->step(0, ev, out);
+  std::vector<std::byte> buf(a->state_capacity());
+  const std::size_t n = a->export_state(buf);
+  ASSERT_GT(n, 0U);
+  buf.resize(n);
+
+  auto b = make_engine(3);
+  ASSERT_TRUE(b->import_state(buf, 0));
+  const auto& mb = dynamic_cast<const CheckpointModule&>(b->module(0));
+  EXPECT_DOUBLE_EQ(mb.compensator().register_value_um(0), -6.0);
+  EXPECT_DOUBLE_EQ(mb.compensator().register_value_um(2), -2.5);
+  EXPECT_EQ(mb.compensator().part_counter(), 1);
+  EXPECT_DOUBLE_EQ(mb.compensator().point(0).applied_um, 0.0);  // part 1 was cut with 0
+  // A plan of another size does not take these bytes.
+  auto c = make_engine(4);
+  std::size_t skipped = 0;
+  (void)c->import_state(buf, 0, &skipped);
+  const auto& mc = dynamic_cast<const CheckpointModule&>(c->module(0));
+  EXPECT_DOUBLE_EQ(mc.compensator().register_value_um(0), 0.0);
+}
+
+TEST(Module, LoadStateRefusesCorruptBytesAllOrNothing) {
+  CheckpointModule m(module_config(), line_plan(2));
+  const auto regs = registers(2);
+  m.attach(engine::RegisterTable(regs));
+  StepOutput out;
+  std::vector<Event> ev = {probe(1, 0, 6.0), probe(1, 1, 3.0)};
+  m.step(0, ev, out);
+  std::vector<std::byte> buf(m.state_capacity());
+  ASSERT_EQ(m.save_state(buf), buf.size());
+  CheckpointModule fresh(module_config(), line_plan(2));
+  fresh.attach(engine::RegisterTable(regs));
+  std::vector<std::byte> bad = buf;
+  // The second record's offset becomes NaN (header 24 bytes, records 160 bytes).
+  const double nan = std::nan("");
+  std::memcpy(bad.data() + 24 + 160 + 8, &nan, sizeof nan);
+  EXPECT_FALSE(fresh.load_state(bad));
+  EXPECT_DOUBLE_EQ(fresh.compensator().register_value_um(0), 0.0);  // nothing changed
+  EXPECT_FALSE(fresh.load_state(std::span<const std::byte>(buf.data(), buf.size() - 1)));
+  EXPECT_TRUE(fresh.load_state(buf));
+  EXPECT_DOUBLE_EQ(fresh.compensator().register_value_um(1), -3.0);
+  EXPECT_TRUE(fresh.load_state({}));
+}
+
+TEST(Module, AttachChecksRegisterKinds) {
+  auto regs = registers(3);
+  regs[2].kind = engine::RegisterKind::kToolLengthWear;
+  CheckpointModule m(module_config(), line_plan(3));
+  EXPECT_THROW(m.attach(engine::RegisterTable(regs)), std::invalid_argument);
+  regs = registers(3);
+  regs[0].kind = engine::RegisterKind::kCheckpoint;
+  EXPECT_THROW(m.attach(engine::RegisterTable(regs)), std::invalid_argument);
+  regs = registers(2);  // one checkpoint register short
+  EXPECT_THROW(m.attach(engine::RegisterTable(regs)), std::invalid_argument);
+}
+
+TEST(Module, EngineStepAllocatesNothing) {
+  auto eng = make_engine(8);
+  std::vector<Event> probes;
+  for (int i = 0; i < 8; ++i) probes.emplace_back(probe(1, i, 1.0 + i));
+  const Event start = part_start(1);
+  StepOutput out;
+  std::vector<std::byte> buf(eng->state_capacity());
+  nccomp::test::AllocationScope scope;
+  for (int part = 0; part < 3; ++part) {
+    eng->step(0, {&start, 1}, out);
+    for (int k = 0; k < 100; ++k) {
+      const Event s = sample(k, 0, -5, k, 12, k * 1'000'000);
+      eng->step(k * 1'000'000, {&s, 1}, out);
+    }
+    eng->step(0, probes, out);
+    (void)eng->export_state(buf);
+  }
+  EXPECT_EQ(scope.count(), 0U);
+}
+
+}  // namespace
+}  // namespace nccomp::core::checkpoint
