@@ -10,6 +10,7 @@
 #include <sstream>
 #include <string>
 
+#include "drivers/can/can_bus.hpp"
 #include "drivers/can/can_config.hpp"
 #include "drivers/can/can_mapping.hpp"
 #include "tests/support/alloc_counter.hpp"
@@ -317,6 +318,33 @@ TEST(CanEncode, OffsetWriteBytesAndRangeRefusal) {
   EXPECT_EQ(p[3], 0xFF);
   EXPECT_FALSE(encode_offset(c.mapping.offsets[0], 1e12, p));
   EXPECT_FALSE(encode_offset(c.mapping.offsets[0], core::kNaN, p));
+}
+
+}  // namespace
+}  // namespace nccomp::drivers::can
+
+namespace nccomp::drivers::can {
+namespace {
+
+TEST(CanBusLifecycle, StartOnMissingInterfaceThrowsNamingItAndStaysStopped) {
+  // GIVEN the reference map on an interface that does not exist (or a kernel without CAN)
+  CanConfig c = load_can_config(reference_path());
+  c.interface = "nccompnone0";
+  CanBus bus(std::move(c));
+  // WHEN started THEN it refuses with a message naming the cause, and nothing runs.
+  try {
+    bus.start();
+    FAIL() << "start() succeeded on a missing interface";
+  } catch (const std::runtime_error& e) {
+    const std::string what = e.what();
+    EXPECT_TRUE(what.find("can: nccompnone0: no such interface") != std::string::npos ||
+                what.find("can: socket(PF_CAN, CAN_RAW) failed") != std::string::npos)
+        << what;
+  }
+  EXPECT_EQ(bus.status().state, LinkState::kStopped);
+  EXPECT_EQ(bus.rx().capacity(), 4096U);
+  EXPECT_EQ(bus.tx().capacity(), 256U);
+  bus.stop();  // idempotent, no thread to join
 }
 
 }  // namespace
