@@ -6,10 +6,13 @@
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <spawn.h>
+#include <sys/socket.h>
+#include <sys/un.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <chrono>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <optional>
@@ -53,6 +56,8 @@ class Daemon {
       ::waitpid(pid_, nullptr, 0);
     }
   }
+  /// Extra environment for the child ("NAME=value").
+  std::vector<std::string> env;
   void start(std::vector<std::string> extra_args = {}) {
     std::vector<std::string> args{NCCOMPD_BIN, "--config", (dir_ / "nccompd.toml").string()};
     args.insert(args.end(), extra_args.begin(), extra_args.end());
@@ -66,7 +71,15 @@ class Daemon {
     const std::string log = (dir_ / "nccompd.log").string();
     posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
     posix_spawn_file_actions_adddup2(&fa, 1, 2);
-    ASSERT_EQ(posix_spawn(&pid_, NCCOMPD_BIN, &fa, nullptr, argv.data(), environ), 0);
+    std::vector<char*> envp;
+    for (char** e = environ; *e != nullptr; ++e) {
+      envp.push_back(*e);
+    }
+    for (auto& e : env) {
+      envp.push_back(e.data());
+    }
+    envp.push_back(nullptr);
+    ASSERT_EQ(posix_spawn(&pid_, NCCOMPD_BIN, &fa, nullptr, argv.data(), envp.data()), 0);
     posix_spawn_file_actions_destroy(&fa);
   }
   void signal(int sig) const { ASSERT_EQ(::kill(pid_, sig), 0); }
@@ -236,6 +249,56 @@ TEST(NccompdProcess, DryRunWritesNothing) {
   EXPECT_EQ(number(s, "offsets_written"), 0.0);
   p.signal(SIGTERM);
   EXPECT_EQ(p.wait(), 0);
+}
+
+// systemd's notify protocol, with the test as the service manager: READY=1 after start-up,
+// WATCHDOG=1 while the loop runs (WATCHDOG_USEC=200 ms → fed every 100 ms), STOPPING=1 at SIGTERM.
+TEST(NccompdProcess, NotifiesReadyWatchdogAndStopping) {
+  TempDir d;
+  d.write("nccompd.toml", config_text(5.0, 50.0));
+  const std::string sock = (d.path / "notify.sock").string();
+  const int fd = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  ASSERT_GE(fd, 0);
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  std::memcpy(addr.sun_path, sock.c_str(), sock.size() + 1);
+  ASSERT_EQ(::bind(fd, reinterpret_cast<const sockaddr*>(&addr), sizeof addr), 0);
+  timeval tv{0, 200'000};
+  ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+  Daemon p(d.path);
+  p.env = {"NOTIFY_SOCKET=" + sock, "WATCHDOG_USEC=200000"};
+  p.start();
+  std::string all;
+  int watchdogs = 0;
+  bool ready = false;
+  const auto end = std::chrono::steady_clock::now() + 15s;
+  while (std::chrono::steady_clock::now() < end && watchdogs < 5) {
+    char buf[1024];
+    const ssize_t n = ::recv(fd, buf, sizeof buf, 0);
+    if (n > 0) {
+      const std::string msg(buf, static_cast<std::size_t>(n));
+      all += msg + "|";
+      ready = ready || msg.find("READY=1") != std::string::npos;
+      // The watchdog is only fed after READY=1.
+      if (msg.find("WATCHDOG=1") != std::string::npos) {
+        EXPECT_TRUE(ready) << all;
+        ++watchdogs;
+      }
+    }
+  }
+  EXPECT_TRUE(ready) << all;
+  EXPECT_GE(watchdogs, 5) << all;
+  EXPECT_NE(all.find("STATUS=running: loop 1000 Hz"), std::string::npos) << all;
+  p.signal(SIGTERM);
+  bool stopping = false;
+  for (int i = 0; i < 50 && !stopping; ++i) {
+    char buf[1024];
+    const ssize_t n = ::recv(fd, buf, sizeof buf, 0);
+    stopping = n > 0 && std::string(buf, static_cast<std::size_t>(n)).find("STOPPING=1") != std::string::npos;
+  }
+  EXPECT_TRUE(stopping);
+  EXPECT_EQ(p.wait(), 0);
+  ::close(fd);
 }
 
 TEST(NccompdProcess, InvalidConfigExitsWithStatus3AndNamesTheLine) {
