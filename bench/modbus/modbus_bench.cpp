@@ -155,7 +155,8 @@ DriverRun driver_round(std::uint16_t port, double rate_hz, TimeNs duration) {
     }
     r.fresh += got ? 1 : 0;
     counter += 1.0;
-    (void)bus.tx().try_push(nccomp::core::OffsetWrite{next, 0, x_mm * 0.1 + std::fmod(counter, 100.0)});
+    (void)bus.tx().try_push(
+        nccomp::core::OffsetWrite{next, 0, x_mm * 0.1 + std::fmod(counter, 100.0)});
     ++r.loop_cycles;
     next += period;
     if (mb::monotonic_now_ns() > next) {
@@ -213,8 +214,8 @@ int main(int argc, char** argv) {
     const auto d = driver_round(port, rate, static_cast<TimeNs>(cycles * 1e9 / rate));
     drv.insert(drv.end(), d.cycles.begin(), d.cycles.end());
   }
-  std::printf("cycle time at %.0f Hz (read %d input registers + write 2 holding registers)\n",
-              rate, kReadRegisters);
+  std::printf("cycle time at %.0f Hz (read %d input registers + write 2 holding registers)\n", rate,
+              kReadRegisters);
   std::printf("| path | cycles | p50 [us] | p99 [us] | p99.9 [us] |\n|---|---|---|---|---|\n");
   std::printf("| bare libmodbus | %zu | %.1f | %.1f | %.1f |\n", bare.size(), pct(bare, 0.5),
               pct(bare, 0.99), pct(bare, 0.999));
@@ -224,7 +225,9 @@ int main(int argc, char** argv) {
               pct(drv, 0.99) / pct(bare, 0.99), pct(drv, 0.999) / pct(bare, 0.999));
 
   // 2. Highest rate with zero overruns.
-  std::printf("| rate [Hz] | loop cycles | loop overruns | driver overruns | fresh samples | driver p99 [us] |\n");
+  std::printf(
+      "| rate [Hz] | loop cycles | loop overruns | driver overruns | fresh samples | driver p99 "
+      "[us] |\n");
   std::printf("|---|---|---|---|---|---|\n");
   double best = 0.0;
   for (double r : {500.0, 1000.0, 2000.0, 4000.0, 8000.0, 10000.0}) {
@@ -245,26 +248,29 @@ int main(int argc, char** argv) {
   server.stop();
 
   // 3. RTU budget of the reference profile.
-  std::printf("| RTU baud | merge_gap_registers | frame gap [ms] | reference profile: bus time per poll [ms] | max poll rate [Hz] |\n|---|---|---|---|---|\n");
+  std::printf(
+      "| RTU baud | merge_gap_registers | frame gap [ms] | reference profile: bus time per poll "
+      "[ms] | max poll rate [Hz] |\n|---|---|---|---|---|\n");
   for (int merge : {0, 16}) {
-  for (int baud : {9600, 19200, 38400, 115200}) {
-    std::string text = "[modbus]\ntransport = \"rtu\"\ndevice = \"/dev/null\"\nbaud = " +
-                       std::to_string(baud) + "\npoll_rate_hz = 0.01\nmerge_gap_registers = " + std::to_string(merge) + "\n";
-    // The reference map below [modbus]'s own keys.
-    FILE* f = std::fopen(NCCOMP_REFERENCE_PROFILE, "r");
-    std::string ref;
-    char buf[4096];
-    std::size_t n = 0;
-    while ((n = std::fread(buf, 1, sizeof(buf), f)) > 0) {
-      ref.append(buf, n);
+    for (int baud : {9600, 19200, 38400, 115200}) {
+      std::string text =
+          "[modbus]\ntransport = \"rtu\"\ndevice = \"/dev/null\"\nbaud = " + std::to_string(baud) +
+          "\npoll_rate_hz = 0.01\nmerge_gap_registers = " + std::to_string(merge) + "\n";
+      // The reference map below [modbus]'s own keys.
+      FILE* f = std::fopen(NCCOMP_REFERENCE_PROFILE, "r");
+      std::string ref;
+      char buf[4096];
+      std::size_t n = 0;
+      while ((n = std::fread(buf, 1, sizeof(buf), f)) > 0) {
+        ref.append(buf, n);
+      }
+      std::fclose(f);
+      text += ref.substr(ref.find("[modbus.axis]"));
+      const mb::ModbusConfig c = mb::parse_modbus_config(text, "reference");
+      std::printf("| %d | %d | %.3f | %.2f (%zu requests) | %.1f |\n", baud, merge,
+                  mb::rtu_frame_gap_s(c) * 1e3, c.poll_bus_time_s * 1e3, c.blocks.size(),
+                  0.9 / c.poll_bus_time_s);
     }
-    std::fclose(f);
-    text += ref.substr(ref.find("[modbus.axis]"));
-    const mb::ModbusConfig c = mb::parse_modbus_config(text, "reference");
-    std::printf("| %d | %d | %.3f | %.2f (%zu requests) | %.1f |\n", baud, merge,
-                mb::rtu_frame_gap_s(c) * 1e3, c.poll_bus_time_s * 1e3, c.blocks.size(),
-                0.9 / c.poll_bus_time_s);
-  }
   }
   return 0;
 }

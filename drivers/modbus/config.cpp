@@ -13,8 +13,8 @@ namespace nccomp::drivers::modbus {
 namespace {
 
 constexpr std::array<std::string_view, kGroupCount> kGroupKeys = {
-    "axis", "tool_measurement", "probe_measurement", "calibration_touch", "tool_change",
-    "program_event"};
+    "axis",        "tool_measurement", "probe_measurement", "calibration_touch",
+    "tool_change", "program_event"};
 
 constexpr std::array<std::array<std::string_view, kMaxFields>, kGroupCount> kFieldKeys = {{
     {"x_mm", "y_mm", "z_mm", "a_deg", "b_deg", "c_deg", "program_path_mm", "tool", "normal_x",
@@ -53,7 +53,7 @@ bool required(Group g, std::size_t f) {
 }
 
 constexpr std::uint16_t kMaxReadRegisters = 125;  // Modbus spec, function 3/4
-constexpr std::uint16_t kMaxReadBits = 2000;       // function 1/2
+constexpr std::uint16_t kMaxReadBits = 2000;      // function 1/2
 
 std::string table_name(Table t) {
   switch (t) {
@@ -329,14 +329,36 @@ ModbusConfig parse_modbus_config(std::string_view toml_text, std::string_view fi
   }
   const toml::table& m = *mnode->as_table();
   const std::string mp = "modbus";
-  static constexpr std::array<std::string_view, 30> kTopKeys = {
-      "transport", "host", "port", "device", "baud", "parity", "data_bits", "stop_bits",
-      "rs485", "unit_id", "response_timeout_s", "byte_timeout_s", "poll_rate_hz",
-      "offset_write_rate_hz", "reconnect_min_s", "reconnect_max_s", "dead_after_failures",
-      "verify_writes", "alarm_after_s", "rx_capacity", "tx_capacity", "merge_gap_registers",
-      "axis",
-      "tool_measurement", "probe_measurement", "calibration_touch", "tool_change",
-      "program_event", "temperature", "offset"};
+  static constexpr std::array<std::string_view, 30> kTopKeys = {"transport",
+                                                                "host",
+                                                                "port",
+                                                                "device",
+                                                                "baud",
+                                                                "parity",
+                                                                "data_bits",
+                                                                "stop_bits",
+                                                                "rs485",
+                                                                "unit_id",
+                                                                "response_timeout_s",
+                                                                "byte_timeout_s",
+                                                                "poll_rate_hz",
+                                                                "offset_write_rate_hz",
+                                                                "reconnect_min_s",
+                                                                "reconnect_max_s",
+                                                                "dead_after_failures",
+                                                                "verify_writes",
+                                                                "alarm_after_s",
+                                                                "rx_capacity",
+                                                                "tx_capacity",
+                                                                "merge_gap_registers",
+                                                                "axis",
+                                                                "tool_measurement",
+                                                                "probe_measurement",
+                                                                "calibration_touch",
+                                                                "tool_change",
+                                                                "program_event",
+                                                                "temperature",
+                                                                "offset"};
   r.check_keys(m, mp, kTopKeys);
 
   ModbusConfig c;
@@ -412,7 +434,8 @@ ModbusConfig parse_modbus_config(std::string_view toml_text, std::string_view fi
     gm.present = true;
     for (auto&& [k, v] : *gt) {
       const auto& keys = kFieldKeys[gi];
-      const auto it = std::find(keys.begin(), keys.begin() + static_cast<std::ptrdiff_t>(kFieldCounts[gi]), k.str());
+      const auto it = std::find(
+          keys.begin(), keys.begin() + static_cast<std::ptrdiff_t>(kFieldCounts[gi]), k.str());
       if (it == keys.begin() + static_cast<std::ptrdiff_t>(kFieldCounts[gi])) {
         r.fail(&v, Reader::join(gp, k.str()), "unknown signal");
       }
@@ -544,8 +567,8 @@ ModbusConfig parse_modbus_config(std::string_view toml_text, std::string_view fi
     const Claim& b = claims[i];
     if (a.table == b.table && b.first <= a.last) {
       std::ostringstream s;
-      s << r.file() << ':' << b.line << ": " << b.path << ": " << table_name(b.table)
-        << " address " << b.first << " overlaps " << a.path << " (line " << a.line << ")";
+      s << r.file() << ':' << b.line << ": " << b.path << ": " << table_name(b.table) << " address "
+        << b.first << " overlaps " << a.path << " (line " << a.line << ")";
       throw ConfigError(s.str());
     }
   }
@@ -674,8 +697,8 @@ ModbusConfig parse_modbus_config(std::string_view toml_text, std::string_view fi
     const double load = c.poll_bus_time_s * c.poll_rate_hz;
     if (load > 0.9) {
       std::ostringstream s;
-      s << r.file() << ": modbus.poll_rate_hz: " << c.poll_rate_hz << " Hz needs "
-        << load * 100.0 << " % of the bus at " << c.baud << " baud (" << c.poll_bus_time_s * 1e3
+      s << r.file() << ": modbus.poll_rate_hz: " << c.poll_rate_hz << " Hz needs " << load * 100.0
+        << " % of the bus at " << c.baud << " baud (" << c.poll_bus_time_s * 1e3
         << " ms per poll for " << c.blocks.size() << " read requests); at most "
         << 0.9 / c.poll_bus_time_s << " Hz";
       throw ConfigError(s.str());

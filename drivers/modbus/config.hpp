@@ -49,9 +49,8 @@ inline constexpr std::size_t kGroupCount = 6;
 
 // Field indices per group (the order of the names in config.cpp's tables).
 namespace axis_field {
-inline constexpr std::size_t kX = 0, kY = 1, kZ = 2, kA = 3, kB = 4, kC = 5, kPath = 6,
-                             kTool = 7, kNormalX = 8, kNormalY = 9, kNormalZ = 10,
-                             kCutting = 11, kCount = 12;
+inline constexpr std::size_t kX = 0, kY = 1, kZ = 2, kA = 3, kB = 4, kC = 5, kPath = 6, kTool = 7,
+                             kNormalX = 8, kNormalY = 9, kNormalZ = 10, kCutting = 11, kCount = 12;
 }
 namespace tool_meas_field {
 inline constexpr std::size_t kSeq = 0, kTool = 1, kWear = 2, kBroken = 3, kCount = 4;

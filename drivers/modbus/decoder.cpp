@@ -35,8 +35,9 @@ PollDecoder::PollDecoder(const ModbusConfig& config) : config_(config) {
 
 double PollDecoder::value(const SignalMap& s) const noexcept {
   const std::vector<std::uint16_t>& b = blocks_[s.block];
-  return modbus::decode(std::span<const std::uint16_t>(b.data() + s.block_offset, width(s.encoding.type)),
-                s.encoding);
+  return modbus::decode(
+      std::span<const std::uint16_t>(b.data() + s.block_offset, width(s.encoding.type)),
+      s.encoding);
 }
 
 void PollDecoder::emit(const core::Event& e) noexcept {
@@ -126,9 +127,9 @@ void PollDecoder::decode_event(Group g, core::TimeNs t_ns) {
   const bool wide = seq_map.encoding.type == ValueType::kUint32;
   // The counter is read raw: scale and offset make no sense for it.
   const std::vector<std::uint16_t>& b = blocks_[seq_map.block];
-  const auto seq = static_cast<std::uint32_t>(decode_raw(
-      std::span<const std::uint16_t>(b.data() + seq_map.block_offset, wide ? 2U : 1U),
-      seq_map.encoding));
+  const auto seq = static_cast<std::uint32_t>(
+      decode_raw(std::span<const std::uint16_t>(b.data() + seq_map.block_offset, wide ? 2U : 1U),
+                 seq_map.encoding));
   SeqState& st = seq_[gi];
   if (!st.baseline) {
     st.baseline = true;

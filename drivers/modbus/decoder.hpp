@@ -24,9 +24,9 @@
 namespace nccomp::drivers::modbus {
 
 struct DecodeCounters {
-  std::uint64_t events_lost{0};       // sequence jumps > 1
-  std::uint64_t sequence_resets{0};   // counter moved backwards (NC restart)
-  std::uint64_t values_invalid{0};    // NaN / inf / non-integral / out-of-range: sample dropped
+  std::uint64_t events_lost{0};      // sequence jumps > 1
+  std::uint64_t sequence_resets{0};  // counter moved backwards (NC restart)
+  std::uint64_t values_invalid{0};   // NaN / inf / non-integral / out-of-range: sample dropped
 };
 
 class PollDecoder {

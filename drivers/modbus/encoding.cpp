@@ -101,8 +101,8 @@ EncodeResult encode(double value, const Encoding& enc, std::span<std::uint16_t> 
       regs[0] = r > 0.5 ? 1 : 0;
       break;
     case ValueType::kInt16:
-      regs[0] = wire_to_host(static_cast<std::uint16_t>(static_cast<std::int16_t>(r)),
-                             enc.byte_order);
+      regs[0] =
+          wire_to_host(static_cast<std::uint16_t>(static_cast<std::int16_t>(r)), enc.byte_order);
       break;
     case ValueType::kUint16:
       regs[0] = wire_to_host(static_cast<std::uint16_t>(r), enc.byte_order);

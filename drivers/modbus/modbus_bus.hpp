@@ -44,19 +44,19 @@ struct ModbusStatus {
   std::array<std::uint64_t, kExceptionKinds> exceptions{};
   std::uint64_t timeouts{0};
   std::uint64_t crc_errors{0};
-  std::uint64_t bad_responses{0};       // wrong transaction id / length / unit / function
-  std::uint64_t connection_errors{0};   // socket / device errors, failed connects
+  std::uint64_t bad_responses{0};      // wrong transaction id / length / unit / function
+  std::uint64_t connection_errors{0};  // socket / device errors, failed connects
   std::uint64_t polls{0};
-  std::uint64_t poll_overruns{0};       // a poll period ended before the poll and writes did
-  std::uint64_t events_lost{0};         // sequence counter jumps > 1
+  std::uint64_t poll_overruns{0};  // a poll period ended before the poll and writes did
+  std::uint64_t events_lost{0};    // sequence counter jumps > 1
   std::uint64_t sequence_resets{0};
-  std::uint64_t values_invalid{0};      // NaN / out of range values from the NC: dropped
-  std::uint64_t offsets_rejected{0};    // not encodable (NaN, out of range) or unmapped register
+  std::uint64_t values_invalid{0};    // NaN / out of range values from the NC: dropped
+  std::uint64_t offsets_rejected{0};  // not encodable (NaN, out of range) or unmapped register
   std::uint64_t verify_mismatches{0};
-  std::uint32_t offsets_pending{0};     // written by the loop, not yet confirmed on the NC
-  core::TimeNs last_cycle_ns{0};        // duration of the last poll + write cycle
+  std::uint32_t offsets_pending{0};  // written by the loop, not yet confirmed on the NC
+  core::TimeNs last_cycle_ns{0};     // duration of the last poll + write cycle
   core::TimeNs max_cycle_ns{0};
-  int last_errno{0};                    // errno of the last fault (libmodbus EMB* codes too)
+  int last_errno{0};  // errno of the last fault (libmodbus EMB* codes too)
 };
 
 class ModbusBus final : public Bus {

@@ -83,10 +83,11 @@ void print_plan(const mb::ModbusConfig& c) {
   } else {
     std::printf("transport rtu %s %u baud, unit %u, poll %.6g Hz, offsets at most %.6g Hz\n",
                 c.device.c_str(), c.baud, c.unit_id, c.poll_rate_hz, c.offset_write_rate_hz);
-    std::printf("rtu: frame gap %.3f ms, %.2f ms of bus time per poll (%.0f %% of the period), "
-                "%.2f ms to write every offset once\n",
-                mb::rtu_frame_gap_s(c) * 1e3, c.poll_bus_time_s * 1e3,
-                c.poll_bus_time_s * c.poll_rate_hz * 100.0, c.write_bus_time_s * 1e3);
+    std::printf(
+        "rtu: frame gap %.3f ms, %.2f ms of bus time per poll (%.0f %% of the period), "
+        "%.2f ms to write every offset once\n",
+        mb::rtu_frame_gap_s(c) * 1e3, c.poll_bus_time_s * 1e3,
+        c.poll_bus_time_s * c.poll_rate_hz * 100.0, c.write_bus_time_s * 1e3);
   }
   std::printf("%zu read request(s) per poll:\n", c.blocks.size());
   for (std::size_t b = 0; b < c.blocks.size(); ++b) {
@@ -137,17 +138,19 @@ int read_once(const mb::ModbusConfig& c) {
       ++events;
     }
   }
-  std::printf("read for 1 s: %llu polls, %zu axis samples, %zu events, %llu lost, "
-              "%llu invalid values\n",
-              static_cast<unsigned long long>(st.polls), samples, events,
-              static_cast<unsigned long long>(st.events_lost),
-              static_cast<unsigned long long>(st.values_invalid));
-  std::printf("faults: %llu timeouts, %llu bad responses, %llu crc, %llu connection errors, "
-              "exceptions:",
-              static_cast<unsigned long long>(st.timeouts),
-              static_cast<unsigned long long>(st.bad_responses),
-              static_cast<unsigned long long>(st.crc_errors),
-              static_cast<unsigned long long>(st.connection_errors));
+  std::printf(
+      "read for 1 s: %llu polls, %zu axis samples, %zu events, %llu lost, "
+      "%llu invalid values\n",
+      static_cast<unsigned long long>(st.polls), samples, events,
+      static_cast<unsigned long long>(st.events_lost),
+      static_cast<unsigned long long>(st.values_invalid));
+  std::printf(
+      "faults: %llu timeouts, %llu bad responses, %llu crc, %llu connection errors, "
+      "exceptions:",
+      static_cast<unsigned long long>(st.timeouts),
+      static_cast<unsigned long long>(st.bad_responses),
+      static_cast<unsigned long long>(st.crc_errors),
+      static_cast<unsigned long long>(st.connection_errors));
   for (std::size_t k = 0; k < st.exceptions.size(); ++k) {
     if (st.exceptions[k] != 0) {
       std::printf(" code %zu x%llu", k, static_cast<unsigned long long>(st.exceptions[k]));

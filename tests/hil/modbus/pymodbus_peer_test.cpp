@@ -149,18 +149,22 @@ address = 2000
 )");
   bus->start();
   Collected got;
-  ASSERT_TRUE(wait_until([&] {
-    got.drain(*bus);
-    return got.axis.size() >= 2;
-  }, 10.0));
+  ASSERT_TRUE(wait_until(
+      [&] {
+        got.drain(*bus);
+        return got.axis.size() >= 2;
+      },
+      10.0));
   EXPECT_NEAR(got.axis.back().position_mm[0], -25.0, 1e-12);
   EXPECT_DOUBLE_EQ(got.axis.back().position_mm[1], 12.75);
   EXPECT_EQ(got.axis.back().tool, 12);
   push_offset(*bus, 0, 8.8);
-  ASSERT_TRUE(wait_until([&] {
-    const auto st = bus->modbus_status();
-    return st.offsets_pending == 0 && st.bus.counters.offsets_written >= 1;
-  }, 10.0));
+  ASSERT_TRUE(wait_until(
+      [&] {
+        const auto st = bus->modbus_status();
+        return st.offsets_pending == 0 && st.bus.counters.offsets_written >= 1;
+      },
+      10.0));
   const auto st = bus->modbus_status();
   EXPECT_GE(st.exceptions[2], 1U);
   EXPECT_EQ(st.verify_mismatches, 0U);  // read back from pymodbus equal to what was written

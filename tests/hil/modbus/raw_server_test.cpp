@@ -16,8 +16,8 @@ namespace {
 std::vector<std::uint8_t> answer(const std::vector<std::uint8_t>& req,
                                  const std::vector<std::uint16_t>& regs) {
   const auto n = static_cast<std::uint8_t>(2 * regs.size());
-  std::vector<std::uint8_t> r{req[0], req[1], 0, 0, 0, static_cast<std::uint8_t>(3 + n), req[6],
-                              req[7], n};
+  std::vector<std::uint8_t> r{req[0], req[1], 0, 0, 0, static_cast<std::uint8_t>(3 + n),
+                              req[6], req[7], n};
   for (std::uint16_t v : regs) {
     r.push_back(static_cast<std::uint8_t>(v >> 8U));
     r.push_back(static_cast<std::uint8_t>(v & 0xFFU));
@@ -74,8 +74,8 @@ x_mm = { table = "input", address = 0, type = "int32" }
         << "decoded garbage " << x;
   }
   const mb::ModbusStatus st = bus->modbus_status();
-  EXPECT_GE(st.timeouts, 1U);        // the truncated frame
-  EXPECT_GE(st.bad_responses, 2U);   // wrong length, wrong transaction id
+  EXPECT_GE(st.timeouts, 1U);       // the truncated frame
+  EXPECT_GE(st.bad_responses, 2U);  // wrong length, wrong transaction id
   EXPECT_EQ(st.bus.counters.malformed, st.bad_responses + st.crc_errors);
   EXPECT_GE(raw.requests(), 6);
 }

@@ -4,10 +4,10 @@
 
 #include <algorithm>
 #include <chrono>
-#include <thread>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <thread>
 
 #include "sim/modbus_nc/nc_server.hpp"
 #include "tests/hil/modbus/hil_common.hpp"
@@ -186,9 +186,8 @@ TEST(ModbusHilSim, EventsExactlyOnceLostCountedOffsetsLatestWinsAcrossRestart) {
   push_offset(*bus, 0, 12.3);
   push_offset(*bus, 0, 15.0);
   push_offset(*bus, 1, -7.25);
-  ASSERT_TRUE(wait_until([&] {
-    return holding_i32(server, 200) == 150 && server.holding(202, 2)[1] == 0xC0E8;
-  }));
+  ASSERT_TRUE(wait_until(
+      [&] { return holding_i32(server, 200) == 150 && server.holding(202, 2)[1] == 0xC0E8; }));
   const auto f = server.holding(202, 2);
   EXPECT_EQ(f[0], 0x0000);  // -7.25f = 0xC0E80000, low word first
   EXPECT_EQ(f[1], 0xC0E8);
@@ -209,8 +208,7 @@ TEST(ModbusHilSim, EventsExactlyOnceLostCountedOffsetsLatestWinsAcrossRestart) {
   // The NC restarts: while it is down the loop moves the offset on, the NC produces 2 events.
   const std::uint64_t written_before = bus->status().counters.offsets_written;
   server.stop();
-  ASSERT_TRUE(wait_until(
-      [&] { return bus->status().state == drivers::LinkState::kDown; }));
+  ASSERT_TRUE(wait_until([&] { return bus->status().state == drivers::LinkState::kDown; }));
   push_offset(*bus, 0, 20.0);
   nc_measure(server, 7, 30.0F, 2);
   ASSERT_TRUE(wait_until([&] { return bus->status().alarm; }));  // link down > alarm_after_s
@@ -351,8 +349,9 @@ address = 65312
   ASSERT_TRUE(wait_until([&] {
     got.drain(*bus);
     return got.axis.size() >= before + 5 && bus->modbus_status().bad_responses >= 3;
-  })) << "timeouts " << bus->modbus_status().timeouts << " bad "
-      << bus->modbus_status().bad_responses << " samples " << got.axis.size();
+  })) << "timeouts "
+      << bus->modbus_status().timeouts << " bad " << bus->modbus_status().bad_responses
+      << " samples " << got.axis.size();
   bus->stop();
   got.drain(*bus);
   for (const auto& s : got.axis) {

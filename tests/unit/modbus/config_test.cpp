@@ -190,13 +190,14 @@ sequence = { address = 10, type = "uint16" }
 tool = { address = 200 }
 )"),
               HasSubstr("modbus.tool_change: its holding signals span 191 addresses"));
-  EXPECT_THAT(error_of(R"([modbus]
+  EXPECT_THAT(
+      error_of(R"([modbus]
 transport = "tcp"
 [modbus.tool_change]
 sequence = { address = 10, type = "int16" }
 tool = { address = 11 }
 )"),
-              HasSubstr("modbus.tool_change.sequence: a sequence counter must be uint16 or uint32"));
+      HasSubstr("modbus.tool_change.sequence: a sequence counter must be uint16 or uint32"));
   EXPECT_THAT(error_of(R"([modbus]
 transport = "tcp"
 [modbus.tool_change]
@@ -262,15 +263,14 @@ x_mm = { address = 0, type = "int32" }
   EXPECT_NEAR(c.poll_bus_time_s, 24.0 * 11.0 / 9600.0, 1e-9);
   EXPECT_NEAR(rtu_frame_gap_s(c), 3.5 * 11.0 / 9600.0, 1e-12);
   // Above 19200 baud the gap is fixed at 1.75 ms.
-  const ModbusConfig fast = parse_modbus_config(
-      std::string(R"([modbus]
+  const ModbusConfig fast = parse_modbus_config(std::string(R"([modbus]
 transport = "rtu"
 device = "/dev/null"
 baud = 115200
 [modbus.axis]
 x_mm = { address = 0, type = "int32" }
 )"),
-      "t.toml");
+                                                "t.toml");
   EXPECT_DOUBLE_EQ(rtu_frame_gap_s(fast), 0.00175);
   // WHEN 100 Hz is asked of 9600 baud THEN it is refused with the achievable rate.
   EXPECT_THAT(error_of(base("poll_rate_hz = 100")),

@@ -165,7 +165,7 @@ TEST_F(ModbusDecoder, Uint32CounterAndRangeChecks) {
   // +1 across the word boundary: 0x00020000
   touch()[0] = 0x0002;
   touch()[1] = 0x0000;
-  touch()[2] = 2;                                       // axis Z
+  touch()[2] = 2;                                        // axis Z
   touch()[3] = static_cast<std::uint16_t>(-1 & 0xFFFF);  // direction -1
   touch()[4] = 0x0001;
   touch()[5] = 0x86A0;  // 100000 * 0.0001 = 10 mm

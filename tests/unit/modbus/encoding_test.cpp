@@ -10,8 +10,8 @@
 namespace nccomp::drivers::modbus {
 namespace {
 
-Encoding enc(ValueType t, WordOrder w = WordOrder::kHighFirst,
-             ByteOrder b = ByteOrder::kBigEndian, double scale = 1.0, double offset = 0.0) {
+Encoding enc(ValueType t, WordOrder w = WordOrder::kHighFirst, ByteOrder b = ByteOrder::kBigEndian,
+             double scale = 1.0, double offset = 0.0) {
   return Encoding{t, w, b, scale, offset};
 }
 
@@ -56,20 +56,20 @@ TEST(ModbusEncoding, Float32KnownPattern) {
                    1.5);
   EXPECT_NEAR(decode(std::array<std::uint16_t, 2>{0xBDCC, 0xCCCD}, enc(ValueType::kFloat32)), -0.1,
               1e-8);
-  EXPECT_TRUE(std::isnan(
-      decode(std::array<std::uint16_t, 2>{0x7FC0, 0x0000}, enc(ValueType::kFloat32))));
+  EXPECT_TRUE(
+      std::isnan(decode(std::array<std::uint16_t, 2>{0x7FC0, 0x0000}, enc(ValueType::kFloat32))));
 }
 
 TEST(ModbusEncoding, ScaleAndOffset) {
   const std::array<std::uint16_t, 2> r{0x0000, 0x3039};  // 12345
-  EXPECT_DOUBLE_EQ(decode(r, enc(ValueType::kInt32, WordOrder::kHighFirst,
-                                 ByteOrder::kBigEndian, 0.001, -10.0)),
-                   12.345 - 10.0);
+  EXPECT_DOUBLE_EQ(
+      decode(r, enc(ValueType::kInt32, WordOrder::kHighFirst, ByteOrder::kBigEndian, 0.001, -10.0)),
+      12.345 - 10.0);
 }
 
 TEST(ModbusEncoding, RoundTripEveryTypeAndOrder) {
-  for (ValueType t : {ValueType::kInt16, ValueType::kUint16, ValueType::kInt32,
-                      ValueType::kUint32, ValueType::kFloat32}) {
+  for (ValueType t : {ValueType::kInt16, ValueType::kUint16, ValueType::kInt32, ValueType::kUint32,
+                      ValueType::kFloat32}) {
     for (WordOrder w : {WordOrder::kHighFirst, WordOrder::kLowFirst}) {
       for (ByteOrder b : {ByteOrder::kBigEndian, ByteOrder::kSwapped}) {
         const Encoding e = enc(t, w, b, 0.1, 5.0);
