@@ -399,6 +399,22 @@ TEST(ModbusHilSim, UnreachableNcBacksOffRaisesTheAlarmAndStopsPromptly) {
   bus2->stop();
 }
 
+TEST(ModbusHilSim, Rs485ModeOnADeviceWithoutItIsAConnectionErrorNotACrash) {
+  PtyPair pty;
+  auto bus = make_bus(rtu_header(pty.a(), "rs485 = true") + R"(
+[modbus.axis]
+x_mm = { table = "input", address = 0 }
+)");
+  bus->start();
+  // A pseudo-terminal has no TIOCSRS485: every connect attempt fails and is counted.
+  ASSERT_TRUE(wait_until([&] { return bus->modbus_status().connection_errors >= 2; }));
+  const auto st = bus->modbus_status();
+  EXPECT_NE(st.last_errno, 0);
+  EXPECT_EQ(st.polls, 0U);
+  EXPECT_NE(st.bus.state, drivers::LinkState::kUp);
+  bus->stop();
+}
+
 TEST(ModbusHilSim, RtuOverPtyPairWithFrameTiming) {
   PtyPair pty;
   ServerConfig sc;
