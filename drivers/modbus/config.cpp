@@ -574,7 +574,7 @@ ModbusConfig parse_modbus_config(std::string_view toml_text, std::string_view fi
   }
 
   // Read blocks: one per (group, table); an event group has exactly one.
-  const auto plan = [&](std::vector<SignalMap*> signals, const std::string& path) {
+  const auto plan = [&](const std::vector<SignalMap*>& signals, const std::string& path) {
     for (std::size_t ti = 0; ti < kTableCount; ++ti) {
       const auto table = static_cast<Table>(ti);
       std::uint32_t lo = 65536;
