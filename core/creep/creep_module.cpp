@@ -116,17 +116,25 @@ void CreepModule::step(TimeNs now_ns, std::span<const Event> events, StepOutput&
 }
 
 std::size_t CreepModule::save_state(std::span<std::byte> buf) const noexcept {
-  if (buf.size() < sizeof(CreepState)) return 0;
+  if (buf.size() < state_capacity()) return 0;
   const CreepState st = comp_.export_state();
   std::memcpy(buf.data(), &st, sizeof(CreepState));
-  return sizeof(CreepState);
+  std::memcpy(buf.data() + sizeof(CreepState), &comp_.tool_memory(), sizeof(ToolMemory));
+  return state_capacity();
 }
 
 bool CreepModule::load_state(std::span<const std::byte> bytes) noexcept {
-  if (!state_bytes_loadable(bytes.data(), bytes.size())) return false;
+  if (bytes.size() != state_capacity() || !state_bytes_loadable(bytes.data(), sizeof(CreepState)) ||
+      !memory_bytes_loadable(bytes.data() + sizeof(CreepState), sizeof(ToolMemory))) {
+    return false;
+  }
+  // Checked in full before anything changes: both parts, or neither.
   CreepState st;
   std::memcpy(&st, bytes.data(), sizeof(CreepState));
-  if (!comp_.restore_state(st)) return false;
+  if (comp_.check_state(st).field != nullptr) return false;
+  std::memcpy(&scratch_memory_, bytes.data() + sizeof(CreepState), sizeof(ToolMemory));
+  if (!comp_.restore_tool_memory(scratch_memory_)) return false;
+  (void)comp_.restore_state(st);  // cannot fail: checked above
   ++generation_;
   return true;
 }

@@ -50,10 +50,14 @@ class CreepModule final : public engine::Module {
   /// Real-time safe.
   void step(TimeNs now_ns, std::span<const Event> events, StepOutput& out) noexcept override;
 
-  [[nodiscard]] std::size_t state_capacity() const noexcept override { return sizeof(CreepState); }
-  /// Real-time safe: the plain-data CreepState, byte for byte.
+  [[nodiscard]] std::size_t state_capacity() const noexcept override {
+    return sizeof(CreepState) + sizeof(ToolMemory);
+  }
+  /// Real-time safe: the plain-data CreepState of the active tool, then the ToolMemory of the
+  /// tools out of the spindle, byte for byte.
   std::size_t save_state(std::span<std::byte> buf) const noexcept override;
-  /// Real-time safe: false if the bytes are not a CreepState valid for this config.
+  /// Real-time safe: false if the bytes are not a state valid for this config (the module then
+  /// keeps its fresh state).
   bool load_state(std::span<const std::byte> bytes) noexcept override;
   /// Advances on every discrete change (measurement, tool change, halt) and every 1 mm of cut
   /// path while creeps, entries or predictions are in progress.
@@ -69,6 +73,8 @@ class CreepModule final : public engine::Module {
  private:
   CreepModuleConfig config_;
   WearCompensator comp_;
+  /// Where load_state() decodes the tool memory (56 kB: not on the loop thread's stack).
+  ToolMemory scratch_memory_{};
   std::uint64_t generation_{0};
   std::uint64_t last_events_{0};
   std::int32_t last_tool_{0};

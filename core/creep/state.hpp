@@ -96,6 +96,22 @@ struct CreepState {
 static_assert(std::is_trivially_copyable_v<CreepState>);
 static_assert(std::is_standard_layout_v<CreepState>);
 
+/// Tools whose wear state is remembered while another tool is in the spindle.
+inline constexpr std::size_t kMaxToolMemory = 8;
+
+/// The states of tools out of the spindle (tool 0 = free slot), so a tool that comes back
+/// resumes with its wear, its creeps and its fitted rate instead of starting uncorrected.
+struct ToolMemory {
+  std::array<std::int32_t, kMaxToolMemory> tool{};
+  /// Order of last use (the least recently used slot is reused when all are taken).
+  std::array<std::uint64_t, kMaxToolMemory> last_use{};
+  std::uint64_t use_counter{0};
+  std::array<CreepState, kMaxToolMemory> state{};
+};
+
+static_assert(std::is_trivially_copyable_v<ToolMemory>);
+static_assert(std::is_standard_layout_v<ToolMemory>);
+
 /// True if bytes can be copied into a CreepState: the right size and every bool byte 0 or 1
 /// (loading any other value into a bool is undefined behaviour, and a corrupt state file can
 /// hold anything). Values are checked afterwards by WearCompensator::check_state(). Real-time
@@ -119,6 +135,16 @@ inline bool state_bytes_loadable(const std::byte* bytes, std::size_t size) noexc
          is_bool(offsetof(CreepState, alarm_flag)) &&
          is_bool(offsetof(CreepState, measurement_due_flag)) &&
          is_bool(offsetof(CreepState, tool_change_flag));
+}
+
+/// The same for a ToolMemory (every remembered state). Real-time safe.
+inline bool memory_bytes_loadable(const std::byte* bytes, std::size_t size) noexcept {
+  if (size != sizeof(ToolMemory)) return false;
+  for (std::size_t k = 0; k < kMaxToolMemory; ++k) {
+    const std::size_t at = offsetof(ToolMemory, state) + k * sizeof(CreepState);
+    if (!state_bytes_loadable(bytes + at, sizeof(CreepState))) return false;
+  }
+  return true;
 }
 
 }  // namespace nccomp::core::creep

@@ -28,6 +28,7 @@ void WearCompensator::configure(const CreepConfig& config) {
   }
   points_ = config_.edge.edge_points;
   s_ = CreepState{};
+  memory_ = ToolMemory{};
   s_.edge_points = static_cast<std::uint32_t>(points_);
   s_.history_count = 1;  // a new tool: zero wear at zero path, the first point of the rate fit
   counters_ = CreepCounters{};
@@ -800,23 +801,74 @@ void WearCompensator::on_tool_change(TimeNs /*now_ns*/, const ToolChange& c,
     }
     return;
   }
-  CreepState fresh{};
-  fresh.edge_points = s_.edge_points;
-  fresh.tool = c.tool;
-  fresh.part = s_.part;
-  fresh.history_count = 1;
-  fresh.history_has_origin = true;
-  // Kept across the change: where the sister restarts, and what the NC holds now.
-  fresh.last_measurement_program_path_mm = s_.last_measurement_program_path_mm;
-  fresh.channel_output_um = s_.channel_output_um;
-  fresh.next_seq = s_.next_seq;
-  s_ = fresh;
+  // Kept across the change: where a sister restarts, and what the NC holds now.
+  const double restart_mm = s_.last_measurement_program_path_mm;
+  const auto held_um = s_.channel_output_um;
+  const std::uint64_t seq = s_.next_seq;
+  if (s_.tool != 0) {
+    // The outgoing tool: remembered until it comes back, forgotten when a sister replaces it.
+    std::size_t slot = kMaxToolMemory;
+    for (std::size_t k = 0; k < kMaxToolMemory && slot == kMaxToolMemory; ++k) {
+      if (memory_.tool[k] == s_.tool) slot = k;
+    }
+    if (c.sister) {
+      if (slot < kMaxToolMemory) memory_.tool[slot] = 0;
+    } else {
+      for (std::size_t k = 0; k < kMaxToolMemory && slot == kMaxToolMemory; ++k) {
+        if (memory_.tool[k] == 0) slot = k;
+      }
+      if (slot == kMaxToolMemory) {
+        slot = 0;
+        for (std::size_t k = 1; k < kMaxToolMemory; ++k) {
+          if (memory_.last_use[k] < memory_.last_use[slot]) slot = k;
+        }
+      }
+      memory_.tool[slot] = s_.tool;
+      memory_.last_use[slot] = ++memory_.use_counter;
+      memory_.state[slot] = s_;
+    }
+  }
+  bool restored = false;
+  if (!c.sister) {
+    for (std::size_t k = 0; k < kMaxToolMemory && !restored; ++k) {
+      if (memory_.tool[k] == c.tool && c.tool != 0) {
+        s_ = memory_.state[k];
+        memory_.tool[k] = 0;
+        restored = true;
+      }
+    }
+  }
+  if (!restored) {
+    CreepState fresh{};
+    fresh.edge_points = s_.edge_points;
+    fresh.tool = c.tool;
+    fresh.part = s_.part;
+    fresh.history_count = 1;
+    fresh.history_has_origin = true;
+    fresh.last_measurement_program_path_mm = restart_mm;
+    s_ = fresh;
+  }
+  s_.channel_output_um = held_um;
+  s_.next_seq = std::max(s_.next_seq, seq);
   select_tool_tables();
   if (c.sister && config_.entry.sister_offset_um > 0.0) {
     start_entry(config_.entry.sister_offset_um, config_.entry.sister_length_mm);
   } else if (config_.entry.retract_um > 0.0) {
     start_entry(config_.entry.retract_um, config_.entry.refeed_length_mm);
   }
+}
+
+bool WearCompensator::restore_tool_memory(const ToolMemory& memory) noexcept {
+  for (std::size_t k = 0; k < kMaxToolMemory; ++k) {
+    if (memory.tool[k] == 0) continue;
+    if (memory.tool[k] < 0 || memory.state[k].tool != memory.tool[k]) return false;
+    if (check_state(memory.state[k]).field != nullptr) return false;
+    for (std::size_t j = 0; j < k; ++j) {
+      if (memory.tool[j] == memory.tool[k]) return false;
+    }
+  }
+  memory_ = memory;
+  return true;
 }
 
 }  // namespace nccomp::core::creep

@@ -71,6 +71,12 @@ class WearCompensator {
   /// Checks a state against the current config. Real-time safe.
   [[nodiscard]] StateProblem check_state(const CreepState& state) const noexcept;
 
+  /// States of the tools out of the spindle (persist them with export_state()). Real-time safe.
+  [[nodiscard]] const ToolMemory& tool_memory() const noexcept { return memory_; }
+  /// Restores them; false (memory unchanged) if a used slot's state fails check_state(), is of
+  /// another tool than its slot says, or a tool appears twice. Real-time safe.
+  bool restore_tool_memory(const ToolMemory& memory) noexcept;
+
   /// Operator acknowledgement: clears the halt, the alarm and the warning flags. Creeps resume
   /// where they were frozen. Real-time safe.
   void clear_alarm() noexcept;
@@ -130,6 +136,7 @@ class WearCompensator {
   ProfileTable table_{};
   std::size_t points_{1};
   CreepState s_{};
+  ToolMemory memory_{};
   CreepCounters counters_{};
   std::array<OffsetLimiter, kChannelCount> limiters_{};
 

@@ -100,6 +100,58 @@ TEST(CreepEntry, SmallerToolCreepsInAndOutAtTheLargerToolsSurface) {
   EXPECT_NEAR(r.z(), 0.0, 1e-12);
 }
 
+// ---- tools out of the spindle ------------------------------------------------------------
+
+TEST(CreepToolMemory, AToolThatComesBackResumesWithItsWearAndItsCreep) {
+  Rig r(base_config());
+  r.measure({20.0});
+  r.run_to(25.0);
+  EXPECT_NEAR(r.z(), -10.0, 1e-9);
+  r.tool_change(2, false);
+  r.advance(0.0);
+  EXPECT_NEAR(r.z(), 0.0, 1e-9);  // tool 2 is new: no wear
+  r.measure({4.0});
+  r.run_to(200.0);
+  EXPECT_NEAR(r.z(), -4.0, 1e-9);
+  r.tool_change(1, false);
+  r.advance(0.0);
+  EXPECT_NEAR(r.z(), -10.0, 1e-9);                // tool 1 where it left off, mid-creep
+  EXPECT_NEAR(r.comp.cut_path_mm(), 25.0, 1e-9);  // its own cut path
+  r.run_to(225.0);
+  EXPECT_NEAR(r.z(), -20.0, 1e-9);
+  r.tool_change(2, false);
+  r.advance(0.0);
+  EXPECT_NEAR(r.z(), -4.0, 1e-9);
+}
+
+TEST(CreepToolMemory, ASisterReplacesTheWornToolForGood) {
+  Rig r(base_config());
+  r.measure({20.0});
+  r.run_to(100.0);
+  r.tool_change(3, true);
+  r.advance(0.0);
+  EXPECT_NEAR(r.z(), 0.0, 1e-9);
+  r.tool_change(1, false);  // tool number 1 again: a fresh tool, the worn one is gone
+  r.advance(0.0);
+  EXPECT_NEAR(r.z(), 0.0, 1e-9);
+}
+
+TEST(CreepToolMemory, TheLeastRecentlyUsedToolIsForgottenBeyondTheSlots) {
+  Rig r(base_config());
+  for (std::int32_t t = 1; t <= static_cast<std::int32_t>(kMaxToolMemory) + 2; ++t) {
+    if (t > 1) r.tool_change(t, false);
+    r.measure({static_cast<double>(t)});
+    r.run_to(r.program_path_mm + 100.0);
+  }
+  // Tools 1 and 2 were pushed out by 3..9 (8 slots, tool 10 in the spindle).
+  r.tool_change(2, false);
+  r.advance(0.0);
+  EXPECT_NEAR(r.z(), 0.0, 1e-9);
+  r.tool_change(9, false);
+  r.advance(0.0);
+  EXPECT_NEAR(r.z(), -9.0, 1e-9);
+}
+
 // ---- item 8 ------------------------------------------------------------------------------
 
 TEST(CreepLimiter, AStepCorrectionIsSlewedAndEveryWriteIsAbsolute) {
@@ -292,6 +344,9 @@ TEST(CreepRealTime, StepAllocatesNothingWith16PointsAnd4Creeps) {
     a.position_mm[0] = path;
     events.emplace_back(a);
     if (k == 1000) events.emplace_back(tm);
+    // Another tool and back: the states are swapped through the tool memory, no allocation.
+    if (k == 1500) events.emplace_back(ToolChange{now, 2, false});
+    if (k == 1600) events.emplace_back(ToolChange{now, 1, false});
     out.clear();
     nccomp::test::AllocationScope scope;
     r.comp.step(now, events, out);

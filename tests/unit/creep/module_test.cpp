@@ -118,15 +118,42 @@ TEST(CreepEngineModule, StateSurvivesARestartThroughTheEngine) {
   EXPECT_NEAR(b.last(2), -8.0, 1e-9);
 }
 
+TEST(CreepEngineModule, RememberedToolsSurviveARestart) {
+  EngineRig a(module_config());
+  a.advance(0.0);
+  a.measure(12.0);
+  for (int i = 0; i < 200; ++i) a.advance(0.5);
+  a.ev.emplace_back(ToolChange{a.now, 2, false});
+  a.advance(0.0);
+  a.advance(0.0);
+  EXPECT_NEAR(a.last(2), 0.0, 1e-12);  // tool 2 is new
+  std::vector<std::byte> buf(a.engine.state_capacity());
+  buf.resize(a.engine.export_state(buf));
+
+  EngineRig b(module_config());
+  std::size_t skipped = 0;
+  ASSERT_TRUE(b.engine.import_state(buf, b.now, &skipped));
+  EXPECT_EQ(skipped, 0U);
+  const auto& comp = dynamic_cast<const CreepModule&>(b.engine.module(0)).compensator();
+  EXPECT_EQ(comp.state().tool, 2);
+  EXPECT_EQ(comp.tool_memory().tool[0], 1);
+  b.ev.emplace_back(ToolChange{b.now, 1, false});
+  b.advance(0.0);  // the first step re-sends what the NC holds (the rate limit allows no move)
+  b.advance(0.0);
+  EXPECT_NEAR(b.last(2), -12.0, 1e-9);  // tool 1 is back with its wear
+  EXPECT_NEAR(b.engine.register_state(2).output_um, -12.0, 1e-9);
+}
+
 TEST(CreepEngineModule, LoadStateRefusesForeignBytes) {
   CreepModule m(module_config());
   std::vector<RegisterSpec> regs = registers();
   m.attach(engine::RegisterTable(regs));
-  std::vector<std::byte> bytes(sizeof(CreepState) - 1);
+  std::vector<std::byte> bytes(m.state_capacity() - 1);
   EXPECT_FALSE(m.load_state(bytes));
+  bytes.assign(m.state_capacity(), std::byte{0});
+  EXPECT_FALSE(m.load_state(bytes));  // version 0, edge points 0: not a state
   CreepState s = m.compensator().export_state();
   s.committed_um[0] = kNaN;
-  bytes.resize(sizeof(CreepState));
   std::memcpy(bytes.data(), &s, sizeof(s));
   EXPECT_FALSE(m.load_state(bytes));
   s.committed_um[0] = 3.0;
