@@ -77,6 +77,8 @@ class PtyPair {
   PtyPair& operator=(const PtyPair&) = delete;
   [[nodiscard]] const std::string& a() const { return path_[0]; }
   [[nodiscard]] const std::string& b() const { return path_[1]; }
+  /// Line noise: flips one bit in each of the next n chunks travelling from b() to a().
+  void corrupt_next(int n) { corrupt_.store(n); }
 
  private:
   void run() {
@@ -93,12 +95,17 @@ class PtyPair {
         if ((p[i].revents & POLLIN) != 0) {
           const ssize_t n = read(master_[i], buf, sizeof(buf));
           if (n > 0) {
+            if (i == 1 && corrupt_.load() > 0) {
+              corrupt_.fetch_sub(1);
+              buf[n - 1] = static_cast<char>(buf[n - 1] ^ 0x10);  // inside the CRC or data
+            }
             (void)!write(master_[1 - i], buf, static_cast<std::size_t>(n));
           }
         }
       }
     }
   }
+  std::atomic<int> corrupt_{0};
   int master_[2]{-1, -1};
   int keep_[2]{-1, -1};
   int stop_[2]{-1, -1};
