@@ -22,10 +22,11 @@ double interpolate(const GridTrajectory& t, double z_mm) noexcept {
   return t.u_mm[i] + f * (t.u_mm[i + 1] - t.u_mm[i]);
 }
 
-std::vector<TrajectoryPoint> simplify_polyline(const GridTrajectory& t, double tol_mm,
-                                               double max_move_mm) {
-  if (!(tol_mm > 0.0) || !std::isfinite(tol_mm)) {
-    throw std::invalid_argument("chord tolerance must be > 0");
+std::vector<TrajectoryPoint> simplify_polyline(const GridTrajectory& t, double below_mm,
+                                               double above_mm, double max_move_mm) {
+  if (!(below_mm >= 0.0) || !(above_mm >= 0.0) || !(below_mm + above_mm > 0.0) ||
+      !std::isfinite(below_mm + above_mm)) {
+    throw std::invalid_argument("chord tolerance band must be >= 0 on both sides and > 0 wide");
   }
   std::size_t first = 0;
   std::size_t last = t.u_mm.size();
@@ -34,6 +35,12 @@ std::vector<TrajectoryPoint> simplify_polyline(const GridTrajectory& t, double t
   if (last - first < 1) {
     throw std::invalid_argument("trajectory is empty");
   }
+  // The band [U − below, U + above] is a symmetric band of half width `half` about U + shift;
+  // vertices sit on the shifted trajectory so that concave and convex parts both get long
+  // chords (with vertices on U itself, a gouge-free band would force one-sample moves on a
+  // crown, whose chords all lie below it).
+  const double shift = 0.5 * (above_mm - below_mm);
+  const double half = 0.5 * (above_mm + below_mm);
   std::vector<TrajectoryPoint> out;
   const auto z = [&](std::size_t i) { return t.z_at(static_cast<std::ptrdiff_t>(i)); };
   const std::size_t max_steps =
@@ -41,7 +48,7 @@ std::vector<TrajectoryPoint> simplify_polyline(const GridTrajectory& t, double t
                                                         std::floor(max_move_mm / t.spacing_mm)))
                         : std::numeric_limits<std::size_t>::max();
   std::size_t a = first;
-  out.push_back({z(a), t.u_mm[a]});
+  out.push_back({z(a), t.u_mm[a] + shift});
   while (a + 1 < last) {
     double lo = -std::numeric_limits<double>::infinity();
     double hi = std::numeric_limits<double>::infinity();
@@ -52,26 +59,26 @@ std::vector<TrajectoryPoint> simplify_polyline(const GridTrajectory& t, double t
       }
       const double dz = z(b) - z(a);
       const double du = t.u_mm[b] - t.u_mm[a];
-      lo = std::max(lo, (du - tol_mm) / dz);
-      hi = std::min(hi, (du + tol_mm) / dz);
+      lo = std::max(lo, (du - half) / dz);
+      hi = std::min(hi, (du + half) / dz);
       if (lo > hi) {
         break;
       }
       const double slope = du / dz;
       if (slope >= lo && slope <= hi) {
-        good = b;  // the chord a→b passes within tol of every point in between
+        good = b;  // the chord a→b passes within the band of every point in between
       }
     }
     a = good;
-    out.push_back({z(a), t.u_mm[a]});
+    out.push_back({z(a), t.u_mm[a] + shift});
   }
   return out;
 }
 
-double chord_error_mm(const GridTrajectory& t, std::span<const TrajectoryPoint> poly) {
-  double worst = 0.0;
+ChordError chord_error(const GridTrajectory& t, std::span<const TrajectoryPoint> poly) {
+  ChordError e;
   if (poly.size() < 2) {
-    return worst;
+    return e;
   }
   std::size_t s = 0;
   const auto n = static_cast<std::ptrdiff_t>(t.u_mm.size());
@@ -87,12 +94,19 @@ double chord_error_mm(const GridTrajectory& t, std::span<const TrajectoryPoint> 
     const auto& p0 = poly[s];
     const auto& p1 = poly[s + 1];
     const double f = !(p1.z_mm > p0.z_mm) ? 0.0 : (z - p0.z_mm) / (p1.z_mm - p0.z_mm);
-    worst = std::max(worst, std::abs(u - (p0.u_mm + f * (p1.u_mm - p0.u_mm))));
+    const double d = p0.u_mm + f * (p1.u_mm - p0.u_mm) - u;
+    e.below_mm = std::max(e.below_mm, -d);
+    e.above_mm = std::max(e.above_mm, d);
   }
-  return worst;
+  return e;
 }
 
-std::vector<TrajectoryPoint> round_vertices(std::span<const TrajectoryPoint> poly, int decimals) {
+double chord_error_mm(const GridTrajectory& t, std::span<const TrajectoryPoint> poly) {
+  return chord_error(t, poly).max_mm();
+}
+
+std::vector<TrajectoryPoint> round_vertices(std::span<const TrajectoryPoint> poly, int decimals,
+                                            bool u_up) {
   if (decimals < 0 || decimals > 9) {
     throw std::invalid_argument("decimals must be 0..9");
   }
@@ -100,7 +114,8 @@ std::vector<TrajectoryPoint> round_vertices(std::span<const TrajectoryPoint> pol
   std::vector<TrajectoryPoint> out(poly.begin(), poly.end());
   for (auto& p : out) {
     p.z_mm = std::round(p.z_mm * scale) / scale;
-    p.u_mm = std::round(p.u_mm * scale) / scale;
+    // 1e-9 of a unit of slack: a value already on the grid must not be pushed up a unit.
+    p.u_mm = (u_up ? std::ceil(p.u_mm * scale - 1e-9) : std::round(p.u_mm * scale)) / scale;
   }
   return out;
 }

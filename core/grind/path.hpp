@@ -14,18 +14,29 @@
 namespace nccomp::core::grind {
 
 /// Vertices of a polyline through the grid trajectory's points (first and last kept) such that
-/// every grid point lies within tol_mm of it in U (the radial direction, which is what the roll
-/// shows). Greedy with a slope cone per vertex: O(N). NaN points (no trajectory) are skipped at
-/// the ends; a NaN inside throws. max_move_mm > 0 caps a move's Z length.
-std::vector<TrajectoryPoint> simplify_polyline(const GridTrajectory& t, double tol_mm,
-                                               double max_move_mm);
+/// every grid point lies within the band [U_t − below_mm, U_t + above_mm] of it, measured in U
+/// (the radial direction, which is what the roll shows). below_mm = 0 gives a gouge-free path:
+/// the chords never dip below the trajectory, they only leave up to above_mm of material.
+/// Greedy with a slope cone per vertex: O(N). NaN points (no trajectory) are skipped at the ends;
+/// a NaN inside throws. max_move_mm > 0 caps a move's Z length.
+std::vector<TrajectoryPoint> simplify_polyline(const GridTrajectory& t, double below_mm,
+                                               double above_mm, double max_move_mm);
 
-/// Max |U_t − polyline(Z_t)| over the grid points covered by the polyline.
+/// Chord error of a polyline against the grid points it covers: the largest deviation below
+/// (polyline under the trajectory: the wheel cuts deeper) and above.
+struct ChordError {
+  double below_mm{0.0};
+  double above_mm{0.0};
+  [[nodiscard]] double max_mm() const noexcept { return below_mm > above_mm ? below_mm : above_mm; }
+};
+ChordError chord_error(const GridTrajectory& t, std::span<const TrajectoryPoint> polyline);
+/// max of chord_error().
 double chord_error_mm(const GridTrajectory& t, std::span<const TrajectoryPoint> polyline);
 
-/// Rounds every vertex to `decimals` places (what the G-code will carry).
+/// Rounds every vertex to `decimals` places (what the G-code will carry); U upward if
+/// `u_up` (keeps a gouge-free polyline gouge-free), to nearest otherwise.
 std::vector<TrajectoryPoint> round_vertices(std::span<const TrajectoryPoint> polyline,
-                                            int decimals);
+                                            int decimals, bool u_up = false);
 
 struct GcodeSpec {
   char z_axis{'Z'};

@@ -54,6 +54,7 @@ struct Options {
   double table_spacing_mm{10.0};
   std::string gcode_out;
   double chord_tol_um{1.0};
+  std::string gcode_band{"above"};
   double max_move_mm{0.0};
   int decimals{4};
   double feed_mm_min{0.0};
@@ -246,9 +247,23 @@ void run(const Options& o) {
   if (o.method == "local") {
     chosen.u_mm = local_grid;
   }
-  const auto poly = g::simplify_polyline(chosen, o.chord_tol_um * 1e-3, o.max_move_mm);
-  const auto rounded = g::round_vertices(poly, o.decimals);
-  const double chord_err = g::chord_error_mm(chosen, rounded);
+  // The chord band leaves one output unit for rounding, so the written G-code honours it.
+  const double unit_mm = std::pow(10.0, -o.decimals);
+  const bool gouge_free = o.gcode_band == "above";
+  if (!gouge_free && o.gcode_band != "both") {
+    throw std::invalid_argument("--gcode-band must be above or both, got '" + o.gcode_band + "'");
+  }
+  const double band_mm = o.chord_tol_um * 1e-3 - (gouge_free ? unit_mm : 0.5 * unit_mm);
+  if (!(band_mm > 0.0)) {
+    throw std::invalid_argument(fmt("--chord-tol-um %g is not above the rounding of %d decimals",
+                                    o.chord_tol_um, o.decimals));
+  }
+  const auto poly = gouge_free ? g::simplify_polyline(chosen, 0.0, band_mm, o.max_move_mm)
+                               : g::simplify_polyline(chosen, 0.5 * band_mm, 0.5 * band_mm,
+                                                      o.max_move_mm);
+  const auto rounded = g::round_vertices(poly, o.decimals, gouge_free);
+  const auto chord = g::chord_error(chosen, rounded);
+  const double chord_err = chord.max_mm();
 
   if (o.verify_points > 0) {
     t0 = std::chrono::steady_clock::now();
@@ -334,8 +349,11 @@ void run(const Options& o) {
               o.table_out.c_str(), table.size(), o.table_spacing_mm,
               g::table_interpolation_error_mm(chosen, p, table) * 1000.0);
   }
-  os << fmt("    G-code: %zu linear moves, max chord error %.4f um (tolerance %.4g um, %d decimals)",
-            rounded.size() - 1, chord_err * 1000.0, o.chord_tol_um, o.decimals);
+  os << fmt("    G-code: %zu linear moves, max chord error %.4f um (%.4f below, %.4f above the "
+            "trajectory; tolerance %.4g um %s, %d decimals)",
+            rounded.size() - 1, chord_err * 1000.0, chord.below_mm * 1000.0,
+            chord.above_mm * 1000.0, o.chord_tol_um,
+            gouge_free ? "above only: gouge-free" : "both sides", o.decimals);
   if (!o.gcode_out.empty()) {
     g::GcodeSpec spec;
     spec.u_axis = o.u_axis[0];
@@ -420,6 +438,9 @@ void setup(CLI::App& app) {
       ->capture_default_str();
   sub->add_option("--gcode-out", opt->gcode_out, "write the G-code block list");
   sub->add_option("--chord-tol-um", opt->chord_tol_um, "G-code: max chord error (um)")
+      ->capture_default_str();
+  sub->add_option("--gcode-band", opt->gcode_band,
+                  "G-code: chords 'above' the trajectory only (gouge-free) or on 'both' sides")
       ->capture_default_str();
   sub->add_option("--max-move-mm", opt->max_move_mm, "G-code: longest move in Z (0: no limit)")
       ->capture_default_str();

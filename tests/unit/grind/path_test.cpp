@@ -18,12 +18,12 @@ GridTrajectory grid(double z0, double dz, std::size_t n, auto&& fn) {
 
 TEST(Path, GivenStraightTrajectory_ThenOneMove) {
   const auto t = grid(-10.0, 0.01, 2001, [](double z) { return 0.3 + 0.002 * z; });
-  const auto poly = simplify_polyline(t, 1e-4, 0.0);
+  const auto poly = simplify_polyline(t, 1e-4, 1e-4, 0.0);
   ASSERT_EQ(poly.size(), 2U);
   EXPECT_NEAR(poly.back().z_mm, 10.0, 1e-12);
   EXPECT_LT(chord_error_mm(t, poly), 1e-12);
   // A move length cap splits it.
-  EXPECT_EQ(simplify_polyline(t, 1e-4, 5.0).size(), 5U);
+  EXPECT_EQ(simplify_polyline(t, 1e-4, 1e-4, 5.0).size(), 5U);
 }
 
 // GIVEN a parabola of curvature κ, THEN chords of length L err by κL²/8: the greedy cone
@@ -32,7 +32,7 @@ TEST(Path, GivenCurvedTrajectory_ThenChordErrorWithinToleranceAndNearIt) {
   const double kappa = 2e-4;
   const auto t = grid(-300.0, 0.05, 12001, [&](double z) { return 0.5 * kappa * z * z; });
   const double tol = 0.5e-3;
-  const auto poly = simplify_polyline(t, tol, 0.0);
+  const auto poly = simplify_polyline(t, tol, tol, 0.0);
   const double err = chord_error_mm(t, poly);
   EXPECT_LE(err, tol + 1e-12);
   EXPECT_GT(err, 0.8 * tol);
@@ -40,6 +40,28 @@ TEST(Path, GivenCurvedTrajectory_ThenChordErrorWithinToleranceAndNearIt) {
   EXPECT_NEAR(static_cast<double>(poly.size() - 1), 600.0 / std::sqrt(8 * tol / kappa), 3.0);
   const auto rounded = round_vertices(poly, 4);
   EXPECT_LE(chord_error_mm(t, rounded), tol + 0.5e-4 + 1e-12);
+}
+
+// GIVEN a crown-like (concave-down) trajectory and a gouge-free band [U, U + tol], THEN no chord
+// dips below it, and the moves are as long as with a symmetric band of the same width.
+TEST(Path, GivenGougeFreeBand_ThenPolylineNeverBelowTrajectory) {
+  const double kappa = 2e-4;
+  const auto t = grid(-300.0, 0.05, 12001, [&](double z) { return 0.6 - 0.5 * kappa * z * z; });
+  const double tol = 1e-3;
+  const auto poly = simplify_polyline(t, 0.0, tol, 0.0);
+  const auto e = chord_error(t, poly);
+  EXPECT_LT(e.below_mm, 1e-12);
+  EXPECT_LE(e.above_mm, tol + 1e-12);
+  // Vertices sit tol/2 above, chords sag by up to tol/2 toward the trajectory.
+  EXPECT_NEAR(e.above_mm, 0.5 * tol, 1e-12);
+  const auto symmetric = simplify_polyline(t, 0.5 * tol, 0.5 * tol, 0.0);
+  EXPECT_EQ(poly.size(), symmetric.size());
+  // Rounding U up keeps it gouge-free.
+  const auto rounded = round_vertices(poly, 4, true);
+  EXPECT_LT(chord_error(t, rounded).below_mm, 1e-12);
+  EXPECT_LE(chord_error(t, rounded).above_mm, tol + 1e-4 + 1e-12);
+  EXPECT_THROW(simplify_polyline(t, 0.0, 0.0, 0.0), std::invalid_argument);
+  EXPECT_THROW(simplify_polyline(t, -1e-3, 1e-3, 0.0), std::invalid_argument);
 }
 
 TEST(Path, GivenVertices_ThenGcodeBlocks) {
