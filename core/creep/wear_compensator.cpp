@@ -159,7 +159,7 @@ void WearCompensator::step(TimeNs now_ns, std::span<const Event> events, StepOut
 
   for (const Event& e : events) {
     if (const auto* a = std::get_if<AxisSample>(&e)) {
-      on_axis_sample(*a);
+      on_axis_sample(now_ns, *a, out);
     } else if (const auto* m = std::get_if<ToolMeasurement>(&e)) {
       on_measurement(now_ns, *m, out);
     } else if (const auto* c = std::get_if<ToolChange>(&e)) {
@@ -187,7 +187,13 @@ void WearCompensator::step(TimeNs now_ns, std::span<const Event> events, StepOut
   write_outputs(now_ns, out);
 }
 
-void WearCompensator::on_axis_sample(const AxisSample& a) noexcept {
+void WearCompensator::on_axis_sample(TimeNs now_ns, const AxisSample& a, StepOutput& out) noexcept {
+  if (a.tool != 0 && s_.tool != 0 && a.tool != s_.tool) {
+    // Another tool in the spindle without a tool-change event (lost, or a driver that does not
+    // map one): never apply one tool's wear to another.
+    on_tool_change(now_ns, ToolChange{a.time_ns, a.tool, false}, out);
+    ++counters_.implicit_tool_changes;
+  }
   const bool cut = a.cutting && !interrupted_;
   if (have_sample_ && cut && cutting_) {
     // Only motion between two cutting samples is cut path: the trip to the laser and back, and

@@ -41,6 +41,8 @@ struct CreepCounters {
   std::uint64_t creeps_folded{0};
   std::uint64_t creeps_superposed{0};
   std::uint64_t events_invalid{0};
+  /// Axis samples that named another tool than the active one without a tool-change event.
+  std::uint64_t implicit_tool_changes{0};
 };
 
 class WearCompensator {
@@ -110,7 +112,7 @@ class WearCompensator {
   [[nodiscard]] const CreepConfig& config() const noexcept { return config_; }
 
  private:
-  void on_axis_sample(const AxisSample& a) noexcept;
+  void on_axis_sample(TimeNs now_ns, const AxisSample& a, StepOutput& out) noexcept;
   void on_measurement(TimeNs now_ns, const ToolMeasurement& m, StepOutput& out) noexcept;
   void on_tool_change(TimeNs now_ns, const ToolChange& c, StepOutput& out) noexcept;
   void start_creep(const std::array<double, kMaxEdgePoints>& delta_um, StepOutput& out,

@@ -124,6 +124,20 @@ TEST(CreepToolMemory, AToolThatComesBackResumesWithItsWearAndItsCreep) {
   EXPECT_NEAR(r.z(), -4.0, 1e-9);
 }
 
+TEST(CreepToolMemory, AnAxisSampleWithAnotherToolIsATacitToolChange) {
+  Rig r(base_config());
+  r.measure({20.0});
+  r.run_to(100.0);
+  r.tool = 5;  // the NC says tool 5 is cutting; no ToolChange event arrived
+  r.advance(0.5);
+  EXPECT_EQ(r.comp.state().tool, 5);
+  EXPECT_EQ(r.comp.counters().implicit_tool_changes, 1U);
+  EXPECT_NEAR(r.z(), 0.0, 1e-9);
+  r.tool = 1;
+  r.advance(0.5);
+  EXPECT_NEAR(r.z(), -20.0, 1e-9);
+}
+
 TEST(CreepToolMemory, ASisterReplacesTheWornToolForGood) {
   Rig r(base_config());
   r.measure({20.0});
@@ -345,8 +359,18 @@ TEST(CreepRealTime, StepAllocatesNothingWith16PointsAnd4Creeps) {
     events.emplace_back(a);
     if (k == 1000) events.emplace_back(tm);
     // Another tool and back: the states are swapped through the tool memory, no allocation.
-    if (k == 1500) events.emplace_back(ToolChange{now, 2, false});
-    if (k == 1600) events.emplace_back(ToolChange{now, 1, false});
+    if (k == 1500) {
+      events.clear();
+      events.emplace_back(ToolChange{now, 2, false});
+      a.tool = 2;
+      events.emplace_back(a);
+    }
+    if (k == 1600) {
+      events.clear();
+      events.emplace_back(ToolChange{now, 1, false});
+      a.tool = 1;
+      events.emplace_back(a);
+    }
     out.clear();
     nccomp::test::AllocationScope scope;
     r.comp.step(now, events, out);
@@ -356,6 +380,7 @@ TEST(CreepRealTime, StepAllocatesNothingWith16PointsAnd4Creeps) {
   EXPECT_EQ(r.comp.counters().measurements_accepted, 5U);
   EXPECT_EQ(r.comp.counters().creeps_folded, 1U);  // the fifth creep folded into the slots
   EXPECT_FALSE(r.comp.halted());
+  EXPECT_EQ(r.comp.counters().implicit_tool_changes, 0U);
 }
 
 }  // namespace

@@ -44,6 +44,7 @@ struct EngineRig {
   std::vector<Event> ev;
   TimeNs now{0};
   double path{0.0};
+  std::int32_t tool{1};
   std::vector<OffsetWrite> writes;
 
   explicit EngineRig(const CreepModuleConfig& m) {
@@ -64,7 +65,7 @@ struct EngineRig {
     AxisSample a;
     a.time_ns = now;
     a.program_path_mm = path;
-    a.tool = 1;
+    a.tool = tool;
     ev.emplace_back(a);
     step();
   }
@@ -124,6 +125,7 @@ TEST(CreepEngineModule, RememberedToolsSurviveARestart) {
   a.measure(12.0);
   for (int i = 0; i < 200; ++i) a.advance(0.5);
   a.ev.emplace_back(ToolChange{a.now, 2, false});
+  a.tool = 2;
   a.advance(0.0);
   a.advance(0.0);
   EXPECT_NEAR(a.last(2), 0.0, 1e-12);  // tool 2 is new
@@ -138,6 +140,7 @@ TEST(CreepEngineModule, RememberedToolsSurviveARestart) {
   EXPECT_EQ(comp.state().tool, 2);
   EXPECT_EQ(comp.tool_memory().tool[0], 1);
   b.ev.emplace_back(ToolChange{b.now, 1, false});
+  b.tool = 1;
   b.advance(0.0);  // the first step re-sends what the NC holds (the rate limit allows no move)
   b.advance(0.0);
   EXPECT_NEAR(b.last(2), -12.0, 1e-9);  // tool 1 is back with its wear
