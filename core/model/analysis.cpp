@@ -303,7 +303,19 @@ SearchSet make_search_set(const Dataset& data, const Model& model,
 Eigen::MatrixXd candidate_basis(const Dataset& data, const SearchSet& set, const TermSpec& spec) {
   const auto n = static_cast<Eigen::Index>(set.rows.size());
   const auto k = static_cast<Eigen::Index>(basis_count(spec.form, spec.degree));
-  Eigen::MatrixXd b = Eigen::MatrixXd::Zero(n, k);
+  // Per-group candidates get k columns per group found among the search rows.
+  std::vector<int> group(set.rows.size(), 0);
+  Eigen::Index groups = 1;
+  if (spec.per[0] >= 0 || spec.per[1] >= 0) {
+    std::map<std::array<double, 2>, int> ids;
+    for (std::size_t j = 0; j < set.rows.size(); ++j) {
+      bool ok = false;
+      const auto key = group_key(spec, data.row(set.rows[j]), ok);
+      group[j] = ok ? ids.emplace(key, static_cast<int>(ids.size())).first->second : -1;
+    }
+    groups = std::max<Eigen::Index>(1, static_cast<Eigen::Index>(ids.size()));
+  }
+  Eigen::MatrixXd b = Eigen::MatrixXd::Zero(n, k * groups);
   std::array<double, kMaxBasis> v{};
   if (spec.form == Form::kLag) {
     const std::vector<TermSpec> one{spec};
@@ -315,15 +327,19 @@ Eigen::MatrixXd candidate_basis(const Dataset& data, const SearchSet& set, const
       const Row row = data.row(i);
       advance_state(one, row, state);
       if (i != set.rows[j]) continue;
-      if (term_basis(spec, row, state.lag_value[0], v) > 0) b(static_cast<Eigen::Index>(j), 0) = v[0];
+      if (group[j] >= 0 && term_basis(spec, row, state.lag_value[0], v) > 0) {
+        b(static_cast<Eigen::Index>(j), group[j]) = v[0];
+      }
       ++j;
     }
     return b;
   }
   for (Eigen::Index j = 0; j < n; ++j) {
     const Row row = data.row(set.rows[static_cast<std::size_t>(j)]);
+    const int g = group[static_cast<std::size_t>(j)];
+    if (g < 0) continue;
     const std::size_t m = term_basis(spec, row, kUnknown, v);
-    for (std::size_t c = 0; c < m; ++c) b(j, static_cast<Eigen::Index>(c)) = v[c];
+    for (std::size_t c = 0; c < m; ++c) b(j, g * k + static_cast<Eigen::Index>(c)) = v[c];
   }
   return b;
 }
@@ -353,7 +369,7 @@ double cheap_reduction(const SearchSet& set, Eigen::MatrixXd b) {
 }
 
 void set_parameter(TermSpec& s, double v) {
-  if (s.form == Form::kStep) {
+  if (s.form == Form::kStep || s.form == Form::kHinge) {
     s.center = v;
   } else {
     s.scale = v;
@@ -389,7 +405,7 @@ std::pair<double, double> search_candidate(const Dataset& data, const SearchSet&
       best_i = i;
     }
   }
-  if (cand.spec.form != Form::kStep) {
+  if (cand.spec.form != Form::kStep && cand.spec.form != Form::kHinge) {
     double lo = cand.grid[best_i > 0 ? best_i - 1 : 0];
     double hi = cand.grid[std::min(best_i + 1, cand.grid.size() - 1)];
     const double phi = 0.5 * (std::sqrt(5.0) - 1.0);
@@ -549,6 +565,7 @@ std::vector<Candidate> make_candidates(const Dataset& data, const std::vector<st
     c.spec.column = column;
     c.spec.degree = degree;
     c.spec.kind_mask = options.kind_mask;
+    c.spec.per = options.per;
     out.push_back(std::move(c));
   };
   auto varies = [](const Range& r) { return r.n >= 8 && r.span() > 0.0; };
@@ -624,6 +641,29 @@ std::vector<Candidate> make_candidates(const Dataset& data, const std::vector<st
       c.multiplicity = 1.0 + 3.0 * std::log10(400.0);
       add("wear_nonlinear", Form::kExpRise, static_cast<int>(Column::kPath), 1, c);
     }
+    if (path.hi > 0.0) {
+      // Accelerating wear towards the end of tool life (scale lengths within the data range).
+      Candidate c;
+      c.grid = log_grid(path.hi / 20.0, path.hi * 4.0, 30);
+      c.multiplicity = 1.0 + 3.0 * std::log10(80.0);
+      add("wear_nonlinear", Form::kExpGrowth, static_cast<int>(Column::kPath), 1, c);
+    }
+    {
+      // A change of the wear rate at an unknown path (break-in → steady → accelerated wear).
+      Candidate h;
+      std::vector<double> v;
+      const auto& pc = data.column(static_cast<int>(Column::kPath));
+      for (std::size_t i = 0; i < pc.size(); ++i) {
+        if (use[i] != 0U && std::isfinite(pc[i])) v.push_back(pc[i]);
+      }
+      std::sort(v.begin(), v.end());
+      for (std::size_t q = 3; q <= 97; ++q) {
+        const double x = v[std::min(v.size() - 1, v.size() * q / 100)];
+        if (h.grid.empty() || x > h.grid.back()) h.grid.push_back(x);
+      }
+      h.multiplicity = std::max(1.0, 2.0 * std::log(dz(std::max<std::size_t>(v.size(), 3))));
+      if (h.grid.size() >= 2) add("wear_nonlinear", Form::kHinge, static_cast<int>(Column::kPath), 1, h);
+    }
     if (path.sd > 0.0) {
       Candidate q;
       q.spec.center = path.mean;
@@ -649,16 +689,16 @@ AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
   if (n < 10) throw AnalysisError("the log has " + std::to_string(n) + " rows; at least 10 needed");
   AnalysisResult result;
   // Time-ordered split: the latest rows are held out of every fit.
-  std::vector<double> t;
+  std::vector<double> times;
   const auto& tc = data.column(static_cast<int>(Column::kTime));
   for (double v : tc) {
-    if (std::isfinite(v)) t.push_back(v);
+    if (std::isfinite(v)) times.push_back(v);
   }
   result.heldout.assign(n, 0);
-  if (!t.empty() && config.heldout_fraction > 0.0) {
-    std::sort(t.begin(), t.end());
-    const auto k = static_cast<std::size_t>(dz(t.size()) * (1.0 - config.heldout_fraction));
-    result.split_time_s = t[std::min(k, t.size() - 1)];
+  if (!times.empty() && config.heldout_fraction > 0.0) {
+    std::sort(times.begin(), times.end());
+    const auto k = static_cast<std::size_t>(dz(times.size()) * (1.0 - config.heldout_fraction));
+    result.split_time_s = times[std::min(k, times.size() - 1)];
     for (std::size_t i = 0; i < n; ++i) {
       if (std::isfinite(tc[i]) && tc[i] >= result.split_time_s) result.heldout[i] = 1;
     }
@@ -676,81 +716,134 @@ AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
   result.declared_residual_um = residual;
 
   std::vector<Candidate> all = make_candidates(data, use, config.search);
-  for (std::size_t step = 0; step < config.max_effects; ++step) {
-    std::vector<Candidate> cands;
+  struct Ranked {
+    double bic;
+    std::size_t index;
+    double reduction;
+  };
+  // Ranks the candidates not yet in the model by BIC on the search rows.
+  auto rank = [&](const std::vector<TermSpec>& in_model, const Model& m,
+                  const std::vector<double>& res, std::vector<Candidate>& cands,
+                  std::vector<TriedCandidate>& tried) {
+    cands.clear();
+    tried.clear();
+    std::vector<Ranked> ranked;
     for (const Candidate& c : all) {
-      const bool present = std::any_of(specs.begin(), specs.end(),
+      const bool present = std::any_of(in_model.begin(), in_model.end(),
                                        [&](const TermSpec& s) { return same_term(s, c.spec); });
       if (!present) cands.push_back(c);
     }
-    if (cands.empty()) break;
-    const SearchSet set = make_search_set(data, model, use, residual, config.search_rows);
+    if (cands.empty()) return ranked;
+    const SearchSet set = make_search_set(data, m, use, res, config.search_rows);
     const double n_sub = dz(set.rows.size());
-    if (set.rss <= 0.0 || n_sub < 8.0) break;
-    struct Ranked {
-      double bic;
-      std::size_t index;
-      double reduction;
-    };
-    std::vector<Ranked> ranked;
+    if (set.rss <= 0.0 || n_sub < 8.0) return ranked;
     for (std::size_t c = 0; c < cands.size(); ++c) {
       const auto [v, red] = search_candidate(data, set, cands[c]);
       if (!cands[c].grid.empty()) set_parameter(cands[c].spec, v);
-      const double df = dz(basis_count(cands[c].spec.form, cands[c].spec.degree)) +
+      const double df = static_cast<double>(candidate_basis(data, set, cands[c].spec).cols()) +
                         (cands[c].grid.empty() ? 0.0 : 1.0);
       const double rss1 = std::max(set.rss - red, 1e-300);
       ranked.push_back({n_sub * std::log(rss1 / n_sub) + df * std::log(n_sub), c, red});
     }
     std::sort(ranked.begin(), ranked.end(),
               [](const Ranked& a, const Ranked& b) { return a.bic < b.bic; });
-    std::vector<TriedCandidate> tried;
     for (const Ranked& rk : ranked) {
       const Candidate& c = cands[rk.index];
-      TriedCandidate tc_out;
-      tc_out.name = c.spec.name;
-      tc_out.column = column_name(c.spec.column, data.extra_columns);
-      tc_out.form = c.spec.form;
-      tc_out.parameter = c.spec.form == Form::kStep ? c.spec.center : c.spec.scale;
-      tc_out.rss_reduction_fraction = rk.reduction / set.rss;
-      tried.push_back(tc_out);
+      TriedCandidate t_out;
+      t_out.name = c.spec.name;
+      t_out.column = column_name(c.spec.column, data.extra_columns);
+      t_out.form = c.spec.form;
+      t_out.parameter = c.spec.form == Form::kStep || c.spec.form == Form::kHinge ? c.spec.center
+                                                                                  : c.spec.scale;
+      t_out.rss_reduction_fraction = rk.reduction / set.rss;
+      tried.push_back(t_out);
     }
+    return ranked;
+  };
+  struct Trial {
+    std::vector<TermSpec> specs;
+    Model model;
+    std::vector<double> residual;
+    FitStats stats;
+    double p_adj{1.0};
+    double f{0.0};
+  };
+  // Refits with one more term; nested F-test against `base`, Bonferroni-adjusted.
+  auto trial = [&](const std::vector<TermSpec>& base_specs, const FitStats& base,
+                   const Candidate& c, std::size_t n_cands) {
+    Trial t;
+    t.specs = base_specs;
+    t.specs.push_back(c.spec);
+    t.model = fit_terms(data, t.specs, use);
+    t.stats = stats_of(data, t.model, result.heldout, &t.residual);
+    const double extra = c.grid.empty() ? 0.0 : 1.0;
+    const double df1 =
+        dz(t.stats.parameters > base.parameters ? t.stats.parameters - base.parameters : 1) +
+        extra;
+    const double df2 = dz(t.stats.fitted.rows) - dz(t.stats.parameters) - extra;
+    if (df2 > 0.0 && t.stats.rss < base.rss) {
+      t.f = ((base.rss - t.stats.rss) / df1) / (std::max(t.stats.rss, 1e-300) / df2);
+      const double p = f_distribution_upper_tail(t.f, df1, df2);
+      t.p_adj = std::min(1.0, p * c.multiplicity * dz(n_cands));
+    }
+    return t;
+  };
+  auto heldout_better = [&](const FitStats& after, const FitStats& before) {
+    return before.heldout.rows == 0 || after.heldout.rms_um < before.heldout.rms_um;
+  };
+  auto accept = [&](const Candidate& c, const Trial& t) {
+    AddedEffect e;
+    e.spec = c.spec;
+    e.before = current;
+    e.after = t.stats;
+    e.p_value = t.p_adj;
+    e.f_statistic = t.f;
+    result.effects.push_back(e);
+    specs = t.specs;
+    model = t.model;
+    residual = t.residual;
+    current = t.stats;
+  };
+
+  std::vector<Candidate> cands;
+  std::vector<TriedCandidate> tried;
+  while (result.effects.size() < config.max_effects) {
+    const std::vector<Ranked> ranked = rank(specs, model, residual, cands, tried);
     bool added = false;
     for (std::size_t k = 0; k < std::min(kRefitPerStep, ranked.size()) && !added; ++k) {
-      const Candidate& c = cands[ranked[k].index];
-      std::vector<TermSpec> next = specs;
-      next.push_back(c.spec);
-      Model m1 = fit_terms(data, next, use);
-      std::vector<double> r1;
-      const FitStats s1 = stats_of(data, m1, result.heldout, &r1);
-      const double df1 = dz(s1.parameters > current.parameters ? s1.parameters - current.parameters
-                                                               : 1) +
-                         (c.grid.empty() ? 0.0 : 1.0);
-      const double df2 = dz(s1.fitted.rows) - dz(s1.parameters) - (c.grid.empty() ? 0.0 : 1.0);
-      double p_adj = 1.0;
-      double f = 0.0;
-      if (df2 > 0.0 && s1.rss < current.rss) {
-        f = ((current.rss - s1.rss) / df1) / (std::max(s1.rss, 1e-300) / df2);
-        const double p = f_distribution_upper_tail(f, df1, df2);
-        p_adj = std::min(1.0, p * c.multiplicity * dz(cands.size()));
-      }
-      const bool heldout_ok =
-          current.heldout.rows == 0 || s1.heldout.rms_um < current.heldout.rms_um;
-      tried[k].p_value = p_adj;
-      tried[k].heldout_improved = heldout_ok;
+      const Candidate c = cands[ranked[k].index];
+      const Trial t = trial(specs, current, c, cands.size());
+      const bool better = heldout_better(t.stats, current);
+      tried[k].p_value = t.p_adj;
+      tried[k].heldout_improved = better;
       tried[k].refitted = true;
-      if (p_adj < config.alpha && heldout_ok) {
-        AddedEffect e;
-        e.spec = c.spec;
-        e.before = current;
-        e.after = s1;
-        e.p_value = p_adj;
-        e.f_statistic = f;
-        result.effects.push_back(e);
-        specs = std::move(next);
-        model = std::move(m1);
-        residual = std::move(r1);
-        current = s1;
+      if (t.p_adj >= config.alpha) continue;
+      if (better) {
+        accept(c, t);
         added = true;
+        break;
+      }
+      // Significant on the fitted rows but worse on the held-out ones: a real effect can be
+      // masked by a second one that dominates the later rows (wear break-in vs. acceleration).
+      // Look one step ahead: accept the pair only if the second term is significant given the
+      // first and the pair lowers the held-out error.
+      if (!config.lookahead || result.effects.size() + 2 > config.max_effects) continue;
+      std::vector<Candidate> cands2;
+      std::vector<TriedCandidate> tried2;
+      const std::vector<Ranked> ranked2 = rank(t.specs, t.model, t.residual, cands2, tried2);
+      for (std::size_t k2 = 0; k2 < std::min(kRefitPerStep, ranked2.size()) && !added; ++k2) {
+        const Candidate c2 = cands2[ranked2[k2].index];
+        const Trial t2 = trial(t.specs, t.stats, c2, cands2.size());
+        tried2[k2].p_value = t2.p_adj;
+        tried2[k2].heldout_improved = heldout_better(t2.stats, current);
+        tried2[k2].refitted = true;
+        if (t2.p_adj < config.alpha && heldout_better(t2.stats, current)) {
+          result.steps.push_back(tried);
+          accept(c, t);
+          tried = std::move(tried2);
+          accept(c2, t2);
+          added = true;
+        }
       }
     }
     result.steps.push_back(std::move(tried));

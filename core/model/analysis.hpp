@@ -12,6 +12,7 @@
 // An effect is added only when the adjusted p-value is below `alpha` and the held-out check holds.
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <exception>
@@ -57,6 +58,8 @@ struct SearchOptions {
   std::vector<int> linear_columns;
   /// Extra columns tried as thermal_drift, first-order lag of that column (speed, power).
   std::vector<int> lag_columns;
+  /// Split every candidate per group of these columns (e.g. tool: one wear curve per tool).
+  std::array<int, 2> per{-1, -1};
   /// Shortest period tried for periodic_x|y|z [mm].
   double period_min_mm{2.0};
 };
@@ -69,6 +72,9 @@ struct AnalysisConfig {
   /// Family-wise false-discovery level per search step.
   double alpha{0.01};
   std::size_t max_effects{4};
+  /// When the best candidate is significant but worsens the held-out rows, try it together
+  /// with the best next candidate (both must be significant, the pair must help held out).
+  bool lookahead{true};
   /// Rows used for the non-linear grid search (the fits use all rows).
   std::size_t search_rows{20000};
 };

@@ -7,8 +7,8 @@
 namespace nccomp::core::model {
 
 namespace {
-constexpr std::array<std::string_view, 7> kFormNames = {"constant", "linear", "poly", "exp_rise",
-                                                        "sine",     "step",   "lag"};
+constexpr std::array<std::string_view, 9> kFormNames = {
+    "constant", "linear", "poly", "exp_rise", "sine", "step", "lag", "exp_growth", "hinge"};
 
 bool same(double a, double b) noexcept {
   // Group keys are integers (tool, point, kind) stored as doubles; exact equality is intended.
@@ -46,7 +46,8 @@ std::size_t basis_count(Form f, int degree) noexcept {
 }
 
 bool has_nonlinear_parameter(Form f) noexcept {
-  return f == Form::kExpRise || f == Form::kSine || f == Form::kStep || f == Form::kLag;
+  return f == Form::kExpRise || f == Form::kSine || f == Form::kStep || f == Form::kLag ||
+         f == Form::kExpGrowth || f == Form::kHinge;
 }
 
 std::size_t term_basis(const TermSpec& spec, const Row& row, double lag_value,
@@ -88,6 +89,13 @@ std::size_t term_basis(const TermSpec& spec, const Row& row, double lag_value,
     }
     case Form::kStep:
       out[0] = v >= spec.center ? 1.0 : 0.0;
+      return 1;
+    case Form::kHinge:
+      out[0] = v > spec.center ? v - spec.center : 0.0;
+      return 1;
+    case Form::kExpGrowth:
+      // Clamped so that a value far beyond the fitted range cannot overflow.
+      out[0] = v > 0.0 ? std::expm1(std::min(v / spec.scale, 50.0)) : 0.0;
       return 1;
     case Form::kLag:
       if (!std::isfinite(lag_value)) return 0;

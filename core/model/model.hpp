@@ -66,6 +66,8 @@ enum class Form : std::uint8_t {
   kSine = 4,      // [sin(2π v / scale), cos(2π v / scale)]: scale = period
   kStep = 5,      // [v ≥ center ? 1 : 0]: level change at `center`
   kLag = 6,       // [first-order lag of v over time_s with time constant `scale` [s]]
+  kExpGrowth = 7,  // [exp(v / scale) − 1] for v ≥ 0: accelerating wear at the end of tool life
+  kHinge = 8,      // [max(0, v − center)]: a rate that changes at `center` (wear stage change)
 };
 
 std::string_view form_name(Form f) noexcept;
@@ -89,9 +91,9 @@ struct TermSpec {
   std::uint8_t kind_mask{0x7};
   /// Polynomial degree (kPoly).
   int degree{1};
-  /// kPoly: centre of u. kStep: the change point (in the column's unit).
+  /// kPoly: centre of u. kStep, kHinge: the change point (in the column's unit).
   double center{0.0};
-  /// kPoly: scale of u. kExpRise: scale length. kSine: period. kLag: time constant [s].
+  /// kPoly: scale of u. kExpRise, kExpGrowth: scale length. kSine: period. kLag: time constant [s].
   double scale{1.0};
 };
 

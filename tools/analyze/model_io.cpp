@@ -192,7 +192,7 @@ ModelFile read_model_table(const toml::table& root, std::string_view source, boo
     const std::string fname = get_string(*form, source, key + ".form");
     if (!cm::parse_form(fname, s.form)) {
       fail(where(source, *form, key + ".form") + ": unknown form '" + fname +
-           "' (constant, linear, poly, exp_rise, sine, step, lag)");
+           "' (constant, linear, poly, exp_rise, sine, step, lag, exp_growth, hinge)");
     }
     if (const auto* c = t.get("column")) {
       s.column = resolve_column(get_string(*c, source, key + ".column"), out.extra_columns, *c,
@@ -220,12 +220,13 @@ ModelFile read_model_table(const toml::table& root, std::string_view source, boo
       s.scale = get_number(*c, source, key + ".scale");
       if (!(s.scale > 0.0)) fail(where(source, *c, key + ".scale") + ": must be > 0");
     } else if (s.form == cm::Form::kExpRise || s.form == cm::Form::kSine ||
-               s.form == cm::Form::kLag || s.form == cm::Form::kPoly) {
+               s.form == cm::Form::kLag || s.form == cm::Form::kPoly ||
+               s.form == cm::Form::kExpGrowth) {
       fail(where(source, t, key) + ".scale: missing (form " + fname +
            " needs its scale / period / time constant)");
     }
-    if (s.form == cm::Form::kStep && t.get("center") == nullptr) {
-      fail(where(source, t, key) + ".center: missing (form step needs the change point)");
+    if ((s.form == cm::Form::kStep || s.form == cm::Form::kHinge) && t.get("center") == nullptr) {
+      fail(where(source, t, key) + ".center: missing (form " + fname + " needs the change point)");
     }
     const auto* g = t.get("groups");
     const auto* c = t.get("coef_um");
@@ -264,8 +265,15 @@ ModelFile read_model_table(const toml::table& root, std::string_view source, boo
     const auto* st = sn->as_table();
     if (st == nullptr) fail(where(source, *sn, "model.search") + ": must be a table");
     check_keys(*st, source, "model.search",
-               {"kinds", "exclude", "linear_columns", "lag_columns", "period_min_mm"});
+               {"kinds", "exclude", "linear_columns", "lag_columns", "period_min_mm", "per"});
     cm::SearchOptions& so = cfg.search;
+    if (const auto* n = st->get("per")) {
+      const auto names = get_strings(*n, source, "model.search.per");
+      if (names.size() > 2) fail(where(source, *n, "model.search.per") + ": at most two columns");
+      for (std::size_t k = 0; k < names.size(); ++k) {
+        so.per[k] = resolve_column(names[k], out.extra_columns, *n, source, "model.search.per");
+      }
+    }
     if (const auto* n = st->get("kinds")) so.kind_mask = kinds_mask(*n, source, "model.search.kinds");
     if (const auto* n = st->get("exclude")) so.exclude = get_strings(*n, source, "model.search.exclude");
     for (const auto* list : {"linear_columns", "lag_columns"}) {
@@ -343,11 +351,11 @@ std::string write_model_toml(const core::model::Model& model,
       o << "]\n";
     }
     if (s.form == cm::Form::kPoly) o << "degree = " << s.degree << "\n";
-    if (s.form == cm::Form::kPoly || s.form == cm::Form::kStep) {
+    if (s.form == cm::Form::kPoly || s.form == cm::Form::kStep || s.form == cm::Form::kHinge) {
       o << "center = " << fmt_double(s.center) << "\n";
     }
     if (s.form == cm::Form::kPoly || cm::has_nonlinear_parameter(s.form)) {
-      if (s.form != cm::Form::kStep) o << "scale = " << fmt_double(s.scale) << "\n";
+      if (s.form != cm::Form::kStep && s.form != cm::Form::kHinge) o << "scale = " << fmt_double(s.scale) << "\n";
     }
     o << "groups = [";
     for (std::size_t g = 0; g < t.groups.size(); ++g) {
@@ -368,6 +376,11 @@ std::string write_model_toml(const core::model::Model& model,
     o << "]\n";
   };
   list("linear_columns", so.linear_columns);
+  std::vector<int> per;
+  for (int c : so.per) {
+    if (c >= 0) per.push_back(c);
+  }
+  list("per", per);
   list("lag_columns", so.lag_columns);
   if (!so.exclude.empty()) {
     o << "exclude = [";

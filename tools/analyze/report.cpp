@@ -88,6 +88,7 @@ std::string params_json(const cm::TermSpec& spec, const cm::Model& model,
   o << "{";
   switch (spec.form) {
     case cm::Form::kExpRise:
+    case cm::Form::kExpGrowth:
       o << (col == "time_s" ? "\"time_constant_s\": " : "\"scale_length" + unit + "\": ")
         << num(spec.scale);
       break;
@@ -98,6 +99,7 @@ std::string params_json(const cm::TermSpec& spec, const cm::Model& model,
       o << "\"period" << unit << "\": " << num(spec.scale);
       break;
     case cm::Form::kStep:
+    case cm::Form::kHinge:
       o << "\"change_at" << unit << "\": " << num(spec.center);
       break;
     case cm::Form::kPoly:
