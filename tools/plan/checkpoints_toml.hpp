@@ -22,7 +22,7 @@ struct GcodeConfig {
   /// Program number of the probing program (O-number).
   int program_number{9100};
   /// Program number of the measuring macro called with G65 P<macro_program>.
-  int macro_program{9811};
+  int macro_program{9860};
   /// Clearance height for moves between checkpoints [mm].
   double safe_z_mm{50.0};
   /// Feed of the descent to the probing height [mm/min].

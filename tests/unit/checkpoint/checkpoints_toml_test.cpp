@@ -47,7 +47,7 @@ TEST(CheckpointsToml, ExampleConfigMapsEveryKey) {
   EXPECT_DOUBLE_EQ(c.compensator.plausible_um, 150.0);
   EXPECT_EQ(c.compensator.outlier_min_history, 4U);
   EXPECT_EQ(c.compensator.reconcile_prefer, cp::ReconcilePrefer::kDaemon);
-  EXPECT_EQ(c.gcode.macro_program, 9811);
+  EXPECT_EQ(c.gcode.macro_program, 9860);
   EXPECT_EQ(c.gcode.nc_variable_first, 12020);
   EXPECT_DOUBLE_EQ(c.gcode.safe_z_mm, 30.0);
 
@@ -69,7 +69,7 @@ TEST(CheckpointsToml, ExampleConfigMapsEveryKey) {
   std::ostringstream gcode;
   write_probing_gcode(gcode, plan, c);
   EXPECT_NE(gcode.str().find("N1 G00 X8.000 Y-7.157\nG01 Z-3.000 F2000.\n"
-                             "G65 P9811 I0.0000 J1.0000 D5.000 A3.000 R2.000 E0. (#12020)\n"),
+                             "G65 P9860 I0.0000 J1.0000 D5.000 A3.000 R2.000 E0. (#12020)\n"),
             std::string::npos)
       << gcode.str().substr(0, 400);
   EXPECT_NE(gcode.str().find("E55. (#12075)"), std::string::npos);
