@@ -26,9 +26,9 @@
 namespace {
 
 using nccomp::core::Event;
+using nccomp::core::from_seconds;
 using nccomp::core::StepOutput;
 using nccomp::core::TimeNs;
-using nccomp::core::from_seconds;
 using nccomp::core::calib::CalibrationConfig;
 using nccomp::core::calib::Calibrator;
 using nccomp::core::calib::FacetRule;
@@ -44,16 +44,19 @@ constexpr double kChordNoiseUm = 0.5;
 // Facet rules.
 
 void facet_table() {
-  std::printf("## Test grinds to convergence (blank radius 5 mm, tolerance 2 um of chord, "
-              "chord noise %.1f um, touch noise %.1f um)\n\n",
-              kChordNoiseUm, kTouchNoiseUm);
-  std::printf("The first grind's error is the reference probe's lateral pretravel (the touches "
-              "cannot see it). Grinds include the final, confirming one; 'x' = not converged in "
-              "30. Mean over 20 seeds; in brackets the worst seed.\n\n");
+  std::printf(
+      "## Test grinds to convergence (blank radius 5 mm, tolerance 2 um of chord, "
+      "chord noise %.1f um, touch noise %.1f um)\n\n",
+      kChordNoiseUm, kTouchNoiseUm);
+  std::printf(
+      "The first grind's error is the reference probe's lateral pretravel (the touches "
+      "cannot see it). Grinds include the final, confirming one; 'x' = not converged in "
+      "30. Mean over 20 seeds; in brackets the worst seed.\n\n");
   const double matched_01 = nccomp::core::calib::matched_proportional_gain(5.0, 0.1);
-  std::printf("| first-grind error | facet depth | exact | proportional, gain matched at 0.1 mm "
-              "(%.4f) | proportional, 0.5x | proportional, 2x | residual dxR - Ex, exact |\n",
-              matched_01);
+  std::printf(
+      "| first-grind error | facet depth | exact | proportional, gain matched at 0.1 mm "
+      "(%.4f) | proportional, 0.5x | proportional, 2x | residual dxR - Ex, exact |\n",
+      matched_01);
   std::printf("|---|---|---|---|---|---|---|\n");
   for (const double depth : {0.1, 0.05}) {
     for (const double err : {4.0, 15.0, 30.0, 60.0}) {
@@ -66,8 +69,7 @@ void facet_table() {
         for (std::uint64_t seed = 1; seed <= 20; ++seed) {
           auto cfg = nccomp::test::calib::test_config();
           cfg.facet_rule = variant == 0 ? FacetRule::kExact : FacetRule::kProportional;
-          cfg.facet_gain_um_per_um =
-              matched_01 * (variant == 2 ? 0.5 : (variant == 3 ? 2.0 : 1.0));
+          cfg.facet_gain_um_per_um = matched_01 * (variant == 2 ? 0.5 : (variant == 3 ? 2.0 : 1.0));
           cfg.max_test_grinds = 30;
           cfg.end_face_test_grind = false;
           MachineErrors e = nccomp::test::calib::test_errors();
@@ -222,12 +224,14 @@ void first_order_table() {
     const double f = 1.0 - std::exp(-std::max(0.0, t) / tau_true);
     return std::array<double, 4>{30.0 * f, 34.0 * f, -12.0 * f, 18.0 * f};
   };
-  std::printf("## 8-hour shift, simulated first-order warm-up (X: 30 um, tau 1.5 h; touch noise "
-              "%.1f um; touches every hour; creep 600 s cosine)\n\n",
-              kTouchNoiseUm);
-  std::printf("| strategy | model tau | X RMS error | X RMS error after the first touch (1-8 h) "
-              "| X max error | largest 1-s change of the applied X correction |\n"
-              "|---|---|---|---|---|---|\n");
+  std::printf(
+      "## 8-hour shift, simulated first-order warm-up (X: 30 um, tau 1.5 h; touch noise "
+      "%.1f um; touches every hour; creep 600 s cosine)\n\n",
+      kTouchNoiseUm);
+  std::printf(
+      "| strategy | model tau | X RMS error | X RMS error after the first touch (1-8 h) "
+      "| X max error | largest 1-s change of the applied X correction |\n"
+      "|---|---|---|---|---|---|\n");
   for (const auto& s : kStrategies) {
     if (s.prediction == Prediction::kTemperature) {
       continue;  // no temperature in this simulation
@@ -265,7 +269,8 @@ Thermal load_thermal(const std::string& path) {
   while (std::getline(in, line)) {
     ++line_no;
     if (line_no == 1) {
-      if (line.find("spindle(RPM)") == std::string::npos || line.find("ch5(um)") == std::string::npos) {
+      if (line.find("spindle(RPM)") == std::string::npos ||
+          line.find("ch5(um)") == std::string::npos) {
         throw std::runtime_error(path + ":1: not the FL_THERMAL header");
       }
       continue;
@@ -288,8 +293,8 @@ Thermal load_thermal(const std::string& path) {
       v.push_back(x);
     }
     if (v.size() != 23) {
-      throw std::runtime_error(path + ":" + std::to_string(line_no) + ": expected 23 columns, got " +
-                               std::to_string(v.size()));
+      throw std::runtime_error(path + ":" + std::to_string(line_no) +
+                               ": expected 23 columns, got " + std::to_string(v.size()));
     }
     if (!d.t_s.empty() && v[0] <= d.t_s.back()) {
       throw std::runtime_error(path + ":" + std::to_string(line_no) + ": time not increasing");
@@ -320,11 +325,12 @@ double interp(const std::vector<double>& t, const std::vector<double>& y, double
 void thermal_tables(const std::string& path) {
   const Thermal d = load_thermal(path);
   std::printf("## 8-hour shifts driven by the FL_THERMAL spindle drift\n\n");
-  std::printf("X <- ch3 (radial, largest), Y <- ch1 (radial), Z <- ch5 (axial growth), each "
-              "relative to its value at the shift start (the nominals are taken then); "
-              "temperature sensor <- t5 (spindle bearing / motor area, follows the speed). "
-              "Touch noise %.1f um, touches every hour, creep 600 s cosine, time model tau 1 h.\n\n",
-              kTouchNoiseUm);
+  std::printf(
+      "X <- ch3 (radial, largest), Y <- ch1 (radial), Z <- ch5 (axial growth), each "
+      "relative to its value at the shift start (the nominals are taken then); "
+      "temperature sensor <- t5 (spindle bearing / motor area, follows the speed). "
+      "Touch noise %.1f um, touches every hour, creep 600 s cosine, time model tau 1 h.\n\n",
+      kTouchNoiseUm);
   const std::array<double, 5> starts{0.0, 8.0, 16.0, 24.0, 32.0};
   std::printf("| strategy | axis |");
   for (const double s : starts) {

@@ -17,9 +17,9 @@
 namespace {
 
 using nccomp::core::Event;
+using nccomp::core::from_seconds;
 using nccomp::core::StepOutput;
 using nccomp::core::TimeNs;
-using nccomp::core::from_seconds;
 using nccomp::core::calib::Calibrator;
 using nccomp::core::calib::Face;
 using nccomp::core::calib::Phase;
@@ -40,7 +40,8 @@ void touch_line(std::ofstream& f, const char* probe, const nccomp::core::Calibra
 
 int main(int argc, char** argv) {
   if (argc != 4) {
-    std::fprintf(stderr, "usage: calib_demo_script TOUCHES_PER_AXIS initial.calib recalibrate.calib\n");
+    std::fprintf(stderr,
+                 "usage: calib_demo_script TOUCHES_PER_AXIS initial.calib recalibrate.calib\n");
     return 2;
   }
   auto cfg = nccomp::test::calib::test_config();

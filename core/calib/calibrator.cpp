@@ -211,8 +211,8 @@ void Calibrator::handle_touch(const CalibrationTouch& t, double now_s, TimeNs no
   const std::size_t slot = t.axis == 0 ? (t.variant == 1 ? kXA : kX) : t.axis + 1u;
   const Phase ph = state_.phase;
   const bool reference = ph == Phase::kReferenceTouches && t.probe == ProbeKind::kReferenceProbe;
-  const bool machine = (ph == Phase::kNominalTouches || ph == Phase::kReady) &&
-                       t.probe == ProbeKind::kMachineProbe;
+  const bool machine =
+      (ph == Phase::kNominalTouches || ph == Phase::kReady) && t.probe == ProbeKind::kMachineProbe;
   if (!reference && !machine) {
     out.alarm(now_ns, Severity::kWarning, AlarmCode::kTouchUnexpected, slot_axis(slot),
               t.trigger_position_mm);
@@ -241,9 +241,9 @@ void Calibrator::handle_touch(const CalibrationTouch& t, double now_s, TimeNs no
   }
   double value = 0.0;
   if (reference) {
-    const std::array<double, kSlotCount> centre{
-        config_.reference_x_lateral_mm, config_.reference_x_axial_mm, config_.reference_y_mm,
-        config_.reference_z_mm};
+    const std::array<double, kSlotCount> centre{config_.reference_x_lateral_mm,
+                                                config_.reference_x_axial_mm,
+                                                config_.reference_y_mm, config_.reference_z_mm};
     const double contact =
         slot == kXA ? config_.reference_axial_contact_mm : config_.reference_contact_mm;
     value = (t.trigger_position_mm - (centre[slot] - t.direction * contact)) * kUmPerMm;

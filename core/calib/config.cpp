@@ -67,8 +67,7 @@ void validate(const CalibrationConfig& c) {
   }
   positive(c.thermal_time_constant_s, "thermal_time_constant_s");
   if (c.temperature_sensor < -1 || c.temperature_sensor > 255) {
-    fail("temperature_sensor", "must be -1 (none) or a sensor index 0..255",
-         c.temperature_sensor);
+    fail("temperature_sensor", "must be -1 (none) or a sensor index 0..255", c.temperature_sensor);
   }
   if (c.prediction == Prediction::kTemperature && c.temperature_sensor < 0) {
     fail("temperature_sensor", "prediction = \"temperature\" needs a mapped sensor",

@@ -13,7 +13,7 @@ namespace nccomp::core::calib {
 
 /// How a test grind's two facet chords are turned into a correction of Δx.
 enum class FacetRule : std::uint8_t {
-  kExact = 0,         // depth from chord on a cylinder: d = ρ − sqrt(ρ² − c²/4), e = (d₊ − d₋)/2
+  kExact = 0,  // depth from chord on a cylinder: d = ρ − sqrt(ρ² − c²/4), e = (d₊ − d₋)/2
   kProportional = 1,  // the seed's controller: e = gain · (c₊ − c₋)
 };
 

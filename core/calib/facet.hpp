@@ -33,8 +33,9 @@ inline double depth_from_chord_mm(double radius_mm, double chord_mm) noexcept {
 /// the +X facet is the deeper one when e > 0.
 inline double facet_error_exact_um(double radius_mm, double chord_plus_mm,
                                    double chord_minus_mm) noexcept {
-  return 0.5 * (depth_from_chord_mm(radius_mm, chord_plus_mm) -
-                depth_from_chord_mm(radius_mm, chord_minus_mm)) *
+  return 0.5 *
+         (depth_from_chord_mm(radius_mm, chord_plus_mm) -
+          depth_from_chord_mm(radius_mm, chord_minus_mm)) *
          1000.0;
 }
 

@@ -265,8 +265,8 @@ void validate(const CalibState& s) {
           "history_count", "must be 0..64");
   require(s.history_next >= 0 && s.history_next < static_cast<std::int32_t>(kHistorySize),
           "history_next", "must be 0..63");
-  require(s.grinds >= 0 && s.result.lateral_grinds >= 0 && s.result.end_face_grinds >= 0,
-          "grinds", "must be >= 0");
+  require(s.grinds >= 0 && s.result.lateral_grinds >= 0 && s.result.end_face_grinds >= 0, "grinds",
+          "must be >= 0");
   const bool calibrated = s.phase == Phase::kNominalTouches || s.phase == Phase::kReady;
   if (calibrated) {
     require(std::isfinite(s.result.dx_r_um) && std::isfinite(s.result.dy_um) &&

@@ -35,8 +35,8 @@ double number(std::string_view w, std::size_t line, const char* what) {
   }
   const auto res = std::from_chars(first, w.data() + w.size(), v);
   if (res.ec != std::errc() || res.ptr != w.data() + w.size() || !std::isfinite(v)) {
-    throw ScriptError(line, std::string(what) + " must be a finite number, got '" +
-                                std::string(w) + "'");
+    throw ScriptError(line,
+                      std::string(what) + " must be a finite number, got '" + std::string(w) + "'");
   }
   return v;
 }
@@ -102,7 +102,8 @@ Command parse_line(std::string_view line, std::size_t line_no) {
     int s = -1;
     const auto res = std::from_chars(w[1].data(), w[1].data() + w[1].size(), s);
     if (res.ec != std::errc() || res.ptr != w[1].data() + w[1].size() || s < 0 || s > 255) {
-      throw ScriptError(line_no, "sensor must be an integer 0..255, got '" + std::string(w[1]) + "'");
+      throw ScriptError(line_no,
+                        "sensor must be an integer 0..255, got '" + std::string(w[1]) + "'");
     }
     const double t = number(w[2], line_no, "temperature");
     if (t < -50.0 || t > 200.0) {
@@ -124,8 +125,8 @@ Command parse_line(std::string_view line, std::size_t line_no) {
     } else if (probe == "machine") {
       c.touch.probe = core::ProbeKind::kMachineProbe;
     } else {
-      throw ScriptError(line_no, "probe must be 'reference' or 'machine', got '" +
-                                     std::string(w[1]) + "'");
+      throw ScriptError(line_no,
+                        "probe must be 'reference' or 'machine', got '" + std::string(w[1]) + "'");
     }
     const std::string axis = lower(w[2]);
     if (axis == "x") {

@@ -1,7 +1,7 @@
 #include "tools/calibrate/session.hpp"
 
-#include <cmath>
 #include <fmt/format.h>
+#include <cmath>
 
 #include <variant>
 
@@ -129,8 +129,8 @@ void Session::report(bool summarise_writes) {
   }
   for (const auto& r : output_.records) {
     const auto axis = static_cast<std::size_t>(r.point);
-    out_ << fmt::format("  record calib {} trigger {:.4f} mm measured {:+.3f} um", axis_name(r.point),
-                        r.position_mm[axis], r.measured_um);
+    out_ << fmt::format("  record calib {} trigger {:.4f} mm measured {:+.3f} um",
+                        axis_name(r.point), r.position_mm[axis], r.measured_um);
     if (std::isfinite(r.temp_c)) {
       out_ << fmt::format(" at {:.2f} degC", r.temp_c);
     }
@@ -160,8 +160,8 @@ bool Session::run(const Command& command, std::size_t line_no) {
           return true;
         } else if constexpr (std::is_same_v<T, CmdTime>) {
           if (c.time_s < t) {
-            throw ScriptError(line_no, fmt::format("time {} s is before the current {} s",
-                                                   c.time_s, t));
+            throw ScriptError(line_no,
+                              fmt::format("time {} s is before the current {} s", c.time_s, t));
           }
           now_ns_ = core::from_seconds(c.time_s);
           step({});
@@ -174,10 +174,11 @@ bool Session::run(const Command& command, std::size_t line_no) {
             step({});
             report(true);
           }
-          out_ << fmt::format("[{:9.1f} s] waited {:.0f} s, {} register writes; X {:+.3f} Y {:+.3f} "
-                              "Z {:+.3f} um\n",
-                              time_s(), c.duration_s, pending_writes_, last_written_[0],
-                              last_written_[1], last_written_[2]);
+          out_ << fmt::format(
+              "[{:9.1f} s] waited {:.0f} s, {} register writes; X {:+.3f} Y {:+.3f} "
+              "Z {:+.3f} um\n",
+              time_s(), c.duration_s, pending_writes_, last_written_[0], last_written_[1],
+              last_written_[2]);
           return true;
         } else if constexpr (std::is_same_v<T, CmdTemperature>) {
           const core::Event e = core::TemperatureSample{now_ns_, c.sensor, c.temperature_c};
@@ -199,12 +200,11 @@ bool Session::run(const Command& command, std::size_t line_no) {
           touch.time_ns = now_ns_;
           const core::Event e = touch;
           step({&e, 1});
-          out_ << fmt::format("[{:9.1f} s] touch {} {}{} {} at {:.4f} mm\n", t,
-                              touch.probe == core::ProbeKind::kReferenceProbe ? "reference"
-                                                                              : "machine",
-                              axis_name(touch.axis), touch.direction > 0 ? "+" : "-",
-                              touch.variant == 1 ? "axial" : "lateral",
-                              touch.trigger_position_mm);
+          out_ << fmt::format(
+              "[{:9.1f} s] touch {} {}{} {} at {:.4f} mm\n", t,
+              touch.probe == core::ProbeKind::kReferenceProbe ? "reference" : "machine",
+              axis_name(touch.axis), touch.direction > 0 ? "+" : "-",
+              touch.variant == 1 ? "axial" : "lateral", touch.trigger_position_mm);
           report(false);
           const auto& r = calib_.result();
           if (before == Phase::kReferenceTouches && calib_.phase() == Phase::kTestGrindLateral) {
@@ -279,13 +279,15 @@ std::string Session::hint() const {
     case Phase::kReferenceTouches:
       return "touch the reference disk with the reference probe (" + progress() + ")";
     case Phase::kTestGrindLateral:
-      return fmt::format("grind the blank from +X and -X with dx {:+.3f} um, then 'facets "
-                         "lateral <c+ mm> <c- mm>'",
-                         calib_.grind_correction_um());
+      return fmt::format(
+          "grind the blank from +X and -X with dx {:+.3f} um, then 'facets "
+          "lateral <c+ mm> <c- mm>'",
+          calib_.grind_correction_um());
     case Phase::kTestGrindEndFace:
-      return fmt::format("grind the end face from +X and -X with dx {:+.3f} um, then 'facets "
-                         "end-face <c+ mm> <c- mm>'",
-                         calib_.grind_correction_um());
+      return fmt::format(
+          "grind the end face from +X and -X with dx {:+.3f} um, then 'facets "
+          "end-face <c+ mm> <c- mm>'",
+          calib_.grind_correction_um());
     case Phase::kNominalTouches:
       return "touch the test body with the machine probe, X twice (A at 90 deg for axial) (" +
              progress() + ")";

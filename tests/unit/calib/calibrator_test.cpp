@@ -71,8 +71,7 @@ TEST(Calibration, RecoversKnownErrorsWithinProbeNoise) {
   EXPECT_NEAR(c.written_um(2), r.dz_um, 0.11);
 }
 
-int grinds_to_converge(FacetRule rule, double gain, double nominal_depth_mm,
-                       std::uint64_t seed) {
+int grinds_to_converge(FacetRule rule, double gain, double nominal_depth_mm, std::uint64_t seed) {
   auto cfg = test_config();
   cfg.facet_rule = rule;
   cfg.facet_gain_um_per_um = gain;
@@ -94,7 +93,8 @@ TEST(Calibration, BothFacetRulesConvergeExactInTwoGrinds) {
   const double matched = core::calib::matched_proportional_gain(5.0, 0.1);
   const int exact = grinds_to_converge(FacetRule::kExact, matched, 0.1, 11);
   const int proportional = grinds_to_converge(FacetRule::kProportional, matched, 0.1, 11);
-  const int proportional_half = grinds_to_converge(FacetRule::kProportional, 0.5 * matched, 0.1, 11);
+  const int proportional_half =
+      grinds_to_converge(FacetRule::kProportional, 0.5 * matched, 0.1, 11);
   // One grind measures, the corrected second one confirms.
   EXPECT_LE(exact, 2);
   EXPECT_GE(exact, 1);

@@ -19,8 +19,8 @@ using core::AlarmCode;
 using core::Event;
 using core::StepOutput;
 using core::TimeNs;
-using core::calib::Calibrator;
 using core::calib::CalibrationConfig;
+using core::calib::Calibrator;
 using core::calib::Phase;
 using core::calib::Prediction;
 using core::calib::Slot;
@@ -79,7 +79,8 @@ ShiftError run_shift(CalibrationConfig cfg, double hours, double interval_s, boo
     for (const auto& w : out.writes) {
       if (w.register_index == cfg.register_x) {
         if (std::isfinite(last_written)) {
-          e.max_write_change_um = std::max(e.max_write_change_um, std::fabs(w.value_um - last_written));
+          e.max_write_change_um =
+              std::max(e.max_write_change_um, std::fabs(w.value_um - last_written));
         }
         last_written = w.value_um;
       }
@@ -145,7 +146,9 @@ TEST(Recalibration, TemperatureModelLearnsTheSlope) {
   feed_temp(now);
   ASSERT_TRUE(run_initial_calibration(c, m, now, out));
   // X drifts 2.5 µm/°C with the temperature.
-  m.set_drift([&temp](double) { return std::array<double, 4>{2.5 * (temp - 20.0), 0.0, 0.0, 0.0}; });
+  m.set_drift([&temp](double) {
+    return std::array<double, 4>{2.5 * (temp - 20.0), 0.0, 0.0, 0.0};
+  });
   for (const double t_c : {22.0, 24.0}) {
     temp = t_c;
     now += core::from_seconds(3600.0);

@@ -59,15 +59,14 @@ class SimMachine {
 
   /// Reference-probe touch of the reference disk; slot 0..3 = X lateral, X axial, Y, Z.
   CalibrationTouch reference_touch(std::size_t slot, std::int8_t direction, TimeNs t_ns) {
-    const std::array<double, kSlotCount> centre{
-        config_.reference_x_lateral_mm, config_.reference_x_axial_mm, config_.reference_y_mm,
-        config_.reference_z_mm};
+    const std::array<double, kSlotCount> centre{config_.reference_x_lateral_mm,
+                                                config_.reference_x_axial_mm,
+                                                config_.reference_y_mm, config_.reference_z_mm};
     const std::array<double, kSlotCount> error{errors_.ex_um, errors_.exa_um, errors_.ey_um,
                                                errors_.ez_um};
     const double contact =
         slot == 1 ? config_.reference_axial_contact_mm : config_.reference_contact_mm;
-    const double pretravel =
-        slot == 1 ? errors_.pretravel_axial_um : errors_.pretravel_lateral_um;
+    const double pretravel = slot == 1 ? errors_.pretravel_axial_um : errors_.pretravel_lateral_um;
     const double trigger_um = error[slot] + direction * pretravel + noise(touch_noise_um_);
     return make_touch(ProbeKind::kReferenceProbe, slot, direction,
                       centre[slot] - direction * contact + trigger_um / 1000.0, t_ns);
@@ -107,7 +106,9 @@ class SimMachine {
     t.trigger_position_mm = position_mm;
     return t;
   }
-  double noise(double sigma) { return sigma > 0.0 ? std::normal_distribution<double>(0.0, sigma)(rng_) : 0.0; }
+  double noise(double sigma) {
+    return sigma > 0.0 ? std::normal_distribution<double>(0.0, sigma)(rng_) : 0.0;
+  }
 
   CalibrationConfig config_;
   MachineErrors errors_;

@@ -14,8 +14,8 @@ namespace {
 
 using core::StepOutput;
 using core::TimeNs;
-using core::calib::CalibState;
 using core::calib::Calibrator;
+using core::calib::CalibState;
 using core::calib::Phase;
 using core::calib::Slot;
 

@@ -104,9 +104,12 @@ TEST(Script, ErrorsNameLineAndWord) {
     return "";
   };
   EXPECT_EQ(msg("touch machine w + 1.0"), "line 12: axis must be x, y or z, got 'w'");
-  EXPECT_EQ(msg("touch machine y + axial 1.0"), "line 12: only X is touched axially (along the stylus)");
-  EXPECT_EQ(msg("touch machine x + 1.0x"), "line 12: trigger position must be a finite number, got '1.0x'");
-  EXPECT_EQ(msg("facets lateral 1.9 nan"), "line 12: chord_minus_mm must be a finite number, got 'nan'");
+  EXPECT_EQ(msg("touch machine y + axial 1.0"),
+            "line 12: only X is touched axially (along the stylus)");
+  EXPECT_EQ(msg("touch machine x + 1.0x"),
+            "line 12: trigger position must be a finite number, got '1.0x'");
+  EXPECT_EQ(msg("facets lateral 1.9 nan"),
+            "line 12: chord_minus_mm must be a finite number, got 'nan'");
   EXPECT_EQ(msg("facets lateral 1.9 -2"), "line 12: chords must be positive [mm]");
   EXPECT_EQ(msg("temperature 300 20"), "line 12: sensor must be an integer 0..255, got '300'");
   EXPECT_EQ(msg("grind"), "line 12: unknown command 'grind' (try 'help')");
