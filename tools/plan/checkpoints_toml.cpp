@@ -102,7 +102,9 @@ class Reader {
       if (*s == choices[i]) return i;
     }
     std::string allowed;
-    for (const auto& c : choices) allowed += (allowed.empty() ? "\"" : ", \"") + c + "\"";
+    for (const auto& c : choices) {
+      allowed.append(allowed.empty() ? "\"" : ", \"").append(c).append("\"");
+    }
     issue(t_.get(key), std::string(key), "must be one of " + allowed + ", got \"" + *s + "\"");
     return def;
   }
@@ -139,7 +141,10 @@ std::string format_issue(const ConfigIssue& i) {
 ConfigError::ConfigError(std::vector<ConfigIssue> issues)
     : std::runtime_error([&] {
         std::string all;
-        for (const auto& i : issues) all += (all.empty() ? "" : "\n") + format_issue(i);
+        for (const auto& i : issues) {
+          if (!all.empty()) all.push_back('\n');
+          all.append(format_issue(i));
+        }
         return all;
       }()),
       issues_(std::move(issues)) {}
@@ -183,16 +188,17 @@ CheckpointsConfig parse_checkpoints(const toml::table& table, const std::string&
       r.issue(inline_contour, "contour", "must be an array of [x_mm, y_mm] pairs");
     } else {
       for (std::size_t i = 0; i < arr->size(); ++i) {
-        const toml::node& e = *arr->get(i);
+        const toml::node& e = (*arr)[i];
         const toml::array* pair = e.as_array();
         const std::string key = "contour[" + std::to_string(i) + "]";
-        if (pair == nullptr || pair->size() != 2 || !pair->get(0)->is_number() ||
-            !pair->get(1)->is_number()) {
+        const toml::node* nx = pair != nullptr && pair->size() == 2 ? pair->get(0) : nullptr;
+        const toml::node* ny = pair != nullptr && pair->size() == 2 ? pair->get(1) : nullptr;
+        if (nx == nullptr || ny == nullptr || !nx->is_number() || !ny->is_number()) {
           r.issue(&e, key, "must be a pair of numbers [x_mm, y_mm]");
           continue;
         }
-        const double x = pair->get(0)->value<double>().value_or(0.0);
-        const double y = pair->get(1)->value<double>().value_or(0.0);
+        const double x = nx->value<double>().value_or(0.0);
+        const double y = ny->value<double>().value_or(0.0);
         if (!std::isfinite(x) || !std::isfinite(y)) {
           r.issue(&e, key, "must be finite");
           continue;
@@ -229,7 +235,7 @@ CheckpointsConfig parse_checkpoints(const toml::table& table, const std::string&
       r.issue(n, "extra_points_mm", "must be an array of numbers [mm along the contour]");
     } else {
       for (std::size_t i = 0; i < arr->size(); ++i) {
-        const toml::node& e = *arr->get(i);
+        const toml::node& e = (*arr)[i];
         if (!e.is_number()) {
           r.issue(&e, "extra_points_mm[" + std::to_string(i) + "]", "must be a number");
           continue;
@@ -245,7 +251,7 @@ CheckpointsConfig parse_checkpoints(const toml::table& table, const std::string&
               "must be an array of tables {from_mm = .., to_mm = .., spacing_mm = ..}");
     } else {
       for (std::size_t i = 0; i < arr->size(); ++i) {
-        const toml::node& e = *arr->get(i);
+        const toml::node& e = (*arr)[i];
         const std::string key = "extra_regions[" + std::to_string(i) + "]";
         const toml::table* t = e.as_table();
         if (t == nullptr) {

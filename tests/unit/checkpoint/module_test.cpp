@@ -4,7 +4,8 @@
 
 #include <cmath>
 #include <cstddef>
-#include <cstring>
+#include <array>
+#include <bit>
 #include <memory>
 #include <stdexcept>
 #include <vector>
@@ -115,8 +116,9 @@ TEST(Module, LoadStateRefusesCorruptBytesAllOrNothing) {
   fresh.attach(engine::RegisterTable(regs));
   std::vector<std::byte> bad = buf;
   // The second record's offset becomes NaN (header 24 bytes, records 160 bytes).
-  const double nan = std::nan("");
-  std::memcpy(bad.data() + 24 + 160 + 8, &nan, sizeof nan);
+  ASSERT_EQ(bad.size(), 24U + 2U * 160U);
+  const auto nan_bytes = std::bit_cast<std::array<std::byte, sizeof(double)>>(std::nan(""));
+  for (std::size_t k = 0; k < nan_bytes.size(); ++k) bad[24 + 160 + 8 + k] = nan_bytes[k];
   EXPECT_FALSE(fresh.load_state(bad));
   EXPECT_DOUBLE_EQ(fresh.compensator().register_value_um(0), 0.0);  // nothing changed
   EXPECT_FALSE(fresh.load_state(std::span<const std::byte>(buf.data(), buf.size() - 1)));
