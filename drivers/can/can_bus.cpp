@@ -508,12 +508,13 @@ void CanBus::check_link(std::int64_t now_ns) noexcept {
   if (!up) {
     return;
   }
-  if (sock_ < 0) {
-    try {
-      open_socket();
-    } catch (...) {
-      return;  // try again at the next check
-    }
+  // Rebind on a fresh socket: if the interface was deleted and re-created (a USB adapter
+  // plugged back in), the old socket is bound to an index that no longer exists.
+  close_socket();
+  try {
+    open_socket();
+  } catch (...) {
+    return;  // try again at the next check
   }
   if_down_ = false;
   recovered();

@@ -419,6 +419,28 @@ TEST_F(CanHil, InterfaceDownAndUpWhileRunningResendsPendingOffset) {
   ASSERT_TRUE(wait_until([&] { return st().bus.counters.events_decoded == 1; }));
 }
 
+TEST_F(CanHil, InterfaceDeletedAndRecreatedDriverRebinds) {
+  start(reference());
+  // The adapter disappears (USB unplugged) and comes back as a new interface of the same name.
+  ASSERT_EQ(sh("ip link del vcan0"), 0);
+  ASSERT_TRUE(wait_until([&] { return st().can.interface_down == 1; }));
+  ASSERT_TRUE(bus_->tx().try_push(core::OffsetWrite{0, 3, -0.5}));
+  bus_->wake();
+  ASSERT_EQ(sh("ip link add vcan0 type vcan"), 0);
+  const CanConfig ncfg = reference();
+  sim::can_nc::CanNcNode nc(ncfg.mapping, kIf);  // bound to the new interface while it is down
+  ASSERT_EQ(sh("ip link set vcan0 up"), 0);
+  const auto w = nc.receive_write(10000);
+  ASSERT_TRUE(w.has_value());
+  EXPECT_EQ(w->register_index, 3);
+  EXPECT_NEAR(w->value_um, -0.5, 1e-9);
+  EXPECT_EQ(w->frame.data[0], 0xFB);  // -5 counts of 0.1 µm
+  ASSERT_TRUE(wait_until([&] { return st().bus.state == LinkState::kUp; }));
+  // Receiving works on the new interface too.
+  ASSERT_EQ(sh("cansend vcan0 160#0200D204"), 0);
+  ASSERT_TRUE(wait_until([&] { return st().bus.counters.events_decoded == 1; }));
+}
+
 TEST_F(CanHil, FullTransmitQueueEnobufsBacksOffAndDeliversLater) {
   // A token-bucket qdisc of ~60 frames/s with room for a few frames, kept full by cangen
   // (ignoring its own ENOBUFS): the driver's send gets ENOBUFS until the flood stops.
