@@ -610,6 +610,10 @@ CalibState Calibrator::export_state() const noexcept {
 
 void Calibrator::import_state(const CalibState& state) {
   validate(state);
+  import_state_unchecked(state);
+}
+
+void Calibrator::import_state_unchecked(const CalibState& state) noexcept {
   CalibState s = state;
   shift_times(s, -clock_offset_s_);
   state_ = s;

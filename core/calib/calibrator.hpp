@@ -90,6 +90,8 @@ class Calibrator {
   [[nodiscard]] CalibState export_state() const noexcept;
   /// Validates (throws std::invalid_argument) and adopts a state exported before a restart.
   void import_state(const CalibState& state);
+  /// Adopts a state that passed state_problem() == nullptr. Real-time safe.
+  void import_state_unchecked(const CalibState& state) noexcept;
 
   // --- inspection (allocation-free) ----------------------------------------------------------
   [[nodiscard]] Phase phase() const noexcept { return state_.phase; }

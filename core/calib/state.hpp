@@ -125,5 +125,8 @@ std::string to_text(const CalibState& state);
 CalibState from_text(std::string_view text);
 /// Semantic checks (ranges, finite values where required); throws std::invalid_argument.
 void validate(const CalibState& state);
+/// The same checks without allocating: nullptr if valid, else a static description naming the
+/// key. Real-time safe.
+const char* state_problem(const CalibState& state) noexcept;
 
 }  // namespace nccomp::core::calib

@@ -119,12 +119,6 @@ std::int64_t parse_int(std::string_view v, std::size_t line, const std::string& 
   return out;
 }
 
-void require(bool ok, const std::string& key, const std::string& why) {
-  if (!ok) {
-    throw std::invalid_argument("calibration state, key " + key + ": " + why);
-  }
-}
-
 }  // namespace
 
 const char* to_string(Phase phase) noexcept {
@@ -258,47 +252,67 @@ CalibState from_text(std::string_view text) {
   return s;
 }
 
-void validate(const CalibState& s) {
-  require(s.version == CalibState::kVersion, "version", "unsupported");
-  require(static_cast<int>(s.phase) <= static_cast<int>(Phase::kReady), "phase", "unknown");
-  require(s.history_count >= 0 && s.history_count <= static_cast<std::int32_t>(kHistorySize),
-          "history_count", "must be 0..64");
-  require(s.history_next >= 0 && s.history_next < static_cast<std::int32_t>(kHistorySize),
-          "history_next", "must be 0..63");
-  require(s.grinds >= 0 && s.result.lateral_grinds >= 0 && s.result.end_face_grinds >= 0, "grinds",
-          "must be >= 0");
-  const bool calibrated = s.phase == Phase::kNominalTouches || s.phase == Phase::kReady;
-  if (calibrated) {
-    require(std::isfinite(s.result.dx_r_um) && std::isfinite(s.result.dy_um) &&
-                std::isfinite(s.result.dz_um),
-            "result", "a calibrated state needs finite dx_r_um, dy_um, dz_um");
+const char* state_problem(const CalibState& s) noexcept {
+  if (s.version != CalibState::kVersion) {
+    return "version: unsupported";
   }
-  if (s.phase == Phase::kTestGrindLateral || s.phase == Phase::kTestGrindEndFace) {
-    require(std::isfinite(s.grind_correction_um), "grind_correction_um",
-            "a test grind in progress needs a finite correction");
+  if (static_cast<int>(s.phase) > static_cast<int>(Phase::kReady)) {
+    return "phase: unknown";
+  }
+  if (s.history_count < 0 || s.history_count > static_cast<std::int32_t>(kHistorySize)) {
+    return "history_count: must be 0..64";
+  }
+  if (s.history_next < 0 || s.history_next >= static_cast<std::int32_t>(kHistorySize)) {
+    return "history_next: must be 0..63";
+  }
+  if (s.grinds < 0 || s.result.lateral_grinds < 0 || s.result.end_face_grinds < 0) {
+    return "grinds: must be >= 0";
+  }
+  const bool calibrated = s.phase == Phase::kNominalTouches || s.phase == Phase::kReady;
+  if (calibrated && !(std::isfinite(s.result.dx_r_um) && std::isfinite(s.result.dy_um) &&
+                      std::isfinite(s.result.dz_um))) {
+    return "result: a calibrated state needs finite dx_r_um, dy_um, dz_um";
+  }
+  if ((s.phase == Phase::kTestGrindLateral || s.phase == Phase::kTestGrindEndFace) &&
+      !std::isfinite(s.grind_correction_um)) {
+    return "grind_correction_um: a test grind in progress needs a finite correction";
   }
   for (std::size_t i = 0; i < kSlotCount; ++i) {
     const auto& n = s.nominals[i];
-    const std::string k = "nominal." + std::to_string(i);
-    require(n.valid == 0 || n.valid == 1, k + ".valid", "must be 0 or 1");
-    require(n.direction == 1 || n.direction == -1, k + ".direction", "must be 1 or -1");
-    if (s.phase == Phase::kReady) {
-      require(n.valid == 1 && std::isfinite(n.position_mm) && std::isfinite(n.time_s), k,
-              "phase ready needs a valid nominal with position and time");
+    if (n.valid != 0 && n.valid != 1) {
+      return "nominal.N.valid: must be 0 or 1";
+    }
+    if (n.direction != 1 && n.direction != -1) {
+      return "nominal.N.direction: must be 1 or -1";
+    }
+    if (s.phase == Phase::kReady &&
+        !(n.valid == 1 && std::isfinite(n.position_mm) && std::isfinite(n.time_s))) {
+      return "nominal.N: phase ready needs a valid nominal with position and time";
     }
     const auto& m = s.models[i];
-    const std::string mk = "model." + std::to_string(i);
-    require(m.anchored == 0 || m.anchored == 1, mk + ".anchored", "must be 0 or 1");
-    if (m.anchored == 1) {
-      require(std::isfinite(m.anchor_time_s) && std::isfinite(m.anchor_drift_um) &&
-                  std::isfinite(m.asymptote_um) && std::isfinite(m.slope_um_per_c),
-              mk, "an anchored model needs finite anchor, asymptote and slope");
-      require(std::isfinite(s.creeps[i].start_time_s) && std::isfinite(s.creeps[i].offset_um),
-              "creep." + std::to_string(i), "an anchored model needs a finite creep");
+    if (m.anchored != 0 && m.anchored != 1) {
+      return "model.N.anchored: must be 0 or 1";
     }
-    require(std::isfinite(m.sum_w) && std::isfinite(m.sum_t) && std::isfinite(m.sum_d) &&
-                std::isfinite(m.sum_tt) && std::isfinite(m.sum_td) && m.sum_w >= 0.0,
-            mk, "fit sums must be finite (sum_w >= 0)");
+    if (m.anchored == 1) {
+      if (!(std::isfinite(m.anchor_time_s) && std::isfinite(m.anchor_drift_um) &&
+            std::isfinite(m.asymptote_um) && std::isfinite(m.slope_um_per_c))) {
+        return "model.N: an anchored model needs finite anchor, asymptote and slope";
+      }
+      if (!(std::isfinite(s.creeps[i].start_time_s) && std::isfinite(s.creeps[i].offset_um))) {
+        return "creep.N: an anchored model needs a finite creep";
+      }
+    }
+    if (!(std::isfinite(m.sum_w) && std::isfinite(m.sum_t) && std::isfinite(m.sum_d) &&
+          std::isfinite(m.sum_tt) && std::isfinite(m.sum_td) && m.sum_w >= 0.0)) {
+      return "model.N: fit sums must be finite (sum_w >= 0)";
+    }
+  }
+  return nullptr;
+}
+
+void validate(const CalibState& s) {
+  if (const char* problem = state_problem(s)) {
+    throw std::invalid_argument(std::string("calibration state, key ") + problem);
   }
 }
 
