@@ -34,8 +34,7 @@ void CalibrationModule::step(TimeNs now_ns, std::span<const Event> events,
   const std::size_t records = out.records.size();
   const std::size_t alarms = out.alarms.size();
   calib_.step(now_ns, events, out);
-  if (calib_.phase() != before || out.records.size() != records ||
-      out.alarms.size() != alarms) {
+  if (calib_.phase() != before || out.records.size() != records || out.alarms.size() != alarms) {
     ++generation_;
   }
 }

@@ -26,9 +26,7 @@ class CalibrationModule final : public engine::Module {
   /// Real-time safe: forwards to Calibrator::step().
   void step(TimeNs now_ns, std::span<const Event> events, StepOutput& out) noexcept override;
 
-  [[nodiscard]] std::size_t state_capacity() const noexcept override {
-    return sizeof(CalibState);
-  }
+  [[nodiscard]] std::size_t state_capacity() const noexcept override { return sizeof(CalibState); }
   /// Real-time safe: the plain-data CalibState (times on the wall clock of
   /// set_clock_offset_s()), byte for byte.
   std::size_t save_state(std::span<std::byte> buf) const noexcept override;
