@@ -309,7 +309,7 @@ int run_daemon(const DaemonOptions& options) {
   }
 
   std::uint64_t generation = 1;
-  std::uint64_t last_beat = loop.heartbeat();
+  HeartbeatWatch heartbeat(loop.heartbeat());
   auto last_feed = std::chrono::steady_clock::now();
   auto last_status = last_feed;
   bool stalled_logged = false;
@@ -367,9 +367,8 @@ int run_daemon(const DaemonOptions& options) {
     const auto now = std::chrono::steady_clock::now();
     if (watchdog && now - last_feed >= std::chrono::microseconds(watchdog_usec / 2)) {
       const std::uint64_t beat = loop.heartbeat();
-      if (beat != last_beat) {
+      if (heartbeat.advanced(beat)) {
         notify("WATCHDOG=1");
-        last_beat = beat;
         stalled_logged = false;
       } else if (!stalled_logged) {
         // No feed: systemd restarts the daemon when WatchdogSec runs out.

@@ -30,6 +30,22 @@ struct Deadline {
 [[nodiscard]] Deadline advance_deadline(TimeNs current_ns, TimeNs now_ns, TimeNs period_ns,
                                         config::OverrunPolicy policy) noexcept;
 
+/// The systemd watchdog's rule: feed it only if the loop's heartbeat advanced since the last
+/// check, so a stalled loop (the process alive, the loop not) is restarted by systemd.
+class HeartbeatWatch {
+ public:
+  explicit HeartbeatWatch(std::uint64_t initial) noexcept : last_(initial) {}
+  /// True if `beat` differs from the beat seen at the previous call (or construction).
+  bool advanced(std::uint64_t beat) noexcept {
+    const bool moved = beat != last_;
+    last_ = beat;
+    return moved;
+  }
+
+ private:
+  std::uint64_t last_;
+};
+
 /// Wake-up latency histogram with fixed buckets: 1 µs wide up to 1024 µs, then 64 buckets per
 /// power of two up to ~2^41 µs. One writer (the loop thread: record() is wait-free, no
 /// allocation), any number of readers (relaxed atomics: a reader may see a histogram a few

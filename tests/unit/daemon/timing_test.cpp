@@ -67,6 +67,16 @@ TEST_P(RecoversFromOverrun, NoBurstAndRegularAfterwards) {
 INSTANTIATE_TEST_SUITE_P(Policies, RecoversFromOverrun,
                          ::testing::Values(OverrunPolicy::kSkipMissed, OverrunPolicy::kRestart));
 
+TEST(HeartbeatWatch, FeedsOnlyWhileTheLoopAdvances) {
+  HeartbeatWatch w(100);
+  EXPECT_FALSE(w.advanced(100));  // no cycle since start: a loop stuck before its first cycle
+  EXPECT_TRUE(w.advanced(150));
+  EXPECT_TRUE(w.advanced(151));
+  EXPECT_FALSE(w.advanced(151));  // stalled: systemd's WatchdogSec runs out → restart
+  EXPECT_FALSE(w.advanced(151));
+  EXPECT_TRUE(w.advanced(152));   // recovered
+}
+
 TEST(LatencyHistogram, BucketsAreContiguousAndContainTheirValues) {
   std::uint64_t prev_edge = 0;
   for (std::size_t b = 0; b < LatencyHistogram::kBuckets - 1; ++b) {
