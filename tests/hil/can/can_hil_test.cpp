@@ -247,8 +247,9 @@ TEST_F(CanHil, EveryMappedSignalDecodedFromTheNcNode) {
     mapped += f.signals.size();
   }
   EXPECT_EQ(checked, mapped);
+  // The status snapshot is published after the events are pushed: wait for it.
+  ASSERT_TRUE(wait_until([&] { return st().bus.counters.events_decoded == events.size(); }));
   const auto s = st();
-  EXPECT_EQ(s.bus.counters.events_decoded, events.size());
   EXPECT_EQ(s.bus.counters.malformed, 0U);
   EXPECT_EQ(s.bus.state, LinkState::kUp);
 }
