@@ -112,7 +112,7 @@ int main(int argc, char** argv) {
     std::memcpy(peer.data(), p.u_mm.data(), n * sizeof(double));
     t_copy.push_back(now_s() - t0);
   }
-  if (peer[n / 2] != p.u_mm[n / 2] && !std::isnan(peer[n / 2])) {  // keep the copy observable
+  if (std::memcmp(peer.data(), p.u_mm.data(), n * sizeof(double)) != 0) {  // copy is observable
     return 2;
   }
 

@@ -14,7 +14,7 @@ constexpr double kMinusInf = -std::numeric_limits<double>::infinity();
 // First integer i at which cap k (> j) is at least cap j, within k's window start lo = k − M and
 // j's window end + 1 = j + M + 1. Caps are f − g, circles of radius R centred at (jΔ, f_j − R).
 std::ptrdiff_t crossing(std::span<const double> f, std::ptrdiff_t j, std::ptrdiff_t k,
-                        std::ptrdiff_t m, double dz_mm, const Wheel& wheel) {
+                        std::ptrdiff_t m, double dz_mm, const Wheel& wheel, const double* rise) {
   const std::ptrdiff_t lo = k - m;
   const std::ptrdiff_t end = j + m + 1;
   if (lo >= end) {
@@ -49,8 +49,9 @@ std::ptrdiff_t crossing(std::span<const double> f, std::ptrdiff_t j, std::ptrdif
     }
   }
   // No crossing on the common domain: one cap is above the other everywhere; compare at lo.
-  const double vj = fj - wheel.rise_mm(static_cast<double>(lo - j) * dz_mm);
-  const double vk = fk - wheel.rise_mm(static_cast<double>(lo - k) * dz_mm);
+  // |lo − j| ≤ M (lo < end = j + M + 1) and k − lo = M: both in the table.
+  const double vj = fj - rise[static_cast<std::size_t>(lo >= j ? lo - j : j - lo)];
+  const double vk = fk - rise[static_cast<std::size_t>(k - lo)];
   return vk >= vj ? lo : end;
 }
 
@@ -77,6 +78,12 @@ void max_plus_arc(std::span<const double> f, double spacing_mm, const Wheel& whe
     scratch.index.assign(need, 0);
     scratch.from.assign(need, 0);
   }
+  const auto m_size = static_cast<std::size_t>(m);
+  scratch.rise.resize(m_size + 1);
+  for (std::size_t k = 0; k <= m_size; ++k) {
+    scratch.rise[k] = wheel.rise_mm(static_cast<double>(k) * spacing_mm);
+  }
+  const double* rise = scratch.rise.data();
   const std::size_t mask = need - 1;
   std::ptrdiff_t* idx = scratch.index.data();
   std::ptrdiff_t* from = scratch.from.data();
@@ -91,7 +98,7 @@ void max_plus_arc(std::span<const double> f, double spacing_mm, const Wheel& whe
       std::ptrdiff_t x = 0;
       while (tail > head) {
         const std::ptrdiff_t b = idx[(tail - 1) & mask];
-        x = crossing(f, b, next, m, spacing_mm, wheel);
+        x = crossing(f, b, next, m, spacing_mm, wheel, rise);
         if (tail - head >= 2 && x <= from[(tail - 1) & mask]) {
           --tail;  // the back never wins: its successor overtakes it before it overtakes its own
           continue;
@@ -109,7 +116,7 @@ void max_plus_arc(std::span<const double> f, double spacing_mm, const Wheel& whe
     if (tail > head) {
       const std::ptrdiff_t j = idx[head & mask];
       if (j - m <= i && i <= j + m) {
-        v = f[static_cast<std::size_t>(j)] - wheel.rise_mm(static_cast<double>(j - i) * spacing_mm);
+        v = f[static_cast<std::size_t>(j)] - rise[static_cast<std::size_t>(j > i ? j - i : i - j)];
       }
     }
     out[static_cast<std::size_t>(q)] = v;

@@ -32,10 +32,11 @@ std::ptrdiff_t half_window_samples(const Wheel& wheel, double spacing_mm);
 
 /// out[k] = max over j ∈ [0, f.size()), |j − i| ≤ M of f[j] − g((j − i)·Δ), i = out_first + k;
 /// −inf where the window holds no sample. O(f.size() + out.size()). `scratch` is reused between
-/// calls (sized here: 2 × 8 bytes per window sample). Not real-time (may allocate scratch).
+/// calls (sized here: about 3 × 8 bytes per window sample). Not real-time (may allocate scratch).
 struct EnvelopeScratch {
   std::vector<std::ptrdiff_t> index;
   std::vector<std::ptrdiff_t> from;
+  std::vector<double> rise;  ///< g(k·Δ), k = 0..M: one table look-up per output, not a sqrt
 };
 void max_plus_arc(std::span<const double> f, double spacing_mm, const Wheel& wheel,
                   std::ptrdiff_t out_first, std::span<double> out, EnvelopeScratch& scratch);

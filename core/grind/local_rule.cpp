@@ -83,8 +83,8 @@ LocalTrajectory local_rule_trajectory(const UniformProfile& profile, const Deriv
     throw std::invalid_argument("local rule: one slope per sample needed");
   }
   LocalTrajectory t;
-  t.point.resize(n);
-  t.contact.resize(n);
+  t.point.assign(n, TrajectoryPoint{0.0, 0.0});
+  t.contact.assign(n, ContactCase::kTangent);
   const double half = wheel.half_width_mm();
   const double r = wheel.radius_mm();
   const double sin_limit = wheel.straight() ? 0.0 : half / r;
