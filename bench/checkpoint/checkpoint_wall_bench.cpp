@@ -66,7 +66,8 @@ struct Geometry {
     std::size_t i = 0;
     while (i + 2 < s.size() && s[i + 1] <= sv) ++i;
     const double u = (sv - s[i]) / (s[i + 1] - s[i]);
-    return {p[i].x_mm + u * (p[i + 1].x_mm - p[i].x_mm), p[i].y_mm + u * (p[i + 1].y_mm - p[i].y_mm)};
+    return {p[i].x_mm + u * (p[i + 1].x_mm - p[i].x_mm),
+            p[i].y_mm + u * (p[i + 1].y_mm - p[i].y_mm)};
   }
 };
 
@@ -76,7 +77,8 @@ Geometry geometry(const cp::PlanConfig& c) {
   g.p.push_back(c.contour.front());
   g.s.push_back(0.0);
   for (std::size_t i = 1; i < g.p.size(); ++i) {
-    g.s.push_back(g.s.back() + std::hypot(g.p[i].x_mm - g.p[i - 1].x_mm, g.p[i].y_mm - g.p[i - 1].y_mm));
+    g.s.push_back(g.s.back() +
+                  std::hypot(g.p[i].x_mm - g.p[i - 1].x_mm, g.p[i].y_mm - g.p[i - 1].y_mm));
   }
   g.length = g.s.back();
   return g;
@@ -109,8 +111,8 @@ double push_off_um(const Geometry& g, double s, double z, const Blank& blank) {
 struct WallResult {
   double rms_um{0.0};
   double max_um{0.0};
-  double max_jump_um{0.0};       // largest change of the applied offset between two samples
-  double max_jump_cp_um{0.0};    // … within ±1 mm of a checkpoint
+  double max_jump_um{0.0};     // largest change of the applied offset between two samples
+  double max_jump_cp_um{0.0};  // … within ±1 mm of a checkpoint
   std::size_t writes{0};
 };
 
@@ -219,9 +221,10 @@ int main() {
   const cp::Plan plan = cp::make_plan(pc);
   const Geometry g = geometry(pc);
   const Blank nominal{};
-  std::printf("# S1 wall benchmark: %zu checkpoints on %zu levels, contour %.3f mm, 10 m/min, "
-              "%.0f Hz\n\n",
-              plan.checkpoints.size(), plan.levels_z_mm.size(), g.length, kRateHz);
+  std::printf(
+      "# S1 wall benchmark: %zu checkpoints on %zu levels, contour %.3f mm, 10 m/min, "
+      "%.0f Hz\n\n",
+      plan.checkpoints.size(), plan.levels_z_mm.size(), g.length, kRateHz);
 
   // --- Table 1 ---
   std::vector<double> learned(plan.checkpoints.size());
@@ -250,8 +253,9 @@ int main() {
     none.configure(c, plan.checkpoints, seed_limits());
     const WallResult r = finish(none, plan, g, pc, nominal, nullptr);
     std::printf("## 1. Perfectly learned offsets, one part\n\n");
-    std::printf("| application | RMS wall error [um] | max wall error [um] | max offset jump "
-                "between samples [um] | at checkpoints [um] | live writes |\n");
+    std::printf(
+        "| application | RMS wall error [um] | max wall error [um] | max offset jump "
+        "between samples [um] | at checkpoints [um] | live writes |\n");
     std::printf("| --- | --- | --- | --- | --- | --- |\n");
     std::printf("| none (uncompensated) | %.2f | %.2f | %.3f | %.3f | %zu |\n", r.rms_um, r.max_um,
                 r.max_jump_um, r.max_jump_cp_um, r.writes);
@@ -269,10 +273,12 @@ int main() {
   }
 
   // --- Table 2 ---
-  std::printf("\n## 2. Series of parts, learning mode A (k = 3), probe noise 0.7 um, "
-              "per-blank hardness scatter\n\n");
-  std::printf("| part | step: RMS wall [um] | step: RMS at checkpoints [um] | creep: RMS wall [um] "
-              "| creep: RMS at checkpoints [um] | creep: part n / part n-1 |\n");
+  std::printf(
+      "\n## 2. Series of parts, learning mode A (k = 3), probe noise 0.7 um, "
+      "per-blank hardness scatter\n\n");
+  std::printf(
+      "| part | step: RMS wall [um] | step: RMS at checkpoints [um] | creep: RMS wall [um] "
+      "| creep: RMS at checkpoints [um] | creep: part n / part n-1 |\n");
   std::printf("| --- | --- | --- | --- | --- | --- |\n");
   cp::CheckpointCompensator step_comp;
   step_comp.configure(config(cp::ApplyMode::kStep, nccomp::core::ProfileShape::kLinear),
@@ -328,8 +334,9 @@ int main() {
   }
 
   // --- Table 3 ---
-  std::printf("\n## 3. Cost of one step() with one axis sample\n\n| trigger | apply | ns per step |\n"
-              "| --- | --- | --- |\n");
+  std::printf(
+      "\n## 3. Cost of one step() with one axis sample\n\n| trigger | apply | ns per step |\n"
+      "| --- | --- | --- |\n");
   for (const auto trig : {cp::TriggerMode::kPath, cp::TriggerMode::kPosition}) {
     for (const auto apply : {cp::ApplyMode::kStep, cp::ApplyMode::kCreep}) {
       cp::CheckpointCompensator comp;

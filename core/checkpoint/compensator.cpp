@@ -62,8 +62,9 @@ void CheckpointCompensator::configure(const CompensatorConfig& c, std::vector<Ch
   require_range(c.xy_tolerance_mm, 0.0, kHuge, true, "xy_tolerance_mm");
   require_range(c.z_band_mm, 0.0, kHuge, true, "z_band_mm");
   if (c.creep_shape == ProfileShape::kTable) {
-    fail("creep_shape", "\"table\" is not available for checkpoints; use linear, cosine or "
-                        "smoothstep");
+    fail("creep_shape",
+         "\"table\" is not available for checkpoints; use linear, cosine or "
+         "smoothstep");
   }
   if (plan.empty() || plan.size() > kMaxCheckpoints) {
     fail("plan", "needs 1 to " + std::to_string(kMaxCheckpoints) + " checkpoints, got " +
@@ -75,15 +76,14 @@ void CheckpointCompensator::configure(const CompensatorConfig& c, std::vector<Ch
                               " checkpoints exceeds the register range 0..65535");
   }
   if (c.active_register < -1 || c.active_register > 0xFFFF) {
-    fail("active_register", "must be -1 (table only) or 0..65535, got " +
-                                std::to_string(c.active_register));
+    fail("active_register",
+         "must be -1 (table only) or 0..65535, got " + std::to_string(c.active_register));
   }
   if (c.active_register >= c.register_base &&
       static_cast<std::size_t>(c.active_register) <= last_register) {
-    fail("active_register", std::to_string(c.active_register) +
-                                " lies inside the checkpoint table (registers " +
-                                std::to_string(c.register_base) + ".." +
-                                std::to_string(last_register) + ")");
+    fail("active_register",
+         std::to_string(c.active_register) + " lies inside the checkpoint table (registers " +
+             std::to_string(c.register_base) + ".." + std::to_string(last_register) + ")");
   }
   for (std::size_t i = 0; i < plan.size(); ++i) {
     const Checkpoint& p = plan[i];
@@ -91,8 +91,8 @@ void CheckpointCompensator::configure(const CompensatorConfig& c, std::vector<Ch
       fail("plan", "checkpoint " + std::to_string(i) + " has id " + std::to_string(p.id) +
                        " (ids must be the machining order 0, 1, 2, ...)");
     }
-    if (!std::isfinite(p.path_mm) || !std::isfinite(p.tool_x_mm) ||
-        !std::isfinite(p.tool_y_mm) || !std::isfinite(p.z_mm)) {
+    if (!std::isfinite(p.path_mm) || !std::isfinite(p.tool_x_mm) || !std::isfinite(p.tool_y_mm) ||
+        !std::isfinite(p.z_mm)) {
       fail("plan", "checkpoint " + std::to_string(i) + " has a non-finite position");
     }
     if (i > 0 && !(p.path_mm > plan[i - 1].path_mm)) {
@@ -239,8 +239,8 @@ void CheckpointCompensator::on_probe(const ProbeMeasurement& m, StepOutput& out)
               m.raw_deviation_um);
     return;
   }
-  const ProbeCorrection corr = correct_probe(m.raw_deviation_um, m.wall_angle_deg,
-                                             m.ball_radius_mm);
+  const ProbeCorrection corr =
+      correct_probe(m.raw_deviation_um, m.wall_angle_deg, m.ball_radius_mm);
   if (corr.status != ProbeStatus::kOk) {
     ++counters_.invalid;
     out.alarm(m.time_ns, Severity::kAlarm, AlarmCode::kProbeInvalidInput, m.checkpoint,
@@ -369,9 +369,9 @@ bool CheckpointCompensator::detect_position(const AxisSample& s, StepOutput& out
   if (!have_prev_) {
     return true;
   }
-  travel_since_mm_ += std::hypot(s.position_mm[0] - prev_.position_mm[0],
-                                 s.position_mm[1] - prev_.position_mm[1],
-                                 s.position_mm[2] - prev_.position_mm[2]);
+  travel_since_mm_ +=
+      std::hypot(s.position_mm[0] - prev_.position_mm[0], s.position_mm[1] - prev_.position_mm[1],
+                 s.position_mm[2] - prev_.position_mm[2]);
   // Several checkpoints may fall into one sample interval at low loop rates: test in order.
   while (next_ < plan_.size()) {
     if (passes(next_, s)) {
@@ -421,8 +421,7 @@ void CheckpointCompensator::on_sample(const AxisSample& s, StepOutput& out) noex
     have_prev_ = false;
     return;
   }
-  const bool ok = config_.trigger == TriggerMode::kPath ? detect_path(s)
-                                                        : detect_position(s, out);
+  const bool ok = config_.trigger == TriggerMode::kPath ? detect_path(s) : detect_position(s, out);
   if (!ok) {
     return;  // no program path published: nothing is known about where the tool is
   }
@@ -449,8 +448,7 @@ void CheckpointCompensator::export_state(CheckpointState& out) const {
 }
 
 const char* CheckpointCompensator::invalid_point_reason(const LearnedPoint& p) const noexcept {
-  if (!std::isfinite(p.learned_um) || !std::isfinite(p.offset_um) ||
-      !std::isfinite(p.applied_um)) {
+  if (!std::isfinite(p.learned_um) || !std::isfinite(p.offset_um) || !std::isfinite(p.applied_um)) {
     return "non-finite value";
   }
   if (p.history_n > kHistoryDepth) {
@@ -489,8 +487,7 @@ void CheckpointCompensator::restore_counters(std::int64_t part_counter,
 
 void CheckpointCompensator::import_state(const CheckpointState& st) {
   if (st.version != 1) {
-    throw std::invalid_argument("checkpoint state: unknown version " +
-                                std::to_string(st.version));
+    throw std::invalid_argument("checkpoint state: unknown version " + std::to_string(st.version));
   }
   if (st.points.size() != plan_.size()) {
     throw std::invalid_argument("checkpoint state: holds " + std::to_string(st.points.size()) +
@@ -499,8 +496,7 @@ void CheckpointCompensator::import_state(const CheckpointState& st) {
   }
   for (std::size_t i = 0; i < st.points.size(); ++i) {
     if (const char* why = invalid_point_reason(st.points[i])) {
-      throw std::invalid_argument("checkpoint state: checkpoint " + std::to_string(i) + ": " +
-                                  why);
+      throw std::invalid_argument("checkpoint state: checkpoint " + std::to_string(i) + ": " + why);
     }
   }
   for (std::size_t i = 0; i < st.points.size(); ++i) {

@@ -1,8 +1,8 @@
 #include "core/checkpoint/module.hpp"
 
 #include <cstring>
-#include <type_traits>
 #include <stdexcept>
+#include <type_traits>
 #include <utility>
 
 namespace nccomp::core::checkpoint {

@@ -38,8 +38,8 @@ void require_finite(double v, const std::string& key) {
 
 // The polyline with its segments and cumulative arc length.
 struct Polyline {
-  std::vector<Point2> p;        // vertices; a closed contour repeats the first at the end
-  std::vector<double> s;        // arc length at each vertex
+  std::vector<Point2> p;  // vertices; a closed contour repeats the first at the end
+  std::vector<double> s;  // arc length at each vertex
   [[nodiscard]] double length() const { return s.back(); }
   [[nodiscard]] std::size_t segments() const { return p.size() - 1; }
 };
@@ -52,12 +52,10 @@ Polyline make_polyline(const PlanConfig& c) {
   }
   pl.s.resize(pl.p.size(), 0.0);
   for (std::size_t i = 1; i < pl.p.size(); ++i) {
-    const double len =
-        std::hypot(pl.p[i].x_mm - pl.p[i - 1].x_mm, pl.p[i].y_mm - pl.p[i - 1].y_mm);
+    const double len = std::hypot(pl.p[i].x_mm - pl.p[i - 1].x_mm, pl.p[i].y_mm - pl.p[i - 1].y_mm);
     if (!(len > 1e-9)) {
       fail("contour", "points " + std::to_string(i - 1) + " and " +
-                          std::to_string(i % c.contour.size()) +
-                          " coincide (zero-length segment)");
+                          std::to_string(i % c.contour.size()) + " coincide (zero-length segment)");
     }
     pl.s[i] = pl.s[i - 1] + len;
   }
@@ -100,8 +98,8 @@ const char* material_side_name(MaterialSide side) noexcept {
 Plan make_plan(const PlanConfig& c) {
   // --- validation, naming the key ---
   if (c.contour.size() < (c.closed ? 3U : 2U)) {
-    fail("contour", std::string("needs at least ") + (c.closed ? "3" : "2") +
-                        " points, got " + std::to_string(c.contour.size()));
+    fail("contour", std::string("needs at least ") + (c.closed ? "3" : "2") + " points, got " +
+                        std::to_string(c.contour.size()));
   }
   if (c.contour.size() > kMaxContourPoints) {
     fail("contour", "more than " + std::to_string(kMaxContourPoints) + " points");
@@ -113,8 +111,8 @@ Plan make_plan(const PlanConfig& c) {
     // Beyond any machine's travel; also keeps lengths and path positions exact to 1 µm.
     if (std::fabs(c.contour[i].x_mm) > kMaxCoordinateMm ||
         std::fabs(c.contour[i].y_mm) > kMaxCoordinateMm) {
-      fail("contour", "point " + std::to_string(i) + " is farther than " +
-                          num(kMaxCoordinateMm) + " mm from the origin");
+      fail("contour", "point " + std::to_string(i) + " is farther than " + num(kMaxCoordinateMm) +
+                          " mm from the origin");
     }
   }
   if (!c.closed && (c.material == MaterialSide::kInside || c.material == MaterialSide::kOutside)) {
@@ -122,7 +120,8 @@ Plan make_plan(const PlanConfig& c) {
   }
   for (const auto& [v, key] :
        {std::pair{c.contour_z_mm, "contour_z_mm"}, std::pair{c.z_start_mm, "z_start_mm"},
-        std::pair{c.z_end_mm, "z_end_mm"}, std::pair{c.program_path_start_mm, "program_path_start_mm"},
+        std::pair{c.z_end_mm, "z_end_mm"},
+        std::pair{c.program_path_start_mm, "program_path_start_mm"},
         std::pair{c.level_link_mm, "level_link_mm"}}) {
     require_finite(v, key);
     if (std::fabs(v) > kMaxCoordinateMm) {
@@ -133,8 +132,8 @@ Plan make_plan(const PlanConfig& c) {
     fail("depth_step_mm", "must be a positive finite number, got " + num(c.depth_step_mm));
   }
   if (c.z_end_mm > c.z_start_mm) {
-    fail("z_end_mm", "must not be above z_start_mm (" + num(c.z_end_mm) + " > " +
-                         num(c.z_start_mm) + ")");
+    fail("z_end_mm",
+         "must not be above z_start_mm (" + num(c.z_end_mm) + " > " + num(c.z_start_mm) + ")");
   }
   const double level_span = (c.z_start_mm - c.z_end_mm) / c.depth_step_mm;
   if (level_span + 1.0 > static_cast<double>(kMaxLevels)) {
@@ -240,8 +239,8 @@ Plan make_plan(const PlanConfig& c) {
     const std::string key = "extra_points_mm[" + std::to_string(i) + "]";
     require_finite(s, key);
     if (s < 0.0 || s > length) {
-      fail(key, "position " + num(s) + " mm is outside the contour (length " + num(length) +
-                    " mm)");
+      fail(key,
+           "position " + num(s) + " mm is outside the contour (length " + num(length) + " mm)");
     }
     positions.push_back({s, CheckpointSource::kExtra});
   }
@@ -266,7 +265,7 @@ Plan make_plan(const PlanConfig& c) {
     }
   }
   std::stable_sort(positions.begin(), positions.end(),
-            [](const Pos& a, const Pos& b) { return a.s < b.s; });
+                   [](const Pos& a, const Pos& b) { return a.s < b.s; });
   std::vector<Pos> merged;
   for (const Pos& p : positions) {
     if (!merged.empty() && p.s - merged.back().s < kMergeDistanceMm) {
@@ -274,7 +273,8 @@ Plan make_plan(const PlanConfig& c) {
     }
     merged.push_back(p);
   }
-  if (c.closed && merged.size() > 1 && merged.front().s + length - merged.back().s < kMergeDistanceMm) {
+  if (c.closed && merged.size() > 1 &&
+      merged.front().s + length - merged.back().s < kMergeDistanceMm) {
     merged.pop_back();
   }
   if (merged.empty()) {
@@ -292,10 +292,9 @@ Plan make_plan(const PlanConfig& c) {
     plan.levels_z_mm.push_back(c.z_start_mm - static_cast<double>(l) * c.depth_step_mm);
   }
   if (n_levels * merged.size() > kMaxCheckpoints) {
-    fail("depth_step_mm", std::to_string(n_levels) + " levels x " +
-                              std::to_string(merged.size()) + " points = " +
-                              std::to_string(n_levels * merged.size()) + " checkpoints, more than " +
-                              std::to_string(kMaxCheckpoints));
+    fail("depth_step_mm", std::to_string(n_levels) + " levels x " + std::to_string(merged.size()) +
+                              " points = " + std::to_string(n_levels * merged.size()) +
+                              " checkpoints, more than " + std::to_string(kMaxCheckpoints));
   }
   const double link = c.level_link_mm < 0.0 ? c.depth_step_mm : c.level_link_mm;
   const double tan_a = std::tan(c.wall_angle_deg * kDegToRad);

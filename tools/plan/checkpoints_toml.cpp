@@ -55,8 +55,7 @@ class Reader {
     return v;
   }
 
-  std::int64_t integer(std::string_view key, std::int64_t def, std::int64_t min,
-                       std::int64_t max) {
+  std::int64_t integer(std::string_view key, std::int64_t def, std::int64_t min, std::int64_t max) {
     const toml::node* n = get(key);
     if (n == nullptr) return def;
     const std::string k(key);
@@ -66,8 +65,9 @@ class Reader {
     }
     const std::int64_t v = n->value<std::int64_t>().value_or(def);
     if (v < min || v > max) {
-      issue(n, k, "must be in [" + std::to_string(min) + ", " + std::to_string(max) + "], got " +
-                      std::to_string(v));
+      issue(n, k,
+            "must be in [" + std::to_string(min) + ", " + std::to_string(max) + "], got " +
+                std::to_string(v));
       return def;
     }
     return v;
@@ -179,8 +179,9 @@ CheckpointsConfig parse_checkpoints(const toml::table& table, const std::string&
     csv = contour_csv_override;
   }
   if ((inline_contour != nullptr) == csv.has_value()) {
-    r.issue(nullptr, "", "needs exactly one of contour = [[x_mm, y_mm], ...] or contour_csv = "
-                         "\"file.csv\"");
+    r.issue(nullptr, "",
+            "needs exactly one of contour = [[x_mm, y_mm], ...] or contour_csv = "
+            "\"file.csv\"");
   } else if (inline_contour != nullptr) {
     out.contour_source = file + ":" + std::to_string(inline_contour->source().begin.line);
     const toml::array* arr = inline_contour->as_array();
@@ -219,9 +220,8 @@ CheckpointsConfig parse_checkpoints(const toml::table& table, const std::string&
 
   // --- plan ---
   p.closed = r.boolean("closed", p.closed);
-  p.material = static_cast<cp::MaterialSide>(
-      r.choice("material", static_cast<std::size_t>(p.material),
-               {"left", "right", "inside", "outside"}));
+  p.material = static_cast<cp::MaterialSide>(r.choice(
+      "material", static_cast<std::size_t>(p.material), {"left", "right", "inside", "outside"}));
   p.contour_z_mm = r.number("contour_z_mm", p.contour_z_mm, -kBig, kBig);
   p.z_start_mm = r.number("z_start_mm", p.z_start_mm, -kBig, kBig);
   p.z_end_mm = r.number("z_end_mm", p.z_end_mm, -kBig, kBig);
@@ -281,15 +281,17 @@ CheckpointsConfig parse_checkpoints(const toml::table& table, const std::string&
   // --- compensator ---
   c.learning_mode = static_cast<cp::LearningMode>(
       r.choice("learning_mode", 0, {"previous_part", "semi_finishing"}));
-  c.finishing_tool = static_cast<std::int32_t>(r.integer("finishing_tool", c.finishing_tool, 0,
-                                                         std::numeric_limits<std::int32_t>::max()));
+  c.finishing_tool = static_cast<std::int32_t>(
+      r.integer("finishing_tool", c.finishing_tool, 0, std::numeric_limits<std::int32_t>::max()));
   c.semi_finishing_tool = static_cast<std::int32_t>(r.integer(
       "semi_finishing_tool", c.semi_finishing_tool, 0, std::numeric_limits<std::int32_t>::max()));
-  c.register_base = static_cast<std::uint16_t>(r.integer("register_base", c.register_base, 0, 65535));
-  c.active_register = static_cast<std::int32_t>(r.integer("active_register", c.active_register, -1, 65535));
+  c.register_base =
+      static_cast<std::uint16_t>(r.integer("register_base", c.register_base, 0, 65535));
+  c.active_register =
+      static_cast<std::int32_t>(r.integer("active_register", c.active_register, -1, 65535));
   c.apply = static_cast<cp::ApplyMode>(r.choice("apply", 1, {"step", "creep"}));
   const std::size_t shape = r.choice("creep_shape", 0, {"linear", "cosine", "smoothstep"});
-  c.creep_shape = shape == 0 ? core::ProfileShape::kLinear
+  c.creep_shape = shape == 0   ? core::ProfileShape::kLinear
                   : shape == 1 ? core::ProfileShape::kCosine
                                : core::ProfileShape::kSmoothstep;
   c.trigger = static_cast<cp::TriggerMode>(r.choice("trigger", 0, {"path", "position"}));
@@ -300,13 +302,16 @@ CheckpointsConfig parse_checkpoints(const toml::table& table, const std::string&
   c.feedback = r.number("feedback", c.feedback, 1e-6, 1.0);
   c.plausible_um = r.number("plausible_um", c.plausible_um, 1e-6, kBig);
   c.outlier_sigma = r.number("outlier_sigma", c.outlier_sigma, 1e-6, kBig);
-  c.outlier_min_history = static_cast<std::uint32_t>(r.integer(
-      "outlier_min_history", c.outlier_min_history, 2, static_cast<std::int64_t>(cp::kHistoryDepth)));
-  c.probe_repeatability_um = r.number("probe_repeatability_um", c.probe_repeatability_um, 0.0, kBig);
+  c.outlier_min_history =
+      static_cast<std::uint32_t>(r.integer("outlier_min_history", c.outlier_min_history, 2,
+                                           static_cast<std::int64_t>(cp::kHistoryDepth)));
+  c.probe_repeatability_um =
+      r.number("probe_repeatability_um", c.probe_repeatability_um, 0.0, kBig);
   c.write_threshold_um = r.number("write_threshold_um", c.write_threshold_um, 0.0, kBig);
-  c.reconcile_tolerance_um = r.number("reconcile_tolerance_um", c.reconcile_tolerance_um, 0.0, kBig);
-  c.reconcile_prefer = static_cast<cp::ReconcilePrefer>(
-      r.choice("reconcile_prefer", 0, {"daemon", "nc"}));
+  c.reconcile_tolerance_um =
+      r.number("reconcile_tolerance_um", c.reconcile_tolerance_um, 0.0, kBig);
+  c.reconcile_prefer =
+      static_cast<cp::ReconcilePrefer>(r.choice("reconcile_prefer", 0, {"daemon", "nc"}));
 
   // --- [checkpoints.gcode] ---
   if (const toml::node* n = r.get("gcode")) {

@@ -43,7 +43,8 @@ void run(const PlanOptions& o) {
     cfg = ck::load_checkpoints_file(
         o.config, o.contour.empty() ? std::nullopt : std::optional<std::string>(o.contour));
   } catch (const ck::ConfigError& e) {
-    throw CommandError(nccomp::tools::kExitInvalidInput, std::string("invalid config\n") + e.what());
+    throw CommandError(nccomp::tools::kExitInvalidInput,
+                       std::string("invalid config\n") + e.what());
   }
   // parse_checkpoints already built the plan once to validate it; this cannot fail now.
   const nccomp::core::checkpoint::Plan plan = nccomp::core::checkpoint::make_plan(cfg.plan);
@@ -66,8 +67,9 @@ void run(const PlanOptions& o) {
 void setup(CLI::App& app) {
   auto opts = std::make_shared<PlanOptions>();
   CLI::App* sub = app.add_subcommand(
-      "plan", "S1 checkpoint plan: probing positions in machining order (CSV) and the probing "
-              "program (G-code) from the [checkpoints] table of a config");
+      "plan",
+      "S1 checkpoint plan: probing positions in machining order (CSV) and the probing "
+      "program (G-code) from the [checkpoints] table of a config");
   sub->add_option("config", opts->config, "config file with a [checkpoints] table")->required();
   sub->add_option("--contour", opts->contour,
                   "contour CSV (x_mm,y_mm) replacing the config's contour / contour_csv");

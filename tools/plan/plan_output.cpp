@@ -29,14 +29,13 @@ const char* source_name(cp::CheckpointSource s) {
 void write_plan_summary(std::ostream& os, const cp::Plan& plan, const CheckpointsConfig& cfg) {
   const auto& c = cfg.compensator;
   const std::size_t n = plan.checkpoints.size();
-  os << "# contour: " << cfg.plan.contour.size() << " points from " << cfg.contour_source
-     << ", " << (cfg.plan.closed ? "closed" : "open") << ", length "
-     << fmt(3, plan.contour_length_mm) << " mm, material "
-     << cp::material_side_name(cfg.plan.material) << ", " << plan.corner_count << " corners\n";
+  os << "# contour: " << cfg.plan.contour.size() << " points from " << cfg.contour_source << ", "
+     << (cfg.plan.closed ? "closed" : "open") << ", length " << fmt(3, plan.contour_length_mm)
+     << " mm, material " << cp::material_side_name(cfg.plan.material) << ", " << plan.corner_count
+     << " corners\n";
   os << "# levels: " << plan.levels_z_mm.size() << " (z " << fmt(3, plan.levels_z_mm.front())
-     << " .. " << fmt(3, plan.levels_z_mm.back()) << " mm, step "
-     << fmt(3, cfg.plan.depth_step_mm) << " mm), " << n / plan.levels_z_mm.size()
-     << " points per level, " << n << " checkpoints\n";
+     << " .. " << fmt(3, plan.levels_z_mm.back()) << " mm, step " << fmt(3, cfg.plan.depth_step_mm)
+     << " mm), " << n / plan.levels_z_mm.size() << " points per level, " << n << " checkpoints\n";
   os << "# registers: " << c.register_base << " .. " << c.register_base + n - 1;
   if (cfg.gcode.nc_variable_first > 0) {
     os << " (NC variables #" << cfg.gcode.nc_variable_first << " .. #"
@@ -46,8 +45,7 @@ void write_plan_summary(std::ostream& os, const cp::Plan& plan, const Checkpoint
      << cp::apply_mode_name(c.apply) << ", trigger " << cp::trigger_mode_name(c.trigger) << "\n";
   os << "# probe: ball radius " << fmt(3, cfg.plan.ball_radius_mm) << " mm, wall angle "
      << fmt(3, cfg.plan.wall_angle_deg) << " deg, delta0 = r/cos(a) - r = "
-     << fmt(3, cp::probe_delta0_um(cfg.plan.ball_radius_mm, cfg.plan.wall_angle_deg))
-     << " um\n";
+     << fmt(3, cp::probe_delta0_um(cfg.plan.ball_radius_mm, cfg.plan.wall_angle_deg)) << " um\n";
 }
 
 void write_plan_csv(std::ostream& os, const cp::Plan& plan, const CheckpointsConfig& cfg) {
@@ -55,13 +53,12 @@ void write_plan_csv(std::ostream& os, const cp::Plan& plan, const CheckpointsCon
         "tool_x_mm,tool_y_mm,start_x_mm,start_y_mm\n";
   for (const cp::Checkpoint& k : plan.checkpoints) {
     os << k.id << ',' << k.level << ',' << source_name(k.source) << ','
-       << cfg.compensator.register_base + k.id << ',' << fmt(3, k.s_mm) << ','
-       << fmt(3, k.path_mm) << ',' << fmt(4, k.x_mm) << ',' << fmt(4, k.y_mm)
-       << ',' << fmt(4, k.z_mm) << ',' << fmt(6, k.dir_x) << ','
-       << fmt(6, k.dir_y) << ',' << fmt(3, k.alpha_deg) << ','
+       << cfg.compensator.register_base + k.id << ',' << fmt(3, k.s_mm) << ',' << fmt(3, k.path_mm)
+       << ',' << fmt(4, k.x_mm) << ',' << fmt(4, k.y_mm) << ',' << fmt(4, k.z_mm) << ','
+       << fmt(6, k.dir_x) << ',' << fmt(6, k.dir_y) << ',' << fmt(3, k.alpha_deg) << ','
        << fmt(3, cp::probe_delta0_um(cfg.plan.ball_radius_mm, k.alpha_deg)) << ','
-       << fmt(4, k.tool_x_mm) << ',' << fmt(4, k.tool_y_mm) << ','
-       << fmt(4, k.start_x_mm) << ',' << fmt(4, k.start_y_mm) << '\n';
+       << fmt(4, k.tool_x_mm) << ',' << fmt(4, k.tool_y_mm) << ',' << fmt(4, k.start_x_mm) << ','
+       << fmt(4, k.start_y_mm) << '\n';
   }
 }
 
@@ -76,13 +73,12 @@ void write_probing_gcode(std::ostream& os, const cp::Plan& plan, const Checkpoin
   os << "(A = WALL ANGLE DEG, R = BALL RADIUS MM, E = CHECKPOINT NUMBER)\n";
   os << "G90 G00 Z" << fmt(3, g.safe_z_mm) << "\n";
   for (const cp::Checkpoint& k : plan.checkpoints) {
-    os << "N" << (k.id + 1) << " G00 X" << fmt(3, k.start_x_mm) << " Y"
-       << fmt(3, k.start_y_mm) << "\n";
+    os << "N" << (k.id + 1) << " G00 X" << fmt(3, k.start_x_mm) << " Y" << fmt(3, k.start_y_mm)
+       << "\n";
     os << "G01 Z" << fmt(3, k.z_mm) << " F" << fmt(0, g.feed_mm_per_min) << ".\n";
-    os << "G65 P" << g.macro_program << " I" << fmt(4, k.dir_x) << " J"
-       << fmt(4, k.dir_y) << " D" << fmt(3, cfg.plan.probe_approach_mm) << " A"
-       << fmt(3, k.alpha_deg) << " R" << fmt(3, cfg.plan.ball_radius_mm) << " E"
-       << k.id << ".";
+    os << "G65 P" << g.macro_program << " I" << fmt(4, k.dir_x) << " J" << fmt(4, k.dir_y) << " D"
+       << fmt(3, cfg.plan.probe_approach_mm) << " A" << fmt(3, k.alpha_deg) << " R"
+       << fmt(3, cfg.plan.ball_radius_mm) << " E" << k.id << ".";
     if (g.nc_variable_first > 0) {
       os << " (#" << g.nc_variable_first + k.id << ")";
     }

@@ -50,8 +50,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     const std::uint8_t mode = *p++;
     cfg.apply = (mode & 1) ? cp::ApplyMode::kStep : cp::ApplyMode::kCreep;
     cfg.trigger = (mode & 2) ? cp::TriggerMode::kPosition : cp::TriggerMode::kPath;
-    cfg.learning_mode = (mode & 4) ? cp::LearningMode::kSemiFinishing
-                                   : cp::LearningMode::kPreviousPart;
+    cfg.learning_mode =
+        (mode & 4) ? cp::LearningMode::kSemiFinishing : cp::LearningMode::kPreviousPart;
   }
   comp->configure(cfg, plan, limits);
   StepOutput out;

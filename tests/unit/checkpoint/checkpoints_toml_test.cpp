@@ -95,7 +95,8 @@ TEST(CheckpointsToml, EveryProblemIsReportedWithLineAndKey) {
   EXPECT_NE(find("checkpoints.material").message.find("\"inside\""), std::string::npos);
   EXPECT_EQ(find("checkpoints.colour").message, "unknown key");
   EXPECT_EQ(find("checkpoints.apply").message, "must be a string");
-  EXPECT_EQ(format_issue(find("checkpoints.colour")), "test.toml:5:10: checkpoints.colour: unknown key");
+  EXPECT_EQ(format_issue(find("checkpoints.colour")),
+            "test.toml:5:10: checkpoints.colour: unknown key");
 }
 
 TEST(CheckpointsToml, SemanticErrorsFromTheCoreCarryTheKeysLine) {
@@ -106,8 +107,9 @@ TEST(CheckpointsToml, SemanticErrorsFromTheCoreCarryTheKeysLine) {
   ASSERT_EQ(issues.size(), 1U);
   EXPECT_EQ(issues[0].key_path, "checkpoints.z_end_mm");
   EXPECT_EQ(issues[0].line, 3);
-  issues = issues_of("[checkpoints]\ncontour = [[0,0],[100,0],[100,60],[0,60]]\n"
-                     "register_base = 20\nactive_register = 22\n");
+  issues = issues_of(
+      "[checkpoints]\ncontour = [[0,0],[100,0],[100,60],[0,60]]\n"
+      "register_base = 20\nactive_register = 22\n");
   ASSERT_EQ(issues.size(), 1U);
   EXPECT_EQ(issues[0].key_path, "checkpoints.active_register");
   EXPECT_EQ(issues[0].line, 4);
@@ -123,8 +125,7 @@ TEST(CheckpointsToml, ContourOverrideReplacesTheFilesContour) {
   const CheckpointsConfig c =
       load_checkpoints_file(kData + "/boss.toml", kData + "/boss_contour.csv");
   EXPECT_EQ(c.plan.contour.size(), 5U);
-  EXPECT_THROW((void)load_checkpoints_file(kData + "/boss.toml", kData + "/nope.csv"),
-               ConfigError);
+  EXPECT_THROW((void)load_checkpoints_file(kData + "/boss.toml", kData + "/nope.csv"), ConfigError);
 }
 
 }  // namespace

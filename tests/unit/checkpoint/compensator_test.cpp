@@ -332,8 +332,7 @@ TEST(Apply, StepHoldsEachCheckpointsValueUntilTheNext) {
 
 TEST(Apply, CreepReachesEachCheckpointsValueExactlyAtTheCheckpoint) {
   CheckpointCompensator comp;
-  comp.configure(live_config(ApplyMode::kCreep, TriggerMode::kPath), line_plan(3),
-                 wide_limits());
+  comp.configure(live_config(ApplyMode::kCreep, TriggerMode::kPath), line_plan(3), wide_limits());
   learn_values(comp, {4.0, 10.0, -6.0});
   (void)run(comp, {part_start(1)});
   const auto at = [&](double path) {
@@ -422,7 +421,7 @@ struct Motion {
 // radius plus the draft (arcs around the convex corners of the CCW boss), programmed path = the
 // contour's arc length (G41: the program is the contour), levels joined by a plunge.
 std::vector<std::array<double, 4>> tool_path(const PlanConfig& pc, const Plan& plan,
-                                              double step_mm) {
+                                             double step_mm) {
   std::vector<std::array<double, 4>> pts;
   const std::size_t nv = pc.contour.size();
   const double tan_a = std::tan(pc.wall_angle_deg * std::numbers::pi / 180.0);
@@ -457,8 +456,8 @@ std::vector<std::array<double, 4>> tool_path(const PlanConfig& pc, const Plan& p
       const int na = std::max(1, static_cast<int>(std::ceil(std::fabs(da) * off / step_mm)));
       for (int k = 0; k < na; ++k) {
         const double ang = a0 + da * k / na;
-        pts.push_back({b.x_mm + off * std::cos(ang), b.y_mm + off * std::sin(ang), z,
-                       base + s0 + len});
+        pts.push_back(
+            {b.x_mm + off * std::cos(ang), b.y_mm + off * std::sin(ang), z, base + s0 + len});
       }
       s0 += len;
     }
@@ -603,7 +602,7 @@ TEST(State, ReconcilePreferDaemonRewritesDifferingRegisters) {
   cfg.reconcile_tolerance_um = 0.5;
   comp.configure(cfg, line_plan(3), wide_limits());
   (void)run(comp, {probe(1, 0, 4.0), probe(1, 1, 6.0), probe(1, 2, 8.0)});
-  (void)run(comp, {});  // nothing pending in mode A until part start
+  (void)run(comp, {});                               // nothing pending in mode A until part start
   const std::vector<double> nc = {-4.2, 0.0, -8.0};  // register 21 lost its value
   const ReconcileReport rep = comp.reconcile(nc);
   EXPECT_EQ(rep.compared, 3U);

@@ -114,8 +114,7 @@ double mean_of(const std::vector<double>& v, std::size_t from, std::size_t to) {
 TEST(Series, ModeALearnsPushOffRisingWithHeightAndTheHardnessGradient) {
   const Series s = run_mode_a(4.0, 20, 0.7, 42);
   std::printf("mode A, k=4: wall RMS part 1 %.2f um, part 2 %.2f um, parts 6-20 %.2f um\n",
-              s.rms_per_part_um[0], s.rms_per_part_um[1],
-              mean_of(s.rms_per_part_um, 5, 20));
+              s.rms_per_part_um[0], s.rms_per_part_um[1], mean_of(s.rms_per_part_um, 5, 20));
   // Part 1 is cut uncompensated: the full push-off (≈ 8–40 µm).
   EXPECT_GT(s.rms_per_part_um[0], 15.0);
   // Part 2 already carries part 1's errors; from part 6 on the wall is within ~1.5 µm RMS.

@@ -2,10 +2,10 @@
 
 #include <gtest/gtest.h>
 
-#include <cmath>
-#include <cstddef>
 #include <array>
 #include <bit>
+#include <cmath>
+#include <cstddef>
 #include <memory>
 #include <stdexcept>
 #include <vector>

@@ -138,7 +138,8 @@ TEST(Plan, OpenContourAndShortSegmentsClampTheCornerOffset) {
   c.depth_step_mm = 1.0;
   c.corner_offset_mm = 5.0;
   const Plan p = make_plan(c);
-  ASSERT_EQ(p.checkpoints.size(), 3U);  // 45, 53 (= 50 + 3 after the first, 3 before the second), 61
+  ASSERT_EQ(p.checkpoints.size(),
+            3U);  // 45, 53 (= 50 + 3 after the first, 3 before the second), 61
   EXPECT_DOUBLE_EQ(p.checkpoints[0].s_mm, 45.0);
   EXPECT_DOUBLE_EQ(p.checkpoints[1].s_mm, 53.0);
   EXPECT_DOUBLE_EQ(p.checkpoints[2].s_mm, 61.0);
