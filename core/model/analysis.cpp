@@ -552,6 +552,30 @@ double noise_floor_um(const Dataset& data, const std::vector<double>& residual,
   return n > 0 ? std::sqrt(ss / (2.0 * dz(n))) : 0.0;
 }
 
+double lag1_autocorrelation(const Dataset& data, const std::vector<double>& residual,
+                            const std::vector<std::uint8_t>& use) {
+  std::map<std::tuple<double, double, double>, double> last;
+  double num = 0.0;
+  double den = 0.0;
+  const auto& kind = data.column(static_cast<int>(Column::kKind));
+  const auto& point = data.column(static_cast<int>(Column::kPoint));
+  const auto& tool = data.column(static_cast<int>(Column::kTool));
+  for (std::size_t i = 0; i < data.rows(); ++i) {
+    if (use[i] == 0U || !std::isfinite(residual[i])) continue;
+    den += residual[i] * residual[i];
+    const auto key = std::make_tuple(kind.empty() ? 0.0 : kind[i], point.empty() ? 0.0 : point[i],
+                                     tool.empty() ? 0.0 : tool[i]);
+    auto it = last.find(key);
+    if (it != last.end()) {
+      num += residual[i] * it->second;
+      it->second = residual[i];
+    } else {
+      last.emplace(key, residual[i]);
+    }
+  }
+  return den > 0.0 ? num / den : 0.0;
+}
+
 std::vector<Candidate> make_candidates(const Dataset& data, const std::vector<std::uint8_t>& use,
                                        const SearchOptions& options) {
   std::vector<Candidate> out;
@@ -729,9 +753,10 @@ AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
     tried.clear();
     std::vector<Ranked> ranked;
     for (const Candidate& c : all) {
-      const bool present = std::any_of(in_model.begin(), in_model.end(),
-                                       [&](const TermSpec& s) { return same_term(s, c.spec); });
-      if (!present) cands.push_back(c);
+      const auto present = std::count_if(in_model.begin(), in_model.end(),
+                                         [&](const TermSpec& s) { return same_term(s, c.spec); });
+      // A lag may be taken twice: two heat paths of one source with different time constants.
+      if (present == 0 || (c.spec.form == Form::kLag && present == 1)) cands.push_back(c);
     }
     if (cands.empty()) return ranked;
     const SearchSet set = make_search_set(data, m, use, res, config.search_rows);
@@ -780,7 +805,14 @@ AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
     const double df1 =
         dz(t.stats.parameters > base.parameters ? t.stats.parameters - base.parameters : 1) +
         extra;
-    const double df2 = dz(t.stats.fitted.rows) - dz(t.stats.parameters) - extra;
+    // Rows sampled densely in time (a gauge every 15 s) have correlated residuals: the F-test
+    // would count them as independent. Scale to the effective number of rows of an AR(1)
+    // residual, n (1 − ρ) / (1 + ρ); independent rows (ρ ≈ 0) keep the plain test.
+    const double rho = config.ar1_correction
+                           ? std::clamp(lag1_autocorrelation(data, t.residual, use), 0.0, 0.999)
+                           : 0.0;
+    const double shrink = (1.0 - rho) / (1.0 + rho);
+    const double df2 = dz(t.stats.fitted.rows) * shrink - dz(t.stats.parameters) - extra;
     if (df2 > 0.0 && t.stats.rss < base.rss) {
       t.f = ((base.rss - t.stats.rss) / df1) / (std::max(t.stats.rss, 1e-300) / df2);
       const double p = f_distribution_upper_tail(t.f, df1, df2);

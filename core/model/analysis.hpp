@@ -75,6 +75,9 @@ struct AnalysisConfig {
   /// When the best candidate is significant but worsens the held-out rows, try it together
   /// with the best next candidate (both must be significant, the pair must help held out).
   bool lookahead{true};
+  /// Scale the F-test to the effective number of rows of an AR(1) residual. Off = rows are
+  /// taken as independent and only the held-out check guards against serially correlated data.
+  bool ar1_correction{true};
   /// Rows used for the non-linear grid search (the fits use all rows).
   std::size_t search_rows{20000};
 };
@@ -156,6 +159,10 @@ std::vector<double> residuals(const Dataset& data, const Model& model);
 /// series in time order; smooth effects cancel in the differences, the noise does not.
 double noise_floor_um(const Dataset& data, const std::vector<double>& residual,
                       const std::vector<std::uint8_t>& use);
+
+/// Lag-1 autocorrelation of the residual within each (kind, point, tool) series in row order.
+double lag1_autocorrelation(const Dataset& data, const std::vector<double>& residual,
+                            const std::vector<std::uint8_t>& use);
 
 /// The candidate effects for this data set (the effect names of issue 11).
 std::vector<Candidate> make_candidates(const Dataset& data, const std::vector<std::uint8_t>& use,

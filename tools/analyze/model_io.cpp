@@ -142,9 +142,18 @@ ModelFile read_model_table(const toml::table& root, std::string_view source, boo
   const auto* model = root["model"].as_table();
   if (model == nullptr) fail(std::string(source) + ": no [model] table");
   check_keys(*model, source, "model",
-             {"heldout_fraction", "alpha", "max_effects", "search_rows", "term", "search"});
+             {"heldout_fraction", "alpha", "max_effects", "search_rows", "ar1_correction",
+              "lookahead", "term", "search"});
   ModelFile out;
   cm::AnalysisConfig& cfg = out.config;
+  for (const char* flag : {"ar1_correction", "lookahead"}) {
+    if (const auto* n = model->get(flag)) {
+      const std::string key = std::string("model.") + flag;
+      if (!n->is_boolean()) fail(where(source, *n, key) + ": must be true or false");
+      (std::string_view(flag) == "lookahead" ? cfg.lookahead : cfg.ar1_correction) =
+          n->value_or(true);
+    }
+  }
   if (const auto* n = model->get("heldout_fraction")) {
     cfg.heldout_fraction = get_number(*n, source, "model.heldout_fraction");
     if (cfg.heldout_fraction < 0.0 || cfg.heldout_fraction > 0.5) {
@@ -329,6 +338,8 @@ std::string write_model_toml(const core::model::Model& model,
   o << "alpha = " << fmt_double(config.alpha) << "\n";
   o << "max_effects = " << config.max_effects << "\n";
   o << "search_rows = " << config.search_rows << "\n";
+  o << "ar1_correction = " << (config.ar1_correction ? "true" : "false") << "\n";
+  o << "lookahead = " << (config.lookahead ? "true" : "false") << "\n";
   for (const cm::Term& t : model.terms()) {
     const cm::TermSpec& s = t.spec;
     o << "\n[[model.term]]\n";
