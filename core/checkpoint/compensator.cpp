@@ -260,8 +260,10 @@ void CheckpointCompensator::on_probe(const ProbeMeasurement& m, StepOutput& out)
   rec.position_mm = m.position_mm;
   rec.angle_deg = m.wall_angle_deg;
   rec.measured_um = corr.corrected_um;
-  rec.applied_um = applied;
-  out.records.push(rec);  // logged whatever is decided below: outliers are data too
+  // The log's convention (core/model's Dataset::target_um): measured_um + applied_um is the error
+  // the machine made before compensation. The offset c cancelled −c of the error.
+  rec.applied_um = 0.0 - applied;  // not -applied: no "-0" in the log
+  out.records.push(rec);           // logged whatever is decided below: outliers are data too
 
   if (std::fabs(corr.corrected_um) > config_.plausible_um) {
     ++counters_.implausible;

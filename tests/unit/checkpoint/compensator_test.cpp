@@ -155,7 +155,9 @@ TEST(Learning, EwmaFeedbackAndSinumerikForm) {
   // Part 2 cut with c = −10 shows a residual of 2 µm: e = 2 − (−10) = 12,
   // M = 10 + (12 − 10)/2 = 11, c = −11.
   out = run(comp, {part_start(2), probe(2, 0, 2.0)});
-  EXPECT_DOUBLE_EQ(out.records[0].applied_um, -10.0);
+  // Logged as the share of the error the offset removed: measured + applied = e = 12.
+  EXPECT_DOUBLE_EQ(out.records[0].applied_um, 10.0);
+  EXPECT_DOUBLE_EQ(out.records[0].measured_um + out.records[0].applied_um, 12.0);
   EXPECT_DOUBLE_EQ(comp.learned_um(0), 11.0);
   EXPECT_DOUBLE_EQ(comp.register_value_um(0), -11.0);
   EXPECT_EQ(comp.learned_count(0), 2U);
