@@ -1,12 +1,12 @@
 #include "daemon/daemon.hpp"
 
+#include <poll.h>
 #include <signal.h>
+#include <spdlog/spdlog.h>
 #include <sys/mman.h>
 #include <sys/signalfd.h>
-#include <poll.h>
-#include <unistd.h>
 #include <systemd/sd-daemon.h>
-#include <spdlog/spdlog.h>
+#include <unistd.h>
 
 #include <chrono>
 #include <cstdlib>
@@ -147,7 +147,8 @@ int run_daemon(const DaemonOptions& options) {
 
   // State: absent → fresh; valid → resumed; corrupt or unusable → hold (offsets stay as the NC
   // has them) and an alarm, never a guess.
-  const std::string state_dir = pick_dir(*config, ssec.directory, "STATE_DIRECTORY", "/var/lib/nccompd");
+  const std::string state_dir =
+      pick_dir(*config, ssec.directory, "STATE_DIRECTORY", "/var/lib/nccompd");
   const std::string state_path = state_dir + "/state.bin";
   std::error_code ec;
   fs::create_directories(state_dir, ec);
@@ -171,16 +172,20 @@ int run_daemon(const DaemonOptions& options) {
     }
   }
   if (!state_problem.empty()) {
-    spdlog::error("{}; offsets are HELD (nothing is written to the NC). Restore or remove the file "
-                  "and restart nccompd.", state_problem);
+    spdlog::error(
+        "{}; offsets are HELD (nothing is written to the NC). Restore or remove the file "
+        "and restart nccompd.",
+        state_problem);
   }
 
   if (dsec.lock_memory) {
     if (mlockall(MCL_CURRENT | MCL_FUTURE) == 0) {
       spdlog::info("memory locked (mlockall)");
     } else {
-      spdlog::warn("mlockall failed: {} (loop may page-fault; grant CAP_IPC_LOCK or raise "
-                   "LimitMEMLOCK)", std::strerror(errno));
+      spdlog::warn(
+          "mlockall failed: {} (loop may page-fault; grant CAP_IPC_LOCK or raise "
+          "LimitMEMLOCK)",
+          std::strerror(errno));
     }
   }
 
@@ -197,7 +202,8 @@ int run_daemon(const DaemonOptions& options) {
     }
   }
 
-  const std::size_t blob_bytes = std::max<std::size_t>(64 * 1024, 4 * runtime->engine->state_capacity());
+  const std::size_t blob_bytes =
+      std::max<std::size_t>(64 * 1024, 4 * runtime->engine->state_capacity());
   StatePersister persister(state_path, blob_bytes);
   persister.start(sequence);
 
@@ -255,10 +261,10 @@ int run_daemon(const DaemonOptions& options) {
   sc.state_path = state_path;
   StatusServer status(sc);
   const auto& stsec = cfg::status_section(*config);
-  const std::string sock = stsec.socket_path.empty()
-                               ? pick_dir(*config, "", "RUNTIME_DIRECTORY", "/run/nccompd") +
-                                     "/status.sock"
-                               : config->resolve(stsec.socket_path);
+  const std::string sock =
+      stsec.socket_path.empty()
+          ? pick_dir(*config, "", "RUNTIME_DIRECTORY", "/run/nccompd") + "/status.sock"
+          : config->resolve(stsec.socket_path);
   fs::create_directories(fs::path(sock).parent_path(), ec);
   try {
     status.start(sock, stsec.prometheus_address, stsec.prometheus_port);
@@ -299,8 +305,8 @@ int run_daemon(const DaemonOptions& options) {
     spdlog::info("loop thread: {} KiB of stack pre-faulted", rep.prefaulted_kib);
   }
 
-  notify("READY=1\nSTATUS=running: loop " + std::to_string(static_cast<int>(dsec.rate_hz)) +
-         " Hz" + (state_problem.empty() ? "" : ", OFFSETS HELD (state corrupt)"));
+  notify("READY=1\nSTATUS=running: loop " + std::to_string(static_cast<int>(dsec.rate_hz)) + " Hz" +
+         (state_problem.empty() ? "" : ", OFFSETS HELD (state corrupt)"));
   std::uint64_t watchdog_usec = 0;
   const bool watchdog = sd_watchdog_enabled(0, &watchdog_usec) > 0 && watchdog_usec > 0;
   if (watchdog) {
@@ -344,12 +350,14 @@ int run_daemon(const DaemonOptions& options) {
               ++generation;
               {
                 std::lock_guard<std::mutex> lock(names_mu);
-                names = std::make_shared<const std::vector<std::string>>(
-                    register_names(*next.config));
+                names =
+                    std::make_shared<const std::vector<std::string>>(register_names(*next.config));
               }
               swap.publish(std::move(rt));
-              spdlog::info("reload: configuration {} accepted (loop settings, buses, state, log "
-                           "and status settings take effect at the next restart)", generation);
+              spdlog::info(
+                  "reload: configuration {} accepted (loop settings, buses, state, log "
+                  "and status settings take effect at the next restart)",
+                  generation);
             } catch (const std::exception& e) {
               refused = e.what();
             }

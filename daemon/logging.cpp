@@ -7,8 +7,8 @@
 #include <systemd/sd-daemon.h>
 
 #include <chrono>
-#include <cstdlib>
 #include <cstdio>
+#include <cstdlib>
 
 namespace nccomp::daemon {
 
@@ -52,25 +52,44 @@ std::string setup_logging(const config::LogSection& section) {
 std::string alarm_name(core::AlarmCode code) {
   using core::AlarmCode;
   switch (code) {
-    case AlarmCode::kNone: return "none";
-    case AlarmCode::kOffsetNonFinite: return "offset_non_finite";
-    case AlarmCode::kOffsetBeyondAbsoluteLimit: return "offset_beyond_absolute_limit";
-    case AlarmCode::kOffsetSlewLimited: return "offset_slew_limited";
-    case AlarmCode::kCreepUnfinished: return "creep_unfinished";
-    case AlarmCode::kToolLifeReached: return "tool_life_reached";
-    case AlarmCode::kToolExcessivelyWorn: return "tool_excessively_worn";
-    case AlarmCode::kToolBrokenOrMismeasured: return "tool_broken_or_mismeasured";
-    case AlarmCode::kMeasurementDue: return "measurement_due";
-    case AlarmCode::kProbeImplausible: return "probe_implausible";
-    case AlarmCode::kProbeOutlier: return "probe_outlier";
-    case AlarmCode::kProbeInvalidInput: return "probe_invalid_input";
-    case AlarmCode::kRecalibrationImplausible: return "recalibration_implausible";
-    case AlarmCode::kTouchScatter: return "touch_scatter";
-    case AlarmCode::kStateCorrupt: return "state_corrupt";
-    case AlarmCode::kEventInvalid: return "event_invalid";
-    case AlarmCode::kRegisterUnknown: return "register_unknown";
-    case AlarmCode::kOffsetWriteDropped: return "offset_write_dropped";
-    default: break;
+    case AlarmCode::kNone:
+      return "none";
+    case AlarmCode::kOffsetNonFinite:
+      return "offset_non_finite";
+    case AlarmCode::kOffsetBeyondAbsoluteLimit:
+      return "offset_beyond_absolute_limit";
+    case AlarmCode::kOffsetSlewLimited:
+      return "offset_slew_limited";
+    case AlarmCode::kCreepUnfinished:
+      return "creep_unfinished";
+    case AlarmCode::kToolLifeReached:
+      return "tool_life_reached";
+    case AlarmCode::kToolExcessivelyWorn:
+      return "tool_excessively_worn";
+    case AlarmCode::kToolBrokenOrMismeasured:
+      return "tool_broken_or_mismeasured";
+    case AlarmCode::kMeasurementDue:
+      return "measurement_due";
+    case AlarmCode::kProbeImplausible:
+      return "probe_implausible";
+    case AlarmCode::kProbeOutlier:
+      return "probe_outlier";
+    case AlarmCode::kProbeInvalidInput:
+      return "probe_invalid_input";
+    case AlarmCode::kRecalibrationImplausible:
+      return "recalibration_implausible";
+    case AlarmCode::kTouchScatter:
+      return "touch_scatter";
+    case AlarmCode::kStateCorrupt:
+      return "state_corrupt";
+    case AlarmCode::kEventInvalid:
+      return "event_invalid";
+    case AlarmCode::kRegisterUnknown:
+      return "register_unknown";
+    case AlarmCode::kOffsetWriteDropped:
+      return "offset_write_dropped";
+    default:
+      break;
   }
   // Codes added by other modules after this list was written still print usefully.
   return "code_" + std::to_string(static_cast<unsigned>(code));
@@ -78,9 +97,12 @@ std::string alarm_name(core::AlarmCode code) {
 
 const char* severity_name(core::Severity s) {
   switch (s) {
-    case core::Severity::kInfo: return "info";
-    case core::Severity::kWarning: return "warning";
-    case core::Severity::kAlarm: return "alarm";
+    case core::Severity::kInfo:
+      return "info";
+    case core::Severity::kWarning:
+      return "warning";
+    case core::Severity::kAlarm:
+      return "alarm";
   }
   return "unknown";
 }
@@ -132,9 +154,10 @@ void EventLogger::drain() {
       case NoteCode::kOverrun:
         ++overruns_unlogged_;
         if (n.time_ns - overrun_log_ns_ >= 1'000'000'000) {
-          spdlog::warn("loop overrun: woke {:.0f} us late, {} deadline(s) skipped ({} overrun(s) "
-                       "since the last message)",
-                       n.b, n.a, overruns_unlogged_);
+          spdlog::warn(
+              "loop overrun: woke {:.0f} us late, {} deadline(s) skipped ({} overrun(s) "
+              "since the last message)",
+              n.b, n.a, overruns_unlogged_);
           overrun_log_ns_ = n.time_ns;
           overruns_unlogged_ = 0;
         }
@@ -150,8 +173,8 @@ void EventLogger::drain() {
         spdlog::error("state export failed: the engine needs {} bytes", n.a);
         break;
       case NoteCode::kWriteDropped:
-        spdlog::warn("offset write to register {} ({} um) dropped: bus TX ring full or no bus",
-                     n.a, n.b);
+        spdlog::warn("offset write to register {} ({} um) dropped: bus TX ring full or no bus", n.a,
+                     n.b);
         break;
     }
   }

@@ -226,7 +226,8 @@ void Loop::cycle(core::TimeNs wake_ns) {
       ++local_.writes_dry_run;
       continue;
     }
-    const int b = w.register_index < rt.register_bus.size() ? rt.register_bus[w.register_index] : -1;
+    const int b =
+        w.register_index < rt.register_bus.size() ? rt.register_bus[w.register_index] : -1;
     if (b >= 0 && static_cast<std::size_t>(b) < buses_.size() &&
         buses_[static_cast<std::size_t>(b)]->tx().try_push(w)) {
       ++local_.writes_sent;
@@ -282,7 +283,8 @@ void Loop::cycle(core::TimeNs wake_ns) {
   if (local_.cycles % 10 == 1) {
     RegisterSnapshot snap;
     snap.config_generation = rt.generation;
-    snap.count = static_cast<std::uint32_t>(std::min(engine.register_count(), kMaxSnapshotRegisters));
+    snap.count =
+        static_cast<std::uint32_t>(std::min(engine.register_count(), kMaxSnapshotRegisters));
     for (std::size_t i = 0; i < snap.count; ++i) {
       snap.regs[i] = engine.register_state(i);
     }

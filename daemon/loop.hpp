@@ -90,24 +90,24 @@ struct LoopStats {
   std::uint64_t overruns{0};
   std::uint64_t missed_deadlines{0};
   core::TimeNs last_latency_ns{0};
-  core::TimeNs max_step_ns{0};          // longest cycle body (wake → done)
+  core::TimeNs max_step_ns{0};  // longest cycle body (wake → done)
   std::uint64_t events_in{0};
   std::uint64_t writes_sent{0};
   std::uint64_t writes_dry_run{0};
   std::uint64_t writes_dropped{0};
   std::uint64_t alarms{0};
-  std::uint64_t alarms_dropped{0};      // alarm ring full
+  std::uint64_t alarms_dropped{0};  // alarm ring full
   std::uint64_t notes_dropped{0};
   std::uint64_t records{0};
-  std::uint64_t records_dropped{0};     // measurement ring full or no writer
+  std::uint64_t records_dropped{0};  // measurement ring full or no writer
   std::uint64_t state_exports{0};
-  std::uint64_t state_export_busy{0};   // persister behind: export postponed
+  std::uint64_t state_export_busy{0};  // persister behind: export postponed
   std::uint64_t state_export_failed{0};
   std::uint64_t config_generation{0};
   std::uint64_t reloads{0};
   std::int64_t minor_faults_after_warmup{-1};  // -1 until the baseline is taken
   std::int64_t major_faults_after_warmup{-1};
-  std::int64_t allocations_after_warmup{-1};   // -1 = not measured
+  std::int64_t allocations_after_warmup{-1};  // -1 = not measured
   bool hold{false};
   bool dry_run{false};
   core::engine::EngineCounters engine{};

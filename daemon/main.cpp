@@ -8,8 +8,7 @@ int main(int argc, char** argv) {
   nccomp::daemon::DaemonOptions options;
   app.add_option("-c,--config", options.config_path, "Configuration file (TOML)")
       ->capture_default_str();
-  app.add_flag("--dry-run", options.dry_run,
-               "Compute and log everything, write nothing to the NC");
+  app.add_flag("--dry-run", options.dry_run, "Compute and log everything, write nothing to the NC");
   app.set_version_flag("--version", "nccompd 0.1.0");
   CLI11_PARSE(app, argc, argv);
   return nccomp::daemon::run_daemon(options);

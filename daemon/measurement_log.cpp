@@ -36,8 +36,8 @@ std::string format_measurement_row(const core::MeasurementRecord& r) {
   char buf[64];
   std::snprintf(buf, sizeof buf, "%.6f", core::seconds(r.time_ns));
   s += buf;
-  s += ',' + std::to_string(r.part) + ',' + std::to_string(r.tool) + ',' + kind_name(r.kind) +
-       ',' + std::to_string(r.point);
+  s += ',' + std::to_string(r.part) + ',' + std::to_string(r.tool) + ',' + kind_name(r.kind) + ',' +
+       std::to_string(r.point);
   for (double p : r.position_mm) {
     cell(s, p, 4);
   }

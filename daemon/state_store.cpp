@@ -99,12 +99,14 @@ StateFile read_state_file(const std::string& path) {
     return out;
   }
   if (size > kMaxPayloadBytes || raw.size() != kHeaderBytes + size) {
-    out.reason = "size mismatch: header says " + std::to_string(size) + " payload bytes, file has " +
-                 std::to_string(raw.size() - kHeaderBytes) + " (truncated or appended)";
+    out.reason = "size mismatch: header says " + std::to_string(size) +
+                 " payload bytes, file has " + std::to_string(raw.size() - kHeaderBytes) +
+                 " (truncated or appended)";
     return out;
   }
   const auto* bytes = reinterpret_cast<const std::byte*>(raw.data());
-  const std::uint32_t actual = crc32(std::span<const std::byte>(bytes + kCrcFrom, raw.size() - kCrcFrom));
+  const std::uint32_t actual =
+      crc32(std::span<const std::byte>(bytes + kCrcFrom, raw.size() - kCrcFrom));
   if (actual != crc) {
     char buf[96];
     std::snprintf(buf, sizeof buf, "checksum mismatch: stored %08x, computed %08x", crc, actual);
@@ -126,7 +128,8 @@ void write_state_file(const std::string& path, std::span<const std::byte> payloa
   std::memcpy(header.data() + 16, &size, 8);
   std::memcpy(header.data() + 24, &sequence, 8);
   const std::uint32_t crc =
-      crc32(payload, crc32(std::span<const std::byte>(header.data() + kCrcFrom, kHeaderBytes - kCrcFrom)));
+      crc32(payload,
+            crc32(std::span<const std::byte>(header.data() + kCrcFrom, kHeaderBytes - kCrcFrom)));
   std::memcpy(header.data() + 12, &crc, 4);
 
   const std::string tmp = path + ".tmp";

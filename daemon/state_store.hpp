@@ -90,8 +90,8 @@ class StatePersister {
   std::string path_;
   std::size_t blob_bytes_;
   std::vector<std::unique_ptr<Blob>> pool_;
-  core::rt::SpscRing<Blob*> free_;   // persister → loop
-  core::rt::SpscRing<Blob*> full_;   // loop → persister
+  core::rt::SpscRing<Blob*> free_;  // persister → loop
+  core::rt::SpscRing<Blob*> full_;  // loop → persister
   std::atomic<bool> stop_{false};
   std::thread thread_;
   mutable std::mutex mu_;  // guards stats_ and serialises writes (thread vs write_now)

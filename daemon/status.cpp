@@ -98,11 +98,16 @@ std::string reg_name(const View& v, std::size_t i) {
 
 const char* link_state_name(drivers::LinkState s) {
   switch (s) {
-    case drivers::LinkState::kStopped: return "stopped";
-    case drivers::LinkState::kConnecting: return "connecting";
-    case drivers::LinkState::kUp: return "up";
-    case drivers::LinkState::kDegraded: return "degraded";
-    case drivers::LinkState::kDown: return "down";
+    case drivers::LinkState::kStopped:
+      return "stopped";
+    case drivers::LinkState::kConnecting:
+      return "connecting";
+    case drivers::LinkState::kUp:
+      return "up";
+    case drivers::LinkState::kDegraded:
+      return "degraded";
+    case drivers::LinkState::kDown:
+      return "down";
   }
   return "unknown";
 }
@@ -114,12 +119,13 @@ std::string render_json(const StatusContext& c) {
   o << "{\"daemon\":{\"pid\":" << ::getpid() << ",\"config\":\"" << json_escape(c.config_path)
     << "\",\"config_generation\":" << s.config_generation << ",\"reloads\":" << s.reloads
     << ",\"dry_run\":" << (s.dry_run ? "true" : "false")
-    << ",\"hold\":" << (s.hold ? "true" : "false") << ",\"state_problem\":"
-    << string_or_null(v.problem) << "},";
-  o << "\"loop\":{\"rate_hz\":" << num(v.rate_hz) << ",\"measured_rate_hz\":"
-    << num(v.measured_rate_hz) << ",\"cycles\":" << s.cycles << ",\"overruns\":" << s.overruns
-    << ",\"missed_deadlines\":" << s.missed_deadlines << ",\"latency_us\":{\"p50\":" << num(v.p50)
-    << ",\"p99\":" << num(v.p99) << ",\"p99_9\":" << num(v.p999) << ",\"max\":" << num(v.max_us)
+    << ",\"hold\":" << (s.hold ? "true" : "false")
+    << ",\"state_problem\":" << string_or_null(v.problem) << "},";
+  o << "\"loop\":{\"rate_hz\":" << num(v.rate_hz)
+    << ",\"measured_rate_hz\":" << num(v.measured_rate_hz) << ",\"cycles\":" << s.cycles
+    << ",\"overruns\":" << s.overruns << ",\"missed_deadlines\":" << s.missed_deadlines
+    << ",\"latency_us\":{\"p50\":" << num(v.p50) << ",\"p99\":" << num(v.p99)
+    << ",\"p99_9\":" << num(v.p999) << ",\"max\":" << num(v.max_us)
     << ",\"last\":" << num(static_cast<double>(s.last_latency_ns) / 1000.0)
     << "},\"max_cycle_us\":" << num(static_cast<double>(s.max_step_ns) / 1000.0)
     << ",\"minor_faults_after_warmup\":" << s.minor_faults_after_warmup
@@ -128,21 +134,22 @@ std::string render_json(const StatusContext& c) {
     << ",\"writes_dry_run\":" << s.writes_dry_run << ",\"writes_dropped\":" << s.writes_dropped
     << ",\"alarms\":" << s.alarms << ",\"alarms_dropped\":" << s.alarms_dropped
     << ",\"records\":" << s.records << ",\"records_dropped\":" << s.records_dropped
-    << ",\"state_exports\":" << s.state_exports << ",\"state_export_busy\":"
-    << s.state_export_busy << ",\"state_export_failed\":" << s.state_export_failed << "},";
+    << ",\"state_exports\":" << s.state_exports << ",\"state_export_busy\":" << s.state_export_busy
+    << ",\"state_export_failed\":" << s.state_export_failed << "},";
   const auto& e = s.engine;
-  o << "\"engine\":{\"events_accepted\":" << e.events_accepted << ",\"events_invalid\":"
-    << e.events_invalid << ",\"events_overflow\":" << e.events_overflow
-    << ",\"writes_forwarded\":" << e.writes_forwarded << ",\"writes_rejected\":"
-    << e.writes_rejected << ",\"writes_unknown_register\":" << e.writes_unknown_register
+  o << "\"engine\":{\"events_accepted\":" << e.events_accepted
+    << ",\"events_invalid\":" << e.events_invalid << ",\"events_overflow\":" << e.events_overflow
+    << ",\"writes_forwarded\":" << e.writes_forwarded
+    << ",\"writes_rejected\":" << e.writes_rejected
+    << ",\"writes_unknown_register\":" << e.writes_unknown_register
     << ",\"writes_held\":" << e.writes_held << ",\"output_overflows\":" << e.output_overflows
     << "},";
   o << "\"registers\":[";
   for (std::size_t i = 0; i < v.r.count; ++i) {
     const auto& r = v.r.regs[i];
     o << (i ? "," : "") << "{\"index\":" << i << ",\"name\":\"" << json_escape(reg_name(v, i))
-      << "\",\"output_um\":" << num(r.output_um) << ",\"target_um\":"
-      << (r.has_target ? num(r.target_um) : "null")
+      << "\",\"output_um\":" << num(r.output_um)
+      << ",\"target_um\":" << (r.has_target ? num(r.target_um) : "null")
       << ",\"slewing\":" << (r.slewing ? "true" : "false") << "}";
   }
   o << "],\"buses\":[";
@@ -154,22 +161,21 @@ std::string render_json(const StatusContext& c) {
       << ",\"frames_rx\":" << k.frames_rx << ",\"frames_tx\":" << k.frames_tx
       << ",\"events_decoded\":" << k.events_decoded << ",\"events_dropped\":" << k.events_dropped
       << ",\"malformed\":" << k.malformed << ",\"offsets_written\":" << k.offsets_written
-      << ",\"offsets_retried\":" << k.offsets_retried << ",\"offsets_failed\":"
-      << k.offsets_failed << ",\"reconnects\":" << k.reconnects << ",\"faults\":" << k.faults
-      << "}";
+      << ",\"offsets_retried\":" << k.offsets_retried << ",\"offsets_failed\":" << k.offsets_failed
+      << ",\"reconnects\":" << k.reconnects << ",\"faults\":" << k.faults << "}";
   }
   o << "],\"state\":{\"path\":\"" << json_escape(c.state_path) << "\"";
   if (c.persister != nullptr) {
     const auto ps = c.persister->stats();
     o << ",\"writes\":" << ps.writes << ",\"failures\":" << ps.failures
-      << ",\"sequence\":" << ps.sequence << ",\"last_error\":"
-      << string_or_null(ps.last_error);
+      << ",\"sequence\":" << ps.sequence << ",\"last_error\":" << string_or_null(ps.last_error);
   }
   o << "},\"measurement_log\":";
   if (c.measurement_log != nullptr) {
     o << "{\"path\":\"" << json_escape(c.measurement_log->current_path())
-      << "\",\"rows\":" << c.measurement_log->rows() << ",\"rotations\":"
-      << c.measurement_log->rotations() << ",\"errors\":" << c.measurement_log->errors() << "}";
+      << "\",\"rows\":" << c.measurement_log->rows()
+      << ",\"rotations\":" << c.measurement_log->rotations()
+      << ",\"errors\":" << c.measurement_log->errors() << "}";
   } else {
     o << "null";
   }
@@ -235,19 +241,18 @@ std::string render_text(const StatusContext& c) {
   for (const auto& [name, bus] : c.buses) {
     const auto st = bus->status();
     const auto& k = st.counters;
-    std::snprintf(buf, sizeof buf,
-                  "  %-10s %-10s%s rx %llu, tx %llu, events %llu (dropped %llu, malformed "
-                  "%llu), offsets %llu (failed %llu), reconnects %llu, faults %llu\n",
-                  name.c_str(), link_state_name(st.state), st.alarm ? " ALARM" : "",
-                  static_cast<unsigned long long>(k.frames_rx),
-                  static_cast<unsigned long long>(k.frames_tx),
-                  static_cast<unsigned long long>(k.events_decoded),
-                  static_cast<unsigned long long>(k.events_dropped),
-                  static_cast<unsigned long long>(k.malformed),
-                  static_cast<unsigned long long>(k.offsets_written),
-                  static_cast<unsigned long long>(k.offsets_failed),
-                  static_cast<unsigned long long>(k.reconnects),
-                  static_cast<unsigned long long>(k.faults));
+    std::snprintf(
+        buf, sizeof buf,
+        "  %-10s %-10s%s rx %llu, tx %llu, events %llu (dropped %llu, malformed "
+        "%llu), offsets %llu (failed %llu), reconnects %llu, faults %llu\n",
+        name.c_str(), link_state_name(st.state), st.alarm ? " ALARM" : "",
+        static_cast<unsigned long long>(k.frames_rx), static_cast<unsigned long long>(k.frames_tx),
+        static_cast<unsigned long long>(k.events_decoded),
+        static_cast<unsigned long long>(k.events_dropped),
+        static_cast<unsigned long long>(k.malformed),
+        static_cast<unsigned long long>(k.offsets_written),
+        static_cast<unsigned long long>(k.offsets_failed),
+        static_cast<unsigned long long>(k.reconnects), static_cast<unsigned long long>(k.faults));
     o << buf;
   }
   o << "state:   " << c.state_path;
@@ -258,8 +263,8 @@ std::string render_text(const StatusContext& c) {
   }
   o << "\n";
   if (c.measurement_log != nullptr) {
-    o << "measurements: " << c.measurement_log->current_path() << ", "
-      << c.measurement_log->rows() << " rows, " << s.records_dropped << " dropped\n";
+    o << "measurements: " << c.measurement_log->current_path() << ", " << c.measurement_log->rows()
+      << " rows, " << s.records_dropped << " dropped\n";
   }
   o << "alarms (last " << EventLogger::kKeepAlarms << "):\n";
   if (c.logger != nullptr) {
@@ -269,8 +274,8 @@ std::string render_text(const StatusContext& c) {
     }
     for (const auto& a : alarms) {
       std::snprintf(buf, sizeof buf, "  %12.3f s  %-7s %-30s subject %d value %g\n",
-                    core::seconds(a.time_ns), severity_name(a.severity),
-                    alarm_name(a.code).c_str(), a.subject, a.value);
+                    core::seconds(a.time_ns), severity_name(a.severity), alarm_name(a.code).c_str(),
+                    a.subject, a.value);
       o << buf;
     }
   }
@@ -291,7 +296,8 @@ std::string render_prometheus(const StatusContext& c) {
   counter("offset_writes_total", "Offset writes queued to a bus.", s.writes_sent);
   counter("offset_writes_dropped_total", "Offset writes the bus could not take.", s.writes_dropped);
   counter("engine_events_invalid_total", "Events rejected by validation.", s.engine.events_invalid);
-  counter("engine_writes_rejected_total", "Targets refused by a limiter.", s.engine.writes_rejected);
+  counter("engine_writes_rejected_total", "Targets refused by a limiter.",
+          s.engine.writes_rejected);
   counter("alarms_total", "Alarms and warnings raised.", s.alarms);
   o << "# HELP nccompd_loop_rate_hz Measured loop rate.\n# TYPE nccompd_loop_rate_hz gauge\n"
     << "nccompd_loop_rate_hz " << num(v.measured_rate_hz) << "\n";

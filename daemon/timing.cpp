@@ -39,7 +39,8 @@ std::uint64_t LatencyHistogram::upper_edge_us(std::size_t bucket) noexcept {
   const std::size_t group = (bucket - kLinear) / kSub;
   const std::size_t sub = (bucket - kLinear) % kSub;
   const std::size_t e = group + 10;
-  return (std::uint64_t{1} << e) + (static_cast<std::uint64_t>(sub) + 1) * (std::uint64_t{1} << (e - 6));
+  return (std::uint64_t{1} << e) +
+         (static_cast<std::uint64_t>(sub) + 1) * (std::uint64_t{1} << (e - 6));
 }
 
 void LatencyHistogram::record(TimeNs latency_ns) noexcept {

@@ -89,9 +89,8 @@ int main(int argc, char** argv) {
   std::printf("nccompd_loop samples=%llu rate_hz=%.0f priority=%d sched_ok=%d mlockall=%d\n",
               static_cast<unsigned long long>(h.count()), rate_hz, priority,
               rep.sched_requested && rep.sched_errno == 0 ? 1 : 0, lock_memory ? 1 : 0);
-  std::printf("nccompd_loop latency_us p50=%.0f p99=%.0f p99.9=%.0f max=%.0f\n",
-              h.quantile_us(0.5), h.quantile_us(0.99), h.quantile_us(0.999),
-              static_cast<double>(h.max_ns()) / 1000.0);
+  std::printf("nccompd_loop latency_us p50=%.0f p99=%.0f p99.9=%.0f max=%.0f\n", h.quantile_us(0.5),
+              h.quantile_us(0.99), h.quantile_us(0.999), static_cast<double>(h.max_ns()) / 1000.0);
   std::printf("nccompd_loop cycles=%llu overruns=%llu missed=%llu max_cycle_us=%.1f\n",
               static_cast<unsigned long long>(s.cycles),
               static_cast<unsigned long long>(s.overruns),

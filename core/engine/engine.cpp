@@ -241,8 +241,7 @@ bool Engine::validate(const Event& e) const noexcept {
 void Engine::accept_target(const OffsetWrite& w, TimeNs now_ns, StepOutput& out) noexcept {
   if (w.register_index >= regs_.size()) {
     ++counters_.writes_unknown_register;
-    out.alarm(now_ns, Severity::kAlarm, AlarmCode::kRegisterUnknown, w.register_index,
-              w.value_um);
+    out.alarm(now_ns, Severity::kAlarm, AlarmCode::kRegisterUnknown, w.register_index, w.value_um);
     return;
   }
   Reg& r = regs_[w.register_index];
@@ -412,9 +411,8 @@ bool Engine::import_state(std::span<const std::byte> bytes, TimeNs now_ns,
       double output_um = 0.0;
       double target_um = 0.0;
       std::uint8_t has_target = 0;
-      if (!rd.get_name(name) || !rd.get(output_um) || !rd.get(target_um) ||
-          !rd.get(has_target) || has_target > 1 || !std::isfinite(output_um) ||
-          !std::isfinite(target_um)) {
+      if (!rd.get_name(name) || !rd.get(output_um) || !rd.get(target_um) || !rd.get(has_target) ||
+          has_target > 1 || !std::isfinite(output_um) || !std::isfinite(target_um)) {
         return false;
       }
       const int idx = RegisterTable(specs_).find(name);

@@ -107,12 +107,12 @@ struct EngineCounters {
   std::uint64_t steps{0};
   std::uint64_t events_accepted{0};
   std::uint64_t events_invalid{0};
-  std::uint64_t events_overflow{0};    // beyond max_events_per_step
+  std::uint64_t events_overflow{0};  // beyond max_events_per_step
   std::uint64_t writes_forwarded{0};
-  std::uint64_t writes_rejected{0};    // limiter rejected (NaN / absolute limit)
+  std::uint64_t writes_rejected{0};  // limiter rejected (NaN / absolute limit)
   std::uint64_t writes_unknown_register{0};
-  std::uint64_t writes_held{0};        // suppressed by hold mode
-  std::uint64_t output_overflows{0};   // StepOutput full: writes/alarms/records lost
+  std::uint64_t writes_held{0};       // suppressed by hold mode
+  std::uint64_t output_overflows{0};  // StepOutput full: writes/alarms/records lost
 };
 
 /// One register's state as status shows it.
@@ -131,8 +131,8 @@ class Engine {
 
   /// Not real-time. Validates registers (unique non-empty names, limits), attaches the modules
   /// (unique names) and sizes every buffer. Throws std::invalid_argument naming the problem.
-  void configure(std::vector<RegisterSpec> registers,
-                 std::vector<std::unique_ptr<Module>> modules, EngineOptions options = {});
+  void configure(std::vector<RegisterSpec> registers, std::vector<std::unique_ptr<Module>> modules,
+                 EngineOptions options = {});
 
   /// Real-time safe: no allocation, no locks, no I/O. `out` is cleared first; it receives the
   /// limited writes, the alarms and the measurement records of this cycle.

@@ -20,7 +20,8 @@ struct RampState {
 
 RampModule::RampModule(RampConfig config) : config_(std::move(config)) {
   if (!std::isfinite(config_.start_um) || !std::isfinite(config_.target_um)) {
-    throw std::invalid_argument("ramp '" + config_.name + "': start_um and target_um must be finite");
+    throw std::invalid_argument("ramp '" + config_.name +
+                                "': start_um and target_um must be finite");
   }
   if (!std::isfinite(config_.rate_um_per_s) || config_.rate_um_per_s <= 0.0) {
     throw std::invalid_argument("ramp '" + config_.name + "': rate_um_per_s must be > 0");
@@ -37,12 +38,9 @@ void RampModule::attach(const RegisterTable& registers) {
   register_index_ = static_cast<std::uint16_t>(idx);
 }
 
-bool RampModule::done() const noexcept {
-  return std::fabs(value_um_ - config_.target_um) <= 0.0;
-}
+bool RampModule::done() const noexcept { return std::fabs(value_um_ - config_.target_um) <= 0.0; }
 
-void RampModule::step(TimeNs now_ns, std::span<const Event> /*events*/,
-                      StepOutput& out) noexcept {
+void RampModule::step(TimeNs now_ns, std::span<const Event> /*events*/, StepOutput& out) noexcept {
   // The first step after start or restore only takes the time: the ramp resumes from its value,
   // it does not make up for the time the daemon was down.
   const double dt_s = has_last_ ? std::max(0.0, seconds(now_ns - last_ns_)) : 0.0;
@@ -52,7 +50,7 @@ void RampModule::step(TimeNs now_ns, std::span<const Event> /*events*/,
   const double advance = std::min(std::fabs(remaining), config_.rate_um_per_s * dt_s);
   if (advance > 0.0) {
     value_um_ = std::fabs(remaining) <= advance ? config_.target_um
-                                                 : value_um_ + std::copysign(advance, remaining);
+                                                : value_um_ + std::copysign(advance, remaining);
     ++generation_;
   }
   out.writes.push(OffsetWrite{now_ns, register_index_, value_um_});
@@ -75,8 +73,7 @@ bool RampModule::load_state(std::span<const std::byte> bytes) noexcept {
   }
   RampState s{};
   std::memcpy(&s, bytes.data(), sizeof(s));
-  if (s.version != kRampStateVersion || !std::isfinite(s.value_um) ||
-      !std::isfinite(s.target_um)) {
+  if (s.version != kRampStateVersion || !std::isfinite(s.value_um) || !std::isfinite(s.target_um)) {
     return false;
   }
   // A changed target in the config (reload) keeps the progress: the ramp heads for the new one.

@@ -40,10 +40,10 @@ class DaemonParser final : public SectionParser {
     s->dry_run = r.boolean("dry_run", false);
     s->max_events_per_cycle =
         static_cast<std::size_t>(r.integer("max_events_per_cycle", 256, 1, 65536));
-    s->overrun_policy = r.choice("overrun_policy", "skip_missed", {"skip_missed", "restart"}) ==
-                                "restart"
-                            ? OverrunPolicy::kRestart
-                            : OverrunPolicy::kSkipMissed;
+    s->overrun_policy =
+        r.choice("overrun_policy", "skip_missed", {"skip_missed", "restart"}) == "restart"
+            ? OverrunPolicy::kRestart
+            : OverrunPolicy::kSkipMissed;
     if (const auto* rt = r.table("realtime")) {
       TableReader q(*rt, "daemon.realtime", diag);
       s->sched_fifo_priority = static_cast<int>(q.integer("sched_fifo_priority", 0, 0, 99));
@@ -227,8 +227,8 @@ class RampParser final : public SectionParser {
       if (!found) {
         Where w = e.where;
         w.key_path += ".register";
-        diag.error(std::move(w), "no register named '" + e.config.register_name +
-                                     "' in [[registers]]");
+        diag.error(std::move(w),
+                   "no register named '" + e.config.register_name + "' in [[registers]]");
       }
     }
   }

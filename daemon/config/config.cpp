@@ -432,9 +432,9 @@ struct Loader {
         auto [it, inserted] = owners.emplace(name, &v);
         if (!inserted) {
           const Where first = where_of(it->second, name);
-          diag.error(&v, name,
-                     "section is already defined at " + first.file + ":" +
-                         std::to_string(first.line));
+          diag.error(
+              &v, name,
+              "section is already defined at " + first.file + ":" + std::to_string(first.line));
         }
       }
     }

@@ -191,8 +191,8 @@ struct LoadResult {
 
 }  // namespace nccomp::daemon::config
 
-#define NCCOMP_REGISTER_CONFIG_SECTION(Type)                                              \
-  namespace {                                                                             \
-  [[maybe_unused]] const int nccomp_config_section_registered_##Type =                    \
-      ::nccomp::daemon::config::register_section(std::make_unique<Type>());               \
+#define NCCOMP_REGISTER_CONFIG_SECTION(Type)                                \
+  namespace {                                                               \
+  [[maybe_unused]] const int nccomp_config_section_registered_##Type =      \
+      ::nccomp::daemon::config::register_section(std::make_unique<Type>()); \
   }

@@ -49,13 +49,14 @@ void setup(CLI::App& app) {
     std::string answer;
     const std::string path = socket_path(*o);
     try {
-      answer = nccomp::daemon::query_status(path, o->json ? "json" : o->metrics ? "metrics" : "text");
+      answer = nccomp::daemon::query_status(path, o->json      ? "json"
+                                                  : o->metrics ? "metrics"
+                                                               : "text");
     } catch (const std::exception& e) {
       throw nccomp::tools::CommandError(nccomp::tools::kExitFailure, e.what());
     }
     if (answer.empty()) {
-      throw nccomp::tools::CommandError(nccomp::tools::kExitFailure,
-                                        "no answer from " + path);
+      throw nccomp::tools::CommandError(nccomp::tools::kExitFailure, "no answer from " + path);
     }
     std::cout << answer;
   });

@@ -138,8 +138,8 @@ bool flag(const std::string& json, const std::string& key) {
 
 struct TempDir {
   TempDir() {
-    path = fs::temp_directory_path() / ("nccompd_hil_" + std::to_string(::getpid()) + "_" +
-                                        std::to_string(n++));
+    path = fs::temp_directory_path() /
+           ("nccompd_hil_" + std::to_string(::getpid()) + "_" + std::to_string(n++));
     fs::remove_all(path);
     fs::create_directories(path);
   }
@@ -158,7 +158,8 @@ TEST(NccompdProcess, KillNineMidRampResumesWithoutDoubling) {
   {
     Daemon p(d.path);
     p.start();
-    const auto s = p.wait_status([](const std::string& j) { return number(j, "output_um") >= 8.0; });
+    const auto s =
+        p.wait_status([](const std::string& j) { return number(j, "output_um") >= 8.0; });
     before_kill = number(s, "output_um");
     p.signal(SIGKILL);
     EXPECT_EQ(p.wait(), 128 + SIGKILL);
@@ -176,7 +177,8 @@ TEST(NccompdProcess, KillNineMidRampResumesWithoutDoubling) {
   // kill; after the restart the ramp continues from there at 10 µm/s. Never from 0.
   EXPECT_GE(resumed, before_kill - 2.0) << p.log();
   EXPECT_LE(resumed, before_kill + 3.0) << p.log();
-  const auto done = p.wait_status([](const std::string& j) { return number(j, "output_um") >= 30.0; });
+  const auto done =
+      p.wait_status([](const std::string& j) { return number(j, "output_um") >= 30.0; });
   // Target reached exactly once: 30 µm, not 30 + what was done before the kill.
   EXPECT_DOUBLE_EQ(number(done, "output_um"), 30.0);
   std::this_thread::sleep_for(300ms);
@@ -243,7 +245,8 @@ TEST(NccompdProcess, DryRunWritesNothing) {
   d.write("nccompd.toml", config_text(5.0, 50.0));
   Daemon p(d.path);
   p.start({"--dry-run"});
-  const auto s = p.wait_status([](const std::string& j) { return number(j, "writes_dry_run") >= 10; });
+  const auto s =
+      p.wait_status([](const std::string& j) { return number(j, "writes_dry_run") >= 10; });
   EXPECT_TRUE(flag(s, "dry_run"));
   EXPECT_EQ(number(s, "writes_sent"), 0.0);
   EXPECT_EQ(number(s, "offsets_written"), 0.0);
@@ -294,7 +297,8 @@ TEST(NccompdProcess, NotifiesReadyWatchdogAndStopping) {
   for (int i = 0; i < 50 && !stopping; ++i) {
     char buf[1024];
     const ssize_t n = ::recv(fd, buf, sizeof buf, 0);
-    stopping = n > 0 && std::string(buf, static_cast<std::size_t>(n)).find("STOPPING=1") != std::string::npos;
+    stopping = n > 0 && std::string(buf, static_cast<std::size_t>(n)).find("STOPPING=1") !=
+                            std::string::npos;
   }
   EXPECT_TRUE(stopping);
   EXPECT_EQ(p.wait(), 0);

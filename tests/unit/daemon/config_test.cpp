@@ -88,7 +88,8 @@ min_interval_s = 0.25
 
 TEST(ConfigLoader, UnknownKeyNamesFileLineAndKeyPath) {
   TempDir d;
-  const auto f = d.write("a.toml", "[daemon]\nrate_hz = 1000\n\n[daemon.realtime]\nlock_memry = true\n");
+  const auto f =
+      d.write("a.toml", "[daemon]\nrate_hz = 1000\n\n[daemon.realtime]\nlock_memry = true\n");
   auto r = load_file(f);
   ASSERT_FALSE(r.config);
   ASSERT_EQ(r.diagnostics.items().size(), 1U);
@@ -271,9 +272,9 @@ TEST(ConfigExamples, ShippedConfigsLoad) {
   EXPECT_NO_THROW((void)build_engine(*loop.config));
   auto main = load_file(std::string(NCCOMP_SOURCE_DIR) + "/config/nccompd.toml");
   for (const auto& d : main.diagnostics.items()) {
-    const bool unregistered_bus =
-        (d.where.key_path == "modbus" || d.where.key_path == "can") &&
-        d.message.rfind("unknown section", 0) == 0 && find_section_parser(d.where.key_path) == nullptr;
+    const bool unregistered_bus = (d.where.key_path == "modbus" || d.where.key_path == "can") &&
+                                  d.message.rfind("unknown section", 0) == 0 &&
+                                  find_section_parser(d.where.key_path) == nullptr;
     EXPECT_TRUE(unregistered_bus) << format(d);
   }
 }

@@ -57,8 +57,8 @@ std::unique_ptr<Runtime> make_runtime(double target_um, double rate_um_per_s, bo
 
 struct Rig {
   explicit Rig(bool dry_run = false)
-      : dir(fs::temp_directory_path() / ("nccomp_loop_" + std::to_string(::getpid()) + "_" +
-                                         std::to_string(counter++))),
+      : dir(fs::temp_directory_path() /
+            ("nccomp_loop_" + std::to_string(::getpid()) + "_" + std::to_string(counter++))),
         bus(256, 256),
         swap(make_runtime(100.0, 100.0, dry_run, 1)) {
     fs::create_directories(dir);
@@ -69,7 +69,7 @@ struct Rig {
     o.state_min_interval_s = 0.02;
     o.state_buffer_bytes = 4096;
     o.warmup_cycles = 20;
-    o.thread_allocations = [] () noexcept { return nccomp::test::thread_allocations(); };
+    o.thread_allocations = []() noexcept { return nccomp::test::thread_allocations(); };
     loop = std::make_unique<Loop>(o, swap, std::vector<drivers::Bus*>{&bus}, persister.get(),
                                   mlog.get());
     bus.start();

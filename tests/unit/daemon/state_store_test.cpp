@@ -18,8 +18,8 @@ namespace fs = std::filesystem;
 
 struct Dir {
   Dir() {
-    path = fs::temp_directory_path() / ("nccomp_state_" + std::to_string(::getpid()) + "_" +
-                                        std::to_string(n++));
+    path = fs::temp_directory_path() /
+           ("nccomp_state_" + std::to_string(::getpid()) + "_" + std::to_string(n++));
     fs::create_directories(path);
   }
   ~Dir() { fs::remove_all(path); }
@@ -39,7 +39,8 @@ std::vector<char> read_all(const fs::path& p) {
 }
 
 void write_raw(const fs::path& p, const std::vector<char>& raw) {
-  std::ofstream(p, std::ios::binary | std::ios::trunc).write(raw.data(), static_cast<std::streamsize>(raw.size()));
+  std::ofstream(p, std::ios::binary | std::ios::trunc)
+      .write(raw.data(), static_cast<std::streamsize>(raw.size()));
 }
 
 TEST(Crc32, MatchesTheStandardCheckValue) {

@@ -96,7 +96,8 @@ TEST(StatusServer, AnswersTextJsonAndPrometheus) {
   const std::string http = http_get(server.prometheus_port(), "/metrics");
   EXPECT_EQ(http.rfind("HTTP/1.0 200 OK", 0), 0U) << http;
   EXPECT_NE(http.find("nccompd_register_output_um{register=\"T1_length_wear\"} 3\n"),
-            std::string::npos) << http;
+            std::string::npos)
+      << http;
   EXPECT_NE(http.find("nccompd_bus_up{bus=\"loopback\"} 1\n"), std::string::npos);
   EXPECT_EQ(http_get(server.prometheus_port(), "/other").rfind("HTTP/1.0 404", 0), 0U);
 

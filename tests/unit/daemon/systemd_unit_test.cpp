@@ -29,7 +29,8 @@ const std::string kUnit = std::string(NCCOMP_SOURCE_DIR) + "/systemd/nccompd.ser
 TEST(SystemdUnit, SecurityExposureIsAtMost2) {
   ASSERT_EQ(std::system("command -v systemd-analyze > /dev/null 2>&1"), 0)
       << "systemd-analyze is missing: install the `systemd` package (scripts/setup)";
-  const std::string out = run("systemd-analyze security --offline=true --no-pager '" + kUnit + "' 2>&1");
+  const std::string out =
+      run("systemd-analyze security --offline=true --no-pager '" + kUnit + "' 2>&1");
   std::smatch m;
   const std::regex re("Overall exposure level for nccompd\\.service: ([0-9]+\\.[0-9]+)");
   ASSERT_TRUE(std::regex_search(out, m, re)) << out;

@@ -74,7 +74,7 @@ TEST(HeartbeatWatch, FeedsOnlyWhileTheLoopAdvances) {
   EXPECT_TRUE(w.advanced(151));
   EXPECT_FALSE(w.advanced(151));  // stalled: systemd's WatchdogSec runs out → restart
   EXPECT_FALSE(w.advanced(151));
-  EXPECT_TRUE(w.advanced(152));   // recovered
+  EXPECT_TRUE(w.advanced(152));  // recovered
 }
 
 TEST(LatencyHistogram, BucketsAreContiguousAndContainTheirValues) {

@@ -18,7 +18,8 @@ constexpr TimeNs kMs = 1'000'000;
 
 RegisterSpec reg(const char* name, double max_abs = 100.0, double max_step = 5.0,
                  double max_rate = 1000.0) {
-  return RegisterSpec{name, RegisterKind::kToolLengthWear, LimiterConfig{max_abs, max_step, max_rate}};
+  return RegisterSpec{name, RegisterKind::kToolLengthWear,
+                      LimiterConfig{max_abs, max_step, max_rate}};
 }
 
 // Writes a fixed value to one register every cycle; counts the events it sees.
