@@ -369,6 +369,11 @@ CheckpointsConfig parse_checkpoints(const toml::table& table, const std::string&
   return out;
 }
 
+std::unique_ptr<cp::CheckpointModule> make_checkpoint_module(const CheckpointsConfig& config) {
+  cp::Plan plan = cp::make_plan(config.plan);
+  return std::make_unique<cp::CheckpointModule>(config.compensator, std::move(plan.checkpoints));
+}
+
 CheckpointsConfig load_checkpoints_file(const std::string& path,
                                         const std::optional<std::string>& contour_csv_override) {
   toml::table root;

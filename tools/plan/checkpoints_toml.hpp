@@ -12,7 +12,10 @@
 #include <string_view>
 #include <vector>
 
+#include <memory>
+
 #include "core/checkpoint/compensator.hpp"
+#include "core/checkpoint/module.hpp"
 #include "core/checkpoint/plan.hpp"
 
 namespace nccomp::tools::checkpoints {
@@ -76,6 +79,11 @@ CheckpointsConfig parse_checkpoints(
 /// replaces the contour. Throws ConfigError.
 CheckpointsConfig load_checkpoints_file(const std::string& path,
                                         const std::optional<std::string>& contour_csv_override);
+
+/// The engine module for a parsed config (what a daemon config section adds to the engine):
+/// builds the plan; the module checks its registers when the engine attaches it. Not real-time.
+std::unique_ptr<core::checkpoint::CheckpointModule> make_checkpoint_module(
+    const CheckpointsConfig& config);
 
 /// Reads a contour CSV file (core::checkpoint::parse_contour_csv); throws std::invalid_argument
 /// naming the file (and line).

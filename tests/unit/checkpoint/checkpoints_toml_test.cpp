@@ -3,7 +3,9 @@
 #include <gtest/gtest.h>
 
 #include <sstream>
+#include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "tools/plan/plan_output.hpp"
 
@@ -119,6 +121,25 @@ TEST(CheckpointsToml, SemanticErrorsFromTheCoreCarryTheKeysLine) {
   issues = issues_of("[checkpoints]\ncontour_csv = \"missing.csv\"\n");
   ASSERT_EQ(issues.size(), 1U);
   EXPECT_NE(issues[0].message.find("missing.csv: cannot open"), std::string::npos);
+}
+
+TEST(CheckpointsToml, ModuleFromTheExampleAttachesToItsRegisters) {
+  const CheckpointsConfig c = load_checkpoints_file(kData + "/boss.toml", std::nullopt);
+  auto module = make_checkpoint_module(c);
+  ASSERT_NE(module, nullptr);
+  EXPECT_EQ(module->name(), "checkpoints");
+  // register_base 20 … 75 of kind checkpoint, active_register 19 of kind tool_radius_wear.
+  std::vector<core::engine::RegisterSpec> regs(76);
+  for (std::size_t i = 0; i < regs.size(); ++i) {
+    regs[i].name = "r" + std::to_string(i);
+    regs[i].kind = i >= 20 ? core::engine::RegisterKind::kCheckpoint
+                           : core::engine::RegisterKind::kToolLengthWear;
+  }
+  EXPECT_THROW(module->attach(core::engine::RegisterTable(regs)), std::invalid_argument);
+  regs[19].kind = core::engine::RegisterKind::kToolRadiusWear;
+  module->attach(core::engine::RegisterTable(regs));
+  EXPECT_EQ(module->compensator().size(), 56U);
+  EXPECT_GT(module->state_capacity(), 56U * 100U);
 }
 
 TEST(CheckpointsToml, ContourOverrideReplacesTheFilesContour) {
