@@ -64,7 +64,9 @@ double concave_radius_mm(double slope, double curvature_per_mm) noexcept {
     return std::numeric_limits<double>::infinity();
   }
   const double s = 1.0 + slope * slope;
-  return s * std::sqrt(s) / curvature_per_mm;
+  const double r = s * std::sqrt(s) / curvature_per_mm;
+  // Radii beyond 10⁹ mm are the fit's rounding noise on straight parts, not concavity.
+  return r > kStraightRadiusMm ? std::numeric_limits<double>::infinity() : r;
 }
 
 void classify_regions(std::vector<Region>& regions, std::span<const double> key_z_mm,

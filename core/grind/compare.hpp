@@ -40,6 +40,8 @@ void classify_regions(std::vector<Region>& regions, std::span<const double> key_
                       const UniformProfile& profile, const Derivatives& d,
                       const LocalTrajectory* local, const Wheel& wheel);
 
+/// Concave radii above this are treated as straight (fit noise).
+inline constexpr double kStraightRadiusMm = 1e9;
 /// Local curvature radius of a concave part ((1 + K1²)^{3/2} / K2, K2 > 0), +inf elsewhere.
 double concave_radius_mm(double slope, double curvature_per_mm) noexcept;
 

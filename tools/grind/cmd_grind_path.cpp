@@ -174,10 +174,10 @@ void run(const Options& o) {
   auto& os = std::cout;
   os << fmt("profile: %s, %zu samples, z %.4f .. %.4f mm, spacing %.6g mm\n", description.c_str(),
             p.size(), p.z0_mm, p.z_last_mm(), p.spacing_mm);
-  os << fmt("wheel: W %.4g mm, h %.6g mm, R %s mm, arc end slope %.6f\n", wheel.width_mm(),
+  os << fmt("wheel: W %.4g mm, h %.6g mm, R %s, arc end slope %.6f\n", wheel.width_mm(),
             wheel.arc_height_mm(),
             wheel.straight() ? "inf (straight grinding line)"
-                             : fmt("%.6g", wheel.radius_mm()).c_str(),
+                             : fmt("%.6g mm", wheel.radius_mm()).c_str(),
             wheel.end_slope());
 
   auto t0 = std::chrono::steady_clock::now();
