@@ -131,7 +131,8 @@ TEST(CheckpointsToml, ModuleFromTheExampleAttachesToItsRegisters) {
   // register_base 20 … 75 of kind checkpoint, active_register 19 of kind tool_radius_wear.
   std::vector<core::engine::RegisterSpec> regs(76);
   for (std::size_t i = 0; i < regs.size(); ++i) {
-    regs[i].name = "r" + std::to_string(i);
+    regs[i].name = std::to_string(i);
+    regs[i].name.insert(0, "register_");
     regs[i].kind = i >= 20 ? core::engine::RegisterKind::kCheckpoint
                            : core::engine::RegisterKind::kToolLengthWear;
   }
