@@ -8,6 +8,7 @@
 #include <chrono>
 #include <filesystem>
 #include <limits>
+#include <optional>
 #include <thread>
 
 #include "core/engine/ramp_module.hpp"
@@ -208,6 +209,46 @@ TEST(Loop, HoldWritesNothingAndPersistsNothing) {
   EXPECT_GT(s.engine.writes_held, 0U);
   EXPECT_EQ(s.state_exports, 0U);
   EXPECT_FALSE(rig.bus.delivered(0).has_value());
+}
+
+// A bus that stops draining its TX ring (link down, I/O thread stuck): writes are dropped and
+// counted, and once the bus drains again the engine's latest value is re-sent, not lost.
+TEST(Loop, DroppedWritesAreCountedAndResentWhenTheBusDrainsAgain) {
+  LoopbackBus stuck(16, 2);  // not started yet: nobody empties its 2-slot TX ring
+  core::rt::ConfigSwap<Runtime> swap(make_runtime(100.0, 100.0, false, 1));
+  LoopOptions o;
+  o.warmup_cycles = 20;
+  o.thread_allocations = []() noexcept { return nccomp::test::thread_allocations(); };
+  Loop loop(o, swap, {&stuck}, nullptr, nullptr);
+  loop.start();
+  const auto end = std::chrono::steady_clock::now() + 5s;
+  while (loop.stats().writes_dropped < 20 && std::chrono::steady_clock::now() < end) {
+    std::this_thread::sleep_for(2ms);
+  }
+  EXPECT_GE(loop.stats().writes_dropped, 20U);
+  bool noted = false;
+  LoopNote n;
+  while (loop.notes().try_pop(n)) {
+    noted = noted || (n.code == NoteCode::kWriteDropped && n.a == 0);
+  }
+  EXPECT_TRUE(noted);
+  stuck.start();  // the bus recovers
+  std::this_thread::sleep_for(50ms);
+  loop.stop();
+  const double out = swap.current().engine->register_state(0).output_um;
+  const auto end2 = std::chrono::steady_clock::now() + 5s;
+  std::optional<double> d;
+  while (std::chrono::steady_clock::now() < end2) {
+    d = stuck.delivered(0);
+    if (d && !(*d < out) && !(*d > out)) {
+      break;
+    }
+    std::this_thread::sleep_for(2ms);
+  }
+  ASSERT_TRUE(d.has_value());
+  EXPECT_DOUBLE_EQ(*d, out);
+  EXPECT_EQ(loop.stats().allocations_after_warmup, 0);
+  stuck.stop();
 }
 
 }  // namespace
