@@ -171,6 +171,8 @@ void run(const Options& o) {
     throw std::invalid_argument("--u-axis and --z-axis must be one letter each");
   }
   const double tol_mm = o.tolerance_um * 1e-3;
+  // Validates the fit against the profile before anything is printed.
+  const g::Derivatives d = g::local_derivatives(p, g::FitSpec{o.fit_degree, o.fit_points});
   auto& os = std::cout;
   os << fmt("profile: %s, %zu samples, z %.4f .. %.4f mm, spacing %.6g mm\n", description.c_str(),
             p.size(), p.z0_mm, p.z_last_mm(), p.spacing_mm);
@@ -188,7 +190,6 @@ void run(const Options& o) {
             exact.u_mm.size(), exact.z0_mm, exact.z_at(static_cast<std::ptrdiff_t>(exact.u_mm.size()) - 1),
             p.z0_mm - exact.z0_mm, t_exact);
 
-  const g::Derivatives d = g::local_derivatives(p, g::FitSpec{o.fit_degree, o.fit_points});
   const g::LocalTrajectory local = g::local_rule_trajectory(p, d, wheel);
   std::size_t cases[4] = {0, 0, 0, 0};
   for (auto c : local.contact) {
