@@ -248,6 +248,7 @@ bool same_term(const TermSpec& a, const TermSpec& b) {
 // its orthonormal basis, and the current residual projected off it.
 struct SearchSet {
   std::vector<std::size_t> rows;
+  std::vector<Row> context;  // the rows' contexts, built once for the many grid evaluations
   Eigen::MatrixXd q;  // n_sub × rank, orthonormal
   Eigen::VectorXd r;  // residual ⟂ q
   double rss{0.0};
@@ -265,6 +266,8 @@ SearchSet make_search_set(const Dataset& data, const Model& model,
     if (use[i] == 0U || !std::isfinite(residual[i])) continue;
     if (k++ % stride == 0) s.rows.push_back(i);
   }
+  s.context.reserve(s.rows.size());
+  for (std::size_t i : s.rows) s.context.push_back(data.row(i));
   const auto n = static_cast<Eigen::Index>(s.rows.size());
   const std::vector<TermSpec>& specs = model.specs();
   Layout layout;
@@ -310,7 +313,7 @@ Eigen::MatrixXd candidate_basis(const Dataset& data, const SearchSet& set, const
     std::map<std::array<double, 2>, int> ids;
     for (std::size_t j = 0; j < set.rows.size(); ++j) {
       bool ok = false;
-      const auto key = group_key(spec, data.row(set.rows[j]), ok);
+      const auto key = group_key(spec, set.context[j], ok);
       group[j] = ok ? ids.emplace(key, static_cast<int>(ids.size())).first->second : -1;
     }
     groups = std::max<Eigen::Index>(1, static_cast<Eigen::Index>(ids.size()));
@@ -335,7 +338,7 @@ Eigen::MatrixXd candidate_basis(const Dataset& data, const SearchSet& set, const
     return b;
   }
   for (Eigen::Index j = 0; j < n; ++j) {
-    const Row row = data.row(set.rows[static_cast<std::size_t>(j)]);
+    const Row& row = set.context[static_cast<std::size_t>(j)];
     const int g = group[static_cast<std::size_t>(j)];
     if (g < 0) continue;
     const std::size_t m = term_basis(spec, row, kUnknown, v);
@@ -389,6 +392,7 @@ std::pair<double, double> search_candidate(const Dataset& data, const SearchSet&
     scored.emplace_back(wide ? cheap_reduction(set, b) : exact_reduction(set, b), i);
   }
   std::sort(scored.begin(), scored.end(), std::greater<>());
+  if (scored.empty()) return {0.0, 0.0};
   // The best few grid points scored exactly, then a golden-section refinement between the
   // neighbours of the best (steps are piecewise constant: their grid is already fine).
   double best_v = cand.grid[scored[0].second];

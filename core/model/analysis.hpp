@@ -79,7 +79,7 @@ struct AnalysisConfig {
   /// taken as independent and only the held-out check guards against serially correlated data.
   bool ar1_correction{true};
   /// Rows used for the non-linear grid search (the fits use all rows).
-  std::size_t search_rows{20000};
+  std::size_t search_rows{10000};
 };
 
 struct ErrorStats {

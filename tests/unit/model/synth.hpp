@@ -111,7 +111,7 @@ inline cm::Dataset generate(const Options& opt) {
       rows.push_back(r);
     }
   }
-  const double run_s = rows.back()[0];
+  const double run_s = rows.empty() ? 0.0 : rows.back()[0];
   for (const cm::Row& r : rows) {
     double y = point_offset[static_cast<std::size_t>(r[4])] + opt.noise_um * gauss(rng);
     for (const auto& e : opt.effects) y += effect_um(e, r, run_s);
