@@ -168,7 +168,7 @@ std::string residual_svg(const cm::Dataset& data, const cm::AnalysisResult& resu
   constexpr double kPanelW = 400.0;
   constexpr double kPanelH = 240.0;
   constexpr double kTop = 40.0;
-  constexpr std::size_t kMaxPoints = 3000;
+  constexpr std::size_t kMaxPoints = 1500;
   double xlo = INFINITY;
   double xhi = -INFINITY;
   double ymax = 0.0;
