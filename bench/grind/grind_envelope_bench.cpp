@@ -28,8 +28,7 @@ namespace {
 namespace g = nccomp::core::grind;
 
 double now_s() {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch())
-      .count();
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
 long max_rss_kib() {
@@ -78,10 +77,11 @@ int main(int argc, char** argv) {
   const std::ptrdiff_t m = g::half_window_samples(wheel, spacing_mm);
   const std::size_t n = p.size();
   const std::size_t n_out = n + 2 * static_cast<std::size_t>(m);
-  std::printf("profile %s: %zu samples (%.1f MB), spacing %g mm; wheel W %g mm h %g mm "
-              "(R %.2f mm), window %td samples each side\n",
-              shape.c_str(), n, static_cast<double>(n * sizeof(double)) / 1e6, spacing_mm,
-              width_mm, height_mm, wheel.radius_mm(), m);
+  std::printf(
+      "profile %s: %zu samples (%.1f MB), spacing %g mm; wheel W %g mm h %g mm "
+      "(R %.2f mm), window %td samples each side\n",
+      shape.c_str(), n, static_cast<double>(n * sizeof(double)) / 1e6, spacing_mm, width_mm,
+      height_mm, wheel.radius_mm(), m);
   const long rss_input_kib = max_rss_kib();
 
   std::vector<double> out(n_out, 0.0);  // pre-faulted: the algorithm is timed, not the kernel
@@ -118,22 +118,22 @@ int main(int argc, char** argv) {
 
   const double te = median(t_env);
   const double tc = median(t_copy);
-  std::printf("exact envelope (O(N) deque): median %.3f s of %d (min %.3f), %.1f M samples/s, "
-              "%.2f ns/sample\n",
-              te, repeats, *std::min_element(t_env.begin(), t_env.end()),
-              static_cast<double>(n) / te / 1e6, te / static_cast<double>(n) * 1e9);
+  std::printf(
+      "exact envelope (O(N) deque): median %.3f s of %d (min %.3f), %.1f M samples/s, "
+      "%.2f ns/sample\n",
+      te, repeats, *std::min_element(t_env.begin(), t_env.end()), static_cast<double>(n) / te / 1e6,
+      te / static_cast<double>(n) * 1e9);
   std::printf("memcpy peer (%.1f MB):      median %.4f s, %.1f M samples/s, %.2f GB/s\n",
-              static_cast<double>(n * sizeof(double)) / 1e6, tc,
-              static_cast<double>(n) / tc / 1e6,
+              static_cast<double>(n * sizeof(double)) / 1e6, tc, static_cast<double>(n) / tc / 1e6,
               static_cast<double>(n * sizeof(double)) / tc / 1e9);
   std::printf("ratio envelope / memcpy: %.1f\n", te / tc);
   std::printf("spot checks against brute force: %d points, max |fast - brute| = %.3g mm\n",
               spot_checks, worst);
-  std::printf("peak RSS: %.1f MiB after the input, %.1f MiB after the envelope (input + output + "
-              "deque scratch %.1f MiB), %.1f MiB at the end (with the peer's buffer)\n",
-              static_cast<double>(rss_input_kib) / 1024.0,
-              static_cast<double>(rss_envelope_kib) / 1024.0,
-              static_cast<double>(scratch.index.size() * 2 * sizeof(std::ptrdiff_t)) / 1048576.0,
-              static_cast<double>(max_rss_kib()) / 1024.0);
+  std::printf(
+      "peak RSS: %.1f MiB after the input, %.1f MiB after the envelope (input + output + "
+      "deque scratch %.1f MiB), %.1f MiB at the end (with the peer's buffer)\n",
+      static_cast<double>(rss_input_kib) / 1024.0, static_cast<double>(rss_envelope_kib) / 1024.0,
+      static_cast<double>(scratch.index.size() * 2 * sizeof(std::ptrdiff_t)) / 1048576.0,
+      static_cast<double>(max_rss_kib()) / 1024.0);
   return 0;
 }

@@ -95,7 +95,8 @@ void classify_regions(std::vector<Region>& regions, std::span<const double> key_
     if (rc < wheel.radius_mm()) {
       it->concave_below_radius = true;
     }
-    if (std::isfinite(rc) && (!(it->min_concave_radius_mm > 0.0) || rc < it->min_concave_radius_mm)) {
+    if (std::isfinite(rc) &&
+        (!(it->min_concave_radius_mm > 0.0) || rc < it->min_concave_radius_mm)) {
       it->min_concave_radius_mm = rc;
     }
     if (z - z_first < half || z_last - z < half) {

@@ -21,13 +21,13 @@ std::vector<double> lowest_pass_on_grid(std::span<const TrajectoryPoint> q, doub
 struct Region {
   double z_from_mm{0.0};
   double z_to_mm{0.0};
-  double worst_mm{0.0};    ///< largest deviation in the run
+  double worst_mm{0.0};  ///< largest deviation in the run
   double z_worst_mm{0.0};
   // Causes found among the profile samples that belong to the run:
-  bool concave_below_radius{false};  ///< local curvature radius of a concave part < R
-  bool near_end{false};              ///< within W/2 of the profile's ends
-  bool arc_end_contact{false};       ///< the local rule has an arc end riding (cases 2/3)
-  double min_concave_radius_mm{0.0}; ///< smallest concave radius seen (0: none concave)
+  bool concave_below_radius{false};   ///< local curvature radius of a concave part < R
+  bool near_end{false};               ///< within W/2 of the profile's ends
+  bool arc_end_contact{false};        ///< the local rule has an arc end riding (cases 2/3)
+  double min_concave_radius_mm{0.0};  ///< smallest concave radius seen (0: none concave)
 };
 
 /// Runs of dev[t] > tol on the grid Z_t = z0 + t·Δ (NaN never counts).

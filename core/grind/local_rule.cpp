@@ -15,9 +15,9 @@ Derivatives local_derivatives(const UniformProfile& profile, const FitSpec& fit)
   }
   const int pts = fit.points == 0 ? fit.degree + 1 : fit.points;
   if (pts < fit.degree + 1 || pts > 64) {
-    throw std::invalid_argument("fit points must be degree + 1 = " +
-                                std::to_string(fit.degree + 1) + " .. 64, got " +
-                                std::to_string(pts));
+    throw std::invalid_argument(
+        "fit points must be degree + 1 = " + std::to_string(fit.degree + 1) + " .. 64, got " +
+        std::to_string(pts));
   }
   const auto n = static_cast<std::ptrdiff_t>(profile.size());
   if (n < pts) {
@@ -52,9 +52,9 @@ Derivatives local_derivatives(const UniformProfile& profile, const FitSpec& fit)
     }
     const Eigen::MatrixXd pinv = a.completeOrthogonalDecomposition().pseudoInverse();
     w1.row(o) = pinv.row(1) / profile.spacing_mm;
-    w2.row(o) = deg >= 2 ? Eigen::RowVectorXd(2.0 * pinv.row(2) /
-                                              (profile.spacing_mm * profile.spacing_mm))
-                         : Eigen::RowVectorXd::Zero(pts);
+    w2.row(o) =
+        deg >= 2 ? Eigen::RowVectorXd(2.0 * pinv.row(2) / (profile.spacing_mm * profile.spacing_mm))
+                 : Eigen::RowVectorXd::Zero(pts);
   }
   Derivatives d;
   d.slope.resize(static_cast<std::size_t>(n));

@@ -44,8 +44,8 @@ std::vector<TrajectoryPoint> simplify_polyline(const GridTrajectory& t, double b
   std::vector<TrajectoryPoint> out;
   const auto z = [&](std::size_t i) { return t.z_at(static_cast<std::ptrdiff_t>(i)); };
   const std::size_t max_steps =
-      max_move_mm > 0.0 ? std::max<std::size_t>(1, static_cast<std::size_t>(
-                                                        std::floor(max_move_mm / t.spacing_mm)))
+      max_move_mm > 0.0 ? std::max<std::size_t>(
+                              1, static_cast<std::size_t>(std::floor(max_move_mm / t.spacing_mm)))
                         : std::numeric_limits<std::size_t>::max();
   std::size_t a = first;
   out.push_back({z(a), t.u_mm[a] + shift});

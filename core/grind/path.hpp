@@ -35,8 +35,8 @@ double chord_error_mm(const GridTrajectory& t, std::span<const TrajectoryPoint> 
 
 /// Rounds every vertex to `decimals` places (what the G-code will carry); U upward if
 /// `u_up` (keeps a gouge-free polyline gouge-free), to nearest otherwise.
-std::vector<TrajectoryPoint> round_vertices(std::span<const TrajectoryPoint> polyline,
-                                            int decimals, bool u_up = false);
+std::vector<TrajectoryPoint> round_vertices(std::span<const TrajectoryPoint> polyline, int decimals,
+                                            bool u_up = false);
 
 struct GcodeSpec {
   char z_axis{'Z'};
@@ -52,9 +52,9 @@ std::string gcode_blocks(std::span<const TrajectoryPoint> polyline, const GcodeS
 
 struct TableRow {
   double z_mm;
-  double u_target_mm;   ///< P(z)
-  double u_wheel_mm;    ///< U_T(z)
-  double correction_um; ///< U_T − P: what the NC adds to a path that follows P
+  double u_target_mm;    ///< P(z)
+  double u_wheel_mm;     ///< U_T(z)
+  double correction_um;  ///< U_T − P: what the NC adds to a path that follows P
 };
 /// Rows every spacing_mm over the profile's range (the last row at the profile's end).
 std::vector<TableRow> correction_table(const GridTrajectory& t, const UniformProfile& p,

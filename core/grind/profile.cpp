@@ -81,8 +81,8 @@ SampledProfile parse_profile_csv(std::string_view text, std::string_view source)
     }
     const auto comma = line.find(',');
     if (comma == std::string_view::npos) {
-      throw std::invalid_argument(where(source, line_no) +
-                                  "expected two fields 'z_mm,u_mm', got " + show(line));
+      throw std::invalid_argument(where(source, line_no) + "expected two fields 'z_mm,u_mm', got " +
+                                  show(line));
     }
     const auto zf = trim(line.substr(0, comma));
     const auto uf = trim(line.substr(comma + 1));
@@ -108,8 +108,7 @@ SampledProfile parse_profile_csv(std::string_view text, std::string_view source)
     }
     if (!out.z_mm.empty() && !(z > out.z_mm.back())) {
       throw std::invalid_argument(where(source, line_no) + "z_mm must increase strictly: " +
-                                  std::to_string(z) + " after " +
-                                  std::to_string(out.z_mm.back()));
+                                  std::to_string(z) + " after " + std::to_string(out.z_mm.back()));
     }
     if (out.z_mm.size() >= kMaxProfileSamples) {
       throw std::invalid_argument(where(source, line_no) + "more than " +
@@ -162,11 +161,9 @@ UniformProfile to_uniform(const SampledProfile& s, double resample_spacing_mm,
   }
   if (!(resample_spacing_mm > 0.0) || !std::isfinite(resample_spacing_mm)) {
     const std::size_t line = s.line.size() == n ? s.line[bad] : bad + 1;
-    throw std::invalid_argument(
-        where(source, line) + "samples are not uniformly spaced (z = " +
-        std::to_string(s.z_mm[bad]) + ", uniform spacing would put it at " +
-        std::to_string(expect_z) +
-        "); give a resampling spacing");
+    throw std::invalid_argument(where(source, line) + "samples are not uniformly spaced (z = " +
+                                std::to_string(s.z_mm[bad]) + ", uniform spacing would put it at " +
+                                std::to_string(expect_z) + "); give a resampling spacing");
   }
   const double count = std::floor(span / resample_spacing_mm * (1.0 + 1e-12)) + 1.0;
   if (count > static_cast<double>(kMaxProfileSamples)) {
@@ -224,8 +221,8 @@ UniformProfile generate_profile(const FamilySpec& spec) {
   const double count =
       std::floor((spec.z_to_mm - spec.z_from_mm) / spec.spacing_mm * (1.0 + 1e-12)) + 1.0;
   if (count > static_cast<double>(kMaxProfileSamples)) {
-    throw std::invalid_argument("profile family: more than " +
-                                std::to_string(kMaxProfileSamples) + " samples");
+    throw std::invalid_argument("profile family: more than " + std::to_string(kMaxProfileSamples) +
+                                " samples");
   }
   if (count < 2.0) {
     throw std::invalid_argument("profile family: the range holds fewer than 2 samples");
@@ -237,8 +234,9 @@ UniformProfile generate_profile(const FamilySpec& spec) {
   switch (spec.family) {
     case Family::kCvc:
       if (spec.coef.size() != 4) {
-        throw std::invalid_argument("profile family cvc: needs exactly 4 coefficients c0..c3, got " +
-                                    std::to_string(spec.coef.size()));
+        throw std::invalid_argument(
+            "profile family cvc: needs exactly 4 coefficients c0..c3, got " +
+            std::to_string(spec.coef.size()));
       }
       break;
     case Family::kPolynomial:
@@ -275,8 +273,8 @@ UniformProfile generate_profile(const FamilySpec& spec) {
       }
       case Family::kSine:
         u = spec.offset_mm +
-            spec.amplitude_mm * std::sin(2.0 * std::numbers::pi * x / spec.wavelength_mm +
-                                         spec.phase_rad);
+            spec.amplitude_mm *
+                std::sin(2.0 * std::numbers::pi * x / spec.wavelength_mm + spec.phase_rad);
         break;
       case Family::kCvc:
       case Family::kPolynomial:

@@ -58,8 +58,8 @@ std::vector<double> ground_by_polyline(std::span<const TrajectoryPoint> q, const
       throw std::invalid_argument("verification: trajectory point " + std::to_string(i) +
                                   " is not finite");
     }
-    Segment s{std::min(p0.z_mm, p1.z_mm), std::max(p0.z_mm, p1.z_mm), p0.z_mm, p0.u_mm, p1.z_mm,
-              p1.u_mm};
+    Segment s{
+        std::min(p0.z_mm, p1.z_mm), std::max(p0.z_mm, p1.z_mm), p0.z_mm, p0.u_mm, p1.z_mm, p1.u_mm};
     if (!seg.empty() && s.z_lo < seg.back().z_lo) {
       sorted = false;
     }

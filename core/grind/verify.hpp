@@ -23,13 +23,13 @@ std::vector<double> ground_by_polyline(std::span<const TrajectoryPoint> q, const
                                        std::span<const double> z_eval);
 
 struct GroundError {
-  std::size_t points{0};        ///< evaluation points compared
-  std::size_t unreached{0};     ///< points no wheel position reaches (B = +inf), left out
-  double max_abs_mm{0.0};       ///< max |B − P|
+  std::size_t points{0};     ///< evaluation points compared
+  std::size_t unreached{0};  ///< points no wheel position reaches (B = +inf), left out
+  double max_abs_mm{0.0};    ///< max |B − P|
   double z_at_max_mm{0.0};
   double rms_mm{0.0};
-  double max_gouge_mm{0.0};     ///< max (P − B): material removed below the target
-  double max_left_mm{0.0};      ///< max (B − P): material left above the target
+  double max_gouge_mm{0.0};  ///< max (P − B): material removed below the target
+  double max_left_mm{0.0};   ///< max (B − P): material left above the target
 };
 GroundError compare_ground(std::span<const double> z_mm, std::span<const double> b_mm,
                            std::span<const double> p_mm);

@@ -12,9 +12,9 @@ Wheel Wheel::from_arc_height(double width_mm, double arc_height_mm) {
                                 std::to_string(width_mm));
   }
   if (!std::isfinite(arc_height_mm) || arc_height_mm < 0.0 || !(arc_height_mm < 0.5 * width_mm)) {
-    throw std::invalid_argument("wheel arc height h must satisfy 0 <= h < W/2 = " +
-                                std::to_string(0.5 * width_mm) + " mm, got " +
-                                std::to_string(arc_height_mm));
+    throw std::invalid_argument(
+        "wheel arc height h must satisfy 0 <= h < W/2 = " + std::to_string(0.5 * width_mm) +
+        " mm, got " + std::to_string(arc_height_mm));
   }
   if (!(arc_height_mm > 0.0)) {
     return Wheel(width_mm, 0.0, std::numeric_limits<double>::infinity());
@@ -29,9 +29,9 @@ Wheel Wheel::from_radius(double width_mm, double radius_mm) {
                                 std::to_string(width_mm));
   }
   if (std::isnan(radius_mm) || !(radius_mm > 0.5 * width_mm)) {
-    throw std::invalid_argument("wheel arc radius R must be > W/2 = " +
-                                std::to_string(0.5 * width_mm) + " mm, got " +
-                                std::to_string(radius_mm));
+    throw std::invalid_argument(
+        "wheel arc radius R must be > W/2 = " + std::to_string(0.5 * width_mm) + " mm, got " +
+        std::to_string(radius_mm));
   }
   if (std::isinf(radius_mm)) {
     return Wheel(width_mm, 0.0, radius_mm);

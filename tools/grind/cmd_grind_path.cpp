@@ -7,8 +7,8 @@
 #include <algorithm>
 #include <cctype>
 #include <chrono>
-#include <cstdarg>
 #include <cmath>
+#include <cstdarg>
 #include <cstdio>
 #include <fstream>
 #include <iostream>
@@ -176,29 +176,32 @@ void run(const Options& o) {
   auto& os = std::cout;
   os << fmt("profile: %s, %zu samples, z %.4f .. %.4f mm, spacing %.6g mm\n", description.c_str(),
             p.size(), p.z0_mm, p.z_last_mm(), p.spacing_mm);
-  os << fmt("wheel: W %.4g mm, h %.6g mm, R %s, arc end slope %.6f\n", wheel.width_mm(),
-            wheel.arc_height_mm(),
-            wheel.straight() ? "inf (straight grinding line)"
-                             : fmt("%.6g mm", wheel.radius_mm()).c_str(),
-            wheel.end_slope());
+  os << fmt(
+      "wheel: W %.4g mm, h %.6g mm, R %s, arc end slope %.6f\n", wheel.width_mm(),
+      wheel.arc_height_mm(),
+      wheel.straight() ? "inf (straight grinding line)" : fmt("%.6g mm", wheel.radius_mm()).c_str(),
+      wheel.end_slope());
 
   auto t0 = std::chrono::steady_clock::now();
   const g::GridTrajectory exact = g::exact_trajectory(p, wheel);
   const double t_exact = seconds_since(t0);
-  os << fmt("exact envelope: %zu points, z %.4f .. %.4f mm (wheel overhangs the ends by %.4f mm), "
-            "%.3f s\n",
-            exact.u_mm.size(), exact.z0_mm, exact.z_at(static_cast<std::ptrdiff_t>(exact.u_mm.size()) - 1),
-            p.z0_mm - exact.z0_mm, t_exact);
+  os << fmt(
+      "exact envelope: %zu points, z %.4f .. %.4f mm (wheel overhangs the ends by %.4f mm), "
+      "%.3f s\n",
+      exact.u_mm.size(), exact.z0_mm,
+      exact.z_at(static_cast<std::ptrdiff_t>(exact.u_mm.size()) - 1), p.z0_mm - exact.z0_mm,
+      t_exact);
 
   const g::LocalTrajectory local = g::local_rule_trajectory(p, d, wheel);
   std::size_t cases[4] = {0, 0, 0, 0};
   for (auto c : local.contact) {
     ++cases[static_cast<int>(c)];
   }
-  os << fmt("three-case rule (degree %d through %d samples): tangent %zu, front end %zu, "
-            "rear end %zu samples\n",
-            o.fit_degree, o.fit_points == 0 ? o.fit_degree + 1 : o.fit_points, cases[1], cases[2],
-            cases[3]);
+  os << fmt(
+      "three-case rule (degree %d through %d samples): tangent %zu, front end %zu, "
+      "rear end %zu samples\n",
+      o.fit_degree, o.fit_points == 0 ? o.fit_degree + 1 : o.fit_points, cases[1], cases[2],
+      cases[3]);
 
   // Local rule against the envelope on the envelope's grid (deepest pass of the rule's path).
   const auto local_grid =
@@ -221,9 +224,10 @@ void run(const Options& o) {
     }
     g::classify_regions(diff_regions, key, p, d, &local, wheel);
   }
-  os << fmt("three-case rule vs exact envelope (U_T): rule below envelope (gouges) by up to %.4f "
-            "um, above by up to %.4f um\n",
-            max_gouge * 1000.0, max_above * 1000.0);
+  os << fmt(
+      "three-case rule vs exact envelope (U_T): rule below envelope (gouges) by up to %.4f "
+      "um, above by up to %.4f um\n",
+      max_gouge * 1000.0, max_above * 1000.0);
   print_regions(os, diff_regions, o.max_regions, o.tolerance_um);
 
   // What this wheel cannot grind at all: B of the exact envelope above P.
@@ -259,9 +263,9 @@ void run(const Options& o) {
     throw std::invalid_argument(fmt("--chord-tol-um %g is not above the rounding of %d decimals",
                                     o.chord_tol_um, o.decimals));
   }
-  const auto poly = gouge_free ? g::simplify_polyline(chosen, 0.0, band_mm, o.max_move_mm)
-                               : g::simplify_polyline(chosen, 0.5 * band_mm, 0.5 * band_mm,
-                                                      o.max_move_mm);
+  const auto poly = gouge_free
+                        ? g::simplify_polyline(chosen, 0.0, band_mm, o.max_move_mm)
+                        : g::simplify_polyline(chosen, 0.5 * band_mm, 0.5 * band_mm, o.max_move_mm);
   const auto rounded = g::round_vertices(poly, o.decimals, gouge_free);
   const auto chord = g::chord_error(chosen, rounded);
   const double chord_err = chord.max_mm();
@@ -294,16 +298,17 @@ void run(const Options& o) {
                         {"three-case rule", &local.point},
                         {"exact envelope", &exact_points},
                         {"G-code polyline", &rounded}};
-    os << fmt("verification (independent: what each path grinds, B(z) = min over the path of "
-              "U + g(z - Z),\n  brute force over path segments at %zu points every %.6g mm):\n",
-              z_eval.size(), p.spacing_mm * static_cast<double>(stride));
-    os << "    path                            max|B-P| um    RMS um  gouge um   left um   at z mm\n";
+    os << fmt(
+        "verification (independent: what each path grinds, B(z) = min over the path of "
+        "U + g(z - Z),\n  brute force over path segments at %zu points every %.6g mm):\n",
+        z_eval.size(), p.spacing_mm * static_cast<double>(stride));
+    os << "    path                            max|B-P| um    RMS um  gouge um   left um   at z "
+          "mm\n";
     for (const auto& r : rows) {
       const auto b = g::ground_by_polyline(*r.q, wheel, z_eval);
       const auto e = g::compare_ground(z_eval, b, p_eval);
       os << fmt("    %-30s %11.4f %9.4f %9.4f %9.4f %9.3f", r.name, e.max_abs_mm * 1000.0,
-                e.rms_mm * 1000.0, e.max_gouge_mm * 1000.0, e.max_left_mm * 1000.0,
-                e.z_at_max_mm);
+                e.rms_mm * 1000.0, e.max_gouge_mm * 1000.0, e.max_left_mm * 1000.0, e.z_at_max_mm);
       if (e.unreached > 0) {
         os << fmt("  (%zu points not reached)", e.unreached);
       }
@@ -345,16 +350,17 @@ void run(const Options& o) {
     if (!out) {
       throw CommandError(nccomp::tools::kExitFailure, "writing " + o.table_out + " failed");
     }
-    os << fmt("    table: %s (%zu rows every %.6g mm; linear interpolation between rows errs by up "
-              "to %.4f um)\n",
-              o.table_out.c_str(), table.size(), o.table_spacing_mm,
-              g::table_interpolation_error_mm(chosen, p, table) * 1000.0);
+    os << fmt(
+        "    table: %s (%zu rows every %.6g mm; linear interpolation between rows errs by up "
+        "to %.4f um)\n",
+        o.table_out.c_str(), table.size(), o.table_spacing_mm,
+        g::table_interpolation_error_mm(chosen, p, table) * 1000.0);
   }
-  os << fmt("    G-code: %zu linear moves, max chord error %.4f um (%.4f below, %.4f above the "
-            "trajectory; tolerance %.4g um %s, %d decimals)",
-            rounded.size() - 1, chord_err * 1000.0, chord.below_mm * 1000.0,
-            chord.above_mm * 1000.0, o.chord_tol_um,
-            gouge_free ? "above only: gouge-free" : "both sides", o.decimals);
+  os << fmt(
+      "    G-code: %zu linear moves, max chord error %.4f um (%.4f below, %.4f above the "
+      "trajectory; tolerance %.4g um %s, %d decimals)",
+      rounded.size() - 1, chord_err * 1000.0, chord.below_mm * 1000.0, chord.above_mm * 1000.0,
+      o.chord_tol_um, gouge_free ? "above only: gouge-free" : "both sides", o.decimals);
   if (!o.gcode_out.empty()) {
     g::GcodeSpec spec;
     spec.u_axis = o.u_axis[0];
@@ -418,7 +424,8 @@ void setup(CLI::App& app) {
       ->required();
   auto* h = sub->add_option("--arc-height-mm", opt->arc_height_mm,
                             "arc height h (mm), 0 <= h < W/2; 0 = straight grinding line");
-  auto* r = sub->add_option("--arc-radius-mm", opt->arc_radius_mm, "arc radius R (mm), instead of h");
+  auto* r =
+      sub->add_option("--arc-radius-mm", opt->arc_radius_mm, "arc radius R (mm), instead of h");
   h->excludes(r);
   sub->add_option("--method", opt->method, "trajectory for the outputs: exact or local")
       ->capture_default_str();
@@ -454,7 +461,8 @@ void setup(CLI::App& app) {
       ->capture_default_str();
   sub->callback([opt] {
     if (!opt->arc_height_mm && !opt->arc_radius_mm) {
-      throw CommandError(nccomp::tools::kExitUsage, "grind-path: give --arc-height-mm or --arc-radius-mm");
+      throw CommandError(nccomp::tools::kExitUsage,
+                         "grind-path: give --arc-height-mm or --arc-radius-mm");
     }
     try {
       run(*opt);

@@ -44,8 +44,8 @@ TEST(Envelope, GivenRandomProfiles_ThenDequeEqualsBruteForce) {
           if (kind < 0.1) {
             level += 5.0 * (unit(rng) - 0.5);  // step
           } else if (kind < 0.5) {
-            level += 0.02 * (unit(rng) - 0.5);  // noise
-          }  // else flat run
+            level += 0.02 * (unit(rng) - 0.5);                     // noise
+          }                                                        // else flat run
           v = level + (unit(rng) < 0.03 ? 3.0 * unit(rng) : 0.0);  // spikes
         }
         const std::ptrdiff_t m = half_window_samples(wheel, dz);

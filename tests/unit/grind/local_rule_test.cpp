@@ -111,9 +111,8 @@ TEST(LocalRule, GivenConvexGentleCrown_ThenEqualsEnvelope) {
 TEST(LocalRule, GivenTightConcaveDip_ThenGougesAndTheRegionIsClassified) {
   const auto wheel = Wheel::from_arc_height(150.0, 0.5);  // R ≈ 5625 mm
   // Dip of curvature radius 1/(2·2e-4) = 2500 mm < R in |z| < 20.
-  const auto p = sampled(-300.0, 0.5, 1201, [](double z) {
-    return std::abs(z) < 20.0 ? -0.08 + 2e-4 * z * z : 0.0;
-  });
+  const auto p = sampled(-300.0, 0.5, 1201,
+                         [](double z) { return std::abs(z) < 20.0 ? -0.08 + 2e-4 * z * z : 0.0; });
   const auto d = local_derivatives(p, FitSpec{});
   const auto exact = exact_trajectory(p, wheel);
   const auto local = local_rule_trajectory(p, d, wheel);

@@ -20,7 +20,8 @@ std::string error_of(auto&& fn) {
 }
 
 TEST(ProfileCsv, GivenHeaderCommentsBlankLinesAndCrlf_ThenSamplesWithLines) {
-  const auto s = parse_profile_csv("# roll 17\r\nz_mm,u_mm\r\n0,0.5\r\n\r\n 1.5 , +0.25\n3,-1e-3", "p.csv");
+  const auto s =
+      parse_profile_csv("# roll 17\r\nz_mm,u_mm\r\n0,0.5\r\n\r\n 1.5 , +0.25\n3,-1e-3", "p.csv");
   ASSERT_EQ(s.z_mm.size(), 3U);
   EXPECT_DOUBLE_EQ(s.z_mm[1], 1.5);
   EXPECT_DOUBLE_EQ(s.u_mm[1], 0.25);
@@ -69,8 +70,8 @@ TEST(ProfileUniform, GivenNonUniformSamples_ThenErrorOrResampling) {
             "n.csv:4: samples are not uniformly spaced (z = 3.000");
   const auto u = to_uniform(s, 0.5, "n.csv");
   ASSERT_EQ(u.size(), 9U);
-  EXPECT_NEAR(u.u_mm[4], 2.0, 1e-12);   // z = 2 between (1,1) and (3,3)
-  EXPECT_NEAR(u.u_mm[7], 2.5, 1e-12);   // z = 3.5 between (3,3) and (4,2)
+  EXPECT_NEAR(u.u_mm[4], 2.0, 1e-12);  // z = 2 between (1,1) and (3,3)
+  EXPECT_NEAR(u.u_mm[7], 2.5, 1e-12);  // z = 3.5 between (3,3) and (4,2)
   EXPECT_NEAR(u.u_mm[8], 2.0, 1e-12);
 }
 

@@ -21,8 +21,7 @@ TEST(Wheel, GivenWidthAndHeight_ThenRadiusIsTheSeedsFormula) {
   const double r = w.radius_mm();
   const double s = 0.01;
   EXPECT_NEAR(w.rise_mm(s), s * s / (2 * r) + s * s * s * s / (8 * r * r * r), 1e-22);
-  EXPECT_NEAR(w.end_slope(), 75.0 / std::sqrt(w.radius_mm() * w.radius_mm() - 75.0 * 75.0),
-              1e-15);
+  EXPECT_NEAR(w.end_slope(), 75.0 / std::sqrt(w.radius_mm() * w.radius_mm() - 75.0 * 75.0), 1e-15);
 }
 
 TEST(Wheel, GivenRadius_ThenHeightRoundTrips) {
