@@ -43,6 +43,38 @@ std::vector<double> ground_by_polyline(std::span<const TrajectoryPoint> q, const
   if (q.empty()) {
     throw std::invalid_argument("verification: empty trajectory");
   }
+  const double half = wheel.half_width_mm();
+  bool increasing = q.size() >= 2;
+  for (std::size_t i = 0; i + 1 < q.size() && increasing; ++i) {
+    increasing =
+        q[i + 1].z_mm >= q[i].z_mm && std::isfinite(q[i].u_mm) && std::isfinite(q[i + 1].u_mm);
+  }
+  if (increasing) {
+    // Paths sorted in Z (every grid trajectory): walk the points themselves, no segment copy
+    // (48 bytes per point would be ~1 GB at 2·10⁷ points).
+    std::vector<double> out(z_eval.size(), std::numeric_limits<double>::infinity());
+    for (std::size_t e = 0; e < z_eval.size(); ++e) {
+      const double z = z_eval[e];
+      const double a = z - half;
+      const double b = z + half;
+      auto it = std::lower_bound(q.begin(), q.end(), a,
+                                 [](const TrajectoryPoint& p, double v) { return p.z_mm < v; });
+      std::size_t i = static_cast<std::size_t>(it - q.begin());
+      i = i > 0 ? i - 1 : 0;
+      double best = std::numeric_limits<double>::infinity();
+      for (; i + 1 < q.size() && q[i].z_mm <= b; ++i) {
+        const Segment sg{q[i].z_mm, q[i + 1].z_mm, q[i].z_mm,
+                         q[i].u_mm, q[i + 1].z_mm, q[i + 1].u_mm};
+        const double lo = std::max(a, sg.z_lo);
+        const double hi = std::min(b, sg.z_hi);
+        if (lo <= hi) {
+          best = std::min(best, segment_min(sg, z, lo, hi, wheel));
+        }
+      }
+      out[e] = best;
+    }
+    return out;
+  }
   std::vector<Segment> seg;
   seg.reserve(std::max<std::size_t>(q.size(), 2) - 1);
   if (q.size() == 1) {
@@ -70,7 +102,6 @@ std::vector<double> ground_by_polyline(std::span<const TrajectoryPoint> q, const
     std::sort(seg.begin(), seg.end(),
               [](const Segment& x, const Segment& y) { return x.z_lo < y.z_lo; });
   }
-  const double half = wheel.half_width_mm();
   std::vector<double> out(z_eval.size(), std::numeric_limits<double>::infinity());
   for (std::size_t e = 0; e < z_eval.size(); ++e) {
     const double z = z_eval[e];

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <vector>
 
@@ -103,6 +104,21 @@ TEST(Verify, GivenExactTrajectory_ThenPolylineAndGridGroundProfilesAgree) {
   }
   EXPECT_LT(worst, 1e-5);
   EXPECT_GT(worst, 0.0);  // they are different algorithms, not the same numbers
+}
+
+// Sorted paths take a copy-free walk, any other order the sorted segment list: same numbers.
+TEST(Verify, GivenReversedPolyline_ThenSameGroundProfile) {
+  const auto wheel = Wheel::from_arc_height(100.0, 0.3);
+  const auto p = sampled(-100.0, 0.2, 1001, [](double z) { return 0.05 * std::sin(z / 15.0); });
+  const auto t = exact_trajectory(p, wheel);
+  auto q = as_points(t);
+  const auto z = zs(p);
+  const auto forward = ground_by_polyline(q, wheel, z);
+  std::reverse(q.begin(), q.end());
+  const auto backward = ground_by_polyline(q, wheel, z);
+  for (std::size_t i = 0; i < z.size(); ++i) {
+    ASSERT_NEAR(forward[i], backward[i], 1e-15) << z[i];
+  }
 }
 
 TEST(Verify, GivenNoTrajectoryWithinReach_ThenUnreached) {
