@@ -249,8 +249,8 @@ bool same_term(const TermSpec& a, const TermSpec& b) {
 struct SearchSet {
   std::vector<std::size_t> rows;
   std::vector<Row> context;  // the rows' contexts, built once for the many grid evaluations
-  Eigen::MatrixXd q;  // n_sub × rank, orthonormal
-  Eigen::VectorXd r;  // residual ⟂ q
+  Eigen::MatrixXd q;         // n_sub × rank, orthonormal
+  Eigen::VectorXd r;         // residual ⟂ q
   double rss{0.0};
 };
 
@@ -286,7 +286,8 @@ SearchSet make_search_set(const Dataset& data, const Model& model,
     advance_state(specs, row, state);
     if (i != s.rows[j]) continue;
     row_entries(specs, layout, row, state, entries);
-    for (const Entry& e : entries) x(static_cast<Eigen::Index>(j), static_cast<Eigen::Index>(e.index)) = e.value;
+    for (const Entry& e : entries)
+      x(static_cast<Eigen::Index>(j), static_cast<Eigen::Index>(e.index)) = e.value;
     ++j;
   }
   // Orthonormal basis of the design's column space (rank-revealing: groups may be collinear).
@@ -402,7 +403,8 @@ std::pair<double, double> search_candidate(const Dataset& data, const SearchSet&
     TermSpec s = cand.spec;
     const std::size_t i = scored[k].second;
     set_parameter(s, cand.grid[i]);
-    const double score = wide ? exact_reduction(set, candidate_basis(data, set, s)) : scored[k].first;
+    const double score =
+        wide ? exact_reduction(set, candidate_basis(data, set, s)) : scored[k].first;
     if (score > best_score) {
       best_score = score;
       best_v = cand.grid[i];
@@ -653,7 +655,8 @@ std::vector<Candidate> make_candidates(const Dataset& data, const std::vector<st
       Candidate c;
       // Frequencies 4× finer than the Fourier spacing 1/span, so no peak falls between points.
       const double df = 1.0 / (4.0 * r.span());
-      const std::size_t count = std::min<std::size_t>(4000, static_cast<std::size_t>((f_hi - f_lo) / df) + 1);
+      const std::size_t count =
+          std::min<std::size_t>(4000, static_cast<std::size_t>((f_hi - f_lo) / df) + 1);
       for (std::size_t i = 0; i < count; ++i) c.grid.push_back(1.0 / (f_hi - dz(i) * df));
       c.multiplicity = std::max(1.0, (f_hi - f_lo) * r.span());
       add("periodic_" + axis, Form::kSine, static_cast<int>(col), 1, c);
@@ -690,7 +693,8 @@ std::vector<Candidate> make_candidates(const Dataset& data, const std::vector<st
         if (h.grid.empty() || x > h.grid.back()) h.grid.push_back(x);
       }
       h.multiplicity = std::max(1.0, 2.0 * std::log(dz(std::max<std::size_t>(v.size(), 3))));
-      if (h.grid.size() >= 2) add("wear_nonlinear", Form::kHinge, static_cast<int>(Column::kPath), 1, h);
+      if (h.grid.size() >= 2)
+        add("wear_nonlinear", Form::kHinge, static_cast<int>(Column::kPath), 1, h);
     }
     if (path.sd > 0.0) {
       Candidate q;
@@ -782,8 +786,8 @@ AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
       t_out.name = c.spec.name;
       t_out.column = column_name(c.spec.column, data.extra_columns);
       t_out.form = c.spec.form;
-      t_out.parameter = c.spec.form == Form::kStep || c.spec.form == Form::kHinge ? c.spec.center
-                                                                                  : c.spec.scale;
+      t_out.parameter =
+          c.spec.form == Form::kStep || c.spec.form == Form::kHinge ? c.spec.center : c.spec.scale;
       t_out.rss_reduction_fraction = rk.reduction / set.rss;
       tried.push_back(t_out);
     }
@@ -807,8 +811,7 @@ AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
     t.stats = stats_of(data, t.model, result.heldout, &t.residual);
     const double extra = c.grid.empty() ? 0.0 : 1.0;
     const double df1 =
-        dz(t.stats.parameters > base.parameters ? t.stats.parameters - base.parameters : 1) +
-        extra;
+        dz(t.stats.parameters > base.parameters ? t.stats.parameters - base.parameters : 1) + extra;
     // Rows sampled densely in time (a gauge every 15 s) have correlated residuals: the F-test
     // would count them as independent. Scale to the effective number of rows of an AR(1)
     // residual, n (1 − ρ) / (1 + ρ); independent rows (ρ ≈ 0) keep the plain test.

@@ -48,8 +48,8 @@ inline constexpr double kUnknown = std::numeric_limits<double>::quiet_NaN();
 
 /// The names of the standard columns, in Column order (the measurement log's header names).
 inline constexpr std::array<std::string_view, kStandardColumns> kStandardColumnNames = {
-    "time_s", "part", "tool", "kind", "point", "x_mm", "y_mm", "z_mm", "angle_deg", "path_mm",
-    "temp_c"};
+    "time_s", "part", "tool",      "kind",    "point", "x_mm",
+    "y_mm",   "z_mm", "angle_deg", "path_mm", "temp_c"};
 
 /// One measurement's context; NaN = unknown (an empty CSV cell).
 using Row = std::array<double, kMaxColumns>;
@@ -62,10 +62,10 @@ enum class Form : std::uint8_t {
   kConstant = 0,  // [1]
   kLinear = 1,    // [v]
   kPoly = 2,      // [u, u², …, u^degree], u = (v − center) / scale
-  kExpRise = 3,   // [1 − exp(−v / scale)] for v ≥ 0: first-order warm-up (time) or break-in (path)
-  kSine = 4,      // [sin(2π v / scale), cos(2π v / scale)]: scale = period
-  kStep = 5,      // [v ≥ center ? 1 : 0]: level change at `center`
-  kLag = 6,       // [first-order lag of v over time_s with time constant `scale` [s]]
+  kExpRise = 3,  // [1 − exp(−v / scale)] for v ≥ 0: first-order warm-up (time) or break-in (path)
+  kSine = 4,       // [sin(2π v / scale), cos(2π v / scale)]: scale = period
+  kStep = 5,       // [v ≥ center ? 1 : 0]: level change at `center`
+  kLag = 6,        // [first-order lag of v over time_s with time constant `scale` [s]]
   kExpGrowth = 7,  // [exp(v / scale) − 1] for v ≥ 0: accelerating wear at the end of tool life
   kHinge = 8,      // [max(0, v − center)]: a rate that changes at `center` (wear stage change)
 };

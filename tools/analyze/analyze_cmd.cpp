@@ -84,9 +84,8 @@ void run(const Options& opt) {
   for (const auto& m : opt.maps) inputs.push_back(m);
   write_file(out / "report.md",
              nccomp::tools::analyze::report_markdown(data, result, inputs, plotted));
-  std::vector<std::string> header = {
-      "Compensation model fitted by `nccomp analyze` on all " + std::to_string(data.rows()) +
-          " rows of:"};
+  std::vector<std::string> header = {"Compensation model fitted by `nccomp analyze` on all " +
+                                     std::to_string(data.rows()) + " rows of:"};
   for (const auto& l : opt.logs) header.push_back("  " + l);
   header.push_back("Load it in nccompd as an include; use it as --config to analyze again.");
   write_file(out / "model.toml", io::write_model_toml(result.final_model, cfg.config, header));
@@ -115,8 +114,7 @@ void setup(CLI::App& app) {
       "analyze",
       "Fit the declared model to a measurement log, find and add the effect it lacks, report the "
       "error before and after");
-  sub->add_option("--log", opt->logs, "measurement log CSV (repeat for several files)")
-      ->required();
+  sub->add_option("--log", opt->logs, "measurement log CSV (repeat for several files)")->required();
   sub->add_option("--config", opt->config, "TOML file with the [model] table")->required();
   sub->add_option("--map", opt->maps,
                   "column mapping TOML for a foreign CSV (one for all logs, or one per --log)");

@@ -32,11 +32,13 @@ void check_keys(const toml::table& t, std::string_view source, std::string_view 
   for (const auto& [k, v] : t) {
     if (std::find(allowed.begin(), allowed.end(), k.str()) == allowed.end()) {
       fail(where(source, v, std::string(path) + "." + std::string(k.str())) +
-           ": unknown key (allowed: " + [&] {
+           ": unknown key (allowed: " +
+           [&] {
              std::string a;
              for (auto x : allowed) a += (a.empty() ? "" : ", ") + std::string(x);
              return a;
-           }() + ")");
+           }() +
+           ")");
     }
   }
 }
@@ -80,7 +82,8 @@ std::uint8_t kinds_mask(const toml::node& n, std::string_view source, const std:
   std::uint8_t mask = 0;
   for (const auto& k : get_strings(n, source, key)) {
     const int i = kind_from_name(k);
-    if (i < 0) fail(where(source, n, key) + ": unknown kind '" + k + "' (tool_wear, contour, calib)");
+    if (i < 0)
+      fail(where(source, n, key) + ": unknown kind '" + k + "' (tool_wear, contour, calib)");
     mask = static_cast<std::uint8_t>(mask | (1U << static_cast<unsigned>(i)));
   }
   if (mask == 0) fail(where(source, n, key) + ": names no kind");
@@ -283,8 +286,10 @@ ModelFile read_model_table(const toml::table& root, std::string_view source, boo
         so.per[k] = resolve_column(names[k], out.extra_columns, *n, source, "model.search.per");
       }
     }
-    if (const auto* n = st->get("kinds")) so.kind_mask = kinds_mask(*n, source, "model.search.kinds");
-    if (const auto* n = st->get("exclude")) so.exclude = get_strings(*n, source, "model.search.exclude");
+    if (const auto* n = st->get("kinds"))
+      so.kind_mask = kinds_mask(*n, source, "model.search.kinds");
+    if (const auto* n = st->get("exclude"))
+      so.exclude = get_strings(*n, source, "model.search.exclude");
     for (const auto* list : {"linear_columns", "lag_columns"}) {
       if (const auto* n = st->get(list)) {
         const std::string key = std::string("model.search.") + list;
@@ -345,7 +350,8 @@ std::string write_model_toml(const core::model::Model& model,
     o << "\n[[model.term]]\n";
     o << "name = " << quote(s.name) << "\n";
     o << "form = " << quote(cm::form_name(s.form)) << "\n";
-    if (s.form != cm::Form::kConstant) o << "column = " << quote(cm::column_name(s.column, ex)) << "\n";
+    if (s.form != cm::Form::kConstant)
+      o << "column = " << quote(cm::column_name(s.column, ex)) << "\n";
     if (s.per[0] >= 0) {
       o << "per = [" << quote(cm::column_name(s.per[0], ex));
       if (s.per[1] >= 0) o << ", " << quote(cm::column_name(s.per[1], ex));
@@ -366,7 +372,8 @@ std::string write_model_toml(const core::model::Model& model,
       o << "center = " << fmt_double(s.center) << "\n";
     }
     if (s.form == cm::Form::kPoly || cm::has_nonlinear_parameter(s.form)) {
-      if (s.form != cm::Form::kStep && s.form != cm::Form::kHinge) o << "scale = " << fmt_double(s.scale) << "\n";
+      if (s.form != cm::Form::kStep && s.form != cm::Form::kHinge)
+        o << "scale = " << fmt_double(s.scale) << "\n";
     }
     o << "groups = [";
     for (std::size_t g = 0; g < t.groups.size(); ++g) {
@@ -383,7 +390,8 @@ std::string write_model_toml(const core::model::Model& model,
   auto list = [&](const char* key, const std::vector<int>& cols) {
     if (cols.empty()) return;
     o << key << " = [";
-    for (std::size_t i = 0; i < cols.size(); ++i) o << (i ? ", " : "") << quote(cm::column_name(cols[i], ex));
+    for (std::size_t i = 0; i < cols.size(); ++i)
+      o << (i ? ", " : "") << quote(cm::column_name(cols[i], ex));
     o << "]\n";
   };
   list("linear_columns", so.linear_columns);
@@ -395,7 +403,8 @@ std::string write_model_toml(const core::model::Model& model,
   list("lag_columns", so.lag_columns);
   if (!so.exclude.empty()) {
     o << "exclude = [";
-    for (std::size_t i = 0; i < so.exclude.size(); ++i) o << (i ? ", " : "") << quote(so.exclude[i]);
+    for (std::size_t i = 0; i < so.exclude.size(); ++i)
+      o << (i ? ", " : "") << quote(so.exclude[i]);
     o << "]\n";
   }
   return o.str();
@@ -443,7 +452,8 @@ Mapping read_mapping_text(std::string_view text, std::string_view source) {
   }
   if (const auto* t = table("scale")) {
     for (const auto& [k, v] : *t) {
-      m.scale.emplace_back(std::string(k.str()), get_number(v, source, "scale." + std::string(k.str())));
+      m.scale.emplace_back(std::string(k.str()),
+                           get_number(v, source, "scale." + std::string(k.str())));
     }
   }
   if (const auto* t = table("constant")) {
@@ -472,7 +482,8 @@ Mapping read_mapping_text(std::string_view text, std::string_view source) {
     for (auto& s : m.wide_measured) s = trim(s);
     m.wide_points = get_numbers(*pts, source, "wide.points");
     if (m.wide_measured.size() != m.wide_points.size() || m.wide_measured.empty()) {
-      fail(where(source, *t, "wide") + ": measured_um and points must have the same, non-zero length");
+      fail(where(source, *t, "wide") +
+           ": measured_um and points must have the same, non-zero length");
     }
   }
   for (const auto& [k, v] : m.scale) {
@@ -688,7 +699,9 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
       if (!cell.empty()) {
         if (!mapped && t.column == static_cast<int>(cm::Column::kKind)) {
           const int k = kind_from_name(cell);
-          if (k < 0) csv_fail(source, line_no, t.name, "'" + std::string(cell) + "' is not tool_wear, contour or calib");
+          if (k < 0)
+            csv_fail(source, line_no, t.name,
+                     "'" + std::string(cell) + "' is not tool_wear, contour or calib");
           v = k;
         } else {
           const char* b = cell.data();
@@ -709,22 +722,23 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
         values[static_cast<std::size_t>(t.column)] = v;
       }
     }
-    for (std::size_t c : {static_cast<std::size_t>(cm::Column::kPart),
-                          static_cast<std::size_t>(cm::Column::kTool),
-                          static_cast<std::size_t>(cm::Column::kPoint)}) {
+    for (std::size_t c :
+         {static_cast<std::size_t>(cm::Column::kPart), static_cast<std::size_t>(cm::Column::kTool),
+          static_cast<std::size_t>(cm::Column::kPoint)}) {
       if (std::isfinite(values[c]) && std::floor(values[c]) < values[c]) {
-        csv_fail(source, line_no, std::string(cm::kStandardColumnNames[c]),
-                 "must be an integer");
+        csv_fail(source, line_no, std::string(cm::kStandardColumnNames[c]), "must be an integer");
       }
     }
     if (!std::isfinite(values[static_cast<std::size_t>(cm::Column::kKind)])) {
-      csv_fail(source, line_no, "kind", mapped ? "no kind (map it or set [constant] kind)" : "empty");
+      csv_fail(source, line_no, "kind",
+               mapped ? "no kind (map it or set [constant] kind)" : "empty");
     }
     const double t_s = values[time_col];
     if (std::isfinite(t_s)) {
       if (t_s < last_time) {
-        csv_fail(source, line_no, "time_s", "goes backwards (" + std::to_string(t_s) + " after " +
-                                                std::to_string(last_time) + "); the log must be in time order");
+        csv_fail(source, line_no, "time_s",
+                 "goes backwards (" + std::to_string(t_s) + " after " + std::to_string(last_time) +
+                     "); the log must be in time order");
       }
       last_time = t_s;
     }
@@ -739,7 +753,8 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
         if (!cell.empty()) {
           auto [p, ec] = std::from_chars(cell.data(), cell.data() + cell.size(), y);
           if (ec != std::errc() || p != cell.data() + cell.size() || !std::isfinite(y)) {
-            csv_fail(source, line_no, mapping.wide_measured[w], "'" + std::string(cell) + "' is not a finite number");
+            csv_fail(source, line_no, mapping.wide_measured[w],
+                     "'" + std::string(cell) + "' is not a finite number");
           }
         }
         values[static_cast<std::size_t>(cm::Column::kPoint)] = mapping.wide_points[w];

@@ -35,8 +35,7 @@ struct ModelFile {
 
 /// Parses `[model]` of `root`. `source` names the file in errors. With require_fitted, every
 /// term must carry `groups` and `coef_um` (a file the daemon loads).
-ModelFile read_model_table(const toml::table& root, std::string_view source,
-                           bool require_fitted);
+ModelFile read_model_table(const toml::table& root, std::string_view source, bool require_fitted);
 
 /// Parses TOML text and its `[model]` table (errors carry line and column).
 ModelFile read_model_text(std::string_view text, std::string_view source, bool require_fitted);

@@ -26,7 +26,8 @@ std::string json_string(const std::string& s) {
       o += c;
     } else if (static_cast<unsigned char>(c) < 0x20) {
       char buf[8];
-      std::snprintf(buf, sizeof buf, "\\u%04x", static_cast<unsigned>(static_cast<unsigned char>(c)));
+      std::snprintf(buf, sizeof buf, "\\u%04x",
+                    static_cast<unsigned>(static_cast<unsigned char>(c)));
       o += buf;
     } else {
       o += c;
@@ -266,9 +267,10 @@ std::string report_markdown(const cm::Dataset& data, const cm::AnalysisResult& r
        "candidates and by its search multiplicity, is below alpha, and the held-out RMS drops.\n";
   o << "\n## Candidates tried at each step (best first)\n\n";
   for (std::size_t s = 0; s < result.steps.size(); ++s) {
-    o << "Step " << s + 1 << ":\n\n| candidate | column | form | parameter | share of residual "
-                             "SS removed | p (adjusted) | held-out better |\n| --- | --- | --- | "
-                             "--- | --- | --- | --- |\n";
+    o << "Step " << s + 1
+      << ":\n\n| candidate | column | form | parameter | share of residual "
+         "SS removed | p (adjusted) | held-out better |\n| --- | --- | --- | "
+         "--- | --- | --- | --- |\n";
     for (const auto& c : result.steps[s]) {
       o << "| " << c.name << " | " << c.column << " | " << cm::form_name(c.form) << " | "
         << num(c.parameter, 5) << " | " << num(c.rss_reduction_fraction, 3) << " | "

@@ -22,7 +22,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     cm::EvalState s = m.make_state();
     cm::Row r = cm::unknown_row();
     for (int i = 0; i < 4; ++i) {
-      for (std::size_t c = 0; c < cm::kMaxColumns; ++c) r[c] = static_cast<double>(static_cast<std::size_t>(i) + c % 3);
+      for (std::size_t c = 0; c < cm::kMaxColumns; ++c)
+        r[c] = static_cast<double>(static_cast<std::size_t>(i) + c % 3);
       r[static_cast<std::size_t>(cm::Column::kKind)] = static_cast<double>(i % 3);
       (void)m.evaluate(r, s);
     }

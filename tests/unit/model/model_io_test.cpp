@@ -79,7 +79,8 @@ measured_um = ["flute_1", "flute_2"]
 points = [1, 2]
 )toml",
                                               "map.toml");
-  std::istringstream in("\xEF\xBB\xBF時間(s) ,cut,flute_1,flute_2,t1(°C)\n0,1,10,11,20.5\n15,2,12,,21\n");
+  std::istringstream in(
+      "\xEF\xBB\xBF時間(s) ,cut,flute_1,flute_2,t1(°C)\n0,1,10,11,20.5\n15,2,12,,21\n");
   cm::Dataset d;
   d.extra_columns = {"t1"};
   io::read_log(in, "phm.csv", m, d);
@@ -101,9 +102,11 @@ TEST(ReadMapping, RefusesUnknownKeysAndColumns) {
     }
     return std::string();
   };
-  EXPECT_EQ(err("[columns]\nspeed = \"x\"\n"), "map.toml:2:9: columns.speed: not a measurement-log column");
+  EXPECT_EQ(err("[columns]\nspeed = \"x\"\n"),
+            "map.toml:2:9: columns.speed: not a measurement-log column");
   EXPECT_EQ(err("[colums]\n").substr(0, 26), "map.toml:1:1: .colums: unk");
-  EXPECT_EQ(err("[constant]\nkind = \"probe\"\n"), "map.toml:2:8: constant.kind: unknown kind 'probe'");
+  EXPECT_EQ(err("[constant]\nkind = \"probe\"\n"),
+            "map.toml:2:8: constant.kind: unknown kind 'probe'");
   EXPECT_EQ(err("[columns\n").substr(0, 11), "map.toml:1:");
 }
 
@@ -114,7 +117,8 @@ TEST(ModelFile, RoundTripsThroughTomlAndEvaluatesTheSame) {
   const cm::Dataset d = nccomp::test::synth::generate(opt);
   const cm::AnalysisResult r = cm::analyze(d, nccomp::test::synth::config());
   ASSERT_FALSE(r.effects.empty());
-  const std::string text = io::write_model_toml(r.final_model, nccomp::test::synth::config(), {"t"});
+  const std::string text =
+      io::write_model_toml(r.final_model, nccomp::test::synth::config(), {"t"});
   const io::ModelFile f = io::read_model_text(text, "model.toml", true);
   const cm::Model back(f.extra_columns, f.fitted_terms);
   cm::EvalState s1 = r.final_model.make_state();
@@ -145,9 +149,10 @@ TEST(ModelFile, RefusesBadTerms) {
             "c.toml:4:9: model.term[0].kinds: unknown kind 'probe' (tool_wear, contour, calib)");
   EXPECT_EQ(err("[[model.term]]\nname = \"a\"\nform = \"constant\"\n", true),
             "c.toml:1:1: model.term[0]: no groups / coef_um: not a fitted model");
-  EXPECT_EQ(err("[[model.term]]\nname = \"a\"\nform = \"constant\"\ngroups = [[0, 0]]\n"
-                "coef_um = [1, 2]\n"),
-            "c.toml:5:11: model.term[0].coef_um: expected 1 values (groups × basis functions), got 2");
+  EXPECT_EQ(
+      err("[[model.term]]\nname = \"a\"\nform = \"constant\"\ngroups = [[0, 0]]\n"
+          "coef_um = [1, 2]\n"),
+      "c.toml:5:11: model.term[0].coef_um: expected 1 values (groups × basis functions), got 2");
   EXPECT_EQ(err("[model]\nalpha = 0.9\n[[model.term]]\nname = \"a\"\nform = \"constant\"\n"),
             "c.toml:2:9: model.alpha: must be within (0, 0.5)");
 }

@@ -36,8 +36,8 @@ cm::Row contour_row(double t_s, double point, double x_mm) {
 }  // namespace
 
 TEST(ModelEvaluate, SumsTermsPerGroupAndIsAllocationFree) {
-  cm::Term offset = term("offset", cm::Form::kConstant, -1, 1.0, {{1.0, 0.0}, {2.0, 0.0}},
-                         {3.0, -2.0});
+  cm::Term offset =
+      term("offset", cm::Form::kConstant, -1, 1.0, {{1.0, 0.0}, {2.0, 0.0}}, {3.0, -2.0});
   offset.spec.per = {static_cast<int>(cm::Column::kPoint), -1};
   cm::Term warm = term("thermal_drift", cm::Form::kExpRise, 0, 1800.0, {{0.0, 0.0}}, {4.0});
   cm::Term per = term("periodic_x", cm::Form::kSine, 5, 25.0, {{0.0, 0.0}}, {2.0, 1.0});

@@ -20,7 +20,8 @@ TEST(Report, SummaryJsonHasExactlyTheIssueKeys) {
   ASSERT_EQ(r.effects.size(), 1U);
   const std::string j = nccomp::tools::analyze::summary_json(d, r);
   // Top-level keys in order, and nothing else at the top level.
-  const std::regex top(R"(^\{\n  "declared_rms_um": [-0-9.e]+,\n  "effects": \[\n    \{.*\}\n  \],\n  "final_rms_um": [-0-9.e]+,\n  "noise_floor_um": [-0-9.e]+\n\}\n$)");
+  const std::regex top(
+      R"(^\{\n  "declared_rms_um": [-0-9.e]+,\n  "effects": \[\n    \{.*\}\n  \],\n  "final_rms_um": [-0-9.e]+,\n  "noise_floor_um": [-0-9.e]+\n\}\n$)");
   EXPECT_TRUE(std::regex_match(j, top)) << j;
   const std::regex effect(
       R"re(\{"name": "part_trend", "column": "part", "form": "linear", "params": \{"coef_um": \[[-0-9.e]+\]\}, "rms_before_um": [-0-9.e]+, "rms_after_um": [-0-9.e]+, "heldout_rms_before_um": [-0-9.e]+, "heldout_rms_after_um": [-0-9.e]+, "p_value": [-0-9.e]+\})re");
@@ -44,7 +45,8 @@ TEST(Report, FiguresAreCompleteSvgWithOnePointPerRow) {
   EXPECT_EQ(svg.rfind("<svg", 0), 0U);
   EXPECT_EQ(svg.substr(svg.size() - 7), "</svg>\n");
   std::size_t circles = 0;
-  for (std::size_t p = svg.find("<circle"); p != std::string::npos; p = svg.find("<circle", p + 1)) {
+  for (std::size_t p = svg.find("<circle"); p != std::string::npos;
+       p = svg.find("<circle", p + 1)) {
     ++circles;
   }
   EXPECT_EQ(circles, 2 * d.rows());  // before and after panels

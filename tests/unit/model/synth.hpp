@@ -69,7 +69,8 @@ inline cm::Dataset generate(const Options& opt) {
   std::uniform_real_distribution<double> uni(0.0, 1.0);
   std::normal_distribution<double> gauss(0.0, 1.0);
   cm::Dataset d;
-  for (std::size_t c = 0; c < cm::kStandardColumns; ++c) d.columns[c].reserve(opt.parts * opt.points_per_part);
+  for (std::size_t c = 0; c < cm::kStandardColumns; ++c)
+    d.columns[c].reserve(opt.parts * opt.points_per_part);
   // Per-checkpoint constants of the declared model.
   std::vector<double> point_offset(opt.points_per_part);
   for (auto& v : point_offset) v = 6.0 * (uni(rng) - 0.5);
