@@ -217,6 +217,40 @@ std::vector<std::int64_t> TableReader::integer_list(std::string_view key, std::i
   return out;
 }
 
+std::vector<double> TableReader::number_list(std::string_view key, double min, double max) {
+  std::vector<double> out;
+  const toml::node* n = get(key);
+  if (n == nullptr) {
+    return out;
+  }
+  const auto* arr = n->as_array();
+  if (arr == nullptr) {
+    diag_.error(n, path(key), "expected an array of numbers");
+    return out;
+  }
+  for (std::size_t i = 0; i < arr->size(); ++i) {
+    const toml::node& e = *arr->get(i);
+    const std::string p = path(key) + "[" + std::to_string(i) + "]";
+    double v = 0.0;
+    if (const auto* f = e.as_floating_point()) {
+      v = f->get();
+    } else if (const auto* iv = e.as_integer()) {
+      v = static_cast<double>(iv->get());
+    } else {
+      diag_.error(&e, p, "expected a number");
+      continue;
+    }
+    if (!std::isfinite(v) || v < min || v > max) {
+      std::ostringstream s;
+      s << "value " << v << " is out of range [" << min << ", " << max << "]";
+      diag_.error(&e, p, s.str());
+      continue;
+    }
+    out.push_back(v);
+  }
+  return out;
+}
+
 const toml::table* TableReader::table(std::string_view key) {
   const toml::node* n = get(key);
   if (n == nullptr) {

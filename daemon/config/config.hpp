@@ -83,6 +83,8 @@ class TableReader {
                      const std::vector<std::string>& choices);
   /// Integers in [min, max]; empty if absent.
   std::vector<std::int64_t> integer_list(std::string_view key, std::int64_t min, std::int64_t max);
+  /// Finite numbers (integers or floats) in [min, max]; empty if absent.
+  std::vector<double> number_list(std::string_view key, double min, double max);
   /// A sub-table (nullptr if absent; an error if present and not a table).
   const toml::table* table(std::string_view key);
   /// An array of tables (nullptr if absent; an error if present with any non-table element).

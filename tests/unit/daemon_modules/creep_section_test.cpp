@@ -1,0 +1,523 @@
+// GIVEN a daemon config with a [creep] section, WHEN the loader reads it, THEN every documented
+// key lands in CreepConfig, every bad key is reported with file:line:column and key path, and
+// the engine built from it creeps (or steps, or predicts) the offsets by the numbers.
+#include "daemon/sections/creep/creep_section.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "core/creep/creep_module.hpp"
+#include "daemon/config/builtin_sections.hpp"
+#include "tests/unit/daemon_modules/temp_dir.hpp"
+
+namespace nccomp::daemon::sections {
+namespace {
+
+using config::load_file;
+using testing::TempDir;
+
+const char* kRegisters = R"(
+[loopback]
+
+[[registers]]
+name = "X_wear_offset"
+kind = "axis_offset"
+bus = "loopback"
+max_abs_um = 100
+max_step_um = 50
+max_rate_um_per_s = 100000
+
+[[registers]]
+name = "Y_wear_offset"
+kind = "axis_offset"
+bus = "loopback"
+max_abs_um = 100
+max_step_um = 50
+max_rate_um_per_s = 100000
+
+[[registers]]
+name = "Z_wear_offset"
+kind = "axis_offset"
+bus = "loopback"
+max_abs_um = 100
+max_step_um = 50
+max_rate_um_per_s = 100000
+
+[[registers]]
+name = "T1_length_wear"
+kind = "tool_length_wear"
+bus = "loopback"
+max_abs_um = 100
+max_step_um = 50
+max_rate_um_per_s = 100000
+)";
+
+const char* kFlagRegisters = R"(
+[[registers]]
+name = "creep_warning"
+kind = "axis_offset"
+bus = "loopback"
+max_abs_um = 1
+max_step_um = 1
+max_rate_um_per_s = 100000
+
+[[registers]]
+name = "creep_alarm"
+kind = "axis_offset"
+bus = "loopback"
+max_abs_um = 1
+max_step_um = 1
+max_rate_um_per_s = 100000
+
+[[registers]]
+name = "measure_request"
+kind = "axis_offset"
+bus = "loopback"
+max_abs_um = 1
+max_step_um = 1
+max_rate_um_per_s = 100000
+
+[[registers]]
+name = "sister_request"
+kind = "axis_offset"
+bus = "loopback"
+max_abs_um = 1
+max_step_um = 1
+max_rate_um_per_s = 100000
+)";
+
+std::string read(const std::string& path) {
+  std::ifstream in(path);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+/// The ```toml block after "### Example" in docs/creep.md: the documentation must stay loadable.
+std::string doc_example() {
+  const std::string md = read(std::string(NCCOMP_SOURCE_DIR) + "/docs/creep.md");
+  const auto h = md.find("### Example");
+  const auto b = md.find("```toml\n", h);
+  const auto e = md.find("```", b + 8);
+  if (h == std::string::npos || b == std::string::npos || e == std::string::npos) return {};
+  return md.substr(b + 8, e - b - 8);
+}
+
+/// "file:line:column: " of the value of the first line of text that contains needle.
+std::string at(const std::string& file, const std::string& text, const std::string& needle) {
+  const auto pos = text.find(needle);
+  if (pos == std::string::npos) return "<" + needle + " not in the text>";
+  int line = 1;
+  std::size_t bol = 0;
+  for (std::size_t i = 0; i < pos; ++i) {
+    if (text[i] == '\n') {
+      ++line;
+      bol = i + 1;
+    }
+  }
+  const auto eq = text.find("= ", pos);
+  const auto col = static_cast<int>(eq + 2 - bol + 1);
+  return file + ":" + std::to_string(line) + ":" + std::to_string(col) + ": ";
+}
+
+std::string errors_of(const std::string& path) {
+  auto r = load_file(path);
+  return r.config ? std::string() : r.diagnostics.to_string();
+}
+
+TEST(CreepSection, ParsesTheDocumentedExampleKeyForKey) {
+  const std::string ex = doc_example();
+  ASSERT_FALSE(ex.empty());
+  TempDir d;
+  const auto f = d.write("a.toml", std::string(kRegisters) + kFlagRegisters + ex);
+  auto r = load_file(f);
+  ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+  const auto* s = creep_section(*r.config);
+  ASSERT_NE(s, nullptr);
+  EXPECT_TRUE(s->enabled);
+  const auto& c = s->module.creep;
+  EXPECT_EQ(c.creep_basis, core::creep::CreepBasis::kPath);
+  EXPECT_DOUBLE_EQ(c.creep_length_mm, 300.0);
+  EXPECT_EQ(c.profile, core::ProfileShape::kCosine);
+  EXPECT_EQ(c.on_unfinished, core::creep::UnfinishedPolicy::kSuperpose);
+  EXPECT_EQ(c.max_creeps, 4U);
+  EXPECT_EQ(c.edge.tool_shape, core::creep::ToolShape::kBall);
+  EXPECT_EQ(c.edge.edge_points, 7U);
+  EXPECT_EQ(c.edge.normal_source, core::creep::NormalSource::kAxisSample);
+  EXPECT_EQ(c.edge.fallback_channel, core::creep::Channel::kZ);
+  EXPECT_EQ(c.output.mode, core::creep::OutputMode::kAxes);
+  EXPECT_EQ(s->module.registers.channel[0], "X_wear_offset");
+  EXPECT_EQ(s->module.registers.channel[2], "Z_wear_offset");
+  EXPECT_EQ(s->module.registers.measurement_due, "measure_request");
+  EXPECT_EQ(s->module.registers.tool_change, "sister_request");
+  EXPECT_EQ(c.interval.basis, core::creep::IntervalBasis::kAdaptive);
+  EXPECT_DOUBLE_EQ(c.interval.target_increment_um, 3.0);
+  EXPECT_DOUBLE_EQ(c.interval.min_interval_mm, 200.0);
+  EXPECT_DOUBLE_EQ(c.interval.max_interval_mm, 3000.0);
+  EXPECT_DOUBLE_EQ(c.tool_life.wear_limit_um, 40.0);
+  EXPECT_DOUBLE_EQ(c.tool_life.excessive_increment_um, 15.0);
+  EXPECT_EQ(c.tool_life.on_excessive, core::creep::ExcessivePolicy::kSister);
+  EXPECT_DOUBLE_EQ(c.tool_life.noise_um, 2.0);
+  EXPECT_TRUE(c.predict.enabled);
+  EXPECT_EQ(c.predict.window, 5U);
+  EXPECT_DOUBLE_EQ(c.entry.sister_offset_um, 5.0);
+  EXPECT_DOUBLE_EQ(c.entry.sister_length_mm, 20.0);
+  EXPECT_DOUBLE_EQ(c.entry.sister_restart_back_mm, 30.0);
+  ASSERT_EQ(c.deflection.size(), 1U);
+  EXPECT_EQ(c.deflection[0].tool, 0);
+  ASSERT_EQ(c.deflection[0].wear_um.size(), 3U);
+  EXPECT_DOUBLE_EQ(c.deflection[0].normal_um[2], 4.0);
+  EXPECT_DOUBLE_EQ(c.deflection[0].lateral_um[1], 1.0);
+  // Defaults where the example is silent.
+  EXPECT_DOUBLE_EQ(c.output.write_resolution_um, 0.1);
+  EXPECT_DOUBLE_EQ(c.tool_life.implausible_factor, 5.0);
+
+  auto engine = config::build_engine(*r.config);
+  ASSERT_EQ(engine->module_count(), 1U);
+  EXPECT_EQ(engine->module(0).name(), "creep");
+}
+
+TEST(CreepSection, ReadsEveryOtherKey) {
+  TempDir d;
+  d.write("paths/normals.csv", "path_mm,nx,ny,nz\n0,0,0,1\n100,1,0,0\n");
+  // In an included file: the toolpath file is relative to that file's directory.
+  d.write("paths/creep.toml", R"(
+[creep]
+creep_basis = "rate_path"
+creep_time_s = 30
+creep_rate_um_per_min = 2.5
+creep_rate_um_per_mm = 0.05
+profile = "table"
+profile_table = [0, 0.1, 0.5, 1]
+on_unfinished = "alarm"
+max_creeps = 2
+[creep.edge]
+tool_shape = "bull_nose"
+edge_points = 3
+normal_source = "toolpath"
+toolpath_file = "normals.csv"
+tool_axis = [1, 0, 0]
+fallback_channel = "radius"
+fallback_sign = 1
+[creep.output]
+mode = "tool_registers"
+length_register = "T1_length_wear"
+tool_register_sign = 1
+write_resolution_um = 0.5
+refresh_interval_s = 0
+[creep.limiter]
+max_abs_um = 70
+max_step_um = 7
+max_rate_um_per_s = 700
+[creep.interval]
+basis = "material"
+interval_mm = 11
+interval_s = 12
+removal_mm3_per_mm = 0.5
+interval_mm3 = 99
+[creep.tool_life]
+implausible_factor = 3
+min_expected_increment_um = 4
+on_excessive = "stop"
+[creep.predict]
+enabled = false
+window = 8
+max_um = 9
+[creep.entry]
+retract_um = 2
+refeed_length_mm = 6
+[[creep.transition]]
+tool = 2
+start_path_mm = 10
+end_path_mm = 60
+in_offset_um = 3
+in_length_mm = 5
+out_offset_um = 4
+out_length_mm = 6
+)");
+  const auto f = d.write("main.toml", std::string("include = [\"paths/creep.toml\"]\n") +
+                                          kRegisters);
+  auto r = load_file(f);
+  ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+  const auto& s = *creep_section(*r.config);
+  const auto& c = s.module.creep;
+  EXPECT_EQ(c.creep_basis, core::creep::CreepBasis::kRatePath);
+  EXPECT_DOUBLE_EQ(c.creep_time_s, 30.0);
+  EXPECT_DOUBLE_EQ(c.creep_rate_um_per_min, 2.5);
+  EXPECT_DOUBLE_EQ(c.creep_rate_um_per_mm, 0.05);
+  EXPECT_EQ(c.profile, core::ProfileShape::kTable);
+  EXPECT_EQ(c.profile_table, (std::vector<double>{0.0, 0.1, 0.5, 1.0}));
+  EXPECT_EQ(c.on_unfinished, core::creep::UnfinishedPolicy::kAlarm);
+  EXPECT_EQ(c.max_creeps, 2U);
+  EXPECT_EQ(c.edge.tool_shape, core::creep::ToolShape::kBullNose);
+  EXPECT_EQ(c.edge.normal_source, core::creep::NormalSource::kToolpath);
+  EXPECT_EQ(s.toolpath_file, (d.path() / "paths/normals.csv").string());
+  ASSERT_EQ(c.toolpath_normals.size(), 2U);
+  EXPECT_DOUBLE_EQ(c.toolpath_normals[1].path_mm, 100.0);
+  EXPECT_DOUBLE_EQ(c.toolpath_normals[1].normal[0], 1.0);
+  EXPECT_DOUBLE_EQ(c.edge.tool_axis[0], 1.0);
+  EXPECT_EQ(c.edge.fallback_channel, core::creep::Channel::kRadius);
+  EXPECT_DOUBLE_EQ(c.edge.fallback_sign, 1.0);
+  EXPECT_EQ(c.output.mode, core::creep::OutputMode::kToolRegisters);
+  EXPECT_EQ(s.module.registers.channel[4], "T1_length_wear");
+  EXPECT_DOUBLE_EQ(c.output.tool_register_sign, 1.0);
+  EXPECT_DOUBLE_EQ(c.output.write_resolution_um, 0.5);
+  EXPECT_DOUBLE_EQ(c.output.refresh_interval_s, 0.0);
+  EXPECT_DOUBLE_EQ(c.limiter.max_step_um, 7.0);
+  EXPECT_EQ(c.interval.basis, core::creep::IntervalBasis::kMaterial);
+  EXPECT_DOUBLE_EQ(c.interval.interval_mm, 11.0);
+  EXPECT_DOUBLE_EQ(c.interval.interval_s, 12.0);
+  EXPECT_DOUBLE_EQ(c.interval.removal_mm3_per_mm, 0.5);
+  EXPECT_DOUBLE_EQ(c.interval.interval_mm3, 99.0);
+  EXPECT_DOUBLE_EQ(c.tool_life.implausible_factor, 3.0);
+  EXPECT_DOUBLE_EQ(c.tool_life.min_expected_increment_um, 4.0);
+  EXPECT_FALSE(c.predict.enabled);
+  EXPECT_EQ(c.predict.window, 8U);
+  EXPECT_DOUBLE_EQ(c.predict.max_um, 9.0);
+  EXPECT_DOUBLE_EQ(c.entry.retract_um, 2.0);
+  EXPECT_DOUBLE_EQ(c.entry.refeed_length_mm, 6.0);
+  ASSERT_EQ(c.transitions.size(), 1U);
+  EXPECT_EQ(c.transitions[0].tool, 2);
+  EXPECT_DOUBLE_EQ(c.transitions[0].out_length_mm, 6.0);
+}
+
+TEST(CreepSection, BadKeysAreReportedWithFileLineColumnAndKeyPath) {
+  TempDir d;
+  const std::string text = std::string(kRegisters) + R"(
+[creep]
+creep_length_mm = -5
+profile = "ramp"
+[creep.edge]
+edge_points = 40
+edge_pointz = 3
+fallback_sign = 0.5
+[creep.output]
+z_register = "Z_wear_offset"
+[[creep.deflection]]
+tool = 1
+wear_um = [0, "ten"]
+normal_um = [0, 1]
+)";
+  const auto f = d.write("bad.toml", text);
+  const std::string e = errors_of(f);
+  EXPECT_NE(e.find(at(f, text, "creep_length_mm = -5") +
+                   "creep.creep_length_mm: value -5 is out of range [0, 1e+09]"),
+            std::string::npos)
+      << e;
+  EXPECT_NE(e.find(at(f, text, "profile = \"ramp\"") +
+                   "creep.profile: \"ramp\" is not one of \"linear\", \"cosine\", "
+                   "\"smoothstep\", \"table\", \"step\""),
+            std::string::npos)
+      << e;
+  EXPECT_NE(e.find(at(f, text, "edge_points = 40") +
+                   "creep.edge.edge_points: value 40 is out of range [1, 32]"),
+            std::string::npos)
+      << e;
+  EXPECT_NE(e.find(at(f, text, "edge_pointz = 3") + "creep.edge.edge_pointz: unknown key"),
+            std::string::npos)
+      << e;
+  EXPECT_NE(e.find(at(f, text, "fallback_sign = 0.5") +
+                   "creep.edge.fallback_sign: must be +1 or -1"),
+            std::string::npos)
+      << e;
+  EXPECT_NE(e.find("creep.deflection[0].wear_um[1]: expected a number"), std::string::npos) << e;
+  EXPECT_NE(e.find("creep.deflection[0].lateral_um: required key is missing"), std::string::npos)
+      << e;
+}
+
+TEST(CreepSection, CrossFieldRulesPointAtTheKey) {
+  TempDir d;
+  const std::string text = std::string(kRegisters) + R"(
+[creep]
+creep_length_mm = 50
+[creep.output]
+mode = "tool_registers"
+z_register = "Z_wear_offset"
+[creep.edge]
+fallback_channel = "length"
+)";
+  const auto f = d.write("a.toml", text);
+  EXPECT_NE(errors_of(f).find(at(f, text, "mode = \"tool_registers\"") +
+                              "creep.output.mode: creep config: creep.output.mode is "
+                              "\"tool_registers\": x/y/z_register must be -1"),
+            std::string::npos)
+      << errors_of(f);
+}
+
+TEST(CreepSection, RegisterNamesAndKindsAreCheckedAgainstTheRegisters) {
+  TempDir d;
+  const std::string unknown = std::string(kRegisters) + R"(
+[creep]
+[creep.output]
+z_register = "Z_offset_typo"
+)";
+  const auto f1 = d.write("a.toml", unknown);
+  EXPECT_NE(errors_of(f1).find(at(f1, unknown, "z_register =") +
+                               "creep.output.z_register: creep.output.z_register: no register "
+                               "named 'Z_offset_typo' in [[registers]]"),
+            std::string::npos)
+      << errors_of(f1);
+  const std::string kind = std::string(kRegisters) + R"(
+[creep]
+[creep.output]
+z_register = "T1_length_wear"
+)";
+  const auto f2 = d.write("b.toml", kind);
+  EXPECT_NE(errors_of(f2).find(at(f2, kind, "z_register =") +
+                               "creep.output.z_register: creep.output.z_register: register "
+                               "'T1_length_wear' is of kind tool_length_wear, expected "
+                               "axis_offset"),
+            std::string::npos)
+      << errors_of(f2);
+  const std::string nofile = std::string(kRegisters) + R"(
+[creep]
+[creep.edge]
+normal_source = "toolpath"
+toolpath_file = "missing.csv"
+[creep.output]
+z_register = "Z_wear_offset"
+)";
+  const auto f3 = d.write("c.toml", nofile);
+  EXPECT_NE(errors_of(f3).find(at(f3, nofile, "toolpath_file =") +
+                               "creep.edge.toolpath_file: cannot read toolpath file '" +
+                               (d.path() / "missing.csv").string() + "': not a regular file"),
+            std::string::npos)
+      << errors_of(f3);
+  d.write("bad.csv", "path_mm,nx,ny,nz\n0,0,0,1\n0,0,0,1\n");
+  const std::string badfile = std::string(kRegisters) + R"(
+[creep]
+[creep.edge]
+normal_source = "toolpath"
+toolpath_file = "bad.csv"
+[creep.output]
+z_register = "Z_wear_offset"
+)";
+  const auto f4 = d.write("d.toml", badfile);
+  EXPECT_NE(errors_of(f4).find(":3: "), std::string::npos) << errors_of(f4);
+}
+
+// A synthetic stream through the engine the loader builds: tool 1, program path advancing
+// 0.5 mm per cycle, one laser measurement of 20 µm at the tip.
+struct Stream {
+  std::unique_ptr<core::engine::Engine> engine;
+  core::StepOutput out;
+  core::TimeNs now{0};
+  double path_mm{0.0};
+  std::vector<double> z;  // Z register (index 2) after each cycle; NaN before the first write
+  double last_z{std::nan("")};
+
+  explicit Stream(const config::Config& c) : engine(config::build_engine(c)) {
+    step({core::ToolChange{0, 1, false}});
+  }
+  void step(std::vector<core::Event> ev) {
+    now += 1'000'000;
+    engine->step(now, ev, out);
+    for (const auto& w : out.writes) {
+      if (w.register_index == 2) last_z = w.value_um;
+    }
+    z.push_back(last_z);
+  }
+  void advance(double ds_mm) {
+    path_mm += ds_mm;
+    core::AxisSample a;
+    a.time_ns = now;
+    a.program_path_mm = path_mm;
+    a.tool = 1;
+    step({a});
+  }
+  void measure(double wear_um) {
+    core::ToolMeasurement m;
+    m.tool = 1;
+    m.wear_um[0] = wear_um;
+    step({m});
+  }
+};
+
+std::string strategy(const std::string& creep) {
+  return std::string(kRegisters) + creep + R"(
+[creep.edge]
+tool_shape = "tip"
+normal_source = "none"
+[creep.output]
+z_register = "Z_wear_offset"
+write_resolution_um = 0.01
+)";
+}
+
+std::unique_ptr<config::Config> load_ok(const TempDir& d, const std::string& text) {
+  auto r = load_file(d.write("s.toml", text));
+  EXPECT_TRUE(r.config) << r.diagnostics.to_string();
+  return std::move(r.config);
+}
+
+TEST(CreepSection, NoCompensationWhenAbsentOrDisabled) {
+  TempDir d;
+  auto absent = load_ok(d, kRegisters);
+  ASSERT_TRUE(absent);
+  EXPECT_EQ(config::build_engine(*absent)->module_count(), 0U);
+  auto off = load_ok(d, strategy("[creep]\nenabled = false\n"));
+  ASSERT_TRUE(off);
+  EXPECT_EQ(config::build_engine(*off)->module_count(), 0U);
+  Stream s(*off);
+  s.advance(0.0);
+  s.measure(20.0);
+  for (int i = 0; i < 100; ++i) s.advance(0.5);
+  EXPECT_TRUE(std::isnan(s.last_z));  // nothing ever written
+}
+
+TEST(CreepSection, StepCorrectionAppliesTheWholeIncrementAtOnce) {
+  TempDir d;
+  auto c = load_ok(d, strategy("[creep]\nprofile = \"step\"\n"));
+  ASSERT_TRUE(c);
+  Stream s(*c);
+  s.advance(0.0);
+  s.measure(20.0);
+  s.advance(0.5);
+  EXPECT_NEAR(s.last_z, -20.0, 1e-9);
+}
+
+TEST(CreepSection, CreepingFeedsTheIncrementOverTheCreepLength) {
+  TempDir d;
+  auto c = load_ok(d, strategy("[creep]\nprofile = \"linear\"\ncreep_length_mm = 50\n"));
+  ASSERT_TRUE(c);
+  Stream s(*c);
+  s.advance(0.0);
+  s.measure(20.0);
+  for (int i = 0; i < 50; ++i) s.advance(0.5);  // 25 of 50 mm
+  EXPECT_NEAR(s.last_z, -10.0, 1e-9);
+  double max_step = 0.0;
+  for (std::size_t i = 1; i < s.z.size(); ++i) {
+    if (!std::isnan(s.z[i - 1])) max_step = std::max(max_step, std::fabs(s.z[i] - s.z[i - 1]));
+  }
+  EXPECT_LE(max_step, 20.0 * 0.5 / 50.0 + 1e-9);  // h·Δs/L
+  for (int i = 0; i < 60; ++i) s.advance(0.5);
+  EXPECT_NEAR(s.last_z, -20.0, 1e-9);
+}
+
+TEST(CreepSection, PredictiveCreepingFeedsTheFittedWearRateBetweenMeasurements) {
+  TempDir d;
+  const std::string creep = "[creep]\nprofile = \"linear\"\ncreep_length_mm = 50\n";
+  auto plain = load_ok(d, strategy(creep));
+  auto pred = load_ok(d, strategy(creep + "[creep.predict]\nenabled = true\nmax_um = 100\n"));
+  ASSERT_TRUE(plain && pred);
+  Stream a(*plain);
+  Stream b(*pred);
+  for (Stream* s : {&a, &b}) {
+    s->advance(0.0);
+    s->measure(2.0);
+    for (int i = 0; i < 200; ++i) s->advance(0.5);  // 100 mm
+    s->measure(12.0);                               // 0.1 µm/mm
+    for (int i = 0; i < 300; ++i) s->advance(0.5);  // 150 mm
+  }
+  EXPECT_NEAR(a.last_z, -12.0, 1e-9);
+  // Prediction adds the fitted rate × path since the measurement: 0.1 µm/mm × 150 mm.
+  EXPECT_NEAR(b.last_z - a.last_z, -15.0, 0.5);
+}
+
+}  // namespace
+}  // namespace nccomp::daemon::sections
