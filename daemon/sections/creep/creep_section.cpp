@@ -106,8 +106,7 @@ std::vector<cc::ToolpathNormal> read_toolpath(const std::string& path, const Whe
   }
 }
 
-void parse_edge(TableReader& r, cc::CreepConfig& c, const toml::node& creep_node,
-                CreepSection& s) {
+void parse_edge(TableReader& r, cc::CreepConfig& c, const toml::node& creep_node, CreepSection& s) {
   auto& e = c.edge;
   e.tool_shape = pick<cc::ToolShape>(r, "tool_shape",
                                      {{"tip", cc::ToolShape::kTip},
@@ -133,8 +132,7 @@ void parse_edge(TableReader& r, cc::CreepConfig& c, const toml::node& creep_node
     s.toolpath_file = p.lexically_normal().string();
     c.toolpath_normals = read_toolpath(s.toolpath_file, r.where("toolpath_file"), r.diagnostics());
   } else if (e.normal_source == cc::NormalSource::kToolpath) {
-    r.diagnostics().error(r.where("normal_source"),
-                          "\"toolpath\" needs creep.edge.toolpath_file");
+    r.diagnostics().error(r.where("normal_source"), "\"toolpath\" needs creep.edge.toolpath_file");
   }
   if (r.node().get("tool_axis") != nullptr) {
     const auto axis = r.number_list("tool_axis", -1.0, 1.0);
@@ -157,7 +155,8 @@ void parse_edge(TableReader& r, cc::CreepConfig& c, const toml::node& creep_node
 void parse_output(TableReader& r, cc::CreepConfig& c, cc::CreepRegisterNames& names) {
   auto& o = c.output;
   o.mode = pick<cc::OutputMode>(
-      r, "mode", {{"axes", cc::OutputMode::kAxes}, {"tool_registers", cc::OutputMode::kToolRegisters}},
+      r, "mode",
+      {{"axes", cc::OutputMode::kAxes}, {"tool_registers", cc::OutputMode::kToolRegisters}},
       o.mode);
   static constexpr std::array<const char*, cc::kChannelCount> kKeys{
       "x_register", "y_register", "z_register", "radius_register", "length_register"};
@@ -223,7 +222,8 @@ void parse_predict(TableReader& r, cc::PredictConfig& p) {
 void parse_entry(TableReader& r, cc::EntryConfig& e) {
   e.sister_offset_um = r.number("sister_offset_um", e.sister_offset_um, 0.0, 1e6);
   e.sister_length_mm = positive(r, "sister_length_mm", e.sister_length_mm);
-  e.sister_restart_back_mm = r.number("sister_restart_back_mm", e.sister_restart_back_mm, 0.0, kBig);
+  e.sister_restart_back_mm =
+      r.number("sister_restart_back_mm", e.sister_restart_back_mm, 0.0, kBig);
   e.retract_um = r.number("retract_um", e.retract_um, 0.0, 1e6);
   e.refeed_length_mm = positive(r, "refeed_length_mm", e.refeed_length_mm);
 }
@@ -393,8 +393,7 @@ namespace {
 class CreepParser final : public config::SectionParser {
  public:
   std::string_view name() const noexcept override { return "creep"; }
-  std::unique_ptr<config::Section> parse(const toml::node& node,
-                                         Diagnostics& diag) const override {
+  std::unique_ptr<config::Section> parse(const toml::node& node, Diagnostics& diag) const override {
     return parse_creep_section(node, diag);
   }
   void cross_check(const config::Config& config, Diagnostics& diag) const override {

@@ -240,8 +240,8 @@ in_length_mm = 5
 out_offset_um = 4
 out_length_mm = 6
 )");
-  const auto f = d.write("main.toml", std::string("include = [\"paths/creep.toml\"]\n") +
-                                          kRegisters);
+  const auto f =
+      d.write("main.toml", std::string("include = [\"paths/creep.toml\"]\n") + kRegisters);
   auto r = load_file(f);
   ASSERT_TRUE(r.config) << r.diagnostics.to_string();
   const auto& s = *creep_section(*r.config);
@@ -321,9 +321,9 @@ normal_um = [0, 1]
   EXPECT_NE(e.find(at(f, text, "edge_pointz = 3") + "creep.edge.edge_pointz: unknown key"),
             std::string::npos)
       << e;
-  EXPECT_NE(e.find(at(f, text, "fallback_sign = 0.5") +
-                   "creep.edge.fallback_sign: must be +1 or -1"),
-            std::string::npos)
+  EXPECT_NE(
+      e.find(at(f, text, "fallback_sign = 0.5") + "creep.edge.fallback_sign: must be +1 or -1"),
+      std::string::npos)
       << e;
   EXPECT_NE(e.find("creep.deflection[0].wear_um[1]: expected a number"), std::string::npos) << e;
   EXPECT_NE(e.find("creep.deflection[0].lateral_um: required key is missing"), std::string::npos)
@@ -517,6 +517,73 @@ TEST(CreepSection, PredictiveCreepingFeedsTheFittedWearRateBetweenMeasurements) 
   EXPECT_NEAR(a.last_z, -12.0, 1e-9);
   // Prediction adds the fitted rate × path since the measurement: 0.1 µm/mm × 150 mm.
   EXPECT_NEAR(b.last_z - a.last_z, -15.0, 0.5);
+}
+
+}  // namespace
+}  // namespace nccomp::daemon::sections
+
+namespace nccomp::daemon::sections {
+namespace {
+
+/// config/nccompd.toml with its bus swapped for the loopback bus (the bus sections are not
+/// this test's business): every other line as shipped.
+std::string shipped_config_on_loopback() {
+  std::string text = read(std::string(NCCOMP_SOURCE_DIR) + "/config/nccompd.toml");
+  const auto inc = text.find("include = [");
+  if (inc != std::string::npos) text.erase(inc, text.find('\n', inc) - inc);
+  for (auto p = text.find("bus = \"modbus\""); p != std::string::npos;
+       p = text.find("bus = \"modbus\"", p)) {
+    text.replace(p, 14, "bus = \"loopback\"");
+  }
+  return text + "\n[loopback]\n";
+}
+
+TEST(ShippedConfig, CreepsTheMeasuredWearIntoTheToolRegistersAlongTheNormal) {
+  TempDir d;
+  auto r = load_file(d.write("nccompd.toml", shipped_config_on_loopback()));
+  ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+  auto engine = config::build_engine(*r.config);
+  ASSERT_EQ(engine->module_count(), 1U);
+  const int length = 0;  // T1_length_wear
+  const int radius = 1;  // T1_radius_wear
+  core::StepOutput out;
+  core::TimeNs now = 0;
+  double values[2] = {std::nan(""), std::nan("")};
+  auto step = [&](std::vector<core::Event> ev) {
+    now += 1'000'000;  // 1 kHz
+    engine->step(now, ev, out);
+    for (const auto& w : out.writes) {
+      if (w.register_index < 2) values[w.register_index] = w.value_um;
+    }
+  };
+  const double theta = 30.0 * M_PI / 180.0;
+  double path = 0.0;
+  auto sample = [&](double ds) {
+    path += ds;
+    core::AxisSample a;
+    a.time_ns = now;
+    a.program_path_mm = path;
+    a.tool = 1;
+    a.has_normal = true;
+    a.normal = {std::sin(theta), 0.0, std::cos(theta)};
+    step({a});
+  };
+  step({core::ToolChange{0, 1, false}});
+  sample(0.0);
+  core::ToolMeasurement m;
+  m.tool = 1;
+  m.wear_um[0] = 12.0;  // one value: the whole edge (below excessive_increment_um = 15)
+  step({m});
+  // 0.1 mm per cycle = 6 m/min: the cosine ramp's steepest slope (π/2 · 12 µm / 200 mm · 100 mm/s
+  // = 9.4 µm/s) stays below the registers' 50 µm/s.
+  for (int i = 0; i < 1000; ++i) sample(0.1);  // half of creep_length_mm = 200
+  // Cosine at half way: half of the wear; split by the engagement angle, negative (Fanuc sign).
+  // (Written when moved by write_resolution_um = 0.1 µm: within 0.1 µm of the ramp.)
+  EXPECT_NEAR(values[length], -6.0 * std::cos(theta), 0.1);
+  EXPECT_NEAR(values[radius], -6.0 * std::sin(theta), 0.1);
+  for (int i = 0; i < 1100; ++i) sample(0.1);
+  EXPECT_NEAR(values[length], -12.0 * std::cos(theta), 1e-9);
+  EXPECT_NEAR(values[radius], -12.0 * std::sin(theta), 1e-9);
 }
 
 }  // namespace
