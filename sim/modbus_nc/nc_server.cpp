@@ -167,6 +167,10 @@ void NcServer::handle(void* ctx_p, int fd, const std::uint8_t* query, int length
     } else if (function == 5 || function == 6) {
       w.values.push_back(static_cast<std::uint16_t>((query[hl + 3] << 8) | query[hl + 4]));
     }
+    if (write_filter_ && !write_filter_(w)) {
+      modbus_reply_exception(ctx, query, MODBUS_EXCEPTION_ILLEGAL_DATA_VALUE);
+      return;
+    }
     writes_.push_back(std::move(w));
   }
   modbus_reply(ctx, q.data(), length, mapping(mapping_));

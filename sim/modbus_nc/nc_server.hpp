@@ -86,6 +86,12 @@ class NcServer {
   [[nodiscard]] std::vector<WriteRecord> writes();
   [[nodiscard]] std::uint64_t requests() const noexcept { return requests_.load(); }
 
+  /// Called on the server thread, under the table mutex, for every write request before it is
+  /// applied: false refuses it with exception 3 (illegal data value) and leaves the registers as
+  /// they were, like an NC that range-checks its offsets (ncsim). Set before start().
+  using WriteFilter = std::function<bool(const WriteRecord&)>;
+  void set_write_filter(WriteFilter filter) { write_filter_ = std::move(filter); }
+
   void set_delay_ms(int ms) noexcept { delay_ms_.store(ms); }
   void set_silent(bool silent) noexcept { silent_.store(silent); }
 
@@ -97,6 +103,7 @@ class NcServer {
   std::mutex mutex_;
   void* mapping_{nullptr};  // modbus_mapping_t, guarded by mutex_
   std::vector<WriteRecord> writes_;
+  WriteFilter write_filter_;
   std::thread thread_;
   int stop_pipe_[2]{-1, -1};
   std::atomic<int> delay_ms_{500};

@@ -1,0 +1,39 @@
+// Parsing of ncsim's TOML config (docs/ncsim.md) with --set overrides. Not real-time.
+// Every refusal names file:line:column and the key path; unknown keys are errors. Data files the
+// config names (the bus map, PHM 2010 wear curves, FL_THERMAL drift, the [checkpoints] table,
+// roll trajectories) are read and validated here, so the model itself does no I/O.
+#pragma once
+
+#include <stdexcept>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "sim/ncsim/sim_config.hpp"
+
+namespace nccomp::sim::ncsim {
+
+class ConfigError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+/// Parses config text; base_dir resolves relative paths. overrides are "path=value" strings
+/// (`--set`): a path whose first part names an effect is taken under [effects]
+/// (`wear.rate_um_per_m=3`), any other path from the top (`ncsim.seed=4`). value is a TOML
+/// value; anything that does not parse as one is taken as a string.
+SimConfig parse_sim_config(std::string_view text, const std::string& file,
+                           const std::string& base_dir,
+                           const std::vector<std::string>& overrides = {});
+/// Reads and parses a file. Throws ConfigError.
+SimConfig load_sim_config(const std::string& path, const std::vector<std::string>& overrides = {});
+
+/// Reads a numeric CSV with a header; returns the named columns. Throws ConfigError naming
+/// file:line. Used for the PHM 2010 and FL_THERMAL files and the roll trajectory / profile.
+std::vector<std::vector<double>> read_csv_columns(const std::string& path,
+                                                  const std::vector<std::string>& columns);
+
+std::string_view program_name(ProgramKind p) noexcept;
+std::string_view bus_name(BusKind b) noexcept;
+
+}  // namespace nccomp::sim::ncsim

@@ -1,0 +1,134 @@
+// ncsim, the virtual NC (docs/ncsim.md):
+//   ncsim --config FILE --program mould_face|side_wall|roll|touch --bus modbus|can --out DIR
+//         [--speed FACTOR | --lockstep SOCKET] [--parts N] [--seed N] [--set effect.key=value ...]
+//         [--wait-client SECONDS]
+// Speed mode waits up to --wait-client (default 10 s) for the daemon's first polls before the
+// clock starts, so that no event is published before the daemon has its baseline.
+// Exit status: 0 program done and result written; 1 runtime error; 2 usage; 3 config error;
+// 4 the daemon ended the lock-step run before the program was done (result written).
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+#include <vector>
+
+#include "sim/ncsim/config.hpp"
+#include "sim/ncsim/run.hpp"
+
+namespace {
+
+[[noreturn]] void usage(const std::string& why) {
+  std::fprintf(stderr,
+               "ncsim: %s\nusage: ncsim --config FILE --program mould_face|side_wall|roll|touch "
+               "--bus modbus|can --out DIR [--speed FACTOR | --lockstep SOCKET] [--parts N] "
+               "[--seed N] [--set effect.key=value ...]\n",
+               why.c_str());
+  std::exit(2);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  using namespace nccomp::sim::ncsim;
+  std::string config_path;
+  RunOptions opt;
+  bool have_program = false;
+  bool have_speed = false;
+  std::vector<std::string> sets;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--help" || a == "-h") {
+      usage("help");
+    }
+    if (i + 1 >= argc) {
+      usage("missing value after " + a);
+    }
+    const std::string v = argv[++i];
+    if (a == "--config") {
+      config_path = v;
+    } else if (a == "--program") {
+      have_program = true;
+      if (v == "mould_face") {
+        opt.program = ProgramKind::kMouldFace;
+      } else if (v == "side_wall") {
+        opt.program = ProgramKind::kSideWall;
+      } else if (v == "roll") {
+        opt.program = ProgramKind::kRoll;
+      } else if (v == "touch") {
+        opt.program = ProgramKind::kTouch;
+      } else {
+        usage("unknown program '" + v + "'");
+      }
+    } else if (a == "--bus") {
+      if (v == "modbus") {
+        opt.bus = BusKind::kModbus;
+      } else if (v == "can") {
+        opt.bus = BusKind::kCan;
+      } else {
+        usage("unknown bus '" + v + "'");
+      }
+    } else if (a == "--out") {
+      opt.out_dir = v;
+    } else if (a == "--speed") {
+      char* end = nullptr;
+      opt.speed = std::strtod(v.c_str(), &end);
+      if (v.empty() || *end != '\0' || !(opt.speed > 0.0) || opt.speed > 1e6) {
+        usage("--speed wants a factor > 0, got '" + v + "'");
+      }
+      have_speed = true;
+    } else if (a == "--wait-client") {
+      char* end = nullptr;
+      opt.wait_client_s = std::strtod(v.c_str(), &end);
+      if (v.empty() || *end != '\0' || !(opt.wait_client_s >= 0.0) || opt.wait_client_s > 3600) {
+        usage("--wait-client wants seconds 0..3600, got '" + v + "'");
+      }
+    } else if (a == "--lockstep") {
+      opt.lockstep_socket = v;
+    } else if (a == "--parts") {
+      sets.push_back("ncsim.parts=" + v);
+    } else if (a == "--seed") {
+      sets.push_back("ncsim.seed=" + v);
+    } else if (a == "--set") {
+      sets.push_back(v);
+    } else {
+      usage("unknown option " + a);
+    }
+  }
+  if (config_path.empty() || !have_program || opt.out_dir.empty()) {
+    usage("--config, --program and --out are required");
+  }
+  if (have_speed && !opt.lockstep_socket.empty()) {
+    usage("--speed and --lockstep exclude each other");
+  }
+  SimConfig config;
+  try {
+    config = load_sim_config(config_path, sets);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "ncsim: %s\n", e.what());
+    return 3;
+  }
+  try {
+    opt.on_ready = [&](std::uint16_t port) {
+      if (opt.lockstep_socket.empty()) {
+        std::printf("ncsim: %s on 127.0.0.1:%u, speed x%g (waiting up to %g s for the daemon)\n",
+                    std::string(program_name(opt.program)).c_str(), port, opt.speed,
+                    opt.wait_client_s);
+      } else {
+        std::printf("ncsim: %s on 127.0.0.1:%u, lock-step on %s\n",
+                    std::string(program_name(opt.program)).c_str(), port,
+                    opt.lockstep_socket.c_str());
+      }
+      std::fflush(stdout);
+    };
+    const RunSummary s = run(config, opt);
+    std::printf("ncsim: %s %s: %.3f s simulated, %llu cycles, %zu offset writes taken, %llu "
+                "refused; result in %s\n",
+                s.completed ? "done" : "stopped early",
+                std::string(program_name(opt.program)).c_str(), s.sim_time_s,
+                static_cast<unsigned long long>(s.cycles), s.writes,
+                static_cast<unsigned long long>(s.refused), opt.out_dir.c_str());
+    return s.completed ? 0 : 4;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "ncsim: %s\n", e.what());
+    return 1;
+  }
+}

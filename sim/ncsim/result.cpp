@@ -1,0 +1,187 @@
+#include "sim/ncsim/result.hpp"
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <stdexcept>
+
+#include "sim/ncsim/config.hpp"
+
+namespace nccomp::sim::ncsim {
+namespace {
+
+std::string num(double v) {
+  char b[64];
+  std::snprintf(b, sizeof(b), "%.9g", v);
+  return b;
+}
+
+std::string quoted(const std::string& s) {
+  std::string o = "\"";
+  for (char c : s) {
+    if (c == '"' || c == '\\') {
+      o += '\\';
+      o += c;
+    } else if (static_cast<unsigned char>(c) < 0x20) {
+      char b[8];
+      std::snprintf(b, sizeof(b), "\\u%04x", c);
+      o += b;
+    } else {
+      o += c;
+    }
+  }
+  return o + "\"";
+}
+
+std::string vec(const Vec3& v) { return "[" + num(v[0]) + "," + num(v[1]) + "," + num(v[2]) + "]"; }
+
+class File {
+ public:
+  File(const std::filesystem::path& p, const char* header) : path_(p), out_(p) {
+    if (!out_) {
+      throw std::runtime_error("cannot write " + p.string());
+    }
+    out_ << header << '\n';
+  }
+  std::ofstream& out() { return out_; }
+  ~File() = default;
+  void close() {
+    out_.close();
+    if (!out_) {
+      throw std::runtime_error("write failed: " + path_.string());
+    }
+  }
+
+ private:
+  std::filesystem::path path_;
+  std::ofstream out_;
+};
+
+const char* b(bool v) { return v ? "true" : "false"; }
+
+}  // namespace
+
+std::string effects_json(const EffectsConfig& e) {
+  std::ostringstream s;
+  const char* curve = e.wear.curve == WearCurve::kLinear  ? "linear"
+                      : e.wear.curve == WearCurve::kPower ? "power"
+                                                          : "phm2010";
+  s << "{\"wear\":{\"enabled\":" << b(e.wear.enabled) << ",\"curve\":\"" << curve
+    << "\",\"initial_um\":" << num(e.wear.initial_um)
+    << ",\"rate_um_per_m\":" << num(e.wear.rate_um_per_m)
+    << ",\"coefficient_um\":" << num(e.wear.coefficient_um)
+    << ",\"exponent\":" << num(e.wear.exponent) << ",\"source\":" << quoted(e.wear.table_source)
+    << "}";
+  s << ",\"pushoff\":{\"enabled\":" << b(e.pushoff.enabled)
+    << ",\"base_um\":" << num(e.pushoff.base_um)
+    << ",\"wear_gain_per_um\":" << num(e.pushoff.wear_gain_per_um)
+    << ",\"clamp_z_mm\":" << num(e.pushoff.clamp_z_mm)
+    << ",\"reference_lever_mm\":" << num(e.pushoff.reference_lever_mm) << "}";
+  s << ",\"hardness\":{\"enabled\":" << b(e.hardness.enabled)
+    << ",\"amplitude\":" << num(e.hardness.amplitude)
+    << ",\"wavelength_mm\":" << num(e.hardness.wavelength_mm) << "}";
+  s << ",\"thermal\":{\"enabled\":" << b(e.thermal.enabled) << ",\"mode\":\""
+    << (e.thermal.mode == ThermalMode::kReplay ? "replay" : "first_order")
+    << "\",\"gain_um\":" << vec(e.thermal.gain_um)
+    << ",\"time_constant_s\":" << num(e.thermal.time_constant_s)
+    << ",\"time_scale\":" << num(e.thermal.time_scale)
+    << ",\"source\":" << quoted(e.thermal.replay_source) << "}";
+  s << ",\"pitch\":{\"enabled\":" << b(e.pitch.enabled)
+    << ",\"amplitude_um\":" << vec(e.pitch.amplitude_um) << ",\"pitch_mm\":" << num(e.pitch.pitch_mm)
+    << ",\"slope_um_per_m\":" << vec(e.pitch.slope_um_per_m) << "}";
+  s << ",\"probe_noise\":{\"enabled\":" << b(e.probe_noise.enabled)
+    << ",\"sigma_um\":" << num(e.probe_noise.sigma_um) << "}";
+  s << ",\"laser_noise\":{\"enabled\":" << b(e.laser_noise.enabled)
+    << ",\"sigma_um\":" << num(e.laser_noise.sigma_um) << "}";
+  s << ",\"broken_tool\":{\"enabled\":" << b(e.broken_tool.enabled)
+    << ",\"at_path_mm\":" << num(e.broken_tool.at_path_mm)
+    << ",\"wear_jump_um\":" << num(e.broken_tool.wear_jump_um)
+    << ",\"report_flag\":" << b(e.broken_tool.report_flag) << "}";
+  s << ",\"probe_outlier\":{\"enabled\":" << b(e.probe_outlier.enabled)
+    << ",\"part\":" << e.probe_outlier.part << ",\"checkpoint\":" << e.probe_outlier.checkpoint
+    << ",\"value_um\":" << num(e.probe_outlier.value_um) << "}}";
+  return s.str();
+}
+
+void write_result(const std::string& dir, const Simulation& sim, const RunInfo& info) {
+  namespace fs = std::filesystem;
+  const fs::path d(dir);
+  std::error_code ec;
+  fs::create_directories(d, ec);
+  if (ec) {
+    throw std::runtime_error("cannot create " + dir + ": " + ec.message());
+  }
+  std::vector<std::string> files;
+  const Results& r = sim.results();
+  if (info.program == ProgramKind::kMouldFace || info.program == ProgramKind::kRoll) {
+    File f(d / "surface.csv", "pass,path_mm,x_mm,y_mm,z_mm,error_um,offset_um");
+    for (const SurfaceRow& s : r.surface) {
+      f.out() << s.pass << ',' << num(s.path_mm) << ',' << num(s.x_mm) << ',' << num(s.y_mm) << ','
+              << num(s.z_mm) << ',' << num(s.error_um) << ',' << num(s.offset_um) << '\n';
+    }
+    f.close();
+    files.emplace_back("surface.csv");
+  }
+  if (info.program == ProgramKind::kSideWall) {
+    File w(d / "walls.csv", "part,layer,z_mm,s_mm,error_um,offset_um");
+    for (const WallRow& s : r.walls) {
+      w.out() << s.part << ',' << s.layer << ',' << num(s.z_mm) << ',' << num(s.s_mm) << ','
+              << num(s.error_um) << ',' << num(s.offset_um) << '\n';
+    }
+    w.close();
+    File c(d / "checkpoints.csv", "part,checkpoint,layer,z_mm,s_mm,error_um,probed_um");
+    for (const CheckpointRow& s : r.checkpoints) {
+      c.out() << s.part << ',' << s.checkpoint << ',' << s.layer << ',' << num(s.z_mm) << ','
+              << num(s.s_mm) << ',' << num(s.error_um) << ',' << num(s.probed_um) << '\n';
+    }
+    c.close();
+    files.emplace_back("walls.csv");
+    files.emplace_back("checkpoints.csv");
+  }
+  if (info.program == ProgramKind::kTouch) {
+    File t(d / "touches.csv",
+           "cycle,probe,axis,direction,variant,trigger_position_mm,true_drift_um");
+    for (const TouchRow& s : r.touches) {
+      t.out() << s.cycle << ',' << s.probe << ',' << s.axis << ',' << s.direction << ','
+              << s.variant << ',' << num(s.trigger_position_mm) << ',' << num(s.true_drift_um)
+              << '\n';
+    }
+    t.close();
+    files.emplace_back("touches.csv");
+  }
+  {
+    File w(d / "writes.csv", "t_s,register_index,value_um,effective_t_s");
+    for (const WriteRow& s : sim.registers().log()) {
+      w.out() << num(s.t_s) << ',' << s.register_index << ',' << num(s.value_um) << ','
+              << num(s.effective_t_s) << '\n';
+    }
+    w.close();
+    files.emplace_back("writes.csv");
+  }
+  std::ostringstream j;
+  j << "{\"format\":\"ncsim-result-1\",\"program\":\"" << program_name(info.program)
+    << "\",\"bus\":\"" << bus_name(info.bus) << "\",\"sim_time_s\":" << num(sim.time_s())
+    << ",\"parts\":" << sim.config().parts << ",\"seed\":" << sim.config().seed
+    << ",\"effects\":" << effects_json(sim.config().effects)
+    << ",\"writes_received\":" << sim.registers().log().size()
+    << ",\"writes_refused\":" << sim.registers().refused() + info.refused_on_bus << ",\"registers\":{";
+  bool first = true;
+  for (const auto& [index, value] : sim.registers().last_values()) {
+    j << (first ? "" : ",") << '"' << index << "\":" << num(value);
+    first = false;
+  }
+  j << "},\"alarms_seen\":" << sim.alarms_seen() << ",\"files\":[";
+  for (std::size_t i = 0; i < files.size(); ++i) {
+    j << (i == 0 ? "" : ",") << quoted(files[i]);
+  }
+  j << "]}\n";
+  std::ofstream out(d / "result.json");
+  out << j.str();
+  out.close();
+  if (!out) {
+    throw std::runtime_error("write failed: " + (d / "result.json").string());
+  }
+}
+
+}  // namespace nccomp::sim::ncsim

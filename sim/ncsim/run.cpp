@@ -1,0 +1,113 @@
+#include "sim/ncsim/run.hpp"
+
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+#include <thread>
+
+#include "drivers/modbus/config.hpp"
+#include "sim/ncsim/lockstep.hpp"
+#include "sim/ncsim/modbus_link.hpp"
+#include "sim/ncsim/result.hpp"
+#include "sim/ncsim/simulation.hpp"
+
+namespace nccomp::sim::ncsim {
+
+RunSummary run(const SimConfig& config, const RunOptions& options) {
+  if (options.bus != BusKind::kModbus) {
+    throw std::runtime_error("ncsim: --bus can is not available yet (docs/ncsim.md, status)");
+  }
+  drivers::modbus::ModbusConfig map;
+  try {
+    map = drivers::modbus::parse_modbus_config(config.bus_map_text, config.bus_map_file);
+  } catch (const std::exception& e) {
+    throw std::runtime_error(std::string("ncsim.bus_map: ") + e.what());
+  }
+  std::vector<std::uint16_t> known;
+  for (const auto& om : map.offsets) {
+    known.push_back(om.register_index);
+  }
+  const double poll_rate_hz = map.poll_rate_hz;
+  const std::size_t blocks = map.blocks.size();
+  Simulation sim(config, options.program, known);
+  ModbusLink link(std::move(map), config.modbus_port, config.nc.offset_limit_um);
+  link.start();
+  const auto period_ns =
+      static_cast<core::TimeNs>(std::llround(core::kNsPerS / config.lockstep_rate_hz));
+  RunSummary summary;
+  auto take_writes = [&](double t_s) {
+    for (const ReceivedOffset& w : link.take_writes()) {
+      (void)sim.write_offset(t_s, w.register_index, w.value_um);
+    }
+  };
+  if (!options.lockstep_socket.empty()) {
+    LockstepServer server(options.lockstep_socket);
+    if (options.on_ready) {
+      options.on_ready(link.port());
+    }
+    server.accept(options.connect_timeout_s);
+    for (std::uint64_t k = 0;; ++k) {
+      const auto t_ns = static_cast<core::TimeNs>(k) * period_ns;
+      sim.advance_to(t_ns);
+      link.publish(sim.axis(), sim.temperatures_c(), sim.take_events(), 0.0);
+      server.tick(k, t_ns);
+      const auto reply = server.wait_done(k, options.done_timeout_s);
+      summary.cycles = k + 1;
+      if (reply == LockstepServer::Reply::kTimeout) {
+        throw std::runtime_error("lockstep: no DONE for cycle " + std::to_string(k) + " within " +
+                                 std::to_string(options.done_timeout_s) + " s");
+      }
+      if (reply != LockstepServer::Reply::kDone) {
+        break;  // the daemon ended the run
+      }
+      // Writes the daemon pushed in this cycle reached the server before DONE (C2).
+      take_writes(core::seconds(t_ns));
+      if (sim.done() && !link.events_pending()) {
+        summary.completed = true;
+        server.bye();
+        break;
+      }
+    }
+  } else {
+    if (options.on_ready) {
+      options.on_ready(link.port());
+    }
+    // Wait for a poller's first two polls: the daemon's first poll only takes the event
+    // counters as a baseline, so events published before it would be lost.
+    const auto wait_end = std::chrono::steady_clock::now() +
+                          std::chrono::duration<double>(options.wait_client_s);
+    while (link.requests() < 2 * blocks && std::chrono::steady_clock::now() < wait_end) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    // An event stays on the registers for a few polls before the next of its group.
+    const double hold_s = 2.5 / poll_rate_hz;
+    const auto start = std::chrono::steady_clock::now();
+    for (std::uint64_t k = 0;; ++k) {
+      const auto t_ns = static_cast<core::TimeNs>(k) * period_ns;
+      sim.advance_to(t_ns);
+      take_writes(sim.time_s());
+      link.publish(sim.axis(), sim.temperatures_c(), sim.take_events(), hold_s);
+      summary.cycles = k + 1;
+      if (sim.done() && !link.events_pending()) {
+        summary.completed = true;
+        break;
+      }
+      const auto next = start + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                                    std::chrono::duration<double>(core::seconds(t_ns + period_ns) /
+                                                                  options.speed));
+      std::this_thread::sleep_until(next);
+    }
+    // Writes still on their way when the program ended.
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    take_writes(sim.time_s());
+  }
+  link.stop();
+  summary.sim_time_s = sim.time_s();
+  summary.writes = sim.registers().log().size();
+  summary.refused = sim.registers().refused() + link.writes_refused();
+  RunInfo info{options.program, options.bus, link.writes_refused()};
+  write_result(options.out_dir, sim, info);
+  return summary;
+}
+
+}  // namespace nccomp::sim::ncsim

@@ -1,0 +1,126 @@
+// ncsim's configuration (sim/ncsim/config/*.toml, config/ncsim.toml), parsed by config.hpp.
+// One struct per TOML table, units in the names; docs/ncsim.md lists every key.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "core/checkpoint/plan.hpp"
+#include "sim/ncsim/model.hpp"
+
+namespace nccomp::sim::ncsim {
+
+enum class ProgramKind : std::uint8_t { kMouldFace, kSideWall, kRoll, kTouch };
+enum class BusKind : std::uint8_t { kModbus, kCan };
+
+/// [nc]: the NC's offset registers and how they act on the cut (logical register indices, as in
+/// the bus map's offset entries; -1 = the NC has no such register).
+struct NcConfig {
+  /// Time from an accepted offset write to the value being in force [s].
+  double latency_s{0.02};
+  /// The NC's own range check: |value| beyond this is refused [µm].
+  double offset_limit_um{500.0};
+  std::int32_t tool_length_register{0};
+  std::int32_t tool_radius_register{1};
+  std::int32_t axis_register[3]{20, 21, 22};
+  /// First register of the S1 checkpoint table and how many there are (table mode).
+  std::int32_t checkpoint_base_register{10};
+  std::int32_t checkpoint_register_count{4};
+  /// A non-zero value written here asks the NC to measure the tool at the laser (-1 = none).
+  std::int32_t measure_request_register{-1};
+  /// Registers whose non-zero value is an alarm / warning the NC shows (counted in result.json).
+  std::vector<std::int32_t> alarm_registers{};
+  /// Tool number in the spindle.
+  std::int32_t tool{1};
+};
+
+/// [program.mould_face]: a gently curved face finished in raster passes with a ball-end mill.
+struct MouldFaceConfig {
+  double size_x_mm{60.0};
+  double size_y_mm{30.0};
+  /// Heights of the two parabolic bulges over X and over Y [mm].
+  double bulge_x_mm{3.0};
+  double bulge_y_mm{1.5};
+  /// Height of the face's lowest corner [mm] (above the clamp: see effects.pushoff.clamp_z_mm).
+  double base_z_mm{0.0};
+  double stepover_mm{1.0};
+  double feed_mm_per_min{3000.0};
+  double ball_radius_mm{3.0};
+  /// Laser measurement every this much cut path [mm]; 0 = only when the daemon asks.
+  double measure_interval_mm{1000.0};
+  /// Duration of a trip to the laser and back [s].
+  double laser_trip_s{4.0};
+  /// Laser position [mm] (where the axes are during the trip).
+  Vec3 laser_position_mm{-50.0, 0.0, 50.0};
+};
+
+/// [program.side_wall]: a side wall finished level by level, probed at the checkpoints of the
+/// [checkpoints] plan, part after part.
+struct SideWallConfig {
+  /// File with the [checkpoints] table (relative to the ncsim config); parsed into `plan`.
+  std::string checkpoints_file{};
+  core::checkpoint::PlanConfig plan{};
+  double feed_mm_per_min{2000.0};
+  /// Time per probed checkpoint [s].
+  double probe_time_s{1.0};
+  /// The NC program selects the table register of the nearest checkpoint (table mode) in
+  /// addition to the live radius-wear register.
+  bool table_registers{false};
+};
+
+/// [program.touch]: touch cycles on the reference disk (reference probe) and on the test body
+/// (machine probe) while the machine warms up (S3).
+struct TouchConfig {
+  /// Number of recalibration cycles after the initial one, and their spacing [s].
+  std::int32_t cycles{6};
+  double cycle_interval_s{300.0};
+  /// Reference disk / test body centre [mm] and radius [mm].
+  Vec3 reference_center_mm{100.0, 50.0, 40.0};
+  double reference_radius_mm{25.0};
+  Vec3 body_center_mm{200.0, 50.0, 40.0};
+  double body_radius_mm{10.0};
+  /// Seconds between two touches of one cycle.
+  double touch_time_s{2.0};
+};
+
+/// [program.roll]: a roll ground along Z following a trajectory (nccomp grind-path output).
+struct RollConfig {
+  std::string trajectory_file{};
+  /// z_mm, u_mm of the wheel's reference point T (the trajectory) and the target profile.
+  std::vector<double> z_mm{};
+  std::vector<double> u_mm{};
+  std::vector<double> target_z_mm{};
+  std::vector<double> target_u_mm{};
+  double feed_mm_per_min{1000.0};
+  double wheel_width_mm{100.0};
+  double wheel_height_mm{0.2};
+  std::int32_t passes{2};
+};
+
+struct SimConfig {
+  std::string file{};
+  /// The bus map (daemon's format) and its text.
+  std::string bus_map_file{};
+  std::string bus_map_text{};
+  /// CAN: the interface ncsim sends on.
+  std::string can_interface{"vcan0"};
+  /// Modbus: the TCP port ncsim serves (the map's port unless overridden; 0 = ephemeral).
+  std::int32_t modbus_port{-1};
+  /// Rate of the daemon's loop in lock-step, and ncsim's publish rate otherwise [Hz].
+  double lockstep_rate_hz{1000.0};
+  /// Largest model step along the path [mm] (the spacing of surface.csv / walls.csv).
+  double step_mm{0.05};
+  std::uint64_t seed{1};
+  std::int32_t parts{1};
+  NcConfig nc{};
+  EffectsConfig effects{};
+  MouldFaceConfig mould_face{};
+  SideWallConfig side_wall{};
+  TouchConfig touch{};
+  RollConfig roll{};
+  /// The effects table as JSON (for result.json), after --set overrides.
+  std::string effects_json{};
+};
+
+}  // namespace nccomp::sim::ncsim
