@@ -60,12 +60,18 @@ std::string as_string(const std::string& src, const toml::node& n, const std::st
 }  // namespace
 
 CalibrationConfig load_calibration_table(const toml::table& root, const std::string& src) {
-  CalibrationConfig c;
   const toml::node* table_node = root.get("calibration");
   if (table_node == nullptr) {
+    CalibrationConfig c;
     core::calib::validate(c);
     return c;
   }
+  return load_calibration_node(*table_node, src);
+}
+
+CalibrationConfig load_calibration_node(const toml::node& calibration, const std::string& src) {
+  CalibrationConfig c;
+  const toml::node* table_node = &calibration;
   const toml::table* t = table_node->as_table();
   if (t == nullptr) {
     std::ostringstream s;

@@ -16,6 +16,10 @@ namespace nccomp::tools::calibrate {
 /// std::invalid_argument "<source>:<line>: calibration.<key>: <why>".
 core::calib::CalibrationConfig load_calibration_table(const toml::table& root,
                                                       const std::string& source);
+/// The same for the [calibration] node itself (the daemon's config loader hands a section its
+/// node, not the root). Throws std::invalid_argument "<source>:<line>: calibration.<key>: <why>".
+core::calib::CalibrationConfig load_calibration_node(const toml::node& calibration,
+                                                     const std::string& source);
 /// Parses TOML text (source names it in errors) and loads its [calibration] table.
 core::calib::CalibrationConfig load_calibration_config_text(std::string_view text,
                                                             const std::string& source);

@@ -11,6 +11,7 @@
 
 #include "core/creep/toolpath.hpp"
 #include "daemon/config/builtin_sections.hpp"
+#include "daemon/sections/common/key_positions.hpp"
 
 namespace nccomp::daemon::sections {
 
@@ -60,21 +61,6 @@ E pick(TableReader& r, std::string_view key, const std::vector<std::pair<std::st
     if (n == v) return e;
   }
   return def;
-}
-
-/// Records the position of every key below node (tables and arrays, with [i] indices).
-void record_positions(const toml::node& node, const std::string& path,
-                      std::map<std::string, Where, std::less<>>& out) {
-  out.emplace(path, config::where_of(&node, path));
-  if (const auto* t = node.as_table()) {
-    for (const auto& [k, v] : *t) {
-      record_positions(v, path + "." + std::string(k.str()), out);
-    }
-  } else if (const auto* a = node.as_array()) {
-    for (std::size_t i = 0; i < a->size(); ++i) {
-      record_positions(*a->get(i), path + "[" + std::to_string(i) + "]", out);
-    }
-  }
 }
 
 /// Reads the toolpath normal file; errors are reported at the key.
@@ -267,26 +253,7 @@ void parse_transitions(const toml::array& arr, cc::CreepConfig& c, Diagnostics& 
 }  // namespace
 
 Where locate_creep_key(const CreepSection& section, std::string_view message) {
-  const auto start = message.find("creep.");
-  if (start == std::string_view::npos) {
-    return section.where;
-  }
-  std::size_t end = start;
-  while (end < message.size() && message[end] != ' ' && message[end] != ':' &&
-         message[end] != ',') {
-    ++end;
-  }
-  std::string key(message.substr(start, end - start));
-  // The nearest key present: creep.deflection[0].wear_um[2] → creep.deflection[0].wear_um → ...
-  while (!key.empty()) {
-    if (auto it = section.key_positions.find(key); it != section.key_positions.end()) {
-      return it->second;
-    }
-    const auto cut = key.find_last_of(".[");
-    if (cut == std::string::npos) break;
-    key.resize(cut);
-  }
-  return section.where;
+  return locate_key(section.key_positions, section.where, message, "creep.");
 }
 
 std::unique_ptr<CreepSection> parse_creep_section(const toml::node& node, Diagnostics& diag) {
@@ -379,7 +346,7 @@ std::unique_ptr<CreepSection> parse_creep_section(const toml::node& node, Diagno
   try {
     cc::validate(probe);
   } catch (const std::invalid_argument& e) {
-    diag.error(locate_creep_key(*s, e.what()), e.what());
+    report_at_key(s->key_positions, s->where, e.what(), "creep.", diag);
   }
   return s;
 }
@@ -410,7 +377,7 @@ class CreepParser final : public config::SectionParser {
     try {
       m->attach(core::engine::RegisterTable(specs));
     } catch (const std::invalid_argument& e) {
-      diag.error(locate_creep_key(*s, e.what()), e.what());
+      report_at_key(s->key_positions, s->where, e.what(), "creep.", diag);
     }
   }
   void add_modules(const config::Config& config,

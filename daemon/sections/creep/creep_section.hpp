@@ -12,12 +12,12 @@
 // names and kinds against [[registers]] in cross_check(). Not real-time.
 #pragma once
 
-#include <map>
 #include <memory>
 #include <string>
 
 #include "core/creep/creep_module.hpp"
 #include "daemon/config/config.hpp"
+#include "daemon/sections/common/key_positions.hpp"
 
 namespace nccomp::daemon::sections {
 
@@ -30,7 +30,7 @@ struct CreepSection final : config::Section {
   /// Position of the [creep] table and of every key below it ("creep.edge.edge_points",
   /// "creep.deflection[0].wear_um[2]"), for errors found after parsing.
   config::Where where;
-  std::map<std::string, config::Where, std::less<>> key_positions;
+  KeyPositions key_positions;
 };
 
 /// Parses one `[creep]` node. creep.edge.toolpath_file is relative to the directory of the file

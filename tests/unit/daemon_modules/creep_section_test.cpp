@@ -358,7 +358,7 @@ z_register = "Z_offset_typo"
 )";
   const auto f1 = d.write("a.toml", unknown);
   EXPECT_NE(errors_of(f1).find(at(f1, unknown, "z_register =") +
-                               "creep.output.z_register: creep.output.z_register: no register "
+                               "creep.output.z_register: no register "
                                "named 'Z_offset_typo' in [[registers]]"),
             std::string::npos)
       << errors_of(f1);
@@ -369,7 +369,7 @@ z_register = "T1_length_wear"
 )";
   const auto f2 = d.write("b.toml", kind);
   EXPECT_NE(errors_of(f2).find(at(f2, kind, "z_register =") +
-                               "creep.output.z_register: creep.output.z_register: register "
+                               "creep.output.z_register: register "
                                "'T1_length_wear' is of kind tool_length_wear, expected "
                                "axis_offset"),
             std::string::npos)

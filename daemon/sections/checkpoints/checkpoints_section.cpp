@@ -1,0 +1,104 @@
+#include "daemon/sections/checkpoints/checkpoints_section.hpp"
+
+#include <filesystem>
+#include <stdexcept>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "core/checkpoint/plan.hpp"
+#include "daemon/config/builtin_sections.hpp"
+
+namespace nccomp::daemon::sections {
+
+namespace {
+
+namespace fs = std::filesystem;
+namespace ck = tools::checkpoints;
+
+/// The key a CheckpointModule::attach() message is about (its messages name no key path).
+config::Where attach_error_position(const CheckpointsSection& s, std::string_view message) {
+  const std::string key = message.find("active_register") != std::string_view::npos
+                              ? "checkpoints.active_register"
+                              : "checkpoints.register_base";
+  if (auto it = s.key_positions.find(key); it != s.key_positions.end()) {
+    return it->second;
+  }
+  return s.where;  // the key is absent: its default is what did not fit
+}
+
+}  // namespace
+
+std::unique_ptr<CheckpointsSection> parse_checkpoints_section(const toml::node& node,
+                                                              config::Diagnostics& diag) {
+  auto s = std::make_unique<CheckpointsSection>();
+  s->where = config::where_of(&node, "checkpoints");
+  const auto* table = node.as_table();
+  if (table == nullptr) {
+    diag.error(&node, "checkpoints", "expected a table ([checkpoints])");
+    return s;
+  }
+  record_positions(node, "checkpoints", s->key_positions);
+  const auto& src = node.source();
+  const std::string file = src.path ? *src.path : std::string();
+  const fs::path base_dir = fs::path(file).parent_path();
+  std::vector<ck::ConfigIssue> issues;
+  s->config = ck::parse_checkpoints(*table, file, base_dir, issues);
+  for (auto& i : issues) {
+    config::Where w;
+    w.file = i.file.empty() ? file : i.file;
+    w.line = i.line;
+    w.column = i.column;
+    w.key_path = i.key_path;
+    diag.error(std::move(w), std::move(i.message));
+  }
+  if (issues.empty()) {
+    try {
+      s->checkpoint_count = core::checkpoint::make_plan(s->config.plan).checkpoints.size();
+    } catch (const std::exception& e) {
+      diag.error(s->where, e.what());
+    }
+  }
+  return s;
+}
+
+const CheckpointsSection* checkpoints_section(const config::Config& config) {
+  return config.find<CheckpointsSection>("checkpoints");
+}
+
+namespace {
+
+class CheckpointsParser final : public config::SectionParser {
+ public:
+  std::string_view name() const noexcept override { return "checkpoints"; }
+  std::unique_ptr<config::Section> parse(const toml::node& node,
+                                         config::Diagnostics& diag) const override {
+    return parse_checkpoints_section(node, diag);
+  }
+  void cross_check(const config::Config& config, config::Diagnostics& diag) const override {
+    const auto* s = checkpoints_section(config);
+    if (s == nullptr) return;
+    std::vector<core::engine::RegisterSpec> specs;
+    for (const auto& e : config::registers_section(config).registers) {
+      specs.push_back(e.spec);
+    }
+    try {
+      auto m = ck::make_checkpoint_module(s->config);
+      m->attach(core::engine::RegisterTable(specs));
+    } catch (const std::exception& e) {
+      diag.error(attach_error_position(*s, e.what()), e.what());
+    }
+  }
+  void add_modules(const config::Config& config,
+                   std::vector<std::unique_ptr<core::engine::Module>>& modules) const override {
+    if (const auto* s = checkpoints_section(config)) {
+      modules.push_back(ck::make_checkpoint_module(s->config));
+    }
+  }
+};
+
+NCCOMP_REGISTER_CONFIG_SECTION(CheckpointsParser)
+
+}  // namespace
+
+}  // namespace nccomp::daemon::sections

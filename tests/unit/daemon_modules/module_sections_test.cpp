@@ -1,0 +1,179 @@
+// GIVEN daemon configs with [checkpoints] and [calibration] sections, WHEN the loader reads them,
+// THEN the tools' loaders fill the module configs, errors carry file:line:column and key path,
+// registers are checked against [[registers]], and the engine built from them steps by the
+// numbers.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "core/checkpoint/probe.hpp"
+#include "daemon/config/builtin_sections.hpp"
+#include "daemon/sections/calibration/calibration_section.hpp"
+#include "daemon/sections/checkpoints/checkpoints_section.hpp"
+#include "tests/unit/daemon_modules/temp_dir.hpp"
+
+namespace nccomp::daemon::sections {
+namespace {
+
+using config::load_file;
+using testing::TempDir;
+
+std::string reg(const std::string& name, const std::string& kind) {
+  return "[[registers]]\nname = \"" + name + "\"\nkind = \"" + kind +
+         "\"\nbus = \"loopback\"\nmax_abs_um = 100\nmax_step_um = 50\n"
+         "max_rate_um_per_s = 100000\n";
+}
+
+/// The reference NC's logical registers 0..75: 0/1 tool wear, 19 the finishing tool's live
+/// radius wear, 20..22 X/Y/Z axis offsets, 20..75 checkpoints in the boss example (which uses
+/// its own layout: the register kinds differ per test).
+std::string registers(int n, int checkpoint_first, int axis_first) {
+  std::string s = "[loopback]\n";
+  for (int i = 0; i < n; ++i) {
+    std::string kind = "tool_length_wear";
+    if (i == 19) kind = "tool_radius_wear";
+    if (i >= checkpoint_first) kind = "checkpoint";
+    if (axis_first >= 0 && i >= axis_first && i < axis_first + 3) kind = "axis_offset";
+    s += reg("r" + std::to_string(i), kind);
+  }
+  return s;
+}
+
+const std::string kBoss = std::string(NCCOMP_SOURCE_DIR) + "/tests/unit/checkpoint/data/boss.toml";
+const std::string kMachine =
+    std::string(NCCOMP_SOURCE_DIR) + "/tools/calibrate/examples/machine.toml";
+
+/// 1-based line of the first line of text that contains needle.
+int line_of(const std::string& text, const std::string& needle) {
+  const auto pos = text.find(needle);
+  if (pos == std::string::npos) return -1;
+  int line = 1;
+  for (std::size_t i = 0; i < pos; ++i) line += text[i] == '\n' ? 1 : 0;
+  return line;
+}
+
+std::string errors_of(const std::string& path) {
+  auto r = load_file(path);
+  return r.config ? std::string() : r.diagnostics.to_string();
+}
+
+TEST(CheckpointsSection, ParsesTheDocumentedExampleAndLearnsFromPartToPart) {
+  TempDir d;
+  // The example as an include: its contour_csv is relative to its own directory.
+  const auto f = d.write("a.toml", "include = [\"" + kBoss + "\"]\n" + registers(76, 20, -1));
+  auto r = load_file(f);
+  ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+  const auto* s = checkpoints_section(*r.config);
+  ASSERT_NE(s, nullptr);
+  EXPECT_EQ(s->checkpoint_count, 56U);  // docs/checkpoints.md: 4 levels × 14 points
+  EXPECT_EQ(s->config.compensator.register_base, 20U);
+  EXPECT_EQ(s->config.compensator.active_register, 19);
+  EXPECT_EQ(s->config.compensator.finishing_tool, 12);
+  auto engine = config::build_engine(*r.config);
+  ASSERT_EQ(engine->module_count(), 1U);
+  EXPECT_EQ(engine->module(0).name(), "checkpoints");
+
+  // Part 1 probed: checkpoint 0 is 6 µm oversize, checkpoint 1 0.5 µm (below the probe's
+  // repeatability of 1 µm: written as 0). The probe reads δ = δ' + (r/cos α − r).
+  const double delta0_um = core::checkpoint::probe_delta0_um(2.0, 3.0);
+  EXPECT_NEAR(delta0_um, 2.745, 5e-4);  // the plan's printout in docs/checkpoints.md
+  auto probe = [&](int cp, double corrected_um) {
+    core::ProbeMeasurement m;
+    m.part = 1;
+    m.checkpoint = cp;
+    m.wall_angle_deg = 3.0;
+    m.ball_radius_mm = 2.0;
+    m.raw_deviation_um = corrected_um + delta0_um;
+    return m;
+  };
+  core::StepOutput out;
+  std::vector<double> value(76, std::nan(""));
+  core::TimeNs now = 0;
+  auto step = [&](std::vector<core::Event> ev) {
+    now += 1'000'000;
+    engine->step(now, ev, out);
+    for (const auto& w : out.writes) value[w.register_index] = w.value_um;
+  };
+  step({probe(0, 6.0), probe(1, 0.5)});
+  step({core::ProgramEvent{now, core::ProgramEventKind::kPartStart, 2}});
+  step({});  // 56 table registers at 32 per cycle: two cycles
+  EXPECT_DOUBLE_EQ(value[20], -6.0);
+  EXPECT_DOUBLE_EQ(value[21], 0.0);
+  EXPECT_DOUBLE_EQ(value[75], 0.0);
+  EXPECT_DOUBLE_EQ(value[19], -6.0);  // the live register pre-positioned at checkpoint 0
+}
+
+TEST(CheckpointsSection, ErrorsCarryFileLineColumnAndRegistersAreChecked) {
+  TempDir d;
+  const std::string bad_text = registers(4, 2, -1) + R"(
+[checkpoints]
+contour = [[0,0],[100,0],[100,"a"],[0,60]]
+depth_step_mm = -1
+colour = "red"
+)";
+  const auto bad = d.write("bad.toml", bad_text);
+  const std::string e = errors_of(bad);
+  EXPECT_NE(e.find(bad + ":" + std::to_string(line_of(bad_text, "contour =")) +
+                   ":26: checkpoints.contour[2]: must be a pair of numbers [x_mm, y_mm]"),
+            std::string::npos)
+      << e;
+  EXPECT_NE(e.find(bad + ":" + std::to_string(line_of(bad_text, "colour =")) +
+                   ":10: checkpoints.colour: unknown key"),
+            std::string::npos)
+      << e;
+  // A plan of 16 checkpoints (2 levels × 4 corners × 2 points) from register 2 needs registers
+  // 2..17: only 4 exist.
+  const std::string text = registers(4, 2, -1) + R"(
+[checkpoints]
+contour = [[0,0],[100,0],[100,60],[0,60]]
+z_start_mm = -2
+z_end_mm = -7
+depth_step_mm = 5
+register_base = 2
+)";
+  const auto few = d.write("few.toml", text);
+  const std::string e2 = errors_of(few);
+  EXPECT_NE(
+      e2.find(few + ":" + std::to_string(line_of(text, "register_base =")) +
+              ":17: checkpoints.register_base: checkpoints: registers 2..17 are needed for 16 "
+              "checkpoints, the register table has 4"),
+      std::string::npos)
+      << e2;
+}
+
+TEST(CalibrationSection, ParsesTheExampleAndChecksTheAxisRegisters) {
+  TempDir d;
+  const auto f = d.write("a.toml", "include = [\"" + kMachine + "\"]\n" + registers(23, 99, 20));
+  auto r = load_file(f);
+  ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+  const auto* s = calibration_section(*r.config);
+  ASSERT_NE(s, nullptr);
+  EXPECT_EQ(s->config.register_x, 20U);
+  EXPECT_EQ(s->config.register_z, 22U);
+  EXPECT_DOUBLE_EQ(s->config.reference_x_axial_mm, 262.5);
+  EXPECT_DOUBLE_EQ(s->config.plausibility_um, 50.0);
+  EXPECT_DOUBLE_EQ(s->config.creep_duration_s, 600.0);
+  auto engine = config::build_engine(*r.config);
+  ASSERT_EQ(engine->module_count(), 1U);
+  EXPECT_EQ(engine->module(0).name(), "calibration");
+
+  // register_x names a tool length register: refused at the key.
+  const std::string text = registers(23, 99, 20) + "[calibration]\nregister_x = 3\n";
+  const auto g = d.write("b.toml", text);
+  EXPECT_NE(errors_of(g).find(g + ":" + std::to_string(line_of(text, "register_x =")) +
+                              ":14: calibration.register_x: register 3 "
+                              "(\"r3\") must be of kind axis_offset"),
+            std::string::npos)
+      << errors_of(g);
+  const std::string typo = registers(23, 99, 20) + "[calibration]\nplausibility = 3\n";
+  const auto h = d.write("c.toml", typo);
+  EXPECT_NE(errors_of(h).find(h + ":" + std::to_string(line_of(typo, "plausibility =")) +
+                              ":16: calibration.plausibility: unknown key"),
+            std::string::npos)
+      << errors_of(h);
+}
+
+}  // namespace
+}  // namespace nccomp::daemon::sections
