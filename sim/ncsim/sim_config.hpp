@@ -23,9 +23,9 @@ struct NcConfig {
   double offset_limit_um{500.0};
   std::int32_t tool_length_register{0};
   std::int32_t tool_radius_register{1};
-  std::int32_t axis_register[3]{20, 21, 22};
+  std::int32_t axis_register[3]{6, 7, 8};
   /// First register of the S1 checkpoint table and how many there are (table mode).
-  std::int32_t checkpoint_base_register{10};
+  std::int32_t checkpoint_base_register{2};
   std::int32_t checkpoint_register_count{4};
   /// A non-zero value written here asks the NC to measure the tool at the laser (-1 = none).
   std::int32_t measure_request_register{-1};

@@ -1,0 +1,304 @@
+// The programs on the machine model, with numbers: the cut follows the offsets in force (after
+// the NC's latency), the NC refuses out-of-range values, the events come in program order.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <variant>
+
+#include "sim/ncsim/simulation.hpp"
+
+namespace nccomp::sim::ncsim {
+namespace {
+
+// The reference map's logical registers: tool length / radius wear 0, 1; checkpoints 2..5;
+// axis offsets X, Y, Z 6, 7, 8.
+const std::vector<std::uint16_t> kKnown{0, 1, 2, 3, 4, 5, 6, 7, 8};
+
+SimConfig quiet_config() {
+  SimConfig c;
+  EffectsConfig& e = c.effects;
+  e.wear.enabled = false;
+  e.pushoff.enabled = false;
+  e.hardness.enabled = false;
+  e.thermal.enabled = false;
+  e.pitch.enabled = false;
+  e.probe_noise.enabled = false;
+  e.laser_noise.enabled = false;
+  c.mould_face.size_x_mm = 10.0;
+  c.mould_face.size_y_mm = 2.0;
+  c.mould_face.stepover_mm = 1.0;
+  c.mould_face.feed_mm_per_min = 600.0;  // 10 mm/s: 0.05 mm steps of 5 ms
+  c.mould_face.measure_interval_mm = 0.0;
+  c.nc.latency_s = 0.1;
+  return c;
+}
+
+TEST(NcsimRegisters, RangeCheckLatencyAndUnknownRegisters) {
+  OffsetRegisters r({0, 20}, 100.0, 0.5);
+  EXPECT_EQ(r.write(1.0, 20, -7.5), WriteResult::kAccepted);
+  EXPECT_EQ(r.write(1.0, 20, 100.5), WriteResult::kOutOfRange);
+  EXPECT_EQ(r.write(1.0, 20, std::nan("")), WriteResult::kOutOfRange);
+  EXPECT_EQ(r.write(1.0, 5, 1.0), WriteResult::kUnknownRegister);
+  EXPECT_EQ(r.refused(), 3U);
+  r.advance(1.49);
+  EXPECT_EQ(r.value(20), 0.0);  // not yet in force
+  r.advance(1.5);
+  EXPECT_EQ(r.value(20), -7.5);
+  ASSERT_EQ(r.log().size(), 1U);
+  EXPECT_DOUBLE_EQ(r.log()[0].effective_t_s, 1.5);
+}
+
+TEST(NcsimMouldFace, ErrorIsTheWearAlongThePathAndEveryRowIsFine) {
+  SimConfig c = quiet_config();
+  c.effects.wear.enabled = true;
+  c.effects.wear.rate_um_per_m = 100.0;  // 0.1 µm per mm of cut
+  Simulation sim(c, ProgramKind::kMouldFace, kKnown);
+  sim.advance_to(core::from_seconds(100.0));
+  ASSERT_TRUE(sim.done());
+  const auto& rows = sim.results().surface;
+  // 3 passes of 10 mm at 0.05 mm.
+  ASSERT_EQ(rows.size(), 600U);
+  double cut = 0.0;
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    cut += 0.05;
+    EXPECT_NEAR(rows[i].error_um, 0.1 * cut, 1e-9) << i;
+    EXPECT_EQ(rows[i].offset_um, 0.0);
+    EXPECT_NEAR(rows[i].z_mm, mould_face_z_mm(c.mould_face, rows[i].x_mm, rows[i].y_mm), 1e-12);
+    if (i > 0 && rows[i].pass == rows[i - 1].pass) {
+      EXPECT_LE(std::hypot(rows[i].x_mm - rows[i - 1].x_mm, rows[i].y_mm - rows[i - 1].y_mm),
+                0.1 + 1e-9);
+    }
+  }
+  EXPECT_EQ(rows.back().pass, 2);
+  // Zig-zag: the second pass runs from x = 10 back to 0 at y = 1.
+  EXPECT_NEAR(rows[200].x_mm, 9.95, 1e-9);
+  EXPECT_NEAR(rows[200].y_mm, 1.0, 1e-12);
+}
+
+TEST(NcsimMouldFace, AxisAndToolOffsetsActAfterTheLatency) {
+  SimConfig c = quiet_config();
+  c.effects.wear.enabled = true;
+  c.effects.wear.rate_um_per_m = 0.0;
+  c.effects.wear.initial_um = 6.0;  // a constant 6 µm of wear
+  Simulation sim(c, ProgramKind::kMouldFace, kKnown);
+  sim.advance_to(core::from_seconds(0.5));
+  // Z axis offset −6 µm (creep's sign: −c·n on a floor) at t = 0.5 s, in force at 0.6 s.
+  ASSERT_EQ(sim.write_offset(0.5, 8, -6.0), WriteResult::kAccepted);
+  // Beyond the NC's range: refused, nothing changes.
+  EXPECT_EQ(sim.write_offset(0.5, 0, 1e4), WriteResult::kOutOfRange);
+  sim.advance_to(core::from_seconds(1.0));
+  const auto& rows = sim.results().surface;
+  for (const SurfaceRow& r : rows) {
+    const Vec3 n = mould_face_normal(c.mould_face, r.x_mm, r.y_mm);
+    // rows are cut at path/feed: 0.05 mm every 5 ms.
+    const double t = r.path_mm / 10.0;
+    if (t < 0.6 - 1e-9) {
+      EXPECT_NEAR(r.error_um, 6.0, 1e-9);
+    } else {
+      EXPECT_NEAR(r.error_um, 6.0 - 6.0 * n[2], 1e-9) << t;
+      EXPECT_NEAR(r.offset_um, 6.0 * n[2], 1e-9);
+    }
+  }
+  // Length and radius wear registers split as the NC applies them: L·n_z + R·sinθ.
+  ASSERT_EQ(sim.write_offset(1.0, 8, 0.0), WriteResult::kAccepted);
+  ASSERT_EQ(sim.write_offset(1.0, 0, -4.0), WriteResult::kAccepted);
+  ASSERT_EQ(sim.write_offset(1.0, 1, -2.0), WriteResult::kAccepted);
+  sim.advance_to(core::from_seconds(3.0));
+  const SurfaceRow& r = sim.results().surface.back();
+  const Vec3 n = mould_face_normal(c.mould_face, r.x_mm, r.y_mm);
+  EXPECT_NEAR(r.error_um, 6.0 - 4.0 * n[2] - 2.0 * std::sqrt(1.0 - n[2] * n[2]), 1e-9);
+}
+
+TEST(NcsimMouldFace, LaserTripsAtTheIntervalInProgramOrder) {
+  SimConfig c = quiet_config();
+  c.effects.wear.enabled = true;
+  c.effects.wear.rate_um_per_m = 1000.0;  // 1 µm per mm
+  c.mould_face.measure_interval_mm = 12.0;
+  c.mould_face.laser_trip_s = 1.0;
+  Simulation sim(c, ProgramKind::kMouldFace, kKnown);
+  std::vector<core::Event> ev;
+  bool cutting_in_trip = false;
+  bool in_trip = false;
+  for (int k = 1; k <= 10000 && !sim.done(); ++k) {
+    sim.advance_to(core::from_seconds(0.001 * k));
+    // The step that raised the interruption still cut; every step of the trip after it must not.
+    cutting_in_trip = cutting_in_trip || (in_trip && sim.axis().cutting);
+    for (auto& e : sim.take_events()) {
+      if (const auto* pe = std::get_if<core::ProgramEvent>(&e)) {
+        in_trip = pe->kind == core::ProgramEventKind::kInterruption;
+      }
+      ev.push_back(e);
+    }
+  }
+  ASSERT_TRUE(sim.done());
+  EXPECT_FALSE(cutting_in_trip);
+  // 30 mm of cut: measurements after 12 and 24 mm.
+  ASSERT_EQ(ev.size(), 9U);  // tool, start, 2 × (interruption, measurement, resume), end
+  EXPECT_TRUE(std::holds_alternative<core::ToolChange>(ev[0]));
+  EXPECT_EQ(std::get<core::ProgramEvent>(ev[1]).kind, core::ProgramEventKind::kPartStart);
+  std::vector<double> wear;
+  for (const auto& e : ev) {
+    if (const auto* tm = std::get_if<core::ToolMeasurement>(&e)) {
+      wear.push_back(tm->wear_um[0]);
+      EXPECT_FALSE(tm->broken);
+    }
+  }
+  ASSERT_EQ(wear.size(), 2U);
+  EXPECT_NEAR(wear[0], 12.0, 0.051);
+  EXPECT_NEAR(wear[1], 24.0, 0.051);
+  EXPECT_EQ(std::get<core::ProgramEvent>(ev.back()).kind, core::ProgramEventKind::kPartEnd);
+  // The trips take 2 × 1 s on top of 30 mm cut + 2 mm of links at 10 mm/s.
+  EXPECT_NEAR(sim.time_s(), 3.2 + 2.0, 0.01);
+}
+
+TEST(NcsimMouldFace, BrokenToolIsReportedByTheLaser) {
+  SimConfig c = quiet_config();
+  c.effects.broken_tool = {true, 5.0, 300.0, true};
+  c.mould_face.measure_interval_mm = 8.0;
+  c.mould_face.laser_trip_s = 0.2;
+  Simulation sim(c, ProgramKind::kMouldFace, kKnown);
+  sim.advance_to(core::from_seconds(10.0));
+  bool seen = false;
+  for (const auto& e : sim.take_events()) {
+    if (const auto* tm = std::get_if<core::ToolMeasurement>(&e)) {
+      seen = true;
+      EXPECT_TRUE(tm->broken);
+      EXPECT_NEAR(tm->wear_um[0], 300.0, 1e-9);
+    }
+  }
+  EXPECT_TRUE(seen);
+}
+
+SimConfig wall_config() {
+  SimConfig c = quiet_config();
+  auto& p = c.side_wall.plan;
+  p.contour = {{0.0, 0.0}, {40.0, 0.0}};
+  p.closed = false;
+  p.material = core::checkpoint::MaterialSide::kLeft;
+  p.z_start_mm = -5.0;
+  p.z_end_mm = -25.0;
+  p.depth_step_mm = 20.0;
+  p.wall_angle_deg = 3.0;
+  p.extra_points_mm = {10.0, 30.0};
+  p.ball_radius_mm = 2.0;
+  p.tool_radius_mm = 5.0;
+  c.side_wall.feed_mm_per_min = 1200.0;
+  c.side_wall.probe_time_s = 0.5;
+  c.parts = 2;
+  return c;
+}
+
+TEST(NcsimSideWall, PushoffGrowsWithHeightAndTheProbeSeesItPlusDelta0) {
+  SimConfig c = wall_config();
+  c.effects.pushoff.enabled = true;
+  c.effects.pushoff.base_um = 10.0;
+  c.effects.pushoff.clamp_z_mm = -45.0;
+  c.effects.pushoff.reference_lever_mm = 40.0;
+  c.effects.pushoff.wear_gain_per_um = 0.0;
+  c.effects.probe_outlier = {true, 2, 1, 400.0};
+  Simulation sim(c, ProgramKind::kSideWall, kKnown);
+  sim.advance_to(core::from_seconds(1000.0));
+  ASSERT_TRUE(sim.done());
+  const auto& walls = sim.results().walls;
+  ASSERT_FALSE(walls.empty());
+  for (const WallRow& w : walls) {
+    EXPECT_NEAR(w.error_um, 10.0 * (w.z_mm + 45.0) / 40.0, 1e-9);
+  }
+  const auto& cps = sim.results().checkpoints;
+  ASSERT_EQ(cps.size(), 8U);  // 2 parts × 2 levels × 2 points
+  const double delta0 = (2.0 / std::cos(3.0 * std::numbers::pi / 180.0) - 2.0) * 1000.0;
+  for (const CheckpointRow& cp : cps) {
+    EXPECT_NEAR(cp.error_um, 10.0 * (cp.z_mm + 45.0) / 40.0, 1e-9);
+    const double outlier = (cp.part == 2 && cp.checkpoint == 1) ? 400.0 : 0.0;
+    EXPECT_NEAR(cp.probed_um, cp.error_um + delta0 + outlier, 1e-9);
+  }
+  // The radius register moves the wall: write +3 µm (S1: c > 0 leaves material) and cut again.
+  SimConfig c2 = c;
+  c2.parts = 1;
+  Simulation s2(c2, ProgramKind::kSideWall, kKnown);
+  ASSERT_EQ(s2.write_offset(0.0, 1, 3.0), WriteResult::kAccepted);
+  s2.advance_to(core::from_seconds(1000.0));
+  for (const WallRow& w : s2.results().walls) {
+    if (w.s_mm > 2.5) {  // after the 0.1 s latency at 20 mm/s
+      EXPECT_NEAR(w.error_um, 10.0 * (w.z_mm + 45.0) / 40.0 + 3.0, 1e-9);
+      EXPECT_NEAR(w.offset_um, -3.0, 1e-12);
+    }
+  }
+  // Probe events: one per checkpoint, with the plan's ids and the wall angle.
+  int probes = 0;
+  for (const auto& e : s2.take_events()) {
+    if (const auto* pm = std::get_if<core::ProbeMeasurement>(&e)) {
+      EXPECT_EQ(pm->checkpoint, probes);
+      EXPECT_DOUBLE_EQ(pm->wall_angle_deg, 3.0);
+      EXPECT_DOUBLE_EQ(pm->ball_radius_mm, 2.0);
+      ++probes;
+    }
+  }
+  EXPECT_EQ(probes, 4);
+}
+
+TEST(NcsimTouch, TriggerShiftIsTheDriftAndTheOffsetCancelsIt) {
+  SimConfig c = quiet_config();
+  c.effects.thermal.enabled = true;
+  c.effects.thermal.gain_um = {6.0, -3.0, 9.0};
+  c.effects.thermal.time_constant_s = 100.0;
+  c.touch.cycles = 2;
+  c.touch.cycle_interval_s = 100.0;
+  c.touch.touch_time_s = 1.0;
+  Simulation sim(c, ProgramKind::kTouch, kKnown);
+  sim.advance_to(core::from_seconds(150.0));
+  // Cancel the X drift from now on with the X axis offset.
+  const double dx = 6.0 * (1.0 - std::exp(-2.0));
+  ASSERT_EQ(sim.write_offset(150.0, 6, -dx), WriteResult::kAccepted);
+  sim.advance_to(core::from_seconds(1000.0));
+  ASSERT_TRUE(sim.done());
+  const auto& t = sim.results().touches;
+  ASSERT_EQ(t.size(), 4U + 3U * 5U);
+  for (const TouchRow& r : t) {
+    const double sign = static_cast<double>(r.direction);
+    const Vec3 c0 = r.probe == 1 ? c.touch.reference_center_mm : c.touch.body_center_mm;
+    const double rad = r.probe == 1 ? c.touch.reference_radius_mm : c.touch.body_radius_mm;
+    const double nominal = c0[static_cast<std::size_t>(r.axis)] - sign * rad;
+    EXPECT_NEAR((r.trigger_position_mm - nominal) * 1000.0, r.true_drift_um, 1e-6);
+    if (r.cycle == 2 && r.axis == 0) {
+      // 2 s apart at t ≈ 200 s: the offset written at 150 s cancels the drift at 200 s.
+      EXPECT_NEAR(r.true_drift_um, 0.0, 0.05);
+    }
+    if (r.cycle == 2 && r.axis == 2) {
+      EXPECT_NEAR(r.true_drift_um, -9.0 * (1.0 - std::exp(-2.08)), 0.05);
+    }
+  }
+}
+
+TEST(NcsimRoll, GroundProfileIsTheEnvelopeMovedByTheXOffset) {
+  SimConfig c = quiet_config();
+  // A 3 % flank ground with a straight wheel (h = 0) whose reference point rides on the target:
+  // a straight wheel touches with its end, so the profile comes out exact on the flat parts.
+  for (int i = 0; i <= 400; ++i) {
+    const double z = 0.5 * i;
+    c.roll.target_z_mm.push_back(z);
+    c.roll.target_u_mm.push_back(z < 80 ? 0.0 : std::min(z - 80.0, 40.0) * 0.03);
+  }
+  c.roll.z_mm = c.roll.target_z_mm;
+  c.roll.u_mm = c.roll.target_u_mm;
+  c.roll.wheel_width_mm = 1.0;
+  c.roll.wheel_height_mm = 0.0;
+  c.roll.passes = 1;
+  c.roll.feed_mm_per_min = 6000.0;
+  Simulation sim(c, ProgramKind::kRoll, kKnown);
+  ASSERT_EQ(sim.write_offset(0.0, 6, 5.0), WriteResult::kAccepted);
+  sim.advance_to(core::from_seconds(100.0));
+  ASSERT_TRUE(sim.done());
+  const auto& rows = sim.results().surface;
+  ASSERT_GT(rows.size(), 3000U);
+  for (const SurfaceRow& r : rows) {
+    // The offset is in force after 0.1 s = 10 mm; on the flank a straight wheel 1 mm wide
+    // grinds the lower end's height (the envelope), 0.5 mm · 3 % = 15 µm lower.
+    if (r.z_mm > 10.5 && (r.z_mm < 79.5 || r.z_mm > 120.5)) {
+      EXPECT_NEAR(r.error_um, 5.0, 1e-6) << r.z_mm;
+    }
+  }
+}
+
+}  // namespace
+}  // namespace nccomp::sim::ncsim
