@@ -246,7 +246,7 @@ void apply_override(toml::table& root, const std::string& spec) {
 }
 
 void read_effects(const toml::table* eff, const std::string& file, const std::string& base,
-                  EffectsConfig& e) {
+                  bool read_files, EffectsConfig& e) {
   Reader r(eff, "effects", file);
   {
     Reader w(r.table("wear"), "effects.wear", file);
@@ -269,6 +269,9 @@ void read_effects(const toml::table* eff, const std::string& file, const std::st
     w.number("path_per_cut_mm", path_per_cut_mm, 1e-3, 1e6);
     w.number("radial_per_vb", radial_per_vb, 0.0, 1.0);
     w.integer("start_cut", start_cut, 1, 314);
+    if (c.curve == WearCurve::kTable && !read_files) {
+      c.curve = WearCurve::kLinear;
+    }
     if (c.curve == WearCurve::kTable) {
       if (phm_file.empty()) {
         w.fail("phm_file", "curve = \"phm2010\" needs phm_file (c4_wear.csv or c6_wear.csv)");
@@ -351,6 +354,9 @@ void read_effects(const toml::table* eff, const std::string& file, const std::st
     t.string("ambient_temperature", temps[1]);
     t.number("time_scale", c.time_scale, 1e-3, 1e5);
     t.number("replay_start_s", c.replay_start_s, 0.0, 1e7);
+    if (c.mode == ThermalMode::kReplay && !read_files) {
+      c.mode = ThermalMode::kFirstOrder;
+    }
     if (c.mode == ThermalMode::kReplay) {
       if (replay_file.empty()) {
         t.fail("replay_file", "mode = \"replay\" needs replay_file (FL_THERMAL data.csv)");
@@ -521,7 +527,7 @@ std::vector<std::vector<double>> read_csv_columns(const std::string& path,
 
 SimConfig parse_sim_config(std::string_view text, const std::string& file,
                            const std::string& base_dir,
-                           const std::vector<std::string>& overrides) {
+                           const std::vector<std::string>& overrides, bool read_files) {
   toml::table root;
   try {
     root = toml::parse(text, file);
@@ -567,7 +573,7 @@ SimConfig parse_sim_config(std::string_view text, const std::string& file,
     n.integer("tool", nc.tool, 1, 9999);
     n.finish();
   }
-  read_effects(top.table("effects"), file, base_dir, c.effects);
+  read_effects(top.table("effects"), file, base_dir, read_files, c.effects);
   {
     Reader p(top.table("program"), "program", file);
     {
@@ -593,7 +599,7 @@ SimConfig parse_sim_config(std::string_view text, const std::string& file,
       s.number("feed_mm_per_min", w.feed_mm_per_min, 1.0, 1e6);
       s.number("probe_time_s", w.probe_time_s, 0.0, 3600.0);
       s.boolean("table_registers", w.table_registers);
-      if (!w.checkpoints_file.empty()) {
+      if (!w.checkpoints_file.empty() && read_files) {
         const std::string path = resolve(base_dir, w.checkpoints_file);
         try {
           w.plan = tools::checkpoints::load_checkpoints_file(path, std::nullopt).plan;
@@ -627,7 +633,7 @@ SimConfig parse_sim_config(std::string_view text, const std::string& file,
       g.number("wheel_width_mm", rc.wheel_width_mm, 0.0, 2000.0);
       g.number("wheel_height_mm", rc.wheel_height_mm, 0.0, 100.0);
       g.integer("passes", rc.passes, 1, 1000);
-      if (!rc.trajectory_file.empty()) {
+      if (!rc.trajectory_file.empty() && read_files) {
         rc.trajectory_file = resolve(base_dir, rc.trajectory_file);
         auto t = read_csv_columns(rc.trajectory_file, {"z_mm", "u_mm"});
         rc.z_mm = std::move(t[0]);
@@ -653,7 +659,9 @@ SimConfig parse_sim_config(std::string_view text, const std::string& file,
   }
   top.finish();
   c.bus_map_file = resolve(base_dir, c.bus_map_file);
-  c.bus_map_text = read_text(c.bus_map_file, "ncsim.bus_map");
+  if (read_files) {
+    c.bus_map_text = read_text(c.bus_map_file, "ncsim.bus_map");
+  }
   return c;
 }
 

@@ -22,9 +22,11 @@ class ConfigError : public std::runtime_error {
 /// (`--set`): a path whose first part names an effect is taken under [effects]
 /// (`wear.rate_um_per_m=3`), any other path from the top (`ncsim.seed=4`). value is a TOML
 /// value; anything that does not parse as one is taken as a string.
+/// read_files = false checks the text only: no data file named in it is opened (fuzzing).
 SimConfig parse_sim_config(std::string_view text, const std::string& file,
                            const std::string& base_dir,
-                           const std::vector<std::string>& overrides = {});
+                           const std::vector<std::string>& overrides = {},
+                           bool read_files = true);
 /// Reads and parses a file. Throws ConfigError.
 SimConfig load_sim_config(const std::string& path, const std::vector<std::string>& overrides = {});
 
