@@ -18,6 +18,10 @@ namespace {
 namespace fs = std::filesystem;
 
 std::string where(const std::string& file, const toml::source_region& r) {
+  // A value from --set carries its own source name: say so rather than point into the file.
+  if (r.path && *r.path == "--set") {
+    return "--set";
+  }
   return file + ":" + std::to_string(r.begin.line) + ":" + std::to_string(r.begin.column);
 }
 
@@ -241,7 +245,22 @@ void apply_override(toml::table& root, const std::string& spec) {
     toml::table v = toml::parse(std::string_view(doc), std::string_view("--set"));
     t->insert_or_assign(parts.back(), std::move(*v.get("v")));
   } catch (const toml::parse_error&) {
-    t->insert_or_assign(parts.back(), value);
+    // Not a TOML value: a bare word is taken as a string (parsed, so it carries "--set" as its
+    // source for the messages).
+    std::string quoted = "v = \"";
+    for (const char ch : value) {
+      if (ch == '"' || ch == '\\') {
+        quoted += '\\';
+      }
+      quoted += ch;
+    }
+    quoted += '"';
+    try {
+      toml::table v = toml::parse(std::string_view(quoted), std::string_view("--set"));
+      t->insert_or_assign(parts.back(), std::move(*v.get("v")));
+    } catch (const toml::parse_error&) {
+      throw ConfigError("--set " + spec + ": the value is neither TOML nor a plain string");
+    }
   }
 }
 

@@ -6,6 +6,8 @@
 // clock starts, so that no event is published before the daemon has its baseline.
 // Exit status: 0 program done and result written; 1 runtime error; 2 usage; 3 config error;
 // 4 the daemon ended the lock-step run before the program was done (result written).
+#include <sys/resource.h>
+
 #include <cstdio>
 #include <cstdlib>
 #include <string>
@@ -120,12 +122,16 @@ int main(int argc, char** argv) {
       std::fflush(stdout);
     };
     const RunSummary s = run(config, opt);
+    rusage ru{};
+    getrusage(RUSAGE_SELF, &ru);
+    const double cpu_s = static_cast<double>(ru.ru_utime.tv_sec + ru.ru_stime.tv_sec) +
+                         1e-6 * static_cast<double>(ru.ru_utime.tv_usec + ru.ru_stime.tv_usec);
     std::printf("ncsim: %s %s: %.3f s simulated, %llu cycles, %zu offset writes taken, %llu "
-                "refused; result in %s\n",
+                "refused, %.3f s CPU; result in %s\n",
                 s.completed ? "done" : "stopped early",
                 std::string(program_name(opt.program)).c_str(), s.sim_time_s,
                 static_cast<unsigned long long>(s.cycles), s.writes,
-                static_cast<unsigned long long>(s.refused), opt.out_dir.c_str());
+                static_cast<unsigned long long>(s.refused), cpu_s, opt.out_dir.c_str());
     return s.completed ? 0 : 4;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "ncsim: %s\n", e.what());

@@ -62,6 +62,10 @@ TEST(NcsimConfig, RefusalsNameFileLineAndKey) {
   EXPECT_NE(error_of("[ncsim]\n").find("ncsim.bus_map: required"), std::string::npos);
   EXPECT_NE(error_of(header() + "[nc\n").find("t.toml:3:"), std::string::npos);
   EXPECT_NE(error_of(header(), {"nosuch.key=1"}).find("nosuch: unknown key"), std::string::npos);
+  EXPECT_EQ(error_of(header() + "[effects.wear]\nenabled = true\n", {"wear.rate=1"}),
+            "--set: effects.wear.rate: unknown key");
+  EXPECT_EQ(error_of(header(), {"wear.enabled=maybe"}),
+            "--set: effects.wear.enabled: must be true or false");
   EXPECT_NE(error_of(header(), {"novalue"}).find("expected KEY=VALUE"), std::string::npos);
   EXPECT_NE(error_of(header() + "[effects.wear]\ncurve = \"phm2010\"\n").find("needs phm_file"),
             std::string::npos);
