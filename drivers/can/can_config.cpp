@@ -16,9 +16,11 @@ class Reader {
 
   [[noreturn]] void fail(const toml::node& at, const std::string& path,
                          const std::string& msg) const {
-    std::ostringstream s;
-    s << file_ << ':' << at.source().begin.line << ": " << path << ": " << msg;
-    throw MappingError(s.str());
+    // Included files: the node knows which file it came from.
+    const auto& src = at.source();
+    throw MappingError(src.path && !src.path->empty() ? *src.path : file_,
+                       static_cast<int>(src.begin.line), static_cast<int>(src.begin.column), path,
+                       msg);
   }
 
   // Unknown keys are errors: a typo must not silently fall back to a default.
@@ -182,18 +184,23 @@ CanConfig parse_can_config(std::string_view toml_text, const std::string& file) 
   try {
     root = toml::parse(toml_text, file);
   } catch (const toml::parse_error& e) {
-    std::ostringstream s;
-    s << file << ':' << e.source().begin.line << ": " << e.description();
-    throw MappingError(s.str());
+    throw MappingError(file, static_cast<int>(e.source().begin.line),
+                       static_cast<int>(e.source().begin.column), "",
+                       std::string(e.description()));
   }
+  const auto* can_node = root.get("can");
+  if (can_node == nullptr || !can_node->is_table()) {
+    throw MappingError(file, 1, 0, "can", "missing [can] table");
+  }
+  return parse_can_table(*can_node->as_table(), file);
+}
+
+CanConfig parse_can_table(const toml::table& can, const std::string& file_name) {
+  const std::string file =
+      can.source().path && !can.source().path->empty() ? *can.source().path : file_name;
   const Reader r(file);
   CanConfig c;
   c.mapping.file = file;
-  const auto* can_node = root.get("can");
-  if (can_node == nullptr || !can_node->is_table()) {
-    throw MappingError(file + ":1: can: missing [can] table");
-  }
-  const toml::table& can = *can_node->as_table();
   const std::string p = "can";
   r.only_keys(can, p,
               {"interface", "fd", "restart", "restart_delay_s", "ack_timeout_s", "ack_retries",

@@ -7,6 +7,8 @@
 #include <string>
 #include <string_view>
 
+#include <toml++/toml.h>
+
 #include "drivers/can/can_mapping.hpp"
 
 namespace nccomp::drivers::can {
@@ -42,6 +44,9 @@ struct CanConfig {
 /// Parses the [can] table of TOML text (other top-level tables are ignored: they belong to
 /// other parts of the daemon). file names the source in error messages. Validates the mapping.
 CanConfig parse_can_config(std::string_view toml_text, const std::string& file);
+/// Parses an already parsed [can] table (the daemon's config loader hands it over). Errors name
+/// the file the table was parsed from (its source path), else file_name.
+CanConfig parse_can_table(const toml::table& can, const std::string& file_name);
 /// Reads and parses a file (error if it cannot be read).
 CanConfig load_can_config(const std::string& path);
 

@@ -11,6 +11,24 @@
 #include <utility>
 
 namespace nccomp::drivers::can {
+
+MappingError::MappingError(std::string file, int line, int column, std::string key_path,
+                           std::string message)
+    : std::runtime_error([&] {
+        std::ostringstream s;
+        s << file << ':' << line << ": ";
+        if (!key_path.empty()) {
+          s << key_path << ": ";
+        }
+        s << message;
+        return s.str();
+      }()),
+      file_(std::move(file)),
+      line_(line),
+      column_(column),
+      key_path_(std::move(key_path)),
+      message_(std::move(message)) {}
+
 namespace {
 
 struct FieldInfo {
@@ -81,13 +99,8 @@ const FieldInfo* field_info(EventKind kind, Field field) noexcept {
 
 [[noreturn]] void fail(const CanMapping& m, const Origin& o, const std::string& key,
                        const std::string& msg) {
-  std::ostringstream s;
-  s << (m.file.empty() ? "<config>" : m.file) << ':' << o.line << ": " << o.key_path;
-  if (!key.empty()) {
-    s << '.' << key;
-  }
-  s << ": " << msg;
-  throw MappingError(s.str());
+  throw MappingError(m.file.empty() ? "<config>" : m.file, static_cast<int>(o.line), 0,
+                     key.empty() ? o.key_path : o.key_path + "." + key, msg);
 }
 
 std::string hex(std::uint32_t id) {

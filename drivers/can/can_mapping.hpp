@@ -27,10 +27,28 @@ inline constexpr std::size_t kMaxPayloadBytes = 64;
 inline constexpr std::uint32_t kMaxStandardId = 0x7FF;
 inline constexpr std::uint32_t kMaxExtendedId = 0x1FFFFFFF;
 
-/// Thrown for an invalid mapping or config; what() is "file:line: key.path: message".
+/// Thrown for an invalid mapping or config; what() is "file:line: key.path: message". The parts
+/// are kept separately too, so that the daemon's config loader can report the error in its own
+/// format (file:line:column: key.path: message).
 class MappingError : public std::runtime_error {
  public:
   using std::runtime_error::runtime_error;
+  MappingError(std::string file, int line, int column, std::string key_path, std::string message);
+
+  [[nodiscard]] const std::string& file() const noexcept { return file_; }
+  /// 0 when unknown.
+  [[nodiscard]] int line() const noexcept { return line_; }
+  [[nodiscard]] int column() const noexcept { return column_; }
+  [[nodiscard]] const std::string& key_path() const noexcept { return key_path_; }
+  /// The message without the position.
+  [[nodiscard]] const std::string& message() const noexcept { return message_; }
+
+ private:
+  std::string file_;
+  int line_{0};
+  int column_{0};
+  std::string key_path_;
+  std::string message_;
 };
 
 enum class ByteOrder : std::uint8_t {

@@ -75,13 +75,18 @@ class Reader {
 
   [[noreturn]] void fail(const toml::node* where, const std::string& path,
                          const std::string& what) const {
-    std::ostringstream s;
-    s << file_;
+    int line = 0;
+    int column = 0;
+    std::string file = file_;
     if (where != nullptr && where->source().begin.line > 0) {
-      s << ':' << where->source().begin.line;
+      line = static_cast<int>(where->source().begin.line);
+      column = static_cast<int>(where->source().begin.column);
+      // Included files: the node knows which file it came from.
+      if (where->source().path && !where->source().path->empty()) {
+        file = *where->source().path;
+      }
     }
-    s << ": " << path << ": " << what;
-    throw ConfigError(s.str());
+    throw ConfigError(std::move(file), line, column, path, what);
   }
 
   /// Refuses keys of `t` not in `allowed`.
@@ -313,21 +318,47 @@ double rtu_frame_gap_s(const ModbusConfig& c) noexcept {
   return c.baud > 19200 ? 0.00175 : 3.5 * rtu_char_time_s(c);
 }
 
+ConfigError::ConfigError(std::string file, int line, int column, std::string key_path,
+                         std::string message)
+    : std::runtime_error([&] {
+        std::ostringstream s;
+        s << file;
+        if (line > 0) {
+          s << ':' << line;
+        }
+        s << ": ";
+        if (!key_path.empty()) {
+          s << key_path << ": ";
+        }
+        s << message;
+        return s.str();
+      }()),
+      file_(std::move(file)),
+      line_(line),
+      column_(column),
+      key_path_(std::move(key_path)),
+      message_(std::move(message)) {}
+
 ModbusConfig parse_modbus_config(std::string_view toml_text, std::string_view file) {
   toml::table root;
   try {
     root = toml::parse(toml_text, file);
   } catch (const toml::parse_error& e) {
-    std::ostringstream s;
-    s << file << ':' << e.source().begin.line << ": " << e.description();
-    throw ConfigError(s.str());
+    throw ConfigError(std::string(file), static_cast<int>(e.source().begin.line),
+                      static_cast<int>(e.source().begin.column), "", std::string(e.description()));
   }
-  const Reader r(file);
   const toml::node* mnode = root.get("modbus");
   if (mnode == nullptr || !mnode->is_table()) {
-    r.fail(mnode, "modbus", "missing [modbus] table");
+    Reader(file).fail(mnode, "modbus", "missing [modbus] table");
   }
-  const toml::table& m = *mnode->as_table();
+  return parse_modbus_table(*mnode->as_table(), file);
+}
+
+ModbusConfig parse_modbus_table(const toml::table& m, std::string_view file) {
+  const std::string table_file =
+      m.source().path && !m.source().path->empty() ? *m.source().path : std::string(file);
+  const Reader r(table_file);
+  const toml::node* mnode = &m;
   const std::string mp = "modbus";
   static constexpr std::array<std::string_view, 30> kTopKeys = {"transport",
                                                                 "host",
@@ -567,9 +598,9 @@ ModbusConfig parse_modbus_config(std::string_view toml_text, std::string_view fi
     const Claim& b = claims[i];
     if (a.table == b.table && b.first <= a.last) {
       std::ostringstream s;
-      s << r.file() << ':' << b.line << ": " << b.path << ": " << table_name(b.table) << " address "
-        << b.first << " overlaps " << a.path << " (line " << a.line << ")";
-      throw ConfigError(s.str());
+      s << table_name(b.table) << " address " << b.first << " overlaps " << a.path << " (line "
+        << a.line << ")";
+      throw ConfigError(std::string(r.file()), b.line, 0, b.path, s.str());
     }
   }
 
@@ -592,10 +623,12 @@ ModbusConfig parse_modbus_config(std::string_view toml_text, std::string_view fi
       const std::uint32_t max = is_bit_table(table) ? kMaxReadBits : kMaxReadRegisters;
       if (span > max) {
         std::ostringstream s;
-        s << r.file() << ": " << path << ": its " << table_name(table) << " signals span " << span
+        s << "its " << table_name(table) << " signals span " << span
           << " addresses, more than one read request carries (" << max
           << "); place them closer together";
-        throw ConfigError(s.str());
+        const std::size_t dot = path.rfind('.');
+        const toml::node* n = dot == std::string::npos ? nullptr : m.get(path.substr(dot + 1));
+        r.fail(n != nullptr ? n : mnode, path, s.str());
       }
       const std::size_t bi = c.blocks.size();
       c.blocks.push_back({table, static_cast<std::uint16_t>(lo), static_cast<std::uint16_t>(span)});
@@ -697,11 +730,11 @@ ModbusConfig parse_modbus_config(std::string_view toml_text, std::string_view fi
     const double load = c.poll_bus_time_s * c.poll_rate_hz;
     if (load > 0.9) {
       std::ostringstream s;
-      s << r.file() << ": modbus.poll_rate_hz: " << c.poll_rate_hz << " Hz needs " << load * 100.0
-        << " % of the bus at " << c.baud << " baud (" << c.poll_bus_time_s * 1e3
-        << " ms per poll for " << c.blocks.size() << " read requests); at most "
-        << 0.9 / c.poll_bus_time_s << " Hz";
-      throw ConfigError(s.str());
+      s << c.poll_rate_hz << " Hz needs " << load * 100.0 << " % of the bus at " << c.baud
+        << " baud (" << c.poll_bus_time_s * 1e3 << " ms per poll for " << c.blocks.size()
+        << " read requests); at most " << 0.9 / c.poll_bus_time_s << " Hz";
+      const toml::node* n = m.get("poll_rate_hz");
+      r.fail(n != nullptr ? n : mnode, "modbus.poll_rate_hz", s.str());
     }
     const double budget_hz =
         c.write_bus_time_s > 0.0 ? (0.9 - load) / c.write_bus_time_s : c.poll_rate_hz;
@@ -709,10 +742,9 @@ ModbusConfig parse_modbus_config(std::string_view toml_text, std::string_view fi
       c.offset_write_rate_hz = std::min(c.poll_rate_hz, budget_hz);
     } else if (c.offset_write_rate_hz > budget_hz + 1e-9) {
       std::ostringstream s;
-      s << r.file() << ": modbus.offset_write_rate_hz: " << c.offset_write_rate_hz
-        << " Hz does not fit the bus time the polls leave at " << c.baud << " baud; at most "
-        << budget_hz << " Hz";
-      throw ConfigError(s.str());
+      s << c.offset_write_rate_hz << " Hz does not fit the bus time the polls leave at " << c.baud
+        << " baud; at most " << budget_hz << " Hz";
+      r.fail(m.get("offset_write_rate_hz"), "modbus.offset_write_rate_hz", s.str());
     }
   } else if (c.offset_write_rate_hz <= 0.0) {
     c.offset_write_rate_hz = c.poll_rate_hz;

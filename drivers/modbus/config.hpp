@@ -22,15 +22,35 @@
 #include <string_view>
 #include <vector>
 
+#include <toml++/toml.h>
+
 #include "core/common/types.hpp"
 #include "drivers/modbus/encoding.hpp"
 
 namespace nccomp::drivers::modbus {
 
-/// A refused config: the message names file, line and key path.
+/// A refused config: what() is "file:line: key.path: message". The parts are kept separately
+/// too, so that the daemon's config loader can report the error in its own format
+/// (file:line:column: key.path: message) beside the errors of other sections.
 class ConfigError : public std::runtime_error {
  public:
   using std::runtime_error::runtime_error;
+  ConfigError(std::string file, int line, int column, std::string key_path, std::string message);
+
+  [[nodiscard]] const std::string& file() const noexcept { return file_; }
+  /// 0 when the error has no single position (e.g. the whole map's bus budget).
+  [[nodiscard]] int line() const noexcept { return line_; }
+  [[nodiscard]] int column() const noexcept { return column_; }
+  [[nodiscard]] const std::string& key_path() const noexcept { return key_path_; }
+  /// The message without the position.
+  [[nodiscard]] const std::string& message() const noexcept { return message_; }
+
+ private:
+  std::string file_;
+  int line_{0};
+  int column_{0};
+  std::string key_path_;
+  std::string message_;
 };
 
 enum class Transport : std::uint8_t { kTcp, kRtu };
@@ -170,6 +190,10 @@ struct ModbusConfig {
 /// Parses the [modbus] table of a TOML document. `file` names the source in messages.
 /// Throws ConfigError. Not real-time.
 ModbusConfig parse_modbus_config(std::string_view toml_text, std::string_view file);
+/// Parses an already parsed [modbus] table (the daemon's config loader hands it over). Errors
+/// name the file the table's nodes were parsed from (their source path), else `file`, with line,
+/// column and key path. Throws ConfigError. Not real-time.
+ModbusConfig parse_modbus_table(const toml::table& modbus, std::string_view file);
 /// Reads and parses a file. Throws ConfigError.
 ModbusConfig load_modbus_config(const std::string& path);
 

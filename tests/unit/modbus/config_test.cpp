@@ -41,7 +41,7 @@ TEST(ModbusConfig, ReferenceProfileParsesIntoOneRequestPerGroup) {
   EXPECT_EQ(c.blocks[2].start, 100);
   EXPECT_EQ(c.blocks[2].count, 62);
   ASSERT_EQ(c.offsets.size(), 9U);
-  EXPECT_EQ(c.offsets[8].register_index, 22);
+  EXPECT_EQ(c.offsets[8].register_index, 8);  // contiguous: the [[registers]] positions
   EXPECT_EQ(c.offsets[8].encoding.word_order, WordOrder::kLowFirst);
   EXPECT_DOUBLE_EQ(c.offset_write_rate_hz, c.poll_rate_hz);  // TCP: derived = poll rate
   const SignalMap& wear =
@@ -274,7 +274,7 @@ x_mm = { address = 0, type = "int32" }
   EXPECT_DOUBLE_EQ(rtu_frame_gap_s(fast), 0.00175);
   // WHEN 100 Hz is asked of 9600 baud THEN it is refused with the achievable rate.
   EXPECT_THAT(error_of(base("poll_rate_hz = 100")),
-              HasSubstr("t.toml: modbus.poll_rate_hz: 100 Hz needs"));
+              HasSubstr("t.toml:6: modbus.poll_rate_hz: 100 Hz needs"));
   // An explicit offset write rate beyond the bus budget is refused too.
   EXPECT_THAT(error_of(base("poll_rate_hz = 10\noffset_write_rate_hz = 50") + R"(
 [[modbus.offset]]
