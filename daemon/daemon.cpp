@@ -19,6 +19,7 @@
 
 #include "daemon/config/builtin_sections.hpp"
 #include "daemon/config/config.hpp"
+#include "daemon/lockstep.hpp"
 #include "daemon/logging.hpp"
 #include "daemon/loop.hpp"
 #include "daemon/measurement_log.hpp"
@@ -162,7 +163,9 @@ int run_daemon(const DaemonOptions& options) {
       state_problem = "state file " + state_path + " is corrupt: " + sf.reason;
     } else {
       std::size_t skipped = 0;
-      if (runtime->engine->import_state(sf.payload, monotonic_ns(), &skipped)) {
+      // In lock-step the peer's clock starts near 0: restored limiters start there too.
+      const core::TimeNs resume_ns = options.lockstep_socket.empty() ? monotonic_ns() : 0;
+      if (runtime->engine->import_state(sf.payload, resume_ns, &skipped)) {
         sequence = sf.sequence;
         spdlog::info("state resumed from {} (write #{}, {} bytes, {} unknown entries skipped)",
                      state_path, sf.sequence, sf.payload.size(), skipped);
@@ -189,8 +192,10 @@ int run_daemon(const DaemonOptions& options) {
     }
   }
 
+  const bool lockstep = !options.lockstep_socket.empty();
   for (auto& b : buses) {
     try {
+      b.bus->set_lockstep(lockstep);
       b.bus->start();
       spdlog::info("bus {} started", b.name);
     } catch (const std::exception& e) {
@@ -234,6 +239,27 @@ int run_daemon(const DaemonOptions& options) {
   std::vector<drivers::Bus*> bus_ptrs;
   for (auto& b : buses) {
     bus_ptrs.push_back(b.bus.get());
+  }
+  LockstepPeer peer;
+  if (lockstep) {
+    try {
+      spdlog::info("lock-step: connecting to {}", options.lockstep_socket);
+      peer.connect(options.lockstep_socket, options.lockstep_connect_timeout_s);
+      spdlog::info("lock-step: connected; the peer's TICKs drive the loop (rate_hz {} is the "
+                   "peer's lockstep_rate_hz)",
+                   dsec.rate_hz);
+    } catch (const std::exception& e) {
+      spdlog::error("{}", e.what());
+      persister.stop();
+      if (mlog) {
+        mlog->stop();
+      }
+      for (auto& b : buses) {
+        b.bus->stop();
+      }
+      return 1;
+    }
+    lo.lockstep = &peer;
   }
   Loop loop(lo, swap, bus_ptrs, &persister, mlog.get());
   loop.set_hold(!state_problem.empty());
@@ -319,7 +345,27 @@ int run_daemon(const DaemonOptions& options) {
   auto last_feed = std::chrono::steady_clock::now();
   auto last_status = last_feed;
   bool stalled_logged = false;
+  std::uint64_t sync_timeouts_logged = 0;
+  std::uint64_t flush_timeouts_logged = 0;
   for (;;) {
+    if (lockstep) {
+      const LoopStats ls = loop.stats();
+      if (ls.sync_timeouts != sync_timeouts_logged || ls.flush_timeouts != flush_timeouts_logged) {
+        const auto bi = static_cast<std::size_t>(std::max(ls.last_timeout_bus, 0));
+        spdlog::warn(
+            "lock-step: bus {} did not answer in time at cycle {} ({} sync, {} flush timeouts "
+            "so far); the cycles completed anyway",
+            bi < buses.size() ? buses[bi].name : std::string("?"), ls.last_timeout_cycle,
+            ls.sync_timeouts, ls.flush_timeouts);
+        sync_timeouts_logged = ls.sync_timeouts;
+        flush_timeouts_logged = ls.flush_timeouts;
+      }
+      if (loop.finished()) {
+        spdlog::info("lock-step: run ended after {} cycles: {}", ls.cycles,
+                     to_string(loop.lockstep_end()));
+        break;
+      }
+    }
     pollfd pfd{sfd, POLLIN, 0};
     const int pr = poll(&pfd, 1, 100);
     if (pr > 0 && (pfd.revents & POLLIN) != 0) {
@@ -425,6 +471,17 @@ int run_daemon(const DaemonOptions& options) {
                ps.failures > 0 ? fmt::format(", {} failures: {}", ps.failures, ps.last_error)
                                : std::string{});
   close(sfd);
+  if (lockstep) {
+    const LockstepEnd end = loop.lockstep_end();
+    if (end == LockstepEnd::kBadMessage || end == LockstepEnd::kBadSequence ||
+        end == LockstepEnd::kSocketError) {
+      spdlog::error("lock-step ended abnormally: {} (detail {})", to_string(end),
+                    end == LockstepEnd::kBadMessage
+                        ? std::string(to_string(static_cast<LockstepDecode>(peer.end_detail())))
+                        : std::to_string(peer.end_detail()));
+      return 1;
+    }
+  }
   return 0;
 }
 

@@ -9,6 +9,7 @@
 #include <cerrno>
 #include <cmath>
 #include <cstring>
+#include <variant>
 
 namespace nccomp::daemon {
 
@@ -124,6 +125,10 @@ void Loop::run() {
   local_.period_ns = period_ns_;
   local_.config_generation = swap_.current().generation;
   setup_done_.store(true, std::memory_order_release);
+  if (options_.lockstep != nullptr) {
+    run_lockstep();
+    return;
+  }
 
   core::TimeNs deadline = now_ns() + period_ns_;
   local_.started_ns = deadline;
@@ -147,29 +152,7 @@ void Loop::run() {
            static_cast<double>(done - deadline) / 1000.0);
     }
     deadline = next.next_ns;
-
-    // Baselines after warm-up; then every 1000 cycles (getrusage is a cheap syscall, not I/O).
-    if (local_.cycles == options_.warmup_cycles) {
-      thread_faults(minflt_base_, majflt_base_);
-      local_.minor_faults_after_warmup = 0;
-      local_.major_faults_after_warmup = 0;
-      if (options_.thread_allocations != nullptr) {
-        alloc_base_ = options_.thread_allocations();
-        local_.allocations_after_warmup = 0;
-      }
-    } else if (local_.cycles > options_.warmup_cycles && local_.cycles % 1000 == 0) {
-      std::int64_t mn = 0;
-      std::int64_t mj = 0;
-      thread_faults(mn, mj);
-      local_.minor_faults_after_warmup = mn - minflt_base_;
-      local_.major_faults_after_warmup = mj - majflt_base_;
-    }
-    if (options_.thread_allocations != nullptr && local_.cycles > options_.warmup_cycles) {
-      local_.allocations_after_warmup =
-          static_cast<std::int64_t>(options_.thread_allocations() - alloc_base_);
-    }
-    stats_.store(local_);
-    heartbeat_.fetch_add(1, std::memory_order_release);
+    finish_cycle();
   }
   // Final fault count for whoever reads the statistics after stop().
   if (local_.cycles > options_.warmup_cycles) {
@@ -182,7 +165,92 @@ void Loop::run() {
   }
 }
 
-void Loop::cycle(core::TimeNs wake_ns) {
+void Loop::run_lockstep() {
+  // The peer is the clock: wait for its TICK (in slices, so that stop() is honoured), bring every
+  // bus up to the NC state of that instant, step at the tick's time, put the writes on the wire,
+  // answer DONE. Nothing here sleeps to a deadline, so the run is as fast as both sides are and
+  // its results do not depend on wall time.
+  LockstepPeer& peer = *options_.lockstep;
+  local_.lockstep = true;
+  constexpr core::TimeNs kSliceNs = 100'000'000;
+  core::TimeNs wait_start = now_ns();
+  while (!stop_.load(std::memory_order_acquire)) {
+    LockstepMessage tick;
+    const LockstepPeer::Wait w = peer.wait_tick(tick, kSliceNs);
+    if (w == LockstepPeer::Wait::kTimeout) {
+      continue;
+    }
+    if (w == LockstepPeer::Wait::kEnd) {
+      break;
+    }
+    const core::TimeNs woke = now_ns();
+    local_.max_wait_ns = std::max(local_.max_wait_ns, woke - wait_start);
+    local_.last_wake_ns = tick.time_ns;
+    local_.lockstep_cycle = tick.cycle;
+    local_.lockstep_time_ns = tick.time_ns;
+    if (local_.cycles == 0) {
+      local_.started_ns = tick.time_ns;
+    }
+    for (std::size_t b = 0; b < buses_.size(); ++b) {
+      if (!buses_[b]->sync(tick.cycle, options_.lockstep_bus_timeout_ns)) {
+        ++local_.sync_timeouts;
+        local_.last_timeout_bus = static_cast<std::int32_t>(b);
+        local_.last_timeout_cycle = tick.cycle;
+      }
+    }
+    cycle(tick.time_ns, true);
+    for (std::size_t b = 0; b < buses_.size(); ++b) {
+      if (!buses_[b]->flush(tick.cycle, options_.lockstep_bus_timeout_ns)) {
+        ++local_.flush_timeouts;
+        local_.last_timeout_bus = static_cast<std::int32_t>(b);
+        local_.last_timeout_cycle = tick.cycle;
+      }
+    }
+    const core::TimeNs done = now_ns();
+    local_.max_step_ns = std::max(local_.max_step_ns, done - woke);
+    finish_cycle();
+    if (!peer.send_done(tick.cycle, tick.time_ns)) {
+      break;
+    }
+    wait_start = now_ns();
+  }
+  if (stop_.load(std::memory_order_acquire) && peer.end() == LockstepEnd::kRunning) {
+    peer.send_bye();
+    lockstep_end_.store(static_cast<std::uint8_t>(LockstepEnd::kStopped),
+                        std::memory_order_release);
+  } else {
+    lockstep_end_.store(static_cast<std::uint8_t>(peer.end()), std::memory_order_release);
+  }
+  stats_.store(local_);
+  finished_.store(true, std::memory_order_release);
+}
+
+void Loop::finish_cycle() noexcept {
+  // Baselines after warm-up; then every 1000 cycles (getrusage is a cheap syscall, not I/O).
+  if (local_.cycles == options_.warmup_cycles) {
+    thread_faults(minflt_base_, majflt_base_);
+    local_.minor_faults_after_warmup = 0;
+    local_.major_faults_after_warmup = 0;
+    if (options_.thread_allocations != nullptr) {
+      alloc_base_ = options_.thread_allocations();
+      local_.allocations_after_warmup = 0;
+    }
+  } else if (local_.cycles > options_.warmup_cycles && local_.cycles % 1000 == 0) {
+    std::int64_t mn = 0;
+    std::int64_t mj = 0;
+    thread_faults(mn, mj);
+    local_.minor_faults_after_warmup = mn - minflt_base_;
+    local_.major_faults_after_warmup = mj - majflt_base_;
+  }
+  if (options_.thread_allocations != nullptr && local_.cycles > options_.warmup_cycles) {
+    local_.allocations_after_warmup =
+        static_cast<std::int64_t>(options_.thread_allocations() - alloc_base_);
+  }
+  stats_.store(local_);
+  heartbeat_.fetch_add(1, std::memory_order_release);
+}
+
+void Loop::cycle(core::TimeNs wake_ns, bool stamp) {
   ++local_.cycles;
   // A reload: export the running engine's state first (the retired configuration may be freed
   // by the reclaiming thread as soon as pickup() returns), then hand it to the new engine.
@@ -217,6 +285,13 @@ void Loop::cycle(core::TimeNs wake_ns) {
     }
   }
   local_.events_in += events_.size();
+  if (stamp) {
+    // Lock-step: the NC state was published for the tick's instant; the driver's reception
+    // time is wall time and would make the run depend on scheduling.
+    for (core::Event& e : events_) {
+      std::visit([wake_ns](auto& ev) { ev.time_ns = wake_ns; }, e);
+    }
+  }
 
   engine.step(wake_ns, std::span<const core::Event>(events_.data(), events_.size()), out_);
 

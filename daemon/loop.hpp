@@ -22,6 +22,7 @@
 #include "core/rt/seqlock.hpp"
 #include "core/rt/spsc_ring.hpp"
 #include "daemon/config/builtin_sections.hpp"
+#include "daemon/lockstep.hpp"
 #include "daemon/measurement_log.hpp"
 #include "daemon/state_store.hpp"
 #include "daemon/timing.hpp"
@@ -71,6 +72,13 @@ struct LoopOptions {
   /// Optional: the calling thread's allocation count (tests and benchmarks link a counting
   /// operator new and pass nccomp::test::thread_allocations). Must be real-time safe.
   std::uint64_t (*thread_allocations)() noexcept {nullptr};
+  /// Lock-step (contract C2): non-null = the loop is driven by this peer's TICKs instead of the
+  /// clock (connected before start(); must outlive the loop). Events are stamped with the
+  /// tick's time, the engine steps at it, and DONE follows the buses' flush().
+  LockstepPeer* lockstep{nullptr};
+  /// Lock-step: longest wait in one bus's sync() or flush() [ns]; a timeout is counted and the
+  /// cycle completes anyway (no deadlock with the peer).
+  core::TimeNs lockstep_bus_timeout_ns{2'000'000'000};
 };
 
 /// What the loop thread got from the OS at start (logged by the caller: the loop never logs).
@@ -111,6 +119,15 @@ struct LoopStats {
   bool hold{false};
   bool dry_run{false};
   core::engine::EngineCounters engine{};
+  // Lock-step only.
+  bool lockstep{false};
+  std::uint64_t lockstep_cycle{0};      // cycle of the last TICK
+  core::TimeNs lockstep_time_ns{0};     // its simulated time
+  std::uint64_t sync_timeouts{0};       // bus sync() that timed out (all buses)
+  std::uint64_t flush_timeouts{0};      // bus flush() that timed out
+  std::int32_t last_timeout_bus{-1};    // index of the bus of the last timeout
+  std::uint64_t last_timeout_cycle{0};  // and its cycle
+  core::TimeNs max_wait_ns{0};          // longest wait for a TICK between two cycles
 };
 
 inline constexpr std::size_t kMaxSnapshotRegisters = 64;
@@ -140,6 +157,14 @@ class Loop {
   /// Hold mode (state corrupt): applied to every engine at the next cycle. Any thread.
   void set_hold(bool hold) noexcept { hold_.store(hold, std::memory_order_relaxed); }
 
+  /// Lock-step: true once the run ended (BYE, the peer gone, a protocol error); the thread has
+  /// then left its loop. Any thread.
+  [[nodiscard]] bool finished() const noexcept { return finished_.load(std::memory_order_acquire); }
+  /// Lock-step: why it ended (valid once finished()).
+  [[nodiscard]] LockstepEnd lockstep_end() const noexcept {
+    return static_cast<LockstepEnd>(lockstep_end_.load(std::memory_order_acquire));
+  }
+
   /// Advances once per cycle: the watchdog's proof of life. Any thread.
   [[nodiscard]] std::uint64_t heartbeat() const noexcept {
     return heartbeat_.load(std::memory_order_acquire);
@@ -154,7 +179,11 @@ class Loop {
 
  private:
   void run();
-  void cycle(core::TimeNs wake_ns);
+  void run_lockstep();
+  /// Fault / allocation baselines, statistics and heartbeat at the end of a cycle.
+  void finish_cycle() noexcept;
+  /// stamp: lock-step, every drained event gets wake_ns as its time.
+  void cycle(core::TimeNs wake_ns, bool stamp = false);
   void note(core::TimeNs t, NoteCode code, std::int64_t a, double b) noexcept;
 
   LoopOptions options_;
@@ -182,6 +211,8 @@ class Loop {
   std::atomic<bool> stop_{false};
   std::atomic<bool> hold_{false};
   std::atomic<bool> setup_done_{false};
+  std::atomic<bool> finished_{false};
+  std::atomic<std::uint8_t> lockstep_end_{0};
   std::atomic<std::uint64_t> heartbeat_{0};
   LoopSetupReport report_{};
   std::thread thread_;

@@ -9,6 +9,9 @@ int main(int argc, char** argv) {
   app.add_option("-c,--config", options.config_path, "Configuration file (TOML)")
       ->capture_default_str();
   app.add_flag("--dry-run", options.dry_run, "Compute and log everything, write nothing to the NC");
+  app.add_option("--lockstep", options.lockstep_socket,
+                 "Lock-step with a simulated NC (ncsim --lockstep SOCKET): its TICKs drive the "
+                 "loop; exits 0 when it says BYE or closes the socket");
   app.set_version_flag("--version", "nccompd 0.1.0");
   CLI11_PARSE(app, argc, argv);
   return nccomp::daemon::run_daemon(options);

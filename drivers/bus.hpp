@@ -59,6 +59,30 @@ class Bus {
   virtual core::rt::SpscRing<core::OffsetWrite>& tx() = 0;
   /// Any thread: a consistent snapshot of the driver's state and counters.
   [[nodiscard]] virtual BusStatus status() const = 0;
+
+  // Lock-step with a simulated NC (docs/daemon.md, "Lock-step with ncsim"): the peer is the
+  // clock; per cycle the loop calls sync(), steps the engine, pushes writes, calls flush().
+  // Buses without bus-side timing (loopback) keep the defaults, which return at once.
+
+  /// Before start(): the driver does bus I/O only when sync() / flush() ask for it (no polling
+  /// or writing on its own schedule), so that a lock-step run is deterministic. Not real-time.
+  virtual void set_lockstep(bool on) { (void)on; }
+  /// Loop thread, lock-step only: returns once all NC state the peer published before its TICK
+  /// of `cycle` is in rx(). Blocks at most timeout_ns; false on timeout (the caller counts it
+  /// and completes the cycle anyway). No allocation.
+  virtual bool sync(std::uint64_t cycle, core::TimeNs timeout_ns) {
+    (void)cycle;
+    (void)timeout_ns;
+    return true;
+  }
+  /// Loop thread, lock-step only: returns once every write pushed into tx() before the call is
+  /// on the wire and taken by the NC side (see the driver). Blocks at most timeout_ns; false on
+  /// timeout. No allocation.
+  virtual bool flush(std::uint64_t cycle, core::TimeNs timeout_ns) {
+    (void)cycle;
+    (void)timeout_ns;
+    return true;
+  }
 };
 
 }  // namespace nccomp::drivers

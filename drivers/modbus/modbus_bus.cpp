@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <chrono>
 #include <cmath>
 #include <ctime>
 #include <stdexcept>
@@ -70,7 +71,12 @@ void ModbusBus::start() {
 }
 
 void ModbusBus::stop() {
-  running_.store(false, std::memory_order_release);
+  {
+    // Under the mutex, so that the lock-step I/O thread cannot miss the wake-up.
+    std::lock_guard<std::mutex> lock(ls_mu_);
+    running_.store(false, std::memory_order_release);
+  }
+  ls_cv_.notify_all();
   if (io_.joinable()) {
     io_.join();
   }
@@ -349,7 +355,149 @@ void ModbusBus::publish(core::TimeNs now_ns) {
   status_.store(st_);
 }
 
+bool ModbusBus::request(std::uint64_t& req, const std::uint64_t& done, const bool& ok,
+                        core::TimeNs timeout_ns) {
+  std::unique_lock<std::mutex> lock(ls_mu_);
+  const std::uint64_t want = ++req;
+  ls_cv_.notify_all();
+  const bool completed = ls_cv_.wait_for(lock, std::chrono::nanoseconds(timeout_ns),
+                                         [&] { return done >= want; });
+  return completed && ok;
+}
+
+bool ModbusBus::sync(std::uint64_t cycle, core::TimeNs timeout_ns) {
+  (void)cycle;  // one poll per request: the request counter orders them
+  return request(sync_req_, sync_done_, sync_ok_, timeout_ns);
+}
+
+bool ModbusBus::flush(std::uint64_t cycle, core::TimeNs timeout_ns) {
+  (void)cycle;
+  return request(flush_req_, flush_done_, flush_ok_, timeout_ns);
+}
+
+bool ModbusBus::ensure_connected(double& backoff_s, bool& ever_connected) {
+  if (ctx_) {
+    return true;
+  }
+  const core::TimeNs now = monotonic_now_ns();
+  if (down_since_ns_ == 0) {
+    down_since_ns_ = now;
+  }
+  if (!connect()) {
+    ++st_.connection_errors;
+    ++st_.bus.counters.faults;
+    st_.bus.state = ever_connected ? LinkState::kDown : LinkState::kConnecting;
+    publish(monotonic_now_ns());
+    sleep_until(monotonic_now_ns() + to_ns(backoff_s));
+    backoff_s = std::min(backoff_s * 2.0, config_.reconnect_max_s);
+    return false;
+  }
+  if (ever_connected) {
+    ++st_.bus.counters.reconnects;
+  }
+  ever_connected = true;
+  backoff_s = config_.reconnect_min_s;
+  down_since_ns_ = 0;
+  // The NC may have restarted and lost what it had: every known offset is written again.
+  for (OffsetSlot& s : slots_) {
+    if (s.has_value && !s.rejected) {
+      if (!s.dirty) {
+        s.dirty_since_ns = now;
+      }
+      s.dirty = true;
+      s.resend = true;
+    }
+  }
+  return true;
+}
+
+void ModbusBus::run_lockstep() {
+  double backoff_s = config_.reconnect_min_s;
+  bool ever_connected = false;
+  down_since_ns_ = monotonic_now_ns();
+  st_.bus.state = LinkState::kConnecting;
+  publish(down_since_ns_);
+  // Connect before the first TICK arrives, so that the first cycle does not wait for it.
+  (void)ensure_connected(backoff_s, ever_connected);
+  for (;;) {
+    std::uint64_t sync_want = 0;
+    std::uint64_t flush_want = 0;
+    {
+      std::unique_lock<std::mutex> lock(ls_mu_);
+      ls_cv_.wait_for(lock, std::chrono::milliseconds(100), [&] {
+        return !running_.load(std::memory_order_acquire) || sync_req_ > sync_done_ ||
+               flush_req_ > flush_done_;
+      });
+      if (!running_.load(std::memory_order_acquire)) {
+        break;
+      }
+      sync_want = sync_req_ > sync_done_ ? sync_req_ : 0;
+      flush_want = flush_req_ > flush_done_ ? flush_req_ : 0;
+    }
+    if (sync_want == 0 && flush_want == 0) {
+      if (!ctx_) {
+        (void)ensure_connected(backoff_s, ever_connected);
+      }
+      publish(monotonic_now_ns());
+      continue;
+    }
+    if (!ensure_connected(backoff_s, ever_connected)) {
+      continue;  // the loop's wait times out and is counted; the request stays open
+    }
+    const core::TimeNs start = monotonic_now_ns();
+    const std::uint64_t faults_before = st_.bus.counters.faults;
+    bool flush_ok = true;
+    bool sync_ok = true;
+    // The older request first: a flush of cycle k is always asked before the sync of k + 1.
+    if (flush_want != 0) {
+      drain_tx(start);
+      write_offsets();
+      for (const OffsetSlot& slot : slots_) {
+        flush_ok = flush_ok && !slot.dirty;
+      }
+      flush_ok = flush_ok && ctx_ != nullptr;
+    }
+    if (sync_want != 0 && ctx_) {
+      poll(monotonic_now_ns());
+      for (const std::uint8_t ok : block_ok_) {
+        sync_ok = sync_ok && ok != 0;
+      }
+    }
+    sync_ok = sync_ok && ctx_ != nullptr;
+    const core::TimeNs now = monotonic_now_ns();
+    st_.last_cycle_ns = now - start;
+    st_.max_cycle_ns = std::max(st_.max_cycle_ns, st_.last_cycle_ns);
+    if (!ctx_) {
+      st_.bus.state = LinkState::kDown;
+      down_since_ns_ = now;
+    } else {
+      st_.bus.state =
+          st_.bus.counters.faults != faults_before ? LinkState::kDegraded : LinkState::kUp;
+    }
+    publish(now);
+    {
+      std::lock_guard<std::mutex> lock(ls_mu_);
+      if (flush_want != 0) {
+        flush_done_ = flush_want;
+        flush_ok_ = flush_ok;
+      }
+      if (sync_want != 0) {
+        sync_done_ = sync_want;
+        sync_ok_ = sync_ok;
+      }
+    }
+    ls_cv_.notify_all();
+  }
+  disconnect();
+  st_.bus.state = LinkState::kStopped;
+  publish(monotonic_now_ns());
+}
+
 void ModbusBus::run() {
+  if (lockstep_) {
+    run_lockstep();
+    return;
+  }
   const core::TimeNs period = to_ns(1.0 / config_.poll_rate_hz);
   const core::TimeNs write_period = to_ns(1.0 / config_.offset_write_rate_hz);
   double backoff_s = config_.reconnect_min_s;

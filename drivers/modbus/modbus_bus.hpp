@@ -20,7 +20,9 @@
 
 #include <array>
 #include <atomic>
+#include <condition_variable>
 #include <cstdint>
+#include <mutex>
 #include <memory>
 #include <thread>
 #include <vector>
@@ -81,6 +83,17 @@ class ModbusBus final : public Bus {
   core::rt::SpscRing<core::Event>& rx() override { return rx_; }
   core::rt::SpscRing<core::OffsetWrite>& tx() override { return tx_; }
   [[nodiscard]] BusStatus status() const override { return status_.load().bus; }
+
+  /// Lock-step (before start()): no polling or writing on the driver's own schedule; sync()
+  /// makes the I/O thread do one complete poll, flush() makes it write every pending offset
+  /// (the write rate limit does not apply: time is the peer's).
+  void set_lockstep(bool on) override { lockstep_ = on; }
+  /// Returns once one poll that started after the call is complete and its events are in rx().
+  /// False on timeout or if the poll failed (not connected, a read failed).
+  bool sync(std::uint64_t cycle, core::TimeNs timeout_ns) override;
+  /// Returns once every offset queued in tx() before the call was written and answered by the
+  /// NC (and read back equal with verify_writes). False on timeout or a failed write.
+  bool flush(std::uint64_t cycle, core::TimeNs timeout_ns) override;
   /// Any thread: the full status with the Modbus counters.
   [[nodiscard]] ModbusStatus modbus_status() const { return status_.load(); }
   [[nodiscard]] const ModbusConfig& config() const noexcept { return config_; }
@@ -101,6 +114,12 @@ class ModbusBus final : public Bus {
   };
 
   void run();
+  void run_lockstep();
+  /// Connects if needed (lock-step); false while not connected.
+  bool ensure_connected(double& backoff_s, bool& ever_connected);
+  /// Loop thread: posts a request and waits for its completion.
+  bool request(std::uint64_t& req, const std::uint64_t& done, const bool& ok,
+               core::TimeNs timeout_ns);
   bool connect();
   void disconnect();
   void poll(core::TimeNs now_ns);
@@ -133,6 +152,18 @@ class ModbusBus final : public Bus {
   core::TimeNs down_since_ns_{0};
   core::TimeNs last_frame_end_ns_{0};
   core::rt::SpscRing<core::TimeNs>* cycle_log_{nullptr};
+
+  // Lock-step: requests from the loop thread, completions from the I/O thread (both under
+  // ls_mu_; the loop thread blocks here by design, it is driven by the peer, not the clock).
+  bool lockstep_{false};
+  std::mutex ls_mu_;
+  std::condition_variable ls_cv_;
+  std::uint64_t sync_req_{0};
+  std::uint64_t sync_done_{0};
+  bool sync_ok_{false};
+  std::uint64_t flush_req_{0};
+  std::uint64_t flush_done_{0};
+  bool flush_ok_{false};
 };
 
 /// CLOCK_MONOTONIC [ns] (the driver time-stamps events on reception).
