@@ -143,8 +143,11 @@ class Reader {
         out = value;
         return;
       }
-      names += names.empty() ? "" : ", ";
-      names += "\"" + std::string(name) + "\"";
+      // Appended piecewise: GCC 12 warns (-Wrestrict, a false positive) on "\"" + string.
+      if (!names.empty()) {
+        names.append(", ");
+      }
+      names.append(1, '"').append(name).append(1, '"');
     }
     fail(key, "must be one of " + names + ", got \"" + s + "\"");
   }
