@@ -76,10 +76,30 @@ std::string alarm_name(core::AlarmCode code) {
       return "probe_outlier";
     case AlarmCode::kProbeInvalidInput:
       return "probe_invalid_input";
+    case AlarmCode::kCheckpointRegisterMismatch:
+      return "checkpoint_register_mismatch";
+    case AlarmCode::kCheckpointMissed:
+      return "checkpoint_missed";
     case AlarmCode::kRecalibrationImplausible:
       return "recalibration_implausible";
     case AlarmCode::kTouchScatter:
       return "touch_scatter";
+    case AlarmCode::kRecalibrationDue:
+      return "recalibration_due";
+    case AlarmCode::kTouchSetIncomplete:
+      return "touch_set_incomplete";
+    case AlarmCode::kCalibrationOutOfRange:
+      return "calibration_out_of_range";
+    case AlarmCode::kTouchUnexpected:
+      return "touch_unexpected";
+    case AlarmCode::kTestGrindNotConverging:
+      return "test_grind_not_converging";
+    case AlarmCode::kRecalibrationApplied:
+      return "recalibration_applied";
+    case AlarmCode::kCalibrationComplete:
+      return "calibration_complete";
+    case AlarmCode::kCalibrationInvalidInput:
+      return "calibration_invalid_input";
     case AlarmCode::kStateCorrupt:
       return "state_corrupt";
     case AlarmCode::kEventInvalid:
@@ -88,10 +108,9 @@ std::string alarm_name(core::AlarmCode code) {
       return "register_unknown";
     case AlarmCode::kOffsetWriteDropped:
       return "offset_write_dropped";
-    default:
-      break;
   }
-  // Codes added by other modules after this list was written still print usefully.
+  // No default above: -Wswitch (an error here) makes every new AlarmCode get its name. A value
+  // outside the enum (a corrupt state, a newer peer) still prints usefully.
   return "code_" + std::to_string(static_cast<unsigned>(code));
 }
 

@@ -89,12 +89,24 @@ void CreepModule::attach(const engine::RegisterTable& registers) {
           std::min(c.limiter.max_rate_um_per_s, spec.limits.max_rate_um_per_s);
     }
   }
-  check_index(c.output.warning_register, "creep.output.warning_register", registers);
-  check_index(c.output.alarm_register, "creep.output.alarm_register", registers);
-  check_index(c.output.measurement_due_register, "creep.output.measurement_due_register",
-              registers);
-  check_index(c.output.tool_change_register, "creep.output.tool_change_register", registers);
-  check_index(c.output.restart_path_register, "creep.output.restart_path_register", registers);
+  // Flags and the restart path are not offsets: a flag must switch at once and a path position
+  // of metres is no correction, so they need registers of kind flag (written as asked, only
+  // the absolute bound applies), never an offset register that the limiter would slew.
+  const std::array<std::pair<std::int32_t, const char*>, 5> flags{
+      {{c.output.warning_register, "creep.output.warning_register"},
+       {c.output.alarm_register, "creep.output.alarm_register"},
+       {c.output.measurement_due_register, "creep.output.measurement_due_register"},
+       {c.output.tool_change_register, "creep.output.tool_change_register"},
+       {c.output.restart_path_register, "creep.output.restart_path_register"}}};
+  for (const auto& [index, key] : flags) {
+    check_index(index, key, registers);
+    if (index < 0) continue;
+    const auto& spec = registers[static_cast<std::size_t>(index)];
+    if (spec.kind != engine::RegisterKind::kFlag) {
+      throw std::invalid_argument(std::string(key) + ": register '" + spec.name + "' is of kind " +
+                                  std::string(engine::to_string(spec.kind)) + ", expected flag");
+    }
+  }
   comp_.configure(c);  // validates: std::invalid_argument naming the key
   ++generation_;
 }

@@ -122,13 +122,15 @@ std::string_view to_string(RegisterKind kind) noexcept {
       return "checkpoint";
     case RegisterKind::kAxisOffset:
       return "axis_offset";
+    case RegisterKind::kFlag:
+      return "flag";
   }
   return "unknown";
 }
 
 bool parse_register_kind(std::string_view name, RegisterKind& out) noexcept {
   for (auto k : {RegisterKind::kToolLengthWear, RegisterKind::kToolRadiusWear,
-                 RegisterKind::kCheckpoint, RegisterKind::kAxisOffset}) {
+                 RegisterKind::kCheckpoint, RegisterKind::kAxisOffset, RegisterKind::kFlag}) {
     if (to_string(k) == name) {
       out = k;
       return true;
@@ -200,6 +202,7 @@ void Engine::configure(std::vector<RegisterSpec> registers,
   valid_.reserve(options.max_events_per_step);
   state_capacity_ = capacity;
   counters_ = {};
+  write_cursor_ = 0;
   register_generation_ = 0;
 }
 
@@ -294,8 +297,13 @@ void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out)
   }
 
   // Every register with a target converges through its limiter, whether or not a module wrote
-  // this cycle: a slewed target keeps moving without the module repeating it.
-  for (std::size_t i = 0; i < regs_.size(); ++i) {
+  // this cycle: a slewed target keeps moving without the module repeating it. The scan starts
+  // where the last full cycle stopped, so with more pending registers than one StepOutput holds
+  // (a large S1 table slewing) every register gets its turn instead of the first 128 forever.
+  const std::size_t n = regs_.size();
+  std::size_t first_deferred = n;
+  for (std::size_t k = 0; k < n; ++k) {
+    const std::size_t i = (write_cursor_ + k) % n;
     Reg& r = regs_[i];
     if (!r.has_target) {
       continue;
@@ -308,7 +316,24 @@ void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out)
       ++counters_.writes_held;
       continue;
     }
-    const LimitResult res = r.limiter.apply(r.target_um, now_ns);
+    if (out.writes.size() == out.writes.capacity()) {
+      // Full: this register waits for the next cycle (its limiter has not moved).
+      if (first_deferred == n) {
+        first_deferred = i;
+      }
+      ++counters_.writes_deferred;
+      continue;
+    }
+    LimitResult res{};
+    if (specs_[i].kind == RegisterKind::kFlag) {
+      // Written as asked (admissible() was checked when the target was accepted); the limiter
+      // is reset to it so status and state show the value in force.
+      r.limiter.reset(r.target_um, now_ns);
+      res.value_um = r.target_um;
+      res.verdict = LimitVerdict::kPassed;
+    } else {
+      res = r.limiter.apply(r.target_um, now_ns);
+    }
     const bool slewed = res.verdict == LimitVerdict::kSlewed;
     if (slewed && !r.slewing) {
       // One warning when slewing starts, not one per cycle.
@@ -325,6 +350,9 @@ void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out)
       ++counters_.writes_forwarded;
       ++register_generation_;
     }
+  }
+  if (first_deferred != n) {
+    write_cursor_ = first_deferred;
   }
   counters_.output_overflows = out.writes.overflows() + out.alarms.overflows() +
                                out.records.overflows() + scratch_.writes.overflows() +

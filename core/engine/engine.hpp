@@ -39,9 +39,15 @@ enum class RegisterKind : std::uint8_t {
   kToolRadiusWear = 1,
   kCheckpoint = 2,
   kAxisOffset = 3,
+  /// A value that is not an offset: a 0 / 1 flag for the NC or PLC (warning, alarm, measurement
+  /// due, tool change request) or a program position (a sister tool's restart path [µm]). It is
+  /// written exactly as the module asks: only non-finite values and values beyond max_abs_um are
+  /// refused; max_step_um and max_rate_um_per_s do not apply (a flag must not be slewed, a path
+  /// position is not a correction).
+  kFlag = 4,
 };
 
-/// "tool_length_wear", "tool_radius_wear", "checkpoint", "axis_offset".
+/// "tool_length_wear", "tool_radius_wear", "checkpoint", "axis_offset", "flag".
 [[nodiscard]] std::string_view to_string(RegisterKind kind) noexcept;
 /// Inverse of to_string(); false if the name is unknown.
 [[nodiscard]] bool parse_register_kind(std::string_view name, RegisterKind& out) noexcept;
@@ -113,6 +119,9 @@ struct EngineCounters {
   std::uint64_t writes_unknown_register{0};
   std::uint64_t writes_held{0};       // suppressed by hold mode
   std::uint64_t output_overflows{0};  // StepOutput full: writes/alarms/records lost
+  /// More registers to write than one StepOutput holds (128): written on the next cycle(s), in
+  /// turn, nothing lost. Large S1 tables at part start or while slewing.
+  std::uint64_t writes_deferred{0};
 };
 
 /// One register's state as status shows it.
@@ -192,6 +201,8 @@ class Engine {
   EngineCounters counters_{};
   std::size_t state_capacity_{0};
   std::uint64_t register_generation_{0};
+  /// First register the convergence scan looks at (round robin when a cycle's writes are full).
+  std::size_t write_cursor_{0};
   bool hold_{false};
 };
 

@@ -154,12 +154,21 @@ class RegistersParser final : public SectionParser {
       }
       const std::string kind =
           r.choice("kind", std::nullopt,
-                   {"tool_length_wear", "tool_radius_wear", "checkpoint", "axis_offset"});
+                   {"tool_length_wear", "tool_radius_wear", "checkpoint", "axis_offset", "flag"});
       (void)core::engine::parse_register_kind(kind, e.spec.kind);
       e.bus = r.string("bus", std::nullopt);
-      e.spec.limits.max_abs_um = r.number("max_abs_um", std::nullopt, 1e-3, 1e6);
-      e.spec.limits.max_step_um = r.number("max_step_um", std::nullopt, 1e-3, 1e6);
-      e.spec.limits.max_rate_um_per_s = r.number("max_rate_um_per_s", std::nullopt, 1e-3, 1e6);
+      if (e.spec.kind == core::engine::RegisterKind::kFlag) {
+        // Flags and program positions (e.g. a restart path of several metres in µm) are written
+        // as asked: only the absolute bound applies (core/engine/engine.hpp, kFlag).
+        e.spec.limits.max_abs_um = r.number("max_abs_um", 1.0, 1e-3, 1e12);
+        e.spec.limits.max_step_um = e.spec.limits.max_abs_um;
+        e.spec.limits.max_rate_um_per_s = e.spec.limits.max_abs_um;
+      } else {
+        e.spec.limits.max_abs_um = r.number("max_abs_um", std::nullopt, 1e-3, 1e6);
+        e.spec.limits.max_step_um = r.number("max_step_um", std::nullopt, 1e-3, 1e6);
+        e.spec.limits.max_rate_um_per_s =
+            r.number("max_rate_um_per_s", std::nullopt, 1e-3, 1e6);
+      }
       e.where.key_path = path;
       s->registers.push_back(std::move(e));
     }

@@ -60,35 +60,24 @@ max_rate_um_per_s = 100000
 const char* kFlagRegisters = R"(
 [[registers]]
 name = "creep_warning"
-kind = "axis_offset"
+kind = "flag"
 bus = "loopback"
-max_abs_um = 1
-max_step_um = 1
-max_rate_um_per_s = 100000
 
 [[registers]]
 name = "creep_alarm"
-kind = "axis_offset"
+kind = "flag"
 bus = "loopback"
-max_abs_um = 1
-max_step_um = 1
-max_rate_um_per_s = 100000
 
 [[registers]]
 name = "measure_request"
-kind = "axis_offset"
+kind = "flag"
 bus = "loopback"
-max_abs_um = 1
-max_step_um = 1
-max_rate_um_per_s = 100000
 
 [[registers]]
 name = "sister_request"
-kind = "axis_offset"
+kind = "flag"
 bus = "loopback"
 max_abs_um = 1
-max_step_um = 1
-max_rate_um_per_s = 100000
 )";
 
 std::string read(const std::string& path) {
@@ -517,6 +506,58 @@ TEST(CreepSection, PredictiveCreepingFeedsTheFittedWearRateBetweenMeasurements) 
   EXPECT_NEAR(a.last_z, -12.0, 1e-9);
   // Prediction adds the fitted rate × path since the measurement: 0.1 µm/mm × 150 mm.
   EXPECT_NEAR(b.last_z - a.last_z, -15.0, 0.5);
+}
+
+TEST(CreepSection, AnExcessiveIncrementRaisesTheAlarmFlagAtOnceAndAppliesNothing) {
+  TempDir d;
+  const std::string text = std::string(kRegisters) + kFlagRegisters + R"(
+[creep]
+profile = "linear"
+[creep.edge]
+tool_shape = "tip"
+normal_source = "none"
+[creep.output]
+z_register = "Z_wear_offset"
+alarm_register = "creep_alarm"
+[creep.tool_life]
+excessive_increment_um = 15
+on_excessive = "stop"
+)";
+  auto c = load_ok(d, text);
+  ASSERT_TRUE(c);
+  Stream s(*c);
+  s.advance(0.0);
+  core::ToolMeasurement m;
+  m.tool = 1;
+  m.wear_um[0] = 20.0;  // > 15: excessively worn
+  s.engine->step(s.now + 1'000'000, std::vector<core::Event>{m}, s.out);
+  bool alarm22 = false;
+  for (const auto& a : s.out.alarms)
+    alarm22 = alarm22 || a.code == core::AlarmCode::kToolExcessivelyWorn;
+  EXPECT_TRUE(alarm22);
+  double flag = std::nan("");
+  for (const auto& w : s.out.writes) {
+    if (w.register_index == 5) flag = w.value_um;  // creep_alarm
+  }
+  EXPECT_DOUBLE_EQ(flag, 1.0);  // a flag register: 0 → 1 in one write, never slewed
+  for (int i = 0; i < 100; ++i) s.advance(0.5);
+  EXPECT_TRUE(std::isnan(s.last_z) || std::fabs(s.last_z) < 1e-12);  // nothing applied
+}
+
+TEST(CreepSection, FlagOutputsNeedFlagRegisters) {
+  TempDir d;
+  const std::string text = std::string(kRegisters) + R"(
+[creep]
+[creep.output]
+z_register = "Z_wear_offset"
+warning_register = "Y_wear_offset"
+)";
+  const auto f = d.write("a.toml", text);
+  EXPECT_NE(errors_of(f).find(at(f, text, "warning_register =") +
+                              "creep.output.warning_register: register 'Y_wear_offset' is of kind "
+                              "axis_offset, expected flag"),
+            std::string::npos)
+      << errors_of(f);
 }
 
 }  // namespace
