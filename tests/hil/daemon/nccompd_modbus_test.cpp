@@ -1,0 +1,307 @@
+// GIVEN the nccompd binary and the project's Modbus NC server (sim/modbus_nc NcServer) on
+// 127.0.0.1 at an ephemeral port, with a [modbus] map and a commissioning ramp on the tool length
+// wear register:
+// - in real time, THEN axis samples and a tool measurement reach the engine, the ramp's value
+//   arrives in the NC's holding registers with the map's scaling (12.3 µm → int32 123 at 0.1 µm
+//   per count), `nccomp status` shows the bus up with its counters, SIGTERM exits 0;
+// - in lock-step with a fake ncsim (contract C2), THEN after every DONE the holding register
+//   holds exactly that cycle's ramp value (one count per 1 ms tick), every published state is
+//   one event in the engine (200 axis samples + 1 tool measurement), and BYE ends it with exit 0.
+#include <arpa/inet.h>
+#include <fcntl.h>
+#include <gtest/gtest.h>
+#include <poll.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <optional>
+#include <regex>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "daemon/lockstep.hpp"
+#include "daemon/status.hpp"
+#include "sim/modbus_nc/nc_server.hpp"
+
+extern char** environ;
+
+namespace {
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+using nccomp::daemon::LockstepMessage;
+using nccomp::daemon::LockstepType;
+using nccomp::sim::modbus_nc::NcServer;
+using nccomp::sim::modbus_nc::ServerConfig;
+using nccomp::sim::modbus_nc::Tables;
+
+std::string config_text(std::uint16_t port, double rate_hz) {
+  std::ostringstream s;
+  s << "[daemon]\nrate_hz = " << rate_hz << "\n"
+    << "[state]\ndirectory = \"state\"\nmin_interval_s = 0.05\n"
+    << "[measurement_log]\ndirectory = \"log\"\n"
+    << "[status]\nsocket_path = \"status.sock\"\n"
+    << "[modbus]\ntransport = \"tcp\"\nhost = \"127.0.0.1\"\nport = " << port << "\n"
+    << "poll_rate_hz = " << rate_hz << "\nresponse_timeout_s = 0.5\n"
+    << "[modbus.axis]\n"
+    << "x_mm = { table = \"input\", address = 0, type = \"int32\", scale = 0.0001 }\n"
+    << "tool = { table = \"input\", address = 8, type = \"uint16\" }\n"
+    << "[modbus.tool_measurement]\n"
+    << "sequence = { table = \"input\", address = 100, type = \"uint16\" }\n"
+    << "tool = { table = \"input\", address = 101, type = \"uint16\" }\n"
+    << "wear_um = { table = \"input\", address = 102, type = \"float32\" }\n"
+    << "[[modbus.offset]]\nregister_index = 0\naddress = 200\ntype = \"int32\"\nscale = 0.1\n"
+    << "[[registers]]\nname = \"T1_length_wear\"\nkind = \"tool_length_wear\"\nbus = \"modbus\"\n"
+    << "max_abs_um = 200\nmax_step_um = 5\nmax_rate_um_per_s = 1000\n"
+    << "[[ramp]]\nname = \"commissioning\"\nregister = \"T1_length_wear\"\ntarget_um = 12.3\n"
+    << "rate_um_per_s = 100\n";
+  return s.str();
+}
+
+struct TempDir {
+  TempDir() {
+    path = fs::temp_directory_path() /
+           ("nccompd_mb_" + std::to_string(::getpid()) + "_" + std::to_string(n++));
+    fs::remove_all(path);
+    fs::create_directories(path);
+  }
+  ~TempDir() { fs::remove_all(path); }
+  void write(const std::string& name, const std::string& text) const {
+    std::ofstream(path / name) << text;
+  }
+  static inline int n = 0;
+  fs::path path;
+};
+
+class Daemon {
+ public:
+  explicit Daemon(fs::path dir) : dir_(std::move(dir)) {}
+  ~Daemon() {
+    if (pid_ > 0) {
+      ::kill(pid_, SIGKILL);
+      ::waitpid(pid_, nullptr, 0);
+    }
+  }
+  void start(std::vector<std::string> extra_args = {}) {
+    std::vector<std::string> args{NCCOMPD_BIN, "--config", (dir_ / "nccompd.toml").string()};
+    args.insert(args.end(), extra_args.begin(), extra_args.end());
+    std::vector<char*> argv;
+    for (auto& a : args) {
+      argv.push_back(a.data());
+    }
+    argv.push_back(nullptr);
+    posix_spawn_file_actions_t fa;
+    posix_spawn_file_actions_init(&fa);
+    const std::string log = (dir_ / "nccompd.log").string();
+    posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
+    posix_spawn_file_actions_adddup2(&fa, 1, 2);
+    ASSERT_EQ(posix_spawn(&pid_, NCCOMPD_BIN, &fa, nullptr, argv.data(), environ), 0);
+    posix_spawn_file_actions_destroy(&fa);
+  }
+  void signal(int sig) const { ASSERT_EQ(::kill(pid_, sig), 0); }
+  /// Exit status (128 + signal if killed); -1 if it did not end within `limit`.
+  int wait(std::chrono::milliseconds limit = 10000ms) {
+    const auto end = std::chrono::steady_clock::now() + limit;
+    while (std::chrono::steady_clock::now() < end) {
+      int st = 0;
+      if (::waitpid(pid_, &st, WNOHANG) == pid_) {
+        pid_ = -1;
+        return WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
+      }
+      std::this_thread::sleep_for(10ms);
+    }
+    return -1;
+  }
+  std::optional<std::string> status(const std::string& what = "json") const {
+    try {
+      auto s = nccomp::daemon::query_status((dir_ / "status.sock").string(), what);
+      if (!s.empty()) {
+        return s;
+      }
+    } catch (const std::exception&) {
+    }
+    return std::nullopt;
+  }
+  std::string log() const {
+    std::ifstream in(dir_ / "nccompd.log");
+    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+  }
+
+ private:
+  fs::path dir_;
+  pid_t pid_{-1};
+};
+
+double number(const std::string& json, const std::string& key) {
+  const std::regex re("\"" + key + "\":(-?[0-9.eE+-]+)");
+  std::smatch m;
+  return std::regex_search(json, m, re) ? std::stod(m[1]) : -1e300;
+}
+
+std::int32_t holding_i32(NcServer& nc, std::uint16_t address) {
+  const auto r = nc.holding(address, 2);
+  return static_cast<std::int32_t>((std::uint32_t{r[0]} << 16) | r[1]);
+}
+
+void set_i32(std::span<std::uint16_t> regs, std::size_t at, std::int32_t v) {
+  const auto u = static_cast<std::uint32_t>(v);
+  regs[at] = static_cast<std::uint16_t>(u >> 16);
+  regs[at + 1] = static_cast<std::uint16_t>(u & 0xFFFF);
+}
+
+void publish_tool_measurement(NcServer& nc, std::uint16_t seq, std::uint16_t tool, float wear_um) {
+  nc.update([&](Tables& t) {
+    std::uint32_t bits = 0;
+    std::memcpy(&bits, &wear_um, sizeof bits);
+    t.input[101] = tool;
+    t.input[102] = static_cast<std::uint16_t>(bits >> 16);
+    t.input[103] = static_cast<std::uint16_t>(bits & 0xFFFF);
+    t.input[100] = seq;  // the counter last: values first, then the event (the profile's rule)
+  });
+}
+
+TEST(NccompdModbus, RealTimeEventsInOffsetsOutStatusShowsTheBus) {
+  TempDir d;
+  NcServer nc(ServerConfig{});
+  nc.start();
+  nc.update([](Tables& t) {
+    set_i32(t.input, 0, 123456);  // x = 12.3456 mm
+    t.input[8] = 1;
+  });
+  d.write("nccompd.toml", config_text(nc.port(), 200.0));
+  Daemon daemon(d.path);
+  daemon.start();
+  // The ramp's target, 12.3 µm, arrives as 123 counts of 0.1 µm.
+  const auto end = std::chrono::steady_clock::now() + 15s;
+  while (holding_i32(nc, 200) != 123 && std::chrono::steady_clock::now() < end) {
+    std::this_thread::sleep_for(20ms);
+  }
+  ASSERT_EQ(holding_i32(nc, 200), 123) << daemon.log();
+  // A tool measurement published by the NC is one more event in the engine.
+  std::string before;
+  for (int i = 0; i < 100 && before.empty(); ++i) {
+    before = daemon.status().value_or("");
+    std::this_thread::sleep_for(20ms);
+  }
+  ASSERT_FALSE(before.empty()) << daemon.log();
+  publish_tool_measurement(nc, 1, 1, 7.5F);
+  std::string after;
+  const auto end2 = std::chrono::steady_clock::now() + 5s;
+  while (std::chrono::steady_clock::now() < end2) {
+    after = daemon.status().value_or("");
+    if (number(after, "events_accepted") > number(before, "events_accepted")) {
+      break;
+    }
+    std::this_thread::sleep_for(20ms);
+  }
+  EXPECT_GT(number(after, "events_accepted"), number(before, "events_accepted"));
+  EXPECT_EQ(number(after, "events_invalid"), 0);
+  EXPECT_NE(after.find("{\"name\":\"modbus\",\"state\":\"up\",\"alarm\":false"), std::string::npos)
+      << after;
+  EXPECT_GE(number(after, "offsets_written"), 1);
+  const std::string text = daemon.status("text").value_or("");
+  EXPECT_NE(text.find("modbus"), std::string::npos) << text;
+  daemon.signal(SIGTERM);
+  EXPECT_EQ(daemon.wait(), 0) << daemon.log();
+  nc.stop();
+}
+
+// The ncsim end of the lock-step socket.
+class Peer {
+ public:
+  explicit Peer(const std::string& path) : path_(path) {
+    listen_fd_ = ::socket(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC, 0);
+    sockaddr_un a{};
+    a.sun_family = AF_UNIX;
+    std::snprintf(a.sun_path, sizeof a.sun_path, "%s", path.c_str());
+    EXPECT_EQ(::bind(listen_fd_, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
+    EXPECT_EQ(::listen(listen_fd_, 1), 0);
+  }
+  ~Peer() {
+    if (fd_ >= 0) {
+      ::close(fd_);
+    }
+    ::close(listen_fd_);
+    ::unlink(path_.c_str());
+  }
+  bool accept_daemon(std::chrono::milliseconds limit) {
+    pollfd p{listen_fd_, POLLIN, 0};
+    if (::poll(&p, 1, static_cast<int>(limit.count())) != 1) {
+      return false;
+    }
+    fd_ = ::accept4(listen_fd_, nullptr, nullptr, SOCK_CLOEXEC);
+    return fd_ >= 0;
+  }
+  void send(LockstepType t, std::uint64_t cycle, std::int64_t time_ns) {
+    const auto b = nccomp::daemon::encode_lockstep({t, cycle, time_ns});
+    ASSERT_EQ(::send(fd_, b.data(), b.size(), MSG_NOSIGNAL), 24);
+  }
+  bool receive(LockstepMessage& m) {
+    pollfd p{fd_, POLLIN, 0};
+    if (::poll(&p, 1, 5000) != 1) {
+      return false;
+    }
+    std::array<std::uint8_t, 64> buf{};
+    const ssize_t n = ::recv(fd_, buf.data(), buf.size(), 0);
+    return n > 0 &&
+           nccomp::daemon::decode_lockstep(
+               std::span<const std::uint8_t>(buf.data(), static_cast<std::size_t>(n)), m) ==
+               nccomp::daemon::LockstepDecode::kOk;
+  }
+
+ private:
+  std::string path_;
+  int listen_fd_{-1};
+  int fd_{-1};
+};
+
+TEST(NccompdModbus, LockstepOffsetsAreOnTheNcAtEveryDone) {
+  TempDir d;
+  NcServer nc(ServerConfig{});
+  nc.start();
+  d.write("nccompd.toml", config_text(nc.port(), 1000.0));
+  const std::string sock = (d.path / "ls.sock").string();
+  Peer peer(sock);
+  Daemon daemon(d.path);
+  daemon.start({"--lockstep", sock});
+  ASSERT_TRUE(peer.accept_daemon(10s)) << daemon.log();
+  constexpr int kTicks = 200;
+  for (int k = 1; k <= kTicks; ++k) {
+    // The NC state of cycle k: X moves 1 µm per cycle; a tool measurement at cycle 50.
+    nc.update([&](Tables& t) { set_i32(t.input, 0, 10 * k); });
+    if (k == 50) {
+      publish_tool_measurement(nc, 1, 1, 7.5F);
+    }
+    peer.send(LockstepType::kTick, static_cast<std::uint64_t>(k), std::int64_t{k} * 1'000'000);
+    LockstepMessage m;
+    ASSERT_TRUE(peer.receive(m)) << "no DONE for cycle " << k << "\n" << daemon.log();
+    ASSERT_EQ(m.type, LockstepType::kDone);
+    ASSERT_EQ(m.cycle, static_cast<std::uint64_t>(k));
+    // The ramp takes the time at cycle 1, then adds 0.1 µm (one count) per 1 ms cycle, and the
+    // write of cycle k is on the NC when DONE(k) arrives.
+    ASSERT_EQ(holding_i32(nc, 200), std::min(k - 1, 123)) << "cycle " << k;
+  }
+  const std::string st = daemon.status().value_or("");
+  // One axis sample per cycle (one poll per TICK) and the tool measurement: nothing lost,
+  // nothing doubled.
+  EXPECT_EQ(number(st, "events_in"), kTicks + 1) << st;
+  EXPECT_EQ(number(st, "events_accepted"), kTicks + 1) << st;
+  peer.send(LockstepType::kBye, kTicks, 0);
+  EXPECT_EQ(daemon.wait(), 0) << daemon.log();
+  EXPECT_NE(daemon.log().find("lock-step: run ended after 200 cycles: the peer said BYE"),
+            std::string::npos)
+      << daemon.log();
+  nc.stop();
+}
+
+}  // namespace
