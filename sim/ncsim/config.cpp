@@ -568,6 +568,7 @@ SimConfig parse_sim_config(std::string_view text, const std::string& file,
     if (c.bus_map_file.empty()) {
       n.fail("bus_map", "required: the daemon's register map (reference-nc-modbus.toml)");
     }
+    n.string("can_bus_map", c.can_bus_map_file);
     n.string("can_interface", c.can_interface);
     n.integer("modbus_port", c.modbus_port, -1, 65535);
     n.number("lockstep_rate_hz", c.lockstep_rate_hz, 1.0, 100000.0);
@@ -683,6 +684,12 @@ SimConfig parse_sim_config(std::string_view text, const std::string& file,
   c.bus_map_file = resolve(base_dir, c.bus_map_file);
   if (read_files) {
     c.bus_map_text = read_text(c.bus_map_file, "ncsim.bus_map");
+  }
+  if (!c.can_bus_map_file.empty()) {
+    c.can_bus_map_file = resolve(base_dir, c.can_bus_map_file);
+    if (read_files) {
+      c.can_bus_map_text = read_text(c.can_bus_map_file, "ncsim.can_bus_map");
+    }
   }
   return c;
 }

@@ -18,34 +18,36 @@
 #include "core/common/types.hpp"
 #include "drivers/modbus/config.hpp"
 #include "sim/modbus_nc/nc_server.hpp"
+#include "sim/ncsim/nc_link.hpp"
 
 namespace nccomp::sim::ncsim {
 
-struct ReceivedOffset {
-  std::uint16_t register_index{0};
-  double value_um{0.0};
-};
-
-class ModbusLink {
+class ModbusLink final : public NcLink {
  public:
   /// port < 0: the map's port; 0: ephemeral. limit_um: the NC's range check [µm].
   ModbusLink(drivers::modbus::ModbusConfig map, int port, double limit_um);
-  void start();
-  void stop();
-  [[nodiscard]] std::uint16_t port() const noexcept { return server_.port(); }
+  void start() override;
+  void stop() override;
+  [[nodiscard]] std::uint16_t port() const override { return server_.port(); }
   /// Requests the server answered so far (any client).
   [[nodiscard]] std::uint64_t requests() const noexcept { return server_.requests(); }
 
   /// Queues events, then publishes the state and the next event of each group.
   void publish(const core::AxisSample& axis, const std::array<double, 2>& temperatures_c,
-               const std::vector<core::Event>& events, double hold_s);
+               const std::vector<core::Event>& events, double hold_s) override;
+  /// Modbus needs no marker: a write request is answered before the daemon's flush() returns.
+  void before_tick(std::uint64_t /*cycle*/) override {}
+  bool after_done(std::uint64_t /*cycle*/, double /*timeout_s*/) override { return true; }
   /// Offset writes accepted since the last call, in arrival order.
-  std::vector<ReceivedOffset> take_writes();
+  std::vector<ReceivedOffset> take_writes() override;
   /// Events not mapped in the register map (never published).
   [[nodiscard]] std::uint64_t events_unmapped() const noexcept { return unmapped_; }
-  [[nodiscard]] std::uint64_t writes_refused() const;
+  [[nodiscard]] std::uint64_t writes_refused() const override;
   /// True while events wait to be published.
-  [[nodiscard]] bool events_pending() const;
+  [[nodiscard]] bool events_pending() const override;
+  [[nodiscard]] bool client_ready() const override {
+    return server_.requests() >= 2 * map_.blocks.size();
+  }
   [[nodiscard]] const drivers::modbus::ModbusConfig& map() const noexcept { return map_; }
 
  private:

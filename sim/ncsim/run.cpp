@@ -1,11 +1,14 @@
 #include "sim/ncsim/run.hpp"
 
 #include <chrono>
+#include <memory>
 #include <cmath>
 #include <stdexcept>
 #include <thread>
 
+#include "drivers/can/can_config.hpp"
 #include "drivers/modbus/config.hpp"
+#include "sim/ncsim/can_link.hpp"
 #include "sim/ncsim/lockstep.hpp"
 #include "sim/ncsim/modbus_link.hpp"
 #include "sim/ncsim/result.hpp"
@@ -13,24 +16,49 @@
 
 namespace nccomp::sim::ncsim {
 
-RunSummary run(const SimConfig& config, const RunOptions& options) {
-  if (options.bus != BusKind::kModbus) {
-    throw std::runtime_error("ncsim: --bus can is not available yet (docs/ncsim.md, status)");
+namespace {
+
+std::unique_ptr<NcLink> make_link(const SimConfig& config, BusKind bus,
+                                  std::vector<std::uint16_t>& known, double& poll_rate_hz) {
+  if (bus == BusKind::kModbus) {
+    drivers::modbus::ModbusConfig map;
+    try {
+      map = drivers::modbus::parse_modbus_config(config.bus_map_text, config.bus_map_file);
+    } catch (const std::exception& e) {
+      throw std::runtime_error(std::string("ncsim.bus_map: ") + e.what());
+    }
+    for (const auto& om : map.offsets) {
+      known.push_back(om.register_index);
+    }
+    poll_rate_hz = map.poll_rate_hz;
+    return std::make_unique<ModbusLink>(std::move(map), config.modbus_port,
+                                        config.nc.offset_limit_um);
   }
-  drivers::modbus::ModbusConfig map;
+  if (config.can_bus_map_text.empty()) {
+    throw std::runtime_error("ncsim: --bus can needs ncsim.can_bus_map (reference-nc-can.toml)");
+  }
+  drivers::can::CanConfig can;
   try {
-    map = drivers::modbus::parse_modbus_config(config.bus_map_text, config.bus_map_file);
+    can = drivers::can::parse_can_config(config.can_bus_map_text, config.can_bus_map_file);
   } catch (const std::exception& e) {
-    throw std::runtime_error(std::string("ncsim.bus_map: ") + e.what());
+    throw std::runtime_error(std::string("ncsim.can_bus_map: ") + e.what());
   }
+  for (const auto& r : can.mapping.offsets) {
+    known.push_back(r.register_index);
+  }
+  poll_rate_hz = 0.0;  // CAN pushes events: nothing to hold
+  return std::make_unique<CanLink>(std::move(can), config.can_interface,
+                                   config.nc.offset_limit_um);
+}
+
+}  // namespace
+
+RunSummary run(const SimConfig& config, const RunOptions& options) {
   std::vector<std::uint16_t> known;
-  for (const auto& om : map.offsets) {
-    known.push_back(om.register_index);
-  }
-  const double poll_rate_hz = map.poll_rate_hz;
-  const std::size_t blocks = map.blocks.size();
+  double poll_rate_hz = 0.0;
+  std::unique_ptr<NcLink> link_ptr = make_link(config, options.bus, known, poll_rate_hz);
+  NcLink& link = *link_ptr;
   Simulation sim(config, options.program, known);
-  ModbusLink link(std::move(map), config.modbus_port, config.nc.offset_limit_um);
   link.start();
   const auto period_ns =
       static_cast<core::TimeNs>(std::llround(core::kNsPerS / config.lockstep_rate_hz));
@@ -50,6 +78,7 @@ RunSummary run(const SimConfig& config, const RunOptions& options) {
       const auto t_ns = static_cast<core::TimeNs>(k) * period_ns;
       sim.advance_to(t_ns);
       link.publish(sim.axis(), sim.temperatures_c(), sim.take_events(), 0.0);
+      link.before_tick(k);
       server.tick(k, t_ns);
       const auto reply = server.wait_done(k, options.done_timeout_s);
       summary.cycles = k + 1;
@@ -60,7 +89,11 @@ RunSummary run(const SimConfig& config, const RunOptions& options) {
       if (reply != LockstepServer::Reply::kDone) {
         break;  // the daemon ended the run
       }
-      // Writes the daemon pushed in this cycle reached the server before DONE (C2).
+      // Writes the daemon pushed in this cycle reached the NC before DONE (Modbus) or before
+      // its SYNC-ACK (CAN), and are taken at the tick's time (C2).
+      if (!link.after_done(k, options.done_timeout_s)) {
+        throw std::runtime_error("lockstep: no SYNC-ACK for cycle " + std::to_string(k));
+      }
       take_writes(core::seconds(t_ns));
       if (sim.done() && !link.events_pending()) {
         summary.completed = true;
@@ -76,11 +109,11 @@ RunSummary run(const SimConfig& config, const RunOptions& options) {
     // counters as a baseline, so events published before it would be lost.
     const auto wait_end = std::chrono::steady_clock::now() +
                           std::chrono::duration<double>(options.wait_client_s);
-    while (link.requests() < 2 * blocks && std::chrono::steady_clock::now() < wait_end) {
+    while (!link.client_ready() && std::chrono::steady_clock::now() < wait_end) {
       std::this_thread::sleep_for(std::chrono::milliseconds(5));
     }
     // An event stays on the registers for a few polls before the next of its group.
-    const double hold_s = 2.5 / poll_rate_hz;
+    const double hold_s = poll_rate_hz > 0.0 ? 2.5 / poll_rate_hz : 0.0;
     const auto start = std::chrono::steady_clock::now();
     for (std::uint64_t k = 0;; ++k) {
       const auto t_ns = static_cast<core::TimeNs>(k) * period_ns;

@@ -103,6 +103,9 @@ struct SimConfig {
   /// The bus map (daemon's format) and its text.
   std::string bus_map_file{};
   std::string bus_map_text{};
+  /// The daemon's CAN map (reference-nc-can.toml) for --bus can, and its text.
+  std::string can_bus_map_file{};
+  std::string can_bus_map_text{};
   /// CAN: the interface ncsim sends on.
   std::string can_interface{"vcan0"};
   /// Modbus: the TCP port ncsim serves (the map's port unless overridden; 0 = ephemeral).
