@@ -584,7 +584,9 @@ TEST(ShippedConfig, CreepsTheMeasuredWearIntoTheToolRegistersAlongTheNormal) {
   auto r = load_file(d.write("nccompd.toml", shipped_config_on_loopback()));
   ASSERT_TRUE(r.config) << r.diagnostics.to_string();
   auto engine = config::build_engine(*r.config);
-  ASSERT_EQ(engine->module_count(), 1U);
+  ASSERT_EQ(engine->module_count(), 2U);  // creep, calibration
+  EXPECT_EQ(engine->module(0).name(), "calibration");
+  EXPECT_EQ(engine->module(1).name(), "creep");
   const int length = 0;  // T1_length_wear
   const int radius = 1;  // T1_radius_wear
   core::StepOutput out;
