@@ -366,8 +366,10 @@ def scenario_modbus_modes(b, source, work):
     c.that(ps["max_step_um"] < 0.25 * ss["max_step_um"],
            "predictive creeping max step %.3f um < 1/4 of step correction's %.3f um" %
            (ps["max_step_um"], ss["max_step_um"]))
-    c.that(cs["max_offset_step_um"] < 0.1 * ss["max_offset_step_um"],
-           "creeping offset change %.3f um < 1/10 of the step's %.3f um" %
+    # Not 1/100 (h·Δs/L would allow it): where a pass turns, the length / radius split of the
+    # correction follows the engagement angle one NC latency late, a 0.4 um blip for ~1 mm.
+    c.that(cs["max_offset_step_um"] < 0.25 * ss["max_offset_step_um"],
+           "creeping offset change %.3f um < 1/4 of the step's %.3f um" %
            (cs["max_offset_step_um"], ss["max_offset_step_um"]))
     fo = off["surface"]["form"]["rms_um"]
     for rep, label in ((step, "step correction"), (creep, "creeping"),
@@ -391,7 +393,7 @@ def scenario_broken_tool(b, source, work):
     """Part (a) with creeping; the tool breaks after the first laser measurement: alarm 23
     (tool_broken_or_mismeasured), and nothing of that measurement applied."""
     r = run_machining(b, source, work, "broken_tool", "nccompd-creep.toml", "ncsim-demo.toml",
-                      sets=["broken_tool.enabled=true", "broken_tool.at_path_mm=1100"],
+                      sets=["broken_tool.enabled=true", "broken_tool.at_path_mm=700"],
                       echo=print)
     c = Check("broken_tool")
     c.that(r.ncsim_rc in (0, 4) and r.daemon_rc == 0,
@@ -403,8 +405,8 @@ def scenario_broken_tool(b, source, work):
     c.that(len(times) >= 2, "the laser measured at least twice (at %s s)" % times)
     writes = r.writes()
     if len(times) >= 2:
-        # The broken measurement is the first one after the break (path 1100 mm; ncsim measures
-        # every 600 mm). Everything the NC took from then on must hold the value in force then:
+        # The broken measurement is the first one after the break (path 700 mm; ncsim measures
+        # every 450 mm). Everything the NC took from then on must hold the value in force then:
         # nothing applied, creep frozen.
         t_broken = times[1]
         regs = sorted({w[1] for w in writes})
