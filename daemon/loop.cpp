@@ -296,6 +296,7 @@ void Loop::cycle(core::TimeNs wake_ns, bool stamp) {
   engine.step(wake_ns, std::span<const core::Event>(events_.data(), events_.size()), out_);
 
   bool dropped = false;
+  std::uint64_t woken = 0;  // buses that got a write this cycle (bit per bus, the first 64)
   for (const core::OffsetWrite& w : out_.writes) {
     if (rt.dry_run) {
       ++local_.writes_dry_run;
@@ -306,10 +307,19 @@ void Loop::cycle(core::TimeNs wake_ns, bool stamp) {
     if (b >= 0 && static_cast<std::size_t>(b) < buses_.size() &&
         buses_[static_cast<std::size_t>(b)]->tx().try_push(w)) {
       ++local_.writes_sent;
+      if (b < 64) {
+        woken |= std::uint64_t{1} << b;
+      }
     } else {
       ++local_.writes_dropped;
       dropped = true;
       note(wake_ns, NoteCode::kWriteDropped, w.register_index, w.value_um);
+    }
+  }
+  // A driver that sleeps between frames (CAN) sends at once instead of at its next poll.
+  for (std::size_t b = 0; b < buses_.size() && b < 64; ++b) {
+    if ((woken >> b) & 1U) {
+      buses_[b]->wake();
     }
   }
   if (dropped) {

@@ -59,6 +59,9 @@ class Bus {
   virtual core::rt::SpscRing<core::OffsetWrite>& tx() = 0;
   /// Any thread: a consistent snapshot of the driver's state and counters.
   [[nodiscard]] virtual BusStatus status() const = 0;
+  /// Loop thread, after pushing into tx(): lets a driver that sleeps between frames send at
+  /// once. Real-time safe (no allocation, no lock, never blocks). Default: nothing to do.
+  virtual void wake() noexcept {}
 
   // Lock-step with a simulated NC (docs/daemon.md, "Lock-step with ncsim"): the peer is the
   // clock; per cycle the loop calls sync(), steps the engine, pushes writes, calls flush().

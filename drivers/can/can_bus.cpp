@@ -17,6 +17,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <chrono>
 #include <cstring>
 #include <stdexcept>
 #include <string>
@@ -112,6 +113,9 @@ void CanBus::open_socket() {
       add(r.ack->id, r.ack->extended);
     }
   }
+  if (lockstep_) {
+    add(kLockstepSyncId, false);
+  }
   if (::setsockopt(s, SOL_CAN_RAW, CAN_RAW_FILTER, filters.empty() ? nullptr : filters.data(),
                    static_cast<socklen_t>(filters.size() * sizeof(can_filter))) < 0) {
     fail("CAN_RAW_FILTER");
@@ -154,6 +158,24 @@ void CanBus::close_socket() noexcept {
 void CanBus::start() {
   if (running_.load()) {
     return;
+  }
+  if (lockstep_) {
+    // The lock-step frames share the bus with the NC's own: an overlap would be misread.
+    const auto clash = [](std::uint32_t id, bool ext) {
+      return !ext && (id == kLockstepSyncId || id == kLockstepSyncAckId);
+    };
+    for (const auto& f : config_.mapping.rx) {
+      if (clash(f.id, f.extended)) {
+        throw std::runtime_error("can: " + f.origin.key_path +
+                                 ": ID 0x7F0/0x7F1 is reserved for lock-step SYNC / SYNC-ACK");
+      }
+    }
+    for (const auto& r : config_.mapping.offsets) {
+      if (clash(r.id, r.extended) || (r.ack && clash(r.ack->id, r.ack->extended))) {
+        throw std::runtime_error("can: " + r.origin.key_path +
+                                 ": ID 0x7F0/0x7F1 is reserved for lock-step SYNC / SYNC-ACK");
+      }
+    }
   }
   open_socket();
   event_fd_ = ::eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK);
@@ -265,8 +287,94 @@ void CanBus::run() noexcept {
     take_writes();
     check_acks(now);
     send_pending(now);
+    serve_flush();
     publish();
   }
+}
+
+bool CanBus::sync(std::uint64_t cycle, core::TimeNs timeout_ns) {
+  std::unique_lock<std::mutex> lock(ls_mu_);
+  return ls_cv_.wait_for(lock, std::chrono::nanoseconds(timeout_ns),
+                         [&] { return synced_plus1_ > cycle; });
+}
+
+bool CanBus::flush(std::uint64_t cycle, core::TimeNs timeout_ns) {
+  std::uint64_t want = 0;
+  {
+    std::lock_guard<std::mutex> lock(ls_mu_);
+    want = ++flush_req_;
+    flush_cycle_ = cycle;
+  }
+  wake();
+  std::unique_lock<std::mutex> lock(ls_mu_);
+  return ls_cv_.wait_for(lock, std::chrono::nanoseconds(timeout_ns),
+                         [&] { return flush_done_ >= want; });
+}
+
+void CanBus::handle_sync(const std::uint8_t* data, std::size_t len) noexcept {
+  if (len != 8) {
+    ++st_.can.rejected_wrong_length;
+    return;
+  }
+  std::uint64_t cycle = 0;
+  for (int i = 7; i >= 0; --i) {
+    cycle = (cycle << 8) | data[i];
+  }
+  ++st_.can.lockstep_syncs;
+  {
+    std::lock_guard<std::mutex> lock(ls_mu_);
+    synced_plus1_ = std::max(synced_plus1_, cycle + 1);
+  }
+  ls_cv_.notify_all();
+}
+
+void CanBus::serve_flush() noexcept {
+  if (!lockstep_) {
+    return;
+  }
+  if (serving_flush_ == 0) {
+    std::lock_guard<std::mutex> lock(ls_mu_);
+    if (flush_req_ > flush_done_) {
+      serving_flush_ = flush_req_;
+      serving_cycle_ = flush_cycle_;
+    }
+  }
+  if (serving_flush_ == 0) {
+    return;
+  }
+  // Read after the request was taken: every write the loop queued before flush() is in the ring.
+  const std::int64_t now = mono_ns();
+  take_writes();
+  send_pending(now);
+  for (const auto& slot : slots_) {
+    if (slot.state == WriteState::kPending) {
+      return;  // not on the wire yet (queue full, link down): the next round tries again
+    }
+  }
+  if (sock_ < 0 || if_down_ || bus_off_ || now < backoff_until_ns_) {
+    return;
+  }
+  can_frame f{};
+  f.can_id = kLockstepSyncAckId;
+  f.len = 8;
+  for (int i = 0; i < 8; ++i) {
+    f.data[i] = static_cast<std::uint8_t>(serving_cycle_ >> (8 * i));
+  }
+  if (::send(sock_, &f, sizeof f, MSG_DONTWAIT) != static_cast<ssize_t>(sizeof f)) {
+    if (errno == ENOBUFS || errno == EAGAIN) {
+      ++st_.can.enobufs;
+      backoff_until_ns_ = now + to_ns(config_.enobufs_backoff_s);
+    }
+    return;
+  }
+  ++st_.bus.counters.frames_tx;
+  ++st_.can.lockstep_sync_acks;
+  {
+    std::lock_guard<std::mutex> lock(ls_mu_);
+    flush_done_ = serving_flush_;
+  }
+  serving_flush_ = 0;
+  ls_cv_.notify_all();
 }
 
 void CanBus::receive_all(std::int64_t now_ns) noexcept {
@@ -313,6 +421,10 @@ void CanBus::receive_all(std::int64_t now_ns) noexcept {
     const std::uint32_t id = can_id & (ext ? CAN_EFF_MASK : CAN_SFF_MASK);
     const std::size_t len = std::min<std::size_t>(frame.len, kMaxPayloadBytes);
     const std::uint32_t key = id_key(id, ext);
+    if (lockstep_ && !ext && id == kLockstepSyncId) {
+      handle_sync(frame.data, len);
+      continue;
+    }
     if (!ack_index_.empty()) {
       const auto it = std::lower_bound(ack_index_.begin(), ack_index_.end(),
                                        std::make_pair(key, std::size_t{0}));

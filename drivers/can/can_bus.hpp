@@ -14,7 +14,9 @@
 
 #include <array>
 #include <atomic>
+#include <condition_variable>
 #include <cstdint>
+#include <mutex>
 #include <memory>
 #include <thread>
 #include <vector>
@@ -26,6 +28,11 @@
 #include "drivers/can/can_mapping.hpp"
 
 namespace nccomp::drivers::can {
+
+/// Lock-step (contract C2): the simulated NC ends each cycle's frames with SYNC (this ID, 8 bytes,
+/// uint64 cycle little-endian); the daemon answers its flush with SYNC-ACK (same layout).
+inline constexpr std::uint32_t kLockstepSyncId = 0x7F0;
+inline constexpr std::uint32_t kLockstepSyncAckId = 0x7F1;
 
 /// The CAN driver's own counters, beside the common BusCounters.
 struct CanCounters {
@@ -47,6 +54,8 @@ struct CanCounters {
   std::uint64_t rejected_wrong_length{0};
   std::uint64_t rejected_out_of_range{0};
   std::uint64_t rejected_not_finite{0};
+  std::uint64_t lockstep_syncs{0};      // SYNC frames received (lock-step)
+  std::uint64_t lockstep_sync_acks{0};  // SYNC-ACK frames sent (lock-step)
 };
 
 struct CanStatus {
@@ -74,7 +83,18 @@ class CanBus final : public Bus {
 
   /// Loop thread, after pushing into tx(): wakes the I/O thread (one eventfd write; no
   /// allocation, no lock, never blocks).
-  void wake() noexcept;
+  void wake() noexcept override;
+
+  /// Lock-step (before start()): also receive the SYNC frames (kLockstepSyncId). The mapping
+  /// must not use the two lock-step IDs (start() throws otherwise).
+  void set_lockstep(bool on) override { lockstep_ = on; }
+  /// Returns once the SYNC frame of `cycle` (or a later one) was received: every frame the NC
+  /// sent before it is decoded and in rx() (one socket, in order). False on timeout.
+  bool sync(std::uint64_t cycle, core::TimeNs timeout_ns) override;
+  /// Returns once every write queued before the call was sent and a SYNC-ACK with `cycle` went
+  /// out after them. Acknowledges of the writes are not awaited (the NC sends them after it read
+  /// the SYNC-ACK). False on timeout (link down, transmit queue full throughout).
+  bool flush(std::uint64_t cycle, core::TimeNs timeout_ns) override;
 
  private:
   enum class WriteState : std::uint8_t { kIdle, kPending, kAwaitAck, kFailed };
@@ -128,6 +148,20 @@ class CanBus final : public Bus {
 
   std::atomic<bool> running_{false};
   std::thread thread_;
+
+  // Lock-step (ls_mu_ guards the request / completion counters; see sync() and flush()).
+  bool lockstep_{false};
+  std::mutex ls_mu_;
+  std::condition_variable ls_cv_;
+  std::uint64_t synced_plus1_{0};  // last SYNC cycle + 1 (0 = none yet)
+  std::uint64_t flush_req_{0};
+  std::uint64_t flush_done_{0};
+  std::uint64_t flush_cycle_{0};
+  /// I/O thread: the open flush request being served (0 = none).
+  std::uint64_t serving_flush_{0};
+  std::uint64_t serving_cycle_{0};
+  void serve_flush() noexcept;
+  void handle_sync(const std::uint8_t* data, std::size_t len) noexcept;
 };
 
 /// Asks the kernel to restart a CAN controller out of bus-off (netlink IFLA_CAN_RESTART, as
