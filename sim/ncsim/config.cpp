@@ -549,7 +549,9 @@ std::vector<std::vector<double>> read_csv_columns(const std::string& path,
 
 SimConfig parse_sim_config(std::string_view text, const std::string& file,
                            const std::string& base_dir,
-                           const std::vector<std::string>& overrides, bool read_files) {
+                           const std::vector<std::string>& overrides, bool read_files,
+                           std::optional<ProgramKind> program) {
+  const auto wants = [&](ProgramKind p) { return read_files && (!program || *program == p); };
   toml::table root;
   try {
     root = toml::parse(text, file);
@@ -622,7 +624,7 @@ SimConfig parse_sim_config(std::string_view text, const std::string& file,
       s.number("feed_mm_per_min", w.feed_mm_per_min, 1.0, 1e6);
       s.number("probe_time_s", w.probe_time_s, 0.0, 3600.0);
       s.boolean("table_registers", w.table_registers);
-      if (!w.checkpoints_file.empty() && read_files) {
+      if (!w.checkpoints_file.empty() && wants(ProgramKind::kSideWall)) {
         const std::string path = resolve(base_dir, w.checkpoints_file);
         try {
           w.plan = tools::checkpoints::load_checkpoints_file(path, std::nullopt).plan;
@@ -656,7 +658,7 @@ SimConfig parse_sim_config(std::string_view text, const std::string& file,
       g.number("wheel_width_mm", rc.wheel_width_mm, 0.0, 2000.0);
       g.number("wheel_height_mm", rc.wheel_height_mm, 0.0, 100.0);
       g.integer("passes", rc.passes, 1, 1000);
-      if (!rc.trajectory_file.empty() && read_files) {
+      if (!rc.trajectory_file.empty() && wants(ProgramKind::kRoll)) {
         rc.trajectory_file = resolve(base_dir, rc.trajectory_file);
         auto t = read_csv_columns(rc.trajectory_file, {"z_mm", "u_mm"});
         rc.z_mm = std::move(t[0]);
@@ -694,9 +696,11 @@ SimConfig parse_sim_config(std::string_view text, const std::string& file,
   return c;
 }
 
-SimConfig load_sim_config(const std::string& path, const std::vector<std::string>& overrides) {
+SimConfig load_sim_config(const std::string& path, const std::vector<std::string>& overrides,
+                          std::optional<ProgramKind> program) {
   const std::string text = read_text(path, "ncsim config");
-  return parse_sim_config(text, path, fs::path(path).parent_path().string(), overrides);
+  return parse_sim_config(text, path, fs::path(path).parent_path().string(), overrides, true,
+                          program);
 }
 
 }  // namespace nccomp::sim::ncsim

@@ -4,6 +4,7 @@
 // roll trajectories) are read and validated here, so the model itself does no I/O.
 #pragma once
 
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <string_view>
@@ -23,12 +24,16 @@ class ConfigError : public std::runtime_error {
 /// (`wear.rate_um_per_m=3`), any other path from the top (`ncsim.seed=4`). value is a TOML
 /// value; anything that does not parse as one is taken as a string.
 /// read_files = false checks the text only: no data file named in it is opened (fuzzing).
+/// program: read only that program's data files (a side-wall plan is not needed to machine a
+/// mould face); nullopt reads every program's.
 SimConfig parse_sim_config(std::string_view text, const std::string& file,
                            const std::string& base_dir,
                            const std::vector<std::string>& overrides = {},
-                           bool read_files = true);
+                           bool read_files = true,
+                           std::optional<ProgramKind> program = std::nullopt);
 /// Reads and parses a file. Throws ConfigError.
-SimConfig load_sim_config(const std::string& path, const std::vector<std::string>& overrides = {});
+SimConfig load_sim_config(const std::string& path, const std::vector<std::string>& overrides = {},
+                          std::optional<ProgramKind> program = std::nullopt);
 
 /// Reads a numeric CSV with a header; returns the named columns. Throws ConfigError naming
 /// file:line. Used for the PHM 2010 and FL_THERMAL files and the roll trajectory / profile.

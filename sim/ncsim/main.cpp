@@ -103,7 +103,7 @@ int main(int argc, char** argv) {
   }
   SimConfig config;
   try {
-    config = load_sim_config(config_path, sets);
+    config = load_sim_config(config_path, sets, opt.program);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "ncsim: %s\n", e.what());
     return 3;

@@ -224,11 +224,8 @@ class MouldFace final : public Program {
 class SideWall final : public Program {
  public:
   explicit SideWall(const SimConfig& c)
-      : c_(c.side_wall), parts_(c.parts), step_mm_(c.step_mm), plan_(core::checkpoint::make_plan(c_.plan)) {
+      : c_(c.side_wall), parts_(c.parts), step_mm_(c.step_mm), plan_(checked_plan(c_)) {
     const auto& pts = c_.plan.contour;
-    if (pts.size() < 2) {
-      throw std::invalid_argument("side_wall: the contour needs at least 2 points");
-    }
     const std::size_t n = pts.size();
     const std::size_t segs = c_.plan.closed ? n : n - 1;
     double area2 = 0.0;
@@ -266,6 +263,15 @@ class SideWall final : public Program {
     return step_mm_ / (c_.feed_mm_per_min / 60.0);
   }
   [[nodiscard]] const core::checkpoint::Plan& plan() const { return plan_; }
+
+  static core::checkpoint::Plan checked_plan(const SideWallConfig& c) {
+    if (c.plan.contour.size() < 2) {
+      throw std::invalid_argument(
+          "side_wall: no wall to machine: set program.side_wall.checkpoints_file (a file with "
+          "the [checkpoints] table, contour of at least 2 points)");
+    }
+    return core::checkpoint::make_plan(c.plan);
+  }
 
   bool step(Simulation& sim, double h_s) override {
     const double d_mm = c_.feed_mm_per_min / 60.0 * h_s;
