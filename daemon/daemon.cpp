@@ -310,8 +310,12 @@ int run_daemon(const DaemonOptions& options) {
   }
 
   const LoopSetupReport rep = loop.start();
-  spdlog::info("loop running at {} Hz, overrun policy {}", dsec.rate_hz,
-               dsec.overrun_policy == cfg::OverrunPolicy::kRestart ? "restart" : "skip_missed");
+  if (lockstep) {
+    spdlog::info("loop running in lock-step: one cycle per TICK of the peer");
+  } else {
+    spdlog::info("loop running at {} Hz, overrun policy {}", dsec.rate_hz,
+                 dsec.overrun_policy == cfg::OverrunPolicy::kRestart ? "restart" : "skip_missed");
+  }
   if (rep.sched_requested) {
     if (rep.sched_errno == 0) {
       spdlog::info("loop thread: SCHED_FIFO priority {}", dsec.sched_fifo_priority);
