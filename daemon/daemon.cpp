@@ -103,6 +103,20 @@ void notify(const std::string& s) { (void)sd_notify(0, s.c_str()); }
 
 }  // namespace
 
+namespace {
+std::vector<std::pair<std::string, StartupHook>>& hook_storage() {
+  static std::vector<std::pair<std::string, StartupHook>> hooks;
+  return hooks;
+}
+}  // namespace
+
+int register_startup_hook(std::string name, StartupHook hook) {
+  hook_storage().emplace_back(std::move(name), std::move(hook));
+  return 0;
+}
+
+const std::vector<std::pair<std::string, StartupHook>>& startup_hooks() { return hook_storage(); }
+
 int run_daemon(const DaemonOptions& options) {
   // Signals are blocked before any thread exists, so every thread inherits the mask and the main
   // thread alone receives them through the signalfd.
@@ -204,6 +218,25 @@ int run_daemon(const DaemonOptions& options) {
         o.bus->stop();
       }
       return 1;
+    }
+  }
+
+  // Start-up hooks of the sections (S1: the NC's checkpoint registers against the learned
+  // table). No driver reads offsets back yet (drivers/bus.hpp has no read-back call), so the
+  // reader says so and the hooks fall back to rewriting what the NC must hold.
+  {
+    const RegisterReader read = [](std::uint16_t) -> std::optional<double> {
+      return std::nullopt;
+    };
+    const core::TimeNs hook_now = lockstep ? 0 : monotonic_ns();
+    for (const auto& [hook_name, hook] : startup_hooks()) {
+      try {
+        for (const auto& line : hook(*runtime->engine, read, hook_now)) {
+          spdlog::info("{}", line);
+        }
+      } catch (const std::exception& e) {
+        spdlog::error("start-up of {}: {}", hook_name, e.what());
+      }
     }
   }
 

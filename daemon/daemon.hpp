@@ -3,7 +3,15 @@
 // SIGHUP reloads). Not real-time: this is the main thread.
 #pragma once
 
+#include <cstdint>
+#include <functional>
+#include <optional>
 #include <string>
+#include <utility>
+#include <vector>
+
+#include "core/common/types.hpp"
+#include "core/engine/engine.hpp"
 
 namespace nccomp::daemon {
 
@@ -21,5 +29,17 @@ struct DaemonOptions {
 /// Runs until SIGTERM / SIGINT (in lock-step also until the peer's BYE or close). Returns the process exit status: 0 after a clean stop, 3 for an
 /// invalid configuration, 1 for any other start-up failure.
 int run_daemon(const DaemonOptions& options);
+
+/// Reads a logical register's value [µm] back from the NC; nullopt when the bus cannot.
+using RegisterReader = std::function<std::optional<double>(std::uint16_t register_index)>;
+/// Start-up work of a config section, run once after the state was restored and the buses were
+/// started, before the loop thread steps the engine (S1: compare the NC's checkpoint registers
+/// with the learned table). Returns lines for the log. Not real-time.
+using StartupHook = std::function<std::vector<std::string>(
+    core::engine::Engine& engine, const RegisterReader& read, core::TimeNs now_ns)>;
+/// Registers a hook (static initialisation of a section's object file).
+int register_startup_hook(std::string name, StartupHook hook);
+/// The registered hooks, in registration order.
+[[nodiscard]] const std::vector<std::pair<std::string, StartupHook>>& startup_hooks();
 
 }  // namespace nccomp::daemon

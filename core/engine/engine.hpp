@@ -177,6 +177,9 @@ class Engine {
   }
   [[nodiscard]] std::size_t module_count() const noexcept { return modules_.size(); }
   [[nodiscard]] const Module& module(std::size_t i) const { return *modules_[i]; }
+  /// For start-up work on a module (e.g. S1 reconcile with registers read back) before the loop
+  /// thread steps the engine. Not real-time; never while another thread steps the engine.
+  [[nodiscard]] Module& module(std::size_t i) { return *modules_[i]; }
   [[nodiscard]] const EngineCounters& counters() const noexcept { return counters_; }
 
  private:

@@ -12,6 +12,7 @@
 #include "daemon/config/builtin_sections.hpp"
 #include "daemon/sections/calibration/calibration_section.hpp"
 #include "daemon/sections/checkpoints/checkpoints_section.hpp"
+#include "daemon/sections/checkpoints/startup.hpp"
 #include "tests/unit/daemon_modules/temp_dir.hpp"
 
 namespace nccomp::daemon::sections {
@@ -103,6 +104,71 @@ TEST(CheckpointsSection, ParsesTheDocumentedExampleAndLearnsFromPartToPart) {
   EXPECT_DOUBLE_EQ(value[21], 0.0);
   EXPECT_DOUBLE_EQ(value[75], 0.0);
   EXPECT_DOUBLE_EQ(value[19], -6.0);  // the live register pre-positioned at checkpoint 0
+}
+
+TEST(CheckpointsStartup, TheNcsRegistersAreComparedWithTheLearnedTable) {
+  TempDir d;
+  auto r = load_file(d.write("a.toml", "include = [\"" + kBoss + "\"]\n" + registers(76, 20, -1)));
+  ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+  auto engine = config::build_engine(*r.config);
+  core::StepOutput out;
+  core::ProbeMeasurement m;
+  m.part = 1;
+  m.checkpoint = 0;
+  m.wall_angle_deg = 3.0;
+  m.ball_radius_mm = 2.0;
+  m.raw_deviation_um = 6.0 + core::checkpoint::probe_delta0_um(2.0, 3.0);
+  engine->step(1'000'000, std::vector<core::Event>{m}, out);  // table: cp 0 = -6, others 0
+  engine->step(
+      1'500'000,
+      std::vector<core::Event>{core::ProgramEvent{0, core::ProgramEventKind::kPartStart, 2}}, out);
+  engine->step(1'600'000, std::vector<core::Event>{}, out);  // all 56 written: the NC has them
+  EXPECT_DOUBLE_EQ(engine->register_state(23).output_um, 0.0);
+
+  // nccompd runs this as its "checkpoints" start-up hook.
+  bool hooked = false;
+  for (const auto& h : startup_hooks()) hooked = hooked || h.first == "checkpoints";
+  EXPECT_TRUE(hooked);
+
+  // A bus that cannot read back: nothing compared, said so.
+  auto none = reconcile_checkpoints(
+      *engine, [](std::uint16_t) { return std::optional<double>{}; }, 0);
+  ASSERT_EQ(none.size(), 1U);
+  EXPECT_FALSE(none[0].read_back);
+  EXPECT_EQ(none[0].message,
+            "checkpoints: 56 of 56 checkpoint registers cannot be read back from the NC; the "
+            "learned table is written again at the next part start");
+
+  // The NC holds the table except register 23 (checkpoint 3), edited to 2 µm: one mismatch of
+  // 2 µm; reconcile_prefer = "daemon" rewrites it on the next step (although the engine had
+  // sent 0 before) and raises warning 33.
+  auto nc = [](std::uint16_t reg) -> std::optional<double> {
+    if (reg == 20) return -6.0;
+    if (reg == 23) return 2.0;
+    if (reg == 19) return -6.0;  // the live register
+    return 0.0;
+  };
+  auto rep = reconcile_checkpoints(*engine, nc, 2'000'000);
+  ASSERT_EQ(rep.size(), 1U);
+  EXPECT_TRUE(rep[0].read_back);
+  EXPECT_EQ(rep[0].compared, 56U);
+  EXPECT_EQ(rep[0].mismatched, 1U);
+  EXPECT_DOUBLE_EQ(rep[0].max_difference_um, 2.0);
+  EXPECT_FALSE(rep[0].adopted_nc);
+  EXPECT_EQ(rep[0].message,
+            "checkpoints: 1 of 56 checkpoint registers differ from the table (max 2.000 um); the "
+            "table is written again (reconcile_prefer = \"daemon\")");
+  engine->step(3'000'000, std::vector<core::Event>{}, out);
+  bool alarm33 = false;
+  for (const auto& a : out.alarms) {
+    alarm33 = alarm33 || a.code == core::AlarmCode::kCheckpointRegisterMismatch;
+  }
+  EXPECT_TRUE(alarm33);
+  double reg23 = std::nan("");
+  for (const auto& w : out.writes) {
+    if (w.register_index == 23) reg23 = w.value_um;
+  }
+  EXPECT_DOUBLE_EQ(reg23, 0.0);  // the daemon's value, written again
 }
 
 TEST(CheckpointsSection, ErrorsCarryFileLineColumnAndRegistersAreChecked) {
