@@ -207,5 +207,37 @@ TEST(NcsimModel, Phm2010CurveReplaysTheMeasuredWear) {
   EXPECT_EQ(m.wear_um(31400.0), m.wear_um(1e9));
 }
 
+TEST(NcsimModel, ThermalReplayFollowsTheFlThermalGauges) {
+  const std::string data = "/work/shared/data/fl_thermal_spindle_drift/data.csv";
+  if (FILE* f = std::fopen(data.c_str(), "r"); f == nullptr) {
+    GTEST_SKIP() << "FL_THERMAL data not present at " << data;
+  } else {
+    std::fclose(f);
+  }
+  const std::string text = std::string("[ncsim]\nbus_map = \"") + NCCOMP_SOURCE_DIR +
+                           "/config/reference-nc-modbus.toml\"\n"
+                           "[effects.thermal]\nmode = \"replay\"\nreplay_file = \"" + data +
+                           "\"\nx_channel = \"ch1\"\nz_channel = \"ch5\"\n"
+                           "channel_sign = [1.0, 1.0, -1.0]\ntime_scale = 1.0\n";
+  const SimConfig c = parse_sim_config(text, "thermal.toml", ".");
+  MachineModel m(c.effects, 1);
+  // Rows t = 0 and 15 s of data.csv: ch1 0.377452788 → 0.399399975, ch5 0.14420852 →
+  // 0.175689695 µm; t5 31.486612097343599 °C and t1 26.181494231478801 °C at 15 s.
+  const Vec3 d = m.thermal_um(15.0);
+  EXPECT_NEAR(d[0], 0.399399975 - 0.377452788, 1e-9);
+  EXPECT_EQ(d[1], 0.0);
+  EXPECT_NEAR(d[2], -(0.175689695 - 0.14420852), 1e-9);
+  EXPECT_NEAR(m.thermal_um(7.5)[2], -(0.175689695 - 0.14420852) / 2.0, 1e-9);
+  EXPECT_NEAR(m.temperature_c(15.0)[0], 31.486612097343599, 1e-9);
+  EXPECT_NEAR(m.temperature_c(15.0)[1], 26.181494231478801, 1e-9);
+  // The axial gauge's peak (SOURCE.md: ch5 up to +39 µm) appears, with the configured sign.
+  double lowest = 0.0;
+  for (double t = 0.0; t < 170000.0; t += 60.0) {
+    lowest = std::min(lowest, m.thermal_um(t)[2]);
+  }
+  EXPECT_LT(lowest, -35.0);
+  EXPECT_GT(lowest, -40.0);
+}
+
 }  // namespace
 }  // namespace nccomp::sim::ncsim
