@@ -33,7 +33,7 @@ class Reader {
 
   [[noreturn]] void fail(std::string_view key, const std::string& msg) const {
     const toml::node* n = t_ != nullptr ? t_->get(key) : nullptr;
-    const std::string pos = n != nullptr ? where(file_, n->source())
+    const std::string pos = n != nullptr    ? where(file_, n->source())
                             : t_ != nullptr ? where(file_, t_->source())
                                             : file_;
     throw ConfigError(pos + ": " + key_path(key) + ": " + msg);
@@ -168,8 +168,7 @@ class Reader {
     }
     for (const auto& [k, v] : *t_) {
       if (used_.count(std::string(k.str())) == 0) {
-        throw ConfigError(where(file_, v.source()) + ": " + key_path(k.str()) +
-                          ": unknown key");
+        throw ConfigError(where(file_, v.source()) + ": " + key_path(k.str()) + ": unknown key");
       }
     }
   }
@@ -210,9 +209,9 @@ void apply_override(toml::table& root, const std::string& spec) {
   }
   std::string key = spec.substr(0, eq);
   const std::string value = spec.substr(eq + 1);
-  static const std::set<std::string> kEffects = {
-      "wear", "pushoff", "hardness", "thermal", "pitch", "probe_noise", "laser_noise",
-      "broken_tool", "probe_outlier"};
+  static const std::set<std::string> kEffects = {"wear",        "pushoff",     "hardness",
+                                                 "thermal",     "pitch",       "probe_noise",
+                                                 "laser_noise", "broken_tool", "probe_outlier"};
   std::vector<std::string> parts;
   std::size_t start = 0;
   while (true) {
@@ -275,7 +274,8 @@ void read_effects(const toml::table* eff, const std::string& file, const std::st
     WearConfig& c = e.wear;
     w.boolean("enabled", c.enabled);
     w.choice("curve", c.curve,
-             {{"linear", WearCurve::kLinear}, {"power", WearCurve::kPower},
+             {{"linear", WearCurve::kLinear},
+              {"power", WearCurve::kPower},
               {"phm2010", WearCurve::kTable}});
     w.number("initial_um", c.initial_um, 0.0, 1e4);
     w.number("rate_um_per_m", c.rate_um_per_m, 0.0, 1e4);
@@ -424,8 +424,8 @@ void read_effects(const toml::table* eff, const std::string& file, const std::st
     p.vec3("slope_um_per_m", e.pitch.slope_um_per_m, -1e3, 1e3);
     p.finish();
   }
-  for (auto [name, cfg] : {std::pair{"probe_noise", &e.probe_noise},
-                           std::pair{"laser_noise", &e.laser_noise}}) {
+  for (auto [name, cfg] :
+       {std::pair{"probe_noise", &e.probe_noise}, std::pair{"laser_noise", &e.laser_noise}}) {
     Reader n(r.table(name), std::string("effects.") + name, file);
     n.boolean("enabled", cfg->enabled);
     n.number("sigma_um", cfg->sigma_um, 0.0, 1e3);
@@ -548,9 +548,8 @@ std::vector<std::vector<double>> read_csv_columns(const std::string& path,
 }
 
 SimConfig parse_sim_config(std::string_view text, const std::string& file,
-                           const std::string& base_dir,
-                           const std::vector<std::string>& overrides, bool read_files,
-                           std::optional<ProgramKind> program) {
+                           const std::string& base_dir, const std::vector<std::string>& overrides,
+                           bool read_files, std::optional<ProgramKind> program) {
   const auto wants = [&](ProgramKind p) { return read_files && (!program || *program == p); };
   toml::table root;
   try {
@@ -629,8 +628,8 @@ SimConfig parse_sim_config(std::string_view text, const std::string& file,
         try {
           w.plan = tools::checkpoints::load_checkpoints_file(path, std::nullopt).plan;
         } catch (const std::exception& e) {
-          throw ConfigError(where(file, root.source()) + ": program.side_wall.checkpoints_file: " +
-                            e.what());
+          throw ConfigError(where(file, root.source()) +
+                            ": program.side_wall.checkpoints_file: " + e.what());
         }
         w.checkpoints_file = path;
       }
@@ -672,8 +671,8 @@ SimConfig parse_sim_config(std::string_view text, const std::string& file,
         for (const auto* zs : {&rc.z_mm, &rc.target_z_mm}) {
           for (std::size_t i = 1; i < zs->size(); ++i) {
             if (!((*zs)[i] > (*zs)[i - 1])) {
-              g.fail("trajectory_file", "z_mm must increase strictly (row " +
-                                            std::to_string(i + 2) + ")");
+              g.fail("trajectory_file",
+                     "z_mm must increase strictly (row " + std::to_string(i + 2) + ")");
             }
           }
         }

@@ -28,8 +28,7 @@ class ConfigError : public std::runtime_error {
 /// mould face); nullopt reads every program's.
 SimConfig parse_sim_config(std::string_view text, const std::string& file,
                            const std::string& base_dir,
-                           const std::vector<std::string>& overrides = {},
-                           bool read_files = true,
+                           const std::vector<std::string>& overrides = {}, bool read_files = true,
                            std::optional<ProgramKind> program = std::nullopt);
 /// Reads and parses a file. Throws ConfigError.
 SimConfig load_sim_config(const std::string& path, const std::vector<std::string>& overrides = {},

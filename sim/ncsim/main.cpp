@@ -126,12 +126,12 @@ int main(int argc, char** argv) {
     getrusage(RUSAGE_SELF, &ru);
     const double cpu_s = static_cast<double>(ru.ru_utime.tv_sec + ru.ru_stime.tv_sec) +
                          1e-6 * static_cast<double>(ru.ru_utime.tv_usec + ru.ru_stime.tv_usec);
-    std::printf("ncsim: %s %s: %.3f s simulated, %llu cycles, %zu offset writes taken, %llu "
-                "refused, %.3f s CPU; result in %s\n",
-                s.completed ? "done" : "stopped early",
-                std::string(program_name(opt.program)).c_str(), s.sim_time_s,
-                static_cast<unsigned long long>(s.cycles), s.writes,
-                static_cast<unsigned long long>(s.refused), cpu_s, opt.out_dir.c_str());
+    std::printf(
+        "ncsim: %s %s: %.3f s simulated, %llu cycles, %zu offset writes taken, %llu "
+        "refused, %.3f s CPU; result in %s\n",
+        s.completed ? "done" : "stopped early", std::string(program_name(opt.program)).c_str(),
+        s.sim_time_s, static_cast<unsigned long long>(s.cycles), s.writes,
+        static_cast<unsigned long long>(s.refused), cpu_s, opt.out_dir.c_str());
     return s.completed ? 0 : 4;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "ncsim: %s\n", e.what());

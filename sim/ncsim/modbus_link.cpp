@@ -126,8 +126,8 @@ bool ModbusLink::filter(const modbus_nc::WriteRecord& w) {
       ok = false;
       break;
     }
-    const double v = mb::decode(std::span<const std::uint16_t>(w.values).subspan(a - first, b - a),
-                                om.encoding);
+    const double v =
+        mb::decode(std::span<const std::uint16_t>(w.values).subspan(a - first, b - a), om.encoding);
     if (!std::isfinite(v) || std::fabs(v) > limit_um_) {
       ok = false;
       break;

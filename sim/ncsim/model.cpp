@@ -135,8 +135,8 @@ Vec3 MachineModel::machine_error_um(const Vec3& p_mm, double t_s) const {
 }
 
 double MachineModel::laser_reading_um(double cut_path_mm) {
-  const double n = config_.laser_noise.enabled ? config_.laser_noise.sigma_um * laser_rng_.gaussian()
-                                               : 0.0;
+  const double n =
+      config_.laser_noise.enabled ? config_.laser_noise.sigma_um * laser_rng_.gaussian() : 0.0;
   return wear_um(cut_path_mm) + n;
 }
 

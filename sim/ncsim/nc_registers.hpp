@@ -46,7 +46,7 @@ class OffsetRegisters {
     double value_um;
   };
   static constexpr std::size_t kRegisterSpace = 65536;
-  std::vector<double> value_;   // in force, by register index
+  std::vector<double> value_;  // in force, by register index
   std::vector<bool> known_;
   std::vector<double> last_written_;
   std::deque<Pending> pending_;  // ordered by effective time (latency is constant)

@@ -194,8 +194,8 @@ class Roll final : public Program {
         continue;  // never reached by the wheel
       }
       const double z = z0_ + static_cast<double>(i) * step_mm_;
-      rows.push_back({pass_, z, ground_[i], 0.0, z, (ground_[i] - target_.at(z)) * 1000.0,
-                      offset_[i]});
+      rows.push_back(
+          {pass_, z, ground_[i], 0.0, z, (ground_[i] - target_.at(z)) * 1000.0, offset_[i]});
     }
   }
 
@@ -219,8 +219,6 @@ class Roll final : public Program {
 std::unique_ptr<Program> make_touch_program(const SimConfig& c) {
   return std::make_unique<Touch>(c);
 }
-std::unique_ptr<Program> make_roll_program(const SimConfig& c) {
-  return std::make_unique<Roll>(c);
-}
+std::unique_ptr<Program> make_roll_program(const SimConfig& c) { return std::make_unique<Roll>(c); }
 
 }  // namespace nccomp::sim::ncsim

@@ -93,7 +93,8 @@ std::string effects_json(const EffectsConfig& e) {
     << ",\"time_scale\":" << num(e.thermal.time_scale)
     << ",\"source\":" << quoted(e.thermal.replay_source) << "}";
   s << ",\"pitch\":{\"enabled\":" << b(e.pitch.enabled)
-    << ",\"amplitude_um\":" << vec(e.pitch.amplitude_um) << ",\"pitch_mm\":" << num(e.pitch.pitch_mm)
+    << ",\"amplitude_um\":" << vec(e.pitch.amplitude_um)
+    << ",\"pitch_mm\":" << num(e.pitch.pitch_mm)
     << ",\"slope_um_per_m\":" << vec(e.pitch.slope_um_per_m) << "}";
   s << ",\"probe_noise\":{\"enabled\":" << b(e.probe_noise.enabled)
     << ",\"sigma_um\":" << num(e.probe_noise.sigma_um) << "}";
@@ -170,7 +171,8 @@ void write_result(const std::string& dir, const Simulation& sim, const RunInfo& 
     << ",\"parts\":" << sim.config().parts << ",\"seed\":" << sim.config().seed
     << ",\"effects\":" << effects_json(sim.config().effects)
     << ",\"writes_received\":" << sim.registers().log().size()
-    << ",\"writes_refused\":" << sim.registers().refused() + info.refused_on_bus << ",\"registers\":{";
+    << ",\"writes_refused\":" << sim.registers().refused() + info.refused_on_bus
+    << ",\"registers\":{";
   bool first = true;
   for (const auto& [index, value] : sim.registers().last_values()) {
     j << (first ? "" : ",") << '"' << index << "\":" << num(value);

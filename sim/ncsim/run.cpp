@@ -1,8 +1,8 @@
 #include "sim/ncsim/run.hpp"
 
 #include <chrono>
-#include <memory>
 #include <cmath>
+#include <memory>
 #include <stdexcept>
 #include <thread>
 
@@ -47,8 +47,7 @@ std::unique_ptr<NcLink> make_link(const SimConfig& config, BusKind bus,
     known.push_back(r.register_index);
   }
   poll_rate_hz = 0.0;  // CAN pushes events: nothing to hold
-  return std::make_unique<CanLink>(std::move(can), config.can_interface,
-                                   config.nc.offset_limit_um);
+  return std::make_unique<CanLink>(std::move(can), config.can_interface, config.nc.offset_limit_um);
 }
 
 }  // namespace
@@ -107,8 +106,8 @@ RunSummary run(const SimConfig& config, const RunOptions& options) {
     }
     // Wait for a poller's first two polls: the daemon's first poll only takes the event
     // counters as a baseline, so events published before it would be lost.
-    const auto wait_end = std::chrono::steady_clock::now() +
-                          std::chrono::duration<double>(options.wait_client_s);
+    const auto wait_end =
+        std::chrono::steady_clock::now() + std::chrono::duration<double>(options.wait_client_s);
     while (!link.client_ready() && std::chrono::steady_clock::now() < wait_end) {
       std::this_thread::sleep_for(std::chrono::milliseconds(5));
     }
@@ -125,9 +124,10 @@ RunSummary run(const SimConfig& config, const RunOptions& options) {
         summary.completed = true;
         break;
       }
-      const auto next = start + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-                                    std::chrono::duration<double>(core::seconds(t_ns + period_ns) /
-                                                                  options.speed));
+      const auto next =
+          start +
+          std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+              std::chrono::duration<double>(core::seconds(t_ns + period_ns) / options.speed));
       std::this_thread::sleep_until(next);
     }
     // Writes still on their way when the program ended.

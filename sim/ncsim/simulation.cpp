@@ -19,8 +19,7 @@ constexpr double kDegPerRad = 180.0 / std::numbers::pi;
 
 Vec3 axis_offsets_um(const Simulation& sim) {
   const NcConfig& nc = sim.config().nc;
-  return {sim.reg(nc.axis_register[0]), sim.reg(nc.axis_register[1]),
-          sim.reg(nc.axis_register[2])};
+  return {sim.reg(nc.axis_register[0]), sim.reg(nc.axis_register[1]), sim.reg(nc.axis_register[2])};
 }
 
 void set_position(AxisSample& a, const Vec3& p_mm, const Vec3& offsets_um) {
@@ -63,8 +62,8 @@ class MouldFace final : public Program {
         const double d = std::min(d_mm, link_left_mm_);
         link_left_mm_ -= d;
         path_mm_ += d;
-        const double y = std::min(static_cast<double>(pass_) * c_.stepover_mm + d_link_done(),
-                                  c_.size_y_mm);
+        const double y =
+            std::min(static_cast<double>(pass_) * c_.stepover_mm + d_link_done(), c_.size_y_mm);
         const double x = dir_ > 0 ? c_.size_x_mm : 0.0;
         publish(sim, x, y, false);
         if (link_left_mm_ <= 1e-12) {
@@ -157,8 +156,8 @@ class MouldFace final : public Program {
 
   void maybe_measure(Simulation& sim) {
     const NcConfig& nc = sim.config().nc;
-    bool due = c_.measure_interval_mm > 0.0 &&
-               cut_path_mm_ - last_measure_mm_ >= c_.measure_interval_mm;
+    bool due =
+        c_.measure_interval_mm > 0.0 && cut_path_mm_ - last_measure_mm_ >= c_.measure_interval_mm;
     if (nc.measure_request_register >= 0) {
       const bool request = std::fabs(sim.reg(nc.measure_request_register)) > 0.0;
       due = due || (request && !request_seen_);
@@ -329,8 +328,7 @@ class SideWall final : public Program {
     const auto& q = pts[(i + 1) % pts.size()];
     const double f = (s - s0_[i]) / std::max(s0_[i + 1] - s0_[i], 1e-12);
     n = seg_n_[i];
-    const double draft =
-        (c_.plan.contour_z_mm - z) * std::tan(c_.plan.wall_angle_deg / kDegPerRad);
+    const double draft = (c_.plan.contour_z_mm - z) * std::tan(c_.plan.wall_angle_deg / kDegPerRad);
     return {p.x_mm + f * (q.x_mm - p.x_mm) + n[0] * draft,
             p.y_mm + f * (q.y_mm - p.y_mm) + n[1] * draft, z};
   }
@@ -339,8 +337,7 @@ class SideWall final : public Program {
     Vec3 n{};
     const Vec3 w = wall_point(s, z, n);
     const double r = c_.plan.tool_radius_mm;
-    set_position(sim.mutable_axis(), {w[0] + r * n[0], w[1] + r * n[1], z},
-                 axis_offsets_um(sim));
+    set_position(sim.mutable_axis(), {w[0] + r * n[0], w[1] + r * n[1], z}, axis_offsets_um(sim));
     AxisSample& a = sim.mutable_axis();
     a.program_path_mm = path_mm_;
     a.has_normal = true;
@@ -383,8 +380,8 @@ class SideWall final : public Program {
     const double e_machine = w + m.pushoff_um(p, w) + dot(m.machine_error_um(p, sim.time_s()), n);
     // Radius wear (live register, and the table register in table mode) moves the wall along
     // its normal (S1 convention: c > 0 leaves material); axis offsets shift the tool.
-    const double comp = dot(axis_offsets_um(sim), n) + sim.reg(nc.tool_radius_register) +
-                        table_offset(sim, s_mm_);
+    const double comp =
+        dot(axis_offsets_um(sim), n) + sim.reg(nc.tool_radius_register) + table_offset(sim, s_mm_);
     const double e = e_machine + comp;
     const auto cell = std::min(static_cast<std::size_t>(std::lround(s_mm_ / step_mm_)), cells_ - 1);
     wall_[static_cast<std::size_t>(level_)][cell] = e;
@@ -425,7 +422,8 @@ class SideWall final : public Program {
     probe_s_ = 0.0;
     MachineModel& m = sim.model();
     const auto level = static_cast<std::size_t>(cp.level);
-    const auto cell = std::min(static_cast<std::size_t>(std::lround(cp.s_mm / step_mm_)), cells_ - 1);
+    const auto cell =
+        std::min(static_cast<std::size_t>(std::lround(cp.s_mm / step_mm_)), cells_ - 1);
     const double e = wall_[level][cell];
     const double r = c_.plan.ball_radius_mm;
     const double delta0_um = (r / std::cos(cp.alpha_deg / kDegPerRad) - r) * 1000.0;
@@ -443,8 +441,7 @@ class SideWall final : public Program {
     pm.ball_radius_mm = r;
     pm.position_mm = {cp.x_mm, cp.y_mm, cp.z_mm};
     sim.emit(pm);
-    sim.mutable_results().checkpoints.push_back(
-        {part_, cp.id, cp.level, cp.z_mm, cp.s_mm, e, raw});
+    sim.mutable_results().checkpoints.push_back({part_, cp.id, cp.level, cp.z_mm, cp.s_mm, e, raw});
     ++probe_index_;
   }
 

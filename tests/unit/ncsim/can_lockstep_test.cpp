@@ -142,14 +142,11 @@ TEST(NcsimCan, LockstepOverVcanSyncAckAndAcknowledgedWrites) {
       ASSERT_TRUE(drivers::can::encode_offset(*z, 9000.0, p));  // beyond the NC's 500 µm
       send_can(bus, z->id, p.data(), z->length_bytes);
     }
-    const std::uint8_t ack[8] = {static_cast<std::uint8_t>(m.cycle),
-                                 static_cast<std::uint8_t>(m.cycle >> 8U),
-                                 static_cast<std::uint8_t>(m.cycle >> 16U),
-                                 static_cast<std::uint8_t>(m.cycle >> 24U),
-                                 static_cast<std::uint8_t>(m.cycle >> 32U),
-                                 static_cast<std::uint8_t>(m.cycle >> 40U),
-                                 static_cast<std::uint8_t>(m.cycle >> 48U),
-                                 static_cast<std::uint8_t>(m.cycle >> 56U)};
+    const std::uint8_t ack[8] = {
+        static_cast<std::uint8_t>(m.cycle),        static_cast<std::uint8_t>(m.cycle >> 8U),
+        static_cast<std::uint8_t>(m.cycle >> 16U), static_cast<std::uint8_t>(m.cycle >> 24U),
+        static_cast<std::uint8_t>(m.cycle >> 32U), static_cast<std::uint8_t>(m.cycle >> 40U),
+        static_cast<std::uint8_t>(m.cycle >> 48U), static_cast<std::uint8_t>(m.cycle >> 56U)};
     send_can(bus, kCanSyncAckId, ack, 8);
     LockstepMessage done{kLockstepMagic, 2, m.cycle, m.time_ns};
     ASSERT_EQ(send(ls, &done, sizeof done, 0), static_cast<ssize_t>(sizeof done));
@@ -164,9 +161,9 @@ TEST(NcsimCan, LockstepOverVcanSyncAckAndAcknowledgedWrites) {
   EXPECT_EQ(acks, 1);  // the accepted write, not the refused one
   EXPECT_EQ(summary.writes, 1U);
   EXPECT_EQ(summary.refused, 1U);
-  EXPECT_EQ(slurp(o.out_dir + "/writes.csv"),
-            "t_s,register_index,value_um,effective_t_s\n0.1," +
-                std::to_string(c.nc.tool_length_register) + ",-4,0.12\n");
+  EXPECT_EQ(slurp(o.out_dir + "/writes.csv"), "t_s,register_index,value_um,effective_t_s\n0.1," +
+                                                  std::to_string(c.nc.tool_length_register) +
+                                                  ",-4,0.12\n");
   EXPECT_NE(slurp(o.out_dir + "/result.json").find("\"bus\":\"can\""), std::string::npos);
 }
 

@@ -38,9 +38,9 @@ TEST(NcsimConfig, ShippedConfigParsesWithItsSideWallPlan) {
 }
 
 TEST(NcsimConfig, SetSwitchesAnEffectAndTopLevelKeys) {
-  const SimConfig c = load_sim_config(
-      kConfig, {"thermal.enabled=false", "wear.rate_um_per_m=2.5", "ncsim.seed=42",
-                "broken_tool.enabled=true", "program.mould_face.stepover_mm=0.5"});
+  const SimConfig c =
+      load_sim_config(kConfig, {"thermal.enabled=false", "wear.rate_um_per_m=2.5", "ncsim.seed=42",
+                                "broken_tool.enabled=true", "program.mould_face.stepover_mm=0.5"});
   EXPECT_FALSE(c.effects.thermal.enabled);
   EXPECT_EQ(c.effects.wear.rate_um_per_m, 2.5);
   EXPECT_EQ(c.seed, 42U);

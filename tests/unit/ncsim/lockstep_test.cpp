@@ -101,8 +101,8 @@ PeerLog fake_daemon(const std::string& sock, std::uint16_t port, double write_at
       EXPECT_EQ(mb::encode(-3.0, e, z), mb::EncodeResult::kOk);
       EXPECT_EQ(modbus_write_registers(ctx, 234, 2, z), 2);
       std::uint16_t big[2];
-      mb::Encoding i32{mb::ValueType::kInt32, mb::WordOrder::kHighFirst,
-                       mb::ByteOrder::kBigEndian, 0.1, 0.0};
+      mb::Encoding i32{mb::ValueType::kInt32, mb::WordOrder::kHighFirst, mb::ByteOrder::kBigEndian,
+                       0.1, 0.0};
       EXPECT_EQ(mb::encode(9000.0, i32, big), mb::EncodeResult::kOk);  // 9 mm: beyond 500 µm
       EXPECT_EQ(modbus_write_registers(ctx, 200, 2, big), -1);
       log.refused_errno = errno;
@@ -169,7 +169,8 @@ TEST(NcsimLockstep, FakeDaemonDrivesTheClockAndItsWritesLandInTheCut) {
   EXPECT_EQ(r.summary.refused, 1U);
   const std::string dir = ::testing::TempDir() + "/ncsim_ls_a";
   // The write is taken at the tick time it was made in (0.1 s), in force 20 ms later.
-  EXPECT_EQ(slurp(dir + "/writes.csv"), "t_s,register_index,value_um,effective_t_s\n0.1,8,-3,0.12\n");
+  EXPECT_EQ(slurp(dir + "/writes.csv"),
+            "t_s,register_index,value_um,effective_t_s\n0.1,8,-3,0.12\n");
   const std::string json = slurp(dir + "/result.json");
   EXPECT_NE(json.find("\"writes_received\":1,\"writes_refused\":1,\"registers\":{\"8\":-3}"),
             std::string::npos)

@@ -216,7 +216,8 @@ TEST(NcsimModel, ThermalReplayFollowsTheFlThermalGauges) {
   }
   const std::string text = std::string("[ncsim]\nbus_map = \"") + NCCOMP_SOURCE_DIR +
                            "/config/reference-nc-modbus.toml\"\n"
-                           "[effects.thermal]\nmode = \"replay\"\nreplay_file = \"" + data +
+                           "[effects.thermal]\nmode = \"replay\"\nreplay_file = \"" +
+                           data +
                            "\"\nx_channel = \"ch1\"\nz_channel = \"ch5\"\n"
                            "channel_sign = [1.0, 1.0, -1.0]\ntime_scale = 1.0\n";
   const SimConfig c = parse_sim_config(text, "thermal.toml", ".");
