@@ -147,6 +147,16 @@ void LockstepPeer::connect(const std::string& path, double timeout_s) {
                            " (is ncsim running with --lockstep " + path + "?)");
 }
 
+void LockstepPeer::adopt(int fd) noexcept {
+  if (fd_ >= 0) {
+    ::close(fd_);
+  }
+  fd_ = fd;
+  end_ = LockstepEnd::kRunning;
+  end_detail_ = 0;
+  ticks_ = 0;
+}
+
 void LockstepPeer::finish(LockstepEnd why, int detail) noexcept {
   if (end_ == LockstepEnd::kRunning) {
     end_ = why;

@@ -66,6 +66,8 @@ class LockstepPeer {
   /// Connects to the peer's socket, retrying every 20 ms for up to timeout_s (the peer may start
   /// after the daemon). Not real-time. Throws std::runtime_error naming the path and the error.
   void connect(const std::string& path, double timeout_s);
+  /// Takes an already connected SOCK_SEQPACKET socket (tests, fuzzing, an inherited socket).
+  void adopt(int fd) noexcept;
 
   enum class Wait : std::uint8_t { kTick, kTimeout, kEnd };
   /// Loop thread: waits at most timeout_ns for the next TICK. kEnd: the run is over, end() says
