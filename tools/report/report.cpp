@@ -371,9 +371,12 @@ std::string report_text(const Report& r) {
            i.program.c_str(), i.bus.c_str(), i.parts, i.seed, i.sim_time_s);
   std::string on;
   std::string off;
-  for (const auto& [name, e] : i.effects) (e.enabled ? on : off) += (name + " ");
-  o += fmt("effects  on: %s| off: %s\n", on.empty() ? "- " : on.c_str(),
-           off.empty() ? "- " : off.c_str());
+  for (const auto& [name, e] : i.effects) {
+    std::string& list = e.enabled ? on : off;
+    list += (list.empty() ? "" : " ") + name;
+  }
+  o += fmt("effects  on: %s | off: %s\n", on.empty() ? "-" : on.c_str(),
+           off.empty() ? "-" : off.c_str());
   o += fmt("NC       %lld offset writes received, %lld alarm(s) seen\n", i.writes_received,
            i.alarms_seen);
   for (const auto& f : r.files) {
