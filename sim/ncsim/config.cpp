@@ -351,6 +351,7 @@ void read_effects(const toml::table* eff, const std::string& file, const std::st
     h.boolean("enabled", e.hardness.enabled);
     h.number("amplitude", e.hardness.amplitude, 0.0, 0.9);
     h.number("wavelength_mm", e.hardness.wavelength_mm, 1.0, 1e5);
+    h.boolean("per_part", e.hardness.per_part);
     h.finish();
   }
   {

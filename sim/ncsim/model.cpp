@@ -23,9 +23,20 @@ double Curve::at(double xq) const {
 }
 
 MachineModel::MachineModel(EffectsConfig config, std::uint64_t seed)
-    : config_(std::move(config)), laser_rng_(seed), probe_rng_(seed ^ 0x5DEECE66DULL) {
+    : config_(std::move(config)), laser_rng_(seed), probe_rng_(seed ^ 0x5DEECE66DULL), seed_(seed) {
+  make_field(seed);
+}
+
+void MachineModel::set_part(std::int32_t part) {
+  if (config_.hardness.per_part) {
+    const auto blank = static_cast<std::uint64_t>(static_cast<std::uint32_t>(part));
+    make_field(seed_ + std::uint64_t{0x9E3779B97F4A7C15} * blank);
+  }
+}
+
+void MachineModel::make_field(std::uint64_t field_seed) {
   // The field uses its own stream so that switching the noise effects does not move it.
-  Rng field(seed ^ 0xA5A5A5A55A5A5A5AULL);
+  Rng field(field_seed ^ 0xA5A5A5A55A5A5A5AULL);
   const double k = 2.0 * std::numbers::pi / std::max(config_.hardness.wavelength_mm, 1e-6);
   for (std::size_t i = 0; i < kWaves; ++i) {
     // Directions mostly in XY (a blank's hardness varies across it), some along Z.

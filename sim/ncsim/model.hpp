@@ -71,6 +71,8 @@ struct HardnessConfig {
   double amplitude{0.1};
   /// Typical wavelength of the field [mm].
   double wavelength_mm{60.0};
+  /// Every blank has its own field (S1 mode B's case); false: the same field for every part.
+  bool per_part{false};
 };
 
 enum class ThermalMode : std::uint8_t { kFirstOrder, kReplay };
@@ -149,6 +151,8 @@ class MachineModel {
   /// Radial wear of the edge [µm] after cut_path_mm of cutting (broken tool included).
   [[nodiscard]] double wear_um(double cut_path_mm) const;
   [[nodiscard]] bool broken(double cut_path_mm) const;
+  /// The program starts part `part` (1, 2, ...): with hardness.per_part, a new blank's field.
+  void set_part(std::int32_t part);
   /// Relative hardness at a point of the part (1 = nominal).
   [[nodiscard]] double hardness(const Vec3& p_mm) const;
   /// Push-off along the normal [µm] (material left) at point p with the given wear.
@@ -177,6 +181,8 @@ class MachineModel {
   std::array<Vec3, kWaves> wave_k_{};
   std::array<double, kWaves> wave_phase_{};
   double wave_norm_{1.0};
+  std::uint64_t seed_{0};
+  void make_field(std::uint64_t field_seed);
 };
 
 }  // namespace nccomp::sim::ncsim

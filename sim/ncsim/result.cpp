@@ -85,7 +85,8 @@ std::string effects_json(const EffectsConfig& e) {
     << ",\"reference_lever_mm\":" << num(e.pushoff.reference_lever_mm) << "}";
   s << ",\"hardness\":{\"enabled\":" << b(e.hardness.enabled)
     << ",\"amplitude\":" << num(e.hardness.amplitude)
-    << ",\"wavelength_mm\":" << num(e.hardness.wavelength_mm) << "}";
+    << ",\"wavelength_mm\":" << num(e.hardness.wavelength_mm)
+    << ",\"per_part\":" << b(e.hardness.per_part) << "}";
   s << ",\"thermal\":{\"enabled\":" << b(e.thermal.enabled) << ",\"mode\":\""
     << (e.thermal.mode == ThermalMode::kReplay ? "replay" : "first_order")
     << "\",\"gain_um\":" << vec(e.thermal.gain_um)

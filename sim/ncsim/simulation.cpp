@@ -53,6 +53,7 @@ class MouldFace final : public Program {
           sim.emit(core::ToolChange{sim.now_ns(), nc.tool, false});
         }
         sim.emit(ProgramEvent{sim.now_ns(), ProgramEventKind::kPartStart, part_});
+        sim.model().set_part(part_);
         phase_ = Phase::kCut;
         return step(sim, h_s);
       case Phase::kCut:
@@ -284,6 +285,7 @@ class SideWall final : public Program {
           sim.emit(core::ToolChange{sim.now_ns(), nc.tool, false});
         }
         sim.emit(ProgramEvent{sim.now_ns(), ProgramEventKind::kPartStart, part_});
+        sim.model().set_part(part_);
         phase_ = Phase::kCut;
         level_ = 0;
         s_mm_ = 0.0;

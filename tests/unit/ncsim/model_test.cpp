@@ -122,6 +122,30 @@ TEST(NcsimModel, HardnessFieldIsSmoothBoundedAndSeeded) {
   EXPECT_LT(max_slope, 0.1 * std::sqrt(6.0) * 2.0 * std::numbers::pi / (60.0 * 0.6));
 }
 
+TEST(NcsimModel, HardnessPerPartGivesEveryBlankItsOwnField) {
+  EffectsConfig e = all_off();
+  e.hardness.enabled = true;
+  e.hardness.amplitude = 0.1;
+  MachineModel same(e, 4);
+  e.hardness.per_part = true;
+  MachineModel own(e, 4);
+  const Vec3 p{30.0, 20.0, -5.0};
+  same.set_part(1);
+  own.set_part(1);
+  const double s1 = same.hardness(p);
+  const double o1 = own.hardness(p);
+  same.set_part(2);
+  own.set_part(2);
+  EXPECT_EQ(same.hardness(p), s1);
+  double diff = 0.0;
+  for (double x = 0.0; x < 200.0; x += 10.0) {
+    diff = std::max(diff, std::fabs(own.hardness({x, 20.0, -5.0}) - o1));
+  }
+  EXPECT_GT(diff, 0.02);
+  own.set_part(1);
+  EXPECT_EQ(own.hardness(p), o1);  // part 1's blank again: the same field (seeded)
+}
+
 TEST(NcsimModel, FirstOrderThermalDriftAndTemperature) {
   EffectsConfig e = all_off();
   e.thermal.enabled = true;

@@ -151,6 +151,35 @@ TEST(NcsimMouldFace, LaserTripsAtTheIntervalInProgramOrder) {
   EXPECT_NEAR(sim.time_s(), 3.2 + 2.0, 0.01);
 }
 
+TEST(NcsimMouldFace, TheDaemonAsksForAMeasurementThroughItsRegister) {
+  SimConfig c = quiet_config();
+  c.mould_face.measure_interval_mm = 0.0;  // only when asked
+  c.mould_face.laser_trip_s = 0.5;
+  c.nc.measure_request_register = 3;
+  Simulation sim(c, ProgramKind::kMouldFace, kKnown);
+  auto measurements = [&] {
+    int n = 0;
+    for (const auto& e : sim.take_events()) {
+      n += std::holds_alternative<core::ToolMeasurement>(e) ? 1 : 0;
+    }
+    return n;
+  };
+  sim.advance_to(core::from_seconds(0.5));
+  EXPECT_EQ(measurements(), 0);
+  // The request (1) is in force after the 0.1 s latency: one trip; holding it at 1 asks nothing
+  // more; 0 then 1 again asks once more (a rising edge per request).
+  ASSERT_EQ(sim.write_offset(0.5, 3, 1.0), WriteResult::kAccepted);
+  sim.advance_to(core::from_seconds(1.5));
+  EXPECT_EQ(measurements(), 1);
+  sim.advance_to(core::from_seconds(2.0));
+  EXPECT_EQ(measurements(), 0);
+  ASSERT_EQ(sim.write_offset(2.0, 3, 0.0), WriteResult::kAccepted);
+  sim.advance_to(core::from_seconds(2.2));
+  ASSERT_EQ(sim.write_offset(2.2, 3, 1.0), WriteResult::kAccepted);
+  sim.advance_to(core::from_seconds(3.2));
+  EXPECT_EQ(measurements(), 1);
+}
+
 TEST(NcsimMouldFace, BrokenToolIsReportedByTheLaser) {
   SimConfig c = quiet_config();
   c.effects.broken_tool = {true, 5.0, 300.0, true};
