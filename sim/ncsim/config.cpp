@@ -476,8 +476,19 @@ std::vector<std::vector<double>> read_csv_columns(const std::string& path,
     throw ConfigError("cannot read " + path);
   }
   std::string line;
-  if (!std::getline(in, line)) {
-    throw ConfigError(path + ":1: empty file, expected a header");
+  std::size_t line_no = 0;
+  // Leading '#' comment lines and blank lines (the profile / trajectory CSVs of
+  // docs/grinding.md allow them) come before the header.
+  for (;;) {
+    if (!std::getline(in, line)) {
+      throw ConfigError(path + ":" + std::to_string(line_no + 1) +
+                        ": empty file, expected a header");
+    }
+    ++line_no;
+    const auto first = line.find_first_not_of(" \t\r");
+    if (first != std::string::npos && line[first] != '#') {
+      break;
+    }
   }
   auto split = [](const std::string& l) {
     std::vector<std::string> out;
@@ -515,15 +526,16 @@ std::vector<std::vector<double>> read_csv_columns(const std::string& path,
       }
     }
     if (found == header.size()) {
-      throw ConfigError(path + ":1: no column \"" + want + "\" in the header");
+      throw ConfigError(path + ":" + std::to_string(line_no) + ": no column \"" + want +
+                        "\" in the header");
     }
     idx.push_back(found);
   }
   std::vector<std::vector<double>> out(columns.size());
-  std::size_t line_no = 1;
   while (std::getline(in, line)) {
     ++line_no;
-    if (trim(line).empty() || trim(line) == "\r") {
+    const std::string t = trim(line);
+    if (t.empty() || t == "\r" || t.front() == '#') {
       continue;
     }
     const auto cells = split(line);

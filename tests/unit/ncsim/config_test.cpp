@@ -83,6 +83,17 @@ TEST(NcsimConfig, CsvReaderNamesLineAndColumn) {
   } catch (const ConfigError& e) {
     EXPECT_EQ(std::string(e.what()), path + ":3: column \"u_mm\": not a finite number: \"abc\"");
   }
+  // '#' comments and blank lines are skipped, before the header as well.
+  const std::string ok = ::testing::TempDir() + "/ncsim_ok.csv";
+  {
+    std::ofstream f(ok);
+    f << "# trajectory\n\nz_mm,u_mm\r\n0,0.5\r\n# mid\n1,-2e-3\n";
+  }
+  const auto cols = read_csv_columns(ok, {"u_mm", "z_mm"});
+  ASSERT_EQ(cols[0].size(), 2U);
+  EXPECT_EQ(cols[0][0], 0.5);
+  EXPECT_EQ(cols[0][1], -2e-3);
+  EXPECT_EQ(cols[1][1], 1.0);
   try {
     (void)read_csv_columns(path, {"z_mm", "w_mm"});
     FAIL() << "accepted a missing column";
