@@ -374,6 +374,19 @@ void Loop::cycle(core::TimeNs wake_ns, bool stamp) {
       snap.regs[i] = engine.register_state(i);
     }
     registers_.store(snap);
+    ModulesSnapshot mods;
+    mods.config_generation = rt.generation;
+    mods.count = static_cast<std::uint32_t>(std::min(engine.module_count(), kMaxSnapshotModules));
+    for (std::size_t m = 0; m < mods.count; ++m) {
+      const auto& mod = engine.module(m);
+      auto& ms = mods.modules[m];
+      const std::string_view name = mod.name();
+      const std::size_t len = std::min(name.size(), ms.name.size() - 1);
+      std::copy_n(name.data(), len, ms.name.data());
+      ms.name[len] = '\0';
+      ms.count = static_cast<std::uint32_t>(mod.status(ms.values));
+    }
+    modules_.store(mods);
   }
 }
 

@@ -130,12 +130,28 @@ struct LoopStats {
   core::TimeNs max_wait_ns{0};          // longest wait for a TICK between two cycles
 };
 
-inline constexpr std::size_t kMaxSnapshotRegisters = 64;
+// Room for a whole S1 table of a few hundred checkpoints (docs/checkpoints.md); copied every
+// 10 cycles (24 bytes per register).
+inline constexpr std::size_t kMaxSnapshotRegisters = 512;
 
 struct RegisterSnapshot {
   std::uint64_t config_generation{0};
   std::uint32_t count{0};
   std::array<core::engine::RegisterState, kMaxSnapshotRegisters> regs{};
+};
+
+inline constexpr std::size_t kMaxSnapshotModules = 8;
+
+/// The engine modules' own status values (core::engine::Module::status()), for `nccomp status`.
+struct ModuleSnapshot {
+  std::array<char, 48> name{};  // NUL-terminated, truncated
+  std::uint32_t count{0};
+  std::array<core::engine::StatusValue, core::engine::kMaxStatusValues> values{};
+};
+struct ModulesSnapshot {
+  std::uint64_t config_generation{0};
+  std::uint32_t count{0};
+  std::array<ModuleSnapshot, kMaxSnapshotModules> modules{};
 };
 
 class Loop {
@@ -171,6 +187,7 @@ class Loop {
   }
   [[nodiscard]] LoopStats stats() const noexcept { return stats_.load(); }
   [[nodiscard]] RegisterSnapshot registers() const noexcept { return registers_.load(); }
+  [[nodiscard]] ModulesSnapshot modules() const noexcept { return modules_.load(); }
   [[nodiscard]] const LatencyHistogram& latency() const noexcept { return latency_; }
 
   /// Consumers (the logger thread).
@@ -201,6 +218,7 @@ class Loop {
   LatencyHistogram latency_;
   core::rt::Seqlock<LoopStats> stats_;
   core::rt::Seqlock<RegisterSnapshot> registers_;
+  core::rt::Seqlock<ModulesSnapshot> modules_;
   LoopStats local_{};
   std::uint64_t persisted_generation_{~std::uint64_t{0}};
   core::TimeNs last_export_ns_{0};

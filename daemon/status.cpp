@@ -66,6 +66,7 @@ std::string num(double v) {
 struct View {
   LoopStats s;
   RegisterSnapshot r;
+  ModulesSnapshot m;
   std::vector<std::string> names;
   double rate_hz{0.0};
   double measured_rate_hz{0.0};
@@ -77,6 +78,7 @@ View gather(const StatusContext& c) {
   View v;
   v.s = c.loop->stats();
   v.r = c.loop->registers();
+  v.m = c.loop->modules();
   v.names = c.register_names ? c.register_names() : std::vector<std::string>{};
   v.rate_hz = v.s.period_ns > 0 ? 1e9 / static_cast<double>(v.s.period_ns) : 0.0;
   const double span_s = core::seconds(v.s.last_wake_ns - v.s.started_ns);
@@ -143,7 +145,7 @@ std::string render_json(const StatusContext& c) {
     << ",\"writes_rejected\":" << e.writes_rejected
     << ",\"writes_unknown_register\":" << e.writes_unknown_register
     << ",\"writes_held\":" << e.writes_held << ",\"output_overflows\":" << e.output_overflows
-    << "},";
+    << ",\"writes_deferred\":" << e.writes_deferred << "},";
   o << "\"registers\":[";
   for (std::size_t i = 0; i < v.r.count; ++i) {
     const auto& r = v.r.regs[i];
@@ -151,6 +153,21 @@ std::string render_json(const StatusContext& c) {
       << "\",\"output_um\":" << num(r.output_um)
       << ",\"target_um\":" << (r.has_target ? num(r.target_um) : "null")
       << ",\"slewing\":" << (r.slewing ? "true" : "false") << "}";
+  }
+  o << "],\"modules\":[";
+  for (std::size_t i = 0; i < v.m.count; ++i) {
+    const auto& m = v.m.modules[i];
+    o << (i ? "," : "") << "{\"name\":\"" << json_escape(m.name.data()) << "\",\"status\":{";
+    for (std::size_t k = 0; k < m.count; ++k) {
+      const auto& sv = m.values[k];
+      o << (k ? "," : "") << "\"" << json_escape(sv.key) << "\":";
+      if (sv.text != nullptr) {
+        o << "\"" << json_escape(sv.text) << "\"";
+      } else {
+        o << num(sv.value);
+      }
+    }
+    o << "}}";
   }
   o << "],\"buses\":[";
   for (std::size_t i = 0; i < c.buses.size(); ++i) {
@@ -237,6 +254,24 @@ std::string render_text(const StatusContext& c) {
     }
     o << "\n";
   }
+  if (v.r.count < v.names.size()) {
+    o << "  ... " << v.names.size() - v.r.count << " more (status shows the first "
+      << kMaxSnapshotRegisters << ")\n";
+  }
+  for (std::size_t i = 0; i < v.m.count; ++i) {
+    const auto& m = v.m.modules[i];
+    o << "module " << m.name.data() << ":";
+    for (std::size_t k = 0; k < m.count; ++k) {
+      const auto& sv = m.values[k];
+      o << (k ? ", " : " ") << sv.key << " ";
+      if (sv.text != nullptr) {
+        o << sv.text;
+      } else {
+        o << num(sv.value);
+      }
+    }
+    o << "\n";
+  }
   o << "buses:\n";
   for (const auto& [name, bus] : c.buses) {
     const auto st = bus->status();
@@ -314,6 +349,18 @@ std::string render_prometheus(const StatusContext& c) {
   for (std::size_t i = 0; i < v.r.count; ++i) {
     o << "nccompd_register_output_um{register=\"" << reg_name(v, i) << "\"} "
       << num(v.r.regs[i].output_um) << "\n";
+  }
+  o << "# HELP nccompd_module_value A compensation module's status value (unit in the key).\n"
+       "# TYPE nccompd_module_value gauge\n";
+  for (std::size_t i = 0; i < v.m.count; ++i) {
+    const auto& m = v.m.modules[i];
+    for (std::size_t k = 0; k < m.count; ++k) {
+      const auto& sv = m.values[k];
+      if (sv.text == nullptr && std::isfinite(sv.value)) {
+        o << "nccompd_module_value{module=\"" << m.name.data() << "\",key=\"" << sv.key << "\"} "
+          << num(sv.value) << "\n";
+      }
+    }
   }
   o << "# HELP nccompd_bus_up 1 while the bus link is up.\n# TYPE nccompd_bus_up gauge\n";
   for (const auto& [name, bus] : c.buses) {

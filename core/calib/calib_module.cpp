@@ -65,4 +65,23 @@ bool CalibrationModule::load_state(std::span<const std::byte> bytes) noexcept {
   return true;
 }
 
+std::size_t CalibrationModule::status(std::span<engine::StatusValue> out) const noexcept {
+  const auto& c = calib_;
+  const engine::StatusValue values[] = {
+      {"phase", 0.0, to_string(c.phase())},
+      {"x_written_um", c.written_um(0), nullptr},
+      {"y_written_um", c.written_um(1), nullptr},
+      {"z_written_um", c.written_um(2), nullptr},
+      {"x_last_drift_um", c.model(Slot::kXLateral).anchor_drift_um, nullptr},
+      {"y_last_drift_um", c.model(Slot::kY).anchor_drift_um, nullptr},
+      {"z_last_drift_um", c.model(Slot::kZ).anchor_drift_um, nullptr},
+  };
+  std::size_t w = 0;
+  for (const auto& v : values) {
+    if (w == out.size()) break;
+    out[w++] = v;
+  }
+  return w;
+}
+
 }  // namespace nccomp::core::calib

@@ -40,6 +40,10 @@ class CalibrationModule final : public engine::Module {
   void set_clock_offset_s(double wall_minus_monotonic_s) noexcept {
     calib_.set_clock_offset_s(wall_minus_monotonic_s);
   }
+  /// Real-time safe: phase, the corrections written [µm] and the last measured drift [µm] per
+  /// axis.
+  std::size_t status(std::span<engine::StatusValue> out) const noexcept override;
+
   /// The calibrator, for operator commands (on the loop thread between steps) and status.
   [[nodiscard]] Calibrator& calibrator() noexcept { return calib_; }
   [[nodiscard]] const Calibrator& calibrator() const noexcept { return calib_; }

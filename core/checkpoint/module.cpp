@@ -135,4 +135,29 @@ bool CheckpointModule::load_state(std::span<const std::byte> bytes) noexcept {
   return true;
 }
 
+std::size_t CheckpointModule::status(std::span<engine::StatusValue> out) const noexcept {
+  const auto& c = compensator_;
+  std::size_t learned = 0;
+  for (std::size_t i = 0; i < c.size(); ++i) {
+    learned += c.learned_count(i) > 0 ? 1U : 0U;
+  }
+  const auto& k = c.counters();
+  const engine::StatusValue values[] = {
+      {"checkpoints", static_cast<double>(c.size()), nullptr},
+      {"learned", static_cast<double>(learned), nullptr},
+      {"passed", static_cast<double>(c.passed()), nullptr},
+      {"part", static_cast<double>(c.part()), nullptr},
+      {"parts", static_cast<double>(c.part_counter()), nullptr},
+      {"probe_readings", static_cast<double>(k.measurements), nullptr},
+      {"implausible", static_cast<double>(k.implausible), nullptr},
+      {"outliers", static_cast<double>(k.outliers), nullptr},
+  };
+  std::size_t w = 0;
+  for (const auto& v : values) {
+    if (w == out.size()) break;
+    out[w++] = v;
+  }
+  return w;
+}
+
 }  // namespace nccomp::core::checkpoint

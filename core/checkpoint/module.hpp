@@ -40,6 +40,10 @@ class CheckpointModule final : public engine::Module {
     return compensator_.generation();
   }
 
+  /// Real-time safe: checkpoints, learned (measured at least once), passed this part, part,
+  /// parts counted, probe readings, alarms (implausible, outliers).
+  std::size_t status(std::span<engine::StatusValue> out) const noexcept override;
+
   [[nodiscard]] CheckpointCompensator& compensator() noexcept { return compensator_; }
   [[nodiscard]] const CheckpointCompensator& compensator() const noexcept { return compensator_; }
 

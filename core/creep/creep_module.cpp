@@ -151,4 +151,40 @@ bool CreepModule::load_state(std::span<const std::byte> bytes) noexcept {
   return true;
 }
 
+std::size_t CreepModule::status(std::span<engine::StatusValue> out) const noexcept {
+  const auto& s = comp_.state();
+  const auto& c = comp_.config();
+  const std::size_t n = std::max<std::size_t>(1, c.edge.edge_points);
+  // The support point with the largest measured wear speaks for the tool.
+  std::size_t k = 0;
+  for (std::size_t i = 1; i < n; ++i) {
+    if (s.measured_um[i] > s.measured_um[k]) k = i;
+  }
+  const double in_force_um = s.committed_um[k] + comp_.applied_wear_um(k);
+  const char* mode = c.profile == ProfileShape::kStep ? "step"
+                     : c.predict.enabled              ? "predictive creeping"
+                                                      : "creeping";
+  const engine::StatusValue values[] = {
+      {"mode", 0.0, mode},
+      {"tool", static_cast<double>(s.tool), nullptr},
+      {"wear_in_force_um", in_force_um, nullptr},
+      {"wear_measured_um", s.measured_um[k], nullptr},
+      {"creep_remaining_um", s.measured_um[k] - in_force_um, nullptr},
+      {"creeps_in_progress", static_cast<double>(comp_.creeps_in_progress()), nullptr},
+      {"correction_um", comp_.correction_um(), nullptr},
+      {"cut_path_mm", s.cut_path_mm, nullptr},
+      {"wear_rate_um_per_mm", s.rate_known ? s.rate_um_per_mm[k] : kNaN, nullptr},
+      {"halted", s.halted ? 1.0 : 0.0, nullptr},
+      {"measurements_accepted", static_cast<double>(comp_.counters().measurements_accepted),
+       nullptr},
+      {"measurements_refused", static_cast<double>(comp_.counters().measurements_refused), nullptr},
+  };
+  std::size_t w = 0;
+  for (const auto& v : values) {
+    if (w == out.size()) break;
+    out[w++] = v;
+  }
+  return w;
+}
+
 }  // namespace nccomp::core::creep

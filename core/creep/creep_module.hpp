@@ -62,6 +62,10 @@ class CreepModule final : public engine::Module {
   /// Advances on every discrete change (measurement, tool change, halt) and every 1 mm of cut
   /// path while creeps, entries or predictions are in progress.
   [[nodiscard]] std::uint64_t state_generation() const noexcept override { return generation_; }
+  /// Real-time safe: mode, tool, wear in force / measured / still to creep (max over the edge)
+  /// [µm], creeps in progress, the correction along the normal [µm], cut path [mm], fitted wear
+  /// rate [µm/mm], halted, measurements accepted / refused.
+  std::size_t status(std::span<engine::StatusValue> out) const noexcept override;
 
   /// Operator acknowledgement (status socket / command). Real-time safe.
   void clear_alarm() noexcept {

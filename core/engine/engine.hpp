@@ -72,6 +72,17 @@ class RegisterTable {
   const std::vector<RegisterSpec>* specs_;
 };
 
+/// One value of a module's status (`nccomp status`): key and text are string literals (static
+/// storage), so a status is filled without allocating. A value with text != nullptr is a word
+/// (e.g. a mode), else a number in the unit its key names.
+struct StatusValue {
+  const char* key{nullptr};
+  double value{0.0};
+  const char* text{nullptr};
+};
+/// Most values one module reports.
+inline constexpr std::size_t kMaxStatusValues = 16;
+
 /// A compensation module (S0 creep, S1 checkpoints, S2, S3, a model). Modules write absolute
 /// targets (OffsetWrite) for registers they were given at attach(); the engine limits them.
 class Module {
@@ -102,6 +113,12 @@ class Module {
   virtual bool load_state(std::span<const std::byte> bytes) noexcept { return bytes.empty(); }
   /// Real-time safe. Advances whenever the state changed in a way worth persisting.
   [[nodiscard]] virtual std::uint64_t state_generation() const noexcept { return 0; }
+  /// Real-time safe (the loop thread publishes it for the status socket). Writes at most
+  /// out.size() values; returns how many.
+  virtual std::size_t status(std::span<StatusValue> out) const noexcept {
+    (void)out;
+    return 0;
+  }
 };
 
 struct EngineOptions {
