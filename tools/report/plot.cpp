@@ -67,8 +67,8 @@ double nice_step(double span, int n) {
 std::vector<std::size_t> decimate(const std::vector<double>& y, std::size_t buckets) {
   std::vector<std::size_t> keep;
   if (y.size() <= 2 * buckets) {
-    keep.resize(y.size());
-    for (std::size_t i = 0; i < y.size(); ++i) keep[i] = i;
+    keep.reserve(y.size());
+    for (std::size_t i = 0; i < y.size(); ++i) keep.push_back(i);
     return keep;
   }
   const std::size_t per = (y.size() + buckets - 1) / buckets;

@@ -373,7 +373,8 @@ std::string report_text(const Report& r) {
   std::string off;
   for (const auto& [name, e] : i.effects) {
     std::string& list = e.enabled ? on : off;
-    list += (list.empty() ? "" : " ") + name;
+    if (!list.empty()) list += ' ';
+    list += name;
   }
   o += fmt("effects  on: %s | off: %s\n", on.empty() ? "-" : on.c_str(),
            off.empty() ? "-" : off.c_str());
@@ -481,6 +482,13 @@ std::string jstr(const std::string& s) {
   return o + "\"";
 }
 
+// Appends every part; used instead of `"literal" + std::string` temporaries, which GCC 12 at -O3
+// flags with a false -Wrestrict.
+template <typename... Parts>
+void put(std::string& o, const Parts&... parts) {
+  (o.append(parts), ...);
+}
+
 std::string jnum(double v) { return std::isfinite(v) ? fmt("%.9g", v) : "null"; }
 
 std::string jloc(const Located& l) {
@@ -499,14 +507,14 @@ std::string jform(const FormError& f) {
 std::string report_json(const Report& r) {
   const auto& i = r.info;
   std::string o = "{";
-  o += "\"format\":\"nccomp-report-1\",\"dir\":" + jstr(r.dir);
-  o += ",\"program\":" + jstr(i.program) + ",\"bus\":" + jstr(i.bus);
+  put(o, "\"format\":\"nccomp-report-1\",\"dir\":", jstr(r.dir));
+  put(o, ",\"program\":", jstr(i.program), ",\"bus\":", jstr(i.bus));
   o += fmt(",\"sim_time_s\":%s,\"parts\":%lld,\"seed\":%lld", jnum(i.sim_time_s).c_str(), i.parts,
            i.seed);
   o += ",\"effects\":{";
   for (std::size_t k = 0; k < i.effects.size(); ++k) {
-    o += (k ? "," : "") + jstr(i.effects[k].first) +
-         fmt(":%s", i.effects[k].second.enabled ? "true" : "false");
+    put(o, k ? "," : "", jstr(i.effects[k].first), ":",
+        i.effects[k].second.enabled ? "true" : "false");
   }
   o += fmt("},\"writes_received\":%lld,\"alarms_seen\":%lld", i.writes_received, i.alarms_seen);
   o += ",\"registers\":{";
@@ -522,27 +530,28 @@ std::string report_json(const Report& r) {
   }
   o += fmt("],\"bad_rows\":%zu,\"bad_row_messages\":[", r.bad_rows);
   for (std::size_t k = 0; k < r.bad_row_messages.size(); ++k) {
-    o += (k ? "," : "") + jstr(r.bad_row_messages[k]);
+    put(o, k ? "," : "", jstr(r.bad_row_messages[k]));
   }
   o += "]";
   if (r.surface) {
     const auto& s = *r.surface;
     o += fmt(",\"surface\":{\"passes\":%zu,\"along\":%s,\"form\":%s", s.passes,
              jstr(s.along).c_str(), jform(s.form).c_str());
-    o += ",\"max_step_um\":" + jnum(s.max_step.value_um) + ",\"max_step_at\":" + jloc(s.max_step);
-    o += ",\"max_step_between_passes_um\":" + jnum(s.max_step_between_passes.value_um) +
-         ",\"max_step_between_passes_at\":" + jloc(s.max_step_between_passes);
-    o += ",\"max_offset_step_um\":" + jnum(s.max_offset_step.value_um) +
-         ",\"max_offset_step_at\":" + jloc(s.max_offset_step);
-    o += ",\"max_offset_jump_between_passes_um\":" +
-         jnum(s.max_offset_jump_between_passes.value_um) + "}";
+    put(o, ",\"max_step_um\":", jnum(s.max_step.value_um), ",\"max_step_at\":", jloc(s.max_step));
+    put(o, ",\"max_step_between_passes_um\":", jnum(s.max_step_between_passes.value_um),
+        ",\"max_step_between_passes_at\":", jloc(s.max_step_between_passes));
+    put(o, ",\"max_offset_step_um\":", jnum(s.max_offset_step.value_um),
+        ",\"max_offset_step_at\":", jloc(s.max_offset_step));
+    put(o,
+        ",\"max_offset_jump_between_passes_um\":", jnum(s.max_offset_jump_between_passes.value_um),
+        "}");
   }
   if (r.walls) {
     const auto& w = *r.walls;
     o += fmt(",\"walls\":{\"parts\":%zu,\"layers\":%zu,\"form\":%s", w.parts, w.layers,
              jform(w.form).c_str());
-    o += ",\"max_step_um\":" + jnum(w.max_step.value_um) + ",\"max_step_at\":" + jloc(w.max_step);
-    o += ",\"max_offset_step_um\":" + jnum(w.max_offset_step.value_um) + ",\"per_part\":[";
+    put(o, ",\"max_step_um\":", jnum(w.max_step.value_um), ",\"max_step_at\":", jloc(w.max_step));
+    put(o, ",\"max_offset_step_um\":", jnum(w.max_offset_step.value_um), ",\"per_part\":[");
     for (std::size_t k = 0; k < w.per_part.size(); ++k) {
       o += fmt("%s{\"part\":%lld,\"form\":%s}", k ? "," : "", w.per_part[k].part,
                jform(w.per_part[k].form).c_str());
