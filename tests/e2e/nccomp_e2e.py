@@ -36,6 +36,9 @@ def _die_with_parent():
     ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL, 0, 0, 0)
 
 
+LIVE = set()  # every Proc not yet stopped (the SIGTERM handler stops them all)
+
+
 class Proc:
     """A child process in its own process group, output to a log file."""
 
@@ -47,6 +50,7 @@ class Proc:
         self.p = subprocess.Popen(self.argv, stdout=self._log, stderr=subprocess.STDOUT,
                                   stdin=subprocess.DEVNULL, cwd=cwd, start_new_session=True,
                                   preexec_fn=_die_with_parent)
+        LIVE.add(self)
 
     def running(self):
         return self.p.poll() is None
@@ -72,6 +76,7 @@ class Proc:
                     pass
                 self.p.wait()
         self._log.close()
+        LIVE.discard(self)
         return self.p.returncode
 
     def log(self):
@@ -317,12 +322,18 @@ class Check:
                                  (self.name, len(self.failures), "\n  ".join(self.failures)))
 
 
-def run_modes(b, source, work, echo=print, speed=None, prefix="", seed=1):
-    results = {}
-    for key, _, cfg in MODES:
-        results[key] = run_machining(b, source, work, prefix + key, cfg, "ncsim-demo.toml",
-                                     seed=seed, speed=speed, echo=echo)
-    return results
+def run_modes(b, source, work, echo=print, speed=None, prefix="", seed=1, parallel=False):
+    """The mould face in the four modes. parallel: all four at once (real time: each takes the
+    part's machining time divided by the speed factor, mostly waiting)."""
+    def one(mode):
+        key, _, cfg = mode
+        return key, run_machining(b, source, work, prefix + key, cfg, "ncsim-demo.toml",
+                                  seed=seed, speed=speed, echo=echo)
+    if not parallel:
+        return dict(one(m) for m in MODES)
+    import concurrent.futures
+    with concurrent.futures.ThreadPoolExecutor(max_workers=len(MODES)) as pool:
+        return dict(pool.map(one, MODES))
 
 
 def modes_table(results):
@@ -497,7 +508,7 @@ def demo(b, source, work, speed):
     mode = "lock-step" if speed is None else "real time, ncsim at x%g" % speed
     print("demo: machining the mould face (part a) four times over Modbus TCP on 127.0.0.1, %s"
           % mode, flush=True)
-    res = run_modes(b, source, work, speed=speed,
+    res = run_modes(b, source, work, speed=speed, parallel=speed is not None,
                     echo=lambda s: print("  " + s, flush=True))
     print()
     print(modes_table(res))
@@ -531,9 +542,15 @@ def main():
     dm.add_argument("--realtime", type=float, default=None, metavar="SPEED",
                     help="real-time daemon, ncsim at this speed factor (default: lock-step)")
     args = ap.parse_args()
-    # SIGTERM (scripts/demo's trap, an operator) unwinds like Ctrl-C: every run's `finally`
-    # stops its ncsim and nccompd.
-    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
+    # SIGTERM / Ctrl-C (scripts/demo's trap, an operator): stop every ncsim and nccompd this
+    # runner started (runs may be in worker threads), then leave.
+    def on_signal(signum, _frame):
+        for p in list(LIVE):
+            p.stop(grace_s=2.0)
+        os._exit(128 + signum)
+
+    signal.signal(signal.SIGTERM, on_signal)
+    signal.signal(signal.SIGINT, on_signal)
     b = Binaries(args.bin_dir, args.nccompd, args.ncsim, args.nccomp)
     args.source = os.path.abspath(args.source)
     args.work = os.path.abspath(args.work)
