@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "core/checkpoint/module.hpp"
 #include "core/checkpoint/probe.hpp"
 #include "daemon/config/builtin_sections.hpp"
 #include "daemon/sections/calibration/calibration_section.hpp"
@@ -239,6 +240,82 @@ TEST(CalibrationSection, ParsesTheExampleAndChecksTheAxisRegisters) {
                               ":16: calibration.plausibility: unknown key"),
             std::string::npos)
       << errors_of(h);
+}
+
+}  // namespace
+}  // namespace nccomp::daemon::sections
+
+namespace nccomp::daemon::sections {
+namespace {
+
+// GIVEN the engine nccompd builds from a config with all three module sections, WHEN its state
+// is exported (what the state file holds) and imported by a freshly built engine (a restart),
+// THEN each module resumes its own state: creep's wear and creep progress, S1's learned values.
+TEST(ModuleState, EveryModuleResumesAfterARestart) {
+  TempDir d;
+  const std::string text = "include = [\"" + kBoss + "\"]\n" + registers(76, 20, -1) + R"(
+[creep]
+profile = "linear"
+creep_length_mm = 50
+[creep.edge]
+tool_shape = "tip"
+normal_source = "none"
+fallback_channel = "length"
+[creep.output]
+mode = "tool_registers"
+length_register = "r0"
+)";
+  const auto f = d.write("a.toml", text);
+  auto r = load_file(f);
+  ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+  auto a = config::build_engine(*r.config);
+  ASSERT_EQ(a->module_count(), 2U);  // checkpoints, creep
+  core::StepOutput out;
+  core::TimeNs now = 0;
+  auto step = [&](core::engine::Engine& e, std::vector<core::Event> ev) {
+    now += 1'000'000;
+    e.step(now, ev, out);
+  };
+  double path = 0.0;
+  auto sample = [&](core::engine::Engine& e) {
+    core::AxisSample s;
+    s.tool = 1;
+    s.program_path_mm = path;
+    step(e, {s});
+    path += 0.5;
+  };
+  step(*a, {core::ToolChange{0, 1, false}});
+  sample(*a);
+  core::ToolMeasurement tm;
+  tm.tool = 1;
+  tm.wear_um[0] = 10.0;
+  step(*a, {tm});
+  for (int i = 0; i < 40; ++i) sample(*a);  // 20 of 50 mm: 4 µm in force
+  core::ProbeMeasurement pm;
+  pm.part = 1;
+  pm.checkpoint = 5;
+  pm.wall_angle_deg = 3.0;
+  pm.ball_radius_mm = 2.0;
+  pm.raw_deviation_um = 8.0 + core::checkpoint::probe_delta0_um(2.0, 3.0);
+  step(*a, {pm});
+  std::vector<std::byte> bytes(a->state_capacity());
+  bytes.resize(a->export_state(bytes));
+  ASSERT_FALSE(bytes.empty());
+
+  auto b = config::build_engine(*r.config);
+  std::size_t skipped = 0;
+  ASSERT_TRUE(b->import_state(bytes, now, &skipped));
+  EXPECT_EQ(skipped, 0U);
+  EXPECT_NEAR(b->register_state(0).output_um, -4.0, 0.1);  // creep's length wear, as sent
+  const auto& cp = dynamic_cast<const core::checkpoint::CheckpointModule&>(b->module(0));
+  EXPECT_EQ(cp.compensator().learned_count(5), 1U);
+  EXPECT_DOUBLE_EQ(cp.compensator().learned_um(5), 8.0);
+  // The creep continues where it was: 30 more mm finish it at the full 10 µm, nothing doubled.
+  path = 1000.0;  // wherever the NC's program is after the restart: re-anchored
+  for (int i = 0; i < 40; ++i) sample(*b);  // first sample re-anchors, then 19.5 mm more
+  EXPECT_NEAR(b->register_state(0).output_um, -4.0 - 6.0 * 19.5 / 30.0, 0.1);
+  for (int i = 0; i < 40; ++i) sample(*b);
+  EXPECT_NEAR(b->register_state(0).output_um, -10.0, 1e-9);
 }
 
 }  // namespace
