@@ -265,8 +265,9 @@ def run_machining(b, source, work, name, daemon_cfg, ncsim_cfg, program="mould_f
                 p.stop()
         shutil.rmtree(sock_dir, ignore_errors=True)
     wall_s = time.monotonic() - t0
-    rep = subprocess.run([b.nccomp, "report", out_dir, "--json", "--svg",
-                          os.path.join(out_dir, "error.svg")],
+    # The touch program has no surface to plot.
+    svg = [] if program == "touch" else ["--svg", os.path.join(out_dir, "error.svg")]
+    rep = subprocess.run([b.nccomp, "report", out_dir, "--json"] + svg,
                          capture_output=True, text=True, timeout=120)
     if rep.returncode != 0:
         raise RuntimeError("%s: nccomp report failed (%d): %s" % (name, rep.returncode,
@@ -455,22 +456,45 @@ def scenario_implausible_probe(b, source, work):
     c.that(all(abs(w[2]) < 100.0 for w in writes),
            "no write carries the 500 um reading (largest %.3f um)" %
            max([abs(w[2]) for w in writes] + [0.0]))
+    # Part 2 is cut with what part 1 taught: nothing at checkpoint 0 (its reading was refused),
+    # the learned values at the three others.
+    rows = {(int(m["part"]), int(m["point"])): m for m in r.measurements()
+            if m.get("kind") == "contour"}
+    c.that(abs(float(rows[(1, 0)]["measured_um"])) > 400.0 if (1, 0) in rows else False,
+           "part 1 checkpoint 0 logged with the implausible reading")
+    if (2, 0) in rows:
+        c.that(abs(float(rows[(2, 0)]["applied_um"])) < 1e-9,
+               "part 2 checkpoint 0 cut with nothing applied (applied_um %s)" %
+               rows[(2, 0)]["applied_um"])
+    for cp in (1, 2, 3):
+        if (2, cp) in rows:
+            c.that(abs(float(rows[(2, cp)]["applied_um"])) > 0.5,
+                   "part 2 checkpoint %d cut with part 1's value (applied_um %s)" %
+                   (cp, rows[(2, cp)]["applied_um"]))
+    c.that(len(rows) == 12, "4 checkpoints x 3 parts probed and logged (%d)" % len(rows))
     c.done()
 
 
 def scenario_undeclared_effect(b, source, work):
-    """Issue 11 item 5: ncsim with the thermal drift on, the daemon's model without it; the
-    daemon logs the measurements, and `nccomp analyze` on that log finds the drift and reports
-    the error before and after."""
+    """Issue 11 item 5: ncsim machines 12 side walls with its tool wear switched on (20 um per m
+    of path), the daemon's declared model (config/demo/model-declared.toml) has no wear term;
+    the daemon logs its probe measurements, and `nccomp analyze` on that log must find the
+    effect (a trend over the parts: the probe rows carry no cut path) and report the error
+    before and after, on fitted and held-out rows.
+
+    (The thermal drift is not used: ncsim's probe sits in the spindle and moves with the drift,
+    so the walls' probe readings do not see it; only the touch cycles on the test body do, and
+    the daemon's [calibration] reference machine does not match ncsim's touch program yet.)"""
     r = run_machining(b, source, work, "undeclared", "nccompd-walls.toml", "ncsim-demo.toml",
-                      program="side_wall", parts=8,
-                      sets=["thermal.enabled=true", "thermal.time_constant_s=60"], echo=print)
+                      program="side_wall", parts=12,
+                      sets=["wear.enabled=true", "wear.rate_um_per_m=20"], echo=print)
     c = Check("undeclared_effect")
     c.that(r.ncsim_rc == 0 and r.daemon_rc == 0,
            "ncsim exit %d, nccompd exit %d" % (r.ncsim_rc, r.daemon_rc))
     log = os.path.join(r.run_dir, "log", "measurements.csv")
-    rows = r.measurements()
-    c.that(len(rows) >= 20, "the daemon logged %d measurements" % len(rows))
+    rows = [m for m in r.measurements() if m.get("kind") == "contour"]
+    c.that(len(rows) == 48, "the daemon logged 4 checkpoints x 12 parts = %d probe rows" %
+           len(rows))
     out = os.path.join(r.run_dir, "analysis")
     a = subprocess.run([b.nccomp, "analyze", "--log", log, "--config",
                         os.path.join(source, "config", "demo", "model-declared.toml"),
@@ -480,14 +504,21 @@ def scenario_undeclared_effect(b, source, work):
     if a.returncode == 0:
         with open(os.path.join(out, "summary.json")) as f:
             s = json.load(f)
-        names = [e["name"] for e in s.get("effects", [])]
-        c.that("thermal_drift" in names, "analyze found thermal_drift: %s" % names)
-        for e in s.get("effects", []):
-            if e["name"] == "thermal_drift":
-                c.that(e["rms_after_um"] < 0.7 * e["rms_before_um"],
-                       "thermal_drift: RMS %.3f -> %.3f um (held-out %.3f -> %.3f um)" % (
-                           e["rms_before_um"], e["rms_after_um"], e["heldout_rms_before_um"],
-                           e["heldout_rms_after_um"]))
+        effects = s.get("effects", [])
+        names = [e["name"] for e in effects]
+        c.that(bool(effects) and effects[0]["name"] in ("part_trend", "tool_wear"),
+               "analyze added the wear first, as part_trend or tool_wear: %s" % names)
+        if effects:
+            e = effects[0]
+            c.that(e["rms_after_um"] < 0.5 * e["rms_before_um"],
+                   "%s: RMS %.3f -> %.3f um (less than half)" % (
+                       e["name"], e["rms_before_um"], e["rms_after_um"]))
+            c.that(e["heldout_rms_after_um"] < 0.5 * e["heldout_rms_before_um"],
+                   "%s: held-out RMS %.3f -> %.3f um (less than half)" % (
+                       e["name"], e["heldout_rms_before_um"], e["heldout_rms_after_um"]))
+        c.that(s["final_rms_um"] < 1.5 * s["noise_floor_um"],
+               "final RMS %.3f um within 1.5 x the noise floor %.3f um" % (
+                   s["final_rms_um"], s["noise_floor_um"]))
     c.done()
 
 
