@@ -483,6 +483,9 @@ int run_daemon(const DaemonOptions& options) {
 
   notify("STOPPING=1\nSTATUS=stopping");
   loop.stop();
+  // The persister first: it writes what the loop queued before it stopped, which is older than
+  // the final state below (written after it, the queued one would overwrite the final one).
+  persister.stop();
   // The loop is stopped: its engine can be read from this thread. Persist the final state (not in
   // hold mode: the corrupt file stays for inspection). The NC keeps its offsets as they are.
   if (state_problem.empty()) {
@@ -492,7 +495,6 @@ int run_daemon(const DaemonOptions& options) {
       persister.write_now(std::span<const std::byte>(buf.data(), n));
     }
   }
-  persister.stop();
   const auto ps = persister.stats();
   status.stop();
   logger.stop();

@@ -222,11 +222,12 @@ RunResult run_once(int ticks) {
   res.end = loop.lockstep_end();
   loop.stop();
   res.stats = loop.stats();
-  // As the daemon does at exit: the final state, written synchronously.
+  // As the daemon does at exit: the persister drains what the loop queued, then the final state
+  // is written synchronously (the other order lets a queued older state overwrite it).
+  persister.stop();
   std::vector<std::byte> buf(swap.current().engine->state_capacity());
   const std::size_t n = swap.current().engine->export_state(buf);
   persister.write_now(std::span<const std::byte>(buf.data(), n));
-  persister.stop();
   mlog.stop();
   const auto limit2 = std::chrono::steady_clock::now() + 2s;
   while (!bus.delivered(0) && std::chrono::steady_clock::now() < limit2) {
