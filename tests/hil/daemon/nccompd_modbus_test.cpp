@@ -133,8 +133,11 @@ class Daemon {
     return std::nullopt;
   }
   std::string log() const {
+    // Through a stringstream: GCC 12 at -O2 flags istreambuf_iterator (-Wnull-dereference).
     std::ifstream in(dir_ / "nccompd.log");
-    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+    std::ostringstream s;
+    s << in.rdbuf();
+    return s.str();
   }
 
  private:
