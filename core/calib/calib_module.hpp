@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "core/calib/calibrator.hpp"
 #include "core/engine/engine.hpp"
@@ -43,6 +44,10 @@ class CalibrationModule final : public engine::Module {
   /// Real-time safe: phase, the corrections written [µm] and the last measured drift [µm] per
   /// axis.
   std::size_t status(std::span<engine::StatusValue> out) const noexcept override;
+  /// register_x, register_y, register_z.
+  [[nodiscard]] std::vector<std::uint16_t> written_registers() const override {
+    return {config_.register_x, config_.register_y, config_.register_z};
+  }
 
   /// The calibrator, for operator commands (on the loop thread between steps) and status.
   [[nodiscard]] Calibrator& calibrator() noexcept { return calib_; }

@@ -160,4 +160,15 @@ std::size_t CheckpointModule::status(std::span<engine::StatusValue> out) const n
   return w;
 }
 
+std::vector<std::uint16_t> CheckpointModule::written_registers() const {
+  std::vector<std::uint16_t> out;
+  for (std::size_t i = 0; i < plan_.size(); ++i) {
+    out.push_back(static_cast<std::uint16_t>(config_.register_base + i));
+  }
+  if (config_.active_register >= 0) {
+    out.push_back(static_cast<std::uint16_t>(config_.active_register));
+  }
+  return out;
+}
+
 }  // namespace nccomp::core::checkpoint

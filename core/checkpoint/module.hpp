@@ -43,6 +43,8 @@ class CheckpointModule final : public engine::Module {
   /// Real-time safe: checkpoints, learned (measured at least once), passed this part, part,
   /// parts counted, probe readings, alarms (implausible, outliers).
   std::size_t status(std::span<engine::StatusValue> out) const noexcept override;
+  /// The table registers and the live register.
+  [[nodiscard]] std::vector<std::uint16_t> written_registers() const override;
 
   [[nodiscard]] CheckpointCompensator& compensator() noexcept { return compensator_; }
   [[nodiscard]] const CheckpointCompensator& compensator() const noexcept { return compensator_; }

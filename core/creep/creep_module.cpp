@@ -187,4 +187,17 @@ std::size_t CreepModule::status(std::span<engine::StatusValue> out) const noexce
   return w;
 }
 
+std::vector<std::uint16_t> CreepModule::written_registers() const {
+  const auto& o = comp_.config().output;
+  std::vector<std::uint16_t> out;
+  for (const std::int32_t r : o.channel_register) {
+    if (r >= 0) out.push_back(static_cast<std::uint16_t>(r));
+  }
+  for (const std::int32_t r : {o.warning_register, o.alarm_register, o.measurement_due_register,
+                               o.tool_change_register, o.restart_path_register}) {
+    if (r >= 0) out.push_back(static_cast<std::uint16_t>(r));
+  }
+  return out;
+}
+
 }  // namespace nccomp::core::creep

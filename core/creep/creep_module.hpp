@@ -5,6 +5,7 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "core/creep/config.hpp"
 #include "core/creep/wear_compensator.hpp"
@@ -66,6 +67,8 @@ class CreepModule final : public engine::Module {
   /// [µm], creeps in progress, the correction along the normal [µm], cut path [mm], fitted wear
   /// rate [µm/mm], halted, measurements accepted / refused.
   std::size_t status(std::span<engine::StatusValue> out) const noexcept override;
+  /// The offset and flag registers of [creep.output] (valid after attach()).
+  [[nodiscard]] std::vector<std::uint16_t> written_registers() const override;
 
   /// Operator acknowledgement (status socket / command). Real-time safe.
   void clear_alarm() noexcept {

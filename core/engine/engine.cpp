@@ -195,6 +195,23 @@ void Engine::configure(std::vector<RegisterSpec> registers,
     m->attach(table);
     capacity += sizeof(std::uint16_t) + name.size() + sizeof(std::uint32_t) + m->state_capacity();
   }
+  // One writer per register: two modules on one register would overwrite each other's target
+  // every cycle (an oscillating offset on the machine).
+  std::vector<int> writer(specs_.size(), -1);
+  for (std::size_t k = 0; k < modules.size(); ++k) {
+    for (const std::uint16_t r : modules[k]->written_registers()) {
+      if (r >= writer.size()) {
+        continue;  // attach() already refused unknown registers
+      }
+      if (writer[r] >= 0 && static_cast<std::size_t>(writer[r]) != k) {
+        throw std::invalid_argument(
+            "engine: register '" + specs_[r].name + "' is written by module '" +
+            std::string(modules[static_cast<std::size_t>(writer[r])]->name()) + "' and by '" +
+            std::string(modules[k]->name()) + "'; give each module its own registers");
+      }
+      writer[r] = static_cast<int>(k);
+    }
+  }
   regs_ = std::move(regs);
   modules_ = std::move(modules);
   options_ = options;

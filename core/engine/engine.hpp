@@ -113,6 +113,10 @@ class Module {
   virtual bool load_state(std::span<const std::byte> bytes) noexcept { return bytes.empty(); }
   /// Real-time safe. Advances whenever the state changed in a way worth persisting.
   [[nodiscard]] virtual std::uint64_t state_generation() const noexcept { return 0; }
+  /// Not real-time (after attach()). The register indices this module writes: two modules must
+  /// not drive the same register (the engine keeps one target per register, so they would
+  /// overwrite each other every cycle); configure() refuses such a table.
+  [[nodiscard]] virtual std::vector<std::uint16_t> written_registers() const { return {}; }
   /// Real-time safe (the loop thread publishes it for the status socket). Writes at most
   /// out.size() values; returns how many.
   virtual std::size_t status(std::span<StatusValue> out) const noexcept {

@@ -8,6 +8,7 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "core/engine/engine.hpp"
 
@@ -43,6 +44,10 @@ class RampModule final : public Module {
   /// Current value of the ramp [µm].
   [[nodiscard]] double value_um() const noexcept { return value_um_; }
   [[nodiscard]] bool done() const noexcept;
+  /// The ramp's register (valid after attach()).
+  [[nodiscard]] std::vector<std::uint16_t> written_registers() const override {
+    return {register_index_};
+  }
 
  private:
   RampConfig config_;

@@ -320,3 +320,36 @@ length_register = "r0"
 
 }  // namespace
 }  // namespace nccomp::daemon::sections
+
+namespace nccomp::daemon::sections {
+namespace {
+
+TEST(ModuleRegisters, TwoModulesOnOneRegisterAreRefused) {
+  TempDir d;
+  // creep's Z offset and calibration's register_z are the same register.
+  const std::string text = registers(23, 99, 20) + R"(
+[creep]
+[creep.edge]
+tool_shape = "tip"
+normal_source = "none"
+[creep.output]
+z_register = "r22"
+[calibration]
+register_x = 20
+register_y = 21
+register_z = 22
+)";
+  auto r = load_file(d.write("a.toml", text));
+  ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+  try {
+    (void)config::build_engine(*r.config);
+    FAIL() << "two writers of r22 accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_STREQ(e.what(),
+                 "engine: register 'r22' is written by module 'calibration' and by 'creep'; give "
+                 "each module its own registers");
+  }
+}
+
+}  // namespace
+}  // namespace nccomp::daemon::sections

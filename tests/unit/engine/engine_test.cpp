@@ -438,3 +438,44 @@ TEST(Engine, MoreWritesThanOneOutputHoldsAreDeferredInTurnNotLost) {
 
 }  // namespace
 }  // namespace nccomp::core::engine
+
+namespace nccomp::core::engine {
+namespace {
+
+// Writes one register and says so.
+class OwnedModule final : public Module {
+ public:
+  OwnedModule(const char* name, std::uint16_t reg) : name_(name), reg_(reg) {}
+  std::string_view name() const noexcept override { return name_; }
+  void attach(const RegisterTable& /*registers*/) override {}
+  void step(TimeNs now_ns, std::span<const Event> /*events*/, StepOutput& out) noexcept override {
+    out.writes.push(OffsetWrite{now_ns, reg_, 1.0});
+  }
+  std::vector<std::uint16_t> written_registers() const override { return {reg_}; }
+
+ private:
+  const char* name_;
+  std::uint16_t reg_;
+};
+
+TEST(Engine, ConfigureRefusesTwoModulesOnOneRegister) {
+  Engine e;
+  std::vector<std::unique_ptr<Module>> m;
+  m.push_back(std::make_unique<OwnedModule>("creep", 1));
+  m.push_back(std::make_unique<OwnedModule>("calibration", 1));
+  try {
+    e.configure({reg("a"), reg("b")}, std::move(m));
+    FAIL() << "configure accepted two writers of register 'b'";
+  } catch (const std::invalid_argument& ex) {
+    EXPECT_STREQ(ex.what(),
+                 "engine: register 'b' is written by module 'creep' and by 'calibration'; give "
+                 "each module its own registers");
+  }
+  std::vector<std::unique_ptr<Module>> ok;
+  ok.push_back(std::make_unique<OwnedModule>("creep", 0));
+  ok.push_back(std::make_unique<OwnedModule>("calibration", 1));
+  EXPECT_NO_THROW(e.configure({reg("a"), reg("b")}, std::move(ok)));
+}
+
+}  // namespace
+}  // namespace nccomp::core::engine
