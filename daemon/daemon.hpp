@@ -26,8 +26,9 @@ struct DaemonOptions {
   double lockstep_connect_timeout_s{10.0};
 };
 
-/// Runs until SIGTERM / SIGINT (in lock-step also until the peer's BYE or close). Returns the process exit status: 0 after a clean stop, 3 for an
-/// invalid configuration, 1 for any other start-up failure.
+/// Runs until SIGTERM / SIGINT (in lock-step also until the peer's BYE or close). Returns the
+/// process exit status: 0 after a clean stop, 3 for an invalid configuration, 1 for any other
+/// start-up failure.
 int run_daemon(const DaemonOptions& options);
 
 /// Reads a logical register's value [µm] back from the NC; nullopt when the bus cannot.

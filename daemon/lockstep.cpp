@@ -40,8 +40,7 @@ std::uint64_t get_u64(const std::uint8_t* p) noexcept {
 
 }  // namespace
 
-std::array<std::uint8_t, kLockstepMessageBytes> encode_lockstep(
-    const LockstepMessage& m) noexcept {
+std::array<std::uint8_t, kLockstepMessageBytes> encode_lockstep(const LockstepMessage& m) noexcept {
   std::array<std::uint8_t, kLockstepMessageBytes> b{};
   put_u32(b.data(), kLockstepMagic);
   put_u32(b.data() + 4, static_cast<std::uint32_t>(m.type));
@@ -50,8 +49,7 @@ std::array<std::uint8_t, kLockstepMessageBytes> encode_lockstep(
   return b;
 }
 
-LockstepDecode decode_lockstep(std::span<const std::uint8_t> bytes,
-                               LockstepMessage& out) noexcept {
+LockstepDecode decode_lockstep(std::span<const std::uint8_t> bytes, LockstepMessage& out) noexcept {
   if (bytes.size() != kLockstepMessageBytes) {
     return LockstepDecode::kWrongSize;
   }
@@ -164,7 +162,8 @@ void LockstepPeer::finish(LockstepEnd why, int detail) noexcept {
   }
 }
 
-LockstepPeer::Wait LockstepPeer::wait_tick(LockstepMessage& tick, core::TimeNs timeout_ns) noexcept {
+LockstepPeer::Wait LockstepPeer::wait_tick(LockstepMessage& tick,
+                                           core::TimeNs timeout_ns) noexcept {
   if (fd_ < 0 || end_ != LockstepEnd::kRunning) {
     return Wait::kEnd;
   }
@@ -229,8 +228,7 @@ bool LockstepPeer::send(const LockstepMessage& m) noexcept {
   const auto b = encode_lockstep(m);
   const ssize_t put = ::send(fd_, b.data(), b.size(), MSG_NOSIGNAL);
   if (put != static_cast<ssize_t>(b.size())) {
-    finish(errno == EPIPE || errno == ECONNRESET ? LockstepEnd::kClosed
-                                                 : LockstepEnd::kSocketError,
+    finish(errno == EPIPE || errno == ECONNRESET ? LockstepEnd::kClosed : LockstepEnd::kSocketError,
            errno);
     return false;
   }

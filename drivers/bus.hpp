@@ -24,16 +24,16 @@ enum class LinkState : std::uint8_t {
 
 /// Counters every driver keeps; drivers add their own in their own status struct.
 struct BusCounters {
-  std::uint64_t frames_rx{0};         // frames / responses received
-  std::uint64_t frames_tx{0};         // frames / requests sent
-  std::uint64_t events_decoded{0};    // core events pushed to rx()
-  std::uint64_t events_dropped{0};    // rx() ring full: events lost (the loop is too slow)
-  std::uint64_t malformed{0};         // rejected input, all reasons
-  std::uint64_t offsets_written{0};   // offset writes confirmed (acknowledged / echoed)
+  std::uint64_t frames_rx{0};        // frames / responses received
+  std::uint64_t frames_tx{0};        // frames / requests sent
+  std::uint64_t events_decoded{0};   // core events pushed to rx()
+  std::uint64_t events_dropped{0};   // rx() ring full: events lost (the loop is too slow)
+  std::uint64_t malformed{0};        // rejected input, all reasons
+  std::uint64_t offsets_written{0};  // offset writes confirmed (acknowledged / echoed)
   std::uint64_t offsets_retried{0};
-  std::uint64_t offsets_failed{0};    // gave up after retries: alarm raised
+  std::uint64_t offsets_failed{0};  // gave up after retries: alarm raised
   std::uint64_t reconnects{0};
-  std::uint64_t faults{0};            // bus faults of any kind
+  std::uint64_t faults{0};  // bus faults of any kind
 };
 
 struct BusStatus {

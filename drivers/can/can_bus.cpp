@@ -89,8 +89,8 @@ void CanBus::open_socket() {
     if (ifr.ifr_mtu != static_cast<int>(CANFD_MTU)) {
       ::close(s);
       throw std::runtime_error("can: " + ifname + ": can.fd = true but the interface MTU is " +
-                               std::to_string(ifr.ifr_mtu) + " (not CAN FD: " +
-                               std::to_string(CANFD_MTU) + ")");
+                               std::to_string(ifr.ifr_mtu) +
+                               " (not CAN FD: " + std::to_string(CANFD_MTU) + ")");
     }
     const int on = 1;
     if (::setsockopt(s, SOL_CAN_RAW, CAN_RAW_FD_FRAMES, &on, sizeof on) < 0) {
@@ -216,9 +216,8 @@ void CanBus::wake() noexcept {
 void CanBus::publish() noexcept {
   auto& b = st_.bus;
   auto& c = st_.can;
-  b.counters.malformed =
-      c.rejected_unknown_id + c.rejected_wrong_length + c.rejected_out_of_range +
-      c.rejected_not_finite;
+  b.counters.malformed = c.rejected_unknown_id + c.rejected_wrong_length + c.rejected_out_of_range +
+                         c.rejected_not_finite;
   b.counters.faults = c.error_passive + c.bus_off + c.interface_down + c.controller_overflow;
   c.rx_overflow = ovfl_base_ + ovfl_last_;
   b.alarm = std::any_of(slots_.begin(), slots_.end(),
@@ -232,9 +231,9 @@ void CanBus::publish() noexcept {
 }
 
 CanBus::Slot* CanBus::slot_for(std::uint16_t register_index) noexcept {
-  const auto it = std::lower_bound(
-      slots_.begin(), slots_.end(), register_index,
-      [](const Slot& s, std::uint16_t r) { return s.reg->register_index < r; });
+  const auto it =
+      std::lower_bound(slots_.begin(), slots_.end(), register_index,
+                       [](const Slot& s, std::uint16_t r) { return s.reg->register_index < r; });
   return (it != slots_.end() && it->reg->register_index == register_index) ? &*it : nullptr;
 }
 
@@ -434,14 +433,23 @@ void CanBus::receive_all(std::int64_t now_ns) noexcept {
       }
     }
     core::Event ev;
-    const auto r = decoder_.decode(id, ext, std::span<const std::uint8_t>(frame.data, len),
-                                   now_ns, ev);
+    const auto r =
+        decoder_.decode(id, ext, std::span<const std::uint8_t>(frame.data, len), now_ns, ev);
     switch (r.reject) {
-      case RejectReason::kNone: break;
-      case RejectReason::kUnknownId: ++st_.can.rejected_unknown_id; break;
-      case RejectReason::kWrongLength: ++st_.can.rejected_wrong_length; break;
-      case RejectReason::kOutOfRange: ++st_.can.rejected_out_of_range; break;
-      case RejectReason::kNotFinite: ++st_.can.rejected_not_finite; break;
+      case RejectReason::kNone:
+        break;
+      case RejectReason::kUnknownId:
+        ++st_.can.rejected_unknown_id;
+        break;
+      case RejectReason::kWrongLength:
+        ++st_.can.rejected_wrong_length;
+        break;
+      case RejectReason::kOutOfRange:
+        ++st_.can.rejected_out_of_range;
+        break;
+      case RejectReason::kNotFinite:
+        ++st_.can.rejected_not_finite;
+        break;
     }
     if (r.emitted) {
       if (rx_ring_.try_push(ev)) {
@@ -543,9 +551,9 @@ void CanBus::send_pending(std::int64_t now_ns) noexcept {
       if (e == ENOBUFS || e == EAGAIN) {
         // Transmit queue full: back off exponentially, the write stays pending.
         ++st_.can.enobufs;
-        backoff_ns_ = backoff_ns_ == 0 ? to_ns(config_.enobufs_backoff_s)
-                                       : std::min(backoff_ns_ * 2,
-                                                  64 * to_ns(config_.enobufs_backoff_s));
+        backoff_ns_ = backoff_ns_ == 0
+                          ? to_ns(config_.enobufs_backoff_s)
+                          : std::min(backoff_ns_ * 2, 64 * to_ns(config_.enobufs_backoff_s));
         backoff_until_ns_ = now_ns + backoff_ns_;
         return;
       }
@@ -612,8 +620,8 @@ void CanBus::check_link(std::int64_t now_ns) noexcept {
   }
   ifreq ifr{};
   std::strncpy(ifr.ifr_name, config_.interface.c_str(), IFNAMSIZ - 1);
-  const bool up = ::ioctl(probe, SIOCGIFFLAGS, &ifr) == 0 &&
-                  (ifr.ifr_flags & IFF_UP) != 0 && (ifr.ifr_flags & IFF_RUNNING) != 0;
+  const bool up = ::ioctl(probe, SIOCGIFFLAGS, &ifr) == 0 && (ifr.ifr_flags & IFF_UP) != 0 &&
+                  (ifr.ifr_flags & IFF_RUNNING) != 0;
   if (probe != sock_) {
     ::close(probe);
   }
@@ -665,8 +673,8 @@ int request_can_restart(int ifindex) noexcept {
   req.ifi.ifi_family = AF_UNSPEC;
   req.ifi.ifi_index = ifindex;
   const auto put = [&req](std::uint16_t type, const void* data, std::size_t len) {
-    auto* rta = reinterpret_cast<rtattr*>(reinterpret_cast<char*>(&req) +
-                                          NLMSG_ALIGN(req.nh.nlmsg_len));
+    auto* rta =
+        reinterpret_cast<rtattr*>(reinterpret_cast<char*>(&req) + NLMSG_ALIGN(req.nh.nlmsg_len));
     rta->rta_type = type;
     rta->rta_len = static_cast<std::uint16_t>(RTA_LENGTH(len));
     if (len > 0) {

@@ -16,8 +16,8 @@
 #include <atomic>
 #include <condition_variable>
 #include <cstdint>
-#include <mutex>
 #include <memory>
+#include <mutex>
 #include <thread>
 #include <vector>
 
@@ -36,20 +36,20 @@ inline constexpr std::uint32_t kLockstepSyncAckId = 0x7F1;
 
 /// The CAN driver's own counters, beside the common BusCounters.
 struct CanCounters {
-  std::uint64_t error_frames{0};      // error frames of any class received
-  std::uint64_t error_warning{0};     // controller reached the warning level
-  std::uint64_t error_passive{0};     // controller went error-passive
-  std::uint64_t bus_off{0};           // bus-off entered
-  std::uint64_t bus_recoveries{0};    // bus-off left (restarted frame or traffic again)
-  std::uint64_t restart_requests{0};  // netlink restarts asked for (restart = "daemon")
-  std::uint64_t restart_failures{0};  // ... refused by the kernel (e.g. vcan: not supported)
-  std::uint64_t interface_down{0};    // the interface went down (ENETDOWN / ENODEV)
+  std::uint64_t error_frames{0};         // error frames of any class received
+  std::uint64_t error_warning{0};        // controller reached the warning level
+  std::uint64_t error_passive{0};        // controller went error-passive
+  std::uint64_t bus_off{0};              // bus-off entered
+  std::uint64_t bus_recoveries{0};       // bus-off left (restarted frame or traffic again)
+  std::uint64_t restart_requests{0};     // netlink restarts asked for (restart = "daemon")
+  std::uint64_t restart_failures{0};     // ... refused by the kernel (e.g. vcan: not supported)
+  std::uint64_t interface_down{0};       // the interface went down (ENETDOWN / ENODEV)
   std::uint64_t controller_overflow{0};  // CAN_ERR_CRTL_RX/TX_OVERFLOW reported by the controller
-  std::uint64_t rx_overflow{0};       // frames the kernel dropped: socket queue full (SO_RXQ_OVFL)
-  std::uint64_t enobufs{0};           // ENOBUFS on send: transmit queue full, backed off
-  std::uint64_t ack_timeouts{0};      // acknowledge not seen in time (each attempt)
-  std::uint64_t tx_unencodable{0};    // offset value does not fit its register's signal
-  std::uint64_t tx_unmapped{0};       // offset write for a register without a mapping
+  std::uint64_t rx_overflow{0};     // frames the kernel dropped: socket queue full (SO_RXQ_OVFL)
+  std::uint64_t enobufs{0};         // ENOBUFS on send: transmit queue full, backed off
+  std::uint64_t ack_timeouts{0};    // acknowledge not seen in time (each attempt)
+  std::uint64_t tx_unencodable{0};  // offset value does not fit its register's signal
+  std::uint64_t tx_unmapped{0};     // offset write for a register without a mapping
   std::uint64_t rejected_unknown_id{0};
   std::uint64_t rejected_wrong_length{0};
   std::uint64_t rejected_out_of_range{0};
@@ -131,7 +131,7 @@ class CanBus final : public Bus {
 
   // I/O thread state (touched only by it once started).
   CanStatus st_{};
-  std::vector<Slot> slots_;                  // one per mapped register, sorted by index
+  std::vector<Slot> slots_;  // one per mapped register, sorted by index
   std::vector<std::pair<std::uint32_t, std::size_t>> ack_index_;  // ack key → slot
   int sock_{-1};
   int event_fd_{-1};
@@ -143,8 +143,8 @@ class CanBus final : public Bus {
   std::int64_t next_restart_ns_{0};
   std::int64_t backoff_until_ns_{0};
   std::int64_t backoff_ns_{0};
-  std::uint64_t ovfl_base_{0};   // drops counted by sockets closed before
-  std::uint32_t ovfl_last_{0};   // the current socket's cumulative drop count
+  std::uint64_t ovfl_base_{0};  // drops counted by sockets closed before
+  std::uint32_t ovfl_last_{0};  // the current socket's cumulative drop count
 
   std::atomic<bool> running_{false};
   std::thread thread_;

@@ -1,11 +1,11 @@
 #include "drivers/can/can_config.hpp"
 
+#include <toml++/toml.h>
 #include <cmath>
 #include <fstream>
 #include <initializer_list>
 #include <limits>
 #include <sstream>
-#include <toml++/toml.h>
 
 namespace nccomp::drivers::can {
 namespace {
@@ -41,9 +41,7 @@ class Reader {
     }
   }
 
-  const toml::node* get(const toml::table& t, std::string_view key) const {
-    return t.get(key);
-  }
+  const toml::node* get(const toml::table& t, std::string_view key) const { return t.get(key); }
 
   bool get_bool(const toml::table& t, const std::string& path, std::string_view key,
                 bool dflt) const {
@@ -98,8 +96,9 @@ class Reader {
     }
     const std::int64_t v = n->as_integer()->get();
     if (v < lo || v > hi) {
-      fail(*n, p, "must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " +
-                      std::to_string(v));
+      fail(*n, p,
+           "must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " +
+               std::to_string(v));
     }
     return v;
   }
@@ -136,8 +135,7 @@ class Reader {
   SignalLayout layout(const toml::table& t, const std::string& path) const {
     SignalLayout l;
     l.start_bit = static_cast<std::uint16_t>(get_int(t, path, "start_bit", std::nullopt, 0, 511));
-    l.length_bits =
-        static_cast<std::uint8_t>(get_int(t, path, "length_bits", std::nullopt, 1, 64));
+    l.length_bits = static_cast<std::uint8_t>(get_int(t, path, "length_bits", std::nullopt, 1, 64));
     const std::string type = get_string(t, path, "type", "unsigned");
     if (type == "unsigned") {
       l.type = ValueType::kUnsigned;
@@ -185,8 +183,7 @@ CanConfig parse_can_config(std::string_view toml_text, const std::string& file) 
     root = toml::parse(toml_text, file);
   } catch (const toml::parse_error& e) {
     throw MappingError(file, static_cast<int>(e.source().begin.line),
-                       static_cast<int>(e.source().begin.column), "",
-                       std::string(e.description()));
+                       static_cast<int>(e.source().begin.column), "", std::string(e.description()));
   }
   const auto* can_node = root.get("can");
   if (can_node == nullptr || !can_node->is_table()) {
@@ -263,8 +260,9 @@ CanConfig parse_can_table(const toml::table& can, const std::string& file_name) 
       for (std::size_t j = 0; j < sigs->size(); ++j) {
         const toml::table& st = *sigs->get(j)->as_table();
         const std::string sp = fp + ".signal[" + std::to_string(j) + "]";
-        r.only_keys(st, sp, {"name", "start_bit", "length_bits", "type", "byte_order", "scale",
-                             "offset", "min", "max"});
+        r.only_keys(st, sp,
+                    {"name", "start_bit", "length_bits", "type", "byte_order", "scale", "offset",
+                     "min", "max"});
         RxSignal s;
         s.origin = r.origin(st, sp);
         s.name = r.get_string(st, sp, "name", std::nullopt);
@@ -283,8 +281,8 @@ CanConfig parse_can_table(const toml::table& can, const std::string& file_name) 
       r.only_keys(ot, op, {"register", "id", "extended", "length_bytes", "value", "ack_id"});
       TxRegister reg;
       reg.origin = r.origin(ot, op);
-      reg.register_index = static_cast<std::uint16_t>(
-          r.get_int(ot, op, "register", std::nullopt, 0, std::numeric_limits<std::uint16_t>::max()));
+      reg.register_index = static_cast<std::uint16_t>(r.get_int(
+          ot, op, "register", std::nullopt, 0, std::numeric_limits<std::uint16_t>::max()));
       reg.extended = r.get_bool(ot, op, "extended", false);
       reg.id = static_cast<std::uint32_t>(r.get_int(ot, op, "id", std::nullopt, 0, kMaxId));
       reg.length_bytes = static_cast<std::uint8_t>(r.get_int(ot, op, "length_bytes", 8, 0, 64));

@@ -21,7 +21,7 @@ enum class RestartMode : std::uint8_t {
 
 struct CanConfig {
   /// Network interface, e.g. "can0" or "vcan0".
-  std::string interface{"can0"};
+  std::string interface { "can0" };
   RestartMode restart{RestartMode::kKernel};
   /// Bus-off → daemon restart request delay, and retry period of failed requests [s].
   double restart_delay_s{0.1};

@@ -85,8 +85,8 @@ constexpr std::array<FieldInfo, 34> kFields{{
 }};
 
 constexpr std::array<std::string_view, kEventKinds> kEventNames{
-    "axis_sample",  "tool_measurement", "probe_measurement", "calibration_touch",
-    "tool_change",  "program_event",    "temperature"};
+    "axis_sample", "tool_measurement", "probe_measurement", "calibration_touch",
+    "tool_change", "program_event",    "temperature"};
 
 const FieldInfo* field_info(EventKind kind, Field field) noexcept {
   for (const auto& f : kFields) {
@@ -117,8 +117,8 @@ void check_layout(const CanMapping& m, const Origin& o, const std::string& key,
     fail(m, o, k + "length_bits", "must be 1..64, got " + std::to_string(l.length_bits));
   }
   if (l.type == ValueType::kFloat && l.length_bits != 32 && l.length_bits != 64) {
-    fail(m, o, k + "length_bits", "a float signal is 32 or 64 bits, got " +
-                                      std::to_string(l.length_bits));
+    fail(m, o, k + "length_bits",
+         "a float signal is 32 or 64 bits, got " + std::to_string(l.length_bits));
   }
   if (!std::isfinite(l.scale) || std::fabs(l.scale) < 1e-300) {
     fail(m, o, k + "scale", "must be finite and non-zero");
@@ -149,8 +149,9 @@ void check_id(const CanMapping& m, const Origin& o, const std::string& key, std:
               bool extended) {
   const std::uint32_t max = extended ? kMaxExtendedId : kMaxStandardId;
   if (id > max) {
-    fail(m, o, key, hex(id) + " exceeds the " + std::string(extended ? "29" : "11") +
-                        "-bit ID range (max " + hex(max) + ")");
+    fail(m, o, key,
+         hex(id) + " exceeds the " + std::string(extended ? "29" : "11") + "-bit ID range (max " +
+             hex(max) + ")");
   }
 }
 
@@ -177,67 +178,140 @@ void apply(core::Event& ev, Field field, double v) noexcept {
         using E = std::decay_t<decltype(e)>;
         if constexpr (std::is_same_v<E, core::AxisSample>) {
           switch (field) {
-            case Field::kXmm: e.position_mm[0] = v; break;
-            case Field::kYmm: e.position_mm[1] = v; break;
-            case Field::kZmm: e.position_mm[2] = v; break;
-            case Field::kAdeg: e.position_mm[3] = v; break;
-            case Field::kBdeg: e.position_mm[4] = v; break;
-            case Field::kCdeg: e.position_mm[5] = v; break;
-            case Field::kProgramPathMm: e.program_path_mm = v; break;
-            case Field::kTool: e.tool = static_cast<std::int32_t>(v); break;
-            case Field::kNormalX: e.normal[0] = v; break;
-            case Field::kNormalY: e.normal[1] = v; break;
-            case Field::kNormalZ: e.normal[2] = v; break;
-            case Field::kCutting: e.cutting = v > 0.5; break;
-            default: break;
+            case Field::kXmm:
+              e.position_mm[0] = v;
+              break;
+            case Field::kYmm:
+              e.position_mm[1] = v;
+              break;
+            case Field::kZmm:
+              e.position_mm[2] = v;
+              break;
+            case Field::kAdeg:
+              e.position_mm[3] = v;
+              break;
+            case Field::kBdeg:
+              e.position_mm[4] = v;
+              break;
+            case Field::kCdeg:
+              e.position_mm[5] = v;
+              break;
+            case Field::kProgramPathMm:
+              e.program_path_mm = v;
+              break;
+            case Field::kTool:
+              e.tool = static_cast<std::int32_t>(v);
+              break;
+            case Field::kNormalX:
+              e.normal[0] = v;
+              break;
+            case Field::kNormalY:
+              e.normal[1] = v;
+              break;
+            case Field::kNormalZ:
+              e.normal[2] = v;
+              break;
+            case Field::kCutting:
+              e.cutting = v > 0.5;
+              break;
+            default:
+              break;
           }
         } else if constexpr (std::is_same_v<E, core::ToolMeasurement>) {
           switch (field) {
-            case Field::kTool: e.tool = static_cast<std::int32_t>(v); break;
-            case Field::kBroken: e.broken = v > 0.5; break;
-            case Field::kWearUm: e.wear_um[0] = v; break;
-            default: break;
+            case Field::kTool:
+              e.tool = static_cast<std::int32_t>(v);
+              break;
+            case Field::kBroken:
+              e.broken = v > 0.5;
+              break;
+            case Field::kWearUm:
+              e.wear_um[0] = v;
+              break;
+            default:
+              break;
           }
         } else if constexpr (std::is_same_v<E, core::ProbeMeasurement>) {
           switch (field) {
-            case Field::kPart: e.part = static_cast<std::int32_t>(v); break;
-            case Field::kCheckpoint: e.checkpoint = static_cast<std::int32_t>(v); break;
-            case Field::kRawDeviationUm: e.raw_deviation_um = v; break;
-            case Field::kWallAngleDeg: e.wall_angle_deg = v; break;
-            case Field::kBallRadiusMm: e.ball_radius_mm = v; break;
-            case Field::kXmm: e.position_mm[0] = v; break;
-            case Field::kYmm: e.position_mm[1] = v; break;
-            case Field::kZmm: e.position_mm[2] = v; break;
-            default: break;
+            case Field::kPart:
+              e.part = static_cast<std::int32_t>(v);
+              break;
+            case Field::kCheckpoint:
+              e.checkpoint = static_cast<std::int32_t>(v);
+              break;
+            case Field::kRawDeviationUm:
+              e.raw_deviation_um = v;
+              break;
+            case Field::kWallAngleDeg:
+              e.wall_angle_deg = v;
+              break;
+            case Field::kBallRadiusMm:
+              e.ball_radius_mm = v;
+              break;
+            case Field::kXmm:
+              e.position_mm[0] = v;
+              break;
+            case Field::kYmm:
+              e.position_mm[1] = v;
+              break;
+            case Field::kZmm:
+              e.position_mm[2] = v;
+              break;
+            default:
+              break;
           }
         } else if constexpr (std::is_same_v<E, core::CalibrationTouch>) {
           switch (field) {
-            case Field::kProbe: e.probe = static_cast<core::ProbeKind>(static_cast<int>(v)); break;
-            case Field::kAxis: e.axis = static_cast<std::uint8_t>(v); break;
-            case Field::kDirection: e.direction = static_cast<std::int8_t>(v); break;
-            case Field::kVariant: e.variant = static_cast<std::uint8_t>(v); break;
-            case Field::kTriggerPositionMm: e.trigger_position_mm = v; break;
-            default: break;
+            case Field::kProbe:
+              e.probe = static_cast<core::ProbeKind>(static_cast<int>(v));
+              break;
+            case Field::kAxis:
+              e.axis = static_cast<std::uint8_t>(v);
+              break;
+            case Field::kDirection:
+              e.direction = static_cast<std::int8_t>(v);
+              break;
+            case Field::kVariant:
+              e.variant = static_cast<std::uint8_t>(v);
+              break;
+            case Field::kTriggerPositionMm:
+              e.trigger_position_mm = v;
+              break;
+            default:
+              break;
           }
         } else if constexpr (std::is_same_v<E, core::ToolChange>) {
           switch (field) {
-            case Field::kTool: e.tool = static_cast<std::int32_t>(v); break;
-            case Field::kSister: e.sister = v > 0.5; break;
-            default: break;
+            case Field::kTool:
+              e.tool = static_cast<std::int32_t>(v);
+              break;
+            case Field::kSister:
+              e.sister = v > 0.5;
+              break;
+            default:
+              break;
           }
         } else if constexpr (std::is_same_v<E, core::ProgramEvent>) {
           switch (field) {
             case Field::kProgramKind:
               e.kind = static_cast<core::ProgramEventKind>(static_cast<int>(v));
               break;
-            case Field::kPart: e.part = static_cast<std::int32_t>(v); break;
-            default: break;
+            case Field::kPart:
+              e.part = static_cast<std::int32_t>(v);
+              break;
+            default:
+              break;
           }
         } else if constexpr (std::is_same_v<E, core::TemperatureSample>) {
           switch (field) {
-            case Field::kSensor: e.sensor = static_cast<std::uint8_t>(v); break;
-            case Field::kTemperatureC: e.temperature_c = v; break;
-            default: break;
+            case Field::kSensor:
+              e.sensor = static_cast<std::uint8_t>(v);
+              break;
+            case Field::kTemperatureC:
+              e.temperature_c = v;
+              break;
+            default:
+              break;
           }
         }
       },
@@ -256,12 +330,18 @@ core::Event initial_event(EventKind kind, std::uint8_t axis_count, bool has_norm
       s.has_normal = has_normal;
       return s;
     }
-    case EventKind::kToolMeasurement: return core::ToolMeasurement{};
-    case EventKind::kProbeMeasurement: return core::ProbeMeasurement{};
-    case EventKind::kCalibrationTouch: return core::CalibrationTouch{};
-    case EventKind::kToolChange: return core::ToolChange{};
-    case EventKind::kProgramEvent: return core::ProgramEvent{};
-    case EventKind::kTemperature: return core::TemperatureSample{};
+    case EventKind::kToolMeasurement:
+      return core::ToolMeasurement{};
+    case EventKind::kProbeMeasurement:
+      return core::ProbeMeasurement{};
+    case EventKind::kCalibrationTouch:
+      return core::CalibrationTouch{};
+    case EventKind::kToolChange:
+      return core::ToolChange{};
+    case EventKind::kProgramEvent:
+      return core::ProgramEvent{};
+    case EventKind::kTemperature:
+      return core::TemperatureSample{};
   }
   return core::AxisSample{};
 }
@@ -312,7 +392,8 @@ std::uint64_t extract_raw(const SignalLayout& layout, std::span<const std::uint8
   return raw;
 }
 
-void insert_raw(const SignalLayout& layout, std::uint64_t raw, std::span<std::uint8_t> data) noexcept {
+void insert_raw(const SignalLayout& layout, std::uint64_t raw,
+                std::span<std::uint8_t> data) noexcept {
   std::array<std::uint16_t, 64> pos{};
   const std::size_t n = signal_bit_positions(layout, data.size() * 8, pos);
   for (std::size_t i = 0; i < n; ++i) {
@@ -328,8 +409,12 @@ void insert_raw(const SignalLayout& layout, std::uint64_t raw, std::span<std::ui
 double raw_to_physical(const SignalLayout& layout, std::uint64_t raw) noexcept {
   double v = 0.0;
   switch (layout.type) {
-    case ValueType::kUnsigned: v = static_cast<double>(raw); break;
-    case ValueType::kSigned: v = static_cast<double>(sign_extend(raw, layout.length_bits)); break;
+    case ValueType::kUnsigned:
+      v = static_cast<double>(raw);
+      break;
+    case ValueType::kSigned:
+      v = static_cast<double>(sign_extend(raw, layout.length_bits));
+      break;
     case ValueType::kFloat:
       if (layout.length_bits == 32) {
         v = static_cast<double>(std::bit_cast<float>(static_cast<std::uint32_t>(raw)));
@@ -587,65 +672,106 @@ std::optional<double> field_value(const core::Event& event, Field field) noexcep
         using E = std::decay_t<decltype(e)>;
         if constexpr (std::is_same_v<E, core::AxisSample>) {
           switch (field) {
-            case Field::kXmm: return e.position_mm[0];
-            case Field::kYmm: return e.position_mm[1];
-            case Field::kZmm: return e.position_mm[2];
-            case Field::kAdeg: return e.position_mm[3];
-            case Field::kBdeg: return e.position_mm[4];
-            case Field::kCdeg: return e.position_mm[5];
-            case Field::kProgramPathMm: return e.program_path_mm;
-            case Field::kTool: return e.tool;
-            case Field::kNormalX: return e.normal[0];
-            case Field::kNormalY: return e.normal[1];
-            case Field::kNormalZ: return e.normal[2];
-            case Field::kCutting: return e.cutting ? 1.0 : 0.0;
-            default: return std::nullopt;
+            case Field::kXmm:
+              return e.position_mm[0];
+            case Field::kYmm:
+              return e.position_mm[1];
+            case Field::kZmm:
+              return e.position_mm[2];
+            case Field::kAdeg:
+              return e.position_mm[3];
+            case Field::kBdeg:
+              return e.position_mm[4];
+            case Field::kCdeg:
+              return e.position_mm[5];
+            case Field::kProgramPathMm:
+              return e.program_path_mm;
+            case Field::kTool:
+              return e.tool;
+            case Field::kNormalX:
+              return e.normal[0];
+            case Field::kNormalY:
+              return e.normal[1];
+            case Field::kNormalZ:
+              return e.normal[2];
+            case Field::kCutting:
+              return e.cutting ? 1.0 : 0.0;
+            default:
+              return std::nullopt;
           }
         } else if constexpr (std::is_same_v<E, core::ToolMeasurement>) {
           switch (field) {
-            case Field::kTool: return e.tool;
-            case Field::kBroken: return e.broken ? 1.0 : 0.0;
-            case Field::kWearUm: return e.wear_um[0];
-            default: return std::nullopt;
+            case Field::kTool:
+              return e.tool;
+            case Field::kBroken:
+              return e.broken ? 1.0 : 0.0;
+            case Field::kWearUm:
+              return e.wear_um[0];
+            default:
+              return std::nullopt;
           }
         } else if constexpr (std::is_same_v<E, core::ProbeMeasurement>) {
           switch (field) {
-            case Field::kPart: return e.part;
-            case Field::kCheckpoint: return e.checkpoint;
-            case Field::kRawDeviationUm: return e.raw_deviation_um;
-            case Field::kWallAngleDeg: return e.wall_angle_deg;
-            case Field::kBallRadiusMm: return e.ball_radius_mm;
-            case Field::kXmm: return e.position_mm[0];
-            case Field::kYmm: return e.position_mm[1];
-            case Field::kZmm: return e.position_mm[2];
-            default: return std::nullopt;
+            case Field::kPart:
+              return e.part;
+            case Field::kCheckpoint:
+              return e.checkpoint;
+            case Field::kRawDeviationUm:
+              return e.raw_deviation_um;
+            case Field::kWallAngleDeg:
+              return e.wall_angle_deg;
+            case Field::kBallRadiusMm:
+              return e.ball_radius_mm;
+            case Field::kXmm:
+              return e.position_mm[0];
+            case Field::kYmm:
+              return e.position_mm[1];
+            case Field::kZmm:
+              return e.position_mm[2];
+            default:
+              return std::nullopt;
           }
         } else if constexpr (std::is_same_v<E, core::CalibrationTouch>) {
           switch (field) {
-            case Field::kProbe: return static_cast<double>(e.probe);
-            case Field::kAxis: return e.axis;
-            case Field::kDirection: return e.direction;
-            case Field::kVariant: return e.variant;
-            case Field::kTriggerPositionMm: return e.trigger_position_mm;
-            default: return std::nullopt;
+            case Field::kProbe:
+              return static_cast<double>(e.probe);
+            case Field::kAxis:
+              return e.axis;
+            case Field::kDirection:
+              return e.direction;
+            case Field::kVariant:
+              return e.variant;
+            case Field::kTriggerPositionMm:
+              return e.trigger_position_mm;
+            default:
+              return std::nullopt;
           }
         } else if constexpr (std::is_same_v<E, core::ToolChange>) {
           switch (field) {
-            case Field::kTool: return e.tool;
-            case Field::kSister: return e.sister ? 1.0 : 0.0;
-            default: return std::nullopt;
+            case Field::kTool:
+              return e.tool;
+            case Field::kSister:
+              return e.sister ? 1.0 : 0.0;
+            default:
+              return std::nullopt;
           }
         } else if constexpr (std::is_same_v<E, core::ProgramEvent>) {
           switch (field) {
-            case Field::kProgramKind: return static_cast<double>(e.kind);
-            case Field::kPart: return e.part;
-            default: return std::nullopt;
+            case Field::kProgramKind:
+              return static_cast<double>(e.kind);
+            case Field::kPart:
+              return e.part;
+            default:
+              return std::nullopt;
           }
         } else {
           switch (field) {
-            case Field::kSensor: return e.sensor;
-            case Field::kTemperatureC: return e.temperature_c;
-            default: return std::nullopt;
+            case Field::kSensor:
+              return e.sensor;
+            case Field::kTemperatureC:
+              return e.temperature_c;
+            default:
+              return std::nullopt;
           }
         }
       },

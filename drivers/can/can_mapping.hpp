@@ -77,7 +77,8 @@ std::size_t signal_bit_positions(const SignalLayout& layout, std::size_t frame_b
 /// The raw bits of a signal (zero-extended). Real-time safe. data must hold the whole layout.
 std::uint64_t extract_raw(const SignalLayout& layout, std::span<const std::uint8_t> data) noexcept;
 /// Writes the low length_bits of raw into the signal's place. Real-time safe.
-void insert_raw(const SignalLayout& layout, std::uint64_t raw, std::span<std::uint8_t> data) noexcept;
+void insert_raw(const SignalLayout& layout, std::uint64_t raw,
+                std::span<std::uint8_t> data) noexcept;
 /// raw → physical value (sign extension, IEEE float for kFloat). Real-time safe.
 double raw_to_physical(const SignalLayout& layout, std::uint64_t raw) noexcept;
 /// physical → raw bits; nullopt if not finite or it does not fit the signal. Real-time safe.
@@ -97,9 +98,33 @@ inline constexpr std::size_t kEventKinds = 7;
 
 /// The event fields a signal may carry. Names (config) are listed in can_mapping.cpp.
 enum class Field : std::uint8_t {
-  kXmm, kYmm, kZmm, kAdeg, kBdeg, kCdeg, kProgramPathMm, kTool, kNormalX, kNormalY, kNormalZ,
-  kCutting, kBroken, kWearUm, kPart, kCheckpoint, kRawDeviationUm, kWallAngleDeg, kBallRadiusMm,
-  kProbe, kAxis, kDirection, kVariant, kTriggerPositionMm, kSister, kProgramKind, kSensor,
+  kXmm,
+  kYmm,
+  kZmm,
+  kAdeg,
+  kBdeg,
+  kCdeg,
+  kProgramPathMm,
+  kTool,
+  kNormalX,
+  kNormalY,
+  kNormalZ,
+  kCutting,
+  kBroken,
+  kWearUm,
+  kPart,
+  kCheckpoint,
+  kRawDeviationUm,
+  kWallAngleDeg,
+  kBallRadiusMm,
+  kProbe,
+  kAxis,
+  kDirection,
+  kVariant,
+  kTriggerPositionMm,
+  kSister,
+  kProgramKind,
+  kSensor,
   kTemperatureC,
 };
 
@@ -178,10 +203,10 @@ bool valid_payload_length(std::size_t length_bytes, bool fd) noexcept;
 /// Why a frame on a mapped ID was rejected.
 enum class RejectReason : std::uint8_t {
   kNone = 0,
-  kUnknownId = 1,     // not mapped (the kernel filter should have dropped it)
-  kWrongLength = 2,   // DLC / payload length differs from the mapping
-  kOutOfRange = 3,    // a value outside its configured or type range
-  kNotFinite = 4,     // NaN or infinity in a float signal
+  kUnknownId = 1,    // not mapped (the kernel filter should have dropped it)
+  kWrongLength = 2,  // DLC / payload length differs from the mapping
+  kOutOfRange = 3,   // a value outside its configured or type range
+  kNotFinite = 4,    // NaN or infinity in a float signal
 };
 inline constexpr std::size_t kRejectReasons = 5;
 

@@ -360,8 +360,8 @@ bool ModbusBus::request(std::uint64_t& req, const std::uint64_t& done, const boo
   std::unique_lock<std::mutex> lock(ls_mu_);
   const std::uint64_t want = ++req;
   ls_cv_.notify_all();
-  const bool completed = ls_cv_.wait_for(lock, std::chrono::nanoseconds(timeout_ns),
-                                         [&] { return done >= want; });
+  const bool completed =
+      ls_cv_.wait_for(lock, std::chrono::nanoseconds(timeout_ns), [&] { return done >= want; });
   return completed && ok;
 }
 

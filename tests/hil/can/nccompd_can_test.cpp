@@ -260,10 +260,9 @@ class Peer {
     }
     std::array<std::uint8_t, 64> buf{};
     const ssize_t n = ::recv(fd_, buf.data(), buf.size(), 0);
-    return n > 0 &&
-           nccomp::daemon::decode_lockstep(
-               std::span<const std::uint8_t>(buf.data(), static_cast<std::size_t>(n)), m) ==
-               nccomp::daemon::LockstepDecode::kOk;
+    return n > 0 && nccomp::daemon::decode_lockstep(
+                        std::span<const std::uint8_t>(buf.data(), static_cast<std::size_t>(n)),
+                        m) == nccomp::daemon::LockstepDecode::kOk;
   }
 
  private:

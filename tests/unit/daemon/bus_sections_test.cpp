@@ -39,8 +39,9 @@ class TempDir {
 std::string registers(const std::string& bus, int n) {
   std::string s;
   for (int i = 0; i < n; ++i) {
-    s += "[[registers]]\nname = \"" + bus + std::to_string(i) + "\"\nkind = \"tool_length_wear\"\n" +
-         "bus = \"" + bus + "\"\nmax_abs_um = 100\nmax_step_um = 5\nmax_rate_um_per_s = 50\n";
+    s += "[[registers]]\nname = \"" + bus + std::to_string(i) +
+         "\"\nkind = \"tool_length_wear\"\n" + "bus = \"" + bus +
+         "\"\nmax_abs_um = 100\nmax_step_um = 5\nmax_rate_um_per_s = 50\n";
   }
   return s;
 }
@@ -131,13 +132,14 @@ TEST(BusSections, RegisterWithoutMappingAndMappingWithoutRegisterAreErrors) {
   EXPECT_EQ(r.diagnostics.items()[0].where.key_path, "modbus.offset[1].register_index");
   EXPECT_EQ(r.diagnostics.items()[0].where.line, 14);
   // GIVEN register 1 on another bus while the Modbus map maps it
-  r = load_file(d.write("c.toml", std::string(kModbus) + "[loopback]\n" +
-                                      registers("modbus", 1) + registers("loopback", 1)));
+  r = load_file(d.write("c.toml", std::string(kModbus) + "[loopback]\n" + registers("modbus", 1) +
+                                      registers("loopback", 1)));
   ASSERT_FALSE(r.config);
   ASSERT_EQ(r.diagnostics.items().size(), 1U) << r.diagnostics.to_string();
   EXPECT_EQ(r.diagnostics.items()[0].where.key_path, "modbus.offset[1].register_index");
-  EXPECT_NE(r.diagnostics.items()[0].message.find("is register 'loopback0', whose bus is 'loopback'"),
-            std::string::npos)
+  EXPECT_NE(
+      r.diagnostics.items()[0].message.find("is register 'loopback0', whose bus is 'loopback'"),
+      std::string::npos)
       << r.diagnostics.to_string();
 }
 

@@ -30,9 +30,9 @@ using namespace std::chrono_literals;
 TEST(LockstepCodec, LittleEndianLayoutAndValidation) {
   // GIVEN a TICK of cycle 0x0102 at 0x0A0B0C ns WHEN encoded THEN the bytes are the contract's
   const auto b = encode_lockstep({LockstepType::kTick, 0x0102, 0x0A0B0C});
-  const std::array<std::uint8_t, 24> want = {0x4D, 0x53, 0x43, 0x4E, 1,    0, 0, 0,
-                                             0x02, 0x01, 0,    0,    0,    0, 0, 0,
-                                             0x0C, 0x0B, 0x0A, 0,    0,    0, 0, 0};
+  const std::array<std::uint8_t, 24> want = {0x4D, 0x53, 0x43, 0x4E, 1, 0, 0, 0,
+                                             0x02, 0x01, 0,    0,    0, 0, 0, 0,
+                                             0x0C, 0x0B, 0x0A, 0,    0, 0, 0, 0};
   EXPECT_EQ(b, want);
   LockstepMessage m;
   ASSERT_EQ(decode_lockstep(b, m), LockstepDecode::kOk);
@@ -83,9 +83,9 @@ class FakeNcsim {
     ::setsockopt(fd_, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
     std::array<std::uint8_t, 64> buf{};
     const ssize_t n = ::recv(fd_, buf.data(), buf.size(), 0);
-    return n > 0 && decode_lockstep(std::span<const std::uint8_t>(buf.data(),
-                                                                   static_cast<std::size_t>(n)),
-                                    m) == LockstepDecode::kOk;
+    return n > 0 &&
+           decode_lockstep(std::span<const std::uint8_t>(buf.data(), static_cast<std::size_t>(n)),
+                           m) == LockstepDecode::kOk;
   }
   // TICK, then the DONE that must answer it.
   void tick(std::uint64_t cycle, core::TimeNs time_ns) {
@@ -149,8 +149,7 @@ std::unique_ptr<Runtime> wear_runtime() {
   std::vector<std::unique_ptr<core::engine::Module>> m;
   m.push_back(std::make_unique<WearModule>());
   rt->engine->configure(
-      {{"T1", core::engine::RegisterKind::kToolLengthWear, {1000.0, 1000.0, 1e6}}},
-      std::move(m));
+      {{"T1", core::engine::RegisterKind::kToolLengthWear, {1000.0, 1000.0, 1e6}}}, std::move(m));
   rt->register_bus = {0};
   return rt;
 }
