@@ -233,18 +233,21 @@ TEST(Loop, DroppedWritesAreCountedAndResentWhenTheBusDrainsAgain) {
   }
   EXPECT_TRUE(noted);
   stuck.start();  // the bus recovers
-  std::this_thread::sleep_for(50ms);
-  loop.stop();
-  const double out = swap.current().engine->register_state(0).output_um;
+  // Let the ramp (100 µm at 100 µm/s) finish while the loop runs: its last value must reach the
+  // NC although earlier writes were dropped. Stopping the loop while the ramp still moves would
+  // race the last write against the TX ring (the loop may drop it in its final cycle).
   const auto end2 = std::chrono::steady_clock::now() + 5s;
   std::optional<double> d;
   while (std::chrono::steady_clock::now() < end2) {
     d = stuck.delivered(0);
-    if (d && !(*d < out) && !(*d > out)) {
+    if (d && !(*d < 100.0) && !(*d > 100.0)) {
       break;
     }
     std::this_thread::sleep_for(2ms);
   }
+  loop.stop();
+  const double out = swap.current().engine->register_state(0).output_um;
+  EXPECT_DOUBLE_EQ(out, 100.0);
   ASSERT_TRUE(d.has_value());
   EXPECT_DOUBLE_EQ(*d, out);
   EXPECT_EQ(loop.stats().allocations_after_warmup, 0);
