@@ -206,6 +206,33 @@ int run_daemon(const DaemonOptions& options) {
     }
   }
 
+  // Start-up hooks of the sections (S1: the NC's checkpoint registers against the learned
+  // table), before the buses start: a bus that can read its offset registers back (Modbus)
+  // does it now on this thread; the others say they cannot, and the hooks fall back to
+  // rewriting what the NC must hold.
+  {
+    const RegisterReader read = [&](std::uint16_t index) -> std::optional<double> {
+      if (index >= runtime->register_bus.size()) {
+        return std::nullopt;
+      }
+      const int b = runtime->register_bus[index];
+      if (b < 0 || static_cast<std::size_t>(b) >= buses.size()) {
+        return std::nullopt;
+      }
+      return buses[static_cast<std::size_t>(b)].bus->read_offset(index);
+    };
+    const core::TimeNs hook_now = options.lockstep_socket.empty() ? monotonic_ns() : 0;
+    for (const auto& [hook_name, hook] : startup_hooks()) {
+      try {
+        for (const auto& line : hook(*runtime->engine, read, hook_now)) {
+          spdlog::info("{}", line);
+        }
+      } catch (const std::exception& e) {
+        spdlog::error("start-up of {}: {}", hook_name, e.what());
+      }
+    }
+  }
+
   const bool lockstep = !options.lockstep_socket.empty();
   for (auto& b : buses) {
     try {
@@ -218,25 +245,6 @@ int run_daemon(const DaemonOptions& options) {
         o.bus->stop();
       }
       return 1;
-    }
-  }
-
-  // Start-up hooks of the sections (S1: the NC's checkpoint registers against the learned
-  // table). No driver reads offsets back yet (drivers/bus.hpp has no read-back call), so the
-  // reader says so and the hooks fall back to rewriting what the NC must hold.
-  {
-    const RegisterReader read = [](std::uint16_t) -> std::optional<double> {
-      return std::nullopt;
-    };
-    const core::TimeNs hook_now = lockstep ? 0 : monotonic_ns();
-    for (const auto& [hook_name, hook] : startup_hooks()) {
-      try {
-        for (const auto& line : hook(*runtime->engine, read, hook_now)) {
-          spdlog::info("{}", line);
-        }
-      } catch (const std::exception& e) {
-        spdlog::error("start-up of {}: {}", hook_name, e.what());
-      }
     }
   }
 

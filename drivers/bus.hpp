@@ -7,6 +7,7 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 
 #include "core/common/types.hpp"
 #include "core/rt/seqlock.hpp"
@@ -85,6 +86,15 @@ class Bus {
     (void)cycle;
     (void)timeout_ns;
     return true;
+  }
+
+  /// Start-up, before start() only (the caller's thread, not real-time): reads the value [µm]
+  /// the NC holds in the offset register mapped to the engine's `register_index`, so that the
+  /// daemon can compare it with its restored state (S1 reconcile). nullopt when the bus cannot
+  /// read back (default), the register is not mapped, or the NC does not answer.
+  [[nodiscard]] virtual std::optional<double> read_offset(std::uint16_t register_index) {
+    (void)register_index;
+    return std::nullopt;
   }
 };
 

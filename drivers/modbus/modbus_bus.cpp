@@ -7,6 +7,8 @@
 #include <chrono>
 #include <cmath>
 #include <ctime>
+#include <optional>
+#include <span>
 #include <stdexcept>
 #include <string>
 
@@ -66,8 +68,47 @@ void ModbusBus::start() {
   if (io_.joinable()) {
     throw std::logic_error("ModbusBus::start: already started");
   }
+  // A connection opened by read_offset() belongs to the caller's thread: the I/O thread starts
+  // from a fresh one (and its own failure counting).
+  disconnect();
   running_.store(true, std::memory_order_release);
   io_ = std::thread([this] { run(); });
+}
+
+std::optional<double> ModbusBus::read_offset(std::uint16_t register_index) {
+  if (io_.joinable()) {
+    return std::nullopt;  // the I/O thread owns the context now
+  }
+  const OffsetMap* map = nullptr;
+  for (const OffsetMap& m : config_.offsets) {
+    if (m.register_index == register_index) {
+      map = &m;
+      break;
+    }
+  }
+  if (map == nullptr) {
+    return std::nullopt;
+  }
+  if (!ctx_) {
+    if (readback_connect_failed_ || !connect()) {
+      readback_connect_failed_ = true;
+      return std::nullopt;
+    }
+  }
+  std::array<std::uint16_t, 2> regs{};
+  const int n = width(map->encoding.type);
+  rtu_gap();
+  const int rc = modbus_read_registers(mb(ctx_), map->address, n, regs.data());
+  after_transaction();
+  if (rc != n) {
+    return std::nullopt;
+  }
+  const double v = decode(std::span<const std::uint16_t>(regs.data(), static_cast<std::size_t>(n)),
+                          map->encoding);
+  if (!std::isfinite(v)) {
+    return std::nullopt;
+  }
+  return v;
 }
 
 void ModbusBus::stop() {

@@ -24,6 +24,7 @@
 #include <cstdint>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <thread>
 #include <vector>
 
@@ -94,6 +95,11 @@ class ModbusBus final : public Bus {
   /// Returns once every offset queued in tx() before the call was written and answered by the
   /// NC (and read back equal with verify_writes). False on timeout or a failed write.
   bool flush(std::uint64_t cycle, core::TimeNs timeout_ns) override;
+  /// Before start() only: connects (once; a failed connect is not retried by later calls) and
+  /// reads the holding register(s) of register_index's offset map with the map's encoding.
+  /// nullopt if unmapped, not connected or the read fails. start() drops this connection, so
+  /// the I/O thread makes its own. Not real-time.
+  [[nodiscard]] std::optional<double> read_offset(std::uint16_t register_index) override;
   /// Any thread: the full status with the Modbus counters.
   [[nodiscard]] ModbusStatus modbus_status() const { return status_.load(); }
   [[nodiscard]] const ModbusConfig& config() const noexcept { return config_; }
@@ -164,6 +170,8 @@ class ModbusBus final : public Bus {
   std::uint64_t flush_req_{0};
   std::uint64_t flush_done_{0};
   bool flush_ok_{false};
+  // read_offset() before start(): true once a connect for it failed (no second wait).
+  bool readback_connect_failed_{false};
 };
 
 /// CLOCK_MONOTONIC [ns] (the driver time-stamps events on reception).

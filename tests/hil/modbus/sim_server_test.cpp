@@ -399,6 +399,58 @@ TEST(ModbusHilSim, UnreachableNcBacksOffRaisesTheAlarmAndStopsPromptly) {
   bus2->stop();
 }
 
+// Start-up read-back (S1 reconcile): before start() the daemon asks what the NC holds in its
+// offset registers; the value comes back in µm through the map's encoding, and start() then
+// runs the I/O thread on its own connection.
+TEST(ModbusHilSim, OffsetsReadBackBeforeStartWithTheMapsEncoding) {
+  NcServer server(ServerConfig{});
+  server.update([](Tables& t) {
+    t.holding[200] = 0xFFFF;  // int32 -1234 * 0.1 = -123.4 µm
+    t.holding[201] = 0xFB2E;
+    t.holding[202] = 0x0000;  // -7.25f = 0xC0E80000, low word first
+    t.holding[203] = 0xC0E8;
+    t.holding[204] = 42;  // int16, scale 1
+  });
+  server.start();
+  auto bus = make_bus(tcp_header(server.port()) + kEventsAndOffsets);
+  const auto r0 = bus->read_offset(0);
+  const auto r1 = bus->read_offset(1);
+  const auto r2 = bus->read_offset(2);
+  ASSERT_TRUE(r0.has_value());
+  ASSERT_TRUE(r1.has_value());
+  ASSERT_TRUE(r2.has_value());
+  EXPECT_NEAR(*r0, -123.4, 1e-9);
+  EXPECT_DOUBLE_EQ(*r1, -7.25);
+  EXPECT_DOUBLE_EQ(*r2, 42.0);
+  EXPECT_FALSE(bus->read_offset(7).has_value()) << "register 7 is not mapped";
+  // After start() the I/O thread owns the connection: no read-back from other threads.
+  bus->start();
+  EXPECT_FALSE(bus->read_offset(0).has_value());
+  push_offset(*bus, 0, 15.0);
+  ASSERT_TRUE(wait_until([&] { return holding_i32(server, 200) == 150; }));
+  bus->stop();
+}
+
+TEST(ModbusHilSim, ReadBackFromAnUnreachableNcIsNulloptOnceAndStartStillWorks) {
+  std::uint16_t port = 0;
+  {
+    NcServer probe(ServerConfig{});
+    probe.start();
+    port = probe.port();
+  }
+  auto bus = make_bus(tcp_header(port) + kEventsAndOffsets);
+  EXPECT_FALSE(bus->read_offset(0).has_value());
+  // A failed connect is not retried per register (a table of 100 checkpoints would wait 100
+  // connect timeouts at start-up).
+  EXPECT_FALSE(bus->read_offset(1).has_value());
+  NcServer server(ServerConfig{.port = port});
+  server.start();
+  bus->start();
+  push_offset(*bus, 0, 1.0);
+  ASSERT_TRUE(wait_until([&] { return holding_i32(server, 200) == 10; }));
+  bus->stop();
+}
+
 TEST(ModbusHilSim, Rs485ModeOnADeviceWithoutItIsAConnectionErrorNotACrash) {
   PtyPair pty;
   auto bus = make_bus(rtu_header(pty.a(), "rs485 = true") + R"(
