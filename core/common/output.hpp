@@ -49,11 +49,16 @@ struct StepOutput {
   FixedVector<OffsetWrite, 128> writes;
   FixedVector<AlarmEvent, 32> alarms;
   FixedVector<MeasurementRecord, 64> records;
+  /// Additive trims (core/engine/engine.hpp, "Trims"): value_um is this module's whole trim of
+  /// the register, replacing the one it published before. The engine adds every module's trim to
+  /// the register's target; a trim never leaves the engine by itself.
+  FixedVector<OffsetWrite, 32> trims;
 
   void clear() noexcept {
     writes.clear();
     alarms.clear();
     records.clear();
+    trims.clear();
   }
   /// Convenience for modules: raise an alarm / warning / info.
   void alarm(TimeNs t_ns, Severity severity, AlarmCode code, std::int32_t subject,

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <set>
 #include <stdexcept>
 #include <type_traits>
@@ -217,6 +218,7 @@ void Engine::configure(std::vector<RegisterSpec> registers,
   options_ = options;
   valid_.clear();
   valid_.reserve(options.max_events_per_step);
+  trims_.assign(modules_.size() * regs_.size(), std::numeric_limits<double>::quiet_NaN());
   state_capacity_ = capacity;
   counters_ = {};
   write_cursor_ = 0;
@@ -265,7 +267,8 @@ void Engine::accept_target(const OffsetWrite& w, TimeNs now_ns, StepOutput& out)
     return;
   }
   Reg& r = regs_[w.register_index];
-  if (!r.limiter.admissible(w.value_um)) {
+  // The register is sent target + trims: the sum is what must be admissible.
+  if (!r.limiter.admissible(w.value_um + r.trim_um)) {
     ++counters_.writes_rejected;
     const AlarmCode code = std::isfinite(w.value_um) ? AlarmCode::kOffsetBeyondAbsoluteLimit
                                                      : AlarmCode::kOffsetNonFinite;
@@ -277,6 +280,41 @@ void Engine::accept_target(const OffsetWrite& w, TimeNs now_ns, StepOutput& out)
   }
   r.target_um = w.value_um;
   r.has_target = true;
+}
+
+void Engine::accept_trim(std::size_t module, const OffsetWrite& w, TimeNs now_ns,
+                         StepOutput& out) noexcept {
+  if (w.register_index >= regs_.size()) {
+    ++counters_.writes_unknown_register;
+    out.alarm(now_ns, Severity::kAlarm, AlarmCode::kRegisterUnknown, w.register_index, w.value_um);
+    return;
+  }
+  const std::size_t n = regs_.size();
+  Reg& r = regs_[w.register_index];
+  // The new sum from every module's trim (exact, no running total that drifts).
+  double sum_um = 0.0;
+  for (std::size_t m = 0; m < modules_.size(); ++m) {
+    const double t = m == module ? w.value_um : trims_[m * n + w.register_index];
+    if (!std::isnan(t) || m == module) {
+      sum_um += t;
+    }
+  }
+  const double base_um = r.has_target ? r.target_um : 0.0;
+  if (!std::isfinite(w.value_um) || !r.limiter.admissible(base_um + sum_um) ||
+      specs_[w.register_index].kind == RegisterKind::kFlag) {
+    ++counters_.writes_rejected;
+    const AlarmCode code = std::isfinite(w.value_um) ? AlarmCode::kOffsetBeyondAbsoluteLimit
+                                                     : AlarmCode::kOffsetNonFinite;
+    out.alarm(now_ns, Severity::kAlarm, code, w.register_index, base_um + sum_um);
+    return;
+  }
+  double& slot = trims_[module * n + w.register_index];
+  if (std::isnan(slot) || std::memcmp(&slot, &w.value_um, sizeof(double)) != 0) {
+    ++register_generation_;
+  }
+  slot = w.value_um;
+  r.trim_um = sum_um;
+  r.has_trim = true;
 }
 
 void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out) noexcept {
@@ -299,11 +337,14 @@ void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out)
   }
   const std::span<const Event> accepted(valid_.data(), valid_.size());
 
-  for (auto& m : modules_) {
+  for (std::size_t k = 0; k < modules_.size(); ++k) {
     scratch_.clear();
-    m->step(now_ns, accepted, scratch_);
+    modules_[k]->step(now_ns, accepted, scratch_);
     for (const auto& w : scratch_.writes) {
       accept_target(w, now_ns, out);
+    }
+    for (const auto& t : scratch_.trims) {
+      accept_trim(k, t, now_ns, out);
     }
     for (const auto& a : scratch_.alarms) {
       out.alarms.push(a);
@@ -322,10 +363,11 @@ void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out)
   for (std::size_t k = 0; k < n; ++k) {
     const std::size_t i = (write_cursor_ + k) % n;
     Reg& r = regs_[i];
-    if (!r.has_target) {
+    if (!r.has_target && !r.has_trim) {
       continue;
     }
-    const bool at_target = r.sent && std::memcmp(&r.sent_um, &r.target_um, sizeof(double)) == 0;
+    const double goal_um = (r.has_target ? r.target_um : 0.0) + r.trim_um;
+    const bool at_target = r.sent && std::memcmp(&r.sent_um, &goal_um, sizeof(double)) == 0;
     if (at_target) {
       continue;
     }
@@ -345,17 +387,17 @@ void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out)
     if (specs_[i].kind == RegisterKind::kFlag) {
       // Written as asked (admissible() was checked when the target was accepted); the limiter
       // is reset to it so status and state show the value in force.
-      r.limiter.reset(r.target_um, now_ns);
-      res.value_um = r.target_um;
+      r.limiter.reset(goal_um, now_ns);
+      res.value_um = goal_um;
       res.verdict = LimitVerdict::kPassed;
     } else {
-      res = r.limiter.apply(r.target_um, now_ns);
+      res = r.limiter.apply(goal_um, now_ns);
     }
     const bool slewed = res.verdict == LimitVerdict::kSlewed;
     if (slewed && !r.slewing) {
       // One warning when slewing starts, not one per cycle.
       out.alarm(now_ns, Severity::kWarning, AlarmCode::kOffsetSlewLimited,
-                static_cast<std::int32_t>(i), r.target_um);
+                static_cast<std::int32_t>(i), goal_um);
     }
     r.slewing = slewed;
     if (r.sent && std::memcmp(&r.sent_um, &res.value_um, sizeof(double)) == 0) {
@@ -372,7 +414,8 @@ void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out)
     write_cursor_ = first_deferred;
   }
   counters_.output_overflows = out.writes.overflows() + out.alarms.overflows() +
-                               out.records.overflows() + scratch_.writes.overflows() +
+                               out.records.overflows() + out.trims.overflows() +
+                               scratch_.trims.overflows() + scratch_.writes.overflows() +
                                scratch_.alarms.overflows() + scratch_.records.overflows();
 }
 
@@ -382,7 +425,8 @@ void Engine::resend_all() noexcept {
       // Forget what was sent; the next step writes the limiter's output (or the target) again.
       r.sent = false;
       if (!r.has_target) {
-        r.target_um = r.limiter.output_um();
+        // The output includes the trims, which are added again on top of the target.
+        r.target_um = r.limiter.output_um() - r.trim_um;
         r.has_target = true;
       }
     }
@@ -391,7 +435,8 @@ void Engine::resend_all() noexcept {
 
 RegisterState Engine::register_state(std::size_t i) const noexcept {
   const Reg& r = regs_[i];
-  return RegisterState{r.limiter.output_um(), r.target_um, r.has_target, r.slewing};
+  return RegisterState{r.limiter.output_um(), r.target_um, r.has_target, r.slewing, r.trim_um,
+                       r.has_trim};
 }
 
 std::uint64_t Engine::state_generation() const noexcept {

@@ -11,6 +11,12 @@
 // - A target the limiter rejects (NaN, beyond the absolute limit) raises an alarm and is not
 //   forwarded: the register holds its value. A slewed target keeps converging on later cycles
 //   without the module writing it again (targets are absolute and remembered per register).
+// - Trims: besides one target per register (one writing module), any module may publish an
+//   additive trim for a register (StepOutput::trims, e.g. the [model] section's fitted effect on
+//   top of S1's learned checkpoint value). The register is sent base target + Σ trims through the
+//   same limiter; a sum the limiter refuses raises the same alarm and changes nothing. Trims are
+//   not part of the saved state: the base target is saved, and the trimming module publishes its
+//   trim again after a restart, so nothing is applied twice.
 // - In hold mode (state file corrupt, operator request) modules still run and alarms still flow,
 //   but no offset write leaves the engine: the NC keeps the offsets it has.
 //
@@ -151,6 +157,9 @@ struct RegisterState {
   double target_um{0.0};  // last accepted target
   bool has_target{false};
   bool slewing{false};
+  /// Σ of the modules' trims; the register converges on target_um + trim_um.
+  double trim_um{0.0};
+  bool has_trim{false};
 };
 
 class Engine {
@@ -211,15 +220,21 @@ class Engine {
     bool has_target{false};
     bool sent{false};
     bool slewing{false};
+    double trim_um{0.0};  // Σ trims_ of this register
+    bool has_trim{false};
   };
 
   bool validate(const Event& e) const noexcept;
   void accept_target(const OffsetWrite& w, TimeNs now_ns, StepOutput& out) noexcept;
+  void accept_trim(std::size_t module, const OffsetWrite& w, TimeNs now_ns,
+                   StepOutput& out) noexcept;
 
   std::vector<RegisterSpec> specs_;
   std::vector<Reg> regs_;
   std::vector<std::unique_ptr<Module>> modules_;
   std::vector<Event> valid_;
+  /// modules × registers: each module's trim of each register [µm]; NaN = none published.
+  std::vector<double> trims_;
   StepOutput scratch_{};
   EngineOptions options_{};
   EngineCounters counters_{};

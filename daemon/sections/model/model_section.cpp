@@ -1,0 +1,167 @@
+#include "daemon/sections/model/model_section.hpp"
+
+#include <cmath>
+#include <filesystem>
+#include <stdexcept>
+#include <string>
+#include <utility>
+
+#include "daemon/config/builtin_sections.hpp"
+#include "tools/analyze/model_io.hpp"
+
+namespace nccomp::daemon::sections {
+
+namespace {
+
+namespace fs = std::filesystem;
+namespace cm = core::model;
+using config::TableReader;
+
+}  // namespace
+
+std::unique_ptr<ModelSection> parse_model_section(const toml::node& node,
+                                                  config::Diagnostics& diag) {
+  auto s = std::make_unique<ModelSection>();
+  s->where = config::where_of(&node, "model");
+  const auto* table = node.as_table();
+  if (table == nullptr) {
+    diag.error(&node, "model", "expected a table ([model])");
+    return s;
+  }
+  TableReader r(*table, "model", diag);
+  const std::string file = r.string("file", std::nullopt);
+  const std::string update = r.choice("update", std::string("part"), {"part", "cycle"});
+  s->each_cycle = update == "cycle";
+  s->temperature_sensor = static_cast<int>(r.integer("temperature_sensor", 0, 0, 255));
+  if (!file.empty()) {
+    const auto& src = node.source();
+    fs::path p(file);
+    if (p.is_relative() && src.path) p = fs::path(*src.path).parent_path() / p;
+    s->file = p.lexically_normal().string();
+    try {
+      s->model = tools::model_io::load_model_file(s->file);
+      s->loaded = true;
+    } catch (const std::exception& e) {
+      diag.error(r.where("file"), std::string("cannot load the model: ") + e.what());
+    }
+  }
+  const toml::array* arr = r.table_array("apply");
+  if (arr == nullptr || arr->empty()) {
+    diag.error(s->where, "model.apply: at least one [[model.apply]] entry is needed (which "
+                         "fitted term goes onto which register)");
+  }
+  for (std::size_t i = 0; arr != nullptr && i < arr->size(); ++i) {
+    const auto* t = arr->get(i)->as_table();
+    if (t == nullptr) continue;  // table_array() reported it
+    const std::string path = "model.apply[" + std::to_string(i) + "]";
+    TableReader q(*t, path, diag);
+    ModelApplyConfig a;
+    a.where = config::where_of(arr->get(i), path);
+    a.term = q.string("term", std::nullopt);
+    a.register_name = q.string("register", std::nullopt);
+    a.apply.gain = q.number("gain", -1.0, -1e3, 1e3);
+    const std::string kind =
+        q.choice("kind", std::string("contour"), {"tool_wear", "contour", "calib"});
+    a.apply.kind = static_cast<double>(tools::model_io::kind_from_name(kind));
+    if (t->contains("point")) {
+      a.apply.point = static_cast<double>(q.integer("point", std::nullopt, -1000000, 1000000));
+    }
+    if (t->contains("tool")) {
+      a.apply.tool = static_cast<double>(q.integer("tool", std::nullopt, 0, 1000000));
+    }
+    q.finish();
+    if (s->loaded && !a.term.empty()) {
+      int found = -1;
+      int count = 0;
+      const auto& terms = s->model.terms();
+      for (std::size_t k = 0; k < terms.size(); ++k) {
+        if (terms[k].spec.name == a.term) {
+          found = static_cast<int>(k);
+          ++count;
+        }
+      }
+      if (count != 1) {
+        std::string names;
+        for (const auto& term : terms) names += (names.empty() ? "" : ", ") + term.spec.name;
+        diag.error(q.where("term"), count == 0
+                                        ? "no term '" + a.term + "' in " + s->file + " (" +
+                                              names + ")"
+                                        : "term '" + a.term + "' appears " +
+                                              std::to_string(count) + " times in " + s->file);
+      } else {
+        a.apply.term_index = static_cast<std::size_t>(found);
+      }
+    }
+    s->applies.push_back(std::move(a));
+  }
+  r.finish();
+  return s;
+}
+
+const ModelSection* model_section(const config::Config& config) {
+  return config.find<ModelSection>("model");
+}
+
+std::unique_ptr<ModelModule> make_model_module(
+    const ModelSection& s, const std::vector<core::engine::RegisterSpec>& registers) {
+  std::vector<ModelApply> applies;
+  const core::engine::RegisterTable table(registers);
+  for (std::size_t i = 0; i < s.applies.size(); ++i) {
+    ModelApply a = s.applies[i].apply;
+    const int idx = table.find(s.applies[i].register_name);
+    if (idx < 0) {
+      throw std::invalid_argument("model.apply[" + std::to_string(i) + "].register: no "
+                                  "[[registers]] entry named '" +
+                                  s.applies[i].register_name + "'");
+    }
+    a.register_index = static_cast<std::uint16_t>(idx);
+    applies.push_back(a);
+  }
+  auto m = std::make_unique<ModelModule>(s.model, std::move(applies), s.each_cycle,
+                                         s.temperature_sensor);
+  m->attach(table);
+  return m;
+}
+
+namespace {
+
+class ModelParser final : public config::SectionParser {
+ public:
+  std::string_view name() const noexcept override { return "model"; }
+  std::unique_ptr<config::Section> parse(const toml::node& node,
+                                         config::Diagnostics& diag) const override {
+    return parse_model_section(node, diag);
+  }
+  void cross_check(const config::Config& config, config::Diagnostics& diag) const override {
+    const auto* s = model_section(config);
+    if (s == nullptr || !s->loaded) return;
+    std::vector<core::engine::RegisterSpec> specs;
+    for (const auto& e : config::registers_section(config).registers) specs.push_back(e.spec);
+    const core::engine::RegisterTable table(specs);
+    for (std::size_t i = 0; i < s->applies.size(); ++i) {
+      const auto& a = s->applies[i];
+      const int idx = table.find(a.register_name);
+      if (idx < 0) {
+        diag.error(a.where, "model.apply[" + std::to_string(i) + "].register: no [[registers]] "
+                            "entry named '" + a.register_name + "'");
+      } else if (specs[static_cast<std::size_t>(idx)].kind == core::engine::RegisterKind::kFlag) {
+        diag.error(a.where, "model.apply[" + std::to_string(i) + "].register: '" +
+                                a.register_name + "' is a flag; a trim needs an offset register");
+      }
+    }
+  }
+  void add_modules(const config::Config& config,
+                   std::vector<std::unique_ptr<core::engine::Module>>& modules) const override {
+    const auto* s = model_section(config);
+    if (s == nullptr) return;
+    std::vector<core::engine::RegisterSpec> specs;
+    for (const auto& e : config::registers_section(config).registers) specs.push_back(e.spec);
+    modules.push_back(make_model_module(*s, specs));
+  }
+};
+
+NCCOMP_REGISTER_CONFIG_SECTION(ModelParser)
+
+}  // namespace
+
+}  // namespace nccomp::daemon::sections

@@ -1,0 +1,45 @@
+// The daemon's `[model]` section (docs/config.md): the model.toml `nccomp analyze` wrote, loaded
+// with its reader (tools/analyze model_io), and `[[model.apply]]` entries mapping fitted terms onto
+// registers as additive trims (ModelModule). Not real-time.
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "core/model/model.hpp"
+#include "daemon/config/config.hpp"
+#include "daemon/sections/model/model_module.hpp"
+
+namespace nccomp::daemon::sections {
+
+struct ModelApplyConfig {
+  std::string term;
+  std::string register_name;
+  ModelApply apply;  // register_index resolved in cross_check() / add_modules()
+  config::Where where;
+};
+
+struct ModelSection final : config::Section {
+  std::string file;  // resolved path of model.toml
+  core::model::Model model;
+  bool loaded{false};
+  bool each_cycle{false};
+  int temperature_sensor{0};
+  std::vector<ModelApplyConfig> applies;
+  config::Where where;
+};
+
+/// Parses one `[model]` node; `file` is relative to the file holding the table.
+std::unique_ptr<ModelSection> parse_model_section(const toml::node& node,
+                                                  config::Diagnostics& diag);
+
+/// The [model] section of a loaded config (nullptr if absent).
+const ModelSection* model_section(const config::Config& config);
+
+/// The engine module of a parsed section, registers resolved against `registers` (throws
+/// std::invalid_argument naming the entry when a register is missing).
+std::unique_ptr<ModelModule> make_model_module(const ModelSection& s,
+                                               const std::vector<core::engine::RegisterSpec>& registers);
+
+}  // namespace nccomp::daemon::sections

@@ -1,0 +1,275 @@
+// GIVEN an engine with a module owning a register and another publishing an additive trim, or a
+// daemon config with [model] and a model.toml with known coefficients, WHEN the engine steps,
+// THEN the register gets base + trim through its limiter, inadmissible sums change nothing, a
+// restart does not apply the trim twice, and config errors name file, line and key.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "core/engine/engine.hpp"
+#include "core/model/model.hpp"
+#include "daemon/config/builtin_sections.hpp"
+#include "daemon/sections/model/model_module.hpp"
+#include "daemon/sections/model/model_section.hpp"
+#include "tests/unit/daemon_modules/temp_dir.hpp"
+#include "tools/analyze/model_io.hpp"
+
+namespace nccomp::daemon::sections {
+namespace {
+
+namespace ce = core::engine;
+namespace cm = core::model;
+using testing::TempDir;
+
+/// Writes a fixed target (base) or a fixed trim on register 0 each step.
+class FixedModule final : public ce::Module {
+ public:
+  FixedModule(std::string name, bool trim, double value_um)
+      : value_um_(value_um), name_(std::move(name)), trim_(trim) {}
+  std::string_view name() const noexcept override { return name_; }
+  void attach(const ce::RegisterTable&) override {}
+  void step(core::TimeNs now_ns, std::span<const core::Event>,
+            core::StepOutput& out) noexcept override {
+    if (trim_) {
+      out.trims.push(core::OffsetWrite{now_ns, 0, value_um_});
+    } else {
+      out.writes.push(core::OffsetWrite{now_ns, 0, value_um_});
+    }
+  }
+  std::vector<std::uint16_t> written_registers() const override {
+    return trim_ ? std::vector<std::uint16_t>{} : std::vector<std::uint16_t>{0};
+  }
+  double value_um_;
+
+ private:
+  std::string name_;
+  bool trim_;
+};
+
+std::vector<ce::RegisterSpec> one_register(double max_abs_um, double max_step_um) {
+  ce::RegisterSpec r;
+  r.name = "checkpoint_0";
+  r.kind = ce::RegisterKind::kCheckpoint;
+  r.limits.max_abs_um = max_abs_um;
+  r.limits.max_step_um = max_step_um;
+  r.limits.max_rate_um_per_s = 1e6;
+  return {r};
+}
+
+double last_write(const core::StepOutput& out, double fallback) {
+  return out.writes.empty() ? fallback : out.writes[out.writes.size() - 1].value_um;
+}
+
+TEST(EngineTrims, TheRegisterGetsTargetPlusTrimThroughItsLimits) {
+  std::vector<std::unique_ptr<ce::Module>> mods;
+  mods.push_back(std::make_unique<FixedModule>("base", false, 10.0));
+  mods.push_back(std::make_unique<FixedModule>("trim", true, -3.5));
+  auto* trim = static_cast<FixedModule*>(mods[1].get());
+  ce::Engine e;
+  e.configure(one_register(20.0, 100.0), std::move(mods));
+  core::StepOutput out;
+  e.step(1'000'000, {}, out);
+  ASSERT_EQ(out.writes.size(), 1U);
+  EXPECT_DOUBLE_EQ(out.writes[0].value_um, 6.5);
+  EXPECT_DOUBLE_EQ(e.register_state(0).target_um, 10.0);
+  EXPECT_DOUBLE_EQ(e.register_state(0).trim_um, -3.5);
+  // 10 + 12 = 22 > max_abs 20: refused with an alarm, the register keeps 6.5.
+  trim->value_um_ = 12.0;
+  e.step(2'000'000, {}, out);
+  EXPECT_TRUE(out.writes.empty());
+  ASSERT_FALSE(out.alarms.empty());
+  EXPECT_EQ(out.alarms[0].code, core::AlarmCode::kOffsetBeyondAbsoluteLimit);
+  EXPECT_DOUBLE_EQ(out.alarms[0].value, 22.0);
+  EXPECT_DOUBLE_EQ(e.register_state(0).output_um, 6.5);
+  // 10 + 9 = 19: admissible, sent.
+  trim->value_um_ = 9.0;
+  e.step(3'000'000, {}, out);
+  EXPECT_DOUBLE_EQ(last_write(out, NAN), 19.0);
+  // A NaN trim: refused, nothing changes.
+  trim->value_um_ = std::nan("");
+  e.step(4'000'000, {}, out);
+  EXPECT_TRUE(out.writes.empty());
+  ASSERT_FALSE(out.alarms.empty());
+  EXPECT_EQ(out.alarms[0].code, core::AlarmCode::kOffsetNonFinite);
+  EXPECT_DOUBLE_EQ(e.register_state(0).output_um, 19.0);
+}
+
+TEST(EngineTrims, TheStepLimitAppliesToTheSum) {
+  std::vector<std::unique_ptr<ce::Module>> mods;
+  mods.push_back(std::make_unique<FixedModule>("base", false, 4.0));
+  mods.push_back(std::make_unique<FixedModule>("trim", true, 4.0));
+  ce::Engine e;
+  e.configure(one_register(100.0, 5.0), std::move(mods));
+  core::StepOutput out;
+  std::vector<double> sent;
+  for (int k = 1; k <= 3; ++k) {
+    e.step(k * 1'000'000, {}, out);
+    sent.push_back(last_write(out, NAN));
+  }
+  // 0 → 8 in steps of at most 5 µm.
+  EXPECT_DOUBLE_EQ(sent[0], 5.0);
+  EXPECT_DOUBLE_EQ(sent[1], 8.0);
+  EXPECT_TRUE(std::isnan(sent[2]));  // at target: nothing more written
+}
+
+TEST(EngineTrims, ARestartDoesNotApplyTheTrimTwice) {
+  std::vector<std::byte> state;
+  {
+    std::vector<std::unique_ptr<ce::Module>> mods;
+    mods.push_back(std::make_unique<FixedModule>("base", false, 10.0));
+    mods.push_back(std::make_unique<FixedModule>("trim", true, 3.0));
+    ce::Engine e;
+    e.configure(one_register(100.0, 100.0), std::move(mods));
+    core::StepOutput out;
+    e.step(1'000'000, {}, out);
+    EXPECT_DOUBLE_EQ(last_write(out, NAN), 13.0);
+    state.resize(e.state_capacity());
+    state.resize(e.export_state(state));
+    ASSERT_FALSE(state.empty());
+  }
+  std::vector<std::unique_ptr<ce::Module>> mods;
+  mods.push_back(std::make_unique<FixedModule>("base", false, 10.0));
+  mods.push_back(std::make_unique<FixedModule>("trim", true, 3.0));
+  ce::Engine e;
+  e.configure(one_register(100.0, 100.0), std::move(mods));
+  ASSERT_TRUE(e.import_state(state, 5'000'000));
+  EXPECT_DOUBLE_EQ(e.register_state(0).output_um, 13.0);
+  EXPECT_DOUBLE_EQ(e.register_state(0).target_um, 10.0);  // the saved target has no trim in it
+  core::StepOutput out;
+  e.step(6'000'000, {}, out);
+  e.step(7'000'000, {}, out);
+  EXPECT_DOUBLE_EQ(e.register_state(0).output_um, 13.0);  // not 16
+  e.resend_all();
+  e.step(8'000'000, {}, out);
+  EXPECT_DOUBLE_EQ(last_write(out, NAN), 13.0);
+}
+
+/// A fitted model: a constant per checkpoint (not applied) and part_trend = 0.02 µm per part ×
+/// part, one coefficient per checkpoint: point 0 → 0.02, point 1 → 0.05.
+cm::Model trend_model() {
+  cm::Term offset;
+  offset.spec.name = "offset";
+  offset.spec.form = cm::Form::kConstant;
+  offset.spec.per = {static_cast<int>(cm::Column::kKind), static_cast<int>(cm::Column::kPoint)};
+  offset.groups = {{1.0, 0.0}, {1.0, 1.0}};
+  offset.coef = {3.0, -2.0};
+  cm::Term trend;
+  trend.spec.name = "part_trend";
+  trend.spec.form = cm::Form::kLinear;
+  trend.spec.column = static_cast<int>(cm::Column::kPart);
+  trend.spec.per = {static_cast<int>(cm::Column::kPoint), -1};
+  trend.spec.kind_mask = 0x2;
+  trend.groups = {{0.0, 0.0}, {1.0, 0.0}};
+  trend.coef = {0.02, 0.05};
+  return cm::Model({}, {offset, trend});
+}
+
+std::string model_toml() {
+  return tools::model_io::write_model_toml(trend_model(), cm::AnalysisConfig{}, {"test"});
+}
+
+std::string registers_toml() {
+  std::string s = "[loopback]\n";
+  for (const char* n : {"checkpoint_0", "checkpoint_1", "warn"}) {
+    const bool flag = std::string(n) == "warn";
+    s += std::string("[[registers]]\nname = \"") + n + "\"\nkind = \"" +
+         (flag ? "flag" : "checkpoint") + "\"\nbus = \"loopback\"\nmax_abs_um = 100\n" +
+         (flag ? "" : "max_step_um = 50\nmax_rate_um_per_s = 100000\n");
+  }
+  return s;
+}
+
+const char* kApply =
+    "[model]\nfile = \"fit/model.toml\"\n"
+    "[[model.apply]]\nterm = \"part_trend\"\nregister = \"checkpoint_0\"\npoint = 0\n"
+    "[[model.apply]]\nterm = \"part_trend\"\nregister = \"checkpoint_1\"\npoint = 1\ngain = -2\n";
+
+TEST(ModelSection, AFittedTermBecomesTheExpectedTrimAtPartStart) {
+  TempDir d;
+  d.write("fit/model.toml", model_toml());
+  auto r = config::load_file(d.write("a.toml", registers_toml() + kApply));
+  ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+  const auto* s = model_section(*r.config);
+  ASSERT_NE(s, nullptr);
+  ASSERT_EQ(s->applies.size(), 2U);
+  EXPECT_EQ(s->applies[0].apply.term_index, 1U);
+  std::vector<ce::RegisterSpec> specs;
+  for (const auto& e : config::registers_section(*r.config).registers) specs.push_back(e.spec);
+  std::vector<std::unique_ptr<ce::Module>> mods;
+  mods.push_back(make_model_module(*s, specs));
+  const auto* m = static_cast<const ModelModule*>(mods[0].get());
+  ce::Engine e;
+  e.configure(specs, std::move(mods));
+  core::StepOutput out;
+  // Before the first part start the part is unknown: the term contributes nothing.
+  e.step(1'000'000, {}, out);
+  EXPECT_DOUBLE_EQ(m->trim_um(0), 0.0);
+  const std::vector<core::Event> ev = {
+      core::ProgramEvent{2'000'000, core::ProgramEventKind::kPartStart, 25}};
+  e.step(2'000'000, ev, out);
+  // trim = gain × coef(point) × part: −1 × 0.02 × 25 = −0.5; −2 × 0.05 × 25 = −2.5.
+  EXPECT_NEAR(m->trim_um(0), -0.5, 1e-12);
+  EXPECT_NEAR(m->trim_um(1), -2.5, 1e-12);
+  EXPECT_NEAR(e.register_state(0).output_um, -0.5, 1e-12);
+  EXPECT_NEAR(e.register_state(1).output_um, -2.5, 1e-12);
+  EXPECT_EQ(e.counters().writes_forwarded, 4U);  // 0 at start-up, then the part-25 trims
+  // The part does not change: no new evaluation, no write.
+  e.step(3'000'000, ev, out);
+  EXPECT_TRUE(out.writes.empty());
+  // Restart: state restored, the trim is published again once, not added to the saved value.
+  std::vector<std::byte> state(e.state_capacity());
+  state.resize(e.export_state(state));
+  std::vector<std::unique_ptr<ce::Module>> mods2;
+  mods2.push_back(make_model_module(*s, specs));
+  ce::Engine e2;
+  e2.configure(specs, std::move(mods2));
+  ASSERT_TRUE(e2.import_state(state, 4'000'000));
+  e2.step(5'000'000, {}, out);
+  EXPECT_NEAR(e2.register_state(0).output_um, -0.5, 1e-12);
+  EXPECT_NEAR(e2.register_state(1).output_um, -2.5, 1e-12);
+}
+
+TEST(ModelSection, ErrorsNameFileLineAndKey) {
+  TempDir d;
+  d.write("fit/model.toml", model_toml());
+  const std::string bad_term =
+      "[model]\nfile = \"fit/model.toml\"\n[[model.apply]]\nterm = \"tool_wear\"\n"
+      "register = \"checkpoint_0\"\n";
+  auto r = config::load_file(d.write("a.toml", registers_toml() + bad_term));
+  ASSERT_FALSE(r.config);
+  const std::string err = r.diagnostics.to_string();
+  EXPECT_NE(err.find("a.toml:"), std::string::npos) << err;
+  EXPECT_NE(err.find("model.apply[0].term"), std::string::npos) << err;
+  EXPECT_NE(err.find("no term 'tool_wear'"), std::string::npos) << err;
+
+  auto r2 = config::load_file(d.write(
+      "b.toml", registers_toml() + "[model]\nfile = \"missing.toml\"\n[[model.apply]]\n"
+                                   "term = \"part_trend\"\nregister = \"checkpoint_0\"\n"));
+  ASSERT_FALSE(r2.config);
+  EXPECT_NE(r2.diagnostics.to_string().find("model.file"), std::string::npos)
+      << r2.diagnostics.to_string();
+
+  auto r3 = config::load_file(d.write(
+      "c.toml", registers_toml() + "[model]\nfile = \"fit/model.toml\"\n[[model.apply]]\n"
+                                   "term = \"part_trend\"\nregister = \"warn\"\n"
+                                   "[[model.apply]]\nterm = \"part_trend\"\nregister = \"nope\"\n"));
+  ASSERT_FALSE(r3.config);
+  const std::string e3 = r3.diagnostics.to_string();
+  EXPECT_NE(e3.find("'warn' is a flag"), std::string::npos) << e3;
+  EXPECT_NE(e3.find("no [[registers]] entry named 'nope'"), std::string::npos) << e3;
+
+  auto r4 = config::load_file(d.write(
+      "d.toml", registers_toml() + "[model]\nfile = \"fit/model.toml\"\n[[model.apply]]\n"
+                                   "term = \"part_trend\"\nregister = \"checkpoint_0\"\n"
+                                   "colour = 1\n"));
+  ASSERT_FALSE(r4.config);
+  const std::string e4 = r4.diagnostics.to_string();
+  EXPECT_NE(e4.find("d.toml:26:10: model.apply[0].colour: unknown key"), std::string::npos)
+      << e4;
+}
+
+}  // namespace
+}  // namespace nccomp::daemon::sections
