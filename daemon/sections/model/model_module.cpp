@@ -136,7 +136,7 @@ std::size_t ModelModule::status(std::span<core::engine::StatusValue> out) const 
   auto put = [&](const char* key, double v) {
     if (n < out.size()) out[n++] = core::engine::StatusValue{key, v, nullptr};
   };
-  put("part", has_part_ ? static_cast<double>(part_) : cm::kUnknown);
+  put("part", has_part_ ? static_cast<double>(part_) : -1.0);  // -1: no part start seen yet
   put("applied_terms", static_cast<double>(applies_.size()));
   if (!trims_um_.empty()) put("first_trim_um", trims_um_[0]);
   return n;
