@@ -14,6 +14,7 @@
 #include "daemon/config/builtin_sections.hpp"
 #include "daemon/sections/model/model_module.hpp"
 #include "daemon/sections/model/model_section.hpp"
+#include "tests/support/alloc_counter.hpp"
 #include "tests/unit/daemon_modules/temp_dir.hpp"
 #include "tools/analyze/model_io.hpp"
 
@@ -230,6 +231,38 @@ TEST(ModelSection, AFittedTermBecomesTheExpectedTrimAtPartStart) {
   e2.step(5'000'000, {}, out);
   EXPECT_NEAR(e2.register_state(0).output_um, -0.5, 1e-12);
   EXPECT_NEAR(e2.register_state(1).output_um, -2.5, 1e-12);
+}
+
+TEST(ModelSection, SteppingAllocatesNothingEvenWhenEvaluatingEachCycle) {
+  TempDir d;
+  d.write("fit/model.toml", model_toml());
+  const std::string text = registers_toml() + std::string(kApply);
+  auto r = config::load_file(
+      d.write("a.toml", text.substr(0, text.find("[model]")) +
+                            "[model]\nfile = \"fit/model.toml\"\nupdate = \"cycle\"\n" +
+                            text.substr(text.find("[[model.apply]]"))));
+  ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+  std::vector<ce::RegisterSpec> specs;
+  for (const auto& e : config::registers_section(*r.config).registers) specs.push_back(e.spec);
+  std::vector<std::unique_ptr<ce::Module>> mods;
+  mods.push_back(make_model_module(*model_section(*r.config), specs));
+  const auto* m = static_cast<const ModelModule*>(mods[0].get());
+  ce::Engine e;
+  e.configure(specs, std::move(mods));
+  core::StepOutput out;
+  double sum_um = 0.0;
+  const nccomp::test::AllocationScope scope;
+  for (std::int32_t k = 1; k <= 200; ++k) {
+    const core::Event ev[] = {
+        core::ProgramEvent{k * 1'000'000LL, core::ProgramEventKind::kPartStart, k / 20}};
+    e.step(k * 1'000'000LL, ev, out);
+    sum_um += m->trim_um(1);
+  }
+  EXPECT_EQ(scope.count(), 0U);
+  // Last part 10: −2 × 0.05 × 10 = −1.
+  EXPECT_NEAR(m->trim_um(1), -1.0, 1e-12);
+  EXPECT_NEAR(e.register_state(1).output_um, -1.0, 1e-12);
+  EXPECT_LT(sum_um, 0.0);
 }
 
 TEST(ModelSection, ErrorsNameFileLineAndKey) {
