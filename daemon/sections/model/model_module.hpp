@@ -1,11 +1,13 @@
 // The engine module of the daemon's [model] section (docs/config.md, docs/closing-the-loop.md):
 // evaluates chosen terms of the model `nccomp analyze` fitted (model.toml) at the machine context
-// the loop knows (part number from ProgramEvents, tool, temperature, time) and publishes each as an
+// the loop knows (part number from ProgramEvents, tool, temperature, time, machine position and
+// the tool's cut path from AxisSamples) and publishes each as an
 // additive trim on a register (core/engine/engine.hpp, "Trims"), on top of what the register's
 // own module (e.g. S1 checkpoints) writes. It writes no target of its own, so it never fights the
 // module that owns the register.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <span>
 #include <string>
@@ -50,10 +52,16 @@ class ModelModule final : public core::engine::Module {
   /// The trim last published for apply entry i [µm].
   [[nodiscard]] double trim_um(std::size_t i) const noexcept { return trims_um_[i]; }
   [[nodiscard]] std::int32_t part() const noexcept { return part_; }
+  /// Cut path of the tool in the spindle since it was loaded [mm] (the log's path_mm).
+  [[nodiscard]] double cut_path_mm() const noexcept { return cut_path_mm_; }
 
  private:
-  static constexpr std::size_t kStateBytes = 4 + 4 + 4 + 4;  // magic, part, tool, flags
+  // magic, part, tool, flags, cut path; a 16-byte state (before the cut path) is still read.
+  static constexpr std::size_t kStateBytes = 4 + 4 + 4 + 4 + 8;
+  static constexpr std::size_t kLegacyStateBytes = 16;
   void evaluate(core::TimeNs now_ns, core::StepOutput& out) noexcept;
+  void on_tool(std::int32_t tool) noexcept;
+  void on_axis_sample(const core::AxisSample& a) noexcept;
 
   core::model::Model model_;
   std::vector<ModelApply> applies_;
@@ -66,6 +74,15 @@ class ModelModule final : public core::engine::Module {
   bool has_part_{false};
   bool has_tool_{false};
   double temp_c_{core::model::kUnknown};
+  // Context from the axis samples: machine position (x_mm, y_mm, z_mm) and the cut path of the
+  // tool since it was loaded (path_mm), accumulated as the creep module does: program path where
+  // the NC publishes it, else the XYZ distance, only between two cutting samples.
+  std::array<double, 3> position_mm_{core::model::kUnknown, core::model::kUnknown,
+                                     core::model::kUnknown};
+  double cut_path_mm_{0.0};
+  double saved_path_mm_{0.0};
+  core::AxisSample last_sample_{};
+  bool have_sample_{false};
   bool dirty_{true};  // publish on the first step (start-up, restart)
   std::uint64_t generation_{0};
 };

@@ -17,6 +17,35 @@ namespace fs = std::filesystem;
 namespace cm = core::model;
 using config::TableReader;
 
+/// Why a term cannot be evaluated in the loop as configured, or "" when it can. The loop knows
+/// time, part, tool, kind / point (from the entry), temp_c (one sensor), x/y/z and path_mm (from
+/// the axis samples); it does not know angle_deg or extra columns, and position / path change
+/// within a part, so a term of them needs update = "cycle".
+std::string loop_context_problem(const cm::TermSpec& spec, bool each_cycle,
+                                 const std::vector<std::string>& extras) {
+  std::vector<int> cols;
+  if (spec.form != cm::Form::kConstant) cols.push_back(spec.column);
+  for (const int c : spec.per) {
+    if (c >= 0) cols.push_back(c);
+  }
+  for (const int c : cols) {
+    const std::string name = cm::column_name(c, extras);
+    if (c == static_cast<int>(cm::Column::kAngle) ||
+        c >= static_cast<int>(cm::kStandardColumns)) {
+      return "depends on " + name +
+             ", which the daemon's loop does not know (it would contribute nothing)";
+    }
+    const bool within_part =
+        c == static_cast<int>(cm::Column::kX) || c == static_cast<int>(cm::Column::kY) ||
+        c == static_cast<int>(cm::Column::kZ) || c == static_cast<int>(cm::Column::kPath);
+    if (within_part && !each_cycle) {
+      return "depends on " + name +
+             ", which changes within a part: set update = \"cycle\" in [model]";
+    }
+  }
+  return {};
+}
+
 }  // namespace
 
 std::unique_ptr<ModelSection> parse_model_section(const toml::node& node,
@@ -90,6 +119,9 @@ std::unique_ptr<ModelSection> parse_model_section(const toml::node& node,
                                               std::to_string(count) + " times in " + s->file);
       } else {
         a.apply.term_index = static_cast<std::size_t>(found);
+        const std::string problem = loop_context_problem(
+            terms[static_cast<std::size_t>(found)].spec, s->each_cycle, s->model.extra_columns());
+        if (!problem.empty()) diag.error(q.where("term"), "term '" + a.term + "' " + problem);
       }
     }
     s->applies.push_back(std::move(a));

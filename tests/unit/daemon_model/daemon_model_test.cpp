@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <memory>
 #include <string>
 #include <vector>
@@ -302,6 +303,174 @@ TEST(ModelSection, ErrorsNameFileLineAndKey) {
   const std::string e4 = r4.diagnostics.to_string();
   EXPECT_NE(e4.find("d.toml:26:10: model.apply[0].colour: unknown key"), std::string::npos)
       << e4;
+}
+
+/// position_x: poly degree 2 in u = x / 100 (coef 2, 0.5); periodic_z: sine of period 40 mm
+/// (coef 1 on sin, 0 on cos); path_wear: 0.01 µm per mm of cut path; angle_term: linear in
+/// angle_deg (which the loop does not know).
+cm::Model position_model() {
+  cm::Term px;
+  px.spec.name = "position_x";
+  px.spec.form = cm::Form::kPoly;
+  px.spec.column = static_cast<int>(cm::Column::kX);
+  px.spec.degree = 2;
+  px.spec.center = 0.0;
+  px.spec.scale = 100.0;
+  px.groups = {{0.0, 0.0}};
+  px.coef = {2.0, 0.5};
+  cm::Term pz;
+  pz.spec.name = "periodic_z";
+  pz.spec.form = cm::Form::kSine;
+  pz.spec.column = static_cast<int>(cm::Column::kZ);
+  pz.spec.scale = 40.0;
+  pz.groups = {{0.0, 0.0}};
+  pz.coef = {1.0, 0.0};
+  cm::Term wear;
+  wear.spec.name = "path_wear";
+  wear.spec.form = cm::Form::kLinear;
+  wear.spec.column = static_cast<int>(cm::Column::kPath);
+  wear.groups = {{0.0, 0.0}};
+  wear.coef = {0.01};
+  cm::Term angle;
+  angle.spec.name = "angle_term";
+  angle.spec.form = cm::Form::kLinear;
+  angle.spec.column = static_cast<int>(cm::Column::kAngle);
+  angle.groups = {{0.0, 0.0}};
+  angle.coef = {0.1};
+  return cm::Model({}, {px, pz, wear, angle});
+}
+
+core::AxisSample sample(double x, double z, std::int32_t tool, bool cutting) {
+  core::AxisSample a;
+  a.position_mm[0] = x;
+  a.position_mm[1] = 0.0;
+  a.position_mm[2] = z;
+  a.tool = tool;
+  a.cutting = cutting;
+  return a;
+}
+
+TEST(ModelModuleContext, PositionAndPeriodicTermsFollowTheAxisSamplesEachCycle) {
+  ModelApply ax;
+  ax.term_index = 0;
+  ax.register_index = 0;
+  ModelApply az;
+  az.term_index = 1;
+  az.register_index = 1;
+  ModelModule m(position_model(), {ax, az}, true, 0);
+  core::StepOutput out;
+  // No axis sample yet: the positions are unknown, the terms contribute nothing.
+  m.step(1'000'000, {}, out);
+  EXPECT_DOUBLE_EQ(m.trim_um(0), 0.0);
+  EXPECT_DOUBLE_EQ(m.trim_um(1), 0.0);
+  // x = 50: u = 0.5 → 2·0.5 + 0.5·0.25 = 1.125 µm, trim −1.125; z = 10: sin(2π·10/40) = 1.
+  const core::Event e1[] = {sample(50.0, 10.0, 1, true)};
+  m.step(2'000'000, e1, out);
+  EXPECT_NEAR(m.trim_um(0), -1.125, 1e-12);
+  EXPECT_NEAR(m.trim_um(1), -1.0, 1e-12);
+  // x = −100: u = −1 → −2 + 0.5 = −1.5 µm, trim +1.5; z = 30: sin(3π/2) = −1 → trim +1.
+  const core::Event e2[] = {sample(-100.0, 30.0, 1, true)};
+  m.step(3'000'000, e2, out);
+  EXPECT_NEAR(m.trim_um(0), 1.5, 1e-12);
+  EXPECT_NEAR(m.trim_um(1), 1.0, 1e-12);
+  // Published each cycle, one trim per entry (the module appends; the engine clears `out`).
+  ASSERT_EQ(out.trims.size(), 6U);
+  EXPECT_NEAR(out.trims[4].value_um, 1.5, 1e-12);
+  EXPECT_EQ(out.trims[5].register_index, 1U);
+}
+
+TEST(ModelModuleContext, CutPathGrowsOnlyWhileCuttingResetsOnToolChangeAndSurvivesARestart) {
+  ModelApply aw;
+  aw.term_index = 2;
+  aw.register_index = 0;
+  ModelModule m(position_model(), {aw}, true, 0);
+  core::StepOutput out;
+  std::int64_t t = 0;
+  // 101 cutting samples 1 mm apart along X: 100 mm of cut path → 0.01 × 100 = 1 µm.
+  for (int k = 0; k <= 100; ++k) {
+    const core::Event e[] = {sample(static_cast<double>(k), 0.0, 7, true)};
+    m.step(t += 1'000'000, e, out);
+  }
+  EXPECT_NEAR(m.cut_path_mm(), 100.0, 1e-9);
+  EXPECT_NEAR(m.trim_um(0), -1.0, 1e-12);
+  // A rapid back to x = 0 and 50 non-cutting samples: no path.
+  for (int k = 0; k < 50; ++k) {
+    const core::Event e[] = {sample(100.0 - 2.0 * k, 0.0, 7, false)};
+    m.step(t += 1'000'000, e, out);
+  }
+  EXPECT_NEAR(m.cut_path_mm(), 100.0, 1e-9);
+  // The program path, where the NC publishes it, is used instead of the XYZ distance.
+  core::AxisSample p1 = sample(0.0, 0.0, 7, true);
+  p1.program_path_mm = 500.0;
+  core::AxisSample p2 = sample(0.0, 0.0, 7, true);  // no axis motion...
+  p2.program_path_mm = 525.0;                        // ...but 25 mm along the program path
+  const core::Event ep1[] = {p1};
+  const core::Event ep2[] = {p2};
+  m.step(t += 1'000'000, ep1, out);
+  m.step(t += 1'000'000, ep2, out);
+  EXPECT_NEAR(m.cut_path_mm(), 125.0, 1e-9);
+  EXPECT_NEAR(m.trim_um(0), -1.25, 1e-12);
+  // Restart: the path comes back from the state.
+  std::vector<std::byte> state(m.state_capacity());
+  state.resize(m.save_state(state));
+  ModelModule m2(position_model(), {aw}, true, 0);
+  ASSERT_TRUE(m2.load_state(state));
+  EXPECT_NEAR(m2.cut_path_mm(), 125.0, 1e-9);
+  m2.step(t += 1'000'000, {}, out);
+  EXPECT_NEAR(m2.trim_um(0), -1.25, 1e-12);
+  // A state with a non-finite path is refused.
+  std::vector<std::byte> bad = state;
+  const double nan = std::nan("");
+  std::memcpy(bad.data() + 16, &nan, 8);
+  ModelModule m3(position_model(), {aw}, true, 0);
+  EXPECT_FALSE(m3.load_state(bad));
+  // Tool change (event): a new tool's path starts at 0.
+  const core::Event tc[] = {core::ToolChange{t, 8, false}};
+  m2.step(t += 1'000'000, tc, out);
+  EXPECT_DOUBLE_EQ(m2.cut_path_mm(), 0.0);
+  EXPECT_DOUBLE_EQ(m2.trim_um(0), 0.0);
+  // A tool change seen only in the axis samples (no event) resets the path too.
+  for (int k = 0; k <= 10; ++k) {
+    const core::Event e[] = {sample(static_cast<double>(k), 0.0, 8, true)};
+    m2.step(t += 1'000'000, e, out);
+  }
+  EXPECT_NEAR(m2.cut_path_mm(), 10.0, 1e-9);
+  const core::Event e9[] = {sample(10.0, 0.0, 9, true)};
+  m2.step(t += 1'000'000, e9, out);
+  EXPECT_DOUBLE_EQ(m2.cut_path_mm(), 0.0);
+}
+
+TEST(ModelSection, TermsTheLoopCannotEvaluateAsConfiguredAreRefused) {
+  TempDir d;
+  d.write("fit/model.toml",
+          tools::model_io::write_model_toml(position_model(), cm::AnalysisConfig{}, {"test"}));
+  const auto load = [&](const std::string& name, const std::string& update,
+                        const std::string& term) {
+    return config::load_file(d.write(
+        name, registers_toml() + "[model]\nfile = \"fit/model.toml\"\nupdate = \"" + update +
+                  "\"\n[[model.apply]]\nterm = \"" + term + "\"\nregister = \"checkpoint_0\"\n"));
+  };
+  auto r1 = load("a.toml", "part", "position_x");
+  ASSERT_FALSE(r1.config);
+  EXPECT_NE(r1.diagnostics.to_string().find(
+                "model.apply[0].term: term 'position_x' depends on x_mm, which changes within a "
+                "part: set update = \"cycle\""),
+            std::string::npos)
+      << r1.diagnostics.to_string();
+  auto r2 = load("b.toml", "part", "path_wear");
+  ASSERT_FALSE(r2.config);
+  EXPECT_NE(r2.diagnostics.to_string().find("depends on path_mm"), std::string::npos)
+      << r2.diagnostics.to_string();
+  auto r3 = load("c.toml", "cycle", "angle_term");
+  ASSERT_FALSE(r3.config);
+  EXPECT_NE(r3.diagnostics.to_string().find(
+                "depends on angle_deg, which the daemon's loop does not know"),
+            std::string::npos)
+      << r3.diagnostics.to_string();
+  for (const char* ok : {"position_x", "periodic_z", "path_wear"}) {
+    auto r = load(std::string("ok_") + ok + ".toml", "cycle", ok);
+    EXPECT_TRUE(r.config) << ok << ": " << r.diagnostics.to_string();
+  }
 }
 
 }  // namespace
