@@ -9,6 +9,8 @@
 #include <sys/un.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <array>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
@@ -179,7 +181,14 @@ std::string render_json(const StatusContext& c) {
       << ",\"events_decoded\":" << k.events_decoded << ",\"events_dropped\":" << k.events_dropped
       << ",\"malformed\":" << k.malformed << ",\"offsets_written\":" << k.offsets_written
       << ",\"offsets_retried\":" << k.offsets_retried << ",\"offsets_failed\":" << k.offsets_failed
-      << ",\"reconnects\":" << k.reconnects << ",\"faults\":" << k.faults << "}";
+      << ",\"reconnects\":" << k.reconnects << ",\"faults\":" << k.faults;
+    std::array<drivers::BusCounterValue, drivers::kMaxBusExtraCounters> extra{};
+    const std::size_t n_extra = std::min(c.buses[i].second->extra_counters(extra), extra.size());
+    o << ",\"counters\":{";
+    for (std::size_t x = 0; x < n_extra; ++x) {
+      o << (x ? "," : "") << "\"" << json_escape(extra[x].name) << "\":" << extra[x].value;
+    }
+    o << "}}";
   }
   o << "],\"state\":{\"path\":\"" << json_escape(c.state_path) << "\"";
   if (c.persister != nullptr) {
@@ -289,6 +298,16 @@ std::string render_text(const StatusContext& c) {
         static_cast<unsigned long long>(k.offsets_failed),
         static_cast<unsigned long long>(k.reconnects), static_cast<unsigned long long>(k.faults));
     o << buf;
+    // Driver-specific counters, only the non-zero ones (a healthy bus prints none).
+    std::array<drivers::BusCounterValue, drivers::kMaxBusExtraCounters> extra{};
+    const std::size_t n_extra = std::min(bus->extra_counters(extra), extra.size());
+    bool any = false;
+    for (std::size_t e = 0; e < n_extra; ++e) {
+      if (extra[e].value == 0) continue;
+      o << (any ? ", " : "             ") << extra[e].name << " " << extra[e].value;
+      any = true;
+    }
+    if (any) o << "\n";
   }
   o << "state:   " << c.state_path;
   if (c.persister != nullptr) {
@@ -371,6 +390,16 @@ std::string render_prometheus(const StatusContext& c) {
   for (const auto& [name, bus] : c.buses) {
     o << "nccompd_bus_faults_total{bus=\"" << name << "\"} " << bus->status().counters.faults
       << "\n";
+  }
+  o << "# HELP nccompd_bus_counter_total Driver-specific bus counters (fault kinds, rejects).\n"
+       "# TYPE nccompd_bus_counter_total counter\n";
+  for (const auto& [name, bus] : c.buses) {
+    std::array<drivers::BusCounterValue, drivers::kMaxBusExtraCounters> extra{};
+    const std::size_t n_extra = std::min(bus->extra_counters(extra), extra.size());
+    for (std::size_t e = 0; e < n_extra; ++e) {
+      o << "nccompd_bus_counter_total{bus=\"" << name << "\",counter=\"" << extra[e].name << "\"} "
+        << extra[e].value << "\n";
+    }
   }
   return o.str();
 }

@@ -6,8 +6,10 @@
 // is published through a seqlock snapshot that any thread may read.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <optional>
+#include <span>
 
 #include "core/common/types.hpp"
 #include "core/rt/seqlock.hpp"
@@ -37,6 +39,17 @@ struct BusCounters {
   std::uint64_t faults{0};  // bus faults of any kind
 };
 
+/// One driver-specific counter for `nccomp status` (text, JSON, metrics): a fault kind, a
+/// per-reason reject, an exception code. `name` is a static snake_case string owned by the driver
+/// ("bus_off", "exception_illegal_address", "rx_overflow").
+struct BusCounterValue {
+  const char* name{""};
+  std::uint64_t value{0};
+};
+
+/// At most this many driver-specific counters are shown per bus.
+inline constexpr std::size_t kMaxBusExtraCounters = 48;
+
 struct BusStatus {
   LinkState state{LinkState::kStopped};
   bool alarm{false};  // a write could not be delivered, or the link is down beyond tolerance
@@ -60,6 +73,14 @@ class Bus {
   virtual core::rt::SpscRing<core::OffsetWrite>& tx() = 0;
   /// Any thread: a consistent snapshot of the driver's state and counters.
   [[nodiscard]] virtual BusStatus status() const = 0;
+  /// Any thread, not real-time (the status thread): the driver's own counters beyond
+  /// BusCounters (fault kinds, per-reason rejects, exception codes, lost events), so that an
+  /// operator sees them in `nccomp status`. Writes at most out.size() entries, always the same
+  /// names in the same order for one driver, and returns how many it wrote. Default: none.
+  [[nodiscard]] virtual std::size_t extra_counters(std::span<BusCounterValue> out) const {
+    (void)out;
+    return 0;
+  }
   /// Loop thread, after pushing into tx(): lets a driver that sleeps between frames send at
   /// once. Real-time safe (no allocation, no lock, never blocks). Default: nothing to do.
   virtual void wake() noexcept {}

@@ -44,6 +44,27 @@ std::string http_get(int port, const std::string& path) {
   return out;
 }
 
+/// A loopback bus that also reports driver-specific counters (as the CAN and Modbus drivers do).
+class CountingBus final : public drivers::Bus {
+ public:
+  void start() override { inner_.start(); }
+  void stop() override { inner_.stop(); }
+  core::rt::SpscRing<core::Event>& rx() override { return inner_.rx(); }
+  core::rt::SpscRing<core::OffsetWrite>& tx() override { return inner_.tx(); }
+  [[nodiscard]] drivers::BusStatus status() const override { return inner_.status(); }
+  [[nodiscard]] std::size_t extra_counters(std::span<drivers::BusCounterValue> out) const override {
+    const drivers::BusCounterValue values[] = {{"bus_off", 2}, {"rx_overflow", 0}};
+    std::size_t n = 0;
+    for (const auto& v : values) {
+      if (n < out.size()) out[n++] = v;
+    }
+    return n;
+  }
+
+ private:
+  LoopbackBus inner_{64, 64};
+};
+
 TEST(StatusServer, AnswersTextJsonAndPrometheus) {
   const fs::path dir = fs::temp_directory_path() / ("nccomp_status_" + std::to_string(::getpid()));
   fs::create_directories(dir);
@@ -56,7 +77,7 @@ TEST(StatusServer, AnswersTextJsonAndPrometheus) {
                         std::move(m));
   rt->register_bus = {0};
   core::rt::ConfigSwap<Runtime> swap(std::move(rt));
-  LoopbackBus bus(64, 64);
+  CountingBus bus;
   bus.start();
   Loop loop(LoopOptions{}, swap, {&bus}, nullptr, nullptr);
   EventLogger logger(loop);
@@ -90,8 +111,13 @@ TEST(StatusServer, AnswersTextJsonAndPrometheus) {
   EXPECT_NE(json.find("\"name\":\"T1_length_wear\",\"output_um\":3,"), std::string::npos) << json;
   EXPECT_NE(json.find("\"buses\":[{\"name\":\"loopback\",\"state\":\"up\""), std::string::npos);
   EXPECT_NE(json.find("\"rate_hz\":1000,"), std::string::npos);
+  // Driver-specific counters: all of them in JSON and metrics, only the non-zero ones in text.
+  EXPECT_NE(json.find("\"counters\":{\"bus_off\":2,\"rx_overflow\":0}}"), std::string::npos)
+      << json;
   const std::string text = query_status(sock, "text");
   EXPECT_NE(text.find("T1_length_wear                3.000 um"), std::string::npos) << text;
+  EXPECT_NE(text.find("bus_off 2\n"), std::string::npos) << text;
+  EXPECT_EQ(text.find("rx_overflow"), std::string::npos) << text;
   EXPECT_NE(query_status(sock, "bogus").find("error: unknown request 'bogus'"), std::string::npos);
   const std::string http = http_get(server.prometheus_port(), "/metrics");
   EXPECT_EQ(http.rfind("HTTP/1.0 200 OK", 0), 0U) << http;
@@ -99,6 +125,9 @@ TEST(StatusServer, AnswersTextJsonAndPrometheus) {
             std::string::npos)
       << http;
   EXPECT_NE(http.find("nccompd_bus_up{bus=\"loopback\"} 1\n"), std::string::npos);
+  EXPECT_NE(http.find("nccompd_bus_counter_total{bus=\"loopback\",counter=\"bus_off\"} 2\n"),
+            std::string::npos)
+      << http;
   EXPECT_EQ(http_get(server.prometheus_port(), "/other").rfind("HTTP/1.0 404", 0), 0U);
 
   server.stop();
