@@ -75,15 +75,32 @@ TEST(ConfigSwap, GivenRetireRingFull_WhenPickedUp_ThenKeepsCurrentUntilReclaimed
   EXPECT_EQ(swap.current().generation, 3U);
 }
 
-TEST(ConfigSwap, GivenPending_WhenLoopPicksUp_ThenNoAllocationOnLoopThread) {
+// The loop thread neither allocates nor frees when it takes a new configuration: the old one is
+// freed by reclaim() on the builder's thread (counted there, not on the loop thread).
+TEST(ConfigSwap, GivenPending_WhenLoopPicksUp_ThenNoAllocationAndNoFreeOnLoopThread) {
+  Config::live = 0;
   ConfigSwap<Config> swap(std::make_unique<Config>(1));
-  swap.publish(std::make_unique<Config>(2));
-  {
-    test::AllocationScope scope;
-    EXPECT_TRUE(swap.pickup());
-    EXPECT_FALSE(swap.pickup());
-    EXPECT_EQ(swap.current().generation, 2U);
-    EXPECT_EQ(scope.count(), 0U);
+  for (std::uint64_t g = 2; g <= 5; ++g) {
+    swap.publish(std::make_unique<Config>(g));
+    std::uint64_t loop_allocs = ~std::uint64_t{0};
+    std::uint64_t loop_frees = ~std::uint64_t{0};
+    bool picked = false;
+    std::thread loop([&] {
+      test::AllocationScope scope;
+      picked = swap.pickup();
+      picked = picked && !swap.pickup() && swap.current().generation == g;
+      loop_allocs = scope.count();
+      loop_frees = scope.frees();
+    });
+    loop.join();
+    EXPECT_TRUE(picked) << "generation " << g;
+    EXPECT_EQ(loop_allocs, 0U) << "generation " << g;
+    EXPECT_EQ(loop_frees, 0U) << "generation " << g;
+    EXPECT_EQ(Config::live.load(), 2);  // the retired one still exists: not freed by the loop
+    test::AllocationScope builder;
+    EXPECT_EQ(swap.reclaim(), 1U);
+    EXPECT_EQ(builder.frees(), 1U);  // freed here, on the builder's thread
+    EXPECT_EQ(Config::live.load(), 1);
   }
 }
 

@@ -68,6 +68,7 @@ TEST(Seqlock, GivenConstructedLock_WhenStoringAndLoading_ThenNoAllocation) {
     EXPECT_TRUE(consistent(lock.load()));
   }
   EXPECT_EQ(scope.count(), 0U);
+  EXPECT_EQ(scope.frees(), 0U);
 }
 
 // Readers never see a torn value while a writer stores at full speed.
