@@ -90,23 +90,35 @@ void validate(const CreepConfig& c) {
     fail("creep.edge.tool_axis", "must be a unit vector, |axis| = " + num(axis_norm));
   }
   sign(e.fallback_sign, "creep.edge.fallback_sign");
-  if (e.normal_source == NormalSource::kToolpath) {
-    if (c.toolpath_normals.size() < 2) {
-      fail("creep.edge.toolpath_file", "needs at least 2 rows for normal_source = \"toolpath\"");
-    }
-    for (std::size_t i = 0; i < c.toolpath_normals.size(); ++i) {
-      const auto& r = c.toolpath_normals[i];
+  const auto& tp = c.toolpath;
+  if (!tp.rows.empty()) {
+    if (tp.rows.size() < 2) fail("creep.edge.toolpath_file", "needs at least 2 rows");
+    for (std::size_t i = 0; i < tp.rows.size(); ++i) {
+      const auto& r = tp.rows[i];
       const std::string key = "creep.edge.toolpath_file row " + std::to_string(i + 1);
       finite(r.path_mm, key + " path_mm");
-      if (i > 0 && !(r.path_mm > c.toolpath_normals[i - 1].path_mm)) {
+      if (i > 0 && !(r.path_mm > tp.rows[i - 1].path_mm)) {
         fail(key, "path_mm must be strictly increasing");
       }
-      const double n = std::sqrt(r.normal[0] * r.normal[0] + r.normal[1] * r.normal[1] +
-                                 r.normal[2] * r.normal[2]);
-      if (!std::isfinite(n) || std::fabs(n - 1.0) > 1e-3) {
-        fail(key, "normal must be a unit vector, |n| = " + num(n));
+      if (tp.has_normals) {
+        const double n = std::sqrt(r.normal[0] * r.normal[0] + r.normal[1] * r.normal[1] +
+                                   r.normal[2] * r.normal[2]);
+        if (!std::isfinite(n) || std::fabs(n - 1.0) > 1e-3) {
+          fail(key, "normal must be a unit vector, |n| = " + num(n));
+        }
+      }
+      if (tp.has_removal && !(std::isfinite(r.removal_mm2) && r.removal_mm2 >= 0.0)) {
+        fail(key, "removal_mm2 must be a finite number >= 0, got " + num(r.removal_mm2));
       }
     }
+  }
+  if (e.normal_source == NormalSource::kToolpath && (tp.rows.size() < 2 || !tp.has_normals)) {
+    fail("creep.edge.toolpath_file",
+         "needs at least 2 rows with normals (nx, ny, nz) for normal_source = \"toolpath\"");
+  }
+  if (e.material_side != MaterialSide::kNone && e.material_side != MaterialSide::kLeft &&
+      e.material_side != MaterialSide::kRight) {
+    fail("creep.edge.material_side", "must be \"none\", \"left\" or \"right\"");
   }
 
   const auto& o = c.output;
@@ -168,6 +180,11 @@ void validate(const CreepConfig& c) {
     case IntervalBasis::kMaterial:
       positive(iv.removal_mm3_per_mm, "creep.interval.removal_mm3_per_mm");
       positive(iv.interval_mm3, "creep.interval.interval_mm3");
+      if (iv.removal_source == RemovalSource::kToolpath &&
+          (tp.rows.size() < 2 || !tp.has_removal)) {
+        fail("creep.interval.removal_source",
+             "is \"toolpath\": creep.edge.toolpath_file needs a removal_mm2 column");
+      }
       break;
   }
 

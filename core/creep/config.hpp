@@ -23,6 +23,12 @@ inline constexpr std::size_t kMaxDeflectionRows = 16;
 inline constexpr std::size_t kMaxTransitions = 16;
 /// Measurements kept for fitting the wear rate (adaptive interval, predictive creeping).
 inline constexpr std::size_t kMaxRateWindow = 8;
+/// Slope continuity at a measurement while the offset moves (superpose): the new increment's
+/// profile is entered with zero slope over this fraction of its span (its steepest slope is then
+/// 1 / (1 − kBlendFraction / 2) = 1.11 times the profile's); a folded creep's slope fades out over
+/// the same fraction; the prediction's rate blends to the new fitted rate over this fraction of
+/// the path since the previous measurement.
+inline constexpr double kBlendFraction = 0.2;
 
 /// What the creep length is measured in (S0 feature 1, claims 2–4).
 enum class CreepBasis : std::uint8_t {
@@ -68,8 +74,19 @@ enum class IntervalBasis : std::uint8_t {
   kPath = 1,      // every interval_mm of cut path
   kTime = 2,      // every interval_s of cutting time
   kAdaptive = 3,  // target_increment_um / fitted wear rate, within [min, max]_interval_mm
-  kMaterial = 4,  // every interval_mm3 of material removed (removal_mm3_per_mm × cut path)
+  kMaterial = 4,  // every interval_mm3 of material removed (cross-section × cut path)
 };
+
+/// Where the removal cross-section of the interval basis "material" comes from.
+enum class RemovalSource : std::uint8_t {
+  kConstant = 0,  // removal_mm3_per_mm everywhere
+  kToolpath = 1,  // the toolpath file's removal_mm2 column by program position (constant outside)
+};
+
+/// Without a surface normal: on which side of the feed direction the material lies (as seen
+/// along the feed with the tool axis pointing up), i.e. where the lateral deflection
+/// compensation pushes the tool. kNone: no lateral compensation without a normal (mode axes).
+enum class MaterialSide : std::uint8_t { kNone = 0, kLeft = 1, kRight = 2 };
 
 enum class ExcessivePolicy : std::uint8_t {
   kStop = 0,    // alarm: stop, nothing applied
@@ -87,12 +104,25 @@ struct EdgeConfig {
   /// Channel that carries the mean wear when no normal is known, and its sign.
   Channel fallback_channel{Channel::kZ};
   double fallback_sign{-1.0};
+  /// Lateral deflection without a normal (mode axes): across the feed direction toward this
+  /// side. In mode tool_registers it goes on the radius register (no direction needed).
+  MaterialSide material_side{MaterialSide::kNone};
 };
 
-/// One row of a toolpath normal table: program path position → unit surface normal.
-struct ToolpathNormal {
+/// One row of the toolpath file: program path position → unit surface normal and / or the
+/// removal cross-section (a_e·a_p) of the segment that starts here.
+struct ToolpathRow {
   double path_mm{0.0};
   std::array<double, 3> normal{0.0, 0.0, 1.0};
+  /// Removal cross-section [mm²] from this row's path_mm to the next row's (NaN: no column).
+  double removal_mm2{kNaN};
+};
+
+/// The parsed toolpath file: which columns it has, and its rows (path strictly increasing).
+struct ToolpathTable {
+  bool has_normals{false};
+  bool has_removal{false};
+  std::vector<ToolpathRow> rows;
 };
 
 /// [creep.output]
@@ -125,7 +155,10 @@ struct IntervalConfig {
   double target_increment_um{5.0};
   double min_interval_mm{100.0};
   double max_interval_mm{5000.0};
+  /// Removal cross-section [mm²] = removed volume per mm of cut path: everywhere (source
+  /// constant), or where the toolpath file has no value (outside its rows, no program path).
   double removal_mm3_per_mm{0.025};
+  RemovalSource removal_source{RemovalSource::kConstant};
   double interval_mm3{50.0};
 };
 
@@ -205,8 +238,9 @@ struct CreepConfig {
   std::size_t max_creeps{4};
 
   EdgeConfig edge{};
-  /// Filled by the loader from creep.edge.toolpath_file; sorted by path_mm.
-  std::vector<ToolpathNormal> toolpath_normals;
+  /// Filled by the loader from creep.edge.toolpath_file: normals (normal_source = toolpath)
+  /// and / or removal cross-sections (interval removal_source = toolpath), sorted by path_mm.
+  ToolpathTable toolpath;
   OutputConfig output{};
   LimiterConfig limiter{};
   IntervalConfig interval{};

@@ -1,10 +1,12 @@
 #include "core/creep/creep_module.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <utility>
 
 namespace nccomp::core::creep {
@@ -14,6 +16,44 @@ namespace {
 constexpr std::array<const char*, kChannelCount> kChannelKeys{
     "creep.output.x_register", "creep.output.y_register", "creep.output.z_register",
     "creep.output.radius_register", "creep.output.length_register"};
+
+// Status keys of remembered tools: string literals in static storage (the loop publishes the
+// pointers, the status thread reads them later), built at compile time for tools 1..kKeyedTools.
+constexpr std::size_t kKeyedTools = 9999;
+constexpr std::size_t kToolKeyLength = 16;  // "T9999_wear_um" + NUL
+struct ToolKeys {
+  std::array<std::array<char, kToolKeyLength>, kKeyedTools + 1> key{};
+};
+constexpr ToolKeys make_tool_keys() {
+  ToolKeys k{};
+  for (std::size_t t = 1; t <= kKeyedTools; ++t) {
+    auto& s = k.key[t];
+    std::size_t n = 0;
+    s[n++] = 'T';
+    char digits[4]{};
+    std::size_t d = 0;
+    for (std::size_t v = t; v > 0; v /= 10) digits[d++] = static_cast<char>('0' + v % 10);
+    while (d > 0) s[n++] = digits[--d];
+    for (const char c : std::string_view("_wear_um")) s[n++] = c;
+    s[n] = '\0';
+  }
+  return k;
+}
+constexpr ToolKeys kToolKeys = make_tool_keys();
+static_assert(std::string_view(kToolKeys.key[9999].data()) == "T9999_wear_um");
+/// Tools outside 1..kKeyedTools: by their slot in the tool memory.
+constexpr std::array<const char*, kMaxToolMemory> kSlotKeys{
+    "memory_slot_1_wear_um", "memory_slot_2_wear_um", "memory_slot_3_wear_um",
+    "memory_slot_4_wear_um", "memory_slot_5_wear_um", "memory_slot_6_wear_um",
+    "memory_slot_7_wear_um", "memory_slot_8_wear_um"};
+
+/// The largest measured wear of a state over its support points [µm].
+double max_measured_um(const CreepState& s) {
+  const std::size_t n = std::clamp<std::size_t>(s.edge_points, 1, kMaxEdgePoints);
+  double w = s.measured_um[0];
+  for (std::size_t i = 1; i < n; ++i) w = std::max(w, s.measured_um[i]);
+  return w;
+}
 
 engine::RegisterKind kind_for(std::size_t channel) {
   switch (static_cast<Channel>(channel)) {
@@ -154,17 +194,26 @@ bool CreepModule::load_state(std::span<const std::byte> bytes) noexcept {
 std::size_t CreepModule::status(std::span<engine::StatusValue> out) const noexcept {
   const auto& s = comp_.state();
   const auto& c = comp_.config();
+  const auto& mem = comp_.tool_memory();
   const std::size_t n = std::max<std::size_t>(1, c.edge.edge_points);
   // The support point with the largest measured wear speaks for the tool.
   std::size_t k = 0;
   for (std::size_t i = 1; i < n; ++i) {
     if (s.measured_um[i] > s.measured_um[k]) k = i;
   }
-  const double in_force_um = s.committed_um[k] + comp_.applied_wear_um(k);
+  const double in_force_um = comp_.applied_wear_um(k);
   const char* mode = c.profile == ProfileShape::kStep ? "step"
                      : c.predict.enabled              ? "predictive creeping"
                                                       : "creeping";
-  const engine::StatusValue values[] = {
+  // Remembered tools, the most recently used first.
+  std::array<std::size_t, kMaxToolMemory> order{};
+  std::size_t remembered = 0;
+  for (std::size_t m = 0; m < kMaxToolMemory; ++m) {
+    if (mem.tool[m] != 0) order[remembered++] = m;
+  }
+  std::sort(order.begin(), order.begin() + static_cast<std::ptrdiff_t>(remembered),
+            [&](std::size_t a, std::size_t b) { return mem.last_use[a] > mem.last_use[b]; });
+  const engine::StatusValue core_values[] = {
       {"mode", 0.0, mode},
       {"tool", static_cast<double>(s.tool), nullptr},
       {"wear_in_force_um", in_force_um, nullptr},
@@ -179,10 +228,30 @@ std::size_t CreepModule::status(std::span<engine::StatusValue> out) const noexce
        nullptr},
       {"measurements_refused", static_cast<double>(comp_.counters().measurements_refused), nullptr},
   };
+  // A status holds at most out.size() values (engine::kMaxStatusValues): every remembered tool
+  // is shown; beyond four of them these make room, the last first.
+  constexpr std::array<const char*, 4> kYield{"measurements_refused", "measurements_accepted",
+                                              "wear_rate_um_per_mm", "cut_path_mm"};
+  const std::size_t total = std::size(core_values) + remembered;
+  const std::size_t drop =
+      std::min(kYield.size(), total > out.size() ? total - out.size() : std::size_t{0});
   std::size_t w = 0;
-  for (const auto& v : values) {
-    if (w == out.size()) break;
+  for (const auto& v : core_values) {
+    bool dropped = false;
+    for (std::size_t d = 0; d < drop; ++d)
+      dropped = dropped || std::string_view(v.key) == kYield[d];
+    if (dropped) continue;
+    if (w == out.size()) return w;
     out[w++] = v;
+  }
+  for (std::size_t j = 0; j < remembered; ++j) {
+    if (w == out.size()) break;
+    const std::size_t m = order[j];
+    const std::int32_t tool = mem.tool[m];
+    const char* key = tool >= 1 && static_cast<std::size_t>(tool) <= kKeyedTools
+                          ? kToolKeys.key[static_cast<std::size_t>(tool)].data()
+                          : kSlotKeys[m];
+    out[w++] = {key, max_measured_um(mem.state[m]), nullptr};
   }
   return w;
 }

@@ -65,7 +65,10 @@ class CreepModule final : public engine::Module {
   [[nodiscard]] std::uint64_t state_generation() const noexcept override { return generation_; }
   /// Real-time safe: mode, tool, wear in force / measured / still to creep (max over the edge)
   /// [µm], creeps in progress, the correction along the normal [µm], cut path [mm], fitted wear
-  /// rate [µm/mm], halted, measurements accepted / refused.
+  /// rate [µm/mm], halted, measurements accepted / refused; then the measured wear of every
+  /// remembered tool (`T<n>_wear_um`, most recently used first; `memory_slot_<k>_wear_um` for a
+  /// tool number beyond 9999). With more than four remembered tools the last four counters make
+  /// room (refused, accepted, rate, cut path) so that all fit into engine::kMaxStatusValues.
   std::size_t status(std::span<engine::StatusValue> out) const noexcept override;
   /// The offset and flag registers of [creep.output] (valid after attach()).
   [[nodiscard]] std::vector<std::uint16_t> written_registers() const override;

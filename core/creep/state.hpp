@@ -14,10 +14,19 @@
 namespace nccomp::core::creep {
 
 /// One wear increment creeping in, per edge support point.
+///
+/// Value at point i, t = clock − start (clock: creep path [mm] or creep time [s]):
+///   v(t) = (delta − s·l/2) · f(g(t / span)) + s · c(t),   c(t) = t − t²/(2l) for t < l, l/2 after
+/// with f the profile, g(u) = u, or the eased progress (zero slope at u = 0) when `eased`, and
+/// s = carry_slope, l = carry_span (a slope carried over from a creep folded into this one, faded
+/// out over l). v(0) = 0, v(end) = delta; the slope at t = 0 is s (eased or zero-slope profiles),
+/// so a creep started while the offset moves continues it without a kink.
 struct CreepSlot {
   bool active{false};
   /// Progress is counted in cut path [mm] (path, rate-per-path bases) or cutting time [s].
   bool path_based{true};
+  /// The profile is entered with zero slope (a creep started while the offset was moving).
+  bool eased{false};
   /// Order of creation (the oldest is folded first when all slots are busy).
   std::uint64_t seq{0};
   /// Creep clock (path [mm] or time [s]) when the creep began.
@@ -25,6 +34,10 @@ struct CreepSlot {
   /// Increment to feed in [µm] and the clock span over which it is fed [mm or s], per point.
   std::array<double, kMaxEdgePoints> delta_um{};
   std::array<double, kMaxEdgePoints> span{};
+  /// Slope carried over from a folded creep [µm per mm or per s] and the clock span over which
+  /// it fades out (0 = none), per point.
+  std::array<double, kMaxEdgePoints> carry_slope{};
+  std::array<double, kMaxEdgePoints> carry_span{};
 };
 
 /// A scalar offset away from the surface that creeps to zero along the path: sister-tool entry
@@ -43,7 +56,7 @@ struct HistoryEntry {
 };
 
 struct CreepState {
-  static constexpr std::uint32_t kVersion = 1;
+  static constexpr std::uint32_t kVersion = 2;
   std::uint32_t version{kVersion};
   /// Edge support points the state was built with (must match the config on import).
   std::uint32_t edge_points{1};
@@ -64,6 +77,11 @@ struct CreepState {
   /// Fitted wear rate [µm/mm of cut path], per point; valid if rate_known.
   std::array<double, kMaxEdgePoints> rate_um_per_mm{};
   bool rate_known{false};
+  /// Predictive creeping: the predicted growth rate in force just before the last measurement
+  /// [µm/mm], per point, and the cut path over which the prediction's rate blends from it to the
+  /// newly fitted rate [mm] (so the prediction's slope has no jump at a measurement).
+  std::array<double, kMaxEdgePoints> rate_prev_um_per_mm{};
+  double rate_blend_mm{0.0};
 
   /// Accepted measurements, oldest first; history[0] is the new tool's origin (zero wear at
   /// zero path) while history_has_origin.
@@ -81,6 +99,10 @@ struct CreepState {
   double last_measurement_creep_path_mm{0.0};
   /// Program path position at the last accepted measurement [mm] (NaN if unknown).
   double last_measurement_program_path_mm{kNaN};
+  /// Material removed by this tool since it was loaded [mm³] (interval basis "material"), and
+  /// the amount at the last accepted measurement.
+  double removed_mm3{0.0};
+  double last_measurement_removed_mm3{0.0};
   std::uint32_t measurements{0};
 
   bool halted{false};
@@ -124,7 +146,8 @@ inline bool state_bytes_loadable(const std::byte* bytes, std::size_t size) noexc
   for (std::size_t k = 0; k < kMaxCreeps; ++k) {
     const std::size_t slot = offsetof(CreepState, creeps) + k * sizeof(CreepSlot);
     if (!is_bool(slot + offsetof(CreepSlot, active)) ||
-        !is_bool(slot + offsetof(CreepSlot, path_based))) {
+        !is_bool(slot + offsetof(CreepSlot, path_based)) ||
+        !is_bool(slot + offsetof(CreepSlot, eased))) {
       return false;
     }
   }

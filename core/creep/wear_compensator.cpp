@@ -14,6 +14,22 @@ namespace {
 
 constexpr double kRadToDeg = 180.0 / std::numbers::pi;
 constexpr double kTiny = 1e-9;
+constexpr double kEase = kBlendFraction;
+/// Slope of the eased progress after the ease-in: φ(1) = 1.
+constexpr double kEaseGain = 1.0 / (1.0 - 0.5 * kEase);
+
+/// Eased progress φ(u): φ(0) = 0 with zero slope, slope rising linearly to kEaseGain over
+/// [0, kEase], constant after; φ(1) = 1.
+double eased(double u) noexcept {
+  if (!(u > 0.0)) return 0.0;
+  if (u >= 1.0) return 1.0;
+  return u < kEase ? kEaseGain * u * u / (2.0 * kEase) : kEaseGain * (u - 0.5 * kEase);
+}
+
+double eased_slope(double u) noexcept {
+  if (u < 0.0 || u >= 1.0) return 0.0;
+  return u < kEase ? kEaseGain * u / kEase : kEaseGain;
+}
 
 }  // namespace
 
@@ -26,6 +42,17 @@ void WearCompensator::configure(const CreepConfig& config) {
     std::copy(config_.profile_table.begin(), config_.profile_table.end(), table_.f.begin());
     table_.n = config_.profile_table.size();
   }
+  removal_cum_mm3_.clear();
+  if (config_.toolpath.has_removal && !config_.toolpath.rows.empty()) {
+    const auto& rows = config_.toolpath.rows;
+    removal_cum_mm3_.reserve(rows.size());
+    double v = 0.0;
+    removal_cum_mm3_.push_back(v);
+    for (std::size_t j = 1; j < rows.size(); ++j) {
+      v += rows[j - 1].removal_mm2 * (rows[j].path_mm - rows[j - 1].path_mm);
+      removal_cum_mm3_.push_back(v);
+    }
+  }
   points_ = config_.edge.edge_points;
   s_ = CreepState{};
   memory_ = ToolMemory{};
@@ -33,6 +60,7 @@ void WearCompensator::configure(const CreepConfig& config) {
   s_.history_count = 1;  // a new tool: zero wear at zero path, the first point of the rate fit
   counters_ = CreepCounters{};
   have_sample_ = false;
+  have_feed_ = false;
   cutting_ = false;
   interrupted_ = false;
   have_now_ = false;
@@ -54,12 +82,19 @@ StateProblem WearCompensator::check_state(const CreepState& st) const noexcept {
   if (bad(st.last_measurement_cut_path_mm)) return {"last_measurement_cut_path_mm", -1};
   if (bad(st.last_measurement_cut_time_s)) return {"last_measurement_cut_time_s", -1};
   if (bad(st.last_measurement_creep_path_mm)) return {"last_measurement_creep_path_mm", -1};
+  if (bad(st.rate_blend_mm) || st.rate_blend_mm < 0.0) return {"rate_blend_mm", -1};
+  if (bad(st.removed_mm3) || st.removed_mm3 < 0.0) return {"removed_mm3", -1};
+  if (bad(st.last_measurement_removed_mm3) || st.last_measurement_removed_mm3 < 0.0 ||
+      st.last_measurement_removed_mm3 > st.removed_mm3) {
+    return {"last_measurement_removed_mm3", -1};
+  }
   if (st.history_count < 1 || st.history_count > kMaxRateWindow) return {"history_count", -1};
   for (std::size_t i = 0; i < points_; ++i) {
     const int ii = static_cast<int>(i);
     if (bad(st.committed_um[i])) return {"committed_um", ii};
     if (bad(st.measured_um[i])) return {"measured_um", ii};
     if (bad(st.rate_um_per_mm[i])) return {"rate_um_per_mm", ii};
+    if (bad(st.rate_prev_um_per_mm[i])) return {"rate_prev_um_per_mm", ii};
     for (std::size_t h = 0; h < st.history_count; ++h) {
       if (bad(st.history[h].wear_um[i]) || bad(st.history[h].cut_path_mm)) {
         return {"history", static_cast<int>(h)};
@@ -73,7 +108,10 @@ StateProblem WearCompensator::check_state(const CreepState& st) const noexcept {
     if (k >= config_.max_creeps) return {"creeps (active beyond creep.max_creeps)", kk};
     if (bad(c.start)) return {"creeps", kk};
     for (std::size_t i = 0; i < points_; ++i) {
-      if (bad(c.delta_um[i]) || bad(c.span[i]) || c.span[i] < 0.0) return {"creeps", kk};
+      if (bad(c.delta_um[i]) || bad(c.span[i]) || c.span[i] < 0.0 || bad(c.carry_slope[i]) ||
+          bad(c.carry_span[i]) || c.carry_span[i] < 0.0) {
+        return {"creeps", kk};
+      }
     }
   }
   if (st.entry.active && (bad(st.entry.start_path_mm) || bad(st.entry.offset_um) ||
@@ -91,6 +129,7 @@ bool WearCompensator::restore_state(const CreepState& st) noexcept {
   s_ = st;
   // Kinematics re-anchor on the first sample; every value is re-sent on the next step.
   have_sample_ = false;
+  have_feed_ = false;
   cutting_ = false;
   interrupted_ = false;
   have_now_ = false;
@@ -215,7 +254,11 @@ void WearCompensator::on_axis_sample(TimeNs now_ns, const AxisSample& a, StepOut
     if (std::isfinite(d) && d > 0.0) {
       s_.cut_path_mm += d;
       if (!s_.halted) s_.creep_path_mm += d;
+      if (config_.interval.basis == IntervalBasis::kMaterial) {
+        s_.removed_mm3 += removal_mm3(last_sample_, a, d);
+      }
     }
+    update_feed_direction(a);
   }
   last_sample_ = a;
   have_sample_ = true;
@@ -226,18 +269,75 @@ void WearCompensator::on_axis_sample(TimeNs now_ns, const AxisSample& a, StepOut
   }
 }
 
-double WearCompensator::creep_fraction(const CreepSlot& c, std::size_t i) const noexcept {
+double WearCompensator::slot_clock(const CreepSlot& c) const noexcept {
+  return c.path_based ? s_.creep_path_mm : s_.creep_time_s;
+}
+
+double WearCompensator::slot_value_um(const CreepSlot& c, std::size_t i) const noexcept {
+  const double t = slot_clock(c) - c.start;
   const double span = c.span[i];
-  if (!(span > 0.0)) return 1.0;
-  const double clock = c.path_based ? s_.creep_path_mm : s_.creep_time_s;
-  return profile_fraction(config_.profile, (clock - c.start) / span, &table_);
+  const double l = c.carry_span[i];
+  double body = c.delta_um[i];
+  double carry = 0.0;
+  if (l > 0.0) {
+    const double s = c.carry_slope[i];
+    const double tc = std::clamp(t, 0.0, l);
+    carry = s * (tc - tc * tc / (2.0 * l));
+    body -= 0.5 * s * l;
+  }
+  double f = 1.0;
+  if (span > 0.0) {
+    const double u = t / span;
+    f = profile_fraction(config_.profile, c.eased ? eased(u) : u, &table_);
+  }
+  return body * f + carry;
+}
+
+double WearCompensator::slot_slope(const CreepSlot& c, std::size_t i) const noexcept {
+  const double t = slot_clock(c) - c.start;
+  const double span = c.span[i];
+  const double l = c.carry_span[i];
+  double body = c.delta_um[i];
+  double slope = 0.0;
+  if (l > 0.0) {
+    body -= 0.5 * c.carry_slope[i] * l;
+    if (t >= 0.0 && t < l) slope += c.carry_slope[i] * (1.0 - t / l);
+  }
+  if (span > 0.0 && t >= 0.0 && t < span) {
+    const double u = t / span;
+    const double df = c.eased ? profile_slope(config_.profile, eased(u), &table_) * eased_slope(u)
+                              : profile_slope(config_.profile, u, &table_);
+    slope += body * df / span;
+  }
+  return slope;
+}
+
+bool WearCompensator::predicting() const noexcept {
+  return config_.predict.enabled && s_.rate_known && s_.measurements >= 2;
 }
 
 double WearCompensator::predicted_um(std::size_t i) const noexcept {
-  if (!config_.predict.enabled || !s_.rate_known || s_.measurements < 2) return 0.0;
+  if (!predicting()) return 0.0;
+  // The rate blends linearly from the one in force before the last measurement to the fitted
+  // one over rate_blend_mm of path: the integral of that rate.
+  const double p = std::max(0.0, s_.creep_path_mm - s_.last_measurement_creep_path_mm);
+  const double r0 = s_.rate_prev_um_per_mm[i];
+  const double r1 = s_.rate_um_per_mm[i];
+  const double lb = s_.rate_blend_mm;
   const double grown =
-      s_.rate_um_per_mm[i] * (s_.creep_path_mm - s_.last_measurement_creep_path_mm);
+      lb > 0.0 && p < lb ? r0 * p + (r1 - r0) * p * p / (2.0 * lb) : r1 * p - (r1 - r0) * 0.5 * lb;
   return std::clamp(grown, 0.0, config_.predict.max_um);
+}
+
+double WearCompensator::prediction_slope(std::size_t i) const noexcept {
+  if (!predicting()) return 0.0;
+  const double g = predicted_um(i);
+  if (!(g > 0.0) || g >= config_.predict.max_um) return 0.0;  // clamped: not growing
+  const double p = std::max(0.0, s_.creep_path_mm - s_.last_measurement_creep_path_mm);
+  const double r0 = s_.rate_prev_um_per_mm[i];
+  const double r1 = s_.rate_um_per_mm[i];
+  const double lb = s_.rate_blend_mm;
+  return lb > 0.0 && p < lb ? r0 + (r1 - r0) * p / lb : r1;
 }
 
 double WearCompensator::applied_wear_um(std::size_t i) const noexcept {
@@ -245,7 +345,7 @@ double WearCompensator::applied_wear_um(std::size_t i) const noexcept {
   double w = s_.committed_um[i] + predicted_um(i);
   for (std::size_t k = 0; k < config_.max_creeps; ++k) {
     const auto& c = s_.creeps[k];
-    if (c.active) w += c.delta_um[i] * creep_fraction(c, i);
+    if (c.active) w += slot_value_um(c, i);
   }
   return w;
 }
@@ -260,10 +360,11 @@ void WearCompensator::retire_finished_creeps() noexcept {
   for (std::size_t k = 0; k < config_.max_creeps; ++k) {
     auto& c = s_.creeps[k];
     if (!c.active) continue;
-    const double clock = c.path_based ? s_.creep_path_mm : s_.creep_time_s;
+    const double t = slot_clock(c) - c.start;
     bool done = true;
     for (std::size_t i = 0; i < points_ && done; ++i) {
-      done = !(c.span[i] > 0.0) || clock - c.start >= c.span[i];
+      done = (!(c.span[i] > 0.0) || t >= c.span[i]) &&
+             (!(c.carry_span[i] > 0.0) || t >= c.carry_span[i]);
     }
     if (done) {
       for (std::size_t i = 0; i < points_; ++i) s_.committed_um[i] += c.delta_um[i];
@@ -275,13 +376,16 @@ void WearCompensator::retire_finished_creeps() noexcept {
   }
 }
 
-void WearCompensator::start_creep(const std::array<double, kMaxEdgePoints>& delta_um,
+void WearCompensator::start_creep(const std::array<double, kMaxEdgePoints>& delta_um, bool moving,
                                   StepOutput& out, TimeNs now_ns) noexcept {
   std::array<double, kMaxEdgePoints> delta = delta_um;
   double largest = 0.0;
   for (std::size_t i = 0; i < points_; ++i) largest = std::max(largest, std::fabs(delta[i]));
-  if (largest < kTiny) return;
+  if (largest < kTiny) return;  // nothing new: the creeps in progress continue unchanged
 
+  const bool path_based =
+      config_.creep_basis == CreepBasis::kPath || config_.creep_basis == CreepBasis::kRatePath;
+  const bool step = config_.profile == ProfileShape::kStep;
   CreepSlot* slot = nullptr;
   CreepSlot* oldest = nullptr;
   for (std::size_t k = 0; k < config_.max_creeps; ++k) {
@@ -292,13 +396,26 @@ void WearCompensator::start_creep(const std::array<double, kMaxEdgePoints>& delt
     }
     if (oldest == nullptr || c.seq < oldest->seq) oldest = &c;
   }
+  // A folded creep's slope and remainder, carried into the new one.
+  std::array<double, kMaxEdgePoints> carry_slope{};
+  std::array<double, kMaxEdgePoints> carry_rest{};
+  std::array<double, kMaxEdgePoints> carry_clock{};
   if (slot == nullptr) {
     // All slots busy: what the oldest creep has fed in stays in force, its remainder joins the
-    // new creep, so the offset keeps its value (no step) and nothing is lost.
+    // new creep, so the offset keeps its value (no step) and nothing is lost; its slope is
+    // carried into the new creep and fades out there (no kink).
+    const double t = slot_clock(*oldest) - oldest->start;
     for (std::size_t i = 0; i < points_; ++i) {
-      const double f = creep_fraction(*oldest, i);
-      s_.committed_um[i] += oldest->delta_um[i] * f;
-      delta[i] += oldest->delta_um[i] * (1.0 - f);
+      const double v = slot_value_um(*oldest, i);
+      s_.committed_um[i] += v;
+      carry_rest[i] = oldest->delta_um[i] - v;
+      delta[i] += carry_rest[i];
+      // Only on the same clock (the basis may have changed with a config reload) and not for the
+      // step profile, which has no slope to keep.
+      if (oldest->path_based == path_based && !step) {
+        carry_slope[i] = slot_slope(*oldest, i);
+        carry_clock[i] = std::max(0.0, std::max(oldest->span[i], oldest->carry_span[i]) - t);
+      }
     }
     slot = oldest;
     ++counters_.creeps_folded;
@@ -308,26 +425,47 @@ void WearCompensator::start_creep(const std::array<double, kMaxEdgePoints>& delt
   *slot = CreepSlot{};
   slot->active = true;
   slot->seq = s_.next_seq++;
-  const bool path_based =
-      config_.creep_basis == CreepBasis::kPath || config_.creep_basis == CreepBasis::kRatePath;
   slot->path_based = path_based;
   slot->start = path_based ? s_.creep_path_mm : s_.creep_time_s;
+  // Entered with zero slope when the offset moves now and the profile would start with a slope
+  // (linear, a table whose first step rises); cosine and smoothstep start flat by themselves.
+  slot->eased = moving && !step && profile_slope(config_.profile, 0.0, &table_) > kTiny;
   for (std::size_t i = 0; i < points_; ++i) {
     slot->delta_um[i] = delta[i];
+    double span = 0.0;
     switch (config_.creep_basis) {
       case CreepBasis::kPath:
-        slot->span[i] = config_.creep_length_mm;
+        span = config_.creep_length_mm;
         break;
       case CreepBasis::kTime:
-        slot->span[i] = config_.creep_time_s;
+        span = config_.creep_time_s;
         break;
       case CreepBasis::kRateTime:
-        slot->span[i] = std::fabs(delta[i]) / config_.creep_rate_um_per_min * 60.0;
+        span = std::fabs(delta[i]) / config_.creep_rate_um_per_min * 60.0;
         break;
       case CreepBasis::kRatePath:
-        slot->span[i] = std::fabs(delta[i]) / config_.creep_rate_um_per_mm;
+        span = std::fabs(delta[i]) / config_.creep_rate_um_per_mm;
         break;
     }
+    const double s = carry_slope[i];
+    if (std::fabs(s) > kTiny) {
+      // At a rate the span follows the amount; never shorter than what the folded creep had
+      // left, so a small amount does not turn the carried slope into a sudden stop.
+      if (config_.creep_basis == CreepBasis::kRateTime ||
+          config_.creep_basis == CreepBasis::kRatePath) {
+        span = std::max(span, carry_clock[i]);
+      }
+      // Fade the carried slope out over kBlendFraction of the span, but never further than
+      // the new target (same direction: the creep stays monotonic and within its end value) or
+      // than the folded creep would have gone (opposite direction).
+      const double reach = s * delta[i] > 0.0 ? std::fabs(delta[i]) : std::fabs(carry_rest[i]);
+      const double l = std::min(kEase * span, 2.0 * reach / std::fabs(s));
+      if (l > kTiny) {
+        slot->carry_slope[i] = s;
+        slot->carry_span[i] = l;
+      }
+    }
+    slot->span[i] = span;
   }
 }
 
@@ -387,7 +525,7 @@ bool WearCompensator::normal_now(std::array<double, 3>& n) const noexcept {
       break;
     case NormalSource::kToolpath: {
       if (!have_sample_ || !std::isfinite(last_sample_.program_path_mm)) return false;
-      const auto& tp = config_.toolpath_normals;
+      const auto& tp = config_.toolpath.rows;
       const double p = last_sample_.program_path_mm;
       const auto it = std::upper_bound(tp.begin(), tp.end(), p,
                                        [](double v, const auto& r) { return v < r.path_mm; });
@@ -407,6 +545,61 @@ bool WearCompensator::normal_now(std::array<double, 3>& n) const noexcept {
   const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
   if (!std::isfinite(len) || len < 1e-9) return false;
   for (auto& v : n) v /= len;
+  return true;
+}
+
+double WearCompensator::toolpath_volume_mm3(double p) const noexcept {
+  const auto& rows = config_.toolpath.rows;
+  const double fallback = config_.interval.removal_mm3_per_mm;
+  if (p <= rows.front().path_mm) return (p - rows.front().path_mm) * fallback;
+  if (p >= rows.back().path_mm) {
+    return removal_cum_mm3_.back() + (p - rows.back().path_mm) * fallback;
+  }
+  const auto it = std::upper_bound(rows.begin(), rows.end(), p,
+                                   [](double v, const ToolpathRow& r) { return v < r.path_mm; });
+  const auto j = static_cast<std::size_t>(it - rows.begin()) - 1;
+  return removal_cum_mm3_[j] + rows[j].removal_mm2 * (p - rows[j].path_mm);
+}
+
+double WearCompensator::removal_mm3(const AxisSample& from, const AxisSample& to,
+                                    double d_mm) const noexcept {
+  const auto& iv = config_.interval;
+  if (iv.removal_source == RemovalSource::kToolpath && !removal_cum_mm3_.empty() &&
+      std::isfinite(from.program_path_mm) && std::isfinite(to.program_path_mm)) {
+    // The cross-section of every segment between the two program positions, each over its
+    // own length (d_mm is that same program path difference here).
+    return std::max(
+        0.0, toolpath_volume_mm3(to.program_path_mm) - toolpath_volume_mm3(from.program_path_mm));
+  }
+  return d_mm * iv.removal_mm3_per_mm;
+}
+
+void WearCompensator::update_feed_direction(const AxisSample& a) noexcept {
+  const std::size_t n =
+      std::min<std::size_t>({static_cast<std::size_t>(a.axis_count),
+                             static_cast<std::size_t>(last_sample_.axis_count), std::size_t{3}});
+  std::array<double, 3> f{};
+  for (std::size_t k = 0; k < n; ++k) f[k] = a.position_mm[k] - last_sample_.position_mm[k];
+  // Across the tool axis only: a plunge along the axis keeps the last direction.
+  const auto& ax = config_.edge.tool_axis;
+  const double along = f[0] * ax[0] + f[1] * ax[1] + f[2] * ax[2];
+  for (std::size_t k = 0; k < 3; ++k) f[k] -= along * ax[k];
+  const double len = std::sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]);
+  if (!std::isfinite(len) || len < 1e-9) return;
+  for (std::size_t k = 0; k < 3; ++k) feed_dir_[k] = f[k] / len;
+  have_feed_ = true;
+}
+
+bool WearCompensator::material_direction(std::array<double, 3>& m) const noexcept {
+  const auto side = config_.edge.material_side;
+  if (side == MaterialSide::kNone || !have_feed_) return false;
+  const auto& a = config_.edge.tool_axis;
+  const auto& f = feed_dir_;
+  // Right of the feed (tool axis up) = f × a; left = a × f.
+  const std::array<double, 3> right{f[1] * a[2] - f[2] * a[1], f[2] * a[0] - f[0] * a[2],
+                                    f[0] * a[1] - f[1] * a[0]};
+  const double sgn = side == MaterialSide::kRight ? 1.0 : -1.0;
+  for (std::size_t k = 0; k < 3; ++k) m[k] = sgn * right[k];
   return true;
 }
 
@@ -460,6 +653,18 @@ void WearCompensator::compute_targets() noexcept {
     c = mean + deflection(mean, false) - away_um;
     const double sgn = axes ? config_.edge.fallback_sign : config_.output.tool_register_sign;
     target[static_cast<std::size_t>(config_.edge.fallback_channel)] = sgn * c;
+    // Lateral deflection without a normal: on the radius register (the NC's radius
+    // compensation knows the side), or across the feed direction toward the configured
+    // material side on the axes; without a side or a feed direction it is not applied.
+    l = deflection(mean, true);
+    std::array<double, 3> m{};
+    if (!axes) {
+      target[static_cast<std::size_t>(Channel::kRadius)] += config_.output.tool_register_sign * l;
+    } else if (material_direction(m)) {
+      for (std::size_t k = 0; k < 3; ++k) target[k] += l * m[k];
+    } else {
+      l = 0.0;
+    }
   }
   correction_um_ = c;
   lateral_um_ = l;
@@ -653,7 +858,7 @@ void WearCompensator::on_measurement(TimeNs now_ns, const ToolMeasurement& m,
       double r = 0.0;
       for (std::size_t k = 0; k < config_.max_creeps; ++k) {
         const auto& c = s_.creeps[k];
-        if (c.active) r += c.delta_um[i] * (1.0 - creep_fraction(c, i));
+        if (c.active) r += c.delta_um[i] - slot_value_um(c, i);
       }
       remaining = std::max(remaining, std::fabs(r));
     }
@@ -672,7 +877,20 @@ void WearCompensator::on_measurement(TimeNs now_ns, const ToolMeasurement& m,
     ++counters_.creeps_superposed;
   }
 
-  // Accept. The prediction made so far becomes committed; the new creep corrects it.
+  // Accept. The prediction made so far becomes committed; the new creep corrects it. The offset
+  // moves now if creeps are in progress or the prediction grows: the new creep then starts with
+  // zero slope and the prediction's rate blends from the one in force (no kink).
+  bool moving = predicting();
+  for (std::size_t k = 0; k < config_.max_creeps && !moving; ++k) {
+    const auto& c = s_.creeps[k];
+    if (!c.active) continue;
+    const double t = slot_clock(c) - c.start;
+    for (std::size_t i = 0; i < points_ && !moving; ++i) {
+      moving = t < c.span[i] || t < c.carry_span[i];
+    }
+  }
+  std::array<double, kMaxEdgePoints> rate_now{};
+  for (std::size_t i = 0; i < points_; ++i) rate_now[i] = prediction_slope(i);
   std::array<double, kMaxEdgePoints> delta{};
   for (std::size_t i = 0; i < points_; ++i) {
     s_.committed_um[i] += predicted_um(i);
@@ -684,9 +902,13 @@ void WearCompensator::on_measurement(TimeNs now_ns, const ToolMeasurement& m,
     delta[i] = w[i] - target;
     s_.measured_um[i] = w[i];
   }
+  const double interval_mm = s_.creep_path_mm - s_.last_measurement_creep_path_mm;
   s_.last_measurement_cut_path_mm = s_.cut_path_mm;
   s_.last_measurement_cut_time_s = s_.cut_time_s;
   s_.last_measurement_creep_path_mm = s_.creep_path_mm;
+  s_.last_measurement_removed_mm3 = s_.removed_mm3;
+  s_.rate_prev_um_per_mm = rate_now;
+  s_.rate_blend_mm = kEase * std::max(0.0, interval_mm);
   if (have_sample_) s_.last_measurement_program_path_mm = last_sample_.program_path_mm;
   ++s_.measurements;
   ++counters_.measurements_accepted;
@@ -701,7 +923,7 @@ void WearCompensator::on_measurement(TimeNs now_ns, const ToolMeasurement& m,
   h.wear_um = w;
   fit_rates();
 
-  start_creep(delta, out, now_ns);
+  start_creep(delta, moving, out, now_ns);
   if (config_.entry.retract_um > 0.0) {
     start_entry(config_.entry.retract_um, config_.entry.refeed_length_mm);
   }
@@ -754,7 +976,10 @@ double WearCompensator::next_measurement_path_mm() const noexcept {
     case IntervalBasis::kPath:
       return last + iv.interval_mm;
     case IntervalBasis::kMaterial:
-      return last + iv.interval_mm3 / iv.removal_mm3_per_mm;
+      if (iv.removal_source == RemovalSource::kConstant) {
+        return last + iv.interval_mm3 / iv.removal_mm3_per_mm;
+      }
+      break;  // depends on where the program goes
     case IntervalBasis::kAdaptive: {
       double max_rate = 0.0;
       if (s_.rate_known) {
@@ -775,12 +1000,22 @@ double WearCompensator::next_measurement_path_mm() const noexcept {
   return std::numeric_limits<double>::infinity();
 }
 
+double WearCompensator::next_measurement_removed_mm3() const noexcept {
+  if (config_.interval.basis != IntervalBasis::kMaterial) {
+    return std::numeric_limits<double>::infinity();
+  }
+  return s_.last_measurement_removed_mm3 + config_.interval.interval_mm3;
+}
+
 void WearCompensator::check_measurement_due(TimeNs now_ns, StepOutput& out) noexcept {
   const auto& iv = config_.interval;
   if (iv.basis == IntervalBasis::kOff || s_.measurement_due_flag) return;
   bool due = false;
   if (iv.basis == IntervalBasis::kTime) {
     due = s_.cut_time_s - s_.last_measurement_cut_time_s >= iv.interval_s;
+  } else if (iv.basis == IntervalBasis::kMaterial) {
+    // A hair of tolerance: the volume is a sum of many products.
+    due = s_.removed_mm3 >= next_measurement_removed_mm3() - 1e-9 * iv.interval_mm3;
   } else {
     due = s_.cut_path_mm >= next_measurement_path_mm();
   }

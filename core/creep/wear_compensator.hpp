@@ -19,6 +19,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <span>
+#include <vector>
 
 #include "core/common/limiter.hpp"
 #include "core/common/output.hpp"
@@ -88,7 +89,7 @@ class WearCompensator {
   [[nodiscard]] double applied_wear_um(std::size_t i) const noexcept;
   /// Correction along the surface normal computed in the last step [µm] (positive = into part).
   [[nodiscard]] double correction_um() const noexcept { return correction_um_; }
-  /// Lateral deflection compensation of the last step [µm].
+  /// Lateral deflection compensation applied in the last step [µm] (0 when it had no direction).
   [[nodiscard]] double lateral_um() const noexcept { return lateral_um_; }
   /// Engagement angle used in the last step [deg]; NaN when the fallback (mean wear) was used.
   [[nodiscard]] double engagement_angle_deg() const noexcept { return engagement_deg_; }
@@ -102,8 +103,13 @@ class WearCompensator {
   }
   [[nodiscard]] std::size_t creeps_in_progress() const noexcept;
   [[nodiscard]] double cut_path_mm() const noexcept { return s_.cut_path_mm; }
-  /// Cut path at which the next measurement falls due [mm] (path-like bases; +inf if off).
+  /// Cut path at which the next measurement falls due [mm] (bases path and adaptive, and
+  /// material with a constant cross-section; +inf otherwise).
   [[nodiscard]] double next_measurement_path_mm() const noexcept;
+  /// Material removed by this tool [mm³] (counted with interval basis "material" only).
+  [[nodiscard]] double removed_mm3() const noexcept { return s_.removed_mm3; }
+  /// Removed material at which the next measurement falls due [mm³] (+inf unless "material").
+  [[nodiscard]] double next_measurement_removed_mm3() const noexcept;
   /// Program path where a sister tool should restart [mm] (NaN if unknown).
   [[nodiscard]] double restart_program_path_mm() const noexcept;
   [[nodiscard]] bool halted() const noexcept { return s_.halted; }
@@ -115,7 +121,9 @@ class WearCompensator {
   void on_axis_sample(TimeNs now_ns, const AxisSample& a, StepOutput& out) noexcept;
   void on_measurement(TimeNs now_ns, const ToolMeasurement& m, StepOutput& out) noexcept;
   void on_tool_change(TimeNs now_ns, const ToolChange& c, StepOutput& out) noexcept;
-  void start_creep(const std::array<double, kMaxEdgePoints>& delta_um, StepOutput& out,
+  /// moving: the offset moves now (creeps in progress or a growing prediction): the new
+  /// increment is then entered with zero slope, so the offset's slope stays continuous.
+  void start_creep(const std::array<double, kMaxEdgePoints>& delta_um, bool moving, StepOutput& out,
                    TimeNs now_ns) noexcept;
   void start_entry(double offset_um, double length_mm) noexcept;
   void retire_finished_creeps() noexcept;
@@ -126,16 +134,37 @@ class WearCompensator {
   void write_flag(TimeNs now_ns, std::int32_t reg, bool value, std::size_t slot,
                   StepOutput& out) noexcept;
   void halt(TimeNs now_ns, AlarmCode code, double value, StepOutput& out) noexcept;
-  [[nodiscard]] double creep_fraction(const CreepSlot& c, std::size_t i) const noexcept;
+  /// Creep clock of a slot now (creep path [mm] or creep time [s]).
+  [[nodiscard]] double slot_clock(const CreepSlot& c) const noexcept;
+  /// What a slot has fed in at point i now [µm] (0 at its start, delta_um at its end).
+  [[nodiscard]] double slot_value_um(const CreepSlot& c, std::size_t i) const noexcept;
+  /// Its slope at point i now [µm per unit of its clock].
+  [[nodiscard]] double slot_slope(const CreepSlot& c, std::size_t i) const noexcept;
   [[nodiscard]] double predicted_um(std::size_t i) const noexcept;
+  /// Slope of the predicted growth at point i now [µm/mm of path] (0 when capped or off).
+  [[nodiscard]] double prediction_slope(std::size_t i) const noexcept;
+  [[nodiscard]] bool predicting() const noexcept;
   [[nodiscard]] double entry_offset_um() const noexcept;
   [[nodiscard]] double transition_offset_um() const noexcept;
   [[nodiscard]] double deflection(double wear_um, bool lateral) const noexcept;
   [[nodiscard]] bool normal_now(std::array<double, 3>& n) const noexcept;
+  /// Feed direction across the tool axis from two cutting samples (kept through axial moves).
+  void update_feed_direction(const AxisSample& a) noexcept;
+  /// Unit direction from the tool toward the material without a normal (material_side across
+  /// the feed direction); false if no side is configured or no feed direction is known yet.
+  [[nodiscard]] bool material_direction(std::array<double, 3>& m) const noexcept;
+  /// Cumulative removed volume of the toolpath table at program position p [mm³] (constant
+  /// cross-section outside its rows).
+  [[nodiscard]] double toolpath_volume_mm3(double p) const noexcept;
+  /// Material removed by a cut of d_mm from sample `from` to sample `to` [mm³].
+  [[nodiscard]] double removal_mm3(const AxisSample& from, const AxisSample& to,
+                                   double d_mm) const noexcept;
   void select_tool_tables() noexcept;
 
   CreepConfig config_{};
   ProfileTable table_{};
+  /// Cumulative removed volume at each toolpath row [mm³] (removal_source = toolpath).
+  std::vector<double> removal_cum_mm3_;
   std::size_t points_{1};
   CreepState s_{};
   ToolMemory memory_{};
@@ -147,6 +176,8 @@ class WearCompensator {
   bool cutting_{false};
   bool interrupted_{false};
   AxisSample last_sample_{};
+  std::array<double, 3> feed_dir_{};
+  bool have_feed_{false};
   TimeNs last_now_ns_{0};
   bool have_now_{false};
   int deflection_index_{-1};

@@ -63,9 +63,8 @@ E pick(TableReader& r, std::string_view key, const std::vector<std::pair<std::st
   return def;
 }
 
-/// Reads the toolpath normal file; errors are reported at the key.
-std::vector<cc::ToolpathNormal> read_toolpath(const std::string& path, const Where& where,
-                                              Diagnostics& diag) {
+/// Reads the toolpath file; errors are reported at the key.
+cc::ToolpathTable read_toolpath(const std::string& path, const Where& where, Diagnostics& diag) {
   std::error_code ec;
   if (!fs::is_regular_file(path, ec)) {
     diag.error(where, "cannot read toolpath file '" + path + "': not a regular file");
@@ -85,7 +84,7 @@ std::vector<cc::ToolpathNormal> read_toolpath(const std::string& path, const Whe
     return {};
   }
   try {
-    return cc::parse_toolpath_normals(text.str(), path);
+    return cc::parse_toolpath(text.str(), path);
   } catch (const std::invalid_argument& e) {
     diag.error(where, e.what());
     return {};
@@ -116,7 +115,12 @@ void parse_edge(TableReader& r, cc::CreepConfig& c, const toml::node& creep_node
       p = dir / p;
     }
     s.toolpath_file = p.lexically_normal().string();
-    c.toolpath_normals = read_toolpath(s.toolpath_file, r.where("toolpath_file"), r.diagnostics());
+    c.toolpath = read_toolpath(s.toolpath_file, r.where("toolpath_file"), r.diagnostics());
+    if (e.normal_source == cc::NormalSource::kToolpath && !c.toolpath.rows.empty() &&
+        !c.toolpath.has_normals) {
+      r.diagnostics().error(r.where("normal_source"),
+                            "\"toolpath\" needs normals (nx, ny, nz) in creep.edge.toolpath_file");
+    }
   } else if (e.normal_source == cc::NormalSource::kToolpath) {
     r.diagnostics().error(r.where("normal_source"), "\"toolpath\" needs creep.edge.toolpath_file");
   }
@@ -136,6 +140,11 @@ void parse_edge(TableReader& r, cc::CreepConfig& c, const toml::node& creep_node
                                           {"length", cc::Channel::kLength}},
                                          e.fallback_channel);
   e.fallback_sign = sign(r, "fallback_sign", e.fallback_sign);
+  e.material_side = pick<cc::MaterialSide>(r, "material_side",
+                                           {{"none", cc::MaterialSide::kNone},
+                                            {"left", cc::MaterialSide::kLeft},
+                                            {"right", cc::MaterialSide::kRight}},
+                                           e.material_side);
 }
 
 void parse_output(TableReader& r, cc::CreepConfig& c, cc::CreepRegisterNames& names) {
@@ -165,7 +174,7 @@ void parse_limiter(TableReader& r, core::LimiterConfig& l) {
   l.max_rate_um_per_s = positive(r, "max_rate_um_per_s", l.max_rate_um_per_s, 1e6);
 }
 
-void parse_interval(TableReader& r, cc::IntervalConfig& iv) {
+void parse_interval(TableReader& r, cc::IntervalConfig& iv, bool have_toolpath) {
   iv.basis = pick<cc::IntervalBasis>(r, "basis",
                                      {{"off", cc::IntervalBasis::kOff},
                                       {"path", cc::IntervalBasis::kPath},
@@ -179,6 +188,14 @@ void parse_interval(TableReader& r, cc::IntervalConfig& iv) {
   iv.min_interval_mm = positive(r, "min_interval_mm", iv.min_interval_mm);
   iv.max_interval_mm = positive(r, "max_interval_mm", iv.max_interval_mm);
   iv.removal_mm3_per_mm = positive(r, "removal_mm3_per_mm", iv.removal_mm3_per_mm);
+  iv.removal_source = pick<cc::RemovalSource>(
+      r, "removal_source",
+      {{"constant", cc::RemovalSource::kConstant}, {"toolpath", cc::RemovalSource::kToolpath}},
+      iv.removal_source);
+  if (iv.removal_source == cc::RemovalSource::kToolpath && !have_toolpath) {
+    r.diagnostics().error(r.where("removal_source"),
+                          "\"toolpath\" needs creep.edge.toolpath_file with a removal_mm2 column");
+  }
   iv.interval_mm3 = positive(r, "interval_mm3", iv.interval_mm3);
   if (iv.max_interval_mm < iv.min_interval_mm) {
     r.diagnostics().error(r.where("max_interval_mm"), "must be >= min_interval_mm");
@@ -313,7 +330,7 @@ std::unique_ptr<CreepSection> parse_creep_section(const toml::node& node, Diagno
     }
     if (const auto* t = r.table("interval")) {
       TableReader q(*t, "creep.interval", diag);
-      parse_interval(q, c.interval);
+      parse_interval(q, c.interval, !s->toolpath_file.empty());
     }
     if (const auto* t = r.table("tool_life")) {
       TableReader q(*t, "creep.tool_life", diag);

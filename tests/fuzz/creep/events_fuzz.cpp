@@ -76,7 +76,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   c.output.alarm_register = 11;
   c.output.measurement_due_register = 12;
   c.output.tool_change_register = 13;
-  c.interval.basis = static_cast<IntervalBasis>(r.byte() % 5);
+  const std::uint8_t iv = r.byte();
+  c.interval.basis = static_cast<IntervalBasis>(iv % 5);
+  // Without a normal: the lateral deflection across the feed direction, toward either side.
+  c.edge.material_side = static_cast<MaterialSide>((iv / 8) % 3);
   c.predict.enabled = (mode & 1) != 0;
   c.entry.sister_offset_um = 5.0;
   c.entry.retract_um = (mode & 2) != 0 ? 3.0 : 0.0;

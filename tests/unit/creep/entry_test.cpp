@@ -300,8 +300,19 @@ TEST(CreepConfigCheck, ErrorsNameTheTomlKey) {
   EXPECT_NE(error_of(c).find("creep.transition[0]"), std::string::npos);
   c = base_config();
   c.edge.normal_source = NormalSource::kToolpath;
-  c.toolpath_normals = {{0.0, {0.0, 0.0, 1.0}}, {0.0, {0.0, 0.0, 1.0}}};
+  c.toolpath = {true, false, {{0.0, {0.0, 0.0, 1.0}}, {0.0, {0.0, 0.0, 1.0}}}};
   EXPECT_NE(error_of(c).find("toolpath_file row 2"), std::string::npos);
+  c.toolpath = {false, true, {{0.0, {0.0, 0.0, 1.0}, 1.0}, {5.0, {0.0, 0.0, 1.0}, 1.0}}};
+  EXPECT_NE(error_of(c).find("creep.edge.toolpath_file needs at least 2 rows with normals"),
+            std::string::npos);  // a removal-only file gives no normals
+  c = base_config();
+  c.interval.basis = IntervalBasis::kMaterial;
+  c.interval.removal_source = RemovalSource::kToolpath;
+  c.toolpath = {true, false, {{0.0, {0.0, 0.0, 1.0}}, {5.0, {0.0, 0.0, 1.0}}}};
+  EXPECT_NE(error_of(c).find("creep.interval.removal_source"), std::string::npos);
+  c.toolpath = {true, true, {{0.0, {0.0, 0.0, 1.0}, -1.0}, {5.0, {0.0, 0.0, 1.0}, 1.0}}};
+  EXPECT_NE(error_of(c).find("toolpath_file row 1 removal_mm2 must be a finite number >= 0"), std::string::npos)
+      << error_of(c);
   c = base_config();
   c.limiter.max_step_um = -1.0;
   EXPECT_NE(error_of(c).find("creep.limiter.max_step_um"), std::string::npos);

@@ -78,6 +78,65 @@ TEST(CreepInterval, ByMaterialRemoved) {
   EXPECT_EQ(r.count(AlarmCode::kMeasurementDue), 1U);
 }
 
+TEST(CreepInterval, ByMaterialRemovedFromTheToolpathCrossSections) {
+  // a_e·a_p per segment from the toolpath file: 0.5 mm² up to 100 mm, 2 mm² up to 200 mm,
+  // 0.25 mm² up to 300 mm (the last row ends the table); 0.1 mm² outside it.
+  auto c = base_config();
+  c.interval.basis = IntervalBasis::kMaterial;
+  c.interval.removal_source = RemovalSource::kToolpath;
+  c.interval.removal_mm3_per_mm = 0.1;
+  c.interval.interval_mm3 = 100.0;
+  c.toolpath = {false,
+                true,
+                {{0.0, {0.0, 0.0, 1.0}, 0.5},
+                 {100.0, {0.0, 0.0, 1.0}, 2.0},
+                 {200.0, {0.0, 0.0, 1.0}, 0.25},
+                 {300.0, {0.0, 0.0, 1.0}, 0.0}}};
+  Rig r(c);
+  r.run_to(100.0);
+  EXPECT_NEAR(r.comp.removed_mm3(), 50.0, 1e-9);
+  // 100 mm³ after 100 + 50 / 2 = 125 mm (a constant 0.5 mm² would say 200 mm).
+  r.run_to(124.5);
+  EXPECT_NEAR(r.comp.removed_mm3(), 99.0, 1e-9);
+  EXPECT_EQ(r.count(AlarmCode::kMeasurementDue), 0U);
+  r.run_to(125.0);
+  EXPECT_EQ(r.count(AlarmCode::kMeasurementDue), 1U);
+  EXPECT_NEAR(r.last_write(12), 1.0, 0.0);
+  r.run_to(130.0);
+  r.measure({3.0});  // at 110 mm³: the next at 210 mm³ = 50 + 2·(p − 100) → p = 180 mm
+  EXPECT_NEAR(r.last_write(12), 0.0, 0.0);
+  EXPECT_NEAR(r.comp.next_measurement_removed_mm3(), 210.0, 1e-9);
+  EXPECT_TRUE(std::isinf(r.comp.next_measurement_path_mm()));
+  r.run_to(179.5);
+  EXPECT_EQ(r.count(AlarmCode::kMeasurementDue), 1U);
+  r.run_to(180.0);
+  EXPECT_EQ(r.count(AlarmCode::kMeasurementDue), 2U);
+  // A sample step across a segment boundary counts each segment's own cross-section:
+  // 180 → 260 mm = 20·2 + 60·0.25.
+  const double v0 = r.comp.removed_mm3();
+  r.advance(80.0);
+  EXPECT_NEAR(r.comp.removed_mm3() - v0, 40.0 + 15.0, 1e-9);
+  // Beyond the table: the constant 0.1 mm² (260 → 300 at 0.25, then 300 → 350 at 0.1).
+  r.run_to(350.0, 10.0);
+  EXPECT_NEAR(r.comp.removed_mm3() - v0, 55.0 + 10.0 + 5.0, 1e-9);
+  // Without a program path (axis positions only) the constant is all there is.
+  r.publish_program_path = false;
+  r.advance(0.0);  // re-anchor
+  r.advance(10.0);
+  EXPECT_NEAR(r.comp.removed_mm3() - v0, 70.0 + 1.0, 1e-9);
+  // Going back along the program (a restart further back) removes nothing.
+  r.publish_program_path = true;
+  r.advance(0.0);  // re-anchor on the program path (360 mm)
+  r.program_path_mm = 100.0;
+  r.advance(0.0);
+  EXPECT_NEAR(r.comp.removed_mm3() - v0, 71.0, 1e-9);
+  r.advance(4.0);  // and then from 100 mm on at 2 mm² again
+  EXPECT_NEAR(r.comp.removed_mm3() - v0, 79.0, 1e-9);
+  // The volume belongs to the tool: a new tool starts from zero.
+  r.tool_change(2, false);
+  EXPECT_NEAR(r.comp.removed_mm3(), 0.0, 0.0);
+}
+
 // ---- item 5 ------------------------------------------------------------------------------
 
 TEST(CreepToolLife, BeyondTheLimitTheSisterIsRequested) {

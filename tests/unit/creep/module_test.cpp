@@ -2,13 +2,16 @@
 // limiters, state persisted and restored through the engine's export / import.
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cstddef>
 #include <cstring>
 #include <memory>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <vector>
 
+#include "bench/creep/engine_cycle.hpp"
 #include "core/creep/creep_module.hpp"
 #include "tests/support/alloc_counter.hpp"
 #include "tests/unit/creep/rig.hpp"
@@ -71,7 +74,7 @@ struct EngineRig {
   }
   void measure(double w) {
     ToolMeasurement m;
-    m.tool = 1;
+    m.tool = tool;
     m.wear_um[0] = w;
     now += 1'000'000;
     ev.emplace_back(m);
@@ -214,6 +217,128 @@ TEST(CreepEngineModule, AttachChecksIndicesAndKinds) {
   } catch (const std::invalid_argument& e) {
     EXPECT_NE(std::string(e.what()).find("T1_length_wear"), std::string::npos);
   }
+}
+
+// ---- status --------------------------------------------------------------------------------
+
+double status_value(const CreepModule& m, std::string_view key) {
+  std::array<engine::StatusValue, engine::kMaxStatusValues> v{};
+  const std::size_t n = m.status(v);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (key == v[i].key) return v[i].value;
+  }
+  return kNaN;
+}
+
+std::vector<std::string> status_keys(const CreepModule& m) {
+  std::array<engine::StatusValue, engine::kMaxStatusValues> v{};
+  const std::size_t n = m.status(v);
+  std::vector<std::string> keys;
+  for (std::size_t i = 0; i < n; ++i) keys.emplace_back(v[i].key);
+  return keys;
+}
+
+TEST(CreepEngineModule, StatusShowsTheWearOfEveryRememberedTool) {
+  EngineRig r(module_config());
+  const auto& m = dynamic_cast<const CreepModule&>(r.engine.module(0));
+  const auto use = [&](std::int32_t tool, double wear) {
+    r.ev.emplace_back(ToolChange{r.now, tool, false});
+    r.tool = tool;
+    r.advance(0.0);
+    r.measure(wear);
+    for (int i = 0; i < 120; ++i) r.advance(0.5);  // 60 mm: the 50 mm creep is done
+  };
+  r.advance(0.0);
+  r.measure(12.0);
+  for (int i = 0; i < 120; ++i) r.advance(0.5);
+  // The spindle tool's wear in force is what was measured once its creep is done (not twice it).
+  EXPECT_NEAR(status_value(m, "wear_in_force_um"), 12.0, 1e-9);
+  EXPECT_NEAR(status_value(m, "creep_remaining_um"), 0.0, 1e-9);
+  use(2, 5.0);
+  use(3, 7.5);
+  EXPECT_NEAR(status_value(m, "tool"), 3.0, 0.0);
+  EXPECT_NEAR(status_value(m, "wear_measured_um"), 7.5, 0.0);
+  EXPECT_NEAR(status_value(m, "T1_wear_um"), 12.0, 0.0);
+  EXPECT_NEAR(status_value(m, "T2_wear_um"), 5.0, 0.0);
+  EXPECT_TRUE(std::isnan(status_value(m, "T3_wear_um")));  // in the spindle: the values above
+  // All twelve values, then the remembered tools, the most recently used first.
+  const std::vector<std::string> first{"mode",
+                                       "tool",
+                                       "wear_in_force_um",
+                                       "wear_measured_um",
+                                       "creep_remaining_um",
+                                       "creeps_in_progress",
+                                       "correction_um",
+                                       "cut_path_mm",
+                                       "wear_rate_um_per_mm",
+                                       "halted",
+                                       "measurements_accepted",
+                                       "measurements_refused",
+                                       "T2_wear_um",
+                                       "T1_wear_um"};
+  EXPECT_EQ(status_keys(m), first);
+  // Seven remembered tools (one beyond 9999): every one is shown; three counters make room.
+  use(4, 1.0);
+  use(5, 2.0);
+  use(6, 3.0);
+  use(12345, 4.0);
+  use(8, 6.0);
+  const auto keys = status_keys(m);
+  ASSERT_EQ(keys.size(), engine::kMaxStatusValues);
+  const std::vector<std::string> tail(keys.begin() + 8, keys.end());
+  EXPECT_EQ(tail,
+            (std::vector<std::string>{"halted", "memory_slot_7_wear_um", "T6_wear_um", "T5_wear_um",
+                                      "T4_wear_um", "T3_wear_um", "T2_wear_um", "T1_wear_um"}))
+      << "memory slot of 12345: " << keys[9];
+  EXPECT_NEAR(status_value(m, "T1_wear_um"), 12.0, 0.0);
+  EXPECT_NEAR(status_value(m, "T6_wear_um"), 3.0, 0.0);
+  EXPECT_EQ(keys[7], "cut_path_mm");
+  EXPECT_TRUE(std::isnan(status_value(m, "measurements_refused")));
+  EXPECT_TRUE(std::isnan(status_value(m, "measurements_accepted")));
+  EXPECT_TRUE(std::isnan(status_value(m, "wear_rate_um_per_mm")));
+  // Real-time safe: no allocation.
+  std::array<engine::StatusValue, engine::kMaxStatusValues> v{};
+  nccomp::test::AllocationScope scope;
+  EXPECT_EQ(m.status(v), engine::kMaxStatusValues);
+  EXPECT_EQ(scope.count(), 0U);
+}
+
+// ---- real time: the engine's step with the creep module ---------------------------------------
+
+TEST(CreepRealTime, EngineStepWithTheCreepModuleAllocatesNothing) {
+  // The cycle bench_creep_cost times: Engine::step() with the creep module, 3 axes, 16 support
+  // points, 4 creeps in progress; plus measurements (each folds the oldest creep), two tool
+  // changes (the tool memory saves and restores a state with 4 creeps), the status and the state
+  // export the loop thread also calls.
+  auto rig = std::make_unique<bench::creep::EngineCycle>();
+  ASSERT_EQ(rig->creeps_in_progress(), 4U);
+  const auto& k = rig->module().compensator().counters();
+  const auto accepted = k.measurements_accepted;
+  const auto folded = k.creeps_folded;
+  std::array<engine::StatusValue, engine::kMaxStatusValues> status{};
+  std::vector<std::byte> state(rig->engine().state_capacity());
+  std::size_t writes = 0;
+  nccomp::test::AllocationScope scope;
+  for (int i = 0; i < 2000; ++i) {
+    if (i == 1000) {
+      rig->change_tool(2);
+    } else if (i == 1500) {
+      rig->change_tool(1);
+    } else if (i % 50 == 25) {
+      rig->measure(rig->next_wear_base_um());
+    } else {
+      rig->cycle();
+    }
+    writes += rig->out().writes.size();
+    (void)rig->module().status(status);
+    if (i % 100 == 0) (void)rig->engine().export_state(state);
+  }
+  EXPECT_EQ(scope.count(), 0U);
+  EXPECT_EQ(rig->creeps_in_progress(), 4U);  // tool 1 is back with its 4 creeps
+  EXPECT_EQ(k.measurements_accepted - accepted, 40U);
+  EXPECT_GE(k.creeps_folded - folded, 30U);
+  EXPECT_GT(writes, 1000U);  // the offsets really move and are written
+  EXPECT_FALSE(rig->module().compensator().halted());
 }
 
 }  // namespace

@@ -173,7 +173,7 @@ TEST(CreepSection, ParsesTheDocumentedExampleKeyForKey) {
 
 TEST(CreepSection, ReadsEveryOtherKey) {
   TempDir d;
-  d.write("paths/normals.csv", "path_mm,nx,ny,nz\n0,0,0,1\n100,1,0,0\n");
+  d.write("paths/normals.csv", "path_mm,nx,ny,nz,removal_mm2\n0,0,0,1,0.75\n100,1,0,0,0\n");
   // In an included file: the toolpath file is relative to that file's directory.
   d.write("paths/creep.toml", R"(
 [creep]
@@ -193,6 +193,7 @@ toolpath_file = "normals.csv"
 tool_axis = [1, 0, 0]
 fallback_channel = "radius"
 fallback_sign = 1
+material_side = "left"
 [creep.output]
 mode = "tool_registers"
 length_register = "T1_length_wear"
@@ -208,6 +209,7 @@ basis = "material"
 interval_mm = 11
 interval_s = 12
 removal_mm3_per_mm = 0.5
+removal_source = "toolpath"
 interval_mm3 = 99
 [creep.tool_life]
 implausible_factor = 3
@@ -246,9 +248,14 @@ out_length_mm = 6
   EXPECT_EQ(c.edge.tool_shape, core::creep::ToolShape::kBullNose);
   EXPECT_EQ(c.edge.normal_source, core::creep::NormalSource::kToolpath);
   EXPECT_EQ(s.toolpath_file, (d.path() / "paths/normals.csv").string());
-  ASSERT_EQ(c.toolpath_normals.size(), 2U);
-  EXPECT_DOUBLE_EQ(c.toolpath_normals[1].path_mm, 100.0);
-  EXPECT_DOUBLE_EQ(c.toolpath_normals[1].normal[0], 1.0);
+  ASSERT_EQ(c.toolpath.rows.size(), 2U);
+  EXPECT_TRUE(c.toolpath.has_normals);
+  EXPECT_TRUE(c.toolpath.has_removal);
+  EXPECT_DOUBLE_EQ(c.toolpath.rows[1].path_mm, 100.0);
+  EXPECT_DOUBLE_EQ(c.toolpath.rows[1].normal[0], 1.0);
+  EXPECT_DOUBLE_EQ(c.toolpath.rows[0].removal_mm2, 0.75);
+  EXPECT_EQ(c.edge.material_side, core::creep::MaterialSide::kLeft);
+  EXPECT_EQ(c.interval.removal_source, core::creep::RemovalSource::kToolpath);
   EXPECT_DOUBLE_EQ(c.edge.tool_axis[0], 1.0);
   EXPECT_EQ(c.edge.fallback_channel, core::creep::Channel::kRadius);
   EXPECT_DOUBLE_EQ(c.edge.fallback_sign, 1.0);
@@ -390,6 +397,69 @@ z_register = "Z_wear_offset"
   EXPECT_NE(errors_of(f4).find(":3: "), std::string::npos) << errors_of(f4);
 }
 
+TEST(CreepSection, TheToolpathFileMustHaveTheColumnsItIsUsedFor) {
+  TempDir d;
+  d.write("removal.csv", "path_mm,removal_mm2\n0,0.5\n100,2\n");
+  d.write("normals.csv", "path_mm,nx,ny,nz\n0,0,0,1\n100,1,0,0\n");
+  const std::string no_normals = std::string(kRegisters) + R"(
+[creep]
+[creep.edge]
+normal_source = "toolpath"
+toolpath_file = "removal.csv"
+[creep.output]
+z_register = "Z_wear_offset"
+)";
+  const auto f1 = d.write("a.toml", no_normals);
+  EXPECT_NE(errors_of(f1).find(at(f1, no_normals, "normal_source =") +
+                               "creep.edge.normal_source: \"toolpath\" needs normals (nx, ny, "
+                               "nz) in creep.edge.toolpath_file"),
+            std::string::npos)
+      << errors_of(f1);
+  const std::string no_file = std::string(kRegisters) + R"(
+[creep]
+[creep.output]
+z_register = "Z_wear_offset"
+[creep.interval]
+basis = "material"
+removal_source = "toolpath"
+)";
+  const auto f2 = d.write("b.toml", no_file);
+  EXPECT_NE(errors_of(f2).find(at(f2, no_file, "removal_source =") +
+                               "creep.interval.removal_source: \"toolpath\" needs "
+                               "creep.edge.toolpath_file with a removal_mm2 column"),
+            std::string::npos)
+      << errors_of(f2);
+  const std::string no_removal = std::string(kRegisters) + R"(
+[creep]
+[creep.edge]
+toolpath_file = "normals.csv"
+[creep.output]
+z_register = "Z_wear_offset"
+[creep.interval]
+basis = "material"
+removal_source = "toolpath"
+)";
+  const auto f3 = d.write("c.toml", no_removal);
+  EXPECT_NE(errors_of(f3).find(at(f3, no_removal, "removal_source =") +
+                               "creep.interval.removal_source: creep config: "
+                               "creep.interval.removal_source is \"toolpath\": "
+                               "creep.edge.toolpath_file needs a removal_mm2 column"),
+            std::string::npos)
+      << errors_of(f3);
+  d.write("neg.csv", "path_mm,removal_mm2\n0,0.5\n100,-2\n");
+  const std::string negative = std::string(kRegisters) + R"(
+[creep]
+[creep.edge]
+toolpath_file = "neg.csv"
+[creep.output]
+z_register = "Z_wear_offset"
+)";
+  const auto f4 = d.write("d.toml", negative);
+  EXPECT_NE(errors_of(f4).find("neg.csv:3: removal_mm2 must be 0..10000 mm², got -2"),
+            std::string::npos)
+      << errors_of(f4);
+}
+
 // A synthetic stream through the engine the loader builds: tool 1, program path advancing
 // 0.5 mm per cycle, one laser measurement of 20 µm at the tip.
 struct Stream {
@@ -504,8 +574,45 @@ TEST(CreepSection, PredictiveCreepingFeedsTheFittedWearRateBetweenMeasurements) 
     for (int i = 0; i < 300; ++i) s->advance(0.5);  // 150 mm
   }
   EXPECT_NEAR(a.last_z, -12.0, 1e-9);
-  // Prediction adds the fitted rate × path since the measurement: 0.1 µm/mm × 150 mm.
-  EXPECT_NEAR(b.last_z - a.last_z, -15.0, 0.5);
+  // Prediction adds the fitted rate × path since the measurement, 0.1 µm/mm × 150 mm, the rate
+  // blended in from 0 over 0.2 of the last interval (20 mm): 15 − 0.1 · 20 / 2 = 14 µm.
+  EXPECT_NEAR(b.last_z - a.last_z, -14.0, 1e-6);
+}
+
+TEST(CreepSection, MeasurementDueByMaterialRemovedFromTheToolpathFile) {
+  // Roughing-like cross-sections along the program: 0.2 mm² for 100 mm, then 1.5 mm²: 50 mm³
+  // are removed after 100 + 30/1.5 = 120 mm (a constant 0.2 mm² would say 250 mm).
+  TempDir d;
+  d.write("part.csv", "# CAM export\npath_mm,removal_mm2\n0,0.2\n100,1.5\n1000,0\n");
+  const std::string text = std::string(kRegisters) + kFlagRegisters + R"(
+[creep]
+[creep.edge]
+tool_shape = "tip"
+normal_source = "none"
+toolpath_file = "part.csv"
+[creep.output]
+z_register = "Z_wear_offset"
+measurement_due_register = "measure_request"
+[creep.interval]
+basis = "material"
+removal_source = "toolpath"
+removal_mm3_per_mm = 0.2
+interval_mm3 = 50
+)";
+  auto c = load_ok(d, text);
+  ASSERT_TRUE(c);
+  Stream s(*c);
+  double due = std::nan("");
+  double due_at_mm = std::nan("");
+  s.advance(0.0);
+  while (s.path_mm < 200.0 && std::isnan(due_at_mm)) {
+    s.advance(0.5);
+    for (const auto& w : s.out.writes) {
+      if (w.register_index == 6) due = w.value_um;  // measure_request
+    }
+    if (due > 0.5) due_at_mm = s.path_mm;
+  }
+  EXPECT_NEAR(due_at_mm, 120.0, 1e-9);
 }
 
 TEST(CreepSection, AnExcessiveIncrementRaisesTheAlarmFlagAtOnceAndAppliesNothing) {
