@@ -152,7 +152,9 @@ int run_daemon(const DaemonOptions& options) {
     return 3;
   }
   if (runtime->dry_run) {
-    spdlog::warn("DRY RUN: offsets are computed and logged, nothing is written to the NC");
+    spdlog::warn(
+        "DRY RUN: offsets are computed and logged, nothing is written to the NC, and the state "
+        "file keeps what the NC has");
   }
   std::mutex names_mu;
   auto names = std::make_shared<const std::vector<std::string>>(register_names(*config));
@@ -286,9 +288,10 @@ int run_daemon(const DaemonOptions& options) {
     try {
       spdlog::info("lock-step: connecting to {}", options.lockstep_socket);
       peer.connect(options.lockstep_socket, options.lockstep_connect_timeout_s);
-      spdlog::info("lock-step: connected; the peer's TICKs drive the loop (rate_hz {} is the "
-                   "peer's lockstep_rate_hz)",
-                   dsec.rate_hz);
+      spdlog::info(
+          "lock-step: connected; the peer's TICKs drive the loop (rate_hz {} is the "
+          "peer's lockstep_rate_hz)",
+          dsec.rate_hz);
     } catch (const std::exception& e) {
       spdlog::error("{}", e.what());
       persister.stop();
@@ -495,10 +498,11 @@ int run_daemon(const DaemonOptions& options) {
   // the final state below (written after it, the queued one would overwrite the final one).
   persister.stop();
   // The loop is stopped: its engine can be read from this thread. Persist the final state (not in
-  // hold mode: the corrupt file stays for inspection). The NC keeps its offsets as they are.
+  // hold mode: the corrupt file stays for inspection; in dry run only the state as the NC has it,
+  // never the dry run's values). The NC keeps its offsets as they are.
   if (state_problem.empty()) {
-    std::vector<std::byte> buf(swap.current().engine->state_capacity());
-    const std::size_t n = swap.current().engine->export_state(buf);
+    std::vector<std::byte> buf(std::max(swap.current().engine->state_capacity(), blob_bytes));
+    const std::size_t n = loop.final_state(buf);
     if (n > 0) {
       persister.write_now(std::span<const std::byte>(buf.data(), n));
     }

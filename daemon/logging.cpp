@@ -195,6 +195,18 @@ void EventLogger::drain() {
         spdlog::warn("offset write to register {} ({} um) dropped: bus TX ring full or no bus", n.a,
                      n.b);
         break;
+      case NoteCode::kDryRunEntered:
+        spdlog::warn(
+            "configuration {} is a DRY RUN: nothing is written to the NC from now on; the state "
+            "file keeps the offsets the NC has now",
+            n.a);
+        break;
+      case NoteCode::kDryRunLeft:
+        spdlog::warn(
+            "configuration {} ends the dry run: it starts from the state before the dry run (the "
+            "dry run's offsets were never sent), through the limiters",
+            n.a);
+        break;
     }
   }
 }

@@ -71,6 +71,7 @@ Loop::Loop(LoopOptions options, core::rt::ConfigSwap<Runtime>& swap,
       measurement_log_(measurement_log),
       period_ns_(static_cast<core::TimeNs>(std::llround(1e9 / options_.rate_hz))),
       carry_(options_.state_buffer_bytes),
+      anchor_(options_.state_buffer_bytes),
       alarms_(1024),
       notes_(1024) {
   events_.reserve(options_.max_events_per_cycle);
@@ -79,6 +80,12 @@ Loop::Loop(LoopOptions options, core::rt::ConfigSwap<Runtime>& swap,
 Loop::~Loop() { stop(); }
 
 LoopSetupReport Loop::start() {
+  if (swap_.current().dry_run && !thread_.joinable()) {
+    // Starting in dry run: the NC holds what the restored state says (or, fresh, nothing from
+    // us). That is the state the file keeps and a later real run starts from.
+    anchor_size_ = swap_.current().engine->export_state(anchor_);
+    anchor_persisted_ = true;
+  }
   stop_.store(false);
   setup_done_.store(false);
   thread_ = std::thread([this] { run(); });
@@ -93,6 +100,18 @@ void Loop::stop() {
   if (thread_.joinable()) {
     thread_.join();
   }
+}
+
+std::size_t Loop::final_state(std::span<std::byte> buf) const {
+  const Runtime& rt = swap_.current();
+  if (!rt.dry_run) {
+    return rt.engine->export_state(buf);
+  }
+  if (anchor_persisted_ || anchor_size_ == 0 || buf.size() < anchor_size_) {
+    return 0;
+  }
+  std::copy_n(anchor_.data(), anchor_size_, buf.data());
+  return anchor_size_;
 }
 
 void Loop::note(core::TimeNs t, NoteCode code, std::int64_t a, double b) noexcept {
@@ -255,13 +274,31 @@ void Loop::cycle(core::TimeNs wake_ns, bool stamp) {
   // A reload: export the running engine's state first (the retired configuration may be freed
   // by the reclaiming thread as soon as pickup() returns), then hand it to the new engine.
   if (swap_.pending()) {
-    const std::size_t n = swap_.current().engine->export_state(carry_);
-    if (n == 0 && swap_.current().engine->state_capacity() > 0) {
+    const Runtime& old = swap_.current();
+    const bool was_dry = old.dry_run;
+    const std::uint64_t old_generation = old.engine->state_generation();
+    const std::size_t n = old.engine->export_state(carry_);
+    if (n == 0 && old.engine->state_capacity() > 0) {
       note(wake_ns, NoteCode::kStateExportFailed,
-           static_cast<std::int64_t>(swap_.current().engine->state_capacity()), 0.0);
+           static_cast<std::int64_t>(old.engine->state_capacity()), 0.0);
     } else if (swap_.pickup()) {
+      // `old` may be freed by the reclaiming thread from here on: only rt is used below.
       const Runtime& rt = swap_.current();
-      if (!rt.engine->import_state(std::span<const std::byte>(carry_.data(), n), wake_ns)) {
+      std::span<const std::byte> carried(carry_.data(), n);
+      if (!was_dry && rt.dry_run) {
+        // Entering dry run: what the NC has now is kept aside (and persisted soon, unless the
+        // file holds it already); the dry run itself carries on from the same state.
+        std::copy_n(carry_.data(), n, anchor_.data());
+        anchor_size_ = n;
+        anchor_persisted_ = old_generation == persisted_generation_;
+        note(wake_ns, NoteCode::kDryRunEntered, static_cast<std::int64_t>(rt.generation), 0.0);
+      } else if (was_dry && !rt.dry_run) {
+        // Leaving dry run: the dry run's register values were never sent. The new engine starts
+        // from the state as the NC has it, and its limiters from those values.
+        carried = std::span<const std::byte>(anchor_.data(), anchor_size_);
+        note(wake_ns, NoteCode::kDryRunLeft, static_cast<std::int64_t>(rt.generation), 0.0);
+      }
+      if (!carried.empty() && !rt.engine->import_state(carried, wake_ns)) {
         note(wake_ns, NoteCode::kStateCarryFailed, static_cast<std::int64_t>(rt.generation), 0.0);
       }
       ++local_.reloads;
@@ -340,8 +377,27 @@ void Loop::cycle(core::TimeNs wake_ns, bool stamp) {
   }
 
   // State: export when it changed, at most every state_min_interval_s, never in hold mode (the
-  // corrupt file stays for the operator to inspect).
-  if (persister_ != nullptr && !hold) {
+  // corrupt file stays for the operator to inspect). In dry run only the state kept aside when
+  // the dry run began is written (once): the dry run's values never reach the file, so a restart
+  // without --dry-run resumes from what the NC really has.
+  if (persister_ != nullptr && !hold && rt.dry_run) {
+    if (!anchor_persisted_ && anchor_size_ > 0) {
+      if (StatePersister::Blob* blob = persister_->acquire()) {
+        if (anchor_size_ <= blob->data.size()) {
+          std::copy_n(anchor_.data(), anchor_size_, blob->data.data());
+          blob->size = anchor_size_;
+          persister_->submit(blob);
+          ++local_.state_exports;
+        } else {
+          persister_->release(blob);
+          ++local_.state_export_failed;
+        }
+        anchor_persisted_ = true;  // tried once; the exit writes it (final_state) if it failed
+      } else {
+        ++local_.state_export_busy;
+      }
+    }
+  } else if (persister_ != nullptr && !hold) {
     const std::uint64_t gen = engine.state_generation();
     const double since_s = core::seconds(wake_ns - last_export_ns_);
     if (gen != persisted_generation_ && since_s >= options_.state_min_interval_s) {

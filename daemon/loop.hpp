@@ -12,6 +12,7 @@
 #include <atomic>
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
 #include <thread>
 #include <vector>
@@ -47,6 +48,8 @@ enum class NoteCode : std::uint8_t {
   kStateCarryFailed = 2,   // a = new generation: the new config could not take the old state
   kStateExportFailed = 3,  // a = bytes needed
   kWriteDropped = 4,       // a = register index (TX ring full or no bus)
+  kDryRunEntered = 5,      // a = new generation: the state as the NC has it is kept aside
+  kDryRunLeft = 6,         // a = new generation: it starts from the state before the dry run
 };
 
 struct LoopNote {
@@ -168,6 +171,11 @@ class Loop {
   LoopSetupReport start();
   /// Asks the thread to finish its cycle and joins it. Idempotent.
   void stop();
+  /// After stop() (not real-time): the state to write at exit into buf; returns its size, or 0
+  /// when there is nothing to write. Normally the engine's state. In dry run it is the state as
+  /// the NC has it (kept aside when the dry run began), and 0 if the file already holds it: the
+  /// dry run's own values were never sent, so they never reach the state file.
+  [[nodiscard]] std::size_t final_state(std::span<std::byte> buf) const;
   [[nodiscard]] bool running() const noexcept { return thread_.joinable(); }
 
   /// Hold mode (state corrupt): applied to every engine at the next cycle. Any thread.
@@ -213,6 +221,12 @@ class Loop {
   std::vector<core::Event> events_;
   core::StepOutput out_{};
   std::vector<std::byte> carry_;
+  // Dry run: the engine state as the NC has it (the last state whose writes really went out),
+  // taken when the dry run began. The dry-run engine's registers advance as if written; on leaving
+  // the dry run (reload) the new engine starts from this state, never from the dry run's values.
+  std::vector<std::byte> anchor_;
+  std::size_t anchor_size_{0};
+  bool anchor_persisted_{true};  // the state file already holds anchor_
   core::rt::SpscRing<core::AlarmEvent> alarms_;
   core::rt::SpscRing<LoopNote> notes_;
   LatencyHistogram latency_;

@@ -1,6 +1,8 @@
 #include "daemon/loopback_bus.hpp"
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 
 namespace nccomp::daemon {
 
@@ -42,6 +44,15 @@ std::optional<double> LoopbackBus::delivered(std::uint16_t register_index) const
   if (it == delivered_.end()) {
     return std::nullopt;
   }
+  return it->second.last_um;
+}
+
+std::optional<LoopbackBus::Delivery> LoopbackBus::delivery(std::uint16_t register_index) const {
+  std::lock_guard<std::mutex> lock(mu_);
+  auto it = delivered_.find(register_index);
+  if (it == delivered_.end()) {
+    return std::nullopt;
+  }
   return it->second;
 }
 
@@ -54,7 +65,15 @@ void LoopbackBus::run() {
       any = true;
       {
         std::lock_guard<std::mutex> lock(mu_);
-        delivered_[w.register_index] = w.value_um;
+        auto [it, fresh] = delivered_.try_emplace(w.register_index);
+        Delivery& d = it->second;
+        const double previous = fresh ? 0.0 : d.last_um;
+        if (fresh) {
+          d.first_um = w.value_um;
+        }
+        d.largest_step_um = std::max(d.largest_step_um, std::fabs(w.value_um - previous));
+        d.last_um = w.value_um;
+        ++d.writes;
       }
       ++local_.counters.frames_tx;
       ++local_.counters.offsets_written;

@@ -31,6 +31,18 @@ class LoopbackBus final : public drivers::Bus {
   /// Last value delivered for a register, if any (any thread).
   [[nodiscard]] std::optional<double> delivered(std::uint16_t register_index) const;
 
+  /// What one register received, as an NC would see it.
+  struct Delivery {
+    double first_um{0.0};
+    double last_um{0.0};
+    /// Largest change between two consecutive delivered values; the first write is measured
+    /// against 0, the value of a register nobody wrote yet [µm].
+    double largest_step_um{0.0};
+    std::uint64_t writes{0};
+  };
+  /// The register's delivery record, if anything was delivered (any thread).
+  [[nodiscard]] std::optional<Delivery> delivery(std::uint16_t register_index) const;
+
  private:
   void run();
 
@@ -39,7 +51,7 @@ class LoopbackBus final : public drivers::Bus {
   core::rt::Seqlock<drivers::BusStatus> status_;
   drivers::BusStatus local_{};  // I/O thread's copy; published through status_
   mutable std::mutex mu_;
-  std::map<std::uint16_t, double> delivered_;
+  std::map<std::uint16_t, Delivery> delivered_;
   std::atomic<bool> stop_{false};
   std::atomic<std::uint64_t> injected_{0};
   std::thread thread_;

@@ -6,7 +6,12 @@
 //   per count), `nccomp status` shows the bus up with its counters, SIGTERM exits 0;
 // - in lock-step with a fake ncsim (contract C2), THEN after every DONE the holding register
 //   holds exactly that cycle's ramp value (one count per 1 ms tick), every published state is
-//   one event in the engine (200 axis samples + 1 tool measurement), and BYE ends it with exit 0.
+//   one event in the engine (200 axis samples + 1 tool measurement), and BYE ends it with exit 0;
+// - killed with SIGKILL in the middle of a creep (S0, [creep]) and restarted, THEN the NC's
+//   register continues from where it was and ends at the measured wear once: every value the NC
+//   received is checked (never beyond the increment, never back, no step past max_step_um);
+// - after a --dry-run, THEN a real start resumes from what the NC really holds (the dry run's
+//   values were never sent and never persisted) and reaches the new target through the limiter.
 #include <arpa/inet.h>
 #include <fcntl.h>
 #include <gtest/gtest.h>
@@ -19,6 +24,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -173,6 +179,60 @@ void publish_tool_measurement(NcServer& nc, std::uint16_t seq, std::uint16_t too
   });
 }
 
+// The [creep] variant: a time-based linear creep of the whole measured wear into the tool length
+// wear register (tip tool, no normals), 4 s of cutting time per increment.
+std::string creep_config_text(std::uint16_t port) {
+  std::ostringstream s;
+  s << "[daemon]\nrate_hz = 1000\n"
+    << "[state]\ndirectory = \"state\"\nmin_interval_s = 0.05\n"
+    << "[measurement_log]\ndirectory = \"log\"\n"
+    << "[status]\nsocket_path = \"status.sock\"\n"
+    << "[modbus]\ntransport = \"tcp\"\nhost = \"127.0.0.1\"\nport = " << port << "\n"
+    << "poll_rate_hz = 200\nresponse_timeout_s = 0.5\n"
+    << "[modbus.axis]\n"
+    << "x_mm = { table = \"input\", address = 0, type = \"int32\", scale = 0.0001 }\n"
+    << "tool = { table = \"input\", address = 8, type = \"uint16\" }\n"
+    << "[modbus.tool_measurement]\n"
+    << "sequence = { table = \"input\", address = 100, type = \"uint16\" }\n"
+    << "tool = { table = \"input\", address = 101, type = \"uint16\" }\n"
+    << "wear_um = { table = \"input\", address = 102, type = \"float32\" }\n"
+    << "[[modbus.offset]]\nregister_index = 0\naddress = 200\ntype = \"int32\"\nscale = 0.1\n"
+    << "[[registers]]\nname = \"T1_length_wear\"\nkind = \"tool_length_wear\"\nbus = \"modbus\"\n"
+    << "max_abs_um = 200\nmax_step_um = 5\nmax_rate_um_per_s = 50\n"
+    << "[creep]\ncreep_basis = \"time\"\ncreep_time_s = 4.0\nprofile = \"linear\"\n"
+    << "[creep.edge]\ntool_shape = \"tip\"\nnormal_source = \"none\"\n"
+    << "fallback_channel = \"length\"\n"
+    << "[creep.output]\nmode = \"tool_registers\"\nlength_register = \"T1_length_wear\"\n";
+  return s.str();
+}
+
+// The ramp variant with a chosen target (rate 100 µm/s).
+std::string ramp_config_text(std::uint16_t port, double target_um) {
+  std::string s = config_text(port, 200.0);
+  const std::string from = "target_um = 12.3";
+  s.replace(s.find(from), from.size(), "target_um = " + std::to_string(target_um));
+  return s;
+}
+
+// Every int32 value the NC received at a holding address (function 16, two registers), in order.
+std::vector<std::int32_t> written_i32(NcServer& nc, std::uint16_t address) {
+  std::vector<std::int32_t> out;
+  for (const auto& w : nc.writes()) {
+    if (w.address == address && w.values.size() == 2) {
+      out.push_back(static_cast<std::int32_t>((std::uint32_t{w.values[0]} << 16) | w.values[1]));
+    }
+  }
+  return out;
+}
+
+std::string file_bytes(const fs::path& p) {
+  // Through a stringstream: GCC 12 at -O2 flags istreambuf_iterator (-Wnull-dereference).
+  std::ifstream in(p, std::ios::binary);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
 TEST(NccompdModbus, RealTimeEventsInOffsetsOutStatusShowsTheBus) {
   TempDir d;
   NcServer nc(ServerConfig{});
@@ -304,6 +364,159 @@ TEST(NccompdModbus, LockstepOffsetsAreOnTheNcAtEveryDone) {
             std::string::npos)
       << daemon.log();
   nc.stop();
+}
+
+// kill -9 in the middle of a creep (S0), then a restart: the NC's register continues from where
+// it was and ends at the measured wear once. Checked on every value the NC received.
+TEST(NccompdModbus, KillNineMidCreepContinuesWithoutDoubling) {
+  TempDir d;
+  NcServer nc(ServerConfig{});
+  nc.start();
+  nc.update([](Tables& t) {
+    set_i32(t.input, 0, 100000);  // x = 10 mm
+    t.input[8] = 1;               // tool 1 in the spindle
+  });
+  d.write("nccompd.toml", creep_config_text(nc.port()));
+  constexpr std::int32_t kFull = 100;  // 10 µm wear = 100 counts of 0.1 µm
+  std::int32_t before_kill = 0;
+  {
+    Daemon daemon(d.path);
+    daemon.start();
+    // The daemon runs and has seen the NC (an axis sample) before the measurement.
+    const auto end = std::chrono::steady_clock::now() + 15s;
+    while (number(daemon.status().value_or(""), "events_accepted") < 1 &&
+           std::chrono::steady_clock::now() < end) {
+      std::this_thread::sleep_for(20ms);
+    }
+    ASSERT_GE(number(daemon.status().value_or(""), "events_accepted"), 1) << daemon.log();
+    publish_tool_measurement(nc, 1, 1, 10.0F);
+    // Kill at about 40 % of the creep (4 s for the whole increment).
+    const auto end2 = std::chrono::steady_clock::now() + 20s;
+    while (std::abs(holding_i32(nc, 200)) < 40 && std::chrono::steady_clock::now() < end2) {
+      std::this_thread::sleep_for(2ms);
+    }
+    daemon.signal(SIGKILL);
+    EXPECT_EQ(daemon.wait(), 128 + SIGKILL);
+    before_kill = holding_i32(nc, 200);
+  }
+  ASSERT_GE(std::abs(before_kill), 40) << "the creep did not get going";
+  ASSERT_LT(std::abs(before_kill), kFull) << "killed too late: not mid-creep";
+  const std::size_t writes_before = written_i32(nc, 200).size();
+
+  Daemon daemon(d.path);
+  daemon.start();
+  // The first status of the new process: the creep resumed where it was (not from 0, and not a
+  // new increment on top).
+  std::string first;
+  const auto end = std::chrono::steady_clock::now() + 15s;
+  while (std::chrono::steady_clock::now() < end) {
+    first = daemon.status().value_or("");
+    if (number(first, "cycles") >= 10) {
+      break;
+    }
+    std::this_thread::sleep_for(5ms);
+  }
+  const double in_force = number(first, "wear_in_force_um");
+  const double remaining = number(first, "creep_remaining_um");
+  EXPECT_GE(in_force, std::abs(before_kill) / 10.0 - 0.5) << first;
+  EXPECT_LE(in_force + remaining, 10.0 + 1e-6) << first;
+  const auto end2 = std::chrono::steady_clock::now() + 20s;
+  while (std::abs(holding_i32(nc, 200)) != kFull && std::chrono::steady_clock::now() < end2) {
+    std::this_thread::sleep_for(10ms);
+  }
+  ASSERT_EQ(std::abs(holding_i32(nc, 200)), kFull) << daemon.log();
+  std::this_thread::sleep_for(1500ms);  // past a refresh interval (1 s): it stays there
+  const std::string last = daemon.status().value_or("");
+  daemon.signal(SIGTERM);
+  EXPECT_EQ(daemon.wait(), 0) << daemon.log();
+  nc.stop();
+
+  EXPECT_EQ(std::abs(holding_i32(nc, 200)), kFull);
+  EXPECT_DOUBLE_EQ(number(last, "wear_in_force_um"), 10.0) << last;
+  EXPECT_DOUBLE_EQ(number(last, "creep_remaining_um"), 0.0) << last;
+  const auto w = written_i32(nc, 200);
+  ASSERT_GT(w.size(), writes_before) << "the restarted daemon wrote nothing";
+  const int sign = w.back() < 0 ? -1 : 1;
+  std::int32_t previous = 0;
+  for (std::size_t i = 0; i < w.size(); ++i) {
+    const std::int32_t v = sign * w[i];  // progress in counts, 0 → 100
+    EXPECT_GE(v, 0) << "write " << i;
+    EXPECT_LE(v, kFull) << "write " << i << ": beyond the measured wear (doubled?)";
+    // Never back by more than the progress the state file may lag behind: min_interval_s
+    // (0.05 s at 2.5 µm/s = 1.25 counts) plus the kill race (the NC was read after the kill).
+    EXPECT_GE(v, previous - 5) << "write " << i << " went back";
+    EXPECT_LE(std::abs(v - previous), 50) << "write " << i << ": step past max_step_um";
+    previous = std::max(previous, v);
+  }
+  // The first write of the new process continues from the NC's value.
+  EXPECT_LE(std::abs(sign * w[writes_before] - sign * before_kill), 5)
+      << "first write after the restart: " << w[writes_before] << ", NC held " << before_kill;
+  EXPECT_NE(daemon.log().find("state resumed from"), std::string::npos) << daemon.log();
+}
+
+// A dry run never reaches the NC nor the state file: the real start that follows resumes from
+// what the NC holds (12.3 µm, from the first real run) and ramps to the new target through the
+// limiter, instead of believing the dry run's 30 µm were sent.
+TEST(NccompdModbus, RealStartAfterDryRunResumesFromWhatTheNcHolds) {
+  TempDir d;
+  NcServer nc(ServerConfig{});
+  nc.start();
+  d.write("nccompd.toml", ramp_config_text(nc.port(), 12.3));
+  const fs::path state = d.path / "state" / "state.bin";
+  {
+    Daemon real(d.path);
+    real.start();
+    const auto end = std::chrono::steady_clock::now() + 15s;
+    while (holding_i32(nc, 200) != 123 && std::chrono::steady_clock::now() < end) {
+      std::this_thread::sleep_for(10ms);
+    }
+    ASSERT_EQ(holding_i32(nc, 200), 123) << real.log();
+    real.signal(SIGTERM);
+    ASSERT_EQ(real.wait(), 0) << real.log();
+  }
+  const auto persisted = file_bytes(state);
+  ASSERT_FALSE(persisted.empty());
+  const std::size_t writes_real = nc.writes().size();
+
+  d.write("nccompd.toml", ramp_config_text(nc.port(), 30.0));
+  {
+    Daemon dry(d.path);
+    dry.start({"--dry-run"});
+    std::string s;
+    const auto end = std::chrono::steady_clock::now() + 15s;
+    while (std::chrono::steady_clock::now() < end) {
+      s = dry.status().value_or("");
+      if (number(s, "output_um") >= 30.0) {
+        break;
+      }
+      std::this_thread::sleep_for(10ms);
+    }
+    EXPECT_DOUBLE_EQ(number(s, "output_um"), 30.0) << s;  // computed ...
+    EXPECT_EQ(holding_i32(nc, 200), 123);                 // ... never sent
+    dry.signal(SIGTERM);
+    ASSERT_EQ(dry.wait(), 0) << dry.log();
+  }
+  EXPECT_EQ(nc.writes().size(), writes_real) << "the dry run wrote to the NC";
+  EXPECT_TRUE(file_bytes(state) == persisted) << "the dry run changed the state file";
+
+  Daemon real(d.path);
+  real.start();
+  const auto end = std::chrono::steady_clock::now() + 15s;
+  while (holding_i32(nc, 200) != 300 && std::chrono::steady_clock::now() < end) {
+    std::this_thread::sleep_for(10ms);
+  }
+  EXPECT_EQ(holding_i32(nc, 200), 300) << real.log();
+  real.signal(SIGTERM);
+  EXPECT_EQ(real.wait(), 0) << real.log();
+  nc.stop();
+  const auto w = written_i32(nc, 200);
+  ASSERT_GT(w.size(), writes_real);
+  std::int32_t previous = 123;
+  for (std::size_t i = writes_real; i < w.size(); ++i) {
+    EXPECT_LE(std::abs(w[i] - previous), 50) << "write " << i << ": step past max_step_um";
+    EXPECT_GE(w[i], previous) << "write " << i;
+    previous = w[i];
+  }
 }
 
 }  // namespace

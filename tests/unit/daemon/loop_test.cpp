@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <limits>
 #include <optional>
@@ -195,6 +196,74 @@ TEST(Loop, DryRunWritesNothingToTheBus) {
   std::this_thread::sleep_for(5ms);
   EXPECT_FALSE(rig.bus.delivered(0).has_value());
   EXPECT_EQ(rig.loop->stats().writes_sent, 0U);
+}
+
+// A dry run computes offsets the NC never receives. Leaving it by a reload (dry_run = false)
+// must not treat them as sent: the NC still holds what it held before (here: nothing, 0), so
+// the first real writes start from there through the limiter (max_step_um = 5), instead of
+// jumping to the dry run's value in one step.
+TEST(Loop, LeavingDryRunByReloadStartsFromWhatTheNcHoldsThroughTheLimiter) {
+  Rig rig(true);
+  rig.loop->start();
+  ASSERT_TRUE(rig.wait_for([&] { return rig.loop->registers().regs[0].output_um > 20.0; }));
+  EXPECT_FALSE(rig.bus.delivered(0).has_value());
+  rig.swap.publish(make_runtime(100.0, 100.0, false, 2));
+  ASSERT_TRUE(rig.wait_for([&] { return rig.loop->stats().config_generation == 2; }));
+  ASSERT_TRUE(rig.wait_for([&] {
+    const auto d = rig.bus.delivery(0);
+    return d && d->writes >= 20;
+  }));
+  rig.loop->stop();
+  const auto d = rig.bus.delivery(0);
+  ASSERT_TRUE(d.has_value());
+  EXPECT_LE(std::fabs(d->first_um), 5.0) << "first real write after the dry run";
+  EXPECT_LE(d->largest_step_um, 5.0) << "a write jumped past max_step_um";
+  bool left = false;
+  LoopNote n;
+  while (rig.loop->notes().try_pop(n)) {
+    left = left || n.code == NoteCode::kDryRunLeft;
+  }
+  EXPECT_TRUE(left);
+  EXPECT_EQ(rig.loop->stats().allocations_after_warmup, 0);
+}
+
+// A dry run never persists: the state file keeps what the NC really got (here there is none).
+TEST(Loop, DryRunPersistsNothing) {
+  Rig rig(true);
+  rig.loop->start();
+  ASSERT_TRUE(rig.wait_for([&] { return rig.loop->stats().writes_dry_run >= 100; }));
+  rig.loop->stop();
+  EXPECT_EQ(rig.loop->stats().state_exports, 0U);
+  rig.persister->stop();
+  EXPECT_EQ(read_state_file((rig.dir / "state.bin").string()).status, StateFileStatus::kAbsent);
+  std::vector<std::byte> buf(4096);
+  EXPECT_EQ(rig.loop->final_state(buf), 0U) << "nothing real happened: nothing to write at exit";
+}
+
+// Entering dry run by a reload: the state as the NC has it at that moment is persisted, while the
+// dry run's own values never reach the file (neither while it runs nor at exit).
+TEST(Loop, EnteringDryRunPersistsTheRealStateOnly) {
+  Rig rig;
+  rig.loop->start();
+  ASSERT_TRUE(rig.wait_for([&] { return rig.loop->registers().regs[0].output_um > 10.0; }));
+  rig.swap.publish(make_runtime(100.0, 100.0, true, 2));
+  ASSERT_TRUE(rig.wait_for([&] { return rig.loop->stats().config_generation == 2; }));
+  const auto real = rig.bus.delivery(0);
+  ASSERT_TRUE(rig.wait_for([&] { return rig.loop->stats().writes_dry_run >= 200; }));
+  rig.loop->stop();
+  ASSERT_TRUE(real.has_value());
+  const double nc_um = rig.bus.delivery(0)->last_um;  // what the NC holds: the last real write
+  EXPECT_GT(rig.swap.current().engine->register_state(0).output_um, nc_um + 5.0)
+      << "the dry run moved on";
+  rig.persister->stop();
+  const auto f = read_state_file((rig.dir / "state.bin").string());
+  ASSERT_EQ(f.status, StateFileStatus::kOk) << f.reason;
+  auto fresh = make_runtime(100.0, 100.0, false, 1);
+  ASSERT_TRUE(fresh->engine->import_state(f.payload, 0));
+  EXPECT_DOUBLE_EQ(fresh->engine->register_state(0).output_um, nc_um);
+  // The file holds it already: the exit has nothing to add (and never the dry run's values).
+  std::vector<std::byte> buf(4096);
+  EXPECT_EQ(rig.loop->final_state(buf), 0U);
 }
 
 TEST(Loop, HoldWritesNothingAndPersistsNothing) {
