@@ -448,6 +448,40 @@ struct Loader {
     }
   }
 
+  // Moves the content of `from` (a later file) into `into` (the first file that defines the
+  // same key path). Tables merge recursively; arrays of tables below the top level are appended
+  // (e.g. one [[creep.deflection]] table file per tool); anything else defined twice is an error.
+  // Moved nodes keep their source position, so later errors still name the file they came from.
+  void merge(toml::node& into, toml::node& from, const std::string& path, bool top_level) {
+    auto* a = into.as_table();
+    auto* b = from.as_table();
+    if (a != nullptr && b != nullptr && !a->is_inline() && !b->is_inline()) {
+      for (auto&& [k, v] : *b) {
+        const std::string key(k.str());
+        const std::string sub = path + "." + key;
+        if (toml::node* existing = a->get(key)) {
+          merge(*existing, v, sub, false);
+        } else {
+          a->insert(toml::key(k), std::move(v));
+        }
+      }
+      return;
+    }
+    auto* x = into.as_array();
+    auto* y = from.as_array();
+    if (!top_level && x != nullptr && y != nullptr && x->is_array_of_tables() &&
+        y->is_array_of_tables()) {
+      for (auto&& e : *y) {
+        x->push_back(std::move(e));
+      }
+      return;
+    }
+    const Where first = where_of(&into, path);
+    diag.error(&from, path,
+               std::string(top_level ? "section" : "key") + " is already defined at " + first.file +
+                   ":" + std::to_string(first.line));
+  }
+
   LoadResult finish(const std::string& base_dir) {
     LoadResult result;
     auto config = std::make_unique<Config>();
@@ -455,20 +489,19 @@ struct Loader {
     for (const auto& d : docs) {
       config->add_file(d->path);
     }
-    // Every top-level key → the one document that defines it.
-    std::map<std::string, const toml::node*> owners;
+    // Every top-level key → the node that holds it. A section may be split over several files:
+    // its tables are merged key by key (e.g. [creep] in the main file, [[creep.deflection]] in
+    // an included table file); a key defined in two files is an error naming both places.
+    std::map<std::string, toml::node*> owners;
     for (const auto& d : docs) {
-      for (const auto& [k, v] : d->table) {
+      for (auto&& [k, v] : d->table) {
         const std::string name(k.str());
         if (name == "include") {
           continue;
         }
         auto [it, inserted] = owners.emplace(name, &v);
         if (!inserted) {
-          const Where first = where_of(it->second, name);
-          diag.error(
-              &v, name,
-              "section is already defined at " + first.file + ":" + std::to_string(first.line));
+          merge(*it->second, v, name, true);
         }
       }
     }

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "daemon/config/builtin_sections.hpp"
+#include "daemon/sections/creep/creep_section.hpp"
 
 namespace nccomp::daemon::config {
 namespace {
@@ -195,13 +196,108 @@ TEST(ConfigLoader, ErrorsInIncludedFilesNameThatFile) {
   EXPECT_EQ(items[1].where.key_path, "status.prometheus_port");
 }
 
-TEST(ConfigLoader, SectionDefinedInTwoFilesIsAnError) {
+TEST(ConfigLoader, KeyDefinedInTwoFilesIsAnErrorNamingBothPlaces) {
   TempDir d;
-  d.write("inc.toml", "[daemon]\nrate_hz = 100\n");
-  const auto f = d.write("main.toml", "include = [\"inc.toml\"]\n[daemon]\nrate_hz = 200\n");
+  const auto inc = d.write("inc.toml", "[daemon]\nrate_hz = 100\n");
+  const auto f = d.write("main.toml", "include = [\"inc.toml\"]\n[daemon]\n\nrate_hz = 200\n");
   auto r = load_file(f);
   ASSERT_EQ(r.diagnostics.items().size(), 1U) << r.diagnostics.to_string();
-  EXPECT_NE(r.diagnostics.items()[0].message.find("already defined at"), std::string::npos);
+  const auto& e = r.diagnostics.items()[0];
+  EXPECT_EQ(e.where.file, inc);
+  EXPECT_EQ(e.where.line, 2);
+  EXPECT_EQ(e.where.key_path, "daemon.rate_hz");
+  EXPECT_EQ(e.message, "key is already defined at " + f + ":4");
+}
+
+TEST(ConfigLoader, TopLevelArrayOfTablesInTwoFilesIsAnError) {
+  TempDir d;
+  d.write("inc.toml", std::string(kRegisters));
+  const auto f = d.write("main.toml", std::string("include = [\"inc.toml\"]\n") +
+                                          "[[registers]]\nname = \"x\"\nkind = \"checkpoint\"\n");
+  auto r = load_file(f);
+  ASSERT_FALSE(r.config);
+  EXPECT_NE(r.diagnostics.to_string().find("registers: section is already defined at " + f),
+            std::string::npos)
+      << r.diagnostics.to_string();
+}
+
+// A section may be split over files: [daemon] in the main file, [daemon.realtime] in an included
+// one; the keys of both arrive, errors in either part name their own file.
+TEST(ConfigLoader, SectionSplitOverFilesIsMerged) {
+  TempDir d;
+  fs::create_directories(d.path() / "rt");
+  const auto inc = d.write("rt/realtime.toml",
+                           "[daemon.realtime]\nsched_fifo_priority = 70\nlock_memory = true\n");
+  const auto f = d.write("main.toml", std::string("include = [\"rt/realtime.toml\"]\n") +
+                                          "[daemon]\nrate_hz = 250\n" + kRegisters);
+  auto r = load_file(f);
+  ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+  EXPECT_DOUBLE_EQ(daemon_section(*r.config).rate_hz, 250.0);
+  EXPECT_EQ(daemon_section(*r.config).sched_fifo_priority, 70);
+  EXPECT_TRUE(daemon_section(*r.config).lock_memory);
+
+  d.write("rt/realtime.toml", "[daemon.realtime]\nsched_fifo_priority = 70\nlock_memry = true\n");
+  auto bad = load_file(f);
+  ASSERT_EQ(bad.diagnostics.items().size(), 1U) << bad.diagnostics.to_string();
+  EXPECT_EQ(bad.diagnostics.items()[0].where.file, inc);
+  EXPECT_EQ(bad.diagnostics.items()[0].where.line, 3);
+  EXPECT_EQ(bad.diagnostics.items()[0].where.key_path, "daemon.realtime.lock_memry");
+}
+
+// Edge-wear (deflection) tables in their own files, one per tool: [[creep.deflection]] entries of
+// several included files are appended in include order; an error in one names its own file.
+TEST(ConfigLoader, CreepDeflectionTablesFromIncludedFiles) {
+  TempDir d;
+  fs::create_directories(d.path() / "tables");
+  d.write("tables/t1.toml",
+          "# tool 1\n[[creep.deflection]]\ntool = 1\nwear_um = [0.0, 20.0]\n"
+          "normal_um = [0.0, 1.5]\nlateral_um = [0.0, 0.0]\n");
+  const auto t2 = d.write("tables/t2.toml",
+                          "[[creep.deflection]]\ntool = 2\nwear_um = [0.0, 10.0, 30.0]\n"
+                          "normal_um = [0.0, 0.5, 2.0]\nlateral_um = [0.0, 0.0, 0.25]\n");
+  const std::string main_text = std::string(R"(include = ["tables/t1.toml", "tables/t2.toml"]
+[loopback]
+[[registers]]
+name = "Z_wear"
+kind = "axis_offset"
+bus = "loopback"
+max_abs_um = 200
+max_step_um = 5
+max_rate_um_per_s = 50
+[creep]
+creep_length_mm = 100.0
+[creep.edge]
+tool_shape = "tip"
+normal_source = "none"
+[creep.output]
+z_register = "Z_wear"
+)");
+  const auto f = d.write("main.toml", main_text);
+  auto r = load_file(f);
+  ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+  const auto* creep = sections::creep_section(*r.config);
+  ASSERT_NE(creep, nullptr);
+  const auto& tables = creep->module.creep.deflection;
+  ASSERT_EQ(tables.size(), 2U);
+  EXPECT_EQ(tables[0].tool, 1);
+  EXPECT_EQ(tables[1].tool, 2);
+  ASSERT_EQ(tables[1].normal_um.size(), 3U);
+  EXPECT_DOUBLE_EQ(tables[1].normal_um[2], 2.0);
+  EXPECT_DOUBLE_EQ(creep->module.creep.creep_length_mm, 100.0);
+  EXPECT_NO_THROW((void)build_engine(*r.config));
+
+  // wear_um not increasing in the second file: the error is there, at its own line.
+  d.write("tables/t2.toml",
+          "[[creep.deflection]]\ntool = 2\nwear_um = [0.0, 30.0, 10.0]\n"
+          "normal_um = [0.0, 0.5, 2.0]\nlateral_um = [0.0, 0.0, 0.25]\n");
+  auto bad = load_file(f);
+  ASSERT_FALSE(bad.config);
+  ASSERT_GE(bad.diagnostics.items().size(), 1U);
+  const auto& e = bad.diagnostics.items()[0];
+  EXPECT_EQ(e.where.file, t2) << bad.diagnostics.to_string();
+  EXPECT_EQ(e.where.line, 3) << bad.diagnostics.to_string();
+  EXPECT_EQ(e.where.key_path.rfind("creep.deflection[1].wear_um", 0), 0U)
+      << bad.diagnostics.to_string();
 }
 
 TEST(ConfigLoader, IncludeCycleIsDetected) {
