@@ -211,8 +211,11 @@ std::size_t CreepModule::status(std::span<engine::StatusValue> out) const noexce
   for (std::size_t m = 0; m < kMaxToolMemory; ++m) {
     if (mem.tool[m] != 0) order[remembered++] = m;
   }
-  std::sort(order.begin(), order.begin() + static_cast<std::ptrdiff_t>(remembered),
-            [&](std::size_t a, std::size_t b) { return mem.last_use[a] > mem.last_use[b]; });
+  for (std::size_t i = 1; i < remembered; ++i) {  // insertion sort: at most 8 entries
+    for (std::size_t j = i; j > 0 && mem.last_use[order[j]] > mem.last_use[order[j - 1]]; --j) {
+      std::swap(order[j], order[j - 1]);
+    }
+  }
   const engine::StatusValue core_values[] = {
       {"mode", 0.0, mode},
       {"tool", static_cast<double>(s.tool), nullptr},

@@ -400,6 +400,7 @@ void WearCompensator::start_creep(const std::array<double, kMaxEdgePoints>& delt
   std::array<double, kMaxEdgePoints> carry_slope{};
   std::array<double, kMaxEdgePoints> carry_rest{};
   std::array<double, kMaxEdgePoints> carry_clock{};
+  if (slot == nullptr && oldest == nullptr) return;  // no slot at all (max_creeps >= 1)
   if (slot == nullptr) {
     // All slots busy: what the oldest creep has fed in stays in force, its remainder joins the
     // new creep, so the offset keeps its value (no step) and nothing is lost; its slope is
