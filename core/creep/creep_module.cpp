@@ -3,11 +3,14 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstddef>
 #include <cstring>
 #include <stdexcept>
 #include <string>
 #include <string_view>
 #include <utility>
+
+#include "core/creep/state_v1.hpp"
 
 namespace nccomp::core::creep {
 
@@ -175,7 +178,53 @@ std::size_t CreepModule::save_state(std::span<std::byte> buf) const noexcept {
   return state_capacity();
 }
 
+bool CreepModule::load_state_v1(std::span<const std::byte> bytes) noexcept {
+  // A state written before version 2: every state in it is checked and converted before
+  // anything changes (both parts, or neither).
+  const std::byte* p = bytes.data();
+  if (!v1::state_bytes_loadable(p)) return false;
+  for (std::size_t k = 0; k < kMaxToolMemory; ++k) {
+    const std::size_t at =
+        sizeof(v1::CreepState) + offsetof(v1::ToolMemory, state) + k * sizeof(v1::CreepState);
+    std::int32_t tool = 0;
+    std::memcpy(
+        &tool,
+        p + sizeof(v1::CreepState) + offsetof(v1::ToolMemory, tool) + k * sizeof(std::int32_t),
+        sizeof tool);
+    if (tool != 0 && !v1::state_bytes_loadable(p + at)) return false;
+  }
+  const double removal = comp_.config().interval.removal_mm3_per_mm;
+  v1::CreepState old;
+  std::memcpy(&old, p, sizeof old);
+  CreepState st;
+  v1::upgrade(old, removal, st);
+  if (comp_.check_state(st).field != nullptr) return false;
+  const std::byte* mem = p + sizeof(v1::CreepState);
+  std::memcpy(scratch_memory_.tool.data(), mem + offsetof(v1::ToolMemory, tool),
+              sizeof(scratch_memory_.tool));
+  std::memcpy(scratch_memory_.last_use.data(), mem + offsetof(v1::ToolMemory, last_use),
+              sizeof(scratch_memory_.last_use));
+  std::memcpy(&scratch_memory_.use_counter, mem + offsetof(v1::ToolMemory, use_counter),
+              sizeof(scratch_memory_.use_counter));
+  for (std::size_t k = 0; k < kMaxToolMemory; ++k) {
+    if (scratch_memory_.tool[k] == 0) {
+      scratch_memory_.state[k] = CreepState{};
+      continue;
+    }
+    std::memcpy(&old, mem + offsetof(v1::ToolMemory, state) + k * sizeof(v1::CreepState),
+                sizeof old);
+    v1::upgrade(old, removal, scratch_memory_.state[k]);
+  }
+  if (!comp_.restore_tool_memory(scratch_memory_)) return false;
+  (void)comp_.restore_state(st);  // cannot fail: checked above
+  ++generation_;
+  return true;
+}
+
 bool CreepModule::load_state(std::span<const std::byte> bytes) noexcept {
+  if (bytes.size() == v1::kModuleStateBytes && bytes.size() != state_capacity()) {
+    return load_state_v1(bytes);
+  }
   if (bytes.size() != state_capacity() || !state_bytes_loadable(bytes.data(), sizeof(CreepState)) ||
       !memory_bytes_loadable(bytes.data() + sizeof(CreepState), sizeof(ToolMemory))) {
     return false;

@@ -58,7 +58,8 @@ class CreepModule final : public engine::Module {
   /// tools out of the spindle, byte for byte.
   std::size_t save_state(std::span<std::byte> buf) const noexcept override;
   /// Real-time safe: false if the bytes are not a state valid for this config (the module then
-  /// keeps its fresh state).
+  /// keeps its fresh state). A state written by version 1 of the layout (before the eased
+  /// superposition) is converted (core/creep/state_v1.hpp).
   bool load_state(std::span<const std::byte> bytes) noexcept override;
   /// Advances on every discrete change (measurement, tool change, halt) and every 1 mm of cut
   /// path while creeps, entries or predictions are in progress.
@@ -81,6 +82,8 @@ class CreepModule final : public engine::Module {
   [[nodiscard]] const WearCompensator& compensator() const noexcept { return comp_; }
 
  private:
+  bool load_state_v1(std::span<const std::byte> bytes) noexcept;
+
   CreepModuleConfig config_;
   WearCompensator comp_;
   /// Where load_state() decodes the tool memory (56 kB: not on the loop thread's stack).

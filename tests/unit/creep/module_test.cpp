@@ -13,6 +13,7 @@
 
 #include "bench/creep/engine_cycle.hpp"
 #include "core/creep/creep_module.hpp"
+#include "core/creep/state_v1.hpp"
 #include "tests/support/alloc_counter.hpp"
 #include "tests/unit/creep/rig.hpp"
 
@@ -171,6 +172,64 @@ TEST(CreepEngineModule, LoadStateRefusesForeignBytes) {
   nccomp::test::AllocationScope scope;
   EXPECT_TRUE(m.load_state(bytes));
   EXPECT_EQ(scope.count(), 0U);
+}
+
+TEST(CreepEngineModule, AStateOfLayoutVersion1IsConvertedNotDropped) {
+  // A daemon upgraded across the state change (version 1 → 2) must resume with its wear: a
+  // fresh state would slew the NC's wear offsets back to zero.
+  auto mc = module_config();
+  mc.creep.interval.removal_mm3_per_mm = 0.5;
+  CreepModule m(mc);
+  std::vector<RegisterSpec> regs = registers();
+  m.attach(engine::RegisterTable(regs));
+  v1::CreepState s;
+  s.edge_points = 1;
+  s.tool = 1;
+  s.cut_path_mm = 30.0;
+  s.creep_path_mm = 30.0;
+  s.committed_um[0] = 2.0;
+  s.measured_um[0] = 22.0;
+  s.measurements = 2;
+  s.last_measurement_cut_path_mm = 20.0;
+  s.last_measurement_creep_path_mm = 20.0;
+  s.creeps[0].active = true;
+  s.creeps[0].seq = 1;
+  s.creeps[0].start = 20.0;  // 20 µm over 50 mm, 10 mm done
+  s.creeps[0].delta_um[0] = 20.0;
+  s.creeps[0].span[0] = 50.0;
+  s.channel_output_um[2] = -6.0;
+  v1::ToolMemory mem;
+  mem.tool[3] = 7;
+  mem.last_use[3] = 1;
+  mem.use_counter = 1;
+  mem.state[3].edge_points = 1;
+  mem.state[3].tool = 7;
+  mem.state[3].measured_um[0] = 9.0;
+  mem.state[3].committed_um[0] = 9.0;
+  std::vector<std::byte> bytes(v1::kModuleStateBytes);
+  std::memcpy(bytes.data(), &s, sizeof s);
+  std::memcpy(bytes.data() + sizeof s, &mem, sizeof mem);
+  ASSERT_NE(bytes.size(), m.state_capacity());
+  nccomp::test::AllocationScope scope;
+  ASSERT_TRUE(m.load_state(bytes));
+  EXPECT_EQ(scope.count(), 0U);
+  const auto& c = m.compensator();
+  EXPECT_EQ(c.state().version, CreepState::kVersion);
+  EXPECT_NEAR(c.applied_wear_um(0), 2.0 + 20.0 * 10.0 / 50.0, 1e-12);  // the creep goes on
+  EXPECT_FALSE(c.state().creeps[0].eased);
+  EXPECT_NEAR(c.state().channel_output_um[2], -6.0, 0.0);
+  EXPECT_NEAR(c.removed_mm3(), 15.0, 1e-12);  // what version 1 counted: path × 0.5 mm²
+  EXPECT_EQ(c.tool_memory().tool[3], 7);
+  EXPECT_NEAR(c.tool_memory().state[3].measured_um[0], 9.0, 0.0);
+  // A version-1-sized blob that is not version 1, or has a corrupt bool, is refused.
+  CreepModule fresh(mc);
+  fresh.attach(engine::RegisterTable(regs));
+  bytes[offsetof(v1::CreepState, halted)] = std::byte{3};
+  EXPECT_FALSE(fresh.load_state(bytes));
+  bytes[offsetof(v1::CreepState, halted)] = std::byte{0};
+  bytes[offsetof(v1::CreepState, version)] = std::byte{2};
+  EXPECT_FALSE(fresh.load_state(bytes));
+  EXPECT_EQ(fresh.compensator().state().measurements, 0U);
 }
 
 TEST(CreepEngineModule, RegistersByName) {
