@@ -33,6 +33,13 @@ namespace {
 namespace fs = std::filesystem;
 namespace cfg = config;
 
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__) || defined(NCCOMP_ASAN) || \
+    defined(NCCOMP_TSAN)
+constexpr bool kSanitizerBuild = true;
+#else
+constexpr bool kSanitizerBuild = false;
+#endif
+
 core::TimeNs monotonic_ns() {
   timespec ts{};
   clock_gettime(CLOCK_MONOTONIC, &ts);
@@ -197,7 +204,11 @@ int run_daemon(const DaemonOptions& options) {
         state_problem);
   }
 
-  if (dsec.lock_memory) {
+  if (dsec.lock_memory && kSanitizerBuild) {
+    spdlog::warn(
+        "lock_memory ignored: this is a sanitizer build (its shadow memory is terabytes of "
+        "reserved address space that mlockall would try to make resident)");
+  } else if (dsec.lock_memory) {
     if (mlockall(MCL_CURRENT | MCL_FUTURE) == 0) {
       spdlog::info("memory locked (mlockall)");
     } else {
@@ -279,6 +290,16 @@ int run_daemon(const DaemonOptions& options) {
   lo.prefault_stack_kib = dsec.prefault_stack_kib;
   lo.state_min_interval_s = ssec.min_interval_s;
   lo.state_buffer_bytes = blob_bytes;
+  if (const char* stall = std::getenv("NCCOMPD_TEST_STALL_AFTER_CYCLES");
+      stall != nullptr && *stall != '\0') {
+    // Test hook of the watchdog test (tests/hil/daemon): never set it on a machine.
+    char* end = nullptr;
+    const unsigned long long n = std::strtoull(stall, &end, 10);
+    if (end != nullptr && *end == '\0' && n > 0) {
+      lo.test_stall_after_cycles = n;
+      spdlog::warn("TEST HOOK NCCOMPD_TEST_STALL_AFTER_CYCLES: the loop stalls after {} cycles", n);
+    }
+  }
   std::vector<drivers::Bus*> bus_ptrs;
   for (auto& b : buses) {
     bus_ptrs.push_back(b.bus.get());

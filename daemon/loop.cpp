@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <variant>
@@ -172,6 +173,13 @@ void Loop::run() {
     }
     deadline = next.next_ns;
     finish_cycle();
+    if (options_.test_stall_after_cycles != 0 &&
+        local_.cycles == options_.test_stall_after_cycles) {
+      // Test hook only: the heartbeat stops advancing while the process stays alive.
+      while (!stop_.load(std::memory_order_acquire)) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+      }
+    }
   }
   // Final fault count for whoever reads the statistics after stop().
   if (local_.cycles > options_.warmup_cycles) {

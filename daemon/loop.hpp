@@ -82,6 +82,10 @@ struct LoopOptions {
   /// Lock-step: longest wait in one bus's sync() or flush() [ns]; a timeout is counted and the
   /// cycle completes anyway (no deadlock with the peer).
   core::TimeNs lockstep_bus_timeout_ns{2'000'000'000};
+  /// Test hook (NCCOMPD_TEST_STALL_AFTER_CYCLES): after this many cycles the loop thread stops
+  /// cycling and only waits for stop(), like a loop stuck in a blocking call, so the process
+  /// tests can show that the systemd watchdog is then no longer fed. 0 = never (production).
+  std::uint64_t test_stall_after_cycles{0};
 };
 
 /// What the loop thread got from the OS at start (logged by the caller: the loop never logs).

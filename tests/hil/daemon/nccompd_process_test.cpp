@@ -11,17 +11,21 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <chrono>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <mutex>
 #include <optional>
 #include <regex>
 #include <sstream>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
+#include "core/engine/engine.hpp"
 #include "daemon/state_store.hpp"
 #include "daemon/status.hpp"
 
@@ -134,6 +138,20 @@ double number(const std::string& json, const std::string& key) {
 }
 bool flag(const std::string& json, const std::string& key) {
   return json.find("\"" + key + "\":true") != std::string::npos;
+}
+
+// The value of register T1_length_wear in an engine state (read back through an engine with the
+// same register, the way nccompd restores it).
+double register_in_state(const std::vector<std::byte>& payload) {
+  nccomp::core::engine::Engine e;
+  e.configure(
+      {{"T1_length_wear", nccomp::core::engine::RegisterKind::kToolLengthWear, {200.0, 5.0, 50.0}}},
+      {});
+  std::size_t skipped = 0;
+  if (!e.import_state(payload, 0, &skipped)) {
+    return -1e300;
+  }
+  return e.register_state(0).output_um;
 }
 
 struct TempDir {
@@ -303,6 +321,126 @@ TEST(NccompdProcess, NotifiesReadyWatchdogAndStopping) {
   EXPECT_TRUE(stopping);
   EXPECT_EQ(p.wait(), 0);
   ::close(fd);
+}
+
+// systemd's notify socket, played by the test: a thread collects every datagram with its time.
+class NotifySocket {
+ public:
+  explicit NotifySocket(std::string path) : path_(std::move(path)) {
+    fd_ = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+    EXPECT_GE(fd_, 0);
+    sockaddr_un addr{};
+    addr.sun_family = AF_UNIX;
+    std::memcpy(addr.sun_path, path_.c_str(), path_.size() + 1);
+    EXPECT_EQ(::bind(fd_, reinterpret_cast<const sockaddr*>(&addr), sizeof addr), 0);
+    timeval tv{0, 50'000};
+    ::setsockopt(fd_, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+    thread_ = std::thread([this] {
+      while (!stop_.load()) {
+        char buf[1024];
+        const ssize_t n = ::recv(fd_, buf, sizeof buf, 0);
+        if (n > 0) {
+          std::lock_guard<std::mutex> lock(mu_);
+          got_.emplace_back(std::chrono::steady_clock::now(),
+                            std::string(buf, static_cast<std::size_t>(n)));
+        }
+      }
+    });
+  }
+  ~NotifySocket() {
+    stop_.store(true);
+    thread_.join();
+    ::close(fd_);
+  }
+  using Message = std::pair<std::chrono::steady_clock::time_point, std::string>;
+  std::vector<Message> messages() {
+    std::lock_guard<std::mutex> lock(mu_);
+    return got_;
+  }
+
+ private:
+  std::string path_;
+  int fd_{-1};
+  std::atomic<bool> stop_{false};
+  std::mutex mu_;
+  std::vector<Message> got_;
+  std::thread thread_;
+};
+
+// A stalled loop stops the watchdog: with WATCHDOG_USEC = 200 ms the daemon feeds every 100 ms
+// while the loop's heartbeat advances; when the loop thread stops cycling (test hook: it stalls
+// after 800 cycles, the process and its other threads stay alive) no WATCHDOG=1 follows, so
+// systemd would kill and restart the service after WatchdogSec.
+TEST(NccompdProcess, StalledLoopStopsFeedingTheWatchdog) {
+  TempDir d;
+  d.write("nccompd.toml", config_text(5.0, 50.0));
+  NotifySocket notify((d.path / "notify.sock").string());
+  Daemon p(d.path);
+  p.env = {"NOTIFY_SOCKET=" + (d.path / "notify.sock").string(), "WATCHDOG_USEC=200000",
+           "NCCOMPD_TEST_STALL_AFTER_CYCLES=800"};
+  p.start();
+  // Wait until the loop has stalled: its cycle count stops at 800 while the status thread still
+  // answers.
+  const auto s = p.wait_status([](const std::string& j) { return number(j, "cycles") >= 800; });
+  ASSERT_EQ(number(s, "cycles"), 800) << s;
+  const auto stalled_seen = std::chrono::steady_clock::now();
+  std::this_thread::sleep_for(1500ms);  // 15 feed periods
+  const auto later = p.status();
+  ASSERT_TRUE(later) << "the status thread must keep answering";
+  EXPECT_EQ(number(*later, "cycles"), 800) << *later;
+  p.signal(SIGTERM);
+  EXPECT_EQ(p.wait(), 0) << p.log();
+
+  int before = 0;
+  int after = 0;
+  bool ready = false;
+  std::chrono::steady_clock::time_point last_feed{};
+  for (const auto& [t, msg] : notify.messages()) {
+    ready = ready || msg.find("READY=1") != std::string::npos;
+    if (msg.find("WATCHDOG=1") != std::string::npos) {
+      (t < stalled_seen ? before : after) += 1;
+      last_feed = t;
+    }
+  }
+  EXPECT_TRUE(ready);
+  EXPECT_GE(before, 3) << "fed while the loop ran (0.8 s at one feed per 100 ms)";
+  // The stall is seen one feed period after it began at most (the feeder compares the heartbeat
+  // with the one of its previous check): no feed later than that.
+  EXPECT_LE(after, 1);
+  EXPECT_LT(last_feed, stalled_seen + 250ms);
+  EXPECT_NE(p.log().find("loop heartbeat stalled at"), std::string::npos) << p.log();
+}
+
+// SIGTERM leaves the final state on disk: with min_interval_s = 3600 the loop persists once (the
+// ramp's first step) and not again; the value the ramp reached afterwards arrives in the file
+// only through the write at exit.
+TEST(NccompdProcess, SigtermWritesTheFinalState) {
+  TempDir d;
+  std::string text = config_text(5.0, 50.0);
+  text.replace(text.find("min_interval_s = 0.05"), 21, "min_interval_s = 3600");
+  d.write("nccompd.toml", text);
+  const auto path = (d.path / "state" / "state.bin").string();
+  Daemon p(d.path);
+  p.start();
+  const auto s = p.wait_status([](const std::string& j) { return number(j, "output_um") >= 5.0; });
+  EXPECT_DOUBLE_EQ(number(s, "output_um"), 5.0);
+  std::this_thread::sleep_for(100ms);
+  // The one periodic write came at the first change (or not at all, when the machine has been up
+  // for less than min_interval_s of CLOCK_MONOTONIC): it does not hold the 5 µm.
+  const auto during = nccomp::daemon::read_state_file(path);
+  std::uint64_t during_sequence = 0;
+  if (during.status == nccomp::daemon::StateFileStatus::kOk) {
+    EXPECT_LT(register_in_state(during.payload), 1.0) << "periodic write after the first step";
+    during_sequence = during.sequence;
+  } else {
+    EXPECT_EQ(during.status, nccomp::daemon::StateFileStatus::kAbsent) << during.reason;
+  }
+  p.signal(SIGTERM);
+  EXPECT_EQ(p.wait(), 0) << p.log();
+  const auto after = nccomp::daemon::read_state_file(path);
+  ASSERT_EQ(after.status, nccomp::daemon::StateFileStatus::kOk) << after.reason;
+  EXPECT_GT(after.sequence, during_sequence);
+  EXPECT_DOUBLE_EQ(register_in_state(after.payload), 5.0);
 }
 
 TEST(NccompdProcess, InvalidConfigExitsWithStatus3AndNamesTheLine) {

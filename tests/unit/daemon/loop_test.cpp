@@ -266,6 +266,65 @@ TEST(Loop, EnteringDryRunPersistsTheRealStateOnly) {
   EXPECT_EQ(rig.loop->final_state(buf), 0U);
 }
 
+// A module that takes 5.5 ms in one cycle (the 50th): with 1 ms cycles that cycle overruns.
+class SlowOnceModule final : public core::engine::Module {
+ public:
+  std::string_view name() const noexcept override { return "slow"; }
+  void attach(const core::engine::RegisterTable& /*registers*/) override {}
+  void step(core::TimeNs /*now_ns*/, std::span<const core::Event> /*events*/,
+            core::StepOutput& /*out*/) noexcept override {
+    if (++steps_ == 50) {
+      std::this_thread::sleep_for(5500us);
+    }
+  }
+
+ private:
+  std::uint64_t steps_{0};
+};
+
+// A slow cycle is an overrun: counted once, its skipped deadlines counted (skip_missed keeps the
+// 1 ms grid: 5.5 ms late → at least 5 deadlines past), noted for the log, and the loop goes on
+// at its rate afterwards (no catch-up burst: the cycles stay below elapsed time / period).
+TEST(Loop, SlowCycleIsCountedAsAnOverrun) {
+  auto rt = std::make_unique<Runtime>();
+  rt->engine = std::make_unique<core::engine::Engine>();
+  std::vector<std::unique_ptr<core::engine::Module>> m;
+  m.push_back(std::make_unique<SlowOnceModule>());
+  rt->engine->configure({{"T1", core::engine::RegisterKind::kToolLengthWear, {200.0, 5.0, 500.0}}},
+                        std::move(m));
+  rt->register_bus = {0};
+  core::rt::ConfigSwap<Runtime> swap(std::move(rt));
+  LoopbackBus bus(16, 16);
+  bus.start();
+  LoopOptions o;
+  o.rate_hz = 1000.0;
+  Loop loop(o, swap, {&bus}, nullptr, nullptr);
+  const auto t0 = std::chrono::steady_clock::now();
+  loop.start();
+  const auto end = t0 + 5s;
+  while (loop.stats().cycles < 200 && std::chrono::steady_clock::now() < end) {
+    std::this_thread::sleep_for(2ms);
+  }
+  loop.stop();
+  const double elapsed_ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  bus.stop();
+  const LoopStats s = loop.stats();
+  ASSERT_GE(s.cycles, 200U);
+  EXPECT_GE(s.overruns, 1U);
+  EXPECT_GE(s.missed_deadlines, 5U);
+  EXPECT_GE(s.max_step_ns, 5'500'000);
+  EXPECT_LT(static_cast<double>(s.cycles), elapsed_ms + 1.0) << "a catch-up burst";
+  bool noted = false;
+  LoopNote n;
+  while (loop.notes().try_pop(n)) {
+    if (n.code == NoteCode::kOverrun && n.a >= 5 && n.b >= 5500.0) {
+      noted = true;
+    }
+  }
+  EXPECT_TRUE(noted) << "the overrun note (missed deadlines, lateness in us) for the logger";
+}
+
 TEST(Loop, HoldWritesNothingAndPersistsNothing) {
   Rig rig;
   rig.loop->set_hold(true);
