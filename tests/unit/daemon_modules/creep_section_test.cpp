@@ -5,14 +5,21 @@
 
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cmath>
 #include <fstream>
+#include <functional>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "core/creep/creep_module.hpp"
 #include "daemon/config/builtin_sections.hpp"
+#include "daemon/logging.hpp"
+#include "daemon/loop.hpp"
+#include "daemon/loopback_bus.hpp"
+#include "daemon/status.hpp"
 #include "tests/unit/daemon_modules/temp_dir.hpp"
 
 namespace nccomp::daemon::sections {
@@ -734,6 +741,82 @@ TEST(ShippedConfig, CreepsTheMeasuredWearIntoTheToolRegistersAlongTheNormal) {
   for (int i = 0; i < 1100; ++i) sample(0.1);
   EXPECT_NEAR(values[length], -12.0 * std::cos(theta), 1e-9);
   EXPECT_NEAR(values[radius], -12.0 * std::sin(theta), 1e-9);
+}
+
+// nccomp status, as the daemon renders it, with the loop running the shipped config: the wear of
+// every tool the creep module remembers, not only the one in the spindle.
+TEST(ShippedConfig, StatusShowsTheWearOfEveryRememberedTool) {
+  using namespace std::chrono_literals;
+  TempDir d;
+  auto loaded = config::load_file(d.write("nccompd.toml", shipped_config_on_loopback()));
+  ASSERT_TRUE(loaded.config) << loaded.diagnostics.to_string();
+  auto rt = std::make_unique<Runtime>();
+  rt->engine = config::build_engine(*loaded.config);
+  std::vector<std::string> names;
+  for (const auto& e : config::registers_section(*loaded.config).registers) {
+    rt->register_bus.push_back(0);
+    names.push_back(e.spec.name);
+  }
+  core::rt::ConfigSwap<Runtime> swap(std::move(rt));
+  LoopbackBus bus(256, 256);
+  bus.start();
+  Loop loop(LoopOptions{}, swap, {&bus}, nullptr, nullptr);
+  EventLogger logger(loop);
+  logger.start();
+  loop.start();
+  StatusContext c;
+  c.loop = &loop;
+  c.buses = {{"loopback", &bus}};
+  c.logger = &logger;
+  c.register_names = [names] { return names; };
+  c.config_path = "nccompd.toml";
+  c.state_path = "state.bin";
+  const auto wait_for = [](const std::function<bool()>& done) {
+    for (int i = 0; i < 500; ++i) {
+      if (done()) return true;
+      std::this_thread::sleep_for(10ms);
+    }
+    return false;
+  };
+  double path = 0.0;
+  // Tool 1 measured 12 µm, tool 2 measured 5 µm, then tool 3 in the spindle, measured 3 µm.
+  for (const auto& [tool, wear] : {std::pair{1, 12.0}, std::pair{2, 5.0}, std::pair{3, 3.0}}) {
+    ASSERT_TRUE(bus.inject(core::ToolChange{0, tool, false}));
+    for (int k = 0; k < 3; ++k) {
+      core::AxisSample a;
+      a.tool = tool;
+      a.program_path_mm = path;
+      path += 1.0;
+      ASSERT_TRUE(bus.inject(a));
+    }
+    core::ToolMeasurement m;
+    m.tool = tool;
+    m.wear_um[0] = wear;
+    ASSERT_TRUE(bus.inject(m));
+    ASSERT_TRUE(wait_for([&] {
+      return render_json(c).find("\"tool\":" + std::to_string(tool) + ",") != std::string::npos &&
+             render_json(c).find("\"measurements_accepted\":" + std::to_string(tool)) !=
+                 std::string::npos;
+    })) << render_json(c);
+  }
+  const std::string text = render_text(c);
+  EXPECT_NE(
+      text.find("module creep: mode creeping, tool 3, wear_in_force_um 0, wear_measured_um 3,"),
+      std::string::npos)
+      << text;
+  EXPECT_NE(text.find("measurements_refused 0, T2_wear_um 5, T1_wear_um 12\n"), std::string::npos)
+      << text;
+  const std::string json = render_json(c);
+  EXPECT_NE(json.find("\"measurements_refused\":0,\"T2_wear_um\":5,\"T1_wear_um\":12}"),
+            std::string::npos)
+      << json;
+  const std::string prom = render_prometheus(c);
+  EXPECT_NE(prom.find("nccompd_module_value{module=\"creep\",key=\"T1_wear_um\"} 12\n"),
+            std::string::npos)
+      << prom;
+  loop.stop();
+  logger.stop();
+  bus.stop();
 }
 
 }  // namespace
