@@ -1,24 +1,27 @@
-// Cost of one WearCompensator::step() (issue 3): 3 axes, 16 edge support points, 4 creeps in
-// progress, a surface normal with every sample, prediction and deflection on — one axis sample
-// per cycle as at the loop rate. Each call is timed on its own (steady_clock); the timer's own
-// cost is measured the same way and reported, not subtracted.
+// Cost of `core.step()` with the creep module (issue 3): the engine (core::engine::Engine::step,
+// what the loop thread calls every cycle: event validation, the module, per-register limiters,
+// write batching) with the creep module attached, 3 axes, 16 edge support points, 4 creeps in
+// progress, a surface normal with every sample, prediction, deflection and adaptive interval on
+// (bench/creep/engine_cycle.hpp; the unit test CreepRealTime.EngineStepWithTheCreepModule-
+// AllocatesNothing runs the same cycle). Its peer in the same run: the creep module alone
+// (CreepModule::step on the same stream). Each call is timed on its own (steady_clock); the
+// timer's own cost is measured the same way and reported, not subtracted.
 //
 //   bench_creep_cost [CYCLES]
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <memory>
 #include <string>
 #include <vector>
 
-#include "core/common/output.hpp"
-#include "core/creep/wear_compensator.hpp"
+#include "bench/creep/engine_cycle.hpp"
 
 namespace {
 
-using namespace nccomp::core;
-using namespace nccomp::core::creep;
 using Clock = std::chrono::steady_clock;
+using nccomp::bench::creep::EngineCycle;
 
 struct Stats {
   double median_ns, p99_ns, p999_ns, max_ns;
@@ -32,111 +35,80 @@ Stats stats(std::vector<double>& v) {
   return {at(0.5), at(0.99), at(0.999), v.back()};
 }
 
+double elapsed_ns(Clock::time_point t0, Clock::time_point t1) {
+  return std::chrono::duration<double, std::nano>(t1 - t0).count();
+}
+
+/// Times `cycles` plain cycles, then 2000 cycles that carry a measurement (5 plain cycles
+/// between them). Fails loudly if the setup is not what the table says.
+void run(EngineCycle& rig, std::size_t cycles, std::vector<double>& t_step,
+         std::vector<double>& t_meas) {
+  for (std::size_t i = 0; i < 10000; ++i) rig.cycle();  // warm-up
+  t_step.resize(cycles);
+  for (std::size_t i = 0; i < cycles; ++i) {
+    const auto t0 = Clock::now();
+    rig.cycle();
+    const auto t1 = Clock::now();
+    t_step[i] = elapsed_ns(t0, t1);
+  }
+  const auto accepted = rig.module().compensator().counters().measurements_accepted;
+  const auto folded = rig.module().compensator().counters().creeps_folded;
+  t_meas.resize(2000);
+  for (std::size_t i = 0; i < t_meas.size(); ++i) {
+    for (int k = 0; k < 5; ++k) rig.cycle();
+    const double base = rig.next_wear_base_um();
+    const auto t0 = Clock::now();
+    rig.measure(base);
+    const auto t1 = Clock::now();
+    t_meas[i] = elapsed_ns(t0, t1);
+  }
+  const auto& k = rig.module().compensator().counters();
+  if (rig.creeps_in_progress() != 4 || rig.module().compensator().halted() ||
+      k.measurements_accepted - accepted != t_meas.size() ||
+      k.creeps_folded - folded != t_meas.size()) {
+    std::fprintf(stderr,
+                 "run: %zu creeps in progress, halted %d, %llu of %zu measurements accepted, "
+                 "%llu folded\n",
+                 rig.creeps_in_progress(), rig.module().compensator().halted() ? 1 : 0,
+                 static_cast<unsigned long long>(k.measurements_accepted - accepted), t_meas.size(),
+                 static_cast<unsigned long long>(k.creeps_folded - folded));
+    std::exit(1);
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   const std::size_t cycles = argc > 1 ? std::stoul(argv[1]) : 200000;
-  CreepConfig c;
-  c.creep_basis = CreepBasis::kPath;
-  c.creep_length_mm = 1e6;  // the 4 creeps stay in progress for the whole run
-  c.profile = ProfileShape::kCosine;
-  c.max_creeps = 4;
-  c.edge.tool_shape = ToolShape::kBall;
-  c.edge.edge_points = 16;
-  c.edge.normal_source = NormalSource::kAxisSample;
-  c.output.mode = OutputMode::kAxes;
-  c.output.channel_register = {0, 1, 2, -1, -1};
-  c.output.warning_register = 10;
-  c.output.alarm_register = 11;
-  c.output.measurement_due_register = 12;
-  c.output.tool_change_register = 13;
-  c.interval.basis = IntervalBasis::kAdaptive;
-  c.predict.enabled = true;
-  c.deflection = {{0, {0.0, 20.0, 50.0}, {0.0, 2.0, 6.0}, {0.0, 1.0, 4.0}}};
-  c.limiter = {500.0, 50.0, 1e4};
-  c.tool_life.min_expected_increment_um = 100.0;
-  WearCompensator comp;
-  comp.configure(c);
-
-  StepOutput out;
-  std::vector<Event> ev;
-  ev.reserve(4);
-  TimeNs now = 0;
-  double path = 0.0;
-  AxisSample a;
-  a.has_normal = true;
-  a.tool = 1;
-  auto cycle = [&](bool with_measurement, double wear_base) {
-    ev.clear();
-    now += 1'000'000;  // 1 kHz loop
-    path += 0.026;     // 1555 mm/min
-    const double ang = 0.001 * path;
-    a.time_ns = now;
-    a.program_path_mm = path;
-    a.position_mm = {path, 0.5 * path, 0.0, 0.0, 0.0, 0.0};
-    a.normal = {std::sin(ang), 0.0, std::cos(ang)};
-    ev.emplace_back(a);
-    if (with_measurement) {
-      ToolMeasurement m;
-      m.tool = 1;
-      m.point_count = 16;
-      for (std::size_t i = 0; i < 16; ++i) m.wear_um[i] = wear_base + 0.2 * static_cast<double>(i);
-      ev.emplace_back(m);
-    }
-    out.clear();
-    comp.step(now, ev, out);
-  };
-  ev.emplace_back(ToolChange{now, 1, false});
-  comp.step(now, ev, out);
-  for (int k = 0; k < 4; ++k) {
-    for (int i = 0; i < 200; ++i) cycle(false, 0.0);
-    cycle(true, 3.0 * (k + 1) * (k + 1));
-  }
-  if (comp.creeps_in_progress() != 4) {
-    std::fprintf(stderr, "setup: %zu creeps in progress, expected 4\n", comp.creeps_in_progress());
-    return 1;
-  }
-  for (std::size_t i = 0; i < 10000; ++i) cycle(false, 0.0);  // warm-up
-
-  std::vector<double> t_step(cycles), t_timer(cycles);
-  for (std::size_t i = 0; i < cycles; ++i) {
-    const auto t0 = Clock::now();
-    cycle(false, 0.0);
-    const auto t1 = Clock::now();
-    t_step[i] = std::chrono::duration<double, std::nano>(t1 - t0).count();
-  }
+  auto engine = std::make_unique<EngineCycle>(true);
+  auto alone = std::make_unique<EngineCycle>(false);
+  std::vector<double> e_step, e_meas, m_step, m_meas;
+  run(*engine, cycles, e_step, e_meas);
+  run(*alone, cycles, m_step, m_meas);
+  std::vector<double> t_timer(cycles);
   for (std::size_t i = 0; i < cycles; ++i) {
     const auto t0 = Clock::now();
     const auto t1 = Clock::now();
-    t_timer[i] = std::chrono::duration<double, std::nano>(t1 - t0).count();
+    t_timer[i] = elapsed_ns(t0, t1);
   }
-  // Cycles that carry a 16-point measurement (folding the oldest creep, 16 log records).
-  std::vector<double> t_meas(2000);
-  for (std::size_t i = 0; i < t_meas.size(); ++i) {
-    for (int k = 0; k < 5; ++k) cycle(false, 0.0);
-    const double base = comp.state().measured_um[0] + 0.5;
-    const auto t0 = Clock::now();
-    cycle(true, base);
-    const auto t1 = Clock::now();
-    t_meas[i] = std::chrono::duration<double, std::nano>(t1 - t0).count();
-  }
-  if (comp.creeps_in_progress() != 4 || comp.halted()) {
-    std::fprintf(stderr, "run: %zu creeps in progress, halted %d\n", comp.creeps_in_progress(),
-                 comp.halted() ? 1 : 0);
-    return 1;
-  }
-  const Stats s = stats(t_step);
+  const Stats es = stats(e_step);
+  const Stats em = stats(e_meas);
+  const Stats ms = stats(m_step);
+  const Stats mm = stats(m_meas);
   const Stats t = stats(t_timer);
-  const Stats m = stats(t_meas);
   std::printf("| cycle | n | median [ns] | p99 [ns] | p99.9 [ns] | max [ns] |\n");
   std::printf("| --- | --- | --- | --- | --- | --- |\n");
-  std::printf(
-      "| step(): 1 axis sample, 3 axes, 16 points, 4 creeps | %zu | %.0f | %.0f | %.0f | %.0f |\n",
-      cycles, s.median_ns, s.p99_ns, s.p999_ns, s.max_ns);
-  std::printf(
-      "| step() + 16-point measurement (fold, 16 records) | %zu | %.0f | %.0f | %.0f | %.0f |\n",
-      t_meas.size(), m.median_ns, m.p99_ns, m.p999_ns, m.max_ns);
-  std::printf("| timer alone (steady_clock pair) | %zu | %.0f | %.0f | %.0f | %.0f |\n", cycles,
-              t.median_ns, t.p99_ns, t.p999_ns, t.max_ns);
+  const auto row = [](const char* what, std::size_t n, const Stats& s) {
+    std::printf("| %s | %zu | %.0f | %.0f | %.0f | %.0f |\n", what, n, s.median_ns, s.p99_ns,
+                s.p999_ns, s.max_ns);
+  };
+  row("Engine::step() with the creep module: 1 axis sample, 3 axes, 16 points, 4 creeps", cycles,
+      es);
+  row("  the same + 16-point measurement (fold, 16 records)", e_meas.size(), em);
+  row("peer: CreepModule::step() alone, same stream", cycles, ms);
+  row("  the same + 16-point measurement", m_meas.size(), mm);
+  row("timer alone (steady_clock pair)", cycles, t);
+  std::printf("\nengine / module alone, median: %.2f; p99.9: %.2f\n", es.median_ns / ms.median_ns,
+              es.p999_ns / ms.p999_ns);
   return 0;
 }

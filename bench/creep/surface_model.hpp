@@ -2,7 +2,10 @@
 // while the tool wears, the tool measured every N passes (mid-pass, as when the NC interrupts a
 // long surface), and the real core (WearCompensator) computing the offsets the NC would apply.
 // The surface error at a point is the true wear at the engagement point minus the correction in
-// force when that point was cut, along the surface normal.
+// force when that point was cut, along the surface normal. The correction's own jump is the change
+// of the wear in force at the current engagement point between two neighbouring samples (at the
+// same engagement angle, so the change of the angle along a curved pass does not count): what the
+// creep itself adds per sample, the quantity the bound h·Δs/L is about.
 #pragma once
 
 #include <algorithm>
@@ -55,6 +58,7 @@ struct Strategy {
 struct Result {
   double max_step_along_um{0.0};   // largest jump between neighbouring points of one pass
   double max_step_across_um{0.0};  // largest jump between neighbouring passes (same x)
+  double max_jump_um{0.0};         // largest change of the correction itself between two samples
   double rms_um{0.0};
   double rms_second_half_um{0.0};  // RMS over the second half of the path (steady state)
   double max_abs_um{0.0};
@@ -115,6 +119,24 @@ inline Result run(const Scenario& sc, const Strategy& st) {
   std::vector<double> prev_pass(static_cast<std::size_t>(n), 0.0);
   std::vector<double> this_pass(static_cast<std::size_t>(n), 0.0);
   std::vector<double> last_measured(sc.edge_points, 0.0);
+  std::vector<double> w_prev(sc.edge_points, 0.0);
+  std::vector<double> w_now(sc.edge_points, 0.0);
+  bool have_prev = false;
+  // The wear in force at engagement angle θ (interpolated between support points as the core
+  // does), or the mean along the edge when the correction goes on a tool register.
+  const auto at_engagement = [&](const std::vector<double>& w, double theta_deg) {
+    const std::size_t points = w.size();
+    if (sc.tool_registers) {
+      double m = 0.0;
+      for (const double v : w) m += v;
+      return m / static_cast<double>(points);
+    }
+    if (points < 2) return w[0];
+    const double x = theta_deg / 90.0 * static_cast<double>(points - 1);
+    const auto i0 = std::min(static_cast<std::size_t>(x), points - 2);
+    const double t = x - static_cast<double>(i0);
+    return w[i0] + t * (w[i0 + 1] - w[i0]);
+  };
   Result r;
   double sum_sq = 0.0;
   std::size_t count = 0;
@@ -165,6 +187,13 @@ inline Result run(const Scenario& sc, const Strategy& st) {
       ev.emplace_back(a);
       out.clear();
       comp.step(now, ev, out);
+      for (std::size_t p = 0; p < sc.edge_points; ++p) w_now[p] = comp.applied_wear_um(p);
+      if (have_prev) {
+        r.max_jump_um = std::max(r.max_jump_um, std::fabs(at_engagement(w_now, theta_deg) -
+                                                          at_engagement(w_prev, theta_deg)));
+      }
+      w_prev.swap(w_now);
+      have_prev = true;
       double applied = 0.0;
       if (sc.tool_registers) {
         applied = -comp.channel_output_um(Channel::kRadius);
