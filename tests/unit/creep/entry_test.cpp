@@ -311,7 +311,8 @@ TEST(CreepConfigCheck, ErrorsNameTheTomlKey) {
   c.toolpath = {true, false, {{0.0, {0.0, 0.0, 1.0}}, {5.0, {0.0, 0.0, 1.0}}}};
   EXPECT_NE(error_of(c).find("creep.interval.removal_source"), std::string::npos);
   c.toolpath = {true, true, {{0.0, {0.0, 0.0, 1.0}, -1.0}, {5.0, {0.0, 0.0, 1.0}, 1.0}}};
-  EXPECT_NE(error_of(c).find("toolpath_file row 1 removal_mm2 must be a finite number >= 0"), std::string::npos)
+  EXPECT_NE(error_of(c).find("toolpath_file row 1 removal_mm2 must be a finite number >= 0"),
+            std::string::npos)
       << error_of(c);
   c = base_config();
   c.limiter.max_step_um = -1.0;
