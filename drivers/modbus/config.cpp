@@ -254,11 +254,33 @@ Encoding read_encoding(const Reader& r, const toml::table& t, const std::string&
   return e;
 }
 
-constexpr std::array<std::string_view, 7> kSignalKeys = {
-    "table", "address", "type", "word_order", "byte_order", "scale", "offset"};
+constexpr std::array<std::string_view, 9> kSignalKeys = {
+    "table", "address", "type", "word_order", "byte_order", "scale", "offset", "min", "max"};
 
-constexpr std::array<std::string_view, 8> kProfileSignalKeys = {
-    "table", "address", "type", "word_order", "byte_order", "scale", "offset", "count"};
+constexpr std::array<std::string_view, 10> kProfileSignalKeys = {
+    "table", "address", "type", "word_order", "byte_order",
+    "scale", "offset",  "min",  "max",        "count"};
+
+/// The plausibility range `min` / `max` of a signal (physical units, after scale and offset).
+void read_range(const Reader& r, const toml::table& t, const std::string& path, SignalMap& s) {
+  const toml::node* lo = t.get("min");
+  const toml::node* hi = t.get("max");
+  if (lo == nullptr && hi == nullptr) {
+    return;
+  }
+  if (is_bit_table(s.table)) {
+    r.fail(lo != nullptr ? lo : hi, Reader::join(path, lo != nullptr ? "min" : "max"),
+           "a " + table_name(s.table) + " is one bit: min / max do not apply");
+  }
+  constexpr double kLimit = 1e300;
+  s.min = r.number(t, path, "min", s.min, -kLimit, kLimit);
+  s.max = r.number(t, path, "max", s.max, -kLimit, kLimit);
+  if (s.min > s.max) {
+    std::ostringstream m;
+    m << "max " << s.max << " is below min " << s.min;
+    r.fail(hi != nullptr ? hi : lo, Reader::join(path, hi != nullptr ? "max" : "min"), m.str());
+  }
+}
 
 /// `allow_count`: the signal may be a run of `count` consecutive values (a wear profile).
 SignalMap read_signal(const Reader& r, const toml::node& n, const std::string& path,
@@ -282,6 +304,7 @@ SignalMap read_signal(const Reader& r, const toml::node& n, const std::string& p
   }
   s.address = static_cast<std::uint16_t>(r.integer(*t, path, "address", 0, 0, 65535));
   s.encoding = read_encoding(r, *t, path, s.table);
+  read_range(r, *t, path, s);
   if (allow_count) {
     s.count = static_cast<std::uint8_t>(
         r.integer(*t, path, "count", 1, 1, static_cast<std::int64_t>(core::kMaxEdgePoints)));
@@ -339,7 +362,8 @@ ConfigError::ConfigError(std::string file, int line, int column, std::string key
       key_path_(std::move(key_path)),
       message_(std::move(message)) {}
 
-ModbusConfig parse_modbus_config(std::string_view toml_text, std::string_view file) {
+ModbusConfig parse_modbus_config(std::string_view toml_text, std::string_view file,
+                                 const ParseOptions& options) {
   toml::table root;
   try {
     root = toml::parse(toml_text, file);
@@ -351,10 +375,11 @@ ModbusConfig parse_modbus_config(std::string_view toml_text, std::string_view fi
   if (mnode == nullptr || !mnode->is_table()) {
     Reader(file).fail(mnode, "modbus", "missing [modbus] table");
   }
-  return parse_modbus_table(*mnode->as_table(), file);
+  return parse_modbus_table(*mnode->as_table(), file, options);
 }
 
-ModbusConfig parse_modbus_table(const toml::table& m, std::string_view file) {
+ModbusConfig parse_modbus_table(const toml::table& m, std::string_view file,
+                                const ParseOptions& options) {
   const std::string table_file =
       m.source().path && !m.source().path->empty() ? *m.source().path : std::string(file);
   const Reader r(table_file);
@@ -423,7 +448,18 @@ ModbusConfig parse_modbus_table(const toml::table& m, std::string_view file) {
   c.unit_id = static_cast<std::uint8_t>(r.integer(m, mp, "unit_id", 1, 0, 247));
   c.response_timeout_s = r.number(m, mp, "response_timeout_s", 0.5, 0.001, 60.0);
   c.byte_timeout_s = r.number(m, mp, "byte_timeout_s", 0.5, 0.0001, 60.0);
-  c.poll_rate_hz = r.number(m, mp, "poll_rate_hz", 100.0, 0.01, 10000.0);
+  c.poll_rate_defaulted = m.get("poll_rate_hz") == nullptr;
+  c.poll_rate_hz = r.number(m, mp, "poll_rate_hz", options.default_poll_rate_hz, 0.01, 10000.0);
+  if (options.max_poll_rate_hz > 0.0 && c.poll_rate_hz > options.max_poll_rate_hz + 1e-9) {
+    std::ostringstream s;
+    s << c.poll_rate_hz << " Hz is faster than the loop ("
+      << (options.rate_source.empty() ? "loop rate" : options.rate_source) << " = "
+      << options.max_poll_rate_hz
+      << " Hz), which takes at most one sample per cycle: the extra polls only load the NC "
+         "and the bus; at most "
+      << options.max_poll_rate_hz << " Hz (leave poll_rate_hz out to poll at the loop rate)";
+    r.fail(m.get("poll_rate_hz"), "modbus.poll_rate_hz", s.str());
+  }
   c.offset_write_rate_hz = r.number(m, mp, "offset_write_rate_hz", 0.0, 0.0, 10000.0);
   c.reconnect_min_s = r.number(m, mp, "reconnect_min_s", 0.1, 0.001, 600.0);
   c.reconnect_max_s = r.number(m, mp, "reconnect_max_s", 5.0, 0.001, 600.0);
@@ -506,6 +542,13 @@ ModbusConfig parse_modbus_table(const toml::table& m, std::string_view file) {
       if (is_bit_table(seq.table)) {
         r.fail(gt->get("sequence"), sp, "a sequence counter must be in holding or input");
       }
+      if (!std::isinf(seq.min) || !std::isinf(seq.max)) {
+        const toml::table* st = gt->get("sequence")->as_table();
+        const bool has_min = st != nullptr && st->get("min") != nullptr;
+        r.fail(st != nullptr ? st->get(has_min ? "min" : "max") : gt,
+               sp + (has_min ? ".min" : ".max"),
+               "a sequence counter has no range: it counts events and wraps");
+      }
       for (std::size_t fi = 1; fi < kFieldCounts[gi]; ++fi) {
         if (gm.fields[fi].mapped && gm.fields[fi].table != seq.table) {
           r.fail(gt->get(kFieldKeys[gi][fi]), Reader::join(gp, kFieldKeys[gi][fi]),
@@ -528,8 +571,9 @@ ModbusConfig parse_modbus_table(const toml::table& m, std::string_view file) {
       if (t == nullptr) {
         r.fail(&(*arr)[i], tp, "expected a table");
       }
-      static constexpr std::array<std::string_view, 8> kTempKeys = {
-          "sensor", "table", "address", "type", "word_order", "byte_order", "scale", "offset"};
+      static constexpr std::array<std::string_view, 10> kTempKeys = {
+          "sensor",     "table", "address", "type", "word_order",
+          "byte_order", "scale", "offset",  "min",  "max"};
       r.check_keys(*t, tp, kTempKeys);
       TemperatureMap tm;
       if (t->get("sensor") == nullptr) {
@@ -730,8 +774,15 @@ ModbusConfig parse_modbus_table(const toml::table& m, std::string_view file) {
     const double load = c.poll_bus_time_s * c.poll_rate_hz;
     if (load > 0.9) {
       std::ostringstream s;
-      s << c.poll_rate_hz << " Hz needs " << load * 100.0 << " % of the bus at " << c.baud
-        << " baud (" << c.poll_bus_time_s * 1e3 << " ms per poll for " << c.blocks.size()
+      s << c.poll_rate_hz << " Hz";
+      if (c.poll_rate_defaulted) {
+        s << " (poll_rate_hz is not set: "
+          << (options.rate_source.empty() ? std::string("the default")
+                                          : "the loop rate " + std::string(options.rate_source))
+          << ")";
+      }
+      s << " needs " << load * 100.0 << " % of the bus at " << c.baud << " baud ("
+        << c.poll_bus_time_s * 1e3 << " ms per poll for " << c.blocks.size()
         << " read requests); at most " << 0.9 / c.poll_bus_time_s << " Hz";
       const toml::node* n = m.get("poll_rate_hz");
       r.fail(n != nullptr ? n : mnode, "modbus.poll_rate_hz", s.str());

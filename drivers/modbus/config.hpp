@@ -17,6 +17,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 #include <stdexcept>
 #include <string>
 #include <string_view>
@@ -111,6 +112,10 @@ struct SignalMap {
   /// Consecutive values of this encoding (only tool_measurement.wear_um: a wear profile over
   /// the edge's support points); 1 for every other signal.
   std::uint8_t count{1};
+  /// Accepted physical range (after scale and offset), from the map's `min` / `max`: a finite
+  /// value outside it drops the sample or event (counted as out of range). Unbounded by default.
+  double min{-std::numeric_limits<double>::infinity()};
+  double max{std::numeric_limits<double>::infinity()};
   /// Position in the poll: read block index and the value's first register within it.
   std::size_t block{0};
   std::uint16_t block_offset{0};
@@ -157,6 +162,8 @@ struct ModbusConfig {
   double response_timeout_s{0.5};
   double byte_timeout_s{0.5};
   double poll_rate_hz{100.0};
+  /// True when poll_rate_hz was not in the file (ParseOptions::default_poll_rate_hz applied).
+  bool poll_rate_defaulted{false};
   /// Offsets are written at most this often (latest value wins in between). 0 in the file means
   /// "derive": the poll rate on TCP, the bus budget left by the polls on RTU.
   double offset_write_rate_hz{0.0};
@@ -187,13 +194,26 @@ struct ModbusConfig {
   double write_bus_time_s{0.0};
 };
 
+/// How poll_rate_hz relates to the loop that consumes the samples.
+struct ParseOptions {
+  /// poll_rate_hz when the key is absent (stand-alone tools: 100 Hz; nccompd: its loop rate).
+  double default_poll_rate_hz{100.0};
+  /// > 0: a larger poll_rate_hz is refused (nccompd: its loop rate; polls the loop never takes
+  /// only load the NC and the bus).
+  double max_poll_rate_hz{0.0};
+  /// Where the two rates come from, for messages (e.g. "daemon.rate_hz"); empty = built in.
+  std::string_view rate_source{};
+};
+
 /// Parses the [modbus] table of a TOML document. `file` names the source in messages.
 /// Throws ConfigError. Not real-time.
-ModbusConfig parse_modbus_config(std::string_view toml_text, std::string_view file);
+ModbusConfig parse_modbus_config(std::string_view toml_text, std::string_view file,
+                                 const ParseOptions& options = {});
 /// Parses an already parsed [modbus] table (the daemon's config loader hands it over). Errors
 /// name the file the table's nodes were parsed from (their source path), else `file`, with line,
 /// column and key path. Throws ConfigError. Not real-time.
-ModbusConfig parse_modbus_table(const toml::table& modbus, std::string_view file);
+ModbusConfig parse_modbus_table(const toml::table& modbus, std::string_view file,
+                                const ParseOptions& options = {});
 /// Reads and parses a file. Throws ConfigError.
 ModbusConfig load_modbus_config(const std::string& path);
 

@@ -40,6 +40,26 @@ double PollDecoder::value(const SignalMap& s) const noexcept {
       s.encoding);
 }
 
+bool PollDecoder::in_range(const GroupMap& g, std::size_t n) const noexcept {
+  for (std::size_t f = 0; f < n; ++f) {
+    const SignalMap& s = g.fields[f];
+    if (!s.mapped || (std::isinf(s.min) && std::isinf(s.max))) {
+      continue;
+    }
+    const std::vector<std::uint16_t>& b = blocks_[s.block];
+    const std::size_t w = width(s.encoding.type);
+    for (std::size_t i = 0; i < s.count; ++i) {
+      const double v = modbus::decode(
+          std::span<const std::uint16_t>(b.data() + s.block_offset + i * w, w), s.encoding);
+      // NaN / inf are not a range question: the callers refuse them (or take NaN as "unknown").
+      if (std::isfinite(v) && (v < s.min || v > s.max)) {
+        return false;
+      }
+    }
+  }
+  return true;
+}
+
 void PollDecoder::emit(const core::Event& e) noexcept {
   // Capacity reserved in the constructor for every group and sensor: never reallocates.
   if (out_.size() < out_.capacity()) {
@@ -76,6 +96,10 @@ std::span<const core::Event> PollDecoder::decode(core::TimeNs t_ns,
 
 void PollDecoder::decode_axis(core::TimeNs t_ns) {
   const GroupMap& g = config_.groups[static_cast<std::size_t>(Group::kAxis)];
+  if (!in_range(g, axis_field::kCount)) {
+    ++counters_.values_out_of_range;
+    return;
+  }
   core::AxisSample s;
   s.time_ns = t_ns;
   s.axis_count = 0;
@@ -147,6 +171,12 @@ void PollDecoder::decode_event(Group g, core::TimeNs t_ns) {
     return;
   }
   counters_.events_lost += delta - 1U;
+  // The counter is consumed either way: an event with an implausible value is dropped once,
+  // never re-read.
+  if (!in_range(gm, field_count(g))) {
+    ++counters_.values_out_of_range;
+    return;
+  }
 
   const auto f = [&](std::size_t i, double dflt) {
     return gm.fields[i].mapped ? value(gm.fields[i]) : dflt;
@@ -252,6 +282,10 @@ void PollDecoder::decode_temperatures(core::TimeNs t_ns, std::span<const std::ui
     const double v = value(tm.value);
     if (!std::isfinite(v)) {
       ++counters_.values_invalid;
+      continue;
+    }
+    if (v < tm.value.min || v > tm.value.max) {
+      ++counters_.values_out_of_range;
       continue;
     }
     const double last = last_temperature_[i];

@@ -12,6 +12,10 @@
 //     counted as a sequence reset.
 // Counters and baselines survive a reconnect, so events produced while the link was down show
 // up as one emitted event plus lost ones, never twice.
+//
+// Plausibility: a finite value outside its signal's `min` / `max` (config) drops the whole sample
+// or event and counts values_out_of_range; NaN / inf / non-integral / invalid codes count
+// values_invalid. Either way an event's counter is consumed, so it is not re-read.
 #pragma once
 
 #include <cstdint>
@@ -24,9 +28,10 @@
 namespace nccomp::drivers::modbus {
 
 struct DecodeCounters {
-  std::uint64_t events_lost{0};      // sequence jumps > 1
-  std::uint64_t sequence_resets{0};  // counter moved backwards (NC restart)
-  std::uint64_t values_invalid{0};   // NaN / inf / non-integral / out-of-range: sample dropped
+  std::uint64_t events_lost{0};          // sequence jumps > 1
+  std::uint64_t sequence_resets{0};      // counter moved backwards (NC restart)
+  std::uint64_t values_invalid{0};       // NaN / inf / non-integral / not a valid code: dropped
+  std::uint64_t values_out_of_range{0};  // finite but outside the map's min / max: dropped
 };
 
 class PollDecoder {
@@ -47,6 +52,8 @@ class PollDecoder {
 
  private:
   [[nodiscard]] double value(const SignalMap& s) const noexcept;
+  /// False if a mapped field of g (the first n) holds a finite value outside its min / max.
+  [[nodiscard]] bool in_range(const GroupMap& g, std::size_t n) const noexcept;
   void decode_axis(core::TimeNs t_ns);
   void decode_event(Group g, core::TimeNs t_ns);
   void decode_temperatures(core::TimeNs t_ns, std::span<const std::uint8_t> block_ok);

@@ -42,6 +42,41 @@ core::TimeNs monotonic_now_ns() noexcept {
   return static_cast<core::TimeNs>(ts.tv_sec) * kNsPerS + ts.tv_nsec;
 }
 
+std::size_t modbus_counters(const ModbusStatus& st, std::span<BusCounterValue> out) noexcept {
+  const auto& x = st.exceptions;
+  const std::array<std::uint64_t, kModbusCounterNames.size()> values = {
+      x[1],
+      x[2],
+      x[3],
+      x[4],
+      x[5],
+      x[6],
+      x[7],
+      x[8],
+      x[10],
+      x[11],
+      x[0] + x[9],
+      st.timeouts,
+      st.crc_errors,
+      st.bad_responses,
+      st.connection_errors,
+      st.connect_attempts,
+      st.poll_overruns,
+      st.events_lost,
+      st.sequence_resets,
+      st.values_invalid,
+      st.values_out_of_range,
+      st.offsets_rejected,
+      st.verify_mismatches,
+      st.offsets_pending,
+  };
+  const std::size_t n = std::min(out.size(), values.size());
+  for (std::size_t i = 0; i < n; ++i) {
+    out[i] = BusCounterValue{kModbusCounterNames[i], values[i]};
+  }
+  return n;
+}
+
 void ModbusBus::ModbusDeleter::operator()(void* ctx) const noexcept {
   auto* m = static_cast<modbus_t*>(ctx);
   modbus_close(m);
@@ -140,6 +175,7 @@ void ModbusBus::sleep_until(core::TimeNs t_ns) const {
 }
 
 bool ModbusBus::connect() {
+  ++st_.connect_attempts;
   modbus_t* ctx = nullptr;
   if (config_.transport == Transport::kTcp) {
     const std::string service = std::to_string(config_.port);
@@ -174,7 +210,8 @@ bool ModbusBus::connect() {
   }
   ctx_ = std::move(holder);
   consecutive_failures_ = 0;
-  last_frame_end_ns_ = 0;
+  // last_frame_end_ns_ is kept: the silence is the line's, and a late answer to the request
+  // before a reconnect may just have ended on it.
   return true;
 }
 
@@ -189,11 +226,12 @@ void ModbusBus::rtu_gap() {
     return;
   }
   const core::TimeNs until = last_frame_end_ns_ + to_ns(rtu_frame_gap_s(config_));
-  if (monotonic_now_ns() < until) {
-    timespec ts{};
-    ts.tv_sec = until / kNsPerS;
-    ts.tv_nsec = until % kNsPerS;
-    clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr);
+  timespec ts{};
+  ts.tv_sec = until / kNsPerS;
+  ts.tv_nsec = until % kNsPerS;
+  // Absolute deadline: a signal (EINTR) only restarts the wait, it never shortens the silence.
+  while (monotonic_now_ns() < until &&
+         clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
   }
 }
 
@@ -250,6 +288,7 @@ void ModbusBus::poll(core::TimeNs now_ns) {
     std::span<std::uint16_t> buf = decoder_.block(i);
     rtu_gap();
     modbus_t* ctx = mb(ctx_);
+    ++cycle_reads_;
     int rc = -1;
     switch (b.table) {
       case Table::kHolding:
@@ -300,6 +339,7 @@ void ModbusBus::poll(core::TimeNs now_ns) {
   st_.events_lost = dc.events_lost;
   st_.sequence_resets = dc.sequence_resets;
   st_.values_invalid = dc.values_invalid;
+  st_.values_out_of_range = dc.values_out_of_range;
 }
 
 void ModbusBus::drain_tx(core::TimeNs now_ns) {
@@ -338,6 +378,7 @@ bool ModbusBus::write_one(const OffsetMap& map, OffsetSlot& slot) {
     ++st_.bus.counters.offsets_retried;
   }
   rtu_gap();
+  ++cycle_writes_;
   int rc = modbus_write_registers(mb(ctx_), map.address, n, regs.data());
   int err = errno;
   after_transaction();
@@ -350,6 +391,7 @@ bool ModbusBus::write_one(const OffsetMap& map, OffsetSlot& slot) {
   if (config_.verify_writes) {
     std::array<std::uint16_t, 2> back{};
     rtu_gap();
+    ++cycle_reads_;
     rc = modbus_read_registers(mb(ctx_), map.address, n, back.data());
     err = errno;
     after_transaction();
@@ -433,12 +475,14 @@ bool ModbusBus::ensure_connected(double& backoff_s, bool& ever_connected) {
     backoff_s = std::min(backoff_s * 2.0, config_.reconnect_max_s);
     return false;
   }
-  if (ever_connected) {
-    ++st_.bus.counters.reconnects;
-  }
-  ever_connected = true;
   backoff_s = config_.reconnect_min_s;
   down_since_ns_ = 0;
+  if (!ever_connected) {
+    // The first connection: offsets queued before it are first writes, already dirty.
+    ever_connected = true;
+    return true;
+  }
+  ++st_.bus.counters.reconnects;
   // The NC may have restarted and lost what it had: every known offset is written again.
   for (OffsetSlot& s : slots_) {
     if (s.has_value && !s.rejected) {
@@ -552,39 +596,16 @@ void ModbusBus::run() {
     core::TimeNs now = monotonic_now_ns();
     drain_tx(now);
     if (!ctx_) {
-      if (down_since_ns_ == 0) {
-        down_since_ns_ = now;
-      }
-      if (!connect()) {
-        ++st_.connection_errors;
-        ++st_.bus.counters.faults;
-        st_.bus.state = ever_connected ? LinkState::kDown : LinkState::kConnecting;
-        publish(monotonic_now_ns());
-        sleep_until(monotonic_now_ns() + to_ns(backoff_s));
-        backoff_s = std::min(backoff_s * 2.0, config_.reconnect_max_s);
+      if (!ensure_connected(backoff_s, ever_connected)) {
         continue;
-      }
-      if (ever_connected) {
-        ++st_.bus.counters.reconnects;
-      }
-      ever_connected = true;
-      backoff_s = config_.reconnect_min_s;
-      down_since_ns_ = 0;
-      // The NC may have restarted and lost what it had: every known offset is written again.
-      for (OffsetSlot& s : slots_) {
-        if (s.has_value && !s.rejected) {
-          if (!s.dirty) {
-            s.dirty_since_ns = now;
-          }
-          s.dirty = true;
-          s.resend = true;
-        }
       }
       next = monotonic_now_ns();
       next_write = next;
     }
     const core::TimeNs cycle_start = monotonic_now_ns();
     const std::uint64_t faults_before = st_.bus.counters.faults;
+    cycle_reads_ = 0;
+    cycle_writes_ = 0;
     poll(cycle_start);
     drain_tx(monotonic_now_ns());
     if (ctx_ && monotonic_now_ns() >= next_write) {
@@ -598,7 +619,7 @@ void ModbusBus::run() {
     st_.last_cycle_ns = now - cycle_start;
     st_.max_cycle_ns = std::max(st_.max_cycle_ns, st_.last_cycle_ns);
     if (cycle_log_ != nullptr && ctx_) {
-      (void)cycle_log_->try_push(st_.last_cycle_ns);
+      (void)cycle_log_->try_push(CycleRecord{st_.last_cycle_ns, cycle_reads_, cycle_writes_});
     }
     if (!ctx_) {
       st_.bus.state = LinkState::kDown;

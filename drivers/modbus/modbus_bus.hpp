@@ -25,6 +25,7 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <span>
 #include <thread>
 #include <vector>
 
@@ -49,17 +50,57 @@ struct ModbusStatus {
   std::uint64_t crc_errors{0};
   std::uint64_t bad_responses{0};      // wrong transaction id / length / unit / function
   std::uint64_t connection_errors{0};  // socket / device errors, failed connects
+  std::uint64_t connect_attempts{0};   // connects tried (first one, reconnects, read-back)
   std::uint64_t polls{0};
   std::uint64_t poll_overruns{0};  // a poll period ended before the poll and writes did
   std::uint64_t events_lost{0};    // sequence counter jumps > 1
   std::uint64_t sequence_resets{0};
-  std::uint64_t values_invalid{0};    // NaN / out of range values from the NC: dropped
-  std::uint64_t offsets_rejected{0};  // not encodable (NaN, out of range) or unmapped register
+  std::uint64_t values_invalid{0};       // NaN / inf / not integral / not a valid code: dropped
+  std::uint64_t values_out_of_range{0};  // finite but outside the map's min / max: dropped
+  std::uint64_t offsets_rejected{0};     // not encodable (NaN, out of range) or unmapped register
   std::uint64_t verify_mismatches{0};
   std::uint32_t offsets_pending{0};  // written by the loop, not yet confirmed on the NC
   core::TimeNs last_cycle_ns{0};     // duration of the last poll + write cycle
   core::TimeNs max_cycle_ns{0};
   int last_errno{0};  // errno of the last fault (libmodbus EMB* codes too)
+};
+
+/// Names of ModbusBus::extra_counters(), in their order (static strings, for status output).
+inline constexpr std::array<const char*, 24> kModbusCounterNames = {
+    "exception_illegal_function",      // 1
+    "exception_illegal_address",       // 2
+    "exception_illegal_value",         // 3
+    "exception_server_failure",        // 4
+    "exception_acknowledge",           // 5
+    "exception_server_busy",           // 6 (slave busy)
+    "exception_negative_acknowledge",  // 7
+    "exception_memory_parity",         // 8
+    "exception_gateway_path",          // 10
+    "exception_gateway_target",        // 11
+    "exception_other",                 // unknown codes and 9
+    "timeouts",
+    "crc_errors",
+    "bad_responses",
+    "connection_errors",
+    "connect_attempts",
+    "poll_overruns",
+    "events_lost",
+    "sequence_resets",
+    "values_invalid",
+    "values_out_of_range",
+    "offsets_rejected",
+    "verify_mismatches",
+    "offsets_pending",  // a gauge: offsets not yet confirmed on the NC now
+};
+
+/// Fills `out` with the counters of `st` in kModbusCounterNames order; returns how many.
+std::size_t modbus_counters(const ModbusStatus& st, std::span<BusCounterValue> out) noexcept;
+
+/// One poll + write cycle of the I/O thread (diagnostics, see attach_cycle_log).
+struct CycleRecord {
+  core::TimeNs duration_ns{0};
+  std::uint16_t reads{0};   // read requests sent (polls and read-backs)
+  std::uint16_t writes{0};  // function 16 requests sent
 };
 
 class ModbusBus final : public Bus {
@@ -84,6 +125,11 @@ class ModbusBus final : public Bus {
   core::rt::SpscRing<core::Event>& rx() override { return rx_; }
   core::rt::SpscRing<core::OffsetWrite>& tx() override { return tx_; }
   [[nodiscard]] BusStatus status() const override { return status_.load().bus; }
+  /// The ModbusStatus counters (kModbusCounterNames) from the seqlock snapshot: exceptions per
+  /// code, timeouts, CRC errors, lost events, verify mismatches, pending offsets, ...
+  [[nodiscard]] std::size_t extra_counters(std::span<BusCounterValue> out) const override {
+    return modbus_counters(status_.load(), out);
+  }
 
   /// Lock-step (before start()): no polling or writing on the driver's own schedule; sync()
   /// makes the I/O thread do one complete poll, flush() makes it write every pending offset
@@ -104,10 +150,11 @@ class ModbusBus final : public Bus {
   [[nodiscard]] ModbusStatus modbus_status() const { return status_.load(); }
   [[nodiscard]] const ModbusConfig& config() const noexcept { return config_; }
 
-  /// Diagnostics: before start(), a ring that receives the duration [ns] of every poll + write
-  /// cycle (dropped when full; the I/O thread never waits for it). For benchmarks and latency
-  /// statistics; the ring must outlive the driver's I/O thread.
-  void attach_cycle_log(core::rt::SpscRing<core::TimeNs>* ring) noexcept { cycle_log_ = ring; }
+  /// Diagnostics: before start(), a ring that receives every connected poll + write cycle of
+  /// the free-running I/O thread: its duration and the requests it sent (dropped when full; the
+  /// I/O thread never waits for it). For benchmarks and latency statistics; the ring must
+  /// outlive the driver's I/O thread.
+  void attach_cycle_log(core::rt::SpscRing<CycleRecord>* ring) noexcept { cycle_log_ = ring; }
 
  private:
   struct OffsetSlot {
@@ -157,7 +204,9 @@ class ModbusBus final : public Bus {
   std::uint32_t consecutive_failures_{0};
   core::TimeNs down_since_ns_{0};
   core::TimeNs last_frame_end_ns_{0};
-  core::rt::SpscRing<core::TimeNs>* cycle_log_{nullptr};
+  core::rt::SpscRing<CycleRecord>* cycle_log_{nullptr};
+  std::uint16_t cycle_reads_{0};
+  std::uint16_t cycle_writes_{0};
 
   // Lock-step: requests from the loop thread, completions from the I/O thread (both under
   // ls_mu_; the loop thread blocks here by design, it is driven by the peer, not the clock).

@@ -2,6 +2,12 @@
 // the map for the daemon, ncsim and `modbus_map`), its errors turned into the loader's
 // diagnostics (file:line:column: key path), cross-checked against [[registers]], and the bus
 // built from it. Not real-time.
+//
+// Poll rate and loop rate: the loop takes at most one sample per cycle, so poll_rate_hz defaults
+// to [daemon] rate_hz and a faster poll_rate_hz is refused. The loop rate is another section's,
+// known only in cross_check(): parse() validates the map (with the lowest poll rate when the key
+// is absent, so that an RTU bus budget is not judged on a rate the daemon will not use), and
+// cross_check() parses it again with the loop rate and keeps that result.
 #include <memory>
 #include <string>
 #include <vector>
@@ -17,9 +23,28 @@ namespace {
 namespace mb = drivers::modbus;
 
 struct ModbusSection final : Section {
-  mb::ModbusConfig config;
+  /// Final after cross_check() (which runs on every config the loader returns).
+  mutable mb::ModbusConfig config;
+  /// The [modbus] table: valid while the loader runs (parse() and cross_check()) only.
+  const toml::table* table{nullptr};
+  std::string file;
   std::vector<MappedRegister> mapped;
 };
+
+/// Reports a refused map at its file:line:column and key path.
+void report(const mb::ConfigError& e, Where w, Diagnostics& diag) {
+  if (!e.file().empty()) {
+    w.file = e.file();
+  }
+  if (e.line() > 0) {
+    w.line = e.line();
+    w.column = e.column();
+  }
+  if (!e.key_path().empty()) {
+    w.key_path = e.key_path();
+  }
+  diag.error(std::move(w), e.message().empty() ? e.what() : e.message());
+}
 
 class ModbusParser final : public SectionParser {
  public:
@@ -33,21 +58,15 @@ class ModbusParser final : public SectionParser {
     }
     const Where table_where = where_of(t, "modbus");
     auto s = std::make_unique<ModbusSection>();
+    s->table = t;
+    s->file = table_where.file;
     try {
-      s->config = mb::parse_modbus_table(*t, table_where.file);
+      mb::ParseOptions provisional;
+      provisional.default_poll_rate_hz =
+          0.01;  // the lowest allowed; cross_check() sets the real one
+      s->config = mb::parse_modbus_table(*t, table_where.file, provisional);
     } catch (const mb::ConfigError& e) {
-      Where w = table_where;
-      if (!e.file().empty()) {
-        w.file = e.file();
-      }
-      if (e.line() > 0) {
-        w.line = e.line();
-        w.column = e.column();
-      }
-      if (!e.key_path().empty()) {
-        w.key_path = e.key_path();
-      }
-      diag.error(std::move(w), e.message().empty() ? e.what() : e.message());
+      report(e, table_where, diag);
       return nullptr;
     }
     // Positions of the offset mappings, for the cross-check's messages (the driver's config
@@ -67,8 +86,20 @@ class ModbusParser final : public SectionParser {
   }
 
   void cross_check(const Config& config, Diagnostics& diag) const override {
-    if (const auto* s = config.find<ModbusSection>("modbus")) {
-      check_register_mapping(config, "modbus", "[[modbus.offset]] register_index", s->mapped, diag);
+    const auto* s = config.find<ModbusSection>("modbus");
+    if (s == nullptr) {
+      return;
+    }
+    check_register_mapping(config, "modbus", "[[modbus.offset]] register_index", s->mapped, diag);
+    const double loop_hz = daemon_section(config).rate_hz;
+    mb::ParseOptions options;
+    options.default_poll_rate_hz = loop_hz;
+    options.max_poll_rate_hz = loop_hz;
+    options.rate_source = "daemon.rate_hz";
+    try {
+      s->config = mb::parse_modbus_table(*s->table, s->file, options);
+    } catch (const mb::ConfigError& e) {
+      report(e, where_of(s->table, "modbus"), diag);
     }
   }
 

@@ -19,6 +19,18 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     if (!(c.offset_write_rate_hz > 0.0) || !(c.poll_rate_hz > 0.0)) {
       std::abort();
     }
+    for (const auto& g : c.groups) {
+      for (const auto& f : g.fields) {
+        if (f.mapped && !(f.min <= f.max)) {
+          std::abort();
+        }
+      }
+    }
+    for (const auto& t : c.temperatures) {
+      if (!(t.value.min <= t.value.max)) {
+        std::abort();
+      }
+    }
   } catch (const nccomp::drivers::modbus::ConfigError&) {
   }
   return 0;

@@ -1,5 +1,6 @@
 // Arbitrary register contents through the poll decoder of the reference NC profile: every event
-// that comes out must be finite and in range; nothing may crash or trip a sanitizer.
+// that comes out must be finite and in range (the codes' ranges and the map's min / max on the
+// axes); nothing may crash or trip a sanitizer.
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -30,8 +31,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     }
     for (const auto& e : dec.decode(poll, ok)) {
       if (const auto* a = std::get_if<nccomp::core::AxisSample>(&e)) {
+        const auto& axis = config.groups[static_cast<std::size_t>(mb::Group::kAxis)];
         for (std::size_t i = 0; i < a->axis_count; ++i) {
-          if (!std::isfinite(a->position_mm[i])) {
+          if (!std::isfinite(a->position_mm[i]) || a->position_mm[i] < axis.fields[i].min ||
+              a->position_mm[i] > axis.fields[i].max) {
             std::abort();
           }
         }

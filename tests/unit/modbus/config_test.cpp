@@ -3,6 +3,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <string>
 
 namespace nccomp::drivers::modbus {
@@ -242,6 +243,125 @@ address = 20
   EXPECT_THAT(error_of("[modbus]\ntransport = \"tcp\"\nrx_capacity = 1000\n"),
               HasSubstr("modbus.rx_capacity: must be a power of two"));
   EXPECT_THAT(error_of("[modbus]\ntransport = [\n"), HasSubstr("t.toml:"));
+}
+
+TEST(ModbusConfig, MinMaxPerSignalAreValidatedWithTheirKeyPath) {
+  // GIVEN plausibility ranges on an axis, a wear profile and a temperature
+  const ModbusConfig c = parse_modbus_config(R"([modbus]
+transport = "tcp"
+[modbus.axis]
+x_mm = { table = "input", address = 0, type = "float32", min = -1200, max = 1200.5 }
+y_mm = { table = "input", address = 2, type = "float32", max = 800 }
+[modbus.tool_measurement]
+sequence = { address = 10, type = "uint16" }
+tool = { address = 11 }
+wear_um = { address = 12, type = "int16", scale = 0.1, count = 2, min = -50, max = 500 }
+[[modbus.temperature]]
+sensor = 0
+table = "input"
+address = 40
+scale = 0.01
+min = -20
+max = 80
+)",
+                                             "t.toml");
+  const auto& axis = c.groups[static_cast<std::size_t>(Group::kAxis)];
+  EXPECT_DOUBLE_EQ(axis.fields[axis_field::kX].min, -1200.0);
+  EXPECT_DOUBLE_EQ(axis.fields[axis_field::kX].max, 1200.5);
+  EXPECT_TRUE(std::isinf(axis.fields[axis_field::kY].min));  // only max given
+  EXPECT_LT(axis.fields[axis_field::kY].min, 0.0);
+  EXPECT_DOUBLE_EQ(axis.fields[axis_field::kY].max, 800.0);
+  const auto& wear =
+      c.groups[static_cast<std::size_t>(Group::kToolMeasurement)].fields[tool_meas_field::kWear];
+  EXPECT_DOUBLE_EQ(wear.min, -50.0);
+  EXPECT_DOUBLE_EQ(wear.max, 500.0);
+  EXPECT_DOUBLE_EQ(c.temperatures[0].value.min, -20.0);
+  EXPECT_DOUBLE_EQ(c.temperatures[0].value.max, 80.0);
+  // Without min / max a signal is unbounded (NaN / inf are refused by the decoder anyway).
+  EXPECT_TRUE(std::isinf(c.groups[static_cast<std::size_t>(Group::kToolMeasurement)]
+                             .fields[tool_meas_field::kTool]
+                             .max));
+
+  const std::string head = "[modbus]\ntransport = \"tcp\"\n[modbus.axis]\n";
+  EXPECT_EQ(error_of(head + "x_mm = { address = 0, min = 5, max = -5 }\n"),
+            "t.toml:4: modbus.axis.x_mm.max: max -5 is below min 5");
+  EXPECT_EQ(error_of(head + "x_mm = { address = 0, min = \"low\" }\n"),
+            "t.toml:4: modbus.axis.x_mm.min: expected a number");
+  EXPECT_EQ(error_of(head + "x_mm = { address = 0, max = nan }\n"),
+            "t.toml:4: modbus.axis.x_mm.max: value nan outside -1e+300..1e+300");
+  EXPECT_EQ(error_of(head + "x_mm = { address = 0 }\ncutting = { table = \"coil\", address = 1, "
+                            "max = 1 }\n"),
+            "t.toml:5: modbus.axis.cutting.max: a coil is one bit: min / max do not apply");
+  EXPECT_EQ(
+      error_of("[modbus]\ntransport = \"tcp\"\n[modbus.tool_change]\n"
+               "sequence = { address = 0, type = \"uint16\", min = 0 }\ntool = { address = 1 }\n"),
+      "t.toml:4: modbus.tool_change.sequence.min: a sequence counter has no range: it counts "
+      "events and wraps");
+  EXPECT_EQ(error_of("[modbus]\ntransport = \"tcp\"\n[modbus.axis]\nx_mm = { address = 0 }\n"
+                     "[[modbus.temperature]]\nsensor = 0\naddress = 9\nmin = 30\nmax = 20\n"),
+            "t.toml:9: modbus.temperature[0].max: max 20 is below min 30");
+  // Offsets are bounded by the engine's limiter and the register's encoding, not here.
+  EXPECT_EQ(error_of("[modbus]\ntransport = \"tcp\"\n[modbus.axis]\nx_mm = { address = 0 }\n"
+                     "[[modbus.offset]]\nregister_index = 0\naddress = 9\nmax = 20\n"),
+            "t.toml:8: modbus.offset[0].max: unknown key");
+}
+
+TEST(ModbusConfig, PollRateDefaultsToTheLoopRateAndIsNotFasterThanIt) {
+  // Stand-alone (modbus_map, ncsim): 100 Hz when the key is absent, no upper bound but the range.
+  ModbusConfig c = parse_modbus_config(kMinimal, "t.toml");
+  EXPECT_DOUBLE_EQ(c.poll_rate_hz, 100.0);
+  EXPECT_TRUE(c.poll_rate_defaulted);
+  // nccompd: the loop rate is the default, and the derived write rate follows it.
+  ParseOptions loop;
+  loop.default_poll_rate_hz = 1000.0;
+  loop.max_poll_rate_hz = 1000.0;
+  loop.rate_source = "daemon.rate_hz";
+  c = parse_modbus_config(kMinimal, "t.toml", loop);
+  EXPECT_DOUBLE_EQ(c.poll_rate_hz, 1000.0);
+  EXPECT_DOUBLE_EQ(c.offset_write_rate_hz, 1000.0);
+  // A slower poll is allowed (the loop then reuses the latest sample).
+  const std::string with_rate = R"(
+[modbus]
+transport = "tcp"
+poll_rate_hz = RATE
+[modbus.axis]
+x_mm = { table = "input", address = 0, type = "int32", scale = 0.001 }
+)";
+  const auto rate = [&](const std::string& r) {
+    std::string t = with_rate;
+    t.replace(t.find("RATE"), 4, r);
+    return t;
+  };
+  c = parse_modbus_config(rate("250"), "t.toml", loop);
+  EXPECT_DOUBLE_EQ(c.poll_rate_hz, 250.0);
+  EXPECT_FALSE(c.poll_rate_defaulted);
+  // A faster one is refused at its key, saying why and what is allowed.
+  try {
+    (void)parse_modbus_config(rate("2000"), "t.toml", loop);
+    ADD_FAILURE() << "2000 Hz accepted with a 1000 Hz loop";
+  } catch (const ConfigError& e) {
+    EXPECT_EQ(e.line(), 4);
+    EXPECT_EQ(e.key_path(), "modbus.poll_rate_hz");
+    EXPECT_EQ(e.message(),
+              "2000 Hz is faster than the loop (daemon.rate_hz = 1000 Hz), which takes at most one "
+              "sample per cycle: the extra polls only load the NC and the bus; at most 1000 Hz "
+              "(leave poll_rate_hz out to poll at the loop rate)");
+  }
+  // RTU: a loop rate the bus cannot carry is refused as such, with the rate that fits.
+  EXPECT_THAT(
+      [&] {
+        try {
+          (void)parse_modbus_config(
+              "[modbus]\ntransport = \"rtu\"\ndevice = \"/dev/null\"\nbaud = 115200\n"
+              "[modbus.axis]\nx_mm = { address = 0, type = \"int32\" }\n",
+              "t.toml", loop);
+        } catch (const ConfigError& e) {
+          return std::string(e.what());
+        }
+        return std::string("(accepted)");
+      }(),
+      HasSubstr("modbus.poll_rate_hz: 1000 Hz (poll_rate_hz is not set: the loop rate "
+                "daemon.rate_hz) needs"));
 }
 
 TEST(ModbusConfig, RtuRateBudget) {

@@ -219,6 +219,104 @@ TEST_F(ModbusDecoder, DecodeIsAllocationFree) {
 namespace nccomp::drivers::modbus {
 namespace {
 
+TEST(ModbusDecoderRange, FiniteButAbsurdValuesAreDroppedAndCountedOnce) {
+  // GIVEN a map with plausibility ranges: X within ±1200 mm, wear within -50..500 µm, the
+  // spindle temperature within -20..80 °C
+  const ModbusConfig c = parse_modbus_config(R"([modbus]
+transport = "tcp"
+[modbus.axis]
+x_mm = { table = "input", address = 0, type = "float32", min = -1200, max = 1200 }
+program_path_mm = { table = "input", address = 2, type = "float32", min = 0 }
+[modbus.tool_measurement]
+sequence = { address = 10, type = "uint16" }
+tool = { address = 11 }
+wear_um = { address = 12, type = "int16", scale = 0.1, count = 2, min = -50, max = 500 }
+[[modbus.temperature]]
+sensor = 4
+table = "input"
+address = 20
+type = "int16"
+scale = 0.01
+min = -20
+max = 80
+)",
+                                             "t.toml");
+  PollDecoder dec(c);
+  std::vector<std::uint8_t> ok(c.blocks.size(), 1);
+  ASSERT_EQ(c.blocks.size(), 3U);  // holding 10..13; input 0..3; input 20
+  auto axis = dec.block(1);
+  auto meas = dec.block(0);
+  auto temp = dec.block(2);
+  const auto count = [](std::span<const core::Event> ev, auto tag) {
+    using T = decltype(tag);
+    std::size_t n = 0;
+    for (const auto& e : ev) {
+      n += std::holds_alternative<T>(e) ? 1U : 0U;
+    }
+    return n;
+  };
+  put_float(axis, 0, 1e30F, false);  // finite, absurd
+  put_float(axis, 2, 10.0F, false);
+  temp[0] = 2150;               // 21.5 °C
+  auto ev = dec.decode(1, ok);  // also the tool measurement baseline
+  EXPECT_EQ(count(ev, core::AxisSample{}), 0U);
+  EXPECT_EQ(count(ev, core::TemperatureSample{}), 1U);
+  EXPECT_EQ(dec.counters().values_out_of_range, 1U);
+  EXPECT_EQ(dec.counters().values_invalid, 0U);
+  // The bounds themselves are accepted; just beyond them is not.
+  put_float(axis, 0, 1200.0F, false);
+  EXPECT_EQ(count(dec.decode(2, ok), core::AxisSample{}), 1U);
+  put_float(axis, 0, -1200.125F, false);
+  EXPECT_EQ(count(dec.decode(3, ok), core::AxisSample{}), 0U);
+  EXPECT_EQ(dec.counters().values_out_of_range, 2U);
+  // A NaN path is "unknown" (passed on), not out of range; a negative one is.
+  put_float(axis, 0, 5.0F, false);
+  put_float(axis, 2, std::nanf(""), false);
+  ev = dec.decode(4, ok);
+  ASSERT_EQ(count(ev, core::AxisSample{}), 1U);
+  put_float(axis, 2, -1.0F, false);
+  EXPECT_EQ(count(dec.decode(5, ok), core::AxisSample{}), 0U);
+  EXPECT_EQ(dec.counters().values_out_of_range, 3U);
+  // NaN X is invalid, not out of range.
+  put_float(axis, 2, 1.0F, false);
+  put_float(axis, 0, std::nanf(""), false);
+  EXPECT_EQ(count(dec.decode(6, ok), core::AxisSample{}), 0U);
+  EXPECT_EQ(dec.counters().values_invalid, 1U);
+  EXPECT_EQ(dec.counters().values_out_of_range, 3U);
+  put_float(axis, 0, 5.0F, false);
+
+  // An event whose second wear point is 3276.7 µm (> 500): dropped, its counter consumed, so
+  // the next poll does not read it again.
+  meas[0] = 1;
+  meas[1] = 4;
+  meas[2] = 25;     // 2.5 µm
+  meas[3] = 32767;  // 3276.7 µm
+  ev = dec.decode(7, ok);
+  EXPECT_EQ(count(ev, core::ToolMeasurement{}), 0U);
+  EXPECT_EQ(dec.counters().values_out_of_range, 4U);
+  EXPECT_EQ(count(dec.decode(8, ok), core::ToolMeasurement{}), 0U);
+  EXPECT_EQ(dec.counters().values_out_of_range, 4U);
+  // The next event is plausible: delivered, nothing lost.
+  meas[0] = 2;
+  meas[3] = 30;
+  ev = dec.decode(9, ok);
+  ASSERT_EQ(count(ev, core::ToolMeasurement{}), 1U);
+  EXPECT_EQ(dec.counters().events_lost, 0U);
+
+  // A temperature of 95 °C (> 80): no sample; back to 22 °C: a sample.
+  temp[0] = 9500;
+  EXPECT_EQ(count(dec.decode(10, ok), core::TemperatureSample{}), 0U);
+  EXPECT_EQ(dec.counters().values_out_of_range, 5U);
+  temp[0] = 2200;
+  {
+    const nccomp::test::AllocationScope scope;  // range checks allocate nothing either
+    ev = dec.decode(11, ok);
+    EXPECT_EQ(scope.count(), 0U);
+  }
+  EXPECT_EQ(count(ev, core::TemperatureSample{}), 1U);
+  EXPECT_EQ(count(ev, core::AxisSample{}), 1U);
+}
+
 TEST(ModbusDecoderProfile, WearProfileOverEdgeSupportPoints) {
   // GIVEN a laser that publishes wear at 4 support points along the edge, int16 in 0.1 µm
   const ModbusConfig c = parse_modbus_config(R"([modbus]
