@@ -79,7 +79,16 @@ std::vector<BusEntry> make_buses(const cfg::Config& c) {
 std::unique_ptr<Runtime> make_runtime(const cfg::Config& c, const std::vector<BusEntry>& buses,
                                       bool dry_run_cli, std::uint64_t generation) {
   auto rt = std::make_unique<Runtime>();
-  rt->engine = cfg::build_engine(c);
+  cfg::Diagnostics diag;
+  rt->engine = cfg::build_engine(c, diag);
+  if (!rt->engine) {
+    // The engine's refusal, located: "file:line:column: key.path: message".
+    std::string what = diag.to_string();
+    while (!what.empty() && what.back() == '\n') {
+      what.pop_back();
+    }
+    throw std::invalid_argument(what);
+  }
   for (const auto& r : cfg::registers_section(c).registers) {
     int idx = -1;
     for (std::size_t b = 0; b < buses.size(); ++b) {

@@ -2,7 +2,9 @@
 
 #include <set>
 #include <stdexcept>
+#include <string>
 #include <utility>
+#include <vector>
 
 #include "daemon/loopback_bus.hpp"
 
@@ -166,8 +168,7 @@ class RegistersParser final : public SectionParser {
       } else {
         e.spec.limits.max_abs_um = r.number("max_abs_um", std::nullopt, 1e-3, 1e6);
         e.spec.limits.max_step_um = r.number("max_step_um", std::nullopt, 1e-3, 1e6);
-        e.spec.limits.max_rate_um_per_s =
-            r.number("max_rate_um_per_s", std::nullopt, 1e-3, 1e6);
+        e.spec.limits.max_rate_um_per_s = r.number("max_rate_um_per_s", std::nullopt, 1e-3, 1e6);
       }
       e.where.key_path = path;
       s->registers.push_back(std::move(e));
@@ -317,6 +318,110 @@ std::unique_ptr<core::engine::Engine> build_engine(const Config& c) {
   engine->configure(std::move(regs), std::move(modules),
                     core::engine::EngineOptions{daemon_section(c).max_events_per_cycle});
   return engine;
+}
+
+namespace {
+
+Where section_where(const Config& c, const std::string& section) {
+  if (auto it = c.keys().find(section); it != c.keys().end()) {
+    return it->second.where;
+  }
+  return Where{c.files().empty() ? std::string() : c.files().front(), 0, 0, section};
+}
+
+// Keys of `section` that name register `name` (a string value) or its index (an integer value of
+// a key with "register" in its name), in key order.
+std::vector<Where> keys_naming(const Config& c, const std::string& section, const std::string& name,
+                               std::size_t index) {
+  std::vector<Where> out;
+  const std::string idx = std::to_string(index);
+  for (const auto& [path, info] : c.keys()) {
+    if (path.rfind(section, 0) != 0 || path.size() == section.size() ||
+        (path[section.size()] != '.' && path[section.size()] != '[')) {
+      continue;
+    }
+    const auto last = path.substr(path.find_last_of(".]") + 1);
+    if ((!info.value.empty() && info.value == name && last.find("register") != std::string::npos) ||
+        (info.value == idx && last.find("register") != std::string::npos)) {
+      out.push_back(info.where);
+    }
+  }
+  return out;
+}
+
+std::string at(const Where& w) {
+  return w.key_path + ", " + w.file + (w.line > 0 ? ":" + std::to_string(w.line) : "");
+}
+
+}  // namespace
+
+std::unique_ptr<core::engine::Engine> build_engine(const Config& c, Diagnostics& diag) {
+  try {
+    return build_engine(c);
+  } catch (const std::exception& refusal) {
+    // Find out where: rebuild each section's modules on their own, attach them to the same
+    // registers and look for the register two of them write.
+    const std::size_t before = diag.items().size();
+    const auto& entries = registers_section(c).registers;
+    std::vector<core::engine::RegisterSpec> specs;
+    for (const auto& e : entries) {
+      specs.push_back(e.spec);
+    }
+    const core::engine::RegisterTable table(specs);
+    struct Owned {
+      std::string section;
+      std::unique_ptr<core::engine::Module> module;
+    };
+    std::vector<Owned> modules;
+    for (const auto* p : section_parsers()) {
+      if (!c.has(p->name())) {
+        continue;
+      }
+      const std::string section(p->name());
+      std::vector<std::unique_ptr<core::engine::Module>> made;
+      try {
+        p->add_modules(c, made);
+        for (auto& m : made) {
+          m->attach(table);
+          modules.push_back(Owned{section, std::move(m)});
+        }
+      } catch (const std::exception& e) {
+        diag.error(section_where(c, section), std::string("engine: ") + e.what());
+      }
+    }
+    std::vector<int> writer(specs.size(), -1);
+    for (std::size_t k = 0; k < modules.size(); ++k) {
+      for (const std::uint16_t r : modules[k].module->written_registers()) {
+        if (r >= writer.size()) {
+          continue;
+        }
+        const int w = writer[r];
+        if (w < 0 || static_cast<std::size_t>(w) == k) {
+          writer[r] = static_cast<int>(k);
+          continue;
+        }
+        const Owned& first = modules[static_cast<std::size_t>(w)];
+        const Owned& second = modules[k];
+        const std::string& name = specs[r].name;
+        const auto first_keys = keys_naming(c, first.section, name, r);
+        const auto second_keys = keys_naming(c, second.section, name, r);
+        const Where first_at =
+            first_keys.empty() ? section_where(c, first.section) : first_keys.front();
+        const Where second_at =
+            second_keys.empty() ? section_where(c, second.section) : second_keys.back();
+        Where reg = r < entries.size() ? entries[r].where : Where{};
+        diag.error(second_at, "register '" + name + "' (" + at(reg) + ") is written by module '" +
+                                  std::string(first.module->name()) + "' (" + at(first_at) +
+                                  ") and by '" + std::string(second.module->name()) +
+                                  "'; give each module its own registers");
+      }
+    }
+    if (diag.items().size() == before) {
+      diag.error(Where{c.files().empty() ? std::string() : c.files().front(), 0, 0, "engine"},
+                 refusal.what());
+    }
+    return nullptr;
+  }
 }
 
 }  // namespace nccomp::daemon::config

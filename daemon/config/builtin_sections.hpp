@@ -97,4 +97,9 @@ const RegistersSection& registers_section(const Config& c);
 /// real-time. Throws std::invalid_argument with the engine's message.
 std::unique_ptr<core::engine::Engine> build_engine(const Config& c);
 
+/// The same, for `nccomp check-config` and nccompd: an engine refusal (e.g. two modules writing
+/// one register) is reported to diag at the file, line and key it concerns (the key of the module
+/// section that names the register, and where the other one is), and nullptr is returned.
+std::unique_ptr<core::engine::Engine> build_engine(const Config& c, Diagnostics& diag);
+
 }  // namespace nccomp::daemon::config

@@ -482,6 +482,25 @@ struct Loader {
                    ":" + std::to_string(first.line));
   }
 
+  static void record_keys(Config& config, const toml::node& node, const std::string& path) {
+    Config::KeyInfo info{where_of(&node, path), {}};
+    if (const auto* str = node.as_string()) {
+      info.value = str->get();
+    } else if (const auto* i = node.as_integer()) {
+      info.value = std::to_string(i->get());
+    }
+    config.add_key(path, std::move(info));
+    if (const auto* t = node.as_table()) {
+      for (const auto& [k, v] : *t) {
+        record_keys(config, v, path + "." + std::string(k.str()));
+      }
+    } else if (const auto* a = node.as_array()) {
+      for (std::size_t i = 0; i < a->size(); ++i) {
+        record_keys(config, *a->get(i), path + "[" + std::to_string(i) + "]");
+      }
+    }
+  }
+
   LoadResult finish(const std::string& base_dir) {
     LoadResult result;
     auto config = std::make_unique<Config>();
@@ -504,6 +523,9 @@ struct Loader {
           merge(*it->second, v, name, true);
         }
       }
+    }
+    for (const auto& [name, node] : owners) {
+      record_keys(*config, *node, name);
     }
     for (const auto& [name, node] : owners) {
       const SectionParser* parser = find_section_parser(name);

@@ -169,8 +169,23 @@ class Config {
   /// Resolves a path from the config against base_directory().
   [[nodiscard]] std::string resolve(const std::string& path) const;
 
+  /// Where a key is, and its value as text when it is a string or an integer ("" otherwise).
+  struct KeyInfo {
+    Where where;
+    std::string value;
+  };
+  /// Every key of every section ("creep.output.z_register", "registers[8].name", tables
+  /// included), recorded by the loader: errors found after loading (the engine's) can name the
+  /// file, line and key they concern.
+  [[nodiscard]] const std::map<std::string, KeyInfo, std::less<>>& keys() const noexcept {
+    return keys_;
+  }
+
   // Used by the loader.
   void set_section(std::string name, std::unique_ptr<Section> section);
+  void add_key(std::string key_path, KeyInfo info) {
+    keys_.emplace(std::move(key_path), std::move(info));
+  }
   void add_file(std::string path) { files_.push_back(std::move(path)); }
   void set_base_directory(std::string dir) { base_dir_ = std::move(dir); }
 
@@ -178,6 +193,7 @@ class Config {
   std::vector<std::string> files_;
   std::string base_dir_;
   std::map<std::string, std::unique_ptr<Section>, std::less<>> sections_;
+  std::map<std::string, KeyInfo, std::less<>> keys_;
 };
 
 struct LoadResult {

@@ -1,6 +1,7 @@
 // `nccomp check-config FILE`: loads the file and its includes exactly as nccompd does, parses
 // every section, cross-checks references and builds the engine (registers, modules, limits).
-// Prints every error as file:line:column: key.path: message; exit status 3 on any error.
+// Prints every error, the engine's refusals included, as file:line:column: key.path: message;
+// exit status 3 on any error.
 #include <iostream>
 #include <string>
 
@@ -20,8 +21,10 @@ void setup(CLI::App& app) {
     namespace cfg = nccomp::daemon::config;
     auto result = cfg::load_file(*file);
     if (result.config) {
-      try {
-        auto engine = cfg::build_engine(*result.config);
+      // Engine-level refusals (e.g. two modules writing one register) are reported like every
+      // other error: file:line:column: key.path: message.
+      auto engine = cfg::build_engine(*result.config, result.diagnostics);
+      if (engine) {
         if (!*quiet) {
           std::cout << *file << ": OK\n  files:";
           for (const auto& f : result.config->files()) {
@@ -41,9 +44,6 @@ void setup(CLI::App& app) {
           std::cout << (engine->module_count() > 0 ? ")" : "") << "\n";
         }
         return;
-      } catch (const std::exception& e) {
-        throw nccomp::tools::CommandError(nccomp::tools::kExitInvalidInput,
-                                          *file + ": engine: " + e.what());
       }
     }
     std::cerr << result.diagnostics.to_string();

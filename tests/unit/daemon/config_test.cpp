@@ -300,6 +300,60 @@ z_register = "Z_wear"
       << bad.diagnostics.to_string();
 }
 
+// An engine-level refusal (two modules writing one register) names file, line and key: the key
+// of the second module that names the register, and where the register and the first module are.
+TEST(ConfigEngine, TwoModulesOnOneRegisterNameFileLineAndKey) {
+  TempDir d;
+  const auto f = d.write("a.toml", R"(include = ["calibration.toml"]
+[loopback]
+[[registers]]
+name = "X_off"
+kind = "axis_offset"
+bus = "loopback"
+max_abs_um = 100
+max_step_um = 5
+max_rate_um_per_s = 20
+[[registers]]
+name = "Y_off"
+kind = "axis_offset"
+bus = "loopback"
+max_abs_um = 100
+max_step_um = 5
+max_rate_um_per_s = 20
+[[registers]]
+name = "Z_off"
+kind = "axis_offset"
+bus = "loopback"
+max_abs_um = 100
+max_step_um = 5
+max_rate_um_per_s = 20
+[creep]
+[creep.edge]
+tool_shape = "tip"
+normal_source = "none"
+[creep.output]
+z_register = "Z_off"
+)");
+  const auto cal = d.write("calibration.toml", R"([calibration]
+register_x = 0
+register_y = 1
+register_z = 2
+)");
+  auto r = load_file(f);
+  ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+  Diagnostics diag;
+  EXPECT_EQ(build_engine(*r.config, diag), nullptr);
+  ASSERT_EQ(diag.items().size(), 1U) << diag.to_string();
+  const auto& e = diag.items()[0];
+  // Modules are built in section order: calibration first, then creep.
+  EXPECT_EQ(e.where.file, f);
+  EXPECT_EQ(e.where.line, 29);
+  EXPECT_EQ(e.where.key_path, "creep.output.z_register");
+  EXPECT_EQ(e.message, "register 'Z_off' (registers[2], " + f +
+                           ":17) is written by module 'calibration' (calibration.register_z, " +
+                           cal + ":4) and by 'creep'; give each module its own registers");
+}
+
 TEST(ConfigLoader, IncludeCycleIsDetected) {
   TempDir d;
   d.write("b.toml", "include = [\"a.toml\"]\n");

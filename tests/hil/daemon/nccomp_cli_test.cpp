@@ -1,0 +1,215 @@
+// GIVEN the operator command `nccomp` as built, WHEN it runs as a process:
+// - `nccomp check-config` on the shipped config, THEN exit 0 and the summary (files, sections,
+//   registers, modules); on a file with errors, THEN exit 3 and every error as
+//   file:line:column: key.path: message on stderr, the engine's refusals (two modules on one
+//   register) included;
+// - `nccomp status` against a running nccompd (loopback bus, commissioning ramp), THEN exit 0 and
+//   the text, JSON and Prometheus forms with the daemon's numbers; without a daemon, THEN exit 1
+//   and the reason.
+#include <fcntl.h>
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <regex>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+extern char** environ;
+
+namespace {
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+
+struct TempDir {
+  TempDir() {
+    path = fs::temp_directory_path() /
+           ("nccomp_cli_" + std::to_string(::getpid()) + "_" + std::to_string(n++));
+    fs::remove_all(path);
+    fs::create_directories(path);
+  }
+  ~TempDir() { fs::remove_all(path); }
+  std::string write(const std::string& name, const std::string& text) const {
+    std::ofstream(path / name) << text;
+    return (path / name).string();
+  }
+  static inline int n = 0;
+  fs::path path;
+};
+
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+pid_t spawn(const std::vector<std::string>& args, const fs::path& out, const fs::path& err) {
+  std::vector<std::string> a = args;
+  std::vector<char*> argv;
+  for (auto& s : a) {
+    argv.push_back(s.data());
+  }
+  argv.push_back(nullptr);
+  posix_spawn_file_actions_t fa;
+  posix_spawn_file_actions_init(&fa);
+  posix_spawn_file_actions_addopen(&fa, 1, out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  posix_spawn_file_actions_addopen(&fa, 2, err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  pid_t pid = -1;
+  EXPECT_EQ(posix_spawn(&pid, argv[0], &fa, nullptr, argv.data(), environ), 0);
+  posix_spawn_file_actions_destroy(&fa);
+  return pid;
+}
+
+int wait_exit(pid_t pid) {
+  int st = 0;
+  ::waitpid(pid, &st, 0);
+  return WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
+}
+
+struct CliRun {
+  int exit_code{-1};
+  std::string out;
+  std::string err;
+};
+
+CliRun nccomp(const TempDir& d, const std::vector<std::string>& args) {
+  std::vector<std::string> a{NCCOMP_BIN};
+  a.insert(a.end(), args.begin(), args.end());
+  const fs::path out = d.path / "cli.out";
+  const fs::path err = d.path / "cli.err";
+  CliRun r;
+  r.exit_code = wait_exit(spawn(a, out, err));
+  r.out = slurp(out);
+  r.err = slurp(err);
+  return r;
+}
+
+double number(const std::string& json, const std::string& key) {
+  const std::regex re("\"" + key + "\":(-?[0-9.eE+-]+)");
+  std::smatch m;
+  return std::regex_search(json, m, re) ? std::stod(m[1]) : -1e300;
+}
+
+TEST(NccompCli, CheckConfigOfTheShippedConfigSucceeds) {
+  TempDir d;
+  const std::string file = std::string(NCCOMP_SOURCE_DIR) + "/config/nccompd.toml";
+  const CliRun r = nccomp(d, {"check-config", file});
+  EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
+  EXPECT_NE(r.out.find(file + ": OK"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("config/reference-nc-modbus.toml"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("  loop: 1000 Hz\n"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("  registers: 9\n"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("  modules: 2 (calibration, creep)\n"), std::string::npos) << r.out;
+  EXPECT_EQ(r.err, "");
+  const CliRun q = nccomp(d, {"check-config", "--quiet", file});
+  EXPECT_EQ(q.exit_code, 0);
+  EXPECT_EQ(q.out, "");
+}
+
+TEST(NccompCli, CheckConfigReportsEveryErrorWithFileLineAndKey) {
+  TempDir d;
+  const auto f = d.write("bad.toml",
+                         "[daemon]\nrate_hz = 20000\ndry_run = 3\n[daemon.realtime]\n"
+                         "lock_memry = true\n[[registers]]\nname = \"a\"\n");
+  const CliRun r = nccomp(d, {"check-config", f});
+  EXPECT_EQ(r.exit_code, 3);
+  EXPECT_EQ(r.out, "");
+  EXPECT_NE(r.err.find(f + ":2:11: daemon.rate_hz: value 20000 is out of range [1, 10000]"),
+            std::string::npos)
+      << r.err;
+  EXPECT_NE(r.err.find(f + ":3:11: daemon.dry_run: expected true or false"), std::string::npos)
+      << r.err;
+  EXPECT_NE(r.err.find(f + ":5:14: daemon.realtime.lock_memry: unknown key"), std::string::npos)
+      << r.err;
+  EXPECT_NE(r.err.find("registers[0].kind: required key is missing"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("error(s) in " + f), std::string::npos) << r.err;
+}
+
+TEST(NccompCli, CheckConfigLocatesEngineRefusals) {
+  TempDir d;
+  std::string regs = "[loopback]\n";
+  for (const char* n : {"X_off", "Y_off", "Z_off"}) {
+    regs += std::string("[[registers]]\nname = \"") + n +
+            "\"\nkind = \"axis_offset\"\nbus = \"loopback\"\nmax_abs_um = 100\n"
+            "max_step_um = 5\nmax_rate_um_per_s = 20\n";
+  }
+  const auto f = d.write(
+      "two.toml", regs + "[creep]\n[creep.edge]\ntool_shape = \"tip\"\nnormal_source = \"none\"\n" +
+                      "[creep.output]\nz_register = \"Z_off\"\n" +
+                      "[calibration]\nregister_x = 0\nregister_y = 1\nregister_z = 2\n");
+  const CliRun r = nccomp(d, {"check-config", f});
+  EXPECT_EQ(r.exit_code, 3);
+  // registers: 3 × 7 lines + [loopback]; [creep] at 23, z_register at 28, register_z at 32.
+  EXPECT_NE(r.err.find(f + ":28:14: creep.output.z_register: register 'Z_off' (registers[2], " + f +
+                       ":16) is written by module 'calibration' (calibration.register_z, " + f +
+                       ":32) and by 'creep'; give each module its own registers"),
+            std::string::npos)
+      << r.err;
+  EXPECT_NE(r.err.find("nccomp: error: 1 error(s) in " + f), std::string::npos) << r.err;
+}
+
+TEST(NccompCli, StatusTalksToTheRunningDaemon) {
+  TempDir d;
+  const auto cfg = d.write("nccompd.toml",
+                           "[daemon]\nrate_hz = 1000\n[state]\ndirectory = \"state\"\n"
+                           "[measurement_log]\ndirectory = \"log\"\n"
+                           "[status]\nsocket_path = \"status.sock\"\n[loopback]\n"
+                           "[[registers]]\nname = \"T1_length_wear\"\nkind = \"tool_length_wear\"\n"
+                           "bus = \"loopback\"\nmax_abs_um = 200\nmax_step_um = 5\n"
+                           "max_rate_um_per_s = 50\n[[ramp]]\nname = \"commissioning\"\n"
+                           "register = \"T1_length_wear\"\ntarget_um = 7.5\nrate_um_per_s = 50\n");
+  const pid_t daemon =
+      spawn({NCCOMPD_BIN, "--config", cfg}, d.path / "nccompd.out", d.path / "nccompd.log");
+  // Until the ramp has reached its target (7.5 µm at 50 µm/s).
+  CliRun json;
+  const auto end = std::chrono::steady_clock::now() + 20s;
+  while (std::chrono::steady_clock::now() < end) {
+    json = nccomp(d, {"status", "--config", cfg, "--json"});
+    if (json.exit_code == 0 && number(json.out, "output_um") >= 7.5) {
+      break;
+    }
+    std::this_thread::sleep_for(50ms);
+  }
+  EXPECT_EQ(json.exit_code, 0) << json.err << slurp(d.path / "nccompd.log");
+  EXPECT_DOUBLE_EQ(number(json.out, "output_um"), 7.5) << json.out;
+  EXPECT_DOUBLE_EQ(number(json.out, "rate_hz"), 1000.0) << json.out;
+  EXPECT_GT(number(json.out, "cycles"), 100.0) << json.out;
+  EXPECT_EQ(number(json.out, "pid"), static_cast<double>(daemon)) << json.out;
+
+  const CliRun text = nccomp(d, {"status", "--socket", (d.path / "status.sock").string()});
+  EXPECT_EQ(text.exit_code, 0) << text.err;
+  EXPECT_NE(text.out.find("nccompd pid " + std::to_string(daemon) + ", config " + cfg),
+            std::string::npos)
+      << text.out;
+  EXPECT_NE(text.out.find("loop:    1000.0 Hz configured"), std::string::npos) << text.out;
+  EXPECT_NE(text.out.find("T1_length_wear                7.500 um"), std::string::npos) << text.out;
+  EXPECT_NE(text.out.find("loopback   up"), std::string::npos) << text.out;
+
+  const CliRun metrics = nccomp(d, {"status", "--config", cfg, "--metrics"});
+  EXPECT_EQ(metrics.exit_code, 0) << metrics.err;
+  EXPECT_NE(metrics.out.find("nccompd_register_output_um{register=\"T1_length_wear\"} 7.5\n"),
+            std::string::npos)
+      << metrics.out;
+  EXPECT_NE(metrics.out.find("nccompd_bus_up{bus=\"loopback\"} 1\n"), std::string::npos)
+      << metrics.out;
+
+  ::kill(daemon, SIGTERM);
+  EXPECT_EQ(wait_exit(daemon), 0) << slurp(d.path / "nccompd.log");
+
+  // No daemon any more: exit 1 and the reason on stderr.
+  const CliRun gone = nccomp(d, {"status", "--config", cfg});
+  EXPECT_EQ(gone.exit_code, 1);
+  EXPECT_EQ(gone.out, "");
+  EXPECT_NE(gone.err.find("status.sock"), std::string::npos) << gone.err;
+}
+
+}  // namespace
