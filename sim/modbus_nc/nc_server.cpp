@@ -100,13 +100,17 @@ void NcServer::stop() {
   ctx_ = nullptr;
 }
 
+Tables NcServer::tables() {
+  modbus_mapping_t* m = mapping(mapping_);
+  return Tables{{m->tab_bits, kTableSize},
+                {m->tab_input_bits, kTableSize},
+                {m->tab_registers, kTableSize},
+                {m->tab_input_registers, kTableSize}};
+}
+
 void NcServer::update(const std::function<void(Tables&)>& fn) {
   const std::lock_guard<std::mutex> lock(mutex_);
-  modbus_mapping_t* m = mapping(mapping_);
-  Tables t{{m->tab_bits, kTableSize},
-           {m->tab_input_bits, kTableSize},
-           {m->tab_registers, kTableSize},
-           {m->tab_input_registers, kTableSize}};
+  Tables t = tables();
   fn(t);
 }
 
@@ -171,7 +175,13 @@ void NcServer::handle(void* ctx_p, int fd, const std::uint8_t* query, int length
       modbus_reply_exception(ctx, query, MODBUS_EXCEPTION_ILLEGAL_DATA_VALUE);
       return;
     }
+    const int rc = modbus_reply(ctx, q.data(), length, mapping(mapping_));
+    if (after_write_ && rc != -1) {
+      Tables t = tables();
+      after_write_(w, t);
+    }
     writes_.push_back(std::move(w));
+    return;
   }
   modbus_reply(ctx, q.data(), length, mapping(mapping_));
 }

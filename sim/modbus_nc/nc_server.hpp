@@ -91,6 +91,12 @@ class NcServer {
   /// they were, like an NC that range-checks its offsets (ncsim). Set before start().
   using WriteFilter = std::function<bool(const WriteRecord&)>;
   void set_write_filter(WriteFilter filter) { write_filter_ = std::move(filter); }
+  /// Called on the server thread, under the table mutex, after a write request was applied and
+  /// answered normally: it may change the tables, like an NC that rounds, clamps or silently
+  /// ignores a value it acknowledged (what a client's read-back verification is for). A read
+  /// that follows sees the change. Set before start().
+  using AfterWrite = std::function<void(const WriteRecord&, Tables&)>;
+  void set_after_write(AfterWrite fn) { after_write_ = std::move(fn); }
 
   void set_delay_ms(int ms) noexcept { delay_ms_.store(ms); }
   void set_silent(bool silent) noexcept { silent_.store(silent); }
@@ -98,12 +104,15 @@ class NcServer {
  private:
   void run();
   void handle(void* ctx, int fd, const std::uint8_t* query, int length);
+  /// The tables over the mapping (caller holds mutex_).
+  Tables tables();
 
   ServerConfig config_;
   std::mutex mutex_;
   void* mapping_{nullptr};  // modbus_mapping_t, guarded by mutex_
   std::vector<WriteRecord> writes_;
   WriteFilter write_filter_;
+  AfterWrite after_write_;
   std::thread thread_;
   int stop_pipe_[2]{-1, -1};
   std::atomic<int> delay_ms_{500};

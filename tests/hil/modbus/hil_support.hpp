@@ -12,6 +12,7 @@
 #include <sys/socket.h>
 #include <sys/wait.h>
 #include <termios.h>
+#include <time.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -19,6 +20,7 @@
 #include <chrono>
 #include <cstdint>
 #include <functional>
+#include <mutex>
 #include <stdexcept>
 #include <string>
 #include <thread>
@@ -39,8 +41,17 @@ inline bool wait_until(const std::function<bool()>& pred, double timeout_s = 5.0
   return pred();
 }
 
+/// One read of the relay: bytes travelling from a() to b() (from_a) or back, time-stamped with
+/// CLOCK_MONOTONIC (the drivers' clock) when the relay read them.
+struct WireChunk {
+  std::int64_t t_ns{0};
+  bool from_a{true};
+  std::vector<std::uint8_t> bytes;
+};
+
 /// Two pseudo-terminals whose master sides are relayed to each other: a() and b() are serial
-/// device paths connected like a null-modem cable.
+/// device paths connected like a null-modem cable. With record(true) the relay keeps every chunk
+/// it passes on (a wire tap for frame-timing checks).
 class PtyPair {
  public:
   PtyPair() {
@@ -79,8 +90,23 @@ class PtyPair {
   [[nodiscard]] const std::string& b() const { return path_[1]; }
   /// Line noise: flips one bit in each of the next n chunks travelling from b() to a().
   void corrupt_next(int n) { corrupt_.store(n); }
+  /// Starts (true) or stops keeping the chunks the relay passes on.
+  void record(bool on) {
+    const std::lock_guard<std::mutex> lock(tap_mutex_);
+    recording_ = on;
+  }
+  /// The chunks kept so far, oldest first.
+  [[nodiscard]] std::vector<WireChunk> recorded() {
+    const std::lock_guard<std::mutex> lock(tap_mutex_);
+    return tap_;
+  }
 
  private:
+  static std::int64_t now_ns() {
+    timespec ts{};
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return std::int64_t{ts.tv_sec} * 1'000'000'000 + ts.tv_nsec;
+  }
   void run() {
     char buf[512];
     for (;;) {
@@ -94,7 +120,14 @@ class PtyPair {
       for (int i = 0; i < 2; ++i) {
         if ((p[i].revents & POLLIN) != 0) {
           const ssize_t n = read(master_[i], buf, sizeof(buf));
+          const std::int64_t t = now_ns();
           if (n > 0) {
+            {
+              const std::lock_guard<std::mutex> lock(tap_mutex_);
+              if (recording_) {
+                tap_.push_back({t, i == 0, std::vector<std::uint8_t>(buf, buf + n)});
+              }
+            }
             if (i == 1 && corrupt_.load() > 0) {
               corrupt_.fetch_sub(1);
               buf[n - 1] = static_cast<char>(buf[n - 1] ^ 0x10);  // inside the CRC or data
@@ -106,6 +139,9 @@ class PtyPair {
     }
   }
   std::atomic<int> corrupt_{0};
+  std::mutex tap_mutex_;
+  bool recording_{false};
+  std::vector<WireChunk> tap_;
   int master_[2]{-1, -1};
   int keep_[2]{-1, -1};
   int stop_[2]{-1, -1};
@@ -155,6 +191,12 @@ class PeerProcess {
     }
     close(out[0]);
     return line;
+  }
+  /// Sends sig to the child (e.g. SIGUSR1 for the peer's register dump).
+  void signal(int sig) const {
+    if (pid_ > 0) {
+      ::kill(pid_, sig);
+    }
   }
   void kill_now() {
     if (pid_ > 0) {

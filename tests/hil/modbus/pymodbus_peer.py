@@ -1,13 +1,17 @@
 #!/usr/bin/python3
 """Independent Modbus peer for the HIL tests: pymodbus' own server (TCP or RTU).
 
-Usage: pymodbus_peer.py tcp [PORT] [INIT]      prints "PORT <n>" once listening on 127.0.0.1
-       pymodbus_peer.py rtu DEVICE [INIT]      prints "READY" once the serial device is open
+Usage: pymodbus_peer.py tcp [PORT] [INIT] [DUMP]   prints "PORT <n>" once listening on 127.0.0.1
+       pymodbus_peer.py rtu DEVICE [INIT] [DUMP]   prints "READY" once the serial device is open
 INIT: table=address:value,... with table one of co, di, hr, ir, e.g. "ir=0:7,1:65535;hr=10:3".
+DUMP: a file; on SIGUSR1 the peer writes its holding registers there ("hr v0,v1,...", atomically
+by rename), so a test can see what an RTU client wrote without a second master on the line.
 The tests write holding registers over Modbus (with their own client) to drive events.
 Runs until killed.
 """
 import asyncio
+import os
+import signal
 import sys
 
 from pymodbus.datastore import (ModbusSequentialDataBlock, ModbusServerContext,
@@ -34,11 +38,23 @@ def make_context(init):
     return ModbusServerContext(slaves=slave, single=True)
 
 
+def install_dump(context, path):
+    def dump():
+        values = context[0].getValues(3, 0, count=SIZE)
+        tmp = path + ".tmp"
+        with open(tmp, "w", encoding="ascii") as f:
+            f.write("hr " + ",".join(str(v) for v in values) + "\n")
+        os.replace(tmp, path)
+    asyncio.get_running_loop().add_signal_handler(signal.SIGUSR1, dump)
+
+
 async def main():
     mode = sys.argv[1]
+    context = make_context(sys.argv[3] if len(sys.argv) > 3 else "")
+    if len(sys.argv) > 4:
+        install_dump(context, sys.argv[4])
     if mode == "tcp":
         port = int(sys.argv[2]) if len(sys.argv) > 2 else 0
-        context = make_context(sys.argv[3] if len(sys.argv) > 3 else "")
         server = await StartAsyncTcpServer(context=context, address=("127.0.0.1", port),
                                            defer_start=True, allow_reuse_address=True)
         task = asyncio.create_task(server.serve_forever())
@@ -46,7 +62,6 @@ async def main():
         print("PORT", server.server.sockets[0].getsockname()[1], flush=True)
         await task
     else:
-        context = make_context(sys.argv[3] if len(sys.argv) > 3 else "")
         server = await StartAsyncSerialServer(context=context, framer=ModbusRtuFramer,
                                               port=sys.argv[2], baudrate=115200, bytesize=8,
                                               parity="N", stopbits=1, defer_start=True)

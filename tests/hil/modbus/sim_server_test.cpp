@@ -3,10 +3,13 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <string_view>
 #include <thread>
 
 #include "sim/modbus_nc/nc_server.hpp"
@@ -237,6 +240,94 @@ TEST(ModbusHilSim, EventsExactlyOnceLostCountedOffsetsLatestWinsAcrossRestart) {
   ASSERT_FALSE(seq.empty());
   EXPECT_TRUE(std::is_sorted(seq.begin(), seq.end()));
   EXPECT_EQ(seq.back(), 200);
+  bus->stop();
+}
+
+// Read-back verification: the NC acknowledges a write but does not hold the value (it rounded it,
+// or silently ignored it). verify_writes reads every written offset back, counts the mismatch and
+// writes the same absolute value again until the NC holds it.
+TEST(ModbusHilSim, ReadBackMismatchIsCountedAndRewrittenUntilTheNcHoldsTheTarget) {
+  NcServer server(ServerConfig{});
+  std::atomic<int> writes_to_200{0};
+  std::array<std::uint16_t, 2> held{};  // what the NC keeps when it ignores a write
+  server.set_after_write([&](const sim::modbus_nc::WriteRecord& w, Tables& t) {
+    if (w.address != 200) {
+      return;
+    }
+    const int n = ++writes_to_200;
+    if (n == 1) {
+      t.holding[201] = static_cast<std::uint16_t>(t.holding[201] + 1);  // "rounded" by one count
+      held = {t.holding[200], t.holding[201]};
+    } else if (n == 2) {
+      t.holding[200] = held[0];  // acknowledged, silently ignored
+      t.holding[201] = held[1];
+    }
+  });
+  server.start();
+  auto bus = make_bus(tcp_header(server.port(), "verify_writes = true") + kEventsAndOffsets);
+  bus->start();
+  push_offset(*bus, 0, 15.0);  // int32 at 0.1 µm: 150 counts
+  ASSERT_TRUE(wait_until([&] {
+    return bus->modbus_status().offsets_pending == 0 && bus->status().counters.offsets_written == 1;
+  }));
+  const mb::ModbusStatus st = bus->modbus_status();
+  EXPECT_EQ(st.verify_mismatches, 2U);
+  EXPECT_EQ(holding_i32(server, 200), 150);
+  // Three function-16 writes of the same absolute value: the target, never an accumulation.
+  std::vector<std::int32_t> sent;
+  for (const auto& w : server.writes()) {
+    if (w.address == 200 && w.values.size() == 2) {
+      sent.push_back(static_cast<std::int32_t>((std::uint32_t{w.values[0]} << 16U) | w.values[1]));
+    }
+  }
+  EXPECT_EQ(sent, (std::vector<std::int32_t>{150, 150, 150}));
+  EXPECT_EQ(st.bus.counters.offsets_retried, 2U);
+  EXPECT_EQ(st.bus.counters.offsets_written, 1U);
+  EXPECT_EQ(st.bus.counters.reconnects, 0U);
+  EXPECT_FALSE(st.bus.alarm);
+  // The mismatches are in the driver's status counters, as nccomp status shows them.
+  std::array<drivers::BusCounterValue, drivers::kMaxBusExtraCounters> c{};
+  const std::size_t n = bus->extra_counters(c);
+  ASSERT_EQ(n, mb::kModbusCounterNames.size());
+  const auto value_of = [&](std::string_view name) {
+    for (std::size_t i = 0; i < n; ++i) {
+      if (name == c[i].name) {
+        return c[i].value;
+      }
+    }
+    ADD_FAILURE() << name << " not among the counters";
+    return std::uint64_t{0};
+  };
+  EXPECT_EQ(value_of("verify_mismatches"), 2U);
+  EXPECT_EQ(value_of("offsets_pending"), 0U);
+  bus->stop();
+}
+
+TEST(ModbusHilSim, AnNcThatNeverHoldsTheValueKeepsItPendingAndRaisesTheAlarm) {
+  NcServer server(ServerConfig{});
+  // The NC clamps register 204 (int16) to 100 counts: 250 never sticks, 80 does.
+  server.set_after_write([](const sim::modbus_nc::WriteRecord& w, Tables& t) {
+    if (w.address == 204 && static_cast<std::int16_t>(t.holding[204]) > 100) {
+      t.holding[204] = 100;
+    }
+  });
+  server.start();
+  auto bus = make_bus(tcp_header(server.port(), "verify_writes = true") + kEventsAndOffsets);
+  bus->start();
+  push_offset(*bus, 2, 250.0);
+  ASSERT_TRUE(wait_until([&] {
+    const auto st = bus->modbus_status();
+    return st.verify_mismatches >= 5 && st.bus.alarm;
+  }));
+  EXPECT_EQ(bus->modbus_status().offsets_pending, 1U);
+  EXPECT_EQ(server.holding(204, 1)[0], 100);
+  // A value the NC accepts: verified, the alarm clears, the counter stops.
+  push_offset(*bus, 2, 80.0);
+  ASSERT_TRUE(wait_until([&] { return !bus->status().alarm && server.holding(204, 1)[0] == 80; }));
+  const std::uint64_t mismatches = bus->modbus_status().verify_mismatches;
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));  // 20 more polls
+  EXPECT_EQ(bus->modbus_status().verify_mismatches, mismatches);
+  EXPECT_EQ(bus->modbus_status().offsets_pending, 0U);
   bus->stop();
 }
 
@@ -519,7 +610,8 @@ address = 65312
   ASSERT_TRUE(wait_until([&] {
     got.drain(*bus);
     return bus->modbus_status().crc_errors >= 1 && got.axis.size() > n + 3;
-  })) << "crc errors " << bus->modbus_status().crc_errors;
+  })) << "crc errors "
+      << bus->modbus_status().crc_errors;
   for (const auto& a : got.axis) {
     ASSERT_NEAR(a.position_mm[0], -0.001, 1e-12);
   }
