@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <stdexcept>
 
@@ -13,15 +14,17 @@ constexpr double kMinusInf = -std::numeric_limits<double>::infinity();
 
 // First integer i at which cap k (> j) is at least cap j, within k's window start lo = k − M and
 // j's window end + 1 = j + M + 1. Caps are f − g, circles of radius R centred at (jΔ, f_j − R).
-std::ptrdiff_t crossing(std::span<const double> f, std::ptrdiff_t j, std::ptrdiff_t k,
-                        std::ptrdiff_t m, double dz_mm, const Wheel& wheel, const double* rise) {
+// `f(j)` is the value of sample j.
+template <class Values>
+std::ptrdiff_t crossing(const Values& f, std::ptrdiff_t j, std::ptrdiff_t k, std::ptrdiff_t m,
+                        double dz_mm, const Wheel& wheel, const double* rise) {
   const std::ptrdiff_t lo = k - m;
   const std::ptrdiff_t end = j + m + 1;
   if (lo >= end) {
     return end;  // windows do not overlap: k takes over when j ends
   }
-  const double fj = f[static_cast<std::size_t>(j)];
-  const double fk = f[static_cast<std::size_t>(k)];
+  const double fj = f(j);
+  const double fk = f(k);
   if (wheel.straight()) {
     return fk >= fj ? lo : end;  // flat caps: the higher one wins all of the overlap
   }
@@ -55,22 +58,12 @@ std::ptrdiff_t crossing(std::span<const double> f, std::ptrdiff_t j, std::ptrdif
   return vk >= vj ? lo : end;
 }
 
-}  // namespace
-
-std::ptrdiff_t half_window_samples(const Wheel& wheel, double spacing_mm) {
-  if (!(spacing_mm > 0.0) || !std::isfinite(spacing_mm)) {
-    throw std::invalid_argument("sample spacing must be > 0 mm");
-  }
-  const double m = std::floor(wheel.half_width_mm() / spacing_mm * (1.0 + 1e-9));
-  if (m > 1e9) {
-    throw std::invalid_argument("wheel width / sample spacing is too large");
-  }
-  return static_cast<std::ptrdiff_t>(m);
-}
-
-void max_plus_arc(std::span<const double> f, double spacing_mm, const Wheel& wheel,
-                  std::ptrdiff_t out_first, std::span<double> out, EnvelopeScratch& scratch) {
-  const auto n = static_cast<std::ptrdiff_t>(f.size());
+// The deque over n samples valued f(j); out(q, v) receives output q = 0..count−1 (index
+// i = out_first + q) in order.
+template <class Values, class Out>
+void max_plus_arc_impl(std::ptrdiff_t n, const Values& f, double spacing_mm, const Wheel& wheel,
+                       std::ptrdiff_t out_first, std::ptrdiff_t count, EnvelopeScratch& scratch,
+                       Out&& out) {
   const std::ptrdiff_t m = half_window_samples(wheel, spacing_mm);
   // The deque never holds more than the caps alive at one query: 2M + 2 (the one just pushed).
   const auto need = std::bit_ceil(static_cast<std::size_t>(std::min(n, 2 * m + 2)) + 1);
@@ -90,7 +83,6 @@ void max_plus_arc(std::span<const double> f, double spacing_mm, const Wheel& whe
   std::size_t head = 0;  // front = idx[head & mask]
   std::size_t tail = 0;  // one past back
   std::ptrdiff_t next = 0;
-  const auto count = static_cast<std::ptrdiff_t>(out.size());
   for (std::ptrdiff_t q = 0; q < count; ++q) {
     const std::ptrdiff_t i = out_first + q;
     // Caps whose window has begun.
@@ -116,11 +108,34 @@ void max_plus_arc(std::span<const double> f, double spacing_mm, const Wheel& whe
     if (tail > head) {
       const std::ptrdiff_t j = idx[head & mask];
       if (j - m <= i && i <= j + m) {
-        v = f[static_cast<std::size_t>(j)] - rise[static_cast<std::size_t>(j > i ? j - i : i - j)];
+        v = f(j) - rise[static_cast<std::size_t>(j > i ? j - i : i - j)];
       }
     }
-    out[static_cast<std::size_t>(q)] = v;
+    out(q, v);
   }
+}
+
+}  // namespace
+
+std::ptrdiff_t half_window_samples(const Wheel& wheel, double spacing_mm) {
+  if (!(spacing_mm > 0.0) || !std::isfinite(spacing_mm)) {
+    throw std::invalid_argument("sample spacing must be > 0 mm");
+  }
+  const double m = std::floor(wheel.half_width_mm() / spacing_mm * (1.0 + 1e-9));
+  if (m > 1e9) {
+    throw std::invalid_argument("wheel width / sample spacing is too large");
+  }
+  return static_cast<std::ptrdiff_t>(m);
+}
+
+void max_plus_arc(std::span<const double> f, double spacing_mm, const Wheel& wheel,
+                  std::ptrdiff_t out_first, std::span<double> out, EnvelopeScratch& scratch) {
+  const double* values = f.data();
+  double* dst = out.data();
+  max_plus_arc_impl(
+      static_cast<std::ptrdiff_t>(f.size()), [values](std::ptrdiff_t j) { return values[j]; },
+      spacing_mm, wheel, out_first, static_cast<std::ptrdiff_t>(out.size()), scratch,
+      [dst](std::ptrdiff_t q, double v) { dst[q] = v; });
 }
 
 void max_plus_arc_brute(std::span<const double> f, double spacing_mm, const Wheel& wheel,
@@ -147,24 +162,46 @@ GridTrajectory exact_trajectory(const UniformProfile& profile, const Wheel& whee
   return t;
 }
 
-std::vector<double> ground_profile_fast(const GridTrajectory& trajectory,
-                                        const UniformProfile& profile, const Wheel& wheel) {
+void ground_profile_chunks(
+    const GridTrajectory& trajectory, const UniformProfile& profile, const Wheel& wheel,
+    const std::function<void(std::size_t first, std::span<const double> b_mm)>& visit) {
   const double shift = (profile.z0_mm - trajectory.z0_mm) / profile.spacing_mm;
   const double shift_round = std::round(shift);
   if (std::abs(trajectory.spacing_mm - profile.spacing_mm) > 1e-9 * profile.spacing_mm ||
       std::abs(shift - shift_round) > 1e-6) {
-    throw std::invalid_argument("ground_profile_fast: trajectory grid is not the profile's grid");
+    throw std::invalid_argument("ground profile: trajectory grid is not the profile's grid");
   }
-  std::vector<double> neg(trajectory.u_mm.size());
-  std::transform(trajectory.u_mm.begin(), trajectory.u_mm.end(), neg.begin(),
-                 [](double u) { return -u; });
-  std::vector<double> b(profile.size());
+  // B = −maxplus(−U_T): the deque reads −U_T in place (negation is exact), no negated copy.
+  const double* u = trajectory.u_mm.data();
+  constexpr std::size_t kChunk = 1U << 14;
+  std::vector<double> chunk(std::min<std::size_t>(kChunk, profile.size()));
+  std::size_t first = 0;
+  std::size_t fill = 0;
   EnvelopeScratch scratch;
-  max_plus_arc(neg, profile.spacing_mm, wheel, static_cast<std::ptrdiff_t>(shift_round), b,
-               scratch);
-  for (double& v : b) {
-    v = -v;  // +inf where no trajectory point reaches z: nothing ground there
+  max_plus_arc_impl(
+      static_cast<std::ptrdiff_t>(trajectory.u_mm.size()), [u](std::ptrdiff_t j) { return -u[j]; },
+      profile.spacing_mm, wheel, static_cast<std::ptrdiff_t>(shift_round),
+      static_cast<std::ptrdiff_t>(profile.size()), scratch,
+      [&](std::ptrdiff_t, double v) {
+        chunk[fill++] = -v;  // +inf where no trajectory point reaches z: nothing ground there
+        if (fill == chunk.size()) {
+          visit(first, std::span<const double>(chunk.data(), fill));
+          first += fill;
+          fill = 0;
+        }
+      });
+  if (fill > 0) {
+    visit(first, std::span<const double>(chunk.data(), fill));
   }
+}
+
+std::vector<double> ground_profile_fast(const GridTrajectory& trajectory,
+                                        const UniformProfile& profile, const Wheel& wheel) {
+  std::vector<double> b(profile.size());
+  ground_profile_chunks(
+      trajectory, profile, wheel, [&b](std::size_t first, std::span<const double> chunk) {
+        std::copy(chunk.begin(), chunk.end(), b.begin() + static_cast<std::ptrdiff_t>(first));
+      });
   return b;
 }
 

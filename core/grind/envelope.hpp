@@ -18,6 +18,7 @@
 #pragma once
 
 #include <cstddef>
+#include <functional>
 #include <span>
 #include <vector>
 
@@ -60,8 +61,15 @@ struct GridTrajectory {
 GridTrajectory exact_trajectory(const UniformProfile& profile, const Wheel& wheel);
 
 /// B on the profile's samples for a trajectory on a grid of the same spacing whose origin is an
-/// integer number of samples from the profile's (as exact_trajectory returns). O(N).
+/// integer number of samples from the profile's (as exact_trajectory returns). O(N). +inf where
+/// no trajectory point is within W/2. Throws std::invalid_argument if the grids differ.
 std::vector<double> ground_profile_fast(const GridTrajectory& trajectory,
                                         const UniformProfile& profile, const Wheel& wheel);
+
+/// The same B, handed to `visit` in consecutive chunks (samples first .. first + b.size() − 1)
+/// instead of one N-sized array: what the command's unreachable-region report streams through.
+void ground_profile_chunks(
+    const GridTrajectory& trajectory, const UniformProfile& profile, const Wheel& wheel,
+    const std::function<void(std::size_t first, std::span<const double> b_mm)>& visit);
 
 }  // namespace nccomp::core::grind

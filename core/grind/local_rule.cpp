@@ -8,8 +8,30 @@
 #include <string>
 
 namespace nccomp::core::grind {
+namespace {
 
-Derivatives local_derivatives(const UniformProfile& profile, const FitSpec& fit) {
+// The three cases for sample (z, u) of fitted slope k1.
+LocalRule::Sample place(double z, double u, double k1, double k2, const Wheel& wheel) noexcept {
+  const double half = wheel.half_width_mm();
+  const double sec = std::sqrt(1.0 + k1 * k1);
+  const double sin_a = k1 / sec;
+  const double cos_a = 1.0 / sec;
+  if (!wheel.straight() && std::abs(sin_a) <= half / wheel.radius_mm()) {
+    // 1 − cos a = sin²a / (1 + cos a): no cancellation for gentle slopes.
+    const double r = wheel.radius_mm();
+    return {{z - r * sin_a, u - r * sin_a * sin_a / (1.0 + cos_a)}, ContactCase::kTangent, k1, k2};
+  }
+  const double end_rise = wheel.rise_mm(half);
+  if (k1 > 0.0) {  // the front (+Z) end rides on the rising flank
+    return {{z - half, u - end_rise}, ContactCase::kFrontEnd, k1, k2};
+  }
+  return {{z + half, u - end_rise}, ContactCase::kRearEnd, k1, k2};
+}
+
+}  // namespace
+
+LocalRule::LocalRule(const UniformProfile& profile, const FitSpec& fit, const Wheel& wheel)
+    : profile_(&profile), wheel_(wheel) {
   if (fit.degree < 1 || fit.degree > 8) {
     throw std::invalid_argument("fit degree must be 1..8, got " + std::to_string(fit.degree));
   }
@@ -35,11 +57,11 @@ Derivatives local_derivatives(const UniformProfile& profile, const FitSpec& fit)
                                   " mm is not finite");
     }
   }
-  // On a uniform grid the fitted derivative at offset o inside the stencil is a fixed linear
-  // combination of the stencil's samples (Savitzky–Golay): one weight row per offset.
+  points_ = pts;
   const int deg = fit.degree;
-  Eigen::MatrixXd w1(pts, pts);
-  Eigen::MatrixXd w2(pts, pts);
+  const auto size = static_cast<std::size_t>(pts);
+  w1_.assign(size * size, 0.0);
+  w2_.assign(size * size, 0.0);
   for (int o = 0; o < pts; ++o) {
     Eigen::MatrixXd a(pts, deg + 1);
     for (int q = 0; q < pts; ++q) {
@@ -51,27 +73,46 @@ Derivatives local_derivatives(const UniformProfile& profile, const FitSpec& fit)
       }
     }
     const Eigen::MatrixXd pinv = a.completeOrthogonalDecomposition().pseudoInverse();
-    w1.row(o) = pinv.row(1) / profile.spacing_mm;
-    w2.row(o) =
-        deg >= 2 ? Eigen::RowVectorXd(2.0 * pinv.row(2) / (profile.spacing_mm * profile.spacing_mm))
-                 : Eigen::RowVectorXd::Zero(pts);
-  }
-  Derivatives d;
-  d.slope.resize(static_cast<std::size_t>(n));
-  d.curvature.resize(static_cast<std::size_t>(n));
-  const std::ptrdiff_t back = (pts - 1) / 2;
-  for (std::ptrdiff_t i = 0; i < n; ++i) {
-    const std::ptrdiff_t s = std::clamp<std::ptrdiff_t>(i - back, 0, n - pts);
-    const auto o = static_cast<Eigen::Index>(i - s);
-    double k1 = 0.0;
-    double k2 = 0.0;
     for (int q = 0; q < pts; ++q) {
-      const double u = profile.u_mm[static_cast<std::size_t>(s + q)];
-      k1 += w1(o, q) * u;
-      k2 += w2(o, q) * u;
+      const auto k = static_cast<std::size_t>(o) * size + static_cast<std::size_t>(q);
+      w1_[k] = pinv(1, q) / profile.spacing_mm;
+      w2_[k] = deg >= 2 ? 2.0 * pinv(2, q) / (profile.spacing_mm * profile.spacing_mm) : 0.0;
     }
-    d.slope[static_cast<std::size_t>(i)] = k1;
-    d.curvature[static_cast<std::size_t>(i)] = k2;
+  }
+}
+
+double LocalRule::apply(const std::vector<double>& w, std::size_t i) const noexcept {
+  // Centred stencil, shifted inward at the ends.
+  const auto n = profile_->size();
+  const auto pts = static_cast<std::size_t>(points_);
+  const std::size_t back = (pts - 1) / 2;
+  const std::size_t s = std::min(i > back ? i - back : 0, n - pts);
+  const double* row = w.data() + (i - s) * pts;
+  const double* u = profile_->u_mm.data() + s;
+  double acc = 0.0;
+  for (std::size_t q = 0; q < pts; ++q) {
+    acc += row[q] * u[q];
+  }
+  return acc;
+}
+
+double LocalRule::slope(std::size_t i) const noexcept { return apply(w1_, i); }
+
+double LocalRule::curvature(std::size_t i) const noexcept { return apply(w2_, i); }
+
+LocalRule::Sample LocalRule::at(std::size_t i) const noexcept {
+  return place(profile_->z_at(static_cast<std::ptrdiff_t>(i)), profile_->u_mm[i], slope(i),
+               curvature(i), wheel_);
+}
+
+Derivatives local_derivatives(const UniformProfile& profile, const FitSpec& fit) {
+  // The wheel does not enter the derivatives; any valid one will do.
+  const LocalRule rule(profile, fit, Wheel::from_arc_height(1.0, 0.0));
+  // Sized at construction: resize() here trips GCC 12's -Wnull-dereference at -O3.
+  Derivatives d{std::vector<double>(profile.size(), 0.0), std::vector<double>(profile.size(), 0.0)};
+  for (std::size_t i = 0; i < profile.size(); ++i) {
+    d.slope[i] = rule.slope(i);
+    d.curvature[i] = rule.curvature(i);
   }
   return d;
 }
@@ -79,34 +120,16 @@ Derivatives local_derivatives(const UniformProfile& profile, const FitSpec& fit)
 LocalTrajectory local_rule_trajectory(const UniformProfile& profile, const Derivatives& d,
                                       const Wheel& wheel) {
   const std::size_t n = profile.size();
-  if (d.slope.size() != n) {
-    throw std::invalid_argument("local rule: one slope per sample needed");
+  if (d.slope.size() != n || d.curvature.size() != n) {
+    throw std::invalid_argument("local rule: one slope and curvature per sample needed");
   }
-  LocalTrajectory t;
-  t.point.assign(n, TrajectoryPoint{0.0, 0.0});
-  t.contact.assign(n, ContactCase::kTangent);
-  const double half = wheel.half_width_mm();
-  const double r = wheel.radius_mm();
-  const double sin_limit = wheel.straight() ? 0.0 : half / r;
-  const double end_rise = wheel.rise_mm(half);
+  LocalTrajectory t{std::vector<TrajectoryPoint>(n, TrajectoryPoint{0.0, 0.0}),
+                    std::vector<ContactCase>(n, ContactCase::kTangent)};
   for (std::size_t i = 0; i < n; ++i) {
-    const double z = profile.z_at(static_cast<std::ptrdiff_t>(i));
-    const double u = profile.u_mm[i];
-    const double k1 = d.slope[i];
-    const double sec = std::sqrt(1.0 + k1 * k1);
-    const double sin_a = k1 / sec;
-    const double cos_a = 1.0 / sec;
-    if (!wheel.straight() && std::abs(sin_a) <= sin_limit) {
-      // 1 − cos a = sin²a / (1 + cos a): no cancellation for gentle slopes.
-      t.point[i] = {z - r * sin_a, u - r * sin_a * sin_a / (1.0 + cos_a)};
-      t.contact[i] = ContactCase::kTangent;
-    } else if (k1 > 0.0) {
-      t.point[i] = {z - half, u - end_rise};  // the front (+Z) end rides on the rising flank
-      t.contact[i] = ContactCase::kFrontEnd;
-    } else {
-      t.point[i] = {z + half, u - end_rise};
-      t.contact[i] = ContactCase::kRearEnd;
-    }
+    const auto s = place(profile.z_at(static_cast<std::ptrdiff_t>(i)), profile.u_mm[i], d.slope[i],
+                         d.curvature[i], wheel);
+    t.point[i] = s.point;
+    t.contact[i] = s.contact;
   }
   return t;
 }

@@ -66,67 +66,140 @@ double UniformProfile::interpolate(double z_mm) const noexcept {
   return u_mm[i] + f * (u_mm[i + 1] - u_mm[i]);
 }
 
-SampledProfile parse_profile_csv(std::string_view text, std::string_view source) {
-  SampledProfile out;
-  std::size_t line_no = 0;
-  bool first_content = true;
-  while (!text.empty()) {
-    const auto eol = text.find('\n');
-    std::string_view line = text.substr(0, eol);
-    text.remove_prefix(eol == std::string_view::npos ? text.size() : eol + 1);
-    ++line_no;
-    line = trim(line);
-    if (line.empty() || line.front() == '#') {
-      continue;
-    }
-    const auto comma = line.find(',');
-    if (comma == std::string_view::npos) {
-      throw std::invalid_argument(where(source, line_no) + "expected two fields 'z_mm,u_mm', got " +
-                                  show(line));
-    }
-    const auto zf = trim(line.substr(0, comma));
-    const auto uf = trim(line.substr(comma + 1));
-    if (uf.find(',') != std::string_view::npos) {
-      throw std::invalid_argument(where(source, line_no) +
-                                  "expected two fields 'z_mm,u_mm', got more: " + show(line));
-    }
-    if (first_content && zf == "z_mm" && uf == "u_mm") {
-      first_content = false;
-      continue;
-    }
-    first_content = false;
-    double z = 0.0;
-    double u = 0.0;
-    if (!parse_number(zf, z)) {
-      throw std::invalid_argument(where(source, line_no) + "z_mm is not a number: " + show(zf));
-    }
-    if (!parse_number(uf, u)) {
-      throw std::invalid_argument(where(source, line_no) + "u_mm is not a number: " + show(uf));
-    }
-    if (!std::isfinite(z) || !std::isfinite(u)) {
-      throw std::invalid_argument(where(source, line_no) + "value is not finite (NaN or inf)");
-    }
-    if (!out.z_mm.empty() && !(z > out.z_mm.back())) {
-      throw std::invalid_argument(where(source, line_no) + "z_mm must increase strictly: " +
-                                  std::to_string(z) + " after " + std::to_string(out.z_mm.back()));
-    }
-    if (out.z_mm.size() >= kMaxProfileSamples) {
-      throw std::invalid_argument(where(source, line_no) + "more than " +
-                                  std::to_string(kMaxProfileSamples) + " samples");
-    }
-    out.z_mm.push_back(z);
-    out.u_mm.push_back(u);
-    out.line.push_back(line_no);
+ProfileCsvParser::ProfileCsvParser(std::string_view source) : source_(source) {}
+
+void ProfileCsvParser::feed(std::string_view chunk) {
+  if (finished_) {
+    throw std::logic_error("ProfileCsvParser: feed after finish");
   }
-  if (out.z_mm.size() < 2) {
-    throw std::invalid_argument(std::string(source) + ": needs at least 2 samples, got " +
-                                std::to_string(out.z_mm.size()));
+  while (!chunk.empty()) {
+    const auto eol = chunk.find('\n');
+    if (eol == std::string_view::npos) {
+      if (pending_.size() + chunk.size() > kMaxProfileCsvLineBytes) {
+        too_long(line_no_ + 1);
+      }
+      pending_.append(chunk);
+      return;
+    }
+    const auto piece = chunk.substr(0, eol);
+    chunk.remove_prefix(eol + 1);
+    if (pending_.empty()) {
+      line(piece);
+    } else {
+      if (pending_.size() + piece.size() > kMaxProfileCsvLineBytes) {
+        too_long(line_no_ + 1);
+      }
+      pending_.append(piece);
+      const std::string whole = std::move(pending_);
+      pending_.clear();
+      line(whole);
+    }
   }
-  return out;
 }
 
-UniformProfile to_uniform(const SampledProfile& s, double resample_spacing_mm,
-                          std::string_view source) {
+void ProfileCsvParser::too_long(std::size_t line_no) const {
+  throw std::invalid_argument(where(source_, line_no) + "line longer than " +
+                              std::to_string(kMaxProfileCsvLineBytes) + " characters");
+}
+
+void ProfileCsvParser::line(std::string_view text) {
+  ++line_no_;
+  if (text.size() > kMaxProfileCsvLineBytes) {
+    too_long(line_no_);
+  }
+  const std::size_t line_no = line_no_;
+  const auto line = trim(text);
+  if (line.empty() || line.front() == '#') {
+    return;
+  }
+  const auto comma = line.find(',');
+  if (comma == std::string_view::npos) {
+    throw std::invalid_argument(where(source_, line_no) + "expected two fields 'z_mm,u_mm', got " +
+                                show(line));
+  }
+  const auto zf = trim(line.substr(0, comma));
+  const auto uf = trim(line.substr(comma + 1));
+  if (uf.find(',') != std::string_view::npos) {
+    throw std::invalid_argument(where(source_, line_no) +
+                                "expected two fields 'z_mm,u_mm', got more: " + show(line));
+  }
+  if (first_content_ && zf == "z_mm" && uf == "u_mm") {
+    first_content_ = false;
+    return;
+  }
+  first_content_ = false;
+  double z = 0.0;
+  double u = 0.0;
+  if (!parse_number(zf, z)) {
+    throw std::invalid_argument(where(source_, line_no) + "z_mm is not a number: " + show(zf));
+  }
+  if (!parse_number(uf, u)) {
+    throw std::invalid_argument(where(source_, line_no) + "u_mm is not a number: " + show(uf));
+  }
+  if (!std::isfinite(z) || !std::isfinite(u)) {
+    throw std::invalid_argument(where(source_, line_no) + "value is not finite (NaN or inf)");
+  }
+  if (!out_.z_mm.empty() && !(z > out_.z_mm.back())) {
+    throw std::invalid_argument(where(source_, line_no) + "z_mm must increase strictly: " +
+                                std::to_string(z) + " after " + std::to_string(out_.z_mm.back()));
+  }
+  if (out_.z_mm.size() >= kMaxProfileSamples) {
+    throw std::invalid_argument(where(source_, line_no) + "more than " +
+                                std::to_string(kMaxProfileSamples) + " samples");
+  }
+  out_.z_mm.push_back(z);
+  out_.u_mm.push_back(u);
+  out_.line.push_back(line_no);
+}
+
+SampledProfile ProfileCsvParser::finish() {
+  if (finished_) {
+    throw std::logic_error("ProfileCsvParser: finish twice");
+  }
+  finished_ = true;
+  if (!pending_.empty()) {  // the last line has no line end
+    const std::string last = std::move(pending_);
+    pending_.clear();
+    line(last);
+  }
+  if (out_.z_mm.size() < 2) {
+    throw std::invalid_argument(source_ + ": needs at least 2 samples, got " +
+                                std::to_string(out_.z_mm.size()));
+  }
+  return std::move(out_);
+}
+
+SampledProfile parse_profile_csv(std::string_view text, std::string_view source) {
+  ProfileCsvParser parser(source);
+  parser.feed(text);
+  return parser.finish();
+}
+
+namespace {
+
+// Index of the first sample that breaks uniformity (n if none) and where it should be.
+std::size_t first_nonuniform(const SampledProfile& s, double dz, double& expect_z) {
+  const std::size_t n = s.z_mm.size();
+  // Uniform: every step equals the first (the operator's view: "line 4 breaks the spacing")
+  // and the samples do not drift from the mean grid the computation uses.
+  const double step0 = s.z_mm[1] - s.z_mm[0];
+  for (std::size_t i = 1; i < n; ++i) {
+    if (std::abs(s.z_mm[i] - s.z_mm[i - 1] - step0) > 1e-6 * step0) {
+      expect_z = s.z_mm[i - 1] + step0;
+      return i;
+    }
+  }
+  for (std::size_t i = 1; i < n; ++i) {
+    const double on_grid = s.z_mm.front() + static_cast<double>(i) * dz;
+    if (std::abs(s.z_mm[i] - on_grid) > 1e-6 * dz) {
+      expect_z = on_grid;
+      return i;
+    }
+  }
+  return n;
+}
+
+double checked_spacing(const SampledProfile& s, std::string_view source) {
   const std::size_t n = s.z_mm.size();
   if (n < 2 || s.u_mm.size() != n) {
     throw std::invalid_argument(std::string(source) + ": needs at least 2 samples");
@@ -135,27 +208,30 @@ UniformProfile to_uniform(const SampledProfile& s, double resample_spacing_mm,
   if (!(span > 0.0)) {
     throw std::invalid_argument(std::string(source) + ": z range is empty");
   }
-  const double dz = span / static_cast<double>(n - 1);
-  // Uniform: every step equals the first (the operator's view: "line 4 breaks the spacing")
-  // and the samples do not drift from the mean grid the computation uses.
-  const double step0 = s.z_mm[1] - s.z_mm[0];
-  std::size_t bad = n;
+  return span / static_cast<double>(n - 1);
+}
+
+}  // namespace
+
+UniformProfile to_uniform(SampledProfile&& s, double resample_spacing_mm, std::string_view source) {
+  const double dz = checked_spacing(s, source);
   double expect_z = 0.0;
-  for (std::size_t i = 1; i < n; ++i) {
-    if (std::abs(s.z_mm[i] - s.z_mm[i - 1] - step0) > 1e-6 * step0) {
-      bad = i;
-      expect_z = s.z_mm[i - 1] + step0;
-      break;
-    }
+  if (first_nonuniform(s, dz, expect_z) == s.z_mm.size()) {
+    const double z0 = s.z_mm.front();
+    UniformProfile out{z0, dz, std::move(s.u_mm)};
+    s = SampledProfile{};  // the z and line arrays are not needed any more
+    return out;
   }
-  for (std::size_t i = 1; i < n && bad == n; ++i) {
-    const double on_grid = s.z_mm.front() + static_cast<double>(i) * dz;
-    if (std::abs(s.z_mm[i] - on_grid) > 1e-6 * dz) {
-      bad = i;
-      expect_z = on_grid;
-      break;
-    }
-  }
+  return to_uniform(static_cast<const SampledProfile&>(s), resample_spacing_mm, source);
+}
+
+UniformProfile to_uniform(const SampledProfile& s, double resample_spacing_mm,
+                          std::string_view source) {
+  const std::size_t n = s.z_mm.size();
+  const double dz = checked_spacing(s, source);
+  const double span = s.z_mm.back() - s.z_mm.front();
+  double expect_z = 0.0;
+  const std::size_t bad = first_nonuniform(s, dz, expect_z);
   if (bad == n) {
     return UniformProfile{s.z_mm.front(), dz, s.u_mm};
   }

@@ -38,15 +38,44 @@ struct SampledProfile {
 /// Upper bound on samples accepted from any source (memory: 8 bytes per sample and array).
 inline constexpr std::size_t kMaxProfileSamples = 200'000'000;
 
+/// Longest CSV line accepted (a line without line ends cannot grow without bound).
+inline constexpr std::size_t kMaxProfileCsvLineBytes = 4096;
+
 /// Parses `z_mm,u_mm` CSV text. An optional header line `z_mm,u_mm`, blank lines, lines starting
 /// with '#' and CR line ends are accepted. Every value must be a finite number; z strictly
-/// increasing; at least 2 samples. Throws std::invalid_argument "<source>:<line>: <what>".
+/// increasing; at least 2 samples; lines of at most kMaxProfileCsvLineBytes. Throws
+/// std::invalid_argument "<source>:<line>: <what>".
 SampledProfile parse_profile_csv(std::string_view text, std::string_view source);
+
+/// The same parser fed piece by piece (lines may be split anywhere between pieces), so that a
+/// caller can read a file in chunks instead of holding all of its text: the result and the
+/// errors are those of parse_profile_csv on the concatenated text.
+class ProfileCsvParser {
+ public:
+  explicit ProfileCsvParser(std::string_view source);
+  void feed(std::string_view chunk);
+  /// The samples (throws if fewer than 2). Call once, after the last feed.
+  SampledProfile finish();
+
+ private:
+  void line(std::string_view text);
+  [[noreturn]] void too_long(std::size_t line_no) const;
+  std::string source_;
+  std::string pending_;  ///< an unfinished line from the previous pieces
+  std::size_t line_no_{0};
+  bool first_content_{true};
+  bool finished_{false};
+  SampledProfile out_;
+};
 
 /// A uniform profile from samples: if they are uniform (within 1e-6 of the spacing) they are
 /// taken as they are; otherwise they are linearly resampled at `resample_spacing_mm` if > 0, or
 /// std::invalid_argument names the first line that breaks uniformity.
 UniformProfile to_uniform(const SampledProfile& samples, double resample_spacing_mm,
+                          std::string_view source);
+/// The same, taking the samples: uniform samples' u array is moved, not copied, and z and the
+/// line numbers are freed (`samples` is left empty).
+UniformProfile to_uniform(SampledProfile&& samples, double resample_spacing_mm,
                           std::string_view source);
 
 enum class Family { kStraight, kConvexCrown, kConcaveCrown, kCvc, kSine, kPolynomial };

@@ -36,90 +36,96 @@ double segment_min(const Segment& s, double z, double a, double b, const Wheel& 
   return s.u0 + m * (zs - s.z0) + wheel.rise_mm(z - zs);
 }
 
-}  // namespace
-
-std::vector<double> ground_by_polyline(std::span<const TrajectoryPoint> q, const Wheel& wheel,
-                                       std::span<const double> z_eval) {
-  if (q.empty()) {
+// B over the polyline through n points pt(0), pt(1), … in any order. The segments are visited
+// in blocks of kBlock whose Z spans are computed first (one pass, 16 bytes per block): an
+// evaluation point looks only into blocks within the wheel's reach. No point or segment is
+// copied, so paths of 2·10⁷ points need no extra N-sized memory.
+template <class Points>
+std::vector<double> ground_impl(std::size_t n, const Points& pt, const Wheel& wheel,
+                                std::span<const double> z_eval) {
+  if (n == 0) {
     throw std::invalid_argument("verification: empty trajectory");
   }
-  const double half = wheel.half_width_mm();
-  bool increasing = q.size() >= 2;
-  for (std::size_t i = 0; i + 1 < q.size() && increasing; ++i) {
-    increasing =
-        q[i + 1].z_mm >= q[i].z_mm && std::isfinite(q[i].u_mm) && std::isfinite(q[i + 1].u_mm);
-  }
-  if (increasing) {
-    // Paths sorted in Z (every grid trajectory): walk the points themselves, no segment copy
-    // (48 bytes per point would be ~1 GB at 2·10⁷ points).
-    std::vector<double> out(z_eval.size(), std::numeric_limits<double>::infinity());
-    for (std::size_t e = 0; e < z_eval.size(); ++e) {
-      const double z = z_eval[e];
-      const double a = z - half;
-      const double b = z + half;
-      auto it = std::lower_bound(q.begin(), q.end(), a,
-                                 [](const TrajectoryPoint& p, double v) { return p.z_mm < v; });
-      std::size_t i = static_cast<std::size_t>(it - q.begin());
-      i = i > 0 ? i - 1 : 0;
-      double best = std::numeric_limits<double>::infinity();
-      for (; i + 1 < q.size() && q[i].z_mm <= b; ++i) {
-        const Segment sg{q[i].z_mm, q[i + 1].z_mm, q[i].z_mm,
-                         q[i].u_mm, q[i + 1].z_mm, q[i + 1].u_mm};
-        const double lo = std::max(a, sg.z_lo);
-        const double hi = std::min(b, sg.z_hi);
-        if (lo <= hi) {
-          best = std::min(best, segment_min(sg, z, lo, hi, wheel));
-        }
+  constexpr std::size_t kBlock = 512;
+  const std::size_t segments = n > 1 ? n - 1 : 1;  // one point: a degenerate segment
+  const std::size_t blocks = (segments + kBlock - 1) / kBlock;
+  struct Span {
+    double lo;
+    double hi;
+  };
+  std::vector<Span> span(blocks);
+  for (std::size_t k = 0; k < blocks; ++k) {
+    const std::size_t first = k * kBlock;
+    const std::size_t last = std::min(first + kBlock, n - 1);  // last point of the block
+    Span s{std::numeric_limits<double>::infinity(), -std::numeric_limits<double>::infinity()};
+    for (std::size_t i = first; i <= last; ++i) {
+      const TrajectoryPoint p = pt(i);
+      if (!std::isfinite(p.z_mm) || !std::isfinite(p.u_mm)) {
+        throw std::invalid_argument("verification: trajectory point " + std::to_string(i) +
+                                    " is not finite");
       }
-      out[e] = best;
+      s.lo = std::min(s.lo, p.z_mm);
+      s.hi = std::max(s.hi, p.z_mm);
     }
-    return out;
+    span[k] = s;
   }
-  std::vector<Segment> seg;
-  seg.reserve(std::max<std::size_t>(q.size(), 2) - 1);
-  if (q.size() == 1) {
-    seg.push_back({q[0].z_mm, q[0].z_mm, q[0].z_mm, q[0].u_mm, q[0].z_mm, q[0].u_mm});
-  }
-  bool sorted = true;
-  double longest = 0.0;
-  for (std::size_t i = 0; i + 1 < q.size(); ++i) {
-    const auto& p0 = q[i];
-    const auto& p1 = q[i + 1];
-    if (!std::isfinite(p0.z_mm) || !std::isfinite(p0.u_mm) || !std::isfinite(p1.z_mm) ||
-        !std::isfinite(p1.u_mm)) {
-      throw std::invalid_argument("verification: trajectory point " + std::to_string(i) +
-                                  " is not finite");
-    }
-    Segment s{
-        std::min(p0.z_mm, p1.z_mm), std::max(p0.z_mm, p1.z_mm), p0.z_mm, p0.u_mm, p1.z_mm, p1.u_mm};
-    if (!seg.empty() && s.z_lo < seg.back().z_lo) {
-      sorted = false;
-    }
-    longest = std::max(longest, s.z_hi - s.z_lo);
-    seg.push_back(s);
-  }
-  if (!sorted) {
-    std::sort(seg.begin(), seg.end(),
-              [](const Segment& x, const Segment& y) { return x.z_lo < y.z_lo; });
-  }
+  const double half = wheel.half_width_mm();
   std::vector<double> out(z_eval.size(), std::numeric_limits<double>::infinity());
   for (std::size_t e = 0; e < z_eval.size(); ++e) {
     const double z = z_eval[e];
     const double a = z - half;
     const double b = z + half;
-    auto it = std::lower_bound(seg.begin(), seg.end(), a - longest,
-                               [](const Segment& s, double v) { return s.z_lo < v; });
     double best = std::numeric_limits<double>::infinity();
-    for (; it != seg.end() && it->z_lo <= b; ++it) {
-      const double lo = std::max(a, it->z_lo);
-      const double hi = std::min(b, it->z_hi);
-      if (lo <= hi) {
-        best = std::min(best, segment_min(*it, z, lo, hi, wheel));
+    for (std::size_t k = 0; k < blocks; ++k) {
+      if (span[k].hi < a || span[k].lo > b) {
+        continue;
+      }
+      const std::size_t first = k * kBlock;
+      const std::size_t end = std::min(first + kBlock, segments);
+      TrajectoryPoint p0 = pt(first);
+      for (std::size_t i = first; i < end; ++i) {
+        const TrajectoryPoint p1 = n > 1 ? pt(i + 1) : p0;
+        const Segment sg{std::min(p0.z_mm, p1.z_mm),
+                         std::max(p0.z_mm, p1.z_mm),
+                         p0.z_mm,
+                         p0.u_mm,
+                         p1.z_mm,
+                         p1.u_mm};
+        const double lo = std::max(a, sg.z_lo);
+        const double hi = std::min(b, sg.z_hi);
+        if (lo <= hi) {
+          best = std::min(best, segment_min(sg, z, lo, hi, wheel));
+        }
+        p0 = p1;
       }
     }
     out[e] = best;
   }
   return out;
+}
+
+}  // namespace
+
+std::vector<double> ground_by_polyline(std::span<const TrajectoryPoint> q, const Wheel& wheel,
+                                       std::span<const double> z_eval) {
+  return ground_impl(
+      q.size(), [q](std::size_t i) { return q[i]; }, wheel, z_eval);
+}
+
+std::vector<double> ground_by_grid_path(double z0_mm, double spacing_mm,
+                                        std::span<const double> u_mm, const Wheel& wheel,
+                                        std::span<const double> z_eval) {
+  return ground_impl(
+      u_mm.size(),
+      [&](std::size_t i) {
+        return TrajectoryPoint{z0_mm + static_cast<double>(i) * spacing_mm, u_mm[i]};
+      },
+      wheel, z_eval);
+}
+
+std::vector<double> ground_by_polyline(const LocalRule& rule, std::span<const double> z_eval) {
+  return ground_impl(
+      rule.size(), [&rule](std::size_t i) { return rule.at(i).point; }, rule.wheel(), z_eval);
 }
 
 GroundError compare_ground(std::span<const double> z_mm, std::span<const double> b_mm,

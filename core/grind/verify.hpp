@@ -6,7 +6,8 @@
 // and g convex, so U(Z) + g(z − Z) has one stationary point where g'(z − Z) equals the segment's
 // slope). It evaluates the polyline itself — the path the NC interpolates — not grid values, and
 // accepts any point order (the local rule's trajectory doubles back in concave regions).
-// Cost: O(E·S_w) for E evaluation points and S_w segments within W of each; not real-time.
+// Cost: O(N) to bound blocks of 512 segments, then O(E·(S_w + N/512)) for E evaluation points
+// and S_w segments in the blocks within W/2 of each; no copy of the path. Not real-time.
 #pragma once
 
 #include <cstddef>
@@ -18,9 +19,17 @@
 
 namespace nccomp::core::grind {
 
-/// B at every z of z_eval (+inf where no part of Q is within W/2 of z).
+/// B at every z of z_eval (+inf where no part of Q is within W/2 of z). Throws
+/// std::invalid_argument on an empty path or a non-finite point.
 std::vector<double> ground_by_polyline(std::span<const TrajectoryPoint> q, const Wheel& wheel,
                                        std::span<const double> z_eval);
+/// The same for the path through (z0 + t·Δ, u[t]), t = 0 … (a grid trajectory such as the exact
+/// envelope, or the profile itself for the usual practice "T follows P"), without copying it.
+std::vector<double> ground_by_grid_path(double z0_mm, double spacing_mm,
+                                        std::span<const double> u_mm, const Wheel& wheel,
+                                        std::span<const double> z_eval);
+/// The same for the three-case rule's path (T of samples 0 … N − 1), evaluated sample by sample.
+std::vector<double> ground_by_polyline(const LocalRule& rule, std::span<const double> z_eval);
 
 struct GroundError {
   std::size_t points{0};     ///< evaluation points compared

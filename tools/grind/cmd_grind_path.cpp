@@ -2,6 +2,7 @@
 // Reads the profile (CSV or a family), computes the exact envelope and the seed's three-case
 // rule, reports where they differ and what cannot be ground, verifies every trajectory with an
 // independent implementation, and writes the trajectory, an NC correction table and G-code.
+#include <unistd.h>
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
@@ -10,12 +11,12 @@
 #include <cmath>
 #include <cstdarg>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <limits>
 #include <numbers>
 #include <optional>
-#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -76,14 +77,51 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
-std::string read_file(const std::string& path) {
+// The profile CSV read in chunks: the file's text is never held whole (at 2·10⁷ samples it
+// is about 400 MB).
+g::SampledProfile read_profile_csv(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) {
     throw CommandError(nccomp::tools::kExitInvalidInput, "cannot open profile file " + path);
   }
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
+  g::ProfileCsvParser parser(path);
+  std::vector<char> buf(std::size_t{1} << 22);
+  while (in) {
+    in.read(buf.data(), static_cast<std::streamsize>(buf.size()));
+    const auto got = static_cast<std::size_t>(in.gcount());
+    if (got > 0) {
+      parser.feed(std::string_view(buf.data(), got));
+    }
+  }
+  if (in.bad()) {
+    throw CommandError(nccomp::tools::kExitInvalidInput,
+                       "reading profile file " + path + " failed");
+  }
+  return parser.finish();
+}
+
+// An output path the command will be able to write: checked before any computation, so that a
+// typo in a directory does not cost a long run (and no file is created for a failed command).
+void check_writable(const std::string& path, const char* option) {
+  if (path.empty()) {
+    return;
+  }
+  namespace fs = std::filesystem;
+  const fs::path p(path);
+  const fs::path dir = p.has_parent_path() ? p.parent_path() : fs::path(".");
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) {
+    throw std::invalid_argument(std::string(option) + " " + path + ": directory " + dir.string() +
+                                " does not exist");
+  }
+  if (fs::is_directory(p, ec)) {
+    throw std::invalid_argument(std::string(option) + " " + path + " is a directory");
+  }
+  const bool exists = fs::exists(p, ec);
+  if (::access(exists ? p.c_str() : dir.c_str(), W_OK) != 0) {
+    throw std::invalid_argument(std::string(option) + " " + path + ": not writable (" +
+                                (exists ? "file" : "directory " + dir.string()) + ")");
+  }
 }
 
 std::ofstream open_out(const std::string& path) {
@@ -92,17 +130,6 @@ std::ofstream open_out(const std::string& path) {
     throw CommandError(nccomp::tools::kExitFailure, "cannot write " + path);
   }
   return out;
-}
-
-std::vector<g::TrajectoryPoint> grid_points(const g::GridTrajectory& t) {
-  std::vector<g::TrajectoryPoint> q;
-  q.reserve(t.u_mm.size());
-  for (std::size_t i = 0; i < t.u_mm.size(); ++i) {
-    if (!std::isnan(t.u_mm[i])) {
-      q.push_back({t.z_at(static_cast<std::ptrdiff_t>(i)), t.u_mm[i]});
-    }
-  }
-  return q;
 }
 
 void print_regions(std::ostream& os, const std::vector<g::Region>& regions, std::size_t limit,
@@ -141,10 +168,10 @@ void print_regions(std::ostream& os, const std::vector<g::Region>& regions, std:
 
 g::UniformProfile load_profile(const Options& o, std::string& description) {
   if (!o.profile_path.empty()) {
-    const auto text = read_file(o.profile_path);
-    const auto samples = g::parse_profile_csv(text, o.profile_path);
-    auto p = g::to_uniform(samples, o.resample_mm, o.profile_path);
-    description = o.profile_path + (p.size() != samples.z_mm.size() ? " (resampled)" : "");
+    auto samples = read_profile_csv(o.profile_path);
+    const std::size_t read = samples.z_mm.size();
+    auto p = g::to_uniform(std::move(samples), o.resample_mm, o.profile_path);
+    description = o.profile_path + (p.size() != read ? " (resampled)" : "");
     return p;
   }
   auto spec = o.spec;
@@ -154,25 +181,57 @@ g::UniformProfile load_profile(const Options& o, std::string& description) {
   return g::generate_profile(spec);
 }
 
+// Memory: at 2·10⁷ samples every N-sized double array is 160 MB. Alive at once: the profile and
+// the exact envelope, plus one more during the rule comparison (the rule's lowest pass on the
+// grid, kept only for --method local). Everything else is evaluated sample by sample (the
+// three-case rule, B of the envelope, the verification's paths): about 3 arrays ≈ 0.5 GB.
 void run(const Options& o) {
   const auto t_start = std::chrono::steady_clock::now();
+  // Options first: nothing is printed or computed for a command that cannot finish.
+  if (o.method != "exact" && o.method != "local") {
+    throw std::invalid_argument("--method must be exact or local, got '" + o.method + "'");
+  }
+  if (!(o.tolerance_um > 0.0) || !(o.chord_tol_um > 0.0) || !std::isfinite(o.tolerance_um) ||
+      !std::isfinite(o.chord_tol_um)) {
+    throw std::invalid_argument("--tolerance-um and --chord-tol-um must be finite and > 0");
+  }
+  if (o.u_axis.size() != 1 || o.z_axis.size() != 1 ||
+      !std::isalpha(static_cast<unsigned char>(o.u_axis[0])) ||
+      !std::isalpha(static_cast<unsigned char>(o.z_axis[0]))) {
+    throw std::invalid_argument("--u-axis and --z-axis must be one letter each");
+  }
+  const bool gouge_free = o.gcode_band == "above";
+  if (!gouge_free && o.gcode_band != "both") {
+    throw std::invalid_argument("--gcode-band must be above or both, got '" + o.gcode_band + "'");
+  }
+  if (o.decimals < 0 || o.decimals > 9) {
+    throw std::invalid_argument(fmt("--decimals must be 0..9, got %d", o.decimals));
+  }
+  // The chord band leaves one output unit for rounding, so the written G-code honours it.
+  const double unit_mm = std::pow(10.0, -o.decimals);
+  const double band_mm = o.chord_tol_um * 1e-3 - (gouge_free ? unit_mm : 0.5 * unit_mm);
+  if (!(band_mm > 0.0)) {
+    throw std::invalid_argument(fmt("--chord-tol-um %g is not above the rounding of %d decimals",
+                                    o.chord_tol_um, o.decimals));
+  }
+  if (!o.table_out.empty() && (!(o.table_spacing_mm > 0.0) || !std::isfinite(o.table_spacing_mm))) {
+    throw std::invalid_argument(fmt("--table-spacing-mm must be > 0, got %g", o.table_spacing_mm));
+  }
+  if (!(o.max_move_mm >= 0.0) || !std::isfinite(o.max_move_mm) || !(o.feed_mm_min >= 0.0) ||
+      !std::isfinite(o.feed_mm_min)) {
+    throw std::invalid_argument("--max-move-mm and --feed-mm-min must be finite and >= 0");
+  }
+  check_writable(o.trajectory_out, "--trajectory-out");
+  check_writable(o.table_out, "--table-out");
+  check_writable(o.gcode_out, "--gcode-out");
+  const double tol_mm = o.tolerance_um * 1e-3;
+
   std::string description;
   const g::UniformProfile p = load_profile(o, description);
   const g::Wheel wheel = o.arc_radius_mm ? g::Wheel::from_radius(o.width_mm, *o.arc_radius_mm)
                                          : g::Wheel::from_arc_height(o.width_mm, *o.arc_height_mm);
-  if (o.method != "exact" && o.method != "local") {
-    throw std::invalid_argument("--method must be exact or local, got '" + o.method + "'");
-  }
-  if (!(o.tolerance_um > 0.0) || !(o.chord_tol_um > 0.0)) {
-    throw std::invalid_argument("--tolerance-um and --chord-tol-um must be > 0");
-  }
-  if (o.u_axis.size() != 1 || o.z_axis.size() != 1 || !std::isalpha(o.u_axis[0]) ||
-      !std::isalpha(o.z_axis[0])) {
-    throw std::invalid_argument("--u-axis and --z-axis must be one letter each");
-  }
-  const double tol_mm = o.tolerance_um * 1e-3;
   // Validates the fit against the profile before anything is printed.
-  const g::Derivatives d = g::local_derivatives(p, g::FitSpec{o.fit_degree, o.fit_points});
+  const g::LocalRule rule(p, g::FitSpec{o.fit_degree, o.fit_points}, wheel);
   auto& os = std::cout;
   os << fmt("profile: %s, %zu samples, z %.4f .. %.4f mm, spacing %.6g mm\n", description.c_str(),
             p.size(), p.z0_mm, p.z_last_mm(), p.spacing_mm);
@@ -192,77 +251,28 @@ void run(const Options& o) {
       exact.z_at(static_cast<std::ptrdiff_t>(exact.u_mm.size()) - 1), p.z0_mm - exact.z0_mm,
       t_exact);
 
-  const g::LocalTrajectory local = g::local_rule_trajectory(p, d, wheel);
-  std::size_t cases[4] = {0, 0, 0, 0};
-  for (auto c : local.contact) {
-    ++cases[static_cast<int>(c)];
-  }
+  // Local rule against the envelope on the envelope's grid (deepest pass of the rule's path).
+  std::vector<double> rule_grid;
+  const auto cmp = g::compare_rule_with_envelope(rule, exact, tol_mm,
+                                                 o.method == "local" ? &rule_grid : nullptr);
   os << fmt(
       "three-case rule (degree %d through %d samples): tangent %zu, front end %zu, "
       "rear end %zu samples\n",
-      o.fit_degree, o.fit_points == 0 ? o.fit_degree + 1 : o.fit_points, cases[1], cases[2],
-      cases[3]);
-
-  // Local rule against the envelope on the envelope's grid (deepest pass of the rule's path).
-  const auto local_grid =
-      g::lowest_pass_on_grid(local.point, exact.z0_mm, exact.spacing_mm, exact.u_mm.size());
-  std::vector<double> gouge(local_grid.size());
-  double max_gouge = 0.0;
-  double max_above = 0.0;
-  for (std::size_t i = 0; i < gouge.size(); ++i) {
-    gouge[i] = exact.u_mm[i] - local_grid[i];
-    if (!std::isnan(gouge[i])) {
-      max_gouge = std::max(max_gouge, gouge[i]);
-      max_above = std::max(max_above, -gouge[i]);
-    }
-  }
-  auto diff_regions = g::regions_above(gouge, exact.z0_mm, exact.spacing_mm, tol_mm);
-  {
-    std::vector<double> key(p.size());
-    for (std::size_t i = 0; i < p.size(); ++i) {
-      key[i] = local.point[i].z_mm;
-    }
-    g::classify_regions(diff_regions, key, p, d, &local, wheel);
-  }
+      o.fit_degree, rule.fit_points(), cmp.tangent, cmp.front_end, cmp.rear_end);
   os << fmt(
       "three-case rule vs exact envelope (U_T): rule below envelope (gouges) by up to %.4f "
       "um, above by up to %.4f um\n",
-      max_gouge * 1000.0, max_above * 1000.0);
-  print_regions(os, diff_regions, o.max_regions, o.tolerance_um);
+      cmp.max_below_mm * 1000.0, cmp.max_above_mm * 1000.0);
+  print_regions(os, cmp.regions, o.max_regions, o.tolerance_um);
 
   // What this wheel cannot grind at all: B of the exact envelope above P.
-  const auto b_exact = g::ground_profile_fast(exact, p, wheel);
-  std::vector<double> left(p.size());
-  for (std::size_t i = 0; i < p.size(); ++i) {
-    left[i] = b_exact[i] - p.u_mm[i];
-  }
-  auto unreachable = g::regions_above(left, p.z0_mm, p.spacing_mm, tol_mm);
-  {
-    std::vector<double> key(p.size());
-    for (std::size_t i = 0; i < p.size(); ++i) {
-      key[i] = p.z_at(static_cast<std::ptrdiff_t>(i));
-    }
-    g::classify_regions(unreachable, key, p, d, nullptr, wheel);
-  }
+  const auto unreachable = g::unreachable_regions(rule, exact, tol_mm);
   os << "unreachable by this wheel (exact envelope grinds B > P):\n";
-  print_regions(os, unreachable, o.max_regions, o.tolerance_um);
+  print_regions(os, unreachable.regions, o.max_regions, o.tolerance_um);
 
   // The trajectory the outputs follow.
-  g::GridTrajectory chosen = exact;
-  if (o.method == "local") {
-    chosen.u_mm = local_grid;
-  }
-  // The chord band leaves one output unit for rounding, so the written G-code honours it.
-  const double unit_mm = std::pow(10.0, -o.decimals);
-  const bool gouge_free = o.gcode_band == "above";
-  if (!gouge_free && o.gcode_band != "both") {
-    throw std::invalid_argument("--gcode-band must be above or both, got '" + o.gcode_band + "'");
-  }
-  const double band_mm = o.chord_tol_um * 1e-3 - (gouge_free ? unit_mm : 0.5 * unit_mm);
-  if (!(band_mm > 0.0)) {
-    throw std::invalid_argument(fmt("--chord-tol-um %g is not above the rounding of %d decimals",
-                                    o.chord_tol_um, o.decimals));
-  }
+  const g::GridTrajectory rule_path{exact.z0_mm, exact.spacing_mm, std::move(rule_grid)};
+  const g::GridTrajectory& chosen = o.method == "local" ? rule_path : exact;
   const auto poly = gouge_free
                         ? g::simplify_polyline(chosen, 0.0, band_mm, o.max_move_mm)
                         : g::simplify_polyline(chosen, 0.5 * band_mm, 0.5 * band_mm, o.max_move_mm);
@@ -285,35 +295,29 @@ void run(const Options& o) {
       z_eval.push_back(p.z_last_mm());
       p_eval.push_back(p.u_mm.back());
     }
-    std::vector<g::TrajectoryPoint> usual(n);
-    for (std::size_t i = 0; i < n; ++i) {
-      usual[i] = {p.z_at(static_cast<std::ptrdiff_t>(i)), p.u_mm[i]};
-    }
-    struct Row {
-      const char* name;
-      const std::vector<g::TrajectoryPoint>* q;
-    };
-    const auto exact_points = grid_points(exact);
-    const Row rows[] = {{"usual practice (T follows P)", &usual},
-                        {"three-case rule", &local.point},
-                        {"exact envelope", &exact_points},
-                        {"G-code polyline", &rounded}};
     os << fmt(
         "verification (independent: what each path grinds, B(z) = min over the path of "
         "U + g(z - Z),\n  brute force over path segments at %zu points every %.6g mm):\n",
         z_eval.size(), p.spacing_mm * static_cast<double>(stride));
     os << "    path                            max|B-P| um    RMS um  gouge um   left um   at z "
           "mm\n";
-    for (const auto& r : rows) {
-      const auto b = g::ground_by_polyline(*r.q, wheel, z_eval);
+    const auto row = [&](const char* name, const std::vector<double>& b) {
       const auto e = g::compare_ground(z_eval, b, p_eval);
-      os << fmt("    %-30s %11.4f %9.4f %9.4f %9.4f %9.3f", r.name, e.max_abs_mm * 1000.0,
+      os << fmt("    %-30s %11.4f %9.4f %9.4f %9.4f %9.3f", name, e.max_abs_mm * 1000.0,
                 e.rms_mm * 1000.0, e.max_gouge_mm * 1000.0, e.max_left_mm * 1000.0, e.z_at_max_mm);
       if (e.unreached > 0) {
         os << fmt("  (%zu points not reached)", e.unreached);
       }
       os << "\n";
-    }
+    };
+    // Each path is read where it lies (no copies): T follows P, the rule sample by sample, the
+    // envelope on its grid, the G-code polyline as written.
+    row("usual practice (T follows P)",
+        g::ground_by_grid_path(p.z0_mm, p.spacing_mm, p.u_mm, wheel, z_eval));
+    row("three-case rule", g::ground_by_polyline(rule, z_eval));
+    row("exact envelope",
+        g::ground_by_grid_path(exact.z0_mm, exact.spacing_mm, exact.u_mm, wheel, z_eval));
+    row("G-code polyline", g::ground_by_polyline(rounded, wheel, z_eval));
     os << fmt("    (%.3f s)\n", seconds_since(t0));
   }
 
@@ -329,12 +333,13 @@ void run(const Options& o) {
       rows = exact.u_mm.size();
     } else {
       out << "z_mm,u_mm,contact\n";  // one T per profile sample, in sample order
-      for (std::size_t i = 0; i < local.point.size(); ++i) {
-        out << fmt("%.7f,%.7f,%d\n", local.point[i].z_mm, local.point[i].u_mm,
-                   static_cast<int>(local.contact[i]));
+      for (std::size_t i = 0; i < rule.size(); ++i) {
+        const auto s = rule.at(i);
+        out << fmt("%.7f,%.7f,%d\n", s.point.z_mm, s.point.u_mm, static_cast<int>(s.contact));
       }
-      rows = local.point.size();
+      rows = rule.size();
     }
+    out.flush();
     if (!out) {
       throw CommandError(nccomp::tools::kExitFailure, "writing " + o.trajectory_out + " failed");
     }
@@ -347,6 +352,7 @@ void run(const Options& o) {
     for (const auto& r : table) {
       out << fmt("%.4f,%.6f,%.6f,%.3f\n", r.z_mm, r.u_target_mm, r.u_wheel_mm, r.correction_um);
     }
+    out.flush();
     if (!out) {
       throw CommandError(nccomp::tools::kExitFailure, "writing " + o.table_out + " failed");
     }
@@ -373,6 +379,7 @@ void run(const Options& o) {
             wheel.arc_height_mm(), rounded.size() - 1, chord_err * 1000.0)};
     auto out = open_out(o.gcode_out);
     out << g::gcode_blocks(rounded, spec);
+    out.flush();
     if (!out) {
       throw CommandError(nccomp::tools::kExitFailure, "writing " + o.gcode_out + " failed");
     }
@@ -388,8 +395,8 @@ void setup(CLI::App& app) {
       "Wheel-midpoint trajectory that grinds a roll profile exactly (S2): exact envelope, "
       "three-case rule, verification, NC table and G-code");
   auto* in = sub->add_option_group("profile", "the target profile P (one of)");
-  auto* file = in->add_option("--profile", opt->profile_path, "CSV file of z_mm,u_mm samples")
-                   ->check(CLI::ExistingFile);
+  // No CLI::ExistingFile check: a missing file is invalid input (exit 3, "cannot open ...").
+  auto* file = in->add_option("--profile", opt->profile_path, "CSV file of z_mm,u_mm samples");
   auto* fam = in->add_option("--family", opt->family,
                              "profile family: straight, convex, concave, cvc, sine, poly");
   in->require_option(1);

@@ -106,39 +106,37 @@ TEST(LocalRule, GivenConvexGentleCrown_ThenEqualsEnvelope) {
   }
 }
 
-// GIVEN a concave dip of radius < R, THEN the local rule cuts below the gouge-free envelope
-// there, and the region is reported with its cause.
-TEST(LocalRule, GivenTightConcaveDip_ThenGougesAndTheRegionIsClassified) {
-  const auto wheel = Wheel::from_arc_height(150.0, 0.5);  // R ≈ 5625 mm
-  // Dip of curvature radius 1/(2·2e-4) = 2500 mm < R in |z| < 20.
-  const auto p = sampled(-300.0, 0.5, 1201,
-                         [](double z) { return std::abs(z) < 20.0 ? -0.08 + 2e-4 * z * z : 0.0; });
-  const auto d = local_derivatives(p, FitSpec{});
-  const auto exact = exact_trajectory(p, wheel);
-  const auto local = local_rule_trajectory(p, d, wheel);
-  const auto on_grid =
-      lowest_pass_on_grid(local.point, exact.z0_mm, exact.spacing_mm, exact.u_mm.size());
-  std::vector<double> gouge(on_grid.size());
-  for (std::size_t i = 0; i < gouge.size(); ++i) {
-    gouge[i] = exact.u_mm[i] - on_grid[i];  // NaN where the local rule has no T
-  }
-  auto regions = regions_above(gouge, exact.z0_mm, exact.spacing_mm, 1e-4);
-  std::vector<double> key(p.size());
-  for (std::size_t i = 0; i < p.size(); ++i) {
-    key[i] = local.point[i].z_mm;
-  }
-  classify_regions(regions, key, p, d, &local, wheel);
-  ASSERT_FALSE(regions.empty());
-  bool found = false;
-  for (const auto& r : regions) {
-    if (r.z_from_mm < 0.0 && r.z_to_mm > 0.0) {
-      found = true;
-      EXPECT_TRUE(r.concave_below_radius);
-      EXPECT_NEAR(r.min_concave_radius_mm, 2500.0, 5.0);
-      EXPECT_GT(r.worst_mm, 1e-3);  // tens of µm: the rule's tangent wheel cuts the dip's rims
+// The rule evaluated sample by sample (what the command uses) gives the same numbers, bit for
+// bit, as the arrays of local_derivatives + local_rule_trajectory.
+TEST(LocalRule, GivenSampleBySampleEvaluation_ThenSameNumbersAsTheArrays) {
+  const auto p = sampled(-50.0, 0.25, 401, [](double z) { return 1.0 * std::sin(z / 7.0); });
+  for (const auto& wheel : {Wheel::from_arc_height(20.0, 0.3), Wheel::from_arc_height(20.0, 0.0)}) {
+    for (const FitSpec fit : {FitSpec{2, 0}, FitSpec{1, 9}, FitSpec{4, 7}}) {
+      const LocalRule rule(p, fit, wheel);
+      const auto d = local_derivatives(p, fit);
+      const auto t = local_rule_trajectory(p, d, wheel);
+      ASSERT_EQ(rule.size(), p.size());
+      std::size_t ends = 0;
+      for (std::size_t i = 0; i < p.size(); ++i) {
+        const auto s = rule.at(i);
+        ASSERT_EQ(s.slope, d.slope[i]);
+        ASSERT_EQ(s.curvature, d.curvature[i]);
+        ASSERT_EQ(s.point.z_mm, t.point[i].z_mm);
+        ASSERT_EQ(s.point.u_mm, t.point[i].u_mm);
+        ASSERT_EQ(s.contact, t.contact[i]);
+        ends += s.contact != ContactCase::kTangent ? 1 : 0;
+      }
+      if (wheel.straight()) {
+        EXPECT_EQ(ends, p.size());  // h = 0: always an end
+      } else {
+        // The steep parts (|slope| up to 0.14 > the arc's end slope 0.060) ride on an end.
+        EXPECT_GT(ends, 0U);
+        EXPECT_LT(ends, p.size());
+      }
     }
   }
-  EXPECT_TRUE(found);
+  EXPECT_THROW(LocalRule(p, FitSpec{2, 1000}, Wheel::from_arc_height(20.0, 0.3)),
+               std::invalid_argument);
 }
 
 }  // namespace

@@ -30,6 +30,77 @@ TEST(ProfileCsv, GivenHeaderCommentsBlankLinesAndCrlf_ThenSamplesWithLines) {
   EXPECT_EQ(s.line[2], 6U);
 }
 
+// Fed in pieces split anywhere (inside numbers, between CR and LF, at line ends), the parser
+// gives what it gives on the whole text: the same samples and lines, or the same error.
+TEST(ProfileCsv, GivenTextInPieces_ThenSameAsWhole) {
+  const std::string texts[] = {
+      "# roll 17\r\nz_mm,u_mm\r\n0,0.5\r\n\r\n 1.5 , +0.25\n3,-1e-3",
+      "0,1\n1,2\n2,3\n",
+      "0,1\n1,2\n1,3\n",      // error on line 3
+      "0,1\n1,nan\n2,3",      // error on line 2
+      "z_mm,u_mm\n0,1\n5,2",  // last line without a line end
+  };
+  for (const auto& text : texts) {
+    const std::string whole = error_of([&] { parse_profile_csv(text, "p.csv"); });
+    for (std::size_t cut1 = 0; cut1 <= text.size(); ++cut1) {
+      for (std::size_t cut2 = cut1; cut2 <= text.size(); cut2 += 3) {
+        ProfileCsvParser parser("p.csv");
+        std::string err = "no error";
+        SampledProfile s;
+        try {
+          parser.feed(std::string_view(text).substr(0, cut1));
+          parser.feed(std::string_view(text).substr(cut1, cut2 - cut1));
+          parser.feed(std::string_view(text).substr(cut2));
+          s = parser.finish();
+        } catch (const std::invalid_argument& e) {
+          err = e.what();
+        }
+        ASSERT_EQ(err, whole) << cut1 << "/" << cut2;
+        if (whole == "no error") {
+          const auto w = parse_profile_csv(text, "p.csv");
+          ASSERT_EQ(s.z_mm, w.z_mm);
+          ASSERT_EQ(s.u_mm, w.u_mm);
+          ASSERT_EQ(s.line, w.line);
+        }
+      }
+    }
+  }
+}
+
+TEST(ProfileCsv, GivenOverlongLine_ThenErrorNamesTheLineWholeOrInPieces) {
+  const std::string text = "0,1\n1," + std::string(kMaxProfileCsvLineBytes, '0') + "\n2,3\n";
+  EXPECT_EQ(error_of([&] { parse_profile_csv(text, "a.csv"); }),
+            "a.csv:2: line longer than 4096 characters");
+  ProfileCsvParser parser("a.csv");
+  parser.feed("0,1\n1,");
+  EXPECT_EQ(error_of([&] {
+              for (int i = 0; i < 5000; ++i) {
+                parser.feed("0");  // no line end ever: refused before it grows without bound
+              }
+            }),
+            "a.csv:2: line longer than 4096 characters");
+}
+
+// Uniform samples taken by value: u is moved (same buffer), z and line freed.
+TEST(ProfileUniform, GivenUniformSamplesByValue_ThenUIsMovedNotCopied) {
+  auto s = parse_profile_csv("0,1\n0.5,2\n1,4\n", "p.csv");
+  const double* data = s.u_mm.data();
+  const auto p = to_uniform(std::move(s), 0.0, "p.csv");
+  EXPECT_EQ(p.u_mm.data(), data);
+  EXPECT_DOUBLE_EQ(p.spacing_mm, 0.5);
+  EXPECT_EQ(p.u_mm, (std::vector<double>{1.0, 2.0, 4.0}));
+  EXPECT_TRUE(s.z_mm.empty());  // NOLINT(bugprone-use-after-move): documented to be emptied
+  // Non-uniform ones are resampled as before (or refused naming the line).
+  auto n = parse_profile_csv("0,0\n1,1\n3,3\n", "p.csv");
+  EXPECT_EQ(error_of([&] { (void)to_uniform(std::move(n), 0.0, "p.csv"); }),
+            "p.csv:3: samples are not uniformly spaced (z = 3.000000, uniform spacing would put it "
+            "at 2.000000); give a resampling spacing");
+  auto r = parse_profile_csv("0,0\n1,1\n3,3\n", "p.csv");
+  const auto q = to_uniform(std::move(r), 0.5, "p.csv");
+  EXPECT_EQ(q.size(), 7U);
+  EXPECT_DOUBLE_EQ(q.u_mm[5], 2.5);
+}
+
 TEST(ProfileCsv, GivenBadInput_ThenErrorNamesFileAndLine) {
   EXPECT_EQ(error_of([] { parse_profile_csv("0,1\n1,nan\n", "a.csv"); }),
             "a.csv:2: value is not finite (NaN or inf)");

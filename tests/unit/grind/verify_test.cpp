@@ -121,6 +121,49 @@ TEST(Verify, GivenReversedPolyline_ThenSameGroundProfile) {
   }
 }
 
+// The paths the command verifies without copying them (a grid, the rule sample by sample) give
+// the same numbers as the same paths stored as points.
+TEST(Verify, GivenGridAndRulePathsReadInPlace_ThenSameAsStoredPoints) {
+  const auto wheel = Wheel::from_arc_height(100.0, 0.3);
+  const auto p = sampled(-100.0, 0.2, 1001, [](double z) { return 0.05 * std::sin(z / 6.0); });
+  const auto t = exact_trajectory(p, wheel);
+  const auto z = zs(p);
+  const auto grid = ground_by_grid_path(t.z0_mm, t.spacing_mm, t.u_mm, wheel, z);
+  const auto stored = ground_by_polyline(as_points(t), wheel, z);
+  const auto usual = ground_by_grid_path(p.z0_mm, p.spacing_mm, p.u_mm, wheel, z);
+  const auto usual_stored = ground_by_polyline(as_points(p), wheel, z);
+  const LocalRule rule(p, FitSpec{}, wheel);
+  const auto local = local_rule_trajectory(p, local_derivatives(p, FitSpec{}), wheel);
+  const auto by_sample = ground_by_polyline(rule, z);
+  const auto rule_stored = ground_by_polyline(local.point, wheel, z);
+  for (std::size_t i = 0; i < z.size(); ++i) {
+    ASSERT_EQ(grid[i], stored[i]) << z[i];
+    ASSERT_EQ(usual[i], usual_stored[i]) << z[i];
+    ASSERT_EQ(by_sample[i], rule_stored[i]) << z[i];
+  }
+  // The rule's path doubles back in the valleys (radius 720 mm < R = 4167 mm): not sorted.
+  bool doubles_back = false;
+  for (std::size_t i = 1; i < local.point.size(); ++i) {
+    doubles_back = doubles_back || local.point[i].z_mm < local.point[i - 1].z_mm;
+  }
+  EXPECT_TRUE(doubles_back);
+  // And the verification sees the rule gouge there while the envelope does not.
+  const auto e_rule = compare_ground(z, by_sample, p.u_mm);
+  const auto e_exact = compare_ground(z, grid, p.u_mm);
+  EXPECT_GT(e_rule.max_gouge_mm, 1e-3);
+  // The envelope's grid points joined by chords: on its crests (curvature ≈ P''/(1 + R·P'') ≈
+  // 2e-4/mm) a chord of 0.2 mm sags κΔ²/8 ≈ 1e-6 mm below it.
+  EXPECT_LT(e_exact.max_gouge_mm, 2e-6);
+}
+
+TEST(Verify, GivenNonFinitePoint_ThenThrows) {
+  const auto wheel = Wheel::from_arc_height(10.0, 0.1);
+  const std::vector<TrajectoryPoint> q{{0.0, 0.0}, {1.0, std::nan("")}, {2.0, 0.0}};
+  const std::vector<double> z{0.5};
+  EXPECT_THROW(ground_by_polyline(q, wheel, z), std::invalid_argument);
+  EXPECT_THROW(ground_by_polyline(std::vector<TrajectoryPoint>{}, wheel, z), std::invalid_argument);
+}
+
 TEST(Verify, GivenNoTrajectoryWithinReach_ThenUnreached) {
   const auto wheel = Wheel::from_arc_height(10.0, 0.1);
   const std::vector<TrajectoryPoint> q{{0.0, 0.0}, {1.0, 0.0}};
