@@ -17,6 +17,7 @@
 #include <mutex>
 #include <optional>
 
+#include "daemon/command.hpp"
 #include "daemon/config/builtin_sections.hpp"
 #include "daemon/config/config.hpp"
 #include "daemon/lockstep.hpp"
@@ -313,6 +314,10 @@ int run_daemon(const DaemonOptions& options) {
   for (auto& b : buses) {
     bus_ptrs.push_back(b.bus.get());
   }
+  // Operator commands (`nccomp calibrate --daemon`): the status thread queues them as events, the
+  // loop drains them like a bus's (last in the list: register indices map to the buses above).
+  CommandBus commands;
+  bus_ptrs.push_back(&commands);
   LockstepPeer peer;
   if (lockstep) {
     try {
@@ -360,6 +365,7 @@ int run_daemon(const DaemonOptions& options) {
   sc.config_path = options.config_path;
   sc.state_path = state_path;
   StatusServer status(sc);
+  set_command_context(CommandContext{&commands, &loop});
   const auto& stsec = cfg::status_section(*config);
   const std::string sock =
       stsec.socket_path.empty()
@@ -539,6 +545,7 @@ int run_daemon(const DaemonOptions& options) {
   }
   const auto ps = persister.stats();
   status.stop();
+  set_command_context(CommandContext{});
   logger.stop();
   if (mlog) {
     mlog->stop();

@@ -17,6 +17,8 @@
 #include <sstream>
 #include <system_error>
 
+#include "daemon/command.hpp"
+
 namespace nccomp::daemon {
 
 namespace {
@@ -510,11 +512,19 @@ void send_all(int fd, const std::string& s) {
 }  // namespace
 
 void StatusServer::serve_unix(int fd) {
-  std::string req = read_request(fd, 64, "\n");
+  // One line: a status request, or an operator command ("calibrate facets lateral 1.99 1.98").
+  std::string req = read_request(fd, 512, "\n");
+  if (const auto nl = req.find('\n'); nl != std::string::npos) {
+    req.erase(nl);
+  }
   while (!req.empty() && (req.back() == '\n' || req.back() == '\r' || req.back() == ' ')) {
     req.pop_back();
   }
   std::string answer;
+  if (dispatch_command(req, answer)) {
+    send_all(fd, answer);
+    return;
+  }
   if (req == "json") {
     answer = render_json(context_);
   } else if (req == "metrics") {

@@ -1,8 +1,11 @@
 #include "core/calib/calib_module.hpp"
 
+#include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <stdexcept>
 #include <utility>
+#include <variant>
 
 namespace nccomp::core::calib {
 
@@ -25,7 +28,104 @@ void CalibrationModule::attach(const engine::RegisterTable& registers) {
                                   "\") must be of kind axis_offset");
     }
   }
+  if (config_.request_register >= 0) {
+    const auto index = static_cast<std::size_t>(config_.request_register);
+    if (index >= registers.size()) {
+      throw std::invalid_argument("calibration.request_register: register " +
+                                  std::to_string(index) + " is not in the register table (" +
+                                  std::to_string(registers.size()) + " registers)");
+    }
+    if (registers[index].kind != engine::RegisterKind::kFlag) {
+      throw std::invalid_argument("calibration.request_register: register " +
+                                  std::to_string(index) + " (\"" + registers[index].name +
+                                  "\") must be of kind flag");
+    }
+  }
   calib_.configure(config_);
+}
+
+void CalibrationModule::run_command(const OperatorCommand& c, TimeNs now_ns,
+                                    StepOutput& out) noexcept {
+  CommandOutcome o;
+  o.sequence = c.sequence;
+  o.kind = c.kind;
+  o.phase_before = calib_.phase();
+  o.status = CommandStatus::kOk;
+  const std::size_t alarms_before = out.alarms.size();
+  switch (c.kind) {
+    case OperatorCommandKind::kCalibrationBegin:
+      calib_.begin_calibration(now_ns, out);
+      break;
+    case OperatorCommandKind::kCalibrationFacets: {
+      if (c.code[0] != 0 && c.code[0] != 1) {
+        o.status = CommandStatus::kInvalidInput;
+        break;
+      }
+      o.facet = calib_.enter_facets(c.code[0] == 0 ? Face::kLateral : Face::kEndFace, c.value[0],
+                                    c.value[1], now_ns, out);
+      if (o.facet.status == FacetStatus::kWrongPhase) {
+        o.status = CommandStatus::kWrongPhase;
+      } else if (o.facet.status == FacetStatus::kInvalidInput) {
+        o.status = CommandStatus::kInvalidInput;
+      }
+      break;
+    }
+    case OperatorCommandKind::kCalibrationDiscard:
+      calib_.discard_touch_set();
+      break;
+    case OperatorCommandKind::kCalibrationRecalibrate:
+      if (!calib_.request_recalibration()) {
+        o.status = CommandStatus::kWrongPhase;
+      }
+      break;
+    case OperatorCommandKind::kCalibrationTouch: {
+      CalibrationTouch t;
+      t.time_ns = now_ns;
+      const bool probe_ok = c.code[0] == 0 || c.code[0] == 1;
+      t.probe = c.code[0] == 1 ? ProbeKind::kReferenceProbe : ProbeKind::kMachineProbe;
+      t.axis = static_cast<std::uint8_t>(c.code[1]);
+      t.direction = c.code[2];
+      t.variant = static_cast<std::uint8_t>(c.code[3]);
+      t.trigger_position_mm = c.value[0];
+      if (!probe_ok || c.code[1] < 0 || c.code[3] < 0) {
+        o.status = CommandStatus::kInvalidInput;
+        break;
+      }
+      calib_.enter_touch(t, now_ns, out);
+      // The calibrator refuses with a warning: 49 = malformed, 45 = not expected now.
+      for (std::size_t i = alarms_before; i < out.alarms.size(); ++i) {
+        if (out.alarms[i].code == AlarmCode::kCalibrationInvalidInput) {
+          o.status = CommandStatus::kInvalidInput;
+        } else if (out.alarms[i].code == AlarmCode::kTouchUnexpected) {
+          o.status = CommandStatus::kWrongPhase;
+        }
+      }
+      break;
+    }
+    case OperatorCommandKind::kCalibrationStatus:
+      break;
+    case OperatorCommandKind::kNone:
+    default:
+      o.status = CommandStatus::kUnknown;
+      break;
+  }
+  for (std::size_t i = alarms_before; i < out.alarms.size(); ++i) {
+    if (o.alarm_count < o.alarms.size()) {
+      o.alarms[o.alarm_count] = out.alarms[i];
+    }
+    ++o.alarm_count;
+  }
+  if (c.kind != OperatorCommandKind::kCalibrationStatus) {
+    if (o.status == CommandStatus::kOk) {
+      ++snapshot_.commands_taken;
+    } else {
+      ++snapshot_.commands_refused;
+    }
+  }
+  if (c.kind != OperatorCommandKind::kCalibrationStatus && o.status == CommandStatus::kOk) {
+    mark_changed();
+  }
+  snapshot_.last_command = o;
 }
 
 void CalibrationModule::step(TimeNs now_ns, std::span<const Event> events,
@@ -33,26 +133,62 @@ void CalibrationModule::step(TimeNs now_ns, std::span<const Event> events,
   const Phase before = calib_.phase();
   const std::size_t records = out.records.size();
   const std::size_t alarms = out.alarms.size();
+  bool commanded = false;
+  for (const Event& e : events) {
+    if (const auto* c = std::get_if<OperatorCommand>(&e)) {
+      run_command(*c, now_ns, out);
+      commanded = true;
+    }
+  }
   calib_.step(now_ns, events, out);
   if (calib_.phase() != before || out.records.size() != records || out.alarms.size() != alarms) {
     ++generation_;
   }
+  if (sink_ != nullptr && (commanded || !published_ || generation_ != published_generation_ ||
+                           now_ns - last_publish_ns_ >= 1'000'000'000)) {
+    publish(now_ns);
+  }
+}
+
+void CalibrationModule::publish(TimeNs now_ns) noexcept {
+  make_snapshot(calib_, now_ns, snapshot_);
+  ++snapshot_.publishes;
+  sink_->publish(snapshot_);
+  published_ = true;
+  published_generation_ = generation_;
+  last_publish_ns_ = now_ns;
+}
+
+void CalibrationModule::rebase_clock(double wall_minus_monotonic_s) noexcept {
+  const CalibState s = calib_.export_state();
+  const std::array<double, 3> written{calib_.written_um(0), calib_.written_um(1),
+                                      calib_.written_um(2)};
+  set_clock_offset_s(wall_minus_monotonic_s);
+  calib_.import_state_unchecked(s);
+  for (std::size_t a = 0; a < 3; ++a) {
+    calib_.restore_written(a, written[a]);
+  }
+  ++generation_;
 }
 
 std::size_t CalibrationModule::save_state(std::span<std::byte> buf) const noexcept {
-  if (buf.size() < sizeof(CalibState)) {
+  if (buf.size() < kStateBytes) {
     return 0;
   }
   const CalibState s = calib_.export_state();
   std::memcpy(buf.data(), &s, sizeof s);
-  return sizeof s;
+  for (std::size_t a = 0; a < 3; ++a) {
+    const double w = calib_.written_um(a);
+    std::memcpy(buf.data() + sizeof s + a * sizeof(double), &w, sizeof w);
+  }
+  return kStateBytes;
 }
 
 bool CalibrationModule::load_state(std::span<const std::byte> bytes) noexcept {
   if (bytes.empty()) {
     return true;
   }
-  if (bytes.size() != sizeof(CalibState)) {
+  if (bytes.size() != sizeof(CalibState) && bytes.size() != kStateBytes) {
     return false;
   }
   CalibState s;
@@ -61,6 +197,13 @@ bool CalibrationModule::load_state(std::span<const std::byte> bytes) noexcept {
     return false;
   }
   calib_.import_state_unchecked(s);
+  if (bytes.size() == kStateBytes) {
+    for (std::size_t a = 0; a < 3; ++a) {
+      double w = kNaN;
+      std::memcpy(&w, bytes.data() + sizeof s + a * sizeof(double), sizeof w);
+      calib_.restore_written(a, w);  // NaN (never written) is ignored
+    }
+  }
   ++generation_;
   return true;
 }
@@ -69,12 +212,15 @@ std::size_t CalibrationModule::status(std::span<engine::StatusValue> out) const 
   const auto& c = calib_;
   const engine::StatusValue values[] = {
       {"phase", 0.0, to_string(c.phase())},
+      {"request", 0.0, to_string(c.request())},
       {"x_written_um", c.written_um(0), nullptr},
       {"y_written_um", c.written_um(1), nullptr},
       {"z_written_um", c.written_um(2), nullptr},
       {"x_last_drift_um", c.model(Slot::kXLateral).anchor_drift_um, nullptr},
       {"y_last_drift_um", c.model(Slot::kY).anchor_drift_um, nullptr},
       {"z_last_drift_um", c.model(Slot::kZ).anchor_drift_um, nullptr},
+      {"grind_dx_um", c.grind_correction_um(), nullptr},
+      {"commands_refused", static_cast<double>(snapshot_.commands_refused), nullptr},
   };
   std::size_t w = 0;
   for (const auto& v : values) {

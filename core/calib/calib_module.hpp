@@ -2,6 +2,11 @@
 // builds one from the `[calibration]` config section (tools/calibrate/config_toml.hpp reads it),
 // the engine steps it with the validated events, limits its absolute targets per register and
 // persists its state with the rest of the engine's.
+//
+// Operator commands arrive as OperatorCommand events (the daemon's status socket queues them
+// into the loop through an SPSC ring); each is executed on the loop thread before the cycle's
+// bus events, and its outcome, together with the calibrator's state, is published to a
+// SnapshotSink, from which the daemon answers the operator.
 #pragma once
 
 #include <cstdint>
@@ -9,6 +14,7 @@
 #include <vector>
 
 #include "core/calib/calibrator.hpp"
+#include "core/calib/snapshot.hpp"
 #include "core/engine/engine.hpp"
 
 namespace nccomp::core::calib {
@@ -24,14 +30,21 @@ class CalibrationModule final : public engine::Module {
   /// axis_offset) and configures the calibrator. Throws std::invalid_argument naming the key.
   void attach(const engine::RegisterTable& registers) override;
 
-  /// Real-time safe: forwards to Calibrator::step().
+  /// Real-time safe: runs the cycle's OperatorCommand events (in order), then
+  /// Calibrator::step(); publishes a snapshot to the sink after a command, a state change, and
+  /// at least once per second.
   void step(TimeNs now_ns, std::span<const Event> events, StepOutput& out) noexcept override;
 
-  [[nodiscard]] std::size_t state_capacity() const noexcept override { return sizeof(CalibState); }
+  /// Bytes of save_state(): the CalibState, then the three axis values last written [µm].
+  static constexpr std::size_t kStateBytes = sizeof(CalibState) + 3 * sizeof(double);
+  [[nodiscard]] std::size_t state_capacity() const noexcept override { return kStateBytes; }
   /// Real-time safe: the plain-data CalibState (times on the wall clock of
-  /// set_clock_offset_s()), byte for byte.
+  /// set_clock_offset_s()), byte for byte, and the values last written to X, Y, Z (so that a
+  /// restarted daemon's limiter starts where the NC is, instead of slewing from 0).
   std::size_t save_state(std::span<std::byte> buf) const noexcept override;
-  /// Real-time safe: false if the bytes are not a valid CalibState (fresh state kept).
+  /// Real-time safe: false if the bytes are not a valid CalibState (fresh state kept). Also
+  /// takes a bare CalibState (sizeof(CalibState) bytes, states saved before the written values
+  /// were added).
   bool load_state(std::span<const std::byte> bytes) noexcept override;
   /// Advances when a touch set is evaluated, a phase changes or the operator acts.
   [[nodiscard]] std::uint64_t state_generation() const noexcept override { return generation_; }
@@ -39,8 +52,15 @@ class CalibrationModule final : public engine::Module {
   /// Wall clock minus the loop's monotonic clock [s]: set it before load_state() so that the
   /// drift models survive a reboot (with 0 they survive a daemon restart, not a reboot).
   void set_clock_offset_s(double wall_minus_monotonic_s) noexcept {
+    clock_offset_s_ = wall_minus_monotonic_s;
     calib_.set_clock_offset_s(wall_minus_monotonic_s);
   }
+  /// Changes the clock offset of a module whose state is already loaded: the state keeps its
+  /// wall-clock times (exported with the old offset, adopted with the new one). Real-time safe.
+  void rebase_clock(double wall_minus_monotonic_s) noexcept;
+  [[nodiscard]] double clock_offset_s() const noexcept { return clock_offset_s_; }
+  /// Where snapshots go (nullptr = nowhere). Not real-time; before the loop steps the module.
+  void set_snapshot_sink(SnapshotSink* sink) noexcept { sink_ = sink; }
   /// Real-time safe: phase, the corrections written [µm] and the last measured drift [µm] per
   /// axis.
   std::size_t status(std::span<engine::StatusValue> out) const noexcept override;
@@ -56,10 +76,19 @@ class CalibrationModule final : public engine::Module {
   void mark_changed() noexcept { ++generation_; }
 
  private:
+  void run_command(const OperatorCommand& c, TimeNs now_ns, StepOutput& out) noexcept;
+  void publish(TimeNs now_ns) noexcept;
+
   CalibrationConfig config_;
   std::string name_;
   Calibrator calib_;
   std::uint64_t generation_{0};
+  double clock_offset_s_{0.0};
+  SnapshotSink* sink_{nullptr};
+  CalibSnapshot snapshot_{};  // the buffer published from (no stack copy of ~4 KB per cycle)
+  std::uint64_t published_generation_{~std::uint64_t{0}};
+  TimeNs last_publish_ns_{0};
+  bool published_{false};
 };
 
 }  // namespace nccomp::core::calib

@@ -64,9 +64,54 @@ void Calibrator::begin_calibration(TimeNs now_ns, StepOutput& out) noexcept {
   state_.result.time_s = seconds(now_ns);
   set_ = TouchSet{};
   due_raised_ = false;
+  demand_ = false;
 }
 
 void Calibrator::discard_touch_set() noexcept { set_ = TouchSet{}; }
+
+bool Calibrator::request_recalibration() noexcept {
+  if (!configured_ || state_.phase != Phase::kReady) {
+    return false;
+  }
+  demand_ = true;
+  return true;
+}
+
+void Calibrator::enter_touch(const CalibrationTouch& touch, TimeNs now_ns,
+                             StepOutput& out) noexcept {
+  if (configured_) {
+    handle_touch(touch, seconds(now_ns), now_ns, out);
+  }
+}
+
+bool Calibrator::grinding() const noexcept {
+  return state_.phase == Phase::kTestGrindLateral || state_.phase == Phase::kTestGrindEndFace;
+}
+
+double Calibrator::offset_in_force_um(std::size_t axis) const noexcept {
+  if (axis >= kAxisCount) {
+    return 0.0;
+  }
+  return std::isfinite(written_um_[axis]) ? written_um_[axis] : 0.0;
+}
+
+RequestCode Calibrator::request() const noexcept {
+  switch (state_.phase) {
+    case Phase::kUncalibrated:
+      return RequestCode::kNone;
+    case Phase::kReferenceTouches:
+      return RequestCode::kReferenceTouches;
+    case Phase::kTestGrindLateral:
+      return RequestCode::kTestGrindLateral;
+    case Phase::kTestGrindEndFace:
+      return RequestCode::kTestGrindEndFace;
+    case Phase::kNominalTouches:
+      return RequestCode::kNominalTouches;
+    case Phase::kReady:
+      return recalibration_requested() ? RequestCode::kRecalibration : RequestCode::kNone;
+  }
+  return RequestCode::kNone;
+}
 
 const Nominal& Calibrator::nominal(Slot slot) const noexcept {
   return state_.nominals[static_cast<std::size_t>(slot)];
@@ -137,6 +182,7 @@ FacetResult Calibrator::enter_facets(Face face, double chord_plus_mm, double cho
       if (config_.end_face_test_grind) {
         state_.phase = Phase::kTestGrindEndFace;
         state_.grind_correction_um = res.dx_touch_axial_um;
+        last_write_s_ = -1e300;
       } else {
         res.dx_a_um = res.dx_touch_axial_um;
         finish_calibration(seconds(now_ns), now_ns, out);
@@ -164,6 +210,7 @@ FacetResult Calibrator::enter_facets(Face face, double chord_plus_mm, double cho
     return r;
   }
   state_.grind_correction_um = next;
+  last_write_s_ = -1e300;  // the X register takes the new Δx at the next step
   r.status = FacetStatus::kGrindAgain;
   return r;
 }
@@ -209,6 +256,11 @@ void Calibrator::handle_touch(const CalibrationTouch& t, double now_s, TimeNs no
     return;
   }
   const std::size_t slot = t.axis == 0 ? (t.variant == 1 ? kXA : kX) : t.axis + 1u;
+  // Everything is compared in machine coordinates: a program-coordinate reading is the machine
+  // position minus the offset the NC holds (machine = program + offset).
+  const double trigger_mm = config_.touch_positions == TouchPositions::kProgram
+                                ? t.trigger_position_mm + offset_in_force_um(t.axis) / kUmPerMm
+                                : t.trigger_position_mm;
   const Phase ph = state_.phase;
   const bool reference = ph == Phase::kReferenceTouches && t.probe == ProbeKind::kReferenceProbe;
   const bool machine =
@@ -246,15 +298,15 @@ void Calibrator::handle_touch(const CalibrationTouch& t, double now_s, TimeNs no
                                                 config_.reference_y_mm, config_.reference_z_mm};
     const double contact =
         slot == kXA ? config_.reference_axial_contact_mm : config_.reference_contact_mm;
-    value = (t.trigger_position_mm - (centre[slot] - t.direction * contact)) * kUmPerMm;
+    value = (trigger_mm - (centre[slot] - t.direction * contact)) * kUmPerMm;
   } else if (ph == Phase::kReady) {
-    value = (t.trigger_position_mm - state_.nominals[slot].position_mm) * kUmPerMm;
+    value = (trigger_mm - state_.nominals[slot].position_mm) * kUmPerMm;
   } else {
-    value = t.trigger_position_mm * kUmPerMm;
+    value = trigger_mm * kUmPerMm;
   }
   const auto i = static_cast<std::size_t>(n);
   set_.value[slot][i] = value;
-  set_.trigger_mm[slot][i] = t.trigger_position_mm;
+  set_.trigger_mm[slot][i] = trigger_mm;
   set_.direction[slot] = t.direction;
   ++n;
   for (const auto c : set_.count) {
@@ -308,6 +360,13 @@ void Calibrator::evaluate_set(double now_s, TimeNs now_ns, StepOutput& out) noex
         break;
     }
   }
+  if (state_.phase == Phase::kReady) {
+    // The requested cycle came (accepted or refused: an alarm tells the operator); the schedule
+    // counts from here.
+    due_raised_ = false;
+    demand_ = false;
+    last_attempt_s_ = now_s;
+  }
   // A scattered set applies nothing; the touch cycle is repeated as a whole.
   set_ = TouchSet{};
 }
@@ -329,6 +388,7 @@ void Calibrator::evaluate_reference(TimeNs now_ns, StepOutput& out) noexcept {
   state_.phase = Phase::kTestGrindLateral;
   state_.grind_correction_um = d[kX];
   state_.grinds = 0;
+  last_write_s_ = -1e300;  // the X register takes the Δx to grind with at the next step
 }
 
 void Calibrator::evaluate_nominals(double now_s, TimeNs now_ns, StepOutput& out) noexcept {
@@ -395,7 +455,6 @@ void Calibrator::evaluate_recalibration(double now_s, TimeNs now_ns, StepOutput&
   state_.history_count =
       std::min(state_.history_count + 1, static_cast<std::int32_t>(kHistorySize));
   state_.last_set_time_s = now_s;
-  due_raised_ = false;
   for (std::size_t a = 0; a < kAxisCount; ++a) {
     out.alarm(now_ns, Severity::kInfo, AlarmCode::kRecalibrationApplied,
               static_cast<std::int32_t>(a), drift[kAxisSlot[a]]);
@@ -509,6 +568,9 @@ double Calibrator::predicted_drift_um(Slot slot, TimeNs now_ns) const noexcept {
   return predict(static_cast<std::size_t>(slot), seconds(now_ns));
 }
 double Calibrator::target_um(std::size_t axis, TimeNs now_ns) const noexcept {
+  if (grinding() && axis == 0) {
+    return state_.grind_correction_um;
+  }
   if (!base_valid() || axis >= kAxisCount) {
     return kNaN;
   }
@@ -523,6 +585,12 @@ void Calibrator::step(TimeNs now_ns, std::span<const Event> events, StepOutput& 
     return;
   }
   const double now_s = seconds(now_ns);
+  for (std::size_t a = 0; a < kAxisCount; ++a) {
+    if (std::isfinite(pending_sync_[a])) {
+      sync_register(a, pending_sync_[a], now_ns);
+      pending_sync_[a] = kNaN;
+    }
+  }
   for (const Event& e : events) {
     if (const auto* touch = std::get_if<CalibrationTouch>(&e)) {
       handle_touch(*touch, now_s, now_ns, out);
@@ -546,24 +614,42 @@ void Calibrator::step(TimeNs now_ns, std::span<const Event> events, StepOutput& 
     out.alarm(now_ns, Severity::kWarning, AlarmCode::kTouchSetIncomplete, -1, have);
     set_ = TouchSet{};
   }
+  const double since_s = now_s - std::fmax(state_.last_set_time_s, last_attempt_s_);
   if (state_.phase == Phase::kReady && config_.recalibration_interval_s > 0.0 && !due_raised_ &&
-      now_s - state_.last_set_time_s >= config_.recalibration_interval_s) {
-    out.alarm(now_ns, Severity::kInfo, AlarmCode::kRecalibrationDue, -1,
-              now_s - state_.last_set_time_s);
+      since_s >= config_.recalibration_interval_s) {
+    out.alarm(now_ns, Severity::kInfo, AlarmCode::kRecalibrationDue, -1, since_s);
     due_raised_ = true;
   }
   write_registers(now_s, now_ns, out);
+  write_request(now_ns, out);
+}
+
+void Calibrator::write_request(TimeNs now_ns, StepOutput& out) noexcept {
+  if (config_.request_register < 0) {
+    return;
+  }
+  const auto code = static_cast<std::int32_t>(request());
+  // A flag: sent when it changes (the engine re-sends it after a reconnect).
+  if (code != written_request_) {
+    out.writes.push(OffsetWrite{now_ns, static_cast<std::uint16_t>(config_.request_register),
+                                static_cast<double>(code)});
+    written_request_ = code;
+  }
 }
 
 void Calibrator::write_registers(double now_s, TimeNs now_ns, StepOutput& out) noexcept {
-  if (!base_valid() || now_s - last_write_s_ < config_.write_period_s) {
+  const bool grind = grinding();
+  if ((!base_valid() && !grind) || now_s - last_write_s_ < config_.write_period_s) {
     return;
   }
   last_write_s_ = now_s;
   const std::array<std::uint16_t, kAxisCount> reg{config_.register_x, config_.register_y,
                                                   config_.register_z};
-  for (std::size_t a = 0; a < kAxisCount; ++a) {
-    const double target = base_um(a) + correction(kAxisSlot[a], now_s);
+  // A test grind is ground with its Δx in force on X; Y and Z keep what they hold.
+  const std::size_t axes = grind ? 1 : kAxisCount;
+  for (std::size_t a = 0; a < axes; ++a) {
+    const double target =
+        grind ? state_.grind_correction_um : base_um(a) + correction(kAxisSlot[a], now_s);
     const LimitResult r = limiters_[a].apply(target, now_ns);
     const auto subject = static_cast<std::int32_t>(reg[a]);
     // Alarms and warnings on the edge only: a held or slewed value persists for many cycles.
@@ -596,6 +682,13 @@ void Calibrator::sync_register(std::size_t axis, double value_um, TimeNs now_ns)
   if (axis < kAxisCount) {
     limiters_[axis].reset(value_um, now_ns);
     written_um_[axis] = limiters_[axis].output_um();
+    pending_sync_[axis] = kNaN;  // what the NC holds now wins over a restored value
+  }
+}
+
+void Calibrator::restore_written(std::size_t axis, double value_um) noexcept {
+  if (axis < kAxisCount && std::isfinite(value_um)) {
+    pending_sync_[axis] = value_um;
   }
 }
 
@@ -619,7 +712,9 @@ void Calibrator::import_state_unchecked(const CalibState& state) noexcept {
   state_ = s;
   set_ = TouchSet{};
   last_write_s_ = -1e300;
+  last_attempt_s_ = -1e300;
   due_raised_ = false;
+  demand_ = false;
 }
 
 }  // namespace nccomp::core::calib

@@ -14,7 +14,15 @@
 // prediction is crept in with a core/common/profile.hpp shape, never applied at once.
 //
 // Output: the axis offset registers X/Y/Z carry base (calibration) + drift correction [µm],
-// absolute values, through one OffsetLimiter per axis.
+// absolute values, through one OffsetLimiter per axis. During a test grind the X register carries
+// the Δx to grind with (Y and Z keep their values). An optional request register (kind flag)
+// carries the RequestCode of what the calibrator waits for, so that the NC or PLC can start the
+// matching cycle (reference touches, test grind, nominal touches, a due or demanded
+// recalibration).
+//
+// Touch positions are compared in machine coordinates. With touch_positions = "program" the NC
+// reports machine − offset; the calibrator adds back the offset it wrote (what the NC holds), so
+// that a correction in force does not read as drift and the corrections converge.
 #pragma once
 
 #include <array>
@@ -68,12 +76,20 @@ class Calibrator {
 
   /// Wall clock minus the monotonic clock of step()'s now_ns [s]; used by export / import.
   void set_clock_offset_s(double wall_minus_monotonic_s) noexcept;
+  [[nodiscard]] double clock_offset_s() const noexcept { return clock_offset_s_; }
 
   /// Starts an initial calibration (discards the previous one; registers keep their values
   /// until the new calibration completes). Allocation-free.
   void begin_calibration(TimeNs now_ns, StepOutput& out) noexcept;
   /// Discards a touch set in progress. Allocation-free.
   void discard_touch_set() noexcept;
+  /// On demand: asks the NC for a recalibration touch cycle now (request register →
+  /// kRecalibration until the next touch set is evaluated). False, and nothing changes, unless
+  /// the calibrator is ready. Allocation-free.
+  bool request_recalibration() noexcept;
+  /// One touch outside step() (an operator's typed touch); the same checks as a bus touch.
+  /// Real-time safe.
+  void enter_touch(const CalibrationTouch& touch, TimeNs now_ns, StepOutput& out) noexcept;
   /// Enters the two facet chords [mm] of a test grind: chord_plus from the facet ground from
   /// +X, chord_minus from −X. Allocation-free.
   FacetResult enter_facets(Face face, double chord_plus_mm, double chord_minus_mm, TimeNs now_ns,
@@ -85,6 +101,9 @@ class Calibrator {
 
   /// Tells the limiter of axis (0..2) what the NC's register holds now (start-up, read-back).
   void sync_register(std::size_t axis, double value_um, TimeNs now_ns) noexcept;
+  /// The same when the time is not known (restoring a saved state): applied at the start of the
+  /// next step(), at its time. Non-finite values are ignored. Real-time safe.
+  void restore_written(std::size_t axis, double value_um) noexcept;
 
   /// State with times on the wall clock (set_clock_offset_s). Allocation-free.
   [[nodiscard]] CalibState export_state() const noexcept;
@@ -109,6 +128,13 @@ class Calibrator {
   [[nodiscard]] double target_um(std::size_t axis, TimeNs now_ns) const noexcept;
   /// Last value written to axis 0..2 [µm] (NaN before the first write).
   [[nodiscard]] double written_um(std::size_t axis) const noexcept { return written_um_[axis]; }
+  /// What the NC holds on axis 0..2 as far as the calibrator knows: the last value written or
+  /// synced, 0 before any [µm]. Program-coordinate touches are corrected by it.
+  [[nodiscard]] double offset_in_force_um(std::size_t axis) const noexcept;
+  /// What the calibrator waits for (the request register's value).
+  [[nodiscard]] RequestCode request() const noexcept;
+  /// A recalibration was asked for (due by the schedule or on demand) and no set evaluated since.
+  [[nodiscard]] bool recalibration_requested() const noexcept { return due_raised_ || demand_; }
   [[nodiscard]] double temperature_c() const noexcept { return temp_c_; }
   [[nodiscard]] const OffsetLimiter& limiter(std::size_t axis) const noexcept {
     return limiters_[axis];
@@ -140,6 +166,8 @@ class Calibrator {
   [[nodiscard]] double base_um(std::size_t axis) const noexcept;
   void emit_records(TimeNs now_ns, StepOutput& out) const noexcept;
   void write_registers(double now_s, TimeNs now_ns, StepOutput& out) noexcept;
+  void write_request(TimeNs now_ns, StepOutput& out) noexcept;
+  [[nodiscard]] bool grinding() const noexcept;
 
   CalibrationConfig config_{};
   bool configured_{false};
@@ -151,8 +179,13 @@ class Calibrator {
   std::array<double, kAxisCount> written_um_{kNaN, kNaN, kNaN};
   std::array<bool, kAxisCount> slewing_{};
   std::array<bool, kAxisCount> rejecting_{};
+  std::array<double, kAxisCount> pending_sync_{kNaN, kNaN, kNaN};
   double last_write_s_{-1e300};
+  /// Last set evaluated in phase ready (accepted or refused): the schedule counts from it too.
+  double last_attempt_s_{-1e300};
+  std::int32_t written_request_{-1};  // -1: not written yet
   bool due_raised_{false};
+  bool demand_{false};
 };
 
 }  // namespace nccomp::core::calib

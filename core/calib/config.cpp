@@ -83,6 +83,18 @@ void validate(const CalibrationConfig& c) {
   positive(c.max_abs_um, "max_abs_um");
   positive(c.max_step_um, "max_step_um");
   positive(c.max_rate_um_per_s, "max_rate_um_per_s");
+  if (c.touch_positions != TouchPositions::kMachine &&
+      c.touch_positions != TouchPositions::kProgram) {
+    fail("touch_positions", "must be machine or program", static_cast<double>(c.touch_positions));
+  }
+  if (c.request_register < -1 || c.request_register > 65535) {
+    fail("request_register", "must be -1 (none) or a register index 0..65535", c.request_register);
+  }
+  if (c.request_register == c.register_x || c.request_register == c.register_y ||
+      c.request_register == c.register_z) {
+    fail("request_register", "must differ from register_x, register_y and register_z",
+         c.request_register);
+  }
   if (c.plausibility_um > c.max_abs_um) {
     fail("plausibility_um", "must not exceed max_abs_um", c.plausibility_um);
   }
@@ -148,6 +160,45 @@ bool parse_prediction(const std::string& s, Prediction& out) noexcept {
     return false;
   }
   return true;
+}
+
+const char* to_string(TouchPositions positions) noexcept {
+  switch (positions) {
+    case TouchPositions::kMachine:
+      return "machine";
+    case TouchPositions::kProgram:
+      return "program";
+  }
+  return "?";
+}
+
+bool parse_touch_positions(const std::string& s, TouchPositions& out) noexcept {
+  if (s == "machine") {
+    out = TouchPositions::kMachine;
+  } else if (s == "program") {
+    out = TouchPositions::kProgram;
+  } else {
+    return false;
+  }
+  return true;
+}
+
+const char* to_string(RequestCode code) noexcept {
+  switch (code) {
+    case RequestCode::kNone:
+      return "none";
+    case RequestCode::kReferenceTouches:
+      return "reference-touches";
+    case RequestCode::kTestGrindLateral:
+      return "test-grind-lateral";
+    case RequestCode::kTestGrindEndFace:
+      return "test-grind-end-face";
+    case RequestCode::kNominalTouches:
+      return "nominal-touches";
+    case RequestCode::kRecalibration:
+      return "recalibration";
+  }
+  return "?";
 }
 
 bool parse_creep_shape(const std::string& s, ProfileShape& out) noexcept {

@@ -24,6 +24,30 @@ enum class Prediction : std::uint8_t {
   kTemperature = 2,  // drift linear in the mapped temperature, slope learned from the touches
 };
 
+/// In which coordinates the NC reports a touch's trigger position.
+enum class TouchPositions : std::uint8_t {
+  /// Machine coordinates: where the axis is at the trigger. The axis offsets nccomp writes do not
+  /// change where the probe meets the body, so they do not enter the reading (drift = touch −
+  /// nominal directly). Sinumerik $AA_MM, a PLC reading the position encoder.
+  kMachine = 0,
+  /// Program (work) coordinates: machine position − axis offset in force (the NC adds the offset
+  /// to the commanded position, machine = program + offset). The calibrator adds the offset it
+  /// last wrote back before comparing with the nominal; without that the corrections would
+  /// alternate between the drift and zero. ncsim's touch program reports these by default.
+  kProgram = 1,
+};
+
+/// Values of the request register (CalibrationConfig::request_register): what the calibrator
+/// waits for, so that the NC or PLC can start the matching cycle. Stable numbers.
+enum class RequestCode : std::uint8_t {
+  kNone = 0,              // nothing to do
+  kReferenceTouches = 1,  // touch the reference disk with the reference probe
+  kTestGrindLateral = 2,  // grind the blank from ±X (X register = the Δx to grind with)
+  kTestGrindEndFace = 3,  // grind the end face from ±X (X register = the Δx to grind with)
+  kNominalTouches = 4,    // machine probe on the test body: the nominals
+  kRecalibration = 5,     // machine probe on the test body: a recalibration (due or on demand)
+};
+
 struct CalibrationConfig {
   // --- NC registers (logical indices of the config's register map) -------------------------
   /// Axis offset registers that take the X / Y / Z correction [µm].
@@ -45,6 +69,8 @@ struct CalibrationConfig {
   double reference_axial_contact_mm{0.0};
   /// Touches per axis (and variant) in one set; their scatter is checked.
   std::int32_t touches_per_axis{1};
+  /// Coordinates of the reported trigger positions (see TouchPositions).
+  TouchPositions touch_positions{TouchPositions::kMachine};
   /// Largest spread (max − min) of the repeated touches of one axis [µm].
   double max_scatter_um{5.0};
   /// A set not completed within this time is discarded [s].
@@ -83,6 +109,10 @@ struct CalibrationConfig {
   /// Slopes learned beyond ± this are clamped [µm/°C].
   double max_temperature_slope_um_per_c{20.0};
 
+  /// Logical register (kind flag) that gets the RequestCode the calibrator waits for; the NC or
+  /// PLC polls it to start its touch cycle or test grind. −1 = none.
+  std::int32_t request_register{-1};
+
   // --- output -------------------------------------------------------------------------------
   /// A correction is re-sent at most this often [s] and only when it moved by the dead band.
   double write_period_s{1.0};
@@ -91,6 +121,11 @@ struct CalibrationConfig {
   double max_abs_um{200.0};
   double max_step_um{5.0};
   double max_rate_um_per_s{50.0};
+
+  // --- daemon only ----------------------------------------------------------------------------
+  /// A state file of `nccomp calibrate --state` that nccompd adopts at start-up when it is newer
+  /// than the calibration the daemon holds (relative to the config file). Empty = none.
+  std::string state_file{};
 };
 
 /// Throws std::invalid_argument naming the offending key ("calibration.<key>") and its value.
@@ -102,6 +137,9 @@ const char* to_string(Prediction prediction) noexcept;
 const char* to_string(ProfileShape shape) noexcept;
 bool parse_facet_rule(const std::string& s, FacetRule& out) noexcept;
 bool parse_prediction(const std::string& s, Prediction& out) noexcept;
+const char* to_string(TouchPositions positions) noexcept;
+bool parse_touch_positions(const std::string& s, TouchPositions& out) noexcept;
+const char* to_string(RequestCode code) noexcept;
 /// The analytic shapes only: linear, cosine, smoothstep, step.
 bool parse_creep_shape(const std::string& s, ProfileShape& out) noexcept;
 

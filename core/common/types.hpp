@@ -117,8 +117,32 @@ struct TemperatureSample {
   double temperature_c{0.0};
 };
 
+/// What an operator command asks (OperatorCommand::kind). Numbers are stable.
+enum class OperatorCommandKind : std::uint8_t {
+  kNone = 0,
+  // S3 calibration (core/calib): `nccomp calibrate --daemon`.
+  kCalibrationBegin = 1,        // start an initial calibration
+  kCalibrationFacets = 2,       // code[0] = face (0 lateral, 1 end face); value = {c+, c-} [mm]
+  kCalibrationDiscard = 3,      // drop a touch set in progress
+  kCalibrationRecalibrate = 4,  // request a recalibration touch cycle now (on demand)
+  kCalibrationTouch = 5,        // a touch typed by the operator: code = {probe, axis, direction,
+                                // variant} as in CalibrationTouch, value[0] = trigger [mm]
+  kCalibrationStatus = 6,       // no change: publish the state (the reply shows it)
+};
+
+/// An operator command (status socket → SPSC ring → the loop): validated by the daemon before it
+/// is queued and again by the module that takes it. `sequence` (> 0) lets the sender find the
+/// module's answer to exactly this command.
+struct OperatorCommand {
+  TimeNs time_ns{0};
+  std::uint32_t sequence{0};
+  OperatorCommandKind kind{OperatorCommandKind::kNone};
+  std::array<std::int8_t, 4> code{};
+  std::array<double, 2> value{};
+};
+
 using Event = std::variant<AxisSample, ToolMeasurement, ProbeMeasurement, CalibrationTouch,
-                           ToolChange, ProgramEvent, TemperatureSample>;
+                           ToolChange, ProgramEvent, TemperatureSample, OperatorCommand>;
 
 // ---------------------------------------------------------------------------------------------
 // Out: commands to the NC, alarms, measurement records.

@@ -1,10 +1,13 @@
 // `nccomp calibrate`: the operator's side of S3 (docs/calibration.md).
 //
 //   nccomp calibrate --config machine.toml [--script FILE|-] [--state FILE] [--epoch UNIX_S]
+//   nccomp calibrate --daemon SOCKET [--script FILE|-] [--interactive]
 //
-// Without --script and with a terminal on stdin it prompts for commands, showing what to do
-// next; with --script it runs the file (or stdin for '-') and stops at the first bad line.
-// --state loads a saved calibration (if the file exists) and saves the result atomically.
+// Without --script and with a terminal on stdin (or --interactive) it prompts for commands,
+// showing what to do next; with --script it runs the file (or stdin for '-') and stops at the
+// first bad line. --state loads a saved calibration (if the file exists) and saves the result
+// atomically. --daemon runs the same commands against a running nccompd's calibrator (status
+// socket): the daemon validates and answers each; wait / await / facets-file run here.
 #include <unistd.h>
 
 #include <chrono>
@@ -15,7 +18,11 @@
 #include <sstream>
 #include <string>
 
+#include <thread>
+
 #include "tools/calibrate/config_toml.hpp"
+#include "tools/calibrate/daemon_client.hpp"
+#include "tools/calibrate/facet_import.hpp"
 #include "tools/calibrate/script.hpp"
 #include "tools/calibrate/session.hpp"
 #include "tools/nccomp/command.hpp"
@@ -31,7 +38,9 @@ struct Options {
   std::string config;
   std::string script;
   std::string state;
+  std::string daemon;
   double epoch_s{-1.0};
+  bool interactive{false};
 };
 
 std::string read_file(const std::string& path) {
@@ -63,7 +72,199 @@ void write_atomically(const std::string& path, const std::string& text) {
   }
 }
 
+// ---------------------------------------------------------------------------------------------
+// Against a running daemon.
+
+struct Answer {
+  bool ok{false};
+  std::string phase;
+  std::string text;  // what to show (the "ok ..." line removed)
+};
+
+Answer ask(const std::string& socket, const std::string& command) {
+  std::string reply;
+  try {
+    reply = cal::daemon_request(socket, command);
+  } catch (const std::exception& e) {
+    throw CommandError(kExitFailure, e.what());
+  }
+  Answer a;
+  if (reply.rfind("ok ", 0) == 0) {
+    a.ok = true;
+    const auto nl = reply.find('\n');
+    const std::string head = reply.substr(3, nl == std::string::npos ? nl : nl - 3);
+    a.phase = head.substr(0, head.find(' '));
+    a.text = nl == std::string::npos ? "" : reply.substr(nl + 1);
+  } else {
+    a.text = reply;
+  }
+  return a;
+}
+
+// The command text without a comment (the daemon parses it again).
+std::string command_text(const std::string& line) {
+  std::string t = line.substr(0, line.find('#'));
+  while (!t.empty() && (t.back() == ' ' || t.back() == '\t' || t.back() == '\r')) t.pop_back();
+  std::size_t b = 0;
+  while (b < t.size() && (t[b] == ' ' || t[b] == '\t')) ++b;
+  return t.substr(b);
+}
+
+void run_daemon(const Options& o) {
+  const bool interactive = o.interactive || (o.script.empty() && isatty(STDIN_FILENO) != 0);
+  std::ifstream file;
+  std::istream* in = &std::cin;
+  std::string source = "stdin";
+  if (!o.script.empty() && o.script != "-") {
+    file.open(o.script);
+    if (!file) {
+      throw CommandError(kExitInvalidInput, o.script + ": cannot be read");
+    }
+    in = &file;
+    source = o.script;
+  }
+  Answer first = ask(o.daemon, "");
+  if (!first.ok) {
+    throw CommandError(kExitFailure, o.daemon + ": " + first.text);
+  }
+  std::cout << "nccomp calibrate on " << o.daemon << " (phase " << first.phase << ")\n";
+  std::string hint_text = first.text;
+  if (interactive) {
+    std::cout << "type 'help' for the commands, 'quit' to leave\n";
+  }
+  std::string line;
+  std::size_t line_no = 0;
+  std::size_t errors = 0;
+  const auto fail = [&](const std::string& what) {
+    ++errors;
+    if (interactive) {
+      std::cout << "error: " << what << '\n';
+      return;
+    }
+    throw CommandError(kExitInvalidInput,
+                       source + ": line " + std::to_string(line_no) + ": " + what);
+  };
+  while (true) {
+    if (interactive) {
+      std::cout << hint_text << "calibrate> " << std::flush;
+    }
+    if (!std::getline(*in, line)) {
+      break;
+    }
+    ++line_no;
+    cal::Command cmd;
+    try {
+      cmd = cal::parse_line(line, line_no);
+    } catch (const cal::ScriptError& e) {
+      std::string what = e.what();
+      what.erase(0, what.find(": ") + 2);  // "line N: " is added by fail()
+      fail(what);
+      continue;
+    }
+    std::string send;
+    bool quit = false;
+    std::visit(
+        [&](const auto& c) {
+          using T = std::decay_t<decltype(c)>;
+          if constexpr (std::is_same_v<T, cal::CmdEmpty>) {
+          } else if constexpr (std::is_same_v<T, cal::CmdHelp>) {
+            std::cout << cal::script_help();
+          } else if constexpr (std::is_same_v<T, cal::CmdQuit>) {
+            quit = true;
+          } else if constexpr (std::is_same_v<T, cal::CmdTime> ||
+                               std::is_same_v<T, cal::CmdTemperature>) {
+            fail("'" + command_text(line).substr(0, command_text(line).find(' ')) +
+                 "' works offline only: the daemon runs on its own clock and takes temperatures "
+                 "from the NC");
+          } else if constexpr (std::is_same_v<T, cal::CmdWait>) {
+            std::this_thread::sleep_for(std::chrono::duration<double>(c.duration_s));
+            std::cout << "waited " << c.duration_s << " s\n";
+          } else if constexpr (std::is_same_v<T, cal::CmdAwait>) {
+            const std::string want = nccomp::core::calib::to_string(c.phase);
+            const auto end =
+                std::chrono::steady_clock::now() + std::chrono::duration<double>(c.timeout_s);
+            Answer a = ask(o.daemon, "");
+            while (a.ok && a.phase != want && std::chrono::steady_clock::now() < end) {
+              std::this_thread::sleep_for(std::chrono::milliseconds(100));
+              a = ask(o.daemon, "");
+            }
+            if (!a.ok) {
+              fail(a.text);
+            } else if (a.phase != want) {
+              fail("the daemon did not reach " + want + " within " +
+                   std::to_string(static_cast<int>(c.timeout_s)) + " s (phase " + a.phase + ")");
+            } else {
+              std::cout << "phase " << a.phase << '\n';
+              hint_text = a.text;
+            }
+          } else if constexpr (std::is_same_v<T, cal::CmdFacetsFile>) {
+            std::vector<cal::FacetMeasurement> rows;
+            try {
+              rows = cal::read_facet_export(c.path);
+            } catch (const std::invalid_argument& e) {
+              fail(e.what());
+              return;
+            }
+            if (c.row > rows.size()) {
+              fail(c.path + ": has " + std::to_string(rows.size()) + " rows, not " +
+                   std::to_string(c.row));
+              return;
+            }
+            const auto& m = rows[c.row == 0 ? rows.size() - 1 : c.row - 1];
+            std::cout << "from " << c.path << " line " << m.line << ":\n";
+            char buf[128];
+            std::snprintf(buf, sizeof buf, "facets %s %.6f %.6f",
+                          m.face == nccomp::core::calib::Face::kLateral ? "lateral" : "end-face",
+                          m.chord_plus_mm, m.chord_minus_mm);
+            send = buf;
+          } else {
+            send = command_text(line);
+          }
+        },
+        cmd);
+    if (quit) {
+      break;
+    }
+    if (send.empty()) {
+      continue;
+    }
+    const Answer a = ask(o.daemon, send);
+    if (!a.ok) {
+      // The daemon's "error: ..." with the prompt after it.
+      const auto nl = a.text.find('\n');
+      std::string what = a.text.substr(0, nl);
+      if (what.rfind("error: ", 0) == 0) what.erase(0, 7);
+      fail(what);
+      if (nl != std::string::npos) {
+        std::cout << a.text.substr(nl + 1);
+        hint_text.clear();
+      }
+      continue;
+    }
+    // The daemon's answer ends with the prompt line ("-- ..."): shown before the next command.
+    const auto cut = a.text.rfind("-- ");
+    std::cout << a.text.substr(0, cut);
+    hint_text = cut == std::string::npos ? "" : a.text.substr(cut);
+  }
+  std::cout << hint_text;
+  if (errors > 0) {
+    std::cout << errors << " command(s) refused\n";
+  }
+}
+
 void run(const Options& o) {
+  if (!o.daemon.empty()) {
+    if (!o.state.empty() || o.epoch_s >= 0.0) {
+      throw CommandError(kExitInvalidInput,
+                         "--state and --epoch are offline options: the daemon keeps its own state "
+                         "(adopt an offline state with [calibration] state_file)");
+    }
+    run_daemon(o);
+    return;
+  }
+  if (o.config.empty()) {
+    throw CommandError(kExitInvalidInput, "--config FILE or --daemon SOCKET is required");
+  }
   nccomp::core::calib::CalibrationConfig config;
   try {
     config = cal::load_calibration_config_file(o.config);
@@ -85,7 +286,7 @@ void run(const Options& o) {
     std::cout << "loaded state " << o.state << " (phase "
               << nccomp::core::calib::to_string(session.calibrator().phase()) << ")\n";
   }
-  const bool interactive = o.script.empty() && isatty(STDIN_FILENO) != 0;
+  const bool interactive = o.interactive || (o.script.empty() && isatty(STDIN_FILENO) != 0);
   std::ifstream file;
   std::istream* in = &std::cin;
   std::string source = "stdin";
@@ -139,9 +340,14 @@ void setup(CLI::App& app) {
       "calibrate",
       "initial calibration (reference touches, test grinds, nominals) and recalibration of the "
       "machine (S3), interactive or from a script");
-  sub->add_option("--config", opts->config, "TOML config with a [calibration] table")
-      ->required()
+  sub->add_option("--config", opts->config, "TOML config with a [calibration] table (offline)")
       ->check(CLI::ExistingFile);
+  sub->add_option("--daemon", opts->daemon,
+                  "run against a running nccompd: its status socket (e.g. "
+                  "/run/nccompd/status.sock)");
+  sub->add_flag("--interactive", opts->interactive,
+                "prompt even when stdin is not a terminal (each command answered, then the "
+                "prompt)");
   sub->add_option("--script", opts->script,
                   "command file ('-' = stdin); without it a terminal gets a prompt");
   sub->add_option("--state", opts->state,

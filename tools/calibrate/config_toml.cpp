@@ -108,6 +108,20 @@ CalibrationConfig load_calibration_node(const toml::node& calibration, const std
       {"reference_contact_mm", num(c.reference_contact_mm)},
       {"reference_axial_contact_mm", num(c.reference_axial_contact_mm)},
       {"touches_per_axis", i32(c.touches_per_axis, 1, 8)},
+      {"touch_positions",
+       [&](const toml::node& n, const std::string& k) {
+         if (!core::calib::parse_touch_positions(as_string(src, n, k), c.touch_positions)) {
+           fail(src, &n, k, "must be \"machine\" or \"program\"");
+         }
+       }},
+      {"request_register", i32(c.request_register, -1, 65535)},
+      {"state_file",
+       [&](const toml::node& n, const std::string& k) {
+         c.state_file = as_string(src, n, k);
+         if (c.state_file.empty()) {
+           fail(src, &n, k, "must not be empty (leave the key out for none)");
+         }
+       }},
       {"max_scatter_um", num(c.max_scatter_um)},
       {"touch_set_timeout_s", num(c.touch_set_timeout_s)},
       {"facet_rule",

@@ -68,7 +68,22 @@ const char* script_help() noexcept {
          "  begin                    start an initial calibration\n"
          "  touch reference|machine x|y|z +|- [lateral|axial] <trigger_mm>\n"
          "  facets lateral|end-face <chord_plus_mm> <chord_minus_mm>\n"
+         "  facets-file <path> [row]  chords from a measuring device's CSV export (last row)\n"
+         "  recalibrate              ask the NC for a recalibration touch cycle now\n"
+         "  await <phase> [timeout_s] (with --daemon) wait until the daemon reaches <phase>\n"
          "  status | discard | help | quit\n";
+}
+
+bool parse_phase(std::string_view name, core::calib::Phase& out) noexcept {
+  using core::calib::Phase;
+  for (const Phase p : {Phase::kUncalibrated, Phase::kReferenceTouches, Phase::kTestGrindLateral,
+                        Phase::kTestGrindEndFace, Phase::kNominalTouches, Phase::kReady}) {
+    if (name == core::calib::to_string(p)) {
+      out = p;
+      return true;
+    }
+  }
+  return false;
 }
 
 Command parse_line(std::string_view line, std::size_t line_no) {
@@ -183,6 +198,42 @@ Command parse_line(std::string_view line, std::size_t line_no) {
     c.chord_minus_mm = number(w[3], line_no, "chord_minus_mm");
     if (c.chord_plus_mm <= 0.0 || c.chord_minus_mm <= 0.0) {
       throw ScriptError(line_no, "chords must be positive [mm]");
+    }
+    return c;
+  }
+  if (verb == "facets-file") {
+    expect_words(w, 2, 3, line_no, "facets-file <path> [row]");
+    CmdFacetsFile c;
+    c.path = std::string(w[1]);
+    if (w.size() == 3) {
+      std::size_t row = 0;
+      const auto res = std::from_chars(w[2].data(), w[2].data() + w[2].size(), row);
+      if (res.ec != std::errc() || res.ptr != w[2].data() + w[2].size() || row < 1 || row > 10000) {
+        throw ScriptError(line_no,
+                          "row must be an integer 1..10000, got '" + std::string(w[2]) + "'");
+      }
+      c.row = row;
+    }
+    return c;
+  }
+  if (verb == "recalibrate") {
+    expect_words(w, 1, 1, line_no, "recalibrate");
+    return CmdRecalibrate{};
+  }
+  if (verb == "await") {
+    expect_words(w, 2, 3, line_no, "await <phase> [timeout_s]");
+    CmdAwait c;
+    if (!parse_phase(lower(w[1]), c.phase)) {
+      throw ScriptError(line_no,
+                        "phase must be uncalibrated, reference-touches, test-grind-lateral, "
+                        "test-grind-end-face, nominal-touches or ready, got '" +
+                            std::string(w[1]) + "'");
+    }
+    if (w.size() == 3) {
+      c.timeout_s = number(w[2], line_no, "timeout");
+      if (c.timeout_s <= 0.0 || c.timeout_s > 86400.0) {
+        throw ScriptError(line_no, "timeout must be in (0, 86400] s");
+      }
     }
     return c;
   }

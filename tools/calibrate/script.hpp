@@ -7,6 +7,9 @@
 //   begin                                       start an initial calibration
 //   touch reference|machine x|y|z +|- [lateral|axial] <trigger_mm>
 //   facets lateral|end-face <chord_plus_mm> <chord_minus_mm>
+//   facets-file <path> [row]                    chords from a measuring device's export
+//   recalibrate                                 ask for a recalibration touch cycle now
+//   await <phase> [timeout_s]                   (--daemon) wait until the daemon is in <phase>
 //   status | discard | help | quit
 //
 // '#' starts a comment; blank lines are ignored.
@@ -43,14 +46,25 @@ struct CmdFacets {
   double chord_plus_mm{0.0};
   double chord_minus_mm{0.0};
 };
+/// A measuring device's export (facet_import.hpp); row 0 = the last row, else 1-based.
+struct CmdFacetsFile {
+  std::string path;
+  std::size_t row{0};
+};
+struct CmdRecalibrate {};
+struct CmdAwait {
+  core::calib::Phase phase{core::calib::Phase::kReady};
+  double timeout_s{600.0};
+};
 struct CmdStatus {};
 struct CmdDiscard {};
 struct CmdHelp {};
 struct CmdQuit {};
 struct CmdEmpty {};
 
-using Command = std::variant<CmdEmpty, CmdTime, CmdWait, CmdTemperature, CmdBegin, CmdTouch,
-                             CmdFacets, CmdStatus, CmdDiscard, CmdHelp, CmdQuit>;
+using Command =
+    std::variant<CmdEmpty, CmdTime, CmdWait, CmdTemperature, CmdBegin, CmdTouch, CmdFacets,
+                 CmdStatus, CmdDiscard, CmdHelp, CmdQuit, CmdFacetsFile, CmdRecalibrate, CmdAwait>;
 
 /// A malformed line: what() is "line N: <why>".
 class ScriptError : public std::invalid_argument {
@@ -68,5 +82,8 @@ Command parse_line(std::string_view line, std::size_t line_no);
 
 /// The help text listing the commands.
 const char* script_help() noexcept;
+
+/// Phase by its name ("ready", "test-grind-lateral", ...); false if unknown.
+bool parse_phase(std::string_view name, core::calib::Phase& out) noexcept;
 
 }  // namespace nccomp::tools::calibrate

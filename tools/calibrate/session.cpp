@@ -5,7 +5,10 @@
 
 #include <variant>
 
+#include "core/calib/snapshot.hpp"
 #include "core/calib/state.hpp"
+#include "tools/calibrate/facet_import.hpp"
+#include "tools/calibrate/render.hpp"
 
 namespace nccomp::tools::calibrate {
 
@@ -13,65 +16,6 @@ namespace {
 
 using core::AlarmCode;
 using core::calib::Phase;
-using core::calib::Slot;
-
-const char* alarm_name(AlarmCode code) {
-  switch (code) {
-    case AlarmCode::kOffsetNonFinite:
-      return "offset-non-finite";
-    case AlarmCode::kOffsetBeyondAbsoluteLimit:
-      return "offset-beyond-absolute-limit";
-    case AlarmCode::kOffsetSlewLimited:
-      return "offset-slew-limited";
-    case AlarmCode::kRecalibrationImplausible:
-      return "recalibration-implausible";
-    case AlarmCode::kTouchScatter:
-      return "touch-scatter";
-    case AlarmCode::kRecalibrationDue:
-      return "recalibration-due";
-    case AlarmCode::kTouchSetIncomplete:
-      return "touch-set-incomplete";
-    case AlarmCode::kCalibrationOutOfRange:
-      return "calibration-out-of-range";
-    case AlarmCode::kTouchUnexpected:
-      return "touch-unexpected";
-    case AlarmCode::kTestGrindNotConverging:
-      return "test-grind-not-converging";
-    case AlarmCode::kRecalibrationApplied:
-      return "recalibration-applied";
-    case AlarmCode::kCalibrationComplete:
-      return "calibration-complete";
-    case AlarmCode::kCalibrationInvalidInput:
-      return "calibration-invalid-input";
-    default:
-      return "other";
-  }
-}
-
-const char* severity_name(core::Severity s) {
-  switch (s) {
-    case core::Severity::kInfo:
-      return "info";
-    case core::Severity::kWarning:
-      return "WARNING";
-    case core::Severity::kAlarm:
-      return "ALARM";
-  }
-  return "?";
-}
-
-const char* axis_name(std::int32_t a) {
-  switch (a) {
-    case 0:
-      return "X";
-    case 1:
-      return "Y";
-    case 2:
-      return "Z";
-    default:
-      return "-";
-  }
-}
 
 }  // namespace
 
@@ -109,23 +53,7 @@ void Session::report(bool summarise_writes) {
     if (a.severity == core::Severity::kAlarm) {
       ++alarms_;
     }
-    const std::int32_t subject = a.subject;
-    out_ << fmt::format("  {} {} {}", severity_name(a.severity), static_cast<int>(a.code),
-                        alarm_name(a.code));
-    if (a.code == AlarmCode::kOffsetSlewLimited || a.code == AlarmCode::kOffsetNonFinite ||
-        a.code == AlarmCode::kOffsetBeyondAbsoluteLimit) {
-      out_ << fmt::format(" register {}: target {:+.3f} um", subject, a.value);
-    } else if (a.code == AlarmCode::kRecalibrationDue) {
-      out_ << fmt::format(": {:.0f} s since the last touch set", a.value);
-    } else if (a.code == AlarmCode::kTouchSetIncomplete) {
-      out_ << fmt::format(": {:.0f} touches discarded", a.value);
-    } else {
-      out_ << fmt::format(" axis {}: {:+.3f}", axis_name(subject), a.value);
-    }
-    if (a.code == AlarmCode::kRecalibrationImplausible || a.code == AlarmCode::kTouchScatter) {
-      out_ << " um, nothing applied";
-    }
-    out_ << '\n';
+    out_ << alarm_line(a);
   }
   for (const auto& r : output_.records) {
     const auto axis = static_cast<std::size_t>(r.point);
@@ -138,6 +66,13 @@ void Session::report(bool summarise_writes) {
   }
   const std::array<std::uint16_t, 3> reg{cfg.register_x, cfg.register_y, cfg.register_z};
   for (const auto& w : output_.writes) {
+    if (cfg.request_register >= 0 &&
+        w.register_index == static_cast<std::uint16_t>(cfg.request_register)) {
+      const auto code = static_cast<core::calib::RequestCode>(static_cast<int>(w.value_um));
+      out_ << fmt::format("  request register {} = {} ({})\n", w.register_index, w.value_um,
+                          core::calib::to_string(code));
+      continue;
+    }
     for (std::size_t a = 0; a < 3; ++a) {
       if (w.register_index == reg[a]) {
         last_written_[a] = w.value_um;
@@ -206,51 +141,40 @@ bool Session::run(const Command& command, std::size_t line_no) {
               axis_name(touch.axis), touch.direction > 0 ? "+" : "-",
               touch.variant == 1 ? "axial" : "lateral", touch.trigger_position_mm);
           report(false);
-          const auto& r = calib_.result();
           if (before == Phase::kReferenceTouches && calib_.phase() == Phase::kTestGrindLateral) {
-            out_ << fmt::format(
-                "  reference touches: dx lateral {:+.3f} um, dx axial {:+.3f} um (pivot D "
-                "{:+.3f} um), dy {:+.3f} um, dz {:+.3f} um\n",
-                r.dx_touch_lateral_um, r.dx_touch_axial_um,
-                r.dx_touch_axial_um - r.dx_touch_lateral_um, r.dy_touch_um, r.dz_touch_um);
+            out_ << reference_line(calib_.result());
           }
           if (before == Phase::kNominalTouches && calib_.phase() == Phase::kReady) {
-            out_ << "  nominals stored:";
-            for (const auto s : {Slot::kXLateral, Slot::kXAxial, Slot::kY, Slot::kZ}) {
-              out_ << fmt::format(" {:.4f}", calib_.nominal(s).position_mm);
-            }
-            out_ << " mm (X lateral, X axial, Y, Z)\n";
+            out_ << nominals_line(calib_.export_state());
           }
         } else if constexpr (std::is_same_v<T, CmdFacets>) {
-          output_.clear();
-          const auto res =
-              calib_.enter_facets(c.face, c.chord_plus_mm, c.chord_minus_mm, now_ns_, output_);
-          out_ << fmt::format("[{:9.1f} s] facets {}: c+ {:.4f} mm, c- {:.4f} mm -> {}", t,
-                              c.face == core::calib::Face::kLateral ? "lateral" : "end-face",
-                              c.chord_plus_mm, c.chord_minus_mm,
-                              core::calib::to_string(res.status));
-          if (std::isfinite(res.error_um)) {
-            out_ << fmt::format(", error {:+.3f} um ({} rule), grind {}", res.error_um,
-                                core::calib::to_string(calib_.config().facet_rule), res.grinds);
+          enter_facets(c.face, c.chord_plus_mm, c.chord_minus_mm);
+        } else if constexpr (std::is_same_v<T, CmdFacetsFile>) {
+          std::vector<FacetMeasurement> rows;
+          try {
+            rows = read_facet_export(c.path);
+          } catch (const std::invalid_argument& e) {
+            throw ScriptError(line_no, e.what());
           }
-          if (res.status == core::calib::FacetStatus::kGrindAgain) {
-            out_ << fmt::format("; grind again with dx {:+.3f} um", res.correction_um);
-          } else if (res.status == core::calib::FacetStatus::kConverged) {
-            out_ << fmt::format("; {} = {:+.3f} um",
-                                c.face == core::calib::Face::kLateral ? "dxR" : "dxA",
-                                res.correction_um);
+          if (c.row > rows.size()) {
+            throw ScriptError(line_no,
+                              fmt::format("{}: has {} rows, not {}", c.path, rows.size(), c.row));
           }
-          out_ << '\n';
+          const FacetMeasurement& m = rows[c.row == 0 ? rows.size() - 1 : c.row - 1];
+          out_ << fmt::format("[{:9.1f} s] from {} line {}:\n", t, c.path, m.line);
+          enter_facets(m.face, m.chord_plus_mm, m.chord_minus_mm);
+        } else if constexpr (std::is_same_v<T, CmdRecalibrate>) {
+          const bool ok = calib_.request_recalibration();
+          out_ << fmt::format("[{:9.1f} s] recalibration {}\n", t,
+                              ok ? "requested: the next machine-probe touch set recalibrates"
+                                 : "refused: not calibrated (phase " +
+                                       std::string(core::calib::to_string(calib_.phase())) + ")");
+          step({});
           report(false);
-          if (calib_.phase() == Phase::kNominalTouches) {
-            const auto& r = calib_.result();
-            out_ << fmt::format(
-                "  calibration: dxR {:+.3f} um, dxA {:+.3f} um, dy {:+.3f} um, dz {:+.3f} um; "
-                "probe lateral {:+.3f} um, probe axial {:+.3f} um, pivot D {:+.3f} um; grinds "
-                "{} + {}\n",
-                r.dx_r_um, r.dx_a_um, r.dy_um, r.dz_um, r.probe_lateral_um, r.probe_axial_um,
-                r.pivot_um, r.lateral_grinds, r.end_face_grinds);
-          }
+        } else if constexpr (std::is_same_v<T, CmdAwait>) {
+          throw ScriptError(line_no,
+                            "await needs --daemon (offline the clock moves only with time and "
+                            "wait)");
         } else if constexpr (std::is_same_v<T, CmdStatus>) {
           print_status();
         } else if constexpr (std::is_same_v<T, CmdDiscard>) {
@@ -266,68 +190,27 @@ bool Session::run(const Command& command, std::size_t line_no) {
       command);
 }
 
-std::string Session::hint() const {
-  const auto& cfg = calib_.config();
-  const auto p = calib_.touch_progress();
-  const auto progress = [&] {
-    return fmt::format("X lateral {}/{}, X axial {}/{}, Y {}/{}, Z {}/{}", p.count[0], p.required,
-                       p.count[1], p.required, p.count[2], p.required, p.count[3], p.required);
-  };
-  switch (calib_.phase()) {
-    case Phase::kUncalibrated:
-      return "not calibrated: 'begin' starts an initial calibration";
-    case Phase::kReferenceTouches:
-      return "touch the reference disk with the reference probe (" + progress() + ")";
-    case Phase::kTestGrindLateral:
-      return fmt::format(
-          "grind the blank from +X and -X with dx {:+.3f} um, then 'facets "
-          "lateral <c+ mm> <c- mm>'",
-          calib_.grind_correction_um());
-    case Phase::kTestGrindEndFace:
-      return fmt::format(
-          "grind the end face from +X and -X with dx {:+.3f} um, then 'facets "
-          "end-face <c+ mm> <c- mm>'",
-          calib_.grind_correction_um());
-    case Phase::kNominalTouches:
-      return "touch the test body with the machine probe, X twice (A at 90 deg for axial) (" +
-             progress() + ")";
-    case Phase::kReady:
-      return fmt::format("calibrated; machine-probe touches recalibrate (set: {}; interval {} s)",
-                         progress(), cfg.recalibration_interval_s);
+void Session::enter_facets(core::calib::Face face, double chord_plus_mm, double chord_minus_mm) {
+  output_.clear();
+  const auto res = calib_.enter_facets(face, chord_plus_mm, chord_minus_mm, now_ns_, output_);
+  out_ << fmt::format("[{:9.1f} s] ", time_s())
+       << facet_line(face, chord_plus_mm, chord_minus_mm, res, calib_.config().facet_rule);
+  report(false);
+  if (calib_.phase() == Phase::kNominalTouches) {
+    out_ << calibration_line(calib_.result());
   }
-  return "";
 }
 
+core::calib::CalibSnapshot Session::snapshot() const {
+  core::calib::CalibSnapshot s;
+  core::calib::make_snapshot(calib_, now_ns_, s);
+  return s;
+}
+
+std::string Session::hint() const { return calibrate::hint(snapshot()); }
+
 void Session::print_status() {
-  const auto& r = calib_.result();
-  out_ << fmt::format("[{:9.1f} s] phase {}\n", time_s(), core::calib::to_string(calib_.phase()));
-  out_ << fmt::format("  calibration: dxR {:+.3f} dxA {:+.3f} dy {:+.3f} dz {:+.3f} um\n",
-                      r.dx_r_um, r.dx_a_um, r.dy_um, r.dz_um);
-  const char* names[] = {"X lateral", "X axial", "Y", "Z"};
-  for (std::size_t s = 0; s < core::calib::kSlotCount; ++s) {
-    const auto slot = static_cast<Slot>(s);
-    const auto& n = calib_.nominal(slot);
-    const auto& m = calib_.model(slot);
-    if (n.valid == 1) {
-      out_ << fmt::format(
-          "  {:9}: nominal {:.4f} mm, last drift {:+.3f} um ({} sets), predicted {:+.3f} um, "
-          "in force {:+.3f} um",
-          names[s], n.position_mm, m.anchor_drift_um, m.touch_sets,
-          calib_.predicted_drift_um(slot, now_ns_), calib_.drift_correction_um(slot, now_ns_));
-      if (std::isfinite(n.temp_c)) {
-        out_ << fmt::format(", slope {:+.3f} um/degC (nominal at {:.2f} degC)", m.slope_um_per_c,
-                            n.temp_c);
-      }
-      out_ << '\n';
-    }
-  }
-  for (std::size_t a = 0; a < 3; ++a) {
-    out_ << fmt::format("  register {} ({}): target {:+.3f} um, written {:+.3f} um\n",
-                        a == 0 ? calib_.config().register_x
-                               : (a == 1 ? calib_.config().register_y : calib_.config().register_z),
-                        axis_name(static_cast<std::int32_t>(a)), calib_.target_um(a, now_ns_),
-                        calib_.written_um(a));
-  }
+  out_ << status_block(snapshot(), fmt::format("[{:9.1f} s]", time_s()));
 }
 
 }  // namespace nccomp::tools::calibrate

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "core/calib/calibrator.hpp"
+#include "core/calib/snapshot.hpp"
 #include "core/common/output.hpp"
 #include "tools/calibrate/script.hpp"
 
@@ -30,6 +31,8 @@ class Session {
 
   /// What the operator should do next, one line.
   [[nodiscard]] std::string hint() const;
+  /// The calibrator as the daemon would publish it (the renderer's input).
+  [[nodiscard]] core::calib::CalibSnapshot snapshot() const;
   [[nodiscard]] const core::calib::Calibrator& calibrator() const noexcept { return calib_; }
   [[nodiscard]] double time_s() const noexcept { return core::seconds(now_ns_); }
   /// Alarms (severity alarm) reported so far.
@@ -39,6 +42,7 @@ class Session {
   void step(std::span<const core::Event> events);
   void report(bool summarise_writes);
   void print_status();
+  void enter_facets(core::calib::Face face, double chord_plus_mm, double chord_minus_mm);
 
   core::calib::Calibrator calib_;
   std::ostream& out_;

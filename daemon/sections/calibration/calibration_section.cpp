@@ -7,6 +7,7 @@
 
 #include "core/calib/calib_module.hpp"
 #include "daemon/config/builtin_sections.hpp"
+#include "daemon/sections/calibration/daemon_link.hpp"
 #include "tools/calibrate/config_toml.hpp"
 
 namespace nccomp::daemon::sections {
@@ -76,7 +77,15 @@ class CalibrationParser final : public config::SectionParser {
   void add_modules(const config::Config& config,
                    std::vector<std::unique_ptr<core::engine::Module>>& modules) const override {
     if (const auto* s = calibration_section(config)) {
-      modules.push_back(std::make_unique<core::calib::CalibrationModule>(s->config));
+      auto c = s->config;
+      if (!c.state_file.empty()) {
+        c.state_file = config.resolve(c.state_file);
+      }
+      auto m = std::make_unique<core::calib::CalibrationModule>(std::move(c));
+      // Before the engine restores the state: its wall-clock times map onto this clock.
+      m->set_clock_offset_s(calibration_clock_offset_s());
+      m->set_snapshot_sink(&calibration_snapshot_sink());
+      modules.push_back(std::move(m));
     }
   }
 };

@@ -80,7 +80,7 @@ TEST(CalibrationModule, StateRoundTripIsAllocationFree) {
     loaded = b.load_state(std::span<const std::byte>(buf.data(), n));
     EXPECT_EQ(scope.count(), 0u);
   }
-  ASSERT_EQ(n, sizeof(core::calib::CalibState));
+  ASSERT_EQ(n, core::calib::CalibrationModule::kStateBytes);
   ASSERT_TRUE(loaded);
   EXPECT_EQ(b.calibrator().phase(), core::calib::Phase::kReady);
   for (std::size_t axis = 0; axis < 3; ++axis) {

@@ -8,7 +8,10 @@
 // - a test grind with X correction Δ applied leaves facets of depth d0 ± (E − Δ) on a cylinder
 //   of radius ρ; the operator measures their chords with chord noise;
 // - the machine probe touches the test body at nominal + drift(t), with touch noise; the drift
-//   per slot (X lateral, X axial, Y, Z) is a function of time supplied by the test.
+//   per slot (X lateral, X axial, Y, Z) is a function of time supplied by the test;
+// - positions are machine coordinates (independent of the axis offsets), or with
+//   set_program_frame(true) program coordinates: machine position − the axis offset in force
+//   (offset_um, which the test keeps equal to what the NC holds: the last register write).
 #pragma once
 
 #include <array>
@@ -56,6 +59,9 @@ class SimMachine {
         rng_(seed) {}
 
   void set_drift(DriftFn drift) { drift_ = std::move(drift); }
+  void set_program_frame(bool on) { program_frame_ = on; }
+  /// The axis offsets X, Y, Z the NC holds [µm] (program frame only).
+  std::array<double, 3> offset_um{};
 
   /// Reference-probe touch of the reference disk; slot 0..3 = X lateral, X axial, Y, Z.
   CalibrationTouch reference_touch(std::size_t slot, std::int8_t direction, TimeNs t_ns) {
@@ -69,7 +75,8 @@ class SimMachine {
     const double pretravel = slot == 1 ? errors_.pretravel_axial_um : errors_.pretravel_lateral_um;
     const double trigger_um = error[slot] + direction * pretravel + noise(touch_noise_um_);
     return make_touch(ProbeKind::kReferenceProbe, slot, direction,
-                      centre[slot] - direction * contact + trigger_um / 1000.0, t_ns);
+                      centre[slot] - direction * contact + trigger_um / 1000.0 - frame_mm(slot),
+                      t_ns);
   }
 
   /// Machine-probe touch of the test body at time t.
@@ -77,7 +84,8 @@ class SimMachine {
     const std::array<double, kSlotCount> body{120.0, 80.0, -40.0, 15.0};
     const double drift_um = drift_ ? drift_(core::seconds(t_ns))[slot] : 0.0;
     return make_touch(ProbeKind::kMachineProbe, slot, direction,
-                      body[slot] - direction * 2.0 + (drift_um + noise(touch_noise_um_)) / 1000.0,
+                      body[slot] - direction * 2.0 + (drift_um + noise(touch_noise_um_)) / 1000.0 -
+                          frame_mm(slot),
                       t_ns);
   }
 
@@ -106,6 +114,10 @@ class SimMachine {
     t.trigger_position_mm = position_mm;
     return t;
   }
+  /// Program coordinates read the offset of the touched axis less.
+  [[nodiscard]] double frame_mm(std::size_t slot) const {
+    return program_frame_ ? offset_um[slot <= 1 ? 0 : slot - 1] / 1000.0 : 0.0;
+  }
   double noise(double sigma) {
     return sigma > 0.0 ? std::normal_distribution<double>(0.0, sigma)(rng_) : 0.0;
   }
@@ -117,6 +129,7 @@ class SimMachine {
   double depth_mm_;
   std::mt19937_64 rng_;
   DriftFn drift_;
+  bool program_frame_{false};
 };
 
 /// Drives a whole initial calibration (reference touches, test grinds, nominal touches) of c on

@@ -1,0 +1,216 @@
+#include "tools/calibrate/render.hpp"
+
+#include <fmt/format.h>
+
+#include <time.h>
+
+#include <cmath>
+#include <ctime>
+
+namespace nccomp::tools::calibrate {
+
+using core::AlarmCode;
+using core::calib::Phase;
+
+const char* axis_name(std::int32_t a) noexcept {
+  switch (a) {
+    case 0:
+      return "X";
+    case 1:
+      return "Y";
+    case 2:
+      return "Z";
+    default:
+      return "-";
+  }
+}
+
+const char* alarm_name(AlarmCode code) noexcept {
+  switch (code) {
+    case AlarmCode::kOffsetNonFinite:
+      return "offset-non-finite";
+    case AlarmCode::kOffsetBeyondAbsoluteLimit:
+      return "offset-beyond-absolute-limit";
+    case AlarmCode::kOffsetSlewLimited:
+      return "offset-slew-limited";
+    case AlarmCode::kRecalibrationImplausible:
+      return "recalibration-implausible";
+    case AlarmCode::kTouchScatter:
+      return "touch-scatter";
+    case AlarmCode::kRecalibrationDue:
+      return "recalibration-due";
+    case AlarmCode::kTouchSetIncomplete:
+      return "touch-set-incomplete";
+    case AlarmCode::kCalibrationOutOfRange:
+      return "calibration-out-of-range";
+    case AlarmCode::kTouchUnexpected:
+      return "touch-unexpected";
+    case AlarmCode::kTestGrindNotConverging:
+      return "test-grind-not-converging";
+    case AlarmCode::kRecalibrationApplied:
+      return "recalibration-applied";
+    case AlarmCode::kCalibrationComplete:
+      return "calibration-complete";
+    case AlarmCode::kCalibrationInvalidInput:
+      return "calibration-invalid-input";
+    default:
+      return "other";
+  }
+}
+
+namespace {
+
+const char* severity_name(core::Severity s) {
+  switch (s) {
+    case core::Severity::kInfo:
+      return "info";
+    case core::Severity::kWarning:
+      return "WARNING";
+    case core::Severity::kAlarm:
+      return "ALARM";
+  }
+  return "?";
+}
+
+}  // namespace
+
+std::string hint(const core::calib::CalibSnapshot& s) {
+  const auto& p = s.progress;
+  const auto progress = [&] {
+    return fmt::format("X lateral {}/{}, X axial {}/{}, Y {}/{}, Z {}/{}", p.count[0], p.required,
+                       p.count[1], p.required, p.count[2], p.required, p.count[3], p.required);
+  };
+  switch (s.state.phase) {
+    case Phase::kUncalibrated:
+      return "not calibrated: 'begin' starts an initial calibration";
+    case Phase::kReferenceTouches:
+      return "touch the reference disk with the reference probe (" + progress() + ")";
+    case Phase::kTestGrindLateral:
+      return fmt::format(
+          "grind the blank from +X and -X with dx {:+.3f} um, then 'facets "
+          "lateral <c+ mm> <c- mm>'",
+          s.state.grind_correction_um);
+    case Phase::kTestGrindEndFace:
+      return fmt::format(
+          "grind the end face from +X and -X with dx {:+.3f} um, then 'facets "
+          "end-face <c+ mm> <c- mm>'",
+          s.state.grind_correction_um);
+    case Phase::kNominalTouches:
+      return "touch the test body with the machine probe, X twice (A at 90 deg for axial) (" +
+             progress() + ")";
+    case Phase::kReady:
+      return fmt::format(
+          "calibrated; machine-probe touches recalibrate (set: {}; interval {} s{})", progress(),
+          s.recalibration_interval_s,
+          s.request == core::calib::RequestCode::kRecalibration ? "; recalibration requested" : "");
+  }
+  return "";
+}
+
+std::string alarm_line(const core::AlarmEvent& a) {
+  std::string o = fmt::format("  {} {} {}", severity_name(a.severity), static_cast<int>(a.code),
+                              alarm_name(a.code));
+  if (a.code == AlarmCode::kOffsetSlewLimited || a.code == AlarmCode::kOffsetNonFinite ||
+      a.code == AlarmCode::kOffsetBeyondAbsoluteLimit) {
+    o += fmt::format(" register {}: target {:+.3f} um", a.subject, a.value);
+  } else if (a.code == AlarmCode::kRecalibrationDue) {
+    o += fmt::format(": {:.0f} s since the last touch set", a.value);
+  } else if (a.code == AlarmCode::kTouchSetIncomplete) {
+    o += fmt::format(": {:.0f} touches discarded", a.value);
+  } else {
+    o += fmt::format(" axis {}: {:+.3f}", axis_name(a.subject), a.value);
+  }
+  if (a.code == AlarmCode::kRecalibrationImplausible || a.code == AlarmCode::kTouchScatter) {
+    o += " um, nothing applied";
+  }
+  o += '\n';
+  return o;
+}
+
+std::string facet_line(core::calib::Face face, double chord_plus_mm, double chord_minus_mm,
+                       const core::calib::FacetResult& r, core::calib::FacetRule rule) {
+  std::string o = fmt::format("facets {}: c+ {:.4f} mm, c- {:.4f} mm -> {}",
+                              face == core::calib::Face::kLateral ? "lateral" : "end-face",
+                              chord_plus_mm, chord_minus_mm, core::calib::to_string(r.status));
+  if (std::isfinite(r.error_um)) {
+    o += fmt::format(", error {:+.3f} um ({} rule), grind {}", r.error_um,
+                     core::calib::to_string(rule), r.grinds);
+  }
+  if (r.status == core::calib::FacetStatus::kGrindAgain) {
+    o += fmt::format("; grind again with dx {:+.3f} um", r.correction_um);
+  } else if (r.status == core::calib::FacetStatus::kConverged) {
+    o += fmt::format("; {} = {:+.3f} um", face == core::calib::Face::kLateral ? "dxR" : "dxA",
+                     r.correction_um);
+  }
+  o += '\n';
+  return o;
+}
+
+std::string reference_line(const core::calib::CalibrationResult& r) {
+  return fmt::format(
+      "  reference touches: dx lateral {:+.3f} um, dx axial {:+.3f} um (pivot D "
+      "{:+.3f} um), dy {:+.3f} um, dz {:+.3f} um\n",
+      r.dx_touch_lateral_um, r.dx_touch_axial_um, r.dx_touch_axial_um - r.dx_touch_lateral_um,
+      r.dy_touch_um, r.dz_touch_um);
+}
+
+std::string calibration_line(const core::calib::CalibrationResult& r) {
+  return fmt::format(
+      "  calibration: dxR {:+.3f} um, dxA {:+.3f} um, dy {:+.3f} um, dz {:+.3f} um; "
+      "probe lateral {:+.3f} um, probe axial {:+.3f} um, pivot D {:+.3f} um; grinds "
+      "{} + {}\n",
+      r.dx_r_um, r.dx_a_um, r.dy_um, r.dz_um, r.probe_lateral_um, r.probe_axial_um, r.pivot_um,
+      r.lateral_grinds, r.end_face_grinds);
+}
+
+std::string nominals_line(const core::calib::CalibState& s) {
+  std::string o = "  nominals stored:";
+  for (const auto& n : s.nominals) {
+    o += fmt::format(" {:.4f}", n.position_mm);
+  }
+  o += " mm (X lateral, X axial, Y, Z)\n";
+  return o;
+}
+
+std::string format_utc(double wall_s) {
+  if (!std::isfinite(wall_s)) {
+    return "never";
+  }
+  const auto t = static_cast<time_t>(wall_s);
+  tm utc{};
+  gmtime_r(&t, &utc);
+  char buf[40];
+  std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M:%S UTC", &utc);
+  return buf;
+}
+
+std::string status_block(const core::calib::CalibSnapshot& s, const std::string& when) {
+  const auto& r = s.state.result;
+  std::string o = when + " phase " + core::calib::to_string(s.state.phase) + "\n";
+  o += fmt::format("  calibration: dxR {:+.3f} dxA {:+.3f} dy {:+.3f} dz {:+.3f} um\n", r.dx_r_um,
+                   r.dx_a_um, r.dy_um, r.dz_um);
+  const char* names[] = {"X lateral", "X axial", "Y", "Z"};
+  for (std::size_t k = 0; k < core::calib::kSlotCount; ++k) {
+    const auto& n = s.state.nominals[k];
+    const auto& m = s.state.models[k];
+    if (n.valid == 1) {
+      o += fmt::format(
+          "  {:9}: nominal {:.4f} mm, last drift {:+.3f} um ({} sets), predicted {:+.3f} um, "
+          "in force {:+.3f} um",
+          names[k], n.position_mm, m.anchor_drift_um, m.touch_sets, s.predicted_um[k],
+          s.correction_um[k]);
+      if (std::isfinite(n.temp_c)) {
+        o += fmt::format(", slope {:+.3f} um/degC (nominal at {:.2f} degC)", m.slope_um_per_c,
+                         n.temp_c);
+      }
+      o += '\n';
+    }
+  }
+  for (std::size_t a = 0; a < 3; ++a) {
+    o += fmt::format("  register {} ({}): target {:+.3f} um, written {:+.3f} um\n", s.registers[a],
+                     axis_name(static_cast<std::int32_t>(a)), s.target_um[a], s.written_um[a]);
+  }
+  return o;
+}
+
+}  // namespace nccomp::tools::calibrate
