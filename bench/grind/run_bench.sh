@@ -48,13 +48,13 @@ while [ "$r" -le "$repeats" ]; do
   # shellcheck disable=SC2086
   /usr/bin/time -f "process: wall %e s, user %U s, max RSS %M KiB" \
     "$nccomp" grind-path $family $wheel $outs > "$work/family.out" 2> "$work/family.time"
-  grep -E "^exact envelope|^total|G-code:" "$work/family.out"
+  grep -E "^exact envelope|^total|G-code:|^    \([0-9.]+ s\)" "$work/family.out"
   cat "$work/family.time"
   echo "== run $r: nccomp grind-path --profile crown2e7.csv $wheel $outs"
   # shellcheck disable=SC2086
   /usr/bin/time -f "process: wall %e s, user %U s, max RSS %M KiB" \
     "$nccomp" grind-path --profile "$csv" $wheel $outs > "$work/csv.out" 2> "$work/csv.time"
-  grep -E "^exact envelope|^total" "$work/csv.out"
+  grep -E "^exact envelope|^total|^    \([0-9.]+ s\)" "$work/csv.out"
   cat "$work/csv.time"
   r=$((r + 1))
 done
