@@ -1,4 +1,4 @@
-// S1 benchmark: how the per-checkpoint offsets reach the wall.
+// S1 benchmark: how the per-checkpoint offsets reach the wall, and what learning does with them.
 //
 // A synthetic boss (120 × 80 mm, chamfered corner), finished layer by layer at 10 m/min with a
 // 1 kHz loop; the wall's push-off error e(s, z) grows with the height above the clamp and with
@@ -10,10 +10,20 @@
 //
 // Table 1: offsets = −e at the checkpoints (perfectly learned), applied as the seed's step (the
 //          value switches at each checkpoint, as a D-number change in the program does), as step
-//          through the default limiter, and creeping (linear, cosine) between checkpoints.
+//          through the default limiter, and creeping (linear, cosine) between checkpoints; with
+//          the step each application leaves at the seam (where each level's closed pass meets
+//          its own start).
 // Table 2: a series of parts with learning (mode A: part n's probe readings → part n+1), probe
-//          noise 0.7 µm: RMS wall error per part, step vs creep.
-// Table 3: cost of one step() [ns] (one axis sample) on this machine.
+//          noise 0.7 µm: RMS wall error per part, step vs creep, and creep through the default
+//          limiter (learning against the value the limiter let through).
+// Levels are joined by a plunge of one depth step at the seam point at 1 m/min (samples, not
+// wall).
+// Table 3: learning over 20 blanks with a per-blank hardness scatter: the EWMA weight k, and
+//          mode A against mode B (semi-finishing with the paired tool, then finishing).
+// Table 4: cost of one step() [ns] (one axis sample) on this machine.
+//
+// The source compiles against the compensator before issue 4's level-aware creep too (no API
+// of it is used), so the seam figures of both can be measured with the same program.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -39,6 +49,8 @@ using nccomp::core::StepOutput;
 using nccomp::core::TimeNs;
 
 constexpr double kFeedMmPerS = 10000.0 / 60.0;
+// The level link: a plunge of one depth step at the seam point at 1 m/min (0.6 s for 10 mm).
+constexpr double kPlungeMmPerS = 1000.0 / 60.0;
 constexpr double kRateHz = 1000.0;
 constexpr double kClampZMm = -45.0;
 constexpr int kRegister = 19;
@@ -73,8 +85,8 @@ struct Geometry {
 
 Geometry geometry(const cp::PlanConfig& c) {
   Geometry g;
-  g.p = c.contour;
-  g.p.push_back(c.contour.front());
+  for (const auto& v : c.contour) g.p.push_back({v.x_mm, v.y_mm});
+  g.p.push_back(g.p.front());
   g.s.push_back(0.0);
   for (std::size_t i = 1; i < g.p.size(); ++i) {
     g.s.push_back(g.s.back() +
@@ -113,20 +125,23 @@ struct WallResult {
   double max_um{0.0};
   double max_jump_um{0.0};     // largest change of the applied offset between two samples
   double max_jump_cp_um{0.0};  // … within ±1 mm of a checkpoint
+  double max_seam_um{0.0};     // largest |c(end of a level's pass) − c(its start)|: same point
   std::size_t writes{0};
 };
 
 // Finishes one part: returns the wall error statistics over every sample of every level, and
-// fills wall_at_cp with the wall error at each checkpoint.
+// fills wall_at_cp with the wall error at each checkpoint. Each level's pass runs from s = 0 to
+// s = L inclusive (the closed contour's start point twice: the seam).
 WallResult finish(cp::CheckpointCompensator& comp, const cp::Plan& plan, const Geometry& g,
-                  const cp::PlanConfig& pc, const Blank& blank, std::vector<double>* wall_at_cp) {
+                  const cp::PlanConfig& pc, const Blank& blank, std::vector<double>* wall_at_cp,
+                  int part = 1) {
   StepOutput out;
-  const Event start = ProgramEvent{0, ProgramEventKind::kPartStart, 1};
+  const Event start = ProgramEvent{0, ProgramEventKind::kPartStart, part};
   comp.step(0, {&start, 1}, out);
   WallResult r;
   double applied = std::nan("");
   // Roughing and semi-finishing take time before the finishing tool arrives: 2 s of cycles
-  // without samples, in which the live register is pre-positioned to checkpoint 0's value.
+  // without samples, in which the live register is pre-positioned to the first pass's start.
   TimeNs t = 0;
   for (int k = 0; k < 2000; ++k) {
     t += static_cast<TimeNs>(1e9 / kRateHz);
@@ -138,15 +153,17 @@ WallResult finish(cp::CheckpointCompensator& comp, const cp::Plan& plan, const G
   }
   double sum2 = 0.0;
   std::size_t n = 0;
-  const double ds = kFeedMmPerS / kRateHz;
   const double link = pc.depth_step_mm;
+  const auto samples = static_cast<std::size_t>(std::ceil(g.length / (kFeedMmPerS / kRateHz)));
   std::size_t next_cp = 0;
   if (wall_at_cp) wall_at_cp->assign(plan.checkpoints.size(), 0.0);
   for (std::size_t l = 0; l < plan.levels_z_mm.size(); ++l) {
     const double z = plan.levels_z_mm[l];
     const double base = static_cast<double>(l) * (g.length + link);
     double prev_applied = std::nan("");
-    for (double s = 0.0; s < g.length; s += ds) {
+    double first_applied = std::nan("");
+    for (std::size_t k = 0; k <= samples; ++k) {
+      const double s = g.length * static_cast<double>(k) / static_cast<double>(samples);
       t += static_cast<TimeNs>(1e9 / kRateHz);
       AxisSample a;
       a.time_ns = t;
@@ -165,17 +182,21 @@ WallResult finish(cp::CheckpointCompensator& comp, const cp::Plan& plan, const G
       }
       const double c = std::isfinite(applied) ? applied : 0.0;
       const double wall = push_off_um(g, s, z, blank) + c;
-      sum2 += wall * wall;
-      ++n;
+      if (k < samples) {  // s = L is the start point again: counted once
+        sum2 += wall * wall;
+        ++n;
+      }
       r.max_um = std::max(r.max_um, std::fabs(wall));
       if (std::isfinite(prev_applied)) {
         const double jump = std::fabs(c - prev_applied);
         r.max_jump_um = std::max(r.max_jump_um, jump);
-        for (const cp::Checkpoint& k : plan.checkpoints) {
-          if (k.level == static_cast<int>(l) && std::fabs(k.s_mm - s) <= 1.0) {
+        for (const cp::Checkpoint& cpt : plan.checkpoints) {
+          if (cpt.level == static_cast<int>(l) && std::fabs(cpt.s_mm - s) <= 1.0) {
             r.max_jump_cp_um = std::max(r.max_jump_cp_um, jump);
           }
         }
+      } else {
+        first_applied = c;
       }
       prev_applied = c;
       while (wall_at_cp && next_cp < plan.checkpoints.size() &&
@@ -184,9 +205,76 @@ WallResult finish(cp::CheckpointCompensator& comp, const cp::Plan& plan, const G
         ++next_cp;
       }
     }
+    r.max_seam_um = std::max(r.max_seam_um, std::fabs(prev_applied - first_applied));
+    if (l + 1 < plan.levels_z_mm.size()) {
+      // The plunge to the next level at the seam point (not a wall sample).
+      const auto link_samples =
+          static_cast<std::size_t>(std::ceil(link / (kPlungeMmPerS / kRateHz)));
+      const cp::Point2 q = g.at(0.0);
+      for (std::size_t k = 1; k < link_samples; ++k) {
+        const double u = static_cast<double>(k) / static_cast<double>(link_samples);
+        t += static_cast<TimeNs>(1e9 / kRateHz);
+        AxisSample a;
+        a.time_ns = t;
+        a.position_mm = {q.x_mm, q.y_mm, z - u * link, 0, 0, 0};
+        a.program_path_mm = base + g.length + u * link;
+        a.tool = 12;
+        const Event ev = a;
+        out.clear();
+        comp.step(t, {&ev, 1}, out);
+        for (const auto& w : out.writes) {
+          if (w.register_index == kRegister) {
+            applied = w.value_um;
+            ++r.writes;
+          }
+        }
+      }
+    }
   }
   r.rms_um = std::sqrt(sum2 / static_cast<double>(n));
   return r;
+}
+
+std::vector<Event> probe_readings(const cp::Plan& plan, const cp::PlanConfig& pc,
+                                  const std::vector<double>& wall_cp, int part, std::mt19937& rng,
+                                  std::normal_distribution<double>& noise) {
+  std::vector<Event> probes;
+  for (std::size_t i = 0; i < wall_cp.size(); ++i) {
+    ProbeMeasurement pm;
+    pm.part = part;
+    pm.checkpoint = static_cast<std::int32_t>(i);
+    pm.wall_angle_deg = plan.checkpoints[i].alpha_deg;
+    pm.ball_radius_mm = pc.ball_radius_mm;
+    pm.raw_deviation_um = wall_cp[i] + noise(rng) +
+                          cp::probe_delta0_um(pc.ball_radius_mm, plan.checkpoints[i].alpha_deg);
+    probes.emplace_back(pm);
+  }
+  return probes;
+}
+
+void feed(cp::CheckpointCompensator& comp, const std::vector<Event>& probes) {
+  for (std::size_t i = 0; i < probes.size(); i += 32) {
+    StepOutput out;
+    const std::size_t n = std::min<std::size_t>(32, probes.size() - i);
+    comp.step(0, std::span<const Event>(probes.data() + i, n), out);
+  }
+}
+
+double rms_of(const std::vector<double>& v) {
+  double s2 = 0.0;
+  for (double x : v) s2 += x * x;
+  return std::sqrt(s2 / static_cast<double>(v.size()));
+}
+
+Blank random_blank(std::mt19937& rng, double sigma_hrc) {
+  std::normal_distribution<double> hrc(0.0, sigma_hrc);
+  std::uniform_real_distribution<double> phase(0.0, 2.0 * std::numbers::pi);
+  Blank b;
+  for (int k = 0; k < 3; ++k) {
+    b.a[k] = hrc(rng);
+    b.phase[k] = phase(rng);
+  }
+  return b;
 }
 
 cp::CompensatorConfig config(cp::ApplyMode apply, nccomp::core::ProfileShape shape) {
@@ -247,18 +335,18 @@ int main() {
       {"creep linear through default limiter", cp::ApplyMode::kCreep,
        nccomp::core::ProfileShape::kLinear, LimiterConfig{}},
   };
+  std::printf("## 1. Perfectly learned offsets, one part\n\n");
+  std::printf(
+      "| application | RMS wall error [um] | max wall error [um] | max offset jump "
+      "between samples [um] | at checkpoints [um] | step at the seam [um] | live writes |\n");
+  std::printf("| --- | --- | --- | --- | --- | --- | --- |\n");
   {
     cp::CheckpointCompensator none;
     cp::CompensatorConfig c = config(cp::ApplyMode::kStep, nccomp::core::ProfileShape::kLinear);
     none.configure(c, plan.checkpoints, seed_limits());
     const WallResult r = finish(none, plan, g, pc, nominal, nullptr);
-    std::printf("## 1. Perfectly learned offsets, one part\n\n");
-    std::printf(
-        "| application | RMS wall error [um] | max wall error [um] | max offset jump "
-        "between samples [um] | at checkpoints [um] | live writes |\n");
-    std::printf("| --- | --- | --- | --- | --- | --- |\n");
-    std::printf("| none (uncompensated) | %.2f | %.2f | %.3f | %.3f | %zu |\n", r.rms_um, r.max_um,
-                r.max_jump_um, r.max_jump_cp_um, r.writes);
+    std::printf("| none (uncompensated) | %.2f | %.2f | %.3f | %.3f | %.3f | %zu |\n", r.rms_um,
+                r.max_um, r.max_jump_um, r.max_jump_cp_um, r.max_seam_um, r.writes);
   }
   for (const Variant& v : variants) {
     cp::CheckpointCompensator comp;
@@ -268,8 +356,8 @@ int main() {
     for (std::size_t i = 0; i < learned.size(); ++i) st.points[i].offset_um = learned[i];
     comp.import_state(st);
     const WallResult r = finish(comp, plan, g, pc, nominal, nullptr);
-    std::printf("| %s | %.2f | %.2f | %.3f | %.3f | %zu |\n", v.name, r.rms_um, r.max_um,
-                r.max_jump_um, r.max_jump_cp_um, r.writes);
+    std::printf("| %s | %.2f | %.2f | %.3f | %.3f | %.3f | %zu |\n", v.name, r.rms_um, r.max_um,
+                r.max_jump_um, r.max_jump_cp_um, r.max_seam_um, r.writes);
   }
 
   // --- Table 2 ---
@@ -278,64 +366,104 @@ int main() {
       "per-blank hardness scatter\n\n");
   std::printf(
       "| part | step: RMS wall [um] | step: RMS at checkpoints [um] | creep: RMS wall [um] "
-      "| creep: RMS at checkpoints [um] | creep: part n / part n-1 |\n");
-  std::printf("| --- | --- | --- | --- | --- | --- |\n");
-  cp::CheckpointCompensator step_comp;
-  step_comp.configure(config(cp::ApplyMode::kStep, nccomp::core::ProfileShape::kLinear),
-                      plan.checkpoints, seed_limits());
-  cp::CheckpointCompensator creep_comp;
-  creep_comp.configure(config(cp::ApplyMode::kCreep, nccomp::core::ProfileShape::kLinear),
+      "| creep: RMS at checkpoints [um] | creep: seam [um] | creep, default limiter: RMS wall "
+      "[um] | creep, default limiter: RMS at checkpoints [um] | step, default limiter: RMS wall "
+      "[um] | step, default limiter: RMS at checkpoints [um] |\n");
+  std::printf("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
+  {
+    cp::CheckpointCompensator comps[4];
+    comps[0].configure(config(cp::ApplyMode::kStep, nccomp::core::ProfileShape::kLinear),
                        plan.checkpoints, seed_limits());
-  std::mt19937 rng(2026);
-  std::normal_distribution<double> hrc(0.0, 0.7);
-  std::uniform_real_distribution<double> phase(0.0, 2.0 * std::numbers::pi);
-  std::normal_distribution<double> noise(0.0, 0.7);
-  double prev_creep = 0.0;
-  for (int part = 1; part <= 10; ++part) {
-    Blank b;
-    for (int k = 0; k < 3; ++k) {
-      b.a[k] = hrc(rng);
-      b.phase[k] = phase(rng);
-    }
-    double rms_cp[2] = {0, 0};
-    WallResult res[2];
-    cp::CheckpointCompensator* comps[2] = {&step_comp, &creep_comp};
-    for (int m = 0; m < 2; ++m) {
-      std::vector<double> wall_cp;
-      res[m] = finish(*comps[m], plan, g, pc, b, &wall_cp);
-      std::vector<Event> probes;
-      double s2 = 0.0;
-      for (std::size_t i = 0; i < wall_cp.size(); ++i) {
-        s2 += wall_cp[i] * wall_cp[i];
-        ProbeMeasurement pm;
-        pm.part = part;
-        pm.checkpoint = static_cast<std::int32_t>(i);
-        pm.wall_angle_deg = pc.wall_angle_deg;
-        pm.ball_radius_mm = pc.ball_radius_mm;
-        pm.raw_deviation_um =
-            wall_cp[i] + noise(rng) + cp::probe_delta0_um(pc.ball_radius_mm, pc.wall_angle_deg);
-        probes.emplace_back(pm);
+    comps[1].configure(config(cp::ApplyMode::kCreep, nccomp::core::ProfileShape::kLinear),
+                       plan.checkpoints, seed_limits());
+    comps[2].configure(config(cp::ApplyMode::kCreep, nccomp::core::ProfileShape::kLinear),
+                       plan.checkpoints, LimiterConfig{});
+    comps[3].configure(config(cp::ApplyMode::kStep, nccomp::core::ProfileShape::kLinear),
+                       plan.checkpoints, LimiterConfig{});
+    std::mt19937 rng(2026);
+    std::normal_distribution<double> noise(0.0, 0.7);
+    for (int part = 1; part <= 10; ++part) {
+      const Blank b = random_blank(rng, 0.7);
+      double rms_cp[4] = {0, 0, 0, 0};
+      WallResult res[4];
+      for (int m = 0; m < 4; ++m) {
+        std::vector<double> wall_cp;
+        res[m] = finish(comps[m], plan, g, pc, b, &wall_cp, part);
+        rms_cp[m] = rms_of(wall_cp);
+        feed(comps[m], probe_readings(plan, pc, wall_cp, part, rng, noise));
       }
-      rms_cp[m] = std::sqrt(s2 / static_cast<double>(wall_cp.size()));
-      for (std::size_t i = 0; i < probes.size(); i += 32) {
-        StepOutput out;
-        const std::size_t n = std::min<std::size_t>(32, probes.size() - i);
-        comps[m]->step(0, std::span<const Event>(probes.data() + i, n), out);
-      }
+      std::printf("| %d | %.2f | %.2f | %.2f | %.2f | %.3f | %.2f | %.2f | %.2f | %.2f |\n", part,
+                  res[0].rms_um, rms_cp[0], res[1].rms_um, rms_cp[1], res[1].max_seam_um,
+                  res[2].rms_um, rms_cp[2], res[3].rms_um, rms_cp[3]);
     }
-    if (part == 1) {
-      std::printf("| %d | %.2f | %.2f | %.2f | %.2f | - |\n", part, res[0].rms_um, rms_cp[0],
-                  res[1].rms_um, rms_cp[1]);
-    } else {
-      std::printf("| %d | %.2f | %.2f | %.2f | %.2f | %.2f |\n", part, res[0].rms_um, rms_cp[0],
-                  res[1].rms_um, rms_cp[1], res[1].rms_um / prev_creep);
-    }
-    prev_creep = res[1].rms_um;
   }
 
   // --- Table 3 ---
+  // 20 blanks; each has its own smooth hardness pattern (3 harmonics along the contour of
+  // σ_blank HRC each) on top of the common 4 HRC gradient. Creep, seed limits, probe noise 0.7.
   std::printf(
-      "\n## 3. Cost of one step() with one axis sample\n\n| trigger | apply | ns per step |\n"
+      "\n## 3. Learning over 20 blanks with a per-blank hardness scatter (creep): RMS wall "
+      "error of parts 6-20 [um]\n\n");
+  std::printf(
+      "| hardness scatter per blank [HRC per harmonic] | mode A k = 1 | mode A k = 3 | "
+      "mode A k = 6 | mode B (paired semi-finishing tool) |\n");
+  std::printf("| --- | --- | --- | --- | --- |\n");
+  for (const double sigma : {0.7, 1.5, 2.5}) {
+    double result[4] = {0, 0, 0, 0};
+    const double ks[3] = {1.0, 3.0, 6.0};
+    for (int m = 0; m < 4; ++m) {
+      cp::CompensatorConfig c = config(cp::ApplyMode::kCreep, nccomp::core::ProfileShape::kLinear);
+      if (m < 3) {
+        c.ewma_weight = ks[m];
+      } else {
+        c.learning_mode = cp::LearningMode::kSemiFinishing;
+        c.semi_finishing_tool = 11;
+      }
+      c.outlier_sigma = 6.0;
+      cp::CheckpointCompensator comp;
+      comp.configure(c, plan.checkpoints, seed_limits());
+      // The same blanks and noise for every column.
+      std::mt19937 rng(77);
+      std::normal_distribution<double> noise(0.0, 0.7);
+      std::normal_distribution<double> pair(0.0, 0.3);
+      std::vector<double> rms_parts;
+      for (int part = 1; part <= 20; ++part) {
+        const Blank b = random_blank(rng, sigma);
+        std::vector<double> pair_err(plan.checkpoints.size());
+        for (double& x : pair_err) x = pair(rng);
+        if (m == 3) {
+          // Semi-finishing with the paired tool (same push-off up to 0.3 µm, no checkpoint
+          // offsets), probed, learned and written before finishing this blank.
+          StepOutput out;
+          const Event start = ProgramEvent{0, ProgramEventKind::kPartStart, part};
+          comp.step(0, {&start, 1}, out);
+          std::vector<double> semi(plan.checkpoints.size());
+          for (std::size_t i = 0; i < semi.size(); ++i) {
+            semi[i] =
+                push_off_um(g, plan.checkpoints[i].s_mm, plan.checkpoints[i].z_mm, b) + pair_err[i];
+          }
+          feed(comp, probe_readings(plan, pc, semi, part, rng, noise));
+        } else {
+          for (std::size_t i = 0; i < pair_err.size(); ++i) (void)noise(rng);  // same draws
+        }
+        std::vector<double> wall_cp;
+        const WallResult r = finish(comp, plan, g, pc, b, &wall_cp, part);
+        if (m < 3) {
+          feed(comp, probe_readings(plan, pc, wall_cp, part, rng, noise));
+        } else {
+          for (std::size_t i = 0; i < wall_cp.size(); ++i) (void)noise(rng);  // same draws
+        }
+        if (part > 5) rms_parts.push_back(r.rms_um);
+      }
+      result[m] = rms_of(rms_parts);
+    }
+    std::printf("| %.1f | %.2f | %.2f | %.2f | %.2f |\n", sigma, result[0], result[1], result[2],
+                result[3]);
+  }
+
+  // --- Table 4 ---
+  std::printf(
+      "\n## 4. Cost of one step() with one axis sample\n\n| trigger | apply | ns per step |\n"
       "| --- | --- | --- |\n");
   for (const auto trig : {cp::TriggerMode::kPath, cp::TriggerMode::kPosition}) {
     for (const auto apply : {cp::ApplyMode::kStep, cp::ApplyMode::kCreep}) {

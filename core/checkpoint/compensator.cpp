@@ -32,6 +32,9 @@ void require_range(double v, double lo, double hi, bool lo_open, const std::stri
 }
 
 constexpr double kHuge = 1e300;
+// A reading's α may differ from the plan's by the bus encoding's resolution (0.01° in the
+// reference profiles), not more.
+constexpr double kAlphaToleranceDeg = 0.02;
 
 }  // namespace
 
@@ -39,7 +42,15 @@ const char* learning_mode_name(LearningMode m) noexcept {
   return m == LearningMode::kPreviousPart ? "previous_part" : "semi_finishing";
 }
 const char* apply_mode_name(ApplyMode m) noexcept {
-  return m == ApplyMode::kStep ? "step" : "creep";
+  switch (m) {
+    case ApplyMode::kStep:
+      return "step";
+    case ApplyMode::kCreep:
+      return "creep";
+    case ApplyMode::kTable:
+      return "table";
+  }
+  return "?";
 }
 const char* trigger_mode_name(TriggerMode m) noexcept {
   return m == TriggerMode::kPath ? "path" : "position";
@@ -85,6 +96,23 @@ void CheckpointCompensator::configure(const CompensatorConfig& c, std::vector<Ch
          std::to_string(c.active_register) + " lies inside the checkpoint table (registers " +
              std::to_string(c.register_base) + ".." + std::to_string(last_register) + ")");
   }
+  if (c.apply != ApplyMode::kStep && c.apply != ApplyMode::kCreep && c.apply != ApplyMode::kTable) {
+    fail("apply", "unknown apply mode");
+  }
+  // A live apply mode without a live register would do nothing at all, silently: the NC would
+  // switch offset numbers at the checkpoints (a step) while the config says "creep".
+  if (c.apply != ApplyMode::kTable && c.active_register < 0) {
+    fail("apply", std::string("\"") + apply_mode_name(c.apply) +
+                      "\" drives the live radius wear register, but active_register = -1 "
+                      "(table only: the NC program selects each checkpoint's offset itself, a "
+                      "step at every checkpoint, and nothing creeps); set active_register to "
+                      "the finishing tool's radius wear register, or apply = \"table\"");
+  }
+  if (c.apply == ApplyMode::kTable && c.active_register >= 0) {
+    fail("apply", "\"table\" writes no live register, but active_register = " +
+                      std::to_string(c.active_register) +
+                      " is set; use apply = \"creep\" or \"step\", or active_register = -1");
+  }
   for (std::size_t i = 0; i < plan.size(); ++i) {
     const Checkpoint& p = plan[i];
     if (p.id != static_cast<std::int32_t>(i)) {
@@ -99,13 +127,59 @@ void CheckpointCompensator::configure(const CompensatorConfig& c, std::vector<Ch
       fail("plan", "checkpoint " + std::to_string(i) + " path_mm " + num(p.path_mm) +
                        " does not increase (machining order)");
     }
+    if (!std::isfinite(p.s_mm) || !std::isfinite(p.pass_length_mm) || p.pass_length_mm < 0.0 ||
+        p.s_mm < 0.0 || (p.pass_length_mm > 0.0 && p.s_mm > p.pass_length_mm) ||
+        (p.closed && !(p.s_mm < p.pass_length_mm))) {
+      fail("plan", "checkpoint " + std::to_string(i) + ": s_mm " + num(p.s_mm) +
+                       " does not lie on its level's pass of " + num(p.pass_length_mm) + " mm" +
+                       (p.closed ? " (closed: 0 <= s_mm < length)" : ""));
+    }
+    const bool new_level = i == 0 || p.level != plan[i - 1].level;
+    if (i == 0 ? p.level != 0 : (new_level && p.level != plan[i - 1].level + 1)) {
+      fail("plan", "checkpoint " + std::to_string(i) + " has level " + std::to_string(p.level) +
+                       " (levels must be 0, 1, 2, ... in machining order)");
+    }
+    if (!new_level) {
+      const Checkpoint& q = plan[i - 1];
+      const double start_p = p.path_mm - p.s_mm;
+      const double start_q = q.path_mm - q.s_mm;
+      if (!(p.s_mm > q.s_mm) || p.closed != q.closed ||
+          std::fabs(p.pass_length_mm - q.pass_length_mm) > 0.0 ||
+          std::fabs(start_p - start_q) > 1e-6 + 1e-12 * std::fabs(p.path_mm) ||
+          std::fabs(p.z_mm - q.z_mm) > 0.0) {
+        fail("plan", "checkpoint " + std::to_string(i) +
+                         " does not continue its level's pass (s_mm must increase along the "
+                         "pass, path_mm - s_mm, z_mm, pass_length_mm and closed must agree)");
+      }
+    } else if (i > 0) {
+      const Checkpoint& q = plan[i - 1];
+      const double prev_end = q.path_mm - q.s_mm + q.pass_length_mm;
+      if (p.path_mm - p.s_mm < prev_end - 1e-6 - 1e-12 * std::fabs(p.path_mm)) {
+        fail("plan", "level " + std::to_string(p.level) + " starts on the program path at " +
+                         num(p.path_mm - p.s_mm) + " mm, before level " + std::to_string(q.level) +
+                         "'s pass ends (" + num(prev_end) + " mm)");
+      }
+    }
+    if (!std::isfinite(p.alpha_deg) || std::fabs(p.alpha_deg) >= kMaxWallAngleDeg) {
+      fail("plan", "checkpoint " + std::to_string(i) + " has a wall angle of " + num(p.alpha_deg) +
+                       " deg (|alpha| < 89)");
+    }
   }
   OffsetLimiter limiter;
   limiter.configure(limits);  // throws naming the limiter field
 
   // Commit only after everything validated: a refused config leaves the old one intact.
+  std::vector<Level> levels;
+  for (std::size_t i = 0; i < plan.size(); ++i) {
+    const Checkpoint& p = plan[i];
+    if (i == 0 || p.level != plan[i - 1].level) {
+      levels.push_back(Level{i, i, p.path_mm - p.s_mm, p.pass_length_mm, p.closed, p.z_mm});
+    }
+    levels.back().last = i;
+  }
   config_ = c;
   plan_ = std::move(plan);
+  levels_ = std::move(levels);
   points_.assign(plan_.size(), LearnedPoint{});
   dirty_.assign(plan_.size(), 0);
   dirty_count_ = 0;
@@ -118,6 +192,9 @@ void CheckpointCompensator::configure(const CompensatorConfig& c, std::vector<Ch
   next_ = 0;
   have_prev_ = false;
   travel_since_mm_ = 0.0;
+  band_level_ = kNone;
+  travel_in_band_mm_ = 0.0;
+  focus_ = -1;
   live_target_um_ = kNaN;
   awaiting_finish_ = false;
   live_written_um_ = kNaN;
@@ -173,7 +250,7 @@ void CheckpointCompensator::preposition(TimeNs now_ns, StepOutput& out) noexcept
   if (config_.active_register < 0 || !awaiting_finish_) {
     return;
   }
-  write_live(register_value_um(0), now_ns, out);
+  write_live(start_value_um(), now_ns, out);
 }
 
 void CheckpointCompensator::write_live(double target_um, TimeNs now_ns, StepOutput& out) noexcept {
@@ -207,6 +284,8 @@ void CheckpointCompensator::on_part_start(TimeNs /*now_ns*/, const ProgramEvent&
   next_ = 0;
   have_prev_ = false;
   travel_since_mm_ = 0.0;
+  band_level_ = kNone;
+  travel_in_band_mm_ = 0.0;
   live_target_um_ = kNaN;
   awaiting_finish_ = true;
 }
@@ -239,15 +318,22 @@ void CheckpointCompensator::on_probe(const ProbeMeasurement& m, StepOutput& out)
               m.raw_deviation_um);
     return;
   }
-  const ProbeCorrection corr =
+  const auto i = static_cast<std::size_t>(m.checkpoint);
+  // The reading is checked as it came (α, r, δ), then corrected with the plan's α of this
+  // checkpoint: the probing program passed exactly that α to the macro, so a reading with
+  // another α belongs to another wall or comes from a stale program, and is not learned.
+  const ProbeCorrection as_read =
       correct_probe(m.raw_deviation_um, m.wall_angle_deg, m.ball_radius_mm);
-  if (corr.status != ProbeStatus::kOk) {
+  if (as_read.status != ProbeStatus::kOk ||
+      std::fabs(m.wall_angle_deg - plan_[i].alpha_deg) > kAlphaToleranceDeg) {
     ++counters_.invalid;
     out.alarm(m.time_ns, Severity::kAlarm, AlarmCode::kProbeInvalidInput, m.checkpoint,
               m.raw_deviation_um);
     return;
   }
-  const auto i = static_cast<std::size_t>(m.checkpoint);
+  const ProbeCorrection corr =
+      correct_probe(m.raw_deviation_um, plan_[i].alpha_deg, m.ball_radius_mm);
+  focus_ = m.checkpoint;
   const bool mode_a = config_.learning_mode == LearningMode::kPreviousPart;
   // Mode B probes the semi-finished wall, which was cut without per-checkpoint offsets.
   const double applied = mode_a ? points_[i].applied_um : 0.0;
@@ -258,7 +344,7 @@ void CheckpointCompensator::on_probe(const ProbeMeasurement& m, StepOutput& out)
   rec.kind = MeasurementKind::kContour;
   rec.point = m.checkpoint;
   rec.position_mm = m.position_mm;
-  rec.angle_deg = m.wall_angle_deg;
+  rec.angle_deg = plan_[i].alpha_deg;
   rec.measured_um = corr.corrected_um;
   // The log's convention (core/model's Dataset::target_um): measured_um + applied_um is the error
   // the machine made before compensation. The offset c cancelled −c of the error.
@@ -291,9 +377,13 @@ void CheckpointCompensator::on_probe(const ProbeMeasurement& m, StepOutput& out)
       return;
     }
   }
-  const double learned = p.count == 0 ? e : p.learned_um + (e - p.learned_um) / config_.ewma_weight;
+  // Mode B applies this blank's own semi-finishing error: an average over earlier blanks would
+  // blend their hardness into this one's offsets, which is what mode B is there to avoid.
+  const double learned =
+      (!mode_a || p.count == 0) ? e : p.learned_um + (e - p.learned_um) / config_.ewma_weight;
   const double target = -learned;
-  const double candidate = p.offset_um + config_.feedback * (target - p.offset_um);
+  const double candidate =
+      mode_a ? p.offset_um + config_.feedback * (target - p.offset_um) : config_.feedback * target;
   const bool in_dead_band = std::fabs(candidate - p.offset_um) < config_.dead_band_um;
   if (!in_dead_band && !limiter_.admissible(candidate)) {
     ++counters_.beyond_limit;
@@ -367,13 +457,19 @@ bool CheckpointCompensator::detect_path(const AxisSample& s) noexcept {
   return true;
 }
 
+bool CheckpointCompensator::in_band(std::size_t level, const AxisSample& s) const noexcept {
+  return std::fabs(s.position_mm[2] - levels_[level].z_mm) <= config_.z_band_mm;
+}
+
 bool CheckpointCompensator::detect_position(const AxisSample& s, StepOutput& out) noexcept {
   if (!have_prev_) {
+    band_level_ = kNone;
     return true;
   }
-  travel_since_mm_ +=
-      std::hypot(s.position_mm[0] - prev_.position_mm[0], s.position_mm[1] - prev_.position_mm[1],
-                 s.position_mm[2] - prev_.position_mm[2]);
+  const double dx = s.position_mm[0] - prev_.position_mm[0];
+  const double dy = s.position_mm[1] - prev_.position_mm[1];
+  const double dz = s.position_mm[2] - prev_.position_mm[2];
+  travel_since_mm_ += std::sqrt(dx * dx + dy * dy + dz * dz);
   // Several checkpoints may fall into one sample interval at low loop rates: test in order.
   while (next_ < plan_.size()) {
     if (passes(next_, s)) {
@@ -395,26 +491,155 @@ bool CheckpointCompensator::detect_position(const AxisSample& s, StepOutput& out
     }
     break;
   }
+  // Before a level's first checkpoint, the tool's progress on that level's pass is its XY travel
+  // since it entered the level's Z band (the pass starts where the plunge ends).
+  if (next_ < plan_.size() &&
+      next_ == levels_[static_cast<std::size_t>(plan_[next_].level)].first &&
+      in_band(static_cast<std::size_t>(plan_[next_].level), s)) {
+    const auto l = static_cast<std::size_t>(plan_[next_].level);
+    if (band_level_ != l) {
+      band_level_ = l;
+      travel_in_band_mm_ = 0.0;
+    } else {
+      travel_in_band_mm_ += std::sqrt(dx * dx + dy * dy);
+    }
+  } else {
+    band_level_ = kNone;
+  }
   return true;
 }
 
+double CheckpointCompensator::ramp(double from_um, double to_um, double u) const noexcept {
+  return from_um + profile_fraction(config_.creep_shape, u) * (to_um - from_um);
+}
+
+double CheckpointCompensator::level_value_um(std::size_t l, std::size_t k,
+                                             double done_mm) const noexcept {
+  const Level& lv = levels_[l];
+  const bool creep = config_.apply == ApplyMode::kCreep;
+  // The seam (closed pass): from the last checkpoint through the pass's start/end point to the
+  // first, span = the part of the pass not between first and last.
+  const bool wraps = lv.closed && lv.length_mm > 0.0;
+  const double seam_span_mm =
+      wraps ? lv.length_mm - plan_[lv.last].s_mm + plan_[lv.first].s_mm : 0.0;
+  const double v_first = register_value_um(lv.first);
+  const double v_last = register_value_um(lv.last);
+  if (k == kNone) {  // before the level's first checkpoint
+    if (!wraps) {
+      return v_first;
+    }
+    if (!creep) {
+      return v_last;  // the value of the checkpoint last passed along the closed contour
+    }
+    const double done = std::min(done_mm, plan_[lv.first].s_mm);
+    const double before_seam = lv.length_mm - plan_[lv.last].s_mm;
+    return ramp(v_last, v_first, (before_seam + done) / seam_span_mm);
+  }
+  const double v_k = register_value_um(k);
+  if (!creep) {
+    return v_k;
+  }
+  if (k < lv.last) {
+    const double span = plan_[k + 1].s_mm - plan_[k].s_mm;
+    return ramp(v_k, register_value_um(k + 1), done_mm / span);
+  }
+  if (!wraps) {
+    return v_last;
+  }
+  return ramp(v_last, v_first, done_mm / seam_span_mm);
+}
+
+double CheckpointCompensator::level_start_value_um(std::size_t l) const noexcept {
+  return level_value_um(l, kNone, 0.0);
+}
+
+double CheckpointCompensator::level_end_value_um(std::size_t l) const noexcept {
+  // At the pass's end point (closed: the seam, where the pass started).
+  const Level& lv = levels_[l];
+  return level_value_um(l, lv.last, lv.length_mm - plan_[lv.last].s_mm);
+}
+
+double CheckpointCompensator::start_value_um() const noexcept {
+  return plan_.empty() ? 0.0 : level_start_value_um(0);
+}
+
+double CheckpointCompensator::path_target_um(double p) const noexcept {
+  // The level whose pass started last at or before p.
+  std::size_t l = 0;
+  {
+    const auto it =
+        std::upper_bound(levels_.begin(), levels_.end(), p,
+                         [](double v, const Level& lv) { return v < lv.start_path_mm; });
+    l = it == levels_.begin() ? 0 : static_cast<std::size_t>(it - levels_.begin()) - 1;
+  }
+  const Level& lv = levels_[l];
+  // 1 nm of slack at the pass's end: path_mm − s_mm carries the rounding of both.
+  const double s = std::max(0.0, p - lv.start_path_mm);
+  if (lv.length_mm > 0.0 && s > lv.length_mm + 1e-6 && l + 1 < levels_.size()) {
+    // The level link: step mode switches to the next level's start value at once (the register
+    // has the whole link to slew), creep ramps from this level's end value to it.
+    const double next_start = level_start_value_um(l + 1);
+    if (config_.apply != ApplyMode::kCreep) {
+      return next_start;
+    }
+    const double link_mm = levels_[l + 1].start_path_mm - lv.start_path_mm - lv.length_mm;
+    return ramp(level_end_value_um(l), next_start,
+                link_mm > 0.0 ? (s - lv.length_mm) / link_mm : 1.0);
+  }
+  // The level's last checkpoint at or before s.
+  const auto first = plan_.begin() + static_cast<std::ptrdiff_t>(lv.first);
+  const auto last = plan_.begin() + static_cast<std::ptrdiff_t>(lv.last) + 1;
+  const auto it =
+      std::upper_bound(first, last, s, [](double v, const Checkpoint& c) { return v < c.s_mm; });
+  if (it == first) {
+    return level_value_um(l, kNone, s);
+  }
+  const auto k = static_cast<std::size_t>(it - plan_.begin()) - 1;
+  return level_value_um(l, k, s - plan_[k].s_mm);
+}
+
+double CheckpointCompensator::position_target_um(const AxisSample& s) const noexcept {
+  // The tool centre's travel runs ahead of the contour around convex corners (tool radius ×
+  // turn): progress is clamped at the next checkpoint, and after a level's last checkpoint at
+  // the pass's end, so the pass still ends with the value it started with.
+  const auto after_last = [&](std::size_t l) {
+    const Level& lv = levels_[l];
+    const double to_end = lv.length_mm - plan_[lv.last].s_mm;
+    return level_value_um(l, lv.last, std::min(travel_since_mm_, to_end));
+  };
+  if (next_ >= plan_.size()) {
+    return after_last(levels_.size() - 1);
+  }
+  const auto l = static_cast<std::size_t>(plan_[next_].level);
+  const Level& lv = levels_[l];
+  if (next_ > lv.first) {
+    return level_value_um(l, next_ - 1,
+                          std::min(travel_since_mm_, plan_[next_].s_mm - plan_[next_ - 1].s_mm));
+  }
+  // Nothing of level l passed yet.
+  if (band_level_ == l) {
+    return level_value_um(l, kNone, travel_in_band_mm_);
+  }
+  if (l == 0 || !have_prev_) {
+    return level_start_value_um(l);
+  }
+  // Still on the previous level after its last checkpoint (through its seam) ...
+  if (in_band(l - 1, s)) {
+    return after_last(l - 1);
+  }
+  // ... or in the level link: its progress is the plunge from one level's Z to the next.
+  const double next_start = level_start_value_um(l);
+  if (config_.apply != ApplyMode::kCreep) {
+    return next_start;
+  }
+  const double dz = levels_[l - 1].z_mm - lv.z_mm;
+  const double u = std::fabs(dz) > 0.0 ? (levels_[l - 1].z_mm - s.position_mm[2]) / dz : 1.0;
+  return ramp(level_end_value_um(l - 1), next_start, u);
+}
+
 double CheckpointCompensator::target_value_um(const AxisSample& s) const noexcept {
-  const std::size_t n = plan_.size();
-  if (next_ == 0) {
-    return register_value_um(0);
-  }
-  if (next_ >= n || config_.apply == ApplyMode::kStep) {
-    return register_value_um(next_ - 1);
-  }
-  const std::size_t a = next_ - 1;
-  const std::size_t b = next_;
-  const double span_mm = plan_[b].path_mm - plan_[a].path_mm;
-  const double done_mm = config_.trigger == TriggerMode::kPath
-                             ? s.program_path_mm - plan_[a].path_mm
-                             : travel_since_mm_;
-  const double f = profile_fraction(config_.creep_shape, done_mm / span_mm);
-  const double va = register_value_um(a);
-  return va + f * (register_value_um(b) - va);
+  return config_.trigger == TriggerMode::kPath ? path_target_um(s.program_path_mm)
+                                               : position_target_um(s);
 }
 
 void CheckpointCompensator::on_sample(const AxisSample& s, StepOutput& out) noexcept {
@@ -423,6 +648,11 @@ void CheckpointCompensator::on_sample(const AxisSample& s, StepOutput& out) noex
     have_prev_ = false;
     return;
   }
+  // Checkpoints passed in this sample (not those counted at a part's first sample or after a
+  // program restart: they were cut before the daemon saw the tool there).
+  const bool fresh = have_prev_ && !(config_.trigger == TriggerMode::kPath &&
+                                     s.program_path_mm < prev_.program_path_mm);
+  const std::size_t passed_before = next_;
   const bool ok = config_.trigger == TriggerMode::kPath ? detect_path(s) : detect_position(s, out);
   if (!ok) {
     return;  // no program path published: nothing is known about where the tool is
@@ -430,11 +660,21 @@ void CheckpointCompensator::on_sample(const AxisSample& s, StepOutput& out) noex
   prev_ = s;
   have_prev_ = true;
   awaiting_finish_ = false;
+  if (next_ > passed_before) {
+    focus_ = static_cast<std::int32_t>(next_ - 1);
+  }
   if (config_.active_register < 0) {
     live_target_um_ = target_value_um(s);
     return;
   }
   write_live(target_value_um(s), s.time_ns, out);
+  // What the wall at these checkpoints is cut with: the live register as the limiter let it
+  // through in this cycle (a slewing register has not reached its target yet).
+  if (fresh && std::isfinite(live_written_um_)) {
+    for (std::size_t i = passed_before; i < next_; ++i) {
+      points_[i].applied_um = live_written_um_;
+    }
+  }
 }
 
 void CheckpointCompensator::reset_live(double nc_value_um, TimeNs now_ns) noexcept {
@@ -538,9 +778,24 @@ ReconcileReport CheckpointCompensator::reconcile(std::span<const double> nc_valu
       points_[i].offset_um = nc;
       if (std::fabs(register_value_um(i) - nc) > config_.reconcile_tolerance_um) {
         mark_dirty(i);  // below the repeatability: the register gets the 0 we would write
+        ++rep.rewritten;
       }
     } else {
       mark_dirty(i);
+      ++rep.rewritten;
+    }
+  }
+  if (rep.adopted_nc && rep.rewritten > 0) {
+    // The whole table will be sent again (some read-backs could not be adopted): the adopted
+    // values go with it as targets, so the engine's resend does not put its last values over
+    // them.
+    for (std::size_t i = 0; i < plan_.size(); ++i) {
+      const double nc = nc_values_um[i];
+      if (std::isfinite(nc) && limiter_.admissible(nc) &&
+          std::fabs(nc - register_value_um(i)) <= config_.reconcile_tolerance_um &&
+          dirty_[i] == 0) {
+        mark_dirty(i);
+      }
     }
   }
   pending_mismatch_ = rep.mismatched;

@@ -2,6 +2,9 @@
 // written in machining order into consecutive NC offset registers, and applied to the finishing
 // tool's radius wear when the tool reaches each checkpoint — as a step (the seed) or creeping
 // along the path between checkpoints (S0's profiles), so the checkpoints leave no steps.
+// Creep stays within a level: on a closed contour it ramps from the level's last checkpoint
+// through the seam to the level's first, so the pass meets itself with the same value; between
+// levels (the level link) it ramps from one level's seam value to the next one's.
 //
 // Sign convention (µm, along the wall's air-side normal):
 //   δ'  > 0: the wall stands proud of nominal (material left, e.g. push-off).
@@ -29,7 +32,10 @@ namespace nccomp::core::checkpoint {
 /// (A) learn from the previous part's finishing (push-off) → next part;
 /// (B) learn from semi-finishing with the paired tool → finishing of the same part.
 enum class LearningMode : std::uint8_t { kPreviousPart = 0, kSemiFinishing = 1 };
-enum class ApplyMode : std::uint8_t { kStep = 0, kCreep = 1 };
+/// How the values reach the wall: kTable = the NC program selects each checkpoint's offset
+/// itself (no live register: active_register = −1); kStep / kCreep = the daemon drives the
+/// live radius wear register (active_register ≥ 0), switching at each checkpoint or creeping.
+enum class ApplyMode : std::uint8_t { kStep = 0, kCreep = 1, kTable = 2 };
 /// How a checkpoint is recognised while finishing: by the program path position the NC
 /// publishes, or by the tool centre passing within xy_tolerance_mm in XY and z_band_mm in Z.
 enum class TriggerMode : std::uint8_t { kPath = 0, kPosition = 1 };
@@ -54,16 +60,19 @@ struct CompensatorConfig {
   /// Logical register of the finishing tool's radius wear written live while finishing, or −1:
   /// table only (the NC program selects the offset number at each checkpoint itself).
   std::int32_t active_register{-1};
-  ApplyMode apply{ApplyMode::kCreep};
+  /// kTable exactly when active_register = −1 (configure() refuses the other combinations).
+  ApplyMode apply{ApplyMode::kTable};
   ProfileShape creep_shape{ProfileShape::kLinear};
   TriggerMode trigger{TriggerMode::kPath};
   double xy_tolerance_mm{0.5};
   double z_band_mm{1.0};
-  /// EWMA weight k ≥ 1 of M_i = M_{i−1} + (E_i − M_{i−1})/k (k = 1: the last part only).
+  /// EWMA weight k ≥ 1 of M_i = M_{i−1} + (E_i − M_{i−1})/k (k = 1: the last part only). Mode A
+  /// only: mode B applies each blank's own reading (M_i = E_i), never earlier blanks'.
   double ewma_weight{3.0};
   /// No offset change smaller than this [µm].
   double dead_band_um{1.0};
-  /// Fraction of the remaining error applied per update, (0, 1].
+  /// Fraction of the error applied per update, (0, 1]. Mode A: c ← c + f·(−M − c); mode B:
+  /// c = −f·E (a fraction of this blank's error, nothing of the previous blank's offset).
   double feedback{1.0};
   /// |δ'| above this [µm] is implausible: alarm, nothing learned.
   double plausible_um{200.0};
@@ -87,8 +96,11 @@ struct LearnedPoint {
   std::uint32_t count{0};
   /// Offset c [µm] (before the repeatability rule).
   double offset_um{0.0};
-  /// Register value in force while the current part was cut (snapshot at part start) [µm]: a
-  /// restart between finishing and probing must still subtract what that part was cut with.
+  /// The offset the current part's wall was cut with at this checkpoint [µm]: the table value at
+  /// part start, replaced, with a live register, by the live register's value as the limiter
+  /// let it through in the cycle the checkpoint triggered (a slewing register cuts with less
+  /// than its target). Persisted: a restart between finishing and probing must still subtract
+  /// what that part was cut with.
   double applied_um{0.0};
   /// Accepted e values, oldest first; history_n valid entries.
   std::array<double, kHistoryDepth> history{};
@@ -111,6 +123,9 @@ struct ReconcileReport {
   std::vector<std::int32_t> mismatched_ids;
   /// True when the NC's values were adopted, false when the daemon's will be rewritten.
   bool adopted_nc{false};
+  /// Mismatched registers the table will write again: all of them with prefer = daemon; with
+  /// prefer = nc those whose read-back could not be adopted (non-finite, beyond the limit).
+  std::size_t rewritten{0};
 };
 
 struct CompensatorCounters {
@@ -177,6 +192,14 @@ class CheckpointCompensator {
   [[nodiscard]] std::size_t passed() const noexcept { return next_; }
   /// The live radius wear target [µm] of the last sample (NaN before finishing started).
   [[nodiscard]] double live_target_um() const noexcept { return live_target_um_; }
+  /// The value the live register holds (last write after the limiter) [µm]; NaN before the
+  /// first write.
+  [[nodiscard]] double live_written_um() const noexcept { return live_written_um_; }
+  /// The checkpoint of the last event (probe reading or trigger), −1 before any. Real-time safe.
+  [[nodiscard]] std::int32_t focus_checkpoint() const noexcept { return focus_; }
+  /// The live target at the start of the first level's pass (what the register is pre-positioned
+  /// to before finishing) [µm].
+  [[nodiscard]] double start_value_um() const noexcept;
   [[nodiscard]] bool table_pending() const noexcept { return dirty_count_ > 0; }
   [[nodiscard]] const CompensatorCounters& counters() const noexcept { return counters_; }
   [[nodiscard]] const CompensatorConfig& config() const noexcept { return config_; }
@@ -192,14 +215,36 @@ class CheckpointCompensator {
   bool detect_path(const AxisSample& s) noexcept;
   bool detect_position(const AxisSample& s, StepOutput& out) noexcept;
   [[nodiscard]] bool passes(std::size_t i, const AxisSample& s) const noexcept;
+  [[nodiscard]] bool in_band(std::size_t level, const AxisSample& s) const noexcept;
   [[nodiscard]] double target_value_um(const AxisSample& s) const noexcept;
+  [[nodiscard]] double path_target_um(double path_mm) const noexcept;
+  [[nodiscard]] double position_target_um(const AxisSample& s) const noexcept;
+  /// The value on level l's pass: after checkpoint k of the level (kNone = before its first)
+  /// and done_mm further along the contour.
+  [[nodiscard]] double level_value_um(std::size_t l, std::size_t k, double done_mm) const noexcept;
+  [[nodiscard]] double level_end_value_um(std::size_t l) const noexcept;
+  [[nodiscard]] double level_start_value_um(std::size_t l) const noexcept;
+  [[nodiscard]] double ramp(double from_um, double to_um, double u) const noexcept;
   void flush_table(TimeNs now_ns, StepOutput& out) noexcept;
   void preposition(TimeNs now_ns, StepOutput& out) noexcept;
   void write_live(double target_um, TimeNs now_ns, StepOutput& out) noexcept;
   void mark_dirty(std::size_t i) noexcept;
 
+  /// One level of the plan: its checkpoints first..last, where its pass starts on the program
+  /// path, its length (0 = unknown) and whether it is closed.
+  struct Level {
+    std::size_t first{0};
+    std::size_t last{0};
+    double start_path_mm{0.0};
+    double length_mm{0.0};
+    bool closed{false};
+    double z_mm{0.0};
+  };
+  static constexpr std::size_t kNone = static_cast<std::size_t>(-1);
+
   CompensatorConfig config_{};
   std::vector<Checkpoint> plan_;
+  std::vector<Level> levels_;
   std::vector<LearnedPoint> points_;
   std::vector<std::uint8_t> dirty_;
   std::size_t dirty_count_{0};
@@ -214,6 +259,12 @@ class CheckpointCompensator {
   AxisSample prev_{};
   /// Path travelled since the last trigger [mm] (trigger = position: the creep's progress).
   double travel_since_mm_{0.0};
+  /// trigger = position: the level whose Z band the tool is in before that level's first
+  /// checkpoint (kNone: none), and its XY travel since it entered the band [mm] (≈ the contour
+  /// position on that level's pass).
+  std::size_t band_level_{kNone};
+  double travel_in_band_mm_{0.0};
+  std::int32_t focus_{-1};
   double live_target_um_{kNaN};
   double live_written_um_{kNaN};
   /// Part started, finishing not yet: the live register is pre-positioned to checkpoint 0.

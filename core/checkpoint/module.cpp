@@ -1,6 +1,7 @@
 #include "core/checkpoint/module.hpp"
 
 #include <cstring>
+#include <iterator>
 #include <stdexcept>
 #include <type_traits>
 #include <utility>
@@ -137,10 +138,30 @@ bool CheckpointModule::load_state(std::span<const std::byte> bytes) noexcept {
 
 std::size_t CheckpointModule::status(std::span<engine::StatusValue> out) const noexcept {
   const auto& c = compensator_;
+  // Bounded whatever the plan's size: counts, the range of the learned values over the whole
+  // table, and every learned value of one checkpoint, the focus (the one last passed by the
+  // finishing tool or last probed). Every checkpoint's offset is in the status's register list.
   std::size_t learned = 0;
+  double lo = kNaN;
+  double hi = kNaN;
+  std::int32_t lo_id = -1;
+  std::int32_t hi_id = -1;
   for (std::size_t i = 0; i < c.size(); ++i) {
-    learned += c.learned_count(i) > 0 ? 1U : 0U;
+    if (c.learned_count(i) == 0) continue;
+    ++learned;
+    const double v = c.learned_um(i);
+    if (lo_id < 0 || v < lo) {
+      lo = v;
+      lo_id = static_cast<std::int32_t>(i);
+    }
+    if (hi_id < 0 || v > hi) {
+      hi = v;
+      hi_id = static_cast<std::int32_t>(i);
+    }
   }
+  const std::int32_t f = c.focus_checkpoint();
+  const bool has_focus = f >= 0 && static_cast<std::size_t>(f) < c.size();
+  const auto fi = static_cast<std::size_t>(has_focus ? f : 0);
   const auto& k = c.counters();
   const engine::StatusValue values[] = {
       {"checkpoints", static_cast<double>(c.size()), nullptr},
@@ -151,7 +172,16 @@ std::size_t CheckpointModule::status(std::span<engine::StatusValue> out) const n
       {"probe_readings", static_cast<double>(k.measurements), nullptr},
       {"implausible", static_cast<double>(k.implausible), nullptr},
       {"outliers", static_cast<double>(k.outliers), nullptr},
+      {"learned_min_um", lo, nullptr},
+      {"learned_min_checkpoint", static_cast<double>(lo_id), nullptr},
+      {"learned_max_um", hi, nullptr},
+      {"learned_max_checkpoint", static_cast<double>(hi_id), nullptr},
+      {"checkpoint", static_cast<double>(has_focus ? f : -1), nullptr},
+      {"checkpoint_learned_um", has_focus ? c.learned_um(fi) : kNaN, nullptr},
+      {"checkpoint_count", has_focus ? static_cast<double>(c.learned_count(fi)) : kNaN, nullptr},
+      {"checkpoint_offset_um", has_focus ? c.register_value_um(fi) : kNaN, nullptr},
   };
+  static_assert(std::size(values) <= engine::kMaxStatusValues);
   std::size_t w = 0;
   for (const auto& v : values) {
     if (w == out.size()) break;

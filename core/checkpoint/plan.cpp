@@ -1,8 +1,10 @@
 #include "core/checkpoint/plan.hpp"
 
 #include <algorithm>
+#include <array>
 #include <charconv>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <sstream>
 #include <stdexcept>
@@ -46,9 +48,12 @@ struct Polyline {
 
 Polyline make_polyline(const PlanConfig& c) {
   Polyline pl;
-  pl.p = c.contour;
+  pl.p.reserve(c.contour.size() + 1);
+  for (const ContourPoint& v : c.contour) {
+    pl.p.push_back({v.x_mm, v.y_mm});
+  }
   if (c.closed) {
-    pl.p.push_back(c.contour.front());
+    pl.p.push_back(pl.p.front());
   }
   pl.s.resize(pl.p.size(), 0.0);
   for (std::size_t i = 1; i < pl.p.size(); ++i) {
@@ -69,11 +74,11 @@ std::size_t segment_at(const Polyline& pl, double s) {
   return std::min(idx, pl.segments() - 1);
 }
 
-double signed_area(const std::vector<Point2>& p) {
+double signed_area(const std::vector<ContourPoint>& p) {
   double a = 0.0;
   for (std::size_t i = 0; i < p.size(); ++i) {
-    const Point2& u = p[i];
-    const Point2& v = p[(i + 1) % p.size()];
+    const ContourPoint& u = p[i];
+    const ContourPoint& v = p[(i + 1) % p.size()];
     a += u.x_mm * v.y_mm - v.x_mm * u.y_mm;
   }
   return 0.5 * a;
@@ -143,6 +148,25 @@ Plan make_plan(const PlanConfig& c) {
   if (std::fabs(c.wall_angle_deg) >= kMaxWallAngleDeg) {
     fail("wall_angle_deg", "must be below 89 degrees in magnitude, got " + num(c.wall_angle_deg));
   }
+  for (std::size_t i = 0; i < c.contour.size(); ++i) {
+    const ContourPoint& v = c.contour[i];
+    const std::string key = "contour[" + std::to_string(i) + "]";
+    // NaN = not given; anything else must be a usable angle.
+    if (!std::isnan(v.alpha_deg) &&
+        (!std::isfinite(v.alpha_deg) || std::fabs(v.alpha_deg) >= kMaxWallAngleDeg)) {
+      fail(key + ".alpha_deg",
+           "must be a finite angle below 89 degrees in magnitude, got " + num(v.alpha_deg));
+    }
+    if (v.corner != CornerMark::kAuto && v.corner != CornerMark::kCorner &&
+        v.corner != CornerMark::kNoCorner) {
+      fail(key + ".corner", "unknown corner mark");
+    }
+    if (!c.closed && v.corner == CornerMark::kCorner && (i == 0 || i + 1 == c.contour.size())) {
+      fail(key + ".corner",
+           "an end point of an open contour cannot be a corner (sub-curve boundaries are "
+           "interior vertices)");
+    }
+  }
   if (!(c.corner_angle_deg > 0.0 && c.corner_angle_deg < 180.0)) {
     fail("corner_angle_deg", "must be in (0, 180), got " + num(c.corner_angle_deg));
   }
@@ -171,11 +195,32 @@ Plan make_plan(const PlanConfig& c) {
     material_left = (area > 0.0) == (c.material == MaterialSide::kInside);
   }
 
-  // --- corners: vertices turning by more than corner_angle_deg ---
-  std::vector<double> corner_s;
+  // --- wall angle of each segment: a vertex's alpha_deg holds from it on ---
   const std::size_t n_seg = pl.segments();
+  std::vector<double> seg_alpha(n_seg, c.wall_angle_deg);
+  for (std::size_t i = 0; i < n_seg; ++i) {
+    if (!std::isnan(c.contour[i].alpha_deg)) {
+      seg_alpha[i] = c.contour[i].alpha_deg;
+    } else if (i > 0) {
+      seg_alpha[i] = seg_alpha[i - 1];
+    }
+  }
+
+  // --- corners: vertices marked as sub-curve boundaries, or turning by more than
+  //     corner_angle_deg (unless marked as no corner) ---
+  std::vector<double> corner_s;
+  std::size_t marked = 0;
   // Closed: every vertex (vertex 0 joins the closing segment); open: interior vertices only.
   for (std::size_t v = c.closed ? 0 : 1; v < n_seg; ++v) {
+    const CornerMark mark = c.contour[v].corner;
+    if (mark == CornerMark::kCorner) {
+      corner_s.push_back(pl.s[v]);
+      ++marked;
+      continue;
+    }
+    if (mark == CornerMark::kNoCorner) {
+      continue;
+    }
     const std::size_t in_seg = (v == 0) ? n_seg - 1 : v - 1;
     const std::size_t out_seg = v;
     const double ax = pl.p[in_seg + 1].x_mm - pl.p[in_seg].x_mm;
@@ -280,13 +325,15 @@ Plan make_plan(const PlanConfig& c) {
   if (merged.empty()) {
     fail("contour", "no checkpoints: no corner turns by more than corner_angle_deg (" +
                         num(c.corner_angle_deg) +
-                        ") and no extra_points_mm / extra_regions are configured");
+                        "), no vertex is marked as a corner and no extra_points_mm / "
+                        "extra_regions are configured");
   }
 
   // --- levels ---
   Plan plan;
   plan.contour_length_mm = length;
   plan.corner_count = corner_s.size();
+  plan.marked_corner_count = marked;
   const auto n_levels = static_cast<std::size_t>(std::floor(level_span + 1e-9)) + 1;
   for (std::size_t l = 0; l < n_levels; ++l) {
     plan.levels_z_mm.push_back(c.z_start_mm - static_cast<double>(l) * c.depth_step_mm);
@@ -297,13 +344,15 @@ Plan make_plan(const PlanConfig& c) {
                               " checkpoints, more than " + std::to_string(kMaxCheckpoints));
   }
   const double link = c.level_link_mm < 0.0 ? c.depth_step_mm : c.level_link_mm;
-  const double tan_a = std::tan(c.wall_angle_deg * kDegToRad);
   std::int32_t id = 0;
+  plan.alpha_min_deg = std::numeric_limits<double>::infinity();
+  plan.alpha_max_deg = -std::numeric_limits<double>::infinity();
   for (std::size_t l = 0; l < n_levels; ++l) {
     const double z = plan.levels_z_mm[l];
-    const double draft_mm = (c.contour_z_mm - z) * tan_a;
     for (const Pos& p : merged) {
       const std::size_t seg = segment_at(pl, p.s);
+      const double alpha_deg = seg_alpha[seg];
+      const double draft_mm = (c.contour_z_mm - z) * std::tan(alpha_deg * kDegToRad);
       const Point2& a = pl.p[seg];
       const Point2& b = pl.p[seg + 1];
       const double seg_len = pl.s[seg + 1] - pl.s[seg];
@@ -324,7 +373,11 @@ Plan make_plan(const PlanConfig& c) {
       cp.z_mm = z;
       cp.dir_x = -nx;
       cp.dir_y = -ny;
-      cp.alpha_deg = c.wall_angle_deg;
+      cp.alpha_deg = alpha_deg;
+      cp.pass_length_mm = length;
+      cp.closed = c.closed;
+      plan.alpha_min_deg = std::min(plan.alpha_min_deg, alpha_deg);
+      plan.alpha_max_deg = std::max(plan.alpha_max_deg, alpha_deg);
       cp.tool_x_mm = cp.x_mm + nx * c.tool_radius_mm;
       cp.tool_y_mm = cp.y_mm + ny * c.tool_radius_mm;
       cp.start_x_mm = cp.x_mm + nx * (c.ball_radius_mm + c.probe_approach_mm);
@@ -340,8 +393,8 @@ Plan make_plan(const PlanConfig& c) {
   return plan;
 }
 
-std::vector<Point2> parse_contour_csv(std::string_view text, std::string_view source) {
-  std::vector<Point2> points;
+std::vector<ContourPoint> parse_contour_csv(std::string_view text, std::string_view source) {
+  std::vector<ContourPoint> points;
   const std::string src(source);
   const auto error = [&](std::size_t line, const std::string& reason) {
     return std::invalid_argument(src + ":" + std::to_string(line) + ": " + reason);
@@ -353,7 +406,22 @@ std::vector<Point2> parse_contour_csv(std::string_view text, std::string_view so
     }
     return s;
   };
-  bool header_seen = false;
+  // Fields of one line (at most kMaxColumns + 1, so a line with too many is recognised).
+  constexpr std::size_t kMaxColumns = 4;
+  const auto split = [&](std::string_view line, std::array<std::string_view, kMaxColumns + 1>& f) {
+    std::size_t n = 0;
+    for (;;) {
+      const std::size_t comma = line.find(',');
+      f[n++] = trim(line.substr(0, comma));
+      if (comma == std::string_view::npos || n == f.size()) {
+        return n;
+      }
+      line.remove_prefix(comma + 1);
+    }
+  };
+  enum class Col : std::uint8_t { kX, kY, kAlpha, kCorner };
+  std::array<Col, kMaxColumns> cols{};
+  std::size_t n_cols = 0;
   std::size_t line_no = 0;
   std::size_t pos = 0;
   while (pos <= text.size()) {
@@ -366,21 +434,41 @@ std::vector<Point2> parse_contour_csv(std::string_view text, std::string_view so
     if (line.empty() || line.front() == '#') {
       continue;
     }
-    const std::size_t comma = line.find(',');
-    if (comma == std::string_view::npos) {
-      throw error(line_no, "expected two comma-separated columns, got '" + std::string(line) + "'");
-    }
-    const std::string_view f0 = trim(line.substr(0, comma));
-    const std::string_view f1 = trim(line.substr(comma + 1));
-    if (f1.find(',') != std::string_view::npos) {
-      throw error(line_no, "expected exactly two columns (x_mm,y_mm)");
-    }
-    if (!header_seen) {
-      if (f0 != "x_mm" || f1 != "y_mm") {
-        throw error(line_no, "header must be 'x_mm,y_mm', got '" + std::string(line) + "'");
+    std::array<std::string_view, kMaxColumns + 1> f{};
+    const std::size_t n = split(line, f);
+    if (n_cols == 0) {
+      if (n < 2 || f[0] != "x_mm" || f[1] != "y_mm" || n > kMaxColumns) {
+        throw error(line_no,
+                    "header must be 'x_mm,y_mm' optionally followed by 'alpha_deg' and / or "
+                    "'corner', got '" +
+                        std::string(line) + "'");
       }
-      header_seen = true;
+      cols[0] = Col::kX;
+      cols[1] = Col::kY;
+      bool have_alpha = false;
+      bool have_corner = false;
+      for (std::size_t k = 2; k < n; ++k) {
+        if (f[k] == "alpha_deg" && !have_alpha) {
+          cols[k] = Col::kAlpha;
+          have_alpha = true;
+        } else if (f[k] == "corner" && !have_corner) {
+          cols[k] = Col::kCorner;
+          have_corner = true;
+        } else {
+          throw error(line_no, "header column " + std::to_string(k + 1) + ": '" +
+                                   std::string(f[k]) +
+                                   "' is not one of alpha_deg, corner (or appears twice)");
+        }
+      }
+      n_cols = n;
       continue;
+    }
+    if (n != n_cols) {
+      throw error(line_no, "expected " + std::to_string(n_cols) +
+                               " comma-separated columns as in the header, got " +
+                               std::to_string(std::min(n, kMaxColumns + 1)) +
+                               (n > kMaxColumns ? " or more" : "") + ": '" + std::string(line) +
+                               "'");
     }
     const auto parse = [&](std::string_view field, const char* name) {
       double v = 0.0;
@@ -396,13 +484,43 @@ std::vector<Point2> parse_contour_csv(std::string_view text, std::string_view so
       }
       return v;
     };
-    const Point2 p{parse(f0, "x_mm"), parse(f1, "y_mm")};
+    ContourPoint p;
+    for (std::size_t k = 0; k < n_cols; ++k) {
+      switch (cols[k]) {
+        case Col::kX:
+          p.x_mm = parse(f[k], "x_mm");
+          break;
+        case Col::kY:
+          p.y_mm = parse(f[k], "y_mm");
+          break;
+        case Col::kAlpha:
+          if (!f[k].empty()) {
+            p.alpha_deg = parse(f[k], "alpha_deg");
+            if (std::fabs(p.alpha_deg) >= kMaxWallAngleDeg) {
+              throw error(line_no, "column alpha_deg: " + std::string(f[k]) +
+                                       " is not below 89 degrees in magnitude");
+            }
+          }
+          break;
+        case Col::kCorner:
+          if (f[k] == "1") {
+            p.corner = CornerMark::kCorner;
+          } else if (f[k] == "0") {
+            p.corner = CornerMark::kNoCorner;
+          } else if (!f[k].empty()) {
+            throw error(line_no, "column corner: '" + std::string(f[k]) +
+                                     "' must be 1 (sub-curve boundary), 0 (no corner) or empty "
+                                     "(by the turn angle)");
+          }
+          break;
+      }
+    }
     if (points.size() >= kMaxContourPoints) {
       throw error(line_no, "more than " + std::to_string(kMaxContourPoints) + " points");
     }
     points.push_back(p);
   }
-  if (!header_seen) {
+  if (n_cols == 0) {
     throw std::invalid_argument(src + ": empty contour file (no 'x_mm,y_mm' header)");
   }
   if (points.empty()) {

@@ -149,7 +149,7 @@ ConfigError::ConfigError(std::vector<ConfigIssue> issues)
       }()),
       issues_(std::move(issues)) {}
 
-std::vector<cp::Point2> read_contour_csv(const std::filesystem::path& path) {
+std::vector<cp::ContourPoint> read_contour_csv(const std::filesystem::path& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) {
     throw std::invalid_argument(path.string() + ": cannot open contour file");
@@ -190,12 +190,35 @@ CheckpointsConfig parse_checkpoints(const toml::table& table, const std::string&
     } else {
       for (std::size_t i = 0; i < arr->size(); ++i) {
         const toml::node& e = (*arr)[i];
-        const toml::array* pair = e.as_array();
         const std::string key = "contour[" + std::to_string(i) + "]";
+        if (const toml::table* vt = e.as_table()) {
+          // A vertex with attributes: { x_mm = .., y_mm = .., alpha_deg = .., corner = .. }.
+          Reader v(*vt, r.path() + "." + key, file, issues);
+          if (vt->get("x_mm") == nullptr || vt->get("y_mm") == nullptr) {
+            v.issue(&e, "", "needs x_mm and y_mm");
+          }
+          cp::ContourPoint pt;
+          pt.x_mm = v.number("x_mm", 0.0, -kBig, kBig);
+          pt.y_mm = v.number("y_mm", 0.0, -kBig, kBig);
+          if (vt->get("alpha_deg") != nullptr) {
+            pt.alpha_deg = v.number("alpha_deg", 0.0, -88.999, 88.999);
+          }
+          if (vt->get("corner") != nullptr) {
+            pt.corner =
+                v.boolean("corner", false) ? cp::CornerMark::kCorner : cp::CornerMark::kNoCorner;
+          }
+          v.finish();
+          p.contour.push_back(pt);
+          continue;
+        }
+        const toml::array* pair = e.as_array();
         const toml::node* nx = pair != nullptr && pair->size() == 2 ? pair->get(0) : nullptr;
         const toml::node* ny = pair != nullptr && pair->size() == 2 ? pair->get(1) : nullptr;
         if (nx == nullptr || ny == nullptr || !nx->is_number() || !ny->is_number()) {
-          r.issue(&e, key, "must be a pair of numbers [x_mm, y_mm]");
+          r.issue(&e, key,
+                  pair != nullptr ? "must be a pair of numbers [x_mm, y_mm]"
+                                  : "must be a pair of numbers [x_mm, y_mm] or a table "
+                                    "{ x_mm = .., y_mm = .., alpha_deg = .., corner = .. }");
           continue;
         }
         const double x = nx->value<double>().value_or(0.0);
@@ -204,7 +227,7 @@ CheckpointsConfig parse_checkpoints(const toml::table& table, const std::string&
           r.issue(&e, key, "must be finite");
           continue;
         }
-        p.contour.push_back({x, y});
+        p.contour.push_back(cp::ContourPoint{x, y});
       }
     }
   } else {
@@ -289,7 +312,12 @@ CheckpointsConfig parse_checkpoints(const toml::table& table, const std::string&
       static_cast<std::uint16_t>(r.integer("register_base", c.register_base, 0, 65535));
   c.active_register =
       static_cast<std::int32_t>(r.integer("active_register", c.active_register, -1, 65535));
-  c.apply = static_cast<cp::ApplyMode>(r.choice("apply", 1, {"step", "creep"}));
+  // Without a live register the NC program applies the table itself: "table". With one, the
+  // daemon creeps unless told to step. A contradicting explicit choice is refused by the core
+  // (checkpoints.apply) below.
+  const std::size_t apply_default = c.active_register >= 0 ? 1 : 2;
+  c.apply =
+      static_cast<cp::ApplyMode>(r.choice("apply", apply_default, {"step", "creep", "table"}));
   const std::size_t shape = r.choice("creep_shape", 0, {"linear", "cosine", "smoothstep"});
   c.creep_shape = shape == 0   ? core::ProfileShape::kLinear
                   : shape == 1 ? core::ProfileShape::kCosine
@@ -298,6 +326,12 @@ CheckpointsConfig parse_checkpoints(const toml::table& table, const std::string&
   c.xy_tolerance_mm = r.number("xy_tolerance_mm", c.xy_tolerance_mm, 1e-6, 1000.0);
   c.z_band_mm = r.number("z_band_mm", c.z_band_mm, 1e-6, 1000.0);
   c.ewma_weight = r.number("ewma_weight", c.ewma_weight, 1.0, 1e6);
+  if (c.learning_mode == cp::LearningMode::kSemiFinishing && table.get("ewma_weight") != nullptr) {
+    r.issue(table.get("ewma_weight"), "ewma_weight",
+            "not used with learning_mode = \"semi_finishing\": mode B applies each blank's own "
+            "semi-finishing reading (an average over blanks would blend earlier blanks' hardness "
+            "into this one's offsets); remove the key");
+  }
   c.dead_band_um = r.number("dead_band_um", c.dead_band_um, 0.0, kBig);
   c.feedback = r.number("feedback", c.feedback, 1e-6, 1.0);
   c.plausible_um = r.number("plausible_um", c.plausible_um, 1e-6, kBig);

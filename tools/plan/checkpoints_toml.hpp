@@ -87,6 +87,6 @@ std::unique_ptr<core::checkpoint::CheckpointModule> make_checkpoint_module(
 
 /// Reads a contour CSV file (core::checkpoint::parse_contour_csv); throws std::invalid_argument
 /// naming the file (and line).
-std::vector<core::checkpoint::Point2> read_contour_csv(const std::filesystem::path& path);
+std::vector<core::checkpoint::ContourPoint> read_contour_csv(const std::filesystem::path& path);
 
 }  // namespace nccomp::tools::checkpoints

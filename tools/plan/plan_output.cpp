@@ -1,5 +1,6 @@
 #include "tools/plan/plan_output.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <string>
@@ -32,7 +33,11 @@ void write_plan_summary(std::ostream& os, const cp::Plan& plan, const Checkpoint
   os << "# contour: " << cfg.plan.contour.size() << " points from " << cfg.contour_source << ", "
      << (cfg.plan.closed ? "closed" : "open") << ", length " << fmt(3, plan.contour_length_mm)
      << " mm, material " << cp::material_side_name(cfg.plan.material) << ", " << plan.corner_count
-     << " corners\n";
+     << " corners";
+  if (plan.marked_corner_count > 0) {
+    os << " (" << plan.marked_corner_count << " marked as sub-curve boundaries)";
+  }
+  os << "\n";
   os << "# levels: " << plan.levels_z_mm.size() << " (z " << fmt(3, plan.levels_z_mm.front())
      << " .. " << fmt(3, plan.levels_z_mm.back()) << " mm, step " << fmt(3, cfg.plan.depth_step_mm)
      << " mm), " << n / plan.levels_z_mm.size() << " points per level, " << n << " checkpoints\n";
@@ -43,9 +48,24 @@ void write_plan_summary(std::ostream& os, const cp::Plan& plan, const Checkpoint
   }
   os << "; learning " << cp::learning_mode_name(c.learning_mode) << ", apply "
      << cp::apply_mode_name(c.apply) << ", trigger " << cp::trigger_mode_name(c.trigger) << "\n";
-  os << "# probe: ball radius " << fmt(3, cfg.plan.ball_radius_mm) << " mm, wall angle "
-     << fmt(3, cfg.plan.wall_angle_deg) << " deg, delta0 = r/cos(a) - r = "
-     << fmt(3, cp::probe_delta0_um(cfg.plan.ball_radius_mm, cfg.plan.wall_angle_deg)) << " um\n";
+  const double r = cfg.plan.ball_radius_mm;
+  os << "# probe: ball radius " << fmt(3, r) << " mm, ";
+  if (!(plan.alpha_max_deg > plan.alpha_min_deg)) {
+    os << "wall angle " << fmt(3, plan.alpha_min_deg)
+       << " deg, delta0 = r/cos(a) - r = " << fmt(3, cp::probe_delta0_um(r, plan.alpha_min_deg))
+       << " um\n";
+  } else {
+    // δ0 grows with |α|: its range over the plan's angles.
+    const double a_lo =
+        plan.alpha_min_deg <= 0.0 && plan.alpha_max_deg >= 0.0
+            ? 0.0
+            : std::min(std::fabs(plan.alpha_min_deg), std::fabs(plan.alpha_max_deg));
+    const double a_hi = std::max(std::fabs(plan.alpha_min_deg), std::fabs(plan.alpha_max_deg));
+    os << "wall angle " << fmt(3, plan.alpha_min_deg) << " .. " << fmt(3, plan.alpha_max_deg)
+       << " deg (per point: column alpha_deg), delta0 = r/cos(a) - r = "
+       << fmt(3, cp::probe_delta0_um(r, a_lo)) << " .. " << fmt(3, cp::probe_delta0_um(r, a_hi))
+       << " um\n";
+  }
 }
 
 void write_plan_csv(std::ostream& os, const cp::Plan& plan, const CheckpointsConfig& cfg) {

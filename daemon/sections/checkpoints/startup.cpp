@@ -30,7 +30,7 @@ std::vector<ReconcileOutcome> reconcile_checkpoints(core::engine::Engine& engine
       }
       values[i] = *v;
     }
-    char line[256];
+    char line[384];
     if (unreadable > 0) {
       std::snprintf(line, sizeof line,
                     "%s: %zu of %zu checkpoint registers cannot be read back from the NC; the "
@@ -41,9 +41,12 @@ std::vector<ReconcileOutcome> reconcile_checkpoints(core::engine::Engine& engine
       continue;
     }
     const auto rep = comp.reconcile(values);
-    if (rep.mismatched > 0) {
+    if (rep.rewritten > 0) {
       // The engine believes the restored values are on the NC and would not write a target it
-      // already sent: make it send every known value again (absolute values: harmless).
+      // already sent: make it send every known value again (absolute values: harmless). Not
+      // when every difference was adopted (prefer = nc): the NC holds exactly those values, and
+      // on a table larger than one cycle's 32 writes the resend would put the engine's last
+      // values over adopted registers the compensator has not re-targeted yet.
       engine.resend_all();
     }
     o.read_back = true;
@@ -61,10 +64,14 @@ std::vector<ReconcileOutcome> reconcile_checkpoints(core::engine::Engine& engine
                     o.module.c_str(), rep.compared);
     } else {
       std::snprintf(line, sizeof line,
-                    "%s: %zu of %zu checkpoint registers differ from the table (max %.3f um); %s",
+                    "%s: %zu of %zu checkpoint registers differ from the table (max %.3f um); %s%s",
                     o.module.c_str(), rep.mismatched, rep.compared, rep.max_difference_um,
                     rep.adopted_nc ? "the NC's values are adopted (reconcile_prefer = \"nc\")"
-                                   : "the table is written again (reconcile_prefer = \"daemon\")");
+                                   : "the table is written again (reconcile_prefer = \"daemon\")",
+                    rep.adopted_nc && rep.rewritten > 0
+                        ? "; some could not be adopted (non-finite or beyond the limit): the "
+                          "whole table is sent again"
+                        : "");
     }
     o.message = line;
     out.push_back(std::move(o));

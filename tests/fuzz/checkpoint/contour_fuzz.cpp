@@ -1,10 +1,14 @@
-// Contour CSV bytes → parse_contour_csv → make_plan: either a plan or std::invalid_argument.
+// Contour CSV bytes → parse_contour_csv → make_plan: either a plan or std::invalid_argument;
+// every plan made is accepted by the compensator (a refused plan would be a planner bug).
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <stdexcept>
 #include <string_view>
 
+#include "core/checkpoint/compensator.hpp"
 #include "core/checkpoint/plan.hpp"
+#include "core/checkpoint/probe.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   namespace cp = nccomp::core::checkpoint;
@@ -27,6 +31,14 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
             __builtin_trap();  // the plan's machining order must be strictly increasing
           }
         }
+        for (const cp::Checkpoint& k : p.checkpoints) {
+          if (!(std::fabs(k.alpha_deg) < cp::kMaxWallAngleDeg)) {
+            __builtin_trap();  // every point's α (from the CSV's column) is a usable angle
+          }
+        }
+        // Every plan the planner makes is one the compensator accepts (levels, passes, seams).
+        cp::CheckpointCompensator comp;
+        comp.configure(cp::CompensatorConfig{}, p.checkpoints, nccomp::core::LimiterConfig{});
       } catch (const std::invalid_argument&) {
       }
     }

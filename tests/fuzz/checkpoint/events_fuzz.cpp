@@ -1,5 +1,6 @@
 // Arbitrary event streams into CheckpointCompensator::step: no crash, no UB, offsets always
 // finite and inside the limiter's absolute limit.
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -7,6 +8,7 @@
 #include <vector>
 
 #include "core/checkpoint/compensator.hpp"
+#include "core/checkpoint/plan.hpp"
 
 namespace {
 
@@ -32,18 +34,38 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   if (comp == nullptr) {
     comp = new cp::CheckpointCompensator();
   }
-  std::vector<cp::Checkpoint> plan;
-  for (int i = 0; i < 6; ++i) {
-    cp::Checkpoint c;
-    c.id = i;
-    c.path_mm = 10.0 * (i + 1);
-    c.tool_x_mm = c.path_mm;
-    c.z_mm = -5.0;
-    plan.push_back(c);
-  }
+  // Plans: six points on one open pass, or a closed 40 × 20 rectangle on three levels (seams and
+  // level links), or the same rectangle open.
+  static const std::vector<cp::Checkpoint> line = [] {
+    std::vector<cp::Checkpoint> plan;
+    for (int i = 0; i < 6; ++i) {
+      cp::Checkpoint c;
+      c.id = i;
+      c.path_mm = 10.0 * (i + 1);
+      c.s_mm = c.path_mm;
+      c.tool_x_mm = c.path_mm;
+      c.z_mm = -5.0;
+      plan.push_back(c);
+    }
+    return plan;
+  }();
+  const auto rect = [](bool closed) {
+    cp::PlanConfig c;
+    c.contour = {{0, 0}, {40, 0}, {40, 20}, {0, 20}};
+    c.closed = closed;
+    c.material = closed ? cp::MaterialSide::kInside : cp::MaterialSide::kLeft;
+    c.z_start_mm = -2.0;
+    c.z_end_mm = -12.0;
+    c.corner_offset_mm = 3.0;
+    return cp::make_plan(c).checkpoints;
+  };
+  static const std::vector<cp::Checkpoint> closed_rect = rect(true);
+  static const std::vector<cp::Checkpoint> open_rect = rect(false);
   cp::CompensatorConfig cfg;
   cfg.active_register = 3;
+  cfg.apply = cp::ApplyMode::kCreep;
   cfg.finishing_tool = 1;
+  const std::vector<cp::Checkpoint>* plan = &line;
   const std::uint8_t* p = data;
   const std::uint8_t* end = data + size;
   if (p < end) {
@@ -52,8 +74,15 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     cfg.trigger = (mode & 2) ? cp::TriggerMode::kPosition : cp::TriggerMode::kPath;
     cfg.learning_mode =
         (mode & 4) ? cp::LearningMode::kSemiFinishing : cp::LearningMode::kPreviousPart;
+    if (mode & 8) {
+      plan = (mode & 16) ? &open_rect : &closed_rect;
+    }
+    if (mode & 32) {
+      cfg.apply = cp::ApplyMode::kTable;
+      cfg.active_register = -1;
+    }
   }
-  comp->configure(cfg, plan, limits);
+  comp->configure(cfg, *plan, limits);
   StepOutput out;
   std::vector<Event> events;
   while (p < end) {
@@ -90,6 +119,19 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         events.clear();
         for (const OffsetWrite& w : out.writes) {
           if (!std::isfinite(w.value_um) || std::fabs(w.value_um) > limits.max_abs_um) {
+            __builtin_trap();
+          }
+        }
+        // The live target is always one of the table's values or between two of them.
+        const double target = comp->live_target_um();
+        if (std::isfinite(target)) {
+          double lo = 0.0;
+          double hi = 0.0;
+          for (std::size_t i = 0; i < comp->size(); ++i) {
+            lo = std::min(lo, comp->register_value_um(i));
+            hi = std::max(hi, comp->register_value_um(i));
+          }
+          if (target < lo - 1e-9 || target > hi + 1e-9) {
             __builtin_trap();
           }
         }

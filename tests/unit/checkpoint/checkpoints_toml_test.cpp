@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -121,6 +122,106 @@ TEST(CheckpointsToml, SemanticErrorsFromTheCoreCarryTheKeysLine) {
   issues = issues_of("[checkpoints]\ncontour_csv = \"missing.csv\"\n");
   ASSERT_EQ(issues.size(), 1U);
   EXPECT_NE(issues[0].message.find("missing.csv: cannot open"), std::string::npos);
+}
+
+TEST(CheckpointsToml, ApplyFollowsTheLiveRegisterAndAContradictionNamesItsLine) {
+  const std::string contour = "[checkpoints]\ncontour = [[0,0],[100,0],[100,60],[0,60]]\n";
+  std::vector<ConfigIssue> issues;
+  // Table only by default; with a live register the default is creep.
+  auto parse = [&](const std::string& text) {
+    issues.clear();
+    const toml::table root = toml::parse(std::string_view(text), std::string_view("test.toml"));
+    return parse_checkpoints(*root["checkpoints"].as_table(), "test.toml", kData, issues);
+  };
+  EXPECT_EQ(parse(contour).compensator.apply, cp::ApplyMode::kTable);
+  EXPECT_TRUE(issues.empty());
+  EXPECT_EQ(parse(contour + "active_register = 19\n").compensator.apply, cp::ApplyMode::kCreep);
+  EXPECT_EQ(parse(contour + "active_register = 19\napply = \"step\"\n").compensator.apply,
+            cp::ApplyMode::kStep);
+  EXPECT_TRUE(issues.empty());
+  // The trap: creep asked for, no live register.
+  (void)parse(contour + "ewma_weight = 2\napply = \"creep\"\n");
+  ASSERT_EQ(issues.size(), 1U);
+  EXPECT_EQ(format_issue(issues[0]).rfind(
+                "test.toml:4:9: checkpoints.apply: \"creep\" drives the live radius wear "
+                "register, but active_register = -1",
+                0),
+            0U)
+      << format_issue(issues[0]);
+  (void)parse(contour + "apply = \"table\"\nactive_register = 19\n");
+  ASSERT_EQ(issues.size(), 1U);
+  EXPECT_EQ(issues[0].key_path, "checkpoints.apply");
+  EXPECT_EQ(issues[0].line, 3);
+}
+
+TEST(CheckpointsToml, ModeBRefusesAnAveragingWeight) {
+  const auto issues = issues_of(
+      "[checkpoints]\ncontour = [[0,0],[100,0],[100,60],[0,60]]\n"
+      "learning_mode = \"semi_finishing\"\newma_weight = 3\n");
+  ASSERT_EQ(issues.size(), 1U);
+  EXPECT_EQ(issues[0].key_path, "checkpoints.ewma_weight");
+  EXPECT_EQ(issues[0].line, 4);
+  EXPECT_NE(issues[0].message.find("mode B applies each blank's own"), std::string::npos);
+  EXPECT_TRUE(issues_of("[checkpoints]\ncontour = [[0,0],[100,0],[100,60],[0,60]]\n"
+                        "learning_mode = \"semi_finishing\"\n")
+                  .empty());
+}
+
+TEST(CheckpointsToml, InlineContourVerticesCarryAlphaAndCornerMarks) {
+  const std::string text =
+      "[checkpoints]\n"
+      "contour = [[0,0], { x_mm = 100, y_mm = 0, alpha_deg = 5, corner = true },\n"
+      "           [130, 30], { x_mm = 100, y_mm = 60, alpha_deg = 3, corner = true },\n"
+      "           { x_mm = 0, y_mm = 60, corner = false }]\n"
+      "wall_angle_deg = 3\nz_start_mm = -2\nz_end_mm = -2\n";
+  std::vector<ConfigIssue> issues;
+  const toml::table root = toml::parse(std::string_view(text), std::string_view("test.toml"));
+  const CheckpointsConfig c =
+      parse_checkpoints(*root["checkpoints"].as_table(), "test.toml", kData, issues);
+  ASSERT_TRUE(issues.empty()) << format_issue(issues[0]);
+  ASSERT_EQ(c.plan.contour.size(), 5U);
+  EXPECT_TRUE(std::isnan(c.plan.contour[0].alpha_deg));
+  EXPECT_DOUBLE_EQ(c.plan.contour[1].alpha_deg, 5.0);
+  EXPECT_EQ(c.plan.contour[1].corner, cp::CornerMark::kCorner);
+  EXPECT_EQ(c.plan.contour[2].corner, cp::CornerMark::kAuto);
+  EXPECT_EQ(c.plan.contour[4].corner, cp::CornerMark::kNoCorner);
+  const cp::Plan plan = cp::make_plan(c.plan);
+  // Corners: (0,0) by its 90° turn, (100,0) and (100,60) marked (45° turns, above 20° anyway),
+  // (130,30) by its 90° turn; (0,60) marked as none.
+  EXPECT_EQ(plan.corner_count, 4U);
+  EXPECT_EQ(plan.marked_corner_count, 2U);
+  EXPECT_DOUBLE_EQ(plan.alpha_min_deg, 3.0);
+  EXPECT_DOUBLE_EQ(plan.alpha_max_deg, 5.0);
+  // The summary, the CSV and the G-code carry each point's α.
+  std::ostringstream summary;
+  write_plan_summary(summary, plan, c);
+  EXPECT_NE(summary.str().find("4 corners (2 marked as sub-curve boundaries)"), std::string::npos)
+      << summary.str();
+  EXPECT_NE(summary.str().find("wall angle 3.000 .. 5.000 deg (per point: column alpha_deg), "
+                               "delta0 = r/cos(a) - r = 1.372 .. 3.820 um"),
+            std::string::npos)
+      << summary.str();
+  std::ostringstream gcode;
+  write_probing_gcode(gcode, plan, c);
+  EXPECT_NE(gcode.str().find(" A5.000 R1.000 E2."), std::string::npos) << gcode.str();
+  EXPECT_NE(gcode.str().find(" A3.000 R1.000 E1."), std::string::npos);
+  std::ostringstream csv;
+  write_plan_csv(csv, plan, c);
+  EXPECT_NE(csv.str().find(",5.000,3.820,"), std::string::npos) << csv.str();
+  // Bad vertices name their key and line.
+  const auto bad = issues_of(
+      "[checkpoints]\ncontour = [[0,0],\n { x_mm = 100 },\n"
+      " { x_mm = 100, y_mm = 60, alpha_deg = 95 },\n { x_mm = 0, y_mm = 60, corner = 1 },\n"
+      " { x_mm = 0, y_mm = 30, colour = 2 }, \"x\"]\n");
+  ASSERT_EQ(bad.size(), 5U);
+  EXPECT_EQ(format_issue(bad[0]), "test.toml:3:2: checkpoints.contour[1]: needs x_mm and y_mm");
+  EXPECT_EQ(bad[1].key_path, "checkpoints.contour[2].alpha_deg");
+  EXPECT_EQ(bad[1].line, 4);
+  EXPECT_EQ(bad[2].key_path, "checkpoints.contour[3].corner");
+  EXPECT_EQ(bad[2].message, "must be true or false");
+  EXPECT_EQ(bad[3].key_path, "checkpoints.contour[4].colour");
+  EXPECT_EQ(bad[4].key_path, "checkpoints.contour[5]");
+  EXPECT_NE(bad[4].message.find("or a table"), std::string::npos);
 }
 
 TEST(CheckpointsToml, ModuleFromTheExampleAttachesToItsRegisters) {

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <numbers>
 #include <stdexcept>
 #include <string>
@@ -135,7 +136,54 @@ TEST(Config, EveryBadValueIsRefusedNamingItsKey) {
   auto plan = line_plan(4);
   plan[2].path_mm = plan[1].path_mm;
   EXPECT_NE(err(base_config(), plan).find("does not increase"), std::string::npos);
+  plan = line_plan(4);
+  plan[2].level = 2;  // levels skip 1
+  EXPECT_NE(err(base_config(), plan).find("levels must be 0, 1, 2"), std::string::npos);
+  plan = line_plan(4);
+  plan[3].alpha_deg = 89.5;
+  EXPECT_NE(err(base_config(), plan).find("wall angle"), std::string::npos);
+  plan = line_plan(4);
+  for (auto& p : plan) {
+    p.pass_length_mm = 35.0;  // s = 10 .. 40: checkpoint 3 lies beyond the pass
+  }
+  EXPECT_NE(err(base_config(), plan).find("does not lie on its level's pass"), std::string::npos);
   EXPECT_EQ(err(base_config()), "");
+}
+
+TEST(Config, ALiveApplyModeWithoutALiveRegisterIsRefused) {
+  // The trap: apply = creep (or step) and active_register = -1 would silently do nothing while
+  // the NC switches offset numbers at each checkpoint.
+  const auto err = [](ApplyMode apply, std::int32_t active) {
+    CompensatorConfig c = base_config();
+    c.apply = apply;
+    c.active_register = active;
+    CheckpointCompensator comp;
+    try {
+      comp.configure(c, line_plan(4), wide_limits());
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  const std::string creep = err(ApplyMode::kCreep, -1);
+  EXPECT_EQ(creep.rfind("checkpoints.apply: \"creep\" drives the live radius wear register, but "
+                        "active_register = -1",
+                        0),
+            0U)
+      << creep;
+  EXPECT_NE(err(ApplyMode::kStep, -1).find("checkpoints.apply: \"step\""), std::string::npos);
+  EXPECT_EQ(err(ApplyMode::kTable, 5)
+                .rfind("checkpoints.apply: \"table\" writes no live "
+                       "register, but active_register = 5",
+                       0),
+            0U);
+  EXPECT_EQ(err(ApplyMode::kTable, -1), "");
+  EXPECT_EQ(err(ApplyMode::kCreep, 5), "");
+  EXPECT_EQ(err(ApplyMode::kStep, 5), "");
+  // The defaults are the table-only method: valid as they are.
+  CheckpointCompensator comp;
+  EXPECT_NO_THROW(comp.configure(CompensatorConfig{}, line_plan(2), wide_limits()));
+  EXPECT_EQ(comp.config().apply, ApplyMode::kTable);
 }
 
 TEST(Learning, EwmaFeedbackAndSinumerikForm) {
@@ -297,6 +345,82 @@ TEST(Learning, ModeBWritesTheSemiFinishingValueBeforeFinishing) {
   EXPECT_DOUBLE_EQ(comp.register_value_um(1), -5.0);
 }
 
+TEST(Learning, ModeBAppliesThisBlanksReadingNotAnAverageOverBlanks) {
+  // Default weights (k = 3): in mode A they average over parts; mode B must not blend the
+  // previous blank's semi-finishing error into this blank's offset.
+  CheckpointCompensator comp;
+  CompensatorConfig cfg = base_config();
+  cfg.learning_mode = LearningMode::kSemiFinishing;
+  cfg.ewma_weight = 3.0;
+  comp.configure(cfg, line_plan(1), wide_limits());
+  (void)run(comp, {part_start(1), probe(1, 0, 10.0)});
+  EXPECT_DOUBLE_EQ(comp.register_value_um(0), -10.0);
+  // Blank 2 is softer: 4 µm. Its offset is −4, not −10 + (4 − 10)/3 = −8.
+  const StepOutput out = run(comp, {part_start(2), probe(2, 0, 4.0)});
+  EXPECT_DOUBLE_EQ(comp.register_value_um(0), -4.0);
+  EXPECT_DOUBLE_EQ(comp.learned_um(0), 4.0);
+  // Part start marks the register for rewriting, the reading changes it before the cycle's
+  // writes go out: one write, −4, before the finishing of this blank.
+  ASSERT_EQ(out.writes.size(), 1U);
+  EXPECT_DOUBLE_EQ(out.writes[0].value_um, -4.0);
+  // Feedback 0.5: half of this blank's error, whatever the previous offset was.
+  CheckpointCompensator half;
+  cfg.feedback = 0.5;
+  half.configure(cfg, line_plan(1), wide_limits());
+  (void)run(half, {part_start(1), probe(1, 0, 10.0)});
+  EXPECT_DOUBLE_EQ(half.register_value_um(0), -5.0);
+  (void)run(half, {part_start(2), probe(2, 0, 4.0)});
+  EXPECT_DOUBLE_EQ(half.register_value_um(0), -2.0);  // mode A's form would give −3.5
+  // Mode A with the same numbers averages (its purpose: the push-off repeats part to part).
+  CheckpointCompensator a;
+  cfg.learning_mode = LearningMode::kPreviousPart;
+  cfg.feedback = 1.0;
+  a.configure(cfg, line_plan(1), wide_limits());
+  (void)run(a, {part_start(1), probe(1, 0, 10.0)});
+  (void)run(a, {part_start(2), probe(2, 0, 4.0 - 10.0)});  // cut with −10: shows e + c
+  EXPECT_DOUBLE_EQ(a.register_value_um(0), -8.0);
+}
+
+TEST(Learning, TheReadingIsCorrectedWithThePlansAlphaAndAnotherAlphaIsRefused) {
+  // Two checkpoints on walls of different draft: 10° and 3° (per sub-curve α in the plan).
+  auto plan = line_plan(2);
+  plan[1].alpha_deg = 3.0;
+  CheckpointCompensator comp;
+  comp.configure(base_config(), plan, wide_limits());
+  ProbeMeasurement m0;
+  m0.part = 1;
+  m0.checkpoint = 0;
+  m0.wall_angle_deg = 10.0;
+  m0.ball_radius_mm = 1.0;
+  m0.raw_deviation_um = 20.0;  // δ' = 20 − 15.42661189 (r = 1 mm, α = 10°)
+  ProbeMeasurement m1 = m0;
+  m1.checkpoint = 1;
+  m1.wall_angle_deg = 3.0;
+  m1.ball_radius_mm = 2.0;  // δ0 = 2.745 µm at 3°
+  StepOutput out = run(comp, {part_start(1), m0, m1});
+  ASSERT_EQ(out.records.size(), 2U);
+  EXPECT_NEAR(out.records[0].measured_um, 20.0 - 15.42661189, 1e-6);
+  EXPECT_DOUBLE_EQ(out.records[0].angle_deg, 10.0);
+  EXPECT_NEAR(probe_delta0_um(2.0, 3.0), 2.7447, 1e-4);
+  EXPECT_DOUBLE_EQ(out.records[1].measured_um, 20.0 - probe_delta0_um(2.0, 3.0));
+  EXPECT_DOUBLE_EQ(out.records[1].angle_deg, 3.0);
+  // A reading with checkpoint 1's number but checkpoint 0's α (a stale probing program): alarm
+  // 32, nothing learned or logged. Within the bus resolution (0.01°) it is accepted.
+  ProbeMeasurement wrong = m1;
+  wrong.wall_angle_deg = 10.0;
+  ProbeMeasurement close = m1;
+  close.wall_angle_deg = 3.01;
+  out = run(comp, {wrong});
+  EXPECT_TRUE(has_alarm(out, AlarmCode::kProbeInvalidInput));
+  EXPECT_TRUE(out.records.empty());
+  EXPECT_EQ(comp.learned_count(1), 1U);
+  out = run(comp, {close});
+  EXPECT_FALSE(has_alarm(out, AlarmCode::kProbeInvalidInput));
+  EXPECT_EQ(comp.learned_count(1), 2U);
+  // Corrected with the plan's 3°, not the reading's 3.01°.
+  EXPECT_DOUBLE_EQ(out.records[0].measured_um, 20.0 - probe_delta0_um(2.0, 3.0));
+}
+
 // --- application while finishing ---
 
 CompensatorConfig live_config(ApplyMode apply, TriggerMode trigger) {
@@ -348,6 +472,100 @@ TEST(Apply, CreepReachesEachCheckpointsValueExactlyAtTheCheckpoint) {
   EXPECT_DOUBLE_EQ(at(27.5), -2.0);
   EXPECT_DOUBLE_EQ(at(30.0), -6.0);
   EXPECT_DOUBLE_EQ(at(40.0), -6.0);
+}
+
+// A 100 × 60 mm rectangle, 2 levels 5 mm apart: per level 8 corner points at
+// s = 5, 95, 105, 155, 165, 255, 265, 315 of a 320 mm closed pass; level 1 starts at path 325.
+Plan two_level_rect(bool closed) {
+  PlanConfig c;
+  c.contour = {{0, 0}, {100, 0}, {100, 60}, {0, 60}};
+  c.closed = closed;
+  c.material = closed ? MaterialSide::kInside : MaterialSide::kLeft;
+  c.z_start_mm = -2.0;
+  c.z_end_mm = -7.0;
+  c.depth_step_mm = 5.0;
+  c.corner_offset_mm = 5.0;
+  return make_plan(c);
+}
+
+// Level 0: 0, 1, 2, ..., 7 µm ×10 except the last = 10; level 1: 40 everywhere.
+std::vector<double> rect_values() {
+  return {0.0,  10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 10.0,
+          40.0, 40.0, 40.0, 40.0, 40.0, 40.0, 40.0, 40.0};
+}
+
+TEST(Levels, CreepWrapsThroughTheSeamAndNeverBlendsAcrossLevels) {
+  const Plan plan = two_level_rect(true);
+  ASSERT_EQ(plan.checkpoints.size(), 16U);
+  ASSERT_DOUBLE_EQ(plan.checkpoints[8].path_mm, 325.0 + 5.0);
+  CheckpointCompensator comp;
+  comp.configure(live_config(ApplyMode::kCreep, TriggerMode::kPath), plan.checkpoints,
+                 wide_limits());
+  learn_values(comp, rect_values());
+  (void)run(comp, {part_start(1)});
+  // Pre-positioned to where the first pass starts: halfway between checkpoint 7 (s = 315,
+  // 10 µm) and checkpoint 0 (s = 5 + 320, 0 µm) through the seam.
+  EXPECT_DOUBLE_EQ(comp.start_value_um(), 5.0);
+  const auto at = [&](double path) {
+    (void)run(comp, {sample(0, 0, -2, path, 12, 0)});
+    return comp.live_target_um();
+  };
+  EXPECT_DOUBLE_EQ(at(0.0), 5.0);     // the pass's start: s = 0 on level 0
+  EXPECT_DOUBLE_EQ(at(2.5), 2.5);     // toward checkpoint 0
+  EXPECT_DOUBLE_EQ(at(5.0), 0.0);     // checkpoint 0
+  EXPECT_DOUBLE_EQ(at(50.0), 5.0);    // halfway to checkpoint 1
+  EXPECT_DOUBLE_EQ(at(315.0), 10.0);  // checkpoint 7
+  EXPECT_DOUBLE_EQ(at(317.5), 7.5);   // through the seam toward checkpoint 0 of the SAME level
+  EXPECT_DOUBLE_EQ(at(320.0), 5.0);   // the pass meets itself with the value it started with
+  // The level link (path 320..325): from level 0's seam value 5 to level 1's 40.
+  EXPECT_DOUBLE_EQ(at(322.5), 22.5);
+  EXPECT_DOUBLE_EQ(at(325.0), 40.0);  // level 1's start: only level 1's values
+  EXPECT_DOUBLE_EQ(at(327.0), 40.0);
+  EXPECT_DOUBLE_EQ(at(645.0), 40.0);  // level 1's end = its start
+  EXPECT_EQ(comp.passed(), 16U);
+}
+
+TEST(Levels, StepHoldsTheLevelsLastValueThroughTheSeam) {
+  const Plan plan = two_level_rect(true);
+  CheckpointCompensator comp;
+  comp.configure(live_config(ApplyMode::kStep, TriggerMode::kPath), plan.checkpoints,
+                 wide_limits());
+  learn_values(comp, rect_values());
+  (void)run(comp, {part_start(1)});
+  const auto at = [&](double path) {
+    (void)run(comp, {sample(0, 0, -2, path, 12, 0)});
+    return comp.live_target_um();
+  };
+  EXPECT_DOUBLE_EQ(at(0.0), 10.0);  // before checkpoint 0: checkpoint 7's value (this level)
+  EXPECT_DOUBLE_EQ(at(5.0), 0.0);
+  EXPECT_DOUBLE_EQ(at(94.0), 0.0);
+  EXPECT_DOUBLE_EQ(at(95.0), 10.0);
+  EXPECT_DOUBLE_EQ(at(319.9), 10.0);  // = the start value: no step at the seam
+  EXPECT_DOUBLE_EQ(at(321.0), 40.0);  // the link: level 1's start value at once
+}
+
+TEST(Levels, OpenPassesHoldTheirEndValuesAndTheLinkRamps) {
+  const Plan plan = two_level_rect(false);
+  // Open: corners at s = 100 and 160 only; points 95, 105, 155, 165 of a 260 mm pass; the link
+  // is one depth step (5 mm): level 1 starts at path 265.
+  ASSERT_EQ(plan.checkpoints.size(), 8U);
+  ASSERT_DOUBLE_EQ(plan.checkpoints[4].path_mm, 265.0 + 95.0);
+  CheckpointCompensator comp;
+  comp.configure(live_config(ApplyMode::kCreep, TriggerMode::kPath), plan.checkpoints,
+                 wide_limits());
+  learn_values(comp, {2.0, 4.0, 6.0, 8.0, 20.0, 30.0, 30.0, 30.0});
+  (void)run(comp, {part_start(1)});
+  EXPECT_DOUBLE_EQ(comp.start_value_um(), 2.0);
+  const auto at = [&](double path) {
+    (void)run(comp, {sample(0, 0, -2, path, 12, 0)});
+    return comp.live_target_um();
+  };
+  EXPECT_DOUBLE_EQ(at(0.0), 2.0);     // before the first: held at the first value
+  EXPECT_DOUBLE_EQ(at(100.0), 3.0);   // halfway 95 → 105
+  EXPECT_DOUBLE_EQ(at(200.0), 8.0);   // after the last: held
+  EXPECT_DOUBLE_EQ(at(260.0), 8.0);   // the pass's end
+  EXPECT_DOUBLE_EQ(at(262.5), 14.0);  // the link: 8 → 20
+  EXPECT_DOUBLE_EQ(at(266.0), 20.0);  // level 1 before its first checkpoint: its first value
 }
 
 TEST(Apply, LiveRegisterWritesPassTheLimiterAndOnlyTheFinishingToolIsCompensated) {
@@ -434,8 +652,8 @@ std::vector<std::array<double, 4>> tool_path(const PlanConfig& pc, const Plan& p
                         static_cast<double>(l) * (plan.contour_length_mm + pc.depth_step_mm);
     double s0 = 0.0;
     for (std::size_t e = 0; e < nv; ++e) {
-      const Point2 a = pc.contour[e];
-      const Point2 b = pc.contour[(e + 1) % nv];
+      const ContourPoint a = pc.contour[e];
+      const ContourPoint b = pc.contour[(e + 1) % nv];
       const double len = std::hypot(b.x_mm - a.x_mm, b.y_mm - a.y_mm);
       const double tx = (b.x_mm - a.x_mm) / len;
       const double ty = (b.y_mm - a.y_mm) / len;
@@ -447,7 +665,7 @@ std::vector<std::array<double, 4>> tool_path(const PlanConfig& pc, const Plan& p
         pts.push_back({a.x_mm + tx * u + nx * off, a.y_mm + ty * u + ny * off, z, base + s0 + u});
       }
       // Arc around the corner b (programmed path does not advance: the contour has a vertex).
-      const Point2 c = pc.contour[(e + 2) % nv];
+      const ContourPoint c = pc.contour[(e + 2) % nv];
       const double len2 = std::hypot(c.x_mm - b.x_mm, c.y_mm - b.y_mm);
       const double a0 = std::atan2(ny, nx);
       const double a1 = std::atan2(-(c.x_mm - b.x_mm) / len2, (c.y_mm - b.y_mm) / len2);
@@ -527,6 +745,58 @@ TEST(Trigger, NoMissedCheckpointAt10mPerMinAnd1kHzByPath) {
 }
 TEST(Trigger, NoMissedCheckpointAt10mPerMinAnd250HzByPath) {
   expect_no_missed(TriggerMode::kPath, 250.0);
+}
+
+TEST(Levels, PositionTriggerAgreesWithThePathAndMeetsItselfAtTheSeam) {
+  // The boss of the trigger tests, its tool centre path at 1 kHz and 10 m/min; creep values by
+  // position (progress = tool travel) against those by program path.
+  const PlanConfig pc = boss_plan_config();
+  const Plan plan = make_plan(pc);
+  const auto pts = tool_path(pc, plan, 10000.0 / 60.0 / 1000.0);
+  std::vector<double> values(plan.checkpoints.size());
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    values[i] = 20.0 * std::sin(0.7 * static_cast<double>(i)) - 3.0 * plan.checkpoints[i].level;
+  }
+  std::vector<double> by[2];
+  for (int m = 0; m < 2; ++m) {
+    CheckpointCompensator comp;
+    CompensatorConfig cfg =
+        live_config(ApplyMode::kCreep, m == 0 ? TriggerMode::kPath : TriggerMode::kPosition);
+    cfg.xy_tolerance_mm = 0.2;
+    comp.configure(cfg, plan.checkpoints, wide_limits());
+    learn_values(comp, values);
+    (void)run(comp, {part_start(1)});
+    for (std::size_t k = 0; k < pts.size(); ++k) {
+      (void)run(comp, {sample(pts[k][0], pts[k][1], pts[k][2], pts[k][3], 12,
+                              static_cast<TimeNs>(k) * 1'000'000)});
+      by[m].push_back(comp.live_target_um());
+    }
+    EXPECT_EQ(comp.passed(), plan.checkpoints.size());
+  }
+  // Per level: the first and the last sample of the pass are the same wall point; their values
+  // differ by at most the ramp's slope over one sample (0.167 mm).
+  double worst_seam[2] = {0.0, 0.0};
+  double worst_diff = 0.0;
+  std::size_t k0 = 0;
+  for (std::size_t l = 0; l < plan.levels_z_mm.size(); ++l) {
+    std::size_t k1 = k0;
+    while (k1 + 1 < pts.size() && std::fabs(pts[k1 + 1][2] - pts[k0][2]) < 1e-9) ++k1;
+    for (int m = 0; m < 2; ++m) {
+      worst_seam[m] = std::max(worst_seam[m], std::fabs(by[m][k1] - by[m][k0]));
+    }
+    for (std::size_t k = k0; k <= k1; ++k) {
+      worst_diff = std::max(worst_diff, std::fabs(by[0][k] - by[1][k]));
+    }
+    k0 = k1 + 1;
+  }
+  std::printf("seam step: path %.4f um, position %.4f um; position vs path max %.3f um\n",
+              worst_seam[0], worst_seam[1], worst_diff);
+  // The steepest ramp here is ~40 µm over 10 mm of seam span: 0.67 µm per sample at most.
+  EXPECT_LT(worst_seam[0], 0.7);
+  EXPECT_LT(worst_seam[1], 0.7);
+  // Position progress runs ahead around convex corners (tool radius × turn), so the two differ
+  // between checkpoints, never by a whole checkpoint-to-checkpoint difference (~40 µm).
+  EXPECT_LT(worst_diff, 10.0);
 }
 
 TEST(Trigger, PositionTriggerNeedsTheRightLevelAndReportsAMissedPoint) {
@@ -626,14 +896,28 @@ TEST(State, ReconcilePreferNcAdoptsTheOperatorsValues) {
   cfg.reconcile_prefer = ReconcilePrefer::kNc;
   comp.configure(cfg, line_plan(2), wide_limits());
   (void)run(comp, {probe(1, 0, 4.0)});
-  const std::vector<double> nc = {-2.0, std::nan("")};
-  const ReconcileReport rep = comp.reconcile(nc);
-  EXPECT_EQ(rep.mismatched, 2U);
+  // Every difference adoptable: nothing is written (the NC holds exactly these values), and the
+  // daemon's start-up hook is told not to resend the table (rewritten = 0).
+  ReconcileReport rep = comp.reconcile(std::vector<double>{-2.0, 0.0});
+  EXPECT_EQ(rep.mismatched, 1U);
+  EXPECT_EQ(rep.rewritten, 0U);
+  EXPECT_TRUE(rep.adopted_nc);
   EXPECT_DOUBLE_EQ(comp.register_value_um(0), -2.0);
-  // A non-finite read-back is never adopted: the daemon's 0 is rewritten.
-  const StepOutput out = run(comp, {});
-  ASSERT_EQ(out.writes.size(), 1U);
-  EXPECT_EQ(out.writes[0].register_index, 21U);
+  StepOutput out = run(comp, {});
+  EXPECT_TRUE(out.writes.empty());
+  EXPECT_TRUE(has_alarm(out, AlarmCode::kCheckpointRegisterMismatch));
+  // A non-finite read-back is never adopted: the daemon's 0 is rewritten, and since the whole
+  // table is then sent again, the adopted value goes with it as the target.
+  rep = comp.reconcile(std::vector<double>{-3.5, std::nan("")});
+  EXPECT_EQ(rep.mismatched, 2U);
+  EXPECT_EQ(rep.rewritten, 1U);
+  EXPECT_DOUBLE_EQ(comp.register_value_um(0), -3.5);
+  out = run(comp, {});
+  ASSERT_EQ(out.writes.size(), 2U);
+  EXPECT_EQ(out.writes[0].register_index, 20U);
+  EXPECT_DOUBLE_EQ(out.writes[0].value_um, -3.5);
+  EXPECT_EQ(out.writes[1].register_index, 21U);
+  EXPECT_DOUBLE_EQ(out.writes[1].value_um, 0.0);
 }
 
 TEST(RealTime, StepAllocatesNothing) {
@@ -646,10 +930,11 @@ TEST(RealTime, StepAllocatesNothing) {
   std::vector<Event> part_events;
   std::vector<Event> probes;
   for (std::size_t i = 0; i < plan.checkpoints.size(); ++i) {
-    probes.emplace_back(probe(1, static_cast<std::int32_t>(i), 3.0 + static_cast<double>(i % 5)));
+    probes.emplace_back(test::probe_at(plan.checkpoints[i], 1, 3.0 + static_cast<double>(i % 5)));
   }
-  probes.emplace_back(probe(1, 0, 150.0));  // outlier / implausible paths too
-  probes.emplace_back(probe(1, 999, 1.0));
+  probes.emplace_back(test::probe_at(plan.checkpoints[0], 1, 250.0));  // implausible
+  probes.emplace_back(probe(1, 999, 1.0));                             // unknown checkpoint
+  probes.emplace_back(probe(1, 1, 1.0, 0, 7.0));                       // α not the plan's
   const Event start = part_start(1);
   StepOutput out;
   nccomp::test::AllocationScope scope;
@@ -668,6 +953,9 @@ TEST(RealTime, StepAllocatesNothing) {
   EXPECT_EQ(scope.count(), 0U);
   EXPECT_EQ(comp.counters().missed, 0U);
   EXPECT_EQ(comp.counters().triggers, 4 * plan.checkpoints.size());
+  EXPECT_EQ(comp.counters().invalid, 4U * 2U);
+  EXPECT_EQ(comp.counters().implausible, 4U);
+  EXPECT_GT(comp.counters().updates, 0U);
 }
 
 }  // namespace

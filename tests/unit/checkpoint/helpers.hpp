@@ -22,6 +22,7 @@ inline std::vector<Checkpoint> line_plan(std::size_t n) {
     c.x_mm = c.tool_x_mm = c.s_mm;
     c.z_mm = -5.0;
     c.dir_y = 1.0;
+    c.alpha_deg = 10.0;  // what probe() reports
     plan.push_back(c);
   }
   return plan;
@@ -35,17 +36,25 @@ inline LimiterConfig wide_limits() {
   return l;
 }
 
-/// A probe reading whose corrected value is corrected_um (α = 10°, r = 1 mm).
+/// A probe reading whose corrected value is corrected_um (α = 10°, the α of line_plan(),
+/// r = 1 mm).
 inline ProbeMeasurement probe(std::int32_t part, std::int32_t cp, double corrected_um,
-                              TimeNs t_ns = 0) {
+                              TimeNs t_ns = 0, double alpha_deg = 10.0) {
   ProbeMeasurement m;
   m.time_ns = t_ns;
   m.part = part;
   m.checkpoint = cp;
-  m.wall_angle_deg = 10.0;
+  m.wall_angle_deg = alpha_deg;
   m.ball_radius_mm = 1.0;
-  m.raw_deviation_um = corrected_um + probe_delta0_um(1.0, 10.0);
+  m.raw_deviation_um = corrected_um + probe_delta0_um(1.0, alpha_deg);
   return m;
+}
+
+/// A probe reading at checkpoint c of a plan, with that checkpoint's α (as the probing program
+/// passes it to the measuring macro).
+inline ProbeMeasurement probe_at(const Checkpoint& c, std::int32_t part, double corrected_um,
+                                 TimeNs t_ns = 0) {
+  return probe(part, c.id, corrected_um, t_ns, c.alpha_deg);
 }
 
 inline ProgramEvent part_start(std::int32_t part) {

@@ -3,6 +3,7 @@
 // arithmetic: wall error of part n at checkpoint i = push-off(n, i) + offset in force.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <random>
@@ -10,13 +11,14 @@
 
 #include "core/checkpoint/compensator.hpp"
 #include "core/checkpoint/plan.hpp"
+#include "core/common/limiter.hpp"
 #include "tests/unit/checkpoint/helpers.hpp"
 
 namespace nccomp::core::checkpoint {
 namespace {
 
 using test::part_start;
-using test::probe;
+using test::probe_at;
 using test::wide_limits;
 
 constexpr double kClampZMm = -30.0;  // the clamp holds the blank's base
@@ -91,7 +93,7 @@ Series run_mode_a(double ewma_weight, int parts, double sigma_blank_hrc, std::ui
       s.mean_push_off_um[i] += push_off_um(c, kNominalHrc - 2.0 + 4.0 * c.x_mm / 100.0, 1.0);
       const double err = e + comp.register_value_um(i);  // what the NC cut with
       wall_error.push_back(err);
-      probes.emplace_back(probe(part, static_cast<std::int32_t>(i), err + probe_noise(rng)));
+      probes.emplace_back(probe_at(plan.checkpoints[i], part, err + probe_noise(rng)));
     }
     out.clear();
     comp.step(0, probes, out);
@@ -182,7 +184,7 @@ TEST(Series, ModeBFollowsEachBlankWhereModeACannot) {
     // Mode B: semi-finish (uncompensated) and probe, then finish with the values just written.
     std::vector<Event> semi;
     for (std::size_t i = 0; i < n; ++i) {
-      semi.emplace_back(probe(part, static_cast<std::int32_t>(i), push[i] + probe_noise(rng)));
+      semi.emplace_back(probe_at(plan.checkpoints[i], part, push[i] + probe_noise(rng)));
     }
     out.clear();
     mode_b.step(0, semi, out);
@@ -194,8 +196,8 @@ TEST(Series, ModeBFollowsEachBlankWhereModeACannot) {
         err_b.push_back(fin + mode_b.register_value_um(i));
         err_a.push_back(fin + mode_a.register_value_um(i));
       }
-      fin_a.emplace_back(probe(part, static_cast<std::int32_t>(i),
-                               fin + mode_a.register_value_um(i) + probe_noise(rng)));
+      fin_a.emplace_back(probe_at(plan.checkpoints[i], part,
+                                  fin + mode_a.register_value_um(i) + probe_noise(rng)));
     }
     out.clear();
     mode_a.step(0, fin_a, out);
@@ -204,6 +206,80 @@ TEST(Series, ModeBFollowsEachBlankWhereModeACannot) {
               rms(err_b));
   EXPECT_LT(rms(err_b), 1.0);
   EXPECT_LT(rms(err_b), 0.6 * rms(err_a));
+}
+
+// Mode A through the live register and the default limiter (5 µm per write, 50 µm/s): the
+// finishing pass is cut sample by sample at 10 m/min with a 1 kHz loop, and the wall at each
+// checkpoint is cut with what the NC's register holds there (the last live write), which lags
+// the table's values. Learning must subtract that value, not the register's target: then the
+// learned error is the true one, part after part, however far the register lags.
+TEST(Series, LearningSubtractsWhatTheRateLimitedRegisterHeldAtEachCheckpoint) {
+  constexpr std::size_t kN = 10;  // checkpoints every 10 mm on a straight wall
+  constexpr std::uint16_t kLive = 5;
+  CompensatorConfig cfg;
+  cfg.finishing_tool = 12;
+  cfg.register_base = 20;
+  cfg.active_register = kLive;
+  cfg.apply = ApplyMode::kStep;
+  cfg.dead_band_um = 0.0;
+  cfg.probe_repeatability_um = 0.0;
+  cfg.write_threshold_um = 0.0;
+  cfg.outlier_sigma = 1e6;
+  CheckpointCompensator comp;
+  comp.configure(cfg, test::line_plan(kN), LimiterConfig{});
+  std::vector<double> e(kN);
+  for (std::size_t i = 0; i < kN; ++i)
+    e[i] = (i % 2 == 0 ? 17.0 : -7.0) + 0.5 * static_cast<double>(i);
+  const double ds_mm = 10000.0 / 60.0 / 1000.0;
+  double held = 0.0;  // what the NC's live register holds
+  double worst_lag = 0.0;
+  TimeNs t = 0;
+  for (int part = 1; part <= 5; ++part) {
+    StepOutput out;
+    std::vector<double> wall(kN, 0.0);
+    std::vector<double> held_at(kN, 0.0);
+    std::vector<double> target_at(kN, 0.0);
+    const auto cycle = [&](std::vector<Event> ev) {
+      out.clear();
+      comp.step(t, ev, out);
+      for (const OffsetWrite& w : out.writes) {
+        if (w.register_index == kLive) held = w.value_um;
+      }
+      t += 1'000'000;
+    };
+    cycle({test::part_start(part)});
+    for (int k = 0; k < 2000; ++k) cycle({});  // roughing: the register is pre-positioned
+    std::size_t next = 0;
+    for (double path = 0.0; path < 10.0 * (kN + 1); path += ds_mm) {
+      cycle({test::sample(path, 0, -5, path, 12, t)});
+      while (next < kN && 10.0 * static_cast<double>(next + 1) <= path) {
+        wall[next] = e[next] + held;  // cut with what the register holds at the checkpoint
+        held_at[next] = held;
+        target_at[next] = comp.register_value_um(next);
+        worst_lag = std::max(worst_lag, std::fabs(held - target_at[next]));
+        ++next;
+      }
+    }
+    ASSERT_EQ(next, kN);
+    std::vector<Event> probes;
+    for (std::size_t i = 0; i < kN; ++i) {
+      probes.emplace_back(test::probe(part, static_cast<std::int32_t>(i), wall[i]));
+    }
+    out.clear();
+    comp.step(t, probes, out);
+    ASSERT_EQ(out.records.size(), kN);
+    for (std::size_t i = 0; i < kN; ++i) {
+      // Logged: the value the wall was cut with; measured + applied = the true error.
+      EXPECT_NEAR(out.records[i].applied_um, -held_at[i], 1e-9) << "part " << part << " cp " << i;
+      EXPECT_NEAR(out.records[i].measured_um + out.records[i].applied_um, e[i], 1e-9);
+      EXPECT_NEAR(comp.learned_um(i), e[i], 1e-9) << "part " << part << " cp " << i;
+    }
+  }
+  // The register really lags its target at the checkpoints (24 µm steps at 50 µm/s, 60 ms
+  // apart): subtracting the target instead would have learned errors off by this much.
+  std::printf("largest lag of the live register behind its target at a checkpoint: %.2f um\n",
+              worst_lag);
+  EXPECT_GT(worst_lag, 10.0);
 }
 
 }  // namespace

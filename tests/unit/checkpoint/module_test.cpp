@@ -8,6 +8,7 @@
 #include <cstddef>
 #include <memory>
 #include <stdexcept>
+#include <string_view>
 #include <vector>
 
 #include "core/engine/engine.hpp"
@@ -137,6 +138,56 @@ TEST(Module, AttachChecksRegisterKinds) {
   EXPECT_THROW(m.attach(engine::RegisterTable(regs)), std::invalid_argument);
   regs = registers(2);  // one checkpoint register short
   EXPECT_THROW(m.attach(engine::RegisterTable(regs)), std::invalid_argument);
+}
+
+double status_value(const CheckpointModule& m, const char* key) {
+  std::array<engine::StatusValue, engine::kMaxStatusValues> v{};
+  const std::size_t n = m.status(v);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (std::string_view(v[i].key) == key) return v[i].value;
+  }
+  ADD_FAILURE() << "no status value " << key;
+  return -1e300;
+}
+
+TEST(Module, StatusShowsTheLearnedValuesBoundedAndWithoutAllocating) {
+  CheckpointModule m(module_config(), line_plan(6));
+  const auto regs = registers(6);
+  m.attach(engine::RegisterTable(regs));
+  std::array<engine::StatusValue, engine::kMaxStatusValues> v{};
+  ASSERT_EQ(m.status(v), 16U);  // within the engine's bound whatever the plan's size
+  EXPECT_TRUE(std::isnan(status_value(m, "learned_min_um")));  // nothing learned yet
+  EXPECT_EQ(status_value(m, "checkpoint"), -1.0);
+  StepOutput out;
+  std::vector<Event> ev = {part_start(1), probe(1, 0, 6.0), probe(1, 3, -4.5), probe(1, 5, 2.0)};
+  m.step(0, ev, out);
+  EXPECT_EQ(status_value(m, "checkpoints"), 6.0);
+  EXPECT_EQ(status_value(m, "learned"), 3.0);
+  EXPECT_NEAR(status_value(m, "learned_min_um"), -4.5, 1e-12);
+  EXPECT_EQ(status_value(m, "learned_min_checkpoint"), 3.0);
+  EXPECT_NEAR(status_value(m, "learned_max_um"), 6.0, 1e-12);
+  EXPECT_EQ(status_value(m, "learned_max_checkpoint"), 0.0);
+  // The focus is the checkpoint of the last event: the last reading ...
+  EXPECT_EQ(status_value(m, "checkpoint"), 5.0);
+  EXPECT_NEAR(status_value(m, "checkpoint_learned_um"), 2.0, 1e-12);
+  EXPECT_EQ(status_value(m, "checkpoint_count"), 1.0);
+  EXPECT_NEAR(status_value(m, "checkpoint_offset_um"), -2.0, 1e-12);
+  // ... then the checkpoint the finishing tool passed last (path 31 is past checkpoint 2).
+  ev = {part_start(2), sample(0, 0, -5, 0, 12, 1'000'000)};
+  m.step(1'000'000, ev, out);
+  ev = {sample(31, 0, -5, 31, 12, 2'000'000)};
+  nccomp::test::AllocationScope scope;
+  m.step(2'000'000, ev, out);
+  const std::size_t n = m.status(v);
+  EXPECT_EQ(scope.count(), 0U);
+  ASSERT_EQ(n, 16U);
+  EXPECT_EQ(status_value(m, "passed"), 3.0);
+  EXPECT_EQ(status_value(m, "checkpoint"), 2.0);
+  EXPECT_EQ(status_value(m, "checkpoint_count"), 0.0);
+  EXPECT_NEAR(status_value(m, "checkpoint_offset_um"), 0.0, 1e-12);
+  // A smaller output span gets the first values only.
+  std::array<engine::StatusValue, 3> few{};
+  EXPECT_EQ(m.status(few), 3U);
 }
 
 TEST(Module, EngineStepAllocatesNothing) {

@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
+#include <limits>
 #include <stdexcept>
 #include <string>
 
@@ -114,6 +116,102 @@ TEST(Plan, ArcApproximatedBySmallSegmentsIsNotACorner) {
   EXPECT_EQ(p.checkpoints.size(), 5U * 6U);
 }
 
+// A boss with a half-round end: a line, a tangent arc (radius 30, 18 chords of 10°), a line
+// back and a straight closing edge. The line → arc and arc → line junctions are tangent (the
+// polyline turns by 5° there): only marking them makes them sub-curve boundaries. The arc is
+// drafted at 5°, the rest at the config's 3°.
+PlanConfig rounded_boss() {
+  PlanConfig c = boss();
+  c.z_start_mm = -2.0;
+  c.z_end_mm = -2.0;
+  c.contour = {{0, 0}, {100, 0, 5.0, CornerMark::kCorner}};
+  for (int k = 1; k < 18; ++k) {
+    const double a = -M_PI / 2 + static_cast<double>(k) * 10.0 * M_PI / 180.0;
+    c.contour.push_back({100.0 + 30.0 * std::cos(a), 30.0 + 30.0 * std::sin(a)});
+  }
+  c.contour.push_back({100, 60, 3.0, CornerMark::kCorner});
+  c.contour.push_back({0, 60});
+  return c;
+}
+
+TEST(Plan, MarkedSubCurveBoundariesAreCornersEvenWhereTheContourIsTangent) {
+  PlanConfig c = rounded_boss();
+  const double chord = 2.0 * 30.0 * std::sin(5.0 * M_PI / 180.0);
+  const double arc_end = 100.0 + 18.0 * chord;  // s of the arc → line junction
+  const double length = arc_end + 100.0 + 60.0;
+  Plan p = make_plan(c);
+  EXPECT_NEAR(p.contour_length_mm, length, 1e-9);
+  EXPECT_EQ(p.corner_count, 4U);  // two 90° corners + two marked tangent junctions
+  EXPECT_EQ(p.marked_corner_count, 2U);
+  const double expect_s[8] = {5.0,           95.0,         105.0,         arc_end - 5.0,
+                              arc_end + 5.0, arc_end + 95, arc_end + 105, length - 5.0};
+  const double expect_alpha[8] = {3.0, 3.0, 5.0, 5.0, 3.0, 3.0, 3.0, 3.0};
+  ASSERT_EQ(p.checkpoints.size(), 8U);
+  for (std::size_t i = 0; i < 8; ++i) {
+    EXPECT_NEAR(p.checkpoints[i].s_mm, expect_s[i], 1e-9) << i;
+    EXPECT_DOUBLE_EQ(p.checkpoints[i].alpha_deg, expect_alpha[i]) << i;
+    EXPECT_DOUBLE_EQ(p.checkpoints[i].pass_length_mm, p.contour_length_mm);
+    EXPECT_TRUE(p.checkpoints[i].closed);
+  }
+  EXPECT_DOUBLE_EQ(p.alpha_min_deg, 3.0);
+  EXPECT_DOUBLE_EQ(p.alpha_max_deg, 5.0);
+  // Each point's draft follows its own α: 2 mm below the contour, the arc's wall (5°) stands
+  // 2·tan 5° = 0.17498 mm out, the line's (3°) 2·tan 3° = 0.10482 mm.
+  EXPECT_NEAR(p.checkpoints[1].y_mm, -2.0 * std::tan(3.0 * M_PI / 180.0), 1e-9);
+  const Checkpoint& on_arc = p.checkpoints[2];
+  const double r_wall = std::hypot(on_arc.x_mm - 100.0, on_arc.y_mm - 30.0);
+  // The chord lies inside the circle; the wall point is 2·tan 5° beyond the chord.
+  const double chord_depth = 30.0 * std::cos(5.0 * M_PI / 180.0);
+  EXPECT_GT(r_wall, chord_depth + 2.0 * std::tan(5.0 * M_PI / 180.0) - 0.05);
+  EXPECT_LT(r_wall, 30.0 + 2.0 * std::tan(5.0 * M_PI / 180.0) + 1e-9);
+  // Unmarked, the tangent junctions are no corners (5° < corner_angle_deg): 2 corners, 4 points.
+  c.contour[1].corner = CornerMark::kAuto;
+  c.contour[19].corner = CornerMark::kAuto;
+  p = make_plan(c);
+  EXPECT_EQ(p.corner_count, 2U);
+  EXPECT_EQ(p.checkpoints.size(), 4U);
+  // A vertex marked as no corner is none, whatever its turn: only the 90° corner at (0, 0) left.
+  c.contour.back().corner = CornerMark::kNoCorner;
+  p = make_plan(c);
+  EXPECT_EQ(p.corner_count, 1U);
+  EXPECT_EQ(p.checkpoints.size(), 2U);
+}
+
+TEST(Plan, ContourCsvCarriesAlphaAndSubCurveBoundaries) {
+  // The rounded boss as the CSV an operator writes: α and corner only where they change.
+  const PlanConfig inline_config = rounded_boss();
+  std::string csv = "# rounded boss\nx_mm,y_mm,alpha_deg,corner\n";
+  for (const ContourPoint& v : inline_config.contour) {
+    char row[128];
+    std::snprintf(row, sizeof row, "%.17g,%.17g,", v.x_mm, v.y_mm);
+    csv += row;
+    if (!std::isnan(v.alpha_deg)) csv += std::to_string(v.alpha_deg);
+    csv += ",";
+    if (v.corner == CornerMark::kCorner) csv += "1";
+    csv += "\n";
+  }
+  PlanConfig c = inline_config;
+  c.contour = parse_contour_csv(csv, "rounded.csv");
+  ASSERT_EQ(c.contour.size(), inline_config.contour.size());
+  EXPECT_TRUE(std::isnan(c.contour[0].alpha_deg));
+  EXPECT_DOUBLE_EQ(c.contour[1].alpha_deg, 5.0);
+  EXPECT_EQ(c.contour[1].corner, CornerMark::kCorner);
+  EXPECT_EQ(c.contour[2].corner, CornerMark::kAuto);
+  const Plan a = make_plan(inline_config);
+  const Plan b = make_plan(c);
+  ASSERT_EQ(a.checkpoints.size(), b.checkpoints.size());
+  for (std::size_t i = 0; i < a.checkpoints.size(); ++i) {
+    EXPECT_NEAR(a.checkpoints[i].s_mm, b.checkpoints[i].s_mm, 1e-9);
+    EXPECT_DOUBLE_EQ(a.checkpoints[i].alpha_deg, b.checkpoints[i].alpha_deg);
+  }
+  // The columns in the other order, and 0 = never a corner.
+  const auto pts = parse_contour_csv("x_mm,y_mm,corner,alpha_deg\n0,0,0,2.5\n10,0,,\n", "o.csv");
+  EXPECT_EQ(pts[0].corner, CornerMark::kNoCorner);
+  EXPECT_DOUBLE_EQ(pts[0].alpha_deg, 2.5);
+  EXPECT_EQ(pts[1].corner, CornerMark::kAuto);
+  EXPECT_TRUE(std::isnan(pts[1].alpha_deg));
+}
+
 TEST(Plan, ExtraPointsAndRegionsForFlexibleAreas) {
   PlanConfig c = boss();
   c.extra_points_mm = {50.0, 95.0};  // 95 coincides with a corner point: merged
@@ -184,6 +282,19 @@ TEST(Plan, BadConfigsNameTheKey) {
   c = boss();
   c.depth_step_mm = 0.001;  // 20001 levels
   EXPECT_NE(error_of(c).find("levels"), std::string::npos);
+  c = boss();
+  c.contour[2].alpha_deg = 89.0;
+  EXPECT_NE(error_of(c).find("checkpoints.contour[2].alpha_deg: must be a finite angle below 89"),
+            std::string::npos)
+      << error_of(c);
+  c = boss();
+  c.contour[1].alpha_deg = std::numeric_limits<double>::infinity();
+  EXPECT_NE(error_of(c).find("checkpoints.contour[1].alpha_deg"), std::string::npos);
+  c = boss();
+  c.closed = false;
+  c.material = MaterialSide::kLeft;
+  c.contour[3].corner = CornerMark::kCorner;  // the open contour's end point
+  EXPECT_NE(error_of(c).find("checkpoints.contour[3].corner: an end point"), std::string::npos);
 }
 
 TEST(ContourCsv, ParsesPointsCommentsAndCrLf) {
@@ -206,8 +317,23 @@ TEST(ContourCsv, ErrorsNameFileAndLine) {
   };
   EXPECT_EQ(err("x,y\n1,2\n").rfind("wall.csv:1: header", 0), 0U) << err("x,y\n1,2\n");
   EXPECT_EQ(err("x_mm,y_mm\n1,2\n3,abc\n").rfind("wall.csv:3: column y_mm", 0), 0U);
-  EXPECT_EQ(err("x_mm,y_mm\n1,2,3\n").rfind("wall.csv:2: expected exactly two", 0), 0U);
-  EXPECT_EQ(err("x_mm,y_mm\n1\n").rfind("wall.csv:2: expected two", 0), 0U);
+  EXPECT_EQ(err("x_mm,y_mm\n1,2,3\n"),
+            "wall.csv:2: expected 2 comma-separated columns as in the header, got 3: '1,2,3'");
+  EXPECT_EQ(err("x_mm,y_mm\n1\n").rfind("wall.csv:2: expected 2 comma-separated", 0), 0U);
+  EXPECT_EQ(
+      err("x_mm,y_mm,alpha_deg\n1,2,3,4,5,6\n")
+          .rfind("wall.csv:2: expected 3 comma-separated columns as in the header, got 5 or more",
+                 0),
+      0U);
+  EXPECT_EQ(err("x_mm,y_mm,colour\n1,2,3\n").rfind("wall.csv:1: header column 3: 'colour'", 0), 0U);
+  EXPECT_EQ(err("x_mm,y_mm,corner,corner\n").rfind("wall.csv:1: header column 4", 0), 0U);
+  EXPECT_EQ(err("x_mm,y_mm,alpha_deg\n1,2,89\n"),
+            "wall.csv:2: column alpha_deg: 89 is not below 89 degrees in magnitude");
+  EXPECT_EQ(err("x_mm,y_mm,alpha_deg\n1,2,x\n"),
+            "wall.csv:2: column alpha_deg: 'x' is not a number");
+  EXPECT_EQ(
+      err("x_mm,y_mm,corner\n1,2,yes\n").rfind("wall.csv:2: column corner: 'yes' must be 1", 0),
+      0U);
   EXPECT_EQ(err("x_mm,y_mm\nnan,2\n").rfind("wall.csv:2: column x_mm is not finite", 0), 0U);
   EXPECT_EQ(err("x_mm,y_mm\n1e999,2\n").rfind("wall.csv:2: column x_mm", 0), 0U);
   EXPECT_EQ(err(",\n").rfind("wall.csv:1: header", 0), 0U);

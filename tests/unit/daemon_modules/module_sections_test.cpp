@@ -104,7 +104,10 @@ TEST(CheckpointsSection, ParsesTheDocumentedExampleAndLearnsFromPartToPart) {
   EXPECT_DOUBLE_EQ(value[20], -6.0);
   EXPECT_DOUBLE_EQ(value[21], 0.0);
   EXPECT_DOUBLE_EQ(value[75], 0.0);
-  EXPECT_DOUBLE_EQ(value[19], -6.0);  // the live register pre-positioned at checkpoint 0
+  // The live register pre-positioned to the start of the first level's closed pass: halfway
+  // through the seam from checkpoint 13 (0, 8 mm before the start) to checkpoint 0 (−6, 8 mm
+  // after it).
+  EXPECT_DOUBLE_EQ(value[19], -3.0);
 }
 
 TEST(CheckpointsStartup, TheNcsRegistersAreComparedWithTheLearnedTable) {
