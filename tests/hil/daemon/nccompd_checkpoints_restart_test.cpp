@@ -1,0 +1,374 @@
+// S1 restart agreement at the process level (docs/checkpoints.md, "Persistence and restart"):
+// GIVEN the nccompd binary with a [checkpoints] table of 4 checkpoints (table only) on the
+// project's Modbus NC server (sim/modbus_nc NcServer, 127.0.0.1, ephemeral port),
+// WHEN the NC publishes a part start and 4 probe readings, then the next part start, THEN the
+// learned offsets arrive in the NC's 4 holding registers in machining order;
+// WHEN nccompd is killed (SIGKILL), an operator edits one checkpoint register on the NC and
+// nccompd is started again, THEN it reads the table back before its bus starts, logs the
+// mismatch (the reconcile line and warning 33), and
+// - with reconcile_prefer = "daemon" writes the learned value back into that register;
+// - with reconcile_prefer = "nc" leaves the operator's value in the NC, adopts it as the
+//   checkpoint's offset, writes it as such at the next part start, and learns the next reading
+//   against it.
+// The registers' max_step_um (50) is above the operator's change (2 µm): see docs/checkpoints.md
+// for what the engine's limiter does with a larger change.
+#include <fcntl.h>
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <optional>
+#include <regex>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "daemon/status.hpp"
+#include "sim/modbus_nc/nc_server.hpp"
+
+extern char** environ;
+
+namespace {
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+using nccomp::sim::modbus_nc::NcServer;
+using nccomp::sim::modbus_nc::ServerConfig;
+using nccomp::sim::modbus_nc::Tables;
+
+// Checkpoint i's register is logical register i, holding register 200 + 2i (int32, 0.1 µm).
+constexpr std::uint16_t kTableAddress = 200;
+
+std::string config_text(std::uint16_t port, const char* prefer) {
+  std::ostringstream s;
+  s << "[daemon]\nrate_hz = 200\n"
+    << "[state]\ndirectory = \"state\"\nmin_interval_s = 0.05\n"
+    << "[measurement_log]\ndirectory = \"log\"\n"
+    << "[status]\nsocket_path = \"status.sock\"\n"
+    << "[modbus]\ntransport = \"tcp\"\nhost = \"127.0.0.1\"\nport = " << port << "\n"
+    << "poll_rate_hz = 200\nresponse_timeout_s = 0.5\n"
+    << "[modbus.axis]\n"
+    << "x_mm = { table = \"input\", address = 0, type = \"int32\", scale = 0.0001 }\n"
+    << "y_mm = { table = \"input\", address = 2, type = \"int32\", scale = 0.0001 }\n"
+    << "z_mm = { table = \"input\", address = 4, type = \"int32\", scale = 0.0001 }\n"
+    << "program_path_mm = { table = \"input\", address = 6, type = \"int32\", scale = 0.001 }\n"
+    << "tool = { table = \"input\", address = 8, type = \"uint16\" }\n"
+    << "[modbus.probe_measurement]\n"
+    << "sequence = { table = \"input\", address = 110, type = \"uint16\" }\n"
+    << "part = { table = \"input\", address = 111, type = \"uint16\" }\n"
+    << "checkpoint = { table = \"input\", address = 112, type = \"uint16\" }\n"
+    << "raw_deviation_um = { table = \"input\", address = 113, type = \"float32\" }\n"
+    << "wall_angle_deg = { table = \"input\", address = 115, type = \"int16\", scale = 0.01 }\n"
+    << "ball_radius_mm = { table = \"input\", address = 116, type = \"uint16\", scale = 0.001 }\n"
+    << "[modbus.program_event]\n"
+    << "sequence = { table = \"input\", address = 150, type = \"uint16\" }\n"
+    << "kind = { table = \"input\", address = 151, type = \"uint16\" }\n"
+    << "part = { table = \"input\", address = 152, type = \"uint32\" }\n";
+  for (int i = 0; i < 4; ++i) {
+    s << "[[modbus.offset]]\nregister_index = " << i << "\naddress = " << kTableAddress + 2 * i
+      << "\ntype = \"int32\"\nscale = 0.1\n";
+  }
+  for (int i = 0; i < 4; ++i) {
+    s << "[[registers]]\nname = \"D" << 20 + i << "_radius_wear\"\nkind = \"checkpoint\"\n"
+      << "bus = \"modbus\"\nmax_abs_um = 200\nmax_step_um = 50\nmax_rate_um_per_s = 1000\n";
+  }
+  // An open straight wall probed at s = 25 and 75 mm on two levels: checkpoints 0..3, table only
+  // (the NC program selects D20 + i itself), learned from the previous part.
+  s << "[checkpoints]\ncontour = [[0.0, 0.0], [100.0, 0.0]]\nclosed = false\nmaterial = \"left\"\n"
+    << "z_start_mm = -5.0\nz_end_mm = -25.0\ndepth_step_mm = 20.0\nwall_angle_deg = 2.0\n"
+    << "extra_points_mm = [25.0, 75.0]\nball_radius_mm = 2.0\nregister_base = 0\n"
+    << "reconcile_prefer = \"" << prefer << "\"\n";
+  return s.str();
+}
+
+struct TempDir {
+  TempDir() {
+    path = fs::temp_directory_path() /
+           ("nccompd_ckpt_" + std::to_string(::getpid()) + "_" + std::to_string(n++));
+    fs::remove_all(path);
+    fs::create_directories(path);
+  }
+  ~TempDir() { fs::remove_all(path); }
+  void write(const std::string& name, const std::string& text) const {
+    std::ofstream(path / name) << text;
+  }
+  static inline int n = 0;
+  fs::path path;
+};
+
+class Daemon {
+ public:
+  explicit Daemon(fs::path dir) : dir_(std::move(dir)) {}
+  ~Daemon() {
+    if (pid_ > 0) {
+      ::kill(pid_, SIGKILL);
+      ::waitpid(pid_, nullptr, 0);
+    }
+  }
+  void start() {
+    std::vector<std::string> args{NCCOMPD_BIN, "--config", (dir_ / "nccompd.toml").string()};
+    std::vector<char*> argv;
+    for (auto& a : args) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    posix_spawn_file_actions_t fa;
+    posix_spawn_file_actions_init(&fa);
+    const std::string log = (dir_ / "nccompd.log").string();
+    posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
+    posix_spawn_file_actions_adddup2(&fa, 1, 2);
+    ASSERT_EQ(posix_spawn(&pid_, NCCOMPD_BIN, &fa, nullptr, argv.data(), environ), 0);
+    posix_spawn_file_actions_destroy(&fa);
+  }
+  void signal(int sig) const { ASSERT_EQ(::kill(pid_, sig), 0); }
+  int wait(std::chrono::milliseconds limit = 10000ms) {
+    const auto end = std::chrono::steady_clock::now() + limit;
+    while (std::chrono::steady_clock::now() < end) {
+      int st = 0;
+      if (::waitpid(pid_, &st, WNOHANG) == pid_) {
+        pid_ = -1;
+        return WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
+      }
+      std::this_thread::sleep_for(10ms);
+    }
+    return -1;
+  }
+  std::string status(const std::string& what = "json") const {
+    try {
+      return nccomp::daemon::query_status((dir_ / "status.sock").string(), what);
+    } catch (const std::exception&) {
+      return {};
+    }
+  }
+  std::string log() const {
+    std::ifstream in(dir_ / "nccompd.log");
+    std::ostringstream s;
+    s << in.rdbuf();
+    return s.str();
+  }
+
+ private:
+  fs::path dir_;
+  pid_t pid_{-1};
+};
+
+double number(const std::string& json, const std::string& key) {
+  const std::regex re("\"" + key + "\":(-?[0-9.eE+-]+)");
+  std::smatch m;
+  return std::regex_search(json, m, re) ? std::stod(m[1]) : -1e300;
+}
+
+bool is(double v, double want) { return std::fabs(v - want) < 1e-9; }
+
+bool wait_until(const std::function<bool()>& f, std::chrono::milliseconds limit = 10000ms) {
+  const auto end = std::chrono::steady_clock::now() + limit;
+  while (std::chrono::steady_clock::now() < end) {
+    if (f()) return true;
+    std::this_thread::sleep_for(10ms);
+  }
+  return f();
+}
+
+std::int32_t holding_i32(NcServer& nc, std::uint16_t address) {
+  const auto r = nc.holding(address, 2);
+  return static_cast<std::int32_t>((std::uint32_t{r[0]} << 16) | r[1]);
+}
+
+std::int32_t table_counts(NcServer& nc, int checkpoint) {
+  return holding_i32(nc, static_cast<std::uint16_t>(kTableAddress + 2 * checkpoint));
+}
+
+// An operator's edit on the NC while nccompd is down.
+void set_table_counts(NcServer& nc, int checkpoint, std::int32_t counts) {
+  const auto u = static_cast<std::uint32_t>(counts);
+  const auto a = static_cast<std::size_t>(kTableAddress + 2 * checkpoint);
+  nc.update([&](Tables& t) {
+    t.holding[a] = static_cast<std::uint16_t>(u >> 16);
+    t.holding[a + 1] = static_cast<std::uint16_t>(u & 0xFFFF);
+  });
+}
+
+// The NC side of the event groups: values first, then the counter (the profile's rule).
+class NcEvents {
+ public:
+  explicit NcEvents(NcServer& nc) : nc_(nc) {}
+  void part_start(std::uint32_t part) {
+    nc_.update([&](Tables& t) {
+      t.input[151] = 0;  // kind 0 = part start
+      t.input[152] = static_cast<std::uint16_t>(part >> 16);
+      t.input[153] = static_cast<std::uint16_t>(part & 0xFFFF);
+      t.input[150] = ++program_seq_;
+    });
+  }
+  void probe(std::uint16_t part, std::uint16_t checkpoint, float raw_um) {
+    nc_.update([&](Tables& t) {
+      std::uint32_t bits = 0;
+      std::memcpy(&bits, &raw_um, sizeof bits);
+      t.input[111] = part;
+      t.input[112] = checkpoint;
+      t.input[113] = static_cast<std::uint16_t>(bits >> 16);
+      t.input[114] = static_cast<std::uint16_t>(bits & 0xFFFF);
+      t.input[115] = 200;   // α = 2.00°, the plan's
+      t.input[116] = 2000;  // r = 2.000 mm
+      t.input[110] = ++probe_seq_;
+    });
+  }
+
+ private:
+  NcServer& nc_;
+  std::uint16_t program_seq_{0};
+  std::uint16_t probe_seq_{0};
+};
+
+// Corrected deviations δ' [µm] found at the 4 checkpoints of part 1: the learned offsets are
+// −δ' (mode A, first part cut without offsets): −6.0, 4.0, −8.0, −2.5 µm = −60, 40, −80, −25
+// counts of 0.1 µm.
+constexpr double kDeltaUm[4] = {6.0, -4.0, 8.0, 2.5};
+constexpr std::int32_t kLearnedCounts[4] = {-60, 40, -80, -25};
+// δ0 = r/cos α − r for r = 2 mm, α = 2°: the probe reports δ = δ' + δ0.
+const double kDelta0Um = 2000.0 * (1.0 / std::cos(2.0 * M_PI / 180.0) - 1.0);
+
+/// Runs nccompd on a fresh NC until it has learned part 1 and written the table at part 2's
+/// start, then kills it with SIGKILL.
+void learn_then_kill(const TempDir& d, NcServer& nc, NcEvents& ev, Daemon& daemon) {
+  daemon.start();
+  // The first poll takes the event counters as a baseline: wait for the bus to be up and polled.
+  ASSERT_TRUE(wait_until([&] {
+    const std::string s = daemon.status();
+    return s.find("\"state\":\"up\"") != std::string::npos && number(s, "cycles") >= 20;
+  })) << daemon.log();
+  ev.part_start(1);
+  ASSERT_TRUE(wait_until([&] { return is(number(daemon.status(), "part"), 1.0); })) << daemon.log();
+  for (std::uint16_t i = 0; i < 4; ++i) {
+    ev.probe(1, i, static_cast<float>(kDeltaUm[i] + kDelta0Um));
+    // One reading per poll at most: wait until the daemon has taken this one.
+    ASSERT_TRUE(wait_until([&] { return is(number(daemon.status(), "probe_readings"), i + 1.0); }))
+        << daemon.log();
+  }
+  ASSERT_EQ(number(daemon.status(), "learned"), 4.0);
+  ev.part_start(2);  // mode A: the learned table is written at the next part start
+  ASSERT_TRUE(wait_until([&] {
+    for (int i = 0; i < 4; ++i) {
+      if (table_counts(nc, i) != kLearnedCounts[i]) return false;
+    }
+    return true;
+  })) << daemon.log();
+  // The state is persisted at most every 0.05 s: give the persister ten times that.
+  std::this_thread::sleep_for(500ms);
+  daemon.signal(SIGKILL);
+  EXPECT_EQ(daemon.wait(), 128 + SIGKILL);
+  ASSERT_TRUE(fs::exists(d.path / "state" / "state.bin"));
+}
+
+TEST(NccompdCheckpointsRestart, PreferDaemonRewritesTheRegisterAnOperatorChanged) {
+  TempDir d;
+  NcServer nc(ServerConfig{});
+  nc.start();
+  d.write("nccompd.toml", config_text(nc.port(), "daemon"));
+  NcEvents ev(nc);
+  {
+    Daemon first(d.path);
+    learn_then_kill(d, nc, ev, first);
+    if (HasFatalFailure()) return;
+  }
+  // While nccompd is down, an operator changes checkpoint 2's register (D22) from the learned
+  // −8.0 µm to −10.0 µm on the NC.
+  set_table_counts(nc, 2, -100);
+  ASSERT_EQ(table_counts(nc, 2), -100);
+  Daemon second(d.path);
+  second.start();
+  // The learned −8.0 µm is written back; the other registers are rewritten with their values.
+  ASSERT_TRUE(wait_until([&] { return table_counts(nc, 2) == kLearnedCounts[2]; })) << second.log();
+  for (int i = 0; i < 4; ++i) EXPECT_EQ(table_counts(nc, i), kLearnedCounts[i]) << i;
+  ASSERT_TRUE(wait_until([&] {
+    return second.log().find("warning checkpoint_register_mismatch (code 33) subject 1") !=
+           std::string::npos;
+  })) << second.log();
+  const std::string log = second.log();
+  EXPECT_NE(log.find("state resumed from"), std::string::npos) << log;
+  EXPECT_NE(log.find("checkpoints: 1 of 4 checkpoint registers differ from the table (max 2.000 "
+                     "um); the table is written again (reconcile_prefer = \"daemon\")"),
+            std::string::npos)
+      << log;
+  // The restarted daemon still has what it learned: 4 checkpoints, offsets −6 .. −2.5 µm.
+  const std::string st = second.status();
+  EXPECT_EQ(number(st, "learned"), 4.0) << st;
+  EXPECT_NEAR(number(st, "learned_max_um"), 8.0, 1e-4) << st;
+  second.signal(SIGTERM);
+  EXPECT_EQ(second.wait(), 0) << second.log();
+  nc.stop();
+}
+
+TEST(NccompdCheckpointsRestart, PreferNcAdoptsTheRegisterAnOperatorChanged) {
+  TempDir d;
+  NcServer nc(ServerConfig{});
+  nc.start();
+  d.write("nccompd.toml", config_text(nc.port(), "nc"));
+  NcEvents ev(nc);
+  {
+    Daemon first(d.path);
+    learn_then_kill(d, nc, ev, first);
+    if (HasFatalFailure()) return;
+  }
+  set_table_counts(nc, 2, -100);  // D22: −8.0 → −10.0 µm by the operator
+  Daemon second(d.path);
+  second.start();
+  ASSERT_TRUE(wait_until([&] {
+    return second.log().find("warning checkpoint_register_mismatch (code 33) subject 1") !=
+           std::string::npos;
+  })) << second.log();
+  EXPECT_NE(second.log().find("checkpoints: 1 of 4 checkpoint registers differ from the table "
+                              "(max 2.000 um); the NC's values are adopted (reconcile_prefer = "
+                              "\"nc\")"),
+            std::string::npos)
+      << second.log();
+  // The operator's value stays in the NC: nothing is written over it after the start.
+  for (int k = 0; k < 50; ++k) {
+    ASSERT_EQ(table_counts(nc, 2), -100) << "after " << k * 20 << " ms\n" << second.log();
+    std::this_thread::sleep_for(20ms);
+  }
+  // At the next part start the whole table is written: checkpoint 2 with the adopted −10.0 µm.
+  ev.part_start(3);
+  ASSERT_TRUE(wait_until([&] { return is(number(second.status(), "part"), 3.0); })) << second.log();
+  std::this_thread::sleep_for(200ms);
+  EXPECT_EQ(table_counts(nc, 0), kLearnedCounts[0]);
+  EXPECT_EQ(table_counts(nc, 1), kLearnedCounts[1]);
+  EXPECT_EQ(table_counts(nc, 2), -100);
+  EXPECT_EQ(table_counts(nc, 3), kLearnedCounts[3]);
+  // Part 3's reading at checkpoint 2 is learned against the −10.0 µm it was cut with: a wall
+  // 1.5 µm too deep (δ' = −1.5) means the error without compensation was −1.5 + 10 = 8.5 µm;
+  // ewma_weight 3 (default): M = 8 + (8.5 − 8)/3 = 8.1667, offset −8.1667 µm = −82 counts at
+  // part 4.
+  ev.probe(3, 2, static_cast<float>(-1.5 + kDelta0Um));
+  ASSERT_TRUE(wait_until([&] { return is(number(second.status(), "probe_readings"), 1.0); }))
+      << second.log();
+  const std::string st = second.status();
+  EXPECT_EQ(number(st, "checkpoint"), 2.0) << st;
+  EXPECT_NEAR(number(st, "checkpoint_learned_um"), 8.0 + (8.5 - 8.0) / 3.0, 1e-3) << st;
+  EXPECT_NEAR(number(st, "checkpoint_offset_um"), -(8.0 + (8.5 - 8.0) / 3.0), 1e-3) << st;
+  // `nccomp status` (text): the module's line, as docs/checkpoints.md shows it.
+  const std::string text = second.status("text");
+  const auto at = text.find("module checkpoints:");
+  ASSERT_NE(at, std::string::npos) << text;
+  const std::string line = text.substr(at, text.find('\n', at) - at);
+  std::printf("%s\n", line.c_str());
+  EXPECT_NE(line.find("checkpoint 2, checkpoint_learned_um 8.16667, checkpoint_count 2, "
+                      "checkpoint_offset_um -8.16667"),
+            std::string::npos)
+      << line;
+  ev.part_start(4);
+  EXPECT_TRUE(wait_until([&] { return table_counts(nc, 2) == -82; })) << table_counts(nc, 2);
+  second.signal(SIGTERM);
+  EXPECT_EQ(second.wait(), 0) << second.log();
+  nc.stop();
+}
+
+}  // namespace
