@@ -184,7 +184,7 @@ void CanBus::start() {
     throw std::runtime_error("can: eventfd: " + errno_text(errno));
   }
   st_.bus.state = LinkState::kUp;
-  publish();
+  publish(mono_ns());
   running_.store(true);
   thread_ = std::thread([this] { run(); });
 }
@@ -203,7 +203,7 @@ void CanBus::stop() {
     event_fd_ = -1;
   }
   st_.bus.state = LinkState::kStopped;
-  publish();
+  publish(mono_ns());
 }
 
 void CanBus::wake() noexcept {
@@ -213,21 +213,51 @@ void CanBus::wake() noexcept {
   }
 }
 
-void CanBus::publish() noexcept {
+void CanBus::publish(std::int64_t now_ns) noexcept {
   auto& b = st_.bus;
   auto& c = st_.can;
   b.counters.malformed = c.rejected_unknown_id + c.rejected_wrong_length + c.rejected_out_of_range +
                          c.rejected_not_finite;
   b.counters.faults = c.error_passive + c.bus_off + c.interface_down + c.controller_overflow;
   c.rx_overflow = ovfl_base_ + ovfl_last_;
-  b.alarm = std::any_of(slots_.begin(), slots_.end(),
-                        [](const Slot& s) { return s.state == WriteState::kFailed; });
+  // Down or bus-off beyond the tolerance: the NC gets no offsets, the operator must know.
+  const bool down_long =
+      down_since_ns_ != 0 && now_ns - down_since_ns_ > to_ns(config_.alarm_after_s);
+  if (down_long && !link_alarm_) {
+    ++c.link_alarms;
+  }
+  link_alarm_ = down_long;
+  b.alarm = link_alarm_ || std::any_of(slots_.begin(), slots_.end(), [](const Slot& s) {
+              return s.state == WriteState::kFailed;
+            });
   if (b.state != LinkState::kStopped) {
     if (if_down_ || bus_off_) {
       b.state = LinkState::kDown;
     }
   }
   status_.store(st_);
+}
+
+std::size_t CanBus::extra_counters(std::span<BusCounterValue> out) const {
+  const CanCounters c = status_.load().can;
+  const std::array<std::uint64_t, kCanCounterNames.size()> values{
+      c.error_frames,          c.error_warning,
+      c.error_passive,         c.bus_off,
+      c.bus_recoveries,        c.restart_requests,
+      c.restart_failures,      c.interface_down,
+      c.link_alarms,           c.controller_overflow,
+      c.rx_overflow,           c.enobufs,
+      c.enobufs_retries,       c.ack_timeouts,
+      c.ack_retries,           c.rejected_wrong_length,
+      c.rejected_out_of_range, c.rejected_not_finite,
+      c.rejected_unknown_id,   c.tx_unencodable,
+      c.tx_unmapped,           c.lockstep_syncs,
+      c.lockstep_sync_acks};
+  const std::size_t n = std::min(out.size(), values.size());
+  for (std::size_t i = 0; i < n; ++i) {
+    out[i] = BusCounterValue{kCanCounterNames[i], values[i]};
+  }
+  return n;
 }
 
 CanBus::Slot* CanBus::slot_for(std::uint16_t register_index) noexcept {
@@ -287,7 +317,7 @@ void CanBus::run() noexcept {
     check_acks(now);
     send_pending(now);
     serve_flush();
-    publish();
+    publish(now);
   }
 }
 
@@ -486,6 +516,7 @@ void CanBus::handle_error_frame(std::uint32_t can_id, const std::uint8_t* data,
     bus_off_ = true;
     ++st_.can.bus_off;
     st_.bus.state = LinkState::kDown;
+    went_down(now_ns);
     next_restart_ns_ = now_ns + to_ns(config_.restart_delay_s);
   }
   if ((can_id & CAN_ERR_RESTARTED) != 0 && bus_off_) {
@@ -535,9 +566,14 @@ void CanBus::send_pending(std::int64_t now_ns) noexcept {
   if (sock_ < 0 || if_down_ || bus_off_ || now_ns < backoff_until_ns_) {
     return;
   }
+  bool after_backoff = backoff_ns_ != 0;  // the last round ended in ENOBUFS
   for (auto& s : slots_) {
     if (s.state != WriteState::kPending) {
       continue;
+    }
+    if (after_backoff) {
+      ++st_.can.enobufs_retries;
+      after_backoff = false;
     }
     canfd_frame f{};
     f.can_id = s.reg->extended ? (s.reg->id | CAN_EFF_FLAG) : s.reg->id;
@@ -586,6 +622,7 @@ void CanBus::check_acks(std::int64_t now_ns) noexcept {
     ++st_.can.ack_timeouts;
     if (s.attempts <= config_.ack_retries) {
       ++st_.bus.counters.offsets_retried;
+      ++st_.can.ack_retries;
       s.state = WriteState::kPending;
     } else {
       ++st_.bus.counters.offsets_failed;
@@ -599,6 +636,7 @@ void CanBus::link_down(std::int64_t now_ns) noexcept {
     if_down_ = true;
     ++st_.can.interface_down;
     st_.bus.state = LinkState::kDown;
+    went_down(now_ns);
   }
   next_link_check_ns_ = now_ns + to_ns(config_.link_check_s);
   // Consume the pending socket error so poll() does not spin on POLLERR.
@@ -640,10 +678,17 @@ void CanBus::check_link(std::int64_t now_ns) noexcept {
   recovered();
 }
 
+void CanBus::went_down(std::int64_t now_ns) noexcept {
+  if (down_since_ns_ == 0) {
+    down_since_ns_ = std::max<std::int64_t>(now_ns, 1);
+  }
+}
+
 void CanBus::recovered() noexcept {
   if (if_down_ || bus_off_) {
     return;
   }
+  down_since_ns_ = 0;  // the next publish() clears the link alarm
   ++st_.bus.counters.reconnects;
   st_.bus.state = LinkState::kUp;
   // Writes that may not have reached the NC go out again (they are absolute values).

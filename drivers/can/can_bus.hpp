@@ -5,7 +5,9 @@
 // waits for the NC's acknowledge where the mapping has one (timeout → re-send → alarm). It rides
 // out bus faults without stopping: error-passive (degraded), bus-off (kernel restart-ms or a
 // restart it requests over netlink), the interface going down and up (writes held and re-sent).
-// Every fault is counted in CanStatus.
+// Every fault is counted in CanStatus and reported through extra_counters() (`nccomp status`).
+// The status alarm is raised by a write given up after its retries, and by the link staying down
+// or bus-off for longer than alarm_after_s; the latter clears when the bus is back.
 //
 // Threads: the loop thread is rx()'s only consumer and tx()'s only producer; it never blocks on
 // the driver. After pushing into tx() it may call wake() so the write goes out at once (without
@@ -15,9 +17,11 @@
 #include <array>
 #include <atomic>
 #include <condition_variable>
+#include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <mutex>
+#include <span>
 #include <thread>
 #include <vector>
 
@@ -45,11 +49,14 @@ struct CanCounters {
   std::uint64_t restart_failures{0};     // ... refused by the kernel (e.g. vcan: not supported)
   std::uint64_t interface_down{0};       // the interface went down (ENETDOWN / ENODEV)
   std::uint64_t controller_overflow{0};  // CAN_ERR_CRTL_RX/TX_OVERFLOW reported by the controller
-  std::uint64_t rx_overflow{0};     // frames the kernel dropped: socket queue full (SO_RXQ_OVFL)
-  std::uint64_t enobufs{0};         // ENOBUFS on send: transmit queue full, backed off
-  std::uint64_t ack_timeouts{0};    // acknowledge not seen in time (each attempt)
-  std::uint64_t tx_unencodable{0};  // offset value does not fit its register's signal
-  std::uint64_t tx_unmapped{0};     // offset write for a register without a mapping
+  std::uint64_t rx_overflow{0};      // frames the kernel dropped: socket queue full (SO_RXQ_OVFL)
+  std::uint64_t enobufs{0};          // ENOBUFS on send: transmit queue full, backed off
+  std::uint64_t enobufs_retries{0};  // send rounds retried after an ENOBUFS back-off
+  std::uint64_t ack_timeouts{0};     // acknowledge not seen in time (each attempt)
+  std::uint64_t ack_retries{0};      // writes re-sent after an acknowledge timeout
+  std::uint64_t link_alarms{0};      // alarm raised: down / bus-off for longer than alarm_after_s
+  std::uint64_t tx_unencodable{0};   // offset value does not fit its register's signal
+  std::uint64_t tx_unmapped{0};      // offset write for a register without a mapping
   std::uint64_t rejected_unknown_id{0};
   std::uint64_t rejected_wrong_length{0};
   std::uint64_t rejected_out_of_range{0};
@@ -80,6 +87,8 @@ class CanBus final : public Bus {
   core::rt::SpscRing<core::OffsetWrite>& tx() override { return tx_ring_; }
   [[nodiscard]] BusStatus status() const override { return status_.load().bus; }
   [[nodiscard]] CanStatus can_status() const { return status_.load(); }
+  /// The CanCounters by name (kCanCounterNames order), from one status snapshot. Any thread.
+  [[nodiscard]] std::size_t extra_counters(std::span<BusCounterValue> out) const override;
 
   /// Loop thread, after pushing into tx(): wakes the I/O thread (one eventfd write; no
   /// allocation, no lock, never blocks).
@@ -119,8 +128,9 @@ class CanBus final : public Bus {
   void check_acks(std::int64_t now_ns) noexcept;
   void link_down(std::int64_t now_ns) noexcept;
   void check_link(std::int64_t now_ns) noexcept;
+  void went_down(std::int64_t now_ns) noexcept;
   void recovered() noexcept;
-  void publish() noexcept;
+  void publish(std::int64_t now_ns) noexcept;
   Slot* slot_for(std::uint16_t register_index) noexcept;
 
   CanConfig config_;
@@ -139,6 +149,8 @@ class CanBus final : public Bus {
   bool fd_frames_{false};
   bool bus_off_{false};
   bool if_down_{false};
+  std::int64_t down_since_ns_{0};  // when the bus went down / bus-off (0 = up)
+  bool link_alarm_{false};         // down for longer than alarm_after_s
   std::int64_t next_link_check_ns_{0};
   std::int64_t next_restart_ns_{0};
   std::int64_t backoff_until_ns_{0};
@@ -163,6 +175,15 @@ class CanBus final : public Bus {
   void serve_flush() noexcept;
   void handle_sync(const std::uint8_t* data, std::size_t len) noexcept;
 };
+
+/// The names extra_counters() reports, in its order (static strings, snake_case).
+inline constexpr std::array<const char*, 23> kCanCounterNames{
+    "error_frames",          "error_warning",       "error_passive",       "bus_off",
+    "bus_recoveries",        "restart_requests",    "restart_failures",    "interface_down",
+    "link_alarms",           "controller_overflow", "rx_overflow",         "enobufs",
+    "enobufs_retries",       "ack_timeouts",        "ack_retries",         "rejected_wrong_length",
+    "rejected_out_of_range", "rejected_not_finite", "rejected_unknown_id", "tx_unencodable",
+    "tx_unmapped",           "lockstep_syncs",      "lockstep_sync_acks"};
 
 /// Asks the kernel to restart a CAN controller out of bus-off (netlink IFLA_CAN_RESTART, as
 /// `ip link set canX type can restart`). Returns 0 or the errno. Not real-time.

@@ -33,6 +33,9 @@ struct CanConfig {
   double enobufs_backoff_s{0.0005};
   /// While the interface is down: how often its state is checked [s].
   double link_check_s{0.05};
+  /// The interface down or the controller bus-off for longer than this raises the status alarm
+  /// (cleared when the bus is back) [s].
+  double alarm_after_s{1.0};
   /// Capacity of the decoded-event ring (power of two) and of the offset-write ring.
   std::uint32_t rx_ring_events{4096};
   std::uint32_t tx_ring_writes{256};

@@ -764,7 +764,7 @@ std::optional<double> field_value(const core::Event& event, Field field) noexcep
             default:
               return std::nullopt;
           }
-        } else {
+        } else if constexpr (std::is_same_v<E, core::TemperatureSample>) {
           switch (field) {
             case Field::kSensor:
               return e.sensor;
@@ -773,6 +773,8 @@ std::optional<double> field_value(const core::Event& event, Field field) noexcep
             default:
               return std::nullopt;
           }
+        } else {
+          return std::nullopt;  // events no CAN frame carries (e.g. operator commands)
         }
       },
       event);

@@ -1,6 +1,7 @@
 // Unit tests of the CAN signal codec, the mapping validation and the TOML parser (no sockets).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
 #include <bit>
 #include <cmath>
@@ -18,7 +19,9 @@
 namespace nccomp::drivers::can {
 namespace {
 
-std::string reference_path() { return std::string(NCCOMP_SOURCE_DIR) + "/config/reference-nc-can.toml"; }
+std::string reference_path() {
+  return std::string(NCCOMP_SOURCE_DIR) + "/config/reference-nc-can.toml";
+}
 
 // The error message of parsing text, or "" if it parsed.
 std::string parse_error(const std::string& text) {
@@ -92,16 +95,16 @@ TEST(CanCodec, Float32RoundTripsAndNaNDecodesAsNaN) {
 
 TEST(CanCodec, OverflowingLayoutHasNoPositions) {
   std::array<std::uint16_t, 64> pos{};
-  EXPECT_EQ(signal_bit_positions({60, 8, ByteOrder::kLittleEndian, ValueType::kUnsigned, 1, 0},
-                                 64, pos),
-            0U);
-  EXPECT_EQ(signal_bit_positions({56, 8, ByteOrder::kLittleEndian, ValueType::kUnsigned, 1, 0},
-                                 64, pos),
-            8U);
+  EXPECT_EQ(
+      signal_bit_positions({60, 8, ByteOrder::kLittleEndian, ValueType::kUnsigned, 1, 0}, 64, pos),
+      0U);
+  EXPECT_EQ(
+      signal_bit_positions({56, 8, ByteOrder::kLittleEndian, ValueType::kUnsigned, 1, 0}, 64, pos),
+      8U);
   // Motorola from bit 56 (byte 7's LSB) with 2 bits walks to byte 8: overflow in 8 bytes.
-  EXPECT_EQ(signal_bit_positions({56, 2, ByteOrder::kBigEndian, ValueType::kUnsigned, 1, 0},
-                                 64, pos),
-            0U);
+  EXPECT_EQ(
+      signal_bit_positions({56, 2, ByteOrder::kBigEndian, ValueType::kUnsigned, 1, 0}, 64, pos),
+      0U);
 }
 
 TEST(CanConfig, ReferenceProfileParses) {
@@ -117,11 +120,37 @@ TEST(CanConfig, ReferenceProfileParses) {
   EXPECT_FALSE(c.mapping.offsets[3].ack.has_value());
 }
 
+TEST(CanConfig, AlarmAfterSecondsParsedDefaultedAndRangeChecked) {
+  EXPECT_DOUBLE_EQ(load_can_config(reference_path()).alarm_after_s, 1.0);
+  EXPECT_DOUBLE_EQ(parse_can_config(kHead, "test.toml").alarm_after_s, 1.0);  // default
+  EXPECT_DOUBLE_EQ(parse_can_config(kHead + "alarm_after_s = 0.25\n", "test.toml").alarm_after_s,
+                   0.25);
+  const std::string e = parse_error(kHead + "alarm_after_s = -1\n");
+  EXPECT_NE(e.find("test.toml:3: can.alarm_after_s: must be in [0, 3600], got -1"),
+            std::string::npos)
+      << e;
+}
+
+TEST(CanConfig, FdReferenceMapParses) {
+  // The CAN FD example (the HIL test decodes its 32-byte axis frame on an MTU-72 vcan0).
+  const CanConfig c =
+      load_can_config(std::string(NCCOMP_SOURCE_DIR) + "/config/reference-nc-can-fd.toml");
+  EXPECT_TRUE(c.mapping.fd);
+  ASSERT_EQ(c.mapping.rx.size(), 2U);
+  EXPECT_EQ(c.mapping.rx[0].id, 0x100U);
+  EXPECT_EQ(c.mapping.rx[0].length_bytes, 32);
+  EXPECT_EQ(c.mapping.rx[0].signals.size(), 9U);
+  EXPECT_EQ(c.mapping.rx[1].length_bytes, 4);  // a classic frame on the same FD socket
+  ASSERT_EQ(c.mapping.offsets.size(), 1U);
+  EXPECT_EQ(c.mapping.offsets[0].length_bytes, 12);
+}
+
 TEST(CanConfig, OverlapRefusedWithKeyPathAndLine) {
-  const std::string text = kHead +
-                           "[[can.rx]]\nid = 0x10\nevent = \"tool_change\"\n"
-                           "[[can.rx.signal]]\nname = \"tool\"\nstart_bit = 0\nlength_bits = 16\n"
-                           "[[can.rx.signal]]\nname = \"sister\"\nstart_bit = 15\nlength_bits = 1\n";
+  const std::string text =
+      kHead +
+      "[[can.rx]]\nid = 0x10\nevent = \"tool_change\"\n"
+      "[[can.rx.signal]]\nname = \"tool\"\nstart_bit = 0\nlength_bits = 16\n"
+      "[[can.rx.signal]]\nname = \"sister\"\nstart_bit = 15\nlength_bits = 1\n";
   const std::string e = parse_error(text);
   EXPECT_NE(e.find("test.toml:10: can.rx[0].signal[1].start_bit: overlaps another signal"),
             std::string::npos)
@@ -157,21 +186,26 @@ TEST(CanConfig, UnknownKeyRefused) {
 }
 
 TEST(CanConfig, DuplicateIdsAndRegistersRefused) {
-  const std::string frame = "[[can.rx]]\nid = 0x10\nevent = \"temperature\"\n"
-                            "[[can.rx.signal]]\nname = \"sensor\"\nstart_bit = 0\nlength_bits = 8\n";
-  const std::string frame2 = "[[can.rx]]\nid = 0x10\nevent = \"tool_change\"\n"
-                             "[[can.rx.signal]]\nname = \"tool\"\nstart_bit = 0\nlength_bits = 8\n";
+  const std::string frame =
+      "[[can.rx]]\nid = 0x10\nevent = \"temperature\"\n"
+      "[[can.rx.signal]]\nname = \"sensor\"\nstart_bit = 0\nlength_bits = 8\n";
+  const std::string frame2 =
+      "[[can.rx]]\nid = 0x10\nevent = \"tool_change\"\n"
+      "[[can.rx.signal]]\nname = \"tool\"\nstart_bit = 0\nlength_bits = 8\n";
   EXPECT_NE(parse_error(kHead + frame + frame2).find("can.rx[1].id: frame ID 0x10 is mapped twice"),
             std::string::npos);
-  const std::string off = "[[can.offset]]\nregister = 0\nid = 0x10\n[can.offset.value]\n"
-                          "start_bit = 0\nlength_bits = 32\ntype = \"signed\"\n";
-  EXPECT_NE(parse_error(kHead + frame + off).find("can.offset[0].id: frame ID 0x10 is already used"),
-            std::string::npos);
+  const std::string off =
+      "[[can.offset]]\nregister = 0\nid = 0x10\n[can.offset.value]\n"
+      "start_bit = 0\nlength_bits = 32\ntype = \"signed\"\n";
+  EXPECT_NE(
+      parse_error(kHead + frame + off).find("can.offset[0].id: frame ID 0x10 is already used"),
+      std::string::npos);
 }
 
 TEST(CanConfig, FdLengthsNeedFdAndValidLengths) {
-  const std::string frame = "[[can.rx]]\nid = 0x10\nlength_bytes = 12\nevent = \"temperature\"\n"
-                            "[[can.rx.signal]]\nname = \"sensor\"\nstart_bit = 0\nlength_bits = 8\n";
+  const std::string frame =
+      "[[can.rx]]\nid = 0x10\nlength_bytes = 12\nevent = \"temperature\"\n"
+      "[[can.rx.signal]]\nname = \"sensor\"\nstart_bit = 0\nlength_bits = 8\n";
   EXPECT_NE(parse_error(kHead + frame).find("can.rx[0].length_bytes: 12 exceeds 8 bytes"),
             std::string::npos);
   EXPECT_EQ(parse_error(kHead + "fd = true\n" + frame), "");
@@ -184,15 +218,18 @@ TEST(CanConfig, FdLengthsNeedFdAndValidLengths) {
 TEST(CanConfig, BadValuesNameTheirKey) {
   EXPECT_NE(parse_error("[can]\n").find("test.toml:1: can.interface: required key missing"),
             std::string::npos);
-  EXPECT_NE(parse_error(kHead + "rx_ring_events = 1000\n").find("can.rx_ring_events: must be a power of two"),
+  EXPECT_NE(parse_error(kHead + "rx_ring_events = 1000\n")
+                .find("can.rx_ring_events: must be a power of two"),
             std::string::npos);
   EXPECT_NE(parse_error(kHead + "restart = \"never\"\n").find("can.restart: must be"),
             std::string::npos);
-  EXPECT_NE(parse_error(kHead + "[[can.rx]]\nid = 0x800\nevent = \"temperature\"\n"
-                                "[[can.rx.signal]]\nname = \"sensor\"\nstart_bit = 0\nlength_bits = 8\n")
-                .find("can.rx[0].id: 0x800 exceeds the 11-bit ID range"),
-            std::string::npos);
-  EXPECT_NE(parse_error(kHead + "[[can.rx]]\nid = 1\nevent = \"spindle\"\n").find("can.rx[0].event: unknown event"),
+  EXPECT_NE(
+      parse_error(kHead + "[[can.rx]]\nid = 0x800\nevent = \"temperature\"\n"
+                          "[[can.rx.signal]]\nname = \"sensor\"\nstart_bit = 0\nlength_bits = 8\n")
+          .find("can.rx[0].id: 0x800 exceeds the 11-bit ID range"),
+      std::string::npos);
+  EXPECT_NE(parse_error(kHead + "[[can.rx]]\nid = 1\nevent = \"spindle\"\n")
+                .find("can.rx[0].event: unknown event"),
             std::string::npos);
   EXPECT_NE(parse_error("[can\n").find("test.toml:1:"), std::string::npos);
   EXPECT_NE(parse_error(kHead + "[[can.rx]]\nid = 1\nevent = \"temperature\"\n"
@@ -268,7 +305,8 @@ TEST_F(DecoderTest, RejectsWrongLengthOutOfRangeAndNaNWithoutChangingState) {
 }
 
 TEST_F(DecoderTest, RejectedFrameLeavesLatestValuesAlone) {
-  ASSERT_FALSE(feed(0x120, {0x05, 0, 0, 0, 0x03, 0x00, 0xB8, 0x0B}).emitted);  // part 5, cp 3, r 3 mm
+  ASSERT_FALSE(
+      feed(0x120, {0x05, 0, 0, 0, 0x03, 0x00, 0xB8, 0x0B}).emitted);  // part 5, cp 3, r 3 mm
   // A bad second part frame: angle 100° > 90 → rejected; the next good one completes.
   EXPECT_EQ(feed(0x121, {0x00, 0x00, 0x20, 0x41, 0x10, 0x27, 0, 0}).reject,
             RejectReason::kOutOfRange);
@@ -345,6 +383,38 @@ TEST(CanBusLifecycle, StartOnMissingInterfaceThrowsNamingItAndStaysStopped) {
   EXPECT_EQ(bus.rx().capacity(), 4096U);
   EXPECT_EQ(bus.tx().capacity(), 256U);
   bus.stop();  // idempotent, no thread to join
+}
+
+TEST(CanBusLifecycle, ExtraCountersHaveFixedUniqueSnakeCaseNames) {
+  // GIVEN a bus that never started
+  CanBus bus(load_can_config(reference_path()));
+  // WHEN its driver counters are read THEN every CanCounters field is there, named, zero.
+  std::array<BusCounterValue, kMaxBusExtraCounters> out{};
+  const std::size_t n = bus.extra_counters(out);
+  ASSERT_EQ(n, kCanCounterNames.size());
+  ASSERT_LE(n, kMaxBusExtraCounters);
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::string name = out[i].name;
+    EXPECT_EQ(name, kCanCounterNames[i]);
+    EXPECT_EQ(out[i].value, 0U) << name;
+    EXPECT_EQ(name.find_first_not_of("abcdefghijklmnopqrstuvwxyz_"), std::string::npos) << name;
+    for (std::size_t j = 0; j < i; ++j) {
+      EXPECT_NE(name, std::string(out[j].name)) << "twice";
+    }
+  }
+  // The ones the operator needs first (issue 7 / the status gaps of the audit).
+  for (const char* want :
+       {"bus_off", "error_passive", "error_warning", "bus_recoveries", "interface_down",
+        "link_alarms", "rx_overflow", "enobufs", "enobufs_retries", "ack_timeouts", "ack_retries",
+        "rejected_wrong_length", "rejected_out_of_range", "rejected_not_finite"}) {
+    EXPECT_NE(std::find(kCanCounterNames.begin(), kCanCounterNames.end(), std::string_view(want)),
+              kCanCounterNames.end())
+        << want;
+  }
+  // A short span gets the first entries only.
+  std::array<BusCounterValue, 3> few{};
+  EXPECT_EQ(bus.extra_counters(few), 3U);
+  EXPECT_STREQ(few[2].name, "error_passive");
 }
 
 }  // namespace
