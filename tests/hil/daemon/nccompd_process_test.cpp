@@ -3,9 +3,11 @@
 // zero, nothing doubled); a corrupt state file holds the offsets with an alarm; a bad reload is
 // refused while the old configuration keeps running; SIGTERM persists and exits 0.
 #include <fcntl.h>
+#include <grp.h>
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <spawn.h>
+#include <sys/resource.h>
 #include <sys/socket.h>
 #include <sys/un.h>
 #include <sys/wait.h>
@@ -26,6 +28,8 @@
 #include <vector>
 
 #include "core/engine/engine.hpp"
+#include "daemon/config/builtin_sections.hpp"
+#include "daemon/config/config.hpp"
 #include "daemon/state_store.hpp"
 #include "daemon/status.hpp"
 
@@ -441,6 +445,158 @@ TEST(NccompdProcess, SigtermWritesTheFinalState) {
   ASSERT_EQ(after.status, nccomp::daemon::StateFileStatus::kOk) << after.reason;
   EXPECT_GT(after.sequence, during_sequence);
   EXPECT_DOUBLE_EQ(register_in_state(after.payload), 5.0);
+}
+
+// The value of `Key=` in systemd/nccompd.service ("" if absent).
+std::string unit_setting(const std::string& key) {
+  std::ifstream in(std::string(NCCOMP_SOURCE_DIR) + "/systemd/nccompd.service");
+  for (std::string l; std::getline(in, l);) {
+    if (l.rfind(key + "=", 0) == 0) {
+      return l.substr(key.size() + 1);
+    }
+  }
+  return {};
+}
+
+constexpr int kCannotSetLimits = 120;
+
+// nccompd as the unit runs it: an unprivileged user (no capabilities) with the unit's
+// LimitRTPRIO / LimitMEMLOCK (memlock 0 = leave it), and the shipped [daemon.realtime] settings.
+// Returns the log, or nullopt if this machine does not let root set those limits.
+std::optional<std::string> run_as_unprivileged(const fs::path& dir, rlim_t rtprio, rlim_t memlock) {
+  const std::string cfg = (dir / "nccompd.toml").string();
+  const std::string log = (dir / "nccompd.log").string();
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    // Child: async-signal-safe calls only until exec.
+    const rlimit rt{rtprio, rtprio};
+    const rlimit ml{memlock, memlock};
+    const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    if (fd < 0 || ::dup2(fd, 1) < 0 || ::dup2(fd, 2) < 0) {
+      ::_exit(119);
+    }
+    if (::setrlimit(RLIMIT_RTPRIO, &rt) != 0 ||
+        (memlock != 0 && ::setrlimit(RLIMIT_MEMLOCK, &ml) != 0)) {
+      ::_exit(kCannotSetLimits);  // raising a hard limit needs CAP_SYS_RESOURCE
+    }
+    if (::setgroups(0, nullptr) != 0 || ::setgid(65534) != 0 || ::setuid(65534) != 0) {
+      ::_exit(119);
+    }
+    const char* argv[] = {NCCOMPD_BIN, "--config", cfg.c_str(), nullptr};
+    ::execve(NCCOMPD_BIN, const_cast<char* const*>(argv), environ);
+    ::_exit(121);
+  }
+  // Until the loop runs (its set-up is logged before READY), then stop it.
+  std::string text;
+  for (int i = 0; i < 200 && text.find("loop running at") == std::string::npos; ++i) {
+    int early = 0;
+    if (::waitpid(pid, &early, WNOHANG) == pid) {
+      if (WIFEXITED(early) && WEXITSTATUS(early) == kCannotSetLimits) {
+        return std::nullopt;
+      }
+      ADD_FAILURE() << "nccompd ended early, status " << early;
+      return std::string();
+    }
+    std::this_thread::sleep_for(50ms);
+    std::ifstream in(log);
+    std::ostringstream ss;
+    ss << in.rdbuf();
+    text = ss.str();
+  }
+  std::this_thread::sleep_for(200ms);
+  ::kill(pid, SIGTERM);
+  int st = 0;
+  ::waitpid(pid, &st, 0);
+  std::ifstream in(log);
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  EXPECT_TRUE(WIFEXITED(st) && WEXITSTATUS(st) == 0) << "status " << st << "\n" << ss.str();
+  return ss.str();
+}
+
+// What the shipped config asks for and what the unit grants, read from the files themselves.
+struct RealtimePolicy {
+  int priority{0};
+  std::size_t prefault_kib{0};
+  int unit_rtprio{0};
+};
+RealtimePolicy shipped_policy() {
+  auto shipped =
+      nccomp::daemon::config::load_file(std::string(NCCOMP_SOURCE_DIR) + "/config/nccompd.toml");
+  EXPECT_TRUE(shipped.config) << shipped.diagnostics.to_string();
+  if (!shipped.config) {
+    return {};
+  }
+  const auto& rt = nccomp::daemon::config::daemon_section(*shipped.config);
+  EXPECT_GT(rt.sched_fifo_priority, 0) << "the shipped config must ask for SCHED_FIFO";
+  EXPECT_TRUE(rt.lock_memory) << "the shipped config must lock memory";
+  EXPECT_GT(rt.prefault_stack_kib, 0U);
+  const int unit_rtprio = std::stoi("0" + unit_setting("LimitRTPRIO"));
+  EXPECT_GE(unit_rtprio, rt.sched_fifo_priority) << "LimitRTPRIO below the shipped priority";
+  EXPECT_EQ(unit_setting("LimitMEMLOCK"), "infinity");
+  EXPECT_EQ(unit_setting("RestrictRealtime"), "no");
+  EXPECT_EQ(unit_setting("CapabilityBoundingSet"), "") << "the limits replace capabilities";
+  return {rt.sched_fifo_priority, rt.prefault_stack_kib, unit_rtprio};
+}
+
+void write_realtime_config(const TempDir& d, const RealtimePolicy& p) {
+  fs::permissions(d.path, fs::perms::all);  // the unprivileged user writes state, log, socket
+  std::ostringstream realtime;
+  realtime << "[daemon.realtime]\nsched_fifo_priority = " << p.priority
+           << "\nlock_memory = true\nprefault_stack_kib = " << p.prefault_kib << "\n";
+  d.write("nccompd.toml", config_text(5.0, 50.0, realtime.str()));
+}
+
+// The shipped config asks for SCHED_FIFO and locked memory, the unit allows both through its
+// rlimits only; without LimitRTPRIO an unprivileged nccompd is refused, says so and runs on
+// (SCHED_OTHER): the rlimit is what grants the policy.
+TEST(NccompdProcess, ShippedRealtimePolicyNeedsTheUnitsRtprioLimit) {
+  if (::geteuid() != 0) {
+    GTEST_SKIP() << "needs root to become the unprivileged user (CI runs as root)";
+  }
+  const RealtimePolicy p = shipped_policy();
+  ASSERT_GT(p.priority, 0);
+  TempDir d;
+  write_realtime_config(d, p);
+  const auto refused = run_as_unprivileged(d.path, 0, 0);
+  ASSERT_TRUE(refused.has_value());
+  EXPECT_NE(refused->find("SCHED_FIFO priority " + std::to_string(p.priority) +
+                          " refused: Operation not permitted (running SCHED_OTHER)"),
+            std::string::npos)
+      << *refused;
+}
+
+// On an installed system the loop runs SCHED_FIFO with its memory locked: an unprivileged user
+// with no capability and the unit's LimitRTPRIO / LimitMEMLOCK gets the shipped policy.
+TEST(NccompdProcess, UnitLimitsGrantTheShippedRealtimePolicy) {
+  if (::geteuid() != 0) {
+    GTEST_SKIP() << "needs root to become the unprivileged user (CI runs as root)";
+  }
+  const RealtimePolicy p = shipped_policy();
+  ASSERT_GT(p.priority, 0);
+  TempDir d;
+  write_realtime_config(d, p);
+  const auto granted_log =
+      run_as_unprivileged(d.path, static_cast<rlim_t>(p.unit_rtprio), RLIM_INFINITY);
+  if (!granted_log) {
+    GTEST_SKIP() << "this machine does not let root raise RLIMIT_RTPRIO / RLIMIT_MEMLOCK (no "
+                    "CAP_SYS_RESOURCE, e.g. a container): this test needs a host where root (or "
+                    "systemd) can set the unit's limits";
+  }
+  const std::string& granted = *granted_log;
+  EXPECT_NE(granted.find("loop thread: SCHED_FIFO priority " + std::to_string(p.priority) + "\n"),
+            std::string::npos)
+      << granted;
+  EXPECT_NE(
+      granted.find("loop thread: " + std::to_string(p.prefault_kib) + " KiB of stack pre-faulted"),
+      std::string::npos)
+      << granted;
+#if defined(NCCOMP_ASAN) || defined(NCCOMP_TSAN)
+  EXPECT_NE(granted.find("lock_memory ignored: this is a sanitizer build"), std::string::npos)
+      << granted;
+#else
+  EXPECT_NE(granted.find("memory locked (mlockall)"), std::string::npos) << granted;
+#endif
 }
 
 TEST(NccompdProcess, InvalidConfigExitsWithStatus3AndNamesTheLine) {
