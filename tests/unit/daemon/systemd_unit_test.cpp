@@ -5,6 +5,8 @@
 #include <cstdio>
 #include <fstream>
 #include <regex>
+#include <set>
+#include <sstream>
 #include <string>
 
 namespace {
@@ -36,6 +38,66 @@ TEST(SystemdUnit, SecurityExposureIsAtMost2) {
   ASSERT_TRUE(std::regex_search(out, m, re)) << out;
   const double exposure = std::stod(m[1]);
   EXPECT_LE(exposure, 2.0) << out;
+}
+
+// Every syscall of `systemd-analyze syscall-filter GROUP`, groups expanded.
+std::set<std::string> syscalls_of(const std::string& group, int depth = 0) {
+  std::set<std::string> out;
+  if (depth > 8) {
+    return out;
+  }
+  std::istringstream in(run("systemd-analyze syscall-filter --no-pager '" + group + "' 2>&1"));
+  bool first = true;
+  for (std::string l; std::getline(in, l);) {
+    const auto b = l.find_first_not_of(" \t");
+    if (b == std::string::npos || l[b] == '#') {
+      continue;
+    }
+    const std::string name = l.substr(b);
+    if (first) {  // the group's own name
+      first = false;
+      continue;
+    }
+    if (name[0] == '@') {
+      const auto sub = syscalls_of(name, depth + 1);
+      out.insert(sub.begin(), sub.end());
+    } else {
+      out.insert(name);
+    }
+  }
+  return out;
+}
+
+// The unit's syscall filter lets the daemon do what its real-time policy and its service contract
+// need: SCHED_FIFO for the loop thread (pthread_setschedparam → sched_setscheduler), CPU
+// affinity, mlockall, absolute-deadline sleeps, the signalfd, the notify socket.
+TEST(SystemdUnit, SyscallFilterAllowsTheRealtimeCalls) {
+  ASSERT_EQ(std::system("command -v systemd-analyze > /dev/null 2>&1"), 0);
+  std::ifstream in(kUnit);
+  std::set<std::string> allowed;
+  std::set<std::string> denied;
+  int filters = 0;
+  for (std::string l; std::getline(in, l);) {
+    if (l.rfind("SystemCallFilter=", 0) != 0) {
+      continue;
+    }
+    ++filters;
+    std::string v = l.substr(17);
+    const bool deny = !v.empty() && v[0] == '~';
+    std::istringstream words(deny ? v.substr(1) : v);
+    for (std::string w; words >> w;) {
+      auto set = w[0] == '@' ? syscalls_of(w) : std::set<std::string>{w};
+      (deny ? denied : allowed).insert(set.begin(), set.end());
+    }
+  }
+  ASSERT_EQ(filters, 2);
+  ASSERT_GT(allowed.size(), 100U) << "group expansion failed";
+  ASSERT_GT(denied.size(), 10U) << "group expansion failed";
+  for (const char* call : {"sched_setscheduler", "sched_setaffinity", "mlockall", "clock_nanosleep",
+                           "signalfd4", "eventfd2", "sendmsg", "getrusage"}) {
+    EXPECT_EQ(allowed.count(call), 1U) << call << " is not allowed by the unit";
+    EXPECT_EQ(denied.count(call), 0U) << call << " is denied by the unit";
+  }
 }
 
 TEST(SystemdUnit, HasTheServiceContract) {
