@@ -6,6 +6,7 @@
 #include <cmath>
 #include <limits>
 #include <map>
+#include <memory>
 #include <numeric>
 #include <tuple>
 #include <utility>
@@ -89,8 +90,18 @@ std::array<double, 2> group_key(const TermSpec& s, const Row& row, bool& ok) {
   return key;
 }
 
+// kWear terms take the wear a reference model predicts as their basis; it goes into the
+// state's per-term slot (lag_value, otherwise used by kLag terms only).
+void set_wear_aux(const std::vector<TermSpec>& specs, const Row& row, const Model* ref,
+                  EvalState& state) {
+  for (std::size_t t = 0; t < specs.size(); ++t) {
+    if (specs[t].form != Form::kWear) continue;
+    state.lag_value[t] = ref != nullptr ? ref->wear_reference(row, specs[t].center) : kUnknown;
+  }
+}
+
 Layout discover_groups(const Dataset& data, const std::vector<TermSpec>& specs,
-                       const std::vector<std::uint8_t>& use) {
+                       const std::vector<std::uint8_t>& use, const Model* wear_ref) {
   Layout layout;
   layout.groups.resize(specs.size());
   std::vector<std::map<std::array<double, 2>, int>> seen(specs.size());
@@ -102,6 +113,7 @@ Layout discover_groups(const Dataset& data, const std::vector<TermSpec>& specs,
     const Row row = data.row(i);
     advance_state(specs, row, state);
     if (use[i] == 0U) continue;
+    set_wear_aux(specs, row, wear_ref, state);
     for (std::size_t t = 0; t < specs.size(); ++t) {
       if (term_basis(specs[t], row, state.lag_value[t], b) == 0) continue;
       bool ok = false;
@@ -247,6 +259,7 @@ bool same_term(const TermSpec& a, const TermSpec& b) {
 // Subsample of the fitted rows for the non-linear search: design matrix of the current model,
 // its orthonormal basis, and the current residual projected off it.
 struct SearchSet {
+  const Model* model{nullptr};  // the current model (the wear reference of kWear candidates)
   std::vector<std::size_t> rows;
   std::vector<Row> context;  // the rows' contexts, built once for the many grid evaluations
   Eigen::MatrixXd q;         // n_sub × rank, orthonormal
@@ -258,6 +271,7 @@ SearchSet make_search_set(const Dataset& data, const Model& model,
                           const std::vector<std::uint8_t>& use, const std::vector<double>& residual,
                           std::size_t max_rows) {
   SearchSet s;
+  s.model = &model;
   std::size_t n_use = 0;
   for (auto u : use) n_use += u != 0U ? 1U : 0U;
   const std::size_t stride = std::max<std::size_t>(1, (n_use + max_rows - 1) / max_rows);
@@ -285,6 +299,7 @@ SearchSet make_search_set(const Dataset& data, const Model& model,
     const Row row = data.row(i);
     advance_state(specs, row, state);
     if (i != s.rows[j]) continue;
+    set_wear_aux(specs, row, &model, state);
     row_entries(specs, layout, row, state, entries);
     for (const Entry& e : entries)
       x(static_cast<Eigen::Index>(j), static_cast<Eigen::Index>(e.index)) = e.value;
@@ -342,7 +357,10 @@ Eigen::MatrixXd candidate_basis(const Dataset& data, const SearchSet& set, const
     const Row& row = set.context[static_cast<std::size_t>(j)];
     const int g = group[static_cast<std::size_t>(j)];
     if (g < 0) continue;
-    const std::size_t m = term_basis(spec, row, kUnknown, v);
+    const double aux = spec.form == Form::kWear && set.model != nullptr
+                           ? set.model->wear_reference(row, spec.center)
+                           : kUnknown;
+    const std::size_t m = term_basis(spec, row, aux, v);
     for (std::size_t c = 0; c < m; ++c) b(j, g * k + static_cast<Eigen::Index>(c)) = v[c];
   }
   return b;
@@ -476,7 +494,32 @@ double f_distribution_upper_tail(double f, double d1, double d2) {
 
 Model fit_terms(const Dataset& data, const std::vector<TermSpec>& specs,
                 const std::vector<std::uint8_t>& use) {
-  const Layout layout = discover_groups(data, specs, use);
+  // Terms proportional to the tool wear: the wear terms are fitted first on the tool_wear rows
+  // (they see no other rows, so this is their joint fit too), and their prediction is the basis.
+  std::unique_ptr<Model> wear_ref;
+  if (std::any_of(specs.begin(), specs.end(),
+                  [](const TermSpec& s) { return s.form == Form::kWear; })) {
+    std::vector<TermSpec> base;
+    for (const TermSpec& s : specs) {
+      if (s.form != Form::kWear) base.push_back(s);
+    }
+    std::vector<std::uint8_t> use_wear(use);
+    const auto& kind = data.column(static_cast<int>(Column::kKind));
+    bool any = false;
+    for (std::size_t i = 0; i < use_wear.size(); ++i) {
+      const bool wear_row = !kind.empty() && std::isfinite(kind[i]) && kind[i] < 0.5;
+      use_wear[i] = use_wear[i] != 0U && wear_row ? 1 : 0;
+      any = any || use_wear[i] != 0U;
+    }
+    if (any && !base.empty()) {
+      try {
+        wear_ref = std::make_unique<Model>(fit_terms(data, base, use_wear));
+      } catch (const AnalysisError&) {
+        wear_ref.reset();  // no wear term fits the tool_wear rows: the wear basis is unknown
+      }
+    }
+  }
+  const Layout layout = discover_groups(data, specs, use, wear_ref.get());
   const auto p = static_cast<Eigen::Index>(layout.parameters);
   if (p == 0) throw AnalysisError("no term applies to any fitted row");
   Eigen::MatrixXd a = Eigen::MatrixXd::Zero(p, p);
@@ -490,6 +533,7 @@ Model fit_terms(const Dataset& data, const std::vector<TermSpec>& specs,
     const Row row = data.row(i);
     advance_state(specs, row, state);
     if (use[i] == 0U || !std::isfinite(data.target_um[i])) continue;
+    set_wear_aux(specs, row, wear_ref.get(), state);
     row_entries(specs, layout, row, state, entries);
     const double y = data.target_um[i];
     for (std::size_t u = 0; u < entries.size(); ++u) {
@@ -583,7 +627,8 @@ double lag1_autocorrelation(const Dataset& data, const std::vector<double>& resi
 }
 
 std::vector<Candidate> make_candidates(const Dataset& data, const std::vector<std::uint8_t>& use,
-                                       const SearchOptions& options) {
+                                       const SearchOptions& options,
+                                       const std::vector<TermSpec>& declared) {
   std::vector<Candidate> out;
   auto excluded = [&](const std::string& name) {
     return std::find(options.exclude.begin(), options.exclude.end(), name) != options.exclude.end();
@@ -703,6 +748,36 @@ std::vector<Candidate> make_candidates(const Dataset& data, const std::vector<st
       add("wear_nonlinear", Form::kPoly, static_cast<int>(Column::kPath), 2, q);
     }
   }
+  // Proportional to the tool wear the model predicts (its terms on the tool_wear rows, e.g. a
+  // declared wear curve per tool): one coefficient for the contour / calib rows, whatever shape
+  // the wear has. Needs measured tool wear among the fitted rows.
+  const bool wear_declared = std::any_of(declared.begin(), declared.end(), [](const TermSpec& s) {
+    return (s.kind_mask & 1U) != 0U && s.form != Form::kWear && s.form != Form::kLag;
+  });
+  const std::uint8_t other_kinds = static_cast<std::uint8_t>(options.kind_mask & 0x6U);
+  if (wear_declared && other_kinds != 0U &&
+      varies(column_range(data, static_cast<int>(Column::kPath), use, other_kinds))) {
+    const auto& kind = data.column(static_cast<int>(Column::kKind));
+    const auto& point = data.column(static_cast<int>(Column::kPoint));
+    std::size_t wear_rows = 0;
+    double first_point = std::numeric_limits<double>::infinity();
+    for (std::size_t i = 0; i < data.rows() && !kind.empty(); ++i) {
+      if (use[i] == 0U || !std::isfinite(kind[i]) || kind[i] > 0.5) continue;
+      ++wear_rows;
+      if (!point.empty() && std::isfinite(point[i])) first_point = std::min(first_point, point[i]);
+    }
+    if (wear_rows >= 8 && !excluded("tool_wear")) {
+      Candidate w;
+      w.spec.name = "tool_wear";
+      w.spec.form = Form::kWear;
+      w.spec.column = static_cast<int>(Column::kPath);
+      w.spec.kind_mask = other_kinds;
+      w.spec.per = options.per;
+      // The edge support point whose wear is the reference: the lowest one measured.
+      w.spec.center = std::isfinite(first_point) ? first_point : 0.0;
+      out.push_back(std::move(w));
+    }
+  }
   if (varies(column_range(data, static_cast<int>(Column::kPart), use, km))) {
     add("part_trend", Form::kLinear, static_cast<int>(Column::kPart), 1, {});
   }
@@ -720,9 +795,11 @@ AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
   const std::size_t n = data.rows();
   if (n < 10) throw AnalysisError("the log has " + std::to_string(n) + " rows; at least 10 needed");
   AnalysisResult result;
-  // Time-ordered split: the latest rows are held out of every fit.
+  // Time-ordered split: the latest rows are held out of every fit (in the order over all
+  // files when the reader gave one: time_s starts again at every warm start).
   std::vector<double> times;
-  const auto& tc = data.column(static_cast<int>(Column::kTime));
+  const auto& tc =
+      data.order_s.size() == n ? data.order_s : data.column(static_cast<int>(Column::kTime));
   for (double v : tc) {
     if (std::isfinite(v)) times.push_back(v);
   }
@@ -747,7 +824,7 @@ AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
   result.declared = current;
   result.declared_residual_um = residual;
 
-  std::vector<Candidate> all = make_candidates(data, use, config.search);
+  std::vector<Candidate> all = make_candidates(data, use, config.search, config.declared);
   struct Ranked {
     double bic;
     std::size_t index;

@@ -32,6 +32,10 @@ struct Dataset {
   /// The deviation the model must explain [µm]: measured_um + applied_um (the error the machine
   /// made before the active compensation took its share).
   std::vector<double> target_um;
+  /// The order of the rows in time over several files, for the time-ordered split: time_s
+  /// within a file, each file after the previous one (time_s starts again at every warm start).
+  /// Empty, or of another length than the rows: time_s itself.
+  std::vector<double> order_s;
 
   Dataset();
   [[nodiscard]] std::size_t rows() const { return target_um.size(); }
@@ -164,9 +168,12 @@ double noise_floor_um(const Dataset& data, const std::vector<double>& residual,
 double lag1_autocorrelation(const Dataset& data, const std::vector<double>& residual,
                             const std::vector<std::uint8_t>& use);
 
-/// The candidate effects for this data set (the effect names of issue 11).
+/// The candidate effects for this data set (the effect names of issue 11). `declared`: the
+/// model's declared terms; a term that applies to tool_wear rows makes `tool_wear` in the form
+/// `wear` (proportional to the model's tool wear) a candidate for the other kinds.
 std::vector<Candidate> make_candidates(const Dataset& data, const std::vector<std::uint8_t>& use,
-                                       const SearchOptions& options);
+                                       const SearchOptions& options,
+                                       const std::vector<TermSpec>& declared = {});
 
 /// The whole analysis.
 AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config);

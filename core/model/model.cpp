@@ -7,8 +7,8 @@
 namespace nccomp::core::model {
 
 namespace {
-constexpr std::array<std::string_view, 9> kFormNames = {
-    "constant", "linear", "poly", "exp_rise", "sine", "step", "lag", "exp_growth", "hinge"};
+constexpr std::array<std::string_view, 10> kFormNames = {
+    "constant", "linear", "poly", "exp_rise", "sine", "step", "lag", "exp_growth", "hinge", "wear"};
 
 bool same(double a, double b) noexcept {
   // Group keys are integers (tool, point, kind) stored as doubles; exact equality is intended.
@@ -50,7 +50,7 @@ bool has_nonlinear_parameter(Form f) noexcept {
          f == Form::kExpGrowth || f == Form::kHinge;
 }
 
-std::size_t term_basis(const TermSpec& spec, const Row& row, double lag_value,
+std::size_t term_basis(const TermSpec& spec, const Row& row, double aux,
                        std::span<double, kMaxBasis> out) noexcept {
   const double kind = row[static_cast<std::size_t>(Column::kKind)];
   if (!std::isfinite(kind) || kind < 0.0 || kind > 7.0) return 0;
@@ -98,8 +98,9 @@ std::size_t term_basis(const TermSpec& spec, const Row& row, double lag_value,
       out[0] = v > 0.0 ? std::expm1(std::min(v / spec.scale, 50.0)) : 0.0;
       return 1;
     case Form::kLag:
-      if (!std::isfinite(lag_value)) return 0;
-      out[0] = lag_value;
+    case Form::kWear:
+      if (!std::isfinite(aux)) return 0;
+      out[0] = aux;
       return 1;
   }
   return 0;
@@ -162,12 +163,31 @@ EvalState Model::make_state() const {
   return s;
 }
 
+double Model::wear_reference(const Row& row, double point) const noexcept {
+  Row r = row;
+  r[static_cast<std::size_t>(Column::kKind)] = 0.0;  // tool_wear
+  r[static_cast<std::size_t>(Column::kPoint)] = point;
+  const EvalState none{};
+  double sum = 0.0;
+  for (std::size_t i = 0; i < terms_.size(); ++i) {
+    const TermSpec& s = terms_[i].spec;
+    if ((s.kind_mask & 1U) == 0U || s.form == Form::kWear || s.form == Form::kLag) continue;
+    sum += evaluate_term(i, r, none);
+  }
+  return sum;
+}
+
 double Model::evaluate_term(std::size_t index, const Row& row,
                             const EvalState& state) const noexcept {
   const Term& t = terms_[index];
   std::array<double, kMaxBasis> b{};
-  const double lag = index < state.lag_value.size() ? state.lag_value[index] : kUnknown;
-  const std::size_t n = term_basis(t.spec, row, lag, b);
+  double aux = kUnknown;
+  if (t.spec.form == Form::kWear) {
+    aux = wear_reference(row, t.spec.center);
+  } else if (index < state.lag_value.size()) {
+    aux = state.lag_value[index];
+  }
+  const std::size_t n = term_basis(t.spec, row, aux, b);
   if (n == 0) return 0.0;
   const int g = find_group(t.spec, t.groups, row);
   if (g < 0) return 0.0;

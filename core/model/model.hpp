@@ -68,6 +68,11 @@ enum class Form : std::uint8_t {
   kLag = 6,        // [first-order lag of v over time_s with time constant `scale` [s]]
   kExpGrowth = 7,  // [exp(v / scale) − 1] for v ≥ 0: accelerating wear at the end of tool life
   kHinge = 8,      // [max(0, v − center)]: a rate that changes at `center` (wear stage change)
+  // [W]: the model's own tool-wear prediction at the row (Model::wear_reference(): the terms
+  // that apply to tool_wear rows, evaluated with kind = tool_wear and point = `center`, the edge
+  // support point): an error proportional to the tool wear, whatever shape the wear curve has.
+  // It may not apply to tool_wear rows itself. `column` is path_mm (what the wear grows with).
+  kWear = 9,
 };
 
 std::string_view form_name(Form f) noexcept;
@@ -108,8 +113,9 @@ struct Term {
 
 /// Basis values of one term at one row. Returns the number of basis functions written into
 /// `out` (0 when the term does not apply to the row: wrong kind, unknown column value).
-/// `lag_value` is the term's filter state (kLag only). Real-time safe.
-std::size_t term_basis(const TermSpec& spec, const Row& row, double lag_value,
+/// `aux` is what the form needs beyond the row: kLag, the term's filter state; kWear, the
+/// model's tool-wear prediction at the row. Real-time safe.
+std::size_t term_basis(const TermSpec& spec, const Row& row, double aux,
                        std::span<double, kMaxBasis> out) noexcept;
 
 /// Index of the row's group in `groups`, or -1 when the row's group was never fitted.
@@ -150,6 +156,11 @@ class Model {
   /// Real-time safe.
   [[nodiscard]] double evaluate_term(std::size_t index, const Row& row,
                                      const EvalState& state) const noexcept;
+
+  /// The tool wear the model predicts at `row` [µm]: Σ of the terms that apply to tool_wear rows
+  /// (kWear and kLag terms excepted), evaluated with kind = tool_wear and point = `point`. The
+  /// basis of kWear terms. Real-time safe.
+  [[nodiscard]] double wear_reference(const Row& row, double point) const noexcept;
 
  private:
   std::vector<std::string> extra_columns_;

@@ -204,7 +204,7 @@ ModelFile read_model_table(const toml::table& root, std::string_view source, boo
     const std::string fname = get_string(*form, source, key + ".form");
     if (!cm::parse_form(fname, s.form)) {
       fail(where(source, *form, key + ".form") + ": unknown form '" + fname +
-           "' (constant, linear, poly, exp_rise, sine, step, lag, exp_growth, hinge)");
+           "' (constant, linear, poly, exp_rise, sine, step, lag, exp_growth, hinge, wear)");
     }
     if (const auto* c = t.get("column")) {
       s.column = resolve_column(get_string(*c, source, key + ".column"), out.extra_columns, *c,
@@ -239,6 +239,12 @@ ModelFile read_model_table(const toml::table& root, std::string_view source, boo
     }
     if ((s.form == cm::Form::kStep || s.form == cm::Form::kHinge) && t.get("center") == nullptr) {
       fail(where(source, t, key) + ".center: missing (form " + fname + " needs the change point)");
+    }
+    if (s.form == cm::Form::kWear && (s.kind_mask & 1U) != 0U) {
+      fail(where(source, t, key) +
+           ".kinds: a term proportional to the tool wear (form wear) "
+           "cannot apply to tool_wear rows; set kinds = [\"contour\"] or "
+           "[\"contour\", \"calib\"]");
     }
     const auto* g = t.get("groups");
     const auto* c = t.get("coef_um");
@@ -368,7 +374,8 @@ std::string write_model_toml(const core::model::Model& model,
       o << "]\n";
     }
     if (s.form == cm::Form::kPoly) o << "degree = " << s.degree << "\n";
-    if (s.form == cm::Form::kPoly || s.form == cm::Form::kStep || s.form == cm::Form::kHinge) {
+    if (s.form == cm::Form::kPoly || s.form == cm::Form::kStep || s.form == cm::Form::kHinge ||
+        s.form == cm::Form::kWear) {
       o << "center = " << fmt_double(s.center) << "\n";
     }
     if (s.form == cm::Form::kPoly || cm::has_nonlinear_parameter(s.form)) {
@@ -387,6 +394,16 @@ std::string write_model_toml(const core::model::Model& model,
   const cm::SearchOptions& so = config.search;
   o << "\n[model.search]\n";
   o << "period_min_mm = " << fmt_double(so.period_min_mm) << "\n";
+  if (so.kind_mask != 0x7) {
+    o << "kinds = [";
+    bool first = true;
+    for (std::size_t k = 0; k < kKindNames.size(); ++k) {
+      if ((so.kind_mask & (1U << k)) == 0U) continue;
+      o << (first ? "" : ", ") << quote(kKindNames[k]);
+      first = false;
+    }
+    o << "]\n";
+  }
   auto list = [&](const char* key, const std::vector<int>& cols) {
     if (cols.empty()) return;
     o << key << " = [";
@@ -656,6 +673,14 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
   const std::size_t time_col = static_cast<std::size_t>(cm::Column::kTime);
   double last_time = -std::numeric_limits<double>::infinity();
   const std::size_t start_rows = data.rows();
+  // The order over files: this file's time_s, moved after the previous files' rows when its
+  // times start earlier (a log of the next warm start).
+  data.order_s.resize(start_rows, cm::kUnknown);
+  double previous_end = -std::numeric_limits<double>::infinity();
+  for (const double v : data.order_s) {
+    if (std::isfinite(v)) previous_end = std::max(previous_end, v);
+  }
+  double order_offset = cm::kUnknown;
   auto& cols = data.columns;
   // Columns this file provides; the others keep their length and are padded with "unknown".
   std::vector<std::size_t> present;
@@ -734,6 +759,9 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
                mapped ? "no kind (map it or set [constant] kind)" : "empty");
     }
     const double t_s = values[time_col];
+    if (std::isfinite(t_s) && std::isnan(order_offset)) {
+      order_offset = t_s <= previous_end ? previous_end + 1.0 - t_s : 0.0;
+    }
     if (std::isfinite(t_s)) {
       if (t_s < last_time) {
         csv_fail(source, line_no, "time_s",
@@ -762,6 +790,7 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
       if (std::isfinite(y)) y *= measured_scale;
       for (std::size_t c : present) cols[c].push_back(values[c]);
       data.target_um.push_back(y + (std::isfinite(applied) ? applied : 0.0));
+      data.order_s.push_back(std::isfinite(t_s) ? t_s + order_offset : cm::kUnknown);
     }
   }
   for (auto& c : cols) {

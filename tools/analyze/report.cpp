@@ -107,6 +107,10 @@ std::string params_json(const cm::TermSpec& spec, const cm::Model& model,
       o << "\"degree\": " << spec.degree << ", \"center" << unit << "\": " << num(spec.center)
         << ", \"scale" << unit << "\": " << num(spec.scale);
       break;
+    case cm::Form::kWear:
+      // coef_um: µm of error per µm of predicted wear at this edge support point.
+      o << "\"wear_point\": " << num(spec.center);
+      break;
     default:
       break;
   }

@@ -25,9 +25,29 @@ struct Options {
   std::size_t parts{60};
   std::size_t points_per_part{20};
   double noise_um{0.5};
-  /// Effect names of issue 11 (thermal_drift = warm-up in time, thermal_temp = linear in temp_c).
+  /// Effect names of issue 11 (thermal_drift = warm-up in time, thermal_temp = linear in temp_c,
+  /// thermal_speed = a first-order lag of the spindle speed, wear_proportional = 0.3 × the
+  /// tool's wear curve).
   std::vector<std::string> effects;
+  /// A laser measurement of the tool after every part: tool_wear rows at edge points 0 and 1
+  /// (the tools wear at different rates, with a break-in), noise 0.3 µm.
+  bool tool_wear_rows{false};
+  /// An extra column spindle_rpm (one speed per part); the effect thermal_speed follows it.
+  bool speed_column{false};
 };
+
+/// True wear [µm] of `tool` at edge point `point` after `path_mm` of cut: a break-in over 300 mm
+/// and a steady rate; each tool wears at its own rate.
+inline double tool_wear_um(int tool, int point, double path_mm) {
+  const double rate_um_per_mm = 0.002 + 0.0012 * static_cast<double>(tool % 3);
+  const double break_in_um = 2.0 + 0.8 * static_cast<double>(tool % 2);
+  const double edge = point == 0 ? 1.0 : 0.7;
+  return edge * (break_in_um * (1.0 - std::exp(-path_mm / 300.0)) + rate_um_per_mm * path_mm);
+}
+
+/// Time constant [s] and gain [µm/rpm] of the thermal_speed effect.
+inline constexpr double kSpeedTauS = 1800.0;
+inline constexpr double kSpeedGainUmPerRpm = 8e-4;
 
 /// The true value of each effect (µm) at a context; also used to check fitted terms.
 inline double effect_um(const std::string& name, const cm::Row& r, double run_s) {
@@ -37,13 +57,26 @@ inline double effect_um(const std::string& name, const cm::Row& r, double run_s)
   const double path = r[9];
   const double temp = r[10];
   const double part = r[1];
+  const double y = r[6];
+  const double z = r[7];
   if (name == "thermal_drift") return 4.0 * (1.0 - std::exp(-t / 5400.0));
   if (name == "thermal_temp") return 2.5 * (temp - 20.0);
   if (name == "position_x") {
     const double u = (x - 200.0) / 100.0;
     return 1.2 * u * u + 1.0 * u;
   }
+  if (name == "position_y") {
+    const double u = (y - 150.0) / 75.0;
+    return 1.0 * u * u - 0.8 * u;
+  }
+  if (name == "position_z") {
+    const double u = (z + 25.0) / 12.5;
+    return -1.1 * u * u + 0.9 * u;
+  }
   if (name == "periodic_x") return 2.5 * std::sin(2.0 * std::numbers::pi * x / 25.0 + 0.7);
+  if (name == "periodic_y") return 2.0 * std::sin(2.0 * std::numbers::pi * y / 20.0 - 1.1);
+  if (name == "periodic_z") return 1.8 * std::cos(2.0 * std::numbers::pi * z / 8.0 + 0.3);
+  if (name == "wear_proportional") return 0.3 * tool_wear_um(static_cast<int>(r[2]), 0, path);
   if (name == "tool_wear") return 1.5e-3 * path;
   if (name == "wear_nonlinear") return 4.0 * (1.0 - std::exp(-path / 400.0));
   if (name == "part_trend") return 0.08 * part;
@@ -81,6 +114,8 @@ inline cm::Dataset generate(const Options& opt) {
   std::size_t parts_on_tool = 0;
   std::size_t tool_life = 4 + static_cast<std::size_t>(uni(rng) * 5.0);
   const double phase = 2.0 * std::numbers::pi * uni(rng);
+  if (opt.speed_column) d.extra_columns = {"spindle_rpm"};
+  std::vector<double> rpm;  // per row (speed_column)
   for (std::size_t p = 0; p < opt.parts; ++p) {
     if (parts_on_tool >= tool_life) {
       tool = tool % 3 + 1;
@@ -95,6 +130,7 @@ inline cm::Dataset generate(const Options& opt) {
     t += gap_s + duration_s;
     path += duration_s * (0.25 + 0.3 * uni(rng));  // feed varies with the part's program
     ++parts_on_tool;
+    const double part_rpm = opt.speed_column ? 1000.0 * std::floor(2.0 + 7.0 * uni(rng)) : 0.0;
     for (std::size_t k = 0; k < opt.points_per_part; ++k) {
       cm::Row r = cm::unknown_row();
       r[0] = t + 4.0 * static_cast<double>(k);
@@ -110,22 +146,84 @@ inline cm::Dataset generate(const Options& opt) {
       r[10] = 20.0 + 1.5 * std::sin(2.0 * std::numbers::pi * r[0] / 86400.0 + phase) +
               0.05 * gauss(rng);
       rows.push_back(r);
+      rpm.push_back(part_rpm);
+    }
+    if (opt.tool_wear_rows) {
+      // The laser measures the tool after the part: two edge points.
+      for (int e = 0; e < 2; ++e) {
+        cm::Row r = cm::unknown_row();
+        r[0] = t + 4.0 * static_cast<double>(opt.points_per_part) + 30.0 + e;
+        r[1] = static_cast<double>(p + 1);
+        r[2] = tool;
+        r[3] = 0.0;  // tool_wear
+        r[4] = e;
+        r[5] = 0.0;
+        r[6] = 0.0;
+        r[7] = 0.0;
+        r[9] = path;
+        r[10] = rows.back()[10];
+        rows.push_back(r);
+        rpm.push_back(0.0);
+      }
     }
   }
   const double run_s = rows.empty() ? 0.0 : rows.back()[0];
-  for (const cm::Row& r : rows) {
-    double y = point_offset[static_cast<std::size_t>(r[4])] + opt.noise_um * gauss(rng);
-    for (const auto& e : opt.effects) y += effect_um(e, r, run_s);
+  double lag = 0.0;  // thermal_speed: the lag of the rows' speed, held between rows
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    const cm::Row& r = rows[i];
+    if (i == 0) {
+      lag = rpm[0];
+    } else {
+      lag = rpm[i - 1] + (lag - rpm[i - 1]) * std::exp(-(r[0] - rows[i - 1][0]) / kSpeedTauS);
+    }
+    double y = 0.0;
+    if (r[3] < 0.5) {  // tool_wear
+      y = tool_wear_um(static_cast<int>(r[2]), static_cast<int>(r[4]), r[9]) + 0.3 * gauss(rng);
+    } else {
+      y = point_offset[static_cast<std::size_t>(r[4])] + opt.noise_um * gauss(rng);
+      for (const auto& e : opt.effects) {
+        y += e == "thermal_speed" ? kSpeedGainUmPerRpm * lag : effect_um(e, r, run_s);
+      }
+    }
     for (std::size_t c = 0; c < cm::kStandardColumns; ++c) d.columns[c].push_back(r[c]);
+    if (opt.speed_column) {
+      d.columns.resize(cm::kStandardColumns + 1);
+      d.columns[cm::kStandardColumns].push_back(rpm[i]);
+    }
     d.target_um.push_back(y);
   }
   return d;
 }
 
-inline cm::AnalysisConfig config() {
+/// The declared model when the log has tool_wear rows: one constant per checkpoint of the
+/// contour, and the wear curve per tool and edge point (the break-in length known, 300 mm).
+inline std::vector<cm::TermSpec> declared_with_wear() {
+  cm::TermSpec offset;
+  offset.name = "offset";
+  offset.form = cm::Form::kConstant;
+  offset.per = {static_cast<int>(cm::Column::kPoint), -1};
+  offset.kind_mask = 0x2;
+  cm::TermSpec rate;
+  rate.name = "wear";
+  rate.form = cm::Form::kLinear;
+  rate.column = static_cast<int>(cm::Column::kPath);
+  rate.per = {static_cast<int>(cm::Column::kTool), static_cast<int>(cm::Column::kPoint)};
+  rate.kind_mask = 0x1;
+  cm::TermSpec break_in = rate;
+  break_in.name = "wear_break_in";
+  break_in.form = cm::Form::kExpRise;
+  break_in.scale = 300.0;
+  return {offset, rate, break_in};
+}
+
+/// The analysis config of a generated log: the declared model, the search on the contour rows
+/// (with the extra column, if any, as a lag candidate).
+inline cm::AnalysisConfig config(const Options& opt = {}) {
   cm::AnalysisConfig c;
-  c.declared = declared_terms();
+  c.declared = opt.tool_wear_rows ? declared_with_wear() : declared_terms();
   c.search.period_min_mm = 5.0;
+  if (opt.tool_wear_rows) c.search.kind_mask = 0x2;
+  if (opt.speed_column) c.search.lag_columns = {static_cast<int>(cm::kStandardColumns)};
   return c;
 }
 
@@ -135,11 +233,19 @@ inline void write_csv(std::ostream& o, const cm::Dataset& d) {
        "applied_um\n";
   static const char* kinds[] = {"tool_wear", "contour", "calib"};
   char buf[512];
+  auto cell = [](double v, int decimals) {
+    if (!std::isfinite(v)) return std::string();
+    char c[64];
+    std::snprintf(c, sizeof c, "%.*f", decimals, v);
+    return std::string(c);
+  };
   for (std::size_t i = 0; i < d.rows(); ++i) {
     const cm::Row r = d.row(i);
-    std::snprintf(buf, sizeof buf, "%.3f,%d,%d,%s,%d,%.4f,%.4f,%.4f,%.3f,%.2f,%.4f,%.4f,0\n", r[0],
+    std::snprintf(buf, sizeof buf, "%.3f,%d,%d,%s,%d,%s,%s,%s,%s,%s,%s,%.4f,0\n", r[0],
                   static_cast<int>(r[1]), static_cast<int>(r[2]), kinds[static_cast<int>(r[3])],
-                  static_cast<int>(r[4]), r[5], r[6], r[7], r[8], r[9], r[10], d.target_um[i]);
+                  static_cast<int>(r[4]), cell(r[5], 4).c_str(), cell(r[6], 4).c_str(),
+                  cell(r[7], 4).c_str(), cell(r[8], 3).c_str(), cell(r[9], 2).c_str(),
+                  cell(r[10], 4).c_str(), d.target_um[i]);
     o << buf;
   }
 }
