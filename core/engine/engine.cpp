@@ -16,6 +16,8 @@ namespace {
 constexpr std::uint32_t kStateMagic = 0x4e45434eU;  // "NCEN"
 constexpr std::uint32_t kStateVersion = 1;
 constexpr std::size_t kMaxNameLength = 255;
+/// The machine context's entry among the modules' states (no module name starts with '@').
+constexpr std::string_view kContextEntry = "@context";
 
 // Little helpers for the state bytes. Native byte order: the state never leaves the machine.
 class Writer {
@@ -193,8 +195,34 @@ void Engine::configure(std::vector<RegisterSpec> registers,
     if (!module_names.insert(name).second) {
       throw std::invalid_argument("engine: module name '" + name + "' is used twice");
     }
+    if (name.front() == '@') {
+      throw std::invalid_argument("engine: module name '" + name + "' may not start with '@'");
+    }
     m->attach(table);
     capacity += sizeof(std::uint16_t) + name.size() + sizeof(std::uint32_t) + m->state_capacity();
+  }
+  capacity += sizeof(std::uint16_t) + kContextEntry.size() + sizeof(std::uint32_t) +
+              MachineContext::kStateBytes;
+  // The context's options: from the one module that sets them (the daemon's
+  // [measurement_context] section), else from the engine options.
+  ContextOptions context_options = options.context;
+  const Module* options_from = nullptr;
+  for (const auto& m : modules) {
+    if (const ContextOptions* o = m->context_options()) {
+      if (options_from != nullptr) {
+        throw std::invalid_argument("engine: modules '" + std::string(options_from->name()) +
+                                    "' and '" + std::string(m->name()) +
+                                    "' both set the measurement context options");
+      }
+      options_from = m.get();
+      context_options = *o;
+    }
+  }
+  MachineContext context;
+  try {
+    context.configure(context_options);
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(std::string("engine: measurement context: ") + e.what());
   }
   // One writer per register: two modules on one register would overwrite each other's target
   // every cycle (an oscillating offset on the machine).
@@ -216,6 +244,8 @@ void Engine::configure(std::vector<RegisterSpec> registers,
   regs_ = std::move(regs);
   modules_ = std::move(modules);
   options_ = options;
+  context_ = context;
+  for (auto& m : modules_) m->bind_context(context_);
   valid_.clear();
   valid_.reserve(options.max_events_per_step);
   trims_.assign(modules_.size() * regs_.size(), std::numeric_limits<double>::quiet_NaN());
@@ -336,6 +366,8 @@ void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out)
     ++counters_.events_accepted;
   }
   const std::span<const Event> accepted(valid_.data(), valid_.size());
+  // The context first: modules that evaluate it see this cycle's samples.
+  context_.update(now_ns, accepted);
 
   for (std::size_t k = 0; k < modules_.size(); ++k) {
     scratch_.clear();
@@ -349,7 +381,8 @@ void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out)
     for (const auto& a : scratch_.alarms) {
       out.alarms.push(a);
     }
-    for (const auto& rec : scratch_.records) {
+    for (MeasurementRecord rec : scratch_.records) {
+      context_.annotate(rec);
       out.records.push(rec);
     }
   }
@@ -435,8 +468,8 @@ void Engine::resend_all() noexcept {
 
 RegisterState Engine::register_state(std::size_t i) const noexcept {
   const Reg& r = regs_[i];
-  return RegisterState{r.limiter.output_um(), r.target_um, r.has_target, r.slewing, r.trim_um,
-                       r.has_trim};
+  return RegisterState{
+      r.limiter.output_um(), r.target_um, r.has_target, r.slewing, r.trim_um, r.has_trim};
 }
 
 std::uint64_t Engine::state_generation() const noexcept {
@@ -444,7 +477,7 @@ std::uint64_t Engine::state_generation() const noexcept {
   for (const auto& m : modules_) {
     g += m->state_generation();
   }
-  return g;
+  return g + context_.generation();
 }
 
 std::size_t Engine::export_state(std::span<std::byte> buf) const noexcept {
@@ -459,7 +492,13 @@ std::size_t Engine::export_state(std::span<std::byte> buf) const noexcept {
     w.put(r.target_um);
     w.put(static_cast<std::uint8_t>(r.has_target ? 1 : 0));
   }
-  w.put(static_cast<std::uint32_t>(modules_.size()));
+  w.put(static_cast<std::uint32_t>(modules_.size() + 1));
+  w.put_name(kContextEntry);
+  w.put(static_cast<std::uint32_t>(MachineContext::kStateBytes));
+  if (!w.ok() || w.rest().size() < MachineContext::kStateBytes) {
+    return 0;
+  }
+  w.skip(context_.save(w.rest()));
   for (const auto& m : modules_) {
     w.put_name(m->name());
     const std::span<std::byte> len_at = w.rest();
@@ -530,6 +569,12 @@ bool Engine::import_state(std::span<const std::byte> bytes, TimeNs now_ns,
       std::span<const std::byte> blob;
       if (!rd.get_name(name) || !rd.get(len) || !rd.get_span(len, blob)) {
         return false;
+      }
+      if (name == kContextEntry) {
+        if (pass == 1 && !context_.load(blob, now_ns)) {
+          ++skip_count;
+        }
+        continue;
       }
       Module* target = nullptr;
       for (auto& m : modules_) {

@@ -19,6 +19,12 @@
 //   trim again after a restart, so nothing is applied twice.
 // - In hold mode (state file corrupt, operator request) modules still run and alarms still flow,
 //   but no offset write leaves the engine: the NC keeps the offsets it has.
+// - Measurement context (core/engine/context.hpp): the engine follows every cycle's validated
+//   events in one MachineContext before the modules step, and every measurement record leaves
+//   the engine through it: path_mm and temp_c a module left unknown are filled in, and time_ns
+//   becomes the time since the machine's warm start (the log's time_s). The context is saved
+//   with the state (an entry named "@context" among the modules' states, which an older engine
+//   skips as an unknown module).
 //
 // Lifecycle: configure() allocates and validates (throws std::invalid_argument naming what is
 // wrong); step(), export_state(), import_state() are real-time safe: no allocation, no locks, no
@@ -36,6 +42,7 @@
 #include "core/common/limiter.hpp"
 #include "core/common/output.hpp"
 #include "core/common/types.hpp"
+#include "core/engine/context.hpp"
 
 namespace nccomp::core::engine {
 
@@ -129,11 +136,21 @@ class Module {
     (void)out;
     return 0;
   }
+  /// Not real-time (configure(), after attach()). The engine's machine context (time since the
+  /// warm start, cut path per tool, temperatures, position; core/engine/context.hpp), updated
+  /// with each cycle's validated events before any module steps. A module may keep the
+  /// reference: it lives as long as the engine.
+  virtual void bind_context(const MachineContext& context) { (void)context; }
+  /// Not real-time. Context options this module sets for the engine (the daemon's
+  /// [measurement_context] section); nullptr = none. At most one module of an engine may.
+  [[nodiscard]] virtual const ContextOptions* context_options() const noexcept { return nullptr; }
 };
 
 struct EngineOptions {
   /// Largest number of events one step accepts; extra events are counted and dropped.
   std::size_t max_events_per_step{256};
+  /// The machine context's options, unless a module sets them (Module::context_options()).
+  ContextOptions context{};
 };
 
 struct EngineCounters {
@@ -211,6 +228,8 @@ class Engine {
   /// thread steps the engine. Not real-time; never while another thread steps the engine.
   [[nodiscard]] Module& module(std::size_t i) { return *modules_[i]; }
   [[nodiscard]] const EngineCounters& counters() const noexcept { return counters_; }
+  /// The machine context (see the file comment). Real-time safe.
+  [[nodiscard]] const MachineContext& context() const noexcept { return context_; }
 
  private:
   struct Reg {
@@ -236,6 +255,7 @@ class Engine {
   /// modules × registers: each module's trim of each register [µm]; NaN = none published.
   std::vector<double> trims_;
   StepOutput scratch_{};
+  MachineContext context_{};
   EngineOptions options_{};
   EngineCounters counters_{};
   std::size_t state_capacity_{0};

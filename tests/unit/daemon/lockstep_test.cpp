@@ -251,8 +251,10 @@ TEST(Lockstep, SameTicksGiveIdenticalLogAndStateAndTickTimes) {
   EXPECT_EQ(a.stats.records, 8U);  // k = 7, 14, ..., 56
   // The last measurement (k = 56: 28 µm) is the register's value on the bus.
   EXPECT_DOUBLE_EQ(a.delivered_um, 28.0);
-  // Records carry the tick's simulated time: k = 7 → 5.007 s.
-  EXPECT_NE(a.measurements.find("\n5.007000,"), std::string::npos) << a.measurements;
+  // Records carry the tick's simulated time, as the time since the machine's warm start
+  // (core/engine/context.hpp; the axes never move here, so since the first tick at 5.001 s):
+  // k = 7 → 5.007 s − 5.001 s.
+  EXPECT_NE(a.measurements.find("\n0.006000,"), std::string::npos) << a.measurements;
   EXPECT_EQ(a.measurements.find("0.000000123"), std::string::npos);
   ASSERT_FALSE(a.state.empty());
   EXPECT_EQ(a.measurements, b.measurements);
