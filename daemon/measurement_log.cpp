@@ -3,7 +3,9 @@
 #include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
+#include <limits>
 #include <system_error>
 
 namespace nccomp::daemon {
@@ -18,6 +20,22 @@ void cell(std::string& s, double v, int decimals) {
     s += buf;
   }
 }
+// time_s of the last data row of an existing log file (its last 4 KiB); −inf if none.
+double last_row_time_s_of_file(const std::string& path) {
+  std::FILE* f = std::fopen(path.c_str(), "rbe");
+  if (f == nullptr) return -std::numeric_limits<double>::infinity();
+  char buf[4096];
+  long start = 0;
+  if (std::fseek(f, 0, SEEK_END) == 0) {
+    const long size = std::ftell(f);
+    start = size > static_cast<long>(sizeof buf) ? size - static_cast<long>(sizeof buf) : 0;
+  }
+  std::size_t n = 0;
+  if (std::fseek(f, start, SEEK_SET) == 0) n = std::fread(buf, 1, sizeof buf, f);
+  std::fclose(f);
+  return last_row_time_s(std::string_view(buf, n), start == 0);
+}
+
 const char* kind_name(core::MeasurementKind k) {
   switch (k) {
     case core::MeasurementKind::kToolWear:
@@ -30,6 +48,29 @@ const char* kind_name(core::MeasurementKind k) {
   return "unknown";
 }
 }  // namespace
+
+double last_row_time_s(std::string_view tail, bool whole) noexcept {
+  // The last complete line that starts with a finite number followed by a comma.
+  std::size_t end = tail.size();
+  while (end > 0) {
+    while (end > 0 && (tail[end - 1] == '\n' || tail[end - 1] == '\r')) --end;
+    std::size_t begin = end;
+    while (begin > 0 && tail[begin - 1] != '\n') --begin;
+    if (begin == 0 && !whole) break;  // the first line of a tail may be cut
+    const std::string_view line = tail.substr(begin, end - begin);
+    const std::size_t comma = line.find(',');
+    if (comma != std::string_view::npos && comma > 0 && comma < 40) {
+      char num[48];
+      line.copy(num, comma);
+      num[comma] = '\0';
+      char* stop = nullptr;
+      const double v = std::strtod(num, &stop);
+      if (stop == num + comma && std::isfinite(v)) return v;
+    }
+    end = begin;
+  }
+  return -std::numeric_limits<double>::infinity();
+}
 
 std::string format_measurement_row(const core::MeasurementRecord& r) {
   std::string s;
@@ -70,6 +111,8 @@ void MeasurementLogWriter::open_current() {
   if (ec) {
     file_bytes_ = 0;
   }
+  last_time_s_ =
+      file_bytes_ > 0 ? last_row_time_s_of_file(path) : -std::numeric_limits<double>::infinity();
   if (file_bytes_ == 0) {
     const int n = std::fprintf(file_, "%s\n", kMeasurementCsvHeader);
     file_bytes_ += n > 0 ? static_cast<std::uint64_t>(n) : 0U;
@@ -115,14 +158,19 @@ void MeasurementLogWriter::rotate() {
 
 void MeasurementLogWriter::write_row(const core::MeasurementRecord& r) {
   const std::string row = format_measurement_row(r);
-  if (file_bytes_ + row.size() + 1 > max_file_bytes_ && file_bytes_ > 0) {
+  // As written (6 decimals): the comparison sees what a reader of the file will see.
+  const double t_s = std::strtod(row.c_str(), nullptr);
+  const bool back_in_time = t_s < last_time_s_;
+  if (back_in_time || (file_bytes_ + row.size() + 1 > max_file_bytes_ && file_bytes_ > 0)) {
     try {
       rotate();
     } catch (const std::exception&) {
       errors_.fetch_add(1);
       return;
     }
+    if (back_in_time) time_rotations_.fetch_add(1);
   }
+  last_time_s_ = t_s;
   if (std::fprintf(file_, "%s\n", row.c_str()) < 0) {
     errors_.fetch_add(1);
     return;

@@ -5,30 +5,37 @@
 #include <cstring>
 #include <stdexcept>
 #include <string>
-#include <type_traits>
 #include <utility>
-#include <variant>
 
 namespace nccomp::daemon::sections {
 
 namespace {
-constexpr std::uint32_t kMagic = 0x4D4F444CU;  // "MODL"
+constexpr std::uint32_t kLegacyMagic = 0x4D4F444CU;  // "MODL": the state before the context
 namespace cm = core::model;
+constexpr std::size_t col(cm::Column c) { return static_cast<std::size_t>(c); }
 }  // namespace
 
 ModelModule::ModelModule(cm::Model model, std::vector<ModelApply> applies, bool update_each_cycle,
-                         int temperature_sensor)
+                         std::vector<ModelInput> inputs)
     : model_(std::move(model)),
       applies_(std::move(applies)),
+      inputs_(std::move(inputs)),
       trims_um_(applies_.size(), 0.0),
       state_(model_.make_state()),
-      each_cycle_(update_each_cycle),
-      temperature_sensor_(temperature_sensor) {
+      each_cycle_(update_each_cycle) {
   for (const auto& a : applies_) {
     if (a.term_index >= model_.terms().size()) {
       throw std::invalid_argument("model: term index " + std::to_string(a.term_index) +
-                                  " beyond the model's " +
-                                  std::to_string(model_.terms().size()) + " terms");
+                                  " beyond the model's " + std::to_string(model_.terms().size()) +
+                                  " terms");
+    }
+  }
+  for (const auto& in : inputs_) {
+    if (in.column < static_cast<int>(cm::kStandardColumns) ||
+        in.column >= static_cast<int>(cm::kStandardColumns + model_.extra_columns().size()) ||
+        in.sensor < 0 || in.sensor >= static_cast<int>(core::engine::kTemperatureSensors)) {
+      throw std::invalid_argument("model: input column " + std::to_string(in.column) +
+                                  " / sensor " + std::to_string(in.sensor) + " out of range");
     }
   }
 }
@@ -47,136 +54,96 @@ void ModelModule::attach(const core::engine::RegisterTable& registers) {
   }
 }
 
-void ModelModule::on_tool(std::int32_t tool) noexcept {
-  if (has_tool_ && tool == tool_) return;
-  if (has_tool_) {
-    cut_path_mm_ = 0.0;  // another tool: its own path since it was loaded
-    saved_path_mm_ = 0.0;
-  }
-  tool_ = tool;
-  has_tool_ = true;
-  dirty_ = true;
-  ++generation_;
-}
-
-void ModelModule::on_axis_sample(const core::AxisSample& a) noexcept {
-  if (a.tool != 0) on_tool(a.tool);  // a tool change the bus did not report as an event
-  const std::size_t n = std::min<std::size_t>(a.axis_count, position_mm_.size());
-  for (std::size_t k = 0; k < n; ++k) {
-    if (std::isfinite(a.position_mm[k])) position_mm_[k] = a.position_mm[k];
-  }
-  if (have_sample_ && a.cutting && last_sample_.cutting) {
-    double d = 0.0;
-    if (std::isfinite(a.program_path_mm) && std::isfinite(last_sample_.program_path_mm)) {
-      d = a.program_path_mm - last_sample_.program_path_mm;
-    } else {
-      const std::size_t m =
-          std::min<std::size_t>({a.axis_count, last_sample_.axis_count, std::size_t{3}});
-      double sq = 0.0;
-      for (std::size_t k = 0; k < m; ++k) {
-        const double dk = a.position_mm[k] - last_sample_.position_mm[k];
-        sq += dk * dk;
-      }
-      d = std::sqrt(sq);
-    }
-    if (std::isfinite(d) && d > 0.0) cut_path_mm_ += d;
-    // Persist the path now and then (the state is saved when the generation advances).
-    if (std::fabs(cut_path_mm_ - saved_path_mm_) >= 1.0) {
-      saved_path_mm_ = cut_path_mm_;
-      ++generation_;
-    }
-  }
-  last_sample_ = a;
-  have_sample_ = true;
+void ModelModule::bind_context(const core::engine::MachineContext& context) {
+  context_ = &context;
+  bound_ = true;
 }
 
 void ModelModule::step(core::TimeNs now_ns, std::span<const core::Event> events,
                        core::StepOutput& out) noexcept {
-  for (const core::Event& e : events) {
-    if (const auto* as = std::get_if<core::AxisSample>(&e)) {
-      on_axis_sample(*as);
-    } else if (const auto* pe = std::get_if<core::ProgramEvent>(&e)) {
-      if (pe->kind == core::ProgramEventKind::kPartStart && (!has_part_ || pe->part != part_)) {
-        part_ = pe->part;
-        has_part_ = true;
-        dirty_ = true;
-        ++generation_;
-      }
-    } else if (const auto* tc = std::get_if<core::ToolChange>(&e)) {
-      on_tool(tc->tool);
-    } else if (const auto* ts = std::get_if<core::TemperatureSample>(&e)) {
-      if (static_cast<int>(ts->sensor) == temperature_sensor_) {
-        temp_c_ = ts->temperature_c;
-      }
-    }
-  }
-  if (dirty_ || each_cycle_) {
+  if (!bound_) own_context_.update(now_ns, events);
+  const core::engine::MachineContext& c = *context_;
+  const std::int32_t tool = c.has_tool() ? c.tool() : -1;
+  const bool changed = c.has_part() != seen_part_ || (c.has_part() && c.part() != last_part_) ||
+                       tool != last_tool_ || c.warm_starts() != last_warm_starts_;
+  if (dirty_ || each_cycle_ || changed) {
+    seen_part_ = c.has_part();
+    last_part_ = c.part();
+    last_tool_ = tool;
+    last_warm_starts_ = c.warm_starts();
     evaluate(now_ns, out);
     dirty_ = false;
   }
 }
 
 void ModelModule::evaluate(core::TimeNs now_ns, core::StepOutput& out) noexcept {
-  // The context of "now": what the loop knows; unknown columns are NaN, and a term whose column
-  // is unknown contributes nothing (e.g. part_trend before the first part start).
+  // The context of "now"; unknown columns are NaN, and a term whose column is unknown
+  // contributes nothing (e.g. part_trend before the first part start).
+  const core::engine::MachineContext& c = *context_;
   cm::Row row = cm::unknown_row();
-  row[static_cast<std::size_t>(cm::Column::kTime)] = static_cast<double>(now_ns) * 1e-9;
-  if (has_part_) row[static_cast<std::size_t>(cm::Column::kPart)] = part_;
-  if (has_tool_) row[static_cast<std::size_t>(cm::Column::kTool)] = tool_;
-  row[static_cast<std::size_t>(cm::Column::kTemp)] = temp_c_;
-  row[static_cast<std::size_t>(cm::Column::kX)] = position_mm_[0];
-  row[static_cast<std::size_t>(cm::Column::kY)] = position_mm_[1];
-  row[static_cast<std::size_t>(cm::Column::kZ)] = position_mm_[2];
-  if (has_tool_ || have_sample_) row[static_cast<std::size_t>(cm::Column::kPath)] = cut_path_mm_;
+  row[col(cm::Column::kTime)] = c.machine_time_s(now_ns);
+  if (c.has_part()) {
+    row[col(cm::Column::kPart)] = c.part();
+  } else if (has_restored_part_) {
+    row[col(cm::Column::kPart)] = restored_part_;
+  }
+  row[col(cm::Column::kTemp)] = c.temp_c();
+  row[col(cm::Column::kX)] = c.position_mm()[0];
+  row[col(cm::Column::kY)] = c.position_mm()[1];
+  row[col(cm::Column::kZ)] = c.position_mm()[2];
+  for (const ModelInput& in : inputs_) {
+    row[static_cast<std::size_t>(in.column)] = c.temperature_c(in.sensor);
+  }
   cm::advance_state(model_.specs(), row, state_);
+  const double tool = c.has_tool() ? static_cast<double>(c.tool()) : cm::kUnknown;
+  const double path_mm = c.has_tool() ? c.cut_path_mm() : cm::kUnknown;
   for (std::size_t i = 0; i < applies_.size(); ++i) {
     const ModelApply& a = applies_[i];
-    row[static_cast<std::size_t>(cm::Column::kKind)] = a.kind;
-    row[static_cast<std::size_t>(cm::Column::kPoint)] = a.point;
+    row[col(cm::Column::kKind)] = a.kind;
+    row[col(cm::Column::kPoint)] = a.point;
+    row[col(cm::Column::kAngle)] = a.angle_deg;
     if (!std::isnan(a.tool)) {
-      row[static_cast<std::size_t>(cm::Column::kTool)] = a.tool;
+      // A term of one tool: its number and its own cut path (NaN until the context knows it).
+      row[col(cm::Column::kTool)] = a.tool;
+      row[col(cm::Column::kPath)] = c.cut_path_mm(static_cast<std::int32_t>(a.tool));
     } else {
-      row[static_cast<std::size_t>(cm::Column::kTool)] =
-          has_tool_ ? static_cast<double>(tool_) : cm::kUnknown;
+      row[col(cm::Column::kTool)] = tool;
+      row[col(cm::Column::kPath)] = path_mm;
     }
-    const double trim = a.gain * model_.evaluate_term(a.term_index, row, state_);
-    // A non-finite trim goes to the engine, which refuses it with an alarm.
-    trims_um_[i] = trim;
-    out.trims.push(core::OffsetWrite{now_ns, a.register_index, trim});
+    trims_um_[i] = a.gain * model_.evaluate_term(a.term_index, row, state_);
+  }
+  // One trim per register: the engine keeps one trim per module and register, so entries on
+  // the same register are summed. A non-finite sum goes to the engine, which refuses it with
+  // an alarm.
+  for (std::size_t i = 0; i < applies_.size(); ++i) {
+    const std::uint16_t reg = applies_[i].register_index;
+    bool first = true;
+    for (std::size_t j = 0; j < i && first; ++j) first = applies_[j].register_index != reg;
+    if (!first) continue;
+    double sum_um = 0.0;
+    for (std::size_t j = i; j < applies_.size(); ++j) {
+      if (applies_[j].register_index == reg) sum_um += trims_um_[j];
+    }
+    out.trims.push(core::OffsetWrite{now_ns, reg, sum_um});
   }
 }
 
-std::size_t ModelModule::save_state(std::span<std::byte> buf) const noexcept {
-  if (buf.size() < kStateBytes) return 0;
-  const std::uint32_t flags = (has_part_ ? 1U : 0U) | (has_tool_ ? 2U : 0U);
-  std::memcpy(buf.data(), &kMagic, 4);
-  std::memcpy(buf.data() + 4, &part_, 4);
-  std::memcpy(buf.data() + 8, &tool_, 4);
-  std::memcpy(buf.data() + 12, &flags, 4);
-  std::memcpy(buf.data() + 16, &cut_path_mm_, 8);
-  return kStateBytes;
-}
-
 bool ModelModule::load_state(std::span<const std::byte> bytes) noexcept {
-  if (bytes.size() != kStateBytes && bytes.size() != kLegacyStateBytes) return false;
+  if (bytes.empty()) {
+    dirty_ = true;  // the engine does not save trims: publish them again on the next step
+    return true;
+  }
+  // An earlier version's state: magic, part, tool, flags (16 bytes), then the cut path (24).
+  if (bytes.size() != 16 && bytes.size() != 24) return false;
   std::uint32_t magic = 0;
   std::uint32_t flags = 0;
   std::int32_t part = 0;
-  std::int32_t tool = 0;
-  double path_mm = 0.0;
   std::memcpy(&magic, bytes.data(), 4);
   std::memcpy(&part, bytes.data() + 4, 4);
-  std::memcpy(&tool, bytes.data() + 8, 4);
   std::memcpy(&flags, bytes.data() + 12, 4);
-  if (bytes.size() == kStateBytes) std::memcpy(&path_mm, bytes.data() + 16, 8);
-  if (magic != kMagic || flags > 3U || !std::isfinite(path_mm) || path_mm < 0.0) return false;
-  part_ = part;
-  tool_ = tool;
-  has_part_ = (flags & 1U) != 0;
-  has_tool_ = (flags & 2U) != 0;
-  cut_path_mm_ = path_mm;
-  saved_path_mm_ = path_mm;
-  // The engine does not save trims: publish them again on the next step.
+  if (magic != kLegacyMagic || flags > 3U) return false;
+  has_restored_part_ = (flags & 1U) != 0;
+  restored_part_ = part;
   dirty_ = true;
   return true;
 }
@@ -186,9 +153,14 @@ std::size_t ModelModule::status(std::span<core::engine::StatusValue> out) const 
   auto put = [&](const char* key, double v) {
     if (n < out.size()) out[n++] = core::engine::StatusValue{key, v, nullptr};
   };
-  put("part", has_part_ ? static_cast<double>(part_) : -1.0);  // -1: no part start seen yet
+  const core::engine::MachineContext& c = *context_;
+  const double part = c.has_part()         ? static_cast<double>(c.part())
+                      : has_restored_part_ ? static_cast<double>(restored_part_)
+                                           : -1.0;  // -1: no part start seen yet
+  put("part", part);
   put("applied_terms", static_cast<double>(applies_.size()));
-  put("cut_path_mm", cut_path_mm_);
+  put("machine_time_s", c.machine_time_s());
+  put("cut_path_mm", c.cut_path_mm());
   if (!trims_um_.empty()) put("first_trim_um", trims_um_[0]);
   return n;
 }

@@ -1,10 +1,14 @@
 // The engine module of the daemon's [model] section (docs/config.md, docs/closing-the-loop.md):
 // evaluates chosen terms of the model `nccomp analyze` fitted (model.toml) at the machine context
-// the loop knows (part number from ProgramEvents, tool, temperature, time, machine position and
-// the tool's cut path from AxisSamples) and publishes each as an
-// additive trim on a register (core/engine/engine.hpp, "Trims"), on top of what the register's
-// own module (e.g. S1 checkpoints) writes. It writes no target of its own, so it never fights the
-// module that owns the register.
+// and publishes each as an additive trim on a register (core/engine/engine.hpp, "Trims"), on top
+// of what the register's own module (e.g. S1 checkpoints) writes. It writes no target of its
+// own, so it never fights the module that owns the register.
+//
+// The context is the engine's MachineContext (core/engine/context.hpp), the same one every
+// measurement record is stamped with: time since the warm start, part, tool, temp_c, machine
+// position, the cut path per tool, and the last value of every temperature sensor (extra model
+// columns mapped with [[model.inputs]]). So a term is evaluated on exactly the columns it was
+// fitted on. A module not attached to an engine (unit tests) follows its own context.
 #pragma once
 
 #include <array>
@@ -14,77 +18,82 @@
 #include <string_view>
 #include <vector>
 
+#include "core/engine/context.hpp"
 #include "core/engine/engine.hpp"
 #include "core/model/model.hpp"
 
 namespace nccomp::daemon::sections {
 
-/// One fitted term mapped onto one register: trim_um = gain × term(context).
+/// One fitted term mapped onto one register: trim_um = gain × term(context). Entries on the
+/// same register add up.
 struct ModelApply {
   std::size_t term_index{0};
   std::uint16_t register_index{0};
   double gain{-1.0};
-  /// Context columns fixed by the entry (kind, point, tool); NaN = from the loop / unknown.
+  /// Context columns fixed by the entry (kind, point, tool, angle); NaN = from the loop /
+  /// unknown. A fixed tool also selects that tool's cut path.
   double kind{1.0};
   double point{core::model::kUnknown};
   double tool{core::model::kUnknown};
+  double angle_deg{core::model::kUnknown};
+};
+
+/// An extra model column fed from a TemperatureSample sensor (any scalar the bus map publishes
+/// on a sensor channel: an ambient temperature, a second structure temperature, …).
+struct ModelInput {
+  int column{-1};  // Row index (≥ core::model::kStandardColumns)
+  int sensor{0};
 };
 
 class ModelModule final : public core::engine::Module {
  public:
-  /// update_each_cycle: re-evaluate every cycle (time / temperature terms); otherwise at start-up,
-  /// part start and tool change only (part terms: the trim is constant over a part).
+  /// update_each_cycle: re-evaluate every cycle (time / temperature / position / path terms);
+  /// otherwise at start-up, part start, tool change and warm start only (the trim is constant
+  /// over a part).
   ModelModule(core::model::Model model, std::vector<ModelApply> applies, bool update_each_cycle,
-              int temperature_sensor);
+              std::vector<ModelInput> inputs = {});
+  ModelModule(const ModelModule&) = delete;
+  ModelModule& operator=(const ModelModule&) = delete;
 
   std::string_view name() const noexcept override { return "model"; }
   /// Checks the register indices (offset registers only: a trim on a flag makes no sense).
   void attach(const core::engine::RegisterTable& registers) override;
+  void bind_context(const core::engine::MachineContext& context) override;
   /// Real-time safe: fixed-size Row, evaluation state sized in the constructor.
   void step(core::TimeNs now_ns, std::span<const core::Event> events,
             core::StepOutput& out) noexcept override;
-  std::size_t state_capacity() const noexcept override { return kStateBytes; }
-  std::size_t save_state(std::span<std::byte> buf) const noexcept override;
+  /// The module keeps no state of its own (the context is saved by the engine). A state of an
+  /// earlier version (part, tool, flags[, cut path]) is still read: its part stands in until
+  /// the first part start.
   bool load_state(std::span<const std::byte> bytes) noexcept override;
-  std::uint64_t state_generation() const noexcept override { return generation_; }
   std::size_t status(std::span<core::engine::StatusValue> out) const noexcept override;
 
   /// The trim last published for apply entry i [µm].
   [[nodiscard]] double trim_um(std::size_t i) const noexcept { return trims_um_[i]; }
-  [[nodiscard]] std::int32_t part() const noexcept { return part_; }
-  /// Cut path of the tool in the spindle since it was loaded [mm] (the log's path_mm).
-  [[nodiscard]] double cut_path_mm() const noexcept { return cut_path_mm_; }
+  /// The context the module evaluates with (the engine's once attached).
+  [[nodiscard]] const core::engine::MachineContext& context() const noexcept { return *context_; }
 
  private:
-  // magic, part, tool, flags, cut path; a 16-byte state (before the cut path) is still read.
-  static constexpr std::size_t kStateBytes = 4 + 4 + 4 + 4 + 8;
-  static constexpr std::size_t kLegacyStateBytes = 16;
   void evaluate(core::TimeNs now_ns, core::StepOutput& out) noexcept;
-  void on_tool(std::int32_t tool) noexcept;
-  void on_axis_sample(const core::AxisSample& a) noexcept;
 
   core::model::Model model_;
   std::vector<ModelApply> applies_;
+  std::vector<ModelInput> inputs_;
   std::vector<double> trims_um_;
   core::model::EvalState state_;
   bool each_cycle_;
-  int temperature_sensor_;
-  std::int32_t part_{0};
-  std::int32_t tool_{0};
-  bool has_part_{false};
-  bool has_tool_{false};
-  double temp_c_{core::model::kUnknown};
-  // Context from the axis samples: machine position (x_mm, y_mm, z_mm) and the cut path of the
-  // tool since it was loaded (path_mm), accumulated as the creep module does: program path where
-  // the NC publishes it, else the XYZ distance, only between two cutting samples.
-  std::array<double, 3> position_mm_{core::model::kUnknown, core::model::kUnknown,
-                                     core::model::kUnknown};
-  double cut_path_mm_{0.0};
-  double saved_path_mm_{0.0};
-  core::AxisSample last_sample_{};
-  bool have_sample_{false};
+  core::engine::MachineContext own_context_;
+  const core::engine::MachineContext* context_{&own_context_};
+  bool bound_{false};
+  // What the last evaluation saw: a change re-evaluates (part start, tool change, warm start).
+  bool seen_part_{false};
+  std::int32_t last_part_{0};
+  std::int32_t last_tool_{-1};
+  std::uint64_t last_warm_starts_{0};
+  // The part of an earlier version's state, until the context knows one.
+  bool has_restored_part_{false};
+  std::int32_t restored_part_{0};
   bool dirty_{true};  // publish on the first step (start-up, restart)
-  std::uint64_t generation_{0};
 };
 
 }  // namespace nccomp::daemon::sections

@@ -7,6 +7,7 @@
 #include <utility>
 
 #include "daemon/config/builtin_sections.hpp"
+#include "daemon/sections/model/context_section.hpp"
 #include "tools/analyze/model_io.hpp"
 
 namespace nccomp::daemon::sections {
@@ -18,22 +19,50 @@ namespace cm = core::model;
 using config::TableReader;
 
 /// Why a term cannot be evaluated in the loop as configured, or "" when it can. The loop knows
-/// time, part, tool, kind / point (from the entry), temp_c (one sensor), x/y/z and path_mm (from
-/// the axis samples); it does not know angle_deg or extra columns, and position / path change
-/// within a part, so a term of them needs update = "cycle".
-std::string loop_context_problem(const cm::TermSpec& spec, bool each_cycle,
-                                 const std::vector<std::string>& extras) {
+/// time_s, part, tool, temp_c, x/y/z and path_mm (the engine's machine context), kind / point /
+/// tool / angle_deg when the [[model.apply]] entry fixes them, and extra columns mapped by
+/// [[model.inputs]]. Position and path change within a part, so a term of them needs
+/// update = "cycle".
+std::string loop_context_problem(const cm::TermSpec& spec, bool each_cycle, const cm::Model& model,
+                                 const std::vector<ModelInputConfig>& inputs,
+                                 const ModelApply& apply) {
+  const std::vector<std::string>& extras = model.extra_columns();
   std::vector<int> cols;
   if (spec.form != cm::Form::kConstant) cols.push_back(spec.column);
   for (const int c : spec.per) {
     if (c >= 0) cols.push_back(c);
   }
+  if (spec.form == cm::Form::kWear) {
+    // Proportional to the model's tool wear: the columns of the wear terms count too (kind and
+    // point are fixed by the form).
+    for (const cm::TermSpec& w : model.specs()) {
+      if ((w.kind_mask & 1U) == 0U || w.form == cm::Form::kWear || w.form == cm::Form::kLag) {
+        continue;
+      }
+      if (w.form != cm::Form::kConstant) cols.push_back(w.column);
+      for (const int c : w.per) {
+        if (c >= 0 && c != static_cast<int>(cm::Column::kKind) &&
+            c != static_cast<int>(cm::Column::kPoint)) {
+          cols.push_back(c);
+        }
+      }
+    }
+  }
   for (const int c : cols) {
     const std::string name = cm::column_name(c, extras);
-    if (c == static_cast<int>(cm::Column::kAngle) ||
-        c >= static_cast<int>(cm::kStandardColumns)) {
-      return "depends on " + name +
-             ", which the daemon's loop does not know (it would contribute nothing)";
+    if (c == static_cast<int>(cm::Column::kAngle) && std::isnan(apply.angle_deg)) {
+      return "depends on angle_deg, which the daemon's loop does not know: give the entry the "
+             "wall or engagement angle of what the register serves (angle_deg = …)";
+    }
+    if (c >= static_cast<int>(cm::kStandardColumns)) {
+      bool mapped = false;
+      for (const auto& in : inputs) mapped = mapped || in.input.column == c;
+      if (!mapped) {
+        return "depends on " + name +
+               ", which the daemon's loop does not know: map it to a sensor with "
+               "[[model.inputs]] column = \"" +
+               name + "\" sensor = N (or it would contribute nothing)";
+      }
     }
     const bool within_part =
         c == static_cast<int>(cm::Column::kX) || c == static_cast<int>(cm::Column::kY) ||
@@ -61,7 +90,11 @@ std::unique_ptr<ModelSection> parse_model_section(const toml::node& node,
   const std::string file = r.string("file", std::nullopt);
   const std::string update = r.choice("update", std::string("part"), {"part", "cycle"});
   s->each_cycle = update == "cycle";
-  s->temperature_sensor = static_cast<int>(r.integer("temperature_sensor", 0, 0, 255));
+  if (table->contains("temperature_sensor")) {
+    s->temperature_sensor = static_cast<int>(r.integer("temperature_sensor", 0, -1, 255));
+    s->has_temperature_sensor = true;
+    s->temperature_where = r.where("temperature_sensor");
+  }
   if (!file.empty()) {
     const auto& src = node.source();
     fs::path p(file);
@@ -74,10 +107,46 @@ std::unique_ptr<ModelSection> parse_model_section(const toml::node& node,
       diag.error(r.where("file"), std::string("cannot load the model: ") + e.what());
     }
   }
+  // Extra columns of the model fed from sensors (before the applies, which check them).
+  const toml::array* ins = r.table_array("inputs");
+  for (std::size_t i = 0; ins != nullptr && i < ins->size(); ++i) {
+    const auto* t = ins->get(i)->as_table();
+    if (t == nullptr) continue;
+    const std::string path = "model.inputs[" + std::to_string(i) + "]";
+    TableReader q(*t, path, diag);
+    ModelInputConfig in;
+    in.where = config::where_of(ins->get(i), path);
+    in.column = q.string("column", std::nullopt);
+    in.input.sensor = static_cast<int>(q.integer("sensor", std::nullopt, 0, 255));
+    q.finish();
+    if (s->loaded && !in.column.empty()) {
+      const auto& extras = s->model.extra_columns();
+      const int c = cm::column_index(in.column, extras);
+      if (c < static_cast<int>(cm::kStandardColumns)) {
+        std::string names;
+        for (const auto& e : extras) names += (names.empty() ? "" : ", ") + e;
+        diag.error(q.where("column"),
+                   c < 0 ? "'" + in.column + "' is not an extra column of " + s->file + " (" +
+                               (names.empty() ? std::string("it has none") : names) + ")"
+                         : "'" + in.column +
+                               "' is a log column the loop knows already; "
+                               "inputs feed extra columns only");
+      } else {
+        in.input.column = c;
+        for (const auto& other : s->inputs) {
+          if (other.input.column == c) {
+            diag.error(q.where("column"), "'" + in.column + "' is mapped twice");
+          }
+        }
+      }
+    }
+    s->inputs.push_back(std::move(in));
+  }
   const toml::array* arr = r.table_array("apply");
   if (arr == nullptr || arr->empty()) {
-    diag.error(s->where, "model.apply: at least one [[model.apply]] entry is needed (which "
-                         "fitted term goes onto which register)");
+    diag.error(s->where,
+               "model.apply: at least one [[model.apply]] entry is needed (which "
+               "fitted term goes onto which register)");
   }
   for (std::size_t i = 0; arr != nullptr && i < arr->size(); ++i) {
     const auto* t = arr->get(i)->as_table();
@@ -98,6 +167,9 @@ std::unique_ptr<ModelSection> parse_model_section(const toml::node& node,
     if (t->contains("tool")) {
       a.apply.tool = static_cast<double>(q.integer("tool", std::nullopt, 0, 1000000));
     }
+    if (t->contains("angle_deg")) {
+      a.apply.angle_deg = q.number("angle_deg", std::nullopt, -360.0, 360.0);
+    }
     q.finish();
     if (s->loaded && !a.term.empty()) {
       int found = -1;
@@ -112,15 +184,15 @@ std::unique_ptr<ModelSection> parse_model_section(const toml::node& node,
       if (count != 1) {
         std::string names;
         for (const auto& term : terms) names += (names.empty() ? "" : ", ") + term.spec.name;
-        diag.error(q.where("term"), count == 0
-                                        ? "no term '" + a.term + "' in " + s->file + " (" +
-                                              names + ")"
-                                        : "term '" + a.term + "' appears " +
-                                              std::to_string(count) + " times in " + s->file);
+        diag.error(q.where("term"),
+                   count == 0 ? "no term '" + a.term + "' in " + s->file + " (" + names + ")"
+                              : "term '" + a.term + "' appears " + std::to_string(count) +
+                                    " times in " + s->file);
       } else {
         a.apply.term_index = static_cast<std::size_t>(found);
-        const std::string problem = loop_context_problem(
-            terms[static_cast<std::size_t>(found)].spec, s->each_cycle, s->model.extra_columns());
+        const std::string problem =
+            loop_context_problem(terms[static_cast<std::size_t>(found)].spec, s->each_cycle,
+                                 s->model, s->inputs, a.apply);
         if (!problem.empty()) diag.error(q.where("term"), "term '" + a.term + "' " + problem);
       }
     }
@@ -142,15 +214,20 @@ std::unique_ptr<ModelModule> make_model_module(
     ModelApply a = s.applies[i].apply;
     const int idx = table.find(s.applies[i].register_name);
     if (idx < 0) {
-      throw std::invalid_argument("model.apply[" + std::to_string(i) + "].register: no "
+      throw std::invalid_argument("model.apply[" + std::to_string(i) +
+                                  "].register: no "
                                   "[[registers]] entry named '" +
                                   s.applies[i].register_name + "'");
     }
     a.register_index = static_cast<std::uint16_t>(idx);
     applies.push_back(a);
   }
-  auto m = std::make_unique<ModelModule>(s.model, std::move(applies), s.each_cycle,
-                                         s.temperature_sensor);
+  std::vector<ModelInput> inputs;
+  for (const auto& in : s.inputs) {
+    if (in.input.column >= 0) inputs.push_back(in.input);
+  }
+  auto m =
+      std::make_unique<ModelModule>(s.model, std::move(applies), s.each_cycle, std::move(inputs));
   m->attach(table);
   return m;
 }
@@ -166,7 +243,21 @@ class ModelParser final : public config::SectionParser {
   }
   void cross_check(const config::Config& config, config::Diagnostics& diag) const override {
     const auto* s = model_section(config);
-    if (s == nullptr || !s->loaded) return;
+    if (s == nullptr) return;
+    // temp_c is one column: the log records it from the measurement context's sensor, and the
+    // terms fitted on it must be evaluated on the same sensor.
+    const int log_sensor = measurement_context_options(config).temperature_sensor;
+    if (s->has_temperature_sensor && s->temperature_sensor != log_sensor) {
+      diag.error(s->temperature_where,
+                 "sensor " + std::to_string(s->temperature_sensor) +
+                     " differs from the sensor the measurement log records as temp_c (" +
+                     std::to_string(log_sensor) +
+                     ", [measurement_context] temperature_sensor): a term fitted on the log's "
+                     "temp_c would be evaluated on another sensor; remove this key or set "
+                     "[measurement_context] temperature_sensor = " +
+                     std::to_string(s->temperature_sensor));
+    }
+    if (!s->loaded) return;
     std::vector<core::engine::RegisterSpec> specs;
     for (const auto& e : config::registers_section(config).registers) specs.push_back(e.spec);
     const core::engine::RegisterTable table(specs);
@@ -174,11 +265,13 @@ class ModelParser final : public config::SectionParser {
       const auto& a = s->applies[i];
       const int idx = table.find(a.register_name);
       if (idx < 0) {
-        diag.error(a.where, "model.apply[" + std::to_string(i) + "].register: no [[registers]] "
-                            "entry named '" + a.register_name + "'");
+        diag.error(a.where, "model.apply[" + std::to_string(i) +
+                                "].register: no [[registers]] "
+                                "entry named '" +
+                                a.register_name + "'");
       } else if (specs[static_cast<std::size_t>(idx)].kind == core::engine::RegisterKind::kFlag) {
-        diag.error(a.where, "model.apply[" + std::to_string(i) + "].register: '" +
-                                a.register_name + "' is a flag; a trim needs an offset register");
+        diag.error(a.where, "model.apply[" + std::to_string(i) + "].register: '" + a.register_name +
+                                "' is a flag; a trim needs an offset register");
       }
     }
   }

@@ -20,13 +20,25 @@ struct ModelApplyConfig {
   config::Where where;
 };
 
+struct ModelInputConfig {
+  std::string column;
+  ModelInput input;  // column resolved against the model's extra columns
+  config::Where where;
+};
+
 struct ModelSection final : config::Section {
   std::string file;  // resolved path of model.toml
   core::model::Model model;
   bool loaded{false};
   bool each_cycle{false};
-  int temperature_sensor{0};
+  /// Kept for configs of the first version: if given it must be the sensor the measurement log
+  /// records as temp_c ([measurement_context] temperature_sensor), the one temp_c terms were
+  /// fitted on.
+  int temperature_sensor{-1};
+  bool has_temperature_sensor{false};
+  config::Where temperature_where;
   std::vector<ModelApplyConfig> applies;
+  std::vector<ModelInputConfig> inputs;
   config::Where where;
 };
 
@@ -39,7 +51,7 @@ const ModelSection* model_section(const config::Config& config);
 
 /// The engine module of a parsed section, registers resolved against `registers` (throws
 /// std::invalid_argument naming the entry when a register is missing).
-std::unique_ptr<ModelModule> make_model_module(const ModelSection& s,
-                                               const std::vector<core::engine::RegisterSpec>& registers);
+std::unique_ptr<ModelModule> make_model_module(
+    const ModelSection& s, const std::vector<core::engine::RegisterSpec>& registers);
 
 }  // namespace nccomp::daemon::sections

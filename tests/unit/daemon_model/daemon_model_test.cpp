@@ -4,15 +4,20 @@
 // restart does not apply the trim twice, and config errors name file, line and key.
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cmath>
 #include <cstring>
+#include <fstream>
+#include <map>
 #include <memory>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "core/engine/engine.hpp"
 #include "core/model/model.hpp"
 #include "daemon/config/builtin_sections.hpp"
+#include "daemon/measurement_log.hpp"
 #include "daemon/sections/model/model_module.hpp"
 #include "daemon/sections/model/model_section.hpp"
 #include "tests/support/alloc_counter.hpp"
@@ -279,30 +284,30 @@ TEST(ModelSection, ErrorsNameFileLineAndKey) {
   EXPECT_NE(err.find("model.apply[0].term"), std::string::npos) << err;
   EXPECT_NE(err.find("no term 'tool_wear'"), std::string::npos) << err;
 
-  auto r2 = config::load_file(d.write(
-      "b.toml", registers_toml() + "[model]\nfile = \"missing.toml\"\n[[model.apply]]\n"
-                                   "term = \"part_trend\"\nregister = \"checkpoint_0\"\n"));
+  auto r2 = config::load_file(
+      d.write("b.toml", registers_toml() + "[model]\nfile = \"missing.toml\"\n[[model.apply]]\n"
+                                           "term = \"part_trend\"\nregister = \"checkpoint_0\"\n"));
   ASSERT_FALSE(r2.config);
   EXPECT_NE(r2.diagnostics.to_string().find("model.file"), std::string::npos)
       << r2.diagnostics.to_string();
 
-  auto r3 = config::load_file(d.write(
-      "c.toml", registers_toml() + "[model]\nfile = \"fit/model.toml\"\n[[model.apply]]\n"
-                                   "term = \"part_trend\"\nregister = \"warn\"\n"
-                                   "[[model.apply]]\nterm = \"part_trend\"\nregister = \"nope\"\n"));
+  auto r3 = config::load_file(
+      d.write("c.toml", registers_toml() +
+                            "[model]\nfile = \"fit/model.toml\"\n[[model.apply]]\n"
+                            "term = \"part_trend\"\nregister = \"warn\"\n"
+                            "[[model.apply]]\nterm = \"part_trend\"\nregister = \"nope\"\n"));
   ASSERT_FALSE(r3.config);
   const std::string e3 = r3.diagnostics.to_string();
   EXPECT_NE(e3.find("'warn' is a flag"), std::string::npos) << e3;
   EXPECT_NE(e3.find("no [[registers]] entry named 'nope'"), std::string::npos) << e3;
 
-  auto r4 = config::load_file(d.write(
-      "d.toml", registers_toml() + "[model]\nfile = \"fit/model.toml\"\n[[model.apply]]\n"
-                                   "term = \"part_trend\"\nregister = \"checkpoint_0\"\n"
-                                   "colour = 1\n"));
+  auto r4 = config::load_file(
+      d.write("d.toml", registers_toml() + "[model]\nfile = \"fit/model.toml\"\n[[model.apply]]\n"
+                                           "term = \"part_trend\"\nregister = \"checkpoint_0\"\n"
+                                           "colour = 1\n"));
   ASSERT_FALSE(r4.config);
   const std::string e4 = r4.diagnostics.to_string();
-  EXPECT_NE(e4.find("d.toml:26:10: model.apply[0].colour: unknown key"), std::string::npos)
-      << e4;
+  EXPECT_NE(e4.find("d.toml:26:10: model.apply[0].colour: unknown key"), std::string::npos) << e4;
 }
 
 /// position_x: poly degree 2 in u = x / 100 (coef 2, 0.5); periodic_z: sine of period 40 mm
@@ -357,7 +362,7 @@ TEST(ModelModuleContext, PositionAndPeriodicTermsFollowTheAxisSamplesEachCycle) 
   ModelApply az;
   az.term_index = 1;
   az.register_index = 1;
-  ModelModule m(position_model(), {ax, az}, true, 0);
+  ModelModule m(position_model(), {ax, az}, true);
   core::StepOutput out;
   // No axis sample yet: the positions are unknown, the terms contribute nothing.
   m.step(1'000'000, {}, out);
@@ -379,65 +384,198 @@ TEST(ModelModuleContext, PositionAndPeriodicTermsFollowTheAxisSamplesEachCycle) 
   EXPECT_EQ(out.trims[5].register_index, 1U);
 }
 
-TEST(ModelModuleContext, CutPathGrowsOnlyWhileCuttingResetsOnToolChangeAndSurvivesARestart) {
+std::vector<ce::RegisterSpec> two_registers() {
+  auto a = one_register(100.0, 100.0);
+  auto b = a;
+  b[0].name = "checkpoint_1";
+  a.push_back(b[0]);
+  return a;
+}
+
+/// An engine with one ModelModule (each cycle) and, optionally, more modules.
+std::unique_ptr<ce::Engine> model_engine(cm::Model model, std::vector<ModelApply> applies,
+                                         const ModelModule** out = nullptr,
+                                         std::vector<std::unique_ptr<ce::Module>> more = {},
+                                         ce::EngineOptions options = {}) {
+  std::vector<std::unique_ptr<ce::Module>> mods;
+  auto m = std::make_unique<ModelModule>(std::move(model), std::move(applies), true);
+  if (out != nullptr) *out = m.get();
+  mods.push_back(std::move(m));
+  for (auto& x : more) mods.push_back(std::move(x));
+  auto e = std::make_unique<ce::Engine>();
+  e->configure(two_registers(), std::move(mods), options);
+  return e;
+}
+
+TEST(ModelModuleContext, CutPathIsTheEnginesPerToolAndSurvivesARestart) {
   ModelApply aw;
   aw.term_index = 2;
   aw.register_index = 0;
-  ModelModule m(position_model(), {aw}, true, 0);
+  const ModelModule* m = nullptr;
+  auto e = model_engine(position_model(), {aw}, &m);
+  ASSERT_EQ(&m->context(), &e->context());  // the engine's context, not a copy
   core::StepOutput out;
   std::int64_t t = 0;
+  auto step = [&](ce::Engine& eng, std::vector<core::Event> ev) {
+    eng.step(t += 1'000'000, ev, out);
+  };
   // 101 cutting samples 1 mm apart along X: 100 mm of cut path → 0.01 × 100 = 1 µm.
-  for (int k = 0; k <= 100; ++k) {
-    const core::Event e[] = {sample(static_cast<double>(k), 0.0, 7, true)};
-    m.step(t += 1'000'000, e, out);
-  }
-  EXPECT_NEAR(m.cut_path_mm(), 100.0, 1e-9);
-  EXPECT_NEAR(m.trim_um(0), -1.0, 1e-12);
-  // A rapid back to x = 0 and 50 non-cutting samples: no path.
-  for (int k = 0; k < 50; ++k) {
-    const core::Event e[] = {sample(100.0 - 2.0 * k, 0.0, 7, false)};
-    m.step(t += 1'000'000, e, out);
-  }
-  EXPECT_NEAR(m.cut_path_mm(), 100.0, 1e-9);
+  for (int k = 0; k <= 100; ++k) step(*e, {sample(static_cast<double>(k), 0.0, 7, true)});
+  EXPECT_NEAR(e->context().cut_path_mm(), 100.0, 1e-9);
+  EXPECT_NEAR(m->trim_um(0), -1.0, 1e-12);
+  EXPECT_NEAR(e->register_state(0).output_um, -1.0, 1e-12);
+  // A rapid back to x = 0: no path.
+  for (int k = 0; k < 50; ++k) step(*e, {sample(100.0 - 2.0 * k, 0.0, 7, false)});
+  EXPECT_NEAR(e->context().cut_path_mm(), 100.0, 1e-9);
   // The program path, where the NC publishes it, is used instead of the XYZ distance.
   core::AxisSample p1 = sample(0.0, 0.0, 7, true);
   p1.program_path_mm = 500.0;
   core::AxisSample p2 = sample(0.0, 0.0, 7, true);  // no axis motion...
-  p2.program_path_mm = 525.0;                        // ...but 25 mm along the program path
-  const core::Event ep1[] = {p1};
-  const core::Event ep2[] = {p2};
-  m.step(t += 1'000'000, ep1, out);
-  m.step(t += 1'000'000, ep2, out);
-  EXPECT_NEAR(m.cut_path_mm(), 125.0, 1e-9);
-  EXPECT_NEAR(m.trim_um(0), -1.25, 1e-12);
-  // Restart: the path comes back from the state.
-  std::vector<std::byte> state(m.state_capacity());
-  state.resize(m.save_state(state));
-  ModelModule m2(position_model(), {aw}, true, 0);
-  ASSERT_TRUE(m2.load_state(state));
-  EXPECT_NEAR(m2.cut_path_mm(), 125.0, 1e-9);
-  m2.step(t += 1'000'000, {}, out);
-  EXPECT_NEAR(m2.trim_um(0), -1.25, 1e-12);
-  // A state with a non-finite path is refused.
-  std::vector<std::byte> bad = state;
-  const double nan = std::nan("");
-  std::memcpy(bad.data() + 16, &nan, 8);
-  ModelModule m3(position_model(), {aw}, true, 0);
-  EXPECT_FALSE(m3.load_state(bad));
-  // Tool change (event): a new tool's path starts at 0.
-  const core::Event tc[] = {core::ToolChange{t, 8, false}};
-  m2.step(t += 1'000'000, tc, out);
-  EXPECT_DOUBLE_EQ(m2.cut_path_mm(), 0.0);
-  EXPECT_DOUBLE_EQ(m2.trim_um(0), 0.0);
-  // A tool change seen only in the axis samples (no event) resets the path too.
-  for (int k = 0; k <= 10; ++k) {
-    const core::Event e[] = {sample(static_cast<double>(k), 0.0, 8, true)};
-    m2.step(t += 1'000'000, e, out);
+  p2.program_path_mm = 525.0;                       // ...but 25 mm along the program path
+  step(*e, {p1});
+  step(*e, {p2});
+  EXPECT_NEAR(m->trim_um(0), -1.25, 1e-12);
+  // Restart: the engine's state carries the path; the trim is published again, once.
+  std::vector<std::byte> state(e->state_capacity());
+  state.resize(e->export_state(state));
+  const ModelModule* m2 = nullptr;
+  auto e2 = model_engine(position_model(), {aw}, &m2);
+  ASSERT_TRUE(e2->import_state(state, t + 1'000'000));
+  EXPECT_NEAR(e2->context().cut_path_mm(), 125.0, 1e-9);
+  step(*e2, {});
+  EXPECT_NEAR(m2->trim_um(0), -1.25, 1e-12);
+  EXPECT_NEAR(e2->register_state(0).output_um, -1.25, 1e-12);
+  // Another tool: its own path from 0; tool 7 back: its 125 mm continue (as creep counts).
+  step(*e2, {core::ToolChange{t, 8, false}});
+  EXPECT_DOUBLE_EQ(m2->trim_um(0), 0.0);
+  for (int k = 0; k <= 10; ++k) step(*e2, {sample(static_cast<double>(k), 0.0, 8, true)});
+  EXPECT_NEAR(m2->trim_um(0), -0.1, 1e-12);
+  step(*e2, {sample(10.0, 0.0, 8, false), core::ToolChange{t, 7, false}});
+  EXPECT_NEAR(m2->trim_um(0), -1.25, 1e-12);
+  // A tool the axis samples name without an event, never seen before: 0.
+  step(*e2, {sample(10.0, 0.0, 9, true)});
+  EXPECT_DOUBLE_EQ(m2->trim_um(0), 0.0);
+  // An entry that fixes the tool evaluates that tool's path whatever is in the spindle.
+  ModelApply fixed = aw;
+  fixed.tool = 8;
+  const ModelModule* m3 = nullptr;
+  auto e3 = model_engine(position_model(), {fixed}, &m3);
+  ASSERT_TRUE(e3->import_state(state, t + 1'000'000));
+  step(*e3, {});
+  EXPECT_TRUE(std::isnan(e3->context().cut_path_mm(8)));  // state from before tool 8 was used
+  EXPECT_DOUBLE_EQ(m3->trim_um(0), 0.0);
+}
+
+TEST(ModelModuleContext, CuttingAdvancesTheStateGenerationEvery10MmNotEveryMm) {
+  ModelApply ax;  // a position term: nothing the model applies uses the path
+  ax.term_index = 0;
+  ax.register_index = 0;
+  auto e = model_engine(position_model(), {ax});
+  core::StepOutput out;
+  std::int64_t t = 0;
+  e->step(t += 1'000'000, std::vector<core::Event>{sample(0.0, 0.0, 1, true)}, out);
+  e->step(t += 1'000'000, std::vector<core::Event>{sample(0.1, 0.0, 1, true)}, out);
+  const auto c0 = e->context().generation();
+  // 1000 samples 0.1 mm apart: 100 mm. The module adds nothing to the state generation (it
+  // keeps no state; the first version advanced it every 1 mm), the context every 10 mm.
+  for (int k = 2; k <= 1001; ++k) {
+    e->step(t += 1'000'000, std::vector<core::Event>{sample(0.1 * k, 0.0, 1, true)}, out);
   }
-  EXPECT_NEAR(m2.cut_path_mm(), 10.0, 1e-9);
-  const core::Event e9[] = {sample(10.0, 0.0, 9, true)};
-  m2.step(t += 1'000'000, e9, out);
-  EXPECT_DOUBLE_EQ(m2.cut_path_mm(), 0.0);
+  EXPECT_NEAR(e->context().cut_path_mm(), 100.1, 1e-6);
+  EXPECT_EQ(e->module(0).state_generation(), 0U);
+  EXPECT_EQ(e->context().generation() - c0, 10U);
+}
+
+/// thermal_drift: 4 µm × (1 − exp(−time_s / 5400 s)), one coefficient.
+cm::Model warmup_model() {
+  cm::Term w;
+  w.spec.name = "thermal_drift";
+  w.spec.form = cm::Form::kExpRise;
+  w.spec.column = static_cast<int>(cm::Column::kTime);
+  w.spec.scale = 5400.0;
+  w.groups = {{0.0, 0.0}};
+  w.coef = {4.0};
+  return cm::Model({}, {w});
+}
+
+/// Emits one contour record at each step with a ProbeMeasurement (what S1 does).
+class ProbeLog final : public ce::Module {
+ public:
+  std::string_view name() const noexcept override { return "probe"; }
+  void attach(const ce::RegisterTable&) override {}
+  void step(core::TimeNs, std::span<const core::Event> events,
+            core::StepOutput& out) noexcept override {
+    for (const auto& e : events) {
+      if (const auto* p = std::get_if<core::ProbeMeasurement>(&e)) {
+        core::MeasurementRecord r;
+        r.time_ns = p->time_ns;
+        r.tool = 1;
+        r.kind = core::MeasurementKind::kContour;
+        out.records.push(r);
+      }
+    }
+  }
+};
+
+double warmup_um(double t_s) { return 4.0 * (1.0 - std::exp(-t_s / 5400.0)); }
+
+TEST(ModelTimeOrigin, AWarmUpTermEvaluatesTheSameAfterARestartAsTheLogsTimeS) {
+  constexpr std::int64_t kS = 1'000'000'000;
+  ModelApply a;
+  a.register_index = 0;
+  auto make = [&](const ModelModule** m) {
+    std::vector<std::unique_ptr<ce::Module>> more;
+    more.push_back(std::make_unique<ProbeLog>());
+    return model_engine(warmup_model(), {a}, m, std::move(more));
+  };
+  const ModelModule* m1 = nullptr;
+  auto e1 = make(&m1);
+  core::StepOutput out;
+  // The daemon starts 1000 s after boot; the machine stands until 1200 s (boot-based clock).
+  e1->step(1000 * kS, std::vector<core::Event>{sample(0.0, 0.0, 1, false)}, out);
+  e1->step(1100 * kS, std::vector<core::Event>{sample(0.0, 0.0, 1, false)}, out);
+  EXPECT_NEAR(m1->trim_um(0), -warmup_um(100.0), 1e-12);  // time since the daemon's start
+  // 1200 s: the first motion, the warm start. 3600 s later, a probe record.
+  e1->step(1200 * kS, std::vector<core::Event>{sample(5.0, 0.0, 1, false)}, out);
+  EXPECT_NEAR(m1->trim_um(0), 0.0, 1e-12);
+  e1->step(4800 * kS,
+           std::vector<core::Event>{sample(6.0, 0.0, 1, false),
+                                    core::ProbeMeasurement{4800 * kS, 1, 0, 0.0, 0.0, 1.0, {}}},
+           out);
+  ASSERT_EQ(out.records.size(), 1U);
+  EXPECT_EQ(out.records[0].time_ns, 3600 * kS);  // the log's time_s
+  EXPECT_NEAR(m1->trim_um(0), -warmup_um(3600.0), 1e-12);
+  std::vector<std::byte> state(e1->state_capacity());
+  state.resize(e1->export_state(state));
+
+  // nccompd restarts: 100 s later on the same clock. The term and the log continue from the
+  // same origin, as if the daemon had run on: 3700 s since the warm start, not 4900 s since boot.
+  const ModelModule* m2 = nullptr;
+  auto e2 = make(&m2);
+  ASSERT_TRUE(e2->import_state(state, 4900 * kS));
+  e2->step(4900 * kS,
+           std::vector<core::Event>{core::ProbeMeasurement{4900 * kS, 1, 0, 0.0, 0.0, 1.0, {}}},
+           out);
+  EXPECT_NEAR(m2->trim_um(0), -warmup_um(3700.0), 1e-12);
+  ASSERT_EQ(out.records.size(), 1U);
+  EXPECT_EQ(out.records[0].time_ns, 3700 * kS);
+  // The register follows (through its limiter, which restarted at the restored value).
+  e2->step(4901 * kS, {}, out);
+  EXPECT_NEAR(e2->register_state(0).output_um, -warmup_um(3701.0), 1e-12);
+  // (The same term on the time since boot would be off by this much.)
+  EXPECT_GT(warmup_um(4900.0) - warmup_um(3700.0), 0.3);
+
+  // A reboot (the clock starts again, now 60 s): the time goes on from 3600 s, and the machine
+  // is cold: its first motion is a warm start and the warm-up term starts again from 0.
+  const ModelModule* m3 = nullptr;
+  auto e3 = make(&m3);
+  ASSERT_TRUE(e3->import_state(state, 60 * kS));
+  e3->step(60 * kS, std::vector<core::Event>{sample(6.0, 0.0, 1, false)}, out);
+  EXPECT_NEAR(m3->trim_um(0), -warmup_um(3600.0), 1e-12);
+  e3->step(70 * kS, std::vector<core::Event>{sample(7.0, 0.0, 1, false)}, out);
+  EXPECT_NEAR(m3->trim_um(0), 0.0, 1e-12);
+  e3->step(670 * kS, std::vector<core::Event>{sample(8.0, 0.0, 1, false)}, out);
+  EXPECT_NEAR(m3->trim_um(0), -warmup_um(600.0), 1e-12);
 }
 
 TEST(ModelSection, TermsTheLoopCannotEvaluateAsConfiguredAreRefused) {
@@ -471,6 +609,207 @@ TEST(ModelSection, TermsTheLoopCannotEvaluateAsConfiguredAreRefused) {
     auto r = load(std::string("ok_") + ok + ".toml", "cycle", ok);
     EXPECT_TRUE(r.config) << ok << ": " << r.diagnostics.to_string();
   }
+}
+
+/// ambient: thermal_drift linear in the extra column ambient_c (−0.88 µm/°C); speed: a
+/// first-order lag of spindle_rpm with τ = 600 s (0.0047 µm/rpm); contact: poly degree 1 in
+/// angle_deg (0.05 µm/°, centre 0, scale 1).
+cm::Model extra_model() {
+  cm::Term amb;
+  amb.spec.name = "ambient";
+  amb.spec.form = cm::Form::kLinear;
+  amb.spec.column = static_cast<int>(cm::kStandardColumns);
+  amb.groups = {{0.0, 0.0}};
+  amb.coef = {-0.88};
+  cm::Term speed;
+  speed.spec.name = "speed";
+  speed.spec.form = cm::Form::kLag;
+  speed.spec.column = static_cast<int>(cm::kStandardColumns) + 1;
+  speed.spec.scale = 600.0;
+  speed.groups = {{0.0, 0.0}};
+  speed.coef = {0.0047};
+  cm::Term contact;
+  contact.spec.name = "contact";
+  contact.spec.form = cm::Form::kPoly;
+  contact.spec.column = static_cast<int>(cm::Column::kAngle);
+  contact.spec.degree = 1;
+  contact.spec.scale = 1.0;
+  contact.groups = {{0.0, 0.0}};
+  contact.coef = {0.05};
+  return cm::Model({"ambient_c", "spindle_rpm"}, {amb, speed, contact});
+}
+
+TEST(ModelInputs, ExtraColumnsFedFromSensorsAreCompensated) {
+  TempDir d;
+  d.write("fit/model.toml",
+          tools::model_io::write_model_toml(extra_model(), cm::AnalysisConfig{}, {"test"}));
+  const std::string text = registers_toml() +
+                           "[model]\nfile = \"fit/model.toml\"\nupdate = \"cycle\"\n"
+                           "[[model.inputs]]\ncolumn = \"ambient_c\"\nsensor = 1\n"
+                           "[[model.inputs]]\ncolumn = \"spindle_rpm\"\nsensor = 7\n"
+                           "[[model.apply]]\nterm = \"ambient\"\nregister = \"checkpoint_0\"\n"
+                           "[[model.apply]]\nterm = \"speed\"\nregister = \"checkpoint_1\"\n"
+                           "[[model.apply]]\nterm = \"contact\"\nregister = \"checkpoint_1\"\n"
+                           "angle_deg = 30\ngain = 1\n";
+  auto r = config::load_file(d.write("a.toml", text));
+  ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+  auto e = config::build_engine(*r.config);
+  ASSERT_EQ(e->module_count(), 1U);  // no [measurement_context]: the defaults (sensor 0)
+  const auto* m = static_cast<const ModelModule*>(&e->module(0));
+  ASSERT_EQ(m->name(), "model");
+  constexpr std::int64_t kS = 1'000'000'000;
+  core::StepOutput out;
+  // Ambient 25 °C on sensor 1, the spindle at 0 rpm on sensor 7 (a speed register the bus map
+  // publishes on a sensor channel).
+  e->step(10 * kS,
+          std::vector<core::Event>{core::TemperatureSample{0, 1, 25.0},
+                                   core::TemperatureSample{0, 7, 0.0}},
+          out);
+  EXPECT_NEAR(m->trim_um(0), 0.88 * 25.0, 1e-12);  // gain −1 × −0.88 × 25
+  EXPECT_NEAR(m->trim_um(1), 0.0, 1e-12);
+  EXPECT_NEAR(m->trim_um(2), 0.05 * 30.0, 1e-12);  // the entry's wall angle
+  // The spindle goes to 5000 rpm: the lag follows with τ = 600 s.
+  e->step(20 * kS, std::vector<core::Event>{core::TemperatureSample{0, 7, 5000.0}}, out);
+  e->step(620 * kS, {}, out);
+  EXPECT_NEAR(m->trim_um(1), -0.0047 * 5000.0 * (1.0 - std::exp(-1.0)), 1e-9);
+  EXPECT_NEAR(e->register_state(1).output_um, -0.0047 * 5000.0 * (1.0 - std::exp(-1.0)) + 1.5,
+              1e-9);
+  // Ambient 20 °C: the trim follows at once.
+  e->step(621 * kS, std::vector<core::Event>{core::TemperatureSample{0, 1, 20.0}}, out);
+  EXPECT_NEAR(m->trim_um(0), 0.88 * 20.0, 1e-12);
+}
+
+TEST(ModelInputs, UnmappedColumnsWrongInputsAndAnotherTemperatureSensorAreRefused) {
+  TempDir d;
+  d.write("fit/model.toml",
+          tools::model_io::write_model_toml(extra_model(), cm::AnalysisConfig{}, {"test"}));
+  const auto load = [&](const std::string& name, const std::string& body) {
+    return config::load_file(d.write(
+        name,
+        registers_toml() + "[model]\nfile = \"fit/model.toml\"\nupdate = \"cycle\"\n" + body));
+  };
+  const auto expect_error = [](const config::LoadResult& r, const std::string& what) {
+    EXPECT_FALSE(r.config);
+    EXPECT_NE(r.diagnostics.to_string().find(what), std::string::npos) << r.diagnostics.to_string();
+  };
+  expect_error(load("a.toml", "[[model.apply]]\nterm = \"ambient\"\nregister = \"checkpoint_0\"\n"),
+               "term 'ambient' depends on ambient_c, which the daemon's loop does not know: map it "
+               "to a sensor with [[model.inputs]] column = \"ambient_c\" sensor = N");
+  expect_error(load("b.toml", "[[model.apply]]\nterm = \"contact\"\nregister = \"checkpoint_0\"\n"),
+               "depends on angle_deg, which the daemon's loop does not know: give the entry");
+  expect_error(load("c.toml",
+                    "[[model.inputs]]\ncolumn = \"t9_c\"\nsensor = 1\n"
+                    "[[model.apply]]\nterm = \"contact\"\nregister = \"checkpoint_0\"\n"
+                    "angle_deg = 10\n"),
+               "model.inputs[0].column: 't9_c' is not an extra column of");
+  expect_error(load("d.toml",
+                    "[[model.inputs]]\ncolumn = \"temp_c\"\nsensor = 1\n"
+                    "[[model.apply]]\nterm = \"contact\"\nregister = \"checkpoint_0\"\n"
+                    "angle_deg = 10\n"),
+               "'temp_c' is a log column the loop knows already");
+  // temp_c: [model] may not read another sensor than the one the log records.
+  const std::string ok_apply =
+      "[[model.apply]]\nterm = \"contact\"\nregister = \"checkpoint_0\"\nangle_deg = 10\n";
+  expect_error(load("e.toml", "temperature_sensor = 2\n" + ok_apply),
+               "sensor 2 differs from the sensor the measurement log records as temp_c (0");
+  auto ok = load("f.toml", "temperature_sensor = 2\n" + ok_apply +
+                               "[measurement_context]\ntemperature_sensor = 2\n"
+                               "warm_start_idle_s = 1800\n");
+  ASSERT_TRUE(ok.config) << ok.diagnostics.to_string();
+  auto e = config::build_engine(*ok.config);
+  EXPECT_EQ(e->context().options().temperature_sensor, 2);
+  EXPECT_DOUBLE_EQ(e->context().options().warm_start_idle_s, 1800.0);
+  expect_error(load("g.toml", ok_apply + "[measurement_context]\nwarm_start_idle_s = 5\n"),
+               "measurement_context.warm_start_idle_s");
+}
+
+TEST(MeasurementContextSection, StatusShowsTheMachineClockAndPath) {
+  TempDir d;
+  auto r = config::load_file(d.write("a.toml", registers_toml() +
+                                                   "[measurement_context]\nwarm_start_idle_s = "
+                                                   "600\ntemperature_sensor = 3\n"));
+  ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+  auto e = config::build_engine(*r.config);
+  constexpr std::int64_t kS = 1'000'000'000;
+  core::StepOutput out;
+  e->step(100 * kS, std::vector<core::Event>{sample(0.0, 0.0, 4, true)}, out);
+  e->step(101 * kS,
+          std::vector<core::Event>{sample(3.0, 4.0, 4, true), core::TemperatureSample{0, 3, 21.5}},
+          out);
+  e->step(161 * kS, std::vector<core::Event>{sample(3.0, 4.0, 4, true)}, out);
+  std::array<ce::StatusValue, ce::kMaxStatusValues> v{};
+  const std::size_t n = e->module(0).status(v);
+  std::map<std::string, double> got;
+  for (std::size_t i = 0; i < n; ++i) got[v[i].key] = v[i].value;
+  EXPECT_DOUBLE_EQ(got["machine_time_s"], 60.0);
+  EXPECT_DOUBLE_EQ(got["idle_s"], 60.0);
+  EXPECT_DOUBLE_EQ(got["warm_starts"], 1.0);
+  EXPECT_DOUBLE_EQ(got["cold"], 0.0);
+  EXPECT_DOUBLE_EQ(got["tool"], 4.0);
+  EXPECT_DOUBLE_EQ(got["cut_path_mm"], 5.0);
+  EXPECT_DOUBLE_EQ(got["temp_c"], 21.5);
+}
+
+std::vector<std::string> read_lines(const std::string& path) {
+  std::ifstream in(path);
+  std::vector<std::string> lines;
+  std::string line;
+  while (std::getline(in, line)) lines.push_back(line);
+  return lines;
+}
+
+TEST(MeasurementLogTime, AWarmStartStartsANewFileAndARestartContinuesTheCurrentOne) {
+  TempDir d;
+  const std::string dir = (d.path() / "log").string();
+  constexpr std::int64_t kS = 1'000'000'000;
+  auto push = [](MeasurementLogWriter& w, std::int64_t t_ns, int point) {
+    core::MeasurementRecord r;
+    r.time_ns = t_ns;
+    r.point = point;
+    r.kind = core::MeasurementKind::kContour;
+    while (!w.ring().try_push(r)) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  };
+  {
+    MeasurementLogWriter w(dir, 1 << 20, 5);
+    w.start();
+    push(w, 100 * kS, 0);
+    push(w, 200 * kS, 1);
+    push(w, 200 * kS, 2);  // the same time: no new file
+    w.stop();
+    EXPECT_EQ(w.time_rotations(), 0U);
+  }
+  {
+    // A restart appends; its first row (250 s) continues the file, the warm start (5 s) does not.
+    MeasurementLogWriter w(dir, 1 << 20, 5);
+    w.start();
+    push(w, 250 * kS, 3);
+    push(w, 5 * kS, 4);
+    push(w, 9 * kS, 5);
+    w.stop();
+    EXPECT_EQ(w.time_rotations(), 1U);
+    EXPECT_EQ(w.rotations(), 1U);
+    EXPECT_EQ(w.rows(), 3U);
+  }
+  {
+    // A restart after the warm start: the current file ends at 9 s, so 3 s starts another file.
+    MeasurementLogWriter w(dir, 1 << 20, 5);
+    w.start();
+    push(w, 3 * kS, 6);
+    w.stop();
+    EXPECT_EQ(w.time_rotations(), 1U);
+  }
+  const auto older = read_lines(dir + "/measurements.csv.2");
+  const auto warm = read_lines(dir + "/measurements.csv.1");
+  const auto current = read_lines(dir + "/measurements.csv");
+  ASSERT_EQ(older.size(), 5U);
+  EXPECT_EQ(older[0], kMeasurementCsvHeader);
+  EXPECT_EQ(older[4].rfind("250.000000,", 0), 0U) << older[4];
+  ASSERT_EQ(warm.size(), 3U);
+  EXPECT_EQ(warm[0], kMeasurementCsvHeader);
+  EXPECT_EQ(warm[1].rfind("5.000000,", 0), 0U) << warm[1];
+  EXPECT_EQ(warm[2].rfind("9.000000,", 0), 0U) << warm[2];
+  ASSERT_EQ(current.size(), 2U);
+  EXPECT_EQ(current[1].rfind("3.000000,", 0), 0U) << current[1];
 }
 
 }  // namespace
