@@ -459,6 +459,79 @@ class BadInput(unittest.TestCase):
         self.assertIn("--wheel-width-mm is required", err)
 
 
+class DocsExamples(unittest.TestCase):
+    """Every `$ nccomp grind-path` example in docs/grinding.md is run, and what it prints must be
+    what the page shows (timings aside); the table and G-code excerpts must be in the files."""
+
+    DOC = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "..", "docs",
+                       "grinding.md")
+    TIME = re.compile(r"\d+\.\d+ s\b")
+
+    def blocks(self):
+        with open(self.DOC) as f:
+            text = f.read()
+        return [b.strip("\n").split("\n") for b in re.findall(r"```\n(.*?)```", text, re.S)]
+
+    @staticmethod
+    def commands(block):
+        """[(command line, [expected output lines])] of a block of `$ ...` commands."""
+        out, i = [], 0
+        while i < len(block):
+            line = block[i]
+            assert line.startswith("$ "), line
+            cmd = line[2:]
+            while cmd.endswith("\\"):
+                i += 1
+                cmd = cmd[:-1] + block[i].strip()
+            cmd = cmd.split("  #")[0]
+            i += 1
+            expected = []
+            while i < len(block) and not block[i].startswith("$ "):
+                expected.append(block[i])
+                i += 1
+            out.append((cmd, expected))
+        return out
+
+    def test_examples_print_what_the_page_shows(self):
+        blocks = self.blocks()
+        ran = 0
+        with tempfile.TemporaryDirectory() as d:
+            with open(os.path.join(d, "bad.csv"), "w") as f:  # the Errors section's bad.csv
+                f.write("z_mm,u_mm\n0,0\n1,0.1\n1,0.2\n2,0.3\n")
+            bindir = os.path.join(d, "bin")
+            os.mkdir(bindir)
+            os.symlink(os.path.abspath(NCCOMP), os.path.join(bindir, "nccomp"))
+            env = dict(os.environ, PATH=bindir + os.pathsep + os.environ["PATH"])
+            for block in blocks:
+                if block[0].startswith("/usr/bin/python3 -c"):  # makes an input file
+                    subprocess.run("\n".join(block), shell=True, cwd=d, check=True, env=env)
+                    continue
+                if not block[0].startswith("$ nccomp grind-path"):
+                    continue
+                for cmd, expected in self.commands(block):
+                    p = subprocess.run(cmd, shell=True, cwd=d, env=env, capture_output=True,
+                                       text=True, timeout=600)
+                    got = (p.stdout + p.stderr).rstrip("\n").split("\n")
+                    norm = lambda lines: [self.TIME.sub("T s", x) for x in lines]
+                    self.assertEqual(norm(got), norm(expected), cmd)
+                    ran += 1
+            # The excerpts of crown_table.csv and crown.nc.
+            for block in blocks:
+                name = ("crown_table.csv" if block[0].startswith("z_mm,u_target_mm")
+                        else "crown.nc" if block[0].startswith("; nccomp grind-path") else None)
+                if name is None:
+                    continue
+                with open(os.path.join(d, name)) as f:
+                    lines = f.read().split("\n")
+                head = block[:block.index("...")] if "..." in block else block
+                self.assertEqual(lines[:len(head)], head, name)
+                tail = block[block.index("...") + 1:] if "..." in block else []
+                if tail:
+                    self.assertEqual(lines[-len(tail) - 1:-1], tail, name)
+                ran += 1
+        self.assertGreaterEqual(ran, 10)
+
+
 if __name__ == "__main__":
     args = sys.argv[1:]
     if len(args) < 2 or args[0] != "--nccomp":
