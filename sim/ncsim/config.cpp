@@ -655,9 +655,30 @@ SimConfig parse_sim_config(std::string_view text, const std::string& file,
       t.number("cycle_interval_s", tc.cycle_interval_s, 0.0, 1e6);
       t.vec3("reference_center_mm", tc.reference_center_mm, -1e5, 1e5);
       t.number("reference_radius_mm", tc.reference_radius_mm, 0.0, 1e4);
+      t.number("reference_axial_radius_mm", tc.reference_axial_radius_mm, 0.0, 1e4);
       t.vec3("body_center_mm", tc.body_center_mm, -1e5, 1e5);
       t.number("body_radius_mm", tc.body_radius_mm, 0.0, 1e4);
+      t.number("body_axial_radius_mm", tc.body_axial_radius_mm, 0.0, 1e4);
       t.number("touch_time_s", tc.touch_time_s, 0.001, 3600.0);
+      t.integer("touches_per_axis", tc.touches_per_axis, 1, 8);
+      t.choice("touch_positions", tc.program_coordinates,
+               {std::pair<std::string_view, bool>{"program", true}, {"machine", false}});
+      t.vec3("axis_error_um", tc.axis_error_um, -1000.0, 1000.0);
+      t.number("x_axial_error_um", tc.x_axial_error_um, -1000.0, 1000.0);
+      t.number("reference_pretravel_um", tc.reference_pretravel_um, -100.0, 100.0);
+      t.number("reference_axial_pretravel_um", tc.reference_axial_pretravel_um, -100.0, 100.0);
+      t.number("blank_radius_mm", tc.blank_radius_mm, 0.1, 1000.0);
+      t.number("grind_depth_mm", tc.grind_depth_mm, 0.001, 10.0);
+      t.number("chord_noise_um", tc.chord_noise_um, 0.0, 100.0);
+      t.number("grind_time_s", tc.grind_time_s, 0.1, 86400.0);
+      t.string("facet_export_path", tc.facet_export_path);
+      t.integer("request_register", tc.request_register, -1, 65535);
+      t.choice("warm_up_from", tc.warm_up_after_nominals,
+               {std::pair<std::string_view, bool>{"start", false}, {"nominals", true}});
+      t.number("give_up_s", tc.give_up_s, 1.0, 1e7);
+      if (!tc.facet_export_path.empty()) {
+        tc.facet_export_path = resolve(base_dir, tc.facet_export_path);
+      }
       t.finish();
     }
     {

@@ -70,18 +70,57 @@ struct SideWallConfig {
 };
 
 /// [program.touch]: touch cycles on the reference disk (reference probe) and on the test body
-/// (machine probe) while the machine warms up (S3).
+/// (machine probe) while the machine warms up, and the test grinds of the initial calibration
+/// (S3). Fixed plan (request_register = -1): reference touches, the nominal set, then a set every
+/// cycle_interval_s. With a request register the program does what the daemon's calibrator asks
+/// (core::calib::RequestCode): reference touches, lateral / end-face test grinds with the X
+/// offset in force (the chords go to the measuring device's export), nominal touches,
+/// recalibration sets.
 struct TouchConfig {
-  /// Number of recalibration cycles after the initial one, and their spacing [s].
+  /// Recalibration cycles after the nominals, and their spacing [s]: the run lasts
+  /// cycles × cycle_interval_s after the warm-up start (both modes).
   std::int32_t cycles{6};
   double cycle_interval_s{300.0};
-  /// Reference disk / test body centre [mm] and radius [mm].
+  /// Reference disk: centre [mm], centre distance at the lateral trigger (radius) [mm] and at the
+  /// axial X trigger (A at 90°) [mm].
   Vec3 reference_center_mm{100.0, 50.0, 40.0};
   double reference_radius_mm{25.0};
+  double reference_axial_radius_mm{30.0};
+  /// Test body: centre [mm] and the centre distance at the trigger [mm] (X lateral, Y, Z) and
+  /// along the stylus (X axial).
   Vec3 body_center_mm{200.0, 50.0, 40.0};
   double body_radius_mm{10.0};
-  /// Seconds between two touches of one cycle.
+  double body_axial_radius_mm{12.0};
+  /// Seconds between two touches of one set.
   double touch_time_s{2.0};
+  /// Touches per slot (X lateral, X axial, Y, Z) in one set.
+  std::int32_t touches_per_axis{1};
+  /// true: trigger positions in program coordinates (machine position − the axis offset in
+  /// force); false: machine coordinates (the offsets do not enter).
+  bool program_coordinates{true};
+  /// Static errors of the machine at the calibration positions [µm]: X (lateral), Y, Z, and X
+  /// along the stylus. An error e displaces the tool by +e; the offset that cancels it is −e.
+  Vec3 axis_error_um{0.0, 0.0, 0.0};
+  double x_axial_error_um{0.0};
+  /// The reference probe triggers this much late in the approach direction [µm].
+  double reference_pretravel_um{0.0};
+  double reference_axial_pretravel_um{0.0};
+  /// Test grinding: blank radius, nominal facet depth, the measuring device's noise (σ of a
+  /// chord), and the time a grind and its measurement take.
+  double blank_radius_mm{5.0};
+  double grind_depth_mm{0.1};
+  double chord_noise_um{0.5};
+  double grind_time_s{300.0};
+  /// The measuring device's CSV export (face,chord_plus_mm,chord_minus_mm, one row per grind,
+  /// flushed at once); empty = none.
+  std::string facet_export_path{};
+  /// Logical register with the daemon's request code; -1 = the fixed plan.
+  std::int32_t request_register{-1};
+  /// The thermal drift (effects.thermal) starts at the program start (false) or once the nominal
+  /// set is touched (true: a cold machine is calibrated, then warms up).
+  bool warm_up_after_nominals{false};
+  /// Request mode: the run ends after this much sim time even if the warm-up never started [s].
+  double give_up_s{86400.0};
 };
 
 /// [program.roll]: a roll ground along Z following a trajectory (nccomp grind-path output).

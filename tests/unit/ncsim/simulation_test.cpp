@@ -282,19 +282,23 @@ TEST(NcsimTouch, TriggerShiftIsTheDriftAndTheOffsetCancelsIt) {
   sim.advance_to(core::from_seconds(1000.0));
   ASSERT_TRUE(sim.done());
   const auto& t = sim.results().touches;
-  ASSERT_EQ(t.size(), 4U + 3U * 5U);
+  // Reference set and nominal set (X lateral, X axial, Y, Z, from +), then 2 cycles.
+  ASSERT_EQ(t.size(), 4U + 4U + 2U * 4U);
   for (const TouchRow& r : t) {
     const double sign = static_cast<double>(r.direction);
     const Vec3 c0 = r.probe == 1 ? c.touch.reference_center_mm : c.touch.body_center_mm;
-    const double rad = r.probe == 1 ? c.touch.reference_radius_mm : c.touch.body_radius_mm;
+    const double rad =
+        r.probe == 1
+            ? (r.variant == 1 ? c.touch.reference_axial_radius_mm : c.touch.reference_radius_mm)
+            : (r.variant == 1 ? c.touch.body_axial_radius_mm : c.touch.body_radius_mm);
     const double nominal = c0[static_cast<std::size_t>(r.axis)] - sign * rad;
     EXPECT_NEAR((r.trigger_position_mm - nominal) * 1000.0, r.true_drift_um, 1e-6);
     if (r.cycle == 2 && r.axis == 0) {
-      // 2 s apart at t ≈ 200 s: the offset written at 150 s cancels the drift at 200 s.
+      // A second apart at t ≈ 200 s: the offset written at 150 s cancels the drift at 200 s.
       EXPECT_NEAR(r.true_drift_um, 0.0, 0.05);
     }
     if (r.cycle == 2 && r.axis == 2) {
-      EXPECT_NEAR(r.true_drift_um, -9.0 * (1.0 - std::exp(-2.08)), 0.05);
+      EXPECT_NEAR(r.true_drift_um, -9.0 * (1.0 - std::exp(-2.04)), 0.05);
     }
   }
 }
