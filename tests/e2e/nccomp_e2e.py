@@ -95,17 +95,13 @@ def free_port():
 # Configs
 
 PATH_KEYS = re.compile(r'^(\s*(?:[a-z_]*bus_map|[a-z_]*_file)\s*=\s*)"([^"]*)"', re.M)
-# Keys that hold a list of files: the daemon's include, ncsim's extra map files.
-PATH_LISTS = re.compile(r'^(\s*(?:include|bus_map_extra|can_bus_map_extra)\s*=\s*)\[([^\]]*)\]',
-                        re.M)
+INCLUDE = re.compile(r'^(\s*include\s*=\s*)\[([^\]]*)\]', re.M)
 
 
 def stage_configs(source, run_dir, daemon_cfg, ncsim_cfg, port, overrides=None):
     """Copies config/demo/<daemon_cfg> and <ncsim_cfg> into run_dir. The Modbus map they share
     is staged as run_dir/map.toml with `port` (so runs never collide); every other file path in
-    them becomes absolute (they stay where they are). overrides: {staged name: {"table.key":
-    value}}; an included file named there by its base name (e.g. "side_wall_checkpoints.toml")
-    is staged too, with its overrides. Returns (daemon_path, ncsim_path)."""
+    them becomes absolute (they stay where they are). Returns (daemon_path, ncsim_path)."""
     demo = os.path.join(source, "config", "demo")
     with open(os.path.join(source, "config", "reference-nc-modbus.toml")) as f:
         map_text = f.read()
@@ -116,29 +112,22 @@ def stage_configs(source, run_dir, daemon_cfg, ncsim_cfg, port, overrides=None):
     with open(map_path, "w") as f:
         f.write(map_text)
 
-    overrides = overrides or {}
-
-    def fix_path(p, base):
+    def fix_path(p):
         if os.path.basename(p) == "reference-nc-modbus.toml":
             return "map.toml"
-        full = p if os.path.isabs(p) else os.path.normpath(os.path.join(base, p))
-        if os.path.basename(p) in overrides:
-            return stage(full, os.path.basename(p))
-        return full
+        return p if os.path.isabs(p) else os.path.normpath(os.path.join(demo, p))
 
-    def stage(src, out_name):
-        base = os.path.dirname(src)
-        with open(src) as f:
+    def stage(name, out_name):
+        with open(os.path.join(demo, name)) as f:
             text = f.read()
-        text = PATH_KEYS.sub(lambda m: '%s"%s"' % (m.group(1), fix_path(m.group(2), base)), text)
+        text = PATH_KEYS.sub(lambda m: '%s"%s"' % (m.group(1), fix_path(m.group(2))), text)
 
-        def fix_list(m):
+        def fix_include(m):
             items = [s.strip().strip('"') for s in m.group(2).split(",") if s.strip()]
-            return m.group(1) + "[" + ", ".join('"%s"' % fix_path(i, base) for i in items) + "]"
+            return m.group(1) + "[" + ", ".join('"%s"' % fix_path(i) for i in items) + "]"
 
-        text = PATH_LISTS.sub(fix_list, text)
-        name = os.path.basename(src)
-        for key, value in overrides.get(out_name, {}).items():
+        text = INCLUDE.sub(fix_include, text)
+        for key, value in (overrides or {}).get(out_name, {}).items():
             # "table.key" → replace the key's line inside that table.
             table, k = key.rsplit(".", 1)
             pat = re.compile(r"(^\[%s\]\s*$(?:(?!^\[).)*?^%s\s*=\s*)[^\n]*" %
@@ -151,8 +140,7 @@ def stage_configs(source, run_dir, daemon_cfg, ncsim_cfg, port, overrides=None):
             f.write(text)
         return path
 
-    return (stage(os.path.join(demo, daemon_cfg), "nccompd.toml"),
-            stage(os.path.join(demo, ncsim_cfg), "ncsim.toml"))
+    return stage(daemon_cfg, "nccompd.toml"), stage(ncsim_cfg, "ncsim.toml")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -188,25 +176,6 @@ class RunResult:
             return []
         head = lines[0].split(",")
         return [dict(zip(head, line.split(","))) for line in lines[1:] if line]
-
-    def report_json_alarms(self):
-        """ncsim's result.json "alarms": every rise of an NC alarm register."""
-        with open(os.path.join(self.out_dir, "result.json")) as f:
-            return json.load(f).get("alarms", [])
-
-    def laser(self):
-        """ncsim's laser rows of measurements.csv (dicts of strings)."""
-        return [m for m in read_csv_rows(os.path.join(self.out_dir, "measurements.csv"))
-                if m["kind"] == "laser"]
-
-    def tool_wear_paths(self):
-        """(time_s, path_mm) of every tool measurement the daemon logged (one per measurement,
-        not per edge point)."""
-        seen = {}
-        for m in self.measurements():
-            if m.get("kind") == "tool_wear":
-                seen.setdefault(m["time_s"], float(m["path_mm"]))
-        return sorted((float(t), p) for t, p in seen.items())
 
     def writes(self):
         """(t_s, register_index, value_um, effective_t_s) of every write the NC took."""
@@ -340,11 +309,6 @@ MODES = [
     ("creep", "creeping", "nccompd-creep.toml"),
     ("predict", "predictive creeping", "nccompd-predict.toml"),
 ]
-# The laser interval of the demo daemons ([creep.interval] interval_mm): ncsim measures when the
-# daemon asks (register 10). Without compensation nothing asks, so ncsim measures on its own at the
-# same interval: every mode's part sees the same laser trips.
-LASER_INTERVAL_MM = 450.0
-MODE_SETS = {"off": ["program.mould_face.measure_interval_mm=%g" % LASER_INTERVAL_MM]}
 
 
 class Check:
@@ -369,8 +333,7 @@ def run_modes(b, source, work, echo=print, speed=None, prefix="", seed=1, parall
     def one(mode):
         key, _, cfg = mode
         return key, run_machining(b, source, work, prefix + key, cfg, "ncsim-demo.toml",
-                                  seed=seed, speed=speed, echo=echo,
-                                  sets=MODE_SETS.get(key, []))
+                                  seed=seed, speed=speed, echo=echo)
     if not parallel:
         return dict(one(m) for m in MODES)
     import concurrent.futures
@@ -403,26 +366,13 @@ def scenario_modbus_modes(b, source, work):
         c.that(r.report["bad_rows"] == 0, "%s: no bad rows in the result" % label)
         c.that(not r.alarms("alarm"), "%s: no alarm logged (%s)" % (label, r.alarms("alarm")))
         c.that(r.report["alarms_seen"] == 0, "%s: NC saw no alarm" % label)
-        if key != "off":
-            # The alarm register is live: the daemon wrote its flag (0) to the NC's register 9.
-            c.that(any(w[1] == ALARM_REGISTER for w in r.writes()) and
-                   r.report["registers"].get(str(ALARM_REGISTER)) == 0,
-                   "%s: the daemon's alarm flag reached the NC's register %d, at 0" %
-                   (label, ALARM_REGISTER))
-            check_laser_on_request(c, r, label, LASER_INTERVAL_MM)
-    laser_off = [float(m["cut_path_mm"]) for m in res["off"].laser()]
-    steps_off = [b_ - a_ for a_, b_ in zip([0.0] + laser_off, laser_off)]
-    c.that(len(laser_off) == 4 and all(LASER_INTERVAL_MM <= d < LASER_INTERVAL_MM + 0.1
-                                       for d in steps_off),
-           "off: ncsim measured on its own every %g mm (+ one model step): %s" %
-           (LASER_INTERVAL_MM, laser_off))
     off, step, creep, pred = (res[k].report for k in ("off", "step", "creep", "predict"))
-    c.that(off["writes_received"] == 0 or all(abs(v) < 1e-9 for v in offsets(off).values()),
+    c.that(off["writes_received"] == 0 or all(abs(v) < 1e-9 for v in off["registers"].values()),
            "off: no offset applied (registers %s)" % off["registers"])
     for rep, label in ((step, "step"), (creep, "creep"), (pred, "predict")):
-        c.that(rep["writes_received"] > 0 and any(abs(v) > 0.5 for v in offsets(rep).values()),
+        c.that(rep["writes_received"] > 0 and any(abs(v) > 0.5 for v in rep["registers"].values()),
                "%s: registers written (%d writes, last %s)" % (label, rep["writes_received"],
-                                                               offsets(rep)))
+                                                               rep["registers"]))
     ss, cs, ps = (r["surface"] for r in (step, creep, pred))
     c.that(ss["max_offset_step_um"] > 2.0,
            "step correction moves the offset at once: %.3f um > 2 um" % ss["max_offset_step_um"])
@@ -446,59 +396,6 @@ def scenario_modbus_modes(b, source, work):
     c.done()
 
 
-ALARM_REGISTER = 9  # config/demo/nc-flags-modbus.toml
-REQUEST_REGISTER = 10
-
-
-def offsets(report):
-    """The last value of every offset register the NC took (the flag registers left out)."""
-    return {k: v for k, v in report["registers"].items()
-            if int(k) not in (ALARM_REGISTER, REQUEST_REGISTER)}
-REQUEST_TOLERANCE_MM = 3.0
-
-
-LASER_TRIP_S = 4.0  # ncsim-demo.toml program.mould_face.laser_trip_s: measured half-way
-
-
-def request_edges(r):
-    """Times [s] at which the NC's request register went from 0 to 1 (the value in force)."""
-    edges, v = [], 0.0
-    for _, reg, val, eff in r.writes():
-        if reg == REQUEST_REGISTER:
-            if v == 0.0 and val != 0.0:
-                edges.append(eff)
-            v = val
-    return edges
-
-
-def check_laser_on_request(c, r, label, interval_mm, min_trips=3):
-    """The laser measured when the daemon asked, and only then: every rise of the NC's request
-    register (the daemon's "measurement due" flag) sent the tool to the laser (measured half-way
-    through the trip), there was no other trip, the daemon logged each measurement at ncsim's
-    time, each interval_mm of the daemon's cut path after the previous one (plus the request's
-    lag: one cycle and the NC's latency, ~1 mm)."""
-    due = [a for a in r.alarms("info") if a[1] == 24]
-    edges = request_edges(r)
-    laser = r.laser()
-    logged = r.tool_wear_paths()
-    c.that(len(laser) >= min_trips and len(laser) == len(edges) == len(logged) and
-           len(due) >= len(edges),
-           "%s: %d laser trips, %d rises of the request register, %d measurements logged "
-           "(equal, >= %d), %d requests raised" %
-           (label, len(laser), len(edges), len(logged), min_trips, len(due)))
-    c.that(len(laser) == len(edges) and
-           all(0 <= float(m["t_s"]) - e - LASER_TRIP_S / 2 <= 0.05 for m, e in zip(laser, edges)),
-           "%s: each trip started when the request reached the NC (at %s s; laser at %s s)" %
-           (label, ["%.3f" % e for e in edges], [m["t_s"] for m in laser]))
-    c.that(all(abs(float(m["t_s"]) - t) < 0.02 for m, (t, _) in zip(laser, logged)),
-           "%s: laser at %s s, the daemon logged %s s" %
-           (label, [m["t_s"] for m in laser], [t for t, _ in logged]))
-    steps = [b - a for a, b in zip([0.0] + [p for _, p in logged], [p for _, p in logged])]
-    c.that(all(interval_mm <= d <= interval_mm + REQUEST_TOLERANCE_MM for d in steps),
-           "%s: the daemon's cut path between measurements %s mm is its interval %g mm (+ < %g)" %
-           (label, ["%.2f" % d for d in steps], interval_mm, REQUEST_TOLERANCE_MM))
-
-
 def value_in_force(writes, register, t_s):
     """The value of `register` the NC took last at or before t_s (0 before any write)."""
     v = 0.0
@@ -510,49 +407,26 @@ def value_in_force(writes, register, t_s):
 
 def scenario_broken_tool(b, source, work):
     """Part (a) with creeping; the tool breaks after the first laser measurement: alarm 23
-    (tool_broken_or_mismeasured) in the daemon's log and on the NC's alarm register, and nothing
-    of that measurement applied. The daemon asks for the laser every 600 mm here (not the demo's
-    450 mm; ncsim's config is unchanged): the trips follow the daemon's interval."""
+    (tool_broken_or_mismeasured), and nothing of that measurement applied."""
     r = run_machining(b, source, work, "broken_tool", "nccompd-creep.toml", "ncsim-demo.toml",
                       sets=["broken_tool.enabled=true", "broken_tool.at_path_mm=700"],
-                      overrides={"nccompd.toml": {"creep.interval.interval_mm": "600.0"}},
                       echo=print)
     c = Check("broken_tool")
     c.that(r.ncsim_rc in (0, 4) and r.daemon_rc == 0,
            "ncsim exit %d, nccompd exit %d" % (r.ncsim_rc, r.daemon_rc))
     c.that(("tool_broken_or_mismeasured", 23) in r.alarms("alarm"),
            "alarm tool_broken_or_mismeasured (code 23) logged: %s" % r.alarms("alarm"))
-    # The daemon asks again in the cycle it refuses the broken measurement (its cut path since the
-    # last accepted one is beyond the interval), so its flag never drops and the NC, which reacts
-    # to a rise, does not go again: two trips for three requests.
-    check_laser_on_request(c, r, "broken_tool", 600.0, min_trips=2)
-    laser = r.laser()
-    c.that(len(laser) >= 2 and laser[0]["broken"] == "0" and laser[1]["broken"] == "1" and
-           float(laser[1]["true_um"]) > 300.0,
-           "ncsim: the second laser reading (at %s mm) reports the broken tool, true wear %s um" %
-           (laser[1]["cut_path_mm"] if len(laser) > 1 else "-",
-            laser[1]["true_um"] if len(laser) > 1 else "-"))
     # One row per edge support point: a measurement is one time.
-    times = [t for t, _ in r.tool_wear_paths()]
+    times = sorted({float(m["time_s"]) for m in r.measurements() if m.get("kind") == "tool_wear"})
     c.that(len(times) >= 2, "the laser measured at least twice (at %s s)" % times)
-    # The NC showed the alarm: its alarm register (the daemon's creep alarm flag) rose once, right
-    # after the broken measurement, and the daemon's code for it is 23.
-    alarms = r.report_json_alarms()
-    c.that(r.report["alarms_seen"] == 1 and len(alarms) == 1 and
-           alarms[0]["register"] == ALARM_REGISTER and len(times) >= 2 and
-           times[1] <= alarms[0]["t_s"] <= times[1] + 0.1,
-           "NC alarm register %d rose once, just after the broken measurement at %s s: %s" %
-           (ALARM_REGISTER, times[1] if len(times) > 1 else "-", alarms))
     writes = r.writes()
     if len(times) >= 2:
-        # The broken measurement is the first one after the break (path 700 mm; the daemon asks
-        # every 600 mm). Everything the NC took from then on must hold the value in force then:
+        # The broken measurement is the first one after the break (path 700 mm; ncsim measures
+        # every 450 mm). Everything the NC took from then on must hold the value in force then:
         # nothing applied, creep frozen.
         t_broken = times[1]
         regs = sorted({w[1] for w in writes})
         for reg in regs:
-            if reg in (ALARM_REGISTER, REQUEST_REGISTER):
-                continue  # flags, not offsets
             held = value_in_force(writes, reg, t_broken + 0.05)
             later = [w[2] for w in writes if w[1] == reg and w[0] > t_broken + 0.05]
             c.that(all(abs(v - held) < 1e-6 for v in later),
@@ -563,8 +437,8 @@ def scenario_broken_tool(b, source, work):
             c.that(abs(final - held) < 1e-6,
                    "register %d ends at %.3f um, the value held at the break" % (reg, final))
         # The creep in progress was frozen: what it had fed in stays, never the 300 um jump.
-        c.that(any(abs(v) > 0.5 for v in offsets(r.report).values()),
-               "the wear measured before the break was applied: %s" % offsets(r.report))
+        c.that(any(abs(v) > 0.5 for v in r.report["registers"].values()),
+               "the wear measured before the break was applied: %s" % r.report["registers"])
     c.done()
 
 
@@ -749,8 +623,8 @@ def scenario_can_modes(b, source, work):
         c.that(not r.alarms("alarm"), "%s: no alarm logged (%s)" % (key, r.alarms("alarm")))
         c.that(r.report["bus"] == "can" and r.report["writes_received"] > 0,
                "%s: offsets written over CAN (%d)" % (key, r.report["writes_received"]))
-        c.that(any(abs(v) > 0.5 for v in offsets(r.report).values()),
-               "%s: registers hold the wear correction: %s" % (key, offsets(r.report)))
+        c.that(any(abs(v) > 0.5 for v in r.report["registers"].values()),
+               "%s: registers hold the wear correction: %s" % (key, r.report["registers"]))
     ss, cs = res["step"].report["surface"], res["creep"].report["surface"]
     c.that(ss["max_step_um"] > 2.0, "step correction cuts a step: %.3f um" % ss["max_step_um"])
     c.that(cs["max_step_um"] < 0.25 * ss["max_step_um"],
