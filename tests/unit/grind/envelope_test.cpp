@@ -9,17 +9,12 @@
 
 #include "core/grind/profile.hpp"
 #include "core/grind/wheel.hpp"
+#include "tests/unit/grind/sampled.hpp"
 
 namespace nccomp::core::grind {
 namespace {
 
-UniformProfile sampled(double z0, double dz, std::size_t n, auto&& fn) {
-  UniformProfile p{z0, dz, std::vector<double>(n)};
-  for (std::size_t i = 0; i < n; ++i) {
-    p.u_mm[i] = fn(p.z_at(static_cast<std::ptrdiff_t>(i)));
-  }
-  return p;
-}
+using test::sampled;
 
 // GIVEN random profiles with every kind of feature (noise, steps, spikes, flat runs),
 // WHEN the O(N) deque computes the envelope, THEN it equals brute force everywhere, including

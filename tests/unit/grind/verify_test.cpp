@@ -8,17 +8,12 @@
 
 #include "core/grind/envelope.hpp"
 #include "core/grind/local_rule.hpp"
+#include "tests/unit/grind/sampled.hpp"
 
 namespace nccomp::core::grind {
 namespace {
 
-UniformProfile sampled(double z0, double dz, std::size_t n, auto&& fn) {
-  UniformProfile p{z0, dz, std::vector<double>(n)};
-  for (std::size_t i = 0; i < n; ++i) {
-    p.u_mm[i] = fn(p.z_at(static_cast<std::ptrdiff_t>(i)));
-  }
-  return p;
-}
+using test::sampled;
 
 std::vector<TrajectoryPoint> as_points(const UniformProfile& p) {
   std::vector<TrajectoryPoint> q(p.size());
