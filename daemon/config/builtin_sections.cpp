@@ -350,7 +350,15 @@ std::vector<Where> keys_naming(const Config& c, const std::string& section, cons
 }
 
 std::string at(const Where& w) {
-  return w.key_path + ", " + w.file + (w.line > 0 ? ":" + std::to_string(w.line) : "");
+  // Appended piece by piece: GCC 12 -O3 reports a false -Wrestrict for "x" + std::string.
+  std::string s = w.key_path;
+  s += ", ";
+  s += w.file;
+  if (w.line > 0) {
+    s += ':';
+    s += std::to_string(w.line);
+  }
+  return s;
 }
 
 }  // namespace
