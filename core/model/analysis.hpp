@@ -33,8 +33,9 @@ struct Dataset {
   /// made before the active compensation took its share).
   std::vector<double> target_um;
   /// The order of the rows in time over several files, for the time-ordered split: time_s
-  /// within a file, each file after the previous one (time_s starts again at every warm start).
-  /// Empty, or of another length than the rows: time_s itself.
+  /// within a file, each of nccompd's logs after the previous one (time_s starts again at every
+  /// warm start); mapped foreign CSVs keep their time_s. Empty, or of another length than the
+  /// rows: time_s itself.
   std::vector<double> order_s;
 
   Dataset();

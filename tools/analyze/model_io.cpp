@@ -674,7 +674,9 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
   double last_time = -std::numeric_limits<double>::infinity();
   const std::size_t start_rows = data.rows();
   // The order over files: this file's time_s, moved after the previous files' rows when its
-  // times start earlier (a log of the next warm start).
+  // times start earlier (nccompd's log of the next warm start). A mapped foreign CSV keeps its
+  // times: several of them are often parallel series (two cutters, two gauges), not one after
+  // another.
   data.order_s.resize(start_rows, cm::kUnknown);
   double previous_end = -std::numeric_limits<double>::infinity();
   for (const double v : data.order_s) {
@@ -760,7 +762,7 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
     }
     const double t_s = values[time_col];
     if (std::isfinite(t_s) && std::isnan(order_offset)) {
-      order_offset = t_s <= previous_end ? previous_end + 1.0 - t_s : 0.0;
+      order_offset = !mapped && t_s <= previous_end ? previous_end + 1.0 - t_s : 0.0;
     }
     if (std::isfinite(t_s)) {
       if (t_s < last_time) {

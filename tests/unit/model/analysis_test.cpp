@@ -240,6 +240,25 @@ TEST(SeveralFiles, TheHeldOutRowsAreTheLastFileWhenTimeStartsAgainAtAWarmStart) 
   }
   EXPECT_EQ(held_day1, 0U);
   EXPECT_EQ(held_day2, d.rows() / 4);
+  // The same files through a column mapping (foreign CSVs, often parallel series such as two
+  // cutters) keep their own times: the split takes the last quarter of the time of both.
+  nccomp::tools::model_io::Mapping m;
+  for (const auto& name : cm::kStandardColumnNames) {
+    if (name != "kind") m.columns.emplace_back(name, name);
+  }
+  m.columns.emplace_back("measured_um", "measured_um");
+  m.constant.emplace_back("kind", 1.0);  // contour
+  cm::Dataset p;
+  day1.clear();
+  day1.seekg(0);
+  day2.clear();
+  day2.seekg(0);
+  nccomp::tools::model_io::read_log(day1, "day1.csv", m, p);
+  nccomp::tools::model_io::read_log(day2, "day2.csv", m, p);
+  ASSERT_EQ(p.order_s.size(), p.rows());
+  for (std::size_t i = 0; i < p.rows(); ++i) {
+    ASSERT_DOUBLE_EQ(p.order_s[i], p.columns[0][i]) << i;
+  }
 }
 
 TEST(FinalModel, EvaluatesToTheFittedPrediction) {
