@@ -170,24 +170,45 @@ std::unique_ptr<ModelSection> parse_model_section(const toml::node& node,
     if (t->contains("angle_deg")) {
       a.apply.angle_deg = q.number("angle_deg", std::nullopt, -360.0, 360.0);
     }
+    // Several terms may share a name (analyze adds thermal_drift in time, in a temperature, as
+    // a lag of the speed): the column and the form choose among them.
+    const std::string column = t->contains("column") ? q.string("column", std::nullopt) : "";
+    const std::string form = t->contains("form") ? q.string("form", std::nullopt) : "";
     q.finish();
     if (s->loaded && !a.term.empty()) {
       int found = -1;
       int count = 0;
       const auto& terms = s->model.terms();
+      const auto& extras = s->model.extra_columns();
+      auto describe = [&](const cm::TermSpec& spec) {
+        return spec.name + " (" +
+               (spec.form == cm::Form::kConstant ? std::string("constant")
+                                                 : cm::column_name(spec.column, extras) + ", " +
+                                                       std::string(cm::form_name(spec.form))) +
+               ")";
+      };
       for (std::size_t k = 0; k < terms.size(); ++k) {
-        if (terms[k].spec.name == a.term) {
-          found = static_cast<int>(k);
-          ++count;
+        const cm::TermSpec& spec = terms[k].spec;
+        if (spec.name != a.term) continue;
+        if (!column.empty() &&
+            (spec.form == cm::Form::kConstant || cm::column_name(spec.column, extras) != column)) {
+          continue;
         }
+        if (!form.empty() && cm::form_name(spec.form) != form) continue;
+        found = static_cast<int>(k);
+        ++count;
       }
       if (count != 1) {
         std::string names;
-        for (const auto& term : terms) names += (names.empty() ? "" : ", ") + term.spec.name;
-        diag.error(q.where("term"),
-                   count == 0 ? "no term '" + a.term + "' in " + s->file + " (" + names + ")"
-                              : "term '" + a.term + "' appears " + std::to_string(count) +
-                                    " times in " + s->file);
+        for (const auto& term : terms) names += (names.empty() ? "" : ", ") + describe(term.spec);
+        const std::string which = "'" + a.term + "'" +
+                                  (column.empty() ? "" : " of column '" + column + "'") +
+                                  (form.empty() ? "" : " of form '" + form + "'");
+        diag.error(q.where("term"), count == 0
+                                        ? "no term " + which + " in " + s->file + " (" + names + ")"
+                                        : "term " + which + " appears " + std::to_string(count) +
+                                              " times in " + s->file + " (" + names +
+                                              "): choose one with column = … and / or form = …");
       } else {
         a.apply.term_index = static_cast<std::size_t>(found);
         const std::string problem =

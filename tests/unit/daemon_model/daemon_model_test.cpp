@@ -10,6 +10,7 @@
 #include <fstream>
 #include <map>
 #include <memory>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -810,6 +811,164 @@ TEST(MeasurementLogTime, AWarmStartStartsANewFileAndARestartContinuesTheCurrentO
   EXPECT_EQ(warm[2].rfind("9.000000,", 0), 0U) << warm[2];
   ASSERT_EQ(current.size(), 2U);
   EXPECT_EQ(current[1].rfind("3.000000,", 0), 0U) << current[1];
+}
+
+std::string read_text(const std::string& path) {
+  std::ifstream in(path);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+TEST(MeasurementRows, S1ProbeRowsCarryTheFinishingToolsCutPathAndTheSensor) {
+  // The checkpoint example of docs/checkpoints.md (finishing tool 12, live radius register 19,
+  // table from 20) and the log's temperature on sensor 2.
+  TempDir d;
+  std::string regs = "[loopback]\n";
+  for (int i = 0; i < 76; ++i) {
+    const std::string kind =
+        i == 19 ? "tool_radius_wear" : (i >= 20 ? "checkpoint" : "tool_length_wear");
+    regs += "[[registers]]\nname = \"r" + std::to_string(i) + "\"\nkind = \"" + kind +
+            "\"\nbus = \"loopback\"\nmax_abs_um = 100\nmax_step_um = 50\n"
+            "max_rate_um_per_s = 100000\n";
+  }
+  auto r =
+      config::load_file(d.write("a.toml", "include = [\"" + std::string(NCCOMP_SOURCE_DIR) +
+                                              "/tests/unit/checkpoint/data/boss.toml\"]\n" + regs +
+                                              "[measurement_context]\ntemperature_sensor = 2\n"));
+  ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+  auto e = config::build_engine(*r.config);
+  constexpr std::int64_t kS = 1'000'000'000;
+  core::StepOutput out;
+  std::int64_t t = 100 * kS;
+  // Tool 12 finishes the part: 41 cutting samples 1 mm apart (40 mm), from 100 s.
+  e->step(t,
+          std::vector<core::Event>{core::ToolChange{t, 12, false}, sample(0.0, 0.0, 12, true),
+                                   core::TemperatureSample{t, 2, 22.75}},
+          out);
+  for (int k = 1; k <= 40; ++k) {
+    e->step(t += kS / 10, std::vector<core::Event>{sample(k, 0.0, 12, true)}, out);
+  }
+  // The probe (tool 30 in the spindle, no cutting) measures checkpoint 5 at 160 s.
+  t = 160 * kS;
+  e->step(t,
+          std::vector<core::Event>{core::ToolChange{t, 30, false}, sample(40.0, 0.0, 30, false),
+                                   core::ProbeMeasurement{t, 1, 5, 3.0, 3.0, 2.0, {1, 2, 3}}},
+          out);
+  ASSERT_EQ(out.records.size(), 1U);
+  const core::MeasurementRecord& rec = out.records[0];
+  EXPECT_EQ(rec.kind, core::MeasurementKind::kContour);
+  EXPECT_EQ(rec.tool, 12);
+  EXPECT_DOUBLE_EQ(rec.path_mm, 40.0);
+  EXPECT_DOUBLE_EQ(rec.temp_c, 22.75);
+  // Since the warm start, the first motion at 100.1 s.
+  EXPECT_EQ(rec.time_ns, 59'900'000'000);
+  const std::string row = format_measurement_row(rec);
+  EXPECT_EQ(row.rfind("59.900000,1,12,contour,5,", 0), 0U) << row;
+  EXPECT_NE(row.find(",40.000,22.750,"), std::string::npos) << row;
+}
+
+TEST(MeasurementRows, S0ToolWearRowsCarryTheSensor) {
+  // The creep example of docs/creep.md with its registers; the temperature on sensor 0 (the
+  // default when there is no [measurement_context]).
+  const std::string md = read_text(std::string(NCCOMP_SOURCE_DIR) + "/docs/creep.md");
+  const auto h = md.find("### Example");
+  const auto b = md.find("```toml\n", h);
+  const auto x = md.find("```", b + 8);
+  ASSERT_NE(x, std::string::npos);
+  std::string regs = "[loopback]\n";
+  for (const char* n : {"X_wear_offset", "Y_wear_offset", "Z_wear_offset"}) {
+    regs += std::string("[[registers]]\nname = \"") + n +
+            "\"\nkind = \"axis_offset\"\nbus = \"loopback\"\nmax_abs_um = 100\nmax_step_um = "
+            "50\nmax_rate_um_per_s = 100000\n";
+  }
+  for (const char* n : {"creep_warning", "creep_alarm", "measure_request", "sister_request"}) {
+    regs += std::string("[[registers]]\nname = \"") + n +
+            "\"\nkind = \"flag\"\nbus = \"loopback\"\nmax_abs_um = 1\n";
+  }
+  TempDir d;
+  auto r = config::load_file(d.write("a.toml", regs + md.substr(b + 8, x - b - 8)));
+  ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+  auto e = config::build_engine(*r.config);
+  constexpr std::int64_t kS = 1'000'000'000;
+  core::StepOutput out;
+  std::int64_t t = 10 * kS;
+  e->step(t,
+          std::vector<core::Event>{core::ToolChange{t, 1, false}, sample(0.0, 0.0, 1, true),
+                                   core::TemperatureSample{t, 0, 24.5}},
+          out);
+  for (int k = 1; k <= 30; ++k) {
+    e->step(t += kS, std::vector<core::Event>{sample(k, 0.0, 1, true)}, out);
+  }
+  core::ToolMeasurement m;
+  m.time_ns = t + kS;
+  m.tool = 1;
+  m.point_count = 1;
+  m.wear_um[0] = 2.0;
+  e->step(t += kS, std::vector<core::Event>{m}, out);
+  ASSERT_EQ(out.records.size(), 7U);  // one row per edge support point
+  for (const auto& rec : out.records) {
+    EXPECT_EQ(rec.kind, core::MeasurementKind::kToolWear);
+    EXPECT_DOUBLE_EQ(rec.path_mm, 30.0);  // creep's own count, the same as the context's
+    EXPECT_DOUBLE_EQ(rec.temp_c, 24.5);
+    EXPECT_EQ(rec.time_ns, 30 * kS);  // warm start at the first motion, 11 s
+  }
+  EXPECT_DOUBLE_EQ(e->context().cut_path_mm(), 30.0);
+}
+
+TEST(ModelInputs, TheFlThermalModelRunsInTheLoopWithItsExtraColumnsOnSensors) {
+  // The model analyze fitted to FL_THERMAL gauge ch1 (docs/closing-the-loop.md): four terms are
+  // called thermal_drift; the column chooses. t5 (temp_c) is the log's sensor 0, the ambient t1
+  // is sensor 1, the spindle speed is published on sensor channel 5.
+  const std::string model =
+      std::string(NCCOMP_SOURCE_DIR) + "/bench/model/figures/fl_thermal_ch1/model.toml";
+  const cm::Model fitted = tools::model_io::load_model_file(model);
+  TempDir d;
+  const std::string head = registers_toml() + "[model]\nfile = \"" + model +
+                           "\"\nupdate = \"cycle\"\n"
+                           "[[model.inputs]]\ncolumn = \"t1_c\"\nsensor = 1\n"
+                           "[[model.inputs]]\ncolumn = \"spindle_rpm\"\nsensor = 5\n";
+  auto ambiguous = config::load_file(d.write(
+      "a.toml", head + "[[model.apply]]\nterm = \"thermal_drift\"\nregister = \"checkpoint_0\"\n"));
+  ASSERT_FALSE(ambiguous.config);
+  EXPECT_NE(ambiguous.diagnostics.to_string().find(
+                "term 'thermal_drift' appears 4 times in " + model +
+                " (offset (constant), thermal_drift (temp_c, linear), thermal_drift "
+                "(spindle_rpm, lag), thermal_drift (t1_c, linear), level_change (time_s, step), "
+                "thermal_drift (time_s, exp_rise)): choose one with column = … and / or form = …"),
+            std::string::npos)
+      << ambiguous.diagnostics.to_string();
+  auto r = config::load_file(d.write(
+      "b.toml", head + "[[model.apply]]\nterm = \"thermal_drift\"\ncolumn = \"spindle_rpm\"\n"
+                       "register = \"checkpoint_0\"\n"
+                       "[[model.apply]]\nterm = \"thermal_drift\"\ncolumn = \"t1_c\"\n"
+                       "register = \"checkpoint_1\"\n"
+                       "[[model.apply]]\nterm = \"thermal_drift\"\ncolumn = \"temp_c\"\n"
+                       "form = \"linear\"\nregister = \"checkpoint_1\"\n"));
+  ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+  const auto* s = model_section(*r.config);
+  ASSERT_EQ(s->applies.size(), 3U);
+  EXPECT_EQ(s->applies[0].apply.term_index, 2U);
+  EXPECT_EQ(s->applies[1].apply.term_index, 3U);
+  EXPECT_EQ(s->applies[2].apply.term_index, 1U);
+  auto e = config::build_engine(*r.config);
+  const auto* m = static_cast<const ModelModule*>(&e->module(0));
+  constexpr std::int64_t kS = 1'000'000'000;
+  core::StepOutput out;
+  // Cold spindle, then 5000 rpm; t5 = 31 °C, t1 = 19.5 °C.
+  e->step(kS,
+          std::vector<core::Event>{core::TemperatureSample{0, 5, 0.0},
+                                   core::TemperatureSample{0, 0, 31.0},
+                                   core::TemperatureSample{0, 1, 19.5}},
+          out);
+  e->step(2 * kS, std::vector<core::Event>{core::TemperatureSample{0, 5, 5000.0}}, out);
+  const double tau_s = fitted.terms()[2].spec.scale;
+  e->step(2 * kS + static_cast<std::int64_t>(tau_s * 1e9), {}, out);
+  EXPECT_NEAR(m->trim_um(0), -fitted.terms()[2].coef[0] * 5000.0 * (1.0 - std::exp(-1.0)), 1e-6);
+  EXPECT_NEAR(m->trim_um(1), -fitted.terms()[3].coef[0] * 19.5, 1e-9);
+  EXPECT_NEAR(m->trim_um(2), -fitted.terms()[1].coef[0] * 31.0, 1e-9);
+  // 5000 rpm for one time constant: about 15 µm of the 23.5 µm the speed term predicts at rest.
+  EXPECT_GT(std::fabs(m->trim_um(0)), 10.0);
 }
 
 }  // namespace
