@@ -8,9 +8,9 @@
 // (the driver's poll_overruns counter in the status JSON), no dropped event, and the loop ran.
 //
 // Usage: bench_modbus_nccompd [seconds_per_rate] [--fifo]
-// --fifo: the daemon's loop thread at SCHED_FIFO 50 ([daemon] sched_fifo_priority), this process
-// (the NC server's thread) too; the driver's I/O thread stays SCHED_OTHER (the daemon does not
-// raise it).
+// --fifo: the daemon's loop thread at SCHED_FIFO 50 ([daemon.realtime] sched_fifo_priority), this
+// process (the NC server's thread) too; nccompd is spawned at SCHED_OTHER, so its driver I/O
+// thread stays there (the daemon raises only its loop thread).
 #include <fcntl.h>
 #include <sched.h>
 #include <signal.h>
@@ -44,7 +44,7 @@ std::string config_text(std::uint16_t port, double rate_hz, bool fifo) {
   std::ostringstream s;
   s << "[daemon]\nrate_hz = " << rate_hz << "\n";
   if (fifo) {
-    s << "sched_fifo_priority = 50\n";
+    s << "[daemon.realtime]\nsched_fifo_priority = 50\n";
   }
   s << "[state]\ndirectory = \"state\"\nmin_interval_s = 0.5\n"
     << "[measurement_log]\ndirectory = \"log\"\n"
@@ -135,11 +135,20 @@ pid_t spawn_daemon(const fs::path& dir) {
   const std::string log = (dir / "nccompd.log").string();
   posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
   posix_spawn_file_actions_adddup2(&fa, 1, 2);
+  // The daemon starts at normal priority whatever this process runs at: only its loop thread
+  // raises itself ([daemon.realtime]), as in production.
+  posix_spawnattr_t attr;
+  posix_spawnattr_init(&attr);
+  sched_param sp{};
+  posix_spawnattr_setschedpolicy(&attr, SCHED_OTHER);
+  posix_spawnattr_setschedparam(&attr, &sp);
+  posix_spawnattr_setflags(&attr, POSIX_SPAWN_SETSCHEDULER);
   pid_t pid = -1;
-  if (posix_spawn(&pid, bin.c_str(), &fa, nullptr, argv.data(), environ) != 0) {
+  if (posix_spawn(&pid, bin.c_str(), &fa, &attr, argv.data(), environ) != 0) {
     std::perror("posix_spawn nccompd");
     std::exit(1);
   }
+  posix_spawnattr_destroy(&attr);
   posix_spawn_file_actions_destroy(&fa);
   return pid;
 }
@@ -206,8 +215,12 @@ int main(int argc, char** argv) {
       std::this_thread::sleep_for(20ms);
     }
     if (!a || !a->up) {
-      std::printf("| %.0f | the bus did not come up (see %s/nccompd.log) |\n", rate, dir.c_str());
       stop_daemon(pid);
+      std::ifstream in(dir / "nccompd.log");
+      std::ostringstream log;
+      log << in.rdbuf();
+      std::printf("| %.0f | the bus did not come up; nccompd's log: |\n%s\n", rate,
+                  log.str().c_str());
       continue;
     }
     std::this_thread::sleep_for(1s);  // warm-up, not measured
