@@ -74,7 +74,8 @@ int main(int argc, char** argv) {
       now = from_seconds(t_s);
       const auto [plus, minus] = m.test_grind(end, c.grind_correction_um());
       char buf[160];
-      std::snprintf(buf, sizeof buf, "time %.0f\nfacets %s %.4f %.4f\n", t_s,
+      // A grind and its measurement take 10 min; the X register carries the grind's dx by then.
+      std::snprintf(buf, sizeof buf, "wait 600\nfacets %s %.4f %.4f\n",
                     end ? "end-face" : "lateral", plus, minus);
       f << buf;
       c.enter_facets(end ? Face::kEndFace : Face::kLateral, plus, minus, now, out);
@@ -83,7 +84,7 @@ int main(int argc, char** argv) {
   t_s += 300.0;
   now = from_seconds(t_s);
   f << "# machine probe on the grinding head touches the test body: the nominals\n"
-    << "time " << t_s << "\n";
+    << "wait 300\n";
   for (std::size_t slot = 0; slot < 4; ++slot) {
     for (int i = 0; i < cfg.touches_per_axis; ++i) {
       const auto t = m.machine_touch(slot, 1, now);

@@ -109,11 +109,14 @@ bool Session::run(const Command& command, std::size_t line_no) {
             step({});
             report(true);
           }
+          // "-" for a register not written yet (a test grind writes X only).
+          const auto um = [](double v) {
+            return std::isfinite(v) ? fmt::format("{:+.3f}", v) : std::string("-");
+          };
           out_ << fmt::format(
-              "[{:9.1f} s] waited {:.0f} s, {} register writes; X {:+.3f} Y {:+.3f} "
-              "Z {:+.3f} um\n",
-              time_s(), c.duration_s, pending_writes_, last_written_[0], last_written_[1],
-              last_written_[2]);
+              "[{:9.1f} s] waited {:.0f} s, {} register writes; X {} Y {} Z {} um\n", time_s(),
+              c.duration_s, pending_writes_, um(last_written_[0]), um(last_written_[1]),
+              um(last_written_[2]));
           return true;
         } else if constexpr (std::is_same_v<T, CmdTemperature>) {
           const core::Event e = core::TemperatureSample{now_ns_, c.sensor, c.temperature_c};

@@ -1,0 +1,271 @@
+// Helpers of the whole-process calibration tests (daemon_calib_test.cpp, prompt_test.cpp): an
+// nccompd process on the loopback bus with the machine of test_config(), requests on its status
+// socket, JSON values.
+#pragma once
+
+#include <fcntl.h>
+#include <gtest/gtest.h>
+#include <poll.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <optional>
+#include <regex>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "tests/unit/calib/sim_machine.hpp"
+#include "tests/unit/calib/test_config.hpp"
+#include "tools/calibrate/daemon_client.hpp"
+
+extern char** environ;
+
+namespace nccomp::test::calib {
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+
+// The machine of test_config() on registers 0..2, request flag on 3.
+// limiter_step_um / limiter_rate: the calibration's own limiter (the restart test makes it slow,
+// so that a restart that forgot where the NC is would show as a dip).
+inline std::string config_text(const std::string& extra_calibration = "",
+                               double limiter_step_um = 50.0,
+                               double limiter_rate_um_per_s = 500.0) {
+  std::ostringstream s;
+  s << "[daemon]\nrate_hz = 200\n"
+    << "[state]\ndirectory = \"state\"\nmin_interval_s = 0.05\n"
+    << "[measurement_log]\ndirectory = \"log\"\n"
+    << "[status]\nsocket_path = \"status.sock\"\n"
+    << "[loopback]\n";
+  for (const char* n : {"X_offset", "Y_offset", "Z_offset"}) {
+    s << "[[registers]]\nname = \"" << n << "\"\nkind = \"axis_offset\"\nbus = \"loopback\"\n"
+      << "max_abs_um = 200\nmax_step_um = 50\nmax_rate_um_per_s = 500\n";
+  }
+  s << "[[registers]]\nname = \"calibration_request\"\nkind = \"flag\"\nbus = \"loopback\"\n"
+    << "max_abs_um = 10\n";
+  const auto c = test_config();
+  s << "[calibration]\nregister_x = 0\nregister_y = 1\nregister_z = 2\nrequest_register = 3\n"
+    << "reference_x_lateral_mm = " << c.reference_x_lateral_mm << "\n"
+    << "reference_x_axial_mm = " << c.reference_x_axial_mm << "\n"
+    << "reference_y_mm = " << c.reference_y_mm << "\nreference_z_mm = " << c.reference_z_mm
+    << "\nreference_contact_mm = " << c.reference_contact_mm
+    << "\nreference_axial_contact_mm = " << c.reference_axial_contact_mm << "\n"
+    << "touches_per_axis = 2\nblank_radius_mm = 5.0\nmax_test_grinds = 10\n"
+    << "prediction = \"none\"\ncreep_shape = \"linear\"\ncreep_duration_s = 4.0\n"
+    << "write_period_s = 0.05\nwrite_deadband_um = 0.01\n"
+    << "max_step_um = " << limiter_step_um << "\nmax_rate_um_per_s = " << limiter_rate_um_per_s
+    << "\nrecalibration_interval_s = 0\n"
+    << extra_calibration;
+  return s.str();
+}
+
+struct TempDir {
+  TempDir() {
+    path = fs::temp_directory_path() /
+           ("nccompd_calib_" + std::to_string(::getpid()) + "_" + std::to_string(n++));
+    fs::remove_all(path);
+    fs::create_directories(path);
+  }
+  ~TempDir() { fs::remove_all(path); }
+  void write(const std::string& name, const std::string& text) const {
+    std::ofstream(path / name) << text;
+  }
+  static inline int n = 0;
+  fs::path path;
+};
+
+class Daemon {
+ public:
+  explicit Daemon(fs::path dir) : dir_(std::move(dir)) {}
+  ~Daemon() { kill_now(); }
+  void start() {
+    std::vector<std::string> args{NCCOMPD_BIN, "--config", (dir_ / "nccompd.toml").string()};
+    std::vector<char*> argv;
+    for (auto& a : args) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    posix_spawn_file_actions_t fa;
+    posix_spawn_file_actions_init(&fa);
+    const std::string log = (dir_ / "nccompd.log").string();
+    posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
+    posix_spawn_file_actions_adddup2(&fa, 1, 2);
+    ASSERT_EQ(posix_spawn(&pid_, NCCOMPD_BIN, &fa, nullptr, argv.data(), environ), 0);
+    posix_spawn_file_actions_destroy(&fa);
+    // Up once the calibration module answers.
+    const auto end = std::chrono::steady_clock::now() + 20s;
+    while (std::chrono::steady_clock::now() < end) {
+      if (const auto a = ask(""); a && a->rfind("ok ", 0) == 0) return;
+      std::this_thread::sleep_for(20ms);
+    }
+    FAIL() << "nccompd did not answer 'calibrate'\n" << log_text();
+  }
+  int stop() {
+    ::kill(pid_, SIGTERM);
+    for (int i = 0; i < 1000; ++i) {
+      int st = 0;
+      if (::waitpid(pid_, &st, WNOHANG) == pid_) {
+        pid_ = -1;
+        // A sanitizer build of nccompd (ASan / TSan presets) reports into the log.
+        EXPECT_EQ(log_text().find("Sanitizer"), std::string::npos) << log_text();
+        return WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
+      }
+      std::this_thread::sleep_for(10ms);
+    }
+    return -1;
+  }
+  void kill_now() {
+    if (pid_ > 0) {
+      ::kill(pid_, SIGKILL);
+      ::waitpid(pid_, nullptr, 0);
+      pid_ = -1;
+    }
+  }
+  [[nodiscard]] bool alive() const { return pid_ > 0 && ::kill(pid_, 0) == 0; }
+  [[nodiscard]] std::optional<std::string> ask(const std::string& command) const {
+    try {
+      return tools::calibrate::daemon_request(socket(), command, 10.0);
+    } catch (const std::exception&) {
+      return std::nullopt;
+    }
+  }
+  [[nodiscard]] std::string socket() const { return (dir_ / "status.sock").string(); }
+  [[nodiscard]] std::string log_text() const {
+    std::ifstream in(dir_ / "nccompd.log");
+    std::ostringstream s;
+    s << in.rdbuf();
+    return s.str();
+  }
+
+ private:
+  fs::path dir_;
+  pid_t pid_{-1};
+};
+
+inline std::string raw_request(const std::string& socket, const std::string& line) {
+  // daemon_request() prefixes "calibrate "; a status request goes through a bare socket.
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  std::memcpy(addr.sun_path, socket.c_str(), socket.size() + 1);
+  const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  if (fd < 0) return "";
+  if (::connect(fd, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) != 0) {
+    ::close(fd);
+    return "";
+  }
+  const std::string req = line + "\n";
+  (void)::send(fd, req.data(), req.size(), MSG_NOSIGNAL);
+  ::shutdown(fd, SHUT_WR);
+  std::string out;
+  char buf[4096];
+  for (;;) {
+    const ssize_t n = ::recv(fd, buf, sizeof buf, 0);
+    if (n <= 0) break;
+    out.append(buf, static_cast<std::size_t>(n));
+  }
+  ::close(fd);
+  return out;
+}
+
+inline double register_output(const std::string& json, const std::string& name) {
+  const std::regex re("\"name\":\"" + name + "\",\"output_um\":(-?[0-9.eE+-]+)");
+  std::smatch m;
+  return std::regex_search(json, m, re) ? std::stod(m[1]) : std::nan("");
+}
+
+inline double number(const std::string& json, const std::string& key) {
+  const std::regex re("\"" + key + "\":(-?[0-9.eE+-]+)");
+  std::smatch m;
+  return std::regex_search(json, m, re) ? std::stod(m[1]) : std::nan("");
+}
+
+inline std::string text(const std::string& json, const std::string& key) {
+  const std::regex re("\"" + key + "\":\"([^\"]*)\"");
+  std::smatch m;
+  return std::regex_search(json, m, re) ? m[1].str() : "";
+}
+
+inline std::string touch_line(const core::CalibrationTouch& t) {
+  char buf[160];
+  std::snprintf(buf, sizeof buf, "touch %s %s %s %s %.6f",
+                t.probe == core::ProbeKind::kReferenceProbe ? "reference" : "machine",
+                t.axis == 0 ? "x" : (t.axis == 1 ? "y" : "z"), t.direction > 0 ? "+" : "-",
+                t.variant == 1 ? "axial" : "lateral", t.trigger_position_mm);
+  return buf;
+}
+
+// The number right after `prefix` in text (NaN if absent).
+inline double value_after(const std::string& text, const std::string& prefix) {
+  const auto p = text.find(prefix);
+  if (p == std::string::npos) return std::nan("");
+  try {
+    return std::stod(text.substr(p + prefix.size()));
+  } catch (const std::exception&) {
+    return std::nan("");
+  }
+}
+
+inline double dx_of(const std::string& answer) {
+  const std::regex re("with dx ([-+0-9.]+) um");
+  std::smatch m;
+  return std::regex_search(answer, m, re) ? std::stod(m[1]) : std::nan("");
+}
+
+// Waits until pred(json) or the limit; returns the last json.
+template <typename Pred>
+inline std::string wait_json(const Daemon& d, Pred pred,
+                             std::chrono::milliseconds limit = 10000ms) {
+  const auto end = std::chrono::steady_clock::now() + limit;
+  std::string j;
+  while (std::chrono::steady_clock::now() < end) {
+    j = raw_request(d.socket(), "json");
+    if (!j.empty() && pred(j)) break;
+    std::this_thread::sleep_for(20ms);
+  }
+  return j;
+}
+
+// The whole initial calibration through the socket; returns the last answer.
+inline std::string calibrate(Daemon& d, SimMachine& m) {
+  auto a = d.ask("begin");
+  EXPECT_TRUE(a && a->rfind("ok reference-touches reference-touches", 0) == 0) << a.value_or("");
+  for (std::size_t slot = 0; slot < 4; ++slot) {
+    for (int i = 0; i < 2; ++i) {
+      a = d.ask(touch_line(m.reference_touch(slot, 1, 0)));
+      EXPECT_TRUE(a && a->rfind("ok ", 0) == 0) << a.value_or("");
+    }
+  }
+  EXPECT_NE(a->find("reference touches: dx lateral"), std::string::npos) << *a;
+  for (const bool end_face : {false, true}) {
+    const std::string face = end_face ? "end-face" : "lateral";
+    const std::string phase = end_face ? "test-grind-end-face" : "test-grind-lateral";
+    for (int grind = 0; grind < 10 && a->find("ok " + phase) == 0; ++grind) {
+      const double dx = dx_of(*a);
+      EXPECT_TRUE(std::isfinite(dx)) << *a;
+      const auto [p, q] = m.test_grind(end_face, dx);
+      char buf[120];
+      std::snprintf(buf, sizeof buf, "facets %s %.6f %.6f", face.c_str(), p, q);
+      a = d.ask(buf);
+      EXPECT_TRUE(a && a->rfind("ok ", 0) == 0) << a.value_or("");
+    }
+  }
+  EXPECT_EQ(a->rfind("ok nominal-touches nominal-touches", 0), 0u) << *a;
+  EXPECT_NE(a->find("calibration: dxR"), std::string::npos) << *a;
+  for (std::size_t slot = 0; slot < 4; ++slot) {
+    for (int i = 0; i < 2; ++i) a = d.ask(touch_line(m.machine_touch(slot, 1, 0)));
+  }
+  EXPECT_EQ(a->rfind("ok ready none", 0), 0u) << *a;
+  EXPECT_NE(a->find("nominals stored:"), std::string::npos) << *a;
+  return *a;
+}
+
+}  // namespace nccomp::test::calib
