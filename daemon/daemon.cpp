@@ -1,5 +1,6 @@
 #include "daemon/daemon.hpp"
 
+#include <dlfcn.h>
 #include <poll.h>
 #include <signal.h>
 #include <spdlog/spdlog.h>
@@ -300,6 +301,16 @@ int run_daemon(const DaemonOptions& options) {
   lo.prefault_stack_kib = dsec.prefault_stack_kib;
   lo.state_min_interval_s = ssec.min_interval_s;
   lo.state_buffer_bytes = blob_bytes;
+  // Benchmarks preload a counting malloc (bench/daemon/alloc_preload): if it is there, the loop
+  // counts its thread's allocations and frees after warm-up (status: allocations_after_warmup).
+  using CountFn = std::uint64_t (*)() noexcept;
+  if (void* a = dlsym(RTLD_DEFAULT, "nccomp_preload_thread_allocations"); a != nullptr) {
+    lo.thread_allocations = reinterpret_cast<CountFn>(a);
+    if (void* f = dlsym(RTLD_DEFAULT, "nccomp_preload_thread_frees"); f != nullptr) {
+      lo.thread_deallocations = reinterpret_cast<CountFn>(f);
+    }
+    spdlog::info("allocation counter preloaded: allocations on the loop thread are counted");
+  }
   if (const char* stall = std::getenv("NCCOMPD_TEST_STALL_AFTER_CYCLES");
       stall != nullptr && *stall != '\0') {
     // Test hook of the watchdog test (tests/hil/daemon): never set it on a machine.

@@ -262,6 +262,10 @@ void Loop::finish_cycle() noexcept {
       alloc_base_ = options_.thread_allocations();
       local_.allocations_after_warmup = 0;
     }
+    if (options_.thread_deallocations != nullptr) {
+      free_base_ = options_.thread_deallocations();
+      local_.frees_after_warmup = 0;
+    }
   } else if (local_.cycles > options_.warmup_cycles && local_.cycles % 1000 == 0) {
     std::int64_t mn = 0;
     std::int64_t mj = 0;
@@ -272,6 +276,10 @@ void Loop::finish_cycle() noexcept {
   if (options_.thread_allocations != nullptr && local_.cycles > options_.warmup_cycles) {
     local_.allocations_after_warmup =
         static_cast<std::int64_t>(options_.thread_allocations() - alloc_base_);
+  }
+  if (options_.thread_deallocations != nullptr && local_.cycles > options_.warmup_cycles) {
+    local_.frees_after_warmup =
+        static_cast<std::int64_t>(options_.thread_deallocations() - free_base_);
   }
   stats_.store(local_);
   heartbeat_.fetch_add(1, std::memory_order_release);

@@ -75,6 +75,8 @@ struct LoopOptions {
   /// Optional: the calling thread's allocation count (tests and benchmarks link a counting
   /// operator new and pass nccomp::test::thread_allocations). Must be real-time safe.
   std::uint64_t (*thread_allocations)() noexcept {nullptr};
+  /// Optional, the same for frees (operator delete / free of a non-null pointer).
+  std::uint64_t (*thread_deallocations)() noexcept {nullptr};
   /// Lock-step (contract C2): non-null = the loop is driven by this peer's TICKs instead of the
   /// clock (connected before start(); must outlive the loop). Events are stamped with the
   /// tick's time, the engine steps at it, and DONE follows the buses' flush().
@@ -123,6 +125,7 @@ struct LoopStats {
   std::int64_t minor_faults_after_warmup{-1};  // -1 until the baseline is taken
   std::int64_t major_faults_after_warmup{-1};
   std::int64_t allocations_after_warmup{-1};  // -1 = not measured
+  std::int64_t frees_after_warmup{-1};        // -1 = not measured
   bool hold{false};
   bool dry_run{false};
   core::engine::EngineCounters engine{};
@@ -243,6 +246,7 @@ class Loop {
   std::int64_t minflt_base_{0};
   std::int64_t majflt_base_{0};
   std::uint64_t alloc_base_{0};
+  std::uint64_t free_base_{0};
 
   std::atomic<bool> stop_{false};
   std::atomic<bool> hold_{false};

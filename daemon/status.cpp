@@ -136,11 +136,13 @@ std::string render_json(const StatusContext& c) {
     << "},\"max_cycle_us\":" << num(static_cast<double>(s.max_step_ns) / 1000.0)
     << ",\"minor_faults_after_warmup\":" << s.minor_faults_after_warmup
     << ",\"major_faults_after_warmup\":" << s.major_faults_after_warmup
-    << ",\"events_in\":" << s.events_in << ",\"writes_sent\":" << s.writes_sent
-    << ",\"writes_dry_run\":" << s.writes_dry_run << ",\"writes_dropped\":" << s.writes_dropped
-    << ",\"alarms\":" << s.alarms << ",\"alarms_dropped\":" << s.alarms_dropped
-    << ",\"records\":" << s.records << ",\"records_dropped\":" << s.records_dropped
-    << ",\"state_exports\":" << s.state_exports << ",\"state_export_busy\":" << s.state_export_busy
+    << ",\"allocations_after_warmup\":" << s.allocations_after_warmup
+    << ",\"frees_after_warmup\":" << s.frees_after_warmup << ",\"events_in\":" << s.events_in
+    << ",\"writes_sent\":" << s.writes_sent << ",\"writes_dry_run\":" << s.writes_dry_run
+    << ",\"writes_dropped\":" << s.writes_dropped << ",\"alarms\":" << s.alarms
+    << ",\"alarms_dropped\":" << s.alarms_dropped << ",\"records\":" << s.records
+    << ",\"records_dropped\":" << s.records_dropped << ",\"state_exports\":" << s.state_exports
+    << ",\"state_export_busy\":" << s.state_export_busy
     << ",\"state_export_failed\":" << s.state_export_failed << "},";
   const auto& e = s.engine;
   o << "\"engine\":{\"events_accepted\":" << e.events_accepted
@@ -247,7 +249,12 @@ std::string render_text(const StatusContext& c) {
                 v.p50, v.p99, v.p999, v.max_us, static_cast<double>(s.max_step_ns) / 1000.0);
   o << buf;
   o << "faults:  " << s.minor_faults_after_warmup << " minor, " << s.major_faults_after_warmup
-    << " major page faults on the loop thread after warm-up\n";
+    << " major page faults on the loop thread after warm-up";
+  if (s.allocations_after_warmup >= 0) {
+    // Only when an allocation counter is linked or preloaded (bench/daemon/alloc_preload).
+    o << "; " << s.allocations_after_warmup << " allocations, " << s.frees_after_warmup << " frees";
+  }
+  o << "\n";
   o << "engine:  " << s.engine.events_accepted << " events (" << s.engine.events_invalid
     << " invalid), " << s.engine.writes_forwarded << " writes (" << s.engine.writes_rejected
     << " rejected, " << s.engine.writes_held << " held), " << s.writes_dropped

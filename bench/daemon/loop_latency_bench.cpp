@@ -65,6 +65,7 @@ int main(int argc, char** argv) {
   o.warmup_cycles = 1000;
 #ifdef NCCOMP_COUNT_ALLOCATIONS
   o.thread_allocations = []() noexcept { return nccomp::test::thread_allocations(); };
+  o.thread_deallocations = []() noexcept { return nccomp::test::thread_deallocations(); };
 #endif
   daemon::Loop loop(o, swap, {&bus}, nullptr, nullptr);
   const auto rep = loop.start();
@@ -96,9 +97,12 @@ int main(int argc, char** argv) {
               static_cast<unsigned long long>(s.overruns),
               static_cast<unsigned long long>(s.missed_deadlines),
               static_cast<double>(s.max_step_ns) / 1000.0);
-  std::printf("nccompd_loop after_warmup minor_faults=%lld major_faults=%lld allocations=%lld\n",
-              static_cast<long long>(s.minor_faults_after_warmup),
-              static_cast<long long>(s.major_faults_after_warmup),
-              static_cast<long long>(s.allocations_after_warmup));
+  std::printf(
+      "nccompd_loop after_warmup minor_faults=%lld major_faults=%lld allocations=%lld "
+      "frees=%lld\n",
+      static_cast<long long>(s.minor_faults_after_warmup),
+      static_cast<long long>(s.major_faults_after_warmup),
+      static_cast<long long>(s.allocations_after_warmup),
+      static_cast<long long>(s.frees_after_warmup));
   return 0;
 }

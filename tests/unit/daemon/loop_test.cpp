@@ -72,6 +72,8 @@ struct Rig {
     o.state_buffer_bytes = 4096;
     o.warmup_cycles = 20;
     o.thread_allocations = []() noexcept { return nccomp::test::thread_allocations(); };
+    o.thread_deallocations = []() noexcept { return nccomp::test::thread_deallocations(); };
+    o.thread_deallocations = []() noexcept { return nccomp::test::thread_deallocations(); };
     loop = std::make_unique<Loop>(o, swap, std::vector<drivers::Bus*>{&bus}, persister.get(),
                                   mlog.get());
     bus.start();
@@ -122,6 +124,7 @@ TEST(Loop, RampReachesTheBusAndStateIsPersisted) {
   EXPECT_EQ(s.writes_sent, s.engine.writes_forwarded);
   EXPECT_GT(s.state_exports, 0U);
   EXPECT_EQ(s.allocations_after_warmup, 0) << "the loop thread allocated after warm-up";
+  EXPECT_EQ(s.frees_after_warmup, 0) << "the loop thread freed after warm-up";
   rig.persister->stop();
   const auto f = read_state_file((rig.dir / "state.bin").string());
   ASSERT_EQ(f.status, StateFileStatus::kOk) << f.reason;
@@ -186,6 +189,7 @@ TEST(Loop, ReloadSwapsAtACycleBoundaryAndCarriesTheState) {
   EXPECT_TRUE(swapped);
   EXPECT_FALSE(carry_failed);
   EXPECT_EQ(s.allocations_after_warmup, 0);
+  EXPECT_EQ(s.frees_after_warmup, 0) << "the retired configuration is freed off the loop thread";
 }
 
 TEST(Loop, DryRunWritesNothingToTheBus) {
@@ -225,6 +229,7 @@ TEST(Loop, LeavingDryRunByReloadStartsFromWhatTheNcHoldsThroughTheLimiter) {
   }
   EXPECT_TRUE(left);
   EXPECT_EQ(rig.loop->stats().allocations_after_warmup, 0);
+  EXPECT_EQ(rig.loop->stats().frees_after_warmup, 0);
 }
 
 // A dry run never persists: the state file keeps what the NC really got (here there is none).
@@ -347,6 +352,7 @@ TEST(Loop, DroppedWritesAreCountedAndResentWhenTheBusDrainsAgain) {
   LoopOptions o;
   o.warmup_cycles = 20;
   o.thread_allocations = []() noexcept { return nccomp::test::thread_allocations(); };
+  o.thread_deallocations = []() noexcept { return nccomp::test::thread_deallocations(); };
   Loop loop(o, swap, {&stuck}, nullptr, nullptr);
   loop.start();
   const auto end = std::chrono::steady_clock::now() + 5s;
@@ -379,6 +385,7 @@ TEST(Loop, DroppedWritesAreCountedAndResentWhenTheBusDrainsAgain) {
   ASSERT_TRUE(d.has_value());
   EXPECT_DOUBLE_EQ(*d, out);
   EXPECT_EQ(loop.stats().allocations_after_warmup, 0);
+  EXPECT_EQ(loop.stats().frees_after_warmup, 0);
   stuck.stop();
 }
 

@@ -1,0 +1,116 @@
+#!/usr/bin/env bash
+# The real nccompd process beside cyclictest, in the same run:
+#   bench/daemon/run_nccompd_latency.sh RELEASE_BUILD_DIR [SECONDS] [CPU]
+#
+# - nccompd: the release binary with the shipped config/nccompd.toml and its include
+#   reference-nc-modbus.toml, unchanged except the NC's TCP port (a free one on 127.0.0.1),
+#   against the project's Modbus NC server (sim/modbus_nc) on loopback. Its real-time settings are
+#   the shipped ones ([daemon.realtime]: SCHED_FIFO priority, lock_memory, stack pre-faulting).
+#   State, logs and the status socket go to a temporary directory through $STATE_DIRECTORY,
+#   $LOGS_DIRECTORY and $RUNTIME_DIRECTORY (what the systemd unit sets). A counting malloc is
+#   preloaded (libnccomp_alloc_preload.so) so the daemon reports its loop thread's allocations
+#   and frees after warm-up.
+# - cyclictest: one thread at the same rate (1 kHz) and the same SCHED_FIFO priority, memory
+#   locked, started together with nccompd.
+# After SECONDS, `nccomp status --json` gives the loop's latency quantiles (its own histogram
+# since start), overruns, page faults, allocations and frees on the loop thread after warm-up;
+# cyclictest's histogram gives its quantiles. Both as the upper edge of a 1 µs bucket.
+# CPU (optional): pin both measuring threads to that CPU (nccompd's [daemon.realtime]
+# cpu_affinity = [CPU], cyclictest -a CPU), so both see the same vCPU's disturbances; the shipped
+# config pins nothing.
+# Needs root (SCHED_FIFO and mlockall without the unit's rlimits) and cyclictest (rt-tests).
+set -euo pipefail
+build=${1:?release build dir}
+secs=${2:-60}
+cpu=${3:-}
+src=$(cd "$(dirname "$0")/../.." && pwd)
+tmp=$(mktemp -d)
+ncpid=""
+dpid=""
+cleanup() {
+  [ -n "$dpid" ] && kill "$dpid" 2> /dev/null || true
+  [ -n "$ncpid" ] && kill "$ncpid" 2> /dev/null || true
+  rm -rf "$tmp"
+}
+trap cleanup EXIT
+
+port=$((20000 + RANDOM % 20000))
+cp "$src/config/nccompd.toml" "$src/config/reference-nc-modbus.toml" "$tmp/"
+sed -i "s/^port = 1502$/port = $port/" "$tmp/reference-nc-modbus.toml"
+grep -q "^port = $port$" "$tmp/reference-nc-modbus.toml"
+prio=$(sed -n 's/^sched_fifo_priority = \([0-9][0-9]*\)$/\1/p' "$tmp/nccompd.toml")
+[ -n "$prio" ] && [ "$prio" -gt 0 ]
+mkdir -p "$tmp/state" "$tmp/log" "$tmp/run"
+pin=()
+if [ -n "$cpu" ]; then
+  sed -i "s/^cpu_affinity = \[\]$/cpu_affinity = [$cpu]/" "$tmp/nccompd.toml"
+  grep -q "^cpu_affinity = \[$cpu\]$" "$tmp/nccompd.toml"
+  pin=(-a "$cpu")
+fi
+
+"$build/sim/modbus_nc/modbus_nc" --bind 127.0.0.1 --port "$port" > "$tmp/nc.log" 2>&1 &
+ncpid=$!
+sleep 0.5
+
+cyclictest -q -t1 "${pin[@]}" -p "$prio" -i 1000 -D "${secs}s" -m -h 30000 --histfile="$tmp/cyc.hist" \
+  > "$tmp/cyc.out" 2>&1 &
+cpid=$!
+STATE_DIRECTORY="$tmp/state" LOGS_DIRECTORY="$tmp/log" RUNTIME_DIRECTORY="$tmp/run" \
+  LD_PRELOAD="$build/bench/daemon/libnccomp_alloc_preload.so" \
+  "$build/daemon/nccompd" --config "$tmp/nccompd.toml" > "$tmp/nccompd.log" 2>&1 &
+dpid=$!
+sleep "$secs"
+"$build/tools/nccomp" status --socket "$tmp/run/status.sock" --json > "$tmp/status.json"
+"$build/tools/nccomp" status --socket "$tmp/run/status.sock" > "$tmp/status.txt"
+wait "$cpid" || true
+kill -TERM "$dpid"
+wait "$dpid"
+dpid=""
+
+echo "== nccompd log"
+cat "$tmp/nccompd.log"
+echo "== nccomp status (at ${secs} s)"
+sed -n '1,6p' "$tmp/status.txt"
+sed -n '/^buses:/,/^state:/p' "$tmp/status.txt"
+echo "== summary"
+/usr/bin/python3 - "$tmp/cyc.hist" "$tmp/status.json" "$prio" "$cpu" <<'PY'
+import json, re, sys
+hist, status, prio = sys.argv[1], sys.argv[2], sys.argv[3]
+counts, maxlat, overflow = {}, None, 0
+for line in open(hist):
+    if line.startswith('#'):
+        m = re.search(r'Max Latencies:\s+(\d+)', line)
+        if m: maxlat = int(m.group(1))
+        m = re.search(r'Histogram Overflows:\s+(\d+)', line)
+        if m: overflow = int(m.group(1))
+        continue
+    parts = line.split()
+    if len(parts) >= 2:
+        counts[int(parts[0])] = int(parts[1])
+total = sum(counts.values()) + overflow
+def q(p):
+    rank, seen = p * total, 0
+    for us in sorted(counts):
+        seen += counts[us]
+        if seen >= rank: return us + 1   # upper edge of the 1 us bucket, as the loop reports
+    return maxlat
+cyc = {'p50': q(0.5), 'p99': q(0.99), 'p99.9': q(0.999), 'max': maxlat}
+s = json.load(open(status))
+loop = s['loop']
+lat = loop['latency_us']
+d = {'p50': lat['p50'], 'p99': lat['p99'], 'p99.9': lat['p99_9'], 'max': lat['max']}
+print(f"priority {prio}, 1000 Hz" + (f", both pinned to CPU {sys.argv[4]}" if len(sys.argv) > 4 and sys.argv[4] else ", not pinned"))
+print(f"nccompd   cycles={loop['cycles']} overruns={loop['overruns']} "
+      f"missed={loop['missed_deadlines']} max_cycle_us={loop['max_cycle_us']:.1f} "
+      f"latency_us p50={d['p50']:g} p99={d['p99']:g} p99.9={d['p99.9']:g} max={d['max']:.0f}")
+print(f"cyclictest samples={total} latency_us p50={cyc['p50']} p99={cyc['p99']} "
+      f"p99.9={cyc['p99.9']} max={cyc['max']}")
+print("ratio nccompd/cyclictest " +
+      " ".join(f"{k}={d[k] / cyc[k]:.2f}" for k in ('p50', 'p99', 'p99.9', 'max')))
+print(f"loop thread after warm-up: minor_faults={loop['minor_faults_after_warmup']} "
+      f"major_faults={loop['major_faults_after_warmup']} "
+      f"allocations={loop['allocations_after_warmup']} frees={loop['frees_after_warmup']}")
+bus = s['buses'][0]
+print(f"bus {bus['name']} {bus['state']} frames_rx={bus['frames_rx']} "
+      f"frames_tx={bus['frames_tx']} events={bus['events_decoded']}")
+PY
