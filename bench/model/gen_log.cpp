@@ -1,7 +1,9 @@
 // Writes a generated measurement log (v1 CSV) for the `nccomp analyze` benchmark:
 //   bench_model_gen ROWS OUT.csv [effect ...]
 // Rows come from the generator of the analysis tests (irregular part times, tool changes,
-// random probe positions), 20 checkpoints per part, probe noise 0.5 µm.
+// random probe positions), 20 checkpoints per part, probe noise 0.5 µm. With the effect
+// wear_proportional the log also has a laser measurement of the tool after every part
+// (bench_config_wear.toml declares its wear curve).
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -19,6 +21,9 @@ int main(int argc, char** argv) {
   opt.parts = std::strtoul(argv[1], nullptr, 10) / opt.points_per_part;
   opt.noise_um = 0.5;
   for (int i = 3; i < argc; ++i) opt.effects.emplace_back(argv[i]);
+  // The tool-wear effect needs the laser measurements of the tool it is proportional to.
+  for (const auto& e : opt.effects)
+    opt.tool_wear_rows = opt.tool_wear_rows || e == "wear_proportional";
   const auto data = nccomp::test::synth::generate(opt);
   std::ofstream out(argv[2]);
   nccomp::test::synth::write_csv(out, data);

@@ -864,7 +864,9 @@ AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
       t_out.column = column_name(c.spec.column, data.extra_columns);
       t_out.form = c.spec.form;
       t_out.parameter =
-          c.spec.form == Form::kStep || c.spec.form == Form::kHinge ? c.spec.center : c.spec.scale;
+          c.spec.form == Form::kStep || c.spec.form == Form::kHinge || c.spec.form == Form::kWear
+              ? c.spec.center
+              : c.spec.scale;
       t_out.rss_reduction_fraction = rk.reduction / set.rss;
       tried.push_back(t_out);
     }

@@ -233,6 +233,18 @@ std::string residual_svg(const cm::Dataset& data, const cm::AnalysisResult& resu
   return o.str();
 }
 
+namespace {
+// True when the reader put several of nccompd's logs one after another (time_s restarted).
+bool logs_in_sequence(const cm::Dataset& data) {
+  const auto& t = data.column(static_cast<int>(cm::Column::kTime));
+  if (data.order_s.size() != data.rows() || t.size() != data.rows()) return false;
+  for (std::size_t i = 0; i < t.size(); ++i) {
+    if (std::isfinite(t[i]) && data.order_s[i] > t[i] + 0.5) return true;
+  }
+  return false;
+}
+}  // namespace
+
 std::string report_markdown(const cm::Dataset& data, const cm::AnalysisResult& result,
                             const std::vector<std::string>& inputs,
                             const std::vector<int>& plotted) {
@@ -242,7 +254,8 @@ std::string report_markdown(const cm::Dataset& data, const cm::AnalysisResult& r
   o << "Inputs: ";
   for (std::size_t i = 0; i < inputs.size(); ++i) o << (i ? ", " : "") << "`" << inputs[i] << "`";
   o << "\n\nRows: " << data.rows() << " (fitted " << result.declared.fitted.rows << ", held out "
-    << result.declared.heldout.rows << ": time_s ≥ " << num(result.split_time_s, 8) << ").\n\n";
+    << result.declared.heldout.rows << ": time_s ≥ " << num(result.split_time_s, 8)
+    << (logs_in_sequence(data) ? " with nccompd's logs one after another" : "") << ").\n\n";
   o << "Noise floor (successive differences of the final residual per series): **"
     << num(result.noise_floor_um, 3) << " µm**.\n\n";
   o << "## Error before and after each step\n\n";
