@@ -128,6 +128,23 @@ class Reader {
       out.push_back(static_cast<std::int32_t>(*v));
     }
   }
+  void string_list(std::string_view key, std::vector<std::string>& out) {
+    const toml::node* n = take(key);
+    if (n == nullptr) {
+      return;
+    }
+    const toml::array* a = n->as_array();
+    if (a == nullptr) {
+      fail(key, "must be an array of strings");
+    }
+    out.clear();
+    for (const auto& e : *a) {
+      if (!e.is_string() || e.value<std::string>()->empty()) {
+        fail(key, "elements must be non-empty strings (file names)");
+      }
+      out.push_back(*e.value<std::string>());
+    }
+  }
   template <typename E>
   void choice(std::string_view key, E& out,
               std::initializer_list<std::pair<std::string_view, E>> options) {
@@ -582,7 +599,9 @@ SimConfig parse_sim_config(std::string_view text, const std::string& file,
     if (c.bus_map_file.empty()) {
       n.fail("bus_map", "required: the daemon's register map (reference-nc-modbus.toml)");
     }
+    n.string_list("bus_map_extra", c.bus_map_extra_files);
     n.string("can_bus_map", c.can_bus_map_file);
+    n.string_list("can_bus_map_extra", c.can_bus_map_extra_files);
     n.string("can_interface", c.can_interface);
     n.integer("modbus_port", c.modbus_port, -1, 65535);
     n.number("lockstep_rate_hz", c.lockstep_rate_hz, 1.0, 100000.0);
@@ -591,6 +610,8 @@ SimConfig parse_sim_config(std::string_view text, const std::string& file,
     n.integer("seed", seed, 0, std::numeric_limits<std::int32_t>::max());
     c.seed = static_cast<std::uint64_t>(seed);
     n.integer("parts", c.parts, 1, 100000);
+    n.integer("first_part", c.first_part, 1, 1000000);
+    n.number("tool_cut_path_mm", c.tool_cut_path_mm, 0.0, 1e9);
     n.finish();
   }
   {
@@ -635,6 +656,7 @@ SimConfig parse_sim_config(std::string_view text, const std::string& file,
       s.string("checkpoints_file", w.checkpoints_file);
       s.number("feed_mm_per_min", w.feed_mm_per_min, 1.0, 1e6);
       s.number("probe_time_s", w.probe_time_s, 0.0, 3600.0);
+      s.number("approach_s", w.approach_s, 0.0, 3600.0);
       s.boolean("table_registers", w.table_registers);
       if (!w.checkpoints_file.empty() && wants(ProgramKind::kSideWall)) {
         const std::string path = resolve(base_dir, w.checkpoints_file);
@@ -720,10 +742,22 @@ SimConfig parse_sim_config(std::string_view text, const std::string& file,
   if (read_files) {
     c.bus_map_text = read_text(c.bus_map_file, "ncsim.bus_map");
   }
+  for (auto& f : c.bus_map_extra_files) {
+    f = resolve(base_dir, f);
+    if (read_files) {
+      c.bus_map_extra_texts.push_back(read_text(f, "ncsim.bus_map_extra"));
+    }
+  }
   if (!c.can_bus_map_file.empty()) {
     c.can_bus_map_file = resolve(base_dir, c.can_bus_map_file);
     if (read_files) {
       c.can_bus_map_text = read_text(c.can_bus_map_file, "ncsim.can_bus_map");
+    }
+  }
+  for (auto& f : c.can_bus_map_extra_files) {
+    f = resolve(base_dir, f);
+    if (read_files) {
+      c.can_bus_map_extra_texts.push_back(read_text(f, "ncsim.can_bus_map_extra"));
     }
   }
   return c;

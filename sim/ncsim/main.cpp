@@ -1,7 +1,9 @@
 // ncsim, the virtual NC (docs/ncsim.md):
 //   ncsim --config FILE --program mould_face|side_wall|roll|touch --bus modbus|can --out DIR
 //         [--speed FACTOR | --lockstep SOCKET] [--parts N] [--seed N] [--set effect.key=value ...]
-//         [--wait-client SECONDS]
+//         [--wait-client SECONDS] [--continue DIR]
+// --continue DIR starts where the run whose result is in DIR ended (DIR/end_state.toml: the next
+// part number and the tool's cut path, so a worn tool stays worn).
 // Speed mode waits up to --wait-client (default 10 s) for the daemon's first polls before the
 // clock starts, so that no event is published before the daemon has its baseline.
 // Exit status: 0 program done and result written; 1 runtime error; 2 usage; 3 config error;
@@ -14,6 +16,7 @@
 #include <vector>
 
 #include "sim/ncsim/config.hpp"
+#include "sim/ncsim/result.hpp"
 #include "sim/ncsim/run.hpp"
 
 namespace {
@@ -22,7 +25,7 @@ namespace {
   std::fprintf(stderr,
                "ncsim: %s\nusage: ncsim --config FILE --program mould_face|side_wall|roll|touch "
                "--bus modbus|can --out DIR [--speed FACTOR | --lockstep SOCKET] [--parts N] "
-               "[--seed N] [--set effect.key=value ...]\n",
+               "[--seed N] [--set effect.key=value ...] [--wait-client SECONDS] [--continue DIR]\n",
                why.c_str());
   std::exit(2);
 }
@@ -36,6 +39,7 @@ int main(int argc, char** argv) {
   bool have_program = false;
   bool have_speed = false;
   std::vector<std::string> sets;
+  std::string continue_dir;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--help" || a == "-h") {
@@ -91,6 +95,8 @@ int main(int argc, char** argv) {
       sets.push_back("ncsim.seed=" + v);
     } else if (a == "--set") {
       sets.push_back(v);
+    } else if (a == "--continue") {
+      continue_dir = v;
     } else {
       usage("unknown option " + a);
     }
@@ -103,6 +109,12 @@ int main(int argc, char** argv) {
   }
   SimConfig config;
   try {
+    if (!continue_dir.empty()) {
+      // The end state first: an explicit --set still wins.
+      std::vector<std::string> all = continuation_overrides(continue_dir);
+      all.insert(all.end(), sets.begin(), sets.end());
+      sets = std::move(all);
+    }
     config = load_sim_config(config_path, sets, opt.program);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "ncsim: %s\n", e.what());

@@ -1,5 +1,7 @@
 #include "sim/ncsim/result.hpp"
 
+#include <toml++/toml.h>
+
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -146,6 +148,17 @@ void write_result(const std::string& dir, const Simulation& sim, const RunInfo& 
     files.emplace_back("walls.csv");
     files.emplace_back("checkpoints.csv");
   }
+  if (info.program == ProgramKind::kMouldFace || info.program == ProgramKind::kSideWall) {
+    File m(d / "measurements.csv",
+           "t_s,kind,part,checkpoint,cut_path_mm,true_um,reading_um,broken");
+    for (const MeasurementRow& s : r.measurements) {
+      m.out() << num(s.t_s) << ',' << (s.kind == MeasurementKind::kLaser ? "laser" : "probe") << ','
+              << s.part << ',' << s.checkpoint << ',' << num(s.cut_path_mm) << ',' << num(s.true_um)
+              << ',' << num(s.reading_um) << ',' << (s.broken ? 1 : 0) << '\n';
+    }
+    m.close();
+    files.emplace_back("measurements.csv");
+  }
   if (info.program == ProgramKind::kTouch) {
     File t(d / "touches.csv",
            "cycle,probe,axis,direction,variant,trigger_position_mm,true_drift_um");
@@ -179,7 +192,30 @@ void write_result(const std::string& dir, const Simulation& sim, const RunInfo& 
     j << (first ? "" : ",") << '"' << index << "\":" << num(value);
     first = false;
   }
-  j << "},\"alarms_seen\":" << sim.alarms_seen() << ",\"files\":[";
+  j << "},\"alarms_seen\":" << sim.alarms_seen() << ",\"alarms\":[";
+  for (std::size_t i = 0; i < r.alarms.size(); ++i) {
+    j << (i == 0 ? "" : ",") << "{\"t_s\":" << num(r.alarms[i].t_s)
+      << ",\"register\":" << r.alarms[i].register_index << ",\"value\":" << num(r.alarms[i].value)
+      << '}';
+  }
+  j << "]";
+  const EndState end = sim.end_state();
+  if (end.valid) {
+    j << ",\"first_part\":" << sim.config().first_part
+      << ",\"end\":{\"next_part\":" << end.next_part
+      << ",\"tool_cut_path_mm\":" << num(end.tool_cut_path_mm) << '}';
+    // What `ncsim --continue DIR` reads.
+    std::ofstream e(d / "end_state.toml");
+    e << "# Where this ncsim run left the machine; `ncsim --continue " << dir
+      << "` starts the next run here.\n[ncsim]\n# The next part's number.\nfirst_part = "
+      << end.next_part << "\n# Cut path of the tool in the spindle [mm] (its wear continues).\n"
+      << "tool_cut_path_mm = " << std::fixed << end.tool_cut_path_mm << '\n';
+    e.close();
+    if (!e) {
+      throw std::runtime_error("write failed: " + (d / "end_state.toml").string());
+    }
+  }
+  j << ",\"files\":[";
   for (std::size_t i = 0; i < files.size(); ++i) {
     j << (i == 0 ? "" : ",") << quoted(files[i]);
   }
@@ -190,6 +226,44 @@ void write_result(const std::string& dir, const Simulation& sim, const RunInfo& 
   if (!out) {
     throw std::runtime_error("write failed: " + (d / "result.json").string());
   }
+}
+
+std::vector<std::string> continuation_overrides(const std::string& dir) {
+  const std::string path = (std::filesystem::path(dir) / "end_state.toml").string();
+  toml::table t;
+  try {
+    t = toml::parse_file(path);
+  } catch (const toml::parse_error& e) {
+    const auto& b = e.source().begin;
+    throw ConfigError(path + ":" + std::to_string(b.line) + ":" + std::to_string(b.column) + ": " +
+                      std::string(e.description()) + " (--continue needs the end_state.toml " +
+                      "of a finished mould_face or side_wall run)");
+  }
+  const toml::table* n = t["ncsim"].as_table();
+  if (n == nullptr || t.size() != 1) {
+    throw ConfigError(path + ": expected only an [ncsim] table");
+  }
+  std::vector<std::string> out;
+  for (const auto& [k, v] : *n) {
+    const std::string key(k.str());
+    if (key == "first_part" && v.is_integer()) {
+      out.push_back("ncsim.first_part=" + std::to_string(*v.value<std::int64_t>()));
+    } else if (key == "tool_cut_path_mm" && v.is_number()) {
+      char b[64];
+      std::snprintf(b, sizeof(b), "%.17g", *v.value<double>());
+      // Always a float literal for the TOML override.
+      std::string val = b;
+      if (val.find_first_of(".eEn") == std::string::npos) {
+        val += ".0";
+      }
+      out.push_back("ncsim.tool_cut_path_mm=" + val);
+    } else {
+      throw ConfigError(path + ": ncsim." + key +
+                        ": unknown key or wrong type (first_part: integer, tool_cut_path_mm: "
+                        "number)");
+    }
+  }
+  return out;
 }
 
 }  // namespace nccomp::sim::ncsim

@@ -8,6 +8,7 @@
 
 #include "drivers/can/can_config.hpp"
 #include "drivers/modbus/config.hpp"
+#include "sim/ncsim/bus_map.hpp"
 #include "sim/ncsim/can_link.hpp"
 #include "sim/ncsim/lockstep.hpp"
 #include "sim/ncsim/modbus_link.hpp"
@@ -23,7 +24,14 @@ std::unique_ptr<NcLink> make_link(const SimConfig& config, BusKind bus,
   if (bus == BusKind::kModbus) {
     drivers::modbus::ModbusConfig map;
     try {
-      map = drivers::modbus::parse_modbus_config(config.bus_map_text, config.bus_map_file);
+      const toml::table root =
+          merged_bus_map(config.bus_map_text, config.bus_map_file, config.bus_map_extra_texts,
+                         config.bus_map_extra_files);
+      const toml::table* m = root["modbus"].as_table();
+      if (m == nullptr) {
+        throw std::runtime_error(config.bus_map_file + ": missing [modbus] table");
+      }
+      map = drivers::modbus::parse_modbus_table(*m, config.bus_map_file);
     } catch (const std::exception& e) {
       throw std::runtime_error(std::string("ncsim.bus_map: ") + e.what());
     }
@@ -39,7 +47,14 @@ std::unique_ptr<NcLink> make_link(const SimConfig& config, BusKind bus,
   }
   drivers::can::CanConfig can;
   try {
-    can = drivers::can::parse_can_config(config.can_bus_map_text, config.can_bus_map_file);
+    const toml::table root =
+        merged_bus_map(config.can_bus_map_text, config.can_bus_map_file,
+                       config.can_bus_map_extra_texts, config.can_bus_map_extra_files);
+    const toml::table* t = root["can"].as_table();
+    if (t == nullptr) {
+      throw std::runtime_error(config.can_bus_map_file + ": missing [can] table");
+    }
+    can = drivers::can::parse_can_table(*t, config.can_bus_map_file);
   } catch (const std::exception& e) {
     throw std::runtime_error(std::string("ncsim.can_bus_map: ") + e.what());
   }

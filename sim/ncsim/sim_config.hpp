@@ -29,7 +29,8 @@ struct NcConfig {
   std::int32_t checkpoint_register_count{4};
   /// A non-zero value written here asks the NC to measure the tool at the laser (-1 = none).
   std::int32_t measure_request_register{-1};
-  /// Registers whose non-zero value is an alarm / warning the NC shows (counted in result.json).
+  /// Registers whose non-zero value is an alarm / warning the NC shows: every change from 0 to a
+  /// non-zero value is one alarm seen (alarms_seen and "alarms" in result.json).
   std::vector<std::int32_t> alarm_registers{};
   /// Tool number in the spindle.
   std::int32_t tool{1};
@@ -64,6 +65,9 @@ struct SideWallConfig {
   double feed_mm_per_min{2000.0};
   /// Time per probed checkpoint [s].
   double probe_time_s{1.0};
+  /// Approach from the part start to the first cut (not cutting, the program path at its start)
+  /// [s]: an offset the daemon writes at the part start is in force before the tool cuts.
+  double approach_s{0.5};
   /// The NC program selects the table register of the nearest checkpoint (table mode) in
   /// addition to the live radius-wear register.
   bool table_registers{false};
@@ -142,9 +146,15 @@ struct SimConfig {
   /// The bus map (daemon's format) and its text.
   std::string bus_map_file{};
   std::string bus_map_text{};
+  /// More files of the map (ncsim.bus_map_extra: e.g. flag registers the reference map lacks),
+  /// appended to it as the daemon's `include` does: path and text of each.
+  std::vector<std::string> bus_map_extra_files{};
+  std::vector<std::string> bus_map_extra_texts{};
   /// The daemon's CAN map (reference-nc-can.toml) for --bus can, and its text.
   std::string can_bus_map_file{};
   std::string can_bus_map_text{};
+  std::vector<std::string> can_bus_map_extra_files{};
+  std::vector<std::string> can_bus_map_extra_texts{};
   /// CAN: the interface ncsim sends on.
   std::string can_interface{"vcan0"};
   /// Modbus: the TCP port ncsim serves (the map's port unless overridden; 0 = ephemeral).
@@ -155,6 +165,11 @@ struct SimConfig {
   double step_mm{0.05};
   std::uint64_t seed{1};
   std::int32_t parts{1};
+  /// Continuation of an earlier run (mould_face, side_wall; `ncsim --continue DIR`): the number
+  /// of the first part, and the cut path the tool in the spindle has behind it [mm] (its wear
+  /// continues from there).
+  std::int32_t first_part{1};
+  double tool_cut_path_mm{0.0};
   NcConfig nc{};
   EffectsConfig effects{};
   MouldFaceConfig mould_face{};

@@ -34,11 +34,21 @@ void set_position(AxisSample& a, const Vec3& p_mm, const Vec3& offsets_um) {
 // (a) mould face: raster passes along X with a ball-end mill, zig-zag, links along Y.
 class MouldFace final : public Program {
  public:
-  explicit MouldFace(const SimConfig& c) : c_(c.mould_face), parts_(c.parts), step_mm_(c.step_mm) {
+  explicit MouldFace(const SimConfig& c)
+      : c_(c.mould_face),
+        first_part_(c.first_part),
+        last_part_(c.first_part + c.parts - 1),
+        step_mm_(c.step_mm),
+        part_(c.first_part),
+        cut_path_mm_(c.tool_cut_path_mm),
+        last_measure_mm_(c.tool_cut_path_mm) {
     passes_ = static_cast<std::int32_t>(std::floor(c_.size_y_mm / c_.stepover_mm + 1e-9)) + 1;
   }
   [[nodiscard]] double max_step_s() const override {
     return step_mm_ / (c_.feed_mm_per_min / 60.0);
+  }
+  [[nodiscard]] EndState end_state() const override {
+    return {true, phase_ == Phase::kDone ? part_ + 1 : part_, cut_path_mm_};
   }
 
   bool step(Simulation& sim, double h_s) override {
@@ -49,7 +59,8 @@ class MouldFace final : public Program {
     a.tool = nc.tool;
     switch (phase_) {
       case Phase::kStart:
-        if (part_ == 1) {
+        if (part_ == first_part_) {
+          // The NC reports the tool in the spindle at the program start.
           sim.emit(core::ToolChange{sim.now_ns(), nc.tool, false});
         }
         sim.emit(ProgramEvent{sim.now_ns(), ProgramEventKind::kPartStart, part_});
@@ -123,7 +134,7 @@ class MouldFace final : public Program {
       } else {
         sim.emit(ProgramEvent{sim.now_ns(), ProgramEventKind::kPartEnd, part_});
         total_passes_ += passes_;
-        if (part_ < parts_) {
+        if (part_ < last_part_) {
           ++part_;
           pass_ = 0;
           dir_ = 1;
@@ -189,6 +200,9 @@ class MouldFace final : public Program {
       tm.point_count = 1;
       tm.wear_um[0] = m.laser_reading_um(cut_path_mm_);
       sim.emit(tm);
+      sim.mutable_results().measurements.push_back({sim.time_s(), MeasurementKind::kLaser, part_,
+                                                    -1, cut_path_mm_, m.wear_um(cut_path_mm_),
+                                                    tm.wear_um[0], tm.broken});
       measured_ = true;
     }
     if (trip_s_ >= c_.laser_trip_s) {
@@ -199,18 +213,19 @@ class MouldFace final : public Program {
   }
 
   MouldFaceConfig c_;
-  std::int32_t parts_;
+  std::int32_t first_part_;
+  std::int32_t last_part_;
   double step_mm_;
+  std::int32_t part_;
+  double cut_path_mm_;
+  double last_measure_mm_;
   std::int32_t passes_{0};
-  std::int32_t part_{1};
   std::int32_t pass_{0};
   std::int32_t total_passes_{0};
   int dir_{1};
   double u_mm_{0.0};
   double link_left_mm_{0.0};
   double path_mm_{0.0};
-  double cut_path_mm_{0.0};
-  double last_measure_mm_{0.0};
   bool request_seen_{false};
   Phase phase_{Phase::kStart};
   Phase resume_phase_{Phase::kCut};
@@ -224,7 +239,13 @@ class MouldFace final : public Program {
 class SideWall final : public Program {
  public:
   explicit SideWall(const SimConfig& c)
-      : c_(c.side_wall), parts_(c.parts), step_mm_(c.step_mm), plan_(checked_plan(c_)) {
+      : c_(c.side_wall),
+        first_part_(c.first_part),
+        last_part_(c.first_part + c.parts - 1),
+        step_mm_(c.step_mm),
+        plan_(checked_plan(c_)),
+        part_(c.first_part),
+        cut_path_mm_(c.tool_cut_path_mm) {
     const auto& pts = c_.plan.contour;
     const std::size_t n = pts.size();
     const std::size_t segs = c_.plan.closed ? n : n - 1;
@@ -263,6 +284,9 @@ class SideWall final : public Program {
     return step_mm_ / (c_.feed_mm_per_min / 60.0);
   }
   [[nodiscard]] const core::checkpoint::Plan& plan() const { return plan_; }
+  [[nodiscard]] EndState end_state() const override {
+    return {true, phase_ == Phase::kDone ? part_ + 1 : part_, cut_path_mm_};
+  }
 
   static core::checkpoint::Plan checked_plan(const SideWallConfig& c) {
     if (c.plan.contour.size() < 2) {
@@ -281,15 +305,24 @@ class SideWall final : public Program {
     a.tool = nc.tool;
     switch (phase_) {
       case Phase::kStart:
-        if (part_ == 1) {
+        if (part_ == first_part_) {
+          // The NC reports the tool in the spindle at the program start.
           sim.emit(core::ToolChange{sim.now_ns(), nc.tool, false});
         }
         sim.emit(ProgramEvent{sim.now_ns(), ProgramEventKind::kPartStart, part_});
         sim.model().set_part(part_);
-        phase_ = Phase::kCut;
+        phase_ = Phase::kApproach;
+        approach_left_s_ = c_.approach_s;
         level_ = 0;
         s_mm_ = 0.0;
         return step(sim, h_s);
+      case Phase::kApproach:
+        publish(sim, 0.0, plan_.levels_z_mm[0], false);
+        approach_left_s_ -= h_s;
+        if (approach_left_s_ <= 1e-12) {
+          phase_ = Phase::kCut;
+        }
+        return true;
       case Phase::kCut:
         cut(sim, d_mm);
         return true;
@@ -315,7 +348,7 @@ class SideWall final : public Program {
   }
 
  private:
-  enum class Phase : std::uint8_t { kStart, kCut, kLink, kProbe, kDone };
+  enum class Phase : std::uint8_t { kStart, kApproach, kCut, kLink, kProbe, kDone };
 
   std::size_t segment(double s) const {
     const auto it = std::upper_bound(s0_.begin(), s0_.end(), s);
@@ -405,7 +438,7 @@ class SideWall final : public Program {
     a.cutting = false;
     if (probe_index_ >= plan_.checkpoints.size()) {
       sim.emit(ProgramEvent{sim.now_ns(), ProgramEventKind::kPartEnd, part_});
-      if (part_ < parts_) {
+      if (part_ < last_part_) {
         ++part_;
         path_mm_ = c_.plan.program_path_start_mm;
         phase_ = Phase::kStart;
@@ -444,25 +477,29 @@ class SideWall final : public Program {
     pm.position_mm = {cp.x_mm, cp.y_mm, cp.z_mm};
     sim.emit(pm);
     sim.mutable_results().checkpoints.push_back({part_, cp.id, cp.level, cp.z_mm, cp.s_mm, e, raw});
+    sim.mutable_results().measurements.push_back({sim.time_s(), MeasurementKind::kProbe, part_,
+                                                  cp.id, cut_path_mm_, e + delta0_um, raw, false});
     ++probe_index_;
   }
 
   SideWallConfig c_;
-  std::int32_t parts_;
+  std::int32_t first_part_;
+  std::int32_t last_part_;
   double step_mm_;
   core::checkpoint::Plan plan_;
+  std::int32_t part_;
+  double cut_path_mm_;
   std::vector<double> s0_;
   std::vector<Vec3> seg_n_;
   double length_mm_{0.0};
   double link_mm_{0.0};
   std::size_t cells_{0};
   std::vector<std::vector<double>> wall_;
-  std::int32_t part_{1};
   std::int32_t level_{0};
+  double approach_left_s_{0.0};
   double s_mm_{0.0};
   double link_left_mm_{0.0};
   double path_mm_{0.0};
-  double cut_path_mm_{0.0};
   Phase phase_{Phase::kStart};
   std::size_t probe_index_{0};
   double probe_s_{0.0};
@@ -538,11 +575,19 @@ std::vector<core::Event> Simulation::take_events() {
 
 WriteResult Simulation::write_offset(double t_s, std::uint16_t register_index, double value_um) {
   const WriteResult r = registers_.write(t_s, register_index, value_um);
-  if (r == WriteResult::kAccepted && std::fabs(value_um) > 0.0) {
-    const auto& al = config_.nc.alarm_registers;
-    if (std::find(al.begin(), al.end(), register_index) != al.end()) {
-      ++alarms_seen_;
+  const auto& al = config_.nc.alarm_registers;
+  if (r == WriteResult::kAccepted && std::find(al.begin(), al.end(), register_index) != al.end()) {
+    auto it = std::find_if(alarm_values_.begin(), alarm_values_.end(),
+                           [&](const auto& e) { return e.first == register_index; });
+    if (it == alarm_values_.end()) {
+      alarm_values_.emplace_back(register_index, 0.0);
+      it = alarm_values_.end() - 1;
     }
+    // The daemon re-sends a raised flag every refresh interval: one alarm per rising edge.
+    if (!(std::fabs(it->second) > 0.0) && std::fabs(value_um) > 0.0) {
+      results_.alarms.push_back({t_s, register_index, value_um});
+    }
+    it->second = value_um;
   }
   return r;
 }

@@ -35,11 +35,46 @@ struct TouchRow {
   double trigger_position_mm, true_drift_um;
 };
 
+/// A reading the NC produced: the laser's tool measurement or a probe reading, with the true
+/// value it measured (measurements.csv).
+enum class MeasurementKind : std::uint8_t { kLaser, kProbe };
+struct MeasurementRow {
+  double t_s;
+  MeasurementKind kind;
+  std::int32_t part;
+  /// Probe: the checkpoint id; laser: -1.
+  std::int32_t checkpoint;
+  /// The tool's cut path when it was measured [mm].
+  double cut_path_mm;
+  /// Laser: the true radial wear (broken edge included); probe: the deviation a noise-free
+  /// probe would show (wall error + the ball's geometric δ0) [µm].
+  double true_um;
+  /// What the NC published [µm].
+  double reading_um;
+  /// Laser: the broken flag the NC published.
+  bool broken;
+};
+/// A change of an alarm register (nc.alarm_registers) from 0 to a non-zero value.
+struct AlarmRow {
+  double t_s;
+  std::int32_t register_index;
+  double value;
+};
+
 struct Results {
   std::vector<SurfaceRow> surface;
   std::vector<WallRow> walls;
   std::vector<CheckpointRow> checkpoints;
   std::vector<TouchRow> touches;
+  std::vector<MeasurementRow> measurements;
+  std::vector<AlarmRow> alarms;
+};
+
+/// Where a program left the machine, for a run that continues it (`ncsim --continue`).
+struct EndState {
+  bool valid{false};
+  std::int32_t next_part{1};
+  double tool_cut_path_mm{0.0};
 };
 
 class Simulation;
@@ -52,6 +87,9 @@ class Program {
   virtual bool step(Simulation& sim, double h_s) = 0;
   /// Largest step [s] (step_mm at the program's feed).
   [[nodiscard]] virtual double max_step_s() const = 0;
+  /// The part a continuing run starts with and the tool's cut path; invalid for programs that
+  /// cannot be continued (touch, roll).
+  [[nodiscard]] virtual EndState end_state() const { return {}; }
 };
 
 class Simulation {
@@ -79,8 +117,11 @@ class Simulation {
   [[nodiscard]] const OffsetRegisters& registers() const noexcept { return registers_; }
   [[nodiscard]] const SimConfig& config() const noexcept { return config_; }
   [[nodiscard]] MachineModel& model() noexcept { return model_; }
-  /// Writes of a non-zero value to an alarm register.
-  [[nodiscard]] std::int32_t alarms_seen() const noexcept { return alarms_seen_; }
+  /// Alarms the NC showed: changes of an alarm register from 0 to a non-zero value.
+  [[nodiscard]] std::int32_t alarms_seen() const noexcept {
+    return static_cast<std::int32_t>(results_.alarms.size());
+  }
+  [[nodiscard]] EndState end_state() const { return program_->end_state(); }
 
   // --- for the programs ---
   Results& mutable_results() noexcept { return results_; }
@@ -100,7 +141,8 @@ class Simulation {
   Results results_;
   double t_s_{0.0};
   bool done_{false};
-  std::int32_t alarms_seen_{0};
+  /// Last value written to each alarm register (edge detection).
+  std::vector<std::pair<std::int32_t, double>> alarm_values_;
 };
 
 /// The mould face's nominal height and outward unit normal at (x, y).

@@ -5,6 +5,9 @@
 #include <fstream>
 #include <sstream>
 
+#include "drivers/can/can_config.hpp"
+#include "drivers/modbus/config.hpp"
+#include "sim/ncsim/bus_map.hpp"
 #include "sim/ncsim/config.hpp"
 #include "sim/ncsim/result.hpp"
 
@@ -99,6 +102,109 @@ TEST(NcsimConfig, CsvReaderNamesLineAndColumn) {
     FAIL() << "accepted a missing column";
   } catch (const ConfigError& e) {
     EXPECT_EQ(std::string(e.what()), path + ":1: no column \"w_mm\" in the header");
+  }
+}
+
+// The demo NC's map is the reference map plus extra files (ncsim.bus_map_extra), merged as the
+// daemon merges its includes: the offsets are appended, an entry's error names its own file, a
+// key defined in two files is refused naming both.
+TEST(NcsimConfig, BusMapExtraFilesAreAppended) {
+  const SimConfig c =
+      load_sim_config(std::string(NCCOMP_SOURCE_DIR) + "/config/demo/ncsim-demo.toml");
+  ASSERT_EQ(c.bus_map_extra_texts.size(), 1U);
+  EXPECT_NE(c.bus_map_extra_files[0].find("config/demo/nc-flags-modbus.toml"), std::string::npos);
+  EXPECT_EQ(c.nc.measure_request_register, 10);
+  ASSERT_EQ(c.nc.alarm_registers.size(), 1U);
+  EXPECT_EQ(c.nc.alarm_registers[0], 9);
+  const toml::table root =
+      merged_bus_map(c.bus_map_text, c.bus_map_file, c.bus_map_extra_texts, c.bus_map_extra_files);
+  const auto map = drivers::modbus::parse_modbus_table(*root["modbus"].as_table(), c.bus_map_file);
+  ASSERT_EQ(map.offsets.size(), 11U);
+  EXPECT_EQ(map.offsets[9].register_index, 9);
+  EXPECT_EQ(map.offsets[9].address, 240);
+  EXPECT_EQ(map.offsets[10].register_index, 10);
+  EXPECT_EQ(map.offsets[10].address, 242);
+  // The CAN profile: 4 registers of the reference map + 6 of nc-extra-can.toml.
+  const toml::table can_root = merged_bus_map(c.can_bus_map_text, c.can_bus_map_file,
+                                              c.can_bus_map_extra_texts, c.can_bus_map_extra_files);
+  const auto can = drivers::can::parse_can_table(*can_root["can"].as_table(), c.can_bus_map_file);
+  ASSERT_EQ(can.mapping.offsets.size(), 10U);
+  EXPECT_EQ(can.mapping.offsets[9].register_index, 9);
+
+  const std::string bad_type =
+      "[[modbus.offset]]\nregister_index = 9\naddress = 240\ntype = \"int12\"\n";
+  try {
+    const toml::table r = merged_bus_map(c.bus_map_text, c.bus_map_file, {bad_type}, {"x.toml"});
+    (void)drivers::modbus::parse_modbus_table(*r["modbus"].as_table(), c.bus_map_file);
+    FAIL() << "accepted type int12";
+  } catch (const std::exception& e) {
+    EXPECT_NE(std::string(e.what()).find("x.toml:4"), std::string::npos) << e.what();
+  }
+  try {
+    (void)merged_bus_map(c.bus_map_text, c.bus_map_file, {"\n[modbus]\nport = 1\n"}, {"y.toml"});
+    FAIL() << "accepted modbus.port twice";
+  } catch (const ConfigError& e) {
+    const std::string w = e.what();
+    EXPECT_EQ(w.rfind("y.toml:3:8: modbus.port: already defined at ", 0), 0U) << w;
+    EXPECT_NE(w.find("reference-nc-modbus.toml:"), std::string::npos) << w;
+  }
+  EXPECT_NE(error_of(header() + "bus_map_extra = \"one.toml\"\n")
+                .find("ncsim.bus_map_extra: must be an array of strings"),
+            std::string::npos);
+}
+
+// `ncsim --continue DIR`: the end state a run writes is what the next run starts from.
+TEST(NcsimConfig, ContinueReadsTheEndStateOfARun) {
+  SimConfig c =
+      load_sim_config(kConfig, {"ncsim.parts=2", "wear.rate_um_per_m=20"}, ProgramKind::kSideWall);
+  const std::vector<std::uint16_t> known{0, 1, 2, 3, 4, 5, 6, 7, 8};
+  Simulation sim(c, ProgramKind::kSideWall, known);
+  sim.advance_to(core::from_seconds(1000.0));
+  ASSERT_TRUE(sim.done());
+  const std::string dir = ::testing::TempDir() + "/ncsim_continue";
+  write_result(dir, sim, RunInfo{ProgramKind::kSideWall, BusKind::kModbus, 0});
+  const auto sets = continuation_overrides(dir);
+  ASSERT_EQ(sets.size(), 2U);
+  EXPECT_EQ(sets[0], "ncsim.first_part=3");
+  EXPECT_EQ(sets[1].rfind("ncsim.tool_cut_path_mm=", 0), 0U);
+  const SimConfig next = load_sim_config(kConfig, sets, ProgramKind::kSideWall);
+  EXPECT_EQ(next.first_part, 3);
+  EXPECT_NEAR(next.tool_cut_path_mm, sim.end_state().tool_cut_path_mm, 1e-6);
+  EXPECT_GT(next.tool_cut_path_mm, 0.0);
+  std::ifstream j(dir + "/result.json");
+  std::stringstream js;
+  js << j.rdbuf();
+  EXPECT_NE(js.str().find("\"first_part\":1,\"end\":{\"next_part\":3,"), std::string::npos)
+      << js.str();
+  EXPECT_NE(js.str().find("\"alarms_seen\":0,\"alarms\":[]"), std::string::npos);
+  std::ifstream mcsv(dir + "/measurements.csv");
+  std::string line;
+  std::getline(mcsv, line);
+  EXPECT_EQ(line, "t_s,kind,part,checkpoint,cut_path_mm,true_um,reading_um,broken");
+  int rows = 0;
+  while (std::getline(mcsv, line)) {
+    EXPECT_NE(line.find(",probe,"), std::string::npos) << line;
+    ++rows;
+  }
+  EXPECT_EQ(rows, 8);  // 4 checkpoints × 2 parts
+  {
+    std::ofstream f(dir + "/end_state.toml");
+    f << "[ncsim]\nfirst_part = 3\nwear_um = 4.0\n";
+  }
+  try {
+    (void)continuation_overrides(dir);
+    FAIL() << "accepted an unknown key";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("end_state.toml: ncsim.wear_um: unknown key"),
+              std::string::npos)
+        << e.what();
+  }
+  try {
+    (void)continuation_overrides(dir + "/nowhere");
+    FAIL() << "accepted a missing directory";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("--continue needs the end_state.toml"), std::string::npos)
+        << e.what();
   }
 }
 

@@ -333,5 +333,185 @@ TEST(NcsimRoll, GroundProfileIsTheEnvelopeMovedByTheXOffset) {
   }
 }
 
+// measurements.csv: every laser reading with the true wear it measured, every probe reading with
+// what a noise-free probe would show.
+TEST(NcsimMeasurements, LaserAndProbeReadingsWithTheirTrueValues) {
+  SimConfig c = quiet_config();
+  c.effects.wear.enabled = true;
+  c.effects.wear.rate_um_per_m = 1000.0;  // 1 µm per mm
+  c.effects.laser_noise.enabled = true;
+  c.effects.laser_noise.sigma_um = 0.8;
+  c.mould_face.measure_interval_mm = 12.0;
+  c.mould_face.laser_trip_s = 1.0;
+  Simulation sim(c, ProgramKind::kMouldFace, kKnown);
+  std::vector<double> published;
+  for (int k = 1; k <= 10000 && !sim.done(); ++k) {
+    sim.advance_to(core::from_seconds(0.001 * k));
+    for (const auto& e : sim.take_events()) {
+      if (const auto* tm = std::get_if<core::ToolMeasurement>(&e)) {
+        published.push_back(tm->wear_um[0]);
+      }
+    }
+  }
+  const auto& m = sim.results().measurements;
+  ASSERT_EQ(m.size(), 2U);
+  ASSERT_EQ(published.size(), 2U);
+  for (std::size_t i = 0; i < 2; ++i) {
+    EXPECT_EQ(m[i].kind, MeasurementKind::kLaser);
+    EXPECT_EQ(m[i].part, 1);
+    EXPECT_EQ(m[i].checkpoint, -1);
+    EXPECT_NEAR(m[i].cut_path_mm, 12.0 * static_cast<double>(i + 1), 0.051);
+    EXPECT_DOUBLE_EQ(m[i].true_um, m[i].cut_path_mm);  // 1 µm per mm from a new tool
+    EXPECT_DOUBLE_EQ(m[i].reading_um, published[i]);
+    EXPECT_GT(std::fabs(m[i].reading_um - m[i].true_um), 1e-6);  // the laser's noise
+    EXPECT_LT(std::fabs(m[i].reading_um - m[i].true_um), 4.0);   // 5 σ
+    EXPECT_FALSE(m[i].broken);
+  }
+  // Half-way through the 1 s trips, at 10 mm/s: 12 mm of cut + 1 mm of link (1.3 s) + 0.5 s;
+  // then the rest of the trip, 12 mm of cut + 1 mm of link again, + 0.5 s.
+  EXPECT_NEAR(m[0].t_s, 1.8, 0.011);
+  EXPECT_NEAR(m[1].t_s, 1.8 + 0.5 + 1.3 + 0.5, 0.011);
+
+  SimConfig w = wall_config();
+  w.effects.pushoff.enabled = true;
+  w.effects.probe_noise.enabled = true;
+  w.effects.probe_outlier = {true, 2, 1, 400.0};
+  Simulation s2(w, ProgramKind::kSideWall, kKnown);
+  s2.advance_to(core::from_seconds(1000.0));
+  const auto& cps = s2.results().checkpoints;
+  const auto& pm = s2.results().measurements;
+  ASSERT_EQ(pm.size(), cps.size());
+  ASSERT_EQ(pm.size(), 8U);
+  const double delta0 = (2.0 / std::cos(3.0 * std::numbers::pi / 180.0) - 2.0) * 1000.0;
+  for (std::size_t i = 0; i < pm.size(); ++i) {
+    EXPECT_EQ(pm[i].kind, MeasurementKind::kProbe);
+    EXPECT_EQ(pm[i].part, cps[i].part);
+    EXPECT_EQ(pm[i].checkpoint, cps[i].checkpoint);
+    EXPECT_DOUBLE_EQ(pm[i].true_um, cps[i].error_um + delta0);
+    EXPECT_DOUBLE_EQ(pm[i].reading_um, cps[i].probed_um);
+    const double outlier = (pm[i].part == 2 && pm[i].checkpoint == 1) ? 400.0 : 0.0;
+    EXPECT_LT(std::fabs(pm[i].reading_um - pm[i].true_um - outlier), 2.5);  // 5 σ of 0.5 µm
+    // Probed after both levels of 40 mm: the tool has 80 mm per part behind it.
+    EXPECT_NEAR(pm[i].cut_path_mm, 80.0 * pm[i].part, 1e-9);
+  }
+}
+
+// An alarm register counts each rise from 0 to a non-zero value once (the daemon re-sends a raised
+// flag every refresh interval); other registers and refused writes count nothing.
+TEST(NcsimAlarms, OneAlarmPerRiseOfAnAlarmRegister) {
+  SimConfig c = quiet_config();
+  c.nc.alarm_registers = {9};
+  const std::vector<std::uint16_t> known{0, 1, 2, 3, 4, 5, 6, 7, 8, 9};
+  Simulation sim(c, ProgramKind::kMouldFace, known);
+  ASSERT_EQ(sim.write_offset(0.1, 9, 0.0), WriteResult::kAccepted);
+  EXPECT_EQ(sim.alarms_seen(), 0);
+  ASSERT_EQ(sim.write_offset(0.2, 9, 1.0), WriteResult::kAccepted);
+  ASSERT_EQ(sim.write_offset(1.2, 9, 1.0), WriteResult::kAccepted);  // refresh
+  ASSERT_EQ(sim.write_offset(1.3, 1, 5.0), WriteResult::kAccepted);  // not an alarm register
+  ASSERT_EQ(sim.write_offset(1.4, 9, 900.0), WriteResult::kOutOfRange);
+  EXPECT_EQ(sim.alarms_seen(), 1);
+  ASSERT_EQ(sim.write_offset(2.0, 9, 0.0), WriteResult::kAccepted);
+  ASSERT_EQ(sim.write_offset(3.0, 9, 2.0), WriteResult::kAccepted);
+  EXPECT_EQ(sim.alarms_seen(), 2);
+  const auto& a = sim.results().alarms;
+  ASSERT_EQ(a.size(), 2U);
+  EXPECT_DOUBLE_EQ(a[0].t_s, 0.2);
+  EXPECT_EQ(a[0].register_index, 9);
+  EXPECT_DOUBLE_EQ(a[0].value, 1.0);
+  EXPECT_DOUBLE_EQ(a[1].t_s, 3.0);
+  EXPECT_DOUBLE_EQ(a[1].value, 2.0);
+}
+
+// A run continued from another one's end state (first part, the tool's cut path) machines the
+// same parts as one longer run: the worn tool stays worn, the part numbers go on.
+TEST(NcsimContinue, TwoRunsMachineWhatOneLongRunMachines) {
+  SimConfig c = wall_config();
+  c.effects.wear.enabled = true;
+  c.effects.wear.rate_um_per_m = 50.0;
+  c.effects.pushoff.enabled = true;
+  c.effects.hardness.enabled = true;
+  c.effects.hardness.per_part = true;
+  c.parts = 4;
+  Simulation whole(c, ProgramKind::kSideWall, kKnown);
+  whole.advance_to(core::from_seconds(1000.0));
+  ASSERT_TRUE(whole.done());
+  EXPECT_EQ(whole.end_state().next_part, 5);
+
+  c.parts = 2;
+  Simulation first(c, ProgramKind::kSideWall, kKnown);
+  first.advance_to(core::from_seconds(1000.0));
+  ASSERT_TRUE(first.done());
+  const EndState end = first.end_state();
+  ASSERT_TRUE(end.valid);
+  EXPECT_EQ(end.next_part, 3);
+  EXPECT_NEAR(end.tool_cut_path_mm, 2 * 80.0, 1e-9);
+  c.first_part = end.next_part;
+  c.tool_cut_path_mm = end.tool_cut_path_mm;
+  Simulation second(c, ProgramKind::kSideWall, kKnown);
+  second.advance_to(core::from_seconds(1000.0));
+  ASSERT_TRUE(second.done());
+  EXPECT_EQ(second.end_state().next_part, 5);
+  EXPECT_NEAR(second.end_state().tool_cut_path_mm, 4 * 80.0, 1e-9);
+
+  std::vector<WallRow> later;
+  for (const WallRow& w : whole.results().walls) {
+    if (w.part >= 3) {
+      later.push_back(w);
+    }
+  }
+  const auto& cont = second.results().walls;
+  ASSERT_EQ(cont.size(), later.size());
+  ASSERT_FALSE(cont.empty());
+  EXPECT_EQ(cont.front().part, 3);
+  EXPECT_EQ(cont.back().part, 4);
+  for (std::size_t i = 0; i < cont.size(); ++i) {
+    EXPECT_EQ(cont[i].part, later[i].part);
+    EXPECT_DOUBLE_EQ(cont[i].s_mm, later[i].s_mm);
+    EXPECT_DOUBLE_EQ(cont[i].error_um, later[i].error_um);
+  }
+  // Wear 50 µm/m over 160 mm before part 3: its first sample is 8 µm worse than part 1's.
+  EXPECT_GT(cont.front().error_um, first.results().walls.front().error_um + 7.0);
+  // The first part of the continued run gets the tool change (the tool in the spindle) and a
+  // part start with its number.
+  std::vector<core::Event> ev;
+  Simulation third(c, ProgramKind::kSideWall, kKnown);
+  third.advance_to(core::from_seconds(0.01));
+  ev = third.take_events();
+  ASSERT_GE(ev.size(), 2U);
+  EXPECT_TRUE(std::holds_alternative<core::ToolChange>(ev[0]));
+  EXPECT_EQ(std::get<core::ProgramEvent>(ev[1]).part, 3);
+
+  // The mould face: the laser's first reading continues the tool's wear.
+  SimConfig m = quiet_config();
+  m.effects.wear.enabled = true;
+  m.effects.wear.rate_um_per_m = 1000.0;
+  m.mould_face.measure_interval_mm = 12.0;
+  m.mould_face.laser_trip_s = 0.2;
+  m.first_part = 7;
+  m.tool_cut_path_mm = 500.0;
+  Simulation face(m, ProgramKind::kMouldFace, kKnown);
+  face.advance_to(core::from_seconds(100.0));
+  ASSERT_FALSE(face.results().measurements.empty());
+  EXPECT_EQ(face.results().measurements[0].part, 7);
+  EXPECT_NEAR(face.results().measurements[0].true_um, 512.0, 0.051);
+  EXPECT_EQ(face.end_state().next_part, 8);
+}
+
+// The side wall's approach: an offset the daemon writes at the part start is in force before the
+// first cut (the NC's latency is shorter than the approach).
+TEST(NcsimSideWall, ApproachBeforeTheFirstCut) {
+  for (const double approach_s : {0.5, 0.0}) {
+    SimConfig c = wall_config();
+    c.parts = 1;
+    c.side_wall.approach_s = approach_s;
+    Simulation sim(c, ProgramKind::kSideWall, kKnown);
+    ASSERT_EQ(sim.write_offset(0.0, 1, 3.0), WriteResult::kAccepted);  // in force at 0.1 s
+    sim.advance_to(core::from_seconds(1000.0));
+    const auto& walls = sim.results().walls;
+    ASSERT_FALSE(walls.empty());
+    EXPECT_NEAR(walls.front().offset_um, approach_s > 0.0 ? -3.0 : 0.0, 1e-12) << approach_s;
+  }
+}
+
 }  // namespace
 }  // namespace nccomp::sim::ncsim
