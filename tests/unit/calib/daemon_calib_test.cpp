@@ -56,10 +56,7 @@ TEST(NccompdCalibration, OperatorCalibratesOverTheSocketAndRecalibrationsTrack) 
   const std::string done = calibrate(d, m);
   // The registers reach the calibration: ΔxR, Δy, Δz against the simulated truth.
   const auto e = test_errors();
-  std::string j = wait_json(d, [&](const std::string& js) {
-    return std::fabs(register_output(js, "Y_offset") - number(js, "y_written_um")) < 1e-6 &&
-           text(js, "phase") == "ready";
-  });
+  std::string j = wait_settled(d);
   const double base_x = register_output(j, "X_offset");
   const double base_y = register_output(j, "Y_offset");
   const double base_z = register_output(j, "Z_offset");
@@ -127,12 +124,8 @@ TEST(NccompdCalibration, RestartMidCreepContinuesWhereTheNcIs) {
     Daemon d(dir.path);
     d.start();
     calibrate(d, m);
-    auto j = wait_json(d, [](const std::string& js) {
-      return std::fabs(register_output(js, "X_offset") - number(js, "x_written_um")) < 1e-6 &&
-             number(js, "x_written_um") > 10.0;
-    });
-    std::this_thread::sleep_for(500ms);
-    base_x = register_output(raw_request(d.socket(), "json"), "X_offset");
+    auto j = wait_settled(d);
+    base_x = register_output(j, "X_offset");
     m.set_drift([](double) { return std::array<double, 4>{20.0, 20.0, -8.0, 6.0}; });
     for (std::size_t slot = 0; slot < 4; ++slot) {
       for (int i = 0; i < 2; ++i) (void)d.ask(touch_line(m.machine_touch(slot, 1, 0)));

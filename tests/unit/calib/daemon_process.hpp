@@ -234,6 +234,35 @@ inline std::string wait_json(const Daemon& d, Pred pred,
   return j;
 }
 
+// Waits until the calibrator's X, Y and Z registers have reached their targets (the status
+// block's "target T um, written W um" equal), then until the loop has published its register
+// snapshot again (every 10 cycles: 20 cycles later); returns that status JSON.
+inline std::string wait_settled(const Daemon& d, std::chrono::milliseconds limit = 10000ms) {
+  const auto end = std::chrono::steady_clock::now() + limit;
+  const std::regex re(R"(register \d+ \([XYZ]\): target ([-+0-9.]+) um, written ([-+0-9.]+) um)");
+  while (std::chrono::steady_clock::now() < end) {
+    const auto a = d.ask("status");
+    int settled = 0;
+    if (a) {
+      for (auto it = std::sregex_iterator(a->begin(), a->end(), re); it != std::sregex_iterator();
+           ++it) {
+        if (std::fabs(std::stod((*it)[1]) - std::stod((*it)[2])) < 0.002) ++settled;
+      }
+    }
+    if (settled == 3) {
+      const double c0 = number(raw_request(d.socket(), "json"), "cycles");
+      while (std::chrono::steady_clock::now() < end) {
+        const std::string j = raw_request(d.socket(), "json");
+        if (number(j, "cycles") >= c0 + 20) return j;
+        std::this_thread::sleep_for(10ms);
+      }
+    }
+    std::this_thread::sleep_for(20ms);
+  }
+  ADD_FAILURE() << "the calibration registers did not settle\n" << d.ask("status").value_or("");
+  return raw_request(d.socket(), "json");
+}
+
 // The whole initial calibration through the socket; returns the last answer.
 inline std::string calibrate(Daemon& d, SimMachine& m) {
   auto a = d.ask("begin");
