@@ -135,7 +135,9 @@ void CalibrationModule::step(TimeNs now_ns, std::span<const Event> events,
   const std::size_t alarms = out.alarms.size();
   bool commanded = false;
   for (const Event& e : events) {
-    if (const auto* c = std::get_if<OperatorCommand>(&e)) {
+    const auto* c = std::get_if<OperatorCommand>(&e);
+    // kWarmStart is the engine's machine context's command, not the calibrator's.
+    if (c != nullptr && c->kind != OperatorCommandKind::kWarmStart) {
       run_command(*c, now_ns, out);
       commanded = true;
     }

@@ -128,6 +128,9 @@ enum class OperatorCommandKind : std::uint8_t {
   kCalibrationTouch = 5,        // a touch typed by the operator: code = {probe, axis, direction,
                                 // variant} as in CalibrationTouch, value[0] = trigger [mm]
   kCalibrationStatus = 6,       // no change: publish the state (the reply shows it)
+  // The engine's machine context (core/engine/context.hpp): `nccomp warm-start`.
+  kWarmStart = 7,  // code[0] = 0: the machine's warm start is now (time_s counts from this
+                   // cycle); 1: the machine is cold, its next axis motion is the warm start
 };
 
 /// An operator command (status socket → SPSC ring → the loop): validated by the daemon before it

@@ -208,6 +208,26 @@ void MachineContext::on_axis_sample(TimeNs now_ns, const AxisSample& a) noexcept
   cutting_ = cut;
 }
 
+void MachineContext::on_command(TimeNs now_ns, const OperatorCommand& c) noexcept {
+  if (c.kind != OperatorCommandKind::kWarmStart || (c.code[0] != 0 && c.code[0] != 1)) {
+    return;
+  }
+  if (c.code[0] == 0) {
+    // Declared now: the origin of time_s is this cycle, and the cycle counts as activity (the
+    // machine is running now; the idle rule starts counting from here).
+    origin_ns_ = now_ns;
+    last_activity_ns_ = now_ns;
+    activity_saved_ns_ = now_ns;
+    cold_ = false;
+    ++warm_starts_;
+  } else {
+    cold_ = true;  // the next axis motion is the warm start
+  }
+  ++commands_;
+  last_sequence_ = c.sequence;
+  ++generation_;
+}
+
 void MachineContext::update(TimeNs now_ns, std::span<const Event> events) noexcept {
   if (!has_step_) {
     // A fresh context: time counts from the first cycle until the first warm start.
@@ -240,6 +260,8 @@ void MachineContext::update(TimeNs now_ns, std::span<const Event> events) noexce
       }
     } else if (const auto* t = std::get_if<TemperatureSample>(&e)) {
       temperature_c_[t->sensor] = t->temperature_c;
+    } else if (const auto* o = std::get_if<OperatorCommand>(&e)) {
+      on_command(now_ns, *o);
     }
   }
 }

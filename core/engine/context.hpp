@@ -23,7 +23,10 @@
 // one boot of the computer), the downtime is known exactly and counts as idle time; if it went
 // back (a reboot, or a new lock-step run), the downtime is unknown and the machine is taken as
 // cold (its next activity is a warm start), the usual case of a cabinet PC switched off with the
-// machine.
+// machine. The operator (or a PLC through the status socket: `nccomp warm-start`) may also declare
+// it with an OperatorCommand kWarmStart: code[0] = 0 makes this cycle the warm start (time_s
+// restarts at 0, the cycle counts as activity), code[0] = 1 makes the machine cold (its next
+// motion is the warm start). Any other code is ignored here (the engine refuses it as invalid).
 //
 // Real-time: update(), annotate(), save() and load() allocate nothing (fixed arrays).
 #pragma once
@@ -77,6 +80,10 @@ class MachineContext {
   [[nodiscard]] std::uint64_t warm_starts() const noexcept { return warm_starts_; }
   /// True while the machine is cold: its next activity will be a warm start.
   [[nodiscard]] bool cold() const noexcept { return cold_; }
+  /// Warm-start commands taken since the context was created (not saved: a count of this
+  /// process), and the sequence number of the last one (0 = none).
+  [[nodiscard]] std::uint64_t warm_start_commands() const noexcept { return commands_; }
+  [[nodiscard]] std::uint32_t last_command_sequence() const noexcept { return last_sequence_; }
 
   [[nodiscard]] bool has_tool() const noexcept { return current_ >= 0; }
   /// Tool in the spindle (0 = the NC names none).
@@ -118,6 +125,7 @@ class MachineContext {
   };
   void on_axis_sample(TimeNs now_ns, const AxisSample& a) noexcept;
   void on_tool_change(std::int32_t tool, bool sister) noexcept;
+  void on_command(TimeNs now_ns, const OperatorCommand& c) noexcept;
   [[nodiscard]] int find_slot(std::int32_t tool) const noexcept;
   int take_slot(std::int32_t tool) noexcept;
 
@@ -131,6 +139,8 @@ class MachineContext {
   bool has_step_{false};
   bool cold_{true};
   std::uint64_t warm_starts_{0};
+  std::uint64_t commands_{0};
+  std::uint32_t last_sequence_{0};
   // Tools and path.
   std::array<ToolSlot, kContextTools> tools_{};
   int current_{-1};

@@ -283,6 +283,14 @@ bool Engine::validate(const Event& e) const noexcept {
           return static_cast<std::uint8_t>(ev.kind) <= 3;
         } else if constexpr (std::is_same_v<T, TemperatureSample>) {
           return std::isfinite(ev.temperature_c);
+        } else if constexpr (std::is_same_v<T, OperatorCommand>) {
+          // The machine context's own command (the other kinds are checked by the module that
+          // takes them): code[0] = 0 (warm start now) or 1 (at the next motion), nothing else.
+          if (ev.kind == OperatorCommandKind::kWarmStart) {
+            return (ev.code[0] == 0 || ev.code[0] == 1) && ev.code[1] == 0 && ev.code[2] == 0 &&
+                   ev.code[3] == 0 && ev.sequence > 0;
+          }
+          return true;
         } else {
           return true;  // ToolChange: every field is valid
         }
@@ -368,6 +376,9 @@ void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out)
   const std::span<const Event> accepted(valid_.data(), valid_.size());
   // The context first: modules that evaluate it see this cycle's samples.
   context_.update(now_ns, accepted);
+  counters_.warm_start_commands = context_.warm_start_commands();
+  counters_.last_warm_start_sequence = context_.last_command_sequence();
+  counters_.warm_starts = context_.warm_starts();
 
   for (std::size_t k = 0; k < modules_.size(); ++k) {
     scratch_.clear();
@@ -464,6 +475,38 @@ void Engine::resend_all() noexcept {
       }
     }
   }
+}
+
+AnchorResult Engine::anchor_register(std::size_t i, double nc_value_um, TimeNs now_ns) noexcept {
+  AnchorResult res;
+  if (i >= regs_.size() || !std::isfinite(nc_value_um)) {
+    return res;
+  }
+  Reg& r = regs_[i];
+  res.known = r.sent;
+  res.before_um = r.limiter.output_um();
+  res.beyond_limit = std::fabs(nc_value_um) > r.limiter.config().max_abs_um;
+  // The NC holds it: it is what was "sent". The next step compares the goal with it and writes
+  // only if they differ, through the limiter that now starts here.
+  r.limiter.reset(nc_value_um, now_ns);
+  r.sent_um = nc_value_um;
+  r.sent = true;
+  r.slewing = false;
+  ++register_generation_;  // the state file gets the NC's value
+  res.anchored = true;
+  return res;
+}
+
+AnchorResult Engine::adopt_register(std::size_t i, double nc_value_um, TimeNs now_ns) noexcept {
+  AnchorResult res = anchor_register(i, nc_value_um, now_ns);
+  if (!res.anchored || res.beyond_limit) {
+    return res;
+  }
+  Reg& r = regs_[i];
+  r.target_um = nc_value_um - r.trim_um;
+  r.has_target = true;
+  res.adopted = true;
+  return res;
 }
 
 RegisterState Engine::register_state(std::size_t i) const noexcept {

@@ -19,6 +19,9 @@
 //   trim again after a restart, so nothing is applied twice.
 // - In hold mode (state file corrupt, operator request) modules still run and alarms still flow,
 //   but no offset write leaves the engine: the NC keeps the offsets it has.
+// - Read-back at start-up: a register whose value the NC returns is anchored to it
+//   (anchor_register()): its limiter slews from what the NC holds, not from the value restored
+//   from the state, so no write steps further than max_step_um from the NC's real value.
 // - Measurement context (core/engine/context.hpp): the engine follows every cycle's validated
 //   events in one MachineContext before the modules step, and every measurement record leaves
 //   the engine through it: path_mm and temp_c a module left unknown are filled in, and time_ns
@@ -166,6 +169,27 @@ struct EngineCounters {
   /// More registers to write than one StepOutput holds (128): written on the next cycle(s), in
   /// turn, nothing lost. Large S1 tables at part start or while slewing.
   std::uint64_t writes_deferred{0};
+  /// Operator warm-start commands (OperatorCommand kWarmStart) the machine context took, the
+  /// sequence number of the last one (0 = none yet), and the context's warm starts (by the idle
+  /// rule or declared): the command's sender waits for its sequence here.
+  std::uint64_t warm_start_commands{0};
+  std::uint32_t last_warm_start_sequence{0};
+  std::uint64_t warm_starts{0};
+};
+
+/// What Engine::anchor_register() / adopt_register() found and did.
+struct AnchorResult {
+  /// False: refused (unknown register, or a non-finite value read back); nothing changed.
+  bool anchored{false};
+  /// What the engine took the NC to hold until then [µm]: the value restored from the state or
+  /// last sent in this run. known = false on a fresh register (nothing restored or sent).
+  double before_um{0.0};
+  bool known{false};
+  /// The value read back lies beyond max_abs_um: it is still the origin (the NC holds it), and
+  /// the next write can only move the register inward.
+  bool beyond_limit{false};
+  /// adopt_register(): the register's target became the value read back.
+  bool adopted{false};
 };
 
 /// One register's state as status shows it.
@@ -201,6 +225,21 @@ class Engine {
   /// Marks every register with a known value to be written again on the next step (after a
   /// bus reconnect, at start-up). Real-time safe.
   void resend_all() noexcept;
+
+  /// Start-up only (after import_state(), before the loop steps the engine; never while another
+  /// thread steps it): the NC was read back and holds nc_value_um in register i. The register's
+  /// limiter and its last-sent value start from that value, so the next writes move from what
+  /// the NC really holds through max_step_um and max_rate_um_per_s (not from the value restored
+  /// from the state, which an operator edit or an NC that lost its registers made wrong). The
+  /// target stays what the modules compute: a register whose target differs converges on it
+  /// from the NC's value. A non-finite value or an unknown register is refused (nothing
+  /// changes). No allocation.
+  AnchorResult anchor_register(std::size_t i, double nc_value_um, TimeNs now_ns) noexcept;
+  /// anchor_register(), and the register's target becomes the NC's value (minus the register's
+  /// trims), so the register stays where it is until a module sends another target: for a
+  /// value a module adopted from the NC (S1 reconcile_prefer = "nc") but publishes only on a
+  /// later cycle. A value beyond max_abs_um is anchored, never adopted.
+  AnchorResult adopt_register(std::size_t i, double nc_value_um, TimeNs now_ns) noexcept;
 
   /// Upper bound [bytes] of export_state(); fixed after configure().
   [[nodiscard]] std::size_t state_capacity() const noexcept { return state_capacity_; }

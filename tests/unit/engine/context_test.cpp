@@ -174,6 +174,70 @@ TEST(MachineContextClock, TheOriginSurvivesARestartAndARebootMakesTheMachineCold
   EXPECT_FALSE(e.has_tool());
 }
 
+OperatorCommand warm_start(std::uint32_t sequence, std::int8_t at_next_motion) {
+  OperatorCommand c;
+  c.sequence = sequence;
+  c.kind = OperatorCommandKind::kWarmStart;
+  c.code = {at_next_motion, 0, 0, 0};
+  return c;
+}
+
+TEST(MachineContextClock, AnOperatorDeclaresAWarmStartNowOrAtTheNextMotion) {
+  MachineContext ctx;
+  ctx.configure(ContextOptions{0, 3600.0});
+  feed(ctx, 10 * kS, {sample(0, 0, 1)});
+  feed(ctx, 100 * kS, {sample(5, 0, 1)});  // the idle rule's warm start
+  ASSERT_EQ(ctx.warm_starts(), 1U);
+  feed(ctx, 400 * kS, {sample(6, 0, 1)});
+  ASSERT_DOUBLE_EQ(ctx.machine_time_s(), 300.0);
+  const auto g = ctx.generation();
+
+  // "Now" at 500 s (the machine stood since 400 s, less than 3600 s: the rule sees no warm
+  // start): time_s counts from 500 s.
+  feed(ctx, 500 * kS, {warm_start(7, 0)});
+  EXPECT_EQ(ctx.warm_starts(), 2U);
+  EXPECT_EQ(ctx.warm_start_commands(), 1U);
+  EXPECT_EQ(ctx.last_command_sequence(), 7U);
+  EXPECT_FALSE(ctx.cold());
+  EXPECT_DOUBLE_EQ(ctx.machine_time_s(), 0.0);
+  EXPECT_DOUBLE_EQ(ctx.machine_time_s(620 * kS), 120.0);
+  EXPECT_DOUBLE_EQ(ctx.idle_s(), 0.0);  // the declared start counts as activity
+  EXPECT_GT(ctx.generation(), g);       // saved with the state
+  MeasurementRecord r;
+  r.time_ns = 530 * kS;
+  ctx.annotate(r);
+  EXPECT_EQ(r.time_ns, 30 * kS);
+  // The idle rule goes on from the declared start: motion 3599 s later is no warm start.
+  feed(ctx, 4099 * kS, {sample(6, 0, 1)});
+  feed(ctx, 4099 * kS + kS / 2, {sample(7, 0, 1)});
+  EXPECT_EQ(ctx.warm_starts(), 2U);
+  EXPECT_DOUBLE_EQ(ctx.machine_time_s(), 3599.5);
+
+  // "At the next motion": the machine is cold now (say it was switched off and on again while
+  // nccompd ran); the time goes on until the axes move, which is the warm start.
+  feed(ctx, 4200 * kS, {warm_start(8, 1)});
+  EXPECT_TRUE(ctx.cold());
+  EXPECT_EQ(ctx.warm_starts(), 2U);
+  EXPECT_EQ(ctx.warm_start_commands(), 2U);
+  EXPECT_EQ(ctx.last_command_sequence(), 8U);
+  feed(ctx, 4300 * kS, {sample(7, 0, 1)});  // standing: still cold
+  EXPECT_TRUE(ctx.cold());
+  EXPECT_DOUBLE_EQ(ctx.machine_time_s(), 3800.0);
+  feed(ctx, 4310 * kS, {sample(9, 0, 1)});
+  EXPECT_EQ(ctx.warm_starts(), 3U);
+  EXPECT_DOUBLE_EQ(ctx.machine_time_s(), 0.0);
+
+  // A code the context does not know, and another command kind: ignored.
+  feed(ctx, 4400 * kS, {warm_start(9, 2)});
+  OperatorCommand other = warm_start(10, 0);
+  other.kind = OperatorCommandKind::kCalibrationStatus;
+  feed(ctx, 4500 * kS, {other});
+  EXPECT_EQ(ctx.warm_start_commands(), 2U);
+  EXPECT_EQ(ctx.last_command_sequence(), 8U);
+  EXPECT_EQ(ctx.warm_starts(), 3U);
+  EXPECT_DOUBLE_EQ(ctx.machine_time_s(), 190.0);
+}
+
 TEST(MachineContext, RefusesOptionsOutOfRange) {
   MachineContext c;
   EXPECT_THROW(c.configure(ContextOptions{256, 7200.0}), std::invalid_argument);
@@ -314,6 +378,57 @@ TEST(EngineContext, OneModuleAtMostSetsTheOptionsAndBadOptionsAreRefused) {
   o.context.temperature_sensor = 5;
   e3.configure({}, {}, o);
   EXPECT_EQ(e3.context().options().temperature_sensor, 5);
+}
+
+TEST(EngineContext, AWarmStartCommandIsValidatedCountedAndSaved) {
+  auto e = probe_engine(ContextOptions{0, 3600.0});
+  StepOutput out;
+  std::vector<Event> ev = {sample(0, 0, 2)};
+  e->step(10 * kS, ev, out);
+  ev = {sample(1, 0, 2)};
+  e->step(20 * kS, ev, out);  // warm start by the rule at 20 s
+  ASSERT_EQ(e->counters().warm_starts, 1U);
+
+  // Malformed: an unknown code, a code in an unused slot, sequence 0. Each is refused as an
+  // invalid event (warning event_invalid), never reaches the context.
+  OperatorCommand bad_code = warm_start(1, 3);
+  OperatorCommand bad_slot = warm_start(2, 0);
+  bad_slot.code[2] = 1;
+  OperatorCommand no_sequence = warm_start(0, 0);
+  ev = {bad_code, bad_slot, no_sequence};
+  e->step(30 * kS, ev, out);
+  EXPECT_EQ(e->counters().events_invalid, 3U);
+  std::size_t invalid_alarms = 0;
+  for (const auto& a : out.alarms) invalid_alarms += a.code == AlarmCode::kEventInvalid ? 1 : 0;
+  EXPECT_EQ(invalid_alarms, 3U);
+  EXPECT_EQ(e->counters().warm_start_commands, 0U);
+  EXPECT_EQ(e->counters().last_warm_start_sequence, 0U);
+
+  // A valid one at 50 s: taken, counted, its sequence published for the sender.
+  ev = {warm_start(4, 0)};
+  e->step(50 * kS, ev, out);
+  EXPECT_EQ(e->counters().warm_start_commands, 1U);
+  EXPECT_EQ(e->counters().last_warm_start_sequence, 4U);
+  EXPECT_EQ(e->counters().warm_starts, 2U);
+  EXPECT_DOUBLE_EQ(e->context().machine_time_s(80 * kS), 30.0);
+
+  // The declared origin is in the state: a restart 10 s later continues from it.
+  std::vector<std::byte> buf(e->state_capacity());
+  const std::size_t n = e->export_state(buf);
+  ASSERT_GT(n, 0U);
+  auto f = probe_engine(ContextOptions{0, 3600.0});
+  ASSERT_TRUE(f->import_state(std::span<const std::byte>(buf.data(), n), 60 * kS));
+  EXPECT_DOUBLE_EQ(f->context().machine_time_s(80 * kS), 30.0);
+  EXPECT_EQ(f->context().warm_starts(), 2U);
+  EXPECT_EQ(f->counters().warm_start_commands, 0U);  // a count of the running process only
+
+  // Taking a command allocates nothing.
+  ev = {warm_start(5, 1)};
+  const nccomp::test::AllocationScope scope;
+  for (int k = 0; k < 100; ++k) e->step((100 + k) * kS, ev, out);
+  EXPECT_EQ(scope.count(), 0U);
+  EXPECT_EQ(e->counters().warm_start_commands, 101U);
+  EXPECT_TRUE(e->context().cold());
 }
 
 TEST(EngineContext, GenerationAdvancesOnChangesNotEveryCycle) {
