@@ -10,10 +10,12 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <iostream>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -235,17 +237,56 @@ int run_daemon(const DaemonOptions& options) {
   // does it now on this thread; the others say they cannot, and the hooks fall back to
   // rewriting what the NC must hold.
   {
+    // Each register is read once: the anchoring below and every hook see the same value.
+    std::map<std::uint16_t, std::optional<double>> read_back;
     const RegisterReader read = [&](std::uint16_t index) -> std::optional<double> {
-      if (index >= runtime->register_bus.size()) {
-        return std::nullopt;
+      if (const auto it = read_back.find(index); it != read_back.end()) {
+        return it->second;
       }
-      const int b = runtime->register_bus[index];
-      if (b < 0 || static_cast<std::size_t>(b) >= buses.size()) {
-        return std::nullopt;
+      std::optional<double> v;
+      const int b = index < runtime->register_bus.size() ? runtime->register_bus[index] : -1;
+      if (b >= 0 && static_cast<std::size_t>(b) < buses.size()) {
+        v = buses[static_cast<std::size_t>(b)].bus->read_offset(index);
       }
-      return buses[static_cast<std::size_t>(b)].bus->read_offset(index);
+      read_back.emplace(index, v);
+      return v;
     };
     const core::TimeNs hook_now = options.lockstep_socket.empty() ? monotonic_ns() : 0;
+    // Every register the NC returns: its limiter starts from the NC's value, not from the state's
+    // (docs/daemon.md, "State and crashes"). Differences beyond 0.1 µm (the reference map's
+    // counts) are logged.
+    auto& engine = *runtime->engine;
+    std::size_t anchored = 0;
+    std::size_t differ = 0;
+    for (std::size_t i = 0; i < engine.register_count() && i <= 0xFFFFU; ++i) {
+      const auto v = read(static_cast<std::uint16_t>(i));
+      const auto a = v ? engine.anchor_register(i, *v, hook_now) : core::engine::AnchorResult{};
+      if (!a.anchored) {
+        continue;
+      }
+      ++anchored;
+      if (a.known && std::fabs(*v - a.before_um) > 0.1) {
+        ++differ;
+        spdlog::warn(
+            "register {} ({}): the NC holds {:.3f} um, the state {:.3f} um ({:+.3f} um); the next "
+            "writes start from the NC's value",
+            i, engine.register_spec(i).name, *v, a.before_um, *v - a.before_um);
+      }
+      if (a.beyond_limit) {
+        spdlog::warn("register {} ({}): the NC holds {:.3f} um, beyond max_abs_um {:.3f}", i,
+                     engine.register_spec(i).name, *v, engine.register_spec(i).limits.max_abs_um);
+      }
+    }
+    if (anchored == 0) {
+      spdlog::info(
+          "registers: none can be read back from the NC; the limiters start from the values in "
+          "the state");
+    } else {
+      spdlog::info(
+          "registers: {} of {} read back from the NC, {} differ from the state; their limiters "
+          "start from the NC's values",
+          anchored, engine.register_count(), differ);
+    }
     for (const auto& [hook_name, hook] : startup_hooks()) {
       try {
         for (const auto& line : hook(*runtime->engine, read, hook_now)) {

@@ -1,5 +1,6 @@
 #include "daemon/sections/checkpoints/startup.hpp"
 
+#include <cmath>
 #include <cstdio>
 #include <vector>
 
@@ -40,14 +41,21 @@ std::vector<ReconcileOutcome> reconcile_checkpoints(core::engine::Engine& engine
       out.push_back(std::move(o));
       continue;
     }
+    // The engine's limiters start from what the NC holds (the register may have been edited, or
+    // the NC may have lost it): the next writes move from there, never more than max_step_um.
+    for (std::size_t i = 0; i < n; ++i) {
+      (void)engine.anchor_register(config.register_base + i, values[i], now_ns);
+    }
     const auto rep = comp.reconcile(values);
-    if (rep.rewritten > 0) {
-      // The engine believes the restored values are on the NC and would not write a target it
-      // already sent: make it send every known value again (absolute values: harmless). Not
-      // when every difference was adopted (prefer = nc): the NC holds exactly those values, and
-      // on a table larger than one cycle's 32 writes the resend would put the engine's last
-      // values over adopted registers the compensator has not re-targeted yet.
-      engine.resend_all();
+    if (rep.adopted_nc) {
+      // Adopted values are the registers' targets from now on, before the compensator publishes
+      // them (32 table registers per cycle): the engine must not pull a register toward the
+      // restored target in between. A value the compensator could not adopt is left to it.
+      for (std::size_t i = 0; i < n; ++i) {
+        if (std::fabs(comp.register_value_um(i) - values[i]) <= config.reconcile_tolerance_um) {
+          (void)engine.adopt_register(config.register_base + i, values[i], now_ns);
+        }
+      }
     }
     o.read_back = true;
     o.compared = rep.compared;
@@ -57,6 +65,8 @@ std::vector<ReconcileOutcome> reconcile_checkpoints(core::engine::Engine& engine
     if (config.active_register >= 0) {
       if (const auto live = read(static_cast<std::uint16_t>(config.active_register))) {
         comp.reset_live(*live, now_ns);
+        (void)engine.anchor_register(static_cast<std::size_t>(config.active_register), *live,
+                                     now_ns);
       }
     }
     if (rep.mismatched == 0) {
@@ -69,8 +79,8 @@ std::vector<ReconcileOutcome> reconcile_checkpoints(core::engine::Engine& engine
                     rep.adopted_nc ? "the NC's values are adopted (reconcile_prefer = \"nc\")"
                                    : "the table is written again (reconcile_prefer = \"daemon\")",
                     rep.adopted_nc && rep.rewritten > 0
-                        ? "; some could not be adopted (non-finite or beyond the limit): the "
-                          "whole table is sent again"
+                        ? "; some could not be adopted (non-finite or beyond the limit): those "
+                          "are written again"
                         : "");
     }
     o.message = line;

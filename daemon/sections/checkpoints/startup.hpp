@@ -1,8 +1,12 @@
 // Start-up of the S1 modules (docs/checkpoints.md, "Persistence and restart"): after the state
 // was restored and before the loop steps the engine, the NC's checkpoint registers are read back
-// and compared with the learned table (CheckpointCompensator::reconcile()), and the live
-// register's limiter starts from the NC's value (reset_live()). Not real-time; call only while
-// no other thread steps the engine.
+// and compared with the learned table (CheckpointCompensator::reconcile()). The engine's limiter
+// of every register read back starts from the NC's value (Engine::anchor_register()), so the
+// table is rewritten (prefer = "daemon") from what the NC holds in steps of at most max_step_um;
+// with prefer = "nc" the adopted values become the registers' targets at once
+// (Engine::adopt_register()), so an operator's edit of any size stays in the NC. The live
+// register's limiters (the compensator's, reset_live(), and the engine's) start from the NC's
+// value too. Not real-time; call only while no other thread steps the engine.
 #pragma once
 
 #include <cstdint>
@@ -18,7 +22,8 @@ namespace nccomp::daemon::sections {
 struct ReconcileOutcome {
   std::string module;
   /// False: some register could not be read; nothing was compared (the table is rewritten at the
-  /// next part start anyway, and the live register's limiter starts from the restored value).
+  /// next part start anyway, and the limiters of the registers not read back start from the
+  /// restored values).
   bool read_back{false};
   std::size_t compared{0};
   std::size_t mismatched{0};
