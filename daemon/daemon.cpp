@@ -280,7 +280,7 @@ int run_daemon(const DaemonOptions& options) {
     if (anchored == 0) {
       spdlog::info(
           "registers: none can be read back from the NC; the limiters start from the values in "
-          "the state");
+          "the state file (0 without one)");
     } else {
       spdlog::info(
           "registers: {} of {} read back from the NC, {} differ from the state; their limiters "
