@@ -10,8 +10,13 @@
 // - with reconcile_prefer = "nc" leaves the operator's value in the NC, adopts it as the
 //   checkpoint's offset, writes it as such at the next part start, and learns the next reading
 //   against it.
-// The registers' max_step_um (50) is above the operator's change (2 µm): see docs/checkpoints.md
-// for what the engine's limiter does with a larger change.
+// The registers' max_step_um (50) is above the operator's change (2 µm) in these two tests. The
+// tests after them (NccompdReadBack) use max_step_um = 5 and max_rate_um_per_s = 50 with an
+// operator's edit of +80.0 µm and an NC that lost its registers (all 0): every value the NC
+// received after the restart is taken from the server's write log and checked: with "nc" the
+// edit stays (no write to that register, 80.0 µm at every sample); with "daemon" the register
+// slews from what the NC held, never more than max_step_um per write, and ends at the learned
+// value.
 #include <fcntl.h>
 #include <gtest/gtest.h>
 #include <signal.h>
@@ -49,7 +54,8 @@ using nccomp::sim::modbus_nc::Tables;
 // Checkpoint i's register is logical register i, holding register 200 + 2i (int32, 0.1 µm).
 constexpr std::uint16_t kTableAddress = 200;
 
-std::string config_text(std::uint16_t port, const char* prefer) {
+std::string config_text(std::uint16_t port, const char* prefer, double max_step_um = 50.0,
+                        double max_rate_um_per_s = 1000.0) {
   std::ostringstream s;
   s << "[daemon]\nrate_hz = 200\n"
     << "[state]\ndirectory = \"state\"\nmin_interval_s = 0.05\n"
@@ -80,7 +86,8 @@ std::string config_text(std::uint16_t port, const char* prefer) {
   }
   for (int i = 0; i < 4; ++i) {
     s << "[[registers]]\nname = \"D" << 20 + i << "_radius_wear\"\nkind = \"checkpoint\"\n"
-      << "bus = \"modbus\"\nmax_abs_um = 200\nmax_step_um = 50\nmax_rate_um_per_s = 1000\n";
+      << "bus = \"modbus\"\nmax_abs_um = 200\nmax_step_um = " << max_step_um
+      << "\nmax_rate_um_per_s = " << max_rate_um_per_s << "\n";
   }
   // An open straight wall probed at s = 25 and 75 mm on two levels: checkpoints 0..3, table only
   // (the NC program selects D20 + i itself), learned from the previous part.
@@ -366,6 +373,190 @@ TEST(NccompdCheckpointsRestart, PreferNcAdoptsTheRegisterAnOperatorChanged) {
       << line;
   ev.part_start(4);
   EXPECT_TRUE(wait_until([&] { return table_counts(nc, 2) == -82; })) << table_counts(nc, 2);
+  second.signal(SIGTERM);
+  EXPECT_EQ(second.wait(), 0) << second.log();
+  nc.stop();
+}
+
+// ---------------------------------------------------------------------------------------------
+// Read-back at start-up (docs/daemon.md, "State and crashes"): the registers' limiters start from
+// what the NC holds. max_step_um = 5, max_rate_um_per_s = 50: at 200 Hz the rate allows 0.25 µm
+// per cycle, so even a few loop cycles the Modbus driver coalesces ("latest value wins") stay
+// below max_step_um on the NC.
+
+constexpr double kStepUm = 5.0;
+constexpr double kRateUmPerS = 50.0;
+
+/// The values (µm) the NC received in checkpoint register i's holding registers, from the
+/// server's write log starting at entry `from`, in order.
+std::vector<double> received_um(NcServer& nc, std::size_t from, int checkpoint) {
+  const auto address = static_cast<std::uint16_t>(kTableAddress + 2 * checkpoint);
+  std::vector<double> out;
+  const auto log = nc.writes();
+  for (std::size_t k = from; k < log.size(); ++k) {
+    const auto& w = log[k];
+    if (w.address != address || w.values.size() != 2) continue;
+    const auto counts = static_cast<std::int32_t>((std::uint32_t{w.values[0]} << 16) | w.values[1]);
+    out.push_back(0.1 * counts);
+  }
+  return out;
+}
+
+std::string joined(const std::vector<double>& v) {
+  std::ostringstream s;
+  for (double x : v) s << x << " ";
+  return s.str();
+}
+
+/// Every step of `values` from `start_um` on is at most kStepUm; the last value is `end_um`.
+void expect_slewed(const std::vector<double>& values, double start_um, double end_um,
+                   const std::string& what) {
+  ASSERT_FALSE(values.empty()) << what;
+  double prev = start_um;
+  double largest = 0.0;
+  for (double v : values) {
+    largest = std::max(largest, std::fabs(v - prev));
+    prev = v;
+  }
+  EXPECT_LE(largest, kStepUm + 1e-9) << what << ": " << joined(values);
+  EXPECT_NEAR(values.back(), end_um, 1e-9) << what << ": " << joined(values);
+  std::printf("%s: %zu writes, %.1f -> %.1f um, largest step %.2f um\n", what.c_str(),
+              values.size(), start_um, values.back(), largest);
+}
+
+TEST(NccompdReadBack, PreferNcKeepsAnEditLargerThanMaxStepAtEverySample) {
+  TempDir d;
+  NcServer nc(ServerConfig{});
+  nc.start();
+  d.write("nccompd.toml", config_text(nc.port(), "nc", kStepUm, kRateUmPerS));
+  NcEvents ev(nc);
+  {
+    Daemon first(d.path);
+    learn_then_kill(d, nc, ev, first);
+    if (HasFatalFailure()) return;
+  }
+  // D22: learned −8.0 µm; the operator sets +80.0 µm (88 µm away, 17.6 × max_step_um).
+  set_table_counts(nc, 2, 800);
+  const std::size_t from = nc.writes().size();
+  Daemon second(d.path);
+  second.start();
+  // Sampled every 5 ms from the start (before the bus is up) for 1.5 s: always 80.0 µm.
+  for (int k = 0; k < 300; ++k) {
+    ASSERT_EQ(table_counts(nc, 2), 800) << "after " << k * 5 << " ms\n" << second.log();
+    std::this_thread::sleep_for(5ms);
+  }
+  ASSERT_TRUE(wait_until([&] {
+    return second.log().find("warning checkpoint_register_mismatch (code 33) subject 1") !=
+           std::string::npos;
+  })) << second.log();
+  const std::string log = second.log();
+  EXPECT_NE(log.find("register 2 (D22_radius_wear): the NC holds 80.000 um, the state -8.000 um "
+                     "(+88.000 um); the next writes start from the NC's value"),
+            std::string::npos)
+      << log;
+  EXPECT_NE(log.find("registers: 4 of 4 read back from the NC, 1 differ from the state"),
+            std::string::npos)
+      << log;
+  EXPECT_NE(log.find("checkpoints: 1 of 4 checkpoint registers differ from the table (max "
+                     "88.000 um); the NC's values are adopted (reconcile_prefer = \"nc\")"),
+            std::string::npos)
+      << log;
+  // At the next part start the table is written: D22 is the adopted 80.0 µm, which the NC
+  // already holds; the others are at their learned values.
+  ev.part_start(3);
+  ASSERT_TRUE(wait_until([&] { return is(number(second.status(), "part"), 3.0); })) << second.log();
+  for (int k = 0; k < 60; ++k) {
+    ASSERT_EQ(table_counts(nc, 2), 800) << "after part start + " << k * 5 << " ms";
+    std::this_thread::sleep_for(5ms);
+  }
+  // Every value the NC received in D22 since the restart: none moved it from 80.0 µm.
+  for (double v : received_um(nc, from, 2)) EXPECT_NEAR(v, 80.0, 1e-9);
+  std::printf("D22 after the restart: %zu writes, all 80.0 um\n", received_um(nc, from, 2).size());
+  for (int i : {0, 1, 3}) EXPECT_EQ(table_counts(nc, i), kLearnedCounts[i]) << i;
+  // The daemon shows what the NC holds and what it aims at: both the operator's value.
+  const std::string st = second.status();
+  EXPECT_NE(st.find("\"name\":\"D22_radius_wear\",\"output_um\":80,\"target_um\":80,"),
+            std::string::npos)
+      << st;
+  second.signal(SIGTERM);
+  EXPECT_EQ(second.wait(), 0) << second.log();
+  nc.stop();
+}
+
+TEST(NccompdReadBack, PreferDaemonSlewsBackFromTheEditWithinTheLimits) {
+  TempDir d;
+  NcServer nc(ServerConfig{});
+  nc.start();
+  d.write("nccompd.toml", config_text(nc.port(), "daemon", kStepUm, kRateUmPerS));
+  NcEvents ev(nc);
+  {
+    Daemon first(d.path);
+    learn_then_kill(d, nc, ev, first);
+    if (HasFatalFailure()) return;
+  }
+  set_table_counts(nc, 2, 800);  // +80.0 µm over the learned −8.0 µm
+  const std::size_t from = nc.writes().size();
+  Daemon second(d.path);
+  const auto t0 = std::chrono::steady_clock::now();
+  second.start();
+  ASSERT_TRUE(wait_until([&] { return table_counts(nc, 2) == kLearnedCounts[2]; }, 20000ms))
+      << table_counts(nc, 2) << "\n"
+      << second.log();
+  const double took_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  // 88 µm at 50 µm/s cannot take less than 1.76 s (the start-up before the first write only
+  // adds to it).
+  EXPECT_GE(took_s, 88.0 / kRateUmPerS) << took_s;
+  const auto d22 = received_um(nc, from, 2);
+  expect_slewed(d22, 80.0, -8.0, "D22 from the operator's +80.0 back to the learned -8.0");
+  // The engine's writes are 0.25 µm apart (50 µm/s at 200 Hz): far more than the 18 writes of
+  // a register that steps max_step_um each time.
+  EXPECT_GT(d22.size(), 88U / 5U + 1U);
+  EXPECT_LE(d22.front(), 80.0 - 0.1);      // the first write moves toward −8.0 ...
+  EXPECT_GE(d22.front(), 80.0 - kStepUm);  // ... from the NC's value, not from −8.0
+  const std::string log = second.log();
+  EXPECT_NE(log.find("register 2 (D22_radius_wear): the NC holds 80.000 um, the state -8.000 um "
+                     "(+88.000 um); the next writes start from the NC's value"),
+            std::string::npos)
+      << log;
+  EXPECT_NE(log.find("the table is written again (reconcile_prefer = \"daemon\")"),
+            std::string::npos)
+      << log;
+  for (int i = 0; i < 4; ++i) EXPECT_EQ(table_counts(nc, i), kLearnedCounts[i]) << i;
+  second.signal(SIGTERM);
+  EXPECT_EQ(second.wait(), 0) << second.log();
+  nc.stop();
+}
+
+TEST(NccompdReadBack, AnNcThatLostItsRegistersGetsTheTableBackFromZeroWithinTheLimits) {
+  TempDir d;
+  NcServer nc(ServerConfig{});
+  nc.start();
+  d.write("nccompd.toml", config_text(nc.port(), "daemon", kStepUm, kRateUmPerS));
+  NcEvents ev(nc);
+  {
+    Daemon first(d.path);
+    learn_then_kill(d, nc, ev, first);
+    if (HasFatalFailure()) return;
+  }
+  // The NC was power-cycled and came back with its offset registers at 0.
+  for (int i = 0; i < 4; ++i) set_table_counts(nc, i, 0);
+  const std::size_t from = nc.writes().size();
+  Daemon second(d.path);
+  second.start();
+  ASSERT_TRUE(wait_until([&] {
+    for (int i = 0; i < 4; ++i) {
+      if (table_counts(nc, i) != kLearnedCounts[i]) return false;
+    }
+    return true;
+  })) << second.log();
+  for (int i = 0; i < 4; ++i) {
+    expect_slewed(received_um(nc, from, i), 0.0, 0.1 * kLearnedCounts[i],
+                  "checkpoint " + std::to_string(i) + " from 0");
+  }
+  EXPECT_NE(second.log().find("registers: 4 of 4 read back from the NC, 4 differ from the state"),
+            std::string::npos)
+      << second.log();
   second.signal(SIGTERM);
   EXPECT_EQ(second.wait(), 0) << second.log();
   nc.stop();
