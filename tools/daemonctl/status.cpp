@@ -5,9 +5,8 @@
 #include <memory>
 #include <string>
 
-#include "daemon/config/builtin_sections.hpp"
-#include "daemon/config/config.hpp"
 #include "daemon/status.hpp"
+#include "tools/daemonctl/status_socket.hpp"
 #include "tools/nccomp/command.hpp"
 
 namespace {
@@ -19,25 +18,6 @@ struct Options {
   bool metrics{false};
 };
 
-std::string socket_path(const Options& o) {
-  if (!o.socket.empty()) {
-    return o.socket;
-  }
-  if (!o.config.empty()) {
-    namespace cfg = nccomp::daemon::config;
-    auto r = cfg::load_file(o.config);
-    if (!r.config) {
-      throw nccomp::tools::CommandError(nccomp::tools::kExitInvalidInput,
-                                        r.diagnostics.to_string() + "cannot read " + o.config);
-    }
-    const auto& s = cfg::status_section(*r.config);
-    if (!s.socket_path.empty()) {
-      return r.config->resolve(s.socket_path);
-    }
-  }
-  return "/run/nccompd/status.sock";
-}
-
 void setup(CLI::App& app) {
   auto* sub = app.add_subcommand("status", "Show the status of the running nccompd");
   auto o = std::make_shared<Options>();
@@ -47,7 +27,7 @@ void setup(CLI::App& app) {
   sub->add_flag("--metrics", o->metrics, "Prometheus text format");
   sub->callback([o] {
     std::string answer;
-    const std::string path = socket_path(*o);
+    const std::string path = nccomp::tools::status_socket_path(o->socket, o->config);
     try {
       answer = nccomp::daemon::query_status(path, o->json      ? "json"
                                                   : o->metrics ? "metrics"
