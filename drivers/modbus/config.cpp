@@ -385,7 +385,7 @@ ModbusConfig parse_modbus_table(const toml::table& m, std::string_view file,
   const Reader r(table_file);
   const toml::node* mnode = &m;
   const std::string mp = "modbus";
-  static constexpr std::array<std::string_view, 30> kTopKeys = {"transport",
+  static constexpr std::array<std::string_view, 32> kTopKeys = {"transport",
                                                                 "host",
                                                                 "port",
                                                                 "device",
@@ -407,6 +407,8 @@ ModbusConfig parse_modbus_table(const toml::table& m, std::string_view file,
                                                                 "rx_capacity",
                                                                 "tx_capacity",
                                                                 "merge_gap_registers",
+                                                                "io_sched_fifo_priority",
+                                                                "io_cpu_affinity",
                                                                 "axis",
                                                                 "tool_measurement",
                                                                 "probe_measurement",
@@ -481,6 +483,48 @@ ModbusConfig parse_modbus_table(const toml::table& m, std::string_view file,
   c.tx_capacity = pow2("tx_capacity", 256);
   c.merge_gap_registers =
       static_cast<std::uint32_t>(r.integer(m, mp, "merge_gap_registers", 0, 0, 125));
+
+  // Real-time policy of the I/O thread (applied by the thread itself, see modbus_bus.hpp).
+  c.io_sched_fifo_priority = static_cast<int>(r.integer(m, mp, "io_sched_fifo_priority", 0, 0, 99));
+  if (c.io_sched_fifo_priority > 0 && options.loop_sched_fifo_priority >= 0 &&
+      c.io_sched_fifo_priority >= options.loop_sched_fifo_priority) {
+    const std::string src = options.loop_priority_source.empty()
+                                ? std::string("the loop's priority")
+                                : std::string(options.loop_priority_source);
+    std::ostringstream s;
+    s << c.io_sched_fifo_priority << " is not below the loop thread's SCHED_FIFO priority (" << src
+      << " = " << options.loop_sched_fifo_priority;
+    if (options.loop_sched_fifo_priority == 0) {
+      s << ": the loop runs at normal scheduling, so any SCHED_FIFO I/O thread would preempt "
+           "it); raise the loop's priority above this one, or set 0 here";
+    } else {
+      s << "): the loop must always preempt the driver's I/O thread; at most "
+        << options.loop_sched_fifo_priority - 1 << " (0 = off)";
+    }
+    r.fail(m.get("io_sched_fifo_priority"), "modbus.io_sched_fifo_priority", s.str());
+  }
+  if (const toml::node* n = m.get("io_cpu_affinity"); n != nullptr) {
+    const auto* arr = n->as_array();
+    if (arr == nullptr) {
+      r.fail(n, "modbus.io_cpu_affinity", "expected an array of CPU numbers (e.g. [1])");
+    }
+    for (std::size_t i = 0; i < arr->size(); ++i) {
+      const toml::node& e = *arr->get(i);
+      const std::string ep = "modbus.io_cpu_affinity[" + std::to_string(i) + "]";
+      if (!e.is_integer()) {
+        r.fail(&e, ep, "expected an integer (a CPU number)");
+      }
+      const std::int64_t cpu = *e.value<std::int64_t>();
+      if (cpu < 0 || cpu > 1023) {
+        r.fail(&e, ep, "value " + std::to_string(cpu) + " outside 0..1023");
+      }
+      if (std::find(c.io_cpu_affinity.begin(), c.io_cpu_affinity.end(), cpu) !=
+          c.io_cpu_affinity.end()) {
+        r.fail(&e, ep, "CPU " + std::to_string(cpu) + " is listed twice");
+      }
+      c.io_cpu_affinity.push_back(static_cast<int>(cpu));
+    }
+  }
 
   std::vector<Claim> claims;
   const auto claim = [&](const SignalMap& s, const std::string& path, const toml::node* n) {

@@ -11,7 +11,8 @@
 // - an event group (sequence counter + its value registers) must lie in one table and within
 //   one read request (125 registers), so it is read atomically: the server answers one request
 //   from one state, and the counter and the values cannot tear;
-// - on RTU, the map's bus time per poll must fit the poll period at the configured baud rate.
+// - on RTU, the map's bus time per poll must fit the poll period at the configured baud rate;
+// - the I/O thread's SCHED_FIFO priority must be below the loop thread's, where that is known.
 #pragma once
 
 #include <array>
@@ -183,6 +184,13 @@ struct ModbusConfig {
   /// blocks. A gap is read too, so raise it only for NCs that answer every address in the gap
   /// (many answer unmapped addresses with exception 2, which would fail the merged request).
   std::uint32_t merge_gap_registers{0};
+  /// SCHED_FIFO priority the I/O thread gives itself at start, 1..99; 0 = leave it as created
+  /// (normal scheduling). Polls at a fixed rate overrun under load at normal priority
+  /// (docs/modbus.md, "Real-time priority of the I/O thread"). In nccompd it must be below the
+  /// loop thread's priority, so that the loop always preempts the driver.
+  int io_sched_fifo_priority{0};
+  /// CPUs the I/O thread pins itself to at start; empty = any CPU.
+  std::vector<int> io_cpu_affinity{};
 
   std::array<GroupMap, kGroupCount> groups{};
   std::vector<TemperatureMap> temperatures{};
@@ -203,6 +211,13 @@ struct ParseOptions {
   double max_poll_rate_hz{0.0};
   /// Where the two rates come from, for messages (e.g. "daemon.rate_hz"); empty = built in.
   std::string_view rate_source{};
+  /// The loop thread's SCHED_FIFO priority (0 = the loop runs at normal scheduling); -1 =
+  /// unknown (stand-alone tools). When known, an io_sched_fifo_priority > 0 that is not below it
+  /// is refused: the I/O thread must never preempt the loop.
+  int loop_sched_fifo_priority{-1};
+  /// Where the loop's priority comes from, for messages (e.g.
+  /// "daemon.realtime.sched_fifo_priority").
+  std::string_view loop_priority_source{};
 };
 
 /// Parses the [modbus] table of a TOML document. `file` names the source in messages.

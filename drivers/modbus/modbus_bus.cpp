@@ -1,11 +1,15 @@
 #include "drivers/modbus/modbus_bus.hpp"
 
 #include <modbus/modbus.h>
+#include <pthread.h>
+#include <sched.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <ctime>
 #include <optional>
 #include <span>
@@ -69,12 +73,59 @@ std::size_t modbus_counters(const ModbusStatus& st, std::span<BusCounterValue> o
       st.offsets_rejected,
       st.verify_mismatches,
       st.offsets_pending,
+      st.io_sched_fifo_priority,
+      st.io_sched_errno,
+      st.io_affinity_errno,
   };
   const std::size_t n = std::min(out.size(), values.size());
   for (std::size_t i = 0; i < n; ++i) {
     out[i] = BusCounterValue{kModbusCounterNames[i], values[i]};
   }
   return n;
+}
+
+std::vector<IoSetupLine> describe_io_setup(const IoThreadSetup& setup, const ModbusConfig& config) {
+  std::vector<IoSetupLine> lines;
+  const auto policy_name = [](int policy, int priority) {
+    if (policy == SCHED_FIFO) {
+      return "SCHED_FIFO priority " + std::to_string(priority);
+    }
+    if (policy == SCHED_RR) {
+      return "SCHED_RR priority " + std::to_string(priority);
+    }
+    return std::string(policy == SCHED_OTHER ? "SCHED_OTHER" : "policy " + std::to_string(policy));
+  };
+  const std::string got = policy_name(setup.policy, setup.priority);
+  if (setup.requested_fifo_priority > 0 && setup.sched_errno == 0) {
+    lines.push_back({false, "I/O thread: " + got});
+  } else if (setup.requested_fifo_priority > 0) {
+    const int p = setup.requested_fifo_priority;
+    lines.push_back({true, "I/O thread: SCHED_FIFO priority " + std::to_string(p) + " refused: " +
+                               std::strerror(setup.sched_errno) + " (running " + got +
+                               "; SCHED_FIFO needs CAP_SYS_NICE or an RLIMIT_RTPRIO of at least " +
+                               std::to_string(p) + ")"});
+  } else if (setup.policy == SCHED_OTHER) {
+    lines.push_back({false, "I/O thread: " + got +
+                                " (io_sched_fifo_priority not set; under load its polls may "
+                                "overrun, see poll_overruns)"});
+  } else {
+    lines.push_back({false, "I/O thread: " + got +
+                                ", inherited from the thread that started it "
+                                "(io_sched_fifo_priority not set)"});
+  }
+  if (setup.affinity_requested) {
+    std::string cpus;
+    for (int c : config.io_cpu_affinity) {
+      cpus += (cpus.empty() ? "" : ",") + std::to_string(c);
+    }
+    if (setup.affinity_errno == 0) {
+      lines.push_back({false, "I/O thread: pinned to CPU(s) " + cpus});
+    } else {
+      lines.push_back({true, "I/O thread: CPU affinity " + cpus + " refused: " +
+                                 std::strerror(setup.affinity_errno) + " (running on any CPU)"});
+    }
+  }
+  return lines;
 }
 
 void ModbusBus::ModbusDeleter::operator()(void* ctx) const noexcept {
@@ -107,7 +158,57 @@ void ModbusBus::start() {
   // from a fresh one (and its own failure counting).
   disconnect();
   running_.store(true, std::memory_order_release);
+  {
+    std::lock_guard<std::mutex> lock(ls_mu_);
+    setup_done_ = false;
+  }
   io_ = std::thread([this] { run(); });
+  {
+    // The thread sets itself up before its first request; report what it got from here, the
+    // caller's thread (the daemon logs it), not from the I/O thread.
+    std::unique_lock<std::mutex> lock(ls_mu_);
+    ls_cv_.wait(lock, [this] { return setup_done_; });
+  }
+  if (on_setup_) {
+    on_setup_(io_setup_);
+  }
+}
+
+void ModbusBus::setup_io_thread() {
+  IoThreadSetup s;
+  s.tid = static_cast<int>(::gettid());
+  s.requested_fifo_priority = config_.io_sched_fifo_priority;
+  if (config_.io_sched_fifo_priority > 0) {
+    sched_param sp{};
+    sp.sched_priority = config_.io_sched_fifo_priority;
+    s.sched_errno = pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp);
+  }
+  if (!config_.io_cpu_affinity.empty()) {
+    s.affinity_requested = true;
+    cpu_set_t set;
+    CPU_ZERO(&set);
+    for (int c : config_.io_cpu_affinity) {
+      CPU_SET(static_cast<std::size_t>(c), &set);  // 0..1023 (config), CPU_SETSIZE is 1024
+    }
+    s.affinity_errno = pthread_setaffinity_np(pthread_self(), sizeof(set), &set);
+  }
+  // What the thread runs at now, whatever was asked: a thread started by a SCHED_FIFO thread
+  // inherits its policy, and that is what the status should show.
+  int policy = SCHED_OTHER;
+  sched_param now{};
+  if (pthread_getschedparam(pthread_self(), &policy, &now) == 0) {
+    s.policy = policy;
+    s.priority = now.sched_priority;
+  }
+  st_.io_sched_fifo_priority = s.policy == SCHED_FIFO ? static_cast<std::uint32_t>(s.priority) : 0U;
+  st_.io_sched_errno = static_cast<std::uint32_t>(s.sched_errno);
+  st_.io_affinity_errno = static_cast<std::uint32_t>(s.affinity_errno);
+  {
+    std::lock_guard<std::mutex> lock(ls_mu_);
+    io_setup_ = s;
+    setup_done_ = true;
+  }
+  ls_cv_.notify_all();
 }
 
 std::optional<double> ModbusBus::read_offset(std::uint16_t register_index) {
@@ -210,6 +311,7 @@ bool ModbusBus::connect() {
   }
   ctx_ = std::move(holder);
   consecutive_failures_ = 0;
+  answered_since_connect_ = false;
   // last_frame_end_ns_ is kept: the silence is the line's, and a late answer to the request
   // before a reconnect may just have ended on it.
   return true;
@@ -249,6 +351,7 @@ bool ModbusBus::fail(int err) {
     ++st_.exceptions[static_cast<std::size_t>(err - MODBUS_ENOBASE)];
     ++st_.bus.counters.frames_rx;
     consecutive_failures_ = 0;
+    answered_since_connect_ = true;
     return true;
   }
   if (err == ETIMEDOUT) {
@@ -319,6 +422,7 @@ void ModbusBus::poll(core::TimeNs now_ns) {
     }
     ++st_.bus.counters.frames_rx;
     consecutive_failures_ = 0;
+    answered_since_connect_ = true;
     block_ok_[i] = 1;
     any = true;
   }
@@ -388,6 +492,7 @@ bool ModbusBus::write_one(const OffsetMap& map, OffsetSlot& slot) {
   }
   ++st_.bus.counters.frames_rx;
   consecutive_failures_ = 0;
+  answered_since_connect_ = true;
   if (config_.verify_writes) {
     std::array<std::uint16_t, 2> back{};
     rtu_gap();
@@ -475,7 +580,8 @@ bool ModbusBus::ensure_connected(double& backoff_s, bool& ever_connected) {
     backoff_s = std::min(backoff_s * 2.0, config_.reconnect_max_s);
     return false;
   }
-  backoff_s = config_.reconnect_min_s;
+  // backoff_s is reset by the caller once this connection has answered (a peer that accepts and
+  // hangs up at once must not reset it).
   down_since_ns_ = 0;
   if (!ever_connected) {
     // The first connection: offsets queued before it are first writes, already dirty.
@@ -549,6 +655,9 @@ void ModbusBus::run_lockstep() {
       }
     }
     sync_ok = sync_ok && ctx_ != nullptr;
+    if (answered_since_connect_) {
+      backoff_s = config_.reconnect_min_s;
+    }
     const core::TimeNs now = monotonic_now_ns();
     st_.last_cycle_ns = now - start;
     st_.max_cycle_ns = std::max(st_.max_cycle_ns, st_.last_cycle_ns);
@@ -579,6 +688,7 @@ void ModbusBus::run_lockstep() {
 }
 
 void ModbusBus::run() {
+  setup_io_thread();
   if (lockstep_) {
     run_lockstep();
     return;
@@ -630,7 +740,19 @@ void ModbusBus::run() {
     }
     publish(now);
     if (!ctx_) {
-      continue;  // reconnect right away; the back-off applies from the second attempt on
+      if (!answered_since_connect_) {
+        // Connected but never answered (a peer that accepts and hangs up, or sends only
+        // garbage): back off as after a failed connect. Reconnecting at once would spin, and at
+        // SCHED_FIFO starve every normal thread on this CPU.
+        sleep_until(now + to_ns(backoff_s));
+        backoff_s = std::min(backoff_s * 2.0, config_.reconnect_max_s);
+      }
+      // A connection that answered is re-made at once; the back-off applies from the second
+      // attempt on.
+      continue;
+    }
+    if (answered_since_connect_) {
+      backoff_s = config_.reconnect_min_s;
     }
     next += period;
     if (now > next) {

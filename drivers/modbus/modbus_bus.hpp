@@ -16,16 +16,23 @@
 //
 // libmodbus blocks in select() up to its timeouts, which is why none of this runs on the loop
 // thread: the loop thread only uses rx(), tx() and status(), all wait-free.
+//
+// Real-time policy (opt-in, io_sched_fifo_priority / io_cpu_affinity): the I/O thread raises
+// itself to SCHED_FIFO and pins itself before its first request; what it asked for and what it
+// got is in io_thread_setup(), in the status (io_sched_* counters) and, through the
+// on_io_thread_setup() callback, in the daemon's log. A refusal is reported, never fatal.
 #pragma once
 
 #include <array>
 #include <atomic>
 #include <condition_variable>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <optional>
 #include <span>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -63,10 +70,36 @@ struct ModbusStatus {
   core::TimeNs last_cycle_ns{0};     // duration of the last poll + write cycle
   core::TimeNs max_cycle_ns{0};
   int last_errno{0};  // errno of the last fault (libmodbus EMB* codes too)
+  // The I/O thread's scheduling as it runs (set once at start, see IoThreadSetup).
+  std::uint32_t io_sched_fifo_priority{0};  // its SCHED_FIFO priority; 0 = not SCHED_FIFO
+  std::uint32_t io_sched_errno{0};          // io_sched_fifo_priority refused with this errno
+  std::uint32_t io_affinity_errno{0};       // io_cpu_affinity refused with this errno
 };
 
+/// What the I/O thread asked for at start and what it got (read back from the kernel).
+struct IoThreadSetup {
+  int requested_fifo_priority{0};  // io_sched_fifo_priority; 0 = not requested
+  int sched_errno{0};              // pthread_setschedparam's result: 0 = granted
+  bool affinity_requested{false};  // io_cpu_affinity not empty
+  int affinity_errno{0};           // pthread_setaffinity_np's result: 0 = granted
+  int policy{0};                   // the thread's policy afterwards (SCHED_OTHER, SCHED_FIFO, ...)
+  int priority{0};                 // and its priority
+  int tid{0};                      // kernel thread id (for sched_getscheduler, ps -L)
+};
+
+/// One log line about the I/O thread's set-up; `warning` when something asked for was refused.
+struct IoSetupLine {
+  bool warning{false};
+  std::string text;
+};
+
+/// The log lines for `setup` (one per aspect: scheduling, and the affinity if asked for), e.g.
+/// "I/O thread: SCHED_FIFO priority 40" or, refused, "I/O thread: SCHED_FIFO priority 40
+/// refused: Operation not permitted (running SCHED_OTHER; ...)". Not real-time.
+std::vector<IoSetupLine> describe_io_setup(const IoThreadSetup& setup, const ModbusConfig& config);
+
 /// Names of ModbusBus::extra_counters(), in their order (static strings, for status output).
-inline constexpr std::array<const char*, 24> kModbusCounterNames = {
+inline constexpr std::array<const char*, 27> kModbusCounterNames = {
     "exception_illegal_function",      // 1
     "exception_illegal_address",       // 2
     "exception_illegal_value",         // 3
@@ -78,6 +111,7 @@ inline constexpr std::array<const char*, 24> kModbusCounterNames = {
     "exception_gateway_path",          // 10
     "exception_gateway_target",        // 11
     "exception_other",                 // unknown codes and 9
+    // clang-format off
     "timeouts",
     "crc_errors",
     "bad_responses",
@@ -90,7 +124,12 @@ inline constexpr std::array<const char*, 24> kModbusCounterNames = {
     "values_out_of_range",
     "offsets_rejected",
     "verify_mismatches",
+    // clang-format on
     "offsets_pending",  // a gauge: offsets not yet confirmed on the NC now
+    // Gauges set once at start: the I/O thread's scheduling (docs/modbus.md).
+    "io_sched_fifo_priority",  // its SCHED_FIFO priority, 0 = normal scheduling
+    "io_sched_errno",          // errno of a refused io_sched_fifo_priority (1 = EPERM), else 0
+    "io_affinity_errno",       // errno of a refused io_cpu_affinity (22 = EINVAL), else 0
 };
 
 /// Fills `out` with the counters of `st` in kModbusCounterNames order; returns how many.
@@ -117,7 +156,9 @@ class ModbusBus final : public Bus {
   ModbusBus& operator=(const ModbusBus&) = delete;
 
   /// Starts the I/O thread; the connection is made (and re-made) there, so an unreachable NC is
-  /// not an error here but a kConnecting / kDown state. Throws if already started.
+  /// not an error here but a kConnecting / kDown state. Returns once the thread has applied its
+  /// scheduling (io_thread_setup()) and, if set, called on_io_thread_setup's callback with it.
+  /// Throws if already started.
   void start() override;
   /// Stops the I/O thread (waits at most one response timeout) and closes the connection.
   void stop() override;
@@ -150,6 +191,17 @@ class ModbusBus final : public Bus {
   [[nodiscard]] ModbusStatus modbus_status() const { return status_.load(); }
   [[nodiscard]] const ModbusConfig& config() const noexcept { return config_; }
 
+  /// Before start(): called by start(), on its thread, with the I/O thread's set-up (the daemon
+  /// logs it, see describe_io_setup). Not real-time.
+  void on_io_thread_setup(std::function<void(const IoThreadSetup&)> fn) {
+    on_setup_ = std::move(fn);
+  }
+  /// After start(): what the I/O thread asked for and got. Read it on start()'s thread (or after
+  /// something that synchronises with it); other threads use modbus_status()'s io_* fields.
+  [[nodiscard]] const IoThreadSetup& io_thread_setup() const noexcept { return io_setup_; }
+  /// While started: the I/O thread's handle (pthread_t), for checks with pthread_getschedparam.
+  [[nodiscard]] std::thread::native_handle_type io_native_handle() { return io_.native_handle(); }
+
   /// Diagnostics: before start(), a ring that receives every connected poll + write cycle of
   /// the free-running I/O thread: its duration and the requests it sent (dropped when full; the
   /// I/O thread never waits for it). For benchmarks and latency statistics; the ring must
@@ -167,6 +219,8 @@ class ModbusBus final : public Bus {
   };
 
   void run();
+  /// I/O thread, first thing: applies io_sched_fifo_priority / io_cpu_affinity, records the result.
+  void setup_io_thread();
   void run_lockstep();
   /// Connects if needed (lock-step); false while not connected.
   bool ensure_connected(double& backoff_s, bool& ever_connected);
@@ -192,6 +246,10 @@ class ModbusBus final : public Bus {
   core::rt::Seqlock<ModbusStatus> status_;
   std::atomic<bool> running_{false};
   std::thread io_;
+  std::function<void(const IoThreadSetup&)> on_setup_;
+  // Written by the I/O thread before it sets setup_done_ (under ls_mu_), read by start() after.
+  IoThreadSetup io_setup_{};
+  bool setup_done_{false};
 
   // I/O thread only.
   std::unique_ptr<void, ModbusDeleter> ctx_;
@@ -202,6 +260,10 @@ class ModbusBus final : public Bus {
   std::vector<OffsetSlot> slots_;
   ModbusStatus st_{};
   std::uint32_t consecutive_failures_{0};
+  // The current connection got at least one answer (data or an exception response): a link that
+  // drops before that is reconnected only after the back-off, so that a peer that accepts and
+  // hangs up cannot make the thread spin (at SCHED_FIFO it would starve every normal thread).
+  bool answered_since_connect_{false};
   core::TimeNs down_since_ns_{0};
   core::TimeNs last_frame_end_ns_{0};
   core::rt::SpscRing<CycleRecord>* cycle_log_{nullptr};

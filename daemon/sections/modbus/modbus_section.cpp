@@ -8,6 +8,13 @@
 // known only in cross_check(): parse() validates the map (with the lowest poll rate when the key
 // is absent, so that an RTU bus budget is not judged on a rate the daemon will not use), and
 // cross_check() parses it again with the loop rate and keeps that result.
+//
+// The I/O thread's real-time priority (io_sched_fifo_priority) is checked the same way against
+// [daemon.realtime] sched_fifo_priority: it must be below the loop's, so that the loop always
+// preempts the driver. What the thread got at start is logged from the bus's start() (a refusal
+// as a warning), like the loop thread's set-up.
+#include <spdlog/spdlog.h>
+
 #include <memory>
 #include <string>
 #include <vector>
@@ -91,11 +98,14 @@ class ModbusParser final : public SectionParser {
       return;
     }
     check_register_mapping(config, "modbus", "[[modbus.offset]] register_index", s->mapped, diag);
-    const double loop_hz = daemon_section(config).rate_hz;
+    const DaemonSection& daemon = daemon_section(config);
+    const double loop_hz = daemon.rate_hz;
     mb::ParseOptions options;
     options.default_poll_rate_hz = loop_hz;
     options.max_poll_rate_hz = loop_hz;
     options.rate_source = "daemon.rate_hz";
+    options.loop_sched_fifo_priority = daemon.sched_fifo_priority;
+    options.loop_priority_source = "daemon.realtime.sched_fifo_priority";
     try {
       s->config = mb::parse_modbus_table(*s->table, s->file, options);
     } catch (const mb::ConfigError& e) {
@@ -110,7 +120,18 @@ class ModbusParser final : public SectionParser {
     if (s == nullptr) {
       return nullptr;
     }
-    return std::make_unique<mb::ModbusBus>(s->config);
+    auto bus = std::make_unique<mb::ModbusBus>(s->config);
+    const mb::ModbusConfig& c = bus->config();
+    bus->on_io_thread_setup([&c](const mb::IoThreadSetup& setup) {
+      for (const mb::IoSetupLine& line : mb::describe_io_setup(setup, c)) {
+        if (line.warning) {
+          spdlog::warn("bus modbus: {}", line.text);
+        } else {
+          spdlog::info("bus modbus: {}", line.text);
+        }
+      }
+    });
+    return bus;
   }
 };
 

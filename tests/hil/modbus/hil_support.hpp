@@ -211,7 +211,9 @@ class PeerProcess {
 };
 
 /// A raw TCP server on 127.0.0.1 (ephemeral port): each received request (bytes as read) is
-/// passed to `respond`, whose returned bytes are sent back (empty = no answer).
+/// passed to `respond`, whose returned bytes are sent back (empty = no answer). With
+/// hang_up_on_request(true) it closes the connection on every request instead (a peer that
+/// accepts and hangs up).
 class RawTcpServer {
  public:
   using Responder = std::function<std::vector<std::uint8_t>(const std::vector<std::uint8_t>&)>;
@@ -244,6 +246,8 @@ class RawTcpServer {
   RawTcpServer& operator=(const RawTcpServer&) = delete;
   [[nodiscard]] std::uint16_t port() const { return port_; }
   [[nodiscard]] int requests() const { return requests_.load(); }
+  [[nodiscard]] int connections() const { return connections_.load(); }
+  void hang_up_on_request(bool on) { hang_up_.store(on); }
 
  private:
   void run() {
@@ -261,6 +265,7 @@ class RawTcpServer {
       }
       if (p[1].revents != 0) {
         clients.push_back(accept(listen_, nullptr, nullptr));
+        ++connections_;
       }
       for (std::size_t i = 2; i < p.size(); ++i) {
         if (p[i].revents == 0) {
@@ -275,6 +280,11 @@ class RawTcpServer {
         }
         req.resize(static_cast<std::size_t>(n));
         ++requests_;
+        if (hang_up_.load()) {
+          close(p[i].fd);
+          clients.erase(std::find(clients.begin(), clients.end(), p[i].fd));
+          break;
+        }
         const std::vector<std::uint8_t> rsp = respond_(req);
         if (!rsp.empty()) {
           (void)!send(p[i].fd, rsp.data(), rsp.size(), MSG_NOSIGNAL);
@@ -290,6 +300,8 @@ class RawTcpServer {
   int stop_[2]{-1, -1};
   std::uint16_t port_{0};
   std::atomic<int> requests_{0};
+  std::atomic<int> connections_{0};
+  std::atomic<bool> hang_up_{false};
   std::thread thread_;
 };
 

@@ -6,10 +6,19 @@
 // verify mismatches, pending offsets, connect attempts) are in the running daemon's status: the
 // JSON `nccomp status --json` prints (daemon::query_status, the call the CLI makes), the text
 // status (non-zero ones) and the Prometheus metrics.
+//
+// The I/O thread's real-time policy in the running daemon: with [modbus] io_sched_fifo_priority
+// below the loop's, nccompd logs what the thread got and shows it in the status
+// (io_sched_fifo_priority); started without CAP_SYS_NICE and with RLIMIT_RTPRIO 0, both the loop's
+// and the I/O thread's SCHED_FIFO are refused with warnings and the daemon runs on.
 #include <fcntl.h>
 #include <gtest/gtest.h>
+#include <linux/capability.h>
+#include <sched.h>
 #include <signal.h>
 #include <spawn.h>
+#include <sys/prctl.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -43,16 +52,17 @@ using nccomp::sim::modbus_nc::ServerConfig;
 using nccomp::sim::modbus_nc::Tables;
 using nccomp::sim::modbus_nc::WriteRecord;
 
-std::string config_text(std::uint16_t port) {
+std::string config_text(std::uint16_t port, const std::string& realtime = "",
+                        const std::string& modbus_rt = "") {
   std::ostringstream s;
   s << "[daemon]\nrate_hz = 200\n"
-    << "[state]\ndirectory = \"state\"\nmin_interval_s = 0.05\n"
+    << realtime << "[state]\ndirectory = \"state\"\nmin_interval_s = 0.05\n"
     << "[measurement_log]\ndirectory = \"log\"\n"
     << "[status]\nsocket_path = \"status.sock\"\n"
     // No poll_rate_hz: the driver polls at the loop rate.
     << "[modbus]\ntransport = \"tcp\"\nhost = \"127.0.0.1\"\nport = " << port << "\n"
     << "response_timeout_s = 0.5\nverify_writes = true\n"
-    << "[modbus.axis]\n"
+    << modbus_rt << "[modbus.axis]\n"
     << "x_mm = { table = \"input\", address = 0, type = \"int32\", scale = 0.0001, min = -1000, "
        "max = 1000 }\n"
     << "[modbus.tool_measurement]\n"
@@ -95,11 +105,33 @@ class Daemon {
   }
   Daemon(const Daemon&) = delete;
   Daemon& operator=(const Daemon&) = delete;
-  void start() {
+  /// without_realtime: the daemon runs without CAP_SYS_NICE (dropped from the bounding set, so
+  /// root's exec does not regain it) and with RLIMIT_RTPRIO 0: SCHED_FIFO is refused.
+  void start(bool without_realtime = false) {
     std::string bin = NCCOMPD_BIN;
     std::string flag = "--config";
     std::string cfg = (dir_ / "nccompd.toml").string();
     std::vector<char*> argv{bin.data(), flag.data(), cfg.data(), nullptr};
+    if (without_realtime) {
+      const std::string log = (dir_ / "nccompd.log").string();
+      pid_ = ::fork();
+      ASSERT_GE(pid_, 0);
+      if (pid_ == 0) {
+        // The child of a threaded process: async-signal-safe calls only, then exec.
+        const rlimit none{0, 0};
+        if (::prctl(PR_CAPBSET_DROP, CAP_SYS_NICE, 0, 0, 0) != 0 ||
+            ::setrlimit(RLIMIT_RTPRIO, &none) != 0) {
+          ::_exit(126);
+        }
+        const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
+        if (fd < 0 || ::dup2(fd, 1) < 0 || ::dup2(fd, 2) < 0) {
+          ::_exit(126);
+        }
+        ::execve(bin.c_str(), argv.data(), environ);
+        ::_exit(127);
+      }
+      return;
+    }
     posix_spawn_file_actions_t fa;
     posix_spawn_file_actions_init(&fa);
     const std::string log = (dir_ / "nccompd.log").string();
@@ -129,6 +161,7 @@ class Daemon {
       return {};
     }
   }
+  [[nodiscard]] pid_t pid() const { return pid_; }
   [[nodiscard]] std::string log() const {
     std::ifstream in(dir_ / "nccompd.log");
     std::ostringstream s;
@@ -240,7 +273,9 @@ TEST(ModbusNccompdCounters, FaultCountersOfTheDriverAreInTheDaemonsStatus) {
   }
   EXPECT_EQ(counter(c, "verify_mismatches"), 1U) << c;
   EXPECT_EQ(counter(c, "offsets_pending"), 0U) << c;
-  EXPECT_EQ(counter(c, "connect_attempts"), 1U) << c;
+  // One connection for nccompd's start-up read-back of the offset register (read_offset, before
+  // the bus starts), one for the I/O thread; no reconnect.
+  EXPECT_EQ(counter(c, "connect_attempts"), 2U) << c;
   EXPECT_EQ(counter(c, "timeouts"), 0U) << c;
   EXPECT_EQ(counter(c, "exception_illegal_value"), 0U) << c;
   EXPECT_EQ(counter(c, "values_invalid"), 0U) << c;
@@ -269,6 +304,91 @@ TEST(ModbusNccompdCounters, FaultCountersOfTheDriverAreInTheDaemonsStatus) {
                          "1\n"),
             std::string::npos)
       << metrics;
+  EXPECT_EQ(daemon.terminate(), 0) << daemon.log();
+  nc.stop();
+}
+
+// GIVEN nccompd with its loop at SCHED_FIFO 30 and [modbus] io_sched_fifo_priority = 20,
+// io_cpu_affinity = [0], WHEN it runs, THEN its log says what the I/O thread got, the status shows
+// io_sched_fifo_priority 20 (JSON and text), and the kernel confirms SCHED_FIFO 20 on the thread.
+TEST(ModbusNccompdCounters, IoThreadPolicyIsLoggedAndInTheStatus) {
+  TempDir d;
+  NcServer nc(ServerConfig{});
+  nc.update([](Tables& t) { set_i32(t.input, 0, 123456); });
+  nc.start();
+  std::ofstream(d.path / "nccompd.toml")
+      << config_text(nc.port(), "[daemon.realtime]\nsched_fifo_priority = 30\n",
+                     "io_sched_fifo_priority = 20\nio_cpu_affinity = [0]\n");
+  Daemon daemon(d.path);
+  daemon.start();
+  ASSERT_TRUE(wait_for([&] { return holding_i32(nc, 200) == 123; }, 15000ms)) << daemon.log();
+  const std::string log = daemon.log();
+  if (log.find("bus modbus: I/O thread: SCHED_FIFO priority 20 refused") != std::string::npos) {
+    (void)daemon.terminate();
+    GTEST_SKIP() << "SCHED_FIFO refused here; the refusal is tested by "
+                    "RefusedIoThreadPriorityIsAWarningAndTheDaemonRuns\n"
+                 << log;
+  }
+  EXPECT_NE(log.find("bus modbus: I/O thread: SCHED_FIFO priority 20\n"), std::string::npos) << log;
+  EXPECT_NE(log.find("bus modbus: I/O thread: pinned to CPU(s) 0\n"), std::string::npos) << log;
+  EXPECT_NE(log.find("loop thread: SCHED_FIFO priority 30\n"), std::string::npos) << log;
+  const std::string c = bus_counters(daemon.status("json"), "modbus");
+  EXPECT_EQ(counter(c, "io_sched_fifo_priority"), 20U) << c;
+  EXPECT_EQ(counter(c, "io_sched_errno"), 0U) << c;
+  EXPECT_EQ(counter(c, "io_affinity_errno"), 0U) << c;
+  const std::string text = daemon.status("text");
+  EXPECT_NE(text.find("io_sched_fifo_priority 20"), std::string::npos) << text;
+  // The kernel's view: exactly one thread of the daemon at SCHED_FIFO 20, the I/O thread.
+  int at_20 = 0;
+  for (const auto& task :
+       fs::directory_iterator("/proc/" + std::to_string(daemon.pid()) + "/task")) {
+    const pid_t tid = static_cast<pid_t>(std::stol(task.path().filename().string()));
+    sched_param sp{};
+    if (sched_getscheduler(tid) == SCHED_FIFO && sched_getparam(tid, &sp) == 0 &&
+        sp.sched_priority == 20) {
+      ++at_20;
+    }
+  }
+  EXPECT_EQ(at_20, 1);
+  EXPECT_EQ(daemon.terminate(), 0) << daemon.log();
+  nc.stop();
+}
+
+// GIVEN the same config, WHEN nccompd runs without CAP_SYS_NICE and with RLIMIT_RTPRIO 0, THEN
+// the loop's and the I/O thread's SCHED_FIFO are refused with warnings naming the reason, the
+// status shows io_sched_errno 1 (EPERM) and io_sched_fifo_priority 0, and offsets still arrive.
+TEST(ModbusNccompdCounters, RefusedIoThreadPriorityIsAWarningAndTheDaemonRuns) {
+  TempDir d;
+  NcServer nc(ServerConfig{});
+  nc.update([](Tables& t) { set_i32(t.input, 0, 123456); });
+  nc.start();
+  std::ofstream(d.path / "nccompd.toml") << config_text(
+      nc.port(), "[daemon.realtime]\nsched_fifo_priority = 30\n", "io_sched_fifo_priority = 20\n");
+  Daemon daemon(d.path);
+  daemon.start(/*without_realtime=*/true);
+  ASSERT_TRUE(wait_for([&] { return holding_i32(nc, 200) == 123; }, 15000ms)) << daemon.log();
+  const std::string log = daemon.log();
+  EXPECT_NE(log.find("bus modbus: I/O thread: SCHED_FIFO priority 20 refused: Operation not "
+                     "permitted (running SCHED_OTHER; SCHED_FIFO needs CAP_SYS_NICE or an "
+                     "RLIMIT_RTPRIO of at least 20)"),
+            std::string::npos)
+      << log;
+  EXPECT_NE(log.find(" warning bus modbus: I/O thread: SCHED_FIFO priority 20 refused"),
+            std::string::npos)
+      << log;
+  EXPECT_NE(log.find("loop thread: SCHED_FIFO priority 30 refused"), std::string::npos) << log;
+  std::string c;
+  ASSERT_TRUE(wait_for(
+      [&] {
+        c = bus_counters(daemon.status("json"), "modbus");
+        return !c.empty();
+      },
+      5000ms))
+      << daemon.log();
+  EXPECT_EQ(counter(c, "io_sched_errno"), static_cast<std::uint64_t>(EPERM)) << c;
+  EXPECT_EQ(counter(c, "io_sched_fifo_priority"), 0U) << c;
+  const std::string text = daemon.status("text");
+  EXPECT_NE(text.find("io_sched_errno 1"), std::string::npos) << text;
   EXPECT_EQ(daemon.terminate(), 0) << daemon.log();
   nc.stop();
 }

@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <string>
+#include <vector>
 
 namespace nccomp::drivers::modbus {
 namespace {
@@ -362,6 +363,81 @@ x_mm = { table = "input", address = 0, type = "int32", scale = 0.001 }
       }(),
       HasSubstr("modbus.poll_rate_hz: 1000 Hz (poll_rate_hz is not set: the loop rate "
                 "daemon.rate_hz) needs"));
+}
+
+// GIVEN the I/O thread's real-time keys, WHEN parsed stand-alone and with the loop's priority
+// known (nccompd), THEN valid values are kept, bad ones refused at their key path, and a priority
+// not below the loop's is refused with the loop's key path and the highest one allowed.
+TEST(ModbusConfig, IoThreadPriorityAndAffinityAreValidatedAgainstTheLoop) {
+  ModbusConfig c = parse_modbus_config(kMinimal, "t.toml");
+  EXPECT_EQ(c.io_sched_fifo_priority, 0);  // off by default
+  EXPECT_TRUE(c.io_cpu_affinity.empty());
+  const auto with = [](const std::string& keys) {
+    return "[modbus]\ntransport = \"tcp\"\n" + keys +
+           "\n[modbus.axis]\nx_mm = { table = \"input\", address = 0, type = \"int32\" }\n";
+  };
+  // Stand-alone (modbus_map, tests): the loop's priority is unknown, any 1..99 is taken.
+  c = parse_modbus_config(with("io_sched_fifo_priority = 99\nio_cpu_affinity = [1, 0]"), "t.toml");
+  EXPECT_EQ(c.io_sched_fifo_priority, 99);
+  EXPECT_EQ(c.io_cpu_affinity, (std::vector<int>{1, 0}));
+  c = parse_modbus_config(with("io_cpu_affinity = []"), "t.toml");
+  EXPECT_TRUE(c.io_cpu_affinity.empty());
+
+  const auto error_with = [&](const std::string& keys, const ParseOptions& o = {}) {
+    try {
+      (void)parse_modbus_config(with(keys), "t.toml", o);
+    } catch (const ConfigError& e) {
+      return std::string(e.what());
+    }
+    return std::string("(accepted)");
+  };
+  EXPECT_EQ(error_with("io_sched_fifo_priority = 100"),
+            "t.toml:3: modbus.io_sched_fifo_priority: value 100 outside 0..99");
+  EXPECT_EQ(error_with("io_sched_fifo_priority = -1"),
+            "t.toml:3: modbus.io_sched_fifo_priority: value -1 outside 0..99");
+  EXPECT_EQ(error_with("io_sched_fifo_priority = \"high\""),
+            "t.toml:3: modbus.io_sched_fifo_priority: expected an integer");
+  EXPECT_EQ(error_with("io_sched_fifo_priority = 1.5"),
+            "t.toml:3: modbus.io_sched_fifo_priority: expected an integer");
+  EXPECT_EQ(error_with("io_cpu_affinity = 1"),
+            "t.toml:3: modbus.io_cpu_affinity: expected an array of CPU numbers (e.g. [1])");
+  EXPECT_EQ(error_with("io_cpu_affinity = [0, \"1\"]"),
+            "t.toml:3: modbus.io_cpu_affinity[1]: expected an integer (a CPU number)");
+  EXPECT_EQ(error_with("io_cpu_affinity = [1024]"),
+            "t.toml:3: modbus.io_cpu_affinity[0]: value 1024 outside 0..1023");
+  EXPECT_EQ(error_with("io_cpu_affinity = [-1]"),
+            "t.toml:3: modbus.io_cpu_affinity[0]: value -1 outside 0..1023");
+  EXPECT_EQ(error_with("io_cpu_affinity = [1, 1]"),
+            "t.toml:3: modbus.io_cpu_affinity[1]: CPU 1 is listed twice");
+
+  // nccompd: the loop at SCHED_FIFO 50.
+  ParseOptions loop;
+  loop.loop_sched_fifo_priority = 50;
+  loop.loop_priority_source = "daemon.realtime.sched_fifo_priority";
+  c = parse_modbus_config(with("io_sched_fifo_priority = 49"), "t.toml", loop);
+  EXPECT_EQ(c.io_sched_fifo_priority, 49);
+  c = parse_modbus_config(with("io_sched_fifo_priority = 0"), "t.toml", loop);
+  EXPECT_EQ(c.io_sched_fifo_priority, 0);
+  const std::string not_below =
+      ": the loop must always preempt the driver's I/O thread; at most 49 (0 = off)";
+  EXPECT_EQ(error_with("io_sched_fifo_priority = 50", loop),
+            "t.toml:3: modbus.io_sched_fifo_priority: 50 is not below the loop thread's "
+            "SCHED_FIFO priority (daemon.realtime.sched_fifo_priority = 50)" +
+                not_below);
+  EXPECT_EQ(error_with("io_sched_fifo_priority = 80", loop),
+            "t.toml:3: modbus.io_sched_fifo_priority: 80 is not below the loop thread's "
+            "SCHED_FIFO priority (daemon.realtime.sched_fifo_priority = 50)" +
+                not_below);
+  // The loop at normal scheduling: any SCHED_FIFO I/O thread would preempt it.
+  loop.loop_sched_fifo_priority = 0;
+  EXPECT_EQ(error_with("io_sched_fifo_priority = 1", loop),
+            "t.toml:3: modbus.io_sched_fifo_priority: 1 is not below the loop thread's SCHED_FIFO "
+            "priority (daemon.realtime.sched_fifo_priority = 0: the loop runs at normal "
+            "scheduling, so any SCHED_FIFO I/O thread would preempt it); raise the loop's "
+            "priority above this one, or set 0 here");
+  c = parse_modbus_config(with("io_sched_fifo_priority = 0\nio_cpu_affinity = [0]"), "t.toml",
+                          loop);
+  EXPECT_EQ(c.io_cpu_affinity, (std::vector<int>{0}));
 }
 
 TEST(ModbusConfig, RtuRateBudget) {

@@ -1,12 +1,14 @@
 // GIVEN nccompd configs with a [modbus] section and a [daemon] loop rate, WHEN the daemon's loader
 // reads them, THEN poll_rate_hz defaults to the loop rate, a poll faster than the loop is refused
 // at its key (file:line:column), an RTU bus that cannot carry the loop rate is refused saying so,
-// and the built bus runs at the resolved rate.
+// and the built bus runs at the resolved rate. The I/O thread's SCHED_FIFO priority is checked
+// against [daemon.realtime] sched_fifo_priority: not below it is refused at its key.
 #include <gtest/gtest.h>
 
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <vector>
 
 #include "daemon/config/config.hpp"
 #include "drivers/modbus/modbus_bus.hpp"
@@ -144,6 +146,48 @@ TEST(ModbusDaemonSection, MinMaxErrorsCarryFileLineColumnAndKeyPath) {
   EXPECT_GT(e.where.column, 60);  // at the max value inside the inline table
   EXPECT_EQ(e.where.key_path, "modbus.axis.x_mm.max");
   EXPECT_EQ(e.message, "max -10 is below min 10");
+}
+
+// GIVEN [daemon.realtime] sched_fifo_priority = 50, WHEN [modbus] io_sched_fifo_priority is 50
+// (equal) or set while the loop runs at normal scheduling, THEN the loader refuses it at its
+// file:line:column and key path; 49 is accepted and reaches the built bus.
+TEST(ModbusDaemonSection, IoThreadPriorityMustBeBelowTheLoopsPriority) {
+  TempDir d;
+  const auto with_loop = [](int loop_prio, const std::string& modbus_top) {
+    std::string text = config(1000.0, modbus_top);
+    return text + "[daemon.realtime]\nsched_fifo_priority = " + std::to_string(loop_prio) + "\n";
+  };
+  std::string f = d.write(with_loop(50, "io_sched_fifo_priority = 50\n"));
+  auto r = load_file(f);
+  ASSERT_FALSE(r.config);
+  ASSERT_EQ(r.diagnostics.items().size(), 1U) << r.diagnostics.to_string();
+  const Diagnostic& e = r.diagnostics.items()[0];
+  EXPECT_EQ(e.where.file, f);
+  EXPECT_EQ(e.where.line, 5);
+  EXPECT_EQ(e.where.column, 26);  // the value
+  EXPECT_EQ(e.where.key_path, "modbus.io_sched_fifo_priority");
+  EXPECT_EQ(e.message,
+            "50 is not below the loop thread's SCHED_FIFO priority "
+            "(daemon.realtime.sched_fifo_priority = 50): the loop must always preempt the "
+            "driver's I/O thread; at most 49 (0 = off)");
+  // The loop without [daemon.realtime] runs at normal scheduling: any SCHED_FIFO I/O thread is
+  // refused.
+  r = load_file(d.write(config(1000.0, "io_sched_fifo_priority = 10\n")));
+  ASSERT_FALSE(r.config);
+  ASSERT_EQ(r.diagnostics.items().size(), 1U) << r.diagnostics.to_string();
+  EXPECT_EQ(r.diagnostics.items()[0].where.key_path, "modbus.io_sched_fifo_priority");
+  EXPECT_NE(r.diagnostics.items()[0].message.find("sched_fifo_priority = 0: the loop runs at "
+                                                  "normal scheduling"),
+            std::string::npos)
+      << r.diagnostics.to_string();
+  // Below the loop: accepted, and the bus gets it with the affinity.
+  r = load_file(d.write(with_loop(50, "io_sched_fifo_priority = 49\nio_cpu_affinity = [0]\n")));
+  ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+  std::unique_ptr<drivers::Bus> bus;
+  const auto* c = bus_config(*r.config, bus);
+  ASSERT_NE(c, nullptr);
+  EXPECT_EQ(c->io_sched_fifo_priority, 49);
+  EXPECT_EQ(c->io_cpu_affinity, (std::vector<int>{0}));
 }
 
 }  // namespace
