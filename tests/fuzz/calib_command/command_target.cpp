@@ -74,7 +74,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         // Chords in a plausible range half of the time.
         if (r[14] & 1) c.value = {1.9 + (r[15] - 128) * 1e-4, 1.9 + (r[16] - 128) * 1e-4};
         e = c;
-        command = true;
+        // kWarmStart is the engine's machine context's, not the calibrator's: not answered here.
+        command = c.kind != core::OperatorCommandKind::kWarmStart;
         break;
       }
       case 1: {
