@@ -5,6 +5,9 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <fstream>
+#include <optional>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -173,6 +176,84 @@ TEST(CheckpointsStartup, TheNcsRegistersAreComparedWithTheLearnedTable) {
     if (w.register_index == 23) reg23 = w.value_um;
   }
   EXPECT_DOUBLE_EQ(reg23, 0.0);  // the daemon's value, written again
+}
+
+// GIVEN the boss example's 56 checkpoints (two cycles of 32 table writes) restarted from its
+// state, and an NC whose checkpoint 40 (register 60, written in the second cycle) an operator set
+// to +80.0 µm, beyond the register's max_step_um of 50, WHEN the start-up hook reconciles,
+// THEN with reconcile_prefer = "nc" the engine's limiters start from the NC's values and the
+// adopted value is the register's target at once: no write ever moves register 60; with "daemon"
+// the register is brought back from +80.0 in steps of at most 50 µm.
+TEST(CheckpointsStartup, TheEnginesLimitersStartFromTheValuesReadBack) {
+  TempDir d;
+  std::ifstream in(kBoss);
+  std::stringstream boss;
+  boss << in.rdbuf();
+  auto text_for = [&](const std::string& prefer) {
+    std::string t = boss.str();
+    const std::string csv = "contour_csv = \"boss_contour.csv\"";
+    t.replace(t.find(csv), csv.size(),
+              "contour_csv = \"" + std::string(NCCOMP_SOURCE_DIR) +
+                  "/tests/unit/checkpoint/data/boss_contour.csv\"");
+    const std::string pref = "reconcile_prefer = \"daemon\"";
+    t.replace(t.find(pref), pref.size(), "reconcile_prefer = \"" + prefer + "\"");
+    return t + registers(76, 20, -1);
+  };
+  for (const std::string prefer : {"nc", "daemon"}) {
+    auto r = load_file(d.write(prefer + ".toml", text_for(prefer)));
+    ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+    // Before the restart: checkpoint 0 learned −6 µm, the table written at part 2's start.
+    auto before = config::build_engine(*r.config);
+    core::StepOutput out;
+    core::ProbeMeasurement m;
+    m.part = 1;
+    m.checkpoint = 0;
+    m.wall_angle_deg = 3.0;
+    m.ball_radius_mm = 2.0;
+    m.raw_deviation_um = 6.0 + core::checkpoint::probe_delta0_um(2.0, 3.0);
+    before->step(1'000'000, std::vector<core::Event>{m}, out);
+    before->step(
+        2'000'000,
+        std::vector<core::Event>{core::ProgramEvent{0, core::ProgramEventKind::kPartStart, 2}},
+        out);
+    before->step(3'000'000, std::vector<core::Event>{}, out);
+    ASSERT_DOUBLE_EQ(before->register_state(60).output_um, 0.0);
+    std::vector<std::byte> state(before->state_capacity());
+    state.resize(before->export_state(state));
+
+    auto after = config::build_engine(*r.config);
+    ASSERT_TRUE(after->import_state(state, 10'000'000));
+    auto nc = [](std::uint16_t reg) -> std::optional<double> {
+      if (reg == 20) return -6.0;
+      if (reg == 60) return 80.0;  // the operator's edit
+      if (reg == 19) return -3.0;  // the live register as the part start left it
+      return 0.0;
+    };
+    const auto rep = reconcile_checkpoints(*after, nc, 10'000'000);
+    ASSERT_EQ(rep.size(), 1U);
+    EXPECT_EQ(rep[0].mismatched, 1U);
+    EXPECT_DOUBLE_EQ(rep[0].max_difference_um, 80.0);
+    EXPECT_DOUBLE_EQ(after->register_state(60).output_um, 80.0) << prefer;
+    std::vector<double> reg60;
+    for (int k = 1; k <= 5; ++k) {
+      after->step(10'000'000 + k * 1'000'000, std::vector<core::Event>{}, out);
+      for (const auto& w : out.writes) {
+        if (w.register_index == 60) reg60.push_back(w.value_um);
+      }
+    }
+    if (prefer == "nc") {
+      EXPECT_TRUE(rep[0].adopted_nc);
+      EXPECT_TRUE(reg60.empty()) << reg60.size() << " writes, first " << reg60.front();
+      EXPECT_DOUBLE_EQ(after->register_state(60).output_um, 80.0);
+      EXPECT_DOUBLE_EQ(after->register_state(60).target_um, 80.0);
+    } else {
+      EXPECT_FALSE(rep[0].adopted_nc);
+      EXPECT_EQ(reg60, (std::vector<double>{30.0, 0.0}));  // 80 → 0 in steps of max_step_um 50
+    }
+    // The other registers agreed with the NC: nothing is written to them.
+    EXPECT_DOUBLE_EQ(after->register_state(20).output_um, -6.0);
+    EXPECT_EQ(after->counters().writes_forwarded, prefer == "nc" ? 0U : 2U) << prefer;
+  }
 }
 
 TEST(CheckpointsSection, ErrorsCarryFileLineColumnAndRegistersAreChecked) {
