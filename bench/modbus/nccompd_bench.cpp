@@ -7,10 +7,15 @@
 // snapshots `seconds` apart. Sustained = in that window no loop overrun, no driver poll overrun
 // (the driver's poll_overruns counter in the status JSON), no dropped event, and the loop ran.
 //
-// Usage: bench_modbus_nccompd [seconds_per_rate] [--fifo]
+// Usage: bench_modbus_nccompd [seconds_per_rate] [--fifo] [--io-fifo[=PRIORITY]]
+//        [--io-cpu=CPU]
 // --fifo: the daemon's loop thread at SCHED_FIFO 50 ([daemon.realtime] sched_fifo_priority), this
-// process (the NC server's thread) too; nccompd is spawned at SCHED_OTHER, so its driver I/O
-// thread stays there (the daemon raises only its loop thread).
+// process (the NC server's thread) too; nccompd is spawned at SCHED_OTHER, so without --io-fifo
+// its driver I/O thread stays there (the daemon raises only its loop thread).
+// --io-fifo[=P]: also [modbus] io_sched_fifo_priority = P (default 40; needs --fifo, since the
+// daemon refuses an I/O priority not below the loop's): the driver's I/O thread raises itself.
+// --io-cpu=C: [modbus] io_cpu_affinity = [C].
+// The header line and the daemon's log lines about both threads say what each thread got.
 #include <fcntl.h>
 #include <sched.h>
 #include <signal.h>
@@ -40,19 +45,34 @@ namespace {
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
 
-std::string config_text(std::uint16_t port, double rate_hz, bool fifo) {
+constexpr int kLoopPriority = 50;
+
+struct Options {
+  double seconds{5.0};
+  bool fifo{false};
+  int io_fifo_priority{0};  // 0 = key not set
+  int io_cpu{-1};           // -1 = key not set
+};
+
+std::string config_text(std::uint16_t port, double rate_hz, const Options& o) {
   std::ostringstream s;
   s << "[daemon]\nrate_hz = " << rate_hz << "\n";
-  if (fifo) {
-    s << "[daemon.realtime]\nsched_fifo_priority = 50\n";
+  if (o.fifo) {
+    s << "[daemon.realtime]\nsched_fifo_priority = " << kLoopPriority << "\n";
   }
   s << "[state]\ndirectory = \"state\"\nmin_interval_s = 0.5\n"
     << "[measurement_log]\ndirectory = \"log\"\n"
     << "[status]\nsocket_path = \"status.sock\"\n"
     << "[modbus]\ntransport = \"tcp\"\nhost = \"127.0.0.1\"\nport = " << port << "\n"
-    << "response_timeout_s = 0.5\n"
-    // The reference profile's axis block (12 input registers) and a tool-measurement group.
-    << "[modbus.axis]\n"
+    << "response_timeout_s = 0.5\n";
+  if (o.io_fifo_priority > 0) {
+    s << "io_sched_fifo_priority = " << o.io_fifo_priority << "\n";
+  }
+  if (o.io_cpu >= 0) {
+    s << "io_cpu_affinity = [" << o.io_cpu << "]\n";
+  }
+  // The reference profile's axis block (12 input registers) and a tool-measurement group.
+  s << "[modbus.axis]\n"
     << "x_mm = { table = \"input\", address = 0, type = \"int32\", scale = 0.0001 }\n"
     << "y_mm = { table = \"input\", address = 2, type = \"int32\", scale = 0.0001 }\n"
     << "z_mm = { table = \"input\", address = 4, type = \"int32\", scale = 0.0001 }\n"
@@ -167,24 +187,81 @@ int stop_daemon(pid_t pid) {
   return -1;
 }
 
+/// The daemon's log lines about its threads' scheduling ("loop thread: ...", "I/O thread: ...").
+std::string thread_lines(const fs::path& log_path) {
+  std::ifstream in(log_path);
+  std::string line;
+  std::string out;
+  while (std::getline(in, line)) {
+    if (line.find("loop thread: SCHED") != std::string::npos ||
+        line.find("I/O thread:") != std::string::npos) {
+      out += "    " + line + "\n";
+    }
+  }
+  return out;
+}
+
+int usage() {
+  std::fprintf(stderr,
+               "usage: bench_modbus_nccompd [seconds_per_rate] [--fifo] [--io-fifo[=PRIORITY]] "
+               "[--io-cpu=CPU]\n");
+  return 2;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   std::setvbuf(stdout, nullptr, _IOLBF, 0);
-  const double seconds = argc > 1 ? std::atof(argv[1]) : 5.0;
-  const bool fifo = argc > 2 && std::string(argv[2]) == "--fifo";
+  Options o;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--fifo") {
+      o.fifo = true;
+    } else if (a == "--io-fifo") {
+      o.io_fifo_priority = 40;
+    } else if (a.rfind("--io-fifo=", 0) == 0) {
+      o.io_fifo_priority = std::atoi(a.c_str() + 10);
+      if (o.io_fifo_priority < 1 || o.io_fifo_priority >= kLoopPriority) {
+        std::fprintf(stderr, "--io-fifo: priority 1..%d (below the loop's %d)\n", kLoopPriority - 1,
+                     kLoopPriority);
+        return 2;
+      }
+    } else if (a.rfind("--io-cpu=", 0) == 0) {
+      o.io_cpu = std::atoi(a.c_str() + 9);
+    } else if (i == 1 && !a.empty() && a[0] != '-') {
+      o.seconds = std::atof(a.c_str());
+    } else {
+      return usage();
+    }
+  }
+  if (o.io_fifo_priority > 0 && !o.fifo) {
+    std::fprintf(stderr,
+                 "--io-fifo needs --fifo: nccompd refuses an I/O thread at SCHED_FIFO above a "
+                 "loop at normal scheduling\n");
+    return 2;
+  }
+  const double seconds = o.seconds;
+  const bool fifo = o.fifo;
   if (fifo) {
     sched_param p{};
-    p.sched_priority = 50;
+    p.sched_priority = kLoopPriority;
     if (sched_setscheduler(0, SCHED_FIFO, &p) != 0) {
       std::perror("sched_setscheduler(SCHED_FIFO)");
       return 1;
     }
   }
+  std::string io = o.io_fifo_priority > 0
+                       ? "driver I/O thread SCHED_FIFO " + std::to_string(o.io_fifo_priority) +
+                             " (io_sched_fifo_priority)"
+                       : std::string("driver I/O thread SCHED_OTHER");
+  if (o.io_cpu >= 0) {
+    io += ", pinned to CPU " + std::to_string(o.io_cpu);
+  }
+  const std::string mode =
+      fifo ? "loop thread and NC server SCHED_FIFO " + std::to_string(kLoopPriority) + ", " + io
+           : "SCHED_OTHER, " + io;
   std::printf("nccompd over Modbus TCP (127.0.0.1) against sim/modbus_nc, %.1f s per rate, %s\n",
-              seconds,
-              fifo ? "loop thread and NC server SCHED_FIFO 50 (driver I/O thread SCHED_OTHER)"
-                   : "SCHED_OTHER");
+              seconds, mode.c_str());
   nccomp::sim::modbus_nc::NcServer server(nccomp::sim::modbus_nc::ServerConfig{});
   server.update([](nccomp::sim::modbus_nc::Tables& t) {
     t.input[1] = 1000;    // X = 0.1 mm
@@ -200,10 +277,11 @@ int main(int argc, char** argv) {
       "[us] |\n"
       "|---|---|---|---|---|---|---|---|---|---|\n");
   double best = 0.0;
+  std::string granted;
   for (double rate : {250.0, 500.0, 1000.0, 2000.0, 4000.0}) {
     fs::remove_all(dir);
     fs::create_directories(dir);
-    std::ofstream(dir / "nccompd.toml") << config_text(server.port(), rate, fifo);
+    std::ofstream(dir / "nccompd.toml") << config_text(server.port(), rate, o);
     const pid_t pid = spawn_daemon(dir);
     const std::string sock = (dir / "status.sock").string();
     std::optional<Snapshot> a;
@@ -231,6 +309,10 @@ int main(int argc, char** argv) {
     const double span =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     const int rc = stop_daemon(pid);
+    if (granted.empty()) {
+      // What the OS granted (the same at every rate), from the daemon's own log.
+      granted = thread_lines(dir / "nccompd.log");
+    }
     if (!a || !b) {
       std::printf("| %.0f | status not readable |\n", rate);
       continue;
@@ -249,6 +331,7 @@ int main(int argc, char** argv) {
       best = rate;
     }
   }
+  std::printf("\nnccompd's log on its threads' scheduling:\n%s", granted.c_str());
   std::printf("\nhighest loop rate nccompd sustained with zero overruns: %.0f Hz\n", best);
   server.stop();
   fs::remove_all(dir);
