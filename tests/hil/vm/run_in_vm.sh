@@ -92,7 +92,7 @@ initrd="$workdir/initramfs-$kver.cpio.gz"
 self_sum=$(sha1sum "$0" | cut -c1-12)
 if [ ! -f "$initrd" ] || [ "$(cat "$initrd.sum" 2>/dev/null)" != "$self_sum" ]; then
   rm -rf "$initrd_dir"
-  mkdir -p "$initrd_dir"/{bin,lib/modules,proc,sys,dev,host,tmp}
+  mkdir -p "$initrd_dir"/{bin,lib/modules,proc,sys,dev,host,hosttmp,tmp}
   cp "$busybox" "$initrd_dir/bin/busybox"
   modlist=""
   for m in virtio_ring virtio virtio_pci_modern_dev virtio_pci_legacy_dev virtio_pci netfs \
@@ -125,12 +125,20 @@ fail() { echo "NCCOMP_VM_ERROR=$1"; echo "NCCOMP_VM_EXIT=125"; poweroff -f; }
 # per lookup (TCG makes each one slow: program and python start-up time).
 mount -t 9p -o trans=virtio,version=9p2000.L,ro,msize=262144,cache=loose host /host || fail "mount host"
 out=$(sed -n 's/.*nccomp.out=\([^ ]*\).*/\1/p' /proc/cmdline)
-mount -t 9p -o trans=virtio,version=9p2000.L,rw,msize=262144 out "/host$out" || fail "mount out"
+expose=$(sed -n 's/.*nccomp.expose=\([^ ]*\).*/\1/p' /proc/cmdline)
 mount -t proc proc /host/proc
 mount -t sysfs sys /host/sys
 mount -t devtmpfs dev /host/dev
+# /tmp is a writable tmpfs inside; where the checkout or the build lives under the host's /tmp
+# (a CI clone in /tmp), those trees are bound back (read-only) over it.
+mount -o bind /host/tmp /hosttmp || fail "bind host tmp"
 mount -t tmpfs tmp /host/tmp
+for p in $(echo "$expose" | tr ',' ' '); do
+  rel=${p#/tmp/}
+  mkdir -p "/host/tmp/$rel" && mount -o bind "/hosttmp/$rel" "/host/tmp/$rel" || fail "expose $p"
+done
 mount -t tmpfs run /host/run 2>/dev/null
+mount -t 9p -o trans=virtio,version=9p2000.L,rw,msize=262144 out "/host$out" || fail "mount out"
 ip link set lo up
 ip link add vcan0 type vcan || fail "ip link add vcan0"
 ip link set vcan0 up || fail "ip link set vcan0 up"
@@ -145,6 +153,25 @@ EOF
   mv "$initrd.tmp" "$initrd"
   echo "$self_sum" >"$initrd.sum"
 fi
+
+# Trees under the host's /tmp that the command needs (the checkout, the build, paths in its
+# arguments): /tmp is a tmpfs inside the VM, so they are bound back in (first level below /tmp).
+expose=""
+repo_root=$(realpath -m "$(dirname "$0")/../../..")
+for p in "$PWD" "$workdir" "$repo_root" "$@"; do
+  case "$p" in
+    /tmp/*) ;;
+    *) continue ;;
+  esac
+  top=$(realpath -m "$p" | cut -d/ -f1-3)
+  case "$top" in
+    /tmp/*[!A-Za-z0-9._-]*) echo "run_in_vm: cannot expose '$top' inside the VM (name)" >&2; exit 125 ;;
+  esac
+  case ",$expose," in
+    *",$top,"*) ;;
+    *) expose="${expose:+$expose,}$top" ;;
+  esac
+done
 
 # The command, as a script in the shared directory (quoted so arguments survive).
 {
@@ -180,7 +207,7 @@ timeout --kill-after=10 "$timeout_s" qemu-system-x86_64 \
   -accel "$accel" "${cpu_opt[@]}" -m "${NCCOMP_VM_MEM_MB:-1024}" -smp "${NCCOMP_VM_SMP:-2}" \
   -nodefaults -no-reboot -display none -serial stdio \
   -kernel "/boot/vmlinuz-$kver" -initrd "$initrd" \
-  -append "console=ttyS0 quiet loglevel=3 panic=-1 nccomp.out=$workdir" \
+  -append "console=ttyS0 quiet loglevel=3 panic=-1 nccomp.out=$workdir nccomp.expose=$expose" \
   -virtfs local,path=/,mount_tag=host,security_model=none,readonly=on,multidevs=remap \
   -virtfs "local,path=$workdir,mount_tag=out,security_model=none,multidevs=remap" \
   </dev/null 2>&1 | tee "$workdir/console.log"
