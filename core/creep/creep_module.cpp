@@ -11,10 +11,14 @@
 #include <utility>
 
 #include "core/creep/state_v1.hpp"
+#include "core/creep/state_v2.hpp"
 
 namespace nccomp::core::creep {
 
 namespace {
+
+/// cos(1°): the held normal is saved again when it turned further.
+constexpr double kCosOneDegree = 0.9998476951563913;
 
 constexpr std::array<const char*, kChannelCount> kChannelKeys{
     "creep.output.x_register", "creep.output.y_register", "creep.output.z_register",
@@ -160,13 +164,22 @@ void CreepModule::step(TimeNs now_ns, std::span<const Event> events, StepOutput&
   const std::uint64_t n = k.measurements_accepted + k.measurements_refused + k.events_invalid;
   const auto& s = comp_.state();
   const bool moving = comp_.creeps_in_progress() > 0 || s.entry.active || s.rate_known;
-  if (n != last_events_ || s.tool != last_tool_ || s.halted != last_halted_ ||
+  // The held normal is saved when it turned by more than 1° (a restart then splits the
+  // correction as the NC holds it, not as it was split long ago).
+  const auto& hn = s.held_normal;
+  const auto& ln = last_normal_;
+  const bool normal_turned =
+      s.normal_held != last_normal_held_ ||
+      (s.normal_held && hn[0] * ln[0] + hn[1] * ln[1] + hn[2] * ln[2] < kCosOneDegree);
+  if (n != last_events_ || s.tool != last_tool_ || s.halted != last_halted_ || normal_turned ||
       (moving && std::fabs(s.cut_path_mm - last_path_mm_) >= 1.0)) {
     ++generation_;
     last_events_ = n;
     last_tool_ = s.tool;
     last_halted_ = s.halted;
     last_path_mm_ = s.cut_path_mm;
+    last_normal_ = s.held_normal;
+    last_normal_held_ = s.normal_held;
   }
 }
 
@@ -178,42 +191,70 @@ std::size_t CreepModule::save_state(std::span<std::byte> buf) const noexcept {
   return state_capacity();
 }
 
-bool CreepModule::load_state_v1(std::span<const std::byte> bytes) noexcept {
-  // A state written before version 2: every state in it is checked and converted before
+namespace {
+
+/// The older layouts a state may come in: their structs, their bool check and their converter.
+struct LayoutV1 {
+  using State = v1::CreepState;
+  using Memory = v1::ToolMemory;
+  static constexpr std::size_t kBytes = v1::kModuleStateBytes;
+  static bool loadable(const std::byte* p) noexcept { return v1::state_bytes_loadable(p); }
+  static void upgrade(const State& o, double removal, CreepState& n) noexcept {
+    v1::upgrade(o, removal, n);
+  }
+};
+struct LayoutV2 {
+  using State = v2::CreepState;
+  using Memory = v2::ToolMemory;
+  static constexpr std::size_t kBytes = v2::kModuleStateBytes;
+  static bool loadable(const std::byte* p) noexcept { return v2::state_bytes_loadable(p); }
+  static void upgrade(const State& o, double removal, CreepState& n) noexcept {
+    v2::upgrade(o, removal, n);
+  }
+};
+static_assert(LayoutV1::kBytes != LayoutV2::kBytes &&
+              LayoutV1::kBytes != sizeof(CreepState) + sizeof(ToolMemory) &&
+              LayoutV2::kBytes != sizeof(CreepState) + sizeof(ToolMemory));
+
+}  // namespace
+
+template <class Layout>
+bool CreepModule::load_state_old(std::span<const std::byte> bytes) noexcept {
+  // A state written by an older layout: every state in it is checked and converted before
   // anything changes (both parts, or neither).
+  using OldState = typename Layout::State;
+  using OldMemory = typename Layout::Memory;
   const std::byte* p = bytes.data();
-  if (!v1::state_bytes_loadable(p)) return false;
+  if (!Layout::loadable(p)) return false;
   for (std::size_t k = 0; k < kMaxToolMemory; ++k) {
     const std::size_t at =
-        sizeof(v1::CreepState) + offsetof(v1::ToolMemory, state) + k * sizeof(v1::CreepState);
+        sizeof(OldState) + offsetof(OldMemory, state) + k * sizeof(OldState);
     std::int32_t tool = 0;
-    std::memcpy(
-        &tool,
-        p + sizeof(v1::CreepState) + offsetof(v1::ToolMemory, tool) + k * sizeof(std::int32_t),
-        sizeof tool);
-    if (tool != 0 && !v1::state_bytes_loadable(p + at)) return false;
+    std::memcpy(&tool,
+                p + sizeof(OldState) + offsetof(OldMemory, tool) + k * sizeof(std::int32_t),
+                sizeof tool);
+    if (tool != 0 && !Layout::loadable(p + at)) return false;
   }
   const double removal = comp_.config().interval.removal_mm3_per_mm;
-  v1::CreepState old;
+  OldState old;
   std::memcpy(&old, p, sizeof old);
   CreepState st;
-  v1::upgrade(old, removal, st);
+  Layout::upgrade(old, removal, st);
   if (comp_.check_state(st).field != nullptr) return false;
-  const std::byte* mem = p + sizeof(v1::CreepState);
-  std::memcpy(scratch_memory_.tool.data(), mem + offsetof(v1::ToolMemory, tool),
+  const std::byte* mem = p + sizeof(OldState);
+  std::memcpy(scratch_memory_.tool.data(), mem + offsetof(OldMemory, tool),
               sizeof(scratch_memory_.tool));
-  std::memcpy(scratch_memory_.last_use.data(), mem + offsetof(v1::ToolMemory, last_use),
+  std::memcpy(scratch_memory_.last_use.data(), mem + offsetof(OldMemory, last_use),
               sizeof(scratch_memory_.last_use));
-  std::memcpy(&scratch_memory_.use_counter, mem + offsetof(v1::ToolMemory, use_counter),
+  std::memcpy(&scratch_memory_.use_counter, mem + offsetof(OldMemory, use_counter),
               sizeof(scratch_memory_.use_counter));
   for (std::size_t k = 0; k < kMaxToolMemory; ++k) {
     if (scratch_memory_.tool[k] == 0) {
       scratch_memory_.state[k] = CreepState{};
       continue;
     }
-    std::memcpy(&old, mem + offsetof(v1::ToolMemory, state) + k * sizeof(v1::CreepState),
-                sizeof old);
-    v1::upgrade(old, removal, scratch_memory_.state[k]);
+    std::memcpy(&old, mem + offsetof(OldMemory, state) + k * sizeof(OldState), sizeof old);
+    Layout::upgrade(old, removal, scratch_memory_.state[k]);
   }
   if (!comp_.restore_tool_memory(scratch_memory_)) return false;
   (void)comp_.restore_state(st);  // cannot fail: checked above
@@ -222,9 +263,8 @@ bool CreepModule::load_state_v1(std::span<const std::byte> bytes) noexcept {
 }
 
 bool CreepModule::load_state(std::span<const std::byte> bytes) noexcept {
-  if (bytes.size() == v1::kModuleStateBytes && bytes.size() != state_capacity()) {
-    return load_state_v1(bytes);
-  }
+  if (bytes.size() == LayoutV1::kBytes) return load_state_old<LayoutV1>(bytes);
+  if (bytes.size() == LayoutV2::kBytes) return load_state_old<LayoutV2>(bytes);
   if (bytes.size() != state_capacity() || !state_bytes_loadable(bytes.data(), sizeof(CreepState)) ||
       !memory_bytes_loadable(bytes.data() + sizeof(CreepState), sizeof(ToolMemory))) {
     return false;

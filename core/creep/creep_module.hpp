@@ -3,6 +3,7 @@
 // its absolute targets per register and persists its state with the rest of the engine's.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -59,10 +60,12 @@ class CreepModule final : public engine::Module {
   std::size_t save_state(std::span<std::byte> buf) const noexcept override;
   /// Real-time safe: false if the bytes are not a state valid for this config (the module then
   /// keeps its fresh state). A state written by version 1 of the layout (before the eased
-  /// superposition) is converted (core/creep/state_v1.hpp).
+  /// superposition) or version 2 (before the held normal and the request hold) is converted
+  /// (core/creep/state_v1.hpp, state_v2.hpp).
   bool load_state(std::span<const std::byte> bytes) noexcept override;
-  /// Advances on every discrete change (measurement, tool change, halt) and every 1 mm of cut
-  /// path while creeps, entries or predictions are in progress.
+  /// Advances on every discrete change (measurement, tool change, halt), every 1 mm of cut
+  /// path while creeps, entries or predictions are in progress, and when the held surface
+  /// normal turned by more than 1°.
   [[nodiscard]] std::uint64_t state_generation() const noexcept override { return generation_; }
   /// Real-time safe: mode, tool, wear in force / measured / still to creep (max over the edge)
   /// [µm], creeps in progress, the correction along the normal [µm], cut path [mm], fitted wear
@@ -82,7 +85,9 @@ class CreepModule final : public engine::Module {
   [[nodiscard]] const WearCompensator& compensator() const noexcept { return comp_; }
 
  private:
-  bool load_state_v1(std::span<const std::byte> bytes) noexcept;
+  /// A state of an older layout (LayoutV1, LayoutV2 in creep_module.cpp), converted.
+  template <class Layout>
+  bool load_state_old(std::span<const std::byte> bytes) noexcept;
 
   CreepModuleConfig config_;
   WearCompensator comp_;
@@ -93,6 +98,8 @@ class CreepModule final : public engine::Module {
   std::int32_t last_tool_{0};
   bool last_halted_{false};
   double last_path_mm_{0.0};
+  std::array<double, 3> last_normal_{};
+  bool last_normal_held_{false};
 };
 
 }  // namespace nccomp::core::creep

@@ -56,7 +56,7 @@ struct HistoryEntry {
 };
 
 struct CreepState {
-  static constexpr std::uint32_t kVersion = 2;
+  static constexpr std::uint32_t kVersion = 3;
   std::uint32_t version{kVersion};
   /// Edge support points the state was built with (must match the config on import).
   std::uint32_t edge_points{1};
@@ -113,6 +113,21 @@ struct CreepState {
 
   /// Last value sent per channel X, Y, Z, radius, length [µm] (what the NC holds).
   std::array<double, kChannelCount> channel_output_um{};
+
+  // Version 3.
+  /// The last surface normal known (unit, machine axes): from the NC's axis samples or the
+  /// toolpath file. Held while no normal is known (not cutting, an interruption, the trip to the
+  /// laser, a restart) so that the split of the correction between the registers does not change
+  /// there. Kept across tool changes (a sister resumes where the last tool stopped).
+  std::array<double, 3> held_normal{};
+  bool normal_held{false};
+  /// A refused measurement answered the last request: the next request falls due one interval
+  /// (on the interval's own clock) after that measurement, never while halted; the operator's
+  /// clear_alarm() lifts the hold. The clocks at the refused measurement:
+  bool request_held{false};
+  double refused_cut_path_mm{0.0};
+  double refused_cut_time_s{0.0};
+  double refused_removed_mm3{0.0};
 };
 
 static_assert(std::is_trivially_copyable_v<CreepState>);
@@ -157,7 +172,8 @@ inline bool state_bytes_loadable(const std::byte* bytes, std::size_t size) noexc
          is_bool(offsetof(CreepState, halted)) && is_bool(offsetof(CreepState, warning_flag)) &&
          is_bool(offsetof(CreepState, alarm_flag)) &&
          is_bool(offsetof(CreepState, measurement_due_flag)) &&
-         is_bool(offsetof(CreepState, tool_change_flag));
+         is_bool(offsetof(CreepState, tool_change_flag)) &&
+         is_bool(offsetof(CreepState, normal_held)) && is_bool(offsetof(CreepState, request_held));
 }
 
 /// The same for a ToolMemory (every remembered state). Real-time safe.

@@ -121,6 +121,16 @@ StateProblem WearCompensator::check_state(const CreepState& st) const noexcept {
   for (std::size_t ch = 0; ch < kChannelCount; ++ch) {
     if (bad(st.channel_output_um[ch])) return {"channel_output_um", static_cast<int>(ch)};
   }
+  if (st.normal_held) {
+    const auto& n = st.held_normal;
+    const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    if (!std::isfinite(len) || std::fabs(len - 1.0) > 1e-6) return {"held_normal", -1};
+  }
+  if (bad(st.refused_cut_path_mm)) return {"refused_cut_path_mm", -1};
+  if (bad(st.refused_cut_time_s)) return {"refused_cut_time_s", -1};
+  if (bad(st.refused_removed_mm3) || st.refused_removed_mm3 < 0.0) {
+    return {"refused_removed_mm3", -1};
+  }
   return {};
 }
 
@@ -159,6 +169,9 @@ void WearCompensator::clear_alarm() noexcept {
   s_.halted = false;
   s_.alarm_flag = false;
   s_.warning_flag = false;
+  // The operator has looked: a measurement refused before may be asked for again at once (the
+  // request fell when that measurement came and stayed low since).
+  s_.request_held = false;
 }
 
 void WearCompensator::select_tool_tables() noexcept {
@@ -611,7 +624,18 @@ void WearCompensator::compute_targets() noexcept {
   std::array<double, 3> n{};
   double c = 0.0;
   double l = 0.0;
-  if (normal_now(n)) {
+  bool have_normal = normal_now(n);
+  if (have_normal) {
+    s_.held_normal = n;
+    s_.normal_held = true;
+  } else if (s_.normal_held && config_.edge.normal_source != NormalSource::kNone) {
+    // No normal now (not cutting, an interruption, the trip to the laser, a restart): the last
+    // one stays in force, so the split of the correction between the registers, and with it the
+    // offset at the surface, does not change until the NC publishes a new one.
+    n = s_.held_normal;
+    have_normal = true;
+  }
+  if (have_normal) {
     const auto& ax = config_.edge.tool_axis;
     // A normal against the tool axis (undercut) cannot be reached by the edge: clamp to 90°.
     const double dot = std::clamp(n[0] * ax[0] + n[1] * ax[1] + n[2] * ax[2], 0.0, 1.0);
@@ -756,6 +780,15 @@ void WearCompensator::halt(TimeNs now_ns, AlarmCode code, double value, StepOutp
 
 void WearCompensator::on_measurement(TimeNs now_ns, const ToolMeasurement& m,
                                      StepOutput& out) noexcept {
+  // Every laser measurement answers the request, whatever is decided about it below: the flag
+  // falls. Until it is accepted, the next request waits for one interval after this one (a
+  // refused measurement is not asked for again in the same cycle, nor at every cycle by an NC
+  // that reacts to the level of the flag).
+  s_.measurement_due_flag = false;
+  s_.request_held = true;
+  s_.refused_cut_path_mm = s_.cut_path_mm;
+  s_.refused_cut_time_s = s_.cut_time_s;
+  s_.refused_removed_mm3 = s_.removed_mm3;
   const std::size_t n_meas = m.point_count;
   if (n_meas != points_ && n_meas != 1) {
     ++counters_.events_invalid;
@@ -794,7 +827,6 @@ void WearCompensator::on_measurement(TimeNs now_ns, const ToolMeasurement& m,
     s_.tool = m.tool;
     select_tool_tables();
   }
-  s_.measurement_due_flag = false;
   if (s_.halted) {
     // Halted: logged above, applied only after the operator clears the alarm or changes tool.
     ++counters_.measurements_refused;
@@ -911,6 +943,7 @@ void WearCompensator::on_measurement(TimeNs now_ns, const ToolMeasurement& m,
   s_.rate_prev_um_per_mm = rate_now;
   s_.rate_blend_mm = kEase * std::max(0.0, interval_mm);
   if (have_sample_) s_.last_measurement_program_path_mm = last_sample_.program_path_mm;
+  s_.request_held = false;
   ++s_.measurements;
   ++counters_.measurements_accepted;
 
@@ -970,15 +1003,14 @@ void WearCompensator::fit_rates() noexcept {
   s_.rate_known = true;
 }
 
-double WearCompensator::next_measurement_path_mm() const noexcept {
+double WearCompensator::interval_path_mm() const noexcept {
   const auto& iv = config_.interval;
-  const double last = s_.last_measurement_cut_path_mm;
   switch (iv.basis) {
     case IntervalBasis::kPath:
-      return last + iv.interval_mm;
+      return iv.interval_mm;
     case IntervalBasis::kMaterial:
       if (iv.removal_source == RemovalSource::kConstant) {
-        return last + iv.interval_mm3 / iv.removal_mm3_per_mm;
+        return iv.interval_mm3 / iv.removal_mm3_per_mm;
       }
       break;  // depends on where the program goes
     case IntervalBasis::kAdaptive: {
@@ -989,10 +1021,10 @@ double WearCompensator::next_measurement_path_mm() const noexcept {
         }
       }
       // Before a rate is known (new tool, break-in wear is fastest) measure at the minimum.
-      if (!s_.rate_known) return last + iv.min_interval_mm;
-      if (!(max_rate > 0.0)) return last + iv.max_interval_mm;
-      return last +
-             std::clamp(iv.target_increment_um / max_rate, iv.min_interval_mm, iv.max_interval_mm);
+      if (!s_.rate_known) return iv.min_interval_mm;
+      if (!(max_rate > 0.0)) return iv.max_interval_mm;
+      return std::clamp(iv.target_increment_um / max_rate, iv.min_interval_mm,
+                        iv.max_interval_mm);
     }
     case IntervalBasis::kOff:
     case IntervalBasis::kTime:
@@ -1001,19 +1033,30 @@ double WearCompensator::next_measurement_path_mm() const noexcept {
   return std::numeric_limits<double>::infinity();
 }
 
+double WearCompensator::next_measurement_path_mm() const noexcept {
+  if (s_.halted) return std::numeric_limits<double>::infinity();
+  const double len = interval_path_mm();
+  const double next = s_.last_measurement_cut_path_mm + len;
+  return s_.request_held ? std::max(next, s_.refused_cut_path_mm + len) : next;
+}
+
 double WearCompensator::next_measurement_removed_mm3() const noexcept {
-  if (config_.interval.basis != IntervalBasis::kMaterial) {
+  if (config_.interval.basis != IntervalBasis::kMaterial || s_.halted) {
     return std::numeric_limits<double>::infinity();
   }
-  return s_.last_measurement_removed_mm3 + config_.interval.interval_mm3;
+  const double len = config_.interval.interval_mm3;
+  const double next = s_.last_measurement_removed_mm3 + len;
+  return s_.request_held ? std::max(next, s_.refused_removed_mm3 + len) : next;
 }
 
 void WearCompensator::check_measurement_due(TimeNs now_ns, StepOutput& out) noexcept {
   const auto& iv = config_.interval;
-  if (iv.basis == IntervalBasis::kOff || s_.measurement_due_flag) return;
+  // Halted: a measurement now would be refused; the operator or a tool change comes first.
+  if (iv.basis == IntervalBasis::kOff || s_.measurement_due_flag || s_.halted) return;
   bool due = false;
   if (iv.basis == IntervalBasis::kTime) {
-    due = s_.cut_time_s - s_.last_measurement_cut_time_s >= iv.interval_s;
+    due = s_.cut_time_s - s_.last_measurement_cut_time_s >= iv.interval_s &&
+          (!s_.request_held || s_.cut_time_s - s_.refused_cut_time_s >= iv.interval_s);
   } else if (iv.basis == IntervalBasis::kMaterial) {
     // A hair of tolerance: the volume is a sum of many products.
     due = s_.removed_mm3 >= next_measurement_removed_mm3() - 1e-9 * iv.interval_mm3;
@@ -1046,6 +1089,9 @@ void WearCompensator::on_tool_change(TimeNs /*now_ns*/, const ToolChange& c,
   // Kept across the change: where a sister restarts, and what the NC holds now.
   const double restart_mm = s_.last_measurement_program_path_mm;
   const auto held_um = s_.channel_output_um;
+  // The surface does not change with the tool: the new one starts with the last normal known.
+  const auto held_normal = s_.held_normal;
+  const bool normal_held = s_.normal_held;
   const std::uint64_t seq = s_.next_seq;
   if (s_.tool != 0) {
     // The outgoing tool: remembered until it comes back, forgotten when a sister replaces it.
@@ -1091,6 +1137,8 @@ void WearCompensator::on_tool_change(TimeNs /*now_ns*/, const ToolChange& c,
     s_ = fresh;
   }
   s_.channel_output_um = held_um;
+  s_.held_normal = held_normal;
+  s_.normal_held = normal_held;
   s_.next_seq = std::max(s_.next_seq, seq);
   select_tool_tables();
   if (c.sister && config_.entry.sister_offset_um > 0.0) {

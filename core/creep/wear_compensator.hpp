@@ -80,8 +80,9 @@ class WearCompensator {
   /// another tool than its slot says, or a tool appears twice. Real-time safe.
   bool restore_tool_memory(const ToolMemory& memory) noexcept;
 
-  /// Operator acknowledgement: clears the halt, the alarm and the warning flags. Creeps resume
-  /// where they were frozen. Real-time safe.
+  /// Operator acknowledgement: clears the halt, the alarm and the warning flags and the hold of
+  /// the "measurement due" request after a refused measurement (so an overdue measurement is
+  /// asked for in the next step). Creeps resume where they were frozen. Real-time safe.
   void clear_alarm() noexcept;
 
   // Observers (real-time safe), for status and tests.
@@ -104,11 +105,13 @@ class WearCompensator {
   [[nodiscard]] std::size_t creeps_in_progress() const noexcept;
   [[nodiscard]] double cut_path_mm() const noexcept { return s_.cut_path_mm; }
   /// Cut path at which the next measurement falls due [mm] (bases path and adaptive, and
-  /// material with a constant cross-section; +inf otherwise).
+  /// material with a constant cross-section; +inf otherwise): one interval after the last
+  /// accepted measurement, and after a refused one while the request is held; +inf while halted.
   [[nodiscard]] double next_measurement_path_mm() const noexcept;
   /// Material removed by this tool [mm³] (counted with interval basis "material" only).
   [[nodiscard]] double removed_mm3() const noexcept { return s_.removed_mm3; }
-  /// Removed material at which the next measurement falls due [mm³] (+inf unless "material").
+  /// Removed material at which the next measurement falls due [mm³] (+inf unless "material",
+  /// and while halted); after a refused measurement as next_measurement_path_mm().
   [[nodiscard]] double next_measurement_removed_mm3() const noexcept;
   /// Program path where a sister tool should restart [mm] (NaN if unknown).
   [[nodiscard]] double restart_program_path_mm() const noexcept;
@@ -128,6 +131,9 @@ class WearCompensator {
   void start_entry(double offset_um, double length_mm) noexcept;
   void retire_finished_creeps() noexcept;
   void fit_rates() noexcept;
+  /// Cut path between two measurements [mm] (bases path and adaptive, and material with a
+  /// constant cross-section; +inf otherwise).
+  [[nodiscard]] double interval_path_mm() const noexcept;
   void check_measurement_due(TimeNs now_ns, StepOutput& out) noexcept;
   void compute_targets() noexcept;
   void write_outputs(TimeNs now_ns, StepOutput& out) noexcept;

@@ -14,6 +14,7 @@
 #include "bench/creep/engine_cycle.hpp"
 #include "core/creep/creep_module.hpp"
 #include "core/creep/state_v1.hpp"
+#include "core/creep/state_v2.hpp"
 #include "tests/support/alloc_counter.hpp"
 #include "tests/unit/creep/rig.hpp"
 
@@ -228,6 +229,82 @@ TEST(CreepEngineModule, AStateOfLayoutVersion1IsConvertedNotDropped) {
   EXPECT_FALSE(fresh.load_state(bytes));
   bytes[offsetof(v1::CreepState, halted)] = std::byte{0};
   bytes[offsetof(v1::CreepState, version)] = std::byte{2};
+  EXPECT_FALSE(fresh.load_state(bytes));
+  EXPECT_EQ(fresh.compensator().state().measurements, 0U);
+}
+
+TEST(CreepEngineModule, AStateOfLayoutVersion2IsConvertedNotDropped) {
+  // Version 3 appended the held normal and the request hold; a daemon upgraded across it resumes
+  // with its wear, its creeps (eased and carried slopes kept) and its prediction's blend.
+  auto mc = module_config();
+  mc.creep.interval.basis = IntervalBasis::kPath;
+  mc.creep.interval.interval_mm = 100.0;
+  CreepModule m(mc);
+  std::vector<RegisterSpec> regs = registers();
+  m.attach(engine::RegisterTable(regs));
+  v2::CreepState s;
+  s.edge_points = 1;
+  s.tool = 1;
+  s.cut_path_mm = 130.0;
+  s.creep_path_mm = 130.0;
+  s.committed_um[0] = 2.0;
+  s.measured_um[0] = 22.0;
+  s.rate_um_per_mm[0] = 0.1;
+  s.rate_prev_um_per_mm[0] = 0.05;
+  s.rate_blend_mm = 4.0;
+  s.measurements = 2;
+  s.last_measurement_cut_path_mm = 120.0;
+  s.last_measurement_creep_path_mm = 120.0;
+  s.removed_mm3 = 7.0;
+  s.last_measurement_removed_mm3 = 6.0;
+  s.creeps[0].active = true;
+  s.creeps[0].eased = true;
+  s.creeps[0].seq = 1;
+  s.creeps[0].start = 120.0;  // 20 µm over 50 mm, 10 mm done, eased
+  s.creeps[0].delta_um[0] = 20.0;
+  s.creeps[0].span[0] = 50.0;
+  s.creeps[0].carry_slope[0] = 0.2;
+  s.creeps[0].carry_span[0] = 10.0;
+  s.channel_output_um[2] = -6.0;
+  v2::ToolMemory mem;
+  mem.tool[5] = 7;
+  mem.last_use[5] = 1;
+  mem.use_counter = 1;
+  mem.state[5].edge_points = 1;
+  mem.state[5].tool = 7;
+  mem.state[5].measured_um[0] = 9.0;
+  mem.state[5].committed_um[0] = 9.0;
+  std::vector<std::byte> bytes(v2::kModuleStateBytes);
+  std::memcpy(bytes.data(), &s, sizeof s);
+  std::memcpy(bytes.data() + sizeof s, &mem, sizeof mem);
+  ASSERT_NE(bytes.size(), m.state_capacity());
+  ASSERT_NE(bytes.size(), v1::kModuleStateBytes);
+  nccomp::test::AllocationScope scope;
+  ASSERT_TRUE(m.load_state(bytes));
+  EXPECT_EQ(scope.count(), 0U);
+  const auto& c = m.compensator();
+  const auto& st = c.state();
+  EXPECT_EQ(st.version, CreepState::kVersion);
+  EXPECT_TRUE(st.creeps[0].eased);
+  EXPECT_NEAR(st.creeps[0].carry_slope[0], 0.2, 0.0);
+  EXPECT_NEAR(st.creeps[0].carry_span[0], 10.0, 0.0);
+  EXPECT_NEAR(st.rate_blend_mm, 4.0, 0.0);
+  EXPECT_NEAR(st.rate_prev_um_per_mm[0], 0.05, 0.0);
+  EXPECT_NEAR(c.removed_mm3(), 7.0, 0.0);
+  EXPECT_NEAR(st.channel_output_um[2], -6.0, 0.0);
+  EXPECT_FALSE(st.normal_held);
+  EXPECT_FALSE(st.request_held);
+  EXPECT_NEAR(c.next_measurement_path_mm(), 220.0, 1e-12);
+  EXPECT_EQ(c.tool_memory().tool[5], 7);
+  EXPECT_NEAR(c.tool_memory().state[5].measured_um[0], 9.0, 0.0);
+  EXPECT_EQ(c.tool_memory().state[5].version, CreepState::kVersion);
+  // A version-2-sized blob that is not version 2, or has a corrupt bool, is refused.
+  CreepModule fresh(mc);
+  fresh.attach(engine::RegisterTable(regs));
+  bytes[offsetof(v2::CreepState, tool_change_flag)] = std::byte{2};
+  EXPECT_FALSE(fresh.load_state(bytes));
+  bytes[offsetof(v2::CreepState, tool_change_flag)] = std::byte{0};
+  bytes[offsetof(v2::CreepState, version)] = std::byte{3};
   EXPECT_FALSE(fresh.load_state(bytes));
   EXPECT_EQ(fresh.compensator().state().measurements, 0U);
 }
