@@ -127,7 +127,12 @@ void PollDecoder::decode_axis(core::TimeNs t_ns) {
     const double nz = value(g.fields[axis_field::kNormalZ]);
     const double norm = std::sqrt(nx * nx + ny * ny + nz * nz);
     // Scaled integers carry a little rounding; anything far from unit length is not a normal.
-    if (std::isfinite(norm) && std::fabs(norm - 1.0) < 0.01) {
+    // All three exactly 0 is the NC's "no normal known" (not cutting, no surface under the
+    // tool): a valid sample without a normal, as a zero normal over CAN.
+    const auto zero = [](double v) { return std::fpclassify(v) == FP_ZERO; };
+    if (zero(nx) && zero(ny) && zero(nz)) {
+      s.has_normal = false;
+    } else if (std::isfinite(norm) && std::fabs(norm - 1.0) < 0.01) {
       s.has_normal = true;
       s.normal = {nx / norm, ny / norm, nz / norm};
     } else {

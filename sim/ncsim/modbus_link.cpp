@@ -183,7 +183,8 @@ void ModbusLink::publish(const core::AxisSample& axis, const std::array<double, 
     put(t, f[mb::axis_field::kPath],
         std::isfinite(axis.program_path_mm) ? axis.program_path_mm : 0.0);
     put(t, f[mb::axis_field::kTool], axis.tool);
-    const std::array<double, 3> n = axis.has_normal ? axis.normal : std::array{0.0, 0.0, 1.0};
+    // No normal known (not cutting, the trip to the laser): all three 0, the map's "no normal".
+    const std::array<double, 3> n = axis.has_normal ? axis.normal : std::array{0.0, 0.0, 0.0};
     put(t, f[mb::axis_field::kNormalX], n[0]);
     put(t, f[mb::axis_field::kNormalY], n[1]);
     put(t, f[mb::axis_field::kNormalZ], n[2]);

@@ -4,6 +4,7 @@
 
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <variant>
 #include <vector>
@@ -315,6 +316,54 @@ max = 80
   }
   EXPECT_EQ(count(ev, core::TemperatureSample{}), 1U);
   EXPECT_EQ(count(ev, core::AxisSample{}), 1U);
+}
+
+TEST(ModbusDecoderNormal, AllZeroIsNoNormalAnyOtherNonUnitVectorDropsTheSample) {
+  // GIVEN the reference map's encoding: three int16 components in 1/10000
+  const ModbusConfig c = parse_modbus_config(R"([modbus]
+transport = "tcp"
+[modbus.axis]
+x_mm = { table = "input", address = 0, type = "int16", scale = 0.01 }
+normal_x = { table = "input", address = 1, type = "int16", scale = 0.0001 }
+normal_y = { table = "input", address = 2, type = "int16", scale = 0.0001 }
+normal_z = { table = "input", address = 3, type = "int16", scale = 0.0001 }
+)",
+                                             "t.toml");
+  PollDecoder dec(c);
+  std::vector<std::uint8_t> ok(c.blocks.size(), 1);
+  ASSERT_EQ(c.blocks.size(), 1U);
+  auto axis = dec.block(0);
+  const auto sample = [&](std::int16_t nx, std::int16_t ny, std::int16_t nz,
+                          core::TimeNs t) -> std::vector<core::AxisSample> {
+    axis[0] = 1234;  // 12.34 mm
+    axis[1] = static_cast<std::uint16_t>(nx);
+    axis[2] = static_cast<std::uint16_t>(ny);
+    axis[3] = static_cast<std::uint16_t>(nz);
+    std::vector<core::AxisSample> out;
+    for (const auto& e : dec.decode(t, ok)) {
+      if (const auto* p = std::get_if<core::AxisSample>(&e)) out.push_back(*p);
+    }
+    return out;
+  };
+  // A unit normal at 30° (rounded to 1/10000): passed on, renormalised.
+  auto s = sample(5000, 0, 8660, 1);
+  ASSERT_EQ(s.size(), 1U);
+  EXPECT_TRUE(s[0].has_normal);
+  EXPECT_NEAR(s[0].normal[0], 0.5, 1e-4);
+  EXPECT_NEAR(s[0].normal[2], std::sqrt(0.75), 1e-4);
+  // WHEN all three are 0 (the NC knows no normal: not cutting, the trip to the laser)
+  // THEN the sample is valid, without a normal, and nothing is counted.
+  s = sample(0, 0, 0, 2);
+  ASSERT_EQ(s.size(), 1U);
+  EXPECT_FALSE(s[0].has_normal);
+  EXPECT_NEAR(s[0].position_mm[0], 12.34, 1e-9);
+  EXPECT_EQ(dec.counters().values_invalid, 0U);
+  // WHEN the vector is neither 0 nor of unit length (a half-written or garbled normal)
+  // THEN the sample is dropped and counted, each time.
+  EXPECT_TRUE(sample(0, 0, 1, 3).empty());      // 0.0001: not zero, not unit
+  EXPECT_TRUE(sample(5000, 0, 0, 4).empty());   // 0.5
+  EXPECT_TRUE(sample(8000, 0, 8000, 5).empty());  // 1.13
+  EXPECT_EQ(dec.counters().values_invalid, 3U);
 }
 
 TEST(ModbusDecoderProfile, WearProfileOverEdgeSupportPoints) {
