@@ -136,8 +136,11 @@ void CalibrationModule::step(TimeNs now_ns, std::span<const Event> events,
   bool commanded = false;
   for (const Event& e : events) {
     const auto* c = std::get_if<OperatorCommand>(&e);
-    // kWarmStart is the engine's machine context's command, not the calibrator's.
-    if (c != nullptr && c->kind != OperatorCommandKind::kWarmStart) {
+    // kWarmStart is the engine's machine context's command, not the calibrator's; kAcknowledge
+    // clears latched alarms, and the calibrator latches none (a refused touch set or
+    // recalibration is re-run or discarded with its own commands).
+    if (c != nullptr && c->kind != OperatorCommandKind::kWarmStart &&
+        c->kind != OperatorCommandKind::kAcknowledge) {
       run_command(*c, now_ns, out);
       commanded = true;
     }

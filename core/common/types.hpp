@@ -131,6 +131,9 @@ enum class OperatorCommandKind : std::uint8_t {
   // The engine's machine context (core/engine/context.hpp): `nccomp warm-start`.
   kWarmStart = 7,  // code[0] = 0: the machine's warm start is now (time_s counts from this
                    // cycle); 1: the machine is cold, its next axis motion is the warm start
+  // Every module with a latched alarm (today the creep module, core/creep): `nccomp acknowledge`.
+  kAcknowledge = 8,  // the operator acknowledges the latched alarms: code all 0 (every module;
+                     // other codes are reserved and refused), values unused
 };
 
 /// An operator command (status socket → SPSC ring → the loop): validated by the daemon before it

@@ -62,6 +62,29 @@ double max_measured_um(const CreepState& s) {
   return w;
 }
 
+/// What an acknowledgement cleared, as `nccomp status` shows it (static strings: the status
+/// thread reads the pointer later).
+const char* ack_text(std::uint64_t count, const CreepModule::Acknowledgement& a) {
+  if (count == 0) return "none yet";
+  constexpr std::array<const char*, 8> kText{"nothing latched",
+                                             "warning flag cleared",
+                                             "alarm flag cleared",
+                                             "alarm and warning flags cleared",
+                                             "halt cleared",
+                                             "halt and warning flag cleared",
+                                             "halt and alarm flag cleared",
+                                             "halt, alarm and warning flags cleared"};
+  const std::size_t k =
+      (a.halted ? 4U : 0U) | (a.alarm_flag ? 2U : 0U) | (a.warning_flag ? 1U : 0U);
+  if (k == 0 && a.request_held) return "measurement request released";
+  return kText[k];
+}
+
+/// Its code: the alarm it cleared, else the warning, 0 = none (-1 = a flag of unknown cause).
+std::int32_t ack_code(const CreepModule::Acknowledgement& a) {
+  return a.alarm_flag ? a.alarm_code : a.warning_flag ? a.warning_code : 0;
+}
+
 engine::RegisterKind kind_for(std::size_t channel) {
   switch (static_cast<Channel>(channel)) {
     case Channel::kX:
@@ -158,8 +181,74 @@ void CreepModule::attach(const engine::RegisterTable& registers) {
   ++generation_;
 }
 
+void CreepModule::clear_alarm() noexcept {
+  const auto& s = comp_.state();
+  last_ack_.halted = s.halted;
+  last_ack_.alarm_flag = s.alarm_flag;
+  last_ack_.warning_flag = s.warning_flag;
+  last_ack_.request_held = s.request_held;
+  last_ack_.alarm_code = latched_alarm_code();
+  last_ack_.warning_code = latched_warning_code();
+  comp_.clear_alarm();
+  alarm_cause_ = AlarmCode::kNone;
+  warning_cause_ = AlarmCode::kNone;
+  ++acknowledged_;
+  ++generation_;  // the state file gets the cleared flags
+}
+
+std::int32_t CreepModule::latched_alarm_code() const noexcept {
+  const auto& s = comp_.state();
+  if (!s.alarm_flag) return 0;
+  return alarm_cause_ != AlarmCode::kNone && alarm_cause_tool_ == s.tool
+             ? static_cast<std::int32_t>(alarm_cause_)
+             : -1;
+}
+
+std::int32_t CreepModule::latched_warning_code() const noexcept {
+  const auto& s = comp_.state();
+  if (!s.warning_flag) return 0;
+  return warning_cause_ != AlarmCode::kNone && warning_cause_tool_ == s.tool
+             ? static_cast<std::int32_t>(warning_cause_)
+             : -1;
+}
+
 void CreepModule::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out) noexcept {
+  // The operator's acknowledgement first: a measurement in the same cycle is then judged by a
+  // module that is no longer halted, and the flag registers written below are already 0. Any
+  // code but 0 is refused by the engine before it gets here.
+  for (const Event& e : events) {
+    const auto* c = std::get_if<OperatorCommand>(&e);
+    if (c != nullptr && c->kind == OperatorCommandKind::kAcknowledge && c->code[0] == 0) {
+      clear_alarm();
+    }
+  }
+  const bool alarm_before = comp_.state().alarm_flag;
+  const bool warning_before = comp_.state().warning_flag;
+  const std::size_t alarms_before = out.alarms.size();
   comp_.step(now_ns, events, out);
+  // The cause of a flag that rose in this step: the first alarm (warning) the step raised (the
+  // measurement's verdict comes before the limiter's alarms of the outputs). A flag restored
+  // with a tool from the tool memory keeps the cause only if it is that tool's.
+  const auto& st = comp_.state();
+  if (st.alarm_flag && !alarm_before) {
+    for (std::size_t i = alarms_before; i < out.alarms.size(); ++i) {
+      if (out.alarms[i].severity == Severity::kAlarm) {
+        alarm_cause_ = out.alarms[i].code;
+        alarm_cause_tool_ = st.tool;
+        break;
+      }
+    }
+  }
+  if (st.warning_flag && !warning_before) {
+    for (std::size_t i = alarms_before; i < out.alarms.size(); ++i) {
+      const auto& a = out.alarms[i];
+      if (a.severity == Severity::kWarning && a.code != AlarmCode::kEventInvalid) {
+        warning_cause_ = a.code;
+        warning_cause_tool_ = st.tool;
+        break;
+      }
+    }
+  }
   const auto& k = comp_.counters();
   const std::uint64_t n = k.measurements_accepted + k.measurements_refused + k.events_invalid;
   const auto& s = comp_.state();
@@ -227,11 +316,9 @@ bool CreepModule::load_state_old(std::span<const std::byte> bytes) noexcept {
   const std::byte* p = bytes.data();
   if (!Layout::loadable(p)) return false;
   for (std::size_t k = 0; k < kMaxToolMemory; ++k) {
-    const std::size_t at =
-        sizeof(OldState) + offsetof(OldMemory, state) + k * sizeof(OldState);
+    const std::size_t at = sizeof(OldState) + offsetof(OldMemory, state) + k * sizeof(OldState);
     std::int32_t tool = 0;
-    std::memcpy(&tool,
-                p + sizeof(OldState) + offsetof(OldMemory, tool) + k * sizeof(std::int32_t),
+    std::memcpy(&tool, p + sizeof(OldState) + offsetof(OldMemory, tool) + k * sizeof(std::int32_t),
                 sizeof tool);
     if (tool != 0 && !Layout::loadable(p + at)) return false;
   }
@@ -258,6 +345,8 @@ bool CreepModule::load_state_old(std::span<const std::byte> bytes) noexcept {
   }
   if (!comp_.restore_tool_memory(scratch_memory_)) return false;
   (void)comp_.restore_state(st);  // cannot fail: checked above
+  alarm_cause_ = AlarmCode::kNone;
+  warning_cause_ = AlarmCode::kNone;
   ++generation_;
   return true;
 }
@@ -276,6 +365,9 @@ bool CreepModule::load_state(std::span<const std::byte> bytes) noexcept {
   std::memcpy(&scratch_memory_, bytes.data() + sizeof(CreepState), sizeof(ToolMemory));
   if (!comp_.restore_tool_memory(scratch_memory_)) return false;
   (void)comp_.restore_state(st);  // cannot fail: checked above
+  // A flag of the restored state was raised by another process: its cause is not known here.
+  alarm_cause_ = AlarmCode::kNone;
+  warning_cause_ = AlarmCode::kNone;
   ++generation_;
   return true;
 }
@@ -316,12 +408,16 @@ std::size_t CreepModule::status(std::span<engine::StatusValue> out) const noexce
       {"cut_path_mm", s.cut_path_mm, nullptr},
       {"wear_rate_um_per_mm", s.rate_known ? s.rate_um_per_mm[k] : kNaN, nullptr},
       {"halted", s.halted ? 1.0 : 0.0, nullptr},
+      {"latched_alarm", static_cast<double>(latched_alarm_code()), nullptr},
+      {"acknowledged", static_cast<double>(acknowledged_), nullptr},
+      {"last_acknowledge", static_cast<double>(ack_code(last_ack_)),
+       ack_text(acknowledged_, last_ack_)},
       {"measurements_accepted", static_cast<double>(comp_.counters().measurements_accepted),
        nullptr},
       {"measurements_refused", static_cast<double>(comp_.counters().measurements_refused), nullptr},
   };
   // A status holds at most out.size() values (engine::kMaxStatusValues): every remembered tool
-  // is shown; beyond four of them these make room, the last first.
+  // is shown; beyond five of them these make room, the first first.
   constexpr std::array<const char*, 4> kYield{"measurements_refused", "measurements_accepted",
                                               "wear_rate_um_per_mm", "cut_path_mm"};
   const std::size_t total = std::size(core_values) + remembered;

@@ -69,20 +69,45 @@ class CreepModule final : public engine::Module {
   [[nodiscard]] std::uint64_t state_generation() const noexcept override { return generation_; }
   /// Real-time safe: mode, tool, wear in force / measured / still to creep (max over the edge)
   /// [µm], creeps in progress, the correction along the normal [µm], cut path [mm], fitted wear
-  /// rate [µm/mm], halted, measurements accepted / refused; then the measured wear of every
-  /// remembered tool (`T<n>_wear_um`, most recently used first; `memory_slot_<k>_wear_um` for a
-  /// tool number beyond 9999). With more than four remembered tools the last four counters make
-  /// room (refused, accepted, rate, cut path) so that all fit into engine::kMaxStatusValues.
+  /// rate [µm/mm], halted, latched_alarm (latched_alarm_code()), acknowledged (count),
+  /// last_acknowledge (text: what the last acknowledgement cleared; value: the alarm code it
+  /// cleared, else the warning code, 0 = none), measurements accepted / refused; then the
+  /// measured wear of every remembered tool (`T<n>_wear_um`, most recently used first;
+  /// `memory_slot_<k>_wear_um` for a tool number beyond 9999). With more than five remembered
+  /// tools up to three counters make room (refused, accepted, rate) so that all fit into
+  /// engine::kMaxStatusValues (20).
   std::size_t status(std::span<engine::StatusValue> out) const noexcept override;
   /// The offset and flag registers of [creep.output] (valid after attach()).
   [[nodiscard]] std::vector<std::uint16_t> written_registers() const override;
 
-  /// Operator acknowledgement (status socket / command). Real-time safe.
-  void clear_alarm() noexcept {
-    comp_.clear_alarm();
-    ++generation_;
-  }
+  /// Operator acknowledgement (`nccomp acknowledge`: an OperatorCommand kAcknowledge in step(),
+  /// taken before the cycle's other events): WearCompensator::clear_alarm() (halt, alarm and
+  /// warning flags, the hold of the measurement request), counted, remembered as
+  /// last_acknowledgement(); the flag registers fall to 0 in the same step. Also when nothing is
+  /// latched (counted, nothing changes). Real-time safe.
+  void clear_alarm() noexcept;
   [[nodiscard]] const WearCompensator& compensator() const noexcept { return comp_; }
+
+  /// What one acknowledgement found latched (and cleared).
+  struct Acknowledgement {
+    bool halted{false};
+    bool alarm_flag{false};
+    bool warning_flag{false};
+    bool request_held{false};
+    /// The alarm that raised the alarm flag (see latched_alarm_code()), and the warning that
+    /// raised the warning flag (0 = none, -1 = not known in this process).
+    std::int32_t alarm_code{0};
+    std::int32_t warning_code{0};
+  };
+  /// Acknowledgements taken since the module was created (a count of this process).
+  [[nodiscard]] std::uint64_t acknowledged() const noexcept { return acknowledged_; }
+  [[nodiscard]] const Acknowledgement& last_acknowledgement() const noexcept { return last_ack_; }
+  /// The alarm code (core::AlarmCode) holding the alarm flag: 0 = the flag is low; -1 = it is
+  /// high but was raised before this process started or while the tool was out of the spindle
+  /// (the state keeps the flag, not its cause: the daemon's log has it).
+  [[nodiscard]] std::int32_t latched_alarm_code() const noexcept;
+  /// The same for the warning flag.
+  [[nodiscard]] std::int32_t latched_warning_code() const noexcept;
 
  private:
   /// A state of an older layout (LayoutV1, LayoutV2 in creep_module.cpp), converted.
@@ -100,6 +125,13 @@ class CreepModule final : public engine::Module {
   double last_path_mm_{0.0};
   std::array<double, 3> last_normal_{};
   bool last_normal_held_{false};
+  // Operator acknowledgements, and the causes of the latched flags (not saved).
+  std::uint64_t acknowledged_{0};
+  Acknowledgement last_ack_{};
+  AlarmCode alarm_cause_{AlarmCode::kNone};
+  std::int32_t alarm_cause_tool_{0};
+  AlarmCode warning_cause_{AlarmCode::kNone};
+  std::int32_t warning_cause_tool_{0};
 };
 
 }  // namespace nccomp::core::creep

@@ -290,6 +290,11 @@ bool Engine::validate(const Event& e) const noexcept {
             return (ev.code[0] == 0 || ev.code[0] == 1) && ev.code[1] == 0 && ev.code[2] == 0 &&
                    ev.code[3] == 0 && ev.sequence > 0;
           }
+          // The operator's acknowledgement of latched alarms (every module): all codes 0.
+          if (ev.kind == OperatorCommandKind::kAcknowledge) {
+            return ev.code[0] == 0 && ev.code[1] == 0 && ev.code[2] == 0 && ev.code[3] == 0 &&
+                   ev.sequence > 0;
+          }
           return true;
         } else {
           return true;  // ToolChange: every field is valid
@@ -372,6 +377,12 @@ void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out)
     }
     valid_.push_back(e);  // capacity reserved in configure(): no allocation
     ++counters_.events_accepted;
+    if (const auto* c = std::get_if<OperatorCommand>(&e);
+        c != nullptr && c->kind == OperatorCommandKind::kAcknowledge) {
+      // Every module steps with it below, in this cycle: the sender waits for this sequence.
+      ++counters_.acknowledge_commands;
+      counters_.last_acknowledge_sequence = c->sequence;
+    }
   }
   const std::span<const Event> accepted(valid_.data(), valid_.size());
   // The context first: modules that evaluate it see this cycle's samples.

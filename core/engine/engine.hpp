@@ -96,8 +96,9 @@ struct StatusValue {
   double value{0.0};
   const char* text{nullptr};
 };
-/// Most values one module reports.
-inline constexpr std::size_t kMaxStatusValues = 16;
+/// Most values one module reports (the creep module: 15 of its own and up to 8 remembered
+/// tools, three of its counters making room).
+inline constexpr std::size_t kMaxStatusValues = 20;
 
 /// A compensation module (S0 creep, S1 checkpoints, S2, S3, a model). Modules write absolute
 /// targets (OffsetWrite) for registers they were given at attach(); the engine limits them.
@@ -175,6 +176,11 @@ struct EngineCounters {
   std::uint64_t warm_start_commands{0};
   std::uint32_t last_warm_start_sequence{0};
   std::uint64_t warm_starts{0};
+  /// Operator acknowledgements (OperatorCommand kAcknowledge) handed to the modules, and the
+  /// sequence number of the last one (0 = none yet): every module stepped with it in the cycle
+  /// that counted it (the creep module clears its halt and flags; docs/daemon.md).
+  std::uint64_t acknowledge_commands{0};
+  std::uint32_t last_acknowledge_sequence{0};
 };
 
 /// What Engine::anchor_register() / adopt_register() found and did.

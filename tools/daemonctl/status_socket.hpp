@@ -1,11 +1,14 @@
-// The status socket of a running nccompd, as `nccomp status` and `nccomp warm-start` find it:
-// --socket PATH, else the [status] socket_path of --config FILE, else /run/nccompd/status.sock.
+// The status socket of a running nccompd, as `nccomp status`, `warm-start` and `acknowledge` find
+// it: --socket PATH, else the [status] socket_path of --config FILE, else /run/nccompd/status.sock;
+// and the request / answer of an operator command on it.
 #pragma once
 
+#include <exception>
 #include <string>
 
 #include "daemon/config/builtin_sections.hpp"
 #include "daemon/config/config.hpp"
+#include "daemon/status.hpp"
 #include "tools/nccomp/command.hpp"
 
 namespace nccomp::tools {
@@ -27,6 +30,27 @@ inline std::string status_socket_path(const std::string& socket, const std::stri
     }
   }
   return "/run/nccompd/status.sock";
+}
+
+/// Sends an operator command's request line to the daemon at path and returns its "ok ..."
+/// answer. Throws CommandError(kExitFailure) when the daemon cannot be reached, does not answer,
+/// or refuses ("error: <why>": the message is <why>).
+inline std::string operator_command(const std::string& path, const std::string& request) {
+  std::string answer;
+  try {
+    answer = nccomp::daemon::query_status(path, request);
+  } catch (const std::exception& e) {
+    throw CommandError(kExitFailure, e.what());
+  }
+  if (answer.empty()) {
+    throw CommandError(kExitFailure, "no answer from " + path);
+  }
+  if (answer.rfind("error: ", 0) == 0) {
+    std::string what = answer.substr(7);
+    while (!what.empty() && what.back() == '\n') what.pop_back();
+    throw CommandError(kExitFailure, what);
+  }
+  return answer;
 }
 
 }  // namespace nccomp::tools

@@ -7,7 +7,6 @@
 #include <memory>
 #include <string>
 
-#include "daemon/status.hpp"
 #include "tools/daemonctl/status_socket.hpp"
 #include "tools/nccomp/command.hpp"
 
@@ -29,22 +28,8 @@ void setup(CLI::App& app) {
                 "The machine is cold now: its next axis motion is the warm start");
   sub->callback([o] {
     const std::string path = nccomp::tools::status_socket_path(o->socket, o->config);
-    std::string answer;
-    try {
-      answer = nccomp::daemon::query_status(
-          path, o->at_next_motion ? "warm-start at-next-motion" : "warm-start now");
-    } catch (const std::exception& e) {
-      throw nccomp::tools::CommandError(nccomp::tools::kExitFailure, e.what());
-    }
-    if (answer.empty()) {
-      throw nccomp::tools::CommandError(nccomp::tools::kExitFailure, "no answer from " + path);
-    }
-    if (answer.rfind("error: ", 0) == 0) {
-      std::string what = answer.substr(7);
-      while (!what.empty() && what.back() == '\n') what.pop_back();
-      throw nccomp::tools::CommandError(nccomp::tools::kExitFailure, what);
-    }
-    std::cout << answer;
+    std::cout << nccomp::tools::operator_command(
+        path, o->at_next_motion ? "warm-start at-next-motion" : "warm-start now");
   });
 }
 

@@ -64,18 +64,22 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     const std::uint8_t* r = data + off;
     core::Event e;
     bool command = false;
+    bool ignored = false;  // an OperatorCommand that is not the calibrator's
     switch (r[0] % 3) {
       case 0: {
         core::OperatorCommand c;
         c.sequence = ++seq;
-        c.kind = static_cast<core::OperatorCommandKind>(r[1] % 9);
+        c.kind = static_cast<core::OperatorCommandKind>(r[1] % 10);  // 9: unknown
         for (std::size_t k = 0; k < 4; ++k) c.code[k] = static_cast<std::int8_t>(r[2 + k]);
         c.value = {value(r + 6), value(r + 10)};
         // Chords in a plausible range half of the time.
         if (r[14] & 1) c.value = {1.9 + (r[15] - 128) * 1e-4, 1.9 + (r[16] - 128) * 1e-4};
         e = c;
-        // kWarmStart is the engine's machine context's, not the calibrator's: not answered here.
-        command = c.kind != core::OperatorCommandKind::kWarmStart;
+        // kWarmStart is the engine's machine context's, kAcknowledge clears latched alarms and
+        // the calibrator latches none: neither is answered here.
+        command = c.kind != core::OperatorCommandKind::kWarmStart &&
+                  c.kind != core::OperatorCommandKind::kAcknowledge;
+        ignored = !command;
         break;
       }
       case 1: {
@@ -97,6 +101,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     m.step(now, {&e, 1}, out);
     if (cc::state_problem(m.calibrator().export_state()) != nullptr) std::abort();
     if (command && sink.last.last_command.sequence != seq) std::abort();
+    if (ignored && sink.last.last_command.sequence == seq) std::abort();
     for (const auto& w : out.writes) {
       if (!std::isfinite(w.value_um) || std::fabs(w.value_um) > cfg.max_abs_um) std::abort();
     }

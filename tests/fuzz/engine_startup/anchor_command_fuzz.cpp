@@ -1,11 +1,13 @@
-// Fuzz target of the engine's start-up read-back and the warm-start command: the bytes are
-// 12-byte records, each an anchor or adopt of a register with a value read back from the NC
-// (plausible, or raw float bits: NaN, infinities, huge), a module target, an OperatorCommand
-// kWarmStart with any sequence and codes, or a cycle (optional axis motion, a time step).
+// Fuzz target of the engine's start-up read-back and the warm-start and acknowledge commands: the
+// bytes are 12-byte records, each an anchor or adopt of a register with a value read back from
+// the NC (plausible, or raw float bits: NaN, infinities, huge), a module target, an
+// OperatorCommand kWarmStart or kAcknowledge with any sequence and codes, or a cycle (optional
+// axis motion, a time step).
 // Whatever arrives: nothing crashes; every value written is finite, never more than max_step_um
 // from what the NC held before (the anchored value or the previous write) and never farther out
 // than max_abs_um or the NC's own value; a valid warm-start command is counted and restarts the
-// machine time, an invalid one is counted as an invalid event and changes nothing.
+// machine time, a valid acknowledgement is counted (its sequence published) and leaves the
+// machine time alone, an invalid command is counted as an invalid event and changes nothing.
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
@@ -72,6 +74,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   core::TimeNs now = 1'000'000'000;
   double x_mm = 0.0;
   std::uint64_t valid_commands = 0;
+  std::uint64_t acknowledgements = 0;
   std::uint64_t invalid_events = 0;
   core::StepOutput out;
   for (std::size_t off = 0; off + 12 <= size; off += 12) {
@@ -97,19 +100,33 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         continue;
       case 3: {
         core::OperatorCommand c;
-        c.kind = core::OperatorCommandKind::kWarmStart;
+        const bool ack = (r[11] & 1) != 0;
+        c.kind =
+            ack ? core::OperatorCommandKind::kAcknowledge : core::OperatorCommandKind::kWarmStart;
         c.sequence = r[2] % 4;  // 0 is invalid
         for (std::size_t k = 0; k < 4; ++k) c.code[k] = static_cast<std::int8_t>(r[3 + k] % 3);
         c.value = {value(r + 7), 0.0};
-        const bool valid = c.sequence > 0 && (c.code[0] == 0 || c.code[0] == 1) && c.code[1] == 0 &&
-                           c.code[2] == 0 && c.code[3] == 0;
+        const bool codes_zero = c.code[1] == 0 && c.code[2] == 0 && c.code[3] == 0;
+        const bool valid =
+            c.sequence > 0 && codes_zero && (c.code[0] == 0 || (!ack && c.code[0] == 1));
         const core::Event ev = c;
+        const auto time_before = e.context().machine_time_s(now);
+        const bool cold_before = e.context().cold();
         now += 1'000'000;
         e.step(now, {&ev, 1}, out);
-        valid_commands += valid ? 1 : 0;
+        if (ack) {
+          acknowledgements += valid ? 1 : 0;
+          // Taken by every module in this cycle: the sender's sequence is published at once.
+          if (valid && e.counters().last_acknowledge_sequence != c.sequence) std::abort();
+          // Not the machine context's: the warm-start state does not move.
+          if (e.context().cold() != cold_before) std::abort();
+          if (!cold_before && e.context().machine_time_s(now) < time_before) std::abort();
+        } else {
+          valid_commands += valid ? 1 : 0;
+          if (valid && c.code[0] == 0 && e.context().machine_time_s(now) > 0.0) std::abort();
+          if (valid && c.code[0] == 1 && !e.context().cold()) std::abort();
+        }
         invalid_events += valid ? 0 : 1;
-        if (valid && c.code[0] == 0 && e.context().machine_time_s(now) > 0.0) std::abort();
-        if (valid && c.code[0] == 1 && !e.context().cold()) std::abort();
         break;
       }
       default: {
@@ -135,7 +152,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       nc[i] = w.value_um;
     }
     const auto& k = e.counters();
-    if (k.warm_start_commands != valid_commands || k.events_invalid != invalid_events) std::abort();
+    if (k.warm_start_commands != valid_commands || k.events_invalid != invalid_events ||
+        k.acknowledge_commands != acknowledgements) {
+      std::abort();
+    }
     if (!(e.context().machine_time_s() >= 0.0) || !std::isfinite(e.context().machine_time_s())) {
       std::abort();
     }

@@ -397,7 +397,7 @@ TEST(CreepEngineModule, StatusShowsTheWearOfEveryRememberedTool) {
   EXPECT_NEAR(status_value(m, "T1_wear_um"), 12.0, 0.0);
   EXPECT_NEAR(status_value(m, "T2_wear_um"), 5.0, 0.0);
   EXPECT_TRUE(std::isnan(status_value(m, "T3_wear_um")));  // in the spindle: the values above
-  // All twelve values, then the remembered tools, the most recently used first.
+  // All fifteen values, then the remembered tools, the most recently used first.
   const std::vector<std::string> first{"mode",
                                        "tool",
                                        "wear_in_force_um",
@@ -408,24 +408,29 @@ TEST(CreepEngineModule, StatusShowsTheWearOfEveryRememberedTool) {
                                        "cut_path_mm",
                                        "wear_rate_um_per_mm",
                                        "halted",
+                                       "latched_alarm",
+                                       "acknowledged",
+                                       "last_acknowledge",
                                        "measurements_accepted",
                                        "measurements_refused",
                                        "T2_wear_um",
                                        "T1_wear_um"};
   EXPECT_EQ(status_keys(m), first);
-  // Seven remembered tools (one beyond 9999): every one is shown; three counters make room.
+  // Eight remembered tools (one beyond 9999): every one is shown; three counters make room.
   use(4, 1.0);
   use(5, 2.0);
   use(6, 3.0);
   use(12345, 4.0);
   use(8, 6.0);
+  use(9, 6.5);
   const auto keys = status_keys(m);
   ASSERT_EQ(keys.size(), engine::kMaxStatusValues);
   const std::vector<std::string> tail(keys.begin() + 8, keys.end());
-  EXPECT_EQ(tail,
-            (std::vector<std::string>{"halted", "memory_slot_7_wear_um", "T6_wear_um", "T5_wear_um",
-                                      "T4_wear_um", "T3_wear_um", "T2_wear_um", "T1_wear_um"}))
-      << "memory slot of 12345: " << keys[9];
+  EXPECT_EQ(tail, (std::vector<std::string>{
+                      "halted", "latched_alarm", "acknowledged", "last_acknowledge", "T8_wear_um",
+                      "memory_slot_7_wear_um", "T6_wear_um", "T5_wear_um", "T4_wear_um",
+                      "T3_wear_um", "T2_wear_um", "T1_wear_um"}))
+      << "memory slot of 12345: " << keys[13];
   EXPECT_NEAR(status_value(m, "T1_wear_um"), 12.0, 0.0);
   EXPECT_NEAR(status_value(m, "T6_wear_um"), 3.0, 0.0);
   EXPECT_EQ(keys[7], "cut_path_mm");

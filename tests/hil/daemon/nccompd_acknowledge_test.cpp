@@ -1,0 +1,335 @@
+// The "acknowledge" operator command end to end (docs/daemon.md, "Operator commands"):
+// GIVEN the nccompd binary on the project's Modbus NC server (127.0.0.1, ephemeral port) with a
+// [creep] module (time basis, a measurement due every 1 s of cutting time) whose alarm flag and
+// "measurement due" flag are NC registers, and a first good laser measurement crept in,
+// WHEN the laser reports the tool broken (the NC's broken register), THEN the alarm register is 1,
+// the request register 0 and nothing is applied, also 1.5 s later (halted: no request);
+// WHEN the operator runs `nccomp acknowledge` (the real nccomp binary), THEN the daemon answers
+// what it cleared (halt and alarm flag, alarm tool_broken_or_mismeasured 23) and logs it, the
+// alarm register goes back to 0 and the request register rises (the overdue measurement), and
+// the next good measurement is accepted and crept in; a second acknowledge with nothing latched
+// is counted and changes nothing, a malformed request is refused with the reason and counted, an
+// unknown option is a usage error, and without a daemon the command fails with exit status 1.
+#include <fcntl.h>
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <regex>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "daemon/status.hpp"
+#include "sim/modbus_nc/nc_server.hpp"
+
+extern char** environ;
+
+namespace {
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+using nccomp::sim::modbus_nc::NcServer;
+using nccomp::sim::modbus_nc::ServerConfig;
+using nccomp::sim::modbus_nc::Tables;
+
+struct TempDir {
+  TempDir() {
+    path = fs::temp_directory_path() /
+           ("nccompd_ack_" + std::to_string(::getpid()) + "_" + std::to_string(n++));
+    fs::remove_all(path);
+    fs::create_directories(path);
+  }
+  ~TempDir() { fs::remove_all(path); }
+  static inline int n = 0;
+  fs::path path;
+};
+
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+pid_t spawn(const std::vector<std::string>& args, const fs::path& out, const fs::path& err,
+            bool append) {
+  std::vector<std::string> a = args;
+  std::vector<char*> argv;
+  for (auto& s : a) argv.push_back(s.data());
+  argv.push_back(nullptr);
+  posix_spawn_file_actions_t fa;
+  posix_spawn_file_actions_init(&fa);
+  const int flags = O_WRONLY | O_CREAT | (append ? O_APPEND : O_TRUNC);
+  posix_spawn_file_actions_addopen(&fa, 1, out.c_str(), flags, 0644);
+  posix_spawn_file_actions_addopen(&fa, 2, err.c_str(), flags, 0644);
+  pid_t pid = -1;
+  EXPECT_EQ(posix_spawn(&pid, argv[0], &fa, nullptr, argv.data(), environ), 0);
+  posix_spawn_file_actions_destroy(&fa);
+  return pid;
+}
+
+int wait_exit(pid_t pid) {
+  int st = 0;
+  ::waitpid(pid, &st, 0);
+  return WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
+}
+
+struct CliRun {
+  int exit_code{-1};
+  std::string out;
+  std::string err;
+};
+
+#ifdef NCCOMP_BIN
+CliRun nccomp(const TempDir& d, const std::vector<std::string>& args) {
+  std::vector<std::string> a{NCCOMP_BIN};
+  a.insert(a.end(), args.begin(), args.end());
+  CliRun r;
+  r.exit_code = wait_exit(spawn(a, d.path / "cli.out", d.path / "cli.err", false));
+  r.out = slurp(d.path / "cli.out");
+  r.err = slurp(d.path / "cli.err");
+  return r;
+}
+#else
+// The ThreadSanitizer build has no `nccomp` binary: the same request line goes to the socket
+// directly (what `nccomp acknowledge` sends), the daemon under TSan.
+CliRun nccomp(const TempDir& d, const std::vector<std::string>& /*args*/) {
+  CliRun r;
+  r.out = nccomp::daemon::query_status((d.path / "status.sock").string(), "acknowledge");
+  r.exit_code = r.out.rfind("error: ", 0) == 0 ? 1 : 0;
+  return r;
+}
+#endif
+
+class Daemon {
+ public:
+  explicit Daemon(fs::path dir) : dir_(std::move(dir)) {}
+  ~Daemon() {
+    if (pid_ > 0) {
+      ::kill(pid_, SIGKILL);
+      ::waitpid(pid_, nullptr, 0);
+    }
+  }
+  void start() {
+    const fs::path log = dir_ / "nccompd.log";
+    pid_ = spawn({NCCOMPD_BIN, "--config", (dir_ / "nccompd.toml").string()}, log, log, true);
+  }
+  int stop() {
+    ::kill(pid_, SIGTERM);
+    const int rc = wait_exit(pid_);
+    pid_ = -1;
+    return rc;
+  }
+  std::string status() const {
+    try {
+      return nccomp::daemon::query_status((dir_ / "status.sock").string(), "json");
+    } catch (const std::exception&) {
+      return {};
+    }
+  }
+  std::string log() const { return slurp(dir_ / "nccompd.log"); }
+
+ private:
+  fs::path dir_;
+  pid_t pid_{-1};
+};
+
+double number(const std::string& json, const std::string& key) {
+  const std::regex re("\"" + key + "\":(-?[0-9.eE+-]+)");
+  std::smatch m;
+  return std::regex_search(json, m, re) ? std::stod(m[1]) : -1e300;
+}
+
+bool is(double v, double want) { return std::fabs(v - want) < 1e-9; }
+
+bool wait_until(const std::function<bool()>& f, std::chrono::milliseconds limit = 10000ms) {
+  const auto end = std::chrono::steady_clock::now() + limit;
+  while (std::chrono::steady_clock::now() < end) {
+    if (f()) return true;
+    std::this_thread::sleep_for(10ms);
+  }
+  return f();
+}
+
+constexpr std::uint16_t kLength = 200;   // T1_length_wear, int32, 0.1 µm (tool_register_sign -1)
+constexpr std::uint16_t kAlarm = 240;    // creep_alarm, uint16 flag
+constexpr std::uint16_t kRequest = 242;  // measure_request, uint16 flag
+
+std::string config_text(std::uint16_t port) {
+  std::ostringstream s;
+  s << "[daemon]\nrate_hz = 200\n"
+    << "[state]\ndirectory = \"state\"\nmin_interval_s = 0.05\n"
+    << "[measurement_log]\ndirectory = \"log\"\n"
+    << "[status]\nsocket_path = \"status.sock\"\n"
+    << "[modbus]\ntransport = \"tcp\"\nhost = \"127.0.0.1\"\nport = " << port << "\n"
+    << "poll_rate_hz = 200\nresponse_timeout_s = 0.5\n"
+    << "[modbus.axis]\n"
+    << "x_mm = { table = \"input\", address = 0, type = \"int32\", scale = 0.0001 }\n"
+    << "tool = { table = \"input\", address = 8, type = \"uint16\" }\n"
+    << "[modbus.tool_measurement]\n"
+    << "sequence = { table = \"input\", address = 100, type = \"uint16\" }\n"
+    << "tool = { table = \"input\", address = 101, type = \"uint16\" }\n"
+    << "wear_um = { table = \"input\", address = 102, type = \"float32\" }\n"
+    << "broken = { table = \"input\", address = 104, type = \"uint16\" }\n"
+    << "[[modbus.offset]]\nregister_index = 0\naddress = 200\ntype = \"int32\"\nscale = 0.1\n"
+    << "[[modbus.offset]]\nregister_index = 1\naddress = 240\ntype = \"uint16\"\nscale = 1.0\n"
+    << "[[modbus.offset]]\nregister_index = 2\naddress = 242\ntype = \"uint16\"\nscale = 1.0\n"
+    << "[[registers]]\nname = \"T1_length_wear\"\nkind = \"tool_length_wear\"\nbus = \"modbus\"\n"
+    << "max_abs_um = 200\nmax_step_um = 5\nmax_rate_um_per_s = 50\n"
+    << "[[registers]]\nname = \"creep_alarm\"\nkind = \"flag\"\nbus = \"modbus\"\n"
+    << "[[registers]]\nname = \"measure_request\"\nkind = \"flag\"\nbus = \"modbus\"\n"
+    << "[creep]\ncreep_basis = \"time\"\ncreep_time_s = 1.0\nprofile = \"linear\"\n"
+    << "[creep.edge]\ntool_shape = \"tip\"\nnormal_source = \"none\"\n"
+    << "fallback_channel = \"length\"\n"
+    << "[creep.output]\nmode = \"tool_registers\"\nlength_register = \"T1_length_wear\"\n"
+    << "alarm_register = \"creep_alarm\"\nmeasurement_due_register = \"measure_request\"\n"
+    << "[creep.interval]\nbasis = \"time\"\ninterval_s = 1.0\n";
+  return s.str();
+}
+
+std::int32_t holding_i32(NcServer& nc, std::uint16_t address) {
+  const auto r = nc.holding(address, 2);
+  return static_cast<std::int32_t>((std::uint32_t{r[0]} << 16) | r[1]);
+}
+
+int holding(NcServer& nc, std::uint16_t address) { return nc.holding(address, 1)[0]; }
+
+// The laser's result: values first, then the event counter (the profile's rule).
+void publish_tool_measurement(NcServer& nc, std::uint16_t seq, float wear_um, bool broken) {
+  nc.update([&](Tables& t) {
+    std::uint32_t bits = 0;
+    std::memcpy(&bits, &wear_um, sizeof bits);
+    t.input[101] = 1;
+    t.input[102] = static_cast<std::uint16_t>(bits >> 16);
+    t.input[103] = static_cast<std::uint16_t>(bits & 0xFFFF);
+    t.input[104] = broken ? 1 : 0;
+    t.input[100] = seq;
+  });
+}
+
+TEST(NccompAcknowledge, TheOperatorLiftsABrokenToolHaltAndTheNextMeasurementIsAccepted) {
+  TempDir d;
+  NcServer nc(ServerConfig{});
+  nc.start();
+  nc.update([](Tables& t) { t.input[8] = 1; });  // tool 1 in the spindle, cutting
+  std::ofstream(d.path / "nccompd.toml") << config_text(nc.port());
+  const std::string socket = (d.path / "status.sock").string();
+  Daemon daemon(d.path);
+  daemon.start();
+  ASSERT_TRUE(wait_until([&] {
+    const std::string s = daemon.status();
+    return s.find("\"state\":\"up\"") != std::string::npos && number(s, "cycles") >= 20;
+  })) << daemon.log();
+
+  // 1 s of cutting: the first measurement is due; 5.0 µm is measured and crept in over 1 s.
+  ASSERT_TRUE(wait_until([&] { return holding(nc, kRequest) == 1; })) << daemon.log();
+  publish_tool_measurement(nc, 1, 5.0F, false);
+  ASSERT_TRUE(wait_until([&] { return holding_i32(nc, kLength) == -50; }))
+      << holding_i32(nc, kLength) << "\n"
+      << daemon.status();
+  EXPECT_EQ(holding(nc, kAlarm), 0);
+
+  // The next one is due; the laser, wet with coolant, reports the tool broken.
+  ASSERT_TRUE(wait_until([&] { return holding(nc, kRequest) == 1; })) << daemon.status();
+  publish_tool_measurement(nc, 2, 6.0F, true);
+  ASSERT_TRUE(wait_until([&] { return holding(nc, kAlarm) == 1; })) << daemon.log();
+  ASSERT_TRUE(wait_until([&] {
+    const std::string s = daemon.status();
+    return is(number(s, "halted"), 1.0) && is(number(s, "latched_alarm"), 23.0);
+  })) << daemon.status();
+  EXPECT_EQ(holding(nc, kRequest), 0);
+  // Halted: 1.5 s of cutting (more than the interval) asks for nothing and applies nothing.
+  std::this_thread::sleep_for(1500ms);
+  EXPECT_EQ(holding(nc, kRequest), 0);
+  EXPECT_EQ(holding(nc, kAlarm), 1);
+  EXPECT_EQ(holding_i32(nc, kLength), -50);
+  EXPECT_EQ(number(daemon.status(), "measurements_accepted"), 1.0);
+
+  // The operator has checked the tool: it is fine. `nccomp acknowledge`.
+  const CliRun ack = nccomp(d, {"acknowledge", "--socket", socket});
+  EXPECT_EQ(ack.exit_code, 0) << ack.out << ack.err;
+  std::printf("%s", ack.out.c_str());
+  EXPECT_EQ(ack.out,
+            "ok acknowledged: creep: halt and alarm flag cleared (alarm tool_broken_or_mismeasured "
+            "23)\n"
+            "  creep: now halted 0, latched alarm none, acknowledgements taken 1\n"
+            "  acknowledge commands taken by the loop: 1; operator commands refused by the "
+            "daemon: 0\n");
+  // The NC sees the alarm fall and the overdue measurement asked for.
+  ASSERT_TRUE(wait_until([&] { return holding(nc, kAlarm) == 0; }, 2000ms));
+  ASSERT_TRUE(wait_until([&] { return holding(nc, kRequest) == 1; }, 2000ms));
+  EXPECT_EQ(holding_i32(nc, kLength), -50);
+
+  // The re-measurement is good: accepted, crept in (7.0 µm), the request falls.
+  publish_tool_measurement(nc, 3, 7.0F, false);
+  ASSERT_TRUE(wait_until([&] { return holding_i32(nc, kLength) == -70; }))
+      << holding_i32(nc, kLength) << "\n"
+      << daemon.status();
+  EXPECT_EQ(holding(nc, kAlarm), 0);
+  const std::string st = daemon.status();
+  EXPECT_EQ(number(st, "measurements_accepted"), 2.0) << st;
+  EXPECT_EQ(number(st, "halted"), 0.0) << st;
+  EXPECT_EQ(number(st, "acknowledged"), 1.0) << st;
+  EXPECT_NE(st.find("\"last_acknowledge\":\"halt and alarm flag cleared\""), std::string::npos)
+      << st;
+
+  // Nothing latched: counted, nothing changes.
+  const CliRun again = nccomp(d, {"acknowledge", "--config", (d.path / "nccompd.toml").string()});
+  EXPECT_EQ(again.exit_code, 0) << again.out << again.err;
+  std::printf("%s", again.out.c_str());
+  EXPECT_EQ(again.out,
+            "ok acknowledged: creep: nothing latched\n"
+            "  creep: now halted 0, latched alarm none, acknowledgements taken 2\n"
+            "  acknowledge commands taken by the loop: 2; operator commands refused by the "
+            "daemon: 0\n");
+  EXPECT_EQ(holding_i32(nc, kLength), -70);
+
+  // A malformed request on the socket: refused with the reason, counted.
+  const std::string bad = nccomp::daemon::query_status(socket, "acknowledge creep");
+  EXPECT_EQ(bad, "error: acknowledge: unknown argument 'creep' (expected nothing or 'all')\n");
+#ifdef NCCOMP_BIN
+  const CliRun usage = nccomp(d, {"acknowledge", "--socket", socket, "--all-of-them"});
+  EXPECT_NE(usage.exit_code, 0);
+  EXPECT_NE(usage.err.find("--all-of-them"), std::string::npos) << usage.err;
+#endif
+
+  const std::string log = daemon.log();
+  std::istringstream lines(log);
+  for (std::string line; std::getline(lines, line);) {
+    if (line.find("operator command") != std::string::npos ||
+        line.find("tool_broken") != std::string::npos) {
+      std::printf("%s\n", line.c_str());
+    }
+  }
+  EXPECT_NE(log.find("operator command #1: acknowledge: creep: halt and alarm flag cleared (alarm "
+                     "tool_broken_or_mismeasured 23)"),
+            std::string::npos)
+      << log;
+  EXPECT_NE(log.find("operator command #2: acknowledge: creep: nothing latched"), std::string::npos)
+      << log;
+  EXPECT_NE(log.find("operator command refused: acknowledge: unknown argument 'creep'"),
+            std::string::npos)
+      << log;
+  EXPECT_EQ(daemon.stop(), 0);
+  nc.stop();
+
+#ifdef NCCOMP_BIN
+  // Without a daemon: exit status 1 and the reason.
+  const CliRun none = nccomp(d, {"acknowledge", "--socket", socket});
+  EXPECT_EQ(none.exit_code, 1);
+  EXPECT_NE(none.err.find("cannot connect to '" + socket + "'"), std::string::npos) << none.err;
+#endif
+}
+
+}  // namespace
