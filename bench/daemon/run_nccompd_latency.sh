@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The real nccompd process beside cyclictest, in the same run:
-#   bench/daemon/run_nccompd_latency.sh RELEASE_BUILD_DIR [SECONDS] [CPU]
+#   bench/daemon/run_nccompd_latency.sh RELEASE_BUILD_DIR [SECONDS] [CPU [IO_CPU]]
 #
 # - nccompd: the release binary with the shipped config/nccompd.toml and its include
 #   reference-nc-modbus.toml, unchanged except the NC's TCP port (a free one on 127.0.0.1),
@@ -18,11 +18,14 @@
 # CPU (optional): pin both measuring threads to that CPU (nccompd's [daemon.realtime]
 # cpu_affinity = [CPU], cyclictest -a CPU), so both see the same vCPU's disturbances; the shipped
 # config pins nothing.
+# IO_CPU (optional, with CPU): also keep the Modbus I/O thread on that CPU ([modbus]
+# io_cpu_affinity = [IO_CPU], at normal priority), away from the loop's.
 # Needs root (SCHED_FIFO and mlockall without the unit's rlimits) and cyclictest (rt-tests).
 set -euo pipefail
 build=${1:?release build dir}
 secs=${2:-60}
 cpu=${3:-}
+io_cpu=${4:-}
 src=$(cd "$(dirname "$0")/../.." && pwd)
 tmp=$(mktemp -d)
 ncpid=""
@@ -46,6 +49,11 @@ if [ -n "$cpu" ]; then
   sed -i "s/^cpu_affinity = \[\]$/cpu_affinity = [$cpu]/" "$tmp/nccompd.toml"
   grep -q "^cpu_affinity = \[$cpu\]$" "$tmp/nccompd.toml"
   pin=(-a "$cpu")
+fi
+if [ -n "$io_cpu" ]; then
+  [ -n "$cpu" ]
+  sed -i "s/^\[modbus\]$/[modbus]\nio_cpu_affinity = [$io_cpu]/" "$tmp/reference-nc-modbus.toml"
+  grep -q "^io_cpu_affinity = \[$io_cpu\]$" "$tmp/reference-nc-modbus.toml"
 fi
 
 "$build/sim/modbus_nc/modbus_nc" --bind 127.0.0.1 --port "$port" > "$tmp/nc.log" 2>&1 &
@@ -73,7 +81,7 @@ echo "== nccomp status (at ${secs} s)"
 sed -n '1,6p' "$tmp/status.txt"
 sed -n '/^buses:/,/^state:/p' "$tmp/status.txt"
 echo "== summary"
-/usr/bin/python3 - "$tmp/cyc.hist" "$tmp/status.json" "$prio" "$cpu" <<'PY'
+/usr/bin/python3 - "$tmp/cyc.hist" "$tmp/status.json" "$prio" "$cpu" "$io_cpu" <<'PY'
 import json, re, sys
 hist, status, prio = sys.argv[1], sys.argv[2], sys.argv[3]
 counts, maxlat, overflow = {}, None, 0
@@ -99,7 +107,8 @@ s = json.load(open(status))
 loop = s['loop']
 lat = loop['latency_us']
 d = {'p50': lat['p50'], 'p99': lat['p99'], 'p99.9': lat['p99_9'], 'max': lat['max']}
-print(f"priority {prio}, 1000 Hz" + (f", both pinned to CPU {sys.argv[4]}" if len(sys.argv) > 4 and sys.argv[4] else ", not pinned"))
+print(f"priority {prio}, 1000 Hz" + (f", both pinned to CPU {sys.argv[4]}" if len(sys.argv) > 4 and sys.argv[4] else ", not pinned")
+      + (f", Modbus I/O thread on CPU {sys.argv[5]}" if len(sys.argv) > 5 and sys.argv[5] else ""))
 print(f"nccompd   cycles={loop['cycles']} overruns={loop['overruns']} "
       f"missed={loop['missed_deadlines']} max_cycle_us={loop['max_cycle_us']:.1f} "
       f"latency_us p50={d['p50']:g} p99={d['p99']:g} p99.9={d['p99.9']:g} max={d['max']:.0f}")
