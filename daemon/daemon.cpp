@@ -483,6 +483,15 @@ int run_daemon(const DaemonOptions& options) {
   bool stalled_logged = false;
   std::uint64_t sync_timeouts_logged = 0;
   std::uint64_t flush_timeouts_logged = 0;
+  // The buses' alarm flags (drivers::BusStatus::alarm) become the daemon's alarm bus_alarm
+  // (code 54) on each rise and fall: logged and in the status's alarm list. Looked at every pass
+  // of this loop (at most 100 ms apart: the poll below), never from the loop thread.
+  BusAlarmWatch bus_alarms;
+  std::vector<std::string> bus_names;
+  for (const auto& b : buses) {
+    bus_names.push_back(b.name);
+  }
+  std::vector<drivers::BusStatus> bus_statuses(buses.size());
   for (;;) {
     if (lockstep) {
       const LoopStats ls = loop.stats();
@@ -554,6 +563,17 @@ int run_daemon(const DaemonOptions& options) {
       }
     }
     swap.reclaim();
+    for (std::size_t i = 0; i < buses.size(); ++i) {
+      bus_statuses[i] = buses[i].bus->status();
+    }
+    for (const BusAlarmChange& c : bus_alarms.update(bus_names, bus_statuses, monotonic_ns())) {
+      if (c.event.severity == core::Severity::kAlarm) {
+        spdlog::error("{}", c.message);
+      } else {
+        spdlog::info("{}", c.message);
+      }
+      logger.raise(c.event);
+    }
     const auto now = std::chrono::steady_clock::now();
     if (watchdog && now - last_feed >= std::chrono::microseconds(watchdog_usec / 2)) {
       const std::uint64_t beat = loop.heartbeat();

@@ -1,4 +1,5 @@
 #include "daemon/logging.hpp"
+#include "daemon/status.hpp"
 
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/sinks/systemd_sink.h>
@@ -108,6 +109,8 @@ std::string alarm_name(core::AlarmCode code) {
       return "register_unknown";
     case AlarmCode::kOffsetWriteDropped:
       return "offset_write_dropped";
+    case AlarmCode::kBusAlarm:
+      return "bus_alarm";
   }
   // No default above: -Wswitch (an error here) makes every new AlarmCode get its name. A value
   // outside the enum (a corrupt state, a newer peer) still prints usefully.
@@ -209,6 +212,50 @@ void EventLogger::drain() {
         break;
     }
   }
+}
+
+std::vector<BusAlarmChange> BusAlarmWatch::update(const std::vector<std::string>& names,
+                                                  const std::vector<drivers::BusStatus>& statuses,
+                                                  core::TimeNs now_ns) {
+  std::vector<BusAlarmChange> out;
+  raised_.resize(statuses.size(), false);
+  failed_seen_.resize(statuses.size(), 0);
+  for (std::size_t i = 0; i < statuses.size(); ++i) {
+    const drivers::BusStatus& st = statuses[i];
+    const bool failed_now = st.counters.offsets_failed > failed_seen_[i];
+    failed_seen_[i] = st.counters.offsets_failed;
+    if (st.alarm == raised_[i]) {
+      continue;
+    }
+    raised_[i] = st.alarm;
+    const std::string name = i < names.size() ? names[i] : "#" + std::to_string(i);
+    const auto& k = st.counters;
+    BusAlarmChange c;
+    c.event = core::AlarmEvent{now_ns, st.alarm ? core::Severity::kAlarm : core::Severity::kInfo,
+                               core::AlarmCode::kBusAlarm, static_cast<std::int32_t>(i),
+                               st.alarm ? 1.0 : 0.0};
+    if (st.alarm) {
+      // Why, as far as the driver's status tells it: a write given up / refused since the last
+      // look, else a link that is not up, else a write still undelivered.
+      const char* why = failed_now ? "an offset write failed or was refused"
+                        : st.state != drivers::LinkState::kUp
+                            ? "the link is not up beyond alarm_after_s"
+                            : "an offset write is undelivered beyond alarm_after_s";
+      c.message = fmt::format(
+          "bus {}: ALARM: offsets may not reach the NC: {} (link {}; offsets written {}, "
+          "retried {}, failed {}; reconnects {})",
+          name, why, link_state_name(st.state), k.offsets_written, k.offsets_retried,
+          k.offsets_failed, k.reconnects);
+    } else {
+      c.message = fmt::format(
+          "bus {}: alarm cleared (link {}; offsets written {}, retried {}, failed {}; reconnects "
+          "{})",
+          name, link_state_name(st.state), k.offsets_written, k.offsets_retried, k.offsets_failed,
+          k.reconnects);
+    }
+    out.push_back(std::move(c));
+  }
+  return out;
 }
 
 void EventLogger::run() {

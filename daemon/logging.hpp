@@ -56,4 +56,27 @@ class EventLogger {
   std::uint64_t overruns_unlogged_{0};
 };
 
+/// One change of a bus's alarm flag (drivers::BusStatus::alarm), as the main thread reports it:
+/// the alarm to raise (AlarmCode::kBusAlarm, subject = the bus's index, value 1 rising with
+/// Severity::kAlarm, 0 clearing with Severity::kInfo) and the log line that says which bus, its
+/// link state and why.
+struct BusAlarmChange {
+  core::AlarmEvent event{};
+  std::string message;
+};
+
+/// Main thread (never the loop: it allocates): watches the buses' alarm flags and reports each
+/// rise and each fall exactly once. A bus starts as "not in alarm".
+class BusAlarmWatch {
+ public:
+  /// names[i] and statuses[i] are bus i (the daemon's bus order; same size on every call).
+  [[nodiscard]] std::vector<BusAlarmChange> update(const std::vector<std::string>& names,
+                                                   const std::vector<drivers::BusStatus>& statuses,
+                                                   core::TimeNs now_ns);
+
+ private:
+  std::vector<bool> raised_;
+  std::vector<std::uint64_t> failed_seen_;  // offsets_failed at the last look
+};
+
 }  // namespace nccomp::daemon

@@ -198,6 +198,11 @@ enum class AlarmCode : std::uint16_t {
   kEventInvalid = 51,
   kRegisterUnknown = 52,     // a module wrote a register index the engine does not have
   kOffsetWriteDropped = 53,  // the bus TX ring was full or no bus takes the register
+  // A bus cannot deliver offsets (a write rejected, or undelivered longer than the bus's
+  // alarm_after_s) or its link is down beyond alarm_after_s (drivers::BusStatus::alarm). Raised
+  // by the daemon's main thread, not by the core: subject = the bus's index, value 1 when it
+  // rises (Severity::kAlarm), 0 when it clears (Severity::kInfo).
+  kBusAlarm = 54,
 };
 
 struct AlarmEvent {
