@@ -59,7 +59,10 @@ class Targets final : public ce::Module {
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   std::vector<ce::RegisterSpec> specs;
   for (std::size_t i = 0; i < kRegs; ++i) {
-    specs.push_back({"r" + std::to_string(i), ce::RegisterKind::kToolRadiusWear,
+    // Not "r" + std::to_string(i): GCC 12 at -O3 reports a false -Wrestrict on it.
+    std::string name = std::to_string(i);
+    name.insert(name.begin(), 'r');
+    specs.push_back({name, ce::RegisterKind::kToolRadiusWear,
                      core::LimiterConfig{kMaxAbs, kMaxStep, 100.0}});
   }
   auto targets = std::make_unique<Targets>();
