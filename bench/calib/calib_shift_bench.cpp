@@ -4,7 +4,8 @@
 // first-order warm-up, and the real FL_THERMAL spindle drift (../shared/data/
 // fl_thermal_spindle_drift, see its SOURCE.md).
 //
-//   bench_calib_shift [--data /work/shared/data/fl_thermal_spindle_drift/data.csv]
+//   bench_calib_shift [--data ../shared/data/fl_thermal_spindle_drift/data.csv]
+//   (default: the one beside the source tree this was built from)
 //
 // Prints markdown tables (bench/results/calib.md).
 #include <algorithm>
@@ -374,7 +375,7 @@ void thermal_tables(const std::string& path) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string data = "/work/shared/data/fl_thermal_spindle_drift/data.csv";
+  std::string data = NCCOMP_FL_THERMAL_CSV;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--data" && i + 1 < argc) {

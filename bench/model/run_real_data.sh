@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
-# Runs `nccomp analyze` on the two real data sets of /work/shared/data and copies the reports and
+# Runs `nccomp analyze` on the two real data sets of ../shared/data (beside the checkout; or
+# $NCCOMP_DATA) and copies the reports and
 # figures used by docs/closing-the-loop.md into bench/model/figures/.
 #   bench/model/run_real_data.sh [path/to/nccomp]
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
 nccomp="${1:-build/release/tools/nccomp}"
-data=/work/shared/data
+data="${NCCOMP_DATA:-$(cd "$here/../../.." && pwd)/shared/data}"
 out="${TMPDIR:-/tmp}/nccomp_closing_the_loop"
 rm -rf "$out"
 "$nccomp" analyze \

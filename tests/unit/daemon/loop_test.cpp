@@ -73,7 +73,6 @@ struct Rig {
     o.warmup_cycles = 20;
     o.thread_allocations = []() noexcept { return nccomp::test::thread_allocations(); };
     o.thread_deallocations = []() noexcept { return nccomp::test::thread_deallocations(); };
-    o.thread_deallocations = []() noexcept { return nccomp::test::thread_deallocations(); };
     loop = std::make_unique<Loop>(o, swap, std::vector<drivers::Bus*>{&bus}, persister.get(),
                                   mlog.get());
     bus.start();
@@ -166,19 +165,29 @@ TEST(Loop, EventsAreValidatedAndRecordsReachTheMeasurementLog) {
 TEST(Loop, ReloadSwapsAtACycleBoundaryAndCarriesTheState) {
   Rig rig;
   rig.loop->start();
-  ASSERT_TRUE(rig.wait_for([&] { return rig.loop->registers().regs[0].output_um > 3.0; }));
-  const double before = rig.loop->registers().regs[0].output_um;
-  // New configuration: same register, the ramp heads for -50 µm instead.
-  rig.swap.publish(make_runtime(-50.0, 100.0, false, 2));
+  // The first configuration's ramp reaches its target, 100 µm (1 s at 100 µm/s).
+  ASSERT_TRUE(rig.wait_for([&] { return rig.loop->registers().regs[0].output_um >= 100.0; }));
+  // New configuration: same register, the ramp heads slowly (1 µm/s) for -50 µm instead. With
+  // the state carried over it starts at 100 µm; a fresh engine would start its ramp at 0.
+  rig.swap.publish(make_runtime(-50.0, 1.0, false, 2));
   ASSERT_TRUE(rig.wait_for([&] { return rig.loop->stats().config_generation == 2; }));
+  std::this_thread::sleep_for(200ms);
+  const double after = rig.loop->registers().regs[0].output_um;
   rig.loop->stop();
   EXPECT_EQ(rig.swap.reclaim(), 1U);
   const auto s = rig.loop->stats();
   EXPECT_EQ(s.reloads, 1U);
-  // The new engine started from the old one's value (no jump back to 0) and moved toward -50.
+  // The new engine continued from the old one's value: 200 ms at 1 µm/s moves it by 0.2 µm
+  // (a slow sanitizer run by a few µm at most), never back toward 0 (the limiter alone would
+  // have brought a fresh ramp 100 µm down in 0.2 s at 500 µm/s).
+  EXPECT_LE(after, 100.0);
+  EXPECT_GT(after, 90.0) << "the ramp's state was not carried over the reload";
   const auto& e = *rig.swap.current().engine;
   EXPECT_TRUE(e.register_state(0).has_target);
-  EXPECT_LT(e.register_state(0).output_um, before + 1.0);
+  EXPECT_LE(e.register_state(0).output_um, after);
+  const auto d = rig.bus.delivery(0);
+  ASSERT_TRUE(d.has_value());
+  EXPECT_LE(d->largest_step_um, 5.0) << "a write jumped past max_step_um at the swap";
   LoopNote n;
   bool swapped = false;
   bool carry_failed = false;

@@ -203,17 +203,22 @@ TEST(NcsimModel, NoiseHasItsSigmaAndSeparateStreams) {
   }
 }
 
+// The real data sets live in ../shared/data beside the checkout (CI clones the project there).
+std::string shared_data(const char* relative) {
+  return std::string(NCCOMP_SOURCE_DIR) + "/../shared/data/" + relative;
+}
+
 TEST(NcsimModel, Phm2010CurveReplaysTheMeasuredWear) {
   // c4 flute_1 (PHM 2010): VB at cut 1 = 31.41635516 µm, cut 2 = 34.8927704 µm.
   const std::string text = std::string("[ncsim]\nbus_map = \"") + NCCOMP_SOURCE_DIR +
                            "/config/reference-nc-modbus.toml\"\n"
-                           "[effects.wear]\ncurve = \"phm2010\"\nphm_file = "
-                           "\"/work/shared/data/phm2010_milling_wear/c4_wear.csv\"\n"
-                           "phm_column = \"flute_1\"\npath_per_cut_mm = 100.0\n"
+                           "[effects.wear]\ncurve = \"phm2010\"\nphm_file = \"" +
+                           shared_data("phm2010_milling_wear/c4_wear.csv") +
+                           "\"\nphm_column = \"flute_1\"\npath_per_cut_mm = 100.0\n"
                            "radial_per_vb = 0.5\n";
-  const std::string data = "/work/shared/data/phm2010_milling_wear/c4_wear.csv";
+  const std::string data = shared_data("phm2010_milling_wear/c4_wear.csv");
   if (FILE* f = std::fopen(data.c_str(), "r"); f == nullptr) {
-    GTEST_SKIP() << "PHM 2010 data not present at " << data;
+    FAIL() << "PHM 2010 data not found at " << data << " (../shared beside the checkout)";
   } else {
     std::fclose(f);
   }
@@ -232,9 +237,9 @@ TEST(NcsimModel, Phm2010CurveReplaysTheMeasuredWear) {
 }
 
 TEST(NcsimModel, ThermalReplayFollowsTheFlThermalGauges) {
-  const std::string data = "/work/shared/data/fl_thermal_spindle_drift/data.csv";
+  const std::string data = shared_data("fl_thermal_spindle_drift/data.csv");
   if (FILE* f = std::fopen(data.c_str(), "r"); f == nullptr) {
-    GTEST_SKIP() << "FL_THERMAL data not present at " << data;
+    FAIL() << "FL_THERMAL data not found at " << data << " (../shared beside the checkout)";
   } else {
     std::fclose(f);
   }
