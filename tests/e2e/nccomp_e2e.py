@@ -452,16 +452,26 @@ def request_edges(r):
     return edges
 
 
-def check_laser_on_request(c, r, label, interval_mm, trip_s=LASER_TRIP_S, min_trips=3):
+def check_laser_on_request(c, r, label, interval_mm, trip_s=LASER_TRIP_S, min_trips=3,
+                           speed=None):
     """The laser measured when the daemon asked, and only then: every rise of the NC's request
     register (the daemon's "measurement due" flag) sent the tool to the laser (measured half-way
     through the trip), there was no other trip, the daemon logged each measurement at ncsim's
     time, each interval_mm of the daemon's cut path after the previous one (plus the request's
-    lag: one cycle and the NC's latency, ~1 mm)."""
+    lag: one cycle and the NC's latency, ~1 mm). speed: the daemon ran on the wall clock and ncsim
+    at this speed factor, so the daemon's times are ncsim's divided by it (compared from the first
+    measurement on) and the request's lag covers speed times as much path."""
     due = [a for a in r.alarms("info") if a[1] == 24]
     edges = request_edges(r)
     laser = r.laser()
     logged = r.tool_wear_paths()
+    if speed is not None and len(edges) == len(laser) + 1:
+        # On the wall clock the request reaches the NC a poll and a write later in ncsim's time
+        # (x speed): one raised in the part's last millimetres can arrive after the program
+        # ended, and an NC does not go to the laser after the end of its program.
+        print("  [note] %s: the last request (at %.3f s) reached the NC after the program's last "
+              "cut; not served" % (label, edges[-1]))
+        edges = edges[:-1]
     c.that(len(laser) >= min_trips and len(laser) == len(edges) == len(logged) and
            len(due) >= len(edges),
            "%s: %d laser trips, %d rises of the request register, %d measurements logged "
@@ -471,17 +481,30 @@ def check_laser_on_request(c, r, label, interval_mm, trip_s=LASER_TRIP_S, min_tr
            all(0 <= float(m["t_s"]) - e - trip_s / 2 <= 0.05 for m, e in zip(laser, edges)),
            "%s: each trip started when the request reached the NC (at %s s; laser at %s s)" %
            (label, ["%.3f" % e for e in edges], [m["t_s"] for m in laser]))
-    c.that(all(abs(float(m["t_s"]) - t) < 0.02 for m, (t, _) in zip(laser, logged)),
-           "%s: laser at %s s, the daemon logged %s s" %
-           (label, [m["t_s"] for m in laser], [t for t, _ in logged]))
+    if speed is None:
+        c.that(all(abs(float(m["t_s"]) - t) < 0.02 for m, (t, _) in zip(laser, logged)),
+               "%s: laser at %s s, the daemon logged %s s" %
+               (label, [m["t_s"] for m in laser], [t for t, _ in logged]))
+    else:
+        sim = [float(m["t_s"]) - float(laser[0]["t_s"]) for m in laser] if laser else []
+        own = [(t - logged[0][0]) * speed for t, _ in logged] if logged else []
+        c.that(len(sim) == len(own) and all(abs(a - b) < 0.1 for a, b in zip(sim, own)),
+               "%s: the daemon logged each measurement at ncsim's time / %g (from the first: "
+               "ncsim %s s, daemon x%g %s s)" % (label, speed, ["%.3f" % t for t in sim], speed,
+                                                 ["%.3f" % t for t in own]))
+    tolerance_mm = REQUEST_TOLERANCE_MM * (1.0 if speed is None else speed)
     steps = [b - a for a, b in zip([0.0] + [p for _, p in logged], [p for _, p in logged])]
-    c.that(all(interval_mm <= d <= interval_mm + REQUEST_TOLERANCE_MM for d in steps),
+    c.that(all(interval_mm <= d <= interval_mm + tolerance_mm for d in steps),
            "%s: the daemon's cut path between measurements %s mm is its interval %g mm (+ < %g)" %
-           (label, ["%.2f" % d for d in steps], interval_mm, REQUEST_TOLERANCE_MM))
+           (label, ["%.2f" % d for d in steps], interval_mm, tolerance_mm))
 
 
-def check_modes(c, res, interval_mm, trip_s, min_step_um):
-    """The assertions of the four modes on one part (Modbus and CAN alike)."""
+def check_modes(c, res, interval_mm, trip_s, min_step_um, speed=None):
+    """The assertions of the four modes on one part (Modbus and CAN alike). speed: the
+    daemon ran against the wall clock (ncsim at a speed factor), so the absolute bound on the
+    creeping step (set by the lock-step's one offset update per cycle of simulated time) is not
+    asserted; the comparisons with step correction and no compensation are."""
+    realtime = speed is not None
     for key, label, _ in MODES:
         r = res[key]
         bus = r.report["bus"]
@@ -504,7 +527,7 @@ def check_modes(c, res, interval_mm, trip_s, min_step_um):
                    "%s: the NC's alarm register %d holds the daemon's flag 0 (%s)" %
                    (label, alarm, "written" if written else
                     "read back at start-up: %s" % (read_back.group(0) if read_back else "no")))
-            check_laser_on_request(c, r, label, interval_mm, trip_s)
+            check_laser_on_request(c, r, label, interval_mm, trip_s, speed=speed)
     laser_off = [float(m["cut_path_mm"]) for m in res["off"].laser()]
     steps_off = [b_ - a_ for a_, b_ in zip([0.0] + laser_off, laser_off)]
     c.that(len(laser_off) >= 3 and all(interval_mm <= d < interval_mm + 0.1 for d in steps_off),
@@ -530,7 +553,7 @@ def check_modes(c, res, interval_mm, trip_s, min_step_um):
     # Across the laser trips too: the NC publishes no normal while the tool is away, the daemon
     # holds the last one, so the radius / length split does not move (it used to: 0.30 um steps
     # at the return). What is left is the registers' 0.1 um resolution and the creep's slope.
-    for label, surf in (("creeping", cs), ("predictive creeping", ps)):
+    for label, surf in (() if realtime else (("creeping", cs), ("predictive creeping", ps))):
         c.that(surf["max_step_um"] < 0.2,
                "%s max step %.3f um < 0.2 um (two counts of the registers' 0.1 um)" %
                (label, surf["max_step_um"]))
@@ -555,6 +578,22 @@ def scenario_modbus_modes(b, source, work):
     print(modes_table(res))
     c = Check("modbus_modes")
     check_modes(c, res, LASER_INTERVAL_MM, LASER_TRIP_S, min_step_um=2.0)
+    c.done()
+
+
+# The README's main job (scripts/demo) runs the daemon in real time against ncsim at a speed
+# factor, not in lock-step: the same four modes, sequentially, ncsim at x4 (about 15 s a part).
+REALTIME_SPEED = 4.0
+
+
+def scenario_modbus_realtime(b, source, work):
+    """Part (a), four daemon configs, nccompd on the wall clock and ncsim at a speed factor (the
+    demo's path): every process ends cleanly, no alarm, the laser on the daemon's request, and
+    creeping leaves a quarter of step correction's step or less."""
+    res = run_modes(b, source, work, speed=REALTIME_SPEED)
+    print(modes_table(res))
+    c = Check("modbus_realtime")
+    check_modes(c, res, LASER_INTERVAL_MM, LASER_TRIP_S, min_step_um=2.0, speed=REALTIME_SPEED)
     c.done()
 
 
@@ -1074,6 +1113,7 @@ def scenario_calib_touch(b, source, work):
 
 SCENARIOS = {
     "modbus_modes": scenario_modbus_modes,
+    "modbus_realtime": scenario_modbus_realtime,
     "broken_tool": scenario_broken_tool,
     "implausible_probe": scenario_implausible_probe,
     "walls_modes": scenario_walls_modes,
