@@ -60,6 +60,12 @@ bool PollDecoder::in_range(const GroupMap& g, std::size_t n) const noexcept {
   return true;
 }
 
+void PollDecoder::note_reconnect() noexcept {
+  for (SeqState& st : seq_) {
+    st.reconnected = true;
+  }
+}
+
 void PollDecoder::emit(const core::Event& e) noexcept {
   // Capacity reserved in the constructor for every group and sensor: never reallocates.
   if (out_.size() < out_.capacity()) {
@@ -162,20 +168,36 @@ void PollDecoder::decode_event(Group g, core::TimeNs t_ns) {
   SeqState& st = seq_[gi];
   if (!st.baseline) {
     st.baseline = true;
+    st.reconnected = false;
     st.last = seq;
     return;
   }
-  const std::uint32_t mask = wide ? 0xFFFFFFFFU : 0xFFFFU;
-  const std::uint32_t delta = (seq - st.last) & mask;
-  if (delta == 0) {
+  const bool first_after_reconnect = st.reconnected;
+  st.reconnected = false;
+  if (seq == st.last) {
+    // After a reconnect this is also what an NC shows that restarted and produced exactly as
+    // many events as it had before: its newest would be missed, and nothing here can tell.
+    if (first_after_reconnect && seq != kSequenceStart) {
+      ++counters_.sequence_unchanged_after_reconnect;
+    }
     return;
+  }
+  // Events since the last read, as far as the counter tells.
+  std::uint32_t events = seq - st.last;
+  if (seq < st.last) {
+    const std::uint32_t mask = wide ? 0xFFFFFFFFU : 0xFFFFU;
+    events = (seq - st.last) & mask;  // on through the top of the range
+    if (events > kMaxWrapEvents) {
+      // Not a wrap: the NC restarted and counted again from its start value.
+      ++counters_.sequence_resets;
+      events = seq - kSequenceStart;
+    }
   }
   st.last = seq;
-  if (delta > mask / 2) {
-    ++counters_.sequence_resets;
-    return;
+  if (events == 0) {
+    return;  // restarted, no event since: the value registers hold none
   }
-  counters_.events_lost += delta - 1U;
+  counters_.events_lost += events - 1U;
   // The counter is consumed either way: an event with an implausible value is dropped once,
   // never re-read.
   if (!in_range(gm, field_count(g))) {

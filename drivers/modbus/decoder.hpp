@@ -2,16 +2,23 @@
 // advanced sequence counter, a TemperatureSample when a temperature changed.
 //
 // Events over a polled bus: the NC writes an event's value registers first and then increments
-// its sequence counter; the counter and the values are read in one request (config.hpp makes
-// sure of that), so they always belong together. Per poll:
+// its sequence counter, which is kSequenceStart (0) when the NC has just started; the counter and
+// the values are read in one request (config.hpp makes sure of that), so they always belong
+// together. Per poll, k being the number of events the counter says happened since the last read:
 //   - first poll after start: the counter is a baseline, nothing is emitted (its event is old);
-//   - counter unchanged: nothing; advanced by 1: the event is emitted once;
-//   - advanced by k > 1: the latest event is emitted and k − 1 events are counted as lost
+//   - counter unchanged: nothing;
+//   - advanced by k (also through the top of its range, 65535 -> 0 for uint16, as long as that
+//     means k <= kMaxWrapEvents): the latest event is emitted once and k − 1 are counted as lost
 //     (the NC produced events faster than the poll rate);
-//   - moved back by more than half its range: the NC restarted its counter; re-baselined,
-//     counted as a sequence reset.
+//   - moved back otherwise, to n: the NC restarted and counted again from kSequenceStart, so
+//     k = n − kSequenceStart events happened since its restart: counted as a sequence reset, the
+//     latest (k >= 1) emitted once, k − 1 counted as lost. Events the NC produced between the
+//     last read and its restart are unknown: neither emitted nor counted.
 // Counters and baselines survive a reconnect, so events produced while the link was down show
-// up as one emitted event plus lost ones, never twice.
+// up as one emitted event plus lost ones, never twice. The one case the counter cannot show: an
+// NC that restarted and produced exactly as many events as it had before. After a reconnect
+// (note_reconnect()) a counter that reads the same value as before, other than kSequenceStart,
+// is counted in sequence_unchanged_after_reconnect, so that an operator can see the doubt.
 //
 // Plausibility: a finite value outside its signal's `min` / `max` (config) drops the whole sample
 // or event and counts values_out_of_range; NaN / inf / non-integral / invalid codes count
@@ -27,9 +34,22 @@
 
 namespace nccomp::drivers::modbus {
 
+/// An NC's event counter right after the NC started (no event yet): what the reference profile
+/// (ncsim, sim/modbus_nc) and PLCs with non-retentive counters do.
+inline constexpr std::uint32_t kSequenceStart = 0;
+/// A counter that moved back is taken for a wrap through the top of its range only if that means
+/// at most this many events since the last read, else for an NC restart. A few events happen
+/// between two polls, a few hundred at most across a long outage; the price is that a restart
+/// from one of the top 256 counter values (uint16: 65280..65535) to a small one can be taken for a
+/// wrap (docs/modbus.md, "NC restarts").
+inline constexpr std::uint32_t kMaxWrapEvents = 256;
+
 struct DecodeCounters {
-  std::uint64_t events_lost{0};          // sequence jumps > 1
-  std::uint64_t sequence_resets{0};      // counter moved backwards (NC restart)
+  std::uint64_t events_lost{0};      // events the counter says happened but were not emitted
+  std::uint64_t sequence_resets{0};  // counter moved backwards (NC restart)
+  // First read after a reconnect saw the same counter (not kSequenceStart): an NC restart that
+  // produced exactly as many events as before cannot be ruled out (its newest would be missed).
+  std::uint64_t sequence_unchanged_after_reconnect{0};
   std::uint64_t values_invalid{0};       // NaN / inf / non-integral / not a valid code: dropped
   std::uint64_t values_out_of_range{0};  // finite but outside the map's min / max: dropped
 };
@@ -48,6 +68,10 @@ class PollDecoder {
   /// Real-time safe: no allocation, no locks, no I/O.
   std::span<const core::Event> decode(core::TimeNs t_ns, std::span<const std::uint8_t> block_ok);
 
+  /// The driver re-established its connection (the NC may have restarted meanwhile): the next
+  /// read of each event counter is checked for an unchanged counter. Real-time safe.
+  void note_reconnect() noexcept;
+
   [[nodiscard]] const DecodeCounters& counters() const noexcept { return counters_; }
 
  private:
@@ -64,6 +88,7 @@ class PollDecoder {
   std::vector<core::Event> out_;
   struct SeqState {
     bool baseline{false};
+    bool reconnected{false};  // no read of this counter since the last reconnect
     std::uint32_t last{0};
   };
   std::array<SeqState, kGroupCount> seq_{};

@@ -69,6 +69,7 @@ std::size_t modbus_counters(const ModbusStatus& st, std::span<BusCounterValue> o
       st.poll_overruns,
       st.events_lost,
       st.sequence_resets,
+      st.sequence_unchanged_after_reconnect,
       st.values_invalid,
       st.values_out_of_range,
       st.offsets_rejected,
@@ -450,6 +451,7 @@ void ModbusBus::poll(core::TimeNs now_ns) {
   const DecodeCounters& dc = decoder_.counters();
   st_.events_lost = dc.events_lost;
   st_.sequence_resets = dc.sequence_resets;
+  st_.sequence_unchanged_after_reconnect = dc.sequence_unchanged_after_reconnect;
   st_.values_invalid = dc.values_invalid;
   st_.values_out_of_range = dc.values_out_of_range;
 }
@@ -597,7 +599,9 @@ bool ModbusBus::ensure_connected(double& backoff_s, bool& ever_connected) {
     return true;
   }
   ++st_.bus.counters.reconnects;
-  // The NC may have restarted and lost what it had: every known offset is written again.
+  // The NC may have restarted: its event counters are checked at their next read ...
+  decoder_.note_reconnect();
+  // ... and, as it may have lost what it had, every known offset is written again.
   for (OffsetSlot& s : slots_) {
     if (s.has_value && !s.rejected) {
       if (!s.dirty) {

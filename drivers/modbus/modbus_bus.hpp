@@ -59,9 +59,11 @@ struct ModbusStatus {
   std::uint64_t connection_errors{0};  // socket / device errors, failed connects
   std::uint64_t connect_attempts{0};   // connects tried (first one, reconnects, read-back)
   std::uint64_t polls{0};
-  std::uint64_t poll_overruns{0};  // a poll period ended before the poll and writes did
-  std::uint64_t events_lost{0};    // sequence counter jumps > 1
-  std::uint64_t sequence_resets{0};
+  std::uint64_t poll_overruns{0};    // a poll period ended before the poll and writes did
+  std::uint64_t events_lost{0};      // events a sequence counter skipped (jumps > 1, NC restart)
+  std::uint64_t sequence_resets{0};  // a sequence counter moved back: NC restart
+  // Same non-zero counter at the first read after a reconnect: an NC restart can't be ruled out.
+  std::uint64_t sequence_unchanged_after_reconnect{0};
   std::uint64_t values_invalid{0};       // NaN / inf / not integral / not a valid code: dropped
   std::uint64_t values_out_of_range{0};  // finite but outside the map's min / max: dropped
   std::uint64_t offsets_rejected{0};     // not encodable (NaN, out of range) or unmapped register
@@ -99,7 +101,7 @@ struct IoSetupLine {
 std::vector<IoSetupLine> describe_io_setup(const IoThreadSetup& setup, const ModbusConfig& config);
 
 /// Names of ModbusBus::extra_counters(), in their order (static strings, for status output).
-inline constexpr std::array<const char*, 27> kModbusCounterNames = {
+inline constexpr std::array<const char*, 28> kModbusCounterNames = {
     "exception_illegal_function",      // 1
     "exception_illegal_address",       // 2
     "exception_illegal_value",         // 3
@@ -120,6 +122,7 @@ inline constexpr std::array<const char*, 27> kModbusCounterNames = {
     "poll_overruns",
     "events_lost",
     "sequence_resets",
+    "sequence_unchanged_after_reconnect",
     "values_invalid",
     "values_out_of_range",
     "offsets_rejected",

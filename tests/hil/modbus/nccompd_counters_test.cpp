@@ -267,8 +267,8 @@ TEST(ModbusNccompdCounters, FaultCountersOfTheDriverAreInTheDaemonsStatus) {
   for (const char* name :
        {"exception_illegal_function", "exception_illegal_value", "exception_gateway_path",
         "exception_gateway_target", "exception_other", "timeouts", "crc_errors", "bad_responses",
-        "connection_errors", "poll_overruns", "sequence_resets", "values_invalid",
-        "offsets_rejected"}) {
+        "connection_errors", "poll_overruns", "sequence_resets",
+        "sequence_unchanged_after_reconnect", "values_invalid", "offsets_rejected"}) {
     EXPECT_TRUE(counter(c, name).has_value()) << name << " missing in " << c;
   }
   EXPECT_EQ(counter(c, "verify_mismatches"), 1U) << c;

@@ -243,6 +243,102 @@ TEST(ModbusHilSim, EventsExactlyOnceLostCountedOffsetsLatestWinsAcrossRestart) {
   bus->stop();
 }
 
+/// The NC restarts (sim/modbus_nc keeps its registers across stop() / start(), so the test does
+/// what a restarting NC does: its tool measurement group powers up at 0) and produces `events`
+/// tool measurements (the newest: tool 8, 33 µm) before the driver is back. Returns once the
+/// driver has reconnected and polled a few times since.
+void restart_nc(NcServer& server, mb::ModbusBus& bus, int events) {
+  const std::uint64_t reconnects = bus.status().counters.reconnects;
+  server.stop();
+  ASSERT_TRUE(wait_until([&] { return bus.status().state == drivers::LinkState::kDown; }));
+  server.update([](Tables& t) { std::fill_n(t.holding.begin() + 100, 5, std::uint16_t{0}); });
+  if (events > 0) {
+    nc_measure(server, 8, 33.0F, events);
+  }
+  server.start();
+  ASSERT_TRUE(wait_until([&] { return bus.status().counters.reconnects > reconnects; }));
+  const std::uint64_t polls = bus.modbus_status().polls;
+  ASSERT_TRUE(wait_until([&] { return bus.modbus_status().polls > polls + 10; }));
+}
+
+// GIVEN the driver polling an NC whose tool measurement counter is at 42, WHEN the NC restarts
+// (counting again from 0) and has produced 3, then exactly 3 again, then no events by the time the
+// driver is back, THEN: the newest of the 3 is delivered once and 2 are counted lost with a reset;
+// an unchanged counter (3 -> 3) delivers nothing but is counted as a doubt the operator can see in
+// the status; a counter back at 0 is a reset with nothing to deliver.
+TEST(ModbusHilSim, NcRestartNewestEventDeliveredRestCountedUnchangedCounterShown) {
+  NcServer server(ServerConfig{});
+  server.update([](Tables& t) { t.holding[100] = 41; });
+  server.start();
+  auto bus = make_bus(tcp_header(server.port()) + kEventsAndOffsets);
+  bus->start();
+  Collected got;
+  ASSERT_TRUE(wait_until([&] {
+    got.drain(*bus);
+    return got.axis.size() >= 2;
+  }));
+  nc_measure(server, 5, 12.5F);  // counter 42
+  ASSERT_TRUE(wait_until([&] {
+    got.drain(*bus);
+    return got.tool_measurements.size() == 1;
+  }));
+
+  // 42 -> restart -> 3: the newest of the three is on the registers.
+  ASSERT_NO_FATAL_FAILURE(restart_nc(server, *bus, 3));
+  ASSERT_TRUE(wait_until([&] {
+    got.drain(*bus);
+    return got.tool_measurements.size() == 2;
+  })) << "the event produced after the NC's restart was not delivered";
+  EXPECT_EQ(got.tool_measurements[1].tool, 8);
+  EXPECT_DOUBLE_EQ(got.tool_measurements[1].wear_um[0], 33.0);
+  mb::ModbusStatus st = bus->modbus_status();
+  EXPECT_EQ(st.sequence_resets, 1U);
+  EXPECT_EQ(st.events_lost, 2U);
+  EXPECT_EQ(st.sequence_unchanged_after_reconnect, 0U);
+
+  // 3 -> restart -> 3: indistinguishable from no restart; nothing delivered, the doubt counted.
+  ASSERT_NO_FATAL_FAILURE(restart_nc(server, *bus, 3));
+  got.drain(*bus);
+  EXPECT_EQ(got.tool_measurements.size(), 2U);
+  st = bus->modbus_status();
+  EXPECT_EQ(st.sequence_unchanged_after_reconnect, 1U);
+  EXPECT_EQ(st.sequence_resets, 1U);
+  EXPECT_EQ(st.events_lost, 2U);
+
+  // 3 -> restart -> 0: a reset, no event to deliver, nothing lost; the next one comes through.
+  ASSERT_NO_FATAL_FAILURE(restart_nc(server, *bus, 0));
+  got.drain(*bus);
+  EXPECT_EQ(got.tool_measurements.size(), 2U);
+  st = bus->modbus_status();
+  EXPECT_EQ(st.sequence_resets, 2U);
+  EXPECT_EQ(st.events_lost, 2U);
+  EXPECT_EQ(st.sequence_unchanged_after_reconnect, 1U);
+  nc_measure(server, 9, 1.5F);
+  ASSERT_TRUE(wait_until([&] {
+    got.drain(*bus);
+    return got.tool_measurements.size() == 3;
+  }));
+  EXPECT_EQ(got.tool_measurements[2].tool, 9);
+  EXPECT_GE(bus->status().counters.reconnects, 3U);
+
+  // The counters as nccomp status shows them (the driver's extra counters, by name).
+  std::array<drivers::BusCounterValue, drivers::kMaxBusExtraCounters> c{};
+  const std::size_t n = bus->extra_counters(c);
+  const auto value_of = [&](std::string_view name) {
+    for (std::size_t i = 0; i < n; ++i) {
+      if (name == c[i].name) {
+        return c[i].value;
+      }
+    }
+    ADD_FAILURE() << name << " not among the counters";
+    return std::uint64_t{0};
+  };
+  EXPECT_EQ(value_of("sequence_resets"), 2U);
+  EXPECT_EQ(value_of("events_lost"), 2U);
+  EXPECT_EQ(value_of("sequence_unchanged_after_reconnect"), 1U);
+  bus->stop();
+}
+
 // Read-back verification: the NC acknowledges a write but does not hold the value (it rounded it,
 // or silently ignored it). verify_writes reads every written offset back, counts the mismatch and
 // writes the same absolute value again until the NC holds it.

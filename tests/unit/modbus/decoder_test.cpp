@@ -214,6 +214,155 @@ TEST_F(ModbusDecoder, DecodeIsAllocationFree) {
   EXPECT_EQ(ev.size(), 4U);  // axis sample, tool measurement, touch, temperature
 }
 
+// An NC that restarts counts its events again from 0 (kSequenceStart). GIVEN the uint16 tool
+// measurement counter read at `before`, WHEN the next poll reads `after` (with the values of the
+// newest event: tool 8, 33 µm), THEN `delivered` events come out, `lost` are counted lost and
+// `resets` sequence resets.
+struct CounterCase {
+  const char* what;
+  std::uint32_t before;
+  std::uint32_t after;
+  std::size_t delivered;
+  std::uint64_t lost;
+  std::uint64_t resets;
+};
+
+TEST(ModbusDecoderRestart, BackwardIsARestartForwardIsEventsWrapOnlyNearTheTop) {
+  const ModbusConfig config = parse_modbus_config(kMap, "t.toml");
+  const std::uint32_t near_top = 65536U - kMaxWrapEvents;  // + 9 -> 9 is +256 events
+  const std::array<CounterCase, 11> cases = {{
+      {"unchanged", 42, 42, 0, 0, 0},
+      {"restart, no event since: nothing to deliver", 42, 0, 0, 0, 1},
+      {"restart from above half the range: not +25536", 40000, 0, 0, 0, 1},
+      {"restart, 3 events since: the newest delivered, 2 lost", 42, 3, 1, 2, 1},
+      {"restart from above half the range, 3 events since: not +25539", 40000, 3, 1, 2, 1},
+      {"forward: +3 (a restart with 9 events since looks the same)", 6, 9, 1, 2, 0},
+      {"forward however far: +39991, not backwards through the wrap", 9, 40000, 1, 39990, 0},
+      {"wrap 65535 -> 0: +1", 65535, 0, 1, 0, 0},
+      {"wrap 65500 -> 100: +136", 65500, 100, 1, 135, 0},
+      {"wrap of kMaxWrapEvents: still a wrap", near_top + 9, 9, 1, kMaxWrapEvents - 1U, 0},
+      {"one more than kMaxWrapEvents: a restart, 9 events since", near_top + 8, 9, 1, 8, 1},
+  }};
+  const auto tool_measurements = [](std::span<const core::Event> ev) {
+    std::vector<core::ToolMeasurement> out;
+    for (const core::Event& e : ev) {
+      if (const auto* p = std::get_if<core::ToolMeasurement>(&e)) {
+        out.push_back(*p);
+      }
+    }
+    return out;
+  };
+  for (const CounterCase& c : cases) {
+    SCOPED_TRACE(::testing::Message() << c.what << ": " << c.before << " -> " << c.after);
+    PollDecoder dec(config);
+    const std::vector<std::uint8_t> ok(config.blocks.size(), 1);
+    std::span<std::uint16_t> meas = dec.block(1);
+    meas[0] = static_cast<std::uint16_t>(c.before);
+    meas[1] = 5;
+    put_float(meas, 2, 12.5F, false);
+    ASSERT_TRUE(tool_measurements(dec.decode(1, ok)).empty()) << "a baseline";
+    meas[0] = static_cast<std::uint16_t>(c.after);
+    meas[1] = 8;
+    put_float(meas, 2, 33.0F, false);
+    const std::vector<core::ToolMeasurement> tm = tool_measurements(dec.decode(2, ok));
+    EXPECT_EQ(tm.size(), c.delivered);
+    if (c.delivered == 1U && tm.size() == 1U) {
+      EXPECT_EQ(tm[0].tool, 8);
+      EXPECT_DOUBLE_EQ(tm[0].wear_um[0], 33.0);
+    }
+    EXPECT_EQ(dec.counters().events_lost, c.lost);
+    EXPECT_EQ(dec.counters().sequence_resets, c.resets);
+    EXPECT_EQ(dec.counters().sequence_unchanged_after_reconnect, 0U);
+    // Never twice: the next poll with the same counter delivers nothing.
+    EXPECT_TRUE(tool_measurements(dec.decode(3, ok)).empty());
+  }
+}
+
+TEST_F(ModbusDecoder, Uint32CounterWrapsNearTheTopAndRestartsBelow) {
+  // GIVEN the uint32 touch counter at 0xFFFFFFFF (values: axis Z, direction -1, 10 mm)
+  touch()[0] = 0xFFFF;
+  touch()[1] = 0xFFFF;
+  touch()[2] = 2;
+  touch()[3] = static_cast<std::uint16_t>(-1 & 0xFFFF);
+  touch()[4] = 0x0001;
+  touch()[5] = 0x86A0;
+  dec.decode(1, ok);
+  // WHEN it wraps to 1 THEN +2: one delivered, one lost
+  touch()[0] = 0;
+  touch()[1] = 1;
+  ASSERT_EQ(events_of<core::CalibrationTouch>(dec.decode(2, ok)).size(), 1U);
+  EXPECT_EQ(dec.counters().events_lost, 1U);
+  // WHEN it reaches 0x00020000 THEN forward (+0x1FFFF)
+  touch()[0] = 0x0002;
+  touch()[1] = 0x0000;
+  ASSERT_EQ(events_of<core::CalibrationTouch>(dec.decode(3, ok)).size(), 1U);
+  EXPECT_EQ(dec.counters().events_lost, std::uint64_t{1} + 0x1FFFEU);
+  EXPECT_EQ(dec.counters().sequence_resets, 0U);
+  // WHEN the NC restarts and makes 5 touches before the next poll THEN the newest is delivered,
+  // 4 lost, one reset
+  touch()[0] = 0;
+  touch()[1] = 5;
+  const auto t = events_of<core::CalibrationTouch>(dec.decode(4, ok));
+  ASSERT_EQ(t.size(), 1U);
+  EXPECT_NEAR(t[0].trigger_position_mm, 10.0, 1e-12);
+  EXPECT_EQ(dec.counters().events_lost, std::uint64_t{1} + 0x1FFFEU + 4U);
+  EXPECT_EQ(dec.counters().sequence_resets, 1U);
+}
+
+// The first read of a counter after a reconnect (the NC may have restarted meanwhile).
+struct ModbusDecoderReconnect : ModbusDecoder {
+  /// Baseline at `before`, then one event (before + 1) delivered.
+  void run_up_to(std::uint16_t before) {
+    meas()[0] = before;
+    ASSERT_TRUE(events_of<core::ToolMeasurement>(dec.decode(1, ok)).empty());
+    meas()[0] = static_cast<std::uint16_t>(before + 1U);
+    meas()[1] = 5;
+    put_float(meas(), 2, 12.5F, false);
+    ASSERT_EQ(events_of<core::ToolMeasurement>(dec.decode(2, ok)).size(), 1U);
+  }
+  /// The NC answers with the tool measurement counter at `counter`.
+  std::vector<core::ToolMeasurement> poll_at(std::uint16_t counter, core::TimeNs t) {
+    meas()[0] = counter;
+    return events_of<core::ToolMeasurement>(dec.decode(t, ok));
+  }
+};
+
+TEST_F(ModbusDecoderReconnect, UnchangedCounterAtTheFirstReadAfterAReconnectIsCounted) {
+  // GIVEN the tool measurement counter at 7 and the touch counter at 0
+  run_up_to(6);
+  // WHEN the link is re-established and the counter still reads 7
+  dec.note_reconnect();
+  // THEN nothing is delivered (the driver cannot know), but the doubt is counted, once per
+  // reconnect and group; the touch counter at 0 leaves no doubt (nothing can have been missed)
+  EXPECT_TRUE(poll_at(7, 3).empty());
+  EXPECT_EQ(dec.counters().sequence_unchanged_after_reconnect, 1U);
+  EXPECT_TRUE(poll_at(7, 4).empty());
+  EXPECT_EQ(dec.counters().sequence_unchanged_after_reconnect, 1U);
+  // WHEN the group is not read in the first poll after a reconnect THEN the check waits for the
+  // first read
+  dec.note_reconnect();
+  ok[1] = 0;
+  EXPECT_TRUE(poll_at(7, 5).empty());
+  EXPECT_EQ(dec.counters().sequence_unchanged_after_reconnect, 1U);
+  ok[1] = 1;
+  EXPECT_TRUE(poll_at(7, 6).empty());
+  EXPECT_EQ(dec.counters().sequence_unchanged_after_reconnect, 2U);
+  // WHEN it moved on after a reconnect THEN delivered as usual, no doubt counted
+  dec.note_reconnect();
+  EXPECT_EQ(poll_at(8, 7).size(), 1U);
+  EXPECT_EQ(dec.counters().sequence_unchanged_after_reconnect, 2U);
+  EXPECT_EQ(dec.counters().events_lost, 0U);
+  EXPECT_EQ(dec.counters().sequence_resets, 0U);
+}
+
+TEST_F(ModbusDecoderReconnect, AReconnectBeforeTheFirstReadIsJustTheBaseline) {
+  dec.note_reconnect();
+  meas()[0] = 7;
+  EXPECT_TRUE(events_of<core::ToolMeasurement>(dec.decode(1, ok)).empty());
+  EXPECT_TRUE(events_of<core::ToolMeasurement>(dec.decode(2, ok)).empty());
+  EXPECT_EQ(dec.counters().sequence_unchanged_after_reconnect, 0U);
+}
+
 }  // namespace
 }  // namespace nccomp::drivers::modbus
 
