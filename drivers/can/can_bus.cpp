@@ -248,11 +248,11 @@ std::size_t CanBus::extra_counters(std::span<BusCounterValue> out) const {
       c.link_alarms,           c.controller_overflow,
       c.rx_overflow,           c.enobufs,
       c.enobufs_retries,       c.ack_timeouts,
-      c.ack_retries,           c.rejected_wrong_length,
-      c.rejected_out_of_range, c.rejected_not_finite,
-      c.rejected_unknown_id,   c.tx_unencodable,
-      c.tx_unmapped,           c.lockstep_syncs,
-      c.lockstep_sync_acks};
+      c.ack_retries,           c.resent_after_recovery,
+      c.rejected_wrong_length, c.rejected_out_of_range,
+      c.rejected_not_finite,   c.rejected_unknown_id,
+      c.tx_unencodable,        c.tx_unmapped,
+      c.lockstep_syncs,        c.lockstep_sync_acks};
   const std::size_t n = std::min(out.size(), values.size());
   for (std::size_t i = 0; i < n; ++i) {
     out[i] = BusCounterValue{kCanCounterNames[i], values[i]};
@@ -549,14 +549,20 @@ void CanBus::take_writes() noexcept {
       ++st_.bus.counters.offsets_failed;
       continue;
     }
+    // Absolute values: a newer write replaces whatever was pending for the register, a
+    // recovery re-send included (the new value is a first send, not a re-send).
+    s->resend = false;
     if (!encode_offset(*s->reg, w.value_um, s->payload)) {
+      // The payload is cleared: nothing to re-send after a recovery until a value fits again
+      // (the NC keeps its last value, the alarm says why).
       ++st_.can.tx_unencodable;
       ++st_.bus.counters.offsets_failed;
       s->state = WriteState::kFailed;
+      s->has_value = false;
       continue;
     }
-    // Absolute values: a newer write replaces whatever was pending for the register.
     s->value_um = w.value_um;
+    s->has_value = true;
     s->state = WriteState::kPending;
     s->attempts = 0;
   }
@@ -604,6 +610,12 @@ void CanBus::send_pending(std::int64_t now_ns) noexcept {
     backoff_ns_ = 0;
     ++st_.bus.counters.frames_tx;
     ++s.attempts;
+    if (s.resend) {
+      // Counted once it is on the wire: once per register and recovery.
+      s.resend = false;
+      ++st_.can.resent_after_recovery;
+      ++st_.bus.counters.offsets_retried;
+    }
     if (s.reg->ack) {
       s.state = WriteState::kAwaitAck;
       s.deadline_ns = now_ns + to_ns(config_.ack_timeout_s);
@@ -691,10 +703,16 @@ void CanBus::recovered() noexcept {
   down_since_ns_ = 0;  // the next publish() clears the link alarm
   ++st_.bus.counters.reconnects;
   st_.bus.state = LinkState::kUp;
-  // Writes that may not have reached the NC go out again (they are absolute values).
+  // Every register that holds a value is sent again, whether or not its frame is acknowledged:
+  // a frame sent just before the fault may never have reached the NC, and one without an ack
+  // would otherwise be lost unnoticed. Absolute values, so a repeat is harmless (the Modbus
+  // driver re-writes every offset after a reconnect the same way). A re-send gets a fresh
+  // retry budget. Writes still pending were never sent: they go out as first sends.
   for (auto& s : slots_) {
-    if (s.state == WriteState::kAwaitAck) {
+    if (s.has_value && s.state != WriteState::kPending) {
       s.state = WriteState::kPending;
+      s.attempts = 0;
+      s.resend = true;
     }
   }
   backoff_until_ns_ = 0;

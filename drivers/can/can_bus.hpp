@@ -4,7 +4,9 @@
 // with FrameDecoder into core events pushed to rx(), takes offset writes from tx(), sends them and
 // waits for the NC's acknowledge where the mapping has one (timeout → re-send → alarm). It rides
 // out bus faults without stopping: error-passive (degraded), bus-off (kernel restart-ms or a
-// restart it requests over netlink), the interface going down and up (writes held and re-sent).
+// restart it requests over netlink), the interface going down and up or re-created (writes held).
+// After every recovery each register that holds a value is sent again once, acknowledged or not:
+// offsets are absolute, and a frame sent just before the fault may never have reached the NC.
 // Every fault is counted in CanStatus and reported through extra_counters() (`nccomp status`).
 // The status alarm is raised by a write given up after its retries, and by the link staying down
 // or bus-off for longer than alarm_after_s; the latter clears when the bus is back.
@@ -54,9 +56,10 @@ struct CanCounters {
   std::uint64_t enobufs_retries{0};  // send rounds retried after an ENOBUFS back-off
   std::uint64_t ack_timeouts{0};     // acknowledge not seen in time (each attempt)
   std::uint64_t ack_retries{0};      // writes re-sent after an acknowledge timeout
-  std::uint64_t link_alarms{0};      // alarm raised: down / bus-off for longer than alarm_after_s
-  std::uint64_t tx_unencodable{0};   // offset value does not fit its register's signal
-  std::uint64_t tx_unmapped{0};      // offset write for a register without a mapping
+  std::uint64_t resent_after_recovery{0};  // held values sent again after a bus recovery
+  std::uint64_t link_alarms{0};     // alarm raised: down / bus-off for longer than alarm_after_s
+  std::uint64_t tx_unencodable{0};  // offset value does not fit its register's signal
+  std::uint64_t tx_unmapped{0};     // offset write for a register without a mapping
   std::uint64_t rejected_unknown_id{0};
   std::uint64_t rejected_wrong_length{0};
   std::uint64_t rejected_out_of_range{0};
@@ -111,6 +114,8 @@ class CanBus final : public Bus {
     const TxRegister* reg{nullptr};
     WriteState state{WriteState::kIdle};
     double value_um{0.0};
+    bool has_value{false};  // payload holds the register's latest value (encodable)
+    bool resend{false};     // pending because of a recovery: counted when it goes out
     std::uint32_t attempts{0};
     std::int64_t deadline_ns{0};
     std::array<std::uint8_t, kMaxPayloadBytes> payload{};
@@ -177,13 +182,19 @@ class CanBus final : public Bus {
 };
 
 /// The names extra_counters() reports, in its order (static strings, snake_case).
-inline constexpr std::array<const char*, 23> kCanCounterNames{
-    "error_frames",          "error_warning",       "error_passive",       "bus_off",
-    "bus_recoveries",        "restart_requests",    "restart_failures",    "interface_down",
-    "link_alarms",           "controller_overflow", "rx_overflow",         "enobufs",
-    "enobufs_retries",       "ack_timeouts",        "ack_retries",         "rejected_wrong_length",
-    "rejected_out_of_range", "rejected_not_finite", "rejected_unknown_id", "tx_unencodable",
-    "tx_unmapped",           "lockstep_syncs",      "lockstep_sync_acks"};
+inline constexpr std::array<const char*, 24> kCanCounterNames{
+    "error_frames",          "error_warning",
+    "error_passive",         "bus_off",
+    "bus_recoveries",        "restart_requests",
+    "restart_failures",      "interface_down",
+    "link_alarms",           "controller_overflow",
+    "rx_overflow",           "enobufs",
+    "enobufs_retries",       "ack_timeouts",
+    "ack_retries",           "resent_after_recovery",
+    "rejected_wrong_length", "rejected_out_of_range",
+    "rejected_not_finite",   "rejected_unknown_id",
+    "tx_unencodable",        "tx_unmapped",
+    "lockstep_syncs",        "lockstep_sync_acks"};
 
 /// Asks the kernel to restart a CAN controller out of bus-off (netlink IFLA_CAN_RESTART, as
 /// `ip link set canX type can restart`). Returns 0 or the errno. Not real-time.

@@ -537,6 +537,134 @@ TEST_F(CanHil, InterfaceDownAndUpWhileRunningResendsPendingOffset) {
   ASSERT_TRUE(wait_until([&] { return st().bus.counters.events_decoded == 1; }));
 }
 
+/// The offset writes the NC node takes off the bus (acknowledging those with an ack ID) until
+/// `done` holds or `timeout` passes; every write in the order seen.
+std::vector<sim::can_nc::ReceivedWrite> collect_writes(
+    sim::can_nc::CanNcNode& nc,
+    const std::function<bool(const std::vector<sim::can_nc::ReceivedWrite>&)>& done,
+    std::chrono::milliseconds timeout) {
+  std::vector<sim::can_nc::ReceivedWrite> got;
+  const auto end = std::chrono::steady_clock::now() + timeout;
+  while (!done(got) && std::chrono::steady_clock::now() < end) {
+    if (auto w = nc.receive_write(20)) {
+      got.push_back(*w);
+    }
+  }
+  return got;
+}
+
+/// How many of `writes` are for `register_index`.
+std::size_t count_for(const std::vector<sim::can_nc::ReceivedWrite>& writes, int register_index) {
+  return static_cast<std::size_t>(std::count_if(writes.begin(), writes.end(), [&](const auto& w) {
+    return w.register_index == register_index;
+  }));
+}
+
+/// The 4 payload bytes of a write as candump prints them ("85FFFFFF").
+std::string hex4(const sim::can_nc::ReceivedWrite& w) {
+  char b[9];
+  std::snprintf(b, sizeof b, "%02X%02X%02X%02X", w.frame.data[0], w.frame.data[1], w.frame.data[2],
+                w.frame.data[3]);
+  return b;
+}
+
+// Offsets are absolute: after a recovery every register that holds a value is sent again once,
+// whether or not its frame is acknowledged. Register 3 of the reference profile has no ack, so a
+// frame of it sent just before the fault could be lost without anybody noticing; register 0 has
+// one. Both were delivered (idle) when the link went down: both go out again after it is back.
+TEST_F(CanHil, InterfaceDownAndUpResendsEveryHeldOffsetAlsoWithoutAcknowledge) {
+  CanConfig cfg = reference();
+  cfg.ack_timeout_s = 1.0;  // a loaded TCG VM can stall the acknowledging peer for 100+ ms
+  start(cfg);
+  sim::can_nc::CanNcNode nc(cfg.mapping, kIf);
+  ASSERT_TRUE(bus_->tx().try_push(core::OffsetWrite{0, 3, -12.3}));  // -123 counts, no ack
+  ASSERT_TRUE(bus_->tx().try_push(core::OffsetWrite{0, 0, 4.5}));    // 45 counts, acknowledged
+  bus_->wake();
+  const auto both = [](const std::vector<sim::can_nc::ReceivedWrite>& w) {
+    return count_for(w, 3) >= 1 && count_for(w, 0) >= 1;
+  };
+  const auto first = collect_writes(nc, both, 10s);
+  ASSERT_TRUE(both(first)) << first.size() << " writes";
+  ASSERT_TRUE(wait_until([&] { return st().bus.counters.offsets_written == 2; }));
+  EXPECT_EQ(st().bus.counters.frames_tx, 2U);
+  EXPECT_EQ(st().can.resent_after_recovery, 0U);
+
+  ASSERT_EQ(sh("ip link set vcan0 down"), 0);
+  ASSERT_TRUE(wait_until([&] { return st().can.interface_down == 1; }));
+  EXPECT_EQ(st().bus.state, LinkState::kDown);
+  ASSERT_EQ(sh("ip link set vcan0 up"), 0);
+  // Nothing new was queued: what the NC sees now is the driver's re-send of what it holds.
+  auto again = collect_writes(nc, both, 10s);
+  ASSERT_TRUE(both(again)) << again.size() << " writes after the link came back";
+  for (const auto& w : again) {
+    if (w.register_index == 3) {
+      EXPECT_EQ(hex4(w), "85FFFFFF");  // the same bytes candump showed for -12.3 µm
+      EXPECT_NEAR(w.value_um, -12.3, 1e-9);
+    } else {
+      EXPECT_EQ(w.register_index, 0);
+      EXPECT_EQ(hex4(w), "2D000000");
+    }
+  }
+  ASSERT_TRUE(wait_until([&] { return st().bus.counters.offsets_written == 4; }));
+  // Sent again once, not over and over.
+  std::this_thread::sleep_for(300ms);
+  while (auto w = nc.receive_write(20)) {
+    again.push_back(*w);
+  }
+  EXPECT_EQ(count_for(again, 3), 1U);
+  EXPECT_EQ(count_for(again, 0), 1U);
+  const auto s = st();
+  EXPECT_EQ(s.bus.counters.frames_tx, 4U);
+  EXPECT_EQ(s.can.resent_after_recovery, 2U);
+  EXPECT_EQ(s.bus.counters.offsets_retried, 2U);  // the re-sends, no acknowledge timeouts
+  EXPECT_EQ(s.can.ack_retries, 0U);
+  EXPECT_EQ(s.bus.counters.offsets_failed, 0U);
+  EXPECT_EQ(s.bus.counters.reconnects, 1U);
+  EXPECT_EQ(s.bus.state, LinkState::kUp);
+  EXPECT_FALSE(s.bus.alarm);
+}
+
+// The same after bus-off: a value sent just before the controller went bus-off (register 3, no
+// acknowledge; register 1, acknowledged) is sent again once the controller has restarted.
+TEST_F(CanHil, BusOffRestartResendsEveryHeldOffsetAlsoWithoutAcknowledge) {
+  CanConfig cfg = reference();
+  cfg.ack_timeout_s = 1.0;
+  start(cfg);
+  sim::can_nc::CanNcNode nc(cfg.mapping, kIf);
+  ASSERT_TRUE(bus_->tx().try_push(core::OffsetWrite{0, 3, 1.0}));  // 10 counts, no ack
+  ASSERT_TRUE(bus_->tx().try_push(core::OffsetWrite{0, 1, 7.0}));  // 70 counts, acknowledged
+  bus_->wake();
+  const auto both = [](const std::vector<sim::can_nc::ReceivedWrite>& w) {
+    return count_for(w, 3) >= 1 && count_for(w, 1) >= 1;
+  };
+  ASSERT_TRUE(both(collect_writes(nc, both, 10s)));
+  ASSERT_TRUE(wait_until([&] { return st().bus.counters.offsets_written == 2; }));
+  ASSERT_EQ(sh("cansend vcan0 20000040#0000000000000000"), 0);  // bus-off
+  ASSERT_TRUE(wait_until([&] { return st().bus.state == LinkState::kDown; }));
+  std::this_thread::sleep_for(100ms);
+  EXPECT_EQ(st().bus.counters.frames_tx, 2U);                   // held while bus-off
+  ASSERT_EQ(sh("cansend vcan0 20000100#0000000000000000"), 0);  // restarted (restart-ms)
+  auto again = collect_writes(nc, both, 10s);
+  ASSERT_TRUE(both(again)) << again.size() << " writes after the restart";
+  ASSERT_TRUE(wait_until([&] { return st().bus.counters.offsets_written == 4; }));
+  std::this_thread::sleep_for(300ms);
+  while (auto w = nc.receive_write(20)) {
+    again.push_back(*w);
+  }
+  EXPECT_EQ(count_for(again, 3), 1U);
+  EXPECT_EQ(count_for(again, 1), 1U);
+  for (const auto& w : again) {
+    EXPECT_EQ(hex4(w), w.register_index == 3 ? "0A000000" : "46000000") << w.register_index;
+  }
+  const auto s = st();
+  EXPECT_EQ(s.can.bus_recoveries, 1U);
+  EXPECT_EQ(s.can.resent_after_recovery, 2U);
+  EXPECT_EQ(s.bus.counters.offsets_retried, 2U);
+  EXPECT_EQ(s.bus.counters.frames_tx, 4U);
+  EXPECT_EQ(s.bus.counters.offsets_failed, 0U);
+  EXPECT_EQ(s.bus.state, LinkState::kUp);
+}
+
 TEST_F(CanHil, InterfaceDeletedAndRecreatedDriverRebinds) {
   CanConfig cfg = reference();
   cfg.alarm_after_s = 60.0;  // an outage shorter than the tolerance raises no alarm
@@ -556,6 +684,9 @@ TEST_F(CanHil, InterfaceDeletedAndRecreatedDriverRebinds) {
   EXPECT_NEAR(w->value_um, -0.5, 1e-9);
   EXPECT_EQ(w->frame.data[0], 0xFB);  // -5 counts of 0.1 µm
   ASSERT_TRUE(wait_until([&] { return st().bus.state == LinkState::kUp; }));
+  // Queued while down, never sent before: a first send, not a re-send.
+  EXPECT_EQ(st().can.resent_after_recovery, 0U);
+  EXPECT_EQ(st().bus.counters.frames_tx, 1U);
   // Receiving works on the new interface too.
   ASSERT_EQ(sh("cansend vcan0 160#0200D204"), 0);
   ASSERT_TRUE(wait_until([&] { return st().bus.counters.events_decoded == 1; }));

@@ -406,7 +406,8 @@ TEST(CanBusLifecycle, ExtraCountersHaveFixedUniqueSnakeCaseNames) {
   for (const char* want :
        {"bus_off", "error_passive", "error_warning", "bus_recoveries", "interface_down",
         "link_alarms", "rx_overflow", "enobufs", "enobufs_retries", "ack_timeouts", "ack_retries",
-        "rejected_wrong_length", "rejected_out_of_range", "rejected_not_finite"}) {
+        "resent_after_recovery", "rejected_wrong_length", "rejected_out_of_range",
+        "rejected_not_finite"}) {
     EXPECT_NE(std::find(kCanCounterNames.begin(), kCanCounterNames.end(), std::string_view(want)),
               kCanCounterNames.end())
         << want;
