@@ -4,8 +4,9 @@
 #   1. the exact envelope alone, with its peer: memcpy of the same 160 MB in the same process
 #      (bench_grind_envelope: median of 3, peak RSS by getrusage);
 #   2. the whole `nccomp grind-path` command (/usr/bin/time: wall, user, max RSS), from the
-#      convex family (with 21 verification points and without verification) and from a
-#      2·10⁷-line CSV file (written once into WORKDIR by awk).
+#      convex family (with 21 polyline verification points and the verification on every
+#      sample, and without any verification) and from a 2·10⁷-line CSV file (written once into
+#      WORKDIR by awk). The verification on every sample alone: run_verify_bench.sh.
 # Each is repeated REPEATS times, interleaved, so the ratios compare runs under the same load.
 #
 #   bench/grind/run_bench.sh NCCOMP BENCH_GRIND_ENVELOPE WORKDIR [REPEATS=3]
@@ -51,11 +52,11 @@ while [ "$r" -le "$repeats" ]; do
     "$nccomp" grind-path $family $wheel $outs > "$work/family.out" 2> "$work/family.time"
   grep -E "^exact envelope|^total|G-code:|^    \([0-9.]+ s\)" "$work/family.out"
   cat "$work/family.time"
-  echo "== run $r: the same without the verification (--verify-points 0)"
+  echo "== run $r: the same without the verification (--verify-points 0 --no-verify-samples)"
   # shellcheck disable=SC2086
   /usr/bin/time -f "process: wall %e s, user %U s, max RSS %M KiB" \
-    "$nccomp" grind-path $family $wheel --verify-points 0 > "$work/noverify.out" \
-    2> "$work/noverify.time"
+    "$nccomp" grind-path $family $wheel --verify-points 0 --no-verify-samples \
+    > "$work/noverify.out" 2> "$work/noverify.time"
   grep -E "^exact envelope|^total" "$work/noverify.out"
   cat "$work/noverify.time"
   echo "== run $r: nccomp grind-path --profile crown2e7.csv $wheel $outs"

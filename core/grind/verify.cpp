@@ -133,24 +133,32 @@ GroundError compare_ground(std::span<const double> z_mm, std::span<const double>
   if (z_mm.size() != b_mm.size() || z_mm.size() != p_mm.size()) {
     throw std::invalid_argument("verification: z, B and P differ in length");
   }
-  GroundError r;
-  double sum2 = 0.0;
+  GroundErrorSum sum;
   for (std::size_t i = 0; i < z_mm.size(); ++i) {
-    if (std::isinf(b_mm[i])) {
-      ++r.unreached;
-      continue;
-    }
-    const double d = b_mm[i] - p_mm[i];
-    ++r.points;
-    sum2 += d * d;
-    if (std::abs(d) > r.max_abs_mm) {
-      r.max_abs_mm = std::abs(d);
-      r.z_at_max_mm = z_mm[i];
-    }
-    r.max_gouge_mm = std::max(r.max_gouge_mm, -d);
-    r.max_left_mm = std::max(r.max_left_mm, d);
+    sum.add(z_mm[i], b_mm[i], p_mm[i]);
   }
-  r.rms_mm = r.points > 0 ? std::sqrt(sum2 / static_cast<double>(r.points)) : 0.0;
+  return sum.result();
+}
+
+void GroundErrorSum::add(double z_mm, double b_mm, double p_mm) noexcept {
+  if (std::isinf(b_mm)) {
+    ++r_.unreached;
+    return;
+  }
+  const double d = b_mm - p_mm;
+  ++r_.points;
+  sum2_ += d * d;
+  if (std::abs(d) > r_.max_abs_mm) {
+    r_.max_abs_mm = std::abs(d);
+    r_.z_at_max_mm = z_mm;
+  }
+  r_.max_gouge_mm = std::max(r_.max_gouge_mm, -d);
+  r_.max_left_mm = std::max(r_.max_left_mm, d);
+}
+
+GroundError GroundErrorSum::result() const noexcept {
+  GroundError r = r_;
+  r.rms_mm = r.points > 0 ? std::sqrt(sum2_ / static_cast<double>(r.points)) : 0.0;
   return r;
 }
 

@@ -8,6 +8,7 @@
 // accepts any point order (the local rule's trajectory doubles back in concave regions).
 // Cost: O(N) to bound blocks of 512 segments, then O(E·(S_w + N/512)) for E evaluation points
 // and S_w segments in the blocks within W/2 of each; no copy of the path. Not real-time.
+// For paths on the profile's grid, verify_grid.hpp computes B at every sample in O(N log M).
 #pragma once
 
 #include <cstddef>
@@ -42,5 +43,17 @@ struct GroundError {
 };
 GroundError compare_ground(std::span<const double> z_mm, std::span<const double> b_mm,
                            std::span<const double> p_mm);
+
+/// compare_ground's figures accumulated one point at a time (the same numbers for the same
+/// points in the same order), for B streamed in chunks instead of held as an array.
+class GroundErrorSum {
+ public:
+  void add(double z_mm, double b_mm, double p_mm) noexcept;
+  [[nodiscard]] GroundError result() const noexcept;
+
+ private:
+  GroundError r_;
+  double sum2_{0.0};
+};
 
 }  // namespace nccomp::core::grind

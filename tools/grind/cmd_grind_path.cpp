@@ -27,6 +27,7 @@
 #include "core/grind/path.hpp"
 #include "core/grind/profile.hpp"
 #include "core/grind/verify.hpp"
+#include "core/grind/verify_grid.hpp"
 #include "core/grind/wheel.hpp"
 #include "tools/nccomp/command.hpp"
 
@@ -49,6 +50,7 @@ struct Options {
   int fit_points{0};
   double tolerance_um{0.1};
   std::size_t verify_points{2001};
+  bool skip_sample_verify{false};
   std::size_t max_regions{12};
   std::string trajectory_out;
   std::string table_out;
@@ -184,7 +186,9 @@ g::UniformProfile load_profile(const Options& o, std::string& description) {
 // Memory: at 2·10⁷ samples every N-sized double array is 160 MB. Alive at once: the profile and
 // the exact envelope, plus one more during the rule comparison (the rule's lowest pass on the
 // grid, kept only for --method local). Everything else is evaluated sample by sample (the
-// three-case rule, B of the envelope, the verification's paths): about 3 arrays ≈ 0.5 GB.
+// three-case rule, B of the envelope, the verification's paths): about 3 arrays ≈ 0.5 GB. The
+// verification on every sample adds its stack while it runs: 8 bytes per wheel position
+// (172 MB for the envelope's N + 2M) and the table of g (8 bytes per sample of W/2).
 void run(const Options& o) {
   const auto t_start = std::chrono::steady_clock::now();
   // Options first: nothing is printed or computed for a command that cannot finish.
@@ -280,6 +284,17 @@ void run(const Options& o) {
   const auto chord = g::chord_error(chosen, rounded);
   const double chord_err = chord.max_mm();
 
+  constexpr const char* kVerifyColumns =
+      "    path                            max|B-P| um    RMS um  gouge um   left um   at z mm\n";
+  const auto row = [&](const char* name, const g::GroundError& e) {
+    os << fmt("    %-30s %11.4f %9.4f %9.4f %9.4f %9.3f", name, e.max_abs_mm * 1000.0,
+              e.rms_mm * 1000.0, e.max_gouge_mm * 1000.0, e.max_left_mm * 1000.0, e.z_at_max_mm);
+    if (e.unreached > 0) {
+      os << fmt("  (%zu points not reached)", e.unreached);
+    }
+    os << "\n";
+  };
+  std::size_t polyline_points = 0;
   if (o.verify_points > 0) {
     t0 = std::chrono::steady_clock::now();
     const std::size_t n = p.size();
@@ -295,29 +310,42 @@ void run(const Options& o) {
       z_eval.push_back(p.z_last_mm());
       p_eval.push_back(p.u_mm.back());
     }
+    polyline_points = z_eval.size();
     os << fmt(
         "verification (independent: what each path grinds, B(z) = min over the path of "
         "U + g(z - Z),\n  brute force over path segments at %zu points every %.6g mm):\n",
         z_eval.size(), p.spacing_mm * static_cast<double>(stride));
-    os << "    path                            max|B-P| um    RMS um  gouge um   left um   at z "
-          "mm\n";
-    const auto row = [&](const char* name, const std::vector<double>& b) {
-      const auto e = g::compare_ground(z_eval, b, p_eval);
-      os << fmt("    %-30s %11.4f %9.4f %9.4f %9.4f %9.3f", name, e.max_abs_mm * 1000.0,
-                e.rms_mm * 1000.0, e.max_gouge_mm * 1000.0, e.max_left_mm * 1000.0, e.z_at_max_mm);
-      if (e.unreached > 0) {
-        os << fmt("  (%zu points not reached)", e.unreached);
-      }
-      os << "\n";
-    };
+    os << kVerifyColumns;
     // Each path is read where it lies (no copies): T follows P, the rule sample by sample, the
     // envelope on its grid, the G-code polyline as written.
+    const auto at_points = [&](const std::vector<double>& b) {
+      return g::compare_ground(z_eval, b, p_eval);
+    };
     row("usual practice (T follows P)",
-        g::ground_by_grid_path(p.z0_mm, p.spacing_mm, p.u_mm, wheel, z_eval));
-    row("three-case rule", g::ground_by_polyline(rule, z_eval));
+        at_points(g::ground_by_grid_path(p.z0_mm, p.spacing_mm, p.u_mm, wheel, z_eval)));
+    row("three-case rule", at_points(g::ground_by_polyline(rule, z_eval)));
+    row("exact envelope", at_points(g::ground_by_grid_path(exact.z0_mm, exact.spacing_mm,
+                                                           exact.u_mm, wheel, z_eval)));
+    row("G-code polyline", at_points(g::ground_by_polyline(rounded, wheel, z_eval)));
+    os << fmt("    (%.3f s)\n", seconds_since(t0));
+  }
+  if (!o.skip_sample_verify) {
+    // B at every sample, streamed (no N-sized B): the wheel at each grid point of the path.
+    t0 = std::chrono::steady_clock::now();
+    os << fmt(
+        "verification on every sample (independent: B at all %zu profile samples, the wheel at "
+        "every grid\n  point of the path, lower envelope of its arcs; ",
+        p.size());
+    if (polyline_points > 0) {
+      os << fmt("the polyline check above is at %zu points):\n", polyline_points);
+    } else {
+      os << "the rule's path and the G-code are\n  checked at --verify-points):\n";
+    }
+    os << kVerifyColumns;
+    row("usual practice (T follows P)",
+        g::verify_grid_every_sample({p.z0_mm, p.spacing_mm, p.u_mm}, p, wheel));
     row("exact envelope",
-        g::ground_by_grid_path(exact.z0_mm, exact.spacing_mm, exact.u_mm, wheel, z_eval));
-    row("G-code polyline", g::ground_by_polyline(rounded, wheel, z_eval));
+        g::verify_grid_every_sample({exact.z0_mm, exact.spacing_mm, exact.u_mm}, p, wheel));
     os << fmt("    (%.3f s)\n", seconds_since(t0));
   }
 
@@ -443,8 +471,10 @@ void setup(CLI::App& app) {
   sub->add_option("--tolerance-um", opt->tolerance_um, "report deviations above this (um)")
       ->capture_default_str();
   sub->add_option("--verify-points", opt->verify_points,
-                  "evaluation points of the independent verification (0: skip)")
+                  "evaluation points of the polyline verification of every path (0: skip)")
       ->capture_default_str();
+  sub->add_flag("--no-verify-samples", opt->skip_sample_verify,
+                "skip the verification on every sample of the usual practice and the envelope");
   sub->add_option("--max-regions", opt->max_regions, "regions listed per report")
       ->capture_default_str();
   sub->add_option("--trajectory-out", opt->trajectory_out, "write the trajectory as CSV");

@@ -46,6 +46,19 @@ def verification_rows(out):
     return rows
 
 
+def every_sample_rows(out):
+    """{'usual practice (T follows P)': (max, rms, gouge, left, z), 'exact envelope': ...} from the
+    verification on every sample (printed after the polyline verification)."""
+    tail = out[out.index("verification on every sample"):]
+    rows = {}
+    for name in ("usual practice (T follows P)", "exact envelope"):
+        m = re.search(re.escape(name) + r"\s+([-\d.]+)\s+([-\d.]+)\s+([-\d.]+)\s+([-\d.]+)\s+([-\d.]+)",
+                      tail)
+        assert m, f"no every-sample row '{name}' in:\n{out}"
+        rows[name] = tuple(float(v) for v in m.groups())
+    return rows
+
+
 def section(out, title):
     """The region lines printed under a report title, up to the next unindented line."""
     lines = out.splitlines()
@@ -144,6 +157,34 @@ class Crown(unittest.TestCase):
         self.assertAlmostEqual(usual[2], e487, delta=1.5e-4)  # all of it a gouge
         self.assertEqual(usual[3], 0.0)  # nothing left
         self.assertAlmostEqual(abs(usual[4]), 487.0, delta=1e-9)
+
+    def test_every_sample_verification(self):
+        # The same paths checked at all 20001 samples: T at the grid points only (no chords), and
+        # z* = 486.85 mm is a sample here, so the usual practice's maximum is the closed form
+        # e(z*) = 15.7748 um itself; the exact envelope grinds P at every sample.
+        self.assertIn("verification on every sample (independent: B at all 20001 profile samples",
+                      self.out)
+        self.assertIn("the polyline check above is at 2001 points):", self.out)
+        rows = every_sample_rows(self.out)
+        usual = rows["usual practice (T follows P)"]
+        zs = 500.0 / (1.0 + 2.0 * self.a * self.r)
+        e_star = (self.a * (500.0**2 - zs**2) - rise(500.0 - zs, self.r)) * 1000.0
+        self.assertAlmostEqual(e_star, 15.7748, delta=1e-4)
+        self.assertAlmostEqual(usual[0], e_star, delta=1e-4)
+        self.assertAlmostEqual(usual[2], e_star, delta=1e-4)
+        self.assertEqual(usual[3], 0.0)
+        self.assertAlmostEqual(abs(usual[4]), 486.85, delta=1e-9)
+        # RMS over every sample against numpy: B = min over grid positions within W/2, here at
+        # every 20th sample (each a window of 3001 positions).
+        z = -500.0 + 0.05 * np.arange(20001)
+        p = 0.6 * (1.0 - (z / 500.0) ** 2)
+        b = np.array([np.min(p[max(0, i - 1500):i + 1501]
+                             + rise(z[max(0, i - 1500):i + 1501] - z[i], self.r))
+                      for i in range(0, 20001, 20)])
+        d = (b - p[::20]) * 1000.0
+        self.assertAlmostEqual(usual[1], math.sqrt(np.mean(d * d)), delta=0.01)
+        exact = rows["exact envelope"]
+        self.assertLessEqual(exact[0], 1e-4)
 
     def test_exact_envelope_at_sampling_resolution(self):
         # Chords of the sampled path sag by at most Δ²/(8R) = 0.05²/(8·5625) mm = 5.6e-5 µm.
@@ -343,6 +384,34 @@ class StraightGrindingLine(unittest.TestCase):
             usual = rows["usual practice (T follows P)"]
             self.assertAlmostEqual(usual[2], 80.0, delta=1e-4)
             self.assertEqual(usual[3], 0.0)
+            # The same on every sample (h = 0: g ≡ 0, B is the running minimum of the path):
+            # 80 um from z = 20 mm on (where exactly the maximum is found among equal values is
+            # up to rounding); RMS by numpy.
+            every = every_sample_rows(out)
+            self.assertEqual(every["exact envelope"][0], 0.0)
+            z = 0.1 * np.arange(1001)
+            p = 0.2 + 0.004 * (z - 50.0)
+            b = np.array([p[max(0, i - 200):i + 201].min() for i in range(1001)])
+            d = (b - p) * 1000.0
+            self.assertAlmostEqual(every["usual practice (T follows P)"][0], 80.0, delta=1e-4)
+            self.assertAlmostEqual(every["usual practice (T follows P)"][1],
+                                   math.sqrt(np.mean(d * d)), delta=1e-4)
+            self.assertGreaterEqual(every["usual practice (T follows P)"][4], 20.0 - 1e-9)
+
+    def test_every_sample_check_alone(self):
+        # --verify-points 0 skips the polyline check only; --no-verify-samples the other one.
+        args = ["--family", "straight", "--slope", "0.004", "--z-from-mm", "0", "--z-to-mm",
+                "100", "--spacing-mm", "0.1", "--wheel-width-mm", "40", "--arc-height-mm", "0"]
+        rc, out, err = run(*args, "--verify-points", "0")
+        self.assertEqual(rc, 0, err)
+        self.assertNotIn("brute force over path segments", out)
+        self.assertIn("the rule's path and the G-code are\n  checked at --verify-points):", out)
+        self.assertAlmostEqual(every_sample_rows(out)["usual practice (T follows P)"][2], 80.0,
+                               delta=1e-4)
+        rc, out, err = run(*args, "--no-verify-samples")
+        self.assertEqual(rc, 0, err)
+        self.assertIn("brute force over path segments", out)
+        self.assertNotIn("verification on every sample", out)
 
 
 class LocalMethod(unittest.TestCase):
@@ -352,7 +421,8 @@ class LocalMethod(unittest.TestCase):
             rc, out, err = run("--family", "convex", "--height-mm", "0.6", "--z-from-mm", "-500",
                                "--z-to-mm", "500", "--spacing-mm", "0.5", "--wheel-width-mm", "150",
                                "--arc-height-mm", "0.5", "--method", "local",
-                               "--trajectory-out", traj, "--verify-points", "0")
+                               "--trajectory-out", traj, "--verify-points", "0",
+                               "--no-verify-samples")
             self.assertEqual(rc, 0, err)
             self.assertIn("outputs (local trajectory):", out)
             self.assertNotIn("verification", out)
