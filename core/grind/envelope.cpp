@@ -162,9 +162,8 @@ GridTrajectory exact_trajectory(const UniformProfile& profile, const Wheel& whee
   return t;
 }
 
-void ground_profile_chunks(
-    const GridTrajectory& trajectory, const UniformProfile& profile, const Wheel& wheel,
-    const std::function<void(std::size_t first, std::span<const double> b_mm)>& visit) {
+void ground_profile_chunks(const GridTrajectory& trajectory, const UniformProfile& profile,
+                           const Wheel& wheel, const ChunkVisitor& visit) {
   const double shift = (profile.z0_mm - trajectory.z0_mm) / profile.spacing_mm;
   const double shift_round = std::round(shift);
   if (std::abs(trajectory.spacing_mm - profile.spacing_mm) > 1e-9 * profile.spacing_mm ||
@@ -173,36 +172,22 @@ void ground_profile_chunks(
   }
   // B = −maxplus(−U_T): the deque reads −U_T in place (negation is exact), no negated copy.
   const double* u = trajectory.u_mm.data();
-  constexpr std::size_t kChunk = 1U << 14;
-  std::vector<double> chunk(std::min<std::size_t>(kChunk, profile.size()));
-  std::size_t first = 0;
-  std::size_t fill = 0;
+  ChunkBuffer out(profile.size(), visit);
   EnvelopeScratch scratch;
   max_plus_arc_impl(
       static_cast<std::ptrdiff_t>(trajectory.u_mm.size()), [u](std::ptrdiff_t j) { return -u[j]; },
       profile.spacing_mm, wheel, static_cast<std::ptrdiff_t>(shift_round),
       static_cast<std::ptrdiff_t>(profile.size()), scratch,
-      [&](std::ptrdiff_t, double v) {
-        chunk[fill++] = -v;  // +inf where no trajectory point reaches z: nothing ground there
-        if (fill == chunk.size()) {
-          visit(first, std::span<const double>(chunk.data(), fill));
-          first += fill;
-          fill = 0;
-        }
-      });
-  if (fill > 0) {
-    visit(first, std::span<const double>(chunk.data(), fill));
-  }
+      // +inf where no trajectory point reaches z: nothing ground there
+      [&out](std::ptrdiff_t, double v) { out.push(-v); });
+  out.finish();
 }
 
 std::vector<double> ground_profile_fast(const GridTrajectory& trajectory,
                                         const UniformProfile& profile, const Wheel& wheel) {
-  std::vector<double> b(profile.size());
-  ground_profile_chunks(
-      trajectory, profile, wheel, [&b](std::size_t first, std::span<const double> chunk) {
-        std::copy(chunk.begin(), chunk.end(), b.begin() + static_cast<std::ptrdiff_t>(first));
-      });
-  return b;
+  return collect_chunks(profile.size(), [&](const ChunkVisitor& visit) {
+    ground_profile_chunks(trajectory, profile, wheel, visit);
+  });
 }
 
 }  // namespace nccomp::core::grind

@@ -22,6 +22,7 @@
 #include <span>
 #include <vector>
 
+#include "core/grind/chunks.hpp"
 #include "core/grind/profile.hpp"
 #include "core/grind/wheel.hpp"
 
@@ -68,8 +69,7 @@ std::vector<double> ground_profile_fast(const GridTrajectory& trajectory,
 
 /// The same B, handed to `visit` in consecutive chunks (samples first .. first + b.size() − 1)
 /// instead of one N-sized array: what the command's unreachable-region report streams through.
-void ground_profile_chunks(
-    const GridTrajectory& trajectory, const UniformProfile& profile, const Wheel& wheel,
-    const std::function<void(std::size_t first, std::span<const double> b_mm)>& visit);
+void ground_profile_chunks(const GridTrajectory& trajectory, const UniformProfile& profile,
+                           const Wheel& wheel, const ChunkVisitor& visit);
 
 }  // namespace nccomp::core::grind

@@ -60,6 +60,62 @@ struct Entry {
   std::int32_t from_rel;
 };
 
+// The first c in (lo, hi) at which `wins(c)` holds, else hi: `wins` is false at lo and true at
+// hi (virtually, where they lie outside the copies' common window) and monotone in between.
+// Where the search starts only sets its cost. First `near` (the last crossing's offset from its
+// copy: on smooth paths the crossing moves by less than a sample from one copy to the next, so
+// two tests settle it); else a gallop from `parabola` (where the copies would cross if the arc
+// were its osculating parabola, O(1) samples off for a roll's slopes, also on noisy paths), then
+// bisection.
+template <class Wins>
+std::ptrdiff_t first_true(std::ptrdiff_t lo, std::ptrdiff_t hi, std::ptrdiff_t near,
+                          double parabola, const Wins& wins) {
+  const std::ptrdiff_t g = std::clamp(near, lo + 1, hi - 1);
+  if (wins(g)) {
+    hi = g;
+    if (g - 1 > lo) {
+      (wins(g - 1) ? hi : lo) = g - 1;
+    }
+  } else {
+    lo = g;
+    if (g + 1 < hi) {
+      (wins(g + 1) ? hi : lo) = g + 1;
+    }
+  }
+  if (hi - lo <= 1) {
+    return hi;
+  }
+  const auto start = static_cast<std::ptrdiff_t>(
+      std::clamp(std::round(parabola), static_cast<double>(lo + 1), static_cast<double>(hi - 1)));
+  std::ptrdiff_t step = 1;
+  if (wins(start)) {
+    hi = start;
+    while (hi - step > lo) {
+      if (!wins(hi - step)) {
+        lo = hi - step;
+        break;
+      }
+      hi -= step;
+      step *= 2;
+    }
+  } else {
+    lo = start;
+    while (lo + step < hi) {
+      if (wins(lo + step)) {
+        hi = lo + step;
+        break;
+      }
+      lo += step;
+      step *= 2;
+    }
+  }
+  while (hi - lo > 1) {
+    const std::ptrdiff_t mid = lo + (hi - lo) / 2;
+    (wins(mid) ? hi : lo) = mid;
+  }
+  return hi;
+}
+
 // The lower envelope over path indices [c_lo, c_hi] (the profile's samples), then the sweep.
 // `out(v)` receives B at c_lo, c_lo + 1, …, c_hi in order.
 // `r_cells` = R/Δ² (0 for the straight grinding line) steers where a search starts.
@@ -77,10 +133,9 @@ void lower_envelope(std::span<const double> u, std::ptrdiff_t c_lo, std::ptrdiff
   const auto dist = [](std::ptrdiff_t x, std::ptrdiff_t y) {
     return static_cast<std::size_t>(x > y ? x - y : y - x);
   };
-  // Where a search starts (only its cost depends on it): for an arc, where the two copies would
-  // cross if the arc were its osculating parabola s²/(2R), c = (a + b)/2 + R·(u_b − u_a)/((b −
-  // a)·Δ²), within a sample or two of the crossing for the slopes of a roll and O(1) away on noisy
-  // paths; for the straight line (all crossings at a window's end), the last crossing's offset.
+  // The last crossing's offset from its copy, where the next search starts (first_true); for an
+  // arc the fallback start is the osculating parabola's crossing, c = (a + b)/2 + R·(u_b −
+  // u_a)/((b − a)·Δ²).
   std::ptrdiff_t guess = 0;
   for (std::ptrdiff_t b = t_first; b <= t_last; ++b) {
     const double ub = uu[b];
@@ -100,72 +155,15 @@ void lower_envelope(std::span<const double> u, std::ptrdiff_t c_lo, std::ptrdiff
         const auto b_wins = [&](std::ptrdiff_t c) {
           return ub + rise[dist(c, b)] <= ua + rise[dist(c, a)];
         };
-        std::ptrdiff_t lo = b_start - 1;  // known false (virtually, if outside)
-        std::ptrdiff_t hi = a_end + 1;    // known true (virtually, if outside)
         if (!(r_cells > 0.0)) {
           // Straight grinding line: g ≡ 0, the difference is constant on the common window.
-          if (b_wins(b_start)) {
-            hi = b_start;
-          } else {
-            lo = a_end;
-          }
+          x = b_wins(b_start) ? b_start : a_end + 1;
         } else {
-          // Where the search starts only sets its cost. First the last crossing's offset from
-          // its copy: on smooth paths the crossing moves by less than a sample from one copy to
-          // the next, so two tests settle it.
-          const std::ptrdiff_t g = std::clamp(b + guess, b_start, a_end);
-          if (b_wins(g)) {
-            hi = g;
-            if (g - 1 > lo) {
-              (b_wins(g - 1) ? hi : lo) = g - 1;
-            }
-          } else {
-            lo = g;
-            if (g + 1 < hi) {
-              (b_wins(g + 1) ? hi : lo) = g + 1;
-            }
-          }
-        }
-        if (hi - lo > 1) {
-          // Not there: gallop from where the copies would cross if the arc were its osculating
-          // parabola s²/(2R), c = (a + b)/2 + R·(u_b − u_a)/((b − a)·Δ²) — O(1) samples off for
-          // a roll's slopes, also on noisy paths — then bisect.
-          const double c =
+          // Where the copies would cross if the arc were its osculating parabola s²/(2R).
+          const double parabola =
               0.5 * static_cast<double>(a + b) + r_cells * (ub - ua) / static_cast<double>(b - a);
-          const auto start = static_cast<std::ptrdiff_t>(
-              std::clamp(std::round(c), static_cast<double>(lo + 1), static_cast<double>(hi - 1)));
-          std::ptrdiff_t step = 1;
-          if (b_wins(start)) {
-            hi = start;
-            while (hi - step > lo) {
-              if (!b_wins(hi - step)) {
-                lo = hi - step;
-                break;
-              }
-              hi -= step;
-              step *= 2;
-            }
-          } else {
-            lo = start;
-            while (lo + step < hi) {
-              if (b_wins(lo + step)) {
-                hi = lo + step;
-                break;
-              }
-              lo += step;
-              step *= 2;
-            }
-          }
-          while (hi - lo > 1) {
-            const std::ptrdiff_t mid = lo + (hi - lo) / 2;
-            if (b_wins(mid)) {
-              hi = mid;
-            } else {
-              lo = mid;
-            }
-          }
+          x = first_true(b_start - 1, a_end + 1, b + guess, parabola, b_wins);
         }
-        x = hi;
       }
       if (x <= s_a) {
         stack.pop_back();  // b is at or below a on all of a's run: a never shows
@@ -203,9 +201,8 @@ void lower_envelope(std::span<const double> u, std::ptrdiff_t c_lo, std::ptrdiff
 
 }  // namespace
 
-void ground_grid_chunks(
-    const GridPathView& path, const UniformProfile& profile, const Wheel& wheel,
-    const std::function<void(std::size_t first, std::span<const double> b_mm)>& visit) {
+void ground_grid_chunks(const GridPathView& path, const UniformProfile& profile,
+                        const Wheel& wheel, const ChunkVisitor& visit) {
   const Grid grid = check_inputs(path, profile, wheel);
   if (path.u_mm.size() > std::numeric_limits<std::uint32_t>::max()) {
     throw std::invalid_argument("grid verification: more than 2^32 - 1 trajectory points");
@@ -222,32 +219,18 @@ void ground_grid_chunks(
   for (std::size_t k = 0; k <= m_size; ++k) {
     rise[k] = wheel.rise_mm(static_cast<double>(k) * dz);
   }
-  constexpr std::size_t kChunk = std::size_t{1} << 14;
-  std::vector<double> chunk(std::min(kChunk, n));
-  std::size_t first = 0;
-  std::size_t fill = 0;
+  ChunkBuffer out(n, visit);
   const double r_cells = wheel.straight() ? 0.0 : wheel.radius_mm() / (dz * dz);
   lower_envelope(path.u_mm, grid.shift, grid.shift + static_cast<std::ptrdiff_t>(n) - 1, grid.m,
-                 rise.data(), r_cells, [&](double v) {
-                   chunk[fill++] = v;
-                   if (fill == chunk.size()) {
-                     visit(first, std::span<const double>(chunk.data(), fill));
-                     first += fill;
-                     fill = 0;
-                   }
-                 });
-  if (fill > 0) {
-    visit(first, std::span<const double>(chunk.data(), fill));
-  }
+                 rise.data(), r_cells, [&out](double v) { out.push(v); });
+  out.finish();
 }
 
 std::vector<double> ground_grid_every_sample(const GridPathView& path,
                                              const UniformProfile& profile, const Wheel& wheel) {
-  std::vector<double> b(profile.size());
-  ground_grid_chunks(path, profile, wheel, [&b](std::size_t first, std::span<const double> chunk) {
-    std::copy(chunk.begin(), chunk.end(), b.begin() + static_cast<std::ptrdiff_t>(first));
+  return collect_chunks(profile.size(), [&](const ChunkVisitor& visit) {
+    ground_grid_chunks(path, profile, wheel, visit);
   });
-  return b;
 }
 
 std::vector<double> ground_grid_brute(const GridPathView& path, const UniformProfile& profile,

@@ -28,10 +28,10 @@
 #pragma once
 
 #include <cstddef>
-#include <functional>
 #include <span>
 #include <vector>
 
+#include "core/grind/chunks.hpp"
 #include "core/grind/profile.hpp"
 #include "core/grind/verify.hpp"
 #include "core/grind/wheel.hpp"
@@ -51,9 +51,8 @@ struct GridPathView {
 /// the profile's (same spacing, origins an integer number of samples apart; the path may start
 /// before or after the profile and extend beyond it). Throws std::invalid_argument on an empty
 /// path, a non-finite height, or grids that differ.
-void ground_grid_chunks(
-    const GridPathView& path, const UniformProfile& profile, const Wheel& wheel,
-    const std::function<void(std::size_t first, std::span<const double> b_mm)>& visit);
+void ground_grid_chunks(const GridPathView& path, const UniformProfile& profile,
+                        const Wheel& wheel, const ChunkVisitor& visit);
 
 /// The same B as one array of profile.size() values.
 std::vector<double> ground_grid_every_sample(const GridPathView& path,
