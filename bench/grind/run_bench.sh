@@ -22,13 +22,7 @@ repeats=${4:-3}
 mkdir -p "$work"
 src=$(cd "$(dirname "$0")/../.." && pwd)
 
-echo "== machine"
-echo "date: $(date -u +%Y-%m-%dT%H:%M:%SZ)"
-echo "commit: $(git -C "$src" rev-parse HEAD)"
-lscpu | grep -E '^(CPU\(s\)|Model name|Thread\(s\) per core):' || true
-uname -r
-g++ --version | head -1
-echo "load before: $(cut -d' ' -f1-3 /proc/loadavg)"
+. "$(dirname "$0")/machine.sh"
 
 csv=$work/crown2e7.csv
 if [ ! -s "$csv" ]; then

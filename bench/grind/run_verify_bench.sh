@@ -19,13 +19,7 @@ repeats=${3:-3}
 mkdir -p "$work"
 src=$(cd "$(dirname "$0")/../.." && pwd)
 
-echo "== machine"
-echo "date: $(date -u +%Y-%m-%dT%H:%M:%SZ)"
-echo "commit: $(git -C "$src" rev-parse HEAD)$(git -C "$src" diff --quiet -- core/grind tools/grind || echo ' + uncommitted core/grind, tools/grind')"
-lscpu | grep -E '^(CPU\(s\)|Model name|Thread\(s\) per core):' || true
-uname -r
-g++ --version | head -1
-echo "uptime before: $(uptime)"
+. "$(dirname "$0")/machine.sh"
 
 family="--family convex --height-mm 0.6 --z-from-mm -1000 --z-to-mm 1000 --spacing-mm 0.0001"
 
@@ -52,4 +46,4 @@ while [ "$r" -le "$repeats" ]; do
   done
   r=$((r + 1))
 done
-echo "uptime after: $(uptime)"
+echo "load after: $(cut -d' ' -f1-3 /proc/loadavg)"
