@@ -304,7 +304,40 @@ TEST_F(DecoderTest, RejectsWrongLengthOutOfRangeAndNaNWithoutChangingState) {
   EXPECT_NEAR(t.temperature_c, 12.34, 1e-9);
 }
 
+// Pins: a frame is validated as a whole before any of its signals is applied. The rejected
+// frames below feed the axis sample without emitting it, and the frame that emits it (0x102)
+// carries none of their signals, so a value applied from a rejected frame would show in the
+// emitted sample. Each rejected frame has valid signals before and after the bad one.
 TEST_F(DecoderTest, RejectedFrameLeavesLatestValuesAlone) {
+  // X 123.4567 mm, Y -1 mm; path 2500 mm, normal (0.6, 0, 0.8).
+  ASSERT_EQ(feed(0x100, {0x87, 0xD6, 0x12, 0x00, 0xF0, 0xD8, 0xFF, 0xFF}).reject,
+            RejectReason::kNone);
+  ASSERT_EQ(feed(0x101, {0xA0, 0x25, 0x26, 0x00, 0x70, 0x17, 0x00, 0x00}).reject,
+            RejectReason::kNone);
+  ASSERT_EQ(feed(0x103, {0x40, 0x1F}).reject, RejectReason::kNone);
+  // X 50 mm (valid), Y 6000 mm (beyond max 5000).
+  EXPECT_EQ(feed(0x100, {0x20, 0xA1, 0x07, 0x00, 0x00, 0x87, 0x93, 0x03}).reject,
+            RejectReason::kOutOfRange);
+  // X 6000 mm (beyond max 5000), Y 2 mm (valid).
+  EXPECT_EQ(feed(0x100, {0x00, 0x87, 0x93, 0x03, 0x20, 0x4E, 0x00, 0x00}).reject,
+            RejectReason::kOutOfRange);
+  // Path 3000 mm and normal_x 0.8 (valid), normal_y 1.5 (beyond max 1).
+  EXPECT_EQ(feed(0x101, {0xC0, 0xC6, 0x2D, 0x00, 0x40, 0x1F, 0x98, 0x3A}).reject,
+            RejectReason::kOutOfRange);
+  // Z 10 mm, tool 7, cutting: emits the sample with the values of the accepted frames only.
+  const auto r = feed(0x102, {0xA0, 0x86, 0x01, 0x00, 0x07, 0x00, 0x01, 0x00}, 6000);
+  ASSERT_TRUE(r.emitted);
+  const auto& s = std::get<core::AxisSample>(out_);
+  EXPECT_NEAR(s.position_mm[0], 123.4567, 1e-9);
+  EXPECT_NEAR(s.position_mm[1], -1.0, 1e-9);
+  EXPECT_NEAR(s.position_mm[2], 10.0, 1e-9);
+  EXPECT_NEAR(s.program_path_mm, 2500.0, 1e-9);
+  EXPECT_NEAR(s.normal[0], 0.6, 1e-12);
+  EXPECT_NEAR(s.normal[1], 0.0, 1e-12);
+  EXPECT_NEAR(s.normal[2], 0.8, 1e-12);
+}
+
+TEST_F(DecoderTest, ProbeMeasurementCompletedByTheNextGoodFrameAfterARejectedOne) {
   ASSERT_FALSE(
       feed(0x120, {0x05, 0, 0, 0, 0x03, 0x00, 0xB8, 0x0B}).emitted);  // part 5, cp 3, r 3 mm
   // A bad second part frame: angle 100° > 90 → rejected; the next good one completes.

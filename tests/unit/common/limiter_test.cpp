@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <limits>
 
 #include "tests/support/alloc_counter.hpp"
@@ -92,6 +93,73 @@ TEST(OffsetLimiter, GivenRestartWithNcValue_WhenReset_ThenContinuesFromIt) {
   l.reset(42.0, 5000 * kMs);
   const auto r = l.apply(43.0, 6000 * kMs);
   EXPECT_DOUBLE_EQ(r.value_um, 43.0);
+}
+
+// Pins: the elapsed time is never negative. A write stamped before the previous one (a clock
+// step, a reordered event) is allowed no change at all; taken literally, −10 s × 50 µm/s is a
+// "budget" of −500 µm whose sign flips into a 500 µm move, beyond both limits.
+TEST(OffsetLimiter, GivenAWriteStampedBeforeTheLastOne_WhenApplied_ThenNothingMoves) {
+  OffsetLimiter l;
+  l.configure({200.0, 5.0, 50.0});
+  l.reset(0.0, 10'000 * kMs);
+  auto r = l.apply(10.0, 0);
+  EXPECT_EQ(r.verdict, LimitVerdict::kSlewed);
+  EXPECT_DOUBLE_EQ(r.value_um, 0.0);
+  EXPECT_DOUBLE_EQ(l.output_um(), 0.0);
+  // The same from a non-zero output toward a smaller target.
+  l.reset(20.0, 10'000 * kMs);
+  r = l.apply(-30.0, 9'000 * kMs);
+  EXPECT_DOUBLE_EQ(r.value_um, 20.0);
+  EXPECT_EQ(l.counters().slewed, 2U);
+}
+
+// Pins: ±max_abs_um itself is inside the limit (apply() agrees with admissible(), which the
+// modules use to refuse a measurement before it changes state); one ulp beyond is rejected.
+TEST(OffsetLimiter, GivenExactlyTheAbsoluteLimit_WhenApplied_ThenPassed) {
+  auto l = make(100.0, 5.0, 50.0);
+  l.reset(98.0, 0);
+  auto r = l.apply(100.0, 1000 * kMs);
+  EXPECT_EQ(r.verdict, LimitVerdict::kPassed);
+  EXPECT_DOUBLE_EQ(r.value_um, 100.0);
+  EXPECT_TRUE(l.admissible(100.0));
+  l.reset(-98.0, 2000 * kMs);
+  r = l.apply(-100.0, 3000 * kMs);
+  EXPECT_EQ(r.verdict, LimitVerdict::kPassed);
+  EXPECT_DOUBLE_EQ(r.value_um, -100.0);
+  EXPECT_TRUE(l.admissible(-100.0));
+  const double beyond = std::nextafter(100.0, 200.0);
+  EXPECT_FALSE(l.admissible(beyond));
+  r = l.apply(beyond, 4000 * kMs);
+  EXPECT_EQ(r.verdict, LimitVerdict::kRejectedAbsolute);
+  EXPECT_DOUBLE_EQ(r.value_um, -100.0);
+  EXPECT_EQ(l.counters().rejected_absolute, 1U);
+}
+
+// Pins: the limiter never holds a non-finite output, whatever reset() is given (a read-back is
+// filtered by its callers today; the limiter must not rely on that). After reset(NaN / ±inf)
+// the output is finite and inside ±max_abs_um, and the next writes are finite and move it by at
+// most max_step_um.
+TEST(OffsetLimiter, GivenANonFiniteNcValue_WhenReset_ThenTheOutputStaysFinite) {
+  const double inf = std::numeric_limits<double>::infinity();
+  for (const double bad : {std::numeric_limits<double>::quiet_NaN(), inf, -inf}) {
+    SCOPED_TRACE(bad);
+    auto l = make(100.0, 5.0, 50.0);
+    l.reset(42.0, 0);
+    l.reset(bad, 1000 * kMs);
+    const double held = l.output_um();
+    EXPECT_TRUE(std::isfinite(held));
+    EXPECT_LE(std::fabs(held), 100.0);
+    EXPECT_TRUE(l.admissible(held));
+    for (int i = 1; i <= 3; ++i) {
+      const double before = l.output_um();
+      const auto r = l.apply(60.0, (1000 + 1000 * i) * kMs);
+      EXPECT_TRUE(std::isfinite(r.value_um));
+      EXPECT_FALSE(r.rejected());
+      EXPECT_LE(std::fabs(r.value_um - before), 5.0);
+    }
+    // Nothing was counted for the reset: it is not a write.
+    EXPECT_EQ(l.counters().rejected_non_finite, 0U);
+  }
 }
 
 TEST(OffsetLimiter, ApplyAllocatesNothing) {

@@ -255,6 +255,36 @@ TEST(CreepToolLife, AWearBeyondTheAbsoluteLimitIsRefusedAndChangesNothing) {
   EXPECT_NEAR(r.z(), -20.0, 1e-9);
 }
 
+// Pins: the admissibility check counts the deflection the module adds on top of the wear. A
+// reading of 48 µm is inside the 50 µm limit, but the offset it asks for is 48 + 4 µm of normal
+// deflection (+ 10 µm lateral): it must be refused before it changes the module's state, not
+// accepted and then held back by the limiter with the state already moved.
+TEST(CreepToolLife, AWearWithinTheLimitThatTheDeflectionPushesBeyondItIsRefused) {
+  auto c = base_config();
+  c.limiter.max_abs_um = 50.0;
+  c.tool_life.min_expected_increment_um = 100.0;
+  c.deflection = {{0, {0.0, 20.0}, {0.0, 4.0}, {0.0, 10.0}}};
+  Rig r(c);
+  r.measure({20.0});  // 20 + 4 + 10 = 34 µm: accepted
+  r.run_to(100.0);
+  ASSERT_NEAR(r.z(), -24.0, 1e-9);
+  const CreepState before = r.comp.export_state();
+  r.measure({48.0});
+  EXPECT_EQ(r.count(AlarmCode::kOffsetBeyondAbsoluteLimit), 1U);
+  EXPECT_EQ(r.comp.counters().measurements_accepted, 1U);
+  EXPECT_EQ(r.comp.counters().measurements_refused, 1U);
+  EXPECT_NEAR(r.last_write(11), 1.0, 0.0);
+  const CreepState& after = r.comp.state();
+  EXPECT_EQ(after.measured_um[0], before.measured_um[0]);
+  EXPECT_EQ(after.committed_um[0], before.committed_um[0]);
+  EXPECT_EQ(after.measurements, before.measurements);
+  EXPECT_EQ(after.history_count, before.history_count);
+  EXPECT_EQ(after.next_seq, before.next_seq);
+  EXPECT_EQ(after.last_measurement_cut_path_mm, before.last_measurement_cut_path_mm);
+  r.run_to(200.0);
+  EXPECT_NEAR(r.z(), -24.0, 1e-9);
+}
+
 TEST(CreepToolLife, AMeasurementOfAnotherToolIsLoggedNotApplied) {
   Rig r(base_config());
   ToolMeasurement m;

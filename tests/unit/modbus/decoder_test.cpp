@@ -467,8 +467,8 @@ max = 80
   EXPECT_EQ(count(ev, core::AxisSample{}), 1U);
 }
 
-TEST(ModbusDecoderNormal, AllZeroIsNoNormalAnyOtherNonUnitVectorDropsTheSample) {
-  // GIVEN the reference map's encoding: three int16 components in 1/10000
+// The reference map's encoding of the surface normal: three int16 components in 1/10000.
+struct ModbusDecoderNormal : ::testing::Test {
   const ModbusConfig c = parse_modbus_config(R"([modbus]
 transport = "tcp"
 [modbus.axis]
@@ -478,12 +478,13 @@ normal_y = { table = "input", address = 2, type = "int16", scale = 0.0001 }
 normal_z = { table = "input", address = 3, type = "int16", scale = 0.0001 }
 )",
                                              "t.toml");
-  PollDecoder dec(c);
-  std::vector<std::uint8_t> ok(c.blocks.size(), 1);
-  ASSERT_EQ(c.blocks.size(), 1U);
-  auto axis = dec.block(0);
-  const auto sample = [&](std::int16_t nx, std::int16_t ny, std::int16_t nz,
-                          core::TimeNs t) -> std::vector<core::AxisSample> {
+  PollDecoder dec{c};
+  std::vector<std::uint8_t> ok = std::vector<std::uint8_t>(c.blocks.size(), 1);
+
+  // The axis samples one poll with these normal registers decodes to.
+  std::vector<core::AxisSample> sample(std::int16_t nx, std::int16_t ny, std::int16_t nz,
+                                       core::TimeNs t) {
+    auto axis = dec.block(0);
     axis[0] = 1234;  // 12.34 mm
     axis[1] = static_cast<std::uint16_t>(nx);
     axis[2] = static_cast<std::uint16_t>(ny);
@@ -493,7 +494,11 @@ normal_z = { table = "input", address = 3, type = "int16", scale = 0.0001 }
       if (const auto* p = std::get_if<core::AxisSample>(&e)) out.push_back(*p);
     }
     return out;
-  };
+  }
+};
+
+TEST_F(ModbusDecoderNormal, AllZeroIsNoNormalAnyOtherNonUnitVectorDropsTheSample) {
+  ASSERT_EQ(c.blocks.size(), 1U);
   // A unit normal at 30° (rounded to 1/10000): passed on, renormalised.
   auto s = sample(5000, 0, 8660, 1);
   ASSERT_EQ(s.size(), 1U);
@@ -509,10 +514,42 @@ normal_z = { table = "input", address = 3, type = "int16", scale = 0.0001 }
   EXPECT_EQ(dec.counters().values_invalid, 0U);
   // WHEN the vector is neither 0 nor of unit length (a half-written or garbled normal)
   // THEN the sample is dropped and counted, each time.
-  EXPECT_TRUE(sample(0, 0, 1, 3).empty());      // 0.0001: not zero, not unit
-  EXPECT_TRUE(sample(5000, 0, 0, 4).empty());   // 0.5
+  EXPECT_TRUE(sample(0, 0, 1, 3).empty());        // 0.0001: not zero, not unit
+  EXPECT_TRUE(sample(5000, 0, 0, 4).empty());     // 0.5
   EXPECT_TRUE(sample(8000, 0, 8000, 5).empty());  // 1.13
   EXPECT_EQ(dec.counters().values_invalid, 3U);
+}
+
+// Pins the documented tolerance (docs/modbus.md: a unit vector ±1 % for the registers' rounding):
+// lengths within 1 % pass and are renormalised, 1.5 % or 8 % off is a garbled normal.
+TEST_F(ModbusDecoderNormal, UnitLengthWithinOnePercentPassesBeyondItDropsTheSample) {
+  struct Case {
+    std::int16_t nx, nz;
+    double length;  // independently: sqrt(nx² + nz²) / 10000
+    bool passes;
+  };
+  const Case cases[] = {
+      {0, 9950, 0.995, true},  {0, 10050, 1.005, true},  {6000, 8040, 1.00320, true},
+      {0, 9850, 0.985, false}, {0, 10150, 1.015, false}, {6000, 7800, 0.98408, false},
+      {0, 9200, 0.92, false},  {0, 10800, 1.08, false},
+  };
+  core::TimeNs t = 1;
+  std::uint64_t dropped = 0;
+  for (const Case& k : cases) {
+    SCOPED_TRACE(k.length);
+    ASSERT_NEAR(std::hypot(k.nx, k.nz) / 10000.0, k.length, 1e-5);
+    const auto s = sample(k.nx, 0, k.nz, t++);
+    if (k.passes) {
+      ASSERT_EQ(s.size(), 1U);
+      EXPECT_TRUE(s[0].has_normal);
+      EXPECT_NEAR(s[0].normal[0], k.nx / 10000.0 / k.length, 1e-5);
+      EXPECT_NEAR(s[0].normal[2], k.nz / 10000.0 / k.length, 1e-5);
+    } else {
+      EXPECT_TRUE(s.empty());
+      ++dropped;
+    }
+    EXPECT_EQ(dec.counters().values_invalid, dropped);
+  }
 }
 
 TEST(ModbusDecoderProfile, WearProfileOverEdgeSupportPoints) {

@@ -34,6 +34,9 @@ struct Options {
   bool tool_wear_rows{false};
   /// An extra column spindle_rpm (one speed per part); the effect thermal_speed follows it.
   bool speed_column{false};
+  /// Serial correlation of the probe noise: each checkpoint's noise is an AR(1) series from part
+  /// to part with this coefficient and standard deviation noise_um (0: independent noise).
+  double noise_ar1_rho{0.0};
 };
 
 /// True wear [µm] of `tool` at edge point `point` after `path_mm` of cut: a break-in over 300 mm
@@ -169,6 +172,9 @@ inline cm::Dataset generate(const Options& opt) {
   }
   const double run_s = rows.empty() ? 0.0 : rows.back()[0];
   double lag = 0.0;  // thermal_speed: the lag of the rows' speed, held between rows
+  std::vector<double> point_noise(opt.points_per_part, 0.0);  // AR(1) state per checkpoint
+  std::vector<std::uint8_t> point_seen(opt.points_per_part, 0);
+  const double innovation = std::sqrt(1.0 - opt.noise_ar1_rho * opt.noise_ar1_rho);
   for (std::size_t i = 0; i < rows.size(); ++i) {
     const cm::Row& r = rows[i];
     if (i == 0) {
@@ -180,7 +186,12 @@ inline cm::Dataset generate(const Options& opt) {
     if (r[3] < 0.5) {  // tool_wear
       y = tool_wear_um(static_cast<int>(r[2]), static_cast<int>(r[4]), r[9]) + 0.3 * gauss(rng);
     } else {
-      y = point_offset[static_cast<std::size_t>(r[4])] + opt.noise_um * gauss(rng);
+      const auto k = static_cast<std::size_t>(r[4]);
+      double& noise = point_noise[k];
+      const double z = opt.noise_um * gauss(rng);
+      noise = point_seen[k] != 0U ? opt.noise_ar1_rho * noise + innovation * z : z;
+      point_seen[k] = 1;
+      y = point_offset[k] + noise;
       for (const auto& e : opt.effects) {
         y += e == "thermal_speed" ? kSpeedGainUmPerRpm * lag : effect_um(e, r, run_s);
       }
