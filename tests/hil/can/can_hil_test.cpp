@@ -503,6 +503,74 @@ TEST_F(CanHil, BusOffWithDaemonRestartRequestsRestartOverNetlink) {
   EXPECT_EQ(st().can.bus_recoveries, 1U);
 }
 
+// Reconnect back-off (issue 17, finding 7): with waits from `min_s` doubling to `max_s`, at most
+// ceil(log2(max / min)) + t / max attempts fit in t seconds after the fault (the waits below the
+// cap, then one per capped wait).
+int max_attempts(double min_s, double max_s, double t_s) {
+  return static_cast<int>(std::ceil(std::log2(max_s / min_s))) + static_cast<int>(t_s / max_s);
+}
+
+// GIVEN restart = "daemon" on vcan (every restart request refused), restart_delay_s 0.01 and
+// reconnect_max_s 0.2, WHEN the bus stays off for 2 s, THEN the requests follow the back-off
+// (at most 15; a fixed 0.01 s period would make 200) and status shows it at the cap.
+TEST_F(CanHil, BusOffRestartRequestsBackOffToTheCap) {
+  CanConfig c = reference();
+  c.restart = RestartMode::kDaemon;
+  c.restart_delay_s = 0.01;
+  c.reconnect_max_s = 0.2;
+  c.reconnect_reset_after_s = 60.0;
+  start(std::move(c));
+  const auto t0 = std::chrono::steady_clock::now();
+  ASSERT_EQ(sh("cansend vcan0 20000040#0000000000000000"), 0);
+  std::this_thread::sleep_for(2s);
+  const CanStatus s = st();
+  const double t = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::printf("%llu restart requests in %.2f s (bound %d)\n",
+              static_cast<unsigned long long>(s.can.restart_requests), t,
+              max_attempts(0.01, 0.2, t));
+  EXPECT_LE(s.can.restart_requests, static_cast<std::uint64_t>(max_attempts(0.01, 0.2, t)));
+  EXPECT_GE(s.can.restart_requests, 4U);
+  EXPECT_EQ(s.can.restart_failures, s.can.restart_requests);
+  // One wait for the bus-off, one after each refused request.
+  EXPECT_EQ(s.can.reconnect_backoffs, 1 + s.can.restart_failures);
+  EXPECT_EQ(s.can.reconnect_backoff_ms, 200U);
+  EXPECT_EQ(s.bus.state, LinkState::kDown);
+  ASSERT_EQ(sh("cansend vcan0 160#0200D204"), 0);  // traffic: the controller is back
+  ASSERT_TRUE(wait_until([&] { return st().bus.state == LinkState::kUp; }));
+}
+
+// GIVEN an interface that goes down and up again and again (a loose connector), link_check_s
+// 0.01 and reconnect_max_s 0.2, WHEN it flaps for 2 s, THEN the driver rebinds on the back-off
+// schedule, not at every check, and is back once the interface stays up.
+TEST_F(CanHil, FlappingInterfaceIsReboundOnTheBackOffSchedule) {
+  CanConfig c = reference();
+  c.link_check_s = 0.01;
+  c.reconnect_max_s = 0.2;
+  c.reconnect_reset_after_s = 60.0;
+  c.alarm_after_s = 60.0;
+  start(std::move(c));
+  std::uint64_t rebinds = 0;
+  double t = 0.0;
+  {
+    const auto t0 = std::chrono::steady_clock::now();
+    Peer flap("while :; do ip link set vcan0 down; ip link set vcan0 up; sleep 0.02; done");
+    std::this_thread::sleep_for(2s);
+    rebinds = st().bus.counters.reconnects;
+    t = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  }
+  const CanStatus s = st();
+  std::printf("%llu interface losses, %llu rebinds in %.2f s (bound %d)\n",
+              static_cast<unsigned long long>(s.can.interface_down),
+              static_cast<unsigned long long>(rebinds), t, max_attempts(0.01, 0.2, t));
+  ASSERT_GE(s.can.interface_down, 2U) << "the flapping was not seen";
+  EXPECT_LE(rebinds, static_cast<std::uint64_t>(max_attempts(0.01, 0.2, t)));
+  EXPECT_GE(s.can.reconnect_backoffs, s.can.interface_down);
+  ASSERT_EQ(sh("ip link set vcan0 up"), 0);
+  ASSERT_TRUE(wait_until([&] { return st().bus.state == LinkState::kUp; }));
+  ASSERT_EQ(sh("cansend vcan0 160#0200D204"), 0);
+  ASSERT_TRUE(wait_until([&] { return st().bus.counters.events_decoded == 1; }));
+}
+
 TEST_F(CanHil, InterfaceDownAndUpWhileRunningResendsPendingOffset) {
   CanConfig cfg = reference();
   cfg.ack_timeout_s = 1.0;  // a loaded TCG VM can stall the acknowledging peer for 100+ ms
