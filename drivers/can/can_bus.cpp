@@ -4,6 +4,7 @@
 #include <linux/can/error.h>
 #include <linux/can/netlink.h>
 #include <linux/can/raw.h>
+#include <linux/capability.h>
 #include <linux/if_link.h>
 #include <linux/netlink.h>
 #include <linux/rtnetlink.h>
@@ -12,10 +13,12 @@
 #include <sys/eventfd.h>
 #include <sys/ioctl.h>
 #include <sys/socket.h>
+#include <sys/syscall.h>
 #include <time.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <cerrno>
 #include <chrono>
 #include <cstring>
@@ -181,6 +184,20 @@ void CanBus::start() {
         throw std::runtime_error("can: " + r.origin.key_path +
                                  ": ID 0x7F0/0x7F1 is reserved for lock-step SYNC / SYNC-ACK");
       }
+    }
+  }
+  if (config_.restart == RestartMode::kDaemon) {
+    // Refused here rather than found out at the first bus-off, which would then never end.
+    const std::string missing = restart_permission_problem();
+    if (!missing.empty()) {
+      throw std::runtime_error(
+          "can: " + config_.interface +
+          ": can.restart = \"daemon\" needs CAP_NET_ADMIN and an AF_NETLINK socket to request "
+          "bus-off restarts, and this process has " +
+          missing +
+          ". Under systemd install the drop-in nccompd-can-restart.conf as "
+          "/etc/systemd/system/nccompd.service.d/can-restart.conf (docs/can.md), or use "
+          "restart = \"kernel\" with the interface's restart-ms");
     }
   }
   open_socket();
@@ -745,6 +762,28 @@ void CanBus::recovered() noexcept {
   }
   backoff_until_ns_ = 0;
   backoff_ns_ = 0;
+}
+
+std::string restart_permission_problem() {
+  std::string missing;
+  __user_cap_header_struct header{};
+  header.version = _LINUX_CAPABILITY_VERSION_3;
+  std::array<__user_cap_data_struct, _LINUX_CAPABILITY_U32S_3> caps{};
+  if (::syscall(SYS_capget, &header, caps.data()) != 0 ||
+      (caps[CAP_TO_INDEX(CAP_NET_ADMIN)].effective & CAP_TO_MASK(CAP_NET_ADMIN)) == 0) {
+    missing = "no CAP_NET_ADMIN in its effective capabilities";
+  }
+  // RestrictAddressFamilies= (seccomp) makes socket() fail with EAFNOSUPPORT.
+  const int nl = ::socket(AF_NETLINK, SOCK_RAW | SOCK_CLOEXEC, NETLINK_ROUTE);
+  if (nl < 0) {
+    const int e = errno;
+    missing += missing.empty() ? "" : "; ";
+    missing += "AF_NETLINK sockets refused: ";
+    missing += errno_text(e);
+  } else {
+    ::close(nl);
+  }
+  return missing;
 }
 
 int request_can_restart(int ifindex) noexcept {

@@ -27,6 +27,7 @@
 #include <memory>
 #include <mutex>
 #include <span>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -90,7 +91,8 @@ class CanBus final : public Bus {
   CanBus& operator=(const CanBus&) = delete;
 
   /// Opens the socket (throws std::runtime_error naming the interface if it cannot: no such
-  /// interface, no AF_CAN, FD mapping on a classic interface) and starts the I/O thread.
+  /// interface, no AF_CAN, FD mapping on a classic interface, restart = "daemon" without the
+  /// rights it needs, see restart_permission_problem()) and starts the I/O thread.
   void start() override;
   void stop() override;
 
@@ -208,6 +210,12 @@ inline constexpr std::array<const char*, 26> kCanCounterNames{
     "tx_unencodable",        "tx_unmapped",
     "lockstep_syncs",        "lockstep_sync_acks",
     "reconnect_backoffs",    "reconnect_backoff_ms"};
+
+/// What keeps this process from asking for bus-off restarts (restart = "daemon"): "" if nothing,
+/// else what is missing ("no CAP_NET_ADMIN in its effective capabilities", "AF_NETLINK sockets
+/// refused: ...", both joined by "; "). The shipped systemd unit allows neither; the drop-in
+/// systemd/nccompd-can-restart.conf does. Not real-time.
+std::string restart_permission_problem();
 
 /// Asks the kernel to restart a CAN controller out of bus-off (netlink IFLA_CAN_RESTART, as
 /// `ip link set canX type can restart`). Returns 0 or the errno. Not real-time.
