@@ -385,7 +385,7 @@ ModbusConfig parse_modbus_table(const toml::table& m, std::string_view file,
   const Reader r(table_file);
   const toml::node* mnode = &m;
   const std::string mp = "modbus";
-  static constexpr std::array<std::string_view, 32> kTopKeys = {"transport",
+  static constexpr std::array<std::string_view, 33> kTopKeys = {"transport",
                                                                 "host",
                                                                 "port",
                                                                 "device",
@@ -401,6 +401,7 @@ ModbusConfig parse_modbus_table(const toml::table& m, std::string_view file,
                                                                 "offset_write_rate_hz",
                                                                 "reconnect_min_s",
                                                                 "reconnect_max_s",
+                                                                "reconnect_reset_after_s",
                                                                 "dead_after_failures",
                                                                 "verify_writes",
                                                                 "alarm_after_s",
@@ -467,6 +468,14 @@ ModbusConfig parse_modbus_table(const toml::table& m, std::string_view file,
   c.reconnect_max_s = r.number(m, mp, "reconnect_max_s", 5.0, 0.001, 600.0);
   if (c.reconnect_max_s < c.reconnect_min_s) {
     r.fail(m.get("reconnect_max_s"), "modbus.reconnect_max_s", "smaller than reconnect_min_s");
+  }
+  // Shorter than the cap, a peer that drops each connection just after that long would get
+  // reconnects more often than reconnect_max_s allows.
+  c.reconnect_reset_after_s =
+      r.number(m, mp, "reconnect_reset_after_s", std::max(10.0, c.reconnect_max_s), 0.001, 86400.0);
+  if (c.reconnect_reset_after_s < c.reconnect_max_s) {
+    r.fail(m.get("reconnect_reset_after_s"), "modbus.reconnect_reset_after_s",
+           "smaller than reconnect_max_s");
   }
   c.dead_after_failures =
       static_cast<std::uint32_t>(r.integer(m, mp, "dead_after_failures", 3, 1, 1000));

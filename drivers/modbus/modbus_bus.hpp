@@ -11,8 +11,10 @@
 //
 // Faults: response and byte timeouts from the config; exception responses are counted per code;
 // garbage (bad CRC, wrong transaction id, wrong length) is counted and the input flushed;
-// dead_after_failures consecutive timeouts / garbage, or a socket error, drop the connection and
-// reconnect with exponential back-off between reconnect_min_s and reconnect_max_s.
+// dead_after_failures consecutive timeouts / garbage, or a socket error, drop the connection.
+// However it was lost (or a connect failed), the next connect waits the back-off, which doubles
+// from reconnect_min_s to reconnect_max_s and returns to reconnect_min_s only after a connection
+// stayed healthy for reconnect_reset_after_s (drivers/reconnect_backoff.hpp).
 //
 // libmodbus blocks in select() up to its timeouts, which is why none of this runs on the loop
 // thread: the loop thread only uses rx(), tx() and status(), all wait-free.
@@ -41,6 +43,7 @@
 #include "drivers/bus.hpp"
 #include "drivers/modbus/config.hpp"
 #include "drivers/modbus/decoder.hpp"
+#include "drivers/reconnect_backoff.hpp"
 
 namespace nccomp::drivers::modbus {
 
@@ -58,6 +61,8 @@ struct ModbusStatus {
   std::uint64_t bad_responses{0};      // wrong transaction id / length / unit / function
   std::uint64_t connection_errors{0};  // socket / device errors, failed connects
   std::uint64_t connect_attempts{0};   // connects tried (first one, reconnects, read-back)
+  // Back-off waits: one per lost connection or failed connect.
+  std::uint64_t reconnect_backoffs{0};
   std::uint64_t polls{0};
   std::uint64_t poll_overruns{0};    // a poll period ended before the poll and writes did
   std::uint64_t events_lost{0};      // events a sequence counter skipped (jumps > 1, NC restart)
@@ -76,6 +81,8 @@ struct ModbusStatus {
   std::uint32_t io_sched_fifo_priority{0};  // its SCHED_FIFO priority; 0 = not SCHED_FIFO
   std::uint32_t io_sched_errno{0};          // io_sched_fifo_priority refused with this errno
   std::uint32_t io_affinity_errno{0};       // io_cpu_affinity refused with this errno
+  // The wait the next lost connection will get while the back-off is raised, 0 at its minimum.
+  std::uint32_t reconnect_backoff_ms{0};
 };
 
 /// What the I/O thread asked for at start and what it got (read back from the kernel).
@@ -101,7 +108,7 @@ struct IoSetupLine {
 std::vector<IoSetupLine> describe_io_setup(const IoThreadSetup& setup, const ModbusConfig& config);
 
 /// Names of ModbusBus::extra_counters(), in their order (static strings, for status output).
-inline constexpr std::array<const char*, 28> kModbusCounterNames = {
+inline constexpr std::array<const char*, 30> kModbusCounterNames = {
     "exception_illegal_function",      // 1
     "exception_illegal_address",       // 2
     "exception_illegal_value",         // 3
@@ -119,6 +126,7 @@ inline constexpr std::array<const char*, 28> kModbusCounterNames = {
     "bad_responses",
     "connection_errors",
     "connect_attempts",
+    "reconnect_backoffs",
     "poll_overruns",
     "events_lost",
     "sequence_resets",
@@ -128,7 +136,8 @@ inline constexpr std::array<const char*, 28> kModbusCounterNames = {
     "offsets_rejected",
     "verify_mismatches",
     // clang-format on
-    "offsets_pending",  // a gauge: offsets not yet confirmed on the NC now
+    "offsets_pending",       // a gauge: offsets not yet confirmed on the NC now
+    "reconnect_backoff_ms",  // a gauge: the raised back-off, 0 at reconnect_min_s
     // Gauges set once at start: the I/O thread's scheduling (docs/modbus.md).
     "io_sched_fifo_priority",  // its SCHED_FIFO priority, 0 = normal scheduling
     "io_sched_errno",          // errno of a refused io_sched_fifo_priority (1 = EPERM), else 0
@@ -225,8 +234,10 @@ class ModbusBus final : public Bus {
   /// I/O thread, first thing: applies io_sched_fifo_priority / io_cpu_affinity, records the result.
   void setup_io_thread();
   void run_lockstep();
-  /// Connects if needed (lock-step); false while not connected.
-  bool ensure_connected(double& backoff_s, bool& ever_connected);
+  /// Connects if needed, first waiting out the back-off; false while not connected.
+  bool ensure_connected(bool& ever_connected);
+  /// The connection was lost, or a connect failed, at now_ns: schedules the next connect.
+  void lost(core::TimeNs now_ns);
   /// Loop thread: posts a request and waits for its completion.
   bool request(std::uint64_t& req, const std::uint64_t& done, const bool& ok,
                core::TimeNs timeout_ns);
@@ -263,10 +274,10 @@ class ModbusBus final : public Bus {
   std::vector<OffsetSlot> slots_;
   ModbusStatus st_{};
   std::uint32_t consecutive_failures_{0};
-  // The current connection got at least one answer (data or an exception response): a link that
-  // drops before that is reconnected only after the back-off, so that a peer that accepts and
-  // hangs up cannot make the thread spin (at SCHED_FIFO it would starve every normal thread).
-  bool answered_since_connect_{false};
+  ReconnectBackoff backoff_;
+  core::TimeNs next_connect_ns_{0};
+  // A transaction of this cycle timed out, was garbled or lost the connection: not healthy.
+  bool cycle_failed_{false};
   core::TimeNs down_since_ns_{0};
   core::TimeNs last_frame_end_ns_{0};
   core::rt::SpscRing<CycleRecord>* cycle_log_{nullptr};

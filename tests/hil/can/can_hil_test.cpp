@@ -2,14 +2,19 @@
 // write: can-utils (cansend, candump, cangen, canplayer) and python3-can. Needs a vcan0 that is
 // up and `ip` rights: run through tests/hil/can/run_hil.sh (a VM where the kernel has no CAN).
 #include <gtest/gtest.h>
+#include <net/if.h>
+#include <sys/ioctl.h>
+#include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <fstream>
 #include <functional>
 #include <memory>
@@ -501,6 +506,90 @@ TEST_F(CanHil, BusOffWithDaemonRestartRequestsRestartOverNetlink) {
   ASSERT_EQ(sh("cansend vcan0 160#0200D204"), 0);
   ASSERT_TRUE(wait_until([&] { return st().bus.state == LinkState::kUp; }));
   EXPECT_EQ(st().can.bus_recoveries, 1U);
+}
+
+// Reconnect back-off (issue 17, finding 7): with waits from `min_s` doubling to `max_s`, at most
+// ceil(log2(max / min)) + t / max attempts fit in t seconds after the fault (the waits below the
+// cap, then one per capped wait).
+int max_attempts(double min_s, double max_s, double t_s) {
+  return static_cast<int>(std::ceil(std::log2(max_s / min_s))) + static_cast<int>(t_s / max_s);
+}
+
+// GIVEN restart = "daemon" on vcan (every restart request refused), restart_delay_s 0.01 and
+// reconnect_max_s 0.2, WHEN the bus stays off for 2 s, THEN the requests follow the back-off
+// (at most 15; a fixed 0.01 s period would make 200) and status shows it at the cap.
+TEST_F(CanHil, BusOffRestartRequestsBackOffToTheCap) {
+  CanConfig c = reference();
+  c.restart = RestartMode::kDaemon;
+  c.restart_delay_s = 0.01;
+  c.reconnect_max_s = 0.2;
+  c.reconnect_reset_after_s = 60.0;
+  start(std::move(c));
+  const auto t0 = std::chrono::steady_clock::now();
+  ASSERT_EQ(sh("cansend vcan0 20000040#0000000000000000"), 0);
+  std::this_thread::sleep_for(2s);
+  const CanStatus s = st();
+  const double t = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::printf("%llu restart requests in %.2f s (bound %d)\n",
+              static_cast<unsigned long long>(s.can.restart_requests), t,
+              max_attempts(0.01, 0.2, t));
+  EXPECT_LE(s.can.restart_requests, static_cast<std::uint64_t>(max_attempts(0.01, 0.2, t)));
+  EXPECT_GE(s.can.restart_requests, 4U);
+  EXPECT_EQ(s.can.restart_failures, s.can.restart_requests);
+  // One wait for the bus-off, one after each refused request.
+  EXPECT_EQ(s.can.reconnect_backoffs, 1 + s.can.restart_failures);
+  EXPECT_EQ(s.can.reconnect_backoff_ms, 200U);
+  EXPECT_EQ(s.bus.state, LinkState::kDown);
+  ASSERT_EQ(sh("cansend vcan0 160#0200D204"), 0);  // traffic: the controller is back
+  ASSERT_TRUE(wait_until([&] { return st().bus.state == LinkState::kUp; }));
+}
+
+// GIVEN an interface that goes down and up every 10 ms (a loose connector; toggled with
+// SIOCSIFFLAGS from a thread, as fork + exec of `ip` is too slow in the emulated VM), link_check_s
+// 0.01 and reconnect_max_s 0.2, WHEN it flaps for 2 s, THEN the driver rebinds on the back-off
+// schedule (at most 15), not after every loss, and is back once the interface stays up.
+TEST_F(CanHil, FlappingInterfaceIsReboundOnTheBackOffSchedule) {
+  CanConfig c = reference();
+  c.link_check_s = 0.01;
+  c.reconnect_max_s = 0.2;
+  c.reconnect_reset_after_s = 60.0;
+  c.alarm_after_s = 60.0;
+  start(std::move(c));
+  std::atomic<bool> stop{false};
+  std::atomic<int> flaps{0};
+  const auto t0 = std::chrono::steady_clock::now();
+  std::thread flapper([&] {
+    const int fd = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+    ifreq ifr{};
+    std::strncpy(ifr.ifr_name, kIf.c_str(), IFNAMSIZ - 1);
+    while (!stop.load() && ::ioctl(fd, SIOCGIFFLAGS, &ifr) == 0) {
+      ifr.ifr_flags = static_cast<short>(ifr.ifr_flags & ~IFF_UP);
+      (void)::ioctl(fd, SIOCSIFFLAGS, &ifr);
+      std::this_thread::sleep_for(2ms);
+      ifr.ifr_flags = static_cast<short>(ifr.ifr_flags | IFF_UP);
+      (void)::ioctl(fd, SIOCSIFFLAGS, &ifr);
+      ++flaps;
+      std::this_thread::sleep_for(8ms);
+    }
+    ::close(fd);
+  });
+  std::this_thread::sleep_for(2s);
+  const std::uint64_t rebinds = st().bus.counters.reconnects;
+  const double t = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  stop.store(true);
+  flapper.join();
+  const CanStatus s = st();
+  std::printf("%d flaps, %llu interface losses, %llu rebinds in %.2f s (bound %d)\n", flaps.load(),
+              static_cast<unsigned long long>(s.can.interface_down),
+              static_cast<unsigned long long>(rebinds), t, max_attempts(0.01, 0.2, t));
+  ASSERT_GE(flaps.load(), 20) << "the interface did not flap";
+  ASSERT_GE(s.can.interface_down, 2U) << "the flapping was not seen";
+  EXPECT_LE(rebinds, static_cast<std::uint64_t>(max_attempts(0.01, 0.2, t)));
+  EXPECT_GE(s.can.reconnect_backoffs, s.can.interface_down);
+  ASSERT_EQ(sh("ip link set vcan0 up"), 0);
+  ASSERT_TRUE(wait_until([&] { return st().bus.state == LinkState::kUp; }));
+  ASSERT_EQ(sh("cansend vcan0 160#0200D204"), 0);
+  ASSERT_TRUE(wait_until([&] { return st().bus.counters.events_decoded == 1; }));
 }
 
 TEST_F(CanHil, InterfaceDownAndUpWhileRunningResendsPendingOffset) {

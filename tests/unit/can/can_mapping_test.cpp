@@ -131,6 +131,25 @@ TEST(CanConfig, AlarmAfterSecondsParsedDefaultedAndRangeChecked) {
       << e;
 }
 
+// The recovery back-off's cap and reset time: 5 s and max(10 s, cap) by default; a reset time
+// below the cap is refused with its key.
+TEST(CanConfig, ReconnectBackOffKeysParsedDefaultedAndChecked) {
+  const CanConfig d = parse_can_config(kHead, "test.toml");
+  EXPECT_DOUBLE_EQ(d.reconnect_max_s, 5.0);
+  EXPECT_DOUBLE_EQ(d.reconnect_reset_after_s, 10.0);
+  const CanConfig c =
+      parse_can_config(kHead + "reconnect_max_s = 2\nreconnect_reset_after_s = 4\n", "test.toml");
+  EXPECT_DOUBLE_EQ(c.reconnect_max_s, 2.0);
+  EXPECT_DOUBLE_EQ(c.reconnect_reset_after_s, 4.0);
+  EXPECT_DOUBLE_EQ(
+      parse_can_config(kHead + "reconnect_max_s = 30\n", "test.toml").reconnect_reset_after_s,
+      30.0);
+  const std::string e = parse_error(kHead + "reconnect_max_s = 30\nreconnect_reset_after_s = 20\n");
+  EXPECT_NE(e.find("test.toml:4: can.reconnect_reset_after_s: smaller than reconnect_max_s"),
+            std::string::npos)
+      << e;
+}
+
 TEST(CanConfig, FdReferenceMapParses) {
   // The CAN FD example (the HIL test decodes its 32-byte axis frame on an MTU-72 vcan0).
   const CanConfig c =

@@ -1,8 +1,12 @@
 // GIVEN systemd/nccompd.service, WHEN systemd-analyze rates its hardening offline, THEN the
 // exposure is 2.0 or lower (issue 9), and the unit has the service contract the daemon relies on.
+// The drop-in systemd/nccompd-can-restart.conf ([can] restart = "daemon", issue 17) adds exactly
+// CAP_NET_ADMIN and AF_NETLINK.
 #include <gtest/gtest.h>
+#include <stdlib.h>
 
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <regex>
 #include <set>
@@ -97,6 +101,79 @@ TEST(SystemdUnit, SyscallFilterAllowsTheRealtimeCalls) {
                            "signalfd4", "eventfd2", "sendmsg", "getrusage"}) {
     EXPECT_EQ(allowed.count(call), 1U) << call << " is not allowed by the unit";
     EXPECT_EQ(denied.count(call), 0U) << call << " is denied by the unit";
+  }
+}
+
+/// The unit (and the drop-in, if given) installed under a scratch root as systemd would find them,
+/// rated by `systemd-analyze security --offline --root`: the output.
+std::string security_with(const std::string& drop_in) {
+  namespace fs = std::filesystem;
+  std::string tmpl = (fs::temp_directory_path() / "nccomp-unit-XXXXXX").string();
+  if (::mkdtemp(tmpl.data()) == nullptr) {
+    return "mkdtemp failed";
+  }
+  const fs::path root = tmpl;
+  const fs::path units = root / "etc/systemd/system";
+  fs::create_directories(units / "nccompd.service.d");
+  fs::copy_file(kUnit, units / "nccompd.service");
+  if (!drop_in.empty()) {
+    fs::copy_file(drop_in, units / "nccompd.service.d/can-restart.conf");
+  }
+  const std::string out = run("systemd-analyze security --offline=true --no-pager --root='" +
+                              root.string() + "' nccompd.service 2>&1");
+  fs::remove_all(root);
+  return out;
+}
+
+/// The settings systemd-analyze marks as exposed ("✗ NAME ..." → NAME).
+std::set<std::string> exposed(const std::string& security) {
+  std::set<std::string> out;
+  std::istringstream in(security);
+  for (std::string l; std::getline(in, l);) {
+    if (l.rfind("\u2717 ", 0) == 0) {
+      const std::string rest = l.substr(std::string("\u2717 ").size());
+      out.insert(rest.substr(0, rest.find(' ')));
+    }
+  }
+  return out;
+}
+
+// GIVEN the unit with the drop-in for [can] restart = "daemon", WHEN systemd merges them, THEN
+// exactly three settings open up: the CAP_NET_ADMIN bounding set, the ambient capability (the
+// daemon runs as user nccomp) and AF_NETLINK sockets; nothing else changes.
+TEST(SystemdUnit, CanRestartDropInAddsOnlyNetAdminAndNetlink) {
+  ASSERT_EQ(std::system("command -v systemd-analyze > /dev/null 2>&1"), 0);
+  const std::string drop_in = std::string(NCCOMP_SOURCE_DIR) + "/systemd/nccompd-can-restart.conf";
+  const std::string plain = security_with("");
+  const std::string merged = security_with(drop_in);
+  const std::set<std::string> before = exposed(plain);
+  const std::set<std::string> after = exposed(merged);
+  ASSERT_GT(before.size(), 10U) << plain;
+  std::set<std::string> added;
+  for (const std::string& s : after) {
+    if (before.count(s) == 0) {
+      added.insert(s);
+    }
+  }
+  EXPECT_EQ(added,
+            (std::set<std::string>{"AmbientCapabilities=", "CapabilityBoundingSet=~CAP_NET_ADMIN",
+                                   "RestrictAddressFamilies=~AF_NETLINK"}))
+      << merged;
+  for (const std::string& s : before) {
+    EXPECT_EQ(after.count(s), 1U) << s << " closed by the drop-in?";
+  }
+  std::smatch m;
+  const std::regex re("Overall exposure level for nccompd\\.service: ([0-9]+\\.[0-9]+)");
+  ASSERT_TRUE(std::regex_search(merged, m, re)) << merged;
+  std::printf("exposure with the drop-in: %s\n", m[1].str().c_str());
+  // The lines the daemon's refusal and docs/can.md tell the operator to install.
+  std::ifstream in(drop_in);
+  const std::string text{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+  for (const char* line :
+       {"[Service]\n", "\nRestrictAddressFamilies=AF_NETLINK\n",
+        "\nCapabilityBoundingSet=CAP_NET_ADMIN\n", "\nAmbientCapabilities=CAP_NET_ADMIN\n",
+        "/etc/systemd/system/nccompd.service.d/can-restart.conf"}) {
+    EXPECT_NE(text.find(line), std::string::npos) << line;
   }
 }
 
