@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <limits>
 
 #include "tests/support/alloc_counter.hpp"
@@ -92,6 +93,23 @@ TEST(OffsetLimiter, GivenRestartWithNcValue_WhenReset_ThenContinuesFromIt) {
   l.reset(42.0, 5000 * kMs);
   const auto r = l.apply(43.0, 6000 * kMs);
   EXPECT_DOUBLE_EQ(r.value_um, 43.0);
+}
+
+// GIVEN an origin beyond max_abs_um (reset() to what an NC held: 250 µm against 100), WHEN
+// slewed toward a target inside, THEN the first value is the bound itself (never 245 µm, which
+// lies beyond it), then max_step_um per write as usual; the same from below.
+TEST(OffsetLimiter, GivenOriginBeyondAbsolute_WhenSlewed_ThenNeverReturnsAValueBeyondIt) {
+  auto l = make(100.0, 5.0, 1000.0);
+  l.reset(250.0, 0);
+  auto r = l.apply(0.0, 1000 * kMs);
+  EXPECT_EQ(r.verdict, LimitVerdict::kSlewed);
+  EXPECT_DOUBLE_EQ(r.value_um, 100.0);
+  r = l.apply(0.0, 2000 * kMs);
+  EXPECT_DOUBLE_EQ(r.value_um, 95.0);
+  l.reset(-1e30, 3000 * kMs);
+  r = l.apply(-20.0, 4000 * kMs);
+  EXPECT_DOUBLE_EQ(r.value_um, -100.0);
+  EXPECT_LE(std::fabs(r.value_um), l.config().max_abs_um);
 }
 
 TEST(OffsetLimiter, ApplyAllocatesNothing) {
