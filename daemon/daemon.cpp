@@ -304,8 +304,11 @@ int run_daemon(const DaemonOptions& options) {
         continue;
       }
       const auto k = static_cast<std::size_t>(engine.register_writer(i));
+      const auto source = engine.module_state(k);
       const std::string_view why =
-          engine.module_state(k) == core::engine::ModuleStateSource::kUnreadable
+          source == core::engine::ModuleStateSource::kRestored
+              ? "the register is held without state since an earlier start"
+          : source == core::engine::ModuleStateSource::kUnreadable
               ? "its entry in the state file could not be read"
           : state_imported ? "it is not in the state file: added to the configuration since"
                            : "no state file";

@@ -624,11 +624,15 @@ StartupAdoption Engine::adopt_without_state(std::size_t i, std::optional<double>
     return StartupAdoption::kNotNeeded;
   }
   const auto k = static_cast<std::size_t>(writer_[i]);
-  if (module_state_[k] == ModuleStateSource::kRestored) {
+  // A restored module needs nothing, unless the register is still held from a start without
+  // state (the NC did not answer then): it is offered what the NC holds now.
+  if (module_state_[k] == ModuleStateSource::kRestored &&
+      regs_[i].hold != RegisterHold::kWithoutState) {
     return StartupAdoption::kNotNeeded;
   }
   if (!readable) {
-    return StartupAdoption::kNotReadable;
+    return regs_[i].hold == RegisterHold::kWithoutState ? StartupAdoption::kHeld
+                                                        : StartupAdoption::kNotReadable;
   }
   const bool flag = specs_[i].kind == RegisterKind::kFlag;
   const bool adopted =
@@ -638,13 +642,15 @@ StartupAdoption Engine::adopt_without_state(std::size_t i, std::optional<double>
   }
   if (adopted) {
     (void)adopt_register(i, *nc_value_um, now_ns);
-    if (std::fabs(*nc_value_um) > kNoOffsetUm) {
-      hold_register(i, RegisterHold::kNone, AlarmCode::kRegisterAdopted, *nc_value_um);
-    }
+    const bool notice = std::fabs(*nc_value_um) > kNoOffsetUm;
+    hold_register(i, RegisterHold::kNone, notice ? AlarmCode::kRegisterAdopted : AlarmCode::kNone,
+                  *nc_value_um);
     return StartupAdoption::kAdopted;
   }
   if (nc_value_um && std::fabs(*nc_value_um) <= kNoOffsetUm) {
-    return StartupAdoption::kNotNeeded;  // nothing in the NC to lose: the module writes
+    // Nothing in the NC to lose: the module writes.
+    hold_register(i, RegisterHold::kNone, AlarmCode::kNone, 0.0);
+    return StartupAdoption::kNotNeeded;
   }
   hold_register(i, RegisterHold::kWithoutState, AlarmCode::kRegisterHeldWithoutState,
                 nc_value_um ? *nc_value_um : kNaN);

@@ -315,7 +315,8 @@ class Engine {
   AnchorResult adopt_register(std::size_t i, double nc_value_um, TimeNs now_ns) noexcept;
 
   /// Start-up only, after import_state() and anchor_register() (same rules): if the module that
-  /// writes register i has no restored state, it is offered what the NC holds
+  /// writes register i has no restored state (or the register is still held without state from
+  /// an earlier start), it is offered what the NC holds
   /// (Module::adopt_output()); an offset register it does not adopt is held. nc_value_um:
   /// the read-back, nullopt if there is none; readable: the bus can read registers back (false:
   /// CAN, loopback; nothing is adopted or held then). Raises the register's alarm on the next

@@ -637,4 +637,64 @@ TEST(NccompdStartup, ACreepModuleAddedSinceTheStateWasWrittenLeavesTheNcsWear) {
   nc.stop();
 }
 
+// The Modbus NC does not answer at start-up (it comes up later): the daemon knows nothing of
+// what it holds, so the registers of its modules without state are held, not zeroed: nothing is
+// written when the NC comes up; a restart that reads the NC then adopts its value.
+TEST(NccompdStartup, AnNcThatDidNotAnswerAtStartUpIsNotWrittenAndARestartAdoptsItsValue) {
+  TempDir d;
+  std::uint16_t port = 0;
+  {
+    NcServer probe(ServerConfig{});
+    probe.start();
+    port = probe.port();
+    probe.stop();
+  }
+  d.write("nccompd.toml", config_text(port, Modules{}));
+  Daemon daemon(d.path);
+  daemon.start();
+  ASSERT_TRUE(wait_until([&] { return daemon.log().find("loop running") != std::string::npos; }))
+      << daemon.log();
+  ServerConfig sc;
+  sc.port = port;
+  NcServer nc(sc);
+  nc.start();
+  machine(nc);
+  preset_wear(nc);
+  wait_running(daemon);
+  if (HasFatalFailure()) return;
+  std::this_thread::sleep_for(1000ms);
+  EXPECT_TRUE(received_um(nc, 0, kLength).empty()) << joined(received_um(nc, 0, kLength));
+  EXPECT_EQ(holding_i32(nc, kLength), kHeldCounts);
+  const std::string log = daemon.log();
+  EXPECT_NE(log.find("register 0 (T1_length_wear): module creep has no usable state (no state "
+                     "file) and the NC did not answer the read-back: nothing is written to it "
+                     "(alarm register_held_without_state, code 62) until `nccomp register "
+                     "release T1_length_wear`"),
+            std::string::npos)
+      << log;
+  EXPECT_NE(log.find("warning register_held_without_state (code 62) subject 0 value nan"),
+            std::string::npos)
+      << log;
+  EXPECT_NE(daemon.request().find("\"hold\":\"without_state\""), std::string::npos);
+  // The operator restarts nccompd now that the NC answers: the module adopts its -33.0 µm.
+  daemon.signal(SIGTERM);
+  EXPECT_EQ(daemon.wait(), 0) << daemon.log();
+  Daemon again(d.path);
+  again.start();
+  wait_running(again);
+  if (HasFatalFailure()) return;
+  std::this_thread::sleep_for(1000ms);
+  EXPECT_TRUE(received_um(nc, 0, kLength).empty()) << joined(received_um(nc, 0, kLength));
+  EXPECT_EQ(holding_i32(nc, kLength), kHeldCounts);
+  EXPECT_NE(again.log().find("module creep has no usable state (the register is held without "
+                             "state since an earlier start); the NC's -33.000 um is its starting "
+                             "point"),
+            std::string::npos)
+      << again.log();
+  EXPECT_EQ(again.request().find("\"hold\":\"without_state\""), std::string::npos);
+  again.signal(SIGTERM);
+  EXPECT_EQ(again.wait(), 0) << again.log();
+  nc.stop();
+}
+
 }  // namespace

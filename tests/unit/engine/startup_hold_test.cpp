@@ -6,7 +6,8 @@
 // - a module without restored state WHEN offered the NC's value (adopt_without_state()) THEN a
 //   module that adopts keeps the register where it is (notice 61), one that cannot leaves it held
 //   (alarm 62) until released, after which it slews from the NC's value; an unanswered read-back
-//   holds too; a bus that cannot read back, a restored module and a flag change nothing;
+//   holds too, until a later start reads the NC; a bus that cannot read back, a restored module
+//   and a flag change nothing;
 // - the holds survive export / import (restart, reload); no write beyond max_abs_um ever leaves
 //   the engine; stepping with commands allocates nothing.
 #include <gtest/gtest.h>
@@ -290,6 +291,17 @@ TEST(StartupHold, AnUnansweredReadBackHoldsAnUnreadableBusAndARestoredModuleDoNo
   ASSERT_EQ(count(held.alarms, AlarmCode::kRegisterHeldWithoutState), 1U);
   EXPECT_TRUE(std::isnan(held.alarms[0].value));
   EXPECT_TRUE(m->offered.empty());  // nothing to offer
+  // The next start reads the NC (-33 µm): the restored module is offered it, the hold ends.
+  auto again = make_engine(0.0, &m);
+  ASSERT_TRUE(again->import_state(state_of(*e), t));
+  EXPECT_EQ(again->register_state(0).hold, RegisterHold::kWithoutState);
+  ASSERT_TRUE(again->anchor_register(0, -33.0, t).anchored);
+  EXPECT_EQ(again->adopt_without_state(0, -33.0, true, t), StartupAdoption::kAdopted);
+  EXPECT_EQ(again->register_state(0).hold, RegisterHold::kNone);
+  const Outcome adopted = run(*again, t, 10);
+  EXPECT_TRUE(adopted.written.empty());
+  EXPECT_EQ(count(adopted.alarms, AlarmCode::kRegisterHeldWithoutState), 0U);
+  EXPECT_EQ(count(adopted.alarms, AlarmCode::kRegisterAdopted), 1U);
 
   // A bus that cannot read back (CAN): the module's values are written (documented).
   auto f = make_engine(2.0, &m);
