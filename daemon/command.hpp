@@ -11,6 +11,7 @@
 #include <functional>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "core/rt/spsc_ring.hpp"
 #include "drivers/bus.hpp"
@@ -48,6 +49,8 @@ class CommandBus final : public drivers::Bus {
 struct CommandContext {
   CommandBus* bus{nullptr};
   const Loop* loop{nullptr};
+  /// The running configuration's register names, by index (a reload may change them).
+  std::function<std::vector<std::string>()> register_names;
 };
 
 /// args: the request line after the verb, trimmed. Returns the answer (lines ending in '\n'):

@@ -111,6 +111,12 @@ std::string alarm_name(core::AlarmCode code) {
       return "offset_write_dropped";
     case AlarmCode::kBusAlarm:
       return "bus_alarm";
+    case AlarmCode::kRegisterBeyondLimit:
+      return "register_beyond_limit";
+    case AlarmCode::kRegisterAdopted:
+      return "register_adopted";
+    case AlarmCode::kRegisterHeldWithoutState:
+      return "register_held_without_state";
   }
   // No default above: -Wswitch (an error here) makes every new AlarmCode get its name. A value
   // outside the enum (a corrupt state, a newer peer) still prints usefully.

@@ -151,14 +151,19 @@ std::string render_json(const StatusContext& c) {
     << ",\"writes_rejected\":" << e.writes_rejected
     << ",\"writes_unknown_register\":" << e.writes_unknown_register
     << ",\"writes_held\":" << e.writes_held << ",\"output_overflows\":" << e.output_overflows
-    << ",\"writes_deferred\":" << e.writes_deferred << "},";
+    << ",\"writes_deferred\":" << e.writes_deferred << ",\"writes_blocked\":" << e.writes_blocked
+    << ",\"release_commands\":" << e.release_commands << "},";
   o << "\"registers\":[";
   for (std::size_t i = 0; i < v.r.count; ++i) {
     const auto& r = v.r.regs[i];
     o << (i ? "," : "") << "{\"index\":" << i << ",\"name\":\"" << json_escape(reg_name(v, i))
       << "\",\"output_um\":" << num(r.output_um)
       << ",\"target_um\":" << (r.has_target ? num(r.target_um) : "null")
-      << ",\"slewing\":" << (r.slewing ? "true" : "false") << "}";
+      << ",\"slewing\":" << (r.slewing ? "true" : "false") << ",\"hold\":"
+      << (r.hold == core::engine::RegisterHold::kNone
+              ? std::string("null")
+              : "\"" + std::string(core::engine::to_string(r.hold)) + "\"")
+      << "}";
   }
   o << "],\"modules\":[";
   for (std::size_t i = 0; i < v.m.count; ++i) {
@@ -270,6 +275,12 @@ std::string render_text(const StatusContext& c) {
                     r.slewing ? "  (slewing)" : "");
       o << buf;
     }
+    // Held at start-up: nothing is written until `nccomp register release NAME`.
+    if (r.hold == core::engine::RegisterHold::kBeyondLimit) {
+      o << "  BLOCKED: the NC holds a value beyond max_abs_um";
+    } else if (r.hold == core::engine::RegisterHold::kWithoutState) {
+      o << "  HELD: no usable state";
+    }
     o << "\n";
   }
   if (v.r.count < v.names.size()) {
@@ -377,6 +388,12 @@ std::string render_prometheus(const StatusContext& c) {
   for (std::size_t i = 0; i < v.r.count; ++i) {
     o << "nccompd_register_output_um{register=\"" << reg_name(v, i) << "\"} "
       << num(v.r.regs[i].output_um) << "\n";
+  }
+  o << "# HELP nccompd_register_held 1 while a register is held at start-up (nothing written).\n"
+       "# TYPE nccompd_register_held gauge\n";
+  for (std::size_t i = 0; i < v.r.count; ++i) {
+    o << "nccompd_register_held{register=\"" << reg_name(v, i) << "\"} "
+      << (v.r.regs[i].hold == core::engine::RegisterHold::kNone ? 0 : 1) << "\n";
   }
   o << "# HELP nccompd_module_value A compensation module's status value (unit in the key).\n"
        "# TYPE nccompd_module_value gauge\n";

@@ -117,6 +117,9 @@ class Bus {
     (void)register_index;
     return std::nullopt;
   }
+  /// Whether read_offset() can return values at all (false: CAN, loopback). A bus that can, but
+  /// returned nullopt, did not answer: the daemon then knows nothing of what the NC holds.
+  [[nodiscard]] virtual bool reads_back() const noexcept { return false; }
 };
 
 }  // namespace nccomp::drivers

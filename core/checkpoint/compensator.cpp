@@ -682,6 +682,16 @@ void CheckpointCompensator::reset_live(double nc_value_um, TimeNs now_ns) noexce
   live_written_um_ = limiter_.output_um();
 }
 
+bool CheckpointCompensator::adopt_register_value(std::size_t i, double nc_value_um) noexcept {
+  if (i >= points_.size() || !limiter_.admissible(nc_value_um)) {
+    return false;
+  }
+  points_[i].offset_um = nc_value_um;
+  points_[i].applied_um = nc_value_um;
+  ++generation_;
+  return true;
+}
+
 void CheckpointCompensator::export_state(CheckpointState& out) const {
   out.version = 1;
   out.part_counter = part_counter_;

@@ -134,6 +134,9 @@ enum class OperatorCommandKind : std::uint8_t {
   // Every module with a latched alarm (today the creep module, core/creep): `nccomp acknowledge`.
   kAcknowledge = 8,  // the operator acknowledges the latched alarms: code all 0 (every module;
                      // other codes are reserved and refused), values unused
+  // The engine's start-up holds (core/engine/engine.hpp): `nccomp register release NAME|all`.
+  kRegisterRelease = 9,  // code all 0; value[0] = the register's index, or -1 = every register
+                         // held; value[1] unused (0)
 };
 
 /// An operator command (status socket → SPSC ring → the loop): validated by the daemon before it
@@ -203,6 +206,17 @@ enum class AlarmCode : std::uint16_t {
   // by the daemon's main thread, not by the core: subject = the bus's index, value 1 when it
   // rises (Severity::kAlarm), 0 when it clears (Severity::kInfo).
   kBusAlarm = 54,
+  // Start-up: what the NC holds in a register against the limits and the daemon's state
+  // (core/engine/engine.hpp, "Start-up holds"); subject = the register, value = what it holds.
+  // The NC holds a value beyond max_abs_um (read back, or restored / carried over a reload that
+  // narrowed the limit): nothing is written to it until the operator releases it.
+  kRegisterBeyondLimit = 60,
+  // The module writing it has no usable state: the NC's value is adopted as the starting point
+  // of its compensation (nothing written until a new measurement or an operator decision).
+  kRegisterAdopted = 61,
+  // No usable state and no adoption (the module cannot adopt the value, or the NC did not
+  // answer the read-back; value NaN then): held, nothing written until the operator releases it.
+  kRegisterHeldWithoutState = 62,
 };
 
 struct AlarmEvent {

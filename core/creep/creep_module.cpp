@@ -252,7 +252,8 @@ void CreepModule::step(TimeNs now_ns, std::span<const Event> events, StepOutput&
   const auto& k = comp_.counters();
   const std::uint64_t n = k.measurements_accepted + k.measurements_refused + k.events_invalid;
   const auto& s = comp_.state();
-  const bool moving = comp_.creeps_in_progress() > 0 || s.entry.active || s.rate_known;
+  const bool moving =
+      comp_.creeps_in_progress() > 0 || s.entry.active || s.rate_known || comp_.adoption_active();
   // The held normal is saved when it turned by more than 1° (a restart then splits the
   // correction as the NC holds it, not as it was split long ago).
   const auto& hn = s.held_normal;
@@ -277,7 +278,27 @@ std::size_t CreepModule::save_state(std::span<std::byte> buf) const noexcept {
   const CreepState st = comp_.export_state();
   std::memcpy(buf.data(), &st, sizeof(CreepState));
   std::memcpy(buf.data() + sizeof(CreepState), &comp_.tool_memory(), sizeof(ToolMemory));
+  std::memcpy(buf.data() + sizeof(CreepState) + sizeof(ToolMemory), &comp_.adoption(),
+              sizeof(AdoptedOutputs));
   return state_capacity();
+}
+
+bool CreepModule::adopt_output(std::uint16_t register_index, double nc_value_um,
+                               TimeNs /*now_ns*/) {
+  const auto& o = comp_.config().output;
+  bool adopted = false;
+  for (std::size_t ch = 0; ch < kChannelCount; ++ch) {
+    if (o.channel_register[ch] == register_index) {
+      adopted = comp_.adopt_channel(static_cast<Channel>(ch), nc_value_um);
+    }
+  }
+  const std::array<std::int32_t, 4> flags{o.warning_register, o.alarm_register,
+                                          o.measurement_due_register, o.tool_change_register};
+  for (std::size_t slot = 0; slot < flags.size(); ++slot) {
+    if (flags[slot] == register_index) adopted = comp_.adopt_flag(slot, nc_value_um);
+  }
+  if (adopted) ++generation_;
+  return adopted;
 }
 
 namespace {
@@ -301,9 +322,12 @@ struct LayoutV2 {
     v2::upgrade(o, removal, n);
   }
 };
-static_assert(LayoutV1::kBytes != LayoutV2::kBytes &&
-              LayoutV1::kBytes != sizeof(CreepState) + sizeof(ToolMemory) &&
-              LayoutV2::kBytes != sizeof(CreepState) + sizeof(ToolMemory));
+/// The current layout without the AdoptedOutputs (written before start-up adoption existed).
+constexpr std::size_t kBytesWithoutAdoption = sizeof(CreepState) + sizeof(ToolMemory);
+static_assert(LayoutV1::kBytes != LayoutV2::kBytes && LayoutV1::kBytes != kBytesWithoutAdoption &&
+              LayoutV2::kBytes != kBytesWithoutAdoption &&
+              LayoutV1::kBytes != kBytesWithoutAdoption + sizeof(AdoptedOutputs) &&
+              LayoutV2::kBytes != kBytesWithoutAdoption + sizeof(AdoptedOutputs));
 
 }  // namespace
 
@@ -345,6 +369,7 @@ bool CreepModule::load_state_old(std::span<const std::byte> bytes) noexcept {
   }
   if (!comp_.restore_tool_memory(scratch_memory_)) return false;
   (void)comp_.restore_state(st);  // cannot fail: checked above
+  comp_.restore_adoption(AdoptedOutputs{});
   alarm_cause_ = AlarmCode::kNone;
   warning_cause_ = AlarmCode::kNone;
   ++generation_;
@@ -354,7 +379,16 @@ bool CreepModule::load_state_old(std::span<const std::byte> bytes) noexcept {
 bool CreepModule::load_state(std::span<const std::byte> bytes) noexcept {
   if (bytes.size() == LayoutV1::kBytes) return load_state_old<LayoutV1>(bytes);
   if (bytes.size() == LayoutV2::kBytes) return load_state_old<LayoutV2>(bytes);
-  if (bytes.size() != state_capacity() || !state_bytes_loadable(bytes.data(), sizeof(CreepState)) ||
+  AdoptedOutputs adoption{};
+  if (bytes.size() == state_capacity()) {
+    if (!adoption_bytes_loadable(bytes.data() + kBytesWithoutAdoption, sizeof(AdoptedOutputs),
+                                 adoption)) {
+      return false;
+    }
+  } else if (bytes.size() != kBytesWithoutAdoption) {
+    return false;
+  }
+  if (!state_bytes_loadable(bytes.data(), sizeof(CreepState)) ||
       !memory_bytes_loadable(bytes.data() + sizeof(CreepState), sizeof(ToolMemory))) {
     return false;
   }
@@ -365,6 +399,7 @@ bool CreepModule::load_state(std::span<const std::byte> bytes) noexcept {
   std::memcpy(&scratch_memory_, bytes.data() + sizeof(CreepState), sizeof(ToolMemory));
   if (!comp_.restore_tool_memory(scratch_memory_)) return false;
   (void)comp_.restore_state(st);  // cannot fail: checked above
+  comp_.restore_adoption(adoption);
   // A flag of the restored state was raised by another process: its cause is not known here.
   alarm_cause_ = AlarmCode::kNone;
   warning_cause_ = AlarmCode::kNone;

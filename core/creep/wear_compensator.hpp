@@ -80,6 +80,25 @@ class WearCompensator {
   /// another tool than its slot says, or a tool appears twice. Real-time safe.
   bool restore_tool_memory(const ToolMemory& memory) noexcept;
 
+  /// Start-up without a usable state (not real-time; before the first step): the NC holds
+  /// value_um in channel ch's register. The channel's output starts there and stays there until
+  /// the next accepted measurement, from which the difference fades out over one creep span
+  /// (AdoptedOutputs). The fallback channel's value also sets the wear baseline (the uniform
+  /// wear whose correction without a normal is that value, committed and measured), so the next
+  /// measurement's increment is judged and crept from it. False (nothing changed) for an unused
+  /// channel or a value the limiter refuses.
+  bool adopt_channel(Channel ch, double value_um) noexcept;
+  /// The same for a flag read back high: the warning (slot 0), alarm (1) and tool change (3)
+  /// flags stay latched as if this module had raised them (acknowledge or a tool change clears
+  /// them). False for the other slots (recomputed) and a flag read back low.
+  bool adopt_flag(std::size_t slot, double value) noexcept;
+  /// What was adopted and is still in force (persisted with the state). Real-time safe.
+  [[nodiscard]] const AdoptedOutputs& adoption() const noexcept { return adopted_; }
+  /// True while an adopted channel is held or fading out. Real-time safe.
+  [[nodiscard]] bool adoption_active() const noexcept;
+  /// Restores a saved adoption (validated by adoption_bytes_loadable()). Real-time safe.
+  void restore_adoption(const AdoptedOutputs& a) noexcept { adopted_ = a; }
+
   /// Operator acknowledgement: clears the halt, the alarm and the warning flags and the hold of
   /// the "measurement due" request after a refused measurement (so an overdue measurement is
   /// asked for in the next step). Creeps resume where they were frozen. Real-time safe.
@@ -136,6 +155,10 @@ class WearCompensator {
   [[nodiscard]] double interval_path_mm() const noexcept;
   void check_measurement_due(TimeNs now_ns, StepOutput& out) noexcept;
   void compute_targets() noexcept;
+  /// Holds the adopted channels, and fades their difference out after a measurement.
+  void apply_adoption(std::array<double, kChannelCount>& target) noexcept;
+  /// Clock span [mm or s] of a creep of `amount_um` on the configured basis.
+  [[nodiscard]] double creep_span(double amount_um) const noexcept;
   void write_outputs(TimeNs now_ns, StepOutput& out) noexcept;
   void write_flag(TimeNs now_ns, std::int32_t reg, bool value, std::size_t slot,
                   StepOutput& out) noexcept;
@@ -174,6 +197,9 @@ class WearCompensator {
   std::size_t points_{1};
   CreepState s_{};
   ToolMemory memory_{};
+  AdoptedOutputs adopted_{};
+  /// A measurement was accepted while channels are held: the fade starts in compute_targets().
+  bool fade_pending_{false};
   CreepCounters counters_{};
   std::array<OffsetLimiter, kChannelCount> limiters_{};
 

@@ -199,6 +199,7 @@ class ModbusBus final : public Bus {
   /// nullopt if unmapped, not connected or the read fails. start() drops this connection, so
   /// the I/O thread makes its own. Not real-time.
   [[nodiscard]] std::optional<double> read_offset(std::uint16_t register_index) override;
+  [[nodiscard]] bool reads_back() const noexcept override { return true; }
   /// Any thread: the full status with the Modbus counters.
   [[nodiscard]] ModbusStatus modbus_status() const { return status_.load(); }
   [[nodiscard]] const ModbusConfig& config() const noexcept { return config_; }

@@ -44,6 +44,9 @@ TEST(AlarmNames, EveryCodeHasItsDocumentedName) {
       {AlarmCode::kRegisterUnknown, "register_unknown"},
       {AlarmCode::kOffsetWriteDropped, "offset_write_dropped"},
       {AlarmCode::kBusAlarm, "bus_alarm"},
+      {AlarmCode::kRegisterBeyondLimit, "register_beyond_limit"},
+      {AlarmCode::kRegisterAdopted, "register_adopted"},
+      {AlarmCode::kRegisterHeldWithoutState, "register_held_without_state"},
   };
   std::set<std::string> seen;
   for (const auto& [code, name] : expected) {
