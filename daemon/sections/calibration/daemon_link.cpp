@@ -5,6 +5,7 @@
 #include <time.h>
 
 #include <atomic>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <fstream>
@@ -320,8 +321,17 @@ std::string handle_calibrate_command(std::string_view args, CommandContext& ctx)
 }
 
 CommandAccess calibrate_access(std::string_view args) noexcept {
-  return args.empty() || args == "status" ? CommandAccess::kReadOnly
-                                          : CommandAccess::kChangesMachine;
+  // Words are case-insensitive in the script language (tools/calibrate/script.cpp).
+  const auto is_status = [](std::string_view a) {
+    constexpr std::string_view kStatus = "status";
+    if (a.size() != kStatus.size()) return false;
+    for (std::size_t i = 0; i < a.size(); ++i) {
+      if (std::tolower(static_cast<unsigned char>(a[i])) != kStatus[i]) return false;
+    }
+    return true;
+  };
+  return args.empty() || is_status(args) ? CommandAccess::kReadOnly
+                                         : CommandAccess::kChangesMachine;
 }
 
 namespace {

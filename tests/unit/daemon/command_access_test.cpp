@@ -70,7 +70,7 @@ TEST(OperatorCommands, EveryVerbButTheCalibrationStatusNeedsTheAdminGroup) {
   }
   // The calibration status (what `nccomp calibrate --daemon` polls) is read-only: it reaches the
   // handler, which answers that this process (no loop) takes no commands.
-  for (const char* line : {"calibrate", "calibrate status", "  calibrate   status  "}) {
+  for (const char* line : {"calibrate", "calibrate status", "  calibrate   Status  "}) {
     EXPECT_EQ(send(line, op), "error: this process takes no operator commands\n") << line;
   }
 }
