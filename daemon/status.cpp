@@ -494,6 +494,11 @@ void send_all(int fd, const std::string& s) {
   }
 }
 
+Clock::time_point deadline_after(double s) {
+  return Clock::now() +
+         std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(s));
+}
+
 std::string seconds_text(double s) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%g", s);
@@ -668,8 +673,7 @@ void StatusServer::accept_clients(int listen_fd, bool http, std::vector<Client>&
     c.fd = fd;
     c.http = http;
     c.id = next_client_++;
-    c.deadline = Clock::now() + std::chrono::duration_cast<Clock::duration>(
-                                    std::chrono::duration<double>(options_.client_timeout_s));
+    c.deadline = deadline_after(options_.client_timeout_s);
     if (!http) {
       c.caller = peer_of(fd);
     }
@@ -701,14 +705,7 @@ void StatusServer::read_request(Client& c) {
     }
   }
   const bool complete = eof || c.in.find(terminator) != std::string::npos;
-  const auto reply = [&](std::string text) {
-    c.out = std::move(text);
-    c.sent = 0;
-    c.phase = Client::Phase::kWriting;
-    c.deadline = Clock::now() + std::chrono::duration_cast<Clock::duration>(
-                                    std::chrono::duration<double>(options_.client_timeout_s));
-    answer(c);
-  };
+  const auto reply = [&](std::string text) { start_answer(c, std::move(text)); };
   if (c.http) {
     // A request line and headers longer than the limit are answered from the request line.
     if (c.in.rfind("GET /metrics", 0) == 0 || c.in.rfind("GET / ", 0) == 0) {
@@ -758,6 +755,14 @@ void StatusServer::read_request(Client& c) {
   }
 }
 
+void StatusServer::start_answer(Client& c, std::string text) {
+  c.out = std::move(text);
+  c.sent = 0;
+  c.phase = Client::Phase::kWriting;
+  c.deadline = deadline_after(options_.client_timeout_s);
+  answer(c);
+}
+
 void StatusServer::answer(Client& c) {
   while (c.sent < c.out.size()) {
     const ssize_t n =
@@ -787,12 +792,7 @@ void StatusServer::take_finished(std::vector<Client>& clients) {
     --commands_in_flight_;
     for (auto& c : clients) {
       if (c.id == id && c.phase == Client::Phase::kCommand) {
-        c.out = std::move(text);
-        c.sent = 0;
-        c.phase = Client::Phase::kWriting;
-        c.deadline = Clock::now() + std::chrono::duration_cast<Clock::duration>(
-                                        std::chrono::duration<double>(options_.client_timeout_s));
-        answer(c);
+        start_answer(c, std::move(text));
         break;
       }
     }

@@ -102,6 +102,7 @@ class StatusServer {
   void run_commands();
   void accept_clients(int listen_fd, bool http, std::vector<Client>& clients);
   void read_request(Client& c);
+  void start_answer(Client& c, std::string text);
   void answer(Client& c);
   void take_finished(std::vector<Client>& clients);
 

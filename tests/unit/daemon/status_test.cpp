@@ -329,6 +329,17 @@ class CaptureSink final : public spdlog::sinks::base_sink<std::mutex> {
   std::string text_;
 };
 
+// Adds a CaptureSink to the default logger for its lifetime: a logger's sinks are not guarded
+// against changes while it logs, so it must outlive the threads that log.
+struct CapturedLog {
+  CapturedLog() { spdlog::default_logger()->sinks().push_back(sink); }
+  ~CapturedLog() {
+    auto& sinks = spdlog::default_logger()->sinks();
+    sinks.erase(std::remove(sinks.begin(), sinks.end(), sink), sinks.end());
+  }
+  std::shared_ptr<CaptureSink> sink = std::make_shared<CaptureSink>();
+};
+
 std::atomic<int> g_changes{0};
 std::atomic<int> g_looks{0};
 // A verb registered with the default access (it changes the machine), and a read-only one.
@@ -356,9 +367,8 @@ TEST(StatusServer, OnlyRootAndTheAdminGroupChangeTheMachine) {
   ASSERT_TRUE(status_gid && admin_gid && other_gid) << "groups users, adm, nogroup";
   const uid_t nobody = 65534;
   const std::string name = nccomp::test::user_name_of(nobody);
+  CapturedLog captured;  // before the threads that log, removed after they stopped
   Rig rig;
-  auto sink = std::make_shared<CaptureSink>();
-  spdlog::default_logger()->sinks().push_back(sink);
   StatusServer server(rig.context());
   const std::string sock = rig.socket();
   StatusServerOptions o;
@@ -397,7 +407,7 @@ TEST(StatusServer, OnlyRootAndTheAdminGroupChangeTheMachine) {
   // Not in the status group: the socket's mode keeps it out (connect fails: exit 11).
   EXPECT_EQ(nccomp::test::request_as(outsider, sock, "text").exit_code, 11);
 
-  const std::string log = sink->text();
+  const std::string log = captured.sink->text();
   EXPECT_NE(log.find("operator command refused: 'test-change now' from uid 65534 (" + name +
                      ") pid " + std::to_string(refused.pid) + ": permission denied: uid 65534 (" +
                      name + ") is not root and not in group 'adm' ([status] admin_group)\n"),
@@ -416,9 +426,6 @@ TEST(StatusServer, OnlyRootAndTheAdminGroupChangeTheMachine) {
             std::string::npos)
       << log;
   EXPECT_EQ(log.find("test-look"), std::string::npos) << "read-only commands are not logged";
-  server.stop();
-  auto& sinks = spdlog::default_logger()->sinks();
-  sinks.erase(std::remove(sinks.begin(), sinks.end(), sink), sinks.end());
 }
 
 }  // namespace
