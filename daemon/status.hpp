@@ -14,7 +14,6 @@
 #pragma once
 
 #include <atomic>
-#include <chrono>
 #include <condition_variable>
 #include <cstdint>
 #include <deque>
@@ -39,7 +38,7 @@ struct StatusServerCounters {
   std::atomic<std::uint64_t> clients{0};       // connections accepted
   std::atomic<std::uint64_t> timed_out{0};     // cut off at their deadline
   std::atomic<std::uint64_t> turned_away{0};   // refused: max_clients, or commands queued
-  std::atomic<std::uint64_t> bad_requests{0};  // too long, or unreadable
+  std::atomic<std::uint64_t> bad_requests{0};  // too long, unknown, or not GET /metrics
 };
 
 struct StatusContext {
