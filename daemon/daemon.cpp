@@ -434,7 +434,7 @@ int run_daemon(const DaemonOptions& options) {
   for (auto& b : buses) {
     bus_ptrs.push_back(b.bus.get());
   }
-  // Operator commands (`nccomp calibrate --daemon`): the status thread queues them as events, the
+  // Operator commands (`nccomp calibrate --daemon`): the command thread queues them as events, the
   // loop drains them like a bus's (last in the list: register indices map to the buses above).
   CommandBus commands;
   bus_ptrs.push_back(&commands);
@@ -493,12 +493,26 @@ int run_daemon(const DaemonOptions& options) {
           : config->resolve(stsec.socket_path);
   fs::create_directories(fs::path(sock).parent_path(), ec);
   try {
-    status.start(sock, stsec.prometheus_address, stsec.prometheus_port);
-    spdlog::info("status socket {}{}", sock,
+    StatusServerOptions so;
+    so.socket_path = sock;
+    so.prometheus_address = stsec.prometheus_address;
+    so.prometheus_port = stsec.prometheus_port;
+    so.policy = CommandPolicy{stsec.admin_group, ::geteuid()};
+    so.client_timeout_s = stsec.client_timeout_s;
+    so.max_clients = stsec.max_clients;
+    status.start(so);
+    spdlog::info("status socket {}{}; commands that change the machine: root and group {}", sock,
                  status.prometheus_port() > 0
                      ? fmt::format(", Prometheus on {}:{}", stsec.prometheus_address,
                                    status.prometheus_port())
-                     : std::string{});
+                     : std::string{},
+                 stsec.admin_group);
+    if (!group_exists(stsec.admin_group)) {
+      spdlog::warn(
+          "status: group '{}' ([status] admin_group) does not exist: only root and the "
+          "daemon's user can run commands that change the machine",
+          stsec.admin_group);
+    }
   } catch (const std::exception& e) {
     spdlog::error("status: {}", e.what());
     logger.stop();
