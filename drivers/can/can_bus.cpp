@@ -21,6 +21,7 @@
 #include <cstring>
 #include <stdexcept>
 #include <string>
+#include <variant>
 
 namespace nccomp::drivers::can {
 namespace {
@@ -44,7 +45,11 @@ CanBus::CanBus(CanConfig config)
     : config_(std::move(config)),
       decoder_(config_.mapping),
       rx_ring_(config_.rx_ring_events),
-      tx_ring_(config_.tx_ring_writes) {
+      tx_ring_(config_.tx_ring_writes),
+      input_watch_(
+          to_ns(config_.degraded_alarm_after_s),
+          std::any_of(config_.mapping.rx.begin(), config_.mapping.rx.end(),
+                      [](const RxFrame& f) { return f.event == EventKind::kAxisSample; })) {
   for (const auto& r : config_.mapping.offsets) {
     Slot s;
     s.reg = &r;
@@ -184,6 +189,7 @@ void CanBus::start() {
     throw std::runtime_error("can: eventfd: " + errno_text(errno));
   }
   st_.bus.state = LinkState::kUp;
+  input_watch_.start(mono_ns());
   publish(mono_ns());
   running_.store(true);
   thread_ = std::thread([this] { run(); });
@@ -234,6 +240,12 @@ void CanBus::publish(std::int64_t now_ns) noexcept {
     if (if_down_ || bus_off_) {
       b.state = LinkState::kDown;
     }
+  }
+  if (b.state == LinkState::kUp) {
+    input_watch_.link_ok(now_ns);
+  }
+  if (!lockstep_) {
+    b.input_stale = b.state != LinkState::kStopped && input_watch_.stale(now_ns);
   }
   status_.store(st_);
 }
@@ -350,6 +362,8 @@ void CanBus::handle_sync(const std::uint8_t* data, std::size_t len) noexcept {
     cycle = (cycle << 8) | data[i];
   }
   ++st_.can.lockstep_syncs;
+  // The peer is the clock: judged at its SYNCs only, so that a paused peer is not stale input.
+  st_.bus.input_stale = input_watch_.stale(mono_ns());
   {
     std::lock_guard<std::mutex> lock(ls_mu_);
     synced_plus1_ = std::max(synced_plus1_, cycle + 1);
@@ -482,6 +496,9 @@ void CanBus::receive_all(std::int64_t now_ns) noexcept {
         break;
     }
     if (r.emitted) {
+      if (std::holds_alternative<core::AxisSample>(ev)) {
+        input_watch_.axis_ok(now_ns);
+      }
       if (rx_ring_.try_push(ev)) {
         ++st_.bus.counters.events_decoded;
       } else {

@@ -201,8 +201,8 @@ CanConfig parse_can_table(const toml::table& can, const std::string& file_name) 
   const std::string p = "can";
   r.only_keys(can, p,
               {"interface", "fd", "restart", "restart_delay_s", "ack_timeout_s", "ack_retries",
-               "enobufs_backoff_s", "link_check_s", "alarm_after_s", "rx_ring_events",
-               "tx_ring_writes", "socket_rcvbuf_bytes", "rx", "offset"});
+               "enobufs_backoff_s", "link_check_s", "alarm_after_s", "degraded_alarm_after_s",
+               "rx_ring_events", "tx_ring_writes", "socket_rcvbuf_bytes", "rx", "offset"});
   c.interface = r.get_string(can, p, "interface", std::nullopt);
   if (c.interface.empty() || c.interface.size() >= 16) {
     r.fail(*can.get("interface"), p + ".interface", "must be 1..15 characters (IFNAMSIZ)");
@@ -222,6 +222,7 @@ CanConfig parse_can_table(const toml::table& can, const std::string& file_name) 
   c.enobufs_backoff_s = r.get_double(can, p, "enobufs_backoff_s", 0.0005, 0.00001, 1.0);
   c.link_check_s = r.get_double(can, p, "link_check_s", 0.05, 0.001, 10.0);
   c.alarm_after_s = r.get_double(can, p, "alarm_after_s", 1.0, 0.0, 3600.0);
+  c.degraded_alarm_after_s = r.get_double(can, p, "degraded_alarm_after_s", 5.0, 0.01, 3600.0);
   const auto pow2 = [&](std::string_view key, std::int64_t dflt) {
     const std::int64_t v = r.get_int(can, p, key, dflt, 2, 1 << 20);
     if ((v & (v - 1)) != 0) {
