@@ -11,9 +11,10 @@
 // GIVEN a [creep] module and the laser's measurement on the NC, WHEN the laser's wear register
 // holds NaN as its counter advances, THEN the creep module raises tool_broken_or_mismeasured (23,
 // value nan) and halts: the NC's alarm register rises, nothing is applied, the measurement log
-// has the row without a value; WHEN six more such measurements follow, THEN each is refused
-// (event_invalid 51, the module is halted) but logged once per burst: one line when the burst
-// starts, one "end of burst" line with the count 6.
+// has the row without a value; WHEN six more such measurements follow (each published once the
+// driver has read the one before), THEN each is refused (event_invalid 51, the module is halted)
+// but logged once per burst: one line when the burst starts, one "end of burst" line with the
+// count 6.
 #include <fcntl.h>
 #include <gtest/gtest.h>
 #include <signal.h>
@@ -207,6 +208,12 @@ TEST(NccompdLoudInput, AnNcThatAnswersEveryReadWithAnExceptionRaisesBusInputStal
            std::string::npos;
   })) << st;
   EXPECT_NE(st.find("\"state\":\"degraded\""), std::string::npos) << st;
+  // What `nccomp status` prints meanwhile (for docs/daemon.md).
+  const std::string text = nccomp::daemon::query_status((d.path / "status.sock").string(), "text");
+  EXPECT_TRUE(std::regex_search(
+      text, std::regex("\n +[0-9.]+ s  alarm +bus_input_stale +subject 0 value 1\n")))
+      << text;
+  std::printf("%s", text.substr(text.find("buses:")).c_str());
   EXPECT_GE(number(st, "exception_server_failure"), 10.0) << st;
   std::this_thread::sleep_for(1000ms);  // still answering with exceptions: reported once
   EXPECT_EQ(count(daemon.log(), kStaleRise), 1U) << daemon.log();
@@ -287,10 +294,11 @@ TEST(NccompdLoudInput, ANaNWearRaisesTheCreepAlarmAndABurstIsLoggedOnce) {
       << st;
   EXPECT_GE(number(st, "values_invalid"), 1.0) << st;
 
-  // Six more, 50 ms apart (each counter step is seen by a poll at 200 Hz).
+  // Six more, each once the driver has read the one before (its values_invalid counted it).
   for (std::uint16_t seq = 2; seq <= 7; ++seq) {
-    std::this_thread::sleep_for(50ms);
     publish_wear(nc, seq, seq % 2 == 0 ? std::numeric_limits<float>::infinity() : std::nanf(""));
+    ASSERT_TRUE(wait_until([&] { return number(daemon.status(), "values_invalid") >= seq; }))
+        << daemon.status();
   }
   const std::string refused = "warning warning event_invalid (code 51) subject 1 value 0";
   const std::string end = "end of burst: event_invalid (code 51, warning) subject 1 value 0: 6 in";

@@ -8,6 +8,7 @@
 #include <string>
 
 #include "core/calib/facet.hpp"
+#include "tests/support/alloc_counter.hpp"
 #include "tests/unit/calib/sim_machine.hpp"
 #include "tests/unit/calib/test_config.hpp"
 
@@ -236,7 +237,11 @@ TEST(Calibration, AFaultedTouchAlarmsAndIsNotTaken) {
   bad.fault = core::InputFault::kInvalid;
   const Event be = bad;
   out.clear();
-  c.step(0, {&be, 1}, out);
+  {
+    const AllocationScope scope;  // the loop's path: allocation-free
+    c.step(0, {&be, 1}, out);
+    EXPECT_EQ(scope.count(), 0U);
+  }
   ASSERT_EQ(out.alarms.size(), 1U);
   EXPECT_EQ(out.alarms[0].code, AlarmCode::kCalibrationInvalidInput);
   EXPECT_EQ(out.alarms[0].severity, core::Severity::kAlarm);

@@ -965,6 +965,9 @@ TEST(RealTime, StepAllocatesNothing) {
   probes.emplace_back(test::probe_at(plan.checkpoints[0], 1, 250.0));  // implausible
   probes.emplace_back(probe(1, 999, 1.0));                             // unknown checkpoint
   probes.emplace_back(probe(1, 1, 1.0, 0, 7.0));                       // α not the plan's
+  ProbeMeasurement faulted = probe(1, 2, 0.0);
+  faulted.fault = InputFault::kInvalid;
+  probes.emplace_back(faulted);  // its value did not arrive intact
   const Event start = part_start(1);
   StepOutput out;
   nccomp::test::AllocationScope scope;
@@ -983,7 +986,7 @@ TEST(RealTime, StepAllocatesNothing) {
   EXPECT_EQ(scope.count(), 0U);
   EXPECT_EQ(comp.counters().missed, 0U);
   EXPECT_EQ(comp.counters().triggers, 4 * plan.checkpoints.size());
-  EXPECT_EQ(comp.counters().invalid, 4U * 2U);
+  EXPECT_EQ(comp.counters().invalid, 4U * 3U);
   EXPECT_EQ(comp.counters().implausible, 4U);
   EXPECT_GT(comp.counters().updates, 0U);
 }

@@ -4,6 +4,7 @@
 
 #include <cmath>
 
+#include "tests/support/alloc_counter.hpp"
 #include "tests/unit/creep/rig.hpp"
 
 namespace nccomp::core::creep {
@@ -284,8 +285,15 @@ TEST(CreepToolLife, AFaultedMeasurementIsAMismeasurementAndChangesNothing) {
       m.time_ns = r.now_ns;
       m.tool = tool;
       m.fault = fault;
-      r.events.emplace_back(m);
-      r.step();
+      const Event e = m;
+      r.out.clear();
+      {
+        const nccomp::test::AllocationScope scope;  // the loop's path: allocation-free
+        r.comp.step(r.now_ns, {&e, 1}, r.out);
+        EXPECT_EQ(scope.count(), 0U);
+      }
+      for (const auto& a : r.out.alarms) r.alarms.push_back(a);
+      for (const auto& rec : r.out.records) r.records.push_back(rec);
       EXPECT_TRUE(r.comp.halted()) << tool;
       ASSERT_EQ(r.count(AlarmCode::kToolBrokenOrMismeasured), 1U) << tool;
       EXPECT_EQ(r.alarms.back().severity, Severity::kAlarm);
