@@ -574,7 +574,7 @@ void ModbusBus::publish(core::TimeNs now_ns) {
   st_.offsets_pending = pending;
   st_.bus.alarm = alarm;
   if (!lockstep_) {
-    st_.bus.input_stale = input_watch_.stale(now_ns);
+    st_.bus.input_stale = st_.bus.state != LinkState::kStopped && input_watch_.stale(now_ns);
   }
   status_.store(st_);
 }
