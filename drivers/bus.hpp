@@ -53,6 +53,10 @@ inline constexpr std::size_t kMaxBusExtraCounters = 48;
 struct BusStatus {
   LinkState state{LinkState::kStopped};
   bool alarm{false};  // a write could not be delivered, or the link is down beyond tolerance
+  // The NC's input has been unusable for longer than the bus's degraded_alarm_after_s: no intact
+  // poll (Modbus) / the link not up (CAN), or no valid axis sample (values NaN / inf / out of
+  // range, or none at all). Clears with the next intact input.
+  bool input_stale{false};
   core::TimeNs last_rx_ns{0};
   BusCounters counters{};
 };

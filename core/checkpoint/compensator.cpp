@@ -312,6 +312,12 @@ void CheckpointCompensator::flush_table(TimeNs now_ns, StepOutput& out) noexcept
 
 void CheckpointCompensator::on_probe(const ProbeMeasurement& m, StepOutput& out) noexcept {
   ++counters_.measurements;
+  if (m.fault != InputFault::kNone) {
+    // The NC reported a reading whose values did not arrive intact: nothing to learn from.
+    ++counters_.invalid;
+    out.alarm(m.time_ns, Severity::kAlarm, AlarmCode::kProbeInvalidInput, m.checkpoint, kNaN);
+    return;
+  }
   if (m.checkpoint < 0 || static_cast<std::size_t>(m.checkpoint) >= plan_.size()) {
     ++counters_.invalid;
     out.alarm(m.time_ns, Severity::kAlarm, AlarmCode::kProbeInvalidInput, m.checkpoint,

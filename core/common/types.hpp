@@ -49,6 +49,16 @@ struct AxisSample {
   bool cutting{true};
 };
 
+/// Why a driver could not use the values of a measurement the NC reported (ToolMeasurement,
+/// ProbeMeasurement, CalibrationTouch). The measurement happened, so it is not dropped in
+/// silence: the event reaches its method, which raises its alarm and changes nothing. A faulted
+/// event's value fields (wear, deviation, angle, radius, positions) are 0 and never a measurement.
+enum class InputFault : std::uint8_t {
+  kNone = 0,
+  kInvalid = 1,     // NaN / inf, not integral, not a valid code, a malformed frame
+  kOutOfRange = 2,  // finite but outside the map's min / max
+};
+
 /// A tool measurement (laser light barrier, measuring diamond).
 struct ToolMeasurement {
   TimeNs time_ns{0};
@@ -58,6 +68,8 @@ struct ToolMeasurement {
   /// Wear [µm] per edge support point; point_count == 1 means wear at the tip / one value.
   std::uint8_t point_count{1};
   std::array<double, kMaxEdgePoints> wear_um{};
+  /// tool is 0 when the fault is in the tool number itself.
+  InputFault fault{InputFault::kNone};
 };
 
 /// A probe measurement of the part at a checkpoint (S1).
@@ -72,6 +84,8 @@ struct ProbeMeasurement {
   /// Probe ball radius r [mm].
   double ball_radius_mm{0.0};
   std::array<double, 3> position_mm{};
+  /// checkpoint is -1 when the fault is in the checkpoint number itself.
+  InputFault fault{InputFault::kNone};
 };
 
 /// Which probe produced a calibration touch (S3).
@@ -89,6 +103,8 @@ struct CalibrationTouch {
   std::uint8_t variant{0};
   /// Axis position at the trigger [mm].
   double trigger_position_mm{0.0};
+  /// probe, axis, direction and variant are as received where valid, else their defaults.
+  InputFault fault{InputFault::kNone};
 };
 
 struct ToolChange {
@@ -152,6 +168,43 @@ struct OperatorCommand {
 
 using Event = std::variant<AxisSample, ToolMeasurement, ProbeMeasurement, CalibrationTouch,
                            ToolChange, ProgramEvent, TemperatureSample, OperatorCommand>;
+
+/// The fault of a measurement event (ToolMeasurement, ProbeMeasurement, CalibrationTouch); kNone
+/// for every other event.
+inline InputFault fault_of(const Event& e) noexcept {
+  return std::visit(
+      [](const auto& ev) {
+        using T = std::decay_t<decltype(ev)>;
+        if constexpr (std::is_same_v<T, ToolMeasurement> || std::is_same_v<T, ProbeMeasurement> ||
+                      std::is_same_v<T, CalibrationTouch>) {
+          return ev.fault;
+        } else {
+          return InputFault::kNone;
+        }
+      },
+      e);
+}
+
+/// Marks a measurement event faulted (fault != kNone) and sets every value field to 0, so that
+/// no value of it can be taken for a measurement; other events are left as they are.
+inline void set_fault(Event& e, InputFault fault) noexcept {
+  if (fault == InputFault::kNone) {
+    return;
+  }
+  if (auto* t = std::get_if<ToolMeasurement>(&e)) {
+    t->fault = fault;
+    t->wear_um.fill(0.0);
+  } else if (auto* p = std::get_if<ProbeMeasurement>(&e)) {
+    p->fault = fault;
+    p->raw_deviation_um = 0.0;
+    p->wall_angle_deg = 0.0;
+    p->ball_radius_mm = 0.0;
+    p->position_mm.fill(0.0);
+  } else if (auto* c = std::get_if<CalibrationTouch>(&e)) {
+    c->fault = fault;
+    c->trigger_position_mm = 0.0;
+  }
+}
 
 // ---------------------------------------------------------------------------------------------
 // Out: commands to the NC, alarms, measurement records.
@@ -217,6 +270,11 @@ enum class AlarmCode : std::uint16_t {
   // No usable state and no adoption (the module cannot adopt the value, or the NC did not
   // answer the read-back; value NaN then): held, nothing written until the operator releases it.
   kRegisterHeldWithoutState = 62,
+  // A bus's input is stale (drivers::BusStatus::input_stale): for longer than the bus's
+  // degraded_alarm_after_s no intact poll (Modbus) / the link not up (CAN), or no valid axis
+  // sample. Raised by the daemon's main thread like kBusAlarm: subject = the bus's index, value 1
+  // when it rises (kAlarm), 0 when it clears (kInfo).
+  kBusInputStale = 55,
 };
 
 struct AlarmEvent {

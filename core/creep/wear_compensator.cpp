@@ -914,7 +914,7 @@ void WearCompensator::on_measurement(TimeNs now_ns, const ToolMeasurement& m,
   }
   std::array<double, kMaxEdgePoints> w{};
   for (std::size_t i = 0; i < points_; ++i) {
-    w[i] = m.broken ? kNaN : m.wear_um[n_meas == 1 ? 0 : i];
+    w[i] = m.broken || m.fault != InputFault::kNone ? kNaN : m.wear_um[n_meas == 1 ? 0 : i];
   }
   // Every measurement is logged, one row per support point, whatever is decided below.
   for (std::size_t i = 0; i < points_; ++i) {
@@ -930,6 +930,12 @@ void WearCompensator::on_measurement(TimeNs now_ns, const ToolMeasurement& m,
     r.measured_um = w[i];
     r.applied_um = 0.0;
     out.records.push(r);
+  }
+  if (m.fault != InputFault::kNone && !s_.halted) {
+    // The laser's result did not arrive intact (the driver's fault, e.g. NaN in the register):
+    // the tool in the spindle counts as mismeasured, whatever tool number came with it.
+    halt(now_ns, AlarmCode::kToolBrokenOrMismeasured, kNaN, out);
+    return;
   }
   if (s_.tool != 0 && m.tool != s_.tool) {
     ++counters_.events_invalid;

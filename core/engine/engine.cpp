@@ -120,6 +120,8 @@ bool all_finite(const std::array<double, N>& a, std::size_t n) {
   return true;
 }
 
+bool valid_fault(InputFault f) { return static_cast<std::uint8_t>(f) <= 2; }
+
 }  // namespace
 
 std::string_view to_string(RegisterKind kind) noexcept {
@@ -292,17 +294,20 @@ bool Engine::validate(const Event& e) const noexcept {
           }
           return !ev.has_normal || all_finite(ev.normal, 3);
         } else if constexpr (std::is_same_v<T, ToolMeasurement>) {
+          if (!valid_fault(ev.fault)) {
+            return false;
+          }
           if (ev.broken) {
             return true;  // the wear values of a broken-tool report are meaningless
           }
           return ev.point_count >= 1 && ev.point_count <= kMaxEdgePoints &&
                  all_finite(ev.wear_um, ev.point_count);
         } else if constexpr (std::is_same_v<T, ProbeMeasurement>) {
-          return std::isfinite(ev.raw_deviation_um) && std::isfinite(ev.wall_angle_deg) &&
-                 std::isfinite(ev.ball_radius_mm) && ev.ball_radius_mm >= 0.0 &&
-                 all_finite(ev.position_mm, 3);
+          return valid_fault(ev.fault) && std::isfinite(ev.raw_deviation_um) &&
+                 std::isfinite(ev.wall_angle_deg) && std::isfinite(ev.ball_radius_mm) &&
+                 ev.ball_radius_mm >= 0.0 && all_finite(ev.position_mm, 3);
         } else if constexpr (std::is_same_v<T, CalibrationTouch>) {
-          return std::isfinite(ev.trigger_position_mm) && ev.axis <= 2 &&
+          return valid_fault(ev.fault) && std::isfinite(ev.trigger_position_mm) && ev.axis <= 2 &&
                  (ev.direction == 1 || ev.direction == -1) &&
                  static_cast<std::uint8_t>(ev.probe) <= 1;
         } else if constexpr (std::is_same_v<T, ProgramEvent>) {
@@ -410,7 +415,10 @@ void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out)
     notices_pending_ = 0;
   }
   valid_.clear();
-  for (const Event& e : events) {
+  for (const Event& in : events) {
+    // A faulted measurement reaches the modules with every value 0, whatever the driver left.
+    Event e = in;
+    set_fault(e, fault_of(e));
     if (!validate(e)) {
       ++counters_.events_invalid;
       out.alarm(now_ns, Severity::kWarning, AlarmCode::kEventInvalid,

@@ -8,6 +8,8 @@
 //
 // - Invalid events (non-finite positions, wear, deviations) are counted, raise kEventInvalid and
 //   never reach a module.
+// - Faulted measurements (InputFault: the NC reported a measurement the driver could not use)
+//   reach the modules with every value field 0, so that each method raises its own alarm.
 // - A target the limiter rejects (NaN, beyond the absolute limit) raises an alarm and is not
 //   forwarded: the register holds its value. A slewed target keeps converging on later cycles
 //   without the module writing it again (targets are absolute and remembered per register).

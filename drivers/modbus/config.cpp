@@ -405,6 +405,7 @@ ModbusConfig parse_modbus_table(const toml::table& m, std::string_view file,
                                                                 "dead_after_failures",
                                                                 "verify_writes",
                                                                 "alarm_after_s",
+                                                                "degraded_alarm_after_s",
                                                                 "rx_capacity",
                                                                 "tx_capacity",
                                                                 "merge_gap_registers",
@@ -481,6 +482,7 @@ ModbusConfig parse_modbus_table(const toml::table& m, std::string_view file,
       static_cast<std::uint32_t>(r.integer(m, mp, "dead_after_failures", 3, 1, 1000));
   c.verify_writes = r.boolean(m, mp, "verify_writes", false);
   c.alarm_after_s = r.number(m, mp, "alarm_after_s", 1.0, 0.0, 3600.0);
+  c.degraded_alarm_after_s = r.number(m, mp, "degraded_alarm_after_s", 5.0, 0.01, 3600.0);
   const auto pow2 = [&](std::string_view key, std::int64_t dflt) {
     const std::int64_t v = r.integer(m, mp, key, dflt, 2, 1 << 20);
     if ((v & (v - 1)) != 0) {

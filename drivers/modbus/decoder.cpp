@@ -198,11 +198,15 @@ void PollDecoder::decode_event(Group g, core::TimeNs t_ns) {
     return;  // restarted, no event since: the value registers hold none
   }
   counters_.events_lost += events - 1U;
-  // The counter is consumed either way: an event with an implausible value is dropped once,
-  // never re-read.
-  if (!in_range(gm, field_count(g))) {
+  // The counter is consumed either way: an event with an implausible value is dropped once (a
+  // measurement is delivered once, marked faulted), never re-read.
+  const bool range_ok = in_range(gm, field_count(g));
+  if (!range_ok) {
     ++counters_.values_out_of_range;
-    return;
+    if (g != Group::kToolMeasurement && g != Group::kProbeMeasurement &&
+        g != Group::kCalibrationTouch) {
+      return;
+    }
   }
 
   const auto f = [&](std::size_t i, double dflt) {
@@ -225,16 +229,15 @@ void PollDecoder::decode_event(Group g, core::TimeNs t_ns) {
         ok = ok && std::isfinite(e.wear_um[i]);
       }
       e.broken = f(tool_meas_field::kBroken, 0.0) > 0.5;
-      if (ok) {
-        emit(e);
-      }
+      emit_measurement(e, range_ok, ok);
       break;
     }
     case Group::kProbeMeasurement: {
       core::ProbeMeasurement e;
       e.time_ns = t_ns;
-      ok = to_int(f(probe_field::kPart, 0), kIntMin, kIntMax, e.part) &&
-           to_int(f(probe_field::kCheckpoint, 0), kIntMin, kIntMax, e.checkpoint);
+      e.checkpoint = -1;  // unknown, unless it decodes
+      const bool part_ok = to_int(f(probe_field::kPart, 0), kIntMin, kIntMax, e.part);
+      ok = to_int(f(probe_field::kCheckpoint, 0), kIntMin, kIntMax, e.checkpoint) && part_ok;
       e.raw_deviation_um = f(probe_field::kDeviation, 0.0);
       e.wall_angle_deg = f(probe_field::kAngle, 0.0);
       e.ball_radius_mm = f(probe_field::kBallRadius, 0.0);
@@ -242,9 +245,7 @@ void PollDecoder::decode_event(Group g, core::TimeNs t_ns) {
       ok = ok && std::isfinite(e.raw_deviation_um) && std::isfinite(e.wall_angle_deg) &&
            std::isfinite(e.ball_radius_mm) && std::isfinite(e.position_mm[0]) &&
            std::isfinite(e.position_mm[1]) && std::isfinite(e.position_mm[2]);
-      if (ok) {
-        emit(e);
-      }
+      emit_measurement(e, range_ok, ok);
       break;
     }
     case Group::kCalibrationTouch: {
@@ -252,21 +253,20 @@ void PollDecoder::decode_event(Group g, core::TimeNs t_ns) {
       e.time_ns = t_ns;
       std::int32_t probe = 0;
       std::int32_t axis = 0;
-      std::int32_t dir = 0;
+      std::int32_t dir = 1;
       std::int32_t variant = 0;
       ok = to_int(f(touch_field::kProbe, 0), 0, 1, probe) &&
            to_int(f(touch_field::kAxis, 0), 0, 2, axis) &&
            to_int(f(touch_field::kDirection, 0), -1, 1, dir) && dir != 0 &&
            to_int(f(touch_field::kVariant, 0), 0, 1, variant);
+      dir = dir == 0 ? 1 : dir;  // a faulted touch still carries a valid direction
       e.probe = static_cast<core::ProbeKind>(probe);
       e.axis = static_cast<std::uint8_t>(axis);
       e.direction = static_cast<std::int8_t>(dir);
       e.variant = static_cast<std::uint8_t>(variant);
       e.trigger_position_mm = f(touch_field::kPosition, 0.0);
       ok = ok && std::isfinite(e.trigger_position_mm);
-      if (ok) {
-        emit(e);
-      }
+      emit_measurement(e, range_ok, ok);
       break;
     }
     case Group::kToolChange: {
@@ -294,9 +294,20 @@ void PollDecoder::decode_event(Group g, core::TimeNs t_ns) {
     case Group::kAxis:
       break;
   }
-  if (!ok) {
+  if (!ok && g != Group::kToolMeasurement && g != Group::kProbeMeasurement &&
+      g != Group::kCalibrationTouch) {
     ++counters_.values_invalid;
   }
+}
+
+void PollDecoder::emit_measurement(core::Event e, bool range_ok, bool ok) noexcept {
+  if (range_ok && !ok) {
+    ++counters_.values_invalid;
+  }
+  if (!range_ok || !ok) {
+    core::set_fault(e, range_ok ? core::InputFault::kInvalid : core::InputFault::kOutOfRange);
+  }
+  emit(e);
 }
 
 void PollDecoder::decode_temperatures(core::TimeNs t_ns, std::span<const std::uint8_t> block_ok) {

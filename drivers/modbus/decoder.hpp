@@ -20,9 +20,12 @@
 // (note_reconnect()) a counter that reads the same value as before, other than kSequenceStart,
 // is counted in sequence_unchanged_after_reconnect, so that an operator can see the doubt.
 //
-// Plausibility: a finite value outside its signal's `min` / `max` (config) drops the whole sample
-// or event and counts values_out_of_range; NaN / inf / non-integral / invalid codes count
-// values_invalid. Either way an event's counter is consumed, so it is not re-read.
+// Plausibility: a finite value outside its signal's `min` / `max` (config) counts
+// values_out_of_range; NaN / inf / non-integral / invalid codes count values_invalid. An axis
+// sample, tool change or program event with such a value is dropped. A measurement (tool
+// measurement, probe measurement, calibration touch) is emitted once, marked faulted
+// (core::InputFault) with its values cleared, so that its method raises its alarm instead of
+// losing it in silence. Either way an event's counter is consumed, so it is not re-read.
 #pragma once
 
 #include <cstdint>
@@ -82,6 +85,9 @@ class PollDecoder {
   void decode_event(Group g, core::TimeNs t_ns);
   void decode_temperatures(core::TimeNs t_ns, std::span<const std::uint8_t> block_ok);
   void emit(const core::Event& e) noexcept;
+  /// Emits a measurement; one whose values are out of range (range_ok false) or invalid (ok
+  /// false) is counted and emitted faulted (core::InputFault), its values cleared.
+  void emit_measurement(core::Event e, bool range_ok, bool ok) noexcept;
 
   const ModbusConfig& config_;
   std::vector<std::vector<std::uint16_t>> blocks_;

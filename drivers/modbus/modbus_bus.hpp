@@ -9,6 +9,10 @@
 // reconnect all known offsets are written again. A repeated write of an absolute value cannot
 // double a correction, so none is lost and none is applied twice.
 //
+// Stale input (input_watch.hpp): no poll with every block read, or no valid axis sample while the
+// axis group is mapped, for longer than degraded_alarm_after_s sets BusStatus::input_stale: an NC
+// that answers every read with an exception keeps the link "degraded", never down.
+//
 // Faults: response and byte timeouts from the config; exception responses are counted per code;
 // garbage (bad CRC, wrong transaction id, wrong length) is counted and the input flushed;
 // dead_after_failures consecutive timeouts / garbage, or a socket error, drop the connection.
@@ -41,6 +45,7 @@
 #include "core/rt/seqlock.hpp"
 #include "core/rt/spsc_ring.hpp"
 #include "drivers/bus.hpp"
+#include "drivers/input_watch.hpp"
 #include "drivers/modbus/config.hpp"
 #include "drivers/modbus/decoder.hpp"
 #include "drivers/reconnect_backoff.hpp"
@@ -253,6 +258,8 @@ class ModbusBus final : public Bus {
   void rtu_gap();
   void after_transaction();
   void publish(core::TimeNs now_ns);
+  /// After a poll: whether every block was read and whether a valid axis sample came out.
+  void note_input(bool all_read, bool axis_seen);
   void sleep_until(core::TimeNs t_ns) const;
 
   const ModbusConfig config_;
@@ -269,6 +276,7 @@ class ModbusBus final : public Bus {
   // I/O thread only.
   std::unique_ptr<void, ModbusDeleter> ctx_;
   PollDecoder decoder_;
+  InputWatch input_watch_;
   std::vector<std::uint8_t> block_ok_;
   std::vector<std::uint8_t> bits_;
   std::vector<std::int32_t> slot_of_register_;  // register_index → offsets index, -1 = unmapped

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <limits>
 #include <variant>
 #include <vector>
 
@@ -176,16 +177,25 @@ TEST_F(ModbusDecoder, Uint32CounterAndRangeChecks) {
   EXPECT_EQ(t[0].direction, -1);
   EXPECT_NEAR(t[0].trigger_position_mm, 10.0, 1e-12);
   EXPECT_EQ(dec.counters().events_lost, 0U);
-  // WHEN the NC sends axis 5 (no such axis) THEN the event is consumed and counted invalid
+  // WHEN the NC sends axis 5 (no such axis) THEN the event is consumed, counted invalid and
+  // delivered once as a faulted touch without a position (its method raises the alarm)
   touch()[1] = 0x0001;
   touch()[2] = 5;
-  EXPECT_TRUE(events_of<core::CalibrationTouch>(dec.decode(3, ok)).empty());
+  t = events_of<core::CalibrationTouch>(dec.decode(3, ok));
+  ASSERT_EQ(t.size(), 1U);
+  EXPECT_EQ(t[0].fault, core::InputFault::kInvalid);
+  EXPECT_EQ(t[0].axis, 0);  // unknown: the default
+  EXPECT_EQ(t[0].trigger_position_mm, 0.0);
   EXPECT_EQ(dec.counters().values_invalid, 1U);
-  // and direction 0 is invalid too
+  EXPECT_TRUE(events_of<core::CalibrationTouch>(dec.decode(4, ok)).empty());  // not re-read
+  // and direction 0 is invalid too; the faulted touch still carries a valid direction
   touch()[1] = 0x0002;
   touch()[2] = 0;
   touch()[3] = 0;
-  EXPECT_TRUE(events_of<core::CalibrationTouch>(dec.decode(4, ok)).empty());
+  t = events_of<core::CalibrationTouch>(dec.decode(5, ok));
+  ASSERT_EQ(t.size(), 1U);
+  EXPECT_EQ(t[0].fault, core::InputFault::kInvalid);
+  EXPECT_EQ(t[0].direction, 1);
   EXPECT_EQ(dec.counters().values_invalid, 2U);
 }
 
@@ -435,15 +445,25 @@ max = 80
   EXPECT_EQ(dec.counters().values_out_of_range, 3U);
   put_float(axis, 0, 5.0F, false);
 
-  // An event whose second wear point is 3276.7 µm (> 500): dropped, its counter consumed, so
-  // the next poll does not read it again.
+  // An event whose second wear point is 3276.7 µm (> 500): delivered once as a faulted
+  // measurement of tool 4 without values, its counter consumed, so the next poll does not read
+  // it again.
   meas[0] = 1;
   meas[1] = 4;
   meas[2] = 25;     // 2.5 µm
   meas[3] = 32767;  // 3276.7 µm
   ev = dec.decode(7, ok);
-  EXPECT_EQ(count(ev, core::ToolMeasurement{}), 0U);
+  ASSERT_EQ(count(ev, core::ToolMeasurement{}), 1U);
+  for (const auto& e : ev) {
+    if (const auto* m = std::get_if<core::ToolMeasurement>(&e)) {
+      EXPECT_EQ(m->fault, core::InputFault::kOutOfRange);
+      EXPECT_EQ(m->tool, 4);
+      EXPECT_EQ(m->wear_um[0], 0.0);
+      EXPECT_EQ(m->wear_um[1], 0.0);
+    }
+  }
   EXPECT_EQ(dec.counters().values_out_of_range, 4U);
+  EXPECT_EQ(dec.counters().values_invalid, 1U);  // out of range is not counted twice
   EXPECT_EQ(count(dec.decode(8, ok), core::ToolMeasurement{}), 0U);
   EXPECT_EQ(dec.counters().values_out_of_range, 4U);
   // The next event is plausible: delivered, nothing lost.
@@ -451,6 +471,7 @@ max = 80
   meas[3] = 30;
   ev = dec.decode(9, ok);
   ASSERT_EQ(count(ev, core::ToolMeasurement{}), 1U);
+  EXPECT_EQ(std::get<core::ToolMeasurement>(ev.back()).fault, core::InputFault::kNone);
   EXPECT_EQ(dec.counters().events_lost, 0U);
 
   // A temperature of 95 °C (> 80): no sample; back to 22 °C: a sample.
@@ -623,4 +644,101 @@ broken = { address = 7 }
 }
 
 }  // namespace
+// Issue 17, finding 4: a measurement whose value arrives NaN, ±inf or beyond the map's range is
+// not lost in silence. GIVEN a laser (float32 wear), a probe (float32 deviation, within ±500 µm)
+// and a touch probe (float32 trigger position), WHEN each publishes a bad value with its counter
+// advanced, THEN each measurement comes out exactly once, marked faulted (kInvalid for NaN / inf,
+// kOutOfRange beyond min / max), with every value field 0 and its identity (tool, checkpoint,
+// axis) as received, counted once; a good value next is an ordinary measurement again.
+TEST(ModbusDecoderFault, BadMeasuredValuesAreDeliveredOnceAsFaultedMeasurements) {
+  const ModbusConfig c = parse_modbus_config(R"([modbus]
+transport = "tcp"
+[modbus.tool_measurement]
+sequence = { address = 0, type = "uint16" }
+tool = { address = 1 }
+wear_um = { address = 2, type = "float32" }
+[modbus.probe_measurement]
+sequence = { address = 4, type = "uint16" }
+part = { address = 5 }
+checkpoint = { address = 6 }
+raw_deviation_um = { address = 7, type = "float32", min = -500, max = 500 }
+wall_angle_deg = { address = 9, type = "int16", scale = 0.1 }
+ball_radius_mm = { address = 10, type = "uint16", scale = 0.001 }
+[modbus.calibration_touch]
+sequence = { address = 11, type = "uint16" }
+axis = { address = 12 }
+direction = { address = 13, type = "int16" }
+trigger_position_mm = { address = 14, type = "float32" }
+)",
+                                             "t.toml");
+  ASSERT_EQ(c.blocks.size(), 1U);  // holding 0..15: one request
+  PollDecoder dec(c);
+  std::vector<std::uint8_t> ok(1, 1);
+  auto b = dec.block(0);
+  b[1] = 7;      // tool 7
+  b[5] = 42;     // part 42
+  b[6] = 3;      // checkpoint 3
+  b[10] = 2000;  // r 2 mm
+  b[12] = 1;     // axis Y
+  b[13] = static_cast<std::uint16_t>(-1 & 0xFFFF);
+  dec.decode(1, ok);  // baselines
+  const auto only = [](std::span<const core::Event> ev) {
+    EXPECT_EQ(ev.size(), 1U);
+    return ev.empty() ? core::Event{} : ev[0];
+  };
+  const float inf = std::numeric_limits<float>::infinity();
+  std::uint16_t seq = 0;
+  for (const float bad : {std::nanf(""), inf, -inf}) {
+    ++seq;
+    b[0] = seq;
+    put_float(b, 2, bad, false);
+    const core::Event e = only(dec.decode(10 + seq, ok));
+    const auto& m = std::get<core::ToolMeasurement>(e);
+    EXPECT_EQ(m.fault, core::InputFault::kInvalid) << bad;
+    EXPECT_EQ(m.tool, 7);
+    EXPECT_EQ(m.wear_um[0], 0.0);
+    EXPECT_EQ(m.time_ns, 10 + seq);
+    EXPECT_EQ(dec.counters().values_invalid, seq);
+    EXPECT_TRUE(dec.decode(20 + seq, ok).empty()) << "read again";
+  }
+  b[0] = ++seq;
+  put_float(b, 2, 12.5F, false);
+  auto m = std::get<core::ToolMeasurement>(only(dec.decode(30, ok)));
+  EXPECT_EQ(m.fault, core::InputFault::kNone);
+  EXPECT_EQ(m.wear_um[0], 12.5);
+
+  // The probe: 800 µm is beyond max = 500, NaN is invalid.
+  b[4] = 1;
+  put_float(b, 7, 800.0F, false);
+  auto p = std::get<core::ProbeMeasurement>(only(dec.decode(31, ok)));
+  EXPECT_EQ(p.fault, core::InputFault::kOutOfRange);
+  EXPECT_EQ(p.checkpoint, 3);
+  EXPECT_EQ(p.part, 42);
+  EXPECT_EQ(p.raw_deviation_um, 0.0);
+  EXPECT_EQ(p.ball_radius_mm, 0.0);
+  EXPECT_EQ(dec.counters().values_out_of_range, 1U);
+  b[4] = 2;
+  put_float(b, 7, std::nanf(""), false);
+  p = std::get<core::ProbeMeasurement>(only(dec.decode(32, ok)));
+  EXPECT_EQ(p.fault, core::InputFault::kInvalid);
+  EXPECT_EQ(dec.counters().values_invalid, 4U);
+  // The touch: +inf trigger position.
+  b[11] = 1;
+  put_float(b, 14, inf, false);
+  auto t = std::get<core::CalibrationTouch>(only(dec.decode(34, ok)));
+  EXPECT_EQ(t.fault, core::InputFault::kInvalid);
+  EXPECT_EQ(t.axis, 1);
+  EXPECT_EQ(t.direction, -1);
+  EXPECT_EQ(t.trigger_position_mm, 0.0);
+  EXPECT_EQ(dec.counters().values_invalid, 5U);
+  EXPECT_EQ(dec.counters().values_out_of_range, 1U);
+  // Faulted or not, decoding allocates nothing.
+  b[11] = 2;
+  const nccomp::test::AllocationScope scope;
+  const auto ev = dec.decode(35, ok);
+  EXPECT_EQ(scope.count(), 0U);
+  ASSERT_EQ(ev.size(), 1U);
+  EXPECT_EQ(std::get<core::CalibrationTouch>(ev[0]).fault, core::InputFault::kInvalid);
+}
+
 }  // namespace nccomp::drivers::modbus
