@@ -52,7 +52,7 @@ CanBus::CanBus(CanConfig config)
       input_watch_(
           to_ns(config_.degraded_alarm_after_s),
           std::any_of(config_.mapping.rx.begin(), config_.mapping.rx.end(),
-                      [](const RxFrame& f) { return f.event == EventKind::kAxisSample; }),
+                      [](const RxFrame& f) { return f.event == EventKind::kAxisSample; })),
       rebind_backoff_(to_ns(config_.link_check_s),
                       to_ns(std::max(config_.link_check_s, config_.reconnect_max_s)),
                       to_ns(config_.reconnect_reset_after_s)),
