@@ -18,6 +18,8 @@ constexpr std::uint32_t kStateVersion = 1;
 constexpr std::size_t kMaxNameLength = 255;
 /// The machine context's entry among the modules' states (no module name starts with '@').
 constexpr std::string_view kContextEntry = "@context";
+/// The event cursors' entry (cursors.hpp); an engine without cursors skips it as unknown.
+constexpr std::string_view kCursorsEntry = "@cursors";
 
 // Little helpers for the state bytes. Native byte order: the state never leaves the machine.
 class Writer {
@@ -203,6 +205,8 @@ void Engine::configure(std::vector<RegisterSpec> registers,
   }
   capacity += sizeof(std::uint16_t) + kContextEntry.size() + sizeof(std::uint32_t) +
               MachineContext::kStateBytes;
+  capacity += sizeof(std::uint16_t) + kCursorsEntry.size() + sizeof(std::uint32_t) +
+              EventCursors::kStateBytes;
   // The context's options: from the one module that sets them (the daemon's
   // [measurement_context] section), else from the engine options.
   ContextOptions context_options = options.context;
@@ -245,6 +249,7 @@ void Engine::configure(std::vector<RegisterSpec> registers,
   modules_ = std::move(modules);
   options_ = options;
   context_ = context;
+  cursors_ = EventCursors{};
   for (auto& m : modules_) m->bind_context(context_);
   valid_.clear();
   valid_.reserve(options.max_events_per_step);
@@ -365,6 +370,11 @@ void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out)
   ++counters_.steps;
   valid_.clear();
   for (const Event& e : events) {
+    // Taken, whatever becomes of it: a restart must not deliver it again.
+    cursors_.take(e);
+    if (const EventOrigin* o = origin_of(e); o != nullptr && o->counter_only) {
+      continue;
+    }
     if (!validate(e)) {
       ++counters_.events_invalid;
       out.alarm(now_ns, Severity::kWarning, AlarmCode::kEventInvalid,
@@ -531,7 +541,7 @@ std::uint64_t Engine::state_generation() const noexcept {
   for (const auto& m : modules_) {
     g += m->state_generation();
   }
-  return g + context_.generation();
+  return g + context_.generation() + cursors_.generation();
 }
 
 std::size_t Engine::export_state(std::span<std::byte> buf) const noexcept {
@@ -546,13 +556,19 @@ std::size_t Engine::export_state(std::span<std::byte> buf) const noexcept {
     w.put(r.target_um);
     w.put(static_cast<std::uint8_t>(r.has_target ? 1 : 0));
   }
-  w.put(static_cast<std::uint32_t>(modules_.size() + 1));
+  w.put(static_cast<std::uint32_t>(modules_.size() + 2));
   w.put_name(kContextEntry);
   w.put(static_cast<std::uint32_t>(MachineContext::kStateBytes));
   if (!w.ok() || w.rest().size() < MachineContext::kStateBytes) {
     return 0;
   }
   w.skip(context_.save(w.rest()));
+  w.put_name(kCursorsEntry);
+  w.put(static_cast<std::uint32_t>(EventCursors::kStateBytes));
+  if (!w.ok() || w.rest().size() < EventCursors::kStateBytes) {
+    return 0;
+  }
+  w.skip(cursors_.save(w.rest()));
   for (const auto& m : modules_) {
     w.put_name(m->name());
     const std::span<std::byte> len_at = w.rest();
@@ -626,6 +642,12 @@ bool Engine::import_state(std::span<const std::byte> bytes, TimeNs now_ns,
       }
       if (name == kContextEntry) {
         if (pass == 1 && !context_.load(blob, now_ns)) {
+          ++skip_count;
+        }
+        continue;
+      }
+      if (name == kCursorsEntry) {
+        if (pass == 1 && !cursors_.load(blob)) {
           ++skip_count;
         }
         continue;
