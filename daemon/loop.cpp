@@ -331,9 +331,13 @@ void Loop::cycle(core::TimeNs wake_ns, bool stamp) {
   local_.dry_run = rt.dry_run;
 
   events_.clear();
-  for (drivers::Bus* bus : buses_) {
+  for (std::size_t b = 0; b < buses_.size(); ++b) {
     core::Event e;
-    while (events_.size() < options_.max_events_per_cycle && bus->rx().try_pop(e)) {
+    while (events_.size() < options_.max_events_per_cycle && buses_[b]->rx().try_pop(e)) {
+      // The engine keeps its event cursors per bus: the bus is the index in this list.
+      if (core::EventOrigin* o = core::origin_of(e)) {
+        o->bus = static_cast<std::uint8_t>(b);
+      }
       events_.push_back(e);  // capacity reserved: no allocation
     }
   }
