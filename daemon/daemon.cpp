@@ -301,11 +301,11 @@ int run_daemon(const DaemonOptions& options) {
 
   // Events the NC published while nccompd was down: the buses resume from the engine's event
   // cursors (restored with the state), and their first reads are logged in the loop below.
-  EventsWhileDown::Buses event_buses;
+  EventsWhileDownLog::Buses event_buses;
   for (auto& b : buses) {
     event_buses.emplace_back(b.name, b.bus.get());
   }
-  EventsWhileDown events_while_down;
+  EventsWhileDownLog events_while_down;
   for (const EventsLine& l :
        events_while_down.resume(runtime->engine->event_cursors(), event_buses)) {
     spdlog::info("{}", l.text);

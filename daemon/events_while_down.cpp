@@ -10,8 +10,8 @@ const char* numbered_kind_name(std::size_t kind) noexcept {
   return kind < kNames.size() ? kNames[kind] : "unknown";
 }
 
-std::vector<EventsLine> EventsWhileDown::resume(const core::engine::EventCursors& cursors,
-                                                const Buses& buses) {
+std::vector<EventsLine> EventsWhileDownLog::resume(const core::engine::EventCursors& cursors,
+                                                   const Buses& buses) {
   std::vector<EventsLine> lines;
   reported_.assign(buses.size(), {});
   for (std::size_t b = 0; b < buses.size(); ++b) {
@@ -45,7 +45,7 @@ std::vector<EventsLine> EventsWhileDown::resume(const core::engine::EventCursors
   return lines;
 }
 
-std::vector<EventsLine> EventsWhileDown::poll(const Buses& buses) {
+std::vector<EventsLine> EventsWhileDownLog::poll(const Buses& buses) {
   std::vector<EventsLine> lines;
   std::array<drivers::EventsWhileDown, core::kNumberedKinds> found{};
   for (std::size_t b = 0; b < buses.size() && b < reported_.size(); ++b) {

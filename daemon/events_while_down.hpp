@@ -24,7 +24,7 @@ struct EventsLine {
 /// "program_event" (the Modbus map's group names) for a core::numbered_kind() index.
 [[nodiscard]] const char* numbered_kind_name(std::size_t kind) noexcept;
 
-class EventsWhileDown {
+class EventsWhileDownLog {
  public:
   /// (name, bus) in the loop's bus order: bus i takes the engine's cursors of index i.
   using Buses = std::vector<std::pair<std::string, drivers::Bus*>>;

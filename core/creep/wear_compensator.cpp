@@ -1040,7 +1040,8 @@ double WearCompensator::interval_path_mm() const noexcept {
       // Before a rate is known (new tool, break-in wear is fastest) measure at the minimum.
       if (!s_.rate_known) return iv.min_interval_mm;
       if (!(max_rate > 0.0)) return iv.max_interval_mm;
-      return std::clamp(iv.target_increment_um / max_rate, iv.min_interval_mm, iv.max_interval_mm);
+      return std::clamp(iv.target_increment_um / max_rate, iv.min_interval_mm,
+                        iv.max_interval_mm);
     }
     case IntervalBasis::kOff:
     case IntervalBasis::kTime:

@@ -59,8 +59,8 @@ TEST(EventsWhileDown, EachBusGetsItsCursorsAndEveryFirstReadIsLoggedOnce) {
   FakeBus modbus(true);
   FakeBus other(true);
   FakeBus can(false);
-  const EventsWhileDown::Buses buses{{"modbus", &modbus}, {"other", &other}, {"can", &can}};
-  EventsWhileDown w;
+  const EventsWhileDownLog::Buses buses{{"modbus", &modbus}, {"other", &other}, {"can", &can}};
+  EventsWhileDownLog w;
   const auto start = w.resume(cursors, buses);
   EXPECT_TRUE(modbus.given[0].known);
   EXPECT_EQ(modbus.given[0].sequence, 4U);
