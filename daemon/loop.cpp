@@ -335,13 +335,15 @@ void Loop::cycle(core::TimeNs wake_ns, bool stamp) {
     core::Event e;
     while (events_.size() < options_.max_events_per_cycle && buses_[b]->rx().try_pop(e)) {
       // The engine keeps its event cursors per bus: the bus is the index in this list.
-      if (core::EventOrigin* o = core::origin_of(e)) {
+      core::EventOrigin* o = core::origin_of(e);
+      if (o != nullptr) {
         o->bus = static_cast<std::uint8_t>(b);
       }
+      // A counter_only event only moves the engine's cursor: not an event in the statistics.
+      local_.events_in += o != nullptr && o->counter_only ? 0U : 1U;
       events_.push_back(e);  // capacity reserved: no allocation
     }
   }
-  local_.events_in += events_.size();
   if (stamp) {
     // Lock-step: the NC state was published for the tick's instant; the driver's reception
     // time is wall time and would make the run depend on scheduling.
