@@ -23,6 +23,7 @@
 #include "daemon/command.hpp"
 #include "daemon/config/builtin_sections.hpp"
 #include "daemon/config/config.hpp"
+#include "daemon/events_while_down.hpp"
 #include "daemon/lockstep.hpp"
 #include "daemon/logging.hpp"
 #include "daemon/loop.hpp"
@@ -366,6 +367,18 @@ int run_daemon(const DaemonOptions& options) {
     }
   }
 
+  // Events the NC published while nccompd was down: the buses resume from the engine's event
+  // cursors (restored with the state), and their first reads are logged in the loop below.
+  EventsWhileDownLog::Buses event_buses;
+  for (auto& b : buses) {
+    event_buses.emplace_back(b.name, b.bus.get());
+  }
+  EventsWhileDownLog events_while_down;
+  for (const EventsLine& l :
+       events_while_down.resume(runtime->engine->event_cursors(), event_buses)) {
+    spdlog::info("{}", l.text);
+  }
+
   const bool lockstep = !options.lockstep_socket.empty();
   for (auto& b : buses) {
     try {
@@ -655,6 +668,13 @@ int run_daemon(const DaemonOptions& options) {
         spdlog::info("{}", c.message);
       }
       logger.raise(c.event);
+    }
+    for (const EventsLine& l : events_while_down.poll(event_buses)) {
+      if (l.warning) {
+        spdlog::warn("{}", l.text);
+      } else {
+        spdlog::info("{}", l.text);
+      }
     }
     const auto now = std::chrono::steady_clock::now();
     if (watchdog && now - last_feed >= std::chrono::microseconds(watchdog_usec / 2)) {

@@ -61,6 +61,18 @@ struct BusStatus {
   BusCounters counters{};
 };
 
+/// What a bus found of one numbered event kind at its first read after resume_events():
+/// `events` happened since the cursor (since the NC's restart, if it restarted), the newest was
+/// delivered (unless its values were refused), the others lost.
+struct EventsWhileDown {
+  std::uint8_t kind{0};      // core::numbered_kind() index
+  std::uint32_t cursor{0};   // the engine's last event of this kind before nccompd stopped
+  std::uint32_t counter{0};  // the NC's counter at the first read
+  std::uint32_t events{0};
+  bool nc_restarted{false};  // the counter moved back: events before the NC's restart unknown
+  bool delivered{false};
+};
+
 class Bus {
  public:
   virtual ~Bus() = default;
@@ -111,6 +123,25 @@ class Bus {
     (void)cycle;
     (void)timeout_ns;
     return true;
+  }
+
+  // Events while nccompd was down (docs/daemon.md): a bus whose NC numbers its events resumes
+  // them from the engine's cursors, restored from the state file.
+
+  /// Before start() (not real-time): the engine's cursors of this bus (core::EventCursorSet, the
+  /// counter of the last event of each kind it took before nccompd stopped). A bus that numbers
+  /// its events delivers, at its first read, the newest event the NC produced since and counts
+  /// the others lost; a kind without a cursor starts from the NC's counter as it finds it. False
+  /// (default): the bus cannot tell which events it missed (CAN: frames carry no counter).
+  virtual bool resume_events(const core::EventCursorSet& cursors) {
+    (void)cursors;
+    return false;
+  }
+  /// Any thread, not real-time: per kind with a cursor, what the first read found, once it
+  /// happened. Writes at most out.size() entries and returns how many. Default: none.
+  [[nodiscard]] virtual std::size_t events_while_down(std::span<EventsWhileDown> out) const {
+    (void)out;
+    return 0;
   }
 
   /// Start-up, before start() only (the caller's thread, not real-time): reads the value [µm]

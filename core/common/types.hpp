@@ -32,6 +32,20 @@ constexpr TimeNs from_seconds(double t_s) { return static_cast<TimeNs>(t_s * kNs
 // ---------------------------------------------------------------------------------------------
 // In: events from the NC / PLC / operator.
 
+/// Where a numbered event came from. A bus whose NC numbers its events (Modbus: a sequence
+/// counter per event group) sets `numbered` and the counter's value; the loop sets `bus` (its
+/// index in the loop's bus list). The engine keeps the last one it took per bus and kind with
+/// its state, so that a restart resumes the bus's events from there (docs/daemon.md, "Events
+/// while nccompd was down").
+struct EventOrigin {
+  std::uint32_t sequence{0};
+  std::uint8_t bus{0};
+  bool numbered{false};
+  /// Not an event: the bus consumed the counter without one to deliver (its first read, an NC
+  /// restart with no event since). The engine moves its cursor and passes nothing on.
+  bool counter_only{false};
+};
+
 /// One sample of the machine state, published by the NC at (up to) the loop rate.
 struct AxisSample {
   TimeNs time_ns{0};
@@ -70,6 +84,7 @@ struct ToolMeasurement {
   std::array<double, kMaxEdgePoints> wear_um{};
   /// tool is 0 when the fault is in the tool number itself.
   InputFault fault{InputFault::kNone};
+  EventOrigin origin{};
 };
 
 /// A probe measurement of the part at a checkpoint (S1).
@@ -86,6 +101,7 @@ struct ProbeMeasurement {
   std::array<double, 3> position_mm{};
   /// checkpoint is -1 when the fault is in the checkpoint number itself.
   InputFault fault{InputFault::kNone};
+  EventOrigin origin{};
 };
 
 /// Which probe produced a calibration touch (S3).
@@ -105,6 +121,7 @@ struct CalibrationTouch {
   double trigger_position_mm{0.0};
   /// probe, axis, direction and variant are as received where valid, else their defaults.
   InputFault fault{InputFault::kNone};
+  EventOrigin origin{};
 };
 
 struct ToolChange {
@@ -112,6 +129,7 @@ struct ToolChange {
   std::int32_t tool{0};
   /// The new tool is a sister of the previous one (same geometry).
   bool sister{false};
+  EventOrigin origin{};
 };
 
 enum class ProgramEventKind : std::uint8_t {
@@ -125,6 +143,7 @@ struct ProgramEvent {
   TimeNs time_ns{0};
   ProgramEventKind kind{ProgramEventKind::kPartStart};
   std::int32_t part{0};
+  EventOrigin origin{};
 };
 
 struct TemperatureSample {
@@ -185,6 +204,35 @@ inline InputFault fault_of(const Event& e) noexcept {
       e);
 }
 
+/// The event kinds a bus may number (EventOrigin), in this order: ToolMeasurement,
+/// ProbeMeasurement, CalibrationTouch, ToolChange, ProgramEvent.
+inline constexpr std::size_t kNumberedKinds = 5;
+
+static_assert(std::is_same_v<std::variant_alternative_t<1, Event>, ToolMeasurement> &&
+              std::is_same_v<std::variant_alternative_t<5, Event>, ProgramEvent>);
+
+/// Index of e's kind among the numbered kinds, or -1 for a kind that is never numbered.
+constexpr int numbered_kind(const Event& e) noexcept {
+  const std::size_t i = e.index();
+  return i >= 1 && i <= kNumberedKinds ? static_cast<int>(i) - 1 : -1;
+}
+
+/// e's origin, or nullptr for a kind that is never numbered. Real-time safe.
+template <typename E>
+requires std::is_same_v<std::remove_const_t<E>, Event>
+auto* origin_of(E& e) noexcept {
+  using Origin = std::conditional_t<std::is_const_v<E>, const EventOrigin, EventOrigin>;
+  return std::visit(
+      [](auto& ev) -> Origin* {
+        if constexpr (requires { ev.origin; }) {
+          return &ev.origin;
+        } else {
+          return nullptr;
+        }
+      },
+      e);
+}
+
 /// Marks a measurement event faulted (fault != kNone) and sets every value field to 0, so that
 /// no value of it can be taken for a measurement; other events are left as they are.
 inline void set_fault(Event& e, InputFault fault) noexcept {
@@ -205,6 +253,13 @@ inline void set_fault(Event& e, InputFault fault) noexcept {
     c->trigger_position_mm = 0.0;
   }
 }
+/// The last numbered event of one kind that the engine took from one bus (its NC's counter).
+struct EventCursor {
+  bool known{false};
+  std::uint32_t sequence{0};
+};
+/// One bus's cursors, indexed by numbered_kind().
+using EventCursorSet = std::array<EventCursor, kNumberedKinds>;
 
 // ---------------------------------------------------------------------------------------------
 // Out: commands to the NC, alarms, measurement records.

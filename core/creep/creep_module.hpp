@@ -93,6 +93,8 @@ class CreepModule final : public engine::Module {
   /// last_acknowledgement(); the flag registers fall to 0 in the same step. Also when nothing is
   /// latched (counted, nothing changes). Real-time safe.
   void clear_alarm() noexcept;
+  /// Start-up only (before the loop steps the engine): WearCompensator::rearm_request().
+  void rearm_request() noexcept { comp_.rearm_request(); }
   [[nodiscard]] const WearCompensator& compensator() const noexcept { return comp_; }
 
   /// What one acknowledgement found latched (and cleared).

@@ -66,6 +66,7 @@ void WearCompensator::configure(const CreepConfig& config) {
   cutting_ = false;
   interrupted_ = false;
   have_now_ = false;
+  rearm_ = false;
   written_once_.fill(false);
   flag_written_once_.fill(false);
   last_verdict_.fill(LimitVerdict::kPassed);
@@ -147,6 +148,7 @@ bool WearCompensator::restore_state(const CreepState& st) noexcept {
   have_now_ = false;
   written_once_.fill(false);
   flag_written_once_.fill(false);
+  rearm_ = false;
   select_tool_tables();
   return true;
 }
@@ -174,6 +176,15 @@ void WearCompensator::clear_alarm() noexcept {
   // The operator has looked: a measurement refused before may be asked for again at once (the
   // request fell when that measurement came and stayed low since).
   s_.request_held = false;
+}
+
+void WearCompensator::rearm_request() noexcept {
+  if (!s_.measurement_due_flag || config_.output.request_rearm_s <= 0.0 ||
+      config_.output.measurement_due_register < 0) {
+    return;
+  }
+  rearm_ = true;
+  rearm_started_ = false;
 }
 
 void WearCompensator::select_tool_tables() noexcept {
@@ -210,6 +221,10 @@ void WearCompensator::step(TimeNs now_ns, std::span<const Event> events, StepOut
   }
   last_now_ns_ = now_ns;
   have_now_ = true;
+  if (rearm_ && !rearm_started_) {
+    rearm_started_ = true;
+    rearm_until_ns_ = now_ns + from_seconds(config_.output.request_rearm_s);
+  }
 
   for (const Event& e : events) {
     if (const auto* a = std::get_if<AxisSample>(&e)) {
@@ -854,7 +869,9 @@ void WearCompensator::write_outputs(TimeNs now_ns, StepOutput& out) noexcept {
   }
   write_flag(now_ns, o.warning_register, s_.warning_flag, 0, out);
   write_flag(now_ns, o.alarm_register, s_.alarm_flag, 1, out);
-  write_flag(now_ns, o.measurement_due_register, s_.measurement_due_flag, 2, out);
+  // Re-armed (start-up): 0 until rearm_until_ns_, or until a measurement lowered the request.
+  rearm_ = rearm_ && s_.measurement_due_flag && now_ns < rearm_until_ns_;
+  write_flag(now_ns, o.measurement_due_register, s_.measurement_due_flag && !rearm_, 2, out);
   write_flag(now_ns, o.tool_change_register, s_.tool_change_flag, 3, out);
   const double restart_mm = restart_program_path_mm();
   if (o.restart_path_register >= 0 && std::isfinite(restart_mm)) {

@@ -104,6 +104,16 @@ class WearCompensator {
   /// asked for in the next step). Creeps resume where they were frozen. Real-time safe.
   void clear_alarm() noexcept;
 
+  /// Start-up, after a state with the measurement request high was restored, when the NC still
+  /// holds the request high (or cannot say): the request register is written 0 from the next
+  /// step for request_rearm_s, then 1 again, so that an NC that reacts to the rising edge sees
+  /// one and the measurement cycle cannot stick (docs/creep.md, "the request"). Nothing changes
+  /// in the state; a measurement that arrives meanwhile ends it. No-op with request_rearm_s 0 or
+  /// the request low. Real-time safe.
+  void rearm_request() noexcept;
+  /// True while the request register is held at 0 by rearm_request().
+  [[nodiscard]] bool rearming() const noexcept { return rearm_; }
+
   // Observers (real-time safe), for status and tests.
   /// Wear in force at support point i now [µm] (committed + creeping + predicted).
   [[nodiscard]] double applied_wear_um(std::size_t i) const noexcept;
@@ -212,6 +222,11 @@ class WearCompensator {
   bool have_feed_{false};
   TimeNs last_now_ns_{0};
   bool have_now_{false};
+  // rearm_request(): the request register is written 0 until rearm_until_ns_ (set at the first
+  // step after it was asked for).
+  bool rearm_{false};
+  bool rearm_started_{false};
+  TimeNs rearm_until_ns_{0};
   int deflection_index_{-1};
   std::array<std::uint8_t, kMaxTransitions> transition_index_{};
   std::size_t transition_count_{0};

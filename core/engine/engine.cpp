@@ -25,6 +25,8 @@ constexpr std::string_view kHoldsEntry = "@holds";
 /// A read-back this close to 0 [µm] is no offset a module without state would lose (the
 /// reference map's resolution is 0.1 µm): nothing to report, nothing to hold.
 constexpr double kNoOffsetUm = 0.1;
+/// The event cursors' entry (cursors.hpp); an engine without cursors skips it as unknown.
+constexpr std::string_view kCursorsEntry = "@cursors";
 
 // Little helpers for the state bytes. Native byte order: the state never leaves the machine.
 class Writer {
@@ -228,6 +230,8 @@ void Engine::configure(std::vector<RegisterSpec> registers,
   for (const auto& r : specs_) {
     capacity += sizeof(std::uint16_t) + r.name.size() + sizeof(std::uint8_t);
   }
+  capacity += sizeof(std::uint16_t) + kCursorsEntry.size() + sizeof(std::uint32_t) +
+              EventCursors::kStateBytes;
   // The context's options: from the one module that sets them (the daemon's
   // [measurement_context] section), else from the engine options.
   ContextOptions context_options = options.context;
@@ -272,6 +276,7 @@ void Engine::configure(std::vector<RegisterSpec> registers,
   modules_ = std::move(modules);
   options_ = options;
   context_ = context;
+  cursors_ = EventCursors{};
   for (auto& m : modules_) m->bind_context(context_);
   valid_.clear();
   valid_.reserve(options.max_events_per_step);
@@ -416,6 +421,11 @@ void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out)
   }
   valid_.clear();
   for (const Event& in : events) {
+    // Taken, whatever becomes of it: a restart must not deliver it again.
+    cursors_.take(in);
+    if (const EventOrigin* o = origin_of(in); o != nullptr && o->counter_only) {
+      continue;
+    }
     // A faulted measurement reaches the modules with every value 0, whatever the driver left.
     Event e = in;
     set_fault(e, fault_of(e));
@@ -689,7 +699,7 @@ std::uint64_t Engine::state_generation() const noexcept {
   for (const auto& m : modules_) {
     g += m->state_generation();
   }
-  return g + context_.generation();
+  return g + context_.generation() + cursors_.generation();
 }
 
 std::size_t Engine::export_state(std::span<std::byte> buf) const noexcept {
@@ -704,7 +714,7 @@ std::size_t Engine::export_state(std::span<std::byte> buf) const noexcept {
     w.put(r.target_um);
     w.put(static_cast<std::uint8_t>(r.has_target ? 1 : 0));
   }
-  w.put(static_cast<std::uint32_t>(modules_.size() + 2));
+  w.put(static_cast<std::uint32_t>(modules_.size() + 3));
   w.put_name(kContextEntry);
   w.put(static_cast<std::uint32_t>(MachineContext::kStateBytes));
   if (!w.ok() || w.rest().size() < MachineContext::kStateBytes) {
@@ -727,6 +737,12 @@ std::size_t Engine::export_state(std::span<std::byte> buf) const noexcept {
     const auto n32 = static_cast<std::uint32_t>(w.size() - begin);
     std::memcpy(len_at.data(), &n32, sizeof(n32));
   }
+  w.put_name(kCursorsEntry);
+  w.put(static_cast<std::uint32_t>(EventCursors::kStateBytes));
+  if (!w.ok() || w.rest().size() < EventCursors::kStateBytes) {
+    return 0;
+  }
+  w.skip(cursors_.save(w.rest()));
   for (const auto& m : modules_) {
     w.put_name(m->name());
     const std::span<std::byte> len_at = w.rest();
@@ -808,6 +824,12 @@ bool Engine::import_state(std::span<const std::byte> bytes, TimeNs now_ns,
       }
       if (name == kContextEntry) {
         if (pass == 1 && !context_.load(blob, now_ns)) {
+          ++skip_count;
+        }
+        continue;
+      }
+      if (name == kCursorsEntry) {
+        if (pass == 1 && !cursors_.load(blob)) {
           ++skip_count;
         }
         continue;

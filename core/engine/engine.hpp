@@ -37,6 +37,9 @@
 //   becomes the time since the machine's warm start (the log's time_s). The context is saved
 //   with the state (an entry named "@context" among the modules' states, which an older engine
 //   skips as an unknown module).
+// - Event cursors (core/engine/cursors.hpp): per bus and numbered event kind, the NC's counter of
+//   the last event step() was handed, saved with the state as the entry "@cursors"; at start-up
+//   the daemon gives them to the buses, which resume the NC's events from there.
 //
 // Lifecycle: configure() allocates and validates (throws std::invalid_argument naming what is
 // wrong); step(), export_state(), import_state() are real-time safe: no allocation, no locks, no
@@ -56,6 +59,7 @@
 #include "core/common/output.hpp"
 #include "core/common/types.hpp"
 #include "core/engine/context.hpp"
+#include "core/engine/cursors.hpp"
 
 namespace nccomp::core::engine {
 
@@ -366,6 +370,8 @@ class Engine {
   [[nodiscard]] const EngineCounters& counters() const noexcept { return counters_; }
   /// The machine context (see the file comment). Real-time safe.
   [[nodiscard]] const MachineContext& context() const noexcept { return context_; }
+  /// The event cursors (see the file comment). Real-time safe.
+  [[nodiscard]] const EventCursors& event_cursors() const noexcept { return cursors_; }
 
  private:
   struct Reg {
@@ -397,6 +403,7 @@ class Engine {
   std::vector<double> trims_;
   StepOutput scratch_{};
   MachineContext context_{};
+  EventCursors cursors_{};
   EngineOptions options_{};
   EngineCounters counters_{};
   std::size_t state_capacity_{0};

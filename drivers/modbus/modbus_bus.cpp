@@ -80,6 +80,8 @@ std::size_t modbus_counters(const ModbusStatus& st, std::span<BusCounterValue> o
       st.events_lost,
       st.sequence_resets,
       st.sequence_unchanged_after_reconnect,
+      st.events_recovered_after_start,
+      st.events_lost_while_down,
       st.values_invalid,
       st.values_out_of_range,
       st.offsets_rejected,
@@ -269,6 +271,31 @@ std::optional<double> ModbusBus::read_offset(std::uint16_t register_index) {
     return std::nullopt;
   }
   return v;
+}
+
+bool ModbusBus::resume_events(const core::EventCursorSet& cursors) {
+  if (io_.joinable()) {
+    return true;  // the I/O thread owns the decoder now
+  }
+  decoder_.resume(cursors);
+  return true;
+}
+
+std::size_t ModbusBus::events_while_down(std::span<EventsWhileDown> out) const {
+  const ModbusStatus st = status_.load();
+  std::size_t n = 0;
+  for (std::size_t gi = 1; gi < kGroupCount && n < out.size(); ++gi) {
+    const ResumeReport& r = st.resume[gi];
+    if (r.done) {
+      out[n++] = EventsWhileDown{static_cast<std::uint8_t>(gi - 1),
+                                 r.cursor,
+                                 r.counter,
+                                 r.events,
+                                 r.nc_restarted,
+                                 r.delivered};
+    }
+  }
+  return n;
 }
 
 void ModbusBus::stop() {
@@ -461,7 +488,8 @@ void ModbusBus::poll(core::TimeNs now_ns) {
   for (const core::Event& e : decoder_.decode(t, block_ok_)) {
     axis_seen = axis_seen || std::holds_alternative<core::AxisSample>(e);
     if (rx_.try_push(e)) {
-      ++st_.bus.counters.events_decoded;
+      const core::EventOrigin* o = core::origin_of(e);
+      st_.bus.counters.events_decoded += o != nullptr && o->counter_only ? 0U : 1U;
     } else {
       ++st_.bus.counters.events_dropped;
     }
@@ -470,6 +498,9 @@ void ModbusBus::poll(core::TimeNs now_ns) {
   st_.events_lost = dc.events_lost;
   st_.sequence_resets = dc.sequence_resets;
   st_.sequence_unchanged_after_reconnect = dc.sequence_unchanged_after_reconnect;
+  st_.events_recovered_after_start = dc.events_recovered_after_start;
+  st_.events_lost_while_down = dc.events_lost_while_down;
+  st_.resume = decoder_.resume_reports();
   st_.values_invalid = dc.values_invalid;
   st_.values_out_of_range = dc.values_out_of_range;
   note_input(all_read, axis_seen);

@@ -74,6 +74,11 @@ struct ModbusStatus {
   std::uint64_t sequence_resets{0};  // a sequence counter moved back: NC restart
   // Same non-zero counter at the first read after a reconnect: an NC restart can't be ruled out.
   std::uint64_t sequence_unchanged_after_reconnect{0};
+  // Events the NC produced while nccompd was down (first read after a start with the engine's
+  // cursors): the newest of a group delivered, the others lost; and what each group's read found.
+  std::uint64_t events_recovered_after_start{0};
+  std::uint64_t events_lost_while_down{0};
+  std::array<ResumeReport, kGroupCount> resume{};
   std::uint64_t values_invalid{0};       // NaN / inf / not integral / not a valid code: dropped
   std::uint64_t values_out_of_range{0};  // finite but outside the map's min / max: dropped
   std::uint64_t offsets_rejected{0};     // not encodable (NaN, out of range) or unmapped register
@@ -136,6 +141,8 @@ inline constexpr std::array<const char*, 30> kModbusCounterNames = {
     "events_lost",
     "sequence_resets",
     "sequence_unchanged_after_reconnect",
+    "events_recovered_after_start",
+    "events_lost_while_down",
     "values_invalid",
     "values_out_of_range",
     "offsets_rejected",
@@ -188,6 +195,10 @@ class ModbusBus final : public Bus {
   [[nodiscard]] std::size_t extra_counters(std::span<BusCounterValue> out) const override {
     return modbus_counters(status_.load(), out);
   }
+  /// Before start(): the decoder resumes each event group from the engine's cursor. Returns true.
+  bool resume_events(const core::EventCursorSet& cursors) override;
+  /// The first read of each resumed group (from the seqlock snapshot).
+  [[nodiscard]] std::size_t events_while_down(std::span<EventsWhileDown> out) const override;
 
   /// Lock-step (before start()): no polling or writing on the driver's own schedule; sync()
   /// makes the I/O thread do one complete poll, flush() makes it write every pending offset

@@ -50,6 +50,13 @@ void put_float(std::span<std::uint16_t> b, std::size_t at, float v, bool low_fir
   b[at + 1] = low_first ? hi : lo;
 }
 
+/// An event to deliver, not a counter the decoder consumed without one (counter_only: the
+/// engine's cursor follows it, nothing else sees it).
+bool delivered(const core::Event& e) {
+  const core::EventOrigin* o = core::origin_of(e);
+  return o == nullptr || !o->counter_only;
+}
+
 struct ModbusDecoder : ::testing::Test {
   ModbusConfig config = parse_modbus_config(kMap, "t.toml");
   PollDecoder dec{config};
@@ -65,7 +72,7 @@ struct ModbusDecoder : ::testing::Test {
   std::vector<T> events_of(std::span<const core::Event> ev) {
     std::vector<T> out;
     for (const auto& e : ev) {
-      if (const auto* p = std::get_if<T>(&e)) {
+      if (const auto* p = std::get_if<T>(&e); p != nullptr && delivered(e)) {
         out.push_back(*p);
       }
     }
@@ -256,7 +263,7 @@ TEST(ModbusDecoderRestart, BackwardIsARestartForwardIsEventsWrapOnlyNearTheTop) 
   const auto tool_measurements = [](std::span<const core::Event> ev) {
     std::vector<core::ToolMeasurement> out;
     for (const core::Event& e : ev) {
-      if (const auto* p = std::get_if<core::ToolMeasurement>(&e)) {
+      if (const auto* p = std::get_if<core::ToolMeasurement>(&e); p != nullptr && delivered(e)) {
         out.push_back(*p);
       }
     }
@@ -363,6 +370,145 @@ TEST_F(ModbusDecoderReconnect, UnchangedCounterAtTheFirstReadAfterAReconnectIsCo
   EXPECT_EQ(dec.counters().sequence_unchanged_after_reconnect, 2U);
   EXPECT_EQ(dec.counters().events_lost, 0U);
   EXPECT_EQ(dec.counters().sequence_resets, 0U);
+}
+
+// The engine's event cursors (docs/daemon.md, "Events while nccompd was down"): every counter the
+// decoder consumes reaches the engine with an event, a counter it consumes without one as a
+// counter_only event, so that a restarted daemon can resume from it.
+TEST_F(ModbusDecoder, EveryConsumedCounterReachesTheEngineAlsoWithoutAnEvent) {
+  // GIVEN the tool measurement counter at 7 and the uint32 touch counter at 0x00010002
+  meas()[0] = 7;
+  touch()[0] = 0x0001;
+  touch()[1] = 0x0002;
+  // WHEN the first poll takes them as the baseline THEN nothing is delivered, but each counter
+  // leaves as a counter_only event of its kind
+  const auto first = dec.decode(1, ok);
+  std::vector<std::pair<std::size_t, core::EventOrigin>> origins;
+  for (const core::Event& e : first) {
+    if (const core::EventOrigin* o = core::origin_of(e)) {
+      origins.emplace_back(e.index(), *o);
+    }
+  }
+  ASSERT_EQ(origins.size(), 2U);
+  EXPECT_EQ(core::numbered_kind(first[1]), 0);  // tool measurement, then the touch
+  EXPECT_TRUE(origins[0].second.numbered && origins[0].second.counter_only);
+  EXPECT_EQ(origins[0].second.sequence, 7U);
+  EXPECT_TRUE(origins[1].second.numbered && origins[1].second.counter_only);
+  EXPECT_EQ(origins[1].second.sequence, 0x00010002U);
+  EXPECT_EQ(core::numbered_kind(first[2]), 2);
+  // WHEN the tool measurement counter moves to 8 THEN its event carries 8 and is delivered
+  meas()[0] = 8;
+  meas()[1] = 3;
+  put_float(meas(), 2, 4.5F, false);
+  const auto tm = events_of<core::ToolMeasurement>(dec.decode(2, ok));
+  ASSERT_EQ(tm.size(), 1U);
+  EXPECT_TRUE(tm[0].origin.numbered);
+  EXPECT_FALSE(tm[0].origin.counter_only);
+  EXPECT_EQ(tm[0].origin.sequence, 8U);
+  // WHEN the NC restarts with no event since (counter 0) THEN the 0 leaves as counter_only
+  meas()[0] = 0;
+  const auto after_restart = dec.decode(3, ok);
+  EXPECT_TRUE(events_of<core::ToolMeasurement>(after_restart).empty());
+  ASSERT_EQ(after_restart.size(), 2U);  // the axis sample and the counter
+  const core::EventOrigin* o = core::origin_of(after_restart[1]);
+  ASSERT_NE(o, nullptr);
+  EXPECT_TRUE(o->counter_only);
+  EXPECT_EQ(o->sequence, 0U);
+  EXPECT_EQ(dec.counters().sequence_resets, 1U);
+}
+
+// GIVEN the engine's cursor of the tool measurement counter restored from the state (nccompd
+// was down), WHEN its first read finds `after` (the newest event's values: tool 8, 33 µm), THEN
+// `delivered` events come out, `lost` are counted lost while down, and the report says so.
+struct ResumeCase {
+  const char* what;
+  std::uint32_t cursor;
+  std::uint32_t after;
+  std::size_t delivered;
+  std::uint64_t lost;
+  bool nc_restarted;
+  std::uint32_t events;
+  std::uint64_t unchanged;  // sequence_unchanged_after_reconnect
+};
+
+TEST(ModbusDecoderResume, TheNewestEventSinceTheCursorIsDeliveredOnceTheOthersCountedLost) {
+  const ModbusConfig config = parse_modbus_config(kMap, "t.toml");
+  const std::array<ResumeCase, 7> cases = {{
+      {"nothing while down", 5, 5, 0, 0, false, 0, 1},
+      {"nothing while down, counter 0: no doubt", 0, 0, 0, 0, false, 0, 0},
+      {"one while down", 5, 6, 1, 0, false, 1, 0},
+      {"three while down: the newest delivered, two lost", 5, 8, 1, 2, false, 3, 0},
+      {"through the top of the range", 65534, 1, 1, 2, false, 3, 0},
+      {"the NC restarted, two since", 5, 2, 1, 1, true, 2, 0},
+      {"the NC restarted, none since", 5, 0, 0, 0, true, 0, 0},
+  }};
+  for (const ResumeCase& c : cases) {
+    SCOPED_TRACE(::testing::Message() << c.what << ": " << c.cursor << " -> " << c.after);
+    PollDecoder dec(config);
+    core::EventCursorSet cursors{};
+    cursors[0] = core::EventCursor{true, c.cursor};  // the tool measurement; the touch unknown
+    dec.resume(cursors);
+    const std::vector<std::uint8_t> ok(config.blocks.size(), 1);
+    std::span<std::uint16_t> meas = dec.block(1);
+    meas[0] = static_cast<std::uint16_t>(c.after);
+    meas[1] = 8;
+    put_float(meas, 2, 33.0F, false);
+    std::vector<core::ToolMeasurement> tm;
+    for (const core::Event& e : dec.decode(1, ok)) {
+      if (const auto* p = std::get_if<core::ToolMeasurement>(&e); p != nullptr && delivered(e)) {
+        tm.push_back(*p);
+      }
+    }
+    ASSERT_EQ(tm.size(), c.delivered);
+    if (c.delivered == 1U) {
+      EXPECT_EQ(tm[0].tool, 8);
+      EXPECT_DOUBLE_EQ(tm[0].wear_um[0], 33.0);
+      EXPECT_EQ(tm[0].origin.sequence, c.after);
+    }
+    EXPECT_EQ(dec.counters().events_lost_while_down, c.lost);
+    EXPECT_EQ(dec.counters().events_recovered_after_start, c.delivered);
+    EXPECT_EQ(dec.counters().events_lost, 0U);
+    EXPECT_EQ(dec.counters().sequence_resets, c.nc_restarted ? 1U : 0U);
+    EXPECT_EQ(dec.counters().sequence_unchanged_after_reconnect, c.unchanged);
+    const ResumeReport& r = dec.resume_reports()[static_cast<std::size_t>(Group::kToolMeasurement)];
+    EXPECT_TRUE(r.done);
+    EXPECT_EQ(r.cursor, c.cursor);
+    EXPECT_EQ(r.counter, c.after);
+    EXPECT_EQ(r.nc_restarted, c.nc_restarted);
+    EXPECT_EQ(r.events, c.events);
+    EXPECT_EQ(r.delivered, c.delivered == 1U);
+    // The touch had no cursor: its first read is the baseline, nothing reported.
+    EXPECT_FALSE(dec.resume_reports()[static_cast<std::size_t>(Group::kCalibrationTouch)].done);
+    // Never twice: the next poll with the same counter delivers nothing, and later events
+    // are counted as usual (not as while down).
+    EXPECT_EQ(dec.decode(2, ok).size(), 1U);  // the axis sample only
+    meas[0] = static_cast<std::uint16_t>(c.after + 3U);
+    EXPECT_EQ(dec.decode(3, ok).size(), 2U);
+    EXPECT_EQ(dec.counters().events_lost, 2U);
+    EXPECT_EQ(dec.counters().events_lost_while_down, c.lost);
+  }
+}
+
+TEST(ModbusDecoderResume, ANewestEventWithInvalidValuesIsReportedNotDelivered) {
+  const ModbusConfig config = parse_modbus_config(kMap, "t.toml");
+  PollDecoder dec(config);
+  core::EventCursorSet cursors{};
+  cursors[0] = core::EventCursor{true, 5};
+  dec.resume(cursors);
+  const std::vector<std::uint8_t> ok(config.blocks.size(), 1);
+  std::span<std::uint16_t> meas = dec.block(1);
+  meas[0] = 7;
+  put_float(meas, 2, std::nanf(""), false);
+  for (const core::Event& e : dec.decode(1, ok)) {
+    EXPECT_EQ(std::get_if<core::ToolMeasurement>(&e), nullptr);
+  }
+  EXPECT_EQ(dec.counters().values_invalid, 1U);
+  EXPECT_EQ(dec.counters().events_lost_while_down, 1U);
+  EXPECT_EQ(dec.counters().events_recovered_after_start, 0U);
+  const ResumeReport& r = dec.resume_reports()[static_cast<std::size_t>(Group::kToolMeasurement)];
+  EXPECT_TRUE(r.done);
+  EXPECT_EQ(r.events, 2U);
+  EXPECT_FALSE(r.delivered);
 }
 
 TEST_F(ModbusDecoderReconnect, AReconnectBeforeTheFirstReadIsJustTheBaseline) {
