@@ -385,7 +385,7 @@ ModbusConfig parse_modbus_table(const toml::table& m, std::string_view file,
   const Reader r(table_file);
   const toml::node* mnode = &m;
   const std::string mp = "modbus";
-  static constexpr std::array<std::string_view, 33> kTopKeys = {"transport",
+  static constexpr std::array<std::string_view, 34> kTopKeys = {"transport",
                                                                 "host",
                                                                 "port",
                                                                 "device",
