@@ -1,15 +1,21 @@
-// The client side of `nccomp calibrate --daemon SOCKET`: one "calibrate ..." request per
-// connection on nccompd's status socket (daemon/command.hpp), the answer read to EOF. Not
-// real-time.
+// The client side of nccompd's status socket (client/protocol.hpp): one request per connection,
+// the answer read until the daemon closes it, within a deadline. Used by `nccomp status`, the
+// operator verbs and `nccomp calibrate --daemon`. Blocking; not real-time.
 #pragma once
 
 #include <string>
+#include <string_view>
 
-namespace nccomp::tools::calibrate {
+namespace nccomp::client {
 
-/// Sends "calibrate <command>\n" and returns the daemon's answer. Throws std::runtime_error
-/// naming the socket when it cannot connect or the daemon does not answer within timeout_s.
-std::string daemon_request(const std::string& socket_path, const std::string& command,
-                           double timeout_s = 15.0);
+/// How long a status request or an operator verb may take (the verbs answer within 3 s) [s].
+inline constexpr double kDefaultTimeoutS = 5.0;
 
-}  // namespace nccomp::tools::calibrate
+/// Sends `request` and a line break to the socket at socket_path and returns the whole answer.
+/// Throws std::runtime_error naming the socket when it cannot connect or send, when the answer
+/// is not complete within timeout_s of the connection, and when the daemon closes the connection
+/// without answering.
+[[nodiscard]] std::string query(const std::string& socket_path, std::string_view request,
+                                double timeout_s = kDefaultTimeoutS);
+
+}  // namespace nccomp::client

@@ -20,7 +20,7 @@
 #include <mutex>
 #include <optional>
 
-#include "daemon/command.hpp"
+#include "daemon/commands/command.hpp"
 #include "daemon/config/builtin_sections.hpp"
 #include "daemon/config/config.hpp"
 #include "daemon/events_while_down.hpp"
@@ -63,6 +63,14 @@ std::string pick_dir(const cfg::Config& c, const std::string& configured, const 
     return s.substr(0, s.find(':'));
   }
   return fallback;
+}
+
+// The status socket: [status] socket_path, else in systemd's RuntimeDirectory, else in /run.
+std::string status_socket_path(const cfg::Config& c) {
+  const auto& s = cfg::status_section(c);
+  return s.socket_path.empty()
+             ? pick_dir(c, "", "RUNTIME_DIRECTORY", "/run/nccompd") + "/status.sock"
+             : c.resolve(s.socket_path);
 }
 
 struct BusEntry {
@@ -122,6 +130,17 @@ std::vector<std::string> register_names(const cfg::Config& c) {
 
 void notify(const std::string& s) { (void)sd_notify(0, s.c_str()); }
 
+/// Loads the configuration; on errors prints them and "nccompd: N error(s) in FILE" to standard
+/// error and returns null.
+std::unique_ptr<cfg::Config> load_config(const std::string& path) {
+  auto loaded = cfg::load_file(path);
+  if (!loaded.config) {
+    std::cerr << loaded.diagnostics.to_string() << "nccompd: " << loaded.diagnostics.items().size()
+              << " error(s) in " << path << "\n";
+  }
+  return std::move(loaded.config);
+}
+
 }  // namespace
 
 namespace {
@@ -153,13 +172,10 @@ int run_daemon(const DaemonOptions& options) {
     return 1;
   }
 
-  auto loaded = cfg::load_file(options.config_path);
-  if (!loaded.config) {
-    std::cerr << loaded.diagnostics.to_string() << "nccompd: " << loaded.diagnostics.items().size()
-              << " error(s) in " << options.config_path << "\n";
+  std::shared_ptr<const cfg::Config> config = load_config(options.config_path);
+  if (!config) {
     return 3;
   }
-  std::shared_ptr<const cfg::Config> config = std::move(loaded.config);
   const std::string log_target = setup_logging(cfg::log_section(*config));
   spdlog::info("nccompd starting: config {}, logging to {}", options.config_path, log_target);
 
@@ -500,10 +516,7 @@ int run_daemon(const DaemonOptions& options) {
   StatusServer status(sc);
   set_command_context(CommandContext{&commands, &loop, sc.register_names});
   const auto& stsec = cfg::status_section(*config);
-  const std::string sock =
-      stsec.socket_path.empty()
-          ? pick_dir(*config, "", "RUNTIME_DIRECTORY", "/run/nccompd") + "/status.sock"
-          : config->resolve(stsec.socket_path);
+  const std::string sock = status_socket_path(*config);
   fs::create_directories(fs::path(sock).parent_path(), ec);
   try {
     StatusServerOptions so;
@@ -744,6 +757,47 @@ int run_daemon(const DaemonOptions& options) {
       return 1;
     }
   }
+  return 0;
+}
+
+int check_config(const DaemonOptions& options) {
+  const std::string& file = options.config_path;
+  auto result = cfg::load_file(file);
+  if (result.config) {
+    // Engine-level refusals (e.g. two modules writing one register) are reported like every
+    // other error: file:line:column: key.path: message.
+    auto engine = cfg::build_engine(*result.config, result.diagnostics);
+    if (engine) {
+      std::cout << file << ": OK\n  files:";
+      for (const auto& f : result.config->files()) {
+        std::cout << " " << f;
+      }
+      std::cout << "\n  sections:";
+      for (const auto& s : result.config->section_names()) {
+        std::cout << " " << s;
+      }
+      const auto& d = cfg::daemon_section(*result.config);
+      std::cout << "\n  loop: " << d.rate_hz << " Hz" << (d.dry_run ? " (dry run)" : "")
+                << "\n  registers: " << engine->register_count()
+                << "\n  modules: " << engine->module_count();
+      for (std::size_t i = 0; i < engine->module_count(); ++i) {
+        std::cout << (i == 0 ? " (" : ", ") << engine->module(i).name();
+      }
+      std::cout << (engine->module_count() > 0 ? ")" : "") << "\n";
+      return 0;
+    }
+  }
+  std::cerr << result.diagnostics.to_string() << "nccompd: " << result.diagnostics.items().size()
+            << " error(s) in " << file << "\n";
+  return 3;
+}
+
+int print_status_socket(const DaemonOptions& options) {
+  const auto config = load_config(options.config_path);
+  if (!config) {
+    return 3;
+  }
+  std::cout << status_socket_path(*config) << "\n";
   return 0;
 }
 

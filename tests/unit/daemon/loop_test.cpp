@@ -13,11 +13,13 @@
 #include <thread>
 
 #include "core/engine/ramp_module.hpp"
-#include "daemon/loopback_bus.hpp"
+#include "drivers/loopback/loopback_bus.hpp"
 #include "tests/support/alloc_counter.hpp"
 
 namespace nccomp::daemon {
 namespace {
+
+using drivers::loopback::LoopbackBus;
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
