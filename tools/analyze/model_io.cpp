@@ -504,8 +504,10 @@ Mapping read_mapping_text(std::string_view text, std::string_view source) {
     }
   }
   for (const auto& [k, v] : m.scale) {
-    const bool known = is_target(k) || std::any_of(m.extra.begin(), m.extra.end(),
-                                                   [&](const auto& e) { return e.first == k; });
+    const std::string& column = k;  // clang 14 cannot capture a structured binding
+    const bool known =
+        is_target(k) || std::any_of(m.extra.begin(), m.extra.end(),
+                                    [&](const auto& e) { return e.first == column; });
     if (!known) fail(std::string(source) + ": scale." + k + ": no such mapped column");
   }
   return m;
