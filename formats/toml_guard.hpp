@@ -1,12 +1,18 @@
-// The one way nccomp hands TOML text to toml++: Debian 12's toml++ 3.3.0 has two defects on
-// malformed input (upstream issues 295, 301, 305), found by coverage-guided fuzzing:
-//   - a table header whose first character is not a key (`[}a]`, `[` + newline, `[[#`): an
-//     assertion in parse_key(), compiled out of Debian's library, undefined behaviour where
-//     it is compiled as an assumption (clang);
+// The one way nccomp hands TOML text to toml++: Debian 12's toml++ 3.3.0 has three defects on
+// malformed input, found by coverage-guided fuzzing (the first and the last fixed upstream
+// after 3.3.0):
+//   - a table header whose first character is not a key (`[}a]`, `[` + newline, `[[[a]]]`,
+//     upstream pull request 301): an assertion in parse_key(), compiled out of Debian's
+//     library, undefined behaviour where it is compiled as an assumption (clang);
+//   - a '}' where an array expects a value (`a = [}`, `a = [1, }`): an assertion in
+//     parse_value(), the same kind;
 //   - a character U+00A1..U+0499, U+2C5E..U+2FFF, U+3001..U+3057 or U+FB26..U+FEFE (é, µ, °,
 //     U+FE00 ...) where toml++ asks whether it is whitespace: outside strings and comments, and
 //     in a multi-line "..." string right after a backslash or after a line-ending backslash.
-//     Its lookup table reaches __builtin_unreachable() there: undefined behaviour.
+//     Its lookup table reaches __builtin_unreachable() there: undefined behaviour (upstream
+//     issues 190 and 295, pull request 305).
+// Debian's library is built without assertions and by GCC (no assumption), so there the first
+// two end in toml++'s own error; the third is undefined behaviour in any build.
 // parse_toml() and parse_toml_file() refuse such text before toml++ sees it, with a
 // toml::parse_error at the offending line and column like toml++'s own errors (or toml++'s own
 // error when the text is already invalid before that place). Only one valid TOML text is
@@ -227,7 +233,8 @@ inline std::optional<TomlDefect> find_toml_defect(std::string_view text) {
 
   enum class Mode { kLineStart, kKey, kValue, kHeader };
   Mode mode = Mode::kLineStart;
-  int depth = 0;  // [ and { open in a value
+  std::string open;         // the [ and { open in a value, innermost last
+  bool array_slot = false;  // in an array after '[' or ',': toml++ parses a value next
   while (r.next(c)) {
     if (mode == Mode::kLineStart) {
       if (c == ' ' || c == '\t' || c == '\n' || c == '\r') continue;
@@ -257,6 +264,7 @@ inline std::optional<TomlDefect> find_toml_defect(std::string_view text) {
       }
     }
     if (c == '"' || c == '\'') {
+      array_slot = false;
       bool stop = false;
       if (auto d = skip_string(c, stop)) return d;
       if (stop) return std::nullopt;
@@ -268,17 +276,29 @@ inline std::optional<TomlDefect> find_toml_defect(std::string_view text) {
       if (c != '\n') return std::nullopt;
     }
     if (c == '\n') {
-      if (mode != Mode::kValue || depth == 0) mode = Mode::kLineStart;
+      if (mode != Mode::kValue || open.empty()) mode = Mode::kLineStart;
       continue;
     }
     if (auto d = outside(c)) return d;
+    if (c == ' ' || c == '\t' || c == '\r') continue;
     if (mode == Mode::kKey && c == '=') {
       mode = Mode::kValue;
-      depth = 0;
-    } else if (mode == Mode::kValue && (c == '[' || c == '{')) {
-      ++depth;
-    } else if (mode == Mode::kValue && (c == ']' || c == '}') && depth > 0) {
-      --depth;
+      open.clear();
+      array_slot = false;
+    } else if (mode == Mode::kValue) {
+      // toml++'s parse_array() hands a '}' there to parse_value(), which asserts a value.
+      if (array_slot && c == '}') {
+        return defect_at(r, "expected a value or ']' in an array, saw '}'");
+      }
+      array_slot = false;
+      if (c == '[' || c == '{') {
+        open += static_cast<char>(c);
+        array_slot = c == '[';
+      } else if ((c == ']' || c == '}') && !open.empty()) {
+        open.pop_back();
+      } else if (c == ',' && !open.empty() && open.back() == '[') {
+        array_slot = true;
+      }
     }
   }
   return std::nullopt;

@@ -21,8 +21,8 @@ std::string only_error(const LoadResult& r) {
 }
 
 TEST(ConfigTomlGuard, KnownDefectsOfToml3AreLocatedErrors) {
-  // Upstream issue 295's table header, 301's U+FE00 in a key, and what the coverage-guided run
-  // of fuzz_daemon_config found (tests/fuzz/config/corpus/toml_*).
+  // The issue's table header and U+FE00 in a key, and what the coverage-guided runs found
+  // (tests/fuzz/config/corpus/toml_defect_*).
   EXPECT_EQ(only_error(load_string("[}a]\n", "fuzz.toml", "/nonexistent")),
             "fuzz.toml:1:2: TOML syntax error: expected a key after '[' of a table header, saw "
             "'}'");
@@ -37,6 +37,8 @@ TEST(ConfigTomlGuard, KnownDefectsOfToml3AreLocatedErrors) {
       only_error(load_string("[log]\nlevel = \"info\"\xC2\xB5\n", "fuzz.toml", "/nonexistent")),
       "fuzz.toml:2:15: TOML syntax error: unexpected character U+00B5 outside a string or "
       "comment");
+  EXPECT_EQ(only_error(load_string("include = [\"x.toml\", }\n", "fuzz.toml", "/nonexistent")),
+            "fuzz.toml:1:22: TOML syntax error: expected a value or ']' in an array, saw '}'");
 }
 
 TEST(ConfigTomlGuard, IncludedFileIsGuardedToo) {

@@ -36,7 +36,7 @@ Refusal refusal(std::string_view text) {
 }
 
 TEST(TomlGuard, TableHeaderWithoutAKeyIsRefused) {
-  // Upstream issue 295's input, then the same defect behind "[[" and after spaces.
+  // The issue's input, then the same defect behind "[[" and after spaces.
   const auto r = refusal("[}a]\n");
   EXPECT_EQ(r.line, 1U);
   EXPECT_EQ(r.column, 2U);
@@ -50,15 +50,27 @@ TEST(TomlGuard, TableHeaderWithoutAKeyIsRefused) {
   EXPECT_EQ(n.column, 2U);
   EXPECT_EQ(n.description, "expected a key after '[' of a table header, saw a line break");
   EXPECT_EQ(refusal("  [#]").column, 4U);
-  EXPECT_EQ(refusal("[[[a]]]").column, 3U);
+  EXPECT_EQ(refusal("[[[a]]]").column, 3U);  // upstream pull request 301
   EXPECT_EQ(refusal("[\t.a]").column, 3U);
   // Found by the coverage-guided run of fuzz_daemon_config (tests/fuzz/config/corpus).
   EXPECT_EQ(refusal("[~easurement_context]\nw = 2\n").column, 2U);
 }
 
+TEST(TomlGuard, ClosingBraceWhereAnArrayExpectsAValueIsRefused) {
+  // Found by the coverage-guided runs of fuzz_daemon_config and fuzz_checkpoint_config.
+  const auto r = refusal("a = [}");
+  EXPECT_EQ(r.line, 1U);
+  EXPECT_EQ(r.column, 6U);
+  EXPECT_EQ(r.description, "expected a value or ']' in an array, saw '}'");
+  EXPECT_EQ(refusal("include = [\"x.toml\", }\n").column, 22U);
+  EXPECT_EQ(refusal("a = [\n  # c\n  }]").line, 3U);
+  EXPECT_EQ(refusal("a = [[}]]").column, 7U);
+  EXPECT_EQ(refusal("a = [{x = 1}, }").column, 15U);
+}
+
 TEST(TomlGuard, CharactersWithoutAWhitespaceAnswerAreRefusedOutsideStrings) {
-  // U+FE00 (upstream issue 301) in a key, at the start of a line, in an inline table; é and °
-  // lie in the same undefined ranges of toml++'s table (U+00A1..U+0499 ...).
+  // U+FE00 in a key, at the start of a line, in an inline table; U+032A (upstream issue 295),
+  // é and ° lie in the same undefined ranges of toml++'s table (U+00A1..U+0499 ...).
   const auto k = refusal("a\xEF\xB8\x80 = 1\n");
   EXPECT_EQ(k.line, 1U);
   EXPECT_EQ(k.column, 2U);
@@ -66,6 +78,8 @@ TEST(TomlGuard, CharactersWithoutAWhitespaceAnswerAreRefusedOutsideStrings) {
   EXPECT_EQ(refusal("\xEF\xB8\x80 = 1").column, 1U);
   EXPECT_EQ(refusal("a = {\xEF\xB8\x80 = 1}").column, 6U);
   EXPECT_EQ(refusal("a = 1\xC2\xB0").column, 6U);
+  EXPECT_EQ(refusal("\xCC\xAA").description,
+            "unexpected character U+032A outside a string or comment");
   EXPECT_EQ(refusal("x = 1\na\xC3\xA9 = 1").line, 2U);
   EXPECT_EQ(refusal("[a\xC3\xA9]").column, 3U);
   EXPECT_EQ(refusal("[\xC3\xA9]").description,
@@ -80,8 +94,8 @@ TEST(TomlGuard, MultiLineStringEscapesThatReachTheTableAreRefused) {
   EXPECT_EQ(e.description, "unknown escape sequence '\\U+00B5'");
   // ... after spaces behind a backslash ...
   EXPECT_EQ(refusal("s = \"\"\"a\\  \xC2\xB5\"\"\"").column, 12U);
-  // ... and as the first character after a line-ending backslash: valid TOML, the one text
-  // the guard refuses; the escape is the way to write it.
+  // ... and as the first character after a line-ending backslash (upstream issue 190): valid
+  // TOML, the one text the guard refuses; the escape is the way to write it.
   const auto c = refusal("s = \"\"\"\\\n  \n   \xC2\xB5m\"\"\"\n");
   EXPECT_EQ(c.line, 3U);
   EXPECT_EQ(c.column, 4U);
@@ -108,6 +122,7 @@ TEST(TomlGuard, ValidTomlWithNonAsciiTextAndNestedArraysParsesAsBefore) {
       "mll = '''\xC2\xB5'''''\n"
       "\"k\xC3\xA9y\" = 1  # \xC3\xA9\n"
       "grid = [\n  [ ],\n  [+1, -2],\n  [{x = 1}],  # \xC2\xB0\n]\n"
+      "inl = {b = [1, 2], c = {d = []}}\n"
       "[\"t\xC3\xA9\".sub]\n"
       "[[arr]]\n";
   ASSERT_FALSE(find_toml_defect(text));
@@ -119,6 +134,7 @@ TEST(TomlGuard, ValidTomlWithNonAsciiTextAndNestedArraysParsesAsBefore) {
   EXPECT_EQ(t["k\xC3\xA9y"].value_or(0), 1);
   EXPECT_EQ(t["grid"].as_array()->size(), 3U);
   EXPECT_EQ(t["grid"][1][0].value_or(0), 1);
+  EXPECT_EQ(t["inl"]["b"][1].value_or(0), 2);
   EXPECT_TRUE(t["t\xC3\xA9"]["sub"].is_table());
   EXPECT_TRUE(t["arr"].is_array_of_tables());
 }
