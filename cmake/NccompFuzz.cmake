@@ -9,6 +9,9 @@ if(NOT CMAKE_CXX_COMPILER_ID STREQUAL "Clang")
   message(FATAL_ERROR "NCCOMP_LIBFUZZER needs clang (preset `fuzz`: /usr/bin/clang++-14)")
 endif()
 add_compile_options(-fsanitize=fuzzer-no-link)
+# C++14 sized deallocation, on in g++ and off by default in clang 14: the same operators (and the
+# allocation counter's replacements of them) in both.
+add_compile_options(-fsized-deallocation)
 
 # toml++ compiled from Debian's headers into the build instead of linking libtomlplusplus.so:
 # the shared library is neither instrumented nor built with assertions, so a coverage-guided run
