@@ -118,7 +118,7 @@ struct IoSetupLine {
 std::vector<IoSetupLine> describe_io_setup(const IoThreadSetup& setup, const ModbusConfig& config);
 
 /// Names of ModbusBus::extra_counters(), in their order (static strings, for status output).
-inline constexpr std::array<const char*, 30> kModbusCounterNames = {
+inline constexpr auto kModbusCounterNames = std::to_array<const char*>({
     "exception_illegal_function",      // 1
     "exception_illegal_address",       // 2
     "exception_illegal_value",         // 3
@@ -154,7 +154,7 @@ inline constexpr std::array<const char*, 30> kModbusCounterNames = {
     "io_sched_fifo_priority",  // its SCHED_FIFO priority, 0 = normal scheduling
     "io_sched_errno",          // errno of a refused io_sched_fifo_priority (1 = EPERM), else 0
     "io_affinity_errno",       // errno of a refused io_cpu_affinity (22 = EINVAL), else 0
-};
+});
 
 /// Fills `out` with the counters of `st` in kModbusCounterNames order; returns how many.
 std::size_t modbus_counters(const ModbusStatus& st, std::span<BusCounterValue> out) noexcept;
