@@ -462,7 +462,8 @@ TEST(NccompdModbus, KillNineMidCreepContinuesWithoutDoubling) {
 
 // A dry run never reaches the NC nor the state file: the real start that follows resumes from
 // what the NC holds (12.3 µm, from the first real run) and ramps to the new target through the
-// limiter, instead of believing the dry run's 30 µm were sent.
+// limiter, instead of believing the dry run's 30 µm were sent; a stalled bus in the middle of
+// the ramp does not merge its steps.
 TEST(NccompdModbus, RealStartAfterDryRunResumesFromWhatTheNcHolds) {
   TempDir d;
   NcServer nc(ServerConfig{});
@@ -507,7 +508,18 @@ TEST(NccompdModbus, RealStartAfterDryRunResumesFromWhatTheNcHolds) {
 
   Daemon real(d.path);
   real.start();
-  const auto end = std::chrono::steady_clock::now() + 15s;
+  // The NC stops answering for 0.3 s at the first write of the ramp: the I/O thread waits in a
+  // request (up to response_timeout_s) while the loop goes on. This test was flaky when load
+  // delayed the I/O thread the same way: the NC then got the loop's writes of that time merged
+  // into one step (8.5 µm, 72 counts seen). The stall makes that certain.
+  auto end = std::chrono::steady_clock::now() + 15s;
+  while (nc.writes().size() == writes_real && std::chrono::steady_clock::now() < end) {
+    std::this_thread::sleep_for(1ms);
+  }
+  nc.set_silent(true);
+  std::this_thread::sleep_for(300ms);
+  nc.set_silent(false);
+  end = std::chrono::steady_clock::now() + 15s;
   while (holding_i32(nc, 200) != 300 && std::chrono::steady_clock::now() < end) {
     std::this_thread::sleep_for(10ms);
   }
