@@ -569,6 +569,7 @@ void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out)
       write_sequence_ = sequence;
       r.sent_um = res.value_um;
       r.sent = true;
+      r.as_is_in_flight = r.resend_as_is;
       r.resend_as_is = false;
       if (receipts_) {
         r.in_flight = sequence;
@@ -608,6 +609,7 @@ void Engine::nc_holds(Reg& r, double value_um) noexcept {
   r.nc_sent = true;
   r.in_flight = 0;
   r.resend_as_is = false;
+  r.as_is_in_flight = false;
 }
 
 void Engine::write_receipt(std::size_t i, WriteReceipt receipt, TimeNs now_ns) noexcept {
@@ -627,6 +629,11 @@ void Engine::write_receipt(std::size_t i, WriteReceipt receipt, TimeNs now_ns) n
       r.nc_sent = true;
       break;
     case WriteOutcome::kRefused:
+      if (r.as_is_in_flight) {
+        // Still unsure which of the two values the NC holds: the same value again.
+        r.resend_as_is = true;
+        break;
+      }
       // The NC keeps what it held: the limiter moves from there again.
       r.limiter.reset(r.nc_um, now_ns);
       r.sent_um = r.nc_um;

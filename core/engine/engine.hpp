@@ -429,11 +429,13 @@ class Engine {
     double notice_value{0.0};
     /// Write receipts: the sequence of the write in flight (0: none); what the NC holds as far
     /// as the engine knows (nc_sent: anything at all), the limiter's origin after a refusal;
-    /// the write in flight is to be sent again as it is (its fate unknown, or imported).
+    /// sent_um is to be written again as it is (its fate unknown, or imported in flight), and
+    /// the write in flight is such a re-send.
     std::uint64_t in_flight{0};
     double nc_um{0.0};
     bool nc_sent{false};
     bool resend_as_is{false};
+    bool as_is_in_flight{false};
   };
 
   bool validate(const Event& e) const noexcept;

@@ -210,6 +210,11 @@ TEST(WriteReceipts, AWriteOfUnknownFateIsSentAgainAsItIs) {
   EXPECT_GT(out.writes[0].sequence, first);
   e->step(201 * kMs, {}, out);
   EXPECT_EQ(out.writes.size(), 0U) << "in flight again";
+  // The re-send is refused (dropped at a full queue): still unsure, the same value again.
+  e->write_receipt(0, {e->write_in_flight(0), WriteOutcome::kRefused}, 202 * kMs);
+  e->step(202 * kMs, {}, out);
+  ASSERT_EQ(out.writes.size(), 1U);
+  EXPECT_DOUBLE_EQ(out.writes[0].value_um, 5.0);
   e->write_receipt(0, {e->write_in_flight(0), WriteOutcome::kReached}, 250 * kMs);
   e->step(250 * kMs, {}, out);
   ASSERT_EQ(out.writes.size(), 1U);
