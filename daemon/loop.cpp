@@ -293,6 +293,7 @@ void Loop::cycle(core::TimeNs wake_ns, bool stamp) {
     const Runtime& old = swap_.current();
     const bool was_dry = old.dry_run;
     const std::uint64_t old_generation = old.engine->state_generation();
+    const std::uint64_t old_sequence = old.engine->write_sequence();
     const std::size_t n = old.engine->export_state(carry_);
     if (n == 0 && old.engine->state_capacity() > 0) {
       note(wake_ns, NoteCode::kStateExportFailed,
@@ -300,6 +301,8 @@ void Loop::cycle(core::TimeNs wake_ns, bool stamp) {
     } else if (swap_.pickup()) {
       // `old` may be freed by the reclaiming thread from here on: only rt is used below.
       const Runtime& rt = swap_.current();
+      // The buses may still report the old engine's writes: the new one numbers its own after.
+      rt.engine->continue_write_sequence(old_sequence);
       std::span<const std::byte> carried(carry_.data(), n);
       if (!was_dry && rt.dry_run) {
         // Entering dry run: what the NC has now is kept aside (and persisted soon, unless the
@@ -329,6 +332,19 @@ void Loop::cycle(core::TimeNs wake_ns, bool stamp) {
   engine.set_hold(hold);
   local_.hold = hold;
   local_.dry_run = rt.dry_run;
+  // The limiter bounds what reaches the NC: each register's next write waits for the bus's
+  // receipt of the last one (core/engine/engine.hpp, "Write receipts").
+  engine.set_write_receipts(true);
+  for (std::size_t i = 0; i < engine.register_count(); ++i) {
+    if (engine.write_in_flight(i) == 0) {
+      continue;
+    }
+    const int b = i < rt.register_bus.size() ? rt.register_bus[i] : -1;
+    if (b >= 0 && static_cast<std::size_t>(b) < buses_.size()) {
+      const drivers::Bus& bus = *buses_[static_cast<std::size_t>(b)];
+      engine.write_receipt(i, bus.write_receipt(static_cast<std::uint16_t>(i)), wake_ns);
+    }
+  }
 
   events_.clear();
   for (std::size_t b = 0; b < buses_.size(); ++b) {
@@ -354,24 +370,32 @@ void Loop::cycle(core::TimeNs wake_ns, bool stamp) {
 
   engine.step(wake_ns, std::span<const core::Event>(events_.data(), events_.size()), out_);
 
-  bool dropped = false;
   std::uint64_t woken = 0;  // buses that got a write this cycle (bit per bus, the first 64)
   for (const core::OffsetWrite& w : out_.writes) {
     if (rt.dry_run) {
+      // Never sent: the dry-run engine moves on as if the NC had taken it.
       ++local_.writes_dry_run;
+      engine.write_receipt(w.register_index, {w.sequence, core::WriteOutcome::kReached}, wake_ns);
       continue;
     }
     const int b =
         w.register_index < rt.register_bus.size() ? rt.register_bus[w.register_index] : -1;
-    if (b >= 0 && static_cast<std::size_t>(b) < buses_.size() &&
-        buses_[static_cast<std::size_t>(b)]->tx().try_push(w)) {
+    drivers::Bus* bus = b >= 0 && static_cast<std::size_t>(b) < buses_.size()
+                            ? buses_[static_cast<std::size_t>(b)]
+                            : nullptr;
+    if (bus != nullptr && bus->tx().try_push(w)) {
       ++local_.writes_sent;
       if (b < 64) {
         woken |= std::uint64_t{1} << b;
       }
+      if (!bus->confirms_writes()) {
+        // It delivers every write it takes, in order.
+        engine.write_receipt(w.register_index, {w.sequence, core::WriteOutcome::kReached}, wake_ns);
+      }
     } else {
+      // The NC keeps what it held: the engine writes the register again from there.
       ++local_.writes_dropped;
-      dropped = true;
+      engine.write_receipt(w.register_index, {w.sequence, core::WriteOutcome::kRefused}, wake_ns);
       note(wake_ns, NoteCode::kWriteDropped, w.register_index, w.value_um);
     }
   }
@@ -380,10 +404,6 @@ void Loop::cycle(core::TimeNs wake_ns, bool stamp) {
     if ((woken >> b) & 1U) {
       buses_[b]->wake();
     }
-  }
-  if (dropped) {
-    // The engine believes those values were sent: make it send every known value again.
-    engine.resend_all();
   }
   for (const core::AlarmEvent& a : out_.alarms) {
     ++local_.alarms;

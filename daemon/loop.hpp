@@ -3,8 +3,10 @@
 //
 // Each cycle: sleep to the absolute deadline (clock_nanosleep TIMER_ABSTIME) → record the
 // wake-up latency → pick up a new configuration at the cycle boundary (state carried over) →
-// drain events from every bus's RX ring → engine.step() → offset writes to the buses' TX rings
-// (nothing in dry-run) → alarms, notes and measurement records to their SPSC rings → state
+// the buses' receipts of the writes in flight to the engine → drain events from every bus's RX
+// ring → engine.step() → offset writes to the buses' TX rings (nothing in dry-run; a write a bus
+// does not confirm counts as on the NC once queued, a dropped one as refused) → alarms, notes
+// and measurement records to their SPSC rings → state
 // export into a pre-allocated blob when it changed → heartbeat and statistics (seqlock).
 // Overruns are counted and handled by advance_deadline()'s policy.
 #pragma once

@@ -155,6 +155,7 @@ std::string render_json(const StatusContext& c) {
     << ",\"writes_unknown_register\":" << e.writes_unknown_register
     << ",\"writes_held\":" << e.writes_held << ",\"output_overflows\":" << e.output_overflows
     << ",\"writes_deferred\":" << e.writes_deferred << ",\"writes_blocked\":" << e.writes_blocked
+    << ",\"writes_awaiting_nc\":" << e.writes_awaiting_nc
     << ",\"release_commands\":" << e.release_commands << "},";
   o << "\"registers\":[";
   for (std::size_t i = 0; i < v.r.count; ++i) {
@@ -162,7 +163,8 @@ std::string render_json(const StatusContext& c) {
     o << (i ? "," : "") << "{\"index\":" << i << ",\"name\":\"" << json_escape(reg_name(v, i))
       << "\",\"output_um\":" << num(r.output_um)
       << ",\"target_um\":" << (r.has_target ? num(r.target_um) : "null")
-      << ",\"slewing\":" << (r.slewing ? "true" : "false") << ",\"hold\":"
+      << ",\"slewing\":" << (r.slewing ? "true" : "false")
+      << ",\"awaiting_nc\":" << (r.awaiting_nc ? "true" : "false") << ",\"hold\":"
       << (r.hold == core::engine::RegisterHold::kNone
               ? std::string("null")
               : "\"" + std::string(core::engine::to_string(r.hold)) + "\"")
@@ -275,7 +277,7 @@ std::string render_text(const StatusContext& c) {
   o << "engine:  " << s.engine.events_accepted << " events (" << s.engine.events_invalid
     << " invalid), " << s.engine.writes_forwarded << " writes (" << s.engine.writes_rejected
     << " rejected, " << s.engine.writes_held << " held), " << s.writes_dropped
-    << " dropped at the bus\n";
+    << " dropped at the bus, " << s.engine.writes_awaiting_nc << " waits for the NC\n";
   o << "registers:\n";
   for (std::size_t i = 0; i < v.r.count; ++i) {
     const auto& r = v.r.regs[i];
@@ -286,6 +288,10 @@ std::string render_text(const StatusContext& c) {
       std::snprintf(buf, sizeof buf, "  target %10.3f um%s", r.target_um,
                     r.slewing ? "  (slewing)" : "");
       o << buf;
+    }
+    // The bus has not confirmed the last write yet; the next one waits for it.
+    if (r.awaiting_nc) {
+      o << "  (waiting for the NC)";
     }
     // Held at start-up: nothing is written until `nccomp register release NAME`.
     if (r.hold == core::engine::RegisterHold::kBeyondLimit) {
@@ -389,6 +395,9 @@ std::string render_prometheus(const StatusContext& c) {
   counter("engine_events_invalid_total", "Events rejected by validation.", s.engine.events_invalid);
   counter("engine_writes_rejected_total", "Targets refused by a limiter.",
           s.engine.writes_rejected);
+  counter("engine_writes_awaiting_nc_total",
+          "Register cycles whose next write waited for the NC to take the last one.",
+          s.engine.writes_awaiting_nc);
   counter("alarms_total", "Alarms and warnings raised.", s.alarms);
   if (c.server != nullptr) {
     counter("status_clients_timed_out_total", "Status clients cut off at their deadline.",

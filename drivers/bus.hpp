@@ -87,6 +87,19 @@ class Bus {
   /// Loop thread (producer): absolute offset writes to deliver. A write for a register replaces
   /// an older pending write for the same register (offsets are absolute).
   virtual core::rt::SpscRing<core::OffsetWrite>& tx() = 0;
+  /// Whether write_receipt() reports what became of the writes. False (default): the bus
+  /// delivers every write it takes, in order, so the loop counts a write as on the NC once
+  /// it is in tx() (loopback).
+  [[nodiscard]] virtual bool confirms_writes() const noexcept { return false; }
+  /// Loop thread, real-time safe (no allocation, no lock, never blocks): the receipt of the
+  /// newest write of register_index the bus finished with (core::WriteReceipt), so that the
+  /// engine limits the register's next write from what the NC holds. A write that another
+  /// replaced before it went out is never reported; the one that replaced it is.
+  [[nodiscard]] virtual core::WriteReceipt write_receipt(
+      std::uint16_t register_index) const noexcept {
+    (void)register_index;
+    return {};
+  }
   /// Any thread: a consistent snapshot of the driver's state and counters.
   [[nodiscard]] virtual BusStatus status() const = 0;
   /// Any thread, not real-time (the status thread): the driver's own counters beyond

@@ -270,6 +270,30 @@ struct OffsetWrite {
   TimeNs time_ns{0};
   std::uint16_t register_index{0};
   double value_um{0.0};
+  /// The engine's number of this write (counting up, never reused while nccompd runs), which
+  /// the bus's WriteReceipt names; 0 = no receipt wanted.
+  std::uint64_t sequence{0};
+};
+
+/// What became of an offset write on its way to the NC (drivers::Bus::write_receipt()).
+enum class WriteOutcome : std::uint8_t {
+  /// Not finished: queued, on its way, or being retried (a reconnect, a read-back mismatch).
+  kPending = 0,
+  /// The NC took the value: answered (Modbus, and read back equal with verify_writes),
+  /// acknowledged, or sent where the map has no acknowledge (CAN).
+  kReached = 1,
+  /// Never sent: not encodable, no mapping, or no room in the bus's queue. The NC keeps what it
+  /// held before.
+  kRefused = 2,
+  /// Sent but never confirmed (CAN: no acknowledge after ack_retries): the NC holds this value or
+  /// the one before.
+  kUnknown = 3,
+};
+
+/// The newest write of one register a bus finished with.
+struct WriteReceipt {
+  std::uint64_t sequence{0};  // OffsetWrite::sequence; 0 = none finished yet
+  WriteOutcome outcome{WriteOutcome::kPending};
 };
 
 enum class Severity : std::uint8_t { kInfo = 0, kWarning = 1, kAlarm = 2 };

@@ -27,6 +27,9 @@ constexpr std::string_view kHoldsEntry = "@holds";
 constexpr double kNoOffsetUm = 0.1;
 /// The event cursors' entry (cursors.hpp); an engine without cursors skips it as unknown.
 constexpr std::string_view kCursorsEntry = "@cursors";
+/// Registers whose write was in flight (write receipts), by name: u32 count, then name and u8
+/// (1 = in flight) per register, a fixed size like "@holds". An older engine skips it.
+constexpr std::string_view kInFlightEntry = "@inflight";
 
 // Little helpers for the state bytes. Native byte order: the state never leaves the machine.
 class Writer {
@@ -232,6 +235,10 @@ void Engine::configure(std::vector<RegisterSpec> registers,
   }
   capacity += sizeof(std::uint16_t) + kCursorsEntry.size() + sizeof(std::uint32_t) +
               EventCursors::kStateBytes;
+  capacity += sizeof(std::uint16_t) + kInFlightEntry.size() + 2 * sizeof(std::uint32_t);
+  for (const auto& r : specs_) {
+    capacity += sizeof(std::uint16_t) + r.name.size() + sizeof(std::uint8_t);
+  }
   // The context's options: from the one module that sets them (the daemon's
   // [measurement_context] section), else from the engine options.
   ContextOptions context_options = options.context;
@@ -495,12 +502,12 @@ void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out)
   for (std::size_t k = 0; k < n; ++k) {
     const std::size_t i = (write_cursor_ + k) % n;
     Reg& r = regs_[i];
-    if (!r.has_target && !r.has_trim) {
+    if (!r.has_target && !r.has_trim && !r.resend_as_is) {
       continue;
     }
     const double goal_um = (r.has_target ? r.target_um : 0.0) + r.trim_um;
     const bool at_target = r.sent && std::memcmp(&r.sent_um, &goal_um, sizeof(double)) == 0;
-    if (at_target) {
+    if (at_target && !r.resend_as_is) {
       continue;
     }
     if (r.hold != RegisterHold::kNone) {
@@ -509,6 +516,13 @@ void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out)
     }
     if (hold_) {
       ++counters_.writes_held;
+      continue;
+    }
+    const bool flag = specs_[i].kind == RegisterKind::kFlag;
+    if (r.in_flight != 0 && !flag) {
+      // The bus may still replace the write in flight by this one: the NC would see both steps
+      // as one. The next write waits, and is limited from what the NC then holds.
+      ++counters_.writes_awaiting_nc;
       continue;
     }
     if (out.writes.size() == out.writes.capacity()) {
@@ -520,7 +534,11 @@ void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out)
       continue;
     }
     LimitResult res{};
-    if (specs_[i].kind == RegisterKind::kFlag) {
+    if (r.resend_as_is) {
+      // The NC holds this value or the one before it, both within max_step_um of it: the same
+      // value again, not a step further.
+      res.value_um = r.sent_um;
+    } else if (flag) {
       // Written as asked (admissible() was checked when the target was accepted); the limiter
       // is reset to it so status and state show the value in force.
       r.limiter.reset(goal_um, now_ns);
@@ -528,25 +546,37 @@ void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out)
       res.verdict = LimitVerdict::kPassed;
     } else {
       res = r.limiter.apply(goal_um, now_ns);
+      const bool slewed = res.verdict == LimitVerdict::kSlewed;
+      if (slewed && !r.slewing) {
+        // One warning when slewing starts, not one per cycle.
+        out.alarm(now_ns, Severity::kWarning, AlarmCode::kOffsetSlewLimited,
+                  static_cast<std::int32_t>(i), goal_um);
+      }
+      r.slewing = slewed;
     }
-    const bool slewed = res.verdict == LimitVerdict::kSlewed;
-    if (slewed && !r.slewing) {
-      // One warning when slewing starts, not one per cycle.
-      out.alarm(now_ns, Severity::kWarning, AlarmCode::kOffsetSlewLimited,
-                static_cast<std::int32_t>(i), goal_um);
-    }
-    r.slewing = slewed;
-    if (r.sent && std::memcmp(&r.sent_um, &res.value_um, sizeof(double)) == 0) {
+    if (r.sent && !r.resend_as_is && std::memcmp(&r.sent_um, &res.value_um, sizeof(double)) == 0) {
       continue;  // the rate limit allows no movement yet this cycle
     }
     if (!r.limiter.admissible(res.value_um)) {
       // A rejected goal holds an origin beyond the limit: never sent, whatever the NC held.
       ++counters_.writes_rejected;
+      r.resend_as_is = false;
       continue;
     }
-    if (out.writes.push(OffsetWrite{now_ns, static_cast<std::uint16_t>(i), res.value_um})) {
+    const std::uint64_t sequence = write_sequence_ + 1;
+    if (out.writes.push(
+            OffsetWrite{now_ns, static_cast<std::uint16_t>(i), res.value_um, sequence})) {
+      write_sequence_ = sequence;
       r.sent_um = res.value_um;
       r.sent = true;
+      r.as_is_in_flight = r.resend_as_is;
+      r.resend_as_is = false;
+      if (receipts_) {
+        r.in_flight = sequence;
+      } else {
+        r.nc_um = res.value_um;
+        r.nc_sent = true;
+      }
       ++counters_.writes_forwarded;
       ++register_generation_;
     }
@@ -574,6 +604,49 @@ void Engine::resend_all() noexcept {
   }
 }
 
+void Engine::nc_holds(Reg& r, double value_um) noexcept {
+  r.nc_um = value_um;
+  r.nc_sent = true;
+  r.in_flight = 0;
+  r.resend_as_is = false;
+  r.as_is_in_flight = false;
+}
+
+void Engine::write_receipt(std::size_t i, WriteReceipt receipt, TimeNs now_ns) noexcept {
+  if (i >= regs_.size()) {
+    return;
+  }
+  Reg& r = regs_[i];
+  // Sequences count up: a receipt of an older write says nothing about the one in flight.
+  if (r.in_flight == 0 || receipt.sequence < r.in_flight ||
+      receipt.outcome == WriteOutcome::kPending) {
+    return;
+  }
+  r.in_flight = 0;
+  switch (receipt.outcome) {
+    case WriteOutcome::kReached:
+      r.nc_um = r.sent_um;
+      r.nc_sent = true;
+      break;
+    case WriteOutcome::kRefused:
+      if (r.as_is_in_flight) {
+        // Still unsure which of the two values the NC holds: the same value again.
+        r.resend_as_is = true;
+        break;
+      }
+      // The NC keeps what it held: the limiter moves from there again.
+      r.limiter.reset(r.nc_um, now_ns);
+      r.sent_um = r.nc_um;
+      r.sent = r.nc_sent;
+      ++register_generation_;
+      break;
+    case WriteOutcome::kUnknown:
+    case WriteOutcome::kPending:
+      r.resend_as_is = true;
+      break;
+  }
+}
+
 AnchorResult Engine::anchor_register(std::size_t i, double nc_value_um, TimeNs now_ns) noexcept {
   AnchorResult res;
   if (i >= regs_.size() || !std::isfinite(nc_value_um)) {
@@ -589,6 +662,7 @@ AnchorResult Engine::anchor_register(std::size_t i, double nc_value_um, TimeNs n
   r.sent_um = nc_value_um;
   r.sent = true;
   r.slewing = false;
+  nc_holds(r, nc_value_um);
   if (res.beyond_limit) {
     hold_register(i, RegisterHold::kBeyondLimit, AlarmCode::kRegisterBeyondLimit, nc_value_um);
   } else if (r.hold == RegisterHold::kBeyondLimit) {
@@ -631,6 +705,7 @@ bool Engine::release_register(std::size_t i, TimeNs now_ns) noexcept {
     }
   }
   // Without state the limiter starts from what the NC holds (anchored): it slews as usual.
+  r.resend_as_is = false;
   hold_register(i, RegisterHold::kNone, AlarmCode::kNone, 0.0);
   ++register_generation_;
   return true;
@@ -690,8 +765,15 @@ AnchorResult Engine::adopt_register(std::size_t i, double nc_value_um, TimeNs no
 
 RegisterState Engine::register_state(std::size_t i) const noexcept {
   const Reg& r = regs_[i];
-  return RegisterState{
-      r.limiter.output_um(), r.target_um, r.has_target, r.slewing, r.trim_um, r.has_trim, r.hold};
+  const bool awaiting = r.in_flight != 0 && specs_[i].kind != RegisterKind::kFlag;
+  return RegisterState{r.limiter.output_um(),
+                       r.target_um,
+                       r.has_target,
+                       r.slewing,
+                       r.trim_um,
+                       r.has_trim,
+                       r.hold,
+                       awaiting};
 }
 
 std::uint64_t Engine::state_generation() const noexcept {
@@ -714,7 +796,7 @@ std::size_t Engine::export_state(std::span<std::byte> buf) const noexcept {
     w.put(r.target_um);
     w.put(static_cast<std::uint8_t>(r.has_target ? 1 : 0));
   }
-  w.put(static_cast<std::uint32_t>(modules_.size() + 3));
+  w.put(static_cast<std::uint32_t>(modules_.size() + 4));
   w.put_name(kContextEntry);
   w.put(static_cast<std::uint32_t>(MachineContext::kStateBytes));
   if (!w.ok() || w.rest().size() < MachineContext::kStateBytes) {
@@ -730,6 +812,25 @@ std::size_t Engine::export_state(std::span<std::byte> buf) const noexcept {
     for (std::size_t i = 0; i < regs_.size(); ++i) {
       w.put_name(specs_[i].name);
       w.put(static_cast<std::uint8_t>(regs_[i].hold));
+    }
+    if (!w.ok()) {
+      return 0;
+    }
+    const auto n32 = static_cast<std::uint32_t>(w.size() - begin);
+    std::memcpy(len_at.data(), &n32, sizeof(n32));
+  }
+  {
+    w.put_name(kInFlightEntry);
+    const std::span<std::byte> len_at = w.rest();
+    w.put(std::uint32_t{0});
+    const std::size_t begin = w.size();
+    w.put(static_cast<std::uint32_t>(regs_.size()));
+    for (std::size_t i = 0; i < regs_.size(); ++i) {
+      const Reg& r = regs_[i];
+      const bool unsure =
+          (r.in_flight != 0 && specs_[i].kind != RegisterKind::kFlag) || r.resend_as_is;
+      w.put_name(specs_[i].name);
+      w.put(static_cast<std::uint8_t>(unsure ? 1 : 0));
     }
     if (!w.ok()) {
       return 0;
@@ -793,12 +894,18 @@ bool Engine::import_state(std::span<const std::byte> bytes, TimeNs now_ns,
         ++skip_count;
         continue;
       }
+      // The limiter would slew from there: the writes would lie beyond the limit too (a state
+      // of a configuration with a larger max_abs_um, or a corrupt file).
+      if (std::fabs(output_um) > specs_[static_cast<std::size_t>(idx)].limits.max_abs_um) {
+        return false;
+      }
       if (pass == 1) {
         const auto i = static_cast<std::size_t>(idx);
         Reg& r = regs_[i];
         r.limiter.reset(output_um, now_ns);
         r.sent_um = output_um;
         r.sent = true;
+        nc_holds(r, output_um);
         r.target_um = target_um;
         r.has_target = has_target == 1;
         r.slewing = false;
@@ -857,6 +964,31 @@ bool Engine::import_state(std::span<const std::byte> bytes, TimeNs now_ns,
           }
         }
         if (!hr.at_end()) {
+          return false;
+        }
+        continue;
+      }
+      if (name == kInFlightEntry) {
+        Reader fr(blob);
+        std::uint32_t count = 0;
+        if (!fr.get(count)) {
+          return false;
+        }
+        for (std::uint32_t k2 = 0; k2 < count; ++k2) {
+          std::string_view reg;
+          std::uint8_t in_flight = 0;
+          if (!fr.get_name(reg) || !fr.get(in_flight) || in_flight > 1) {
+            return false;
+          }
+          const int idx = RegisterTable(specs_).find(reg);
+          if (pass == 1 && idx >= 0 && in_flight == 1) {
+            // Saved while the bus had not confirmed it: the NC holds it or the value before.
+            Reg& r = regs_[static_cast<std::size_t>(idx)];
+            r.resend_as_is =
+                r.sent && specs_[static_cast<std::size_t>(idx)].kind != RegisterKind::kFlag;
+          }
+        }
+        if (!fr.at_end()) {
           return false;
         }
         continue;

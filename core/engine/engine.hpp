@@ -40,12 +40,22 @@
 // - Event cursors (core/engine/cursors.hpp): per bus and numbered event kind, the NC's counter of
 //   the last event step() was handed, saved with the state as the entry "@cursors"; at start-up
 //   the daemon gives them to the buses, which resume the NC's events from there.
+// - Write receipts (set_write_receipts(), the daemon's loop): max_step_um and max_rate_um_per_s
+//   bound what reaches the NC. A bus may write less often than the loop steps (a slow poll, a
+//   back-off, a reconnect) and keeps only the latest value per register, so two writes the
+//   limiter spaced would reach the NC as one larger step. Each write of an offset register is
+//   therefore in flight until the bus reports it finished (write_receipt()); meanwhile the
+//   register gets no other write, and the next one is limited from what the NC holds. A refused
+//   write puts the limiter back on the NC's value; a write of unknown fate is sent again as it
+//   is (within max_step_um of either value the NC may hold). Registers in flight are saved with
+//   the state (entry "@inflight") and sent again as they are after an import (reload, restart).
 //
 // Lifecycle: configure() allocates and validates (throws std::invalid_argument naming what is
 // wrong); step(), export_state(), import_state() are real-time safe: no allocation, no locks, no
 // I/O. core/ is pure: time comes in as an argument.
 #pragma once
 
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -223,6 +233,10 @@ struct EngineCounters {
   std::uint32_t last_acknowledge_sequence{0};
   /// Writes a held register (RegisterHold) would have received: one per register and cycle.
   std::uint64_t writes_blocked{0};
+  /// Write receipts: a register's next write waited for the NC to take its previous one (one per
+  /// register and cycle). Grows while a bus writes less often than the loop steps: the register
+  /// then slews at max_step_um per bus write, not at max_rate_um_per_s.
+  std::uint64_t writes_awaiting_nc{0};
   /// Operator releases (OperatorCommand kRegisterRelease) taken, the sequence of the last one
   /// (the sender waits for it) and how many registers it released (0: none was held).
   std::uint64_t release_commands{0};
@@ -255,6 +269,8 @@ struct RegisterState {
   double trim_um{0.0};
   bool has_trim{false};
   RegisterHold hold{RegisterHold::kNone};
+  /// Write receipts: output_um is in flight, the bus has not reported it on the NC yet.
+  bool awaiting_nc{false};
 };
 
 /// What Engine::adopt_without_state() did with one register.
@@ -305,6 +321,30 @@ class Engine {
   /// bus reconnect, at start-up). Real-time safe.
   void resend_all() noexcept;
 
+  /// Write receipts (see the file comment; off by default: a write counts as on the NC when
+  /// step() emits it). On: each write of a register that is not a flag stays in flight until
+  /// write_receipt() reports it finished. Only from the thread that steps the engine.
+  /// Real-time safe.
+  void set_write_receipts(bool on) noexcept { receipts_ = on; }
+  /// The sequence (OffsetWrite::sequence) of register i's write in flight, 0 if none. Real-time
+  /// safe.
+  [[nodiscard]] std::uint64_t write_in_flight(std::size_t i) const noexcept {
+    return i < regs_.size() ? regs_[i].in_flight : 0;
+  }
+  /// What the bus did with register i's writes: a receipt for the write in flight (or a later
+  /// one) finishes it. kReached: the NC holds it; kRefused: the NC keeps what it held, the
+  /// limiter starts from there again at now_ns; kUnknown: it is sent again as it is. Anything
+  /// else (kPending, an older sequence, an unknown register) changes nothing. Real-time safe.
+  void write_receipt(std::size_t i, WriteReceipt receipt, TimeNs now_ns) noexcept;
+  /// The sequence of the last write step() emitted (0: none yet).
+  [[nodiscard]] std::uint64_t write_sequence() const noexcept { return write_sequence_; }
+  /// A new engine taking over from another (reload): its writes are numbered after `last`, so a
+  /// bus's receipt of an earlier engine's write is never taken for one of its own. Before its
+  /// first step. Real-time safe.
+  void continue_write_sequence(std::uint64_t last) noexcept {
+    write_sequence_ = std::max(write_sequence_, last);
+  }
+
   /// Start-up only (after import_state(), before the loop steps the engine; never while another
   /// thread steps it): the NC was read back and holds nc_value_um in register i. The register's
   /// limiter and its last-sent value start from that value, so the next writes move from what
@@ -350,7 +390,8 @@ class Engine {
   /// Real-time safe. Restores a state exported by this or an earlier configuration: registers and
   /// modules are matched by name (unknown ones in the bytes are skipped and counted in
   /// `skipped`). Limiters restart from the restored outputs at now_ns. Returns false if the bytes
-  /// are malformed; the engine is then unchanged.
+  /// are malformed or a register's output lies beyond its max_abs_um (the limiter would slew
+  /// from there, every write beyond the limit); the engine is then unchanged.
   bool import_state(std::span<const std::byte> bytes, TimeNs now_ns,
                     std::size_t* skipped = nullptr) noexcept;
   /// Real-time safe. Advances when registers or module states changed.
@@ -387,6 +428,15 @@ class Engine {
     /// An alarm for this register raised on the next step (kNone: none), with its value.
     AlarmCode notice{AlarmCode::kNone};
     double notice_value{0.0};
+    /// Write receipts: the sequence of the write in flight (0: none); what the NC holds as far
+    /// as the engine knows (nc_sent: anything at all), the limiter's origin after a refusal;
+    /// sent_um is to be written again as it is (its fate unknown, or imported in flight), and
+    /// the write in flight is such a re-send.
+    std::uint64_t in_flight{0};
+    double nc_um{0.0};
+    bool nc_sent{false};
+    bool resend_as_is{false};
+    bool as_is_in_flight{false};
   };
 
   bool validate(const Event& e) const noexcept;
@@ -394,6 +444,8 @@ class Engine {
   void accept_target(const OffsetWrite& w, TimeNs now_ns, StepOutput& out) noexcept;
   void accept_trim(std::size_t module, const OffsetWrite& w, TimeNs now_ns,
                    StepOutput& out) noexcept;
+  /// The NC holds `value_um` (read back, restored): nothing in flight.
+  static void nc_holds(Reg& r, double value_um) noexcept;
 
   std::vector<RegisterSpec> specs_;
   std::vector<Reg> regs_;
@@ -415,7 +467,9 @@ class Engine {
   std::vector<int> writer_;
   /// Registers whose notice is still to be raised (step() skips the scan while 0).
   std::size_t notices_pending_{0};
+  std::uint64_t write_sequence_{0};
   bool hold_{false};
+  bool receipts_{false};
 };
 
 }  // namespace nccomp::core::engine

@@ -49,10 +49,10 @@ CanBus::CanBus(CanConfig config)
       decoder_(config_.mapping),
       rx_ring_(config_.rx_ring_events),
       tx_ring_(config_.tx_ring_writes),
-      input_watch_(
-          to_ns(config_.degraded_alarm_after_s),
-          std::any_of(config_.mapping.rx.begin(), config_.mapping.rx.end(),
-                      [](const RxFrame& f) { return f.event == EventKind::kAxisSample; })),
+      input_watch_(to_ns(config_.degraded_alarm_after_s),
+                   std::any_of(config_.mapping.rx.begin(), config_.mapping.rx.end(),
+                               [](const RxFrame& f) { return f.event == EventKind::kAxisSample; })),
+      receipts_(config_.mapping.offsets.size()),
       rebind_backoff_(to_ns(config_.link_check_s),
                       to_ns(std::max(config_.link_check_s, config_.reconnect_max_s)),
                       to_ns(config_.reconnect_reset_after_s)),
@@ -67,6 +67,9 @@ CanBus::CanBus(CanConfig config)
   std::sort(slots_.begin(), slots_.end(), [](const Slot& a, const Slot& b) {
     return a.reg->register_index < b.reg->register_index;
   });
+  for (const Slot& s : slots_) {
+    slot_registers_.push_back(s.reg->register_index);
+  }
   for (std::size_t i = 0; i < slots_.size(); ++i) {
     if (slots_[i].reg->ack) {
       ack_index_.emplace_back(id_key(slots_[i].reg->ack->id, slots_[i].reg->ack->extended), i);
@@ -257,7 +260,7 @@ void CanBus::publish(std::int64_t now_ns) noexcept {
   }
   link_alarm_ = down_long;
   b.alarm = link_alarm_ || std::any_of(slots_.begin(), slots_.end(), [](const Slot& s) {
-              return s.state == WriteState::kFailed;
+              return s.state == WriteState::kFailed || s.given_up;
             });
   if (b.state != LinkState::kStopped) {
     if (if_down_ || bus_off_) {
@@ -294,6 +297,14 @@ std::size_t CanBus::extra_counters(std::span<BusCounterValue> out) const {
     out[i] = BusCounterValue{kCanCounterNames[i], values[i]};
   }
   return n;
+}
+
+core::WriteReceipt CanBus::write_receipt(std::uint16_t register_index) const noexcept {
+  const auto it = std::lower_bound(slot_registers_.begin(), slot_registers_.end(), register_index);
+  if (it == slot_registers_.end() || *it != register_index) {
+    return kUnmappedReceipt;
+  }
+  return receipts_.load(static_cast<std::size_t>(it - slot_registers_.begin()));
 }
 
 CanBus::Slot* CanBus::slot_for(std::uint16_t register_index) noexcept {
@@ -586,7 +597,9 @@ void CanBus::handle_ack(std::uint32_t key, const std::uint8_t* data, std::size_t
     if (s.state == WriteState::kAwaitAck && len == s.reg->length_bytes &&
         std::memcmp(data, s.payload.data(), len) == 0) {
       s.state = WriteState::kIdle;
+      s.given_up = false;
       ++st_.bus.counters.offsets_written;
+      receipts_.publish(it->second, s.sequence, core::WriteOutcome::kReached);
     }
   }
 }
@@ -603,6 +616,7 @@ void CanBus::take_writes() noexcept {
     // Absolute values: a newer write replaces whatever was pending for the register, a
     // recovery re-send included (the new value is a first send, not a re-send).
     s->resend = false;
+    s->sequence = w.sequence;
     if (!encode_offset(*s->reg, w.value_um, s->payload)) {
       // The payload is cleared: nothing to re-send after a recovery until a value fits again
       // (the NC keeps its last value, the alarm says why).
@@ -610,6 +624,8 @@ void CanBus::take_writes() noexcept {
       ++st_.bus.counters.offsets_failed;
       s->state = WriteState::kFailed;
       s->has_value = false;
+      receipts_.publish(static_cast<std::size_t>(s - slots_.data()), w.sequence,
+                        core::WriteOutcome::kRefused);
       continue;
     }
     s->value_um = w.value_um;
@@ -651,6 +667,8 @@ void CanBus::send_pending(std::int64_t now_ns) noexcept {
       }
       ++st_.bus.counters.offsets_failed;
       s.state = WriteState::kFailed;
+      receipts_.publish(static_cast<std::size_t>(&s - slots_.data()), s.sequence,
+                        core::WriteOutcome::kRefused);
       continue;
     }
     ++st_.bus.counters.frames_tx;
@@ -667,6 +685,8 @@ void CanBus::send_pending(std::int64_t now_ns) noexcept {
     } else {
       s.state = WriteState::kIdle;
       ++st_.bus.counters.offsets_written;
+      receipts_.publish(static_cast<std::size_t>(&s - slots_.data()), s.sequence,
+                        core::WriteOutcome::kReached);
     }
   }
   // Everything pending went out: only now is the queue known to have room again (one frame that
@@ -695,6 +715,9 @@ void CanBus::check_acks(std::int64_t now_ns) noexcept {
     } else {
       ++st_.bus.counters.offsets_failed;
       s.state = WriteState::kFailed;
+      s.given_up = true;
+      receipts_.publish(static_cast<std::size_t>(&s - slots_.data()), s.sequence,
+                        core::WriteOutcome::kUnknown);
     }
   }
 }

@@ -10,6 +10,11 @@
 // while the bus keeps failing, up to reconnect_max_s, reset after reconnect_reset_after_s up.
 // After every recovery each register that holds a value is sent again once, acknowledged or not:
 // offsets are absolute, and a frame sent just before the fault may never have reached the NC.
+// Frames go out in the order they are sent; only a write still pending (link down, bus-off,
+// transmit queue full) is replaced by a later one of its register. write_receipt() says what
+// became of each register's newest write (reached: acknowledged, or sent where the map has no
+// acknowledge; refused: not encodable or not sendable; unknown: no acknowledge after the
+// retries), so the engine sends the next value only after the NC took the last one.
 // Every fault is counted in CanStatus and reported through extra_counters() (`nccomp status`).
 // The status alarm is raised by a write given up after its retries, and by the link staying down
 // or bus-off for longer than alarm_after_s; the latter clears when the bus is back. The input is
@@ -38,8 +43,9 @@
 #include "drivers/bus.hpp"
 #include "drivers/can/can_config.hpp"
 #include "drivers/can/can_mapping.hpp"
-#include "drivers/reconnect_backoff.hpp"
 #include "drivers/input_watch.hpp"
+#include "drivers/reconnect_backoff.hpp"
+#include "drivers/write_receipts.hpp"
 
 namespace nccomp::drivers::can {
 
@@ -101,6 +107,9 @@ class CanBus final : public Bus {
 
   core::rt::SpscRing<core::Event>& rx() override { return rx_ring_; }
   core::rt::SpscRing<core::OffsetWrite>& tx() override { return tx_ring_; }
+  [[nodiscard]] bool confirms_writes() const noexcept override { return true; }
+  [[nodiscard]] core::WriteReceipt write_receipt(
+      std::uint16_t register_index) const noexcept override;
   [[nodiscard]] BusStatus status() const override { return status_.load().bus; }
   [[nodiscard]] CanStatus can_status() const { return status_.load(); }
   /// The CanCounters by name (kCanCounterNames order), from one status snapshot. Any thread.
@@ -129,6 +138,10 @@ class CanBus final : public Bus {
     double value_um{0.0};
     bool has_value{false};  // payload holds the register's latest value (encodable)
     bool resend{false};     // pending because of a recovery: counted when it goes out
+    // Given up without an acknowledge: the alarm stays until the NC acknowledges this register
+    // (the engine sends the same value again meanwhile).
+    bool given_up{false};
+    std::uint64_t sequence{0};  // OffsetWrite::sequence of the payload
     std::uint32_t attempts{0};
     std::int64_t deadline_ns{0};
     std::array<std::uint8_t, kMaxPayloadBytes> payload{};
@@ -162,6 +175,9 @@ class CanBus final : public Bus {
   // I/O thread state (touched only by it once started).
   CanStatus st_{};
   std::vector<Slot> slots_;  // one per mapped register, sorted by index
+  // slots_' register indices, fixed after the constructor (the loop thread reads it too).
+  std::vector<std::uint16_t> slot_registers_;
+  WriteReceipts receipts_;
   std::vector<std::pair<std::uint32_t, std::size_t>> ack_index_;  // ack key → slot
   int sock_{-1};
   int event_fd_{-1};

@@ -167,6 +167,7 @@ ModbusBus::ModbusBus(ModbusConfig config)
       bits_(2000, 0),
       slot_of_register_(65536, -1),
       slots_(config_.offsets.size()),
+      receipts_(config_.offsets.size()),
       backoff_(to_ns(config_.reconnect_min_s), to_ns(config_.reconnect_max_s),
                to_ns(config_.reconnect_reset_after_s)) {
   for (std::size_t i = 0; i < config_.offsets.size(); ++i) {
@@ -520,6 +521,11 @@ void ModbusBus::note_input(bool all_read, bool axis_seen) {
   }
 }
 
+core::WriteReceipt ModbusBus::write_receipt(std::uint16_t register_index) const noexcept {
+  const std::int32_t idx = slot_of_register_[register_index];
+  return idx < 0 ? kUnmappedReceipt : receipts_.load(static_cast<std::size_t>(idx));
+}
+
 void ModbusBus::drain_tx(core::TimeNs now_ns) {
   core::OffsetWrite w;
   while (tx_.try_pop(w)) {
@@ -530,17 +536,22 @@ void ModbusBus::drain_tx(core::TimeNs now_ns) {
       continue;
     }
     OffsetSlot& s = slots_[static_cast<std::size_t>(idx)];
-    // Latest value wins: an older pending value for this register is simply replaced.
+    // Latest value wins: an older pending value for this register is replaced, and never
+    // reported. The engine's offsets wait for their receipt, so only a flag (or a writer
+    // without receipts) gets here with a value still pending.
     if (!s.dirty) {
       s.dirty_since_ns = now_ns;
     }
     s.value_um = w.value_um;
+    s.sequence = w.sequence;
     s.has_value = true;
     s.dirty = true;
   }
 }
 
-bool ModbusBus::write_one(const OffsetMap& map, OffsetSlot& slot) {
+bool ModbusBus::write_one(std::size_t slot_index) {
+  const OffsetMap& map = config_.offsets[slot_index];
+  OffsetSlot& slot = slots_[slot_index];
   std::array<std::uint16_t, 2> regs{};
   const int n = width(map.encoding.type);
   if (encode(slot.value_um, map.encoding, regs) != EncodeResult::kOk) {
@@ -550,6 +561,7 @@ bool ModbusBus::write_one(const OffsetMap& map, OffsetSlot& slot) {
     ++st_.bus.counters.offsets_failed;
     slot.rejected = true;
     slot.dirty = false;
+    receipts_.publish(slot_index, slot.sequence, core::WriteOutcome::kRefused);
     return true;
   }
   if (slot.resend) {
@@ -589,12 +601,13 @@ bool ModbusBus::write_one(const OffsetMap& map, OffsetSlot& slot) {
   slot.dirty = false;
   slot.rejected = false;
   slot.resend = false;
+  receipts_.publish(slot_index, slot.sequence, core::WriteOutcome::kReached);
   return true;
 }
 
 void ModbusBus::write_offsets() {
   for (std::size_t i = 0; i < slots_.size() && ctx_; ++i) {
-    if (slots_[i].dirty && !write_one(config_.offsets[i], slots_[i])) {
+    if (slots_[i].dirty && !write_one(i)) {
       break;
     }
   }
@@ -796,7 +809,8 @@ void ModbusBus::run() {
     drain_tx(now);
     if (!ctx_) {
       if (now < next_connect_ns_) {
-        // Back-off: keep taking the loop's writes (latest value wins) and publishing the state.
+        // Back-off: keep taking the loop's writes (latest value wins; the engine sends a
+        // register's next value only after this one's receipt) and publishing the state.
         publish(now);
         sleep_until(std::min(next_connect_ns_, now + kDownTickNs));
         continue;

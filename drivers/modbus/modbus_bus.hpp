@@ -7,7 +7,10 @@
 // Offsets are absolute: the latest value per register wins, an undelivered one stays pending
 // and is re-sent until acknowledged (and, with verify_writes, read back equal); after every
 // reconnect all known offsets are written again. A repeated write of an absolute value cannot
-// double a correction, so none is lost and none is applied twice.
+// double a correction, so none is lost and none is applied twice. Each finished write is
+// reported in write_receipt() (reached once answered and verified, refused if not encodable), so
+// that the engine sends a register's next value only after the NC took the last one: a slow poll
+// or a back-off then slows the slew, instead of merging the limiter's steps into one.
 //
 // Stale input (input_watch.hpp): no poll with every block read, or no valid axis sample while the
 // axis group is mapped, for longer than degraded_alarm_after_s sets BusStatus::input_stale: an NC
@@ -49,6 +52,7 @@
 #include "drivers/modbus/config.hpp"
 #include "drivers/modbus/decoder.hpp"
 #include "drivers/reconnect_backoff.hpp"
+#include "drivers/write_receipts.hpp"
 
 namespace nccomp::drivers::modbus {
 
@@ -189,6 +193,11 @@ class ModbusBus final : public Bus {
 
   core::rt::SpscRing<core::Event>& rx() override { return rx_; }
   core::rt::SpscRing<core::OffsetWrite>& tx() override { return tx_; }
+  [[nodiscard]] bool confirms_writes() const noexcept override { return true; }
+  /// Reached once the NC answered the write (and, with verify_writes, held it on read-back);
+  /// refused if the value does not fit the register or the register has no mapping.
+  [[nodiscard]] core::WriteReceipt write_receipt(
+      std::uint16_t register_index) const noexcept override;
   [[nodiscard]] BusStatus status() const override { return status_.load().bus; }
   /// The ModbusStatus counters (kModbusCounterNames) from the seqlock snapshot: exceptions per
   /// code, timeouts, CRC errors, lost events, verify mismatches, pending offsets, ...
@@ -244,6 +253,7 @@ class ModbusBus final : public Bus {
     bool rejected{false};
     bool resend{false};  // a re-send (after a failure or a reconnect), counted as a retry
     double value_um{0.0};
+    std::uint64_t sequence{0};  // OffsetWrite::sequence of value_um
     core::TimeNs dirty_since_ns{0};
   };
 
@@ -263,7 +273,7 @@ class ModbusBus final : public Bus {
   void poll(core::TimeNs now_ns);
   void drain_tx(core::TimeNs now_ns);
   void write_offsets();
-  bool write_one(const OffsetMap& map, OffsetSlot& slot);
+  bool write_one(std::size_t slot_index);
   /// Classifies a failed libmodbus call. Returns false when the connection was dropped.
   bool fail(int err);
   void rtu_gap();
@@ -290,8 +300,11 @@ class ModbusBus final : public Bus {
   InputWatch input_watch_;
   std::vector<std::uint8_t> block_ok_;
   std::vector<std::uint8_t> bits_;
-  std::vector<std::int32_t> slot_of_register_;  // register_index → offsets index, -1 = unmapped
+  // register_index → offsets index, -1 = unmapped; fixed after the constructor, so the loop thread
+  // reads it too (write_receipt()).
+  std::vector<std::int32_t> slot_of_register_;
   std::vector<OffsetSlot> slots_;
+  WriteReceipts receipts_;
   ModbusStatus st_{};
   std::uint32_t consecutive_failures_{0};
   ReconnectBackoff backoff_;

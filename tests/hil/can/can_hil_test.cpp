@@ -436,9 +436,12 @@ TEST_F(CanHil, MissingAcknowledgeRetriesThenAlarmsAndALaterAckClearsIt) {
   c.ack_timeout_s = 0.3;  // long enough for the node's answer on a loaded machine
   c.ack_retries = 2;
   start(std::move(c));
-  ASSERT_TRUE(bus_->tx().try_push(core::OffsetWrite{0, 1, 7.0}));
+  ASSERT_TRUE(bus_->tx().try_push(core::OffsetWrite{0, 1, 7.0, 11}));
   bus_->wake();
   ASSERT_TRUE(wait_until([&] { return st().bus.alarm; }));
+  // Sent, never confirmed: the NC may hold 7.0 µm or what it had (the engine sends 7.0 again).
+  EXPECT_EQ(bus_->write_receipt(1).sequence, 11U);
+  EXPECT_EQ(bus_->write_receipt(1).outcome, core::WriteOutcome::kUnknown);
   auto s = st();
   EXPECT_EQ(s.bus.counters.frames_tx, 3U);  // first attempt + 2 retries
   EXPECT_EQ(s.bus.counters.offsets_retried, 2U);
@@ -449,7 +452,7 @@ TEST_F(CanHil, MissingAcknowledgeRetriesThenAlarmsAndALaterAckClearsIt) {
   // Now the NC answers: the next write is acknowledged and the alarm clears.
   const CanConfig cfg = reference();
   sim::can_nc::CanNcNode nc(cfg.mapping, kIf);
-  ASSERT_TRUE(bus_->tx().try_push(core::OffsetWrite{0, 1, 8.0}));
+  ASSERT_TRUE(bus_->tx().try_push(core::OffsetWrite{0, 1, 8.0, 12}));
   bus_->wake();
   const auto w = nc.receive_write(5000);
   ASSERT_TRUE(w.has_value());
@@ -457,6 +460,8 @@ TEST_F(CanHil, MissingAcknowledgeRetriesThenAlarmsAndALaterAckClearsIt) {
   EXPECT_NEAR(w->value_um, 8.0, 1e-9);
   ASSERT_TRUE(wait_until([&] { return st().bus.counters.offsets_written == 1; }));
   EXPECT_FALSE(st().bus.alarm);
+  EXPECT_EQ(bus_->write_receipt(1).sequence, 12U);
+  EXPECT_EQ(bus_->write_receipt(1).outcome, core::WriteOutcome::kReached);
 }
 
 TEST_F(CanHil, ErrorPassiveAndBusOffInjectedWritesHeldUntilRestart) {
@@ -747,6 +752,47 @@ TEST_F(CanHil, InterfaceDownAndUpResendsEveryHeldOffsetAlsoWithoutAcknowledge) {
   EXPECT_EQ(s.bus.counters.reconnects, 1U);
   EXPECT_EQ(s.bus.state, LinkState::kUp);
   EXPECT_FALSE(s.bus.alarm);
+}
+
+// Write receipts (issue 17 follow-up). Frames leave in the order they are sent, but a write
+// still pending (here: the interface is down) is replaced by a later one of its register, and
+// the NC then sees both moves as one step. So the driver reports each register's newest finished
+// write: reached once acknowledged (or sent, where the map has no acknowledge), never the one
+// that was replaced; refused when the value does not fit; an unmapped register refuses all.
+TEST_F(CanHil, WriteReceiptsReportWhatTheNcTookAndNeverAReplacedWrite) {
+  CanConfig cfg = reference();
+  cfg.ack_timeout_s = 1.0;  // a loaded TCG VM can stall the acknowledging peer for 100+ ms
+  start(cfg);
+  ASSERT_TRUE(bus_->confirms_writes());
+  sim::can_nc::CanNcNode nc(cfg.mapping, kIf);
+  ASSERT_EQ(sh("ip link set vcan0 down"), 0);
+  ASSERT_TRUE(bus_->tx().try_push(core::OffsetWrite{0, 2, -3.3, 5}));
+  bus_->wake();
+  ASSERT_TRUE(wait_until([&] { return st().can.interface_down == 1; }));
+  ASSERT_TRUE(bus_->tx().try_push(core::OffsetWrite{0, 2, -2.2, 6}));  // replaces -3.3
+  bus_->wake();
+  std::this_thread::sleep_for(200ms);
+  EXPECT_EQ(bus_->write_receipt(2).sequence, 0U) << "reported while the link is down";
+  ASSERT_EQ(sh("ip link set vcan0 up"), 0);
+  const auto got = collect_writes(
+      nc, [](const auto& w) { return count_for(w, 2) >= 1; }, 10s);
+  ASSERT_EQ(count_for(got, 2), 1U);
+  EXPECT_NEAR(got.front().value_um, -2.2, 1e-9) << "only the newest value goes out";
+  ASSERT_TRUE(wait_until([&] { return bus_->write_receipt(2).sequence == 6; }));
+  EXPECT_EQ(bus_->write_receipt(2).outcome, core::WriteOutcome::kReached);
+  // Register 3 has no acknowledge: reached once it is sent.
+  ASSERT_TRUE(bus_->tx().try_push(core::OffsetWrite{0, 3, 1.0, 7}));
+  bus_->wake();
+  ASSERT_TRUE(wait_until([&] { return bus_->write_receipt(3).sequence == 7; }));
+  EXPECT_EQ(bus_->write_receipt(3).outcome, core::WriteOutcome::kReached);
+  // Beyond its 32-bit signal (0.1 µm per count): refused, nothing sent.
+  const auto frames = st().bus.counters.frames_tx;
+  ASSERT_TRUE(bus_->tx().try_push(core::OffsetWrite{0, 3, 1e12, 8}));
+  bus_->wake();
+  ASSERT_TRUE(wait_until([&] { return bus_->write_receipt(3).sequence == 8; }));
+  EXPECT_EQ(bus_->write_receipt(3).outcome, core::WriteOutcome::kRefused);
+  EXPECT_EQ(st().bus.counters.frames_tx, frames);
+  EXPECT_EQ(bus_->write_receipt(999).outcome, core::WriteOutcome::kRefused);  // no mapping
 }
 
 // The same after bus-off: a value sent just before the controller went bus-off (register 3, no

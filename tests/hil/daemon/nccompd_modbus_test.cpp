@@ -11,7 +11,11 @@
 //   register continues from where it was and ends at the measured wear once: every value the NC
 //   received is checked (never beyond the increment, never back, no step past max_step_um);
 // - after a --dry-run, THEN a real start resumes from what the NC really holds (the dry run's
-//   values were never sent and never persisted) and reaches the new target through the limiter.
+//   values were never sent and never persisted) and reaches the new target through the limiter;
+// - with the loop at 1 kHz, the Modbus poll at 20 Hz and a limiter that allows 50 µm per poll
+//   period by its rate but 5 µm per write, and the NC server away for a second in the middle,
+//   THEN every value the NC receives is within max_step_um of the one before (issue 17
+//   follow-up: the driver's latest-value slot used to merge 50 of the loop's writes into one).
 #include <arpa/inet.h>
 #include <fcntl.h>
 #include <gtest/gtest.h>
@@ -23,11 +27,13 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
 #include <optional>
 #include <regex>
 #include <sstream>
@@ -456,7 +462,8 @@ TEST(NccompdModbus, KillNineMidCreepContinuesWithoutDoubling) {
 
 // A dry run never reaches the NC nor the state file: the real start that follows resumes from
 // what the NC holds (12.3 µm, from the first real run) and ramps to the new target through the
-// limiter, instead of believing the dry run's 30 µm were sent.
+// limiter, instead of believing the dry run's 30 µm were sent; a stalled bus in the middle of
+// the ramp does not merge its steps.
 TEST(NccompdModbus, RealStartAfterDryRunResumesFromWhatTheNcHolds) {
   TempDir d;
   NcServer nc(ServerConfig{});
@@ -501,7 +508,18 @@ TEST(NccompdModbus, RealStartAfterDryRunResumesFromWhatTheNcHolds) {
 
   Daemon real(d.path);
   real.start();
-  const auto end = std::chrono::steady_clock::now() + 15s;
+  // The NC stops answering for 0.3 s at the first write of the ramp: the I/O thread waits in a
+  // request (up to response_timeout_s) while the loop goes on. This test was flaky when load
+  // delayed the I/O thread the same way: the NC then got the loop's writes of that time merged
+  // into one step (8.5 µm, 72 counts seen). The stall makes that certain.
+  auto end = std::chrono::steady_clock::now() + 15s;
+  while (nc.writes().size() == writes_real && std::chrono::steady_clock::now() < end) {
+    std::this_thread::sleep_for(1ms);
+  }
+  nc.set_silent(true);
+  std::this_thread::sleep_for(300ms);
+  nc.set_silent(false);
+  end = std::chrono::steady_clock::now() + 15s;
   while (holding_i32(nc, 200) != 300 && std::chrono::steady_clock::now() < end) {
     std::this_thread::sleep_for(10ms);
   }
@@ -517,6 +535,63 @@ TEST(NccompdModbus, RealStartAfterDryRunResumesFromWhatTheNcHolds) {
     EXPECT_GE(w[i], previous) << "write " << i;
     previous = w[i];
   }
+}
+
+// Issue 17 follow-up. The ramp asks for 1000 µm/s, the limiter allows 1000 µm/s and 5 µm per
+// write; the loop steps at 1 kHz (1 µm per cycle), the Modbus driver polls and writes at 20 Hz.
+// The driver keeps one slot per register (latest value wins), so before write receipts the NC
+// received ~50 µm per write. Now each write waits for the NC to take the previous one: 5 µm per
+// poll period, also across a back-off while the NC server is stopped for 1 s.
+TEST(NccompdModbus, SlowPollNeverStepsTheNcPastMaxStepNorAcrossAnOutage) {
+  TempDir d;
+  NcServer nc(ServerConfig{});
+  nc.start();
+  std::string text = config_text(nc.port(), 1000.0);
+  const auto set = [&text](const std::string& from, const std::string& to) {
+    const auto at = text.find(from);
+    ASSERT_NE(at, std::string::npos) << from;
+    text.replace(at, from.size(), to);
+  };
+  set("poll_rate_hz = 1000\n", "poll_rate_hz = 20\n");
+  set("target_um = 12.3\n", "target_um = 150\n");
+  set("\nrate_um_per_s = 100\n", "\nrate_um_per_s = 1000\n");
+  d.write("nccompd.toml", text);
+  Daemon daemon(d.path);
+  daemon.start();
+  auto end = std::chrono::steady_clock::now() + 20s;
+  while (holding_i32(nc, 200) < 500 && std::chrono::steady_clock::now() < end) {
+    std::this_thread::sleep_for(5ms);
+  }
+  ASSERT_GE(holding_i32(nc, 200), 500) << daemon.log();
+  // Slewing, and the register waits for the NC (20 Hz) rather than the limiter's rate.
+  const std::string slewing = daemon.status().value_or("");
+  EXPECT_NE(slewing.find("\"slewing\":true"), std::string::npos) << slewing;
+  nc.stop();  // the NC goes away: timeouts, a reconnect back-off, the loop keeps stepping
+  std::this_thread::sleep_for(1s);
+  nc.start();
+  end = std::chrono::steady_clock::now() + 30s;
+  while (holding_i32(nc, 200) != 1500 && std::chrono::steady_clock::now() < end) {
+    std::this_thread::sleep_for(10ms);
+  }
+  EXPECT_EQ(holding_i32(nc, 200), 1500) << daemon.log();
+  const std::string s = daemon.status().value_or("");
+  EXPECT_GT(number(s, "writes_awaiting_nc"), 1000.0) << s;
+  EXPECT_GE(number(s, "reconnects"), 1.0) << s;
+  daemon.signal(SIGTERM);
+  EXPECT_EQ(daemon.wait(), 0) << daemon.log();
+  nc.stop();
+  const auto w = written_i32(nc, 200);
+  ASSERT_FALSE(w.empty());
+  std::int32_t previous = 0;
+  std::int32_t largest = 0;
+  for (std::size_t i = 0; i < w.size(); ++i) {
+    EXPECT_LE(std::abs(w[i] - previous), 50) << "write " << i << ": step past max_step_um";
+    largest = std::max(largest, std::abs(w[i] - previous));
+    previous = w[i];
+  }
+  EXPECT_EQ(w.back(), 1500);
+  EXPECT_GE(w.size(), 30U);  // 150 µm at 5 µm per write
+  std::cout << "NC writes " << w.size() << ", largest step " << largest << " counts\n";
 }
 
 }  // namespace

@@ -450,6 +450,52 @@ TEST(ModbusHilSim, ServerThatStopsAnsweringIsDetectedAndOffsetsArriveAfterwards)
   bus->stop();
 }
 
+// Write receipts (issue 17 follow-up): the driver reports a write reached only once the NC
+// answered it and holds it on read-back, never while the NC is silent or holds something else;
+// a value the register cannot take is refused, an unmapped register refuses everything.
+TEST(ModbusHilSim, WriteReceiptsReportWhatReachedTheNc) {
+  NcServer server(ServerConfig{});
+  // The NC clamps register 204 (int16) to 100 counts.
+  server.set_after_write([](const sim::modbus_nc::WriteRecord& w, Tables& t) {
+    if (w.address == 204 && static_cast<std::int16_t>(t.holding[204]) > 100) {
+      t.holding[204] = 100;
+    }
+  });
+  server.start();
+  auto bus = make_bus(tcp_header(server.port(), "verify_writes = true") + kEventsAndOffsets);
+  ASSERT_TRUE(bus->confirms_writes());
+  bus->start();
+  ASSERT_TRUE(wait_until([&] { return bus->status().state == drivers::LinkState::kUp; }));
+  const auto receipt = [&](std::uint16_t r) { return bus->write_receipt(r); };
+  EXPECT_EQ(receipt(0).sequence, 0U);
+  EXPECT_EQ(receipt(0).outcome, core::WriteOutcome::kPending);
+  server.set_silent(true);
+  ASSERT_TRUE(bus->tx().try_push(core::OffsetWrite{0, 0, 42.0, 7}));
+  ASSERT_TRUE(wait_until([&] {
+    const auto st = bus->modbus_status();
+    return st.timeouts >= 3 && st.bus.counters.reconnects >= 1;
+  }));
+  EXPECT_EQ(receipt(0).sequence, 0U) << "reported before the NC answered";
+  server.set_silent(false);
+  ASSERT_TRUE(wait_until([&] { return receipt(0).sequence == 7; }));
+  EXPECT_EQ(receipt(0).outcome, core::WriteOutcome::kReached);
+  EXPECT_EQ(holding_i32(server, 200), 420);
+  // 250 counts never stick on register 204: no receipt while the read-back differs.
+  ASSERT_TRUE(bus->tx().try_push(core::OffsetWrite{0, 2, 250.0, 8}));
+  ASSERT_TRUE(wait_until([&] { return bus->modbus_status().verify_mismatches >= 3; }));
+  EXPECT_EQ(receipt(2).sequence, 0U);
+  ASSERT_TRUE(bus->tx().try_push(core::OffsetWrite{0, 2, 80.0, 9}));
+  ASSERT_TRUE(wait_until([&] { return receipt(2).sequence == 9; }));
+  EXPECT_EQ(receipt(2).outcome, core::WriteOutcome::kReached);
+  // Beyond int16: refused, the NC keeps 80.
+  ASSERT_TRUE(bus->tx().try_push(core::OffsetWrite{0, 2, 1e6, 10}));
+  ASSERT_TRUE(wait_until([&] { return receipt(2).sequence == 10; }));
+  EXPECT_EQ(receipt(2).outcome, core::WriteOutcome::kRefused);
+  EXPECT_EQ(server.holding(204, 1)[0], 80);
+  EXPECT_EQ(receipt(9).outcome, core::WriteOutcome::kRefused);  // no mapping
+  bus->stop();
+}
+
 TEST(ModbusHilSim, ExceptionResponsesCountedPerKindOthersKeepFlowing) {
   using sim::modbus_nc::kExceptionBase;
   NcServer server(ServerConfig{});

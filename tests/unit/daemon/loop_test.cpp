@@ -5,15 +5,19 @@
 
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <limits>
+#include <mutex>
 #include <optional>
 #include <thread>
+#include <vector>
 
 #include "core/engine/ramp_module.hpp"
 #include "drivers/loopback/loopback_bus.hpp"
+#include "drivers/write_receipts.hpp"
 #include "tests/support/alloc_counter.hpp"
 
 namespace nccomp::daemon {
@@ -434,6 +438,98 @@ TEST(Loop, DroppedWritesAreCountedAndResentWhenTheBusDrainsAgain) {
   EXPECT_EQ(loop.stats().allocations_after_warmup, 0);
   EXPECT_EQ(loop.stats().frees_after_warmup, 0);
   stuck.stop();
+}
+
+// A bus like the Modbus driver at a 20 Hz poll: every 50 ms its I/O thread takes what the loop
+// queued, keeps the latest value of register 0 (older ones are replaced, never written), writes
+// it to its "NC" and publishes the receipt.
+class SlowCoalescingBus final : public drivers::Bus {
+ public:
+  SlowCoalescingBus() : rx_(16), tx_(256), receipts_(1) {}
+  ~SlowCoalescingBus() override { stop(); }
+  void start() override {
+    thread_ = std::thread([this] {
+      while (!stop_.load()) {
+        std::this_thread::sleep_for(50ms);
+        core::OffsetWrite w;
+        std::optional<core::OffsetWrite> latest;
+        while (tx_.try_pop(w)) {
+          latest = w;
+        }
+        if (latest) {
+          std::lock_guard<std::mutex> lock(mu_);
+          nc_.push_back(latest->value_um);
+          receipts_.publish(0, latest->sequence, core::WriteOutcome::kReached);
+        }
+      }
+    });
+  }
+  void stop() override {
+    stop_.store(true);
+    if (thread_.joinable()) {
+      thread_.join();
+    }
+  }
+  core::rt::SpscRing<core::Event>& rx() override { return rx_; }
+  core::rt::SpscRing<core::OffsetWrite>& tx() override { return tx_; }
+  [[nodiscard]] drivers::BusStatus status() const override { return {}; }
+  [[nodiscard]] bool confirms_writes() const noexcept override { return true; }
+  [[nodiscard]] core::WriteReceipt write_receipt(std::uint16_t r) const noexcept override {
+    return r == 0 ? receipts_.load(0) : drivers::kUnmappedReceipt;
+  }
+  std::vector<double> nc() {
+    std::lock_guard<std::mutex> lock(mu_);
+    return nc_;
+  }
+
+ private:
+  core::rt::SpscRing<core::Event> rx_;
+  core::rt::SpscRing<core::OffsetWrite> tx_;
+  drivers::WriteReceipts receipts_;
+  std::mutex mu_;
+  std::vector<double> nc_;
+  std::atomic<bool> stop_{false};
+  std::thread thread_;
+};
+
+// Issue 17 follow-up: the loop at 1 kHz, the limiter allowing 500 µm/s (0.5 µm per cycle, 25 µm
+// per 50 ms) and 5 µm per write, a bus that writes every 50 ms. Every value the NC receives is
+// within max_step_um of the one before (without receipts the bus merged 50 cycles into one
+// step of 25 µm), and the register still reaches its target.
+TEST(Loop, ASlowBusNeverStepsTheNcPastMaxStep) {
+  SlowCoalescingBus bus;
+  core::rt::ConfigSwap<Runtime> swap(make_runtime(60.0, 1000.0, false, 1));
+  LoopOptions o;
+  o.warmup_cycles = 20;
+  o.thread_allocations = []() noexcept { return nccomp::test::thread_allocations(); };
+  o.thread_deallocations = []() noexcept { return nccomp::test::thread_deallocations(); };
+  Loop loop(o, swap, {&bus}, nullptr, nullptr);
+  bus.start();
+  loop.start();
+  const auto end = std::chrono::steady_clock::now() + 10s;
+  while (std::chrono::steady_clock::now() < end) {
+    const auto nc = bus.nc();
+    if (!nc.empty() && !(nc.back() < 60.0) && !(nc.back() > 60.0)) {
+      break;
+    }
+    std::this_thread::sleep_for(5ms);
+  }
+  loop.stop();
+  bus.stop();
+  const auto nc = bus.nc();
+  ASSERT_FALSE(nc.empty());
+  EXPECT_DOUBLE_EQ(nc.back(), 60.0);
+  double before = 0.0;
+  for (std::size_t i = 0; i < nc.size(); ++i) {
+    EXPECT_LE(std::fabs(nc[i] - before), 5.0 + 1e-9) << "write " << i << " stepped past 5 um";
+    before = nc[i];
+  }
+  EXPECT_GE(nc.size(), 12U);  // 60 µm at 5 µm per write
+  const auto s = loop.stats();
+  EXPECT_GT(s.engine.writes_awaiting_nc, 0U);
+  EXPECT_EQ(s.writes_dropped, 0U);
+  EXPECT_EQ(s.allocations_after_warmup, 0) << "the loop thread allocated after warm-up";
+  EXPECT_EQ(s.frees_after_warmup, 0) << "the loop thread freed after warm-up";
 }
 
 }  // namespace
