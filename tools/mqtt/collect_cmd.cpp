@@ -37,6 +37,7 @@ std::int64_t mono_ns() {
 void run(const Options& o, const std::string& password) {
   namespace mq = nccomp::tools::mqtt;
   mq::CollectorStore store(o.out);
+  // A persistent session: the broker keeps the rows for this client id while it is away.
   mq::MqttLink link(o.broker, password);
   const std::string filter =
       "nccomp/" + (o.site.empty() ? std::string("+") : o.site) + "/+/measurements";

@@ -313,7 +313,14 @@ void DiskQueue::delete_acked_segments() {
     }
     ::unlink(segments_.front().path.c_str());
     segments_.erase(segments_.begin());
-    if (read_segment_ > 0) --read_segment_;
+    if (read_segment_ > 0) {
+      --read_segment_;
+    } else {
+      // The reader was at the end of the deleted segment: it goes on at the next one's start
+      // (its offset was into the deleted file).
+      read_offset_ = 0;
+      read_buffer_.clear();
+    }
   }
 }
 

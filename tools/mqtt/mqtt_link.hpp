@@ -66,7 +66,8 @@ class MqttLink {
   /// False if it could not be handed to Paho (not connected, too many in flight).
   bool publish(const std::string& topic, const std::string& payload, std::uint64_t tag,
                bool retained = false);
-  /// Waits up to timeout_ms for events and returns them (possibly none).
+  /// Waits up to timeout_ms for events and returns them (possibly none); subscribes after a
+  /// connect. Call from one thread, the one that calls connect().
   std::vector<LinkEvent> wait(int timeout_ms);
   /// Disconnects (waits up to timeout_ms for Paho to finish).
   void disconnect(int timeout_ms = 2000);
@@ -86,6 +87,7 @@ class MqttLink {
   static void on_publish_failed(void* ctx, MQTTAsync_failureData5* r);
   static void on_subscribed(void* ctx, MQTTAsync_successData5* r);
   static void on_subscribe_failed(void* ctx, MQTTAsync_failureData5* r);
+  void create_client();
   void push(LinkEvent e);
   void finish(Pending* p, LinkEvent e);
 
@@ -98,6 +100,7 @@ class MqttLink {
   std::deque<LinkEvent> events_;
   bool connected_{false};
   bool connecting_{false};
+  bool used_{false};
   std::unordered_map<Pending*, std::unique_ptr<Pending>> pending_;
   std::string filter_;
   MessageHandler handler_;

@@ -67,6 +67,7 @@ void Publisher::handle(const LinkEvent& e, std::int64_t now) {
   using T = LinkEvent::Type;
   switch (e.type) {
     case T::kConnected:
+      connected_ = true;
       spdlog::info("connected to {} as {} ({} message(s) queued)", config_.broker.uri,
                    config_.broker.client_id, queue_.queued());
       backoff_s_ = 1.0;
@@ -88,6 +89,7 @@ void Publisher::handle(const LinkEvent& e, std::int64_t now) {
       backoff_s_ = std::min(backoff_s_ * 2.0, config_.broker.reconnect_max_s);
       break;
     case T::kConnectionLost:
+      connected_ = false;
       spdlog::warn("connection to {} lost ({}); {} message(s) queued", config_.broker.uri, e.text,
                    queue_.queued());
       queue_.rewind();
@@ -262,7 +264,7 @@ int Publisher::run(const std::atomic<bool>& stop) {
   while (!stop.load()) {
     for (const LinkEvent& e : link_->wait(20)) handle(e, mono_ns());
     now = mono_ns();
-    if (!link_->connected() && now >= next_connect_ns_) {
+    if (!connected_ && now >= next_connect_ns_) {
       next_connect_ns_ = after_s(now, 15.0);  // the attempt's result sets the next one
       link_->connect();
     }
@@ -288,15 +290,17 @@ int Publisher::run(const std::atomic<bool>& stop) {
           queue_.dropped("measurements"), queue_.dropped("alarms"), queue_.dropped("model"));
       last_dropped_ = queue_.dropped_total();
     }
-    if (link_->connected() && now >= paused_until_ns_) send();
-    if (link_->connected() && now >= next_heartbeat_ns_) {
+    // The connection as the events say (not link_->connected(), which turns true before the
+    // kConnected event rewinds the queue: messages sent in between would go twice).
+    if (connected_ && now >= paused_until_ns_) send();
+    if (connected_ && now >= next_heartbeat_ns_) {
       next_heartbeat_ns_ = after_s(now, config_.heartbeat_s);
       heartbeat(true);
     }
   }
   spdlog::info("stopping: {} message(s) queued, {} published in this run", queue_.queued(),
                published_);
-  if (link_->connected()) {
+  if (connected_) {
     heartbeat(false);
     const auto until = mono_ns() + 2 * kNs;
     while (link_->in_flight() > 0 && mono_ns() < until) {

@@ -43,6 +43,7 @@ class Publisher {
   StatusMemory memory_;
   std::unique_ptr<MqttLink> link_;
   std::set<std::uint64_t> in_flight_;
+  bool connected_{false};
   std::int64_t next_connect_ns_{0};
   double backoff_s_{1.0};
   std::int64_t paused_until_ns_{0};

@@ -104,6 +104,24 @@ TEST(DiskQueue, AcknowledgedSegmentsAreDeleted) {
   EXPECT_EQ(files, 1U);
 }
 
+TEST(DiskQueue, TheReaderGoesOnWhenTheSegmentItFinishedIsDeleted) {
+  // Found by the broker tests: every message of a segment sent and acknowledged, the next
+  // message starts a new segment, the old one is deleted: the reader must go on there.
+  TempDir d("nccomp_q_reader");
+  DiskQueue q({d.str(), 32, 0.0});  // segments of 2
+  q.open();
+  put(q, "measurements", 2);
+  q.flush();
+  std::vector<std::uint64_t> ids;
+  EXPECT_EQ(drain(q, &ids), (std::vector<std::uint64_t>{1, 2}));
+  for (std::uint64_t id : ids) q.ack(id);
+  q.flush();
+  put(q, "measurements", 3);
+  q.flush();
+  EXPECT_EQ(q.segments(), 2U);
+  EXPECT_EQ(drain(q), (std::vector<std::uint64_t>{3, 4, 5}));
+}
+
 TEST(DiskQueue, AfterACrashSequencesGoOnAndFlushedMessagesAreThere) {
   TempDir d("nccomp_q_crash");
   const pid_t pid = ::fork();
