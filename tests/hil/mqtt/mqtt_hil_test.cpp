@@ -22,13 +22,16 @@
 #include <spawn.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
+#include <sys/un.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <chrono>
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <mutex>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
@@ -146,6 +149,62 @@ class Process {
   pid_t pid_{-1};
 };
 
+/// A stand-in for nccompd's status socket: answers every request with the JSON it is given
+/// (the daemon's status format: daemon, loop, modules, alarms), as nccompd does (one request
+/// line, one answer, close).
+class FakeStatusSocket {
+ public:
+  explicit FakeStatusSocket(const std::string& path) : path_(path) {
+    fd_ = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    sockaddr_un a{};
+    a.sun_family = AF_UNIX;
+    std::snprintf(a.sun_path, sizeof a.sun_path, "%s", path.c_str());
+    ::unlink(path.c_str());
+    EXPECT_EQ(::bind(fd_, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
+    EXPECT_EQ(::listen(fd_, 8), 0);
+    thread_ = std::thread([this] {
+      while (!stop_.load()) {
+        const int c = ::accept(fd_, nullptr, nullptr);
+        if (c < 0) continue;
+        char buf[64];
+        (void)::recv(c, buf, sizeof buf, 0);
+        std::string answer;
+        {
+          std::lock_guard<std::mutex> lock(mu_);
+          answer = answer_;
+          ++requests_;
+        }
+        (void)::send(c, answer.data(), answer.size(), MSG_NOSIGNAL);
+        ::close(c);
+      }
+    });
+  }
+  ~FakeStatusSocket() {
+    stop_.store(true);
+    ::shutdown(fd_, SHUT_RDWR);
+    ::close(fd_);
+    thread_.join();
+    ::unlink(path_.c_str());
+  }
+  void set(const nlohmann::json& j) {
+    std::lock_guard<std::mutex> lock(mu_);
+    answer_ = j.dump() + "\n";
+  }
+  int requests() {
+    std::lock_guard<std::mutex> lock(mu_);
+    return requests_;
+  }
+
+ private:
+  std::string path_;
+  int fd_{-1};
+  std::atomic<bool> stop_{false};
+  std::mutex mu_;
+  std::string answer_{"{}\n"};
+  int requests_{0};
+  std::thread thread_;
+};
+
 class MqttHil : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -215,10 +274,11 @@ class MqttHil : public ::testing::Test {
   }
 
   void write_publisher_config(const std::string& machine, const std::string& user,
-                              std::int64_t max_messages) {
+                              std::int64_t max_messages, const std::string& status_socket = "") {
     std::ofstream(dir_ / "pub.toml")
         << "[publish]\nsite = \"s1\"\nmachine = \"" << machine << "\"\nheartbeat_s = 1\n"
-        << "[source]\nlog_directory = \"log\"\npoll_s = 0.05\nstatus_socket = \"\"\n"
+        << "[source]\nlog_directory = \"log\"\npoll_s = 0.05\nstatus_socket = \"" << status_socket
+        << "\"\nstatus_poll_s = 0.1\n"
         << "[broker]\nuri = \"" << broker_uri() << "\"\nusername = \"" << user
         << "\"\npassword_file = \"" << user << ".pw\"\nreconnect_max_s = 1\n"
         << "[queue]\ndirectory = \"queue\"\nmax_messages = " << max_messages << "\n";
@@ -448,6 +508,66 @@ TEST_F(MqttHil, TheBrokerRefusesAnotherMachinesTopicAndThePublisherReportsIt) {
   // Nothing was acknowledged: every row is still queued.
   const auto s = nlohmann::json::parse(slurp(dir_ / "queue" / "state.json"));
   EXPECT_EQ(s.at("next_id").get<int>() - s.at("head").get<int>(), next_point_);
+}
+
+TEST_F(MqttHil, AlarmsAcknowledgementsAndTheModelArePublishedOnceAlsoAcrossARestart) {
+  start_broker();
+  write_secret("m1.pw", "pw-m1");
+  const std::string sock = (dir_ / "status.sock").string();
+  FakeStatusSocket status(sock);
+  const auto alarm = [](double t_s, int code, int subject) {
+    return nlohmann::json{{"time_s", t_s},      {"severity", "alarm"},
+                          {"code", code},       {"name", "tool_broken_or_mismeasured"},
+                          {"subject", subject}, {"value", 12.5}};
+  };
+  const auto answer = [&](nlohmann::json alarms, int acknowledged) {
+    return nlohmann::json{
+        {"daemon", {{"pid", 4242}, {"config_generation", 1}, {"hold", false}}},
+        {"loop", {{"cycles", 1000}, {"overruns", 0}, {"latency_us", {{"p99_9", 20.0}}}}},
+        {"modules",
+         {{{"name", "creep"},
+           {"status", {{"acknowledged", acknowledged}, {"last_acknowledge", "halt released"}}}}}},
+        {"measurement_log", {{"rows", 0}, {"errors", 0}}},
+        {"alarms", std::move(alarms)}};
+  };
+  status.set(answer({alarm(100.0, 23, 4)}, 0));
+  const fs::path seen = dir_ / "alarms.txt";
+  Process sub({"/usr/bin/mosquitto_sub", "-p", std::to_string(port_), "-u", "coll", "-P", "pw-c",
+               "-t", "nccomp/s1/m1/alarms", "-t", "nccomp/s1/m1/model", "-v", "-q", "1"},
+              seen);
+  std::this_thread::sleep_for(300ms);
+  write_publisher_config("m1", "m1", 1000, sock);
+  start_publisher();
+  const auto count = [&](const std::string& what) {
+    const std::string text = slurp(seen);
+    std::size_t n = 0;
+    for (std::size_t at = text.find(what); at != std::string::npos; at = text.find(what, at + 1)) {
+      ++n;
+    }
+    return n;
+  };
+  ASSERT_TRUE(wait_for([&] { return count("\"event\":\"alarm\"") == 1; }, 20s))
+      << slurp(seen) << slurp(dir_ / "publish.log");
+  // Polled again and again (every 0.1 s): still one. Then a second alarm and an acknowledgement.
+  ASSERT_TRUE(wait_for([&] { return status.requests() >= 10; }, 10s));
+  status.set(answer({alarm(100.0, 23, 4), alarm(101.5, 23, 5)}, 1));
+  ASSERT_TRUE(wait_for([&] { return count("\"event\":\"acknowledge\"") == 1; }, 10s))
+      << slurp(seen);
+  // A restart of the publisher sees the same list: nothing new.
+  EXPECT_EQ(publisher_.stop(), 0);
+  start_publisher();
+  const int before = status.requests();
+  ASSERT_TRUE(wait_for([&] { return status.requests() >= before + 10; }, 10s));
+  std::this_thread::sleep_for(500ms);
+  EXPECT_EQ(count("\"event\":\"alarm\""), 2U) << slurp(seen);
+  EXPECT_EQ(count("\"event\":\"acknowledge\""), 1U) << slurp(seen);
+  EXPECT_EQ(count("nccomp/s1/m1/model "), 1U) << slurp(seen);
+  // Sequence numbers of the alarms topic: 1, 2, 3 in the order sent.
+  EXPECT_NE(slurp(seen).find("{\"seq\":3,\"machine\":\"m1\""), std::string::npos) << slurp(seen);
+  const auto hb = heartbeat("m1");
+  ASSERT_TRUE(hb.is_object());
+  EXPECT_EQ(hb.at("daemon").at("pid"), 4242);
+  EXPECT_EQ(hb.at("daemon").at("latency_us_p99_9"), 20.0);
 }
 
 }  // namespace
