@@ -139,7 +139,13 @@ void Publisher::poll_log() {
   }
   for (const LogProblem& p : problems) {
     ++source_problems_;
-    spdlog::warn("{}{}: {}", p.file, p.line > 0 ? ":" + std::to_string(p.line) : "", p.message);
+    // Built with +=: GCC 12 warns falsely (-Wrestrict) about ":" + std::string at -O3.
+    std::string where = p.file;
+    if (p.line > 0) {
+      where += ':';
+      where += std::to_string(p.line);
+    }
+    spdlog::warn("{}: {}", where, p.message);
   }
   for (std::size_t i = 0; i < rows.size(); ++i) {
     const LogRow& r = rows[i];
