@@ -24,6 +24,7 @@
 #include <cstring>
 #include <stdexcept>
 #include <string>
+#include <variant>
 
 namespace nccomp::drivers::can {
 namespace {
@@ -48,6 +49,10 @@ CanBus::CanBus(CanConfig config)
       decoder_(config_.mapping),
       rx_ring_(config_.rx_ring_events),
       tx_ring_(config_.tx_ring_writes),
+      input_watch_(
+          to_ns(config_.degraded_alarm_after_s),
+          std::any_of(config_.mapping.rx.begin(), config_.mapping.rx.end(),
+                      [](const RxFrame& f) { return f.event == EventKind::kAxisSample; })),
       rebind_backoff_(to_ns(config_.link_check_s),
                       to_ns(std::max(config_.link_check_s, config_.reconnect_max_s)),
                       to_ns(config_.reconnect_reset_after_s)),
@@ -207,6 +212,7 @@ void CanBus::start() {
     throw std::runtime_error("can: eventfd: " + errno_text(errno));
   }
   st_.bus.state = LinkState::kUp;
+  input_watch_.start(mono_ns());
   publish(mono_ns());
   running_.store(true);
   thread_ = std::thread([this] { run(); });
@@ -257,6 +263,12 @@ void CanBus::publish(std::int64_t now_ns) noexcept {
     if (if_down_ || bus_off_) {
       b.state = LinkState::kDown;
     }
+  }
+  if (b.state == LinkState::kUp) {
+    input_watch_.link_ok(now_ns);
+  }
+  if (!lockstep_) {
+    b.input_stale = b.state != LinkState::kStopped && input_watch_.stale(now_ns);
   }
   status_.store(st_);
 }
@@ -383,6 +395,8 @@ void CanBus::handle_sync(const std::uint8_t* data, std::size_t len) noexcept {
     cycle = (cycle << 8) | data[i];
   }
   ++st_.can.lockstep_syncs;
+  // The peer is the clock: judged at its SYNCs only, so that a paused peer is not stale input.
+  st_.bus.input_stale = input_watch_.stale(mono_ns());
   {
     std::lock_guard<std::mutex> lock(ls_mu_);
     synced_plus1_ = std::max(synced_plus1_, cycle + 1);
@@ -514,6 +528,9 @@ void CanBus::receive_all(std::int64_t now_ns) noexcept {
         break;
     }
     if (r.emitted) {
+      if (std::holds_alternative<core::AxisSample>(ev)) {
+        input_watch_.axis_ok(now_ns);
+      }
       if (rx_ring_.try_push(ev)) {
         ++st_.bus.counters.events_decoded;
       } else {

@@ -12,7 +12,9 @@
 // offsets are absolute, and a frame sent just before the fault may never have reached the NC.
 // Every fault is counted in CanStatus and reported through extra_counters() (`nccomp status`).
 // The status alarm is raised by a write given up after its retries, and by the link staying down
-// or bus-off for longer than alarm_after_s; the latter clears when the bus is back.
+// or bus-off for longer than alarm_after_s; the latter clears when the bus is back. The input is
+// stale (BusStatus::input_stale, input_watch.hpp) when the link has not been up (error-passive
+// counts) or, with axis frames mapped, no valid axis sample came, for degraded_alarm_after_s.
 //
 // Threads: the loop thread is rx()'s only consumer and tx()'s only producer; it never blocks on
 // the driver. After pushing into tx() it may call wake() so the write goes out at once (without
@@ -37,6 +39,7 @@
 #include "drivers/can/can_config.hpp"
 #include "drivers/can/can_mapping.hpp"
 #include "drivers/reconnect_backoff.hpp"
+#include "drivers/input_watch.hpp"
 
 namespace nccomp::drivers::can {
 
@@ -154,6 +157,7 @@ class CanBus final : public Bus {
   core::rt::SpscRing<core::Event> rx_ring_;
   core::rt::SpscRing<core::OffsetWrite> tx_ring_;
   core::rt::Seqlock<CanStatus> status_;
+  InputWatch input_watch_;  // I/O thread (start() before it runs)
 
   // I/O thread state (touched only by it once started).
   CanStatus st_{};

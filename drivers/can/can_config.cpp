@@ -8,6 +8,8 @@
 #include <limits>
 #include <sstream>
 
+#include "formats/toml_guard.hpp"
+
 namespace nccomp::drivers::can {
 namespace {
 
@@ -181,7 +183,7 @@ constexpr std::int64_t kMaxId = kMaxExtendedId;
 CanConfig parse_can_config(std::string_view toml_text, const std::string& file) {
   toml::table root;
   try {
-    root = toml::parse(toml_text, file);
+    root = formats::parse_toml(toml_text, file);
   } catch (const toml::parse_error& e) {
     throw MappingError(file, static_cast<int>(e.source().begin.line),
                        static_cast<int>(e.source().begin.column), "", std::string(e.description()));
@@ -200,11 +202,11 @@ CanConfig parse_can_table(const toml::table& can, const std::string& file_name) 
   CanConfig c;
   c.mapping.file = file;
   const std::string p = "can";
-  r.only_keys(
-      can, p,
-      {"interface", "fd", "restart", "restart_delay_s", "ack_timeout_s", "ack_retries",
-       "enobufs_backoff_s", "link_check_s", "reconnect_max_s", "reconnect_reset_after_s",
-       "alarm_after_s", "rx_ring_events", "tx_ring_writes", "socket_rcvbuf_bytes", "rx", "offset"});
+  r.only_keys(can, p,
+              {"interface", "fd", "restart", "restart_delay_s", "ack_timeout_s", "ack_retries",
+               "enobufs_backoff_s", "link_check_s", "reconnect_max_s", "reconnect_reset_after_s",
+               "alarm_after_s", "degraded_alarm_after_s", "rx_ring_events", "tx_ring_writes",
+               "socket_rcvbuf_bytes", "rx", "offset"});
   c.interface = r.get_string(can, p, "interface", std::nullopt);
   if (c.interface.empty() || c.interface.size() >= 16) {
     r.fail(*can.get("interface"), p + ".interface", "must be 1..15 characters (IFNAMSIZ)");
@@ -233,6 +235,7 @@ CanConfig parse_can_table(const toml::table& can, const std::string& file_name) 
            "smaller than reconnect_max_s");
   }
   c.alarm_after_s = r.get_double(can, p, "alarm_after_s", 1.0, 0.0, 3600.0);
+  c.degraded_alarm_after_s = r.get_double(can, p, "degraded_alarm_after_s", 5.0, 0.01, 3600.0);
   const auto pow2 = [&](std::string_view key, std::int64_t dflt) {
     const std::int64_t v = r.get_int(can, p, key, dflt, 2, 1 << 20);
     if ((v & (v - 1)) != 0) {

@@ -44,6 +44,9 @@ struct CanConfig {
   /// The interface down or the controller bus-off for longer than this raises the status alarm
   /// (cleared when the bus is back) [s].
   double alarm_after_s{1.0};
+  /// The link not up (error-passive, down, bus-off), or no valid axis sample while the map has
+  /// axis frames, for longer than this: the input is stale (BusStatus::input_stale) [s].
+  double degraded_alarm_after_s{5.0};
   /// Capacity of the decoded-event ring (power of two) and of the offset-write ring.
   std::uint32_t rx_ring_events{4096};
   std::uint32_t tx_ring_writes{256};

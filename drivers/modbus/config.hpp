@@ -182,6 +182,9 @@ struct ModbusConfig {
   bool verify_writes{false};
   /// An offset still undelivered, or the link down, for this long raises the status alarm.
   double alarm_after_s{1.0};
+  /// No intact poll (every block read without a fault and, if the axis group is mapped, a valid
+  /// axis sample) for this long: the input is stale (BusStatus::input_stale, the daemon's alarm).
+  double degraded_alarm_after_s{5.0};
   std::size_t rx_capacity{1024};
   std::size_t tx_capacity{256};
   /// Read blocks of one table whose gap is at most this many registers (8x as many bits) are

@@ -16,6 +16,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <variant>
 
 namespace nccomp::drivers::modbus {
 namespace {
@@ -79,6 +80,8 @@ std::size_t modbus_counters(const ModbusStatus& st, std::span<BusCounterValue> o
       st.events_lost,
       st.sequence_resets,
       st.sequence_unchanged_after_reconnect,
+      st.events_recovered_after_start,
+      st.events_lost_while_down,
       st.values_invalid,
       st.values_out_of_range,
       st.offsets_rejected,
@@ -158,6 +161,8 @@ ModbusBus::ModbusBus(ModbusConfig config)
       rx_(config_.rx_capacity),
       tx_(config_.tx_capacity),
       decoder_(config_),
+      input_watch_(to_ns(config_.degraded_alarm_after_s),
+                   config_.groups[static_cast<std::size_t>(Group::kAxis)].present),
       block_ok_(config_.blocks.size(), 0),
       bits_(2000, 0),
       slot_of_register_(65536, -1),
@@ -266,6 +271,31 @@ std::optional<double> ModbusBus::read_offset(std::uint16_t register_index) {
     return std::nullopt;
   }
   return v;
+}
+
+bool ModbusBus::resume_events(const core::EventCursorSet& cursors) {
+  if (io_.joinable()) {
+    return true;  // the I/O thread owns the decoder now
+  }
+  decoder_.resume(cursors);
+  return true;
+}
+
+std::size_t ModbusBus::events_while_down(std::span<EventsWhileDown> out) const {
+  const ModbusStatus st = status_.load();
+  std::size_t n = 0;
+  for (std::size_t gi = 1; gi < kGroupCount && n < out.size(); ++gi) {
+    const ResumeReport& r = st.resume[gi];
+    if (r.done) {
+      out[n++] = EventsWhileDown{static_cast<std::uint8_t>(gi - 1),
+                                 r.cursor,
+                                 r.counter,
+                                 r.events,
+                                 r.nc_restarted,
+                                 r.delivered};
+    }
+  }
+  return n;
 }
 
 void ModbusBus::stop() {
@@ -446,14 +476,20 @@ void ModbusBus::poll(core::TimeNs now_ns) {
     any = true;
   }
   ++st_.polls;
+  bool axis_seen = false;
+  const bool all_read = ctx_ && std::all_of(block_ok_.begin(), block_ok_.end(),
+                                            [](std::uint8_t ok) { return ok != 0; });
   if (!any) {
+    note_input(all_read, axis_seen);
     return;
   }
   const core::TimeNs t = monotonic_now_ns();
   st_.bus.last_rx_ns = t;
   for (const core::Event& e : decoder_.decode(t, block_ok_)) {
+    axis_seen = axis_seen || std::holds_alternative<core::AxisSample>(e);
     if (rx_.try_push(e)) {
-      ++st_.bus.counters.events_decoded;
+      const core::EventOrigin* o = core::origin_of(e);
+      st_.bus.counters.events_decoded += o != nullptr && o->counter_only ? 0U : 1U;
     } else {
       ++st_.bus.counters.events_dropped;
     }
@@ -462,8 +498,26 @@ void ModbusBus::poll(core::TimeNs now_ns) {
   st_.events_lost = dc.events_lost;
   st_.sequence_resets = dc.sequence_resets;
   st_.sequence_unchanged_after_reconnect = dc.sequence_unchanged_after_reconnect;
+  st_.events_recovered_after_start = dc.events_recovered_after_start;
+  st_.events_lost_while_down = dc.events_lost_while_down;
+  st_.resume = decoder_.resume_reports();
   st_.values_invalid = dc.values_invalid;
   st_.values_out_of_range = dc.values_out_of_range;
+  note_input(all_read, axis_seen);
+}
+
+void ModbusBus::note_input(bool all_read, bool axis_seen) {
+  const core::TimeNs now = monotonic_now_ns();
+  if (all_read) {
+    input_watch_.link_ok(now);
+  }
+  if (axis_seen) {
+    input_watch_.axis_ok(now);
+  }
+  if (lockstep_) {
+    // The peer is the clock: judged at its polls only, so that a paused peer is not stale.
+    st_.bus.input_stale = input_watch_.stale(now);
+  }
 }
 
 void ModbusBus::drain_tx(core::TimeNs now_ns) {
@@ -559,6 +613,9 @@ void ModbusBus::publish(core::TimeNs now_ns) {
   }
   st_.offsets_pending = pending;
   st_.bus.alarm = alarm;
+  if (!lockstep_) {
+    st_.bus.input_stale = st_.bus.state != LinkState::kStopped && input_watch_.stale(now_ns);
+  }
   status_.store(st_);
 }
 
@@ -636,6 +693,7 @@ bool ModbusBus::ensure_connected(bool& ever_connected) {
 void ModbusBus::run_lockstep() {
   bool ever_connected = false;
   down_since_ns_ = monotonic_now_ns();
+  input_watch_.start(down_since_ns_);
   st_.bus.state = LinkState::kConnecting;
   publish(down_since_ns_);
   // Connect before the first TICK arrives, so that the first cycle does not wait for it.
@@ -730,6 +788,7 @@ void ModbusBus::run() {
   core::TimeNs next = monotonic_now_ns();
   core::TimeNs next_write = next;
   down_since_ns_ = next;
+  input_watch_.start(next);
   st_.bus.state = LinkState::kConnecting;
   publish(next);
   while (running_.load(std::memory_order_acquire)) {

@@ -9,6 +9,10 @@
 // reconnect all known offsets are written again. A repeated write of an absolute value cannot
 // double a correction, so none is lost and none is applied twice.
 //
+// Stale input (input_watch.hpp): no poll with every block read, or no valid axis sample while the
+// axis group is mapped, for longer than degraded_alarm_after_s sets BusStatus::input_stale: an NC
+// that answers every read with an exception keeps the link "degraded", never down.
+//
 // Faults: response and byte timeouts from the config; exception responses are counted per code;
 // garbage (bad CRC, wrong transaction id, wrong length) is counted and the input flushed;
 // dead_after_failures consecutive timeouts / garbage, or a socket error, drop the connection.
@@ -41,6 +45,7 @@
 #include "core/rt/seqlock.hpp"
 #include "core/rt/spsc_ring.hpp"
 #include "drivers/bus.hpp"
+#include "drivers/input_watch.hpp"
 #include "drivers/modbus/config.hpp"
 #include "drivers/modbus/decoder.hpp"
 #include "drivers/reconnect_backoff.hpp"
@@ -69,6 +74,11 @@ struct ModbusStatus {
   std::uint64_t sequence_resets{0};  // a sequence counter moved back: NC restart
   // Same non-zero counter at the first read after a reconnect: an NC restart can't be ruled out.
   std::uint64_t sequence_unchanged_after_reconnect{0};
+  // Events the NC produced while nccompd was down (first read after a start with the engine's
+  // cursors): the newest of a group delivered, the others lost; and what each group's read found.
+  std::uint64_t events_recovered_after_start{0};
+  std::uint64_t events_lost_while_down{0};
+  std::array<ResumeReport, kGroupCount> resume{};
   std::uint64_t values_invalid{0};       // NaN / inf / not integral / not a valid code: dropped
   std::uint64_t values_out_of_range{0};  // finite but outside the map's min / max: dropped
   std::uint64_t offsets_rejected{0};     // not encodable (NaN, out of range) or unmapped register
@@ -108,7 +118,7 @@ struct IoSetupLine {
 std::vector<IoSetupLine> describe_io_setup(const IoThreadSetup& setup, const ModbusConfig& config);
 
 /// Names of ModbusBus::extra_counters(), in their order (static strings, for status output).
-inline constexpr std::array<const char*, 30> kModbusCounterNames = {
+inline constexpr auto kModbusCounterNames = std::to_array<const char*>({
     "exception_illegal_function",      // 1
     "exception_illegal_address",       // 2
     "exception_illegal_value",         // 3
@@ -131,6 +141,8 @@ inline constexpr std::array<const char*, 30> kModbusCounterNames = {
     "events_lost",
     "sequence_resets",
     "sequence_unchanged_after_reconnect",
+    "events_recovered_after_start",
+    "events_lost_while_down",
     "values_invalid",
     "values_out_of_range",
     "offsets_rejected",
@@ -142,7 +154,7 @@ inline constexpr std::array<const char*, 30> kModbusCounterNames = {
     "io_sched_fifo_priority",  // its SCHED_FIFO priority, 0 = normal scheduling
     "io_sched_errno",          // errno of a refused io_sched_fifo_priority (1 = EPERM), else 0
     "io_affinity_errno",       // errno of a refused io_cpu_affinity (22 = EINVAL), else 0
-};
+});
 
 /// Fills `out` with the counters of `st` in kModbusCounterNames order; returns how many.
 std::size_t modbus_counters(const ModbusStatus& st, std::span<BusCounterValue> out) noexcept;
@@ -183,6 +195,10 @@ class ModbusBus final : public Bus {
   [[nodiscard]] std::size_t extra_counters(std::span<BusCounterValue> out) const override {
     return modbus_counters(status_.load(), out);
   }
+  /// Before start(): the decoder resumes each event group from the engine's cursor. Returns true.
+  bool resume_events(const core::EventCursorSet& cursors) override;
+  /// The first read of each resumed group (from the seqlock snapshot).
+  [[nodiscard]] std::size_t events_while_down(std::span<EventsWhileDown> out) const override;
 
   /// Lock-step (before start()): no polling or writing on the driver's own schedule; sync()
   /// makes the I/O thread do one complete poll, flush() makes it write every pending offset
@@ -199,6 +215,7 @@ class ModbusBus final : public Bus {
   /// nullopt if unmapped, not connected or the read fails. start() drops this connection, so
   /// the I/O thread makes its own. Not real-time.
   [[nodiscard]] std::optional<double> read_offset(std::uint16_t register_index) override;
+  [[nodiscard]] bool reads_back() const noexcept override { return true; }
   /// Any thread: the full status with the Modbus counters.
   [[nodiscard]] ModbusStatus modbus_status() const { return status_.load(); }
   [[nodiscard]] const ModbusConfig& config() const noexcept { return config_; }
@@ -252,6 +269,8 @@ class ModbusBus final : public Bus {
   void rtu_gap();
   void after_transaction();
   void publish(core::TimeNs now_ns);
+  /// After a poll: whether every block was read and whether a valid axis sample came out.
+  void note_input(bool all_read, bool axis_seen);
   void sleep_until(core::TimeNs t_ns) const;
 
   const ModbusConfig config_;
@@ -268,6 +287,7 @@ class ModbusBus final : public Bus {
   // I/O thread only.
   std::unique_ptr<void, ModbusDeleter> ctx_;
   PollDecoder decoder_;
+  InputWatch input_watch_;
   std::vector<std::uint8_t> block_ok_;
   std::vector<std::uint8_t> bits_;
   std::vector<std::int32_t> slot_of_register_;  // register_index → offsets index, -1 = unmapped

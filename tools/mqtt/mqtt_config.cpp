@@ -9,6 +9,7 @@
 #include <stdexcept>
 
 #include "daemon/config/builtin_sections.hpp"
+#include "formats/toml_guard.hpp"
 
 namespace nccomp::tools::mqtt {
 
@@ -86,7 +87,7 @@ std::string read_password_file(const std::string& path) {
 std::optional<PublishConfig> load_publish_config(const std::string& path, cfg::Diagnostics& diag) {
   toml::table root;
   try {
-    root = toml::parse_file(path);
+    root = formats::parse_toml_file(path);
   } catch (const toml::parse_error& e) {
     cfg::Where w;
     w.file = path;

@@ -127,6 +127,11 @@ std::vector<core::Event> drain(CanBus& bus) {
 
 std::string format_event(const core::Event& ev) {
   char b[512];
+  // A faulted measurement (a rejected frame of it): " fault=invalid" / " fault=out_of_range".
+  const core::InputFault fault = core::fault_of(ev);
+  const char* f = fault == core::InputFault::kNone      ? ""
+                  : fault == core::InputFault::kInvalid ? " fault=invalid"
+                                                        : " fault=out_of_range";
   std::visit(
       [&](const auto& e) {
         using E = std::decay_t<decltype(e)>;
@@ -137,20 +142,20 @@ std::string format_event(const core::Event& ev) {
                         e.position_mm[0], e.position_mm[1], e.position_mm[2], e.program_path_mm,
                         e.tool, e.normal[0], e.normal[1], e.normal[2], e.cutting ? 1 : 0);
         } else if constexpr (std::is_same_v<E, core::ToolMeasurement>) {
-          std::snprintf(b, sizeof b, "tool_measurement tool=%d broken=%d wear_um=%.2f", e.tool,
-                        e.broken ? 1 : 0, e.wear_um[0]);
+          std::snprintf(b, sizeof b, "tool_measurement tool=%d broken=%d wear_um=%.2f%s", e.tool,
+                        e.broken ? 1 : 0, e.wear_um[0], f);
         } else if constexpr (std::is_same_v<E, core::ProbeMeasurement>) {
           std::snprintf(b, sizeof b,
                         "probe_measurement part=%d checkpoint=%d raw_deviation_um=%.3f "
-                        "wall_angle_deg=%.2f ball_radius_mm=%.3f",
+                        "wall_angle_deg=%.2f ball_radius_mm=%.3f%s",
                         e.part, e.checkpoint, e.raw_deviation_um, e.wall_angle_deg,
-                        e.ball_radius_mm);
+                        e.ball_radius_mm, f);
         } else if constexpr (std::is_same_v<E, core::CalibrationTouch>) {
           std::snprintf(b, sizeof b,
                         "calibration_touch probe=%d axis=%d direction=%d variant=%d "
-                        "trigger_position_mm=%.4f",
+                        "trigger_position_mm=%.4f%s",
                         static_cast<int>(e.probe), e.axis, e.direction, e.variant,
-                        e.trigger_position_mm);
+                        e.trigger_position_mm, f);
         } else if constexpr (std::is_same_v<E, core::ToolChange>) {
           std::snprintf(b, sizeof b, "tool_change tool=%d sister=%d", e.tool, e.sister ? 1 : 0);
         } else if constexpr (std::is_same_v<E, core::ProgramEvent>) {
@@ -490,6 +495,37 @@ TEST_F(CanHil, ErrorPassiveAndBusOffInjectedWritesHeldUntilRestart) {
   EXPECT_EQ(s.can.error_frames, 4U);
   EXPECT_GE(s.bus.counters.faults, 2U);
   EXPECT_EQ(s.bus.state, LinkState::kUp);
+}
+
+// Issue 17, finding 4, over vcan. GIVEN degraded_alarm_after_s = 0.3 and the reference map (axis
+// frames mapped), WHEN no axis frame comes, THEN the input is stale; WHEN the NC node sends axis
+// samples every 20 ms, THEN it clears; WHEN the controller then stays error-passive (the link
+// "degraded", frames still arriving), THEN the input is stale again, and clears at error-active.
+TEST_F(CanHil, NoAxisFramesOrErrorPassiveBeyondTheDegradedTimeIsStaleInput) {
+  CanConfig cfg = reference();
+  cfg.degraded_alarm_after_s = 0.3;
+  const CanMapping mapping = cfg.mapping;
+  start(std::move(cfg));
+  ASSERT_TRUE(wait_until([&] { return st().bus.input_stale; }));
+  EXPECT_EQ(st().bus.state, LinkState::kUp);
+  std::atomic<bool> sending{true};
+  std::thread nc_thread([&] {
+    sim::can_nc::CanNcNode nc(mapping, kIf);
+    const core::Event axis = sample_events()[0];
+    while (sending.load()) {
+      nc.send_event(axis);
+      std::this_thread::sleep_for(20ms);
+    }
+  });
+  EXPECT_TRUE(wait_until([&] { return !st().bus.input_stale; }));
+  ASSERT_EQ(sh("cansend vcan0 20000004#0030000000000000"), 0);  // error-passive
+  EXPECT_TRUE(wait_until([&] { return st().bus.input_stale; }));
+  EXPECT_EQ(st().bus.state, LinkState::kDegraded);
+  EXPECT_FALSE(st().bus.alarm);  // the offsets' alarm is another matter
+  ASSERT_EQ(sh("cansend vcan0 20000004#0040000000000000"), 0);  // error-active
+  EXPECT_TRUE(wait_until([&] { return !st().bus.input_stale; }));
+  sending.store(false);
+  nc_thread.join();
 }
 
 TEST_F(CanHil, BusOffWithDaemonRestartRequestsRestartOverNetlink) {
@@ -839,7 +875,13 @@ TEST_F(CanHil, MalformedFramesRejectedAndCountedPerReason) {
   ASSERT_EQ(sh("cansend vcan0 160#R"), 0);                 // RTR on a mapped ID: filtered
   ASSERT_EQ(sh("cansend vcan0 7A0#0011223344556677"), 0);  // unmapped: filtered
   ASSERT_EQ(sh("cansend vcan0 160#0200D204"), 0);          // one good frame
-  ASSERT_TRUE(wait_until([&] { return st().bus.counters.events_decoded == 1; }));
+  // Two events: the good temperature and the probe measurement whose completing frame was NaN,
+  // passed on faulted (its method raises the alarm) instead of dropped in silence.
+  ASSERT_TRUE(wait_until([&] { return st().bus.counters.events_decoded == 2; }));
+  const auto got = drain(*bus_);
+  ASSERT_EQ(got.size(), 2U);
+  EXPECT_EQ(core::fault_of(got[0]), core::InputFault::kInvalid);
+  EXPECT_TRUE(std::holds_alternative<core::ProbeMeasurement>(got[0]));
   const auto s = st();
   EXPECT_EQ(s.can.rejected_wrong_length, 1U);
   EXPECT_EQ(s.can.rejected_out_of_range, 2U);
@@ -884,9 +926,10 @@ TEST_F(CanHil, CangenFloodOnMappedIdOverflowCountedNoCrash) {
     return s.bus.counters.frames_rx + s.can.rx_overflow >= kFrames + 1;
   }));
   EXPECT_EQ(s.bus.counters.frames_rx + s.can.rx_overflow, static_cast<std::uint64_t>(kFrames + 1));
-  EXPECT_EQ(
-      s.bus.counters.events_decoded + s.bus.counters.events_dropped + s.bus.counters.malformed,
-      s.bus.counters.frames_rx);
+  // Every frame received is one event: a valid tool measurement, a rejected one passed on
+  // faulted (also counted malformed), or the temperature.
+  EXPECT_EQ(s.bus.counters.events_decoded + s.bus.counters.events_dropped,
+            s.bus.counters.frames_rx);
   EXPECT_EQ(s.bus.counters.events_decoded, 64U);  // the ring's capacity, nobody drained it
   EXPECT_GT(s.bus.counters.events_dropped, 0U);
   EXPECT_GT(s.can.rx_overflow, 0U);

@@ -2,8 +2,12 @@
 // exposure is 2.0 or lower (issue 9), and the unit has the service contract the daemon relies on.
 // The drop-in systemd/nccompd-can-restart.conf ([can] restart = "daemon", issue 17) adds exactly
 // CAP_NET_ADMIN and AF_NETLINK.
+// GIVEN systemd/nccompd.sysusers.conf, WHEN systemd-sysusers applies it to an empty root
+// directory, THEN it creates the daemon's user and group nccomp and the admin group nccomp-admin
+// (the default [status] admin_group), the daemon's user not being a member of the latter.
 #include <gtest/gtest.h>
 #include <stdlib.h>
+#include <unistd.h>
 
 #include <cstdio>
 #include <filesystem>
@@ -190,6 +194,35 @@ TEST(SystemdUnit, HasTheServiceContract) {
   std::ifstream su(std::string(NCCOMP_SOURCE_DIR) + "/systemd/nccompd.sysusers.conf");
   const std::string sysusers{std::istreambuf_iterator<char>(su), std::istreambuf_iterator<char>()};
   EXPECT_NE(sysusers.find("u     nccomp"), std::string::npos);
+}
+
+TEST(SystemdUnit, SysusersCreatesTheDaemonUserAndTheAdminGroup) {
+  if (std::system("command -v systemd-sysusers > /dev/null 2>&1") != 0) {
+    GTEST_SKIP() << "systemd-sysusers is missing: install the `systemd` package (scripts/setup)";
+  }
+  namespace fs = std::filesystem;
+  const fs::path root =
+      fs::temp_directory_path() / ("nccomp_sysusers_" + std::to_string(::getpid()));
+  fs::remove_all(root);
+  fs::create_directories(root / "etc");
+  const std::string out = run("systemd-sysusers --root='" + root.string() + "' '" +
+                              NCCOMP_SOURCE_DIR + "/systemd/nccompd.sysusers.conf' 2>&1");
+  const auto slurp = [](const fs::path& p) {
+    std::ifstream in(p);
+    return std::string{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+  };
+  const std::string group = slurp(root / "etc/group");
+  const std::string passwd = slurp(root / "etc/passwd");
+  fs::remove_all(root);
+  EXPECT_TRUE(std::regex_search(passwd, std::regex("(^|\n)nccomp:x:[0-9]+:[0-9]+:"))) << out;
+  EXPECT_TRUE(std::regex_search(group, std::regex("(^|\n)nccomp:x:[0-9]+:\n"))) << group;
+  // The admin group, with no members: an administrator adds the operators who may change the
+  // machine (usermod -aG nccomp-admin), the daemon itself needs no membership.
+  EXPECT_TRUE(std::regex_search(group, std::regex("(^|\n)nccomp-admin:x:[0-9]+:\n"))) << group;
+  EXPECT_TRUE(std::regex_search(group, std::regex("(^|\n)dialout:x:[0-9]+:nccomp\n"))) << group;
+  std::ifstream cfg(std::string(NCCOMP_SOURCE_DIR) + "/config/nccompd.toml");
+  const std::string shipped{std::istreambuf_iterator<char>(cfg), std::istreambuf_iterator<char>()};
+  EXPECT_NE(shipped.find("\nadmin_group = \"nccomp-admin\"\n"), std::string::npos);
 }
 
 }  // namespace

@@ -124,6 +124,17 @@ TEST(ModbusConfig, ReconnectBackOffKeys) {
             "t.toml:4: modbus.reconnect_max_s: smaller than reconnect_min_s");
 }
 
+TEST(ModbusConfig, DegradedAlarmAfterParsedDefaultedAndRangeChecked) {
+  EXPECT_DOUBLE_EQ(parse_modbus_config(kMinimal, "t.toml").degraded_alarm_after_s, 5.0);
+  const std::string head = "[modbus]\ntransport = \"tcp\"\n";
+  const std::string axis = "[modbus.axis]\nx_mm = { table = \"input\", address = 0 }\n";
+  EXPECT_DOUBLE_EQ(parse_modbus_config(head + "degraded_alarm_after_s = 0.5\n" + axis, "t.toml")
+                       .degraded_alarm_after_s,
+                   0.5);
+  EXPECT_THAT(error_of(head + "degraded_alarm_after_s = 0\n" + axis),
+              HasSubstr("t.toml:3: modbus.degraded_alarm_after_s:"));
+}
+
 TEST(ModbusConfig, UnknownKeyNamesFileLineAndPath) {
   EXPECT_EQ(error_of(std::string(kMinimal) + "pol_rate_hz = 5\n"),
             "t.toml:6: modbus.axis.pol_rate_hz: unknown signal");
