@@ -3,8 +3,8 @@
 // row, takes its latency = arrival (CLOCK_REALTIME) − the row's utc; counts rows, duplicates
 // (seq not above the last of its machine) and gaps per machine. Stops SECONDS_AFTER_LAST seconds
 // after the last row arrived (or on SIGTERM) and writes a JSON summary.
-#include <atomic>
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <csignal>
 #include <cstdio>
@@ -14,6 +14,7 @@
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "tools/mqtt/mqtt_config.hpp"
@@ -64,25 +65,25 @@ int main(int argc, char** argv) {
   std::uint64_t rows = 0, dups = 0, gaps = 0;
   std::atomic<std::int64_t> last_arrival{0};
   mq::MqttLink link(b, mq::read_password_file(argv[3]));
-  link.subscribe_on_connect("nccomp/+/+/measurements", [&](const std::string& topic,
-                                                           const std::string& payload) {
-    const std::int64_t now = real_ms();
-    const auto j = nlohmann::json::parse(payload, nullptr, false);
-    if (!j.is_object()) return true;
-    std::lock_guard<std::mutex> lock(mu);
-    const auto seq = j.value("seq", std::uint64_t{0});
-    std::uint64_t& last = last_seq[topic];
-    if (seq <= last) {
-      ++dups;
-    } else {
-      if (last > 0 && seq > last + 1) gaps += seq - last - 1;
-      last = seq;
-      ++rows;
-      latency_ms.push_back(now - utc_ms(j.value("utc", std::string{})));
-    }
-    last_arrival.store(now);
-    return true;
-  });
+  link.subscribe_on_connect("nccomp/+/+/measurements",
+                            [&](const std::string& topic, const std::string& payload) {
+                              const std::int64_t now = real_ms();
+                              const auto j = nlohmann::json::parse(payload, nullptr, false);
+                              if (!j.is_object()) return true;
+                              std::lock_guard<std::mutex> lock(mu);
+                              const auto seq = j.value("seq", std::uint64_t{0});
+                              std::uint64_t& last = last_seq[topic];
+                              if (seq <= last) {
+                                ++dups;
+                              } else {
+                                if (last > 0 && seq > last + 1) gaps += seq - last - 1;
+                                last = seq;
+                                ++rows;
+                                latency_ms.push_back(now - utc_ms(j.value("utc", std::string{})));
+                              }
+                              last_arrival.store(now);
+                              return true;
+                            });
   link.connect();
   while (!g_stop.load()) {
     for (const auto& e : link.wait(100)) {
@@ -101,12 +102,17 @@ int main(int argc, char** argv) {
   const auto q = [&](double p) {
     return latency_ms.empty()
                ? 0
-               : latency_ms[std::min(latency_ms.size() - 1,
-                                     static_cast<std::size_t>(p * static_cast<double>(latency_ms.size())))];
+               : latency_ms[std::min(
+                     latency_ms.size() - 1,
+                     static_cast<std::size_t>(p * static_cast<double>(latency_ms.size())))];
   };
-  nlohmann::json out{{"rows", rows},           {"duplicates", dups},     {"gaps", gaps},
-                     {"machines", last_seq.size()}, {"latency_ms_p50", q(0.5)},
-                     {"latency_ms_p99", q(0.99)}, {"latency_ms_p999", q(0.999)},
+  nlohmann::json out{{"rows", rows},
+                     {"duplicates", dups},
+                     {"gaps", gaps},
+                     {"machines", last_seq.size()},
+                     {"latency_ms_p50", q(0.5)},
+                     {"latency_ms_p99", q(0.99)},
+                     {"latency_ms_p999", q(0.999)},
                      {"latency_ms_max", latency_ms.empty() ? 0 : latency_ms.back()}};
   std::ofstream(argv[5]) << out.dump(2) << "\n";
   std::printf("%s\n", out.dump().c_str());

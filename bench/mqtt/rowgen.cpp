@@ -51,11 +51,12 @@ int main(int argc, char** argv) {
     r.measured_um = 1.0;
     r.position_mm = {100.0, -20.0, -5.0};
     r.context[0] = 25.0;
-    while (!writers[m]->ring().try_push(r)) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    while (!writers[m]->ring().try_push(r))
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
     ++rows[m];
-    std::this_thread::sleep_until(
-        start + std::chrono::nanoseconds(static_cast<std::int64_t>(
-                    static_cast<double>(i + 1) * 1e9 / (rate * machines))));
+    std::this_thread::sleep_until(start +
+                                  std::chrono::nanoseconds(static_cast<std::int64_t>(
+                                      static_cast<double>(i + 1) * 1e9 / (rate * machines))));
   }
   for (auto& w : writers) w->stop();
   long sum = 0;
