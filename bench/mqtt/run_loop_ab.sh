@@ -8,7 +8,9 @@
 # written at 1000 rows/s (bench_mqtt_rowgen, one machine) and `nccomp publish` publishing it and
 # polling this nccompd's status socket every second (the shipped defaults). The order alternates
 # (A B, B A, …) so that a drift of the machine's load does not favour one side. Prints the p99.9
-# of each run (nccompd and cyclictest) and the ratio B/A per pair.
+# of each run (nccompd and cyclictest).
+# NO_STATUS=1 (optional): B's publisher does not poll the status socket (status_socket = ""),
+# to tell the cost of the status queries from the rest of the MQTT side.
 # Needs root (as run_nccompd_latency.sh), mosquitto, cyclictest.
 set -euo pipefail
 build=${1:?release build dir}
@@ -46,6 +48,8 @@ start_mqtt() {
   "$build/tools/nccomp" collect --broker "tcp://127.0.0.1:$port" --out "$d/out" --username coll \
     --password-file "$d/coll.pw" > "$d/collect.log" 2>&1 &
   side+=($!)
+  local status="$d/run/status.sock"
+  [ "${NO_STATUS:-0}" = 1 ] && status=""
   "$build/bench/mqtt/bench_mqtt_rowgen" "$d/log" 1 1000 "$((secs + 10))" > "$d/rowgen.out" &
   side+=($!)
   cat > "$d/m000.toml" << EOT
@@ -54,7 +58,7 @@ site = "bench"
 machine = "m000"
 [source]
 log_directory = "log/m000"
-status_socket = "$d/run/status.sock"
+status_socket = "$status"
 [broker]
 uri = "tcp://127.0.0.1:$port"
 username = "m000"
