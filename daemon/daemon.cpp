@@ -403,10 +403,20 @@ int run_daemon(const DaemonOptions& options) {
   const auto& msec = cfg::measurement_log_section(*config);
   if (msec.enabled) {
     const std::string dir = pick_dir(*config, msec.directory, "LOGS_DIRECTORY", "/var/log/nccompd");
-    mlog = std::make_unique<MeasurementLogWriter>(dir, msec.max_file_bytes, msec.keep_files);
+    MeasurementLogOptions mo;
+    mo.directory = dir;
+    mo.max_file_bytes = msec.max_file_bytes;
+    mo.keep_files = msec.keep_files;
+    const std::string machine = msec.machine_id.empty() ? host_machine_id() : msec.machine_id;
+    mo.machine_id = machine;
+    mo.context_columns = msec.context_columns;
+    mo.monotonic_record_clock = !lockstep;  // the peer's TICKs are not CLOCK_MONOTONIC
+    mo.fsync_interval_s = msec.fsync_interval_s;
+    mlog = std::make_unique<MeasurementLogWriter>(std::move(mo));
     try {
       mlog->start();
-      spdlog::info("measurement log: {}", mlog->current_path());
+      spdlog::info("measurement log: {} (machine {}, {} context column(s))", mlog->current_path(),
+                   machine, msec.context_columns.size());
     } catch (const std::exception& e) {
       spdlog::warn("measurement log disabled: {}", e.what());
       mlog.reset();
