@@ -351,10 +351,11 @@ TEST(EngineState, EveryTruncationIsRejectedAndLeavesTheEngineUnchanged) {
   EXPECT_NEAR(e2->register_state(1).output_um, 2.0, 1e-9);
 }
 
-TEST(EngineState, AnOutputBeyondTheRegistersAbsoluteLimitIsRefused) {
+TEST(EngineState, AnOutputBeyondTheRegistersAbsoluteLimitIsHeldAndNeverWritten) {
   // Found by fuzz_state_import: a state whose register output lies beyond max_abs_um (a larger
   // limit before, or a corrupt file) was taken, and the limiter slewed from there: every write
-  // lay beyond the limit.
+  // lay beyond the limit. The state is taken (the other registers and modules keep theirs) and
+  // the register is held beyond the limit, as a read-back beyond it: nothing is written to it.
   auto e1 = ramp_engine(40.0, 100.0);
   StepOutput out;
   for (int k = 0; k <= 500; ++k) e1->step(k * kMs, {}, out);
@@ -366,17 +367,23 @@ TEST(EngineState, AnOutputBeyondTheRegistersAbsoluteLimitIsRefused) {
   std::vector<std::unique_ptr<Module>> m;
   m.push_back(std::make_unique<RampModule>(RampConfig{"ramp", "a", 0.0, 10.0, 100.0}));
   e2.configure({reg("b"), reg("a", 30.0)}, std::move(m));
-  EXPECT_FALSE(e2.import_state(std::span<const std::byte>(buf.data(), n), 0));
-  EXPECT_DOUBLE_EQ(e2.register_state(1).output_um, 0.0);
+  ASSERT_TRUE(e2.import_state(std::span<const std::byte>(buf.data(), n), 0));
+  EXPECT_EQ(e2.register_state(1).hold, RegisterHold::kBeyondLimit);
+  std::size_t writes_a = 0;
   for (int k = 1; k <= 200; ++k) {
     e2.step(k * kMs, {}, out);
-    for (const auto& w : out.writes) EXPECT_LE(std::fabs(w.value_um), 30.0);
+    for (const auto& w : out.writes) {
+      EXPECT_LE(std::fabs(w.value_um), 30.0);
+      writes_a += w.register_index == 1 ? 1U : 0U;
+    }
   }
+  EXPECT_EQ(writes_a, 0U);
   // At the limit itself it is taken.
   Engine e3;
   e3.configure({reg("b"), reg("a", 40.0)}, {});
   EXPECT_TRUE(e3.import_state(std::span<const std::byte>(buf.data(), n), 0));
   EXPECT_NEAR(e3.register_state(1).output_um, 40.0, 1e-9);
+  EXPECT_EQ(e3.register_state(1).hold, RegisterHold::kNone);
 }
 
 TEST(EngineState, ImportSkipsRegistersAndModulesTheConfigNoLongerHas) {
