@@ -122,3 +122,16 @@ TEST(FalseDiscoveries, AStructureOnlyInTheFittedRowsFailsTheHeldOutCheck) {
     EXPECT_LE(r.final_stats.heldout.rms_um, r.declared.heldout.rms_um);
   }
 }
+
+// Pins the multiple-testing correction. GIVEN logs with no undeclared effect and no held-out rows
+// (heldout_fraction 0: nothing but the F-test decides) WHEN analysed with 50 seeds THEN at most 5 %
+// add an effect: the best of the candidates is tested against alpha times their number
+// (Bonferroni), not as if it were the only one tried.
+TEST(FalseDiscoveries, AtMostFivePercentWithoutHeldOutRows) {
+  const int discoveries = false_discoveries(13000, [](synth::Options& opt, cm::AnalysisConfig& c) {
+    c = synth::config(opt);
+    c.heldout_fraction = 0.0;
+  });
+  std::printf("false discoveries without held-out rows: %d of %d\n", discoveries, kSeeds);
+  EXPECT_LE(discoveries, kSeeds * 5 / 100);
+}
