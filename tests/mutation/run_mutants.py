@@ -182,7 +182,9 @@ def ctest(build_dir: Path, regex: str, jobs: int, timeout_s: int,
     for line in out.splitlines():
         m = FAILED_RE.match(line)
         if m:
-            failed.append(f"{m.group(1)} ({m.group(2).strip().lstrip('*')})")
+            # "***Failed  0.10 sec", "***Timeout 300.01 sec", "Subprocess aborted ...": the kind
+            kind = m.group(2).strip().lstrip("*").split()[0]
+            failed.append(f"{m.group(1)} ({kind.lower()})")
             continue
         m = PASSED_RE.match(line)
         if m:
