@@ -22,7 +22,7 @@ import subprocess
 import sys
 import time
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
@@ -61,7 +61,6 @@ class Outcome:
     build_s: float = 0.0
     test_s: float = 0.0
     tests_run: int = 0
-    extra: list[str] = field(default_factory=list)
 
 
 def load_mutants(tree: Path) -> list[Mutant]:
@@ -222,7 +221,6 @@ def test_one(m: Mutant, scratch: Path, build_dir: Path, args: argparse.Namespace
         if failed:
             o.status = "killed"
             o.killed_by = failed[0]
-            o.extra = failed[1:]
         elif rc != 0:
             o.status = "killed"
             o.killed_by = "ctest exit " + str(rc)
