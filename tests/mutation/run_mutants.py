@@ -286,14 +286,19 @@ def machine() -> str:
     return f"{platform.node()}: {os.cpu_count()} CPUs ({cpu}), Linux {platform.release()}"
 
 
-def write_results(outcomes: list[Outcome], command: str, started: datetime.datetime,
-                  wall_s: float, baseline_s: float, load: tuple[float, float]) -> None:
-    counts = {s: sum(1 for o in outcomes if o.status == s)
-              for s in ("killed", "survived", "stillborn", "equivalent")}
+def tree_version() -> str:
+    """The commit the scratch copy was made from, and whether the tree differed from it."""
     head = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", "HEAD"],
                           capture_output=True, text=True).stdout.strip()
     dirty = subprocess.run(["git", "-C", str(REPO), "status", "--porcelain", "--untracked-files=no"],
                            capture_output=True, text=True).stdout.strip()
+    return f"commit {head}{' with uncommitted changes' if dirty else ''}"
+
+
+def write_results(outcomes: list[Outcome], command: str, tree: str, started: datetime.datetime,
+                  wall_s: float, baseline_s: float, load: tuple[float, float]) -> None:
+    counts = {s: sum(1 for o in outcomes if o.status == s)
+              for s in ("killed", "survived", "stillborn", "equivalent")}
     lines = [
         "# Mutation check of the safety code",
         "",
@@ -302,9 +307,11 @@ def write_results(outcomes: list[Outcome], command: str, started: datetime.datet
         "first failure. *killed*: a test failed (the first failing test is named); *survived*: all",
         "passed; *stillborn*: the mutant does not compile. Build and test times are wall seconds on",
         "a machine shared with other builds (they vary with its load; no figure here is a target).",
+        "A build is short where the shared ccache already held the mutated object (an earlier run",
+        "of the same mutant); compiled afresh, a mutant of core/model/analysis.cpp takes minutes.",
         "",
         f"- command: `{command}`",
-        f"- tree: commit {head}{' with uncommitted changes' if dirty else ''}",
+        f"- tree: {tree}",
         f"- date: {started.strftime('%Y-%m-%d %H:%M')} UTC",
         f"- machine: {machine()}; load average {load[0]:.1f} at the start, {load[1]:.1f} at the end",
         f"- wall time: {wall_s / 60:.1f} min (baseline build and test of the unmutated tree "
@@ -378,6 +385,7 @@ def main() -> int:
             raise MutationError("the scratch copy must not be the tree itself")
         build_dir = scratch / "build" / args.preset
         started = datetime.datetime.now(datetime.timezone.utc)
+        tree = tree_version()
         load0 = os.getloadavg()[0]
         t0 = time.monotonic()
         n = sync_scratch(REPO, scratch)
@@ -396,7 +404,7 @@ def main() -> int:
         print_table(outcomes)
         if args.record:
             command = "tests/mutation/run_mutants.py " + " ".join(sys.argv[1:])
-            write_results(outcomes, command, started, time.monotonic() - t0, base_s,
+            write_results(outcomes, command, tree, started, time.monotonic() - t0, base_s,
                           (load0, os.getloadavg()[0]))
         return 0 if all(o.status in ("killed", "equivalent") for o in outcomes) else 1
     except MutationError as e:
