@@ -523,11 +523,20 @@ void Daemon::start_persister_and_log() {
   if (!msec.enabled) {
     return;
   }
-  const std::string dir = pick_dir(*config_, msec.directory, "LOGS_DIRECTORY", "/var/log/nccompd");
-  mlog_ = std::make_unique<MeasurementLogWriter>(dir, msec.max_file_bytes, msec.keep_files);
+  MeasurementLogOptions mo;
+  mo.directory = pick_dir(*config_, msec.directory, "LOGS_DIRECTORY", "/var/log/nccompd");
+  mo.max_file_bytes = msec.max_file_bytes;
+  mo.keep_files = msec.keep_files;
+  const std::string machine = msec.machine_id.empty() ? host_machine_id() : msec.machine_id;
+  mo.machine_id = machine;
+  mo.context_columns = msec.context_columns;
+  mo.monotonic_record_clock = !lockstep_;  // the peer's TICKs are not CLOCK_MONOTONIC
+  mo.fsync_interval_s = msec.fsync_interval_s;
+  mlog_ = std::make_unique<MeasurementLogWriter>(std::move(mo));
   try {
     mlog_->start();
-    spdlog::info("measurement log: {}", mlog_->current_path());
+    spdlog::info("measurement log: {} (machine {}, {} context column(s))", mlog_->current_path(),
+                 machine, msec.context_columns.size());
   } catch (const std::exception& e) {
     spdlog::warn("measurement log disabled: {}", e.what());
     mlog_.reset();

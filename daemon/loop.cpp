@@ -411,8 +411,9 @@ void Loop::cycle(core::TimeNs wake_ns, bool stamp) {
       ++local_.alarms_dropped;
     }
   }
-  for (const core::MeasurementRecord& r : out_.records) {
+  for (core::MeasurementRecord r : out_.records) {
     ++local_.records;
+    if (measurement_log_ != nullptr) measurement_log_->stamp(r, engine.context());
     if (measurement_log_ == nullptr || !measurement_log_->ring().try_push(r)) {
       ++local_.records_dropped;
     }

@@ -20,6 +20,8 @@
 # config pins nothing.
 # IO_CPU (optional, with CPU): also keep the Modbus I/O thread on that CPU ([modbus]
 # io_cpu_affinity = [IO_CPU], at normal priority), away from the loop's.
+# NCCOMPD_BENCH_RUN_DIR (optional): the daemon's runtime directory (its status socket) instead
+# of a temporary one, for a companion process to find it (bench/mqtt/run_loop_ab.sh).
 # Needs root (SCHED_FIFO and mlockall without the unit's rlimits) and cyclictest (rt-tests).
 set -euo pipefail
 build=${1:?release build dir}
@@ -43,7 +45,8 @@ sed -i "s/^port = 1502$/port = $port/" "$tmp/reference-nc-modbus.toml"
 grep -q "^port = $port$" "$tmp/reference-nc-modbus.toml"
 prio=$(sed -n 's/^sched_fifo_priority = \([0-9][0-9]*\)$/\1/p' "$tmp/nccompd.toml")
 [ -n "$prio" ] && [ "$prio" -gt 0 ]
-mkdir -p "$tmp/state" "$tmp/log" "$tmp/run"
+run=${NCCOMPD_BENCH_RUN_DIR:-$tmp/run}
+mkdir -p "$tmp/state" "$tmp/log" "$run"
 pin=()
 if [ -n "$cpu" ]; then
   sed -i "s/^cpu_affinity = \[\]$/cpu_affinity = [$cpu]/" "$tmp/nccompd.toml"
@@ -63,13 +66,13 @@ sleep 0.5
 cyclictest -q -t1 "${pin[@]}" -p "$prio" -i 1000 -D "${secs}s" -m -h 30000 --histfile="$tmp/cyc.hist" \
   > "$tmp/cyc.out" 2>&1 &
 cpid=$!
-STATE_DIRECTORY="$tmp/state" LOGS_DIRECTORY="$tmp/log" RUNTIME_DIRECTORY="$tmp/run" \
+STATE_DIRECTORY="$tmp/state" LOGS_DIRECTORY="$tmp/log" RUNTIME_DIRECTORY="$run" \
   LD_PRELOAD="$build/bench/daemon/libnccomp_alloc_preload.so" \
   "$build/daemon/nccompd" --config "$tmp/nccompd.toml" > "$tmp/nccompd.log" 2>&1 &
 dpid=$!
 sleep "$secs"
-"$build/tools/nccomp" status --socket "$tmp/run/status.sock" --json > "$tmp/status.json"
-"$build/tools/nccomp" status --socket "$tmp/run/status.sock" > "$tmp/status.txt"
+"$build/tools/nccomp" status --socket "$run/status.sock" --json > "$tmp/status.json"
+"$build/tools/nccomp" status --socket "$run/status.sock" > "$tmp/status.txt"
 wait "$cpid" || true
 kill -TERM "$dpid"
 wait "$dpid"

@@ -369,6 +369,9 @@ struct AlarmEvent {
 /// Measurement kinds of the measurement log (architecture.md, "Measurement log").
 enum class MeasurementKind : std::uint8_t { kToolWear = 0, kContour = 1, kCalib = 2 };
 
+/// Context values a measurement record carries for the log's named context columns (v2).
+inline constexpr std::size_t kMaxContextValues = 8;
+
 /// One row of the measurement log.
 struct MeasurementRecord {
   TimeNs time_ns{0};
@@ -382,6 +385,15 @@ struct MeasurementRecord {
   double temp_c{kNaN};
   double measured_um{0.0};
   double applied_um{0.0};
+  // v2 of the log (architecture.md, "Measurement log").
+  /// The warm start time_ns counts from (the machine's warm-start count, saved with the state).
+  std::uint64_t session{0};
+  /// The step clock's time of the record [ns]: time_ns before the engine made it machine time
+  /// (the log writer converts it to UTC).
+  TimeNs clock_ns{0};
+  /// Values of the log's context columns, filled by the daemon (NaN = unknown).
+  std::array<double, kMaxContextValues> context{kNaN, kNaN, kNaN, kNaN, kNaN, kNaN, kNaN, kNaN};
+  static_assert(kMaxContextValues == 8, "the initializer above lists one NaN per value");
 };
 
 static_assert(std::is_trivially_copyable_v<Event>);

@@ -276,6 +276,8 @@ void MachineContext::annotate(MeasurementRecord& r) const noexcept {
     r.path_mm = p;
   }
   if (std::isnan(r.temp_c)) r.temp_c = temp_c();
+  r.session = warm_starts_;
+  r.clock_ns = r.time_ns;
   r.time_ns = r.time_ns > origin_ns_ ? sub(r.time_ns, origin_ns_) : 0;
 }
 

@@ -66,8 +66,8 @@ class MachineContext {
 
   /// Real-time safe. Fills what the module that made the record left unknown (NaN): path_mm =
   /// the cut path of the record's tool (of the unnamed tool when the NC publishes no tool
-  /// number), temp_c = the configured sensor's last value; and converts time_ns to the time
-  /// since the warm start (never negative).
+  /// number), temp_c = the configured sensor's last value; sets session = warm_starts() and
+  /// clock_ns = time_ns, then converts time_ns to the time since the warm start (never negative).
   void annotate(MeasurementRecord& r) const noexcept;
 
   /// Seconds since the warm start at time t_ns (the step clock), ≥ 0.

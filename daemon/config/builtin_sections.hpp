@@ -10,6 +10,7 @@
 #include "core/engine/engine.hpp"
 #include "core/engine/ramp_module.hpp"
 #include "daemon/config/config.hpp"
+#include "daemon/measurement_log.hpp"
 
 namespace nccomp::daemon::config {
 
@@ -50,7 +51,16 @@ struct MeasurementLogSection final : Section {
   std::string directory;
   std::uint64_t max_file_bytes{16U * 1024U * 1024U};
   int keep_files{8};
+  /// Rows reach the disk (fdatasync) at least this often [s]; 0 = every batch.
+  double fsync_interval_s{1.0};
+  /// The log's `machine` column (and the MQTT topics'); empty = the host name.
+  std::string machine_id;
+  /// Context columns after the v2 columns: a name and the sensor channel whose value is logged.
+  std::vector<ContextColumn> context_columns;
 };
+
+/// A machine id: 1 … 64 of [A-Za-z0-9._-], starting with a letter or digit.
+[[nodiscard]] bool valid_machine_id(std::string_view id);
 
 struct StatusSection final : Section {
   /// Empty = $RUNTIME_DIRECTORY/status.sock (systemd) or /run/nccompd/status.sock.

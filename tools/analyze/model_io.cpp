@@ -700,6 +700,16 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
   std::sort(present.begin(), present.end());
   present.erase(std::unique(present.begin(), present.end()), present.end());
   for (std::size_t c : present) cols[c].resize(start_rows, cm::kUnknown);
+  // v2 (the header has machine, utc and session; architecture.md): time_s restarts at each warm
+  // start, so it must only grow within a session, and a later session is ordered after the
+  // rows before it. One machine per file.
+  const int session_field =
+      !mapped && find("machine") >= 0 && find("utc") >= 0 ? find("session") : -1;
+  const int machine_field = session_field >= 0 ? find("machine") : -1;
+  double session = -1.0;
+  std::string machine;
+  std::size_t machine_line = 0;
+  double order_end = previous_end;
   cm::Row values;
   while (std::getline(in, line)) {
     ++line_no;
@@ -765,6 +775,43 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
                mapped ? "no kind (map it or set [constant] kind)" : "empty");
     }
     const double t_s = values[time_col];
+    if (session_field >= 0) {
+      const auto sf = static_cast<std::size_t>(session_field);
+      const auto mf = static_cast<std::size_t>(machine_field);
+      if (sf >= nf || mf >= nf) {
+        csv_fail(source, line_no, sf >= nf ? "session" : "machine",
+                 "missing (the row has " + std::to_string(nf) + " fields)");
+      }
+      const std::string_view cell = trim_view(fields[sf]);
+      double v = -1.0;
+      const auto [p, ec] = std::from_chars(cell.data(), cell.data() + cell.size(), v);
+      if (ec != std::errc() || p != cell.data() + cell.size() || !(v >= 0.0) || std::floor(v) < v) {
+        csv_fail(source, line_no, "session",
+                 "'" + std::string(cell) + "' is not a warm-start number (an integer >= 0)");
+      }
+      if (v < session) {
+        csv_fail(source, line_no, "session",
+                 "goes backwards (" + std::string(cell) + " after " +
+                     std::to_string(static_cast<long long>(session)) +
+                     "); the log must be in time order");
+      }
+      if (v > session && session >= 0.0) {
+        // A new warm start: its time_s counts from 0 again, after this file's rows so far.
+        last_time = -std::numeric_limits<double>::infinity();
+        previous_end = order_end;
+        order_offset = cm::kUnknown;
+      }
+      session = v;
+      const std::string m(trim_view(fields[mf]));
+      if (machine_line == 0) {
+        machine = m;
+        machine_line = line_no;
+      } else if (m != machine) {
+        csv_fail(source, line_no, "machine",
+                 "'" + m + "' in a log of '" + machine + "' (line " + std::to_string(machine_line) +
+                     "): analyze one machine's log at a time");
+      }
+    }
     if (std::isfinite(t_s) && std::isnan(order_offset)) {
       order_offset = !mapped && t_s <= previous_end ? previous_end + 1.0 - t_s : 0.0;
     }
@@ -797,6 +844,7 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
       for (std::size_t c : present) cols[c].push_back(values[c]);
       data.target_um.push_back(y + (std::isfinite(applied) ? applied : 0.0));
       data.order_s.push_back(std::isfinite(t_s) ? t_s + order_offset : cm::kUnknown);
+      if (std::isfinite(t_s)) order_end = std::max(order_end, t_s + order_offset);
     }
   }
   for (auto& c : cols) {

@@ -69,7 +69,8 @@ struct Mapping {
 Mapping read_mapping_text(std::string_view text, std::string_view source);
 Mapping read_mapping_file(const std::string& path);
 
-/// Reads a CSV (the v1 log when `mapping` is empty, else mapped) and appends its rows to `data`.
+/// Reads a CSV (the v1 or v2 log when `mapping` is empty, else mapped) and appends its rows to
+/// `data`. In a v2 log (machine, utc and session columns) time_s restarts with each session.
 /// Only the extra columns named in data.extra_columns are kept. `source` names the stream in
 /// errors ("file:line: column 'x': …").
 void read_log(std::istream& in, std::string_view source, const Mapping& mapping,

@@ -5,7 +5,8 @@
 // parts probed, temperatures) before each import. Each input is imported twice: as it is, and
 // XORed over that valid state from an offset its first two bytes choose. For any bytes:
 //   - refused: the engine is unchanged (the same exported state, the same register states);
-//   - accepted: every register's output is finite and within its max_abs_um, or held beyond it;
+//   - accepted: every register's output is finite, and within its max_abs_um unless the register
+//     is held beyond the limit (what the NC holds, saved so: docs/daemon.md, "Start-up");
 //   - then 16 cycles with axis motion, a part, probe and laser measurements, temperatures, a
 //     calibration touch set and an acknowledge: every write is finite, within max_abs_um and,
 //     for offsets, within max_step_um and max_rate_um_per_s · Δt of the register's previous
@@ -201,11 +202,10 @@ void import_and_step(std::span<const std::byte> bytes) {
     return;
   }
   for (std::size_t i = 0; i < e->register_count(); ++i) {
-    // Beyond the limit only if held (alarm 60): then nothing is written to it (checked below).
     const auto r = e->register_state(i);
-    CHECK(std::isfinite(r.output_um) &&
-          (std::fabs(r.output_um) <= e->register_spec(i).limits.max_abs_um ||
-           r.hold == ce::RegisterHold::kBeyondLimit));
+    CHECK(std::isfinite(r.output_um));
+    CHECK(std::fabs(r.output_um) <= e->register_spec(i).limits.max_abs_um ||
+          r.hold == ce::RegisterHold::kBeyondLimit);
   }
   run(*e, t1, 16);
   (void)export_of(*e);

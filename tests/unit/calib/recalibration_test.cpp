@@ -196,6 +196,37 @@ TEST(Recalibration, ImplausibleChangeRaisesAlarmAndAppliesNothing) {
   EXPECT_DOUBLE_EQ(c.model(Slot::kXLateral).anchor_drift_um, 0.0);
 }
 
+// GIVEN a machine calibrated with max_abs_um 45 (X's base value 23 µm) WHEN a plausible touch set
+// (X drifted 25 µm, within the 45 µm plausibility bound) would move X to 48 µm THEN the set raises
+// offset_beyond_absolute_limit and applies nothing, on any axis.
+TEST(Recalibration, ASetThatWouldMoveAnAxisBeyondTheLimitAppliesNothing) {
+  auto cfg = test_config();
+  cfg.touches_per_axis = 1;
+  cfg.max_abs_um = 45.0;
+  cfg.plausibility_um = 45.0;  // may not exceed max_abs_um
+  Calibrator c;
+  c.configure(cfg);
+  SimMachine m(cfg, test_errors(), 0.0, 0.0, 0.1, 3);
+  TimeNs now = 0;
+  StepOutput out;
+  ASSERT_TRUE(run_initial_calibration(c, m, now, out));
+  const double base_x = c.target_um(0, now);
+  ASSERT_NEAR(base_x, test_errors().ex_um, 1e-6);
+  const double drift_x = cfg.max_abs_um - base_x + 3.0;
+  ASSERT_LT(drift_x, cfg.plausibility_um);
+  m.set_drift([drift_x](double) { return std::array<double, 4>{drift_x, 1.0, 1.0, 1.0}; });
+  now += core::from_seconds(1800.0);
+  std::array<double, 3> before{};
+  for (std::size_t a = 0; a < 3; ++a) before[a] = c.target_um(a, now);
+  out.clear();
+  run_touch_set(c, m, now, out);
+  ASSERT_TRUE(has_alarm(out, AlarmCode::kOffsetBeyondAbsoluteLimit));
+  EXPECT_FALSE(has_alarm(out, AlarmCode::kRecalibrationImplausible));
+  EXPECT_FALSE(has_alarm(out, AlarmCode::kRecalibrationApplied));
+  for (std::size_t a = 0; a < 3; ++a) EXPECT_DOUBLE_EQ(c.target_um(a, now), before[a]) << a;
+  EXPECT_DOUBLE_EQ(c.model(Slot::kXLateral).anchor_drift_um, 0.0);
+}
+
 TEST(Recalibration, ScatteredTouchesRaiseAlarmAndApplyNothing) {
   auto cfg = test_config();
   cfg.touches_per_axis = 2;

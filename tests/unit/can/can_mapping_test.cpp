@@ -514,6 +514,33 @@ TEST_F(DecoderTest, DecodeAndEncodeAllocateNothing) {
   EXPECT_EQ(scope.count(), 0U);
 }
 
+// An integral field (tool, checkpoint, kind, ...) whose scaled value is not an integer is refused,
+// never rounded to a neighbour's number: a map with a wrong scale, or garbage from the NC.
+TEST(CanDecoderIntegral, AFractionalToolNumberIsRefusedNotRounded) {
+  const CanConfig c = parse_can_config(kHead +
+                                           "[[can.rx]]\nid = 0x140\nlength_bytes = 2\n"
+                                           "event = \"tool_change\"\n[[can.rx.signal]]\n"
+                                           "name = \"tool\"\nstart_bit = 0\nlength_bits = 16\n"
+                                           "scale = 0.5\n",
+                                       "test.toml");
+  FrameDecoder dec(c.mapping);
+  core::Event out;
+  const auto feed = [&](std::uint16_t raw) {
+    const std::array<std::uint8_t, 2> d{static_cast<std::uint8_t>(raw & 0xFFU),
+                                        static_cast<std::uint8_t>(raw >> 8U)};
+    return dec.decode(0x140, false, d, 1000, out);
+  };
+  // 14 counts = tool 7
+  auto r = feed(14);
+  ASSERT_TRUE(r.emitted);
+  EXPECT_EQ(std::get<core::ToolChange>(out).tool, 7);
+  // 15 counts = 7.5: refused; the latest tool stays 7
+  r = feed(15);
+  EXPECT_EQ(r.reject, RejectReason::kOutOfRange);
+  EXPECT_FALSE(r.emitted);
+  EXPECT_EQ(std::get<core::ToolChange>(out).tool, 7);
+}
+
 TEST(CanEncode, OffsetWriteBytesAndRangeRefusal) {
   const CanConfig c = load_can_config(reference_path());
   std::array<std::uint8_t, kMaxPayloadBytes> p{};

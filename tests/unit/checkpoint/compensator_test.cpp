@@ -296,6 +296,33 @@ TEST(Learning, OutlierBeyondKSigmaIsLoggedNotLearned) {
   EXPECT_DOUBLE_EQ(comp.learned_um(0), learned + (12.0 - learned) / 4.0);
 }
 
+// GIVEN a history that repeats exactly (σ = 0) THEN the outlier bound is k times the probe's
+// repeatability, not 0: a reading within it is learned, one beyond it is an outlier.
+TEST(Learning, APerfectlyRepeatingHistoryUsesTheProbesRepeatabilityAsSigma) {
+  CheckpointCompensator comp;
+  CompensatorConfig cfg = base_config();
+  cfg.ewma_weight = 4.0;
+  cfg.outlier_sigma = 3.0;
+  cfg.outlier_min_history = 4;
+  cfg.probe_repeatability_um = 0.5;
+  comp.configure(cfg, line_plan(1), wide_limits());
+  for (int k = 0; k < 4; ++k) {
+    const double c = comp.register_value_um(0);
+    (void)run(comp, {part_start(k + 1), probe(k + 1, 0, 10.0 + c)});
+  }
+  const double learned = comp.learned_um(0);
+  const double offset = comp.register_value_um(0);
+  // mean 10, σ 0 → σ_eff 0.5: 3σ_eff = 1.5. e = 12 deviates by 2 → outlier.
+  StepOutput out = run(comp, {part_start(5), probe(5, 0, 12.0 + offset)});
+  EXPECT_TRUE(has_alarm(out, AlarmCode::kProbeOutlier));
+  EXPECT_DOUBLE_EQ(comp.learned_um(0), learned);
+  // e = 11 deviates by 1 < 1.5 → learned.
+  out = run(comp, {part_start(6), probe(6, 0, 11.0 + offset)});
+  EXPECT_FALSE(has_alarm(out, AlarmCode::kProbeOutlier));
+  EXPECT_EQ(comp.counters().outliers, 1U);
+  EXPECT_DOUBLE_EQ(comp.learned_um(0), learned + (11.0 - learned) / 4.0);
+}
+
 TEST(Learning, OffsetBeyondTheAbsoluteLimitIsRefused) {
   CheckpointCompensator comp;
   LimiterConfig lim = wide_limits();

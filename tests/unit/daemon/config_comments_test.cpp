@@ -93,7 +93,8 @@ TEST_P(ShippedConfig, EveryKeyHasACommentAbove) {
 
 INSTANTIATE_TEST_SUITE_P(Config, ShippedConfig,
                          testing::Values("nccompd.toml", "nccompd-loopback.toml",
-                                         "reference-nc-modbus.toml", "reference-nc-can.toml"),
+                                         "reference-nc-modbus.toml", "reference-nc-can.toml",
+                                         "nccomp-publish.toml"),
                          [](const testing::TestParamInfo<const char*>& i) {
                            std::string n = i.param;
                            for (char& ch : n) {

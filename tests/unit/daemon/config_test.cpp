@@ -87,6 +87,51 @@ min_interval_s = 0.25
   EXPECT_EQ(engine->register_count(), 1U);
 }
 
+TEST(ConfigLoader, MeasurementLogV2KeysAreReadAndEveryMistakeIsNamed) {
+  TempDir d;
+  auto r = load_file(d.write("a.toml", std::string(R"([measurement_log]
+machine_id = "mill-07"
+fsync_interval_s = 0.5
+context_columns = [{ name = "spindle_temp_c", sensor = 3 }, { name = "feed_override_pct", sensor = 40 }]
+)") + kRegisters));
+  ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+  const auto& m = measurement_log_section(*r.config);
+  EXPECT_EQ(m.machine_id, "mill-07");
+  EXPECT_DOUBLE_EQ(m.fsync_interval_s, 0.5);
+  ASSERT_EQ(m.context_columns.size(), 2U);
+  EXPECT_EQ(m.context_columns[1].name, "feed_override_pct");
+  EXPECT_EQ(m.context_columns[1].sensor, 40);
+
+  r = load_file(d.write("b.toml", R"([measurement_log]
+machine_id = "mill/07"
+context_columns = [
+  { name = "Spindle", sensor = 3 },
+  { name = "temp_c", sensor = 1 },
+  { name = "x_c", sensor = 256 },
+  { name = "y_c", sensor = 2, unit = "c" },
+  { name = "z_c" },
+  { name = "y_c", sensor = 4 },
+]
+)"));
+  ASSERT_FALSE(r.config);
+  const auto& items = r.diagnostics.items();
+  ASSERT_EQ(items.size(), 7U) << r.diagnostics.to_string();
+  EXPECT_EQ(items[0].where.key_path, "measurement_log.machine_id");
+  EXPECT_EQ(items[0].where.line, 2);
+  EXPECT_NE(items[0].message.find("not a machine id"), std::string::npos) << items[0].message;
+  EXPECT_EQ(items[1].where.key_path, "measurement_log.context_columns[0].name");
+  EXPECT_NE(items[1].message.find("snake_case"), std::string::npos) << items[1].message;
+  EXPECT_EQ(items[2].where.key_path, "measurement_log.context_columns[1].name");
+  EXPECT_NE(items[2].message.find("a column of the log already"), std::string::npos);
+  EXPECT_EQ(items[3].where.key_path, "measurement_log.context_columns[2].sensor");
+  EXPECT_EQ(items[4].where.key_path, "measurement_log.context_columns[3].unit");
+  EXPECT_EQ(items[4].message, "unknown key");
+  EXPECT_EQ(items[5].where.key_path, "measurement_log.context_columns[4].sensor");
+  EXPECT_EQ(items[6].where.key_path, "measurement_log.context_columns[5].name");
+  EXPECT_NE(items[6].message.find("named twice"), std::string::npos);
+  EXPECT_EQ(items[6].where.line, 9);
+}
+
 TEST(ConfigLoader, UnknownKeyNamesFileLineAndKeyPath) {
   TempDir d;
   const auto f =

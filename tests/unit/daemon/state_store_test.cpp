@@ -109,6 +109,29 @@ TEST(StateFile, ReasonsNameTheProblem) {
   EXPECT_NE(read_state_file(p.string()).reason.find("checksum mismatch"), std::string::npos);
 }
 
+// A file whose checksum covers bytes beyond the payload size its header states (a writer that
+// appended after the header was made, two files run together): the checksum alone cannot tell,
+// the size field does. Refused, whatever the extra bytes are.
+TEST(StateFile, ExtraBytesUnderAValidChecksumAreRefusedBySize) {
+  Dir d;
+  const auto p = d.path / "state.bin";
+  write_state_file(p.string(), bytes_of("engine state plus more"), 5);
+  auto raw = read_all(p);
+  ASSERT_EQ(raw.size(), 32U + 22U);
+  // The header now says 12 payload bytes ("engine state"); the checksum is made right again over
+  // everything from the size field on (the file's checksum range, bytes 16..end).
+  const std::uint64_t size = 12;
+  std::memcpy(raw.data() + 16, &size, 8);
+  const std::uint32_t crc = crc32(std::span<const std::byte>(
+      reinterpret_cast<const std::byte*>(raw.data()) + 16, raw.size() - 16));
+  std::memcpy(raw.data() + 12, &crc, 4);
+  write_raw(p, raw);
+  const auto f = read_state_file(p.string());
+  EXPECT_EQ(f.status, StateFileStatus::kCorrupt);
+  EXPECT_TRUE(f.payload.empty());
+  EXPECT_NE(f.reason.find("size mismatch"), std::string::npos) << f.reason;
+}
+
 TEST(StateFile, WriteIntoMissingDirectoryThrowsNamingThePath) {
   try {
     write_state_file("/nonexistent-nccomp/state.bin", bytes_of("x"), 1);

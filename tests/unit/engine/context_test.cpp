@@ -179,6 +179,44 @@ TEST(MachineContextClock, TheOriginSurvivesARestartAndARebootMakesTheMachineCold
   EXPECT_FALSE(e.has_tool());
 }
 
+TEST(MachineContextSession, RecordsCarryTheWarmStartNumberAndTheStepClockAcrossARestart) {
+  // The log's session (v2) is the warm-start count: it names the warm start time_s counts from.
+  MachineContext a;
+  a.configure(ContextOptions{0, 3600.0});
+  MeasurementRecord r;
+  r.time_ns = 500 * kS;
+  a.annotate(r);
+  EXPECT_EQ(r.session, 0U);  // before any motion: the first cycle's time, session 0
+  feed(a, 1000 * kS, {sample(0, 0, 3)});
+  feed(a, 1001 * kS, {sample(1, 0, 3)});  // warm start 1 at 1001 s
+  r = MeasurementRecord{};
+  r.time_ns = 1005 * kS;
+  a.annotate(r);
+  EXPECT_EQ(r.session, 1U);
+  EXPECT_EQ(r.clock_ns, 1005 * kS);
+  EXPECT_EQ(r.time_ns, 4 * kS);
+  std::vector<std::byte> bytes(MachineContext::kStateBytes);
+  ASSERT_EQ(a.save(bytes), MachineContext::kStateBytes);
+
+  // A restart after a reboot (the clock went back to 30 s): still session 1 until the machine
+  // moves, then session 2, not 1 again.
+  MachineContext b;
+  b.configure(ContextOptions{0, 3600.0});
+  ASSERT_TRUE(b.load(bytes, 30 * kS));
+  r = MeasurementRecord{};
+  r.time_ns = 35 * kS;
+  b.annotate(r);
+  EXPECT_EQ(r.session, 1U);
+  feed(b, 40 * kS, {sample(1, 0, 3)});
+  feed(b, 41 * kS, {sample(2, 0, 3)});
+  r = MeasurementRecord{};
+  r.time_ns = 43 * kS;
+  b.annotate(r);
+  EXPECT_EQ(r.session, 2U);
+  EXPECT_EQ(r.clock_ns, 43 * kS);
+  EXPECT_EQ(r.time_ns, 2 * kS);
+}
+
 OperatorCommand warm_start(std::uint32_t sequence, std::int8_t at_next_motion) {
   OperatorCommand c;
   c.sequence = sequence;

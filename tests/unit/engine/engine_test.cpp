@@ -351,11 +351,62 @@ TEST(EngineState, EveryTruncationIsRejectedAndLeavesTheEngineUnchanged) {
   EXPECT_NEAR(e2->register_state(1).output_um, 2.0, 1e-9);
 }
 
-TEST(EngineState, AnOutputBeyondTheRegistersAbsoluteLimitIsHeldNeverWritten) {
+// Publishes a trim of one register every cycle (as the [model] section does).
+class TrimModule final : public Module {
+ public:
+  explicit TrimModule(double value) : value_(value) {}
+  std::string_view name() const noexcept override { return "trim"; }
+  void attach(const RegisterTable& /*registers*/) override {}
+  void step(TimeNs now_ns, std::span<const Event> /*events*/, StepOutput& out) noexcept override {
+    out.trims.push(OffsetWrite{now_ns, 0, value_});
+  }
+  double value_;
+};
+
+// GIVEN max_abs_um 20, a module's target of 10 and another module's trim of 8 (18 µm sent)
+// WHEN either changes so that each alone is admissible but the sum is not THEN it is refused with
+// alarm offset_beyond_absolute_limit, the target and the trim stay, nothing is written; a change
+// whose sum lies at the limit itself is sent.
+TEST(EngineTrims, TheSumOfTargetAndTrimMustBeAdmissibleWhicheverOfThemChanges) {
+  std::vector<std::unique_ptr<Module>> m;
+  auto base = std::make_unique<ConstantModule>("base", 0, 10.0);
+  auto trim = std::make_unique<TrimModule>(8.0);
+  ConstantModule* b = base.get();
+  TrimModule* tr = trim.get();
+  m.push_back(std::move(base));
+  m.push_back(std::move(trim));
+  Engine e;
+  e.configure({reg("a", 20.0, 100.0)}, std::move(m));
+  StepOutput out;
+  e.step(kMs, {}, out);
+  ASSERT_EQ(out.writes.size(), 1U);
+  EXPECT_DOUBLE_EQ(out.writes[0].value_um, 18.0);
+  const auto refused = [&](TimeNs t, double alarm_value) {
+    e.step(t, {}, out);
+    EXPECT_TRUE(out.writes.empty());
+    ASSERT_EQ(out.alarms.size(), 1U);
+    EXPECT_EQ(out.alarms[0].code, AlarmCode::kOffsetBeyondAbsoluteLimit);
+    EXPECT_DOUBLE_EQ(out.alarms[0].value, alarm_value);
+    EXPECT_DOUBLE_EQ(e.register_state(0).target_um, 10.0);
+    EXPECT_DOUBLE_EQ(e.register_state(0).trim_um, 8.0);
+    EXPECT_DOUBLE_EQ(e.register_state(0).output_um, 18.0);
+  };
+  b->value_ = 15.0;  // 15 + 8 = 23: the target is refused (the alarm names the target)
+  refused(2 * kMs, 15.0);
+  b->value_ = 10.0;
+  tr->value_ = 11.0;  // 10 + 11 = 21: the trim is refused (the alarm names the sum)
+  refused(3 * kMs, 21.0);
+  tr->value_ = 10.0;  // 10 + 10 = 20: the limit itself, sent
+  e.step(4 * kMs, {}, out);
+  ASSERT_EQ(out.writes.size(), 1U);
+  EXPECT_DOUBLE_EQ(out.writes[0].value_um, 20.0);
+}
+
+TEST(EngineState, AnOutputBeyondTheRegistersAbsoluteLimitIsHeldAndNeverWritten) {
   // Found by fuzz_state_import: a state whose register output lies beyond max_abs_um (a larger
   // limit before, or a corrupt file) was taken, and the limiter slewed from there: every write
-  // lay beyond the limit. Now the register is held (alarm 60) like a read-back beyond the limit:
-  // nothing is written to it until the operator releases it, the rest of the state is kept.
+  // lay beyond the limit. The state is taken (the other registers and modules keep theirs) and
+  // the register is held beyond the limit, as a read-back beyond it: nothing is written to it.
   auto e1 = ramp_engine(40.0, 100.0);
   StepOutput out;
   for (int k = 0; k <= 500; ++k) e1->step(k * kMs, {}, out);

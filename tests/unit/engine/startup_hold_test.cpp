@@ -177,6 +177,33 @@ TEST(StartupHold, ReleasedWithoutATargetTheRegisterStartsFromTheBoundNeverBeyond
   for (double v : w.written) EXPECT_LE(std::fabs(v), 200.0);
 }
 
+// A restored target beyond a narrowed limit cannot be the released value: the register starts
+// from the bound (what status shows), and later targets slew from there, never beyond it.
+TEST(StartupHold, ReleasedWithARestoredTargetBeyondANarrowedLimitTheRegisterStartsFromTheBound) {
+  Writer* m = nullptr;
+  auto before = make_engine(150.0, &m);
+  TimeNs t = 0;
+  (void)run(*before, t, 40);  // target and output 150 µm, saved
+  const auto state = state_of(*before);
+  auto e = make_engine(150.0, &m, 100.0);
+  m->publish = false;  // no new target: the restored 150 µm stands
+  ASSERT_TRUE(e->import_state(state, t));
+  ASSERT_EQ(e->register_state(0).hold, RegisterHold::kBeyondLimit);
+  ASSERT_DOUBLE_EQ(e->register_state(0).target_um, 150.0);
+  const Event r = release(0.0, 1);
+  const Outcome w = run(*e, t, 5, {&r, 1});
+  EXPECT_EQ(e->counters().last_release_count, 1U);
+  EXPECT_EQ(e->register_state(0).hold, RegisterHold::kNone);
+  EXPECT_DOUBLE_EQ(e->register_state(0).output_um, 100.0);
+  for (double v : w.written) EXPECT_LE(std::fabs(v), 100.0);
+  m->value_um = 50.0;
+  m->publish = true;
+  const Outcome later = run(*e, t, 20);
+  ASSERT_FALSE(later.written.empty());
+  EXPECT_DOUBLE_EQ(later.written.front(), 95.0);
+  EXPECT_DOUBLE_EQ(later.written.back(), 50.0);
+}
+
 TEST(StartupHold, ARestoredOutputBeyondANarrowedLimitIsHeldAndAReadBackWithinItEndsTheHold) {
   Writer* m = nullptr;
   auto before = make_engine(150.0, &m);

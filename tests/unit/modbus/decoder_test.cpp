@@ -897,4 +897,49 @@ trigger_position_mm = { address = 14, type = "float32" }
   EXPECT_EQ(std::get<core::CalibrationTouch>(ev[0]).fault, core::InputFault::kInvalid);
 }
 
+TEST(ModbusDecoderFault, AFractionalNumberIsInvalidNotRoundedToANeighbour) {
+  // GIVEN a checkpoint number in a float32 register and a tool number in counts of 0.5 (a map
+  // with a wrong scale, or an NC that writes garbage)
+  const ModbusConfig c = parse_modbus_config(R"([modbus]
+transport = "tcp"
+[modbus.probe_measurement]
+sequence = { address = 0, type = "uint16" }
+checkpoint = { address = 1, type = "float32" }
+raw_deviation_um = { address = 3, type = "float32" }
+[modbus.tool_change]
+sequence = { address = 5, type = "uint16" }
+tool = { address = 6, type = "uint16", scale = 0.5 }
+)",
+                                             "t.toml");
+  PollDecoder dec(c);
+  std::vector<std::uint8_t> ok(c.blocks.size(), 1);
+  auto b = dec.block(0);
+  dec.decode(1, ok);  // baselines
+  // WHEN checkpoint 3 and tool 14 * 0.5 = 7 arrive THEN both are taken
+  b[0] = 1;
+  put_float(b, 1, 3.0F, false);
+  put_float(b, 3, 12.0F, false);
+  b[5] = 1;
+  b[6] = 14;
+  auto ev = dec.decode(2, ok);
+  ASSERT_EQ(ev.size(), 2U);
+  const auto& p = std::get<core::ProbeMeasurement>(ev[0]);
+  EXPECT_EQ(p.fault, core::InputFault::kNone);
+  EXPECT_EQ(p.checkpoint, 3);
+  EXPECT_EQ(std::get<core::ToolChange>(ev[1]).tool, 7);
+  // WHEN checkpoint 3.25 and tool 15 * 0.5 = 7.5 arrive THEN neither is rounded to checkpoint 3
+  // or tool 8: the probe reading is delivered faulted without a checkpoint, the tool change is
+  // dropped, both counted invalid
+  b[0] = 2;
+  put_float(b, 1, 3.25F, false);
+  b[5] = 2;
+  b[6] = 15;
+  ev = dec.decode(3, ok);
+  ASSERT_EQ(ev.size(), 1U);
+  const auto& q = std::get<core::ProbeMeasurement>(ev[0]);
+  EXPECT_EQ(q.fault, core::InputFault::kInvalid);
+  EXPECT_EQ(q.checkpoint, -1);
+  EXPECT_EQ(dec.counters().values_invalid, 2U);
+}
+
 }  // namespace nccomp::drivers::modbus

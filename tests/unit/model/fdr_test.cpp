@@ -122,3 +122,50 @@ TEST(FalseDiscoveries, AStructureOnlyInTheFittedRowsFailsTheHeldOutCheck) {
     EXPECT_LE(r.final_stats.heldout.rms_um, r.declared.heldout.rms_um);
   }
 }
+
+// Pins the multiple-testing correction. GIVEN logs with no undeclared effect and no held-out rows
+// (heldout_fraction 0: nothing but the F-test decides) WHEN analysed with 50 seeds THEN at most 5 %
+// add an effect: the best of the candidates is tested against alpha times their number
+// (Bonferroni), not as if it were the only one tried.
+TEST(FalseDiscoveries, AtMostFivePercentWithoutHeldOutRows) {
+  const int discoveries = false_discoveries(13000, [](synth::Options& opt, cm::AnalysisConfig& c) {
+    c = synth::config(opt);
+    c.heldout_fraction = 0.0;
+  });
+  std::printf("false discoveries without held-out rows: %d of %d\n", discoveries, kSeeds);
+  EXPECT_LE(discoveries, kSeeds * 5 / 100);
+}
+
+// Pins the look-ahead's rule (analysis.hpp: both terms must be significant). GIVEN logs (noise 2
+// µm) whose contour rows drift by up to 3 µm over parts 1–23 and not from part 24 on WHEN analysed
+// THEN the best candidate is significant on the fitted rows but raises the held-out error, so the
+// look-ahead tries it with a second term; a pair is added only if the second term is significant
+// too: every added effect has p below alpha. (A level change at the drift's end rescues the trend
+// on the held-out rows of seeds 401 and 402 with p = 0.13 and 0.31; seed 403's pair is
+// significant.)
+TEST(FalseDiscoveries, TheLookAheadAddsAPairOnlyIfItsSecondTermIsSignificant) {
+  for (std::uint64_t seed = 401; seed <= 403; ++seed) {
+    SCOPED_TRACE(seed);
+    synth::Options opt;
+    opt.seed = seed;
+    opt.parts = 30;
+    opt.points_per_part = 12;
+    opt.noise_um = 2.0;
+    cm::Dataset d = synth::generate(opt);
+    const auto& part = d.column(static_cast<int>(cm::Column::kPart));
+    for (std::size_t i = 0; i < d.rows(); ++i) {
+      if (part[i] <= 23.0) d.target_um[i] += 3.0 * part[i] / 24.0;
+    }
+    const cm::AnalysisConfig c = synth::config(opt);
+    const cm::AnalysisResult r = cm::analyze(d, c);
+    ASSERT_FALSE(r.steps.empty());
+    ASSERT_FALSE(r.steps[0].empty());
+    const cm::TriedCandidate& best = r.steps[0][0];
+    EXPECT_LT(best.p_value, c.alpha) << best.name;
+    EXPECT_FALSE(best.heldout_improved) << best.name;
+    for (const cm::AddedEffect& e : r.effects) {
+      EXPECT_LT(e.p_value, c.alpha) << e.spec.name;
+    }
+    EXPECT_LE(r.final_stats.heldout.rms_um, r.declared.heldout.rms_um);
+  }
+}

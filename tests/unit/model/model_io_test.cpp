@@ -44,6 +44,44 @@ TEST(ReadLog, ReadsV1RowsIgnoringExtraColumnsAndEmptyAsUnknown) {
   EXPECT_DOUBLE_EQ(d.target_um[1], 7.0);
 }
 
+TEST(ReadLog, ReadsV2WhereTimeRestartsWithEachSessionAndKeepsTheContextColumns) {
+  // Two warm starts in one file (the collector's per-machine log): session 4 from 0 s, session 5
+  // from 0 s again; the second session's rows are ordered after the first one's.
+  const std::string h = std::string(kHeader) + ",machine,utc,session,spindle_temp_c\n";
+  std::istringstream in(h +
+                        "10,1,2,contour,4,,,,,,,1.0,0,m1,2024-05-06T07:00:10.000Z,4,30.5\n"
+                        "20,1,2,contour,4,,,,,,,2.0,0,m1,2024-05-06T07:00:20.000Z,4,31.0\n"
+                        "3,2,2,contour,4,,,,,,,3.0,0,m1,2024-05-06T09:00:03.000Z,5,22.0\n"
+                        "8,2,2,contour,4,,,,,,,4.0,0,m1,2024-05-06T09:00:08.000Z,5,\n");
+  cm::Dataset d;
+  d.extra_columns = {"spindle_temp_c"};
+  io::read_log(in, "log.csv", {}, d);
+  ASSERT_EQ(d.rows(), 4U);
+  EXPECT_DOUBLE_EQ(d.column(0)[2], 3.0);  // time_s as written: since the warm start
+  ASSERT_EQ(d.order_s.size(), 4U);
+  EXPECT_DOUBLE_EQ(d.order_s[0], 10.0);
+  EXPECT_DOUBLE_EQ(d.order_s[1], 20.0);
+  EXPECT_DOUBLE_EQ(d.order_s[2], 21.0);  // after 20 s: 20 + 1 - 3 + 3
+  EXPECT_DOUBLE_EQ(d.order_s[3], 26.0);
+  EXPECT_DOUBLE_EQ(d.column(cm::kStandardColumns)[1], 31.0);
+  EXPECT_TRUE(std::isnan(d.column(cm::kStandardColumns)[3]));
+
+  const std::string r = ",,,,,,,1.0,0,m1,2024-05-06T07:00:10.000Z,";
+  // Within a session time_s still must not go back, nor the session itself.
+  EXPECT_EQ(
+      error_of(h + "10,1,2,contour,4" + r + "4,1\n8,1,2,contour,4" + r + "4,1\n").substr(0, 38),
+      "log.csv:3: column 'time_s': goes backw");
+  EXPECT_EQ(error_of(h + "10,1,2,contour,4" + r + "4,1\n8,1,2,contour,4" + r + "3,1\n"),
+            "log.csv:3: column 'session': goes backwards (3 after 4); the log must be in time "
+            "order");
+  EXPECT_EQ(error_of(h + "10,1,2,contour,4" + r + "x,1\n"),
+            "log.csv:2: column 'session': 'x' is not a warm-start number (an integer >= 0)");
+  EXPECT_EQ(
+      error_of(h + "10,1,2,contour,4" + r + "4,1\n11,1,2,contour,4,,,,,,,1.0,0,m2,," + "4,1\n"),
+      "log.csv:3: column 'machine': 'm2' in a log of 'm1' (line 2): analyze one machine's "
+      "log at a time");
+}
+
 TEST(ReadLog, NamesFileLineAndColumnOfBadInput) {
   const std::string h = std::string(kHeader) + "\n";
   EXPECT_EQ(error_of(h + "1,1,1,contour,1,x,0,0,0,0,,1,0\n"),
