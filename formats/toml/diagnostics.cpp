@@ -1,0 +1,53 @@
+#include "formats/toml/diagnostics.hpp"
+
+#include <sstream>
+#include <utility>
+
+namespace nccomp::formats {
+
+std::string format(const Diagnostic& d) {
+  std::ostringstream s;
+  s << (d.where.file.empty() ? "<config>" : d.where.file);
+  if (d.where.line > 0) {
+    s << ':' << d.where.line << ':' << d.where.column;
+  }
+  s << ": ";
+  if (!d.where.key_path.empty()) {
+    s << d.where.key_path << ": ";
+  }
+  s << d.message;
+  return s.str();
+}
+
+void Diagnostics::error(Where where, std::string message) {
+  items_.push_back(Diagnostic{std::move(where), std::move(message)});
+}
+
+void Diagnostics::error(const toml::node* node, std::string key_path, std::string message) {
+  error(where_of(node, std::move(key_path)), std::move(message));
+}
+
+std::string Diagnostics::to_string() const {
+  std::string out;
+  for (const auto& d : items_) {
+    out += format(d);
+    out += '\n';
+  }
+  return out;
+}
+
+Where where_of(const toml::node* node, std::string key_path) {
+  Where w;
+  w.key_path = std::move(key_path);
+  if (node != nullptr) {
+    const auto& src = node->source();
+    if (src.path) {
+      w.file = *src.path;
+    }
+    w.line = static_cast<int>(src.begin.line);
+    w.column = static_cast<int>(src.begin.column);
+  }
+  return w;
+}
+
+}  // namespace nccomp::formats

@@ -1,0 +1,49 @@
+// The one diagnostics type of every nccomp file format: a place (file:line:column and key path)
+// and a message. Loaders collect every error instead of stopping at the first, so the operator
+// sees all of them at once.
+//
+// Not real-time: everything here allocates.
+#pragma once
+
+#include <toml++/toml.h>
+
+#include <string>
+#include <vector>
+
+namespace nccomp::formats {
+
+/// A position in a file, kept by loaders for errors found after parsing.
+struct Where {
+  std::string file;
+  int line{0};
+  int column{0};
+  std::string key_path;
+};
+
+struct Diagnostic {
+  Where where;
+  std::string message;
+};
+
+/// "file:line:column: key.path: message" (the compilers' format, so editors jump to it).
+[[nodiscard]] std::string format(const Diagnostic& d);
+
+/// Collects errors; parsing continues after an error so the operator sees all of them at once.
+class Diagnostics {
+ public:
+  void error(Where where, std::string message);
+  /// An error at node's source position.
+  void error(const toml::node* node, std::string key_path, std::string message);
+  [[nodiscard]] bool ok() const noexcept { return items_.empty(); }
+  [[nodiscard]] const std::vector<Diagnostic>& items() const noexcept { return items_; }
+  /// All errors, one per line.
+  [[nodiscard]] std::string to_string() const;
+
+ private:
+  std::vector<Diagnostic> items_;
+};
+
+/// node's source position (file, line, column) under key_path; no position if node is null.
+[[nodiscard]] Where where_of(const toml::node* node, std::string key_path);
+
+}  // namespace nccomp::formats
