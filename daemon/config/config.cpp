@@ -129,7 +129,7 @@ struct Loader {
     }
     const auto* arr = inc->as_array();
     if (arr == nullptr) {
-      diag.error(inc, "include", "expected an array of file names");
+      diag.error(inc, "include", "must be an array of file names");
       return;
     }
     for (std::size_t i = 0; i < arr->size(); ++i) {
@@ -137,7 +137,7 @@ struct Loader {
       const std::string key = "include[" + std::to_string(i) + "]";
       const auto* s = e.as_string();
       if (s == nullptr || s->get().empty()) {
-        diag.error(&e, key, "expected a file name");
+        diag.error(&e, key, "must be a file name");
         continue;
       }
       fs::path p(s->get());

@@ -9,7 +9,8 @@ std::string format(const Diagnostic& d) {
   std::ostringstream s;
   s << (d.where.file.empty() ? "<config>" : d.where.file);
   if (d.where.line > 0) {
-    s << ':' << d.where.line << ':' << d.where.column;
+    s << ':' << d.where.line;
+    if (d.where.column > 0) s << ':' << d.where.column;
   }
   s << ": ";
   if (!d.where.key_path.empty()) {

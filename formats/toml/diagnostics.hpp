@@ -25,7 +25,8 @@ struct Diagnostic {
   std::string message;
 };
 
-/// "file:line:column: key.path: message" (the compilers' format, so editors jump to it).
+/// "file:line:column: key.path: message" (the compilers' format, so editors jump to it); the
+/// column is left out where it is unknown (0), line and column where the line is.
 [[nodiscard]] std::string format(const Diagnostic& d);
 
 /// Collects errors; parsing continues after an error so the operator sees all of them at once.

@@ -32,7 +32,7 @@ std::unique_ptr<CalibrationSection> parse_calibration_section(const toml::node& 
   auto s = std::make_unique<CalibrationSection>();
   s->where = config::where_of(&node, "calibration");
   if (node.as_table() == nullptr) {
-    diag.error(&node, "calibration", "expected a table ([calibration])");
+    diag.error(&node, "calibration", "must be a table ([calibration])");
     return s;
   }
   record_positions(node, "calibration", s->key_positions);

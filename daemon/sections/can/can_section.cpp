@@ -28,7 +28,7 @@ class CanParser final : public SectionParser {
   std::unique_ptr<Section> parse(const toml::node& node, Diagnostics& diag) const override {
     const auto* t = node.as_table();
     if (t == nullptr) {
-      diag.error(&node, "can", "expected a table ([can])");
+      diag.error(&node, "can", "must be a table ([can])");
       return nullptr;
     }
     const Where table_where = where_of(t, "can");

@@ -35,7 +35,7 @@ std::unique_ptr<CheckpointsSection> parse_checkpoints_section(const toml::node& 
   s->where = config::where_of(&node, "checkpoints");
   const auto* table = node.as_table();
   if (table == nullptr) {
-    diag.error(&node, "checkpoints", "expected a table ([checkpoints])");
+    diag.error(&node, "checkpoints", "must be a table ([checkpoints])");
     return s;
   }
   record_positions(node, "checkpoints", s->key_positions);

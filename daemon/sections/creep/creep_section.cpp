@@ -246,7 +246,7 @@ void parse_deflection(const toml::array& arr, cc::CreepConfig& c, Diagnostics& d
     d.lateral_um = r.number_list("lateral_um", -1e6, 1e6);
     for (const char* k : {"wear_um", "normal_um", "lateral_um"}) {
       if (r.node().get(k) == nullptr) {
-        diag.error(r.where(k), "required key is missing");
+        diag.error(r.where(k), "missing required key");
       }
     }
     c.deflection.push_back(std::move(d));
@@ -279,7 +279,7 @@ std::unique_ptr<CreepSection> parse_creep_section(const toml::node& node, Diagno
   s->where = config::where_of(&node, "creep");
   const auto* table = node.as_table();
   if (table == nullptr) {
-    diag.error(&node, "creep", "expected a table ([creep])");
+    diag.error(&node, "creep", "must be a table ([creep])");
     return s;
   }
   record_positions(node, "creep", s->key_positions);

@@ -60,7 +60,7 @@ class ModbusParser final : public SectionParser {
   std::unique_ptr<Section> parse(const toml::node& node, Diagnostics& diag) const override {
     const auto* t = node.as_table();
     if (t == nullptr) {
-      diag.error(&node, "modbus", "expected a table ([modbus])");
+      diag.error(&node, "modbus", "must be a table ([modbus])");
       return nullptr;
     }
     const Where table_where = where_of(t, "modbus");

@@ -18,7 +18,7 @@ class MeasurementContextParser final : public config::SectionParser {
     s->where = config::where_of(&node, "measurement_context");
     const auto* table = node.as_table();
     if (table == nullptr) {
-      diag.error(&node, "measurement_context", "expected a table ([measurement_context])");
+      diag.error(&node, "measurement_context", "must be a table ([measurement_context])");
       return s;
     }
     config::TableReader r(*table, "measurement_context", diag);

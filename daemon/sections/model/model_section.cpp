@@ -83,7 +83,7 @@ std::unique_ptr<ModelSection> parse_model_section(const toml::node& node,
   s->where = config::where_of(&node, "model");
   const auto* table = node.as_table();
   if (table == nullptr) {
-    diag.error(&node, "model", "expected a table ([model])");
+    diag.error(&node, "model", "must be a table ([model])");
     return s;
   }
   TableReader r(*table, "model", diag);
