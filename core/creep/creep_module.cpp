@@ -26,28 +26,29 @@ constexpr std::array<const char*, kChannelCount> kChannelKeys{
 
 // Status keys of remembered tools: string literals in static storage (the loop publishes the
 // pointers, the status thread reads them later), built at compile time for tools 1..kKeyedTools.
+// Plain arrays and pointers: with std::array's operator[] calls clang's constexpr evaluation
+// runs out of steps (its default limit) before tool 9999.
 constexpr std::size_t kKeyedTools = 9999;
 constexpr std::size_t kToolKeyLength = 16;  // "T9999_wear_um" + NUL
 struct ToolKeys {
-  std::array<std::array<char, kToolKeyLength>, kKeyedTools + 1> key{};
+  char key[kKeyedTools + 1][kToolKeyLength]{};
 };
 constexpr ToolKeys make_tool_keys() {
   ToolKeys k{};
   for (std::size_t t = 1; t <= kKeyedTools; ++t) {
-    auto& s = k.key[t];
-    std::size_t n = 0;
-    s[n++] = 'T';
-    char digits[4]{};
-    std::size_t d = 0;
-    for (std::size_t v = t; v > 0; v /= 10) digits[d++] = static_cast<char>('0' + v % 10);
-    while (d > 0) s[n++] = digits[--d];
-    for (const char c : std::string_view("_wear_um")) s[n++] = c;
-    s[n] = '\0';
+    char* s = k.key[t];
+    *s++ = 'T';
+    std::size_t p = 1000;
+    while (p > t) p /= 10;
+    for (; p > 0; p /= 10) *s++ = static_cast<char>('0' + t / p % 10);
+    for (const char c : "_wear_um") *s++ = c;  // with its NUL
   }
   return k;
 }
 constexpr ToolKeys kToolKeys = make_tool_keys();
-static_assert(std::string_view(kToolKeys.key[9999].data()) == "T9999_wear_um");
+static_assert(std::string_view(kToolKeys.key[1]) == "T1_wear_um");
+static_assert(std::string_view(kToolKeys.key[907]) == "T907_wear_um");
+static_assert(std::string_view(kToolKeys.key[9999]) == "T9999_wear_um");
 /// Tools outside 1..kKeyedTools: by their slot in the tool memory.
 constexpr std::array<const char*, kMaxToolMemory> kSlotKeys{
     "memory_slot_1_wear_um", "memory_slot_2_wear_um", "memory_slot_3_wear_um",
@@ -472,7 +473,7 @@ std::size_t CreepModule::status(std::span<engine::StatusValue> out) const noexce
     const std::size_t m = order[j];
     const std::int32_t tool = mem.tool[m];
     const char* key = tool >= 1 && static_cast<std::size_t>(tool) <= kKeyedTools
-                          ? kToolKeys.key[static_cast<std::size_t>(tool)].data()
+                          ? kToolKeys.key[static_cast<std::size_t>(tool)]
                           : kSlotKeys[m];
     out[w++] = {key, max_measured_um(mem.state[m]), nullptr};
   }

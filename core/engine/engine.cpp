@@ -793,6 +793,11 @@ bool Engine::import_state(std::span<const std::byte> bytes, TimeNs now_ns,
         ++skip_count;
         continue;
       }
+      // The limiter would slew from there: the writes would lie beyond the limit too (a state
+      // of a configuration with a larger max_abs_um, or a corrupt file).
+      if (std::fabs(output_um) > specs_[static_cast<std::size_t>(idx)].limits.max_abs_um) {
+        return false;
+      }
       if (pass == 1) {
         const auto i = static_cast<std::size_t>(idx);
         Reg& r = regs_[i];

@@ -350,7 +350,8 @@ class Engine {
   /// Real-time safe. Restores a state exported by this or an earlier configuration: registers and
   /// modules are matched by name (unknown ones in the bytes are skipped and counted in
   /// `skipped`). Limiters restart from the restored outputs at now_ns. Returns false if the bytes
-  /// are malformed; the engine is then unchanged.
+  /// are malformed or a register's output lies beyond its max_abs_um (the limiter would slew
+  /// from there, every write beyond the limit); the engine is then unchanged.
   bool import_state(std::span<const std::byte> bytes, TimeNs now_ns,
                     std::size_t* skipped = nullptr) noexcept;
   /// Real-time safe. Advances when registers or module states changed.

@@ -8,6 +8,8 @@
 #include <limits>
 #include <sstream>
 
+#include "formats/toml_guard.hpp"
+
 namespace nccomp::drivers::can {
 namespace {
 
@@ -181,7 +183,7 @@ constexpr std::int64_t kMaxId = kMaxExtendedId;
 CanConfig parse_can_config(std::string_view toml_text, const std::string& file) {
   toml::table root;
   try {
-    root = toml::parse(toml_text, file);
+    root = formats::parse_toml(toml_text, file);
   } catch (const toml::parse_error& e) {
     throw MappingError(file, static_cast<int>(e.source().begin.line),
                        static_cast<int>(e.source().begin.column), "", std::string(e.description()));

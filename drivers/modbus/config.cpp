@@ -9,6 +9,8 @@
 
 #include <toml++/toml.h>
 
+#include "formats/toml_guard.hpp"
+
 namespace nccomp::drivers::modbus {
 namespace {
 
@@ -366,7 +368,7 @@ ModbusConfig parse_modbus_config(std::string_view toml_text, std::string_view fi
                                  const ParseOptions& options) {
   toml::table root;
   try {
-    root = toml::parse(toml_text, file);
+    root = formats::parse_toml(toml_text, file);
   } catch (const toml::parse_error& e) {
     throw ConfigError(std::string(file), static_cast<int>(e.source().begin.line),
                       static_cast<int>(e.source().begin.column), "", std::string(e.description()));

@@ -351,6 +351,34 @@ TEST(EngineState, EveryTruncationIsRejectedAndLeavesTheEngineUnchanged) {
   EXPECT_NEAR(e2->register_state(1).output_um, 2.0, 1e-9);
 }
 
+TEST(EngineState, AnOutputBeyondTheRegistersAbsoluteLimitIsRefused) {
+  // Found by fuzz_state_import: a state whose register output lies beyond max_abs_um (a larger
+  // limit before, or a corrupt file) was taken, and the limiter slewed from there: every write
+  // lay beyond the limit.
+  auto e1 = ramp_engine(40.0, 100.0);
+  StepOutput out;
+  for (int k = 0; k <= 500; ++k) e1->step(k * kMs, {}, out);
+  ASSERT_NEAR(e1->register_state(1).output_um, 40.0, 1e-9);
+  std::vector<std::byte> buf(e1->state_capacity());
+  const std::size_t n = e1->export_state(buf);
+
+  Engine e2;
+  std::vector<std::unique_ptr<Module>> m;
+  m.push_back(std::make_unique<RampModule>(RampConfig{"ramp", "a", 0.0, 10.0, 100.0}));
+  e2.configure({reg("b"), reg("a", 30.0)}, std::move(m));
+  EXPECT_FALSE(e2.import_state(std::span<const std::byte>(buf.data(), n), 0));
+  EXPECT_DOUBLE_EQ(e2.register_state(1).output_um, 0.0);
+  for (int k = 1; k <= 200; ++k) {
+    e2.step(k * kMs, {}, out);
+    for (const auto& w : out.writes) EXPECT_LE(std::fabs(w.value_um), 30.0);
+  }
+  // At the limit itself it is taken.
+  Engine e3;
+  e3.configure({reg("b"), reg("a", 40.0)}, {});
+  EXPECT_TRUE(e3.import_state(std::span<const std::byte>(buf.data(), n), 0));
+  EXPECT_NEAR(e3.register_state(1).output_um, 40.0, 1e-9);
+}
+
 TEST(EngineState, ImportSkipsRegistersAndModulesTheConfigNoLongerHas) {
   auto e1 = ramp_engine(10.0, 100.0);
   StepOutput out;

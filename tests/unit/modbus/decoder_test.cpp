@@ -489,7 +489,10 @@ TEST(ModbusDecoderResume, TheNewestEventSinceTheCursorIsDeliveredOnceTheOthersCo
   }
 }
 
-TEST(ModbusDecoderResume, ANewestEventWithInvalidValuesIsReportedNotDelivered) {
+// The newest event published while nccompd was down has an invalid value: like any invalid
+// measurement it is delivered once, marked faulted with its values cleared (its method raises its
+// alarm and changes nothing), and its counter becomes the cursor; the one before it is lost.
+TEST(ModbusDecoderResume, ANewestEventWithInvalidValuesIsDeliveredFaulted) {
   const ModbusConfig config = parse_modbus_config(kMap, "t.toml");
   PollDecoder dec(config);
   core::EventCursorSet cursors{};
@@ -499,16 +502,23 @@ TEST(ModbusDecoderResume, ANewestEventWithInvalidValuesIsReportedNotDelivered) {
   std::span<std::uint16_t> meas = dec.block(1);
   meas[0] = 7;
   put_float(meas, 2, std::nanf(""), false);
+  int measurements = 0;
   for (const core::Event& e : dec.decode(1, ok)) {
-    EXPECT_EQ(std::get_if<core::ToolMeasurement>(&e), nullptr);
+    if (const auto* t = std::get_if<core::ToolMeasurement>(&e)) {
+      ++measurements;
+      EXPECT_EQ(t->fault, core::InputFault::kInvalid);
+      EXPECT_EQ(t->wear_um[0], 0.0);
+      EXPECT_EQ(t->origin.sequence, 7U);
+    }
   }
+  EXPECT_EQ(measurements, 1);
   EXPECT_EQ(dec.counters().values_invalid, 1U);
   EXPECT_EQ(dec.counters().events_lost_while_down, 1U);
-  EXPECT_EQ(dec.counters().events_recovered_after_start, 0U);
+  EXPECT_EQ(dec.counters().events_recovered_after_start, 1U);
   const ResumeReport& r = dec.resume_reports()[static_cast<std::size_t>(Group::kToolMeasurement)];
   EXPECT_TRUE(r.done);
   EXPECT_EQ(r.events, 2U);
-  EXPECT_FALSE(r.delivered);
+  EXPECT_TRUE(r.delivered);
 }
 
 TEST_F(ModbusDecoderReconnect, AReconnectBeforeTheFirstReadIsJustTheBaseline) {
