@@ -5,7 +5,7 @@
 #include <stdexcept>
 #include <utility>
 
-#include "formats/toml_guard.hpp"
+#include "formats/toml/guard.hpp"
 
 namespace nccomp::daemon::config {
 

@@ -10,7 +10,7 @@
 #include <set>
 #include <sstream>
 
-#include "formats/toml_guard.hpp"
+#include "formats/toml/guard.hpp"
 #include "tools/plan/checkpoints_toml.hpp"
 
 namespace nccomp::sim::ncsim {

@@ -7,7 +7,7 @@
 #include <sstream>
 
 #include "core/common/limiter.hpp"
-#include "formats/toml_guard.hpp"
+#include "formats/toml/guard.hpp"
 
 namespace nccomp::tools::checkpoints {
 

@@ -7,7 +7,7 @@
 #include <string_view>
 #include <vector>
 
-#include "formats/toml_guard.hpp"
+#include "formats/toml/guard.hpp"
 #include "tools/plan/checkpoints_toml.hpp"
 #include "tools/plan/plan_output.hpp"
 

@@ -12,7 +12,7 @@
 #include "core/creep/creep_module.hpp"
 #include "core/engine/engine.hpp"
 #include "daemon/sections/creep/creep_section.hpp"
-#include "formats/toml_guard.hpp"
+#include "formats/toml/guard.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   namespace cfg = nccomp::daemon::config;
