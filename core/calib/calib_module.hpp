@@ -27,7 +27,7 @@ class CalibrationModule final : public engine::Module {
   [[nodiscard]] std::string_view name() const noexcept override { return name_; }
 
   /// Not real-time. Checks register_x/y/z against the table (they must exist and be of kind
-  /// axis_offset) and configures the calibrator. Throws std::invalid_argument naming the key.
+  /// axis_offset) and configures the calibrator. Throws core::ConfigInvalid naming the key.
   void attach(const engine::RegisterTable& registers) override;
 
   /// Real-time safe: runs the cycle's OperatorCommand events (in order), then

@@ -37,6 +37,44 @@ std::string Diagnostics::to_string() const {
   return out;
 }
 
+namespace {
+
+Diagnostics with_file(Diagnostics d, const std::string& file) {
+  Diagnostics out;
+  for (Diagnostic item : d.items()) {
+    if (item.where.file.empty()) item.where.file = file;
+    out.error(std::move(item.where), std::move(item.message));
+  }
+  return out;
+}
+
+std::string text_of(const Diagnostics& d) {
+  std::string s = d.to_string();
+  if (!s.empty() && s.back() == '\n') s.pop_back();
+  return s;
+}
+
+Diagnostics syntax_error(const toml::parse_error& e, const std::string& file) {
+  Diagnostics d;
+  Where w;
+  w.file = e.source().path ? *e.source().path : file;
+  w.line = static_cast<int>(e.source().begin.line);
+  w.column = static_cast<int>(e.source().begin.column);
+  d.error(std::move(w), std::string(e.description()));
+  return d;
+}
+
+}  // namespace
+
+DiagnosticsError::DiagnosticsError(Diagnostics diagnostics)
+    : std::invalid_argument(text_of(diagnostics)), diagnostics_(std::move(diagnostics)) {}
+
+DiagnosticsError::DiagnosticsError(Diagnostics diagnostics, const std::string& file)
+    : DiagnosticsError(with_file(std::move(diagnostics), file)) {}
+
+DiagnosticsError::DiagnosticsError(const toml::parse_error& e, const std::string& file)
+    : DiagnosticsError(syntax_error(e, file)) {}
+
 Where where_of(const toml::node* node, std::string key_path) {
   Where w;
   w.key_path = std::move(key_path);

@@ -7,6 +7,7 @@
 
 #include <toml++/toml.h>
 
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -42,6 +43,21 @@ class Diagnostics {
 
  private:
   std::vector<Diagnostic> items_;
+};
+
+/// Thrown by the loaders a command calls (nccomp calibrate, nccomp plan) with every error; a
+/// std::invalid_argument whose what() is every error, one per line.
+class DiagnosticsError : public std::invalid_argument {
+ public:
+  /// Errors without a file name get `file`.
+  DiagnosticsError(Diagnostics diagnostics, const std::string& file);
+  /// A TOML syntax error, at its line and column in `file`.
+  DiagnosticsError(const toml::parse_error& e, const std::string& file);
+  [[nodiscard]] const Diagnostics& diagnostics() const noexcept { return diagnostics_; }
+
+ private:
+  explicit DiagnosticsError(Diagnostics diagnostics);
+  Diagnostics diagnostics_;
 };
 
 /// node's source position (file, line, column) under key_path; no position if node is null.

@@ -6,8 +6,10 @@
 #include <set>
 #include <sstream>
 
+#include "core/common/config_issue.hpp"
 #include "core/common/limiter.hpp"
 #include "formats/toml/guard.hpp"
+#include "formats/toml/key_positions.hpp"
 
 namespace nccomp::tools::checkpoints {
 
@@ -369,7 +371,7 @@ CheckpointsConfig parse_checkpoints(const toml::table& table, const std::string&
   if (issues.size() != issues_before) {
     return out;
   }
-  // Semantic checks of the core (each message names its key "checkpoints.<key>").
+  // Semantic checks of the core, each issue at its key (or the nearest parent in the file).
   try {
     const cp::Plan plan = cp::make_plan(out.plan);
     if (out.gcode.safe_z_mm <= plan.levels_z_mm.front()) {
@@ -378,28 +380,19 @@ CheckpointsConfig parse_checkpoints(const toml::table& table, const std::string&
     }
     cp::CheckpointCompensator probe_config;
     probe_config.configure(out.compensator, plan.checkpoints, core::LimiterConfig{});
-  } catch (const std::invalid_argument& e) {
-    ConfigIssue i;
-    i.file = file;
-    i.line = static_cast<int>(table.source().begin.line);
-    i.column = static_cast<int>(table.source().begin.column);
-    std::string msg = e.what();
-    // "checkpoints.key: reason" → key path and message.
-    const auto colon = msg.find(": ");
-    if (msg.rfind("checkpoints.", 0) == 0 && colon != std::string::npos) {
-      i.key_path = msg.substr(0, colon);
-      const std::string key = i.key_path.substr(std::string("checkpoints.").size());
-      const std::string top = key.substr(0, key.find_first_of(".["));
-      if (const toml::node* n = table.get(top)) {
-        i.line = static_cast<int>(n->source().begin.line);
-        i.column = static_cast<int>(n->source().begin.column);
-      }
-      i.message = msg.substr(colon + 2);
-    } else {
-      i.key_path = "checkpoints";
-      i.message = msg;
+  } catch (const core::ConfigInvalid& e) {
+    formats::KeyPositions positions;
+    formats::record_positions(table, "checkpoints", positions);
+    for (const auto& issue : e.issues()) {
+      const formats::Where w = formats::position_of(positions, issue.key, formats::Where{});
+      ConfigIssue i;
+      i.file = file;
+      i.line = w.line;
+      i.column = w.column;
+      i.key_path = issue.key;
+      i.message = issue.reason;
+      issues.push_back(std::move(i));
     }
-    issues.push_back(std::move(i));
   }
   return out;
 }

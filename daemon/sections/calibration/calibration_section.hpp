@@ -1,5 +1,5 @@
 // The daemon's `[calibration]` section (docs/calibration.md): parsed by
-// tools::calibrate::load_calibration_node() (the loader `nccomp calibrate` uses), registers
+// formats::calib::parse_calibration() (the loader `nccomp calibrate` uses), registers
 // checked against [[registers]] in cross_check(), one CalibrationModule added to the engine.
 // Not real-time.
 #pragma once
@@ -8,14 +8,14 @@
 
 #include "core/calib/config.hpp"
 #include "daemon/config/config.hpp"
-#include "daemon/sections/common/key_positions.hpp"
+#include "formats/toml/key_positions.hpp"
 
 namespace nccomp::daemon::sections {
 
 struct CalibrationSection final : config::Section {
   core::calib::CalibrationConfig config;
   config::Where where;
-  KeyPositions key_positions;
+  formats::KeyPositions key_positions;
 };
 
 /// Parses one `[calibration]` node.

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "core/checkpoint/plan.hpp"
+#include "core/common/config_issue.hpp"
 #include "daemon/config/builtin_sections.hpp"
 
 namespace nccomp::daemon::sections {
@@ -15,17 +16,6 @@ namespace {
 
 namespace fs = std::filesystem;
 namespace ck = tools::checkpoints;
-
-/// The key a CheckpointModule::attach() message is about (its messages name no key path).
-config::Where attach_error_position(const CheckpointsSection& s, std::string_view message) {
-  const std::string key = message.find("active_register") != std::string_view::npos
-                              ? "checkpoints.active_register"
-                              : "checkpoints.register_base";
-  if (auto it = s.key_positions.find(key); it != s.key_positions.end()) {
-    return it->second;
-  }
-  return s.where;  // the key is absent: its default is what did not fit
-}
 
 }  // namespace
 
@@ -38,7 +28,7 @@ std::unique_ptr<CheckpointsSection> parse_checkpoints_section(const toml::node& 
     diag.error(&node, "checkpoints", "must be a table ([checkpoints])");
     return s;
   }
-  record_positions(node, "checkpoints", s->key_positions);
+  formats::record_positions(node, "checkpoints", s->key_positions);
   const auto& src = node.source();
   const std::string file = src.path ? *src.path : std::string();
   const fs::path base_dir = fs::path(file).parent_path();
@@ -55,6 +45,8 @@ std::unique_ptr<CheckpointsSection> parse_checkpoints_section(const toml::node& 
   if (issues.empty()) {
     try {
       s->checkpoint_count = core::checkpoint::make_plan(s->config.plan).checkpoints.size();
+    } catch (const core::ConfigInvalid& e) {
+      formats::report(s->key_positions, s->where, e, diag);
     } catch (const std::exception& e) {
       diag.error(s->where, e.what());
     }
@@ -85,8 +77,10 @@ class CheckpointsParser final : public config::SectionParser {
     try {
       auto m = ck::make_checkpoint_module(s->config);
       m->attach(core::engine::RegisterTable(specs));
+    } catch (const core::ConfigInvalid& e) {
+      formats::report(s->key_positions, s->where, e, diag);
     } catch (const std::exception& e) {
-      diag.error(attach_error_position(*s, e.what()), e.what());
+      diag.error(s->where, e.what());  // not a key's fault
     }
   }
   void add_modules(const config::Config& config,

@@ -7,7 +7,7 @@
 #include <memory>
 
 #include "daemon/config/config.hpp"
-#include "daemon/sections/common/key_positions.hpp"
+#include "formats/toml/key_positions.hpp"
 #include "tools/plan/checkpoints_toml.hpp"
 
 namespace nccomp::daemon::sections {
@@ -17,7 +17,7 @@ struct CheckpointsSection final : config::Section {
   /// Number of checkpoints of the plan (the registers register_base .. + count − 1).
   std::size_t checkpoint_count{0};
   config::Where where;
-  KeyPositions key_positions;
+  formats::KeyPositions key_positions;
 };
 
 /// Parses one `[checkpoints]` node; contour_csv is relative to the file holding the table.

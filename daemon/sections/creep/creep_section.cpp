@@ -11,7 +11,6 @@
 
 #include "core/creep/toolpath.hpp"
 #include "daemon/config/builtin_sections.hpp"
-#include "daemon/sections/common/key_positions.hpp"
 
 namespace nccomp::daemon::sections {
 
@@ -270,10 +269,6 @@ void parse_transitions(const toml::array& arr, cc::CreepConfig& c, Diagnostics& 
 
 }  // namespace
 
-Where locate_creep_key(const CreepSection& section, std::string_view message) {
-  return locate_key(section.key_positions, section.where, message, "creep.");
-}
-
 std::unique_ptr<CreepSection> parse_creep_section(const toml::node& node, Diagnostics& diag) {
   auto s = std::make_unique<CreepSection>();
   s->where = config::where_of(&node, "creep");
@@ -282,7 +277,7 @@ std::unique_ptr<CreepSection> parse_creep_section(const toml::node& node, Diagno
     diag.error(&node, "creep", "must be a table ([creep])");
     return s;
   }
-  record_positions(node, "creep", s->key_positions);
+  formats::record_positions(node, "creep", s->key_positions);
   const std::size_t errors_before = diag.items().size();
   auto& c = s->module.creep;
   {
@@ -363,8 +358,8 @@ std::unique_ptr<CreepSection> parse_creep_section(const toml::node& node, Diagno
   }
   try {
     cc::validate(probe);
-  } catch (const std::invalid_argument& e) {
-    report_at_key(s->key_positions, s->where, e.what(), "creep.", diag);
+  } catch (const core::ConfigInvalid& e) {
+    formats::report(s->key_positions, s->where, e, diag);
   }
   return s;
 }
@@ -388,14 +383,16 @@ class CreepParser final : public config::SectionParser {
     for (const auto& e : config::registers_section(config).registers) {
       specs.push_back(e.spec);
     }
-    // The module's own attach() is the one judge of names, kinds and limits; its message names
-    // the key, mapped back to the key's position in the file.
+    // The module's own attach() is the one judge of names, kinds and limits; each issue names
+    // its key, mapped to the key's position in the file.
     // (On the heap: the module holds the memory of 8 tools, ~100 kB.)
     auto m = std::make_unique<cc::CreepModule>(s->module);
     try {
       m->attach(core::engine::RegisterTable(specs));
+    } catch (const core::ConfigInvalid& e) {
+      formats::report(s->key_positions, s->where, e, diag);
     } catch (const std::invalid_argument& e) {
-      report_at_key(s->key_positions, s->where, e.what(), "creep.", diag);
+      diag.error(s->where, e.what());  // not a key's fault (e.g. the limiter's own refusal)
     }
   }
   void add_modules(const config::Config& config,

@@ -7,12 +7,15 @@
 #include <stdexcept>
 #include <string>
 
-#include "tools/calibrate/config_toml.hpp"
+#include "formats/calib/config_toml.hpp"
 #include "tools/calibrate/script.hpp"
 #include "tools/calibrate/session.hpp"
 
 namespace nccomp::tools::calibrate {
 namespace {
+
+using formats::calib::load_calibration_config_file;
+using formats::calib::load_calibration_config_text;
 
 std::string error_of(const std::string& toml) {
   try {
@@ -57,19 +60,24 @@ touches_per_axis = 3
 
 TEST(CalibrationToml, ErrorsNameFileLineAndKey) {
   EXPECT_EQ(error_of("[calibration]\n\nplausibilty_um = 5\n"),
-            "m.toml:3: calibration.plausibilty_um: unknown key");
+            "m.toml:3:18: calibration.plausibilty_um: unknown key");
   EXPECT_EQ(error_of("[calibration]\nfacet_rule = \"guess\"\n"),
-            "m.toml:2: calibration.facet_rule: must be \"exact\" or \"proportional\"");
+            "m.toml:2:14: calibration.facet_rule: must be one of \"exact\", \"proportional\", "
+            "got \"guess\"");
   EXPECT_EQ(error_of("[calibration]\nregister_x = 70000\n"),
-            "m.toml:2: calibration.register_x: must be in 0..65535, got 70000");
+            "m.toml:2:14: calibration.register_x: must be an integer in [0, 65535], got 70000");
   EXPECT_EQ(error_of("[calibration]\nblank_radius_mm = \"5\"\n"),
-            "m.toml:2: calibration.blank_radius_mm: must be a number");
+            "m.toml:2:19: calibration.blank_radius_mm: must be a finite number");
+  // Every error, not only the first.
+  EXPECT_EQ(error_of("[calibration]\nregister_x = 70000\nfacet_rulez = 1\n"),
+            "m.toml:2:14: calibration.register_x: must be an integer in [0, 65535], got 70000\n"
+            "m.toml:3:15: calibration.facet_rulez: unknown key");
   EXPECT_NE(error_of("[calibration]\nblank_radius_mm = -5.0\n").find("calibration.blank_radius_mm"),
             std::string::npos);
   EXPECT_NE(error_of("[calibration]\nprediction = \"temperature\"\n")
                 .find("calibration.temperature_sensor"),
             std::string::npos);
-  EXPECT_NE(error_of("calibration = 3\n").find("m.toml:1: calibration: must be a table"),
+  EXPECT_NE(error_of("calibration = 3\n").find("m.toml:1:15: calibration: must be a table"),
             std::string::npos);
   EXPECT_NE(error_of("[calibration\n").find("m.toml:1"), std::string::npos);
 }

@@ -329,8 +329,7 @@ normal_um = [0, 1]
       std::string::npos)
       << e;
   EXPECT_NE(e.find("creep.deflection[0].wear_um[1]: must be a number"), std::string::npos) << e;
-  EXPECT_NE(e.find("creep.deflection[0].lateral_um: missing required key"), std::string::npos)
-      << e;
+  EXPECT_NE(e.find("creep.deflection[0].lateral_um: missing required key"), std::string::npos) << e;
 }
 
 TEST(CreepSection, CrossFieldRulesPointAtTheKey) {
@@ -346,8 +345,7 @@ fallback_channel = "length"
 )";
   const auto f = d.write("a.toml", text);
   EXPECT_NE(errors_of(f).find(at(f, text, "mode = \"tool_registers\"") +
-                              "creep.output.mode: creep config: creep.output.mode is "
-                              "\"tool_registers\": x/y/z_register must be -1"),
+                              "creep.output.mode: \"tool_registers\": x/y/z_register must be -1"),
             std::string::npos)
       << errors_of(f);
 }
@@ -448,8 +446,7 @@ removal_source = "toolpath"
 )";
   const auto f3 = d.write("c.toml", no_removal);
   EXPECT_NE(errors_of(f3).find(at(f3, no_removal, "removal_source =") +
-                               "creep.interval.removal_source: creep config: "
-                               "creep.interval.removal_source is \"toolpath\": "
+                               "creep.interval.removal_source: \"toolpath\": "
                                "creep.edge.toolpath_file needs a removal_mm2 column"),
             std::string::npos)
       << errors_of(f3);
