@@ -1,5 +1,5 @@
 // Calibration and recalibration (S3) as an engine module (core/engine/engine.hpp): the daemon
-// builds one from the `[calibration]` config section (tools/calibrate/config_toml.hpp reads it),
+// builds one from the `[calibration]` config section (formats/calib/config_toml.hpp reads it),
 // the engine steps it with the validated events, limits its absolute targets per register and
 // persists its state with the rest of the engine's.
 //

@@ -15,7 +15,7 @@ namespace nccomp::daemon::sections {
 namespace {
 
 namespace fs = std::filesystem;
-namespace ck = tools::checkpoints;
+namespace ck = formats::checkpoints;
 
 }  // namespace
 
@@ -32,17 +32,9 @@ std::unique_ptr<CheckpointsSection> parse_checkpoints_section(const toml::node& 
   const auto& src = node.source();
   const std::string file = src.path ? *src.path : std::string();
   const fs::path base_dir = fs::path(file).parent_path();
-  std::vector<ck::ConfigIssue> issues;
-  s->config = ck::parse_checkpoints(*table, file, base_dir, issues);
-  for (auto& i : issues) {
-    config::Where w;
-    w.file = i.file.empty() ? file : i.file;
-    w.line = i.line;
-    w.column = i.column;
-    w.key_path = i.key_path;
-    diag.error(std::move(w), std::move(i.message));
-  }
-  if (issues.empty()) {
+  const std::size_t errors_before = diag.items().size();
+  s->config = ck::parse_checkpoints(*table, file, base_dir, diag);
+  if (diag.items().size() == errors_before) {
     try {
       s->checkpoint_count = core::checkpoint::make_plan(s->config.plan).checkpoints.size();
     } catch (const core::ConfigInvalid& e) {

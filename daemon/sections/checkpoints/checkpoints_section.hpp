@@ -1,5 +1,5 @@
 // The daemon's `[checkpoints]` section (docs/checkpoints.md): parsed by
-// tools::checkpoints::parse_checkpoints() (the loader `nccomp plan` uses, so the daemon and the
+// formats::checkpoints::parse_checkpoints() (the loader `nccomp plan` uses, so the daemon and the
 // probing program always agree on the plan), registers checked against [[registers]] in
 // cross_check(), one CheckpointModule added to the engine. Not real-time.
 #pragma once
@@ -7,13 +7,13 @@
 #include <memory>
 
 #include "daemon/config/config.hpp"
+#include "formats/checkpoints/checkpoints_toml.hpp"
 #include "formats/toml/key_positions.hpp"
-#include "tools/plan/checkpoints_toml.hpp"
 
 namespace nccomp::daemon::sections {
 
 struct CheckpointsSection final : config::Section {
-  tools::checkpoints::CheckpointsConfig config;
+  formats::checkpoints::CheckpointsConfig config;
   /// Number of checkpoints of the plan (the registers register_base .. + count − 1).
   std::size_t checkpoint_count{0};
   config::Where where;
