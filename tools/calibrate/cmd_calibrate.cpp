@@ -21,9 +21,9 @@
 #include <thread>
 
 #include "formats/calib/config_toml.hpp"
+#include "formats/calib/facet_import.hpp"
+#include "formats/calib/script.hpp"
 #include "tools/calibrate/daemon_client.hpp"
-#include "tools/calibrate/facet_import.hpp"
-#include "tools/calibrate/script.hpp"
 #include "tools/calibrate/session.hpp"
 #include "tools/nccomp/command.hpp"
 

@@ -10,7 +10,7 @@
 #include "core/calib/calibrator.hpp"
 #include "core/calib/state.hpp"
 #include "formats/calib/config_toml.hpp"
-#include "tools/calibrate/script.hpp"
+#include "formats/calib/script.hpp"
 #include "tools/calibrate/session.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {

@@ -8,7 +8,7 @@
 #include <string>
 
 #include "formats/calib/config_toml.hpp"
-#include "tools/calibrate/script.hpp"
+#include "formats/calib/script.hpp"
 #include "tools/calibrate/session.hpp"
 
 namespace nccomp::tools::calibrate {

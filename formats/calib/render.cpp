@@ -1,4 +1,4 @@
-#include "tools/calibrate/render.hpp"
+#include "formats/calib/render.hpp"
 
 #include <fmt/format.h>
 
@@ -7,7 +7,7 @@
 #include <cmath>
 #include <ctime>
 
-namespace nccomp::tools::calibrate {
+namespace nccomp::formats::calib {
 
 using core::AlarmCode;
 using core::calib::Phase;
@@ -213,4 +213,4 @@ std::string status_block(const core::calib::CalibSnapshot& s, const std::string&
   return o;
 }
 
-}  // namespace nccomp::tools::calibrate
+}  // namespace nccomp::formats::calib
