@@ -2,12 +2,14 @@
 // on the documented example files.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <fstream>
 #include <sstream>
 #include <stdexcept>
 #include <string>
 
 #include "formats/calib/config_toml.hpp"
+#include "formats/calib/render.hpp"
 #include "formats/calib/script.hpp"
 #include "tools/calibrate/session.hpp"
 
@@ -159,6 +161,16 @@ TEST(Session, ExampleScriptsCalibrateAndRecalibrate) {
   EXPECT_EQ(b.calibrator().model(core::calib::Slot::kXLateral).touch_sets, 3);
   // No slewing from zero after the import: the registers resume at the saved corrections.
   EXPECT_EQ(log2.str().find("offset-slew-limited"), std::string::npos) << log2.str();
+}
+
+// The dates were computed with Python's datetime (UTC), independently of this code.
+TEST(Render, UtcTimes) {
+  EXPECT_EQ(formats::calib::format_utc(1795766400.0), "2026-11-27 08:00:00 UTC");
+  EXPECT_EQ(formats::calib::format_utc(1795788723.9), "2026-11-27 14:12:03 UTC");
+  EXPECT_EQ(formats::calib::format_utc(951868799.0), "2000-02-29 23:59:59 UTC");
+  EXPECT_EQ(formats::calib::format_utc(0.0), "1970-01-01 00:00:00 UTC");
+  EXPECT_EQ(formats::calib::format_utc(-1.0), "1969-12-31 23:59:59 UTC");
+  EXPECT_EQ(formats::calib::format_utc(std::nan("")), "never");
 }
 
 TEST(Session, TimeCannotGoBack) {
