@@ -10,6 +10,11 @@
 
 namespace nccomp::daemon::config {
 
+using formats::Diagnostics;
+using formats::TableReader;
+using formats::Where;
+using formats::where_of;
+
 namespace {
 
 const toml::table* as_table(const toml::node& node, std::string_view name, Diagnostics& diag) {

@@ -9,6 +9,10 @@
 
 namespace nccomp::daemon::config {
 
+using formats::Diagnostics;
+using formats::Where;
+using formats::where_of;
+
 void register_builtin_sections();  // builtin_sections.cpp
 
 namespace fs = std::filesystem;

@@ -29,15 +29,6 @@
 
 namespace nccomp::daemon::config {
 
-// The diagnostics type and the reader moved to formats/toml/ (issue 18); these names stay
-// until every section says formats:: itself.
-using formats::Diagnostic;
-using formats::Diagnostics;
-using formats::format;
-using formats::TableReader;
-using formats::Where;
-using formats::where_of;
-
 /// Parsed content of one section. Section parsers derive their own type from it.
 class Section {
  public:
@@ -54,11 +45,12 @@ class SectionParser {
   [[nodiscard]] virtual std::string_view name() const noexcept = 0;
   /// Parses the section's node (a table, or an array of tables for [[name]] sections). Report
   /// problems to diag (with where_of()/TableReader) and return what could be parsed.
-  virtual std::unique_ptr<Section> parse(const toml::node& node, Diagnostics& diag) const = 0;
+  virtual std::unique_ptr<Section> parse(const toml::node& node,
+                                         formats::Diagnostics& diag) const = 0;
   /// The section's value when the file does not have it; nullptr = the section stays absent.
   [[nodiscard]] virtual std::unique_ptr<Section> absent() const { return nullptr; }
   /// After every section is parsed: checks references to other sections.
-  virtual void cross_check(const Config& config, Diagnostics& diag) const {
+  virtual void cross_check(const Config& config, formats::Diagnostics& diag) const {
     (void)config;
     (void)diag;
   }
@@ -103,7 +95,7 @@ class Config {
 
   /// Where a key is, and its value as text when it is a string or an integer ("" otherwise).
   struct KeyInfo {
-    Where where;
+    formats::Where where;
     std::string value;
   };
   /// Every key of every section ("creep.output.z_register", "registers[8].name", tables
@@ -130,7 +122,7 @@ class Config {
 
 struct LoadResult {
   std::unique_ptr<Config> config;  // null if there were errors
-  Diagnostics diagnostics;
+  formats::Diagnostics diagnostics;
 };
 
 /// Loads path and its includes, parses every section, cross-checks. Never throws for bad input.

@@ -14,9 +14,9 @@
 namespace nccomp::daemon::sections {
 
 std::unique_ptr<CalibrationSection> parse_calibration_section(const toml::node& node,
-                                                              config::Diagnostics& diag) {
+                                                              formats::Diagnostics& diag) {
   auto s = std::make_unique<CalibrationSection>();
-  s->where = config::where_of(&node, "calibration");
+  s->where = formats::where_of(&node, "calibration");
   if (node.as_table() == nullptr) {
     diag.error(&node, "calibration", "must be a table ([calibration])");
     return s;
@@ -36,10 +36,10 @@ class CalibrationParser final : public config::SectionParser {
  public:
   std::string_view name() const noexcept override { return "calibration"; }
   std::unique_ptr<config::Section> parse(const toml::node& node,
-                                         config::Diagnostics& diag) const override {
+                                         formats::Diagnostics& diag) const override {
     return parse_calibration_section(node, diag);
   }
-  void cross_check(const config::Config& config, config::Diagnostics& diag) const override {
+  void cross_check(const config::Config& config, formats::Diagnostics& diag) const override {
     const auto* s = calibration_section(config);
     if (s == nullptr) return;
     std::vector<core::engine::RegisterSpec> specs;

@@ -14,13 +14,13 @@ namespace nccomp::daemon::sections {
 
 struct CalibrationSection final : config::Section {
   core::calib::CalibrationConfig config;
-  config::Where where;
+  formats::Where where;
   formats::KeyPositions key_positions;
 };
 
 /// Parses one `[calibration]` node.
 std::unique_ptr<CalibrationSection> parse_calibration_section(const toml::node& node,
-                                                              config::Diagnostics& diag);
+                                                              formats::Diagnostics& diag);
 
 /// The [calibration] section of a loaded config (nullptr if absent).
 const CalibrationSection* calibration_section(const config::Config& config);

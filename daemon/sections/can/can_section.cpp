@@ -12,6 +12,10 @@
 #include "drivers/can/can_config.hpp"
 
 namespace nccomp::daemon::config {
+
+using formats::Diagnostics;
+using formats::Where;
+using formats::where_of;
 namespace {
 
 namespace cn = drivers::can;

@@ -20,9 +20,9 @@ namespace ck = formats::checkpoints;
 }  // namespace
 
 std::unique_ptr<CheckpointsSection> parse_checkpoints_section(const toml::node& node,
-                                                              config::Diagnostics& diag) {
+                                                              formats::Diagnostics& diag) {
   auto s = std::make_unique<CheckpointsSection>();
-  s->where = config::where_of(&node, "checkpoints");
+  s->where = formats::where_of(&node, "checkpoints");
   const auto* table = node.as_table();
   if (table == nullptr) {
     diag.error(&node, "checkpoints", "must be a table ([checkpoints])");
@@ -56,10 +56,10 @@ class CheckpointsParser final : public config::SectionParser {
  public:
   std::string_view name() const noexcept override { return "checkpoints"; }
   std::unique_ptr<config::Section> parse(const toml::node& node,
-                                         config::Diagnostics& diag) const override {
+                                         formats::Diagnostics& diag) const override {
     return parse_checkpoints_section(node, diag);
   }
-  void cross_check(const config::Config& config, config::Diagnostics& diag) const override {
+  void cross_check(const config::Config& config, formats::Diagnostics& diag) const override {
     const auto* s = checkpoints_section(config);
     if (s == nullptr) return;
     std::vector<core::engine::RegisterSpec> specs;

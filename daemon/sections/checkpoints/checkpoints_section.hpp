@@ -16,13 +16,13 @@ struct CheckpointsSection final : config::Section {
   formats::checkpoints::CheckpointsConfig config;
   /// Number of checkpoints of the plan (the registers register_base .. + count − 1).
   std::size_t checkpoint_count{0};
-  config::Where where;
+  formats::Where where;
   formats::KeyPositions key_positions;
 };
 
 /// Parses one `[checkpoints]` node; contour_csv is relative to the file holding the table.
 std::unique_ptr<CheckpointsSection> parse_checkpoints_section(const toml::node& node,
-                                                              config::Diagnostics& diag);
+                                                              formats::Diagnostics& diag);
 
 /// The [checkpoints] section of a loaded config (nullptr if absent).
 const CheckpointsSection* checkpoints_section(const config::Config& config);

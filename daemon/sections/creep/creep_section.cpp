@@ -18,9 +18,9 @@ namespace {
 
 namespace fs = std::filesystem;
 namespace cc = core::creep;
-using config::Diagnostics;
-using config::TableReader;
-using config::Where;
+using formats::Diagnostics;
+using formats::TableReader;
+using formats::Where;
 
 // Largest accepted toolpath file: kMaxToolpathRows rows of a generous 64 bytes each. A bigger
 // file is refused before it is read (and /dev/zero or a FIFO is not a regular file).
@@ -271,7 +271,7 @@ void parse_transitions(const toml::array& arr, cc::CreepConfig& c, Diagnostics& 
 
 std::unique_ptr<CreepSection> parse_creep_section(const toml::node& node, Diagnostics& diag) {
   auto s = std::make_unique<CreepSection>();
-  s->where = config::where_of(&node, "creep");
+  s->where = formats::where_of(&node, "creep");
   const auto* table = node.as_table();
   if (table == nullptr) {
     diag.error(&node, "creep", "must be a table ([creep])");

@@ -29,14 +29,14 @@ struct CreepSection final : config::Section {
   std::string toolpath_file;
   /// Position of the [creep] table and of every key below it ("creep.edge.edge_points",
   /// "creep.deflection[0].wear_um[2]"), for errors found after parsing.
-  config::Where where;
+  formats::Where where;
   formats::KeyPositions key_positions;
 };
 
 /// Parses one `[creep]` node. creep.edge.toolpath_file is relative to the directory of the file
 /// that holds the table. Problems go to diag; the result is meaningful only if none was added.
 std::unique_ptr<CreepSection> parse_creep_section(const toml::node& node,
-                                                  config::Diagnostics& diag);
+                                                  formats::Diagnostics& diag);
 
 /// The [creep] section of a loaded config (nullptr if absent).
 const CreepSection* creep_section(const config::Config& config);

@@ -25,6 +25,10 @@
 #include "drivers/modbus/modbus_bus.hpp"
 
 namespace nccomp::daemon::config {
+
+using formats::Diagnostics;
+using formats::Where;
+using formats::where_of;
 namespace {
 
 namespace mb = drivers::modbus;

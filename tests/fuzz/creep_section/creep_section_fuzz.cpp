@@ -28,10 +28,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   if (node == nullptr) {
     return 0;
   }
-  cfg::Diagnostics diag;
+  nccomp::formats::Diagnostics diag;
   auto section = nccomp::daemon::sections::parse_creep_section(*node, diag);
   for (const auto& d : diag.items()) {
-    (void)cfg::format(d);
+    (void)nccomp::formats::format(d);
   }
   if (!diag.ok()) {
     return 0;

@@ -12,6 +12,9 @@
 #include "daemon/sections/creep/creep_section.hpp"
 
 namespace nccomp::daemon::config {
+
+using formats::Diagnostics;
+using formats::format;
 namespace {
 
 namespace fs = std::filesystem;

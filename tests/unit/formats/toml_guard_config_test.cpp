@@ -12,6 +12,8 @@
 #include "daemon/config/config.hpp"
 
 namespace nccomp::daemon::config {
+
+using formats::format;
 namespace {
 
 std::string only_error(const LoadResult& r) {
