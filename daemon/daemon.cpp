@@ -84,7 +84,7 @@ std::vector<BusEntry> make_buses(const cfg::Config& c) {
 std::unique_ptr<Runtime> make_runtime(const cfg::Config& c, const std::vector<BusEntry>& buses,
                                       bool dry_run_cli, std::uint64_t generation) {
   auto rt = std::make_unique<Runtime>();
-  cfg::Diagnostics diag;
+  formats::Diagnostics diag;
   rt->engine = cfg::build_engine(c, diag);
   if (!rt->engine) {
     // The engine's refusal, located: "file:line:column: key.path: message".
@@ -632,7 +632,7 @@ int run_daemon(const DaemonOptions& options) {
           std::string refused;
           if (!next.config) {
             for (const auto& d : next.diagnostics.items()) {
-              spdlog::error("reload: {}", cfg::format(d));
+              spdlog::error("reload: {}", formats::format(d));
             }
             refused = std::to_string(next.diagnostics.items().size()) + " error(s)";
           } else {

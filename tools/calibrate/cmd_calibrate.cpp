@@ -20,10 +20,10 @@
 
 #include <thread>
 
-#include "tools/calibrate/config_toml.hpp"
+#include "formats/calib/config_toml.hpp"
+#include "formats/calib/facet_import.hpp"
+#include "formats/calib/script.hpp"
 #include "tools/calibrate/daemon_client.hpp"
-#include "tools/calibrate/facet_import.hpp"
-#include "tools/calibrate/script.hpp"
 #include "tools/calibrate/session.hpp"
 #include "tools/nccomp/command.hpp"
 
@@ -267,7 +267,7 @@ void run(const Options& o) {
   }
   nccomp::core::calib::CalibrationConfig config;
   try {
-    config = cal::load_calibration_config_file(o.config);
+    config = nccomp::formats::calib::load_calibration_config_file(o.config);
   } catch (const std::invalid_argument& e) {
     throw CommandError(kExitInvalidInput, e.what());
   }

@@ -15,13 +15,13 @@
 
 #include "core/calib/state.hpp"
 #include "core/rt/seqlock.hpp"
-#include "tools/calibrate/render.hpp"
-#include "tools/calibrate/script.hpp"
+#include "formats/calib/render.hpp"
+#include "formats/calib/script.hpp"
 
 namespace nccomp::daemon::sections {
 
 namespace cal = core::calib;
-namespace tc = tools::calibrate;
+namespace tc = formats::calib;
 
 namespace {
 
@@ -321,7 +321,7 @@ std::string handle_calibrate_command(std::string_view args, CommandContext& ctx)
 }
 
 CommandAccess calibrate_access(std::string_view args) noexcept {
-  // Words are case-insensitive in the script language (tools/calibrate/script.cpp).
+  // Words are case-insensitive in the script language (formats/calib/script.cpp).
   const auto is_status = [](std::string_view a) {
     constexpr std::string_view kStatus = "status";
     if (a.size() != kStatus.size()) return false;

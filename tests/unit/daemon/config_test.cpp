@@ -12,6 +12,9 @@
 #include "daemon/sections/creep/creep_section.hpp"
 
 namespace nccomp::daemon::config {
+
+using formats::Diagnostics;
+using formats::format;
 namespace {
 
 namespace fs = std::filesystem;
@@ -176,9 +179,9 @@ cpu_affinity = [1, "x"]
   ASSERT_EQ(items.size(), 5U) << r.diagnostics.to_string();
   EXPECT_EQ(items[0].where.key_path, "daemon.rate_hz");
   EXPECT_EQ(items[0].where.line, 2);
-  EXPECT_NE(items[0].message.find("out of range [1, 10000]"), std::string::npos);
+  EXPECT_NE(items[0].message.find("must be a number in [1, 10000]"), std::string::npos);
   EXPECT_EQ(items[1].where.key_path, "daemon.dry_run");
-  EXPECT_EQ(items[1].message, "expected true or false");
+  EXPECT_EQ(items[1].message, "must be true or false");
   EXPECT_EQ(items[2].where.key_path, "daemon.overrun_policy");
   EXPECT_EQ(items[2].where.line, 4);
   EXPECT_EQ(items[3].where.key_path, "daemon.realtime.sched_fifo_priority");
@@ -207,7 +210,7 @@ max_rate_um_per_s = 50
   const auto& items = r.diagnostics.items();
   ASSERT_EQ(items.size(), 3U) << r.diagnostics.to_string();
   EXPECT_EQ(items[0].where.key_path, "registers[0].max_rate_um_per_s");
-  EXPECT_EQ(items[0].message, "required key is missing");
+  EXPECT_EQ(items[0].message, "missing required key");
   EXPECT_EQ(items[1].where.key_path, "registers[1].name");
   EXPECT_EQ(items[1].where.line, 9);
   EXPECT_EQ(items[2].where.key_path, "registers[1].kind");
@@ -250,7 +253,7 @@ TEST(ConfigLoader, StatusAdminGroupAndClientLimits) {
   EXPECT_EQ(items[0].where.file, f);
   EXPECT_EQ(items[0].where.line, 2);
   EXPECT_EQ(items[0].where.key_path, "status.admin_group");
-  EXPECT_NE(items[0].message.find("expected a group name"), std::string::npos) << items[0].message;
+  EXPECT_NE(items[0].message.find("must be a group name"), std::string::npos) << items[0].message;
   EXPECT_EQ(items[1].where.key_path, "status.client_timeout_s");
   EXPECT_EQ(items[2].where.key_path, "status.max_clients");
 }
