@@ -9,7 +9,7 @@
 #include <stdexcept>
 
 #include "daemon/config/builtin_sections.hpp"
-#include "formats/toml_guard.hpp"
+#include "formats/toml/guard.hpp"
 
 namespace nccomp::tools::mqtt {
 
