@@ -212,6 +212,39 @@ TEST_F(CliConventions, AnInvalidInputFileExitsWith3) {
   }
 }
 
+// nccomp(1) cannot drift from the binary: every subcommand `nccomp --help` lists has its section
+// ("## name") in man/nccomp.1.scd, and every long option its `--help` lists is named there.
+TEST_F(CliConventions, TheManPageOfNccompDocumentsEverySubcommandAndOption) {
+  const std::string page = slurp(std::string(NCCOMP_SOURCE_DIR) + "/man/nccomp.1.scd");
+  ASSERT_FALSE(page.empty());
+  const std::vector<std::string> subs = subcommands(run({NCCOMP_BIN, "--help"}).out);
+  ASSERT_FALSE(subs.empty());
+  for (const std::string& sub : subs) {
+    SCOPED_TRACE(sub);
+    const auto begin = page.find("\n## " + sub + "\n");
+    ASSERT_NE(begin, std::string::npos) << "no section '## " << sub << "'";
+    const auto end = page.find("\n#", begin + 1);
+    const std::string section = page.substr(begin, end - begin);
+    std::istringstream help(run({NCCOMP_BIN, sub, "--help"}).out);
+    const std::regex option(R"(--[a-z][a-z0-9-]*)");
+    std::string line;
+    while (std::getline(help, line)) {
+      if (line.rfind("  ", 0) != 0 || line.find_first_not_of(' ') == std::string::npos ||
+          line[line.find_first_not_of(' ')] != '-') {
+        continue;  // description lines
+      }
+      const std::string names = line.substr(0, line.find(' ', line.find_first_not_of(' ')));
+      for (std::sregex_iterator it(names.begin(), names.end(), option), e; it != e; ++it) {
+        if (it->str() == "--help") {
+          continue;
+        }
+        EXPECT_TRUE(std::regex_search(section, std::regex(it->str() + "([^A-Za-z0-9_-]|$)")))
+            << it->str() << " of nccomp " << sub << " is not in nccomp(1)";
+      }
+    }
+  }
+}
+
 TEST_F(CliConventions, BashCompletionOffersEverySubcommandAndItsOptions) {
   const Proc help = run({NCCOMP_BIN, "--help"});
   const std::vector<std::string> subs = subcommands(help.out);
