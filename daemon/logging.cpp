@@ -6,12 +6,19 @@
 #include <spdlog/spdlog.h>
 #include <sys/stat.h>
 #include <systemd/sd-daemon.h>
+#include <systemd/sd-journal.h>
 
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
 
 namespace nccomp::daemon {
+
+namespace {
+// Set once by setup_logging() before any thread logs: alarms then go to the journal with their
+// code, name, subject and value as fields (journalctl NCCOMP_ALARM_CODE=54).
+bool g_journal_fields = false;
+}  // namespace
 
 bool stderr_is_journal() {
   const char* js = std::getenv("JOURNAL_STREAM");
@@ -47,6 +54,7 @@ std::string setup_logging(const config::LogSection& section) {
   logger->set_level(spdlog::level::from_str(section.level == "warning" ? "warn" : section.level));
   logger->flush_on(spdlog::level::info);
   spdlog::set_default_logger(logger);
+  g_journal_fields = journal;
   return journal ? "journal" : "terminal";
 }
 
@@ -161,8 +169,23 @@ void EventLogger::log_alarm(const core::AlarmEvent& a) {
   const auto level = a.severity == core::Severity::kAlarm     ? spdlog::level::err
                      : a.severity == core::Severity::kWarning ? spdlog::level::warn
                                                               : spdlog::level::info;
-  spdlog::log(level, "{} {} (code {}) subject {} value {}", severity_name(a.severity),
-              alarm_name(a.code), static_cast<unsigned>(a.code), a.subject, a.value);
+  if (!g_journal_fields || !spdlog::default_logger()->should_log(level)) {
+    spdlog::log(level, "{} {} (code {}) subject {} value {}", severity_name(a.severity),
+                alarm_name(a.code), static_cast<unsigned>(a.code), a.subject, a.value);
+    return;
+  }
+  const std::string name = alarm_name(a.code);
+  const int priority = a.severity == core::Severity::kAlarm     ? LOG_ERR
+                       : a.severity == core::Severity::kWarning ? LOG_WARNING
+                                                                : LOG_INFO;
+  const std::string message =
+      fmt::format("{} {} (code {}) subject {} value {}", severity_name(a.severity), name,
+                  static_cast<unsigned>(a.code), a.subject, a.value);
+  sd_journal_send("MESSAGE=%s", message.c_str(), "PRIORITY=%d", priority,
+                  "SYSLOG_IDENTIFIER=nccompd", "NCCOMP_ALARM_CODE=%u",
+                  static_cast<unsigned>(a.code), "NCCOMP_ALARM_NAME=%s", name.c_str(),
+                  "NCCOMP_ALARM_SEVERITY=%s", severity_name(a.severity), "NCCOMP_ALARM_SUBJECT=%d",
+                  static_cast<int>(a.subject), "NCCOMP_ALARM_VALUE=%g", a.value, nullptr);
 }
 
 void EventLogger::drain() {
