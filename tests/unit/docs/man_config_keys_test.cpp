@@ -8,9 +8,10 @@
 //   refused as an unknown key (while two made-up keys in the same table are).
 //
 // The page documents a table with a heading "## [a.b]" ("## [[a.b]]" for an array of tables; a
-// "\*" segment stands for any name, e.g. the signals of a Modbus group) and each key with a line
-// "*key* = ..." below it. Top-level keys stand under a heading without brackets. The fixtures
-// nccompd-model-context.toml and nccompd-creep-extra.toml add the tables no shipped example has.
+// segment in capitals stands for any name: [modbus.GROUP.SIGNAL] is every Modbus signal) and each
+// key with a line "*key* = ..." below it. Top-level keys stand under a heading without brackets.
+// The fixtures nccompd-model-context.toml and nccompd-creep-extra.toml add the tables no shipped
+// example has.
 #include <gtest/gtest.h>
 #include <toml++/toml.h>
 #include <unistd.h>
@@ -62,7 +63,8 @@ std::vector<std::string> split(const std::string& path) {
   return parts;
 }
 
-/// A documented key or table pattern matches a path segment by segment ("*" matches any one).
+/// A documented key or table pattern matches a path segment by segment (an upper-case segment,
+/// e.g. SIGNAL, stands for any one).
 bool matches(const std::string& pattern, const std::string& path) {
   const auto p = split(pattern);
   const auto k = split(path);
@@ -70,7 +72,9 @@ bool matches(const std::string& pattern, const std::string& path) {
     return false;
   }
   for (std::size_t i = 0; i < p.size(); ++i) {
-    if (p[i] != "*" && p[i] != k[i]) {
+    const bool any =
+        std::all_of(p[i].begin(), p[i].end(), [](char c) { return c >= 'A' && c <= 'Z'; });
+    if (!any && p[i] != k[i]) {
       return false;
     }
   }
@@ -78,7 +82,7 @@ bool matches(const std::string& pattern, const std::string& path) {
 }
 
 struct ManPage {
-  std::set<std::string> tables;  // "daemon.realtime", "registers", "modbus.*.*"
+  std::set<std::string> tables;  // "daemon.realtime", "registers", "modbus.GROUP.SIGNAL"
   std::set<std::string> arrays;  // the tables written [[...]]
   std::map<std::string, std::set<std::string>> keys;  // table ("" = top level) -> key names
 };
@@ -86,8 +90,7 @@ struct ManPage {
 ManPage read_man_page() {
   ManPage m;
   std::istringstream in(slurp(kSource / "man/nccompd.toml.5.scd"));
-  // scdoc needs "*" escaped in text: "## [modbus.\*.\*]".
-  const std::regex heading(R"(^#{2,3} (\[\[?)((?:[a-z0-9_.]|\\\*)+)\]\]?\s*$)");
+  const std::regex heading(R"(^#{2,3} (\[\[?)([A-Za-z0-9_.]+)\]\]?\s*$)");
   const std::regex other_heading(R"(^#{1,3} )");
   const std::regex key(R"(^\*([a-z0-9_]+)\* = )");
   std::string table;
@@ -95,7 +98,7 @@ ManPage read_man_page() {
   while (std::getline(in, line)) {
     std::smatch mm;
     if (std::regex_match(line, mm, heading)) {
-      table = std::regex_replace(mm[2].str(), std::regex(R"(\\)"), "");
+      table = mm[2].str();
       m.tables.insert(table);
       if (mm[1].str() == "[[") {
         m.arrays.insert(table);
