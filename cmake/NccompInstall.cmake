@@ -46,6 +46,8 @@ install(FILES README.md docs/calibration.md docs/can.md docs/checkpoints.md
 install(FILES config/nccompd.toml config/nccompd-loopback.toml config/reference-nc-modbus.toml
               config/reference-nc-can.toml config/reference-nc-can-fd.toml
         DESTINATION "${CMAKE_INSTALL_DOCDIR}/examples")
+# The drop-in for [can] restart = "daemon" (docs/can.md): an example, never active by itself.
+install(FILES systemd/nccompd-can-restart.conf DESTINATION "${CMAKE_INSTALL_DOCDIR}/examples")
 install(FILES LICENSE DESTINATION "${CMAKE_INSTALL_DOCDIR}")
 install(FILES tools/nccomp/nccomp.bash DESTINATION
         "${CMAKE_INSTALL_DATADIR}/bash-completion/completions" RENAME nccomp)

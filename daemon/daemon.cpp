@@ -23,6 +23,7 @@
 #include "daemon/command.hpp"
 #include "daemon/config/builtin_sections.hpp"
 #include "daemon/config/config.hpp"
+#include "daemon/events_while_down.hpp"
 #include "daemon/lockstep.hpp"
 #include "daemon/logging.hpp"
 #include "daemon/loop.hpp"
@@ -191,6 +192,7 @@ int run_daemon(const DaemonOptions& options) {
   fs::create_directories(state_dir, ec);
   std::string state_problem;
   std::uint64_t sequence = 0;
+  bool state_imported = false;
   {
     const StateFile sf = read_state_file(state_path);
     if (sf.status == StateFileStatus::kAbsent) {
@@ -203,6 +205,7 @@ int run_daemon(const DaemonOptions& options) {
       const core::TimeNs resume_ns = options.lockstep_socket.empty() ? monotonic_ns() : 0;
       if (runtime->engine->import_state(sf.payload, resume_ns, &skipped)) {
         sequence = sf.sequence;
+        state_imported = true;
         spdlog::info("state resumed from {} (write #{}, {} bytes, {} unknown entries skipped)",
                      state_path, sf.sequence, sf.payload.size(), skipped);
       } else {
@@ -258,6 +261,7 @@ int run_daemon(const DaemonOptions& options) {
     auto& engine = *runtime->engine;
     std::size_t anchored = 0;
     std::size_t differ = 0;
+    std::size_t beyond = 0;
     for (std::size_t i = 0; i < engine.register_count() && i <= 0xFFFFU; ++i) {
       const auto v = read(static_cast<std::uint16_t>(i));
       const auto a = v ? engine.anchor_register(i, *v, hook_now) : core::engine::AnchorResult{};
@@ -273,19 +277,84 @@ int run_daemon(const DaemonOptions& options) {
             i, engine.register_spec(i).name, *v, a.before_um, *v - a.before_um);
       }
       if (a.beyond_limit) {
-        spdlog::warn("register {} ({}): the NC holds {:.3f} um, beyond max_abs_um {:.3f}", i,
-                     engine.register_spec(i).name, *v, engine.register_spec(i).limits.max_abs_um);
+        ++beyond;
+        spdlog::error(
+            "register {} ({}): the NC holds {:.3f} um, beyond max_abs_um {:.3f}: nothing is "
+            "written "
+            "to it (alarm register_beyond_limit, code 60) until the NC's register is corrected and "
+            "nccompd restarted, or `nccomp register release {}` writes the daemon's value in one "
+            "move",
+            i, engine.register_spec(i).name, *v, engine.register_spec(i).limits.max_abs_um,
+            engine.register_spec(i).name);
+      }
+    }
+    // Modules without usable state take what the NC holds as their starting point, or the
+    // register is held (docs/daemon.md, "Start without usable state"). Not in hold mode (a
+    // corrupt state file): nothing is written then anyway, and the file may still be restored.
+    std::size_t adopted = 0;
+    std::size_t held = 0;
+    for (std::size_t i = 0; state_problem.empty() && i < engine.register_count() && i <= 0xFFFFU;
+         ++i) {
+      const int b = i < runtime->register_bus.size() ? runtime->register_bus[i] : -1;
+      const bool readable = b >= 0 && static_cast<std::size_t>(b) < buses.size() &&
+                            buses[static_cast<std::size_t>(b)].bus->reads_back();
+      const auto v = read(static_cast<std::uint16_t>(i));
+      const auto what = engine.adopt_without_state(i, v, readable, hook_now);
+      if (what == core::engine::StartupAdoption::kNotNeeded ||
+          what == core::engine::StartupAdoption::kFlag) {
+        continue;
+      }
+      const auto k = static_cast<std::size_t>(engine.register_writer(i));
+      const auto source = engine.module_state(k);
+      const std::string_view why =
+          source == core::engine::ModuleStateSource::kRestored
+              ? "the register is held without state since an earlier start"
+          : source == core::engine::ModuleStateSource::kUnreadable
+              ? "its entry in the state file could not be read"
+          : state_imported ? "it is not in the state file: added to the configuration since"
+                           : "no state file";
+      const std::string& name = engine.register_spec(i).name;
+      const std::string_view module = engine.module(k).name();
+      if (what == core::engine::StartupAdoption::kAdopted) {
+        ++adopted;
+        if (std::fabs(*v) > 0.1) {
+          spdlog::warn(
+              "register {} ({}): module {} has no usable state ({}); the NC's {:.3f} um is its "
+              "starting point: nothing is written to the register until a new measurement "
+              "(register_adopted, code 61)",
+              i, name, module, why, *v);
+        }
+      } else if (what == core::engine::StartupAdoption::kHeld) {
+        ++held;
+        spdlog::warn(
+            "register {} ({}): module {} has no usable state ({}) and {}: nothing is written to "
+            "it (alarm register_held_without_state, code 62) until `nccomp register release {}`",
+            i, name, module, why,
+            v ? fmt::format("cannot adopt the NC's {:.3f} um", *v)
+              : std::string("the NC did not answer the read-back"),
+            name);
+      } else {
+        spdlog::warn(
+            "register {} ({}): module {} has no usable state ({}) and bus {} cannot read it back: "
+            "the module's values are written as it computes them from nothing; if the NC holds "
+            "an offset there that must be kept, stop nccompd and see docs/daemon.md",
+            i, name, module, why,
+            b >= 0 && static_cast<std::size_t>(b) < buses.size()
+                ? buses[static_cast<std::size_t>(b)].name
+                : std::string("?"));
       }
     }
     if (anchored == 0) {
       spdlog::info(
           "registers: none can be read back from the NC; the limiters start from the values in "
-          "the state file (0 without one)");
+          "the state file (0 without one){}",
+          held > 0 ? fmt::format("; {} held without state", held) : std::string{});
     } else {
       spdlog::info(
-          "registers: {} of {} read back from the NC, {} differ from the state; their limiters "
+          "registers: {} of {} read back from the NC, {} differ from the state, {} beyond "
+          "max_abs_um (held), {} adopted without state, {} held without state; their limiters "
           "start from the NC's values",
-          anchored, engine.register_count(), differ);
+          anchored, engine.register_count(), differ, beyond, adopted, held);
     }
     for (const auto& [hook_name, hook] : startup_hooks()) {
       try {
@@ -296,6 +365,18 @@ int run_daemon(const DaemonOptions& options) {
         spdlog::error("start-up of {}: {}", hook_name, e.what());
       }
     }
+  }
+
+  // Events the NC published while nccompd was down: the buses resume from the engine's event
+  // cursors (restored with the state), and their first reads are logged in the loop below.
+  EventsWhileDownLog::Buses event_buses;
+  for (auto& b : buses) {
+    event_buses.emplace_back(b.name, b.bus.get());
+  }
+  EventsWhileDownLog events_while_down;
+  for (const EventsLine& l :
+       events_while_down.resume(runtime->engine->event_cursors(), event_buses)) {
+    spdlog::info("{}", l.text);
   }
 
   const bool lockstep = !options.lockstep_socket.empty();
@@ -366,7 +447,7 @@ int run_daemon(const DaemonOptions& options) {
   for (auto& b : buses) {
     bus_ptrs.push_back(b.bus.get());
   }
-  // Operator commands (`nccomp calibrate --daemon`): the status thread queues them as events, the
+  // Operator commands (`nccomp calibrate --daemon`): the command thread queues them as events, the
   // loop drains them like a bus's (last in the list: register indices map to the buses above).
   CommandBus commands;
   bus_ptrs.push_back(&commands);
@@ -417,7 +498,7 @@ int run_daemon(const DaemonOptions& options) {
   sc.config_path = options.config_path;
   sc.state_path = state_path;
   StatusServer status(sc);
-  set_command_context(CommandContext{&commands, &loop});
+  set_command_context(CommandContext{&commands, &loop, sc.register_names});
   const auto& stsec = cfg::status_section(*config);
   const std::string sock =
       stsec.socket_path.empty()
@@ -425,12 +506,26 @@ int run_daemon(const DaemonOptions& options) {
           : config->resolve(stsec.socket_path);
   fs::create_directories(fs::path(sock).parent_path(), ec);
   try {
-    status.start(sock, stsec.prometheus_address, stsec.prometheus_port);
-    spdlog::info("status socket {}{}", sock,
+    StatusServerOptions so;
+    so.socket_path = sock;
+    so.prometheus_address = stsec.prometheus_address;
+    so.prometheus_port = stsec.prometheus_port;
+    so.policy = CommandPolicy{stsec.admin_group, ::geteuid()};
+    so.client_timeout_s = stsec.client_timeout_s;
+    so.max_clients = stsec.max_clients;
+    status.start(so);
+    spdlog::info("status socket {}{}; commands that change the machine: root and group {}", sock,
                  status.prometheus_port() > 0
                      ? fmt::format(", Prometheus on {}:{}", stsec.prometheus_address,
                                    status.prometheus_port())
-                     : std::string{});
+                     : std::string{},
+                 stsec.admin_group);
+    if (!group_exists(stsec.admin_group)) {
+      spdlog::warn(
+          "status: group '{}' ([status] admin_group) does not exist: only root and the "
+          "daemon's user can run commands that change the machine",
+          stsec.admin_group);
+    }
   } catch (const std::exception& e) {
     spdlog::error("status: {}", e.what());
     logger.stop();
@@ -573,6 +668,13 @@ int run_daemon(const DaemonOptions& options) {
         spdlog::info("{}", c.message);
       }
       logger.raise(c.event);
+    }
+    for (const EventsLine& l : events_while_down.poll(event_buses)) {
+      if (l.warning) {
+        spdlog::warn("{}", l.text);
+      } else {
+        spdlog::info("{}", l.text);
+      }
     }
     const auto now = std::chrono::steady_clock::now();
     if (watchdog && now - last_feed >= std::chrono::microseconds(watchdog_usec / 2)) {

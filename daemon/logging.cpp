@@ -11,6 +11,8 @@
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
+#include <limits>
 
 namespace nccomp::daemon {
 
@@ -119,6 +121,14 @@ std::string alarm_name(core::AlarmCode code) {
       return "offset_write_dropped";
     case AlarmCode::kBusAlarm:
       return "bus_alarm";
+    case AlarmCode::kRegisterBeyondLimit:
+      return "register_beyond_limit";
+    case AlarmCode::kRegisterAdopted:
+      return "register_adopted";
+    case AlarmCode::kRegisterHeldWithoutState:
+      return "register_held_without_state";
+    case AlarmCode::kBusInputStale:
+      return "bus_input_stale";
   }
   // No default above: -Wswitch (an error here) makes every new AlarmCode get its name. A value
   // outside the enum (a corrupt state, a newer peer) still prints usefully.
@@ -158,17 +168,90 @@ std::vector<core::AlarmEvent> EventLogger::last_alarms() const {
 
 void EventLogger::raise(const core::AlarmEvent& a) { log_alarm(a); }
 
-void EventLogger::log_alarm(const core::AlarmEvent& a) {
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    last_.push_back(a);
-    while (last_.size() > kKeepAlarms) {
-      last_.pop_front();
+namespace {
+
+spdlog::level::level_enum level_of(core::Severity s) {
+  return s == core::Severity::kAlarm     ? spdlog::level::err
+         : s == core::Severity::kWarning ? spdlog::level::warn
+                                         : spdlog::level::info;
+}
+
+core::TimeNs steady_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+bool identical(const core::AlarmEvent& a, const core::AlarmEvent& b) {
+  // The value bit for bit: NaN equals NaN here, which is what a repeated NaN fault is.
+  return a.severity == b.severity && a.code == b.code && a.subject == b.subject &&
+         std::memcmp(&a.value, &b.value, sizeof a.value) == 0;
+}
+
+}  // namespace
+
+bool AlarmBursts::add(const core::AlarmEvent& a, core::TimeNs now_ns, std::vector<Burst>& ended) {
+  expire(now_ns, ended);
+  if (a.severity == core::Severity::kInfo) {
+    // An info ends the bursts of its code and subject (a clear ends the rise's burst).
+    std::erase_if(open_, [&](const Burst& b) {
+      if (b.alarm.code != a.code || b.alarm.subject != a.subject) {
+        return false;
+      }
+      if (b.count > 1) {
+        ended.push_back(b);
+      }
+      return true;
+    });
+    return true;
+  }
+  for (Burst& b : open_) {
+    if (identical(b.alarm, a)) {
+      ++b.count;
+      b.last_ns = now_ns;
+      return false;
     }
   }
-  const auto level = a.severity == core::Severity::kAlarm     ? spdlog::level::err
-                     : a.severity == core::Severity::kWarning ? spdlog::level::warn
-                                                              : spdlog::level::info;
+  std::erase_if(open_, [&](const Burst& b) {
+    if (b.alarm.code != a.code || b.alarm.subject != a.subject || b.alarm.severity == a.severity) {
+      return false;
+    }
+    if (b.count > 1) {
+      ended.push_back(b);
+    }
+    return true;
+  });
+  open_.push_back(Burst{a, 1, now_ns, now_ns});
+  return true;
+}
+
+void AlarmBursts::expire(core::TimeNs now_ns, std::vector<Burst>& ended) {
+  std::erase_if(open_, [&](const Burst& b) {
+    if (now_ns - b.last_ns < kQuietNs && now_ns != std::numeric_limits<core::TimeNs>::max()) {
+      return false;
+    }
+    if (b.count > 1) {
+      ended.push_back(b);
+    }
+    return true;
+  });
+}
+
+std::string burst_end_line(const AlarmBursts::Burst& b) {
+  const core::AlarmEvent& a = b.alarm;
+  return fmt::format(
+      "end of burst: {} (code {}, {}) subject {} value {}: {} in {:.1f} s (only the first was "
+      "logged)",
+      alarm_name(a.code), static_cast<unsigned>(a.code), severity_name(a.severity), a.subject,
+      a.value, b.count, static_cast<double>(b.last_ns - b.first_ns) / 1e9);
+}
+
+namespace {
+
+// To the journal, the alarm's code, name, severity, subject and value go as fields too
+// (journalctl -u nccompd NCCOMP_ALARM_CODE=54); the terminal gets the line only.
+void log_alarm_line(const core::AlarmEvent& a) {
+  const auto level = level_of(a.severity);
   if (!g_journal_fields || !spdlog::default_logger()->should_log(level)) {
     spdlog::log(level, "{} {} (code {}) subject {} value {}", severity_name(a.severity),
                 alarm_name(a.code), static_cast<unsigned>(a.code), a.subject, a.value);
@@ -186,6 +269,38 @@ void EventLogger::log_alarm(const core::AlarmEvent& a) {
                   static_cast<unsigned>(a.code), "NCCOMP_ALARM_NAME=%s", name.c_str(),
                   "NCCOMP_ALARM_SEVERITY=%s", severity_name(a.severity), "NCCOMP_ALARM_SUBJECT=%d",
                   static_cast<int>(a.subject), "NCCOMP_ALARM_VALUE=%g", a.value, nullptr);
+}
+
+}  // namespace
+
+void EventLogger::log_alarm(const core::AlarmEvent& a) {
+  std::vector<AlarmBursts::Burst> ended;
+  bool log = false;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    last_.push_back(a);
+    while (last_.size() > kKeepAlarms) {
+      last_.pop_front();
+    }
+    log = bursts_.add(a, steady_ns(), ended);
+  }
+  for (const auto& b : ended) {
+    spdlog::log(level_of(b.alarm.severity), "{}", burst_end_line(b));
+  }
+  if (log) {
+    log_alarm_line(a);
+  }
+}
+
+void EventLogger::end_bursts(core::TimeNs now_ns) {
+  std::vector<AlarmBursts::Burst> ended;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    bursts_.expire(now_ns, ended);
+  }
+  for (const auto& b : ended) {
+    spdlog::log(level_of(b.alarm.severity), "{}", burst_end_line(b));
+  }
 }
 
 void EventLogger::drain() {
@@ -243,8 +358,39 @@ std::vector<BusAlarmChange> BusAlarmWatch::update(const std::vector<std::string>
   std::vector<BusAlarmChange> out;
   raised_.resize(statuses.size(), false);
   failed_seen_.resize(statuses.size(), 0);
+  stale_raised_.resize(statuses.size(), false);
+  stale_counters_.resize(statuses.size());
+  stale_since_ns_.resize(statuses.size(), 0);
   for (std::size_t i = 0; i < statuses.size(); ++i) {
     const drivers::BusStatus& st = statuses[i];
+    if (st.input_stale != stale_raised_[i]) {
+      stale_raised_[i] = st.input_stale;
+      const std::string name = i < names.size() ? names[i] : fmt::format("#{}", i);
+      const auto& k = st.counters;
+      BusAlarmChange c;
+      c.event =
+          core::AlarmEvent{now_ns, st.input_stale ? core::Severity::kAlarm : core::Severity::kInfo,
+                           core::AlarmCode::kBusInputStale, static_cast<std::int32_t>(i),
+                           st.input_stale ? 1.0 : 0.0};
+      if (st.input_stale) {
+        stale_counters_[i] = k;
+        stale_since_ns_[i] = now_ns;
+        c.message = fmt::format(
+            "bus {}: ALARM: input from the NC is stale: the link not healthy or no valid axis "
+            "sample for longer than degraded_alarm_after_s; positions and measurements are not "
+            "arriving (link {}; frames rx {}, faults {}, malformed {}; its counters in `nccomp "
+            "status`)",
+            name, link_state_name(st.state), k.frames_rx, k.faults, k.malformed);
+      } else {
+        const auto& b = stale_counters_[i];
+        c.message = fmt::format(
+            "bus {}: input stale cleared after {:.1f} s (link {}; meanwhile faults {}, "
+            "malformed {}, frames rx {})",
+            name, static_cast<double>(now_ns - stale_since_ns_[i]) / 1e9, link_state_name(st.state),
+            k.faults - b.faults, k.malformed - b.malformed, k.frames_rx - b.frames_rx);
+      }
+      out.push_back(std::move(c));
+    }
     const bool failed_now = st.counters.offsets_failed > failed_seen_[i];
     failed_seen_[i] = st.counters.offsets_failed;
     if (st.alarm == raised_[i]) {
@@ -286,6 +432,7 @@ void EventLogger::run() {
   for (;;) {
     const bool stopping = stop_.load(std::memory_order_acquire);
     drain();
+    end_bursts(stopping ? std::numeric_limits<core::TimeNs>::max() : steady_ns());
     if (stopping) {
       return;
     }

@@ -27,6 +27,36 @@ std::string setup_logging(const config::LogSection& section);
 [[nodiscard]] std::string alarm_name(core::AlarmCode code);
 [[nodiscard]] const char* severity_name(core::Severity s);
 
+/// What the log makes of repeated alarms (warnings and alarms; info lines are events of their
+/// own and always logged): a burst of identical alarms (same severity, code, subject and value,
+/// e.g. a measurement the NC keeps sending as NaN) is one line when it starts and, if more came,
+/// one line when it ends, with how many there were. A burst ends when no identical alarm came for
+/// kQuietNs, or when one with the same code and subject but another severity comes (a clear).
+/// Not thread-safe (EventLogger holds its mutex); allocates (never on the loop thread).
+class AlarmBursts {
+ public:
+  static constexpr core::TimeNs kQuietNs = 2'000'000'000;
+  struct Burst {
+    core::AlarmEvent alarm{};  // the first of the burst
+    std::uint64_t count{0};
+    core::TimeNs first_ns{0};  // arrival times (the caller's clock)
+    core::TimeNs last_ns{0};
+  };
+  /// An alarm arrived at now_ns: true if it is to be logged (it starts a burst, or it is info).
+  /// Bursts it ends with more than one alarm are appended to `ended`.
+  bool add(const core::AlarmEvent& a, core::TimeNs now_ns, std::vector<Burst>& ended);
+  /// Ends the bursts quiet for kQuietNs at now_ns (every burst at INT64_MAX); those with more
+  /// than one alarm are appended to `ended`.
+  void expire(core::TimeNs now_ns, std::vector<Burst>& ended);
+
+ private:
+  std::vector<Burst> open_;
+};
+
+/// The log line that ends a burst: "end of burst: NAME (code N, SEVERITY) subject S value V: C in
+/// T s (only the first was logged)".
+[[nodiscard]] std::string burst_end_line(const AlarmBursts::Burst& b);
+
 class EventLogger {
  public:
   static constexpr std::size_t kKeepAlarms = 32;
@@ -45,10 +75,12 @@ class EventLogger {
   void run();
   void drain();
   void log_alarm(const core::AlarmEvent& a);
+  void end_bursts(core::TimeNs now_ns);
 
   Loop& loop_;
   mutable std::mutex mu_;
   std::deque<core::AlarmEvent> last_;
+  AlarmBursts bursts_;  // under mu_
   std::atomic<bool> stop_{false};
   std::thread thread_;
   // Overrun notes are summarised: at most one message per second.
@@ -65,8 +97,10 @@ struct BusAlarmChange {
   std::string message;
 };
 
-/// Main thread (never the loop: it allocates): watches the buses' alarm flags and reports each
-/// rise and each fall exactly once. A bus starts as "not in alarm".
+/// Main thread (never the loop: it allocates): watches the buses' alarm flags (BusStatus::alarm
+/// → kBusAlarm, BusStatus::input_stale → kBusInputStale) and reports each rise and each fall
+/// exactly once; the fall of input_stale says how long it lasted and the faults, malformed frames
+/// and frames received meanwhile. A bus starts as "not in alarm".
 class BusAlarmWatch {
  public:
   /// names[i] and statuses[i] are bus i (the daemon's bus order; same size on every call).
@@ -77,6 +111,9 @@ class BusAlarmWatch {
  private:
   std::vector<bool> raised_;
   std::vector<std::uint64_t> failed_seen_;  // offsets_failed at the last look
+  std::vector<bool> stale_raised_;
+  std::vector<drivers::BusCounters> stale_counters_;  // at the rise of input_stale
+  std::vector<core::TimeNs> stale_since_ns_;
 };
 
 }  // namespace nccomp::daemon

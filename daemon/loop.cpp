@@ -331,13 +331,19 @@ void Loop::cycle(core::TimeNs wake_ns, bool stamp) {
   local_.dry_run = rt.dry_run;
 
   events_.clear();
-  for (drivers::Bus* bus : buses_) {
+  for (std::size_t b = 0; b < buses_.size(); ++b) {
     core::Event e;
-    while (events_.size() < options_.max_events_per_cycle && bus->rx().try_pop(e)) {
+    while (events_.size() < options_.max_events_per_cycle && buses_[b]->rx().try_pop(e)) {
+      // The engine keeps its event cursors per bus: the bus is the index in this list.
+      core::EventOrigin* o = core::origin_of(e);
+      if (o != nullptr) {
+        o->bus = static_cast<std::uint8_t>(b);
+      }
+      // A counter_only event only moves the engine's cursor: not an event in the statistics.
+      local_.events_in += o != nullptr && o->counter_only ? 0U : 1U;
       events_.push_back(e);  // capacity reserved: no allocation
     }
   }
-  local_.events_in += events_.size();
   if (stamp) {
     // Lock-step: the NC state was published for the tick's instant; the driver's reception
     // time is wall time and would make the run depend on scheduling.

@@ -4,6 +4,7 @@
 #include <fcntl.h>
 #include <netinet/in.h>
 #include <poll.h>
+#include <sys/eventfd.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/un.h>
@@ -12,6 +13,7 @@
 #include <algorithm>
 #include <array>
 #include <cerrno>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <sstream>
@@ -151,14 +153,19 @@ std::string render_json(const StatusContext& c) {
     << ",\"writes_rejected\":" << e.writes_rejected
     << ",\"writes_unknown_register\":" << e.writes_unknown_register
     << ",\"writes_held\":" << e.writes_held << ",\"output_overflows\":" << e.output_overflows
-    << ",\"writes_deferred\":" << e.writes_deferred << "},";
+    << ",\"writes_deferred\":" << e.writes_deferred << ",\"writes_blocked\":" << e.writes_blocked
+    << ",\"release_commands\":" << e.release_commands << "},";
   o << "\"registers\":[";
   for (std::size_t i = 0; i < v.r.count; ++i) {
     const auto& r = v.r.regs[i];
     o << (i ? "," : "") << "{\"index\":" << i << ",\"name\":\"" << json_escape(reg_name(v, i))
       << "\",\"output_um\":" << num(r.output_um)
       << ",\"target_um\":" << (r.has_target ? num(r.target_um) : "null")
-      << ",\"slewing\":" << (r.slewing ? "true" : "false") << "}";
+      << ",\"slewing\":" << (r.slewing ? "true" : "false") << ",\"hold\":"
+      << (r.hold == core::engine::RegisterHold::kNone
+              ? std::string("null")
+              : "\"" + std::string(core::engine::to_string(r.hold)) + "\"")
+      << "}";
   }
   o << "],\"modules\":[";
   for (std::size_t i = 0; i < v.m.count; ++i) {
@@ -206,6 +213,15 @@ std::string render_json(const StatusContext& c) {
       << "\",\"rows\":" << c.measurement_log->rows()
       << ",\"rotations\":" << c.measurement_log->rotations()
       << ",\"errors\":" << c.measurement_log->errors() << "}";
+  } else {
+    o << "null";
+  }
+  o << ",\"status_server\":";
+  if (c.server != nullptr) {
+    o << "{\"clients\":" << c.server->clients.load()
+      << ",\"timed_out\":" << c.server->timed_out.load()
+      << ",\"turned_away\":" << c.server->turned_away.load()
+      << ",\"bad_requests\":" << c.server->bad_requests.load() << "}";
   } else {
     o << "null";
   }
@@ -270,6 +286,12 @@ std::string render_text(const StatusContext& c) {
                     r.slewing ? "  (slewing)" : "");
       o << buf;
     }
+    // Held at start-up: nothing is written until `nccomp register release NAME`.
+    if (r.hold == core::engine::RegisterHold::kBeyondLimit) {
+      o << "  BLOCKED: the NC holds a value beyond max_abs_um";
+    } else if (r.hold == core::engine::RegisterHold::kWithoutState) {
+      o << "  HELD: no usable state";
+    }
     o << "\n";
   }
   if (v.r.count < v.names.size()) {
@@ -329,6 +351,11 @@ std::string render_text(const StatusContext& c) {
     o << "measurements: " << c.measurement_log->current_path() << ", " << c.measurement_log->rows()
       << " rows, " << s.records_dropped << " dropped\n";
   }
+  if (c.server != nullptr) {
+    o << "clients: " << c.server->clients.load() << " served, " << c.server->timed_out.load()
+      << " cut off at their deadline, " << c.server->turned_away.load() << " turned away (busy), "
+      << c.server->bad_requests.load() << " bad requests\n";
+  }
   o << "alarms (last " << EventLogger::kKeepAlarms << "):\n";
   if (c.logger != nullptr) {
     const auto alarms = c.logger->last_alarms();
@@ -362,6 +389,12 @@ std::string render_prometheus(const StatusContext& c) {
   counter("engine_writes_rejected_total", "Targets refused by a limiter.",
           s.engine.writes_rejected);
   counter("alarms_total", "Alarms and warnings raised.", s.alarms);
+  if (c.server != nullptr) {
+    counter("status_clients_timed_out_total", "Status clients cut off at their deadline.",
+            c.server->timed_out.load());
+    counter("status_clients_turned_away_total", "Status clients refused as busy.",
+            c.server->turned_away.load());
+  }
   o << "# HELP nccompd_loop_rate_hz Measured loop rate.\n# TYPE nccompd_loop_rate_hz gauge\n"
     << "nccompd_loop_rate_hz " << num(v.measured_rate_hz) << "\n";
   o << "# HELP nccompd_loop_latency_us Wake-up latency quantiles since start.\n"
@@ -377,6 +410,12 @@ std::string render_prometheus(const StatusContext& c) {
   for (std::size_t i = 0; i < v.r.count; ++i) {
     o << "nccompd_register_output_um{register=\"" << reg_name(v, i) << "\"} "
       << num(v.r.regs[i].output_um) << "\n";
+  }
+  o << "# HELP nccompd_register_held 1 while a register is held at start-up (nothing written).\n"
+       "# TYPE nccompd_register_held gauge\n";
+  for (std::size_t i = 0; i < v.r.count; ++i) {
+    o << "nccompd_register_held{register=\"" << reg_name(v, i) << "\"} "
+      << (v.r.regs[i].hold == core::engine::RegisterHold::kNone ? 0 : 1) << "\n";
   }
   o << "# HELP nccompd_module_value A compensation module's status value (unit in the key).\n"
        "# TYPE nccompd_module_value gauge\n";
@@ -413,11 +452,102 @@ std::string render_prometheus(const StatusContext& c) {
   return o.str();
 }
 
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+constexpr std::size_t kUnixRequestBytes = 512;   // one line, the newline included
+constexpr std::size_t kHttpRequestBytes = 4096;  // the request line and headers
+constexpr std::size_t kMaxCommandsWaiting = 8;   // queued or running on the command thread
+
+// The caller as the kernel recorded it at connect(): SO_PEERGROUPS, not /proc/<pid>/status (the
+// pid may have exited and been reused by then) nor getgrouplist(uid) (the group database, not
+// the process: it would grant a group the caller's process has dropped or not yet received).
+Caller peer_of(int fd) {
+  Caller c;
+  ucred cred{};
+  socklen_t len = sizeof cred;
+  if (::getsockopt(fd, SOL_SOCKET, SO_PEERCRED, &cred, &len) != 0) {
+    return c;
+  }
+  c.known = true;
+  c.pid = cred.pid;
+  c.uid = cred.uid;
+  c.gid = cred.gid;
+  std::vector<gid_t> groups(64);
+  for (int attempt = 0; attempt < 2; ++attempt) {
+    socklen_t glen = static_cast<socklen_t>(groups.size() * sizeof(gid_t));
+    if (::getsockopt(fd, SOL_SOCKET, SO_PEERGROUPS, groups.data(), &glen) == 0) {
+      groups.resize(glen / sizeof(gid_t));
+      c.groups = std::move(groups);
+      c.groups_known = true;
+      break;
+    }
+    if (errno != ERANGE) break;
+    groups.resize(glen / sizeof(gid_t) + 1);  // the kernel said how many it has
+  }
+  return c;
+}
+
+// A last word to a client being dropped; never waits (the client may not read).
+void send_nowait(int fd, const std::string& s) {
+  (void)::send(fd, s.data(), s.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
+}
+
+std::string http_response(const std::string& status, const std::string& body) {
+  return "HTTP/1.0 " + status + "\r\nContent-Type: text/plain; version=0.0.4\r\nContent-Length: " +
+         std::to_string(body.size()) + "\r\nConnection: close\r\n\r\n" + body;
+}
+
+// Client side: blocking.
+void send_all(int fd, const std::string& s) {
+  std::size_t off = 0;
+  while (off < s.size()) {
+    const ssize_t n = ::send(fd, s.data() + off, s.size() - off, MSG_NOSIGNAL);
+    if (n <= 0) {
+      return;
+    }
+    off += static_cast<std::size_t>(n);
+  }
+}
+
+Clock::time_point deadline_after(double s) {
+  return Clock::now() +
+         std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(s));
+}
+
+std::string seconds_text(double s) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%g", s);
+  return buf;
+}
+
+}  // namespace
+
+struct StatusServer::Client {
+  enum class Phase { kReading, kCommand, kWriting, kDone };
+  int fd{-1};
+  bool http{false};
+  std::uint64_t id{0};
+  Caller caller;
+  Phase phase{Phase::kReading};
+  Clock::time_point deadline;
+  std::string in;
+  std::string out;
+  std::size_t sent{0};
+};
+
+StatusServer::StatusServer(StatusContext context) : context_(std::move(context)) {
+  context_.server = &counters_;
+}
+
 StatusServer::~StatusServer() { stop(); }
 
-void StatusServer::start(const std::string& socket_path, const std::string& prometheus_address,
-                         int prometheus_port) {
-  socket_path_ = socket_path;
+void StatusServer::start(const StatusServerOptions& options) {
+  options_ = options;
+  options_.client_timeout_s = std::clamp(options_.client_timeout_s, 0.01, 3600.0);
+  options_.max_clients = std::max(options_.max_clients, 1);
+  const std::string& socket_path = options_.socket_path;
   sockaddr_un addr{};
   addr.sun_family = AF_UNIX;
   if (socket_path.size() >= sizeof(addr.sun_path)) {
@@ -426,7 +556,7 @@ void StatusServer::start(const std::string& socket_path, const std::string& prom
   }
   std::memcpy(addr.sun_path, socket_path.c_str(), socket_path.size() + 1);
   ::unlink(socket_path.c_str());  // a stale socket of a crashed daemon
-  unix_fd_ = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  unix_fd_ = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0);
   if (unix_fd_ < 0) {
     sys_fail("status socket");
   }
@@ -436,12 +566,14 @@ void StatusServer::start(const std::string& socket_path, const std::string& prom
   if (::chmod(socket_path.c_str(), 0660) != 0) {
     sys_fail("cannot chmod status socket '" + socket_path + "'");
   }
-  if (::listen(unix_fd_, 8) != 0) {
+  if (::listen(unix_fd_, 64) != 0) {
     sys_fail("cannot listen on '" + socket_path + "'");
   }
+  const int prometheus_port = options_.prometheus_port;
+  const std::string& prometheus_address = options_.prometheus_address;
   if (prometheus_port > 0 || prometheus_port == -1) {
     const bool v6 = prometheus_address == "::1";
-    tcp_fd_ = ::socket(v6 ? AF_INET6 : AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    tcp_fd_ = ::socket(v6 ? AF_INET6 : AF_INET, SOCK_STREAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0);
     if (tcp_fd_ < 0) {
       sys_fail("prometheus socket");
     }
@@ -462,7 +594,7 @@ void StatusServer::start(const std::string& socket_path, const std::string& prom
       a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
       rc = ::bind(tcp_fd_, reinterpret_cast<const sockaddr*>(&a), sizeof a);
     }
-    if (rc != 0 || ::listen(tcp_fd_, 8) != 0) {
+    if (rc != 0 || ::listen(tcp_fd_, 64) != 0) {
       sys_fail("cannot listen on " + prometheus_address + ":" + std::to_string(port));
     }
     sockaddr_storage got{};
@@ -471,116 +603,285 @@ void StatusServer::start(const std::string& socket_path, const std::string& prom
     bound_port_ = ntohs(v6 ? reinterpret_cast<sockaddr_in6*>(&got)->sin6_port
                            : reinterpret_cast<sockaddr_in*>(&got)->sin_port);
   }
+  wake_fd_ = ::eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK);
+  if (wake_fd_ < 0) {
+    sys_fail("status eventfd");
+  }
   stop_.store(false);
   thread_ = std::thread([this] { run(); });
+  command_thread_ = std::thread([this] { run_commands(); });
 }
 
 void StatusServer::stop() {
-  stop_.store(true);
+  {
+    std::lock_guard<std::mutex> lock(jobs_mu_);
+    stop_.store(true);
+  }
+  jobs_cv_.notify_all();
+  if (wake_fd_ >= 0) {
+    const std::uint64_t one = 1;
+    (void)!::write(wake_fd_, &one, sizeof one);
+  }
   if (thread_.joinable()) {
     thread_.join();
   }
+  if (command_thread_.joinable()) {
+    command_thread_.join();
+  }
   if (unix_fd_ >= 0) {
     ::close(unix_fd_);
-    ::unlink(socket_path_.c_str());
+    ::unlink(options_.socket_path.c_str());
     unix_fd_ = -1;
   }
   if (tcp_fd_ >= 0) {
     ::close(tcp_fd_);
     tcp_fd_ = -1;
   }
+  if (wake_fd_ >= 0) {
+    ::close(wake_fd_);
+    wake_fd_ = -1;
+  }
+  jobs_.clear();
+  finished_.clear();
 }
 
-namespace {
-std::string read_request(int fd, std::size_t limit, const char* terminator) {
-  timeval tv{1, 0};
-  ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
-  std::string req;
-  char buf[512];
-  while (req.size() < limit && req.find(terminator) == std::string::npos) {
-    const ssize_t n = ::recv(fd, buf, sizeof buf, 0);
-    if (n <= 0) {
-      break;
+void StatusServer::run_commands() {
+  for (;;) {
+    Job job;
+    {
+      std::unique_lock<std::mutex> lock(jobs_mu_);
+      jobs_cv_.wait(lock, [this] { return stop_.load() || !jobs_.empty(); });
+      if (stop_.load()) {
+        return;
+      }
+      job = std::move(jobs_.front());
+      jobs_.pop_front();
     }
-    req.append(buf, static_cast<std::size_t>(n));
+    std::string answer;
+    if (!dispatch_command(job.line, job.caller, options_.policy, answer)) {
+      answer = "error: unknown request\n";  // only if the verb were unregistered meanwhile
+    }
+    {
+      std::lock_guard<std::mutex> lock(jobs_mu_);
+      finished_.emplace_back(job.client, std::move(answer));
+    }
+    const std::uint64_t one = 1;
+    (void)!::write(wake_fd_, &one, sizeof one);
   }
-  return req;
 }
-void send_all(int fd, const std::string& s) {
-  std::size_t off = 0;
-  while (off < s.size()) {
-    const ssize_t n = ::send(fd, s.data() + off, s.size() - off, MSG_NOSIGNAL);
-    if (n <= 0) {
+
+void StatusServer::accept_clients(int listen_fd, bool http, std::vector<Client>& clients) {
+  for (;;) {
+    const int fd = ::accept4(listen_fd, nullptr, nullptr, SOCK_CLOEXEC | SOCK_NONBLOCK);
+    if (fd < 0) {
+      if (errno == EINTR || errno == ECONNABORTED) continue;
+      return;  // EAGAIN: none left; anything else is tried again at the next poll
+    }
+    counters_.clients.fetch_add(1);
+    if (clients.size() >= static_cast<std::size_t>(options_.max_clients)) {
+      counters_.turned_away.fetch_add(1);
+      const std::string why = "busy: " + std::to_string(clients.size()) +
+                              " clients are being served ([status] max_clients); try again\n";
+      send_nowait(fd, http ? http_response("503 Service Unavailable", why) : "error: " + why);
+      ::close(fd);
+      continue;
+    }
+    Client c;
+    c.fd = fd;
+    c.http = http;
+    c.id = next_client_++;
+    c.deadline = deadline_after(options_.client_timeout_s);
+    if (!http) {
+      c.caller = peer_of(fd);
+    }
+    clients.push_back(std::move(c));
+  }
+}
+
+void StatusServer::read_request(Client& c) {
+  const std::size_t limit = c.http ? kHttpRequestBytes : kUnixRequestBytes;
+  const char* terminator = c.http ? "\r\n\r\n" : "\n";
+  bool eof = false;
+  char buf[512];
+  while (c.in.size() < limit && c.in.find(terminator) == std::string::npos) {
+    const ssize_t n = ::recv(c.fd, buf, std::min(sizeof buf, limit - c.in.size()), 0);
+    if (n > 0) {
+      c.in.append(buf, static_cast<std::size_t>(n));
+    } else if (n == 0) {
+      eof = true;
+      break;
+    } else if (errno == EINTR) {
+      continue;
+    } else if (errno == EAGAIN || errno == EWOULDBLOCK) {
+      return;  // more at the next poll, until the deadline
+    } else {
+      ::close(c.fd);
+      c.fd = -1;
+      c.phase = Client::Phase::kDone;
       return;
     }
-    off += static_cast<std::size_t>(n);
   }
-}
-}  // namespace
-
-void StatusServer::serve_unix(int fd) {
+  const bool complete = eof || c.in.find(terminator) != std::string::npos;
+  const auto reply = [&](std::string text) { start_answer(c, std::move(text)); };
+  if (c.http) {
+    // A request line and headers longer than the limit are answered from the request line.
+    if (c.in.rfind("GET /metrics", 0) == 0 || c.in.rfind("GET / ", 0) == 0) {
+      reply(http_response("200 OK", render_prometheus(context_)));
+    } else {
+      counters_.bad_requests.fetch_add(1);
+      reply(http_response("404 Not Found", "GET /metrics\n"));
+    }
+    return;
+  }
+  if (!complete) {
+    counters_.bad_requests.fetch_add(1);
+    reply("error: request longer than " + std::to_string(kUnixRequestBytes - 1) +
+          " bytes (one line: text, json, metrics or an operator command)\n");
+    return;
+  }
   // One line: a status request, or an operator command ("calibrate facets lateral 1.99 1.98").
-  std::string req = read_request(fd, 512, "\n");
-  if (const auto nl = req.find('\n'); nl != std::string::npos) {
-    req.erase(nl);
-  }
-  while (!req.empty() && (req.back() == '\n' || req.back() == '\r' || req.back() == ' ')) {
+  std::string req = c.in.substr(0, c.in.find('\n'));
+  while (!req.empty() && (req.back() == '\r' || req.back() == ' ')) {
     req.pop_back();
   }
-  std::string answer;
-  if (dispatch_command(req, answer)) {
-    send_all(fd, answer);
+  if (is_command(req)) {
+    if (commands_in_flight_ >= kMaxCommandsWaiting) {
+      counters_.turned_away.fetch_add(1);
+      reply("error: busy: " + std::to_string(commands_in_flight_) +
+            " operator commands are waiting for the loop; try again\n");
+      return;
+    }
+    ++commands_in_flight_;
+    c.phase = Client::Phase::kCommand;  // no deadline: the handler has its own
+    {
+      std::lock_guard<std::mutex> lock(jobs_mu_);
+      jobs_.push_back(Job{c.id, req, c.caller});
+    }
+    jobs_cv_.notify_one();
     return;
   }
   if (req == "json") {
-    answer = render_json(context_);
+    reply(render_json(context_));
   } else if (req == "metrics") {
-    answer = render_prometheus(context_);
+    reply(render_prometheus(context_));
   } else if (req == "text" || req.empty()) {
-    answer = render_text(context_);
+    reply(render_text(context_));
   } else {
-    answer = "error: unknown request '" + req.substr(0, 32) + "' (text, json, metrics)\n";
+    counters_.bad_requests.fetch_add(1);
+    reply("error: unknown request '" + req.substr(0, 32) + "' (text, json, metrics)\n");
   }
-  send_all(fd, answer);
 }
 
-void StatusServer::serve_http(int fd) {
-  const std::string req = read_request(fd, 4096, "\r\n\r\n");
-  std::string body;
-  std::string status = "200 OK";
-  if (req.rfind("GET /metrics", 0) == 0 || req.rfind("GET / ", 0) == 0) {
-    body = render_prometheus(context_);
-  } else {
-    status = "404 Not Found";
-    body = "GET /metrics\n";
+void StatusServer::start_answer(Client& c, std::string text) {
+  c.out = std::move(text);
+  c.sent = 0;
+  c.phase = Client::Phase::kWriting;
+  c.deadline = deadline_after(options_.client_timeout_s);
+  answer(c);
+}
+
+void StatusServer::answer(Client& c) {
+  while (c.sent < c.out.size()) {
+    const ssize_t n =
+        ::send(c.fd, c.out.data() + c.sent, c.out.size() - c.sent, MSG_NOSIGNAL | MSG_DONTWAIT);
+    if (n > 0) {
+      c.sent += static_cast<std::size_t>(n);
+    } else if (n < 0 && errno == EINTR) {
+      continue;
+    } else if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)) {
+      return;  // the client reads slowly: the rest at the next POLLOUT, until the deadline
+    } else {
+      break;  // the client has gone
+    }
   }
-  send_all(fd, "HTTP/1.0 " + status +
-                   "\r\nContent-Type: text/plain; version=0.0.4\r\nContent-Length: " +
-                   std::to_string(body.size()) + "\r\nConnection: close\r\n\r\n" + body);
+  ::close(c.fd);
+  c.fd = -1;
+  c.phase = Client::Phase::kDone;
+}
+
+void StatusServer::take_finished(std::vector<Client>& clients) {
+  std::vector<std::pair<std::uint64_t, std::string>> done;
+  {
+    std::lock_guard<std::mutex> lock(jobs_mu_);
+    done.swap(finished_);
+  }
+  for (auto& [id, text] : done) {
+    --commands_in_flight_;
+    for (auto& c : clients) {
+      if (c.id == id && c.phase == Client::Phase::kCommand) {
+        start_answer(c, std::move(text));
+        break;
+      }
+    }
+  }
 }
 
 void StatusServer::run() {
+  std::vector<Client> clients;
+  std::vector<pollfd> fds;
+  std::vector<std::size_t> owner;  // fds[3 + k] belongs to clients[owner[k]]
   while (!stop_.load()) {
-    pollfd fds[2] = {{unix_fd_, POLLIN, 0}, {tcp_fd_, POLLIN, 0}};
-    const int n = ::poll(fds, tcp_fd_ >= 0 ? 2 : 1, 200);
-    if (n <= 0) {
+    fds.clear();
+    owner.clear();
+    fds.push_back({wake_fd_, POLLIN, 0});
+    fds.push_back({unix_fd_, POLLIN, 0});
+    fds.push_back({tcp_fd_, POLLIN, 0});  // -1 (no Prometheus port) is ignored by poll
+    const auto now = Clock::now();
+    auto next = now + std::chrono::milliseconds(200);
+    for (std::size_t i = 0; i < clients.size(); ++i) {
+      const Client& c = clients[i];
+      if (c.phase != Client::Phase::kReading && c.phase != Client::Phase::kWriting) {
+        continue;  // a command running: its answer comes through wake_fd_
+      }
+      fds.push_back(
+          {c.fd, static_cast<short>(c.phase == Client::Phase::kReading ? POLLIN : POLLOUT), 0});
+      owner.push_back(i);
+      next = std::min(next, c.deadline);
+    }
+    const auto wait =
+        std::chrono::ceil<std::chrono::milliseconds>(std::max(next - now, Clock::duration{0}));
+    if (::poll(fds.data(), fds.size(), static_cast<int>(wait.count())) < 0 && errno != EINTR) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));  // e.g. ENOMEM: try again
       continue;
     }
-    for (int i = 0; i < 2; ++i) {
-      if (fds[i].fd < 0 || (fds[i].revents & POLLIN) == 0) {
-        continue;
-      }
-      const int c = ::accept4(fds[i].fd, nullptr, nullptr, SOCK_CLOEXEC);
-      if (c < 0) {
-        continue;
-      }
-      if (i == 0) {
-        serve_unix(c);
-      } else {
-        serve_http(c);
-      }
-      ::close(c);
+    if ((fds[0].revents & POLLIN) != 0) {
+      std::uint64_t n = 0;
+      (void)!::read(wake_fd_, &n, sizeof n);
+      take_finished(clients);
     }
+    for (std::size_t k = 0; k < owner.size(); ++k) {
+      if (fds[3 + k].revents == 0) continue;
+      Client& c = clients[owner[k]];
+      if (c.phase == Client::Phase::kReading) {
+        read_request(c);
+      } else if (c.phase == Client::Phase::kWriting) {
+        answer(c);
+      }
+    }
+    if ((fds[1].revents & POLLIN) != 0) {
+      accept_clients(unix_fd_, false, clients);
+    }
+    if ((fds[2].revents & POLLIN) != 0) {
+      accept_clients(tcp_fd_, true, clients);
+    }
+    const auto t = Clock::now();
+    for (auto& c : clients) {
+      const bool waiting = c.phase == Client::Phase::kReading || c.phase == Client::Phase::kWriting;
+      if (!waiting || t < c.deadline) continue;
+      counters_.timed_out.fetch_add(1);
+      if (c.phase == Client::Phase::kReading) {
+        const std::string why =
+            "no complete request within " + seconds_text(options_.client_timeout_s) + " s\n";
+        send_nowait(c.fd, c.http ? http_response("408 Request Timeout", why) : "error: " + why);
+      }
+      ::close(c.fd);
+      c.fd = -1;
+      c.phase = Client::Phase::kDone;
+    }
+    std::erase_if(clients, [](const Client& c) { return c.phase == Client::Phase::kDone; });
+  }
+  for (auto& c : clients) {
+    if (c.fd >= 0) ::close(c.fd);
   }
 }
 

@@ -53,8 +53,24 @@ inline constexpr std::size_t kMaxBusExtraCounters = 48;
 struct BusStatus {
   LinkState state{LinkState::kStopped};
   bool alarm{false};  // a write could not be delivered, or the link is down beyond tolerance
+  // The NC's input has been unusable for longer than the bus's degraded_alarm_after_s: no intact
+  // poll (Modbus) / the link not up (CAN), or no valid axis sample (values NaN / inf / out of
+  // range, or none at all). Clears with the next intact input.
+  bool input_stale{false};
   core::TimeNs last_rx_ns{0};
   BusCounters counters{};
+};
+
+/// What a bus found of one numbered event kind at its first read after resume_events():
+/// `events` happened since the cursor (since the NC's restart, if it restarted), the newest was
+/// delivered (unless its values were refused), the others lost.
+struct EventsWhileDown {
+  std::uint8_t kind{0};      // core::numbered_kind() index
+  std::uint32_t cursor{0};   // the engine's last event of this kind before nccompd stopped
+  std::uint32_t counter{0};  // the NC's counter at the first read
+  std::uint32_t events{0};
+  bool nc_restarted{false};  // the counter moved back: events before the NC's restart unknown
+  bool delivered{false};
 };
 
 class Bus {
@@ -109,6 +125,25 @@ class Bus {
     return true;
   }
 
+  // Events while nccompd was down (docs/daemon.md): a bus whose NC numbers its events resumes
+  // them from the engine's cursors, restored from the state file.
+
+  /// Before start() (not real-time): the engine's cursors of this bus (core::EventCursorSet, the
+  /// counter of the last event of each kind it took before nccompd stopped). A bus that numbers
+  /// its events delivers, at its first read, the newest event the NC produced since and counts
+  /// the others lost; a kind without a cursor starts from the NC's counter as it finds it. False
+  /// (default): the bus cannot tell which events it missed (CAN: frames carry no counter).
+  virtual bool resume_events(const core::EventCursorSet& cursors) {
+    (void)cursors;
+    return false;
+  }
+  /// Any thread, not real-time: per kind with a cursor, what the first read found, once it
+  /// happened. Writes at most out.size() entries and returns how many. Default: none.
+  [[nodiscard]] virtual std::size_t events_while_down(std::span<EventsWhileDown> out) const {
+    (void)out;
+    return 0;
+  }
+
   /// Start-up, before start() only (the caller's thread, not real-time): reads the value [µm]
   /// the NC holds in the offset register mapped to the engine's `register_index`, so that the
   /// daemon can compare it with its restored state (S1 reconcile). nullopt when the bus cannot
@@ -117,6 +152,9 @@ class Bus {
     (void)register_index;
     return std::nullopt;
   }
+  /// Whether read_offset() can return values at all (false: CAN, loopback). A bus that can, but
+  /// returned nullopt, did not answer: the daemon then knows nothing of what the NC holds.
+  [[nodiscard]] virtual bool reads_back() const noexcept { return false; }
 };
 
 }  // namespace nccomp::drivers

@@ -1,6 +1,7 @@
 #include "core/calib/calib_module.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <stdexcept>
@@ -42,6 +43,20 @@ void CalibrationModule::attach(const engine::RegisterTable& registers) {
     }
   }
   calib_.configure(config_);
+}
+
+bool CalibrationModule::adopt_output(std::uint16_t register_index, double nc_value_um,
+                                     TimeNs now_ns) {
+  const std::array<std::uint16_t, 3> reg{config_.register_x, config_.register_y,
+                                         config_.register_z};
+  for (std::size_t a = 0; a < reg.size(); ++a) {
+    if (reg[a] == register_index && std::isfinite(nc_value_um)) {
+      calib_.sync_register(a, nc_value_um, now_ns);
+      ++generation_;
+      return true;
+    }
+  }
+  return false;
 }
 
 void CalibrationModule::run_command(const OperatorCommand& c, TimeNs now_ns,

@@ -68,6 +68,10 @@ class CalibrationModule final : public engine::Module {
   [[nodiscard]] std::vector<std::uint16_t> written_registers() const override {
     return {config_.register_x, config_.register_y, config_.register_z};
   }
+  /// Without a state: the axis register's limiter starts from what the NC holds
+  /// (Calibrator::sync_register()); an uncalibrated module writes nothing, so the NC keeps it
+  /// until a calibration (or a newer [calibration] state_file) computes the axis offsets.
+  bool adopt_output(std::uint16_t register_index, double nc_value_um, TimeNs now_ns) override;
 
   /// The calibrator, for operator commands (on the loop thread between steps) and status.
   [[nodiscard]] Calibrator& calibrator() noexcept { return calib_; }

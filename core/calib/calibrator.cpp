@@ -248,6 +248,13 @@ void Calibrator::finish_calibration(double now_s, TimeNs now_ns, StepOutput& out
 
 void Calibrator::handle_touch(const CalibrationTouch& t, double now_s, TimeNs now_ns,
                               StepOutput& out) noexcept {
+  if (t.fault != InputFault::kNone) {
+    // A touch the NC reported whose values did not arrive intact: an alarm, not the warning of a
+    // malformed operator entry, because the touch cycle on the machine lost a touch. The set in
+    // progress waits for it as for any missing touch (touch_set_timeout_s).
+    out.alarm(now_ns, Severity::kAlarm, AlarmCode::kCalibrationInvalidInput, t.axis, kNaN);
+    return;
+  }
   const bool valid = t.axis <= 2 && (t.direction == 1 || t.direction == -1) && t.variant <= 1 &&
                      (t.variant == 0 || t.axis == 0) && std::isfinite(t.trigger_position_mm);
   if (!valid) {

@@ -242,7 +242,8 @@ CalibState from_text(std::string_view text) {
   if (used != values.size()) {
     for (const auto& [key, value] : values) {
       bool known = false;
-      visit_fields(s, [&](const std::string& k, const auto&) { known = known || k == key; });
+      const std::string& name = key;  // clang 14 cannot capture a structured binding
+      visit_fields(s, [&](const std::string& k, const auto&) { known = known || k == name; });
       if (!known) {
         fail(value.second, key, "unknown key");
       }

@@ -312,6 +312,12 @@ void CheckpointCompensator::flush_table(TimeNs now_ns, StepOutput& out) noexcept
 
 void CheckpointCompensator::on_probe(const ProbeMeasurement& m, StepOutput& out) noexcept {
   ++counters_.measurements;
+  if (m.fault != InputFault::kNone) {
+    // The NC reported a reading whose values did not arrive intact: nothing to learn from.
+    ++counters_.invalid;
+    out.alarm(m.time_ns, Severity::kAlarm, AlarmCode::kProbeInvalidInput, m.checkpoint, kNaN);
+    return;
+  }
   if (m.checkpoint < 0 || static_cast<std::size_t>(m.checkpoint) >= plan_.size()) {
     ++counters_.invalid;
     out.alarm(m.time_ns, Severity::kAlarm, AlarmCode::kProbeInvalidInput, m.checkpoint,
@@ -680,6 +686,16 @@ void CheckpointCompensator::on_sample(const AxisSample& s, StepOutput& out) noex
 void CheckpointCompensator::reset_live(double nc_value_um, TimeNs now_ns) noexcept {
   limiter_.reset(nc_value_um, now_ns);
   live_written_um_ = limiter_.output_um();
+}
+
+bool CheckpointCompensator::adopt_register_value(std::size_t i, double nc_value_um) noexcept {
+  if (i >= points_.size() || !limiter_.admissible(nc_value_um)) {
+    return false;
+  }
+  points_[i].offset_um = nc_value_um;
+  points_[i].applied_um = nc_value_um;
+  ++generation_;
+  return true;
 }
 
 void CheckpointCompensator::export_state(CheckpointState& out) const {

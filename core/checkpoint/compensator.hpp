@@ -180,6 +180,10 @@ class CheckpointCompensator {
   /// Starts the live register's limiter from the value the NC holds (read back at start-up or
   /// after a reconnect) instead of 0. Not real-time.
   void reset_live(double nc_value_um, TimeNs now_ns) noexcept;
+  /// Start-up without a state: checkpoint i's offset (and the value its wall is cut with) becomes
+  /// what the NC holds, so the table is not rewritten from zeros; the next measurement is
+  /// learned against it. False (nothing changed) for a value the limiter refuses. Not real-time.
+  bool adopt_register_value(std::size_t i, double nc_value_um) noexcept;
 
   /// The value of checkpoint i's register [µm] (after the repeatability rule).
   [[nodiscard]] double register_value_um(std::size_t i) const noexcept;

@@ -1,5 +1,6 @@
 #include "core/checkpoint/module.hpp"
 
+#include <cmath>
 #include <cstring>
 #include <iterator>
 #include <stdexcept>
@@ -68,6 +69,22 @@ void CheckpointModule::attach(const engine::RegisterTable& registers) {
 void CheckpointModule::step(TimeNs now_ns, std::span<const Event> events,
                             StepOutput& out) noexcept {
   compensator_.step(now_ns, events, out);
+}
+
+bool CheckpointModule::adopt_output(std::uint16_t register_index, double nc_value_um,
+                                    TimeNs now_ns) {
+  if (!std::isfinite(nc_value_um)) {
+    return false;
+  }
+  if (config_.active_register >= 0 && register_index == config_.active_register) {
+    compensator_.reset_live(nc_value_um, now_ns);
+    return true;
+  }
+  if (register_index < config_.register_base) {
+    return false;
+  }
+  return compensator_.adopt_register_value(
+      static_cast<std::size_t>(register_index - config_.register_base), nc_value_um);
 }
 
 std::size_t CheckpointModule::state_capacity() const noexcept {

@@ -45,6 +45,10 @@ class CheckpointModule final : public engine::Module {
   std::size_t status(std::span<engine::StatusValue> out) const noexcept override;
   /// The table registers and the live register.
   [[nodiscard]] std::vector<std::uint16_t> written_registers() const override;
+  /// Without a state: a table register's value becomes the checkpoint's offset
+  /// (CheckpointCompensator::adopt_register_value()); the live register's limiter starts from
+  /// the NC's value (it is written again only while finishing, from the adopted table).
+  bool adopt_output(std::uint16_t register_index, double nc_value_um, TimeNs now_ns) override;
 
   [[nodiscard]] CheckpointCompensator& compensator() noexcept { return compensator_; }
   [[nodiscard]] const CheckpointCompensator& compensator() const noexcept { return compensator_; }

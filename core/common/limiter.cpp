@@ -22,7 +22,7 @@ void OffsetLimiter::configure(const LimiterConfig& config) {
   require_positive(config.max_rate_um_per_s, "max_rate_um_per_s");
   config_ = config;
   // A reconfiguration must not let a held value escape the new absolute limit silently: it is
-  // kept (the NC holds it) but the next write can only move it inward.
+  // kept (the NC holds it), and the next value passed or slewed lies within the new bound.
 }
 
 void OffsetLimiter::reset(double current_um, TimeNs now_ns) noexcept {
@@ -53,7 +53,10 @@ LimitResult OffsetLimiter::apply(double target_um, TimeNs now_ns) noexcept {
   LimitVerdict verdict = LimitVerdict::kPassed;
   double out = target_um;
   if (std::fabs(change) > allowed) {
-    out = output_um_ + std::copysign(allowed, change);
+    // From an origin beyond max_abs_um (an NC that held such a value) the slewed value is
+    // brought inside the bound: no value beyond it ever leaves the limiter.
+    out = std::clamp(output_um_ + std::copysign(allowed, change), -config_.max_abs_um,
+                     config_.max_abs_um);
     verdict = LimitVerdict::kSlewed;
     ++counters_.slewed;
   } else {

@@ -5,6 +5,8 @@
 // - change beyond max_step_um per write or max_rate_um_per_s · Δt: slewed — the output moves
 //   toward the target by the allowed amount (a rate cap, like Sinumerik's MD32760 or LinuxCNC's
 //   external-offset velocity), and keeps moving on later writes.
+// - No value beyond max_abs_um is ever returned as passed or slewed: from an origin beyond it
+//   (reset() to what an NC held) the first move lands on the bound, not max_step_um inward.
 //
 // Rejections are alarms; slewing is a warning. Measurements that would push a target beyond
 // max_abs_um must be refused by the module before they change any state (admissible()).

@@ -32,6 +32,20 @@ constexpr TimeNs from_seconds(double t_s) { return static_cast<TimeNs>(t_s * kNs
 // ---------------------------------------------------------------------------------------------
 // In: events from the NC / PLC / operator.
 
+/// Where a numbered event came from. A bus whose NC numbers its events (Modbus: a sequence
+/// counter per event group) sets `numbered` and the counter's value; the loop sets `bus` (its
+/// index in the loop's bus list). The engine keeps the last one it took per bus and kind with
+/// its state, so that a restart resumes the bus's events from there (docs/daemon.md, "Events
+/// while nccompd was down").
+struct EventOrigin {
+  std::uint32_t sequence{0};
+  std::uint8_t bus{0};
+  bool numbered{false};
+  /// Not an event: the bus consumed the counter without one to deliver (its first read, an NC
+  /// restart with no event since). The engine moves its cursor and passes nothing on.
+  bool counter_only{false};
+};
+
 /// One sample of the machine state, published by the NC at (up to) the loop rate.
 struct AxisSample {
   TimeNs time_ns{0};
@@ -49,6 +63,16 @@ struct AxisSample {
   bool cutting{true};
 };
 
+/// Why a driver could not use the values of a measurement the NC reported (ToolMeasurement,
+/// ProbeMeasurement, CalibrationTouch). The measurement happened, so it is not dropped in
+/// silence: the event reaches its method, which raises its alarm and changes nothing. A faulted
+/// event's value fields (wear, deviation, angle, radius, positions) are 0 and never a measurement.
+enum class InputFault : std::uint8_t {
+  kNone = 0,
+  kInvalid = 1,     // NaN / inf, not integral, not a valid code, a malformed frame
+  kOutOfRange = 2,  // finite but outside the map's min / max
+};
+
 /// A tool measurement (laser light barrier, measuring diamond).
 struct ToolMeasurement {
   TimeNs time_ns{0};
@@ -58,6 +82,9 @@ struct ToolMeasurement {
   /// Wear [µm] per edge support point; point_count == 1 means wear at the tip / one value.
   std::uint8_t point_count{1};
   std::array<double, kMaxEdgePoints> wear_um{};
+  /// tool is 0 when the fault is in the tool number itself.
+  InputFault fault{InputFault::kNone};
+  EventOrigin origin{};
 };
 
 /// A probe measurement of the part at a checkpoint (S1).
@@ -72,6 +99,9 @@ struct ProbeMeasurement {
   /// Probe ball radius r [mm].
   double ball_radius_mm{0.0};
   std::array<double, 3> position_mm{};
+  /// checkpoint is -1 when the fault is in the checkpoint number itself.
+  InputFault fault{InputFault::kNone};
+  EventOrigin origin{};
 };
 
 /// Which probe produced a calibration touch (S3).
@@ -89,6 +119,9 @@ struct CalibrationTouch {
   std::uint8_t variant{0};
   /// Axis position at the trigger [mm].
   double trigger_position_mm{0.0};
+  /// probe, axis, direction and variant are as received where valid, else their defaults.
+  InputFault fault{InputFault::kNone};
+  EventOrigin origin{};
 };
 
 struct ToolChange {
@@ -96,6 +129,7 @@ struct ToolChange {
   std::int32_t tool{0};
   /// The new tool is a sister of the previous one (same geometry).
   bool sister{false};
+  EventOrigin origin{};
 };
 
 enum class ProgramEventKind : std::uint8_t {
@@ -109,6 +143,7 @@ struct ProgramEvent {
   TimeNs time_ns{0};
   ProgramEventKind kind{ProgramEventKind::kPartStart};
   std::int32_t part{0};
+  EventOrigin origin{};
 };
 
 struct TemperatureSample {
@@ -134,6 +169,9 @@ enum class OperatorCommandKind : std::uint8_t {
   // Every module with a latched alarm (today the creep module, core/creep): `nccomp acknowledge`.
   kAcknowledge = 8,  // the operator acknowledges the latched alarms: code all 0 (every module;
                      // other codes are reserved and refused), values unused
+  // The engine's start-up holds (core/engine/engine.hpp): `nccomp register release NAME|all`.
+  kRegisterRelease = 9,  // code all 0; value[0] = the register's index, or -1 = every register
+                         // held; value[1] unused (0)
 };
 
 /// An operator command (status socket → SPSC ring → the loop): validated by the daemon before it
@@ -149,6 +187,79 @@ struct OperatorCommand {
 
 using Event = std::variant<AxisSample, ToolMeasurement, ProbeMeasurement, CalibrationTouch,
                            ToolChange, ProgramEvent, TemperatureSample, OperatorCommand>;
+
+/// The fault of a measurement event (ToolMeasurement, ProbeMeasurement, CalibrationTouch); kNone
+/// for every other event.
+inline InputFault fault_of(const Event& e) noexcept {
+  return std::visit(
+      [](const auto& ev) {
+        using T = std::decay_t<decltype(ev)>;
+        if constexpr (std::is_same_v<T, ToolMeasurement> || std::is_same_v<T, ProbeMeasurement> ||
+                      std::is_same_v<T, CalibrationTouch>) {
+          return ev.fault;
+        } else {
+          return InputFault::kNone;
+        }
+      },
+      e);
+}
+
+/// The event kinds a bus may number (EventOrigin), in this order: ToolMeasurement,
+/// ProbeMeasurement, CalibrationTouch, ToolChange, ProgramEvent.
+inline constexpr std::size_t kNumberedKinds = 5;
+
+static_assert(std::is_same_v<std::variant_alternative_t<1, Event>, ToolMeasurement> &&
+              std::is_same_v<std::variant_alternative_t<5, Event>, ProgramEvent>);
+
+/// Index of e's kind among the numbered kinds, or -1 for a kind that is never numbered.
+constexpr int numbered_kind(const Event& e) noexcept {
+  const std::size_t i = e.index();
+  return i >= 1 && i <= kNumberedKinds ? static_cast<int>(i) - 1 : -1;
+}
+
+/// e's origin, or nullptr for a kind that is never numbered. Real-time safe.
+template <typename E>
+requires std::is_same_v<std::remove_const_t<E>, Event>
+auto* origin_of(E& e) noexcept {
+  using Origin = std::conditional_t<std::is_const_v<E>, const EventOrigin, EventOrigin>;
+  return std::visit(
+      [](auto& ev) -> Origin* {
+        if constexpr (requires { ev.origin; }) {
+          return &ev.origin;
+        } else {
+          return nullptr;
+        }
+      },
+      e);
+}
+
+/// Marks a measurement event faulted (fault != kNone) and sets every value field to 0, so that
+/// no value of it can be taken for a measurement; other events are left as they are.
+inline void set_fault(Event& e, InputFault fault) noexcept {
+  if (fault == InputFault::kNone) {
+    return;
+  }
+  if (auto* t = std::get_if<ToolMeasurement>(&e)) {
+    t->fault = fault;
+    t->wear_um.fill(0.0);
+  } else if (auto* p = std::get_if<ProbeMeasurement>(&e)) {
+    p->fault = fault;
+    p->raw_deviation_um = 0.0;
+    p->wall_angle_deg = 0.0;
+    p->ball_radius_mm = 0.0;
+    p->position_mm.fill(0.0);
+  } else if (auto* c = std::get_if<CalibrationTouch>(&e)) {
+    c->fault = fault;
+    c->trigger_position_mm = 0.0;
+  }
+}
+/// The last numbered event of one kind that the engine took from one bus (its NC's counter).
+struct EventCursor {
+  bool known{false};
+  std::uint32_t sequence{0};
+};
+/// One bus's cursors, indexed by numbered_kind().
+using EventCursorSet = std::array<EventCursor, kNumberedKinds>;
 
 // ---------------------------------------------------------------------------------------------
 // Out: commands to the NC, alarms, measurement records.
@@ -203,6 +314,22 @@ enum class AlarmCode : std::uint16_t {
   // by the daemon's main thread, not by the core: subject = the bus's index, value 1 when it
   // rises (Severity::kAlarm), 0 when it clears (Severity::kInfo).
   kBusAlarm = 54,
+  // Start-up: what the NC holds in a register against the limits and the daemon's state
+  // (core/engine/engine.hpp, "Start-up holds"); subject = the register, value = what it holds.
+  // The NC holds a value beyond max_abs_um (read back, or restored / carried over a reload that
+  // narrowed the limit): nothing is written to it until the operator releases it.
+  kRegisterBeyondLimit = 60,
+  // The module writing it has no usable state: the NC's value is adopted as the starting point
+  // of its compensation (nothing written until a new measurement or an operator decision).
+  kRegisterAdopted = 61,
+  // No usable state and no adoption (the module cannot adopt the value, or the NC did not
+  // answer the read-back; value NaN then): held, nothing written until the operator releases it.
+  kRegisterHeldWithoutState = 62,
+  // A bus's input is stale (drivers::BusStatus::input_stale): for longer than the bus's
+  // degraded_alarm_after_s no intact poll (Modbus) / the link not up (CAN), or no valid axis
+  // sample. Raised by the daemon's main thread like kBusAlarm: subject = the bus's index, value 1
+  // when it rises (kAlarm), 0 when it clears (kInfo).
+  kBusInputStale = 55,
 };
 
 struct AlarmEvent {

@@ -154,6 +154,7 @@ void validate(const CreepConfig& c) {
   register_index(o.restart_path_register, "creep.output.restart_path_register");
   positive(o.write_resolution_um, "creep.output.write_resolution_um");
   non_negative(o.refresh_interval_s, "creep.output.refresh_interval_s");
+  non_negative(o.request_rearm_s, "creep.output.request_rearm_s");
 
   positive(c.limiter.max_abs_um, "creep.limiter.max_abs_um");
   positive(c.limiter.max_step_um, "creep.limiter.max_step_um");

@@ -145,6 +145,10 @@ struct OutputConfig {
   double write_resolution_um{0.1};
   /// Every value is re-sent at this interval, so a lost write heals [s]; 0 = never.
   double refresh_interval_s{1.0};
+  /// A measurement request restored high at start-up while the NC still holds it high is
+  /// written 0 for this long and then 1 again (WearCompensator::rearm_request()), so that an NC
+  /// that reacts to the rising edge sees one [s]; 0 = never.
+  double request_rearm_s{1.0};
 };
 
 /// [creep.interval]

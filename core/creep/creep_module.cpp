@@ -26,28 +26,29 @@ constexpr std::array<const char*, kChannelCount> kChannelKeys{
 
 // Status keys of remembered tools: string literals in static storage (the loop publishes the
 // pointers, the status thread reads them later), built at compile time for tools 1..kKeyedTools.
+// Plain arrays and pointers: with std::array's operator[] calls clang's constexpr evaluation
+// runs out of steps (its default limit) before tool 9999.
 constexpr std::size_t kKeyedTools = 9999;
 constexpr std::size_t kToolKeyLength = 16;  // "T9999_wear_um" + NUL
 struct ToolKeys {
-  std::array<std::array<char, kToolKeyLength>, kKeyedTools + 1> key{};
+  char key[kKeyedTools + 1][kToolKeyLength]{};
 };
 constexpr ToolKeys make_tool_keys() {
   ToolKeys k{};
   for (std::size_t t = 1; t <= kKeyedTools; ++t) {
-    auto& s = k.key[t];
-    std::size_t n = 0;
-    s[n++] = 'T';
-    char digits[4]{};
-    std::size_t d = 0;
-    for (std::size_t v = t; v > 0; v /= 10) digits[d++] = static_cast<char>('0' + v % 10);
-    while (d > 0) s[n++] = digits[--d];
-    for (const char c : std::string_view("_wear_um")) s[n++] = c;
-    s[n] = '\0';
+    char* s = k.key[t];
+    *s++ = 'T';
+    std::size_t p = 1000;
+    while (p > t) p /= 10;
+    for (; p > 0; p /= 10) *s++ = static_cast<char>('0' + t / p % 10);
+    for (const char c : "_wear_um") *s++ = c;  // with its NUL
   }
   return k;
 }
 constexpr ToolKeys kToolKeys = make_tool_keys();
-static_assert(std::string_view(kToolKeys.key[9999].data()) == "T9999_wear_um");
+static_assert(std::string_view(kToolKeys.key[1]) == "T1_wear_um");
+static_assert(std::string_view(kToolKeys.key[907]) == "T907_wear_um");
+static_assert(std::string_view(kToolKeys.key[9999]) == "T9999_wear_um");
 /// Tools outside 1..kKeyedTools: by their slot in the tool memory.
 constexpr std::array<const char*, kMaxToolMemory> kSlotKeys{
     "memory_slot_1_wear_um", "memory_slot_2_wear_um", "memory_slot_3_wear_um",
@@ -252,7 +253,8 @@ void CreepModule::step(TimeNs now_ns, std::span<const Event> events, StepOutput&
   const auto& k = comp_.counters();
   const std::uint64_t n = k.measurements_accepted + k.measurements_refused + k.events_invalid;
   const auto& s = comp_.state();
-  const bool moving = comp_.creeps_in_progress() > 0 || s.entry.active || s.rate_known;
+  const bool moving =
+      comp_.creeps_in_progress() > 0 || s.entry.active || s.rate_known || comp_.adoption_active();
   // The held normal is saved when it turned by more than 1° (a restart then splits the
   // correction as the NC holds it, not as it was split long ago).
   const auto& hn = s.held_normal;
@@ -277,7 +279,27 @@ std::size_t CreepModule::save_state(std::span<std::byte> buf) const noexcept {
   const CreepState st = comp_.export_state();
   std::memcpy(buf.data(), &st, sizeof(CreepState));
   std::memcpy(buf.data() + sizeof(CreepState), &comp_.tool_memory(), sizeof(ToolMemory));
+  std::memcpy(buf.data() + sizeof(CreepState) + sizeof(ToolMemory), &comp_.adoption(),
+              sizeof(AdoptedOutputs));
   return state_capacity();
+}
+
+bool CreepModule::adopt_output(std::uint16_t register_index, double nc_value_um,
+                               TimeNs /*now_ns*/) {
+  const auto& o = comp_.config().output;
+  bool adopted = false;
+  for (std::size_t ch = 0; ch < kChannelCount; ++ch) {
+    if (o.channel_register[ch] == register_index) {
+      adopted = comp_.adopt_channel(static_cast<Channel>(ch), nc_value_um);
+    }
+  }
+  const std::array<std::int32_t, 4> flags{o.warning_register, o.alarm_register,
+                                          o.measurement_due_register, o.tool_change_register};
+  for (std::size_t slot = 0; slot < flags.size(); ++slot) {
+    if (flags[slot] == register_index) adopted = comp_.adopt_flag(slot, nc_value_um);
+  }
+  if (adopted) ++generation_;
+  return adopted;
 }
 
 namespace {
@@ -301,9 +323,12 @@ struct LayoutV2 {
     v2::upgrade(o, removal, n);
   }
 };
-static_assert(LayoutV1::kBytes != LayoutV2::kBytes &&
-              LayoutV1::kBytes != sizeof(CreepState) + sizeof(ToolMemory) &&
-              LayoutV2::kBytes != sizeof(CreepState) + sizeof(ToolMemory));
+/// The current layout without the AdoptedOutputs (written before start-up adoption existed).
+constexpr std::size_t kBytesWithoutAdoption = sizeof(CreepState) + sizeof(ToolMemory);
+static_assert(LayoutV1::kBytes != LayoutV2::kBytes && LayoutV1::kBytes != kBytesWithoutAdoption &&
+              LayoutV2::kBytes != kBytesWithoutAdoption &&
+              LayoutV1::kBytes != kBytesWithoutAdoption + sizeof(AdoptedOutputs) &&
+              LayoutV2::kBytes != kBytesWithoutAdoption + sizeof(AdoptedOutputs));
 
 }  // namespace
 
@@ -345,6 +370,7 @@ bool CreepModule::load_state_old(std::span<const std::byte> bytes) noexcept {
   }
   if (!comp_.restore_tool_memory(scratch_memory_)) return false;
   (void)comp_.restore_state(st);  // cannot fail: checked above
+  comp_.restore_adoption(AdoptedOutputs{});
   alarm_cause_ = AlarmCode::kNone;
   warning_cause_ = AlarmCode::kNone;
   ++generation_;
@@ -354,7 +380,16 @@ bool CreepModule::load_state_old(std::span<const std::byte> bytes) noexcept {
 bool CreepModule::load_state(std::span<const std::byte> bytes) noexcept {
   if (bytes.size() == LayoutV1::kBytes) return load_state_old<LayoutV1>(bytes);
   if (bytes.size() == LayoutV2::kBytes) return load_state_old<LayoutV2>(bytes);
-  if (bytes.size() != state_capacity() || !state_bytes_loadable(bytes.data(), sizeof(CreepState)) ||
+  AdoptedOutputs adoption{};
+  if (bytes.size() == state_capacity()) {
+    if (!adoption_bytes_loadable(bytes.data() + kBytesWithoutAdoption, sizeof(AdoptedOutputs),
+                                 adoption)) {
+      return false;
+    }
+  } else if (bytes.size() != kBytesWithoutAdoption) {
+    return false;
+  }
+  if (!state_bytes_loadable(bytes.data(), sizeof(CreepState)) ||
       !memory_bytes_loadable(bytes.data() + sizeof(CreepState), sizeof(ToolMemory))) {
     return false;
   }
@@ -365,6 +400,7 @@ bool CreepModule::load_state(std::span<const std::byte> bytes) noexcept {
   std::memcpy(&scratch_memory_, bytes.data() + sizeof(CreepState), sizeof(ToolMemory));
   if (!comp_.restore_tool_memory(scratch_memory_)) return false;
   (void)comp_.restore_state(st);  // cannot fail: checked above
+  comp_.restore_adoption(adoption);
   // A flag of the restored state was raised by another process: its cause is not known here.
   alarm_cause_ = AlarmCode::kNone;
   warning_cause_ = AlarmCode::kNone;
@@ -437,7 +473,7 @@ std::size_t CreepModule::status(std::span<engine::StatusValue> out) const noexce
     const std::size_t m = order[j];
     const std::int32_t tool = mem.tool[m];
     const char* key = tool >= 1 && static_cast<std::size_t>(tool) <= kKeyedTools
-                          ? kToolKeys.key[static_cast<std::size_t>(tool)].data()
+                          ? kToolKeys.key[static_cast<std::size_t>(tool)]
                           : kSlotKeys[m];
     out[w++] = {key, max_measured_um(mem.state[m]), nullptr};
   }

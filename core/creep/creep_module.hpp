@@ -53,15 +53,17 @@ class CreepModule final : public engine::Module {
   void step(TimeNs now_ns, std::span<const Event> events, StepOutput& out) noexcept override;
 
   [[nodiscard]] std::size_t state_capacity() const noexcept override {
-    return sizeof(CreepState) + sizeof(ToolMemory);
+    return sizeof(CreepState) + sizeof(ToolMemory) + sizeof(AdoptedOutputs);
   }
   /// Real-time safe: the plain-data CreepState of the active tool, then the ToolMemory of the
-  /// tools out of the spindle, byte for byte.
+  /// tools out of the spindle, then what was adopted at a start without state (AdoptedOutputs),
+  /// byte for byte.
   std::size_t save_state(std::span<std::byte> buf) const noexcept override;
   /// Real-time safe: false if the bytes are not a state valid for this config (the module then
   /// keeps its fresh state). A state written by version 1 of the layout (before the eased
   /// superposition) or version 2 (before the held normal and the request hold) is converted
-  /// (core/creep/state_v1.hpp, state_v2.hpp).
+  /// (core/creep/state_v1.hpp, state_v2.hpp); one without the AdoptedOutputs (before start-up
+  /// adoption) loads with nothing adopted.
   bool load_state(std::span<const std::byte> bytes) noexcept override;
   /// Advances on every discrete change (measurement, tool change, halt), every 1 mm of cut
   /// path while creeps, entries or predictions are in progress, and when the held surface
@@ -79,6 +81,11 @@ class CreepModule final : public engine::Module {
   std::size_t status(std::span<engine::StatusValue> out) const noexcept override;
   /// The offset and flag registers of [creep.output] (valid after attach()).
   [[nodiscard]] std::vector<std::uint16_t> written_registers() const override;
+  /// Without a state: a channel register's value is held until the next measurement and the
+  /// fallback channel's sets the wear baseline (WearCompensator::adopt_channel()); the warning,
+  /// alarm and tool change flags read back high stay latched (adopt_flag()). The measurement
+  /// request and the restart path are recomputed (false).
+  bool adopt_output(std::uint16_t register_index, double nc_value_um, TimeNs now_ns) override;
 
   /// Operator acknowledgement (`nccomp acknowledge`: an OperatorCommand kAcknowledge in step(),
   /// taken before the cycle's other events): WearCompensator::clear_alarm() (halt, alarm and
@@ -86,6 +93,8 @@ class CreepModule final : public engine::Module {
   /// last_acknowledgement(); the flag registers fall to 0 in the same step. Also when nothing is
   /// latched (counted, nothing changes). Real-time safe.
   void clear_alarm() noexcept;
+  /// Start-up only (before the loop steps the engine): WearCompensator::rearm_request().
+  void rearm_request() noexcept { comp_.rearm_request(); }
   [[nodiscard]] const WearCompensator& compensator() const noexcept { return comp_; }
 
   /// What one acknowledgement found latched (and cleared).

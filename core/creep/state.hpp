@@ -4,8 +4,10 @@
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <type_traits>
 
 #include "core/common/types.hpp"
@@ -148,6 +150,47 @@ struct ToolMemory {
 
 static_assert(std::is_trivially_copyable_v<ToolMemory>);
 static_assert(std::is_standard_layout_v<ToolMemory>);
+
+/// What the NC held when the module started without a usable state (CreepModule::adopt_output(),
+/// WearCompensator::adopt_channel()): a held channel keeps the NC's value in force until the next
+/// accepted measurement; from there the difference between it and the computed value fades out
+/// with the creep profile over one creep span, so the register moves from what the NC held to
+/// the new value, never back toward 0. Plain data with byte-sized flags; saved after the state
+/// and the tool memory.
+struct AdoptedOutputs {
+  static constexpr std::uint32_t kVersion = 1;
+  std::uint32_t version{kVersion};
+  /// 1: channel ch is held at held_um[ch].
+  std::array<std::uint8_t, kChannelCount> held{};
+  /// 1: fade_um[ch] (held − computed at the measurement) fades out on the creep clock.
+  std::uint8_t fading{0};
+  std::uint8_t fade_path_based{0};
+  std::array<double, kChannelCount> held_um{};
+  std::array<double, kChannelCount> fade_um{};
+  double fade_start{0.0};
+  double fade_span{0.0};
+};
+static_assert(std::is_trivially_copyable_v<AdoptedOutputs>);
+
+/// True if bytes hold a valid AdoptedOutputs (size, version, 0/1 flags, finite values).
+/// Real-time safe.
+inline bool adoption_bytes_loadable(const std::byte* bytes, std::size_t size,
+                                    AdoptedOutputs& out) noexcept {
+  if (size != sizeof(AdoptedOutputs)) return false;
+  AdoptedOutputs a;
+  std::memcpy(&a, bytes, sizeof a);
+  if (a.version != AdoptedOutputs::kVersion || a.fading > 1 || a.fade_path_based > 1) return false;
+  for (std::size_t ch = 0; ch < kChannelCount; ++ch) {
+    if (a.held[ch] > 1 || !std::isfinite(a.held_um[ch]) || !std::isfinite(a.fade_um[ch])) {
+      return false;
+    }
+  }
+  if (!std::isfinite(a.fade_start) || !std::isfinite(a.fade_span) || a.fade_span < 0.0) {
+    return false;
+  }
+  out = a;
+  return true;
+}
 
 /// True if bytes can be copied into a CreepState: the right size and every bool byte 0 or 1
 /// (loading any other value into a bool is undefined behaviour, and a corrupt state file can

@@ -56,6 +56,8 @@ void WearCompensator::configure(const CreepConfig& config) {
   points_ = config_.edge.edge_points;
   s_ = CreepState{};
   memory_ = ToolMemory{};
+  adopted_ = AdoptedOutputs{};
+  fade_pending_ = false;
   s_.edge_points = static_cast<std::uint32_t>(points_);
   s_.history_count = 1;  // a new tool: zero wear at zero path, the first point of the rate fit
   counters_ = CreepCounters{};
@@ -64,6 +66,7 @@ void WearCompensator::configure(const CreepConfig& config) {
   cutting_ = false;
   interrupted_ = false;
   have_now_ = false;
+  rearm_ = false;
   written_once_.fill(false);
   flag_written_once_.fill(false);
   last_verdict_.fill(LimitVerdict::kPassed);
@@ -145,6 +148,7 @@ bool WearCompensator::restore_state(const CreepState& st) noexcept {
   have_now_ = false;
   written_once_.fill(false);
   flag_written_once_.fill(false);
+  rearm_ = false;
   select_tool_tables();
   return true;
 }
@@ -172,6 +176,15 @@ void WearCompensator::clear_alarm() noexcept {
   // The operator has looked: a measurement refused before may be asked for again at once (the
   // request fell when that measurement came and stayed low since).
   s_.request_held = false;
+}
+
+void WearCompensator::rearm_request() noexcept {
+  if (!s_.measurement_due_flag || config_.output.request_rearm_s <= 0.0 ||
+      config_.output.measurement_due_register < 0) {
+    return;
+  }
+  rearm_ = true;
+  rearm_started_ = false;
 }
 
 void WearCompensator::select_tool_tables() noexcept {
@@ -208,6 +221,10 @@ void WearCompensator::step(TimeNs now_ns, std::span<const Event> events, StepOut
   }
   last_now_ns_ = now_ns;
   have_now_ = true;
+  if (rearm_ && !rearm_started_) {
+    rearm_started_ = true;
+    rearm_until_ns_ = now_ns + from_seconds(config_.output.request_rearm_s);
+  }
 
   for (const Event& e : events) {
     if (const auto* a = std::get_if<AxisSample>(&e)) {
@@ -693,10 +710,123 @@ void WearCompensator::compute_targets() noexcept {
   }
   correction_um_ = c;
   lateral_um_ = l;
+  apply_adoption(target);
   if (s_.halted) {
     target = s_.channel_output_um;  // stop applying: hold what the NC has
   }
   target_um_ = target;
+}
+
+void WearCompensator::apply_adoption(std::array<double, kChannelCount>& target) noexcept {
+  auto& a = adopted_;
+  if (fade_pending_) {
+    // The first measurement after the adoption: from here the held values give way to the
+    // computed ones along the creep profile (target = held at the start, computed at the end).
+    fade_pending_ = false;
+    double largest = 0.0;
+    for (std::size_t ch = 0; ch < kChannelCount; ++ch) {
+      a.fade_um[ch] = a.held[ch] != 0 ? a.held_um[ch] - target[ch] : 0.0;
+      largest = std::max(largest, std::fabs(a.fade_um[ch]));
+      a.held[ch] = 0;
+    }
+    const bool path_based =
+        config_.creep_basis == CreepBasis::kPath || config_.creep_basis == CreepBasis::kRatePath;
+    a.fade_path_based = path_based ? 1 : 0;
+    a.fade_start = path_based ? s_.creep_path_mm : s_.creep_time_s;
+    a.fade_span = creep_span(largest);
+    a.fading = largest > kTiny ? 1 : 0;
+  }
+  for (std::size_t ch = 0; ch < kChannelCount; ++ch) {
+    if (a.held[ch] != 0) target[ch] = a.held_um[ch];
+  }
+  if (a.fading != 0) {
+    const double clock = a.fade_path_based != 0 ? s_.creep_path_mm : s_.creep_time_s;
+    const double u = a.fade_span > 0.0 ? (clock - a.fade_start) / a.fade_span : 1.0;
+    const double rest = 1.0 - profile_fraction(config_.profile, u, &table_);
+    if (rest <= 0.0) {
+      a.fading = 0;
+    } else {
+      for (std::size_t ch = 0; ch < kChannelCount; ++ch) target[ch] += rest * a.fade_um[ch];
+    }
+  }
+}
+
+double WearCompensator::creep_span(double amount_um) const noexcept {
+  switch (config_.creep_basis) {
+    case CreepBasis::kPath:
+      return config_.creep_length_mm;
+    case CreepBasis::kTime:
+      return config_.creep_time_s;
+    case CreepBasis::kRateTime:
+      return std::fabs(amount_um) / config_.creep_rate_um_per_min * 60.0;
+    case CreepBasis::kRatePath:
+      return std::fabs(amount_um) / config_.creep_rate_um_per_mm;
+  }
+  return 0.0;
+}
+
+bool WearCompensator::adoption_active() const noexcept {
+  if (adopted_.fading != 0) return true;
+  for (const auto h : adopted_.held) {
+    if (h != 0) return true;
+  }
+  return false;
+}
+
+bool WearCompensator::adopt_channel(Channel ch, double value_um) noexcept {
+  const auto k = static_cast<std::size_t>(ch);
+  if (config_.output.channel_register[k] < 0 || !limiters_[k].admissible(value_um)) {
+    return false;
+  }
+  adopted_.held[k] = 1;
+  adopted_.held_um[k] = value_um;
+  s_.channel_output_um[k] = value_um;  // the limiter starts here at the first step
+  const bool axes = config_.output.mode == OutputMode::kAxes;
+  if (ch != config_.edge.fallback_channel || s_.measurements > 0) return true;
+  // The wear baseline: without a normal the fallback channel carries sign · (w + deflection(w)),
+  // plus the lateral deflection on a radius register; find the uniform w ≥ 0 behind the value.
+  const double sign = axes ? config_.edge.fallback_sign : config_.output.tool_register_sign;
+  const bool lateral = !axes && ch == Channel::kRadius;
+  const auto h = [&](double w) {
+    return w + deflection(w, false) + (lateral ? deflection(w, true) : 0.0);
+  };
+  const double c = value_um / sign;
+  double lo = 0.0;
+  double hi = limiters_[k].config().max_abs_um;
+  if (!(c > h(lo)) || c > h(hi)) return true;  // no wear, or no uniform wear explains it
+  for (int it = 0; it < 200; ++it) {
+    const double mid = 0.5 * (lo + hi);
+    if (!(mid > lo && mid < hi)) break;  // adjacent doubles
+    (h(mid) < c ? lo : hi) = mid;
+  }
+  const double w = std::fabs(h(lo) - c) < std::fabs(h(hi) - c) ? lo : hi;
+  for (std::size_t i = 0; i < points_; ++i) {
+    s_.committed_um[i] = w;
+    s_.measured_um[i] = w;
+    s_.history[0].wear_um[i] = w;
+  }
+  // The baseline is the first point of the rate fit, at this tool's path (not the origin).
+  s_.history[0].cut_path_mm = s_.cut_path_mm;
+  s_.history_count = 1;
+  s_.history_has_origin = false;
+  return true;
+}
+
+bool WearCompensator::adopt_flag(std::size_t slot, double value) noexcept {
+  if (!(value >= 0.5)) return false;
+  switch (slot) {
+    case 0:
+      s_.warning_flag = true;
+      return true;
+    case 1:
+      s_.alarm_flag = true;
+      return true;
+    case 3:
+      s_.tool_change_flag = true;
+      return true;
+    default:
+      return false;
+  }
 }
 
 void WearCompensator::write_outputs(TimeNs now_ns, StepOutput& out) noexcept {
@@ -739,7 +869,9 @@ void WearCompensator::write_outputs(TimeNs now_ns, StepOutput& out) noexcept {
   }
   write_flag(now_ns, o.warning_register, s_.warning_flag, 0, out);
   write_flag(now_ns, o.alarm_register, s_.alarm_flag, 1, out);
-  write_flag(now_ns, o.measurement_due_register, s_.measurement_due_flag, 2, out);
+  // Re-armed (start-up): 0 until rearm_until_ns_, or until a measurement lowered the request.
+  rearm_ = rearm_ && s_.measurement_due_flag && now_ns < rearm_until_ns_;
+  write_flag(now_ns, o.measurement_due_register, s_.measurement_due_flag && !rearm_, 2, out);
   write_flag(now_ns, o.tool_change_register, s_.tool_change_flag, 3, out);
   const double restart_mm = restart_program_path_mm();
   if (o.restart_path_register >= 0 && std::isfinite(restart_mm)) {
@@ -799,7 +931,7 @@ void WearCompensator::on_measurement(TimeNs now_ns, const ToolMeasurement& m,
   }
   std::array<double, kMaxEdgePoints> w{};
   for (std::size_t i = 0; i < points_; ++i) {
-    w[i] = m.broken ? kNaN : m.wear_um[n_meas == 1 ? 0 : i];
+    w[i] = m.broken || m.fault != InputFault::kNone ? kNaN : m.wear_um[n_meas == 1 ? 0 : i];
   }
   // Every measurement is logged, one row per support point, whatever is decided below.
   for (std::size_t i = 0; i < points_; ++i) {
@@ -815,6 +947,12 @@ void WearCompensator::on_measurement(TimeNs now_ns, const ToolMeasurement& m,
     r.measured_um = w[i];
     r.applied_um = 0.0;
     out.records.push(r);
+  }
+  if (m.fault != InputFault::kNone && !s_.halted) {
+    // The laser's result did not arrive intact (the driver's fault, e.g. NaN in the register):
+    // the tool in the spindle counts as mismeasured, whatever tool number came with it.
+    halt(now_ns, AlarmCode::kToolBrokenOrMismeasured, kNaN, out);
+    return;
   }
   if (s_.tool != 0 && m.tool != s_.tool) {
     ++counters_.events_invalid;
@@ -946,6 +1084,7 @@ void WearCompensator::on_measurement(TimeNs now_ns, const ToolMeasurement& m,
   s_.request_held = false;
   ++s_.measurements;
   ++counters_.measurements_accepted;
+  for (const auto h : adopted_.held) fade_pending_ = fade_pending_ || h != 0;
 
   if (s_.history_count == kMaxRateWindow) {
     std::copy(s_.history.begin() + 1, s_.history.end(), s_.history.begin());
@@ -1023,8 +1162,7 @@ double WearCompensator::interval_path_mm() const noexcept {
       // Before a rate is known (new tool, break-in wear is fastest) measure at the minimum.
       if (!s_.rate_known) return iv.min_interval_mm;
       if (!(max_rate > 0.0)) return iv.max_interval_mm;
-      return std::clamp(iv.target_increment_um / max_rate, iv.min_interval_mm,
-                        iv.max_interval_mm);
+      return std::clamp(iv.target_increment_um / max_rate, iv.min_interval_mm, iv.max_interval_mm);
     }
     case IntervalBasis::kOff:
     case IntervalBasis::kTime:
@@ -1079,6 +1217,18 @@ double WearCompensator::restart_program_path_mm() const noexcept {
 void WearCompensator::on_tool_change(TimeNs /*now_ns*/, const ToolChange& c,
                                      StepOutput& /*out*/) noexcept {
   const bool new_tool = c.tool != s_.tool || c.sister;
+  if (new_tool && s_.tool == 0 && adoption_active()) {
+    // The first tool named after a start without state: the NC's offsets (and the wear baseline
+    // read from them) are this tool's, as with the first axis sample naming it.
+    s_.tool = c.tool;
+    select_tool_tables();
+    return;
+  }
+  if (new_tool) {
+    // Another tool: what was adopted belonged to the one before (remembered with its state).
+    adopted_ = AdoptedOutputs{};
+    fade_pending_ = false;
+  }
   if (!new_tool) {
     // The same tool back in the spindle (e.g. after a measurement outside the machine).
     if (config_.entry.retract_um > 0.0) {

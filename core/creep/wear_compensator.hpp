@@ -80,10 +80,39 @@ class WearCompensator {
   /// another tool than its slot says, or a tool appears twice. Real-time safe.
   bool restore_tool_memory(const ToolMemory& memory) noexcept;
 
+  /// Start-up without a usable state (not real-time; before the first step): the NC holds
+  /// value_um in channel ch's register. The channel's output starts there and stays there until
+  /// the next accepted measurement, from which the difference fades out over one creep span
+  /// (AdoptedOutputs). The fallback channel's value also sets the wear baseline (the uniform
+  /// wear whose correction without a normal is that value, committed and measured), so the next
+  /// measurement's increment is judged and crept from it. False (nothing changed) for an unused
+  /// channel or a value the limiter refuses.
+  bool adopt_channel(Channel ch, double value_um) noexcept;
+  /// The same for a flag read back high: the warning (slot 0), alarm (1) and tool change (3)
+  /// flags stay latched as if this module had raised them (acknowledge or a tool change clears
+  /// them). False for the other slots (recomputed) and a flag read back low.
+  bool adopt_flag(std::size_t slot, double value) noexcept;
+  /// What was adopted and is still in force (persisted with the state). Real-time safe.
+  [[nodiscard]] const AdoptedOutputs& adoption() const noexcept { return adopted_; }
+  /// True while an adopted channel is held or fading out. Real-time safe.
+  [[nodiscard]] bool adoption_active() const noexcept;
+  /// Restores a saved adoption (validated by adoption_bytes_loadable()). Real-time safe.
+  void restore_adoption(const AdoptedOutputs& a) noexcept { adopted_ = a; }
+
   /// Operator acknowledgement: clears the halt, the alarm and the warning flags and the hold of
   /// the "measurement due" request after a refused measurement (so an overdue measurement is
   /// asked for in the next step). Creeps resume where they were frozen. Real-time safe.
   void clear_alarm() noexcept;
+
+  /// Start-up, after a state with the measurement request high was restored, when the NC still
+  /// holds the request high (or cannot say): the request register is written 0 from the next
+  /// step for request_rearm_s, then 1 again, so that an NC that reacts to the rising edge sees
+  /// one and the measurement cycle cannot stick (docs/creep.md, "the request"). Nothing changes
+  /// in the state; a measurement that arrives meanwhile ends it. No-op with request_rearm_s 0 or
+  /// the request low. Real-time safe.
+  void rearm_request() noexcept;
+  /// True while the request register is held at 0 by rearm_request().
+  [[nodiscard]] bool rearming() const noexcept { return rearm_; }
 
   // Observers (real-time safe), for status and tests.
   /// Wear in force at support point i now [µm] (committed + creeping + predicted).
@@ -136,6 +165,10 @@ class WearCompensator {
   [[nodiscard]] double interval_path_mm() const noexcept;
   void check_measurement_due(TimeNs now_ns, StepOutput& out) noexcept;
   void compute_targets() noexcept;
+  /// Holds the adopted channels, and fades their difference out after a measurement.
+  void apply_adoption(std::array<double, kChannelCount>& target) noexcept;
+  /// Clock span [mm or s] of a creep of `amount_um` on the configured basis.
+  [[nodiscard]] double creep_span(double amount_um) const noexcept;
   void write_outputs(TimeNs now_ns, StepOutput& out) noexcept;
   void write_flag(TimeNs now_ns, std::int32_t reg, bool value, std::size_t slot,
                   StepOutput& out) noexcept;
@@ -174,6 +207,9 @@ class WearCompensator {
   std::size_t points_{1};
   CreepState s_{};
   ToolMemory memory_{};
+  AdoptedOutputs adopted_{};
+  /// A measurement was accepted while channels are held: the fade starts in compute_targets().
+  bool fade_pending_{false};
   CreepCounters counters_{};
   std::array<OffsetLimiter, kChannelCount> limiters_{};
 
@@ -186,6 +222,11 @@ class WearCompensator {
   bool have_feed_{false};
   TimeNs last_now_ns_{0};
   bool have_now_{false};
+  // rearm_request(): the request register is written 0 until rearm_until_ns_ (set at the first
+  // step after it was asked for).
+  bool rearm_{false};
+  bool rearm_started_{false};
+  TimeNs rearm_until_ns_{0};
   int deflection_index_{-1};
   std::array<std::uint8_t, kMaxTransitions> transition_index_{};
   std::size_t transition_count_{0};

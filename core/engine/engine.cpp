@@ -18,6 +18,15 @@ constexpr std::uint32_t kStateVersion = 1;
 constexpr std::size_t kMaxNameLength = 255;
 /// The machine context's entry among the modules' states (no module name starts with '@').
 constexpr std::string_view kContextEntry = "@context";
+/// Every register's hold, by name: u32 count, then name and u8 RegisterHold per register (a fixed
+/// size: state_capacity() stays exact). Only kWithoutState is restored from it: a hold beyond
+/// the limit follows from the saved output (what the NC holds).
+constexpr std::string_view kHoldsEntry = "@holds";
+/// A read-back this close to 0 [µm] is no offset a module without state would lose (the
+/// reference map's resolution is 0.1 µm): nothing to report, nothing to hold.
+constexpr double kNoOffsetUm = 0.1;
+/// The event cursors' entry (cursors.hpp); an engine without cursors skips it as unknown.
+constexpr std::string_view kCursorsEntry = "@cursors";
 
 // Little helpers for the state bytes. Native byte order: the state never leaves the machine.
 class Writer {
@@ -113,6 +122,8 @@ bool all_finite(const std::array<double, N>& a, std::size_t n) {
   return true;
 }
 
+bool valid_fault(InputFault f) { return static_cast<std::uint8_t>(f) <= 2; }
+
 }  // namespace
 
 std::string_view to_string(RegisterKind kind) noexcept {
@@ -140,6 +151,18 @@ bool parse_register_kind(std::string_view name, RegisterKind& out) noexcept {
     }
   }
   return false;
+}
+
+std::string_view to_string(RegisterHold hold) noexcept {
+  switch (hold) {
+    case RegisterHold::kNone:
+      return "none";
+    case RegisterHold::kBeyondLimit:
+      return "beyond_limit";
+    case RegisterHold::kWithoutState:
+      return "without_state";
+  }
+  return "unknown";
 }
 
 int RegisterTable::find(std::string_view name) const noexcept {
@@ -203,6 +226,12 @@ void Engine::configure(std::vector<RegisterSpec> registers,
   }
   capacity += sizeof(std::uint16_t) + kContextEntry.size() + sizeof(std::uint32_t) +
               MachineContext::kStateBytes;
+  capacity += sizeof(std::uint16_t) + kHoldsEntry.size() + 2 * sizeof(std::uint32_t);
+  for (const auto& r : specs_) {
+    capacity += sizeof(std::uint16_t) + r.name.size() + sizeof(std::uint8_t);
+  }
+  capacity += sizeof(std::uint16_t) + kCursorsEntry.size() + sizeof(std::uint32_t) +
+              EventCursors::kStateBytes;
   // The context's options: from the one module that sets them (the daemon's
   // [measurement_context] section), else from the engine options.
   ContextOptions context_options = options.context;
@@ -242,9 +271,12 @@ void Engine::configure(std::vector<RegisterSpec> registers,
     }
   }
   regs_ = std::move(regs);
+  writer_ = std::move(writer);
+  module_state_.assign(modules.size(), ModuleStateSource::kFresh);
   modules_ = std::move(modules);
   options_ = options;
   context_ = context;
+  cursors_ = EventCursors{};
   for (auto& m : modules_) m->bind_context(context_);
   valid_.clear();
   valid_.reserve(options.max_events_per_step);
@@ -253,11 +285,12 @@ void Engine::configure(std::vector<RegisterSpec> registers,
   counters_ = {};
   write_cursor_ = 0;
   register_generation_ = 0;
+  notices_pending_ = 0;
 }
 
 bool Engine::validate(const Event& e) const noexcept {
   return std::visit(
-      [](const auto& ev) -> bool {
+      [this](const auto& ev) -> bool {
         using T = std::decay_t<decltype(ev)>;
         if constexpr (std::is_same_v<T, AxisSample>) {
           if (ev.axis_count > kMaxAxes || !all_finite(ev.position_mm, ev.axis_count) ||
@@ -266,17 +299,20 @@ bool Engine::validate(const Event& e) const noexcept {
           }
           return !ev.has_normal || all_finite(ev.normal, 3);
         } else if constexpr (std::is_same_v<T, ToolMeasurement>) {
+          if (!valid_fault(ev.fault)) {
+            return false;
+          }
           if (ev.broken) {
             return true;  // the wear values of a broken-tool report are meaningless
           }
           return ev.point_count >= 1 && ev.point_count <= kMaxEdgePoints &&
                  all_finite(ev.wear_um, ev.point_count);
         } else if constexpr (std::is_same_v<T, ProbeMeasurement>) {
-          return std::isfinite(ev.raw_deviation_um) && std::isfinite(ev.wall_angle_deg) &&
-                 std::isfinite(ev.ball_radius_mm) && ev.ball_radius_mm >= 0.0 &&
-                 all_finite(ev.position_mm, 3);
+          return valid_fault(ev.fault) && std::isfinite(ev.raw_deviation_um) &&
+                 std::isfinite(ev.wall_angle_deg) && std::isfinite(ev.ball_radius_mm) &&
+                 ev.ball_radius_mm >= 0.0 && all_finite(ev.position_mm, 3);
         } else if constexpr (std::is_same_v<T, CalibrationTouch>) {
-          return std::isfinite(ev.trigger_position_mm) && ev.axis <= 2 &&
+          return valid_fault(ev.fault) && std::isfinite(ev.trigger_position_mm) && ev.axis <= 2 &&
                  (ev.direction == 1 || ev.direction == -1) &&
                  static_cast<std::uint8_t>(ev.probe) <= 1;
         } else if constexpr (std::is_same_v<T, ProgramEvent>) {
@@ -294,6 +330,14 @@ bool Engine::validate(const Event& e) const noexcept {
           if (ev.kind == OperatorCommandKind::kAcknowledge) {
             return ev.code[0] == 0 && ev.code[1] == 0 && ev.code[2] == 0 && ev.code[3] == 0 &&
                    ev.sequence > 0;
+          }
+          // The release of a held register: value[0] = its index (an integer), or -1 = all.
+          if (ev.kind == OperatorCommandKind::kRegisterRelease) {
+            const double r = ev.value[0];
+            return ev.code[0] == 0 && ev.code[1] == 0 && ev.code[2] == 0 && ev.code[3] == 0 &&
+                   ev.sequence > 0 && std::fabs(ev.value[1]) <= 0.0 && std::isfinite(r) &&
+                   std::fabs(r - std::trunc(r)) <= 0.0 && r >= -1.0 &&
+                   r < static_cast<double>(regs_.size());
           }
           return true;
         } else {
@@ -363,8 +407,28 @@ void Engine::accept_trim(std::size_t module, const OffsetWrite& w, TimeNs now_ns
 void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out) noexcept {
   out.clear();
   ++counters_.steps;
+  if (notices_pending_ > 0) {
+    // The start-up holds and adoptions (and a reload's), once each.
+    for (std::size_t i = 0; i < regs_.size(); ++i) {
+      Reg& r = regs_[i];
+      if (r.notice == AlarmCode::kNone) continue;
+      const Severity sev =
+          r.notice == AlarmCode::kRegisterBeyondLimit ? Severity::kAlarm : Severity::kWarning;
+      out.alarm(now_ns, sev, r.notice, static_cast<std::int32_t>(i), r.notice_value);
+      r.notice = AlarmCode::kNone;
+    }
+    notices_pending_ = 0;
+  }
   valid_.clear();
-  for (const Event& e : events) {
+  for (const Event& in : events) {
+    // Taken, whatever becomes of it: a restart must not deliver it again.
+    cursors_.take(in);
+    if (const EventOrigin* o = origin_of(in); o != nullptr && o->counter_only) {
+      continue;
+    }
+    // A faulted measurement reaches the modules with every value 0, whatever the driver left.
+    Event e = in;
+    set_fault(e, fault_of(e));
     if (!validate(e)) {
       ++counters_.events_invalid;
       out.alarm(now_ns, Severity::kWarning, AlarmCode::kEventInvalid,
@@ -382,6 +446,19 @@ void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out)
       // Every module steps with it below, in this cycle: the sender waits for this sequence.
       ++counters_.acknowledge_commands;
       counters_.last_acknowledge_sequence = c->sequence;
+    } else if (c != nullptr && c->kind == OperatorCommandKind::kRegisterRelease) {
+      // Before the modules step: the released registers are written in this cycle.
+      std::uint32_t released = 0;
+      if (c->value[0] < 0.0) {
+        for (std::size_t i = 0; i < regs_.size(); ++i) {
+          released += release_register(i, now_ns) ? 1U : 0U;
+        }
+      } else {
+        released = release_register(static_cast<std::size_t>(c->value[0]), now_ns) ? 1U : 0U;
+      }
+      ++counters_.release_commands;
+      counters_.last_release_sequence = c->sequence;
+      counters_.last_release_count = released;
     }
   }
   const std::span<const Event> accepted(valid_.data(), valid_.size());
@@ -426,6 +503,10 @@ void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out)
     if (at_target) {
       continue;
     }
+    if (r.hold != RegisterHold::kNone) {
+      ++counters_.writes_blocked;
+      continue;
+    }
     if (hold_) {
       ++counters_.writes_held;
       continue;
@@ -458,6 +539,11 @@ void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out)
     if (r.sent && std::memcmp(&r.sent_um, &res.value_um, sizeof(double)) == 0) {
       continue;  // the rate limit allows no movement yet this cycle
     }
+    if (!r.limiter.admissible(res.value_um)) {
+      // A rejected goal holds an origin beyond the limit: never sent, whatever the NC held.
+      ++counters_.writes_rejected;
+      continue;
+    }
     if (out.writes.push(OffsetWrite{now_ns, static_cast<std::uint16_t>(i), res.value_um})) {
       r.sent_um = res.value_um;
       r.sent = true;
@@ -476,7 +562,7 @@ void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out)
 
 void Engine::resend_all() noexcept {
   for (auto& r : regs_) {
-    if (r.sent) {
+    if (r.sent && r.hold == RegisterHold::kNone) {
       // Forget what was sent; the next step writes the limiter's output (or the target) again.
       r.sent = false;
       if (!r.has_target) {
@@ -503,9 +589,91 @@ AnchorResult Engine::anchor_register(std::size_t i, double nc_value_um, TimeNs n
   r.sent_um = nc_value_um;
   r.sent = true;
   r.slewing = false;
+  if (res.beyond_limit) {
+    hold_register(i, RegisterHold::kBeyondLimit, AlarmCode::kRegisterBeyondLimit, nc_value_um);
+  } else if (r.hold == RegisterHold::kBeyondLimit) {
+    // The state said beyond, the NC holds a value within the limits now (corrected by hand).
+    hold_register(i, RegisterHold::kNone, AlarmCode::kNone, 0.0);
+  }
   ++register_generation_;  // the state file gets the NC's value
   res.anchored = true;
   return res;
+}
+
+void Engine::hold_register(std::size_t i, RegisterHold hold, AlarmCode notice,
+                           double value) noexcept {
+  Reg& r = regs_[i];
+  r.hold = hold;
+  r.slewing = false;
+  if (r.notice == AlarmCode::kNone && notice != AlarmCode::kNone) ++notices_pending_;
+  if (r.notice != AlarmCode::kNone && notice == AlarmCode::kNone && notices_pending_ > 0) {
+    --notices_pending_;
+  }
+  r.notice = notice;
+  r.notice_value = value;
+}
+
+bool Engine::release_register(std::size_t i, TimeNs now_ns) noexcept {
+  if (i >= regs_.size() || regs_[i].hold == RegisterHold::kNone) {
+    return false;
+  }
+  Reg& r = regs_[i];
+  if (r.hold == RegisterHold::kBeyondLimit) {
+    // Any write moves the register from beyond the limit into it: the operator's release makes
+    // it one move, to the goal itself if the limits admit it, else to the bound from where the
+    // limiter slews toward later targets.
+    const double goal_um = (r.has_target ? r.target_um : 0.0) + r.trim_um;
+    const double bound = r.limiter.config().max_abs_um;
+    if ((r.has_target || r.has_trim) && r.limiter.admissible(goal_um)) {
+      r.limiter.reset(goal_um, now_ns);
+    } else {
+      r.limiter.reset(std::clamp(r.limiter.output_um(), -bound, bound), now_ns);
+    }
+  }
+  // Without state the limiter starts from what the NC holds (anchored): it slews as usual.
+  hold_register(i, RegisterHold::kNone, AlarmCode::kNone, 0.0);
+  ++register_generation_;
+  return true;
+}
+
+StartupAdoption Engine::adopt_without_state(std::size_t i, std::optional<double> nc_value_um,
+                                            bool readable, TimeNs now_ns) {
+  if (i >= regs_.size() || writer_[i] < 0 || regs_[i].hold == RegisterHold::kBeyondLimit) {
+    return StartupAdoption::kNotNeeded;
+  }
+  const auto k = static_cast<std::size_t>(writer_[i]);
+  // A restored module needs nothing, unless the register is still held from a start without
+  // state (the NC did not answer then): it is offered what the NC holds now.
+  if (module_state_[k] == ModuleStateSource::kRestored &&
+      regs_[i].hold != RegisterHold::kWithoutState) {
+    return StartupAdoption::kNotNeeded;
+  }
+  if (!readable) {
+    return regs_[i].hold == RegisterHold::kWithoutState ? StartupAdoption::kHeld
+                                                        : StartupAdoption::kNotReadable;
+  }
+  const bool flag = specs_[i].kind == RegisterKind::kFlag;
+  const bool adopted =
+      nc_value_um && modules_[k]->adopt_output(static_cast<std::uint16_t>(i), *nc_value_um, now_ns);
+  if (flag) {
+    return StartupAdoption::kFlag;
+  }
+  if (adopted) {
+    (void)adopt_register(i, *nc_value_um, now_ns);
+    const bool notice = std::fabs(*nc_value_um) > kNoOffsetUm;
+    hold_register(i, RegisterHold::kNone, notice ? AlarmCode::kRegisterAdopted : AlarmCode::kNone,
+                  *nc_value_um);
+    return StartupAdoption::kAdopted;
+  }
+  if (nc_value_um && std::fabs(*nc_value_um) <= kNoOffsetUm) {
+    // Nothing in the NC to lose: the module writes.
+    hold_register(i, RegisterHold::kNone, AlarmCode::kNone, 0.0);
+    return StartupAdoption::kNotNeeded;
+  }
+  hold_register(i, RegisterHold::kWithoutState, AlarmCode::kRegisterHeldWithoutState,
+                nc_value_um ? *nc_value_um : kNaN);
+  ++register_generation_;
+  return StartupAdoption::kHeld;
 }
 
 AnchorResult Engine::adopt_register(std::size_t i, double nc_value_um, TimeNs now_ns) noexcept {
@@ -523,7 +691,7 @@ AnchorResult Engine::adopt_register(std::size_t i, double nc_value_um, TimeNs no
 RegisterState Engine::register_state(std::size_t i) const noexcept {
   const Reg& r = regs_[i];
   return RegisterState{
-      r.limiter.output_um(), r.target_um, r.has_target, r.slewing, r.trim_um, r.has_trim};
+      r.limiter.output_um(), r.target_um, r.has_target, r.slewing, r.trim_um, r.has_trim, r.hold};
 }
 
 std::uint64_t Engine::state_generation() const noexcept {
@@ -531,7 +699,7 @@ std::uint64_t Engine::state_generation() const noexcept {
   for (const auto& m : modules_) {
     g += m->state_generation();
   }
-  return g + context_.generation();
+  return g + context_.generation() + cursors_.generation();
 }
 
 std::size_t Engine::export_state(std::span<std::byte> buf) const noexcept {
@@ -546,13 +714,35 @@ std::size_t Engine::export_state(std::span<std::byte> buf) const noexcept {
     w.put(r.target_um);
     w.put(static_cast<std::uint8_t>(r.has_target ? 1 : 0));
   }
-  w.put(static_cast<std::uint32_t>(modules_.size() + 1));
+  w.put(static_cast<std::uint32_t>(modules_.size() + 3));
   w.put_name(kContextEntry);
   w.put(static_cast<std::uint32_t>(MachineContext::kStateBytes));
   if (!w.ok() || w.rest().size() < MachineContext::kStateBytes) {
     return 0;
   }
   w.skip(context_.save(w.rest()));
+  {
+    w.put_name(kHoldsEntry);
+    const std::span<std::byte> len_at = w.rest();
+    w.put(std::uint32_t{0});
+    const std::size_t begin = w.size();
+    w.put(static_cast<std::uint32_t>(regs_.size()));
+    for (std::size_t i = 0; i < regs_.size(); ++i) {
+      w.put_name(specs_[i].name);
+      w.put(static_cast<std::uint8_t>(regs_[i].hold));
+    }
+    if (!w.ok()) {
+      return 0;
+    }
+    const auto n32 = static_cast<std::uint32_t>(w.size() - begin);
+    std::memcpy(len_at.data(), &n32, sizeof(n32));
+  }
+  w.put_name(kCursorsEntry);
+  w.put(static_cast<std::uint32_t>(EventCursors::kStateBytes));
+  if (!w.ok() || w.rest().size() < EventCursors::kStateBytes) {
+    return 0;
+  }
+  w.skip(cursors_.save(w.rest()));
   for (const auto& m : modules_) {
     w.put_name(m->name());
     const std::span<std::byte> len_at = w.rest();
@@ -603,14 +793,27 @@ bool Engine::import_state(std::span<const std::byte> bytes, TimeNs now_ns,
         ++skip_count;
         continue;
       }
+      // The limiter would slew from there: the writes would lie beyond the limit too (a state
+      // of a configuration with a larger max_abs_um, or a corrupt file).
+      if (std::fabs(output_um) > specs_[static_cast<std::size_t>(idx)].limits.max_abs_um) {
+        return false;
+      }
       if (pass == 1) {
-        Reg& r = regs_[static_cast<std::size_t>(idx)];
+        const auto i = static_cast<std::size_t>(idx);
+        Reg& r = regs_[i];
         r.limiter.reset(output_um, now_ns);
         r.sent_um = output_um;
         r.sent = true;
         r.target_um = target_um;
         r.has_target = has_target == 1;
         r.slewing = false;
+        // What the NC holds lies beyond the limit (saved so, or a reload narrowed the limit):
+        // held until the operator releases it, like a value read back beyond it.
+        if (std::fabs(output_um) > r.limiter.config().max_abs_um) {
+          hold_register(i, RegisterHold::kBeyondLimit, AlarmCode::kRegisterBeyondLimit, output_um);
+        } else {
+          hold_register(i, RegisterHold::kNone, AlarmCode::kNone, 0.0);
+        }
       }
     }
     std::uint32_t nmods = 0;
@@ -630,18 +833,56 @@ bool Engine::import_state(std::span<const std::byte> bytes, TimeNs now_ns,
         }
         continue;
       }
-      Module* target = nullptr;
-      for (auto& m : modules_) {
-        if (m->name() == name) {
-          target = m.get();
+      if (name == kCursorsEntry) {
+        if (pass == 1 && !cursors_.load(blob)) {
+          ++skip_count;
+        }
+        continue;
+      }
+      if (name == kHoldsEntry) {
+        Reader hr(blob);
+        std::uint32_t held = 0;
+        if (!hr.get(held)) {
+          return false;
+        }
+        for (std::uint32_t h = 0; h < held; ++h) {
+          std::string_view reg;
+          std::uint8_t hold = 0;
+          if (!hr.get_name(reg) || !hr.get(hold) ||
+              hold > static_cast<std::uint8_t>(RegisterHold::kWithoutState)) {
+            return false;
+          }
+          const int idx = RegisterTable(specs_).find(reg);
+          if (pass == 1 && idx >= 0 &&
+              hold == static_cast<std::uint8_t>(RegisterHold::kWithoutState) &&
+              regs_[static_cast<std::size_t>(idx)].hold == RegisterHold::kNone) {
+            const auto i = static_cast<std::size_t>(idx);
+            hold_register(i, RegisterHold::kWithoutState, AlarmCode::kRegisterHeldWithoutState,
+                          regs_[i].limiter.output_um());
+          }
+        }
+        if (!hr.at_end()) {
+          return false;
+        }
+        continue;
+      }
+      std::size_t target = modules_.size();
+      for (std::size_t m = 0; m < modules_.size(); ++m) {
+        if (modules_[m]->name() == name) {
+          target = m;
         }
       }
-      if (target == nullptr) {
+      if (target == modules_.size()) {
         ++skip_count;
         continue;
       }
-      if (pass == 1 && !target->load_state(blob)) {
-        ++skip_count;
+      if (pass == 1) {
+        const bool loaded = modules_[target]->load_state(blob);
+        module_state_[target] =
+            loaded ? ModuleStateSource::kRestored : ModuleStateSource::kUnreadable;
+        if (!loaded) {
+          ++skip_count;
+        }
       }
     }
     if (!rd.at_end()) {

@@ -8,6 +8,8 @@
 //
 // - Invalid events (non-finite positions, wear, deviations) are counted, raise kEventInvalid and
 //   never reach a module.
+// - Faulted measurements (InputFault: the NC reported a measurement the driver could not use)
+//   reach the modules with every value field 0, so that each method raises its own alarm.
 // - A target the limiter rejects (NaN, beyond the absolute limit) raises an alarm and is not
 //   forwarded: the register holds its value. A slewed target keeps converging on later cycles
 //   without the module writing it again (targets are absolute and remembered per register).
@@ -22,12 +24,22 @@
 // - Read-back at start-up: a register whose value the NC returns is anchored to it
 //   (anchor_register()): its limiter slews from what the NC holds, not from the value restored
 //   from the state, so no write steps further than max_step_um from the NC's real value.
+// - Start-up holds (RegisterHold): a register whose NC value lies beyond max_abs_um is never
+//   written (not even inward) until the operator releases it (OperatorCommand
+//   kRegisterRelease); the release writes the register's target in one move, within the limits.
+//   A module without usable state (none restored: no state file, its entry unreadable, or added
+//   since) is asked to adopt what the NC holds (Module::adopt_output()); an offset register it
+//   cannot adopt, or whose value the NC did not return, is held until released. Held registers
+//   raise one alarm each (codes 60..62) and are saved with the state (an entry "@holds").
 // - Measurement context (core/engine/context.hpp): the engine follows every cycle's validated
 //   events in one MachineContext before the modules step, and every measurement record leaves
 //   the engine through it: path_mm and temp_c a module left unknown are filled in, and time_ns
 //   becomes the time since the machine's warm start (the log's time_s). The context is saved
 //   with the state (an entry named "@context" among the modules' states, which an older engine
 //   skips as an unknown module).
+// - Event cursors (core/engine/cursors.hpp): per bus and numbered event kind, the NC's counter of
+//   the last event step() was handed, saved with the state as the entry "@cursors"; at start-up
+//   the daemon gives them to the buses, which resume the NC's events from there.
 //
 // Lifecycle: configure() allocates and validates (throws std::invalid_argument naming what is
 // wrong); step(), export_state(), import_state() are real-time safe: no allocation, no locks, no
@@ -37,6 +49,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <span>
 #include <string>
 #include <string_view>
@@ -46,6 +59,7 @@
 #include "core/common/output.hpp"
 #include "core/common/types.hpp"
 #include "core/engine/context.hpp"
+#include "core/engine/cursors.hpp"
 
 namespace nccomp::core::engine {
 
@@ -67,6 +81,20 @@ enum class RegisterKind : std::uint8_t {
 [[nodiscard]] std::string_view to_string(RegisterKind kind) noexcept;
 /// Inverse of to_string(); false if the name is unknown.
 [[nodiscard]] bool parse_register_kind(std::string_view name, RegisterKind& out) noexcept;
+
+/// Why the engine writes nothing to a register (RegisterState::hold, `nccomp status`).
+enum class RegisterHold : std::uint8_t {
+  kNone = 0,
+  /// The NC holds a value beyond max_abs_um (read back at start-up, or the output restored or
+  /// carried over a reload lies beyond the limit): alarm register_beyond_limit (60).
+  kBeyondLimit = 1,
+  /// The module that writes it has no usable state and did not adopt the NC's value (or the NC
+  /// did not answer the read-back): alarm register_held_without_state (62).
+  kWithoutState = 2,
+};
+
+/// "none", "beyond_limit", "without_state".
+[[nodiscard]] std::string_view to_string(RegisterHold hold) noexcept;
 
 struct RegisterSpec {
   /// Unique name (config key `name`), used to match state across restarts and reloads.
@@ -148,6 +176,18 @@ class Module {
   /// Not real-time. Context options this module sets for the engine (the daemon's
   /// [measurement_context] section); nullptr = none. At most one module of an engine may.
   [[nodiscard]] virtual const ContextOptions* context_options() const noexcept { return nullptr; }
+  /// Start-up only (not real-time; after import_state(), before the loop steps the engine): the
+  /// module has no usable state and the NC holds nc_value_um in register_index, one of
+  /// written_registers(). True: the module took the value as the starting point of its
+  /// compensation and keeps the register there until a new measurement (or a command) moves it,
+  /// never back toward its fresh value. False (the default): it cannot; the engine then holds
+  /// an offset register until the operator releases it (a flag is written as computed).
+  virtual bool adopt_output(std::uint16_t register_index, double nc_value_um, TimeNs now_ns) {
+    (void)register_index;
+    (void)nc_value_um;
+    (void)now_ns;
+    return false;
+  }
 };
 
 struct EngineOptions {
@@ -181,6 +221,13 @@ struct EngineCounters {
   /// that counted it (the creep module clears its halt and flags; docs/daemon.md).
   std::uint64_t acknowledge_commands{0};
   std::uint32_t last_acknowledge_sequence{0};
+  /// Writes a held register (RegisterHold) would have received: one per register and cycle.
+  std::uint64_t writes_blocked{0};
+  /// Operator releases (OperatorCommand kRegisterRelease) taken, the sequence of the last one
+  /// (the sender waits for it) and how many registers it released (0: none was held).
+  std::uint64_t release_commands{0};
+  std::uint32_t last_release_sequence{0};
+  std::uint32_t last_release_count{0};
 };
 
 /// What Engine::anchor_register() / adopt_register() found and did.
@@ -191,8 +238,8 @@ struct AnchorResult {
   /// last sent in this run. known = false on a fresh register (nothing restored or sent).
   double before_um{0.0};
   bool known{false};
-  /// The value read back lies beyond max_abs_um: it is still the origin (the NC holds it), and
-  /// the next write can only move the register inward.
+  /// The value read back lies beyond max_abs_um: the register is held (RegisterHold::
+  /// kBeyondLimit), nothing is written to it until the operator releases it.
   bool beyond_limit{false};
   /// adopt_register(): the register's target became the value read back.
   bool adopted{false};
@@ -207,6 +254,32 @@ struct RegisterState {
   /// Σ of the modules' trims; the register converges on target_um + trim_um.
   double trim_um{0.0};
   bool has_trim{false};
+  RegisterHold hold{RegisterHold::kNone};
+};
+
+/// What Engine::adopt_without_state() did with one register.
+enum class StartupAdoption : std::uint8_t {
+  /// Nothing: no module writes it, its module's state was restored, or it is held beyond the
+  /// limit.
+  kNotNeeded = 0,
+  /// The module took the NC's value as its starting point (the register's target is that value).
+  kAdopted = 1,
+  /// Held: nothing is written until the operator releases it (RegisterHold::kWithoutState).
+  kHeld = 2,
+  /// A flag register: written as the module computes it (after the module saw the NC's value).
+  kFlag = 3,
+  /// The bus cannot read the register back: the module's values are written (the daemon has
+  /// nothing to adopt; docs/daemon.md says what the operator does).
+  kNotReadable = 4,
+};
+
+/// Whether a module's state came from the state file (Engine::module_state()).
+enum class ModuleStateSource : std::uint8_t {
+  /// No state was imported for it: no state file, or the module is not in it.
+  kFresh = 0,
+  /// Its entry was in the state but the module refused the bytes (it kept its fresh state).
+  kUnreadable = 1,
+  kRestored = 2,
 };
 
 class Engine {
@@ -247,6 +320,28 @@ class Engine {
   /// later cycle. A value beyond max_abs_um is anchored, never adopted.
   AnchorResult adopt_register(std::size_t i, double nc_value_um, TimeNs now_ns) noexcept;
 
+  /// Start-up only, after import_state() and anchor_register() (same rules): if the module that
+  /// writes register i has no restored state (or the register is still held without state from
+  /// an earlier start), it is offered what the NC holds
+  /// (Module::adopt_output()); an offset register it does not adopt is held. nc_value_um:
+  /// the read-back, nullopt if there is none; readable: the bus can read registers back (false:
+  /// CAN, loopback; nothing is adopted or held then). Raises the register's alarm on the next
+  /// step (61 adopted, 62 held) when the NC's value is not 0 (beyond 0.1 µm) or unknown.
+  StartupAdoption adopt_without_state(std::size_t i, std::optional<double> nc_value_um,
+                                      bool readable, TimeNs now_ns);
+  /// Whether module k's state was restored by import_state() (kFresh before any import).
+  [[nodiscard]] ModuleStateSource module_state(std::size_t k) const noexcept {
+    return module_state_[k];
+  }
+  /// The module that writes register i (Module::written_registers()), or -1.
+  [[nodiscard]] int register_writer(std::size_t i) const noexcept { return writer_[i]; }
+  /// Ends register i's hold (what OperatorCommand kRegisterRelease does in step()): beyond the
+  /// limit, the register's target (with trims) is written in one move if it is within the
+  /// limits, else the limiter starts from the bound; without state, the register converges on
+  /// its target from the NC's value through the limiter. False if it was not held. Real-time
+  /// safe; only from the thread that steps the engine.
+  bool release_register(std::size_t i, TimeNs now_ns) noexcept;
+
   /// Upper bound [bytes] of export_state(); fixed after configure().
   [[nodiscard]] std::size_t state_capacity() const noexcept { return state_capacity_; }
   /// Real-time safe. Serialises registers and module states into buf; returns bytes written, or
@@ -255,7 +350,8 @@ class Engine {
   /// Real-time safe. Restores a state exported by this or an earlier configuration: registers and
   /// modules are matched by name (unknown ones in the bytes are skipped and counted in
   /// `skipped`). Limiters restart from the restored outputs at now_ns. Returns false if the bytes
-  /// are malformed; the engine is then unchanged.
+  /// are malformed or a register's output lies beyond its max_abs_um (the limiter would slew
+  /// from there, every write beyond the limit); the engine is then unchanged.
   bool import_state(std::span<const std::byte> bytes, TimeNs now_ns,
                     std::size_t* skipped = nullptr) noexcept;
   /// Real-time safe. Advances when registers or module states changed.
@@ -275,6 +371,8 @@ class Engine {
   [[nodiscard]] const EngineCounters& counters() const noexcept { return counters_; }
   /// The machine context (see the file comment). Real-time safe.
   [[nodiscard]] const MachineContext& context() const noexcept { return context_; }
+  /// The event cursors (see the file comment). Real-time safe.
+  [[nodiscard]] const EventCursors& event_cursors() const noexcept { return cursors_; }
 
  private:
   struct Reg {
@@ -286,9 +384,14 @@ class Engine {
     bool slewing{false};
     double trim_um{0.0};  // Σ trims_ of this register
     bool has_trim{false};
+    RegisterHold hold{RegisterHold::kNone};
+    /// An alarm for this register raised on the next step (kNone: none), with its value.
+    AlarmCode notice{AlarmCode::kNone};
+    double notice_value{0.0};
   };
 
   bool validate(const Event& e) const noexcept;
+  void hold_register(std::size_t i, RegisterHold hold, AlarmCode notice, double value) noexcept;
   void accept_target(const OffsetWrite& w, TimeNs now_ns, StepOutput& out) noexcept;
   void accept_trim(std::size_t module, const OffsetWrite& w, TimeNs now_ns,
                    StepOutput& out) noexcept;
@@ -301,12 +404,18 @@ class Engine {
   std::vector<double> trims_;
   StepOutput scratch_{};
   MachineContext context_{};
+  EventCursors cursors_{};
   EngineOptions options_{};
   EngineCounters counters_{};
   std::size_t state_capacity_{0};
   std::uint64_t register_generation_{0};
   /// First register the convergence scan looks at (round robin when a cycle's writes are full).
   std::size_t write_cursor_{0};
+  /// Per module: where its state came from; per register: the module that writes it (-1: none).
+  std::vector<ModuleStateSource> module_state_;
+  std::vector<int> writer_;
+  /// Registers whose notice is still to be raised (step() skips the scan while 0).
+  std::size_t notices_pending_{0};
   bool hold_{false};
 };
 

@@ -56,6 +56,16 @@ void RampModule::step(TimeNs now_ns, std::span<const Event> /*events*/, StepOutp
   out.writes.push(OffsetWrite{now_ns, register_index_, value_um_});
 }
 
+bool RampModule::adopt_output(std::uint16_t register_index, double nc_value_um, TimeNs /*now_ns*/) {
+  if (register_index != register_index_ || !std::isfinite(nc_value_um)) {
+    return false;
+  }
+  value_um_ = nc_value_um;
+  has_last_ = false;
+  ++generation_;
+  return true;
+}
+
 std::size_t RampModule::state_capacity() const noexcept { return sizeof(RampState); }
 
 std::size_t RampModule::save_state(std::span<std::byte> buf) const noexcept {

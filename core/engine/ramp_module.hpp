@@ -40,6 +40,9 @@ class RampModule final : public Module {
   std::size_t save_state(std::span<std::byte> buf) const noexcept override;
   bool load_state(std::span<const std::byte> bytes) noexcept override;
   [[nodiscard]] std::uint64_t state_generation() const noexcept override { return generation_; }
+  /// Without a state the ramp starts from what the NC holds instead of start_um: its configured
+  /// target is the operator's decision, the NC's value its origin (never a jump to start_um).
+  bool adopt_output(std::uint16_t register_index, double nc_value_um, TimeNs now_ns) override;
 
   /// Current value of the ramp [µm].
   [[nodiscard]] double value_um() const noexcept { return value_um_; }

@@ -20,6 +20,19 @@ const toml::table* as_table(const toml::node& node, std::string_view name, Diagn
   return t;
 }
 
+// What useradd / systemd-sysusers accept as a group name.
+bool valid_group_name(const std::string& n) {
+  const auto alpha = [](char c) { return (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z'); };
+  const auto digit = [](char c) { return c >= '0' && c <= '9'; };
+  if (n.empty() || n.size() > 32 || !(alpha(n[0]) || n[0] == '_')) return false;
+  for (std::size_t i = 1; i < n.size(); ++i) {
+    const char c = n[i];
+    const bool last_dollar = c == '$' && i + 1 == n.size();
+    if (!(alpha(c) || digit(c) || c == '_' || c == '-' || c == '.' || last_dollar)) return false;
+  }
+  return true;
+}
+
 template <typename T>
 const T& typed(const Config& c, std::string_view name) {
   static const T fallback{};
@@ -124,6 +137,14 @@ class StatusParser final : public SectionParser {
       }
       s->prometheus_port = static_cast<int>(r.integer("prometheus_port", 0, 0, 65535));
       s->prometheus_address = r.choice("prometheus_address", "127.0.0.1", {"127.0.0.1", "::1"});
+      s->admin_group = r.string("admin_group", "nccomp-admin");
+      if (!valid_group_name(s->admin_group)) {
+        diag.error(r.where("admin_group"),
+                   "expected a group name: a letter or '_', then letters, digits, '_', '-' or "
+                   "'.', at most 32 characters");
+      }
+      s->client_timeout_s = r.number("client_timeout_s", 2.0, 0.1, 60.0);
+      s->max_clients = static_cast<int>(r.integer("max_clients", 32, 1, 1024));
     }
     return s;
   }

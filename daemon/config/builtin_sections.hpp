@@ -58,6 +58,13 @@ struct StatusSection final : Section {
   /// 0 = no Prometheus endpoint.
   int prometheus_port{0};
   std::string prometheus_address{"127.0.0.1"};
+  /// Members may run operator commands that change the machine (acknowledge, warm-start,
+  /// calibrate ...); status is for everyone who can open the socket.
+  std::string admin_group{"nccomp-admin"};
+  /// A client's time for its request, and again for taking its answer [s].
+  double client_timeout_s{2.0};
+  /// Status clients served at once (Unix socket and Prometheus together).
+  int max_clients{32};
 };
 
 struct RegisterEntry {

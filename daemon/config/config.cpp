@@ -13,6 +13,8 @@
 #include <stdexcept>
 #include <utility>
 
+#include "formats/toml_guard.hpp"
+
 namespace nccomp::daemon::config {
 
 void register_builtin_sections();  // builtin_sections.cpp
@@ -471,7 +473,7 @@ struct Loader {
     }
     open_files.insert(id);
     try {
-      toml::table t = toml::parse_file(path);
+      toml::table t = formats::parse_toml_file(path);
       add(std::move(t), path, fs::path(path).parent_path().string(), depth);
     } catch (const toml::parse_error& e) {
       report_parse_error(e, path);
@@ -612,7 +614,7 @@ LoadResult load_string(std::string_view text, const std::string& name,
                        const std::string& base_dir) {
   Loader loader;
   try {
-    toml::table t = toml::parse(text, name);
+    toml::table t = formats::parse_toml(text, name);
     loader.open_files.insert(name);
     loader.add(std::move(t), name, base_dir, 0);
   } catch (const toml::parse_error& e) {

@@ -4,6 +4,7 @@
 #include <linux/can/error.h>
 #include <linux/can/netlink.h>
 #include <linux/can/raw.h>
+#include <linux/capability.h>
 #include <linux/if_link.h>
 #include <linux/netlink.h>
 #include <linux/rtnetlink.h>
@@ -12,15 +13,18 @@
 #include <sys/eventfd.h>
 #include <sys/ioctl.h>
 #include <sys/socket.h>
+#include <sys/syscall.h>
 #include <time.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <cerrno>
 #include <chrono>
 #include <cstring>
 #include <stdexcept>
 #include <string>
+#include <variant>
 
 namespace nccomp::drivers::can {
 namespace {
@@ -44,7 +48,17 @@ CanBus::CanBus(CanConfig config)
     : config_(std::move(config)),
       decoder_(config_.mapping),
       rx_ring_(config_.rx_ring_events),
-      tx_ring_(config_.tx_ring_writes) {
+      tx_ring_(config_.tx_ring_writes),
+      input_watch_(
+          to_ns(config_.degraded_alarm_after_s),
+          std::any_of(config_.mapping.rx.begin(), config_.mapping.rx.end(),
+                      [](const RxFrame& f) { return f.event == EventKind::kAxisSample; })),
+      rebind_backoff_(to_ns(config_.link_check_s),
+                      to_ns(std::max(config_.link_check_s, config_.reconnect_max_s)),
+                      to_ns(config_.reconnect_reset_after_s)),
+      restart_backoff_(to_ns(config_.restart_delay_s),
+                       to_ns(std::max(config_.restart_delay_s, config_.reconnect_max_s)),
+                       to_ns(config_.reconnect_reset_after_s)) {
   for (const auto& r : config_.mapping.offsets) {
     Slot s;
     s.reg = &r;
@@ -177,6 +191,20 @@ void CanBus::start() {
       }
     }
   }
+  if (config_.restart == RestartMode::kDaemon) {
+    // Refused here rather than found out at the first bus-off, which would then never end.
+    const std::string missing = restart_permission_problem();
+    if (!missing.empty()) {
+      throw std::runtime_error(
+          "can: " + config_.interface +
+          ": can.restart = \"daemon\" needs CAP_NET_ADMIN and an AF_NETLINK socket to request "
+          "bus-off restarts, and this process has " +
+          missing +
+          ". Under systemd install the drop-in nccompd-can-restart.conf as "
+          "/etc/systemd/system/nccompd.service.d/can-restart.conf (docs/can.md), or use "
+          "restart = \"kernel\" with the interface's restart-ms");
+    }
+  }
   open_socket();
   event_fd_ = ::eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK);
   if (event_fd_ < 0) {
@@ -184,6 +212,7 @@ void CanBus::start() {
     throw std::runtime_error("can: eventfd: " + errno_text(errno));
   }
   st_.bus.state = LinkState::kUp;
+  input_watch_.start(mono_ns());
   publish(mono_ns());
   running_.store(true);
   thread_ = std::thread([this] { run(); });
@@ -235,6 +264,12 @@ void CanBus::publish(std::int64_t now_ns) noexcept {
       b.state = LinkState::kDown;
     }
   }
+  if (b.state == LinkState::kUp) {
+    input_watch_.link_ok(now_ns);
+  }
+  if (!lockstep_) {
+    b.input_stale = b.state != LinkState::kStopped && input_watch_.stale(now_ns);
+  }
   status_.store(st_);
 }
 
@@ -252,7 +287,8 @@ std::size_t CanBus::extra_counters(std::span<BusCounterValue> out) const {
       c.rejected_wrong_length, c.rejected_out_of_range,
       c.rejected_not_finite,   c.rejected_unknown_id,
       c.tx_unencodable,        c.tx_unmapped,
-      c.lockstep_syncs,        c.lockstep_sync_acks};
+      c.lockstep_syncs,        c.lockstep_sync_acks,
+      c.reconnect_backoffs,    c.reconnect_backoff_ms};
   const std::size_t n = std::min(out.size(), values.size());
   for (std::size_t i = 0; i < n; ++i) {
     out[i] = BusCounterValue{kCanCounterNames[i], values[i]};
@@ -310,13 +346,22 @@ void CanBus::run() noexcept {
       ++st_.can.restart_requests;
       if (request_can_restart(ifindex_) != 0) {
         ++st_.can.restart_failures;
+        next_restart_ns_ = restart_backoff_.lost(now);
+      } else {
+        // Granted: the restarted frame ends bus-off; without it, ask again after as long.
+        next_restart_ns_ = now + restart_backoff_.delay_ns();
       }
-      next_restart_ns_ = now + to_ns(config_.restart_delay_s);
     }
     take_writes();
     check_acks(now);
     send_pending(now);
     serve_flush();
+    rebind_backoff_.healthy(now, !if_down_);
+    restart_backoff_.healthy(now, !if_down_ && !bus_off_);
+    st_.can.reconnect_backoffs = rebind_backoff_.waits() + restart_backoff_.waits();
+    st_.can.reconnect_backoff_ms = static_cast<std::uint64_t>(
+        std::max(rebind_backoff_.raised_delay_ns(), restart_backoff_.raised_delay_ns()) /
+        1'000'000);
     publish(now);
   }
 }
@@ -350,6 +395,8 @@ void CanBus::handle_sync(const std::uint8_t* data, std::size_t len) noexcept {
     cycle = (cycle << 8) | data[i];
   }
   ++st_.can.lockstep_syncs;
+  // The peer is the clock: judged at its SYNCs only, so that a paused peer is not stale input.
+  st_.bus.input_stale = input_watch_.stale(mono_ns());
   {
     std::lock_guard<std::mutex> lock(ls_mu_);
     synced_plus1_ = std::max(synced_plus1_, cycle + 1);
@@ -391,8 +438,7 @@ void CanBus::serve_flush() noexcept {
   }
   if (::send(sock_, &f, sizeof f, MSG_DONTWAIT) != static_cast<ssize_t>(sizeof f)) {
     if (errno == ENOBUFS || errno == EAGAIN) {
-      ++st_.can.enobufs;
-      backoff_until_ns_ = now + to_ns(config_.enobufs_backoff_s);
+      queue_full(now);
     }
     return;
   }
@@ -482,6 +528,9 @@ void CanBus::receive_all(std::int64_t now_ns) noexcept {
         break;
     }
     if (r.emitted) {
+      if (std::holds_alternative<core::AxisSample>(ev)) {
+        input_watch_.axis_ok(now_ns);
+      }
       if (rx_ring_.try_push(ev)) {
         ++st_.bus.counters.events_decoded;
       } else {
@@ -517,7 +566,9 @@ void CanBus::handle_error_frame(std::uint32_t can_id, const std::uint8_t* data,
     ++st_.can.bus_off;
     st_.bus.state = LinkState::kDown;
     went_down(now_ns);
-    next_restart_ns_ = now_ns + to_ns(config_.restart_delay_s);
+    if (config_.restart == RestartMode::kDaemon) {
+      next_restart_ns_ = restart_backoff_.lost(now_ns);
+    }
   }
   if ((can_id & CAN_ERR_RESTARTED) != 0 && bus_off_) {
     bus_off_ = false;
@@ -591,12 +642,7 @@ void CanBus::send_pending(std::int64_t now_ns) noexcept {
     if (put < 0) {
       const int e = errno;
       if (e == ENOBUFS || e == EAGAIN) {
-        // Transmit queue full: back off exponentially, the write stays pending.
-        ++st_.can.enobufs;
-        backoff_ns_ = backoff_ns_ == 0
-                          ? to_ns(config_.enobufs_backoff_s)
-                          : std::min(backoff_ns_ * 2, 64 * to_ns(config_.enobufs_backoff_s));
-        backoff_until_ns_ = now_ns + backoff_ns_;
+        queue_full(now_ns);  // the write stays pending
         return;
       }
       if (e == ENETDOWN || e == ENODEV || e == ENXIO) {
@@ -607,7 +653,6 @@ void CanBus::send_pending(std::int64_t now_ns) noexcept {
       s.state = WriteState::kFailed;
       continue;
     }
-    backoff_ns_ = 0;
     ++st_.bus.counters.frames_tx;
     ++s.attempts;
     if (s.resend) {
@@ -624,6 +669,17 @@ void CanBus::send_pending(std::int64_t now_ns) noexcept {
       ++st_.bus.counters.offsets_written;
     }
   }
+  // Everything pending went out: only now is the queue known to have room again (one frame that
+  // fitted is not enough).
+  backoff_ns_ = 0;
+}
+
+void CanBus::queue_full(std::int64_t now_ns) noexcept {
+  // Transmit queue full: back off exponentially, from enobufs_backoff_s up to 64 times that.
+  ++st_.can.enobufs;
+  const std::int64_t base = to_ns(config_.enobufs_backoff_s);
+  backoff_ns_ = backoff_ns_ == 0 ? base : std::min(backoff_ns_ * 2, 64 * base);
+  backoff_until_ns_ = now_ns + backoff_ns_;
 }
 
 void CanBus::check_acks(std::int64_t now_ns) noexcept {
@@ -649,6 +705,7 @@ void CanBus::link_down(std::int64_t now_ns) noexcept {
     ++st_.can.interface_down;
     st_.bus.state = LinkState::kDown;
     went_down(now_ns);
+    next_rebind_ns_ = rebind_backoff_.lost(now_ns);
   }
   next_link_check_ns_ = now_ns + to_ns(config_.link_check_s);
   // Consume the pending socket error so poll() does not spin on POLLERR.
@@ -663,6 +720,10 @@ void CanBus::link_down(std::int64_t now_ns) noexcept {
 }
 
 void CanBus::check_link(std::int64_t now_ns) noexcept {
+  if (now_ns < next_rebind_ns_) {
+    next_link_check_ns_ = next_rebind_ns_;  // back-off: no rebind before then
+    return;
+  }
   next_link_check_ns_ = now_ns + to_ns(config_.link_check_s);
   const int probe = sock_ >= 0 ? sock_ : ::socket(PF_CAN, SOCK_RAW | SOCK_CLOEXEC, CAN_RAW);
   if (probe < 0) {
@@ -684,7 +745,8 @@ void CanBus::check_link(std::int64_t now_ns) noexcept {
   try {
     open_socket();
   } catch (...) {
-    return;  // try again at the next check
+    next_rebind_ns_ = rebind_backoff_.lost(now_ns);
+    return;
   }
   if_down_ = false;
   recovered();
@@ -717,6 +779,28 @@ void CanBus::recovered() noexcept {
   }
   backoff_until_ns_ = 0;
   backoff_ns_ = 0;
+}
+
+std::string restart_permission_problem() {
+  std::string missing;
+  __user_cap_header_struct header{};
+  header.version = _LINUX_CAPABILITY_VERSION_3;
+  std::array<__user_cap_data_struct, _LINUX_CAPABILITY_U32S_3> caps{};
+  if (::syscall(SYS_capget, &header, caps.data()) != 0 ||
+      (caps[CAP_TO_INDEX(CAP_NET_ADMIN)].effective & CAP_TO_MASK(CAP_NET_ADMIN)) == 0) {
+    missing = "no CAP_NET_ADMIN in its effective capabilities";
+  }
+  // RestrictAddressFamilies= (seccomp) makes socket() fail with EAFNOSUPPORT.
+  const int nl = ::socket(AF_NETLINK, SOCK_RAW | SOCK_CLOEXEC, NETLINK_ROUTE);
+  if (nl < 0) {
+    const int e = errno;
+    missing += missing.empty() ? "" : "; ";
+    missing += "AF_NETLINK sockets refused: ";
+    missing += errno_text(e);
+  } else {
+    ::close(nl);
+  }
+  return missing;
 }
 
 int request_can_restart(int ifindex) noexcept {

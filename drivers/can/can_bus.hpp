@@ -5,11 +5,16 @@
 // waits for the NC's acknowledge where the mapping has one (timeout → re-send → alarm). It rides
 // out bus faults without stopping: error-passive (degraded), bus-off (kernel restart-ms or a
 // restart it requests over netlink), the interface going down and up or re-created (writes held).
+// Its own recovery steps wait a back-off (drivers/reconnect_backoff.hpp): the rebind after the
+// interface went down from link_check_s, the restart requests from restart_delay_s, each doubling
+// while the bus keeps failing, up to reconnect_max_s, reset after reconnect_reset_after_s up.
 // After every recovery each register that holds a value is sent again once, acknowledged or not:
 // offsets are absolute, and a frame sent just before the fault may never have reached the NC.
 // Every fault is counted in CanStatus and reported through extra_counters() (`nccomp status`).
 // The status alarm is raised by a write given up after its retries, and by the link staying down
-// or bus-off for longer than alarm_after_s; the latter clears when the bus is back.
+// or bus-off for longer than alarm_after_s; the latter clears when the bus is back. The input is
+// stale (BusStatus::input_stale, input_watch.hpp) when the link has not been up (error-passive
+// counts) or, with axis frames mapped, no valid axis sample came, for degraded_alarm_after_s.
 //
 // Threads: the loop thread is rx()'s only consumer and tx()'s only producer; it never blocks on
 // the driver. After pushing into tx() it may call wake() so the write goes out at once (without
@@ -24,6 +29,7 @@
 #include <memory>
 #include <mutex>
 #include <span>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -32,6 +38,8 @@
 #include "drivers/bus.hpp"
 #include "drivers/can/can_config.hpp"
 #include "drivers/can/can_mapping.hpp"
+#include "drivers/reconnect_backoff.hpp"
+#include "drivers/input_watch.hpp"
 
 namespace nccomp::drivers::can {
 
@@ -66,6 +74,10 @@ struct CanCounters {
   std::uint64_t rejected_not_finite{0};
   std::uint64_t lockstep_syncs{0};      // SYNC frames received (lock-step)
   std::uint64_t lockstep_sync_acks{0};  // SYNC-ACK frames sent (lock-step)
+  // Back-off waits of the recovery: interface lost or rebind failed, bus-off or restart refused.
+  std::uint64_t reconnect_backoffs{0};
+  // Gauge: the longer of the rebind and the restart back-off while raised, 0 at their minimum.
+  std::uint64_t reconnect_backoff_ms{0};
 };
 
 struct CanStatus {
@@ -82,7 +94,8 @@ class CanBus final : public Bus {
   CanBus& operator=(const CanBus&) = delete;
 
   /// Opens the socket (throws std::runtime_error naming the interface if it cannot: no such
-  /// interface, no AF_CAN, FD mapping on a classic interface) and starts the I/O thread.
+  /// interface, no AF_CAN, FD mapping on a classic interface, restart = "daemon" without the
+  /// rights it needs, see restart_permission_problem()) and starts the I/O thread.
   void start() override;
   void stop() override;
 
@@ -135,6 +148,7 @@ class CanBus final : public Bus {
   void check_link(std::int64_t now_ns) noexcept;
   void went_down(std::int64_t now_ns) noexcept;
   void recovered() noexcept;
+  void queue_full(std::int64_t now_ns) noexcept;
   void publish(std::int64_t now_ns) noexcept;
   Slot* slot_for(std::uint16_t register_index) noexcept;
 
@@ -143,6 +157,7 @@ class CanBus final : public Bus {
   core::rt::SpscRing<core::Event> rx_ring_;
   core::rt::SpscRing<core::OffsetWrite> tx_ring_;
   core::rt::Seqlock<CanStatus> status_;
+  InputWatch input_watch_;  // I/O thread (start() before it runs)
 
   // I/O thread state (touched only by it once started).
   CanStatus st_{};
@@ -158,6 +173,9 @@ class CanBus final : public Bus {
   bool link_alarm_{false};         // down for longer than alarm_after_s
   std::int64_t next_link_check_ns_{0};
   std::int64_t next_restart_ns_{0};
+  std::int64_t next_rebind_ns_{0};
+  ReconnectBackoff rebind_backoff_;   // interface down → rebind
+  ReconnectBackoff restart_backoff_;  // bus-off → netlink restart request (restart = "daemon")
   std::int64_t backoff_until_ns_{0};
   std::int64_t backoff_ns_{0};
   std::uint64_t ovfl_base_{0};  // drops counted by sockets closed before
@@ -182,7 +200,7 @@ class CanBus final : public Bus {
 };
 
 /// The names extra_counters() reports, in its order (static strings, snake_case).
-inline constexpr std::array<const char*, 24> kCanCounterNames{
+inline constexpr std::array<const char*, 26> kCanCounterNames{
     "error_frames",          "error_warning",
     "error_passive",         "bus_off",
     "bus_recoveries",        "restart_requests",
@@ -194,7 +212,14 @@ inline constexpr std::array<const char*, 24> kCanCounterNames{
     "rejected_wrong_length", "rejected_out_of_range",
     "rejected_not_finite",   "rejected_unknown_id",
     "tx_unencodable",        "tx_unmapped",
-    "lockstep_syncs",        "lockstep_sync_acks"};
+    "lockstep_syncs",        "lockstep_sync_acks",
+    "reconnect_backoffs",    "reconnect_backoff_ms"};
+
+/// What keeps this process from asking for bus-off restarts (restart = "daemon"): "" if nothing,
+/// else what is missing ("no CAP_NET_ADMIN in its effective capabilities", "AF_NETLINK sockets
+/// refused: ...", both joined by "; "). The shipped systemd unit allows neither; the drop-in
+/// systemd/nccompd-can-restart.conf does. Not real-time.
+std::string restart_permission_problem();
 
 /// Asks the kernel to restart a CAN controller out of bus-off (netlink IFLA_CAN_RESTART, as
 /// `ip link set canX type can restart`). Returns 0 or the errno. Not real-time.

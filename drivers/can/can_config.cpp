@@ -1,11 +1,14 @@
 #include "drivers/can/can_config.hpp"
 
 #include <toml++/toml.h>
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <initializer_list>
 #include <limits>
 #include <sstream>
+
+#include "formats/toml_guard.hpp"
 
 namespace nccomp::drivers::can {
 namespace {
@@ -180,7 +183,7 @@ constexpr std::int64_t kMaxId = kMaxExtendedId;
 CanConfig parse_can_config(std::string_view toml_text, const std::string& file) {
   toml::table root;
   try {
-    root = toml::parse(toml_text, file);
+    root = formats::parse_toml(toml_text, file);
   } catch (const toml::parse_error& e) {
     throw MappingError(file, static_cast<int>(e.source().begin.line),
                        static_cast<int>(e.source().begin.column), "", std::string(e.description()));
@@ -201,8 +204,9 @@ CanConfig parse_can_table(const toml::table& can, const std::string& file_name) 
   const std::string p = "can";
   r.only_keys(can, p,
               {"interface", "fd", "restart", "restart_delay_s", "ack_timeout_s", "ack_retries",
-               "enobufs_backoff_s", "link_check_s", "alarm_after_s", "rx_ring_events",
-               "tx_ring_writes", "socket_rcvbuf_bytes", "rx", "offset"});
+               "enobufs_backoff_s", "link_check_s", "reconnect_max_s", "reconnect_reset_after_s",
+               "alarm_after_s", "degraded_alarm_after_s", "rx_ring_events", "tx_ring_writes",
+               "socket_rcvbuf_bytes", "rx", "offset"});
   c.interface = r.get_string(can, p, "interface", std::nullopt);
   if (c.interface.empty() || c.interface.size() >= 16) {
     r.fail(*can.get("interface"), p + ".interface", "must be 1..15 characters (IFNAMSIZ)");
@@ -221,7 +225,17 @@ CanConfig parse_can_table(const toml::table& can, const std::string& file_name) 
   c.ack_retries = static_cast<std::uint32_t>(r.get_int(can, p, "ack_retries", 3, 0, 100));
   c.enobufs_backoff_s = r.get_double(can, p, "enobufs_backoff_s", 0.0005, 0.00001, 1.0);
   c.link_check_s = r.get_double(can, p, "link_check_s", 0.05, 0.001, 10.0);
+  c.reconnect_max_s = r.get_double(can, p, "reconnect_max_s", 5.0, 0.001, 600.0);
+  // Shorter than the cap, a link that fails just after each such stretch would be recovered more
+  // often than reconnect_max_s allows.
+  c.reconnect_reset_after_s = r.get_double(can, p, "reconnect_reset_after_s",
+                                           std::max(10.0, c.reconnect_max_s), 0.001, 86400.0);
+  if (c.reconnect_reset_after_s < c.reconnect_max_s) {
+    r.fail(*can.get("reconnect_reset_after_s"), p + ".reconnect_reset_after_s",
+           "smaller than reconnect_max_s");
+  }
   c.alarm_after_s = r.get_double(can, p, "alarm_after_s", 1.0, 0.0, 3600.0);
+  c.degraded_alarm_after_s = r.get_double(can, p, "degraded_alarm_after_s", 5.0, 0.01, 3600.0);
   const auto pow2 = [&](std::string_view key, std::int64_t dflt) {
     const std::int64_t v = r.get_int(can, p, key, dflt, 2, 1 << 20);
     if ((v & (v - 1)) != 0) {

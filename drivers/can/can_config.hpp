@@ -23,7 +23,8 @@ struct CanConfig {
   /// Network interface, e.g. "can0" or "vcan0".
   std::string interface { "can0" };
   RestartMode restart{RestartMode::kKernel};
-  /// Bus-off → daemon restart request delay, and retry period of failed requests [s].
+  /// Bus-off → daemon restart request delay [s]; the first wait of the restart back-off, which
+  /// doubles per further request or bus-off up to reconnect_max_s.
   double restart_delay_s{0.1};
   /// Time to wait for an offset write's acknowledge before re-sending it [s].
   double ack_timeout_s{0.05};
@@ -31,11 +32,21 @@ struct CanConfig {
   std::uint32_t ack_retries{3};
   /// First back-off after ENOBUFS (transmit queue full); doubles up to 64 × [s].
   double enobufs_backoff_s{0.0005};
-  /// While the interface is down: how often its state is checked [s].
+  /// While the interface is down: how often its state is checked [s]; also the first wait before
+  /// the driver rebinds after the interface went down, which doubles per further loss or failed
+  /// rebind up to reconnect_max_s.
   double link_check_s{0.05};
+  /// Cap of both back-offs [s] (a restart_delay_s or link_check_s above it is not doubled) ...
+  double reconnect_max_s{5.0};
+  /// ... which return to their first wait once the bus stayed up (not down, not bus-off) this
+  /// long [s]; at least reconnect_max_s.
+  double reconnect_reset_after_s{10.0};
   /// The interface down or the controller bus-off for longer than this raises the status alarm
   /// (cleared when the bus is back) [s].
   double alarm_after_s{1.0};
+  /// The link not up (error-passive, down, bus-off), or no valid axis sample while the map has
+  /// axis frames, for longer than this: the input is stale (BusStatus::input_stale) [s].
+  double degraded_alarm_after_s{5.0};
   /// Capacity of the decoded-event ring (power of two) and of the offset-write ring.
   std::uint32_t rx_ring_events{4096};
   std::uint32_t tx_ring_writes{256};

@@ -621,7 +621,7 @@ FrameDecoder::Result FrameDecoder::decode(std::uint32_t id, bool extended,
   }
   const RxFrame& f = mapping_.rx[static_cast<std::size_t>(idx)];
   if (payload.size() != f.length_bytes) {
-    return {RejectReason::kWrongLength, false};
+    return reject(f, RejectReason::kWrongLength, now_ns, out);
   }
   // Check every signal before applying any: a malformed frame leaves the latest values alone.
   std::array<double, kMaxPayloadBytes * 8> values{};
@@ -629,21 +629,23 @@ FrameDecoder::Result FrameDecoder::decode(std::uint32_t id, bool extended,
     const RxSignal& s = f.signals[i];
     const double v = raw_to_physical(s.layout, extract_raw(s.layout, payload));
     if (!std::isfinite(v)) {
-      return {RejectReason::kNotFinite, false};
+      return reject(f, RejectReason::kNotFinite, now_ns, out);
     }
     const FieldInfo* info = field_info(f.event, s.field);
     if (v < s.min || v > s.max || (info != nullptr && (v < info->lo || v > info->hi))) {
-      return {RejectReason::kOutOfRange, false};
+      return reject(f, RejectReason::kOutOfRange, now_ns, out);
     }
     if (info != nullptr && info->integral && std::fabs(v - std::nearbyint(v)) > 1e-9) {
-      return {RejectReason::kOutOfRange, false};
+      return reject(f, RejectReason::kOutOfRange, now_ns, out);
     }
     if (s.field == Field::kDirection && std::fabs(v) < 0.5) {
-      return {RejectReason::kOutOfRange, false};  // an approach direction is +1 or -1
+      // An approach direction is +1 or -1.
+      return reject(f, RejectReason::kOutOfRange, now_ns, out);
     }
     values[i] = (info != nullptr && info->integral) ? std::nearbyint(v) : v;
   }
-  core::Event& ev = latest_[static_cast<std::size_t>(f.event)];
+  const auto k = static_cast<std::size_t>(f.event);
+  core::Event& ev = latest_[k];
   for (std::size_t i = 0; i < f.signals.size(); ++i) {
     apply(ev, f.signals[i].field, values[i]);
   }
@@ -652,7 +654,41 @@ FrameDecoder::Result FrameDecoder::decode(std::uint32_t id, bool extended,
     return {RejectReason::kNone, false};
   }
   out = ev;
+  // A measurement one of whose earlier frames was rejected is delivered faulted.
+  core::set_fault(out, faults_[k]);
+  faults_[k] = core::InputFault::kNone;
   return {RejectReason::kNone, true};
+}
+
+FrameDecoder::Result FrameDecoder::reject(const RxFrame& f, RejectReason why, core::TimeNs now_ns,
+                                          core::Event& out) noexcept {
+  if (f.event != EventKind::kToolMeasurement && f.event != EventKind::kProbeMeasurement &&
+      f.event != EventKind::kCalibrationTouch) {
+    return {why, false};
+  }
+  // The NC reported a measurement whose values cannot be used: it is delivered faulted (its
+  // method raises the alarm), never dropped in silence, and never with an earlier measurement's
+  // values in the fields this frame carries (they become unknown).
+  const auto k = static_cast<std::size_t>(f.event);
+  core::Event& ev = latest_[k];
+  for (const RxSignal& s : f.signals) {
+    apply(ev, s.field,
+          s.field == Field::kCheckpoint  ? -1.0
+          : s.field == Field::kDirection ? 1.0
+                                         : 0.0);
+  }
+  set_time(ev, now_ns);
+  if (faults_[k] == core::InputFault::kNone) {
+    faults_[k] = why == RejectReason::kOutOfRange ? core::InputFault::kOutOfRange
+                                                  : core::InputFault::kInvalid;
+  }
+  if (!f.emit) {
+    return {why, false};
+  }
+  out = ev;
+  core::set_fault(out, faults_[k]);
+  faults_[k] = core::InputFault::kNone;
+  return {why, true};
 }
 
 bool encode_offset(const TxRegister& reg, double value_um,

@@ -218,12 +218,15 @@ class FrameDecoder {
 
   struct Result {
     RejectReason reject{RejectReason::kNone};
-    /// true if out holds a complete event to push.
+    /// true if out holds a complete event to push (also a faulted measurement, with a reject).
     bool emitted{false};
   };
 
-  /// Decodes one frame received at now_ns. A rejected frame changes nothing (all its signals
-  /// are checked before any is applied). Real-time safe: no allocation, no locks, no I/O.
+  /// Decodes one frame received at now_ns. A rejected frame applies none of its signals (all
+  /// are checked before any is applied). A rejected frame of a measurement (tool measurement,
+  /// probe measurement, calibration touch) makes that measurement faulted (core::InputFault, its
+  /// values 0): emitted at once if the frame completes the event, else by the frame that does.
+  /// Real-time safe: no allocation, no locks, no I/O.
   Result decode(std::uint32_t id, bool extended, std::span<const std::uint8_t> payload,
                 core::TimeNs now_ns, core::Event& out) noexcept;
 
@@ -231,9 +234,12 @@ class FrameDecoder {
   [[nodiscard]] int find(std::uint32_t id, bool extended) const noexcept;
 
  private:
+  Result reject(const RxFrame& f, RejectReason why, core::TimeNs now_ns, core::Event& out) noexcept;
+
   const CanMapping& mapping_;
   std::vector<std::pair<std::uint32_t, int>> index_;  // (key, rx index), sorted by key
   std::array<core::Event, kEventKinds> latest_;
+  std::array<core::InputFault, kEventKinds> faults_{};  // a frame of the event was rejected
 };
 
 /// Encodes an offset write into a payload of reg.length_bytes bytes (unused bits zero).

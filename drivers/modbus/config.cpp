@@ -9,6 +9,8 @@
 
 #include <toml++/toml.h>
 
+#include "formats/toml_guard.hpp"
+
 namespace nccomp::drivers::modbus {
 namespace {
 
@@ -366,7 +368,7 @@ ModbusConfig parse_modbus_config(std::string_view toml_text, std::string_view fi
                                  const ParseOptions& options) {
   toml::table root;
   try {
-    root = toml::parse(toml_text, file);
+    root = formats::parse_toml(toml_text, file);
   } catch (const toml::parse_error& e) {
     throw ConfigError(std::string(file), static_cast<int>(e.source().begin.line),
                       static_cast<int>(e.source().begin.column), "", std::string(e.description()));
@@ -385,38 +387,40 @@ ModbusConfig parse_modbus_table(const toml::table& m, std::string_view file,
   const Reader r(table_file);
   const toml::node* mnode = &m;
   const std::string mp = "modbus";
-  static constexpr std::array<std::string_view, 32> kTopKeys = {"transport",
-                                                                "host",
-                                                                "port",
-                                                                "device",
-                                                                "baud",
-                                                                "parity",
-                                                                "data_bits",
-                                                                "stop_bits",
-                                                                "rs485",
-                                                                "unit_id",
-                                                                "response_timeout_s",
-                                                                "byte_timeout_s",
-                                                                "poll_rate_hz",
-                                                                "offset_write_rate_hz",
-                                                                "reconnect_min_s",
-                                                                "reconnect_max_s",
-                                                                "dead_after_failures",
-                                                                "verify_writes",
-                                                                "alarm_after_s",
-                                                                "rx_capacity",
-                                                                "tx_capacity",
-                                                                "merge_gap_registers",
-                                                                "io_sched_fifo_priority",
-                                                                "io_cpu_affinity",
-                                                                "axis",
-                                                                "tool_measurement",
-                                                                "probe_measurement",
-                                                                "calibration_touch",
-                                                                "tool_change",
-                                                                "program_event",
-                                                                "temperature",
-                                                                "offset"};
+  static constexpr auto kTopKeys = std::to_array<std::string_view>({"transport",
+                                                                    "host",
+                                                                    "port",
+                                                                    "device",
+                                                                    "baud",
+                                                                    "parity",
+                                                                    "data_bits",
+                                                                    "stop_bits",
+                                                                    "rs485",
+                                                                    "unit_id",
+                                                                    "response_timeout_s",
+                                                                    "byte_timeout_s",
+                                                                    "poll_rate_hz",
+                                                                    "offset_write_rate_hz",
+                                                                    "reconnect_min_s",
+                                                                    "reconnect_max_s",
+                                                                    "reconnect_reset_after_s",
+                                                                    "dead_after_failures",
+                                                                    "verify_writes",
+                                                                    "alarm_after_s",
+                                                                    "degraded_alarm_after_s",
+                                                                    "rx_capacity",
+                                                                    "tx_capacity",
+                                                                    "merge_gap_registers",
+                                                                    "io_sched_fifo_priority",
+                                                                    "io_cpu_affinity",
+                                                                    "axis",
+                                                                    "tool_measurement",
+                                                                    "probe_measurement",
+                                                                    "calibration_touch",
+                                                                    "tool_change",
+                                                                    "program_event",
+                                                                    "temperature",
+                                                                    "offset"});
   r.check_keys(m, mp, kTopKeys);
 
   ModbusConfig c;
@@ -468,10 +472,19 @@ ModbusConfig parse_modbus_table(const toml::table& m, std::string_view file,
   if (c.reconnect_max_s < c.reconnect_min_s) {
     r.fail(m.get("reconnect_max_s"), "modbus.reconnect_max_s", "smaller than reconnect_min_s");
   }
+  // Shorter than the cap, a peer that drops each connection just after that long would get
+  // reconnects more often than reconnect_max_s allows.
+  c.reconnect_reset_after_s =
+      r.number(m, mp, "reconnect_reset_after_s", std::max(10.0, c.reconnect_max_s), 0.001, 86400.0);
+  if (c.reconnect_reset_after_s < c.reconnect_max_s) {
+    r.fail(m.get("reconnect_reset_after_s"), "modbus.reconnect_reset_after_s",
+           "smaller than reconnect_max_s");
+  }
   c.dead_after_failures =
       static_cast<std::uint32_t>(r.integer(m, mp, "dead_after_failures", 3, 1, 1000));
   c.verify_writes = r.boolean(m, mp, "verify_writes", false);
   c.alarm_after_s = r.number(m, mp, "alarm_after_s", 1.0, 0.0, 3600.0);
+  c.degraded_alarm_after_s = r.number(m, mp, "degraded_alarm_after_s", 5.0, 0.01, 3600.0);
   const auto pow2 = [&](std::string_view key, std::int64_t dflt) {
     const std::int64_t v = r.integer(m, mp, key, dflt, 2, 1 << 20);
     if ((v & (v - 1)) != 0) {

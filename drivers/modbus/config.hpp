@@ -168,8 +168,13 @@ struct ModbusConfig {
   /// Offsets are written at most this often (latest value wins in between). 0 in the file means
   /// "derive": the poll rate on TCP, the bus budget left by the polls on RTU.
   double offset_write_rate_hz{0.0};
+  /// Reconnect back-off [s]: however the connection was lost, the next connect waits the
+  /// back-off, which starts at reconnect_min_s and doubles up to reconnect_max_s ...
   double reconnect_min_s{0.1};
   double reconnect_max_s{5.0};
+  /// ... and returns to reconnect_min_s only after a connection stayed healthy (every read and
+  /// write answered, no timeout or garbage) this long [s]; at least reconnect_max_s.
+  double reconnect_reset_after_s{10.0};
   /// Consecutive failed transactions (timeouts, garbage) after which the link is declared dead
   /// and reconnected: detects a silently dead TCP connection (cable pull).
   std::uint32_t dead_after_failures{3};
@@ -177,6 +182,9 @@ struct ModbusConfig {
   bool verify_writes{false};
   /// An offset still undelivered, or the link down, for this long raises the status alarm.
   double alarm_after_s{1.0};
+  /// No intact poll (every block read without a fault and, if the axis group is mapped, a valid
+  /// axis sample) for this long: the input is stale (BusStatus::input_stale, the daemon's alarm).
+  double degraded_alarm_after_s{5.0};
   std::size_t rx_capacity{1024};
   std::size_t tx_capacity{256};
   /// Read blocks of one table whose gap is at most this many registers (8x as many bits) are

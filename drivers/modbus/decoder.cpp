@@ -66,6 +66,40 @@ void PollDecoder::note_reconnect() noexcept {
   }
 }
 
+void PollDecoder::resume(const core::EventCursorSet& cursors) noexcept {
+  for (std::size_t gi = 1; gi < kGroupCount; ++gi) {
+    // The groups after kAxis are in the order of the numbered kinds. Like a reconnect: an NC
+    // that restarted meanwhile and counted up to the cursor again cannot be told apart.
+    const core::EventCursor& c = cursors[gi - 1];
+    if (c.known) {
+      seq_[gi] = SeqState{true, true, true, c.sequence};
+    }
+  }
+}
+
+void PollDecoder::emit_counter(Group g, core::TimeNs t_ns, std::uint32_t seq) noexcept {
+  const core::EventOrigin origin{seq, 0, true, true};
+  switch (g) {
+    case Group::kToolMeasurement:
+      emit(core::ToolMeasurement{.time_ns = t_ns, .origin = origin});
+      break;
+    case Group::kProbeMeasurement:
+      emit(core::ProbeMeasurement{.time_ns = t_ns, .origin = origin});
+      break;
+    case Group::kCalibrationTouch:
+      emit(core::CalibrationTouch{.time_ns = t_ns, .origin = origin});
+      break;
+    case Group::kToolChange:
+      emit(core::ToolChange{.time_ns = t_ns, .origin = origin});
+      break;
+    case Group::kProgramEvent:
+      emit(core::ProgramEvent{.time_ns = t_ns, .origin = origin});
+      break;
+    case Group::kAxis:
+      break;
+  }
+}
+
 void PollDecoder::emit(const core::Event& e) noexcept {
   // Capacity reserved in the constructor for every group and sensor: never reallocates.
   if (out_.size() < out_.capacity()) {
@@ -170,10 +204,17 @@ void PollDecoder::decode_event(Group g, core::TimeNs t_ns) {
     st.baseline = true;
     st.reconnected = false;
     st.last = seq;
+    emit_counter(g, t_ns, seq);  // the engine's cursor from now on, also after a restart
     return;
   }
   const bool first_after_reconnect = st.reconnected;
   st.reconnected = false;
+  // The first read after a start with the engine's cursor: what it finds is reported.
+  const bool resumed = st.resumed;
+  st.resumed = false;
+  if (resumed) {
+    resume_[gi] = ResumeReport{true, st.last, seq, false, 0, false};
+  }
   if (seq == st.last) {
     // After a reconnect this is also what an NC shows that restarted and produced exactly as
     // many events as it had before: its newest would be missed, and nothing here can tell.
@@ -191,20 +232,31 @@ void PollDecoder::decode_event(Group g, core::TimeNs t_ns) {
       // Not a wrap: the NC restarted and counted again from its start value.
       ++counters_.sequence_resets;
       events = seq - kSequenceStart;
+      resume_[gi].nc_restarted = resumed;
     }
   }
   st.last = seq;
+  if (resumed) {
+    resume_[gi].events = events;
+  }
   if (events == 0) {
+    emit_counter(g, t_ns, seq);
     return;  // restarted, no event since: the value registers hold none
   }
-  counters_.events_lost += events - 1U;
-  // The counter is consumed either way: an event with an implausible value is dropped once,
-  // never re-read.
-  if (!in_range(gm, field_count(g))) {
+  (resumed ? counters_.events_lost_while_down : counters_.events_lost) += events - 1U;
+  const std::size_t emitted_before = out_.size();
+  // The counter is consumed either way: an event with an implausible value is dropped once (a
+  // measurement is delivered once, marked faulted), never re-read.
+  const bool range_ok = in_range(gm, field_count(g));
+  if (!range_ok) {
     ++counters_.values_out_of_range;
-    return;
+    if (g != Group::kToolMeasurement && g != Group::kProbeMeasurement &&
+        g != Group::kCalibrationTouch) {
+      return;
+    }
   }
 
+  const core::EventOrigin origin{seq, 0, true};  // the engine's cursor once it takes the event
   const auto f = [&](std::size_t i, double dflt) {
     return gm.fields[i].mapped ? value(gm.fields[i]) : dflt;
   };
@@ -213,6 +265,7 @@ void PollDecoder::decode_event(Group g, core::TimeNs t_ns) {
     case Group::kToolMeasurement: {
       core::ToolMeasurement e;
       e.time_ns = t_ns;
+      e.origin = origin;
       ok = to_int(f(tool_meas_field::kTool, 0), 0, kIntMax, e.tool);
       const SignalMap& wear = gm.fields[tool_meas_field::kWear];
       e.point_count = wear.count;
@@ -225,16 +278,16 @@ void PollDecoder::decode_event(Group g, core::TimeNs t_ns) {
         ok = ok && std::isfinite(e.wear_um[i]);
       }
       e.broken = f(tool_meas_field::kBroken, 0.0) > 0.5;
-      if (ok) {
-        emit(e);
-      }
+      emit_measurement(e, range_ok, ok);
       break;
     }
     case Group::kProbeMeasurement: {
       core::ProbeMeasurement e;
       e.time_ns = t_ns;
-      ok = to_int(f(probe_field::kPart, 0), kIntMin, kIntMax, e.part) &&
-           to_int(f(probe_field::kCheckpoint, 0), kIntMin, kIntMax, e.checkpoint);
+      e.origin = origin;
+      e.checkpoint = -1;  // unknown, unless it decodes
+      const bool part_ok = to_int(f(probe_field::kPart, 0), kIntMin, kIntMax, e.part);
+      ok = to_int(f(probe_field::kCheckpoint, 0), kIntMin, kIntMax, e.checkpoint) && part_ok;
       e.raw_deviation_um = f(probe_field::kDeviation, 0.0);
       e.wall_angle_deg = f(probe_field::kAngle, 0.0);
       e.ball_radius_mm = f(probe_field::kBallRadius, 0.0);
@@ -242,36 +295,35 @@ void PollDecoder::decode_event(Group g, core::TimeNs t_ns) {
       ok = ok && std::isfinite(e.raw_deviation_um) && std::isfinite(e.wall_angle_deg) &&
            std::isfinite(e.ball_radius_mm) && std::isfinite(e.position_mm[0]) &&
            std::isfinite(e.position_mm[1]) && std::isfinite(e.position_mm[2]);
-      if (ok) {
-        emit(e);
-      }
+      emit_measurement(e, range_ok, ok);
       break;
     }
     case Group::kCalibrationTouch: {
       core::CalibrationTouch e;
       e.time_ns = t_ns;
+      e.origin = origin;
       std::int32_t probe = 0;
       std::int32_t axis = 0;
-      std::int32_t dir = 0;
+      std::int32_t dir = 1;
       std::int32_t variant = 0;
       ok = to_int(f(touch_field::kProbe, 0), 0, 1, probe) &&
            to_int(f(touch_field::kAxis, 0), 0, 2, axis) &&
            to_int(f(touch_field::kDirection, 0), -1, 1, dir) && dir != 0 &&
            to_int(f(touch_field::kVariant, 0), 0, 1, variant);
+      dir = dir == 0 ? 1 : dir;  // a faulted touch still carries a valid direction
       e.probe = static_cast<core::ProbeKind>(probe);
       e.axis = static_cast<std::uint8_t>(axis);
       e.direction = static_cast<std::int8_t>(dir);
       e.variant = static_cast<std::uint8_t>(variant);
       e.trigger_position_mm = f(touch_field::kPosition, 0.0);
       ok = ok && std::isfinite(e.trigger_position_mm);
-      if (ok) {
-        emit(e);
-      }
+      emit_measurement(e, range_ok, ok);
       break;
     }
     case Group::kToolChange: {
       core::ToolChange e;
       e.time_ns = t_ns;
+      e.origin = origin;
       ok = to_int(f(tool_change_field::kTool, 0), 0, kIntMax, e.tool);
       e.sister = f(tool_change_field::kSister, 0.0) > 0.5;
       if (ok) {
@@ -282,6 +334,7 @@ void PollDecoder::decode_event(Group g, core::TimeNs t_ns) {
     case Group::kProgramEvent: {
       core::ProgramEvent e;
       e.time_ns = t_ns;
+      e.origin = origin;
       std::int32_t kind = 0;
       ok = to_int(f(program_field::kKind, 0), 0, 3, kind) &&
            to_int(f(program_field::kPart, 0), kIntMin, kIntMax, e.part);
@@ -294,9 +347,24 @@ void PollDecoder::decode_event(Group g, core::TimeNs t_ns) {
     case Group::kAxis:
       break;
   }
-  if (!ok) {
+  if (!ok && g != Group::kToolMeasurement && g != Group::kProbeMeasurement &&
+      g != Group::kCalibrationTouch) {
     ++counters_.values_invalid;
   }
+  if (resumed && out_.size() > emitted_before) {
+    resume_[gi].delivered = true;
+    ++counters_.events_recovered_after_start;
+  }
+}
+
+void PollDecoder::emit_measurement(core::Event e, bool range_ok, bool ok) noexcept {
+  if (range_ok && !ok) {
+    ++counters_.values_invalid;
+  }
+  if (!range_ok || !ok) {
+    core::set_fault(e, range_ok ? core::InputFault::kInvalid : core::InputFault::kOutOfRange);
+  }
+  emit(e);
 }
 
 void PollDecoder::decode_temperatures(core::TimeNs t_ns, std::span<const std::uint8_t> block_ok) {

@@ -5,7 +5,12 @@
 // its sequence counter, which is kSequenceStart (0) when the NC has just started; the counter and
 // the values are read in one request (config.hpp makes sure of that), so they always belong
 // together. Per poll, k being the number of events the counter says happened since the last read:
-//   - first poll after start: the counter is a baseline, nothing is emitted (its event is old);
+//   - first poll after start without a cursor (resume()): the counter is a baseline, nothing is
+//     emitted (its event is old);
+//   - first poll after start with a cursor, the counter of the last event the engine took
+//     before nccompd stopped (saved with its state): the rules below against the cursor, the
+//     events counted in events_recovered_after_start / events_lost_while_down instead (they
+//     happened while nccompd was down) and reported in resume_reports();
 //   - counter unchanged: nothing;
 //   - advanced by k (also through the top of its range, 65535 -> 0 for uint16, as long as that
 //     means k <= kMaxWrapEvents): the latest event is emitted once and k − 1 are counted as lost
@@ -20,9 +25,16 @@
 // (note_reconnect()) a counter that reads the same value as before, other than kSequenceStart,
 // is counted in sequence_unchanged_after_reconnect, so that an operator can see the doubt.
 //
-// Plausibility: a finite value outside its signal's `min` / `max` (config) drops the whole sample
-// or event and counts values_out_of_range; NaN / inf / non-integral / invalid codes count
-// values_invalid. Either way an event's counter is consumed, so it is not re-read.
+// Plausibility: a finite value outside its signal's `min` / `max` (config) counts
+// values_out_of_range; NaN / inf / non-integral / invalid codes count values_invalid. An axis
+// sample, tool change or program event with such a value is dropped. A measurement (tool
+// measurement, probe measurement, calibration touch) is emitted once, marked faulted
+// (core::InputFault) with its values cleared, so that its method raises its alarm instead of
+// losing it in silence. Either way an event's counter is consumed, so it is not re-read.
+//
+// Every emitted event carries its counter (core::EventOrigin, `numbered`), which the engine keeps
+// as its cursor; a counter consumed without an event (a baseline, an NC restart with none since)
+// is emitted as a counter_only event, so that the cursor follows it.
 #pragma once
 
 #include <cstdint>
@@ -45,13 +57,27 @@ inline constexpr std::uint32_t kSequenceStart = 0;
 inline constexpr std::uint32_t kMaxWrapEvents = 256;
 
 struct DecodeCounters {
-  std::uint64_t events_lost{0};      // events the counter says happened but were not emitted
+  std::uint64_t events_lost{0};  // events the counter says happened but were not emitted
+  // First read after a start with a cursor: the newest of the events the NC produced while
+  // nccompd was down, emitted; and the others, not emitted.
+  std::uint64_t events_recovered_after_start{0};
+  std::uint64_t events_lost_while_down{0};
   std::uint64_t sequence_resets{0};  // counter moved backwards (NC restart)
   // First read after a reconnect saw the same counter (not kSequenceStart): an NC restart that
   // produced exactly as many events as before cannot be ruled out (its newest would be missed).
   std::uint64_t sequence_unchanged_after_reconnect{0};
   std::uint64_t values_invalid{0};       // NaN / inf / non-integral / not a valid code: dropped
   std::uint64_t values_out_of_range{0};  // finite but outside the map's min / max: dropped
+};
+
+/// What the first read of one event group's counter after a start with a cursor found.
+struct ResumeReport {
+  bool done{false};          // the first read happened (the fields below are set)
+  std::uint32_t cursor{0};   // the engine's last event before nccompd stopped
+  std::uint32_t counter{0};  // the NC's counter at the first read
+  bool nc_restarted{false};  // it moved back: the NC counted again from kSequenceStart
+  std::uint32_t events{0};   // events since the cursor (since the NC's restart), as it tells
+  bool delivered{false};     // the newest was emitted (false: none, or its values were refused)
 };
 
 class PollDecoder {
@@ -72,6 +98,14 @@ class PollDecoder {
   /// read of each event counter is checked for an unchanged counter. Real-time safe.
   void note_reconnect() noexcept;
 
+  /// Before the first decode(): the engine's cursors (core::numbered_kind() order). A group with
+  /// a known cursor compares its first read with it instead of taking it as a baseline.
+  void resume(const core::EventCursorSet& cursors) noexcept;
+  /// Per group (Group order): what its first read after resume() found.
+  [[nodiscard]] const std::array<ResumeReport, kGroupCount>& resume_reports() const noexcept {
+    return resume_;
+  }
+
   [[nodiscard]] const DecodeCounters& counters() const noexcept { return counters_; }
 
  private:
@@ -82,6 +116,11 @@ class PollDecoder {
   void decode_event(Group g, core::TimeNs t_ns);
   void decode_temperatures(core::TimeNs t_ns, std::span<const std::uint8_t> block_ok);
   void emit(const core::Event& e) noexcept;
+  /// Emits a measurement; one whose values are out of range (range_ok false) or invalid (ok
+  /// false) is counted and emitted faulted (core::InputFault), its values cleared.
+  void emit_measurement(core::Event e, bool range_ok, bool ok) noexcept;
+  /// A counter consumed without an event to deliver (core::EventOrigin::counter_only).
+  void emit_counter(Group g, core::TimeNs t_ns, std::uint32_t seq) noexcept;
 
   const ModbusConfig& config_;
   std::vector<std::vector<std::uint16_t>> blocks_;
@@ -89,9 +128,11 @@ class PollDecoder {
   struct SeqState {
     bool baseline{false};
     bool reconnected{false};  // no read of this counter since the last reconnect
+    bool resumed{false};      // `last` is the engine's cursor, not read from the NC yet
     std::uint32_t last{0};
   };
   std::array<SeqState, kGroupCount> seq_{};
+  std::array<ResumeReport, kGroupCount> resume_{};
   std::vector<double> last_temperature_;
   DecodeCounters counters_{};
 };

@@ -16,6 +16,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <variant>
 
 namespace nccomp::drivers::modbus {
 namespace {
@@ -27,6 +28,14 @@ modbus_t* mb(const std::unique_ptr<void, ModbusBus::ModbusDeleter>& p) {
 constexpr core::TimeNs kNsPerS = 1'000'000'000;
 
 core::TimeNs to_ns(double s) { return static_cast<core::TimeNs>(std::llround(s * 1e9)); }
+
+std::uint32_t to_ms(core::TimeNs ns) {
+  return static_cast<std::uint32_t>(std::llround(static_cast<double>(ns) * 1e-6));
+}
+
+// While the connection is down: how often the I/O thread takes the loop's writes and publishes
+// its status during a back-off wait.
+constexpr core::TimeNs kDownTickNs = 20'000'000;
 
 void set_timeout(modbus_t* ctx, double s, bool response) {
   const auto us = static_cast<std::uint64_t>(std::llround(s * 1e6));
@@ -66,15 +75,19 @@ std::size_t modbus_counters(const ModbusStatus& st, std::span<BusCounterValue> o
       st.bad_responses,
       st.connection_errors,
       st.connect_attempts,
+      st.reconnect_backoffs,
       st.poll_overruns,
       st.events_lost,
       st.sequence_resets,
       st.sequence_unchanged_after_reconnect,
+      st.events_recovered_after_start,
+      st.events_lost_while_down,
       st.values_invalid,
       st.values_out_of_range,
       st.offsets_rejected,
       st.verify_mismatches,
       st.offsets_pending,
+      st.reconnect_backoff_ms,
       st.io_sched_fifo_priority,
       st.io_sched_errno,
       st.io_affinity_errno,
@@ -148,10 +161,14 @@ ModbusBus::ModbusBus(ModbusConfig config)
       rx_(config_.rx_capacity),
       tx_(config_.tx_capacity),
       decoder_(config_),
+      input_watch_(to_ns(config_.degraded_alarm_after_s),
+                   config_.groups[static_cast<std::size_t>(Group::kAxis)].present),
       block_ok_(config_.blocks.size(), 0),
       bits_(2000, 0),
       slot_of_register_(65536, -1),
-      slots_(config_.offsets.size()) {
+      slots_(config_.offsets.size()),
+      backoff_(to_ns(config_.reconnect_min_s), to_ns(config_.reconnect_max_s),
+               to_ns(config_.reconnect_reset_after_s)) {
   for (std::size_t i = 0; i < config_.offsets.size(); ++i) {
     slot_of_register_[config_.offsets[i].register_index] = static_cast<std::int32_t>(i);
   }
@@ -256,6 +273,31 @@ std::optional<double> ModbusBus::read_offset(std::uint16_t register_index) {
   return v;
 }
 
+bool ModbusBus::resume_events(const core::EventCursorSet& cursors) {
+  if (io_.joinable()) {
+    return true;  // the I/O thread owns the decoder now
+  }
+  decoder_.resume(cursors);
+  return true;
+}
+
+std::size_t ModbusBus::events_while_down(std::span<EventsWhileDown> out) const {
+  const ModbusStatus st = status_.load();
+  std::size_t n = 0;
+  for (std::size_t gi = 1; gi < kGroupCount && n < out.size(); ++gi) {
+    const ResumeReport& r = st.resume[gi];
+    if (r.done) {
+      out[n++] = EventsWhileDown{static_cast<std::uint8_t>(gi - 1),
+                                 r.cursor,
+                                 r.counter,
+                                 r.events,
+                                 r.nc_restarted,
+                                 r.delivered};
+    }
+  }
+  return n;
+}
+
 void ModbusBus::stop() {
   {
     // Under the mutex, so that the lock-step I/O thread cannot miss the wake-up.
@@ -320,7 +362,6 @@ bool ModbusBus::connect() {
   }
   ctx_ = std::move(holder);
   consecutive_failures_ = 0;
-  answered_since_connect_ = false;
   // last_frame_end_ns_ is kept: the silence is the line's, and a late answer to the request
   // before a reconnect may just have ended on it.
   return true;
@@ -360,9 +401,9 @@ bool ModbusBus::fail(int err) {
     ++st_.exceptions[static_cast<std::size_t>(err - MODBUS_ENOBASE)];
     ++st_.bus.counters.frames_rx;
     consecutive_failures_ = 0;
-    answered_since_connect_ = true;
     return true;
   }
+  cycle_failed_ = true;
   if (err == ETIMEDOUT) {
     ++st_.timeouts;
   } else if (err == EMBBADCRC) {
@@ -431,19 +472,24 @@ void ModbusBus::poll(core::TimeNs now_ns) {
     }
     ++st_.bus.counters.frames_rx;
     consecutive_failures_ = 0;
-    answered_since_connect_ = true;
     block_ok_[i] = 1;
     any = true;
   }
   ++st_.polls;
+  bool axis_seen = false;
+  const bool all_read = ctx_ && std::all_of(block_ok_.begin(), block_ok_.end(),
+                                            [](std::uint8_t ok) { return ok != 0; });
   if (!any) {
+    note_input(all_read, axis_seen);
     return;
   }
   const core::TimeNs t = monotonic_now_ns();
   st_.bus.last_rx_ns = t;
   for (const core::Event& e : decoder_.decode(t, block_ok_)) {
+    axis_seen = axis_seen || std::holds_alternative<core::AxisSample>(e);
     if (rx_.try_push(e)) {
-      ++st_.bus.counters.events_decoded;
+      const core::EventOrigin* o = core::origin_of(e);
+      st_.bus.counters.events_decoded += o != nullptr && o->counter_only ? 0U : 1U;
     } else {
       ++st_.bus.counters.events_dropped;
     }
@@ -452,8 +498,26 @@ void ModbusBus::poll(core::TimeNs now_ns) {
   st_.events_lost = dc.events_lost;
   st_.sequence_resets = dc.sequence_resets;
   st_.sequence_unchanged_after_reconnect = dc.sequence_unchanged_after_reconnect;
+  st_.events_recovered_after_start = dc.events_recovered_after_start;
+  st_.events_lost_while_down = dc.events_lost_while_down;
+  st_.resume = decoder_.resume_reports();
   st_.values_invalid = dc.values_invalid;
   st_.values_out_of_range = dc.values_out_of_range;
+  note_input(all_read, axis_seen);
+}
+
+void ModbusBus::note_input(bool all_read, bool axis_seen) {
+  const core::TimeNs now = monotonic_now_ns();
+  if (all_read) {
+    input_watch_.link_ok(now);
+  }
+  if (axis_seen) {
+    input_watch_.axis_ok(now);
+  }
+  if (lockstep_) {
+    // The peer is the clock: judged at its polls only, so that a paused peer is not stale.
+    st_.bus.input_stale = input_watch_.stale(now);
+  }
 }
 
 void ModbusBus::drain_tx(core::TimeNs now_ns) {
@@ -502,7 +566,6 @@ bool ModbusBus::write_one(const OffsetMap& map, OffsetSlot& slot) {
   }
   ++st_.bus.counters.frames_rx;
   consecutive_failures_ = 0;
-  answered_since_connect_ = true;
   if (config_.verify_writes) {
     std::array<std::uint16_t, 2> back{};
     rtu_gap();
@@ -550,6 +613,9 @@ void ModbusBus::publish(core::TimeNs now_ns) {
   }
   st_.offsets_pending = pending;
   st_.bus.alarm = alarm;
+  if (!lockstep_) {
+    st_.bus.input_stale = st_.bus.state != LinkState::kStopped && input_watch_.stale(now_ns);
+  }
   status_.store(st_);
 }
 
@@ -573,25 +639,35 @@ bool ModbusBus::flush(std::uint64_t cycle, core::TimeNs timeout_ns) {
   return request(flush_req_, flush_done_, flush_ok_, timeout_ns);
 }
 
-bool ModbusBus::ensure_connected(double& backoff_s, bool& ever_connected) {
+void ModbusBus::lost(core::TimeNs now_ns) {
+  next_connect_ns_ = backoff_.lost(now_ns);
+  st_.reconnect_backoffs = backoff_.waits();
+  st_.reconnect_backoff_ms = to_ms(backoff_.raised_delay_ns());
+}
+
+bool ModbusBus::ensure_connected(bool& ever_connected) {
   if (ctx_) {
     return true;
   }
-  const core::TimeNs now = monotonic_now_ns();
+  core::TimeNs now = monotonic_now_ns();
   if (down_since_ns_ == 0) {
     down_since_ns_ = now;
+  }
+  if (now < next_connect_ns_) {
+    sleep_until(next_connect_ns_);
+    if (!running_.load(std::memory_order_acquire)) {
+      return false;
+    }
+    now = monotonic_now_ns();
   }
   if (!connect()) {
     ++st_.connection_errors;
     ++st_.bus.counters.faults;
     st_.bus.state = ever_connected ? LinkState::kDown : LinkState::kConnecting;
+    lost(monotonic_now_ns());
     publish(monotonic_now_ns());
-    sleep_until(monotonic_now_ns() + to_ns(backoff_s));
-    backoff_s = std::min(backoff_s * 2.0, config_.reconnect_max_s);
     return false;
   }
-  // backoff_s is reset by the caller once this connection has answered (a peer that accepts and
-  // hangs up at once must not reset it).
   down_since_ns_ = 0;
   if (!ever_connected) {
     // The first connection: offsets queued before it are first writes, already dirty.
@@ -615,13 +691,13 @@ bool ModbusBus::ensure_connected(double& backoff_s, bool& ever_connected) {
 }
 
 void ModbusBus::run_lockstep() {
-  double backoff_s = config_.reconnect_min_s;
   bool ever_connected = false;
   down_since_ns_ = monotonic_now_ns();
+  input_watch_.start(down_since_ns_);
   st_.bus.state = LinkState::kConnecting;
   publish(down_since_ns_);
   // Connect before the first TICK arrives, so that the first cycle does not wait for it.
-  (void)ensure_connected(backoff_s, ever_connected);
+  (void)ensure_connected(ever_connected);
   for (;;) {
     std::uint64_t sync_want = 0;
     std::uint64_t flush_want = 0;
@@ -639,16 +715,17 @@ void ModbusBus::run_lockstep() {
     }
     if (sync_want == 0 && flush_want == 0) {
       if (!ctx_) {
-        (void)ensure_connected(backoff_s, ever_connected);
+        (void)ensure_connected(ever_connected);
       }
       publish(monotonic_now_ns());
       continue;
     }
-    if (!ensure_connected(backoff_s, ever_connected)) {
+    if (!ensure_connected(ever_connected)) {
       continue;  // the loop's wait times out and is counted; the request stays open
     }
     const core::TimeNs start = monotonic_now_ns();
     const std::uint64_t faults_before = st_.bus.counters.faults;
+    cycle_failed_ = false;
     bool flush_ok = true;
     bool sync_ok = true;
     // The older request first: a flush of cycle k is always asked before the sync of k + 1.
@@ -667,16 +744,16 @@ void ModbusBus::run_lockstep() {
       }
     }
     sync_ok = sync_ok && ctx_ != nullptr;
-    if (answered_since_connect_) {
-      backoff_s = config_.reconnect_min_s;
-    }
     const core::TimeNs now = monotonic_now_ns();
     st_.last_cycle_ns = now - start;
     st_.max_cycle_ns = std::max(st_.max_cycle_ns, st_.last_cycle_ns);
     if (!ctx_) {
       st_.bus.state = LinkState::kDown;
       down_since_ns_ = now;
+      lost(now);
     } else {
+      backoff_.healthy(now, !cycle_failed_);
+      st_.reconnect_backoff_ms = to_ms(backoff_.raised_delay_ns());
       st_.bus.state =
           st_.bus.counters.faults != faults_before ? LinkState::kDegraded : LinkState::kUp;
     }
@@ -707,18 +784,24 @@ void ModbusBus::run() {
   }
   const core::TimeNs period = to_ns(1.0 / config_.poll_rate_hz);
   const core::TimeNs write_period = to_ns(1.0 / config_.offset_write_rate_hz);
-  double backoff_s = config_.reconnect_min_s;
   bool ever_connected = false;
   core::TimeNs next = monotonic_now_ns();
   core::TimeNs next_write = next;
   down_since_ns_ = next;
+  input_watch_.start(next);
   st_.bus.state = LinkState::kConnecting;
   publish(next);
   while (running_.load(std::memory_order_acquire)) {
     core::TimeNs now = monotonic_now_ns();
     drain_tx(now);
     if (!ctx_) {
-      if (!ensure_connected(backoff_s, ever_connected)) {
+      if (now < next_connect_ns_) {
+        // Back-off: keep taking the loop's writes (latest value wins) and publishing the state.
+        publish(now);
+        sleep_until(std::min(next_connect_ns_, now + kDownTickNs));
+        continue;
+      }
+      if (!ensure_connected(ever_connected)) {
         continue;
       }
       next = monotonic_now_ns();
@@ -726,6 +809,7 @@ void ModbusBus::run() {
     }
     const core::TimeNs cycle_start = monotonic_now_ns();
     const std::uint64_t faults_before = st_.bus.counters.faults;
+    cycle_failed_ = false;
     cycle_reads_ = 0;
     cycle_writes_ = 0;
     poll(cycle_start);
@@ -746,25 +830,16 @@ void ModbusBus::run() {
     if (!ctx_) {
       st_.bus.state = LinkState::kDown;
       down_since_ns_ = now;
+      lost(now);
     } else {
       st_.bus.state =
           st_.bus.counters.faults != faults_before ? LinkState::kDegraded : LinkState::kUp;
+      backoff_.healthy(now, !cycle_failed_);
+      st_.reconnect_backoff_ms = to_ms(backoff_.raised_delay_ns());
     }
     publish(now);
     if (!ctx_) {
-      if (!answered_since_connect_) {
-        // Connected but never answered (a peer that accepts and hangs up, or sends only
-        // garbage): back off as after a failed connect. Reconnecting at once would spin, and at
-        // SCHED_FIFO starve every normal thread on this CPU.
-        sleep_until(now + to_ns(backoff_s));
-        backoff_s = std::min(backoff_s * 2.0, config_.reconnect_max_s);
-      }
-      // A connection that answered is re-made at once; the back-off applies from the second
-      // attempt on.
-      continue;
-    }
-    if (answered_since_connect_) {
-      backoff_s = config_.reconnect_min_s;
+      continue;  // the next connect waits the back-off, however the connection was lost
     }
     next += period;
     if (now > next) {

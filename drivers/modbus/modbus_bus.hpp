@@ -9,10 +9,16 @@
 // reconnect all known offsets are written again. A repeated write of an absolute value cannot
 // double a correction, so none is lost and none is applied twice.
 //
+// Stale input (input_watch.hpp): no poll with every block read, or no valid axis sample while the
+// axis group is mapped, for longer than degraded_alarm_after_s sets BusStatus::input_stale: an NC
+// that answers every read with an exception keeps the link "degraded", never down.
+//
 // Faults: response and byte timeouts from the config; exception responses are counted per code;
 // garbage (bad CRC, wrong transaction id, wrong length) is counted and the input flushed;
-// dead_after_failures consecutive timeouts / garbage, or a socket error, drop the connection and
-// reconnect with exponential back-off between reconnect_min_s and reconnect_max_s.
+// dead_after_failures consecutive timeouts / garbage, or a socket error, drop the connection.
+// However it was lost (or a connect failed), the next connect waits the back-off, which doubles
+// from reconnect_min_s to reconnect_max_s and returns to reconnect_min_s only after a connection
+// stayed healthy for reconnect_reset_after_s (drivers/reconnect_backoff.hpp).
 //
 // libmodbus blocks in select() up to its timeouts, which is why none of this runs on the loop
 // thread: the loop thread only uses rx(), tx() and status(), all wait-free.
@@ -39,8 +45,10 @@
 #include "core/rt/seqlock.hpp"
 #include "core/rt/spsc_ring.hpp"
 #include "drivers/bus.hpp"
+#include "drivers/input_watch.hpp"
 #include "drivers/modbus/config.hpp"
 #include "drivers/modbus/decoder.hpp"
+#include "drivers/reconnect_backoff.hpp"
 
 namespace nccomp::drivers::modbus {
 
@@ -58,12 +66,19 @@ struct ModbusStatus {
   std::uint64_t bad_responses{0};      // wrong transaction id / length / unit / function
   std::uint64_t connection_errors{0};  // socket / device errors, failed connects
   std::uint64_t connect_attempts{0};   // connects tried (first one, reconnects, read-back)
+  // Back-off waits: one per lost connection or failed connect.
+  std::uint64_t reconnect_backoffs{0};
   std::uint64_t polls{0};
   std::uint64_t poll_overruns{0};    // a poll period ended before the poll and writes did
   std::uint64_t events_lost{0};      // events a sequence counter skipped (jumps > 1, NC restart)
   std::uint64_t sequence_resets{0};  // a sequence counter moved back: NC restart
   // Same non-zero counter at the first read after a reconnect: an NC restart can't be ruled out.
   std::uint64_t sequence_unchanged_after_reconnect{0};
+  // Events the NC produced while nccompd was down (first read after a start with the engine's
+  // cursors): the newest of a group delivered, the others lost; and what each group's read found.
+  std::uint64_t events_recovered_after_start{0};
+  std::uint64_t events_lost_while_down{0};
+  std::array<ResumeReport, kGroupCount> resume{};
   std::uint64_t values_invalid{0};       // NaN / inf / not integral / not a valid code: dropped
   std::uint64_t values_out_of_range{0};  // finite but outside the map's min / max: dropped
   std::uint64_t offsets_rejected{0};     // not encodable (NaN, out of range) or unmapped register
@@ -76,6 +91,8 @@ struct ModbusStatus {
   std::uint32_t io_sched_fifo_priority{0};  // its SCHED_FIFO priority; 0 = not SCHED_FIFO
   std::uint32_t io_sched_errno{0};          // io_sched_fifo_priority refused with this errno
   std::uint32_t io_affinity_errno{0};       // io_cpu_affinity refused with this errno
+  // The wait the next lost connection will get while the back-off is raised, 0 at its minimum.
+  std::uint32_t reconnect_backoff_ms{0};
 };
 
 /// What the I/O thread asked for at start and what it got (read back from the kernel).
@@ -101,7 +118,7 @@ struct IoSetupLine {
 std::vector<IoSetupLine> describe_io_setup(const IoThreadSetup& setup, const ModbusConfig& config);
 
 /// Names of ModbusBus::extra_counters(), in their order (static strings, for status output).
-inline constexpr std::array<const char*, 28> kModbusCounterNames = {
+inline constexpr auto kModbusCounterNames = std::to_array<const char*>({
     "exception_illegal_function",      // 1
     "exception_illegal_address",       // 2
     "exception_illegal_value",         // 3
@@ -119,21 +136,25 @@ inline constexpr std::array<const char*, 28> kModbusCounterNames = {
     "bad_responses",
     "connection_errors",
     "connect_attempts",
+    "reconnect_backoffs",
     "poll_overruns",
     "events_lost",
     "sequence_resets",
     "sequence_unchanged_after_reconnect",
+    "events_recovered_after_start",
+    "events_lost_while_down",
     "values_invalid",
     "values_out_of_range",
     "offsets_rejected",
     "verify_mismatches",
     // clang-format on
-    "offsets_pending",  // a gauge: offsets not yet confirmed on the NC now
+    "offsets_pending",       // a gauge: offsets not yet confirmed on the NC now
+    "reconnect_backoff_ms",  // a gauge: the raised back-off, 0 at reconnect_min_s
     // Gauges set once at start: the I/O thread's scheduling (docs/modbus.md).
     "io_sched_fifo_priority",  // its SCHED_FIFO priority, 0 = normal scheduling
     "io_sched_errno",          // errno of a refused io_sched_fifo_priority (1 = EPERM), else 0
     "io_affinity_errno",       // errno of a refused io_cpu_affinity (22 = EINVAL), else 0
-};
+});
 
 /// Fills `out` with the counters of `st` in kModbusCounterNames order; returns how many.
 std::size_t modbus_counters(const ModbusStatus& st, std::span<BusCounterValue> out) noexcept;
@@ -174,6 +195,10 @@ class ModbusBus final : public Bus {
   [[nodiscard]] std::size_t extra_counters(std::span<BusCounterValue> out) const override {
     return modbus_counters(status_.load(), out);
   }
+  /// Before start(): the decoder resumes each event group from the engine's cursor. Returns true.
+  bool resume_events(const core::EventCursorSet& cursors) override;
+  /// The first read of each resumed group (from the seqlock snapshot).
+  [[nodiscard]] std::size_t events_while_down(std::span<EventsWhileDown> out) const override;
 
   /// Lock-step (before start()): no polling or writing on the driver's own schedule; sync()
   /// makes the I/O thread do one complete poll, flush() makes it write every pending offset
@@ -190,6 +215,7 @@ class ModbusBus final : public Bus {
   /// nullopt if unmapped, not connected or the read fails. start() drops this connection, so
   /// the I/O thread makes its own. Not real-time.
   [[nodiscard]] std::optional<double> read_offset(std::uint16_t register_index) override;
+  [[nodiscard]] bool reads_back() const noexcept override { return true; }
   /// Any thread: the full status with the Modbus counters.
   [[nodiscard]] ModbusStatus modbus_status() const { return status_.load(); }
   [[nodiscard]] const ModbusConfig& config() const noexcept { return config_; }
@@ -225,8 +251,10 @@ class ModbusBus final : public Bus {
   /// I/O thread, first thing: applies io_sched_fifo_priority / io_cpu_affinity, records the result.
   void setup_io_thread();
   void run_lockstep();
-  /// Connects if needed (lock-step); false while not connected.
-  bool ensure_connected(double& backoff_s, bool& ever_connected);
+  /// Connects if needed, first waiting out the back-off; false while not connected.
+  bool ensure_connected(bool& ever_connected);
+  /// The connection was lost, or a connect failed, at now_ns: schedules the next connect.
+  void lost(core::TimeNs now_ns);
   /// Loop thread: posts a request and waits for its completion.
   bool request(std::uint64_t& req, const std::uint64_t& done, const bool& ok,
                core::TimeNs timeout_ns);
@@ -241,6 +269,8 @@ class ModbusBus final : public Bus {
   void rtu_gap();
   void after_transaction();
   void publish(core::TimeNs now_ns);
+  /// After a poll: whether every block was read and whether a valid axis sample came out.
+  void note_input(bool all_read, bool axis_seen);
   void sleep_until(core::TimeNs t_ns) const;
 
   const ModbusConfig config_;
@@ -257,16 +287,17 @@ class ModbusBus final : public Bus {
   // I/O thread only.
   std::unique_ptr<void, ModbusDeleter> ctx_;
   PollDecoder decoder_;
+  InputWatch input_watch_;
   std::vector<std::uint8_t> block_ok_;
   std::vector<std::uint8_t> bits_;
   std::vector<std::int32_t> slot_of_register_;  // register_index → offsets index, -1 = unmapped
   std::vector<OffsetSlot> slots_;
   ModbusStatus st_{};
   std::uint32_t consecutive_failures_{0};
-  // The current connection got at least one answer (data or an exception response): a link that
-  // drops before that is reconnected only after the back-off, so that a peer that accepts and
-  // hangs up cannot make the thread spin (at SCHED_FIFO it would starve every normal thread).
-  bool answered_since_connect_{false};
+  ReconnectBackoff backoff_;
+  core::TimeNs next_connect_ns_{0};
+  // A transaction of this cycle timed out, was garbled or lost the connection: not healthy.
+  bool cycle_failed_{false};
   core::TimeNs down_since_ns_{0};
   core::TimeNs last_frame_end_ns_{0};
   core::rt::SpscRing<CycleRecord>* cycle_log_{nullptr};

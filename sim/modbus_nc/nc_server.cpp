@@ -144,6 +144,10 @@ void NcServer::handle(void* ctx_p, int fd, const std::uint8_t* query, int length
   if (touches(address, count, kDelayAddress)) {
     std::this_thread::sleep_for(std::chrono::milliseconds(delay_ms_.load()));
   }
+  if (const int code = read_exception_.load(); code != 0 && function >= 1 && function <= 4) {
+    modbus_reply_exception(ctx, query, static_cast<unsigned>(code));
+    return;
+  }
   for (unsigned code = 1; code <= 11; ++code) {
     if (touches(address, count, static_cast<std::uint16_t>(kExceptionBase + code))) {
       modbus_reply_exception(ctx, query, code);

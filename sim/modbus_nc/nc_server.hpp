@@ -10,7 +10,9 @@
 //   kWrongTidAddress           TCP: answered with transaction id + 1; RTU: from another unit id
 //   kSilentAddress             never answered
 // Whole-server faults: set_silent(true) stops answering every request while keeping the
-// connection open (a hung NC, a pulled cable as seen from the client).
+// connection open (a hung NC, a pulled cable as seen from the client); set_read_exception(code)
+// answers every read (functions 1-4) with Modbus exception `code` while writes still work (an NC
+// whose PLC lost its register map); 0 ends it.
 //
 // Threads: the server runs its own thread; update() / read() / writes() may be called from any
 // thread. A request is answered under the same mutex update() takes, so a change made in one
@@ -100,6 +102,7 @@ class NcServer {
 
   void set_delay_ms(int ms) noexcept { delay_ms_.store(ms); }
   void set_silent(bool silent) noexcept { silent_.store(silent); }
+  void set_read_exception(int code) noexcept { read_exception_.store(code); }
 
  private:
   void run();
@@ -117,6 +120,7 @@ class NcServer {
   int stop_pipe_[2]{-1, -1};
   std::atomic<int> delay_ms_{500};
   std::atomic<bool> silent_{false};
+  std::atomic<int> read_exception_{0};
   std::atomic<std::uint64_t> requests_{0};
   void* ctx_{nullptr};  // modbus_t, server thread after start()
   int listen_fd_{-1};

@@ -2,6 +2,7 @@
 
 #include <string_view>
 
+#include "formats/toml_guard.hpp"
 #include "sim/ncsim/config.hpp"
 
 namespace nccomp::sim::ncsim {
@@ -15,7 +16,7 @@ std::string place(const toml::node& n, const std::string& fallback) {
 
 toml::table parse(const std::string& text, const std::string& file) {
   try {
-    return toml::parse(text, file);
+    return formats::parse_toml(text, file);
   } catch (const toml::parse_error& e) {
     throw ConfigError(file + ":" + std::to_string(e.source().begin.line) + ":" +
                       std::to_string(e.source().begin.column) + ": " +

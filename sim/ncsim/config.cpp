@@ -10,6 +10,7 @@
 #include <set>
 #include <sstream>
 
+#include "formats/toml_guard.hpp"
 #include "tools/plan/checkpoints_toml.hpp"
 
 namespace nccomp::sim::ncsim {
@@ -261,7 +262,7 @@ void apply_override(toml::table& root, const std::string& spec) {
   }
   try {
     const std::string doc = "v = " + value;
-    toml::table v = toml::parse(std::string_view(doc), std::string_view("--set"));
+    toml::table v = formats::parse_toml(std::string_view(doc), std::string_view("--set"));
     t->insert_or_assign(parts.back(), std::move(*v.get("v")));
   } catch (const toml::parse_error&) {
     // Not a TOML value: a bare word is taken as a string (parsed, so it carries "--set" as its
@@ -275,7 +276,7 @@ void apply_override(toml::table& root, const std::string& spec) {
     }
     quoted += '"';
     try {
-      toml::table v = toml::parse(std::string_view(quoted), std::string_view("--set"));
+      toml::table v = formats::parse_toml(std::string_view(quoted), std::string_view("--set"));
       t->insert_or_assign(parts.back(), std::move(*v.get("v")));
     } catch (const toml::parse_error&) {
       throw ConfigError("--set " + spec + ": the value is neither TOML nor a plain string");
@@ -583,7 +584,7 @@ SimConfig parse_sim_config(std::string_view text, const std::string& file,
   const auto wants = [&](ProgramKind p) { return read_files && (!program || *program == p); };
   toml::table root;
   try {
-    root = toml::parse(text, file);
+    root = formats::parse_toml(text, file);
   } catch (const toml::parse_error& e) {
     throw ConfigError(where(file, e.source()) + ": " + std::string(e.description()));
   }

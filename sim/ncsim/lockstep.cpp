@@ -77,6 +77,20 @@ void LockstepServer::accept(double timeout_s) {
   }
 }
 
+void LockstepServer::wait_closed(double timeout_s) {
+  pollfd p{fd_, POLLIN, 0};
+  if (::poll(&p, 1, static_cast<int>(timeout_s * 1000.0)) <= 0) {
+    throw std::runtime_error("lockstep: the daemon did not go away within " +
+                             std::to_string(timeout_s) + " s");
+  }
+  unsigned char buf[64];
+  if (::recv(fd_, buf, sizeof(buf), 0) > 0) {
+    throw std::runtime_error("lockstep: a message from the daemon while waiting for it to go away");
+  }
+  ::close(fd_);
+  fd_ = -1;
+}
+
 void LockstepServer::tick(std::uint64_t cycle, std::int64_t time_ns) {
   const LockstepMessage m{kLockstepMagic, static_cast<std::uint32_t>(LockstepType::kTick), cycle,
                           time_ns};

@@ -33,6 +33,9 @@ class LockstepServer {
 
   /// Waits for the daemon to connect. Throws std::runtime_error after timeout_s.
   void accept(double timeout_s);
+  /// Waits for the connected daemon to close its end (without a BYE: it was killed), then
+  /// forgets it, so that accept() takes the next one. Throws after timeout_s or on a message.
+  void wait_closed(double timeout_s);
   void tick(std::uint64_t cycle, std::int64_t time_ns);
   enum class Reply : std::uint8_t { kDone, kBye, kClosed, kTimeout };
   /// Waits for DONE of this cycle (a DONE of another cycle or a malformed message throws).

@@ -1,7 +1,7 @@
 // ncsim, the virtual NC (docs/ncsim.md):
 //   ncsim --config FILE --program mould_face|side_wall|roll|touch --bus modbus|can --out DIR
 //         [--speed FACTOR | --lockstep SOCKET] [--parts N] [--seed N] [--set effect.key=value ...]
-//         [--wait-client SECONDS] [--continue DIR]
+//         [--wait-client SECONDS] [--continue DIR] [--lockstep-outage N,AFTER_S,DOWN_S]
 // --continue DIR starts where the run whose result is in DIR ended (DIR/end_state.toml: the next
 // part number and the tool's cut path, so a worn tool stays worn).
 // Speed mode waits up to --wait-client (default 10 s) for the daemon's first polls before the
@@ -25,7 +25,8 @@ namespace {
 constexpr const char* kUsage =
     "usage: ncsim --config FILE --program mould_face|side_wall|roll|touch --bus modbus|can "
     "--out DIR [--speed FACTOR | --lockstep SOCKET] [--parts N] [--seed N] "
-    "[--set effect.key=value ...] [--wait-client SECONDS] [--continue DIR]\n"
+    "[--set effect.key=value ...] [--wait-client SECONDS] [--continue DIR] "
+    "[--lockstep-outage N,AFTER_S,DOWN_S]\n"
     "       ncsim --help | --version\n";
 
 [[noreturn]] void usage(const std::string& why) {
@@ -49,6 +50,9 @@ void help() {
       "  --wait-client SECONDS   speed mode: wait this long for the daemon's first poll "
       "(default 10)\n"
       "  --continue DIR          start where the run whose result is in DIR ended\n"
+      "  --lockstep-outage N,AFTER_S,DOWN_S\n"
+      "                          lock-step, Modbus: AFTER_S after the N-th measure request, "
+      "wait for the daemon to go away, machine DOWN_S without it, wait for it to come back\n"
       "  -h, --help              this help; --version the version\n"
       "Exit status: 0 done, 1 run-time error, 2 usage, 3 config error, 4 the daemon ended a "
       "lock-step run early.\n",
@@ -119,6 +123,21 @@ int main(int argc, char** argv) {
       }
     } else if (a == "--lockstep") {
       opt.lockstep_socket = v;
+    } else if (a == "--lockstep-outage") {
+      int n = 0;
+      double after_s = 0.0;
+      double down_s = 0.0;
+      char tail = 0;
+      if (std::sscanf(v.c_str(), "%d,%lf,%lf%c", &n, &after_s, &down_s, &tail) != 3 || n < 1 ||
+          !(after_s >= 0.0) || after_s > 3600.0 || !(down_s > 0.0) || down_s > 3600.0) {
+        usage(
+            "--lockstep-outage wants N,AFTER_S,DOWN_S (N >= 1, 0 <= AFTER_S <= 3600, "
+            "0 < DOWN_S <= 3600), got '" +
+            v + "'");
+      }
+      opt.outage_at_request = n;
+      opt.outage_after_s = after_s;
+      opt.outage_s = down_s;
     } else if (a == "--parts") {
       sets.push_back("ncsim.parts=" + v);
     } else if (a == "--seed") {
@@ -136,6 +155,9 @@ int main(int argc, char** argv) {
   }
   if (have_speed && !opt.lockstep_socket.empty()) {
     usage("--speed and --lockstep exclude each other");
+  }
+  if (opt.outage_at_request > 0 && opt.lockstep_socket.empty()) {
+    usage("--lockstep-outage needs --lockstep");
   }
   SimConfig config;
   try {

@@ -8,6 +8,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "formats/toml_guard.hpp"
 #include "sim/ncsim/config.hpp"
 
 namespace nccomp::sim::ncsim {
@@ -232,7 +233,7 @@ std::vector<std::string> continuation_overrides(const std::string& dir) {
   const std::string path = (std::filesystem::path(dir) / "end_state.toml").string();
   toml::table t;
   try {
-    t = toml::parse_file(path);
+    t = formats::parse_toml_file(path);
   } catch (const toml::parse_error& e) {
     const auto& b = e.source().begin;
     throw ConfigError(path + ":" + std::to_string(b.line) + ":" + std::to_string(b.column) + ": " +

@@ -2,6 +2,8 @@
 
 #include <chrono>
 #include <cmath>
+#include <cstdio>
+#include <limits>
 #include <memory>
 #include <stdexcept>
 #include <thread>
@@ -88,6 +90,14 @@ RunSummary run(const SimConfig& config, const RunOptions& options) {
       options.on_ready(link.port());
     }
     server.accept(options.connect_timeout_s);
+    const int request_reg = config.nc.measure_request_register;
+    if (options.outage_at_request > 0 && (options.bus != BusKind::kModbus || request_reg < 0)) {
+      throw std::runtime_error(
+          "ncsim: a lock-step outage needs --bus modbus and nc.measure_request_register");
+    }
+    int request_rises = 0;
+    bool request_up = false;
+    std::int64_t outage_start_ns = -1;
     for (std::uint64_t k = 0;; ++k) {
       const auto t_ns = static_cast<core::TimeNs>(k) * period_ns;
       sim.advance_to(t_ns);
@@ -113,6 +123,38 @@ RunSummary run(const SimConfig& config, const RunOptions& options) {
         summary.completed = true;
         server.bye();
         break;
+      }
+      if (options.outage_at_request > 0 && outage_start_ns < 0) {
+        const bool up = std::fabs(sim.reg(request_reg)) > 0.0;
+        request_rises += up && !request_up ? 1 : 0;
+        request_up = up;
+        if (request_rises == options.outage_at_request) {
+          outage_start_ns = t_ns + core::from_seconds(options.outage_after_s);
+        }
+      }
+      if (outage_start_ns >= 0 && t_ns >= outage_start_ns) {
+        // The daemon goes down here (its caller kills it) and is back outage_s later: the NC
+        // machines on alone meanwhile, and publishes what happens (the laser's result).
+        std::printf(
+            "ncsim: lock-step outage at cycle %llu (%.3f s): waiting for the daemon to go "
+            "away\n",
+            static_cast<unsigned long long>(k), core::seconds(t_ns));
+        std::fflush(stdout);
+        server.wait_closed(options.connect_timeout_s);
+        const auto down =
+            static_cast<std::uint64_t>(std::llround(options.outage_s * config.lockstep_rate_hz));
+        for (std::uint64_t j = 0; j < down; ++j) {
+          ++k;
+          const auto tj = static_cast<core::TimeNs>(k) * period_ns;
+          sim.advance_to(tj);
+          link.publish(sim.axis(), sim.temperatures_c(), sim.take_events(), 0.0);
+        }
+        std::printf("ncsim: outage over at cycle %llu (%.3f s): waiting for the daemon\n",
+                    static_cast<unsigned long long>(k),
+                    core::seconds(static_cast<core::TimeNs>(k) * period_ns));
+        std::fflush(stdout);
+        server.accept(options.connect_timeout_s);
+        outage_start_ns = std::numeric_limits<std::int64_t>::max();  // once
       }
     }
   } else {

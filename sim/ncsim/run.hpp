@@ -25,6 +25,14 @@ struct RunOptions {
   /// Lock-step: how long to wait for the daemon to connect, and for each DONE [s].
   double connect_timeout_s{30.0};
   double done_timeout_s{10.0};
+  /// Lock-step, Modbus: an outage of the daemon (a restart; docs/ncsim.md). outage_s of simulated
+  /// time after the outage_at_request-th rise of the NC's measure request register, ncsim stops
+  /// ticking, prints "ncsim: lock-step outage ...", waits for the daemon to go away (killed by
+  /// the caller), machines outage_s of simulated time without it and then waits for a daemon to
+  /// connect and goes on. 0 = no outage.
+  int outage_at_request{0};
+  double outage_after_s{0.0};
+  double outage_s{0.0};
   /// Called once the bus is up, with the Modbus port (0 for CAN): tests start their peer here.
   std::function<void(std::uint16_t)> on_ready;
 };

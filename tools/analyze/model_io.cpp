@@ -8,6 +8,8 @@
 #include <sstream>
 #include <utility>
 
+#include "formats/toml_guard.hpp"
+
 namespace nccomp::tools::model_io {
 
 namespace cm = core::model;
@@ -319,7 +321,7 @@ ModelFile read_model_table(const toml::table& root, std::string_view source, boo
 ModelFile read_model_text(std::string_view text, std::string_view source, bool require_fitted) {
   toml::table root;
   try {
-    root = toml::parse(text, source);
+    root = formats::parse_toml(text, source);
   } catch (const toml::parse_error& e) {
     std::ostringstream s;
     s << source << ":" << e.source().begin.line << ":" << e.source().begin.column << ": "
@@ -433,7 +435,7 @@ std::string write_model_toml(const core::model::Model& model,
 Mapping read_mapping_text(std::string_view text, std::string_view source) {
   toml::table root;
   try {
-    root = toml::parse(text, source);
+    root = formats::parse_toml(text, source);
   } catch (const toml::parse_error& e) {
     std::ostringstream s;
     s << source << ":" << e.source().begin.line << ":" << e.source().begin.column << ": "
@@ -504,8 +506,10 @@ Mapping read_mapping_text(std::string_view text, std::string_view source) {
     }
   }
   for (const auto& [k, v] : m.scale) {
-    const bool known = is_target(k) || std::any_of(m.extra.begin(), m.extra.end(),
-                                                   [&](const auto& e) { return e.first == k; });
+    const std::string& column = k;  // clang 14 cannot capture a structured binding
+    const bool known =
+        is_target(k) || std::any_of(m.extra.begin(), m.extra.end(),
+                                    [&](const auto& e) { return e.first == column; });
     if (!known) fail(std::string(source) + ": scale." + k + ": no such mapped column");
   }
   return m;

@@ -152,8 +152,8 @@ std::vector<int> plotted_columns(const cm::Dataset& data) {
   for (std::size_t c = 0; c < data.columns.size(); ++c) {
     if (c == static_cast<std::size_t>(cm::Column::kKind)) continue;
     const auto& v = data.columns[c];
-    double lo = INFINITY;
-    double hi = -INFINITY;
+    double lo = HUGE_VAL;
+    double hi = -HUGE_VAL;
     for (double x : v) {
       if (std::isfinite(x)) {
         lo = std::min(lo, x);
@@ -174,8 +174,8 @@ std::string residual_svg(const cm::Dataset& data, const cm::AnalysisResult& resu
   constexpr double kPanelH = 240.0;
   constexpr double kTop = 40.0;
   constexpr std::size_t kMaxPoints = 1500;
-  double xlo = INFINITY;
-  double xhi = -INFINITY;
+  double xlo = HUGE_VAL;
+  double xhi = -HUGE_VAL;
   double ymax = 0.0;
   for (std::size_t i = 0; i < x.size(); ++i) {
     if (!std::isfinite(x[i])) continue;

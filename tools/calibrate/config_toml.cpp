@@ -8,6 +8,8 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "formats/toml_guard.hpp"
+
 namespace nccomp::tools::calibrate {
 
 namespace {
@@ -187,7 +189,7 @@ CalibrationConfig load_calibration_node(const toml::node& calibration, const std
 CalibrationConfig load_calibration_config_text(std::string_view text, const std::string& source) {
   toml::table root;
   try {
-    root = toml::parse(text, source);
+    root = formats::parse_toml(text, source);
   } catch (const toml::parse_error& e) {
     std::ostringstream s;
     s << source << ':' << e.source().begin.line << ": " << e.description();
@@ -199,7 +201,7 @@ CalibrationConfig load_calibration_config_text(std::string_view text, const std:
 CalibrationConfig load_calibration_config_file(const std::string& path) {
   toml::table root;
   try {
-    root = toml::parse_file(path);
+    root = formats::parse_toml_file(path);
   } catch (const toml::parse_error& e) {
     std::ostringstream s;
     s << path << ':' << e.source().begin.line << ": " << e.description();

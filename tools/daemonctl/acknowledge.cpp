@@ -3,7 +3,8 @@
 // mis-measured tool (alarm 23) or an excessive increment (alarm 22, on_excessive = "stop"), its
 // alarm and warning flags, and the hold of the measurement request, so that the overdue laser
 // measurement is asked for again. One "acknowledge" request on the status socket; the daemon
-// answers once its loop has taken the command, with what was cleared.
+// answers once its loop has taken the command, with what was cleared. Changes the machine: the
+// daemon takes it from root and members of [status] admin_group only; a refusal exits 3.
 #include <iostream>
 #include <memory>
 #include <string>

@@ -1,5 +1,6 @@
 // `nccomp status [--json|--metrics] [--socket PATH | --config FILE]`: asks a running nccompd for
-// its status over the Unix socket (loop statistics, registers, buses, state, last alarms).
+// its status over the Unix socket (loop statistics, registers, buses, state, last alarms). Exit
+// status 1 when the daemon cannot be reached or answers an error (busy).
 #include <cstdlib>
 #include <iostream>
 #include <memory>
@@ -37,6 +38,10 @@ void setup(CLI::App& app) {
     }
     if (answer.empty()) {
       throw nccomp::tools::CommandError(nccomp::tools::kExitFailure, "no answer from " + path);
+    }
+    if (answer.rfind("error: ", 0) == 0) {  // e.g. busy: max_clients are being served
+      while (!answer.empty() && answer.back() == '\n') answer.pop_back();
+      throw nccomp::tools::CommandError(nccomp::tools::kExitFailure, answer.substr(7));
     }
     std::cout << answer;
   });

@@ -33,8 +33,9 @@ inline std::string status_socket_path(const std::string& socket, const std::stri
 }
 
 /// Sends an operator command's request line to the daemon at path and returns its "ok ..."
-/// answer. Throws CommandError(kExitFailure) when the daemon cannot be reached, does not answer,
-/// or refuses ("error: <why>": the message is <why>).
+/// answer. Throws CommandError(kExitFailure) when the daemon cannot be reached or does not
+/// answer, CommandError(kExitInvalidInput) when it refuses ("error: <why>", a malformed or not
+/// permitted command: the message is <why>).
 inline std::string operator_command(const std::string& path, const std::string& request) {
   std::string answer;
   try {
@@ -48,7 +49,7 @@ inline std::string operator_command(const std::string& path, const std::string& 
   if (answer.rfind("error: ", 0) == 0) {
     std::string what = answer.substr(7);
     while (!what.empty() && what.back() == '\n') what.pop_back();
-    throw CommandError(kExitFailure, what);
+    throw CommandError(kExitInvalidInput, what);
   }
   return answer;
 }

@@ -2,7 +2,8 @@
 // that the machine's warm start is now (the origin of the measurement log's time_s and of the
 // [model]'s warm-up terms), or that the machine is cold and its next axis motion is the warm start
 // (docs/daemon.md, "Warm start"). One "warm-start ..." request on the status socket; the daemon
-// answers once its loop has taken the command.
+// answers once its loop has taken the command. Changes the machine: the daemon takes it from root
+// and members of [status] admin_group only; a refusal exits 3.
 #include <iostream>
 #include <memory>
 #include <string>

@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "core/common/limiter.hpp"
+#include "formats/toml_guard.hpp"
 
 namespace nccomp::tools::checkpoints {
 
@@ -412,7 +413,7 @@ CheckpointsConfig load_checkpoints_file(const std::string& path,
                                         const std::optional<std::string>& contour_csv_override) {
   toml::table root;
   try {
-    root = toml::parse_file(path);
+    root = formats::parse_toml_file(path);
   } catch (const toml::parse_error& e) {
     ConfigIssue i;
     i.file = path;

@@ -65,6 +65,9 @@ const std::vector<CsvColumn>& writes_schema();
 
 /// A JSON value (result.json). Objects keep their key order.
 struct Json {
+  // Defined below the struct: clang would otherwise check std::pair<std::string, Json> while
+  // Json is still incomplete.
+  Json();
   enum class Type { kNull, kBool, kNumber, kString, kArray, kObject };
   Type type{Type::kNull};
   bool boolean{false};
@@ -76,6 +79,7 @@ struct Json {
   /// Member by key, or nullptr (also when this is not an object).
   [[nodiscard]] const Json* find(std::string_view key) const;
 };
+inline Json::Json() = default;
 
 /// Parses a JSON document; throws ReportInputError "file:line:col: what". Nesting is limited to
 /// 64 levels (a hostile file cannot exhaust the stack).

@@ -2,10 +2,12 @@
 // `nccomp acknowledge` clears the latched alarms of the running daemon ("acknowledge" or
 // "acknowledge all"): the creep module's halt after a broken / mis-measured tool (alarm 23) or an
 // excessive increment (alarm 22, on_excessive = "stop"), its alarm and warning flags and the hold
-// of the measurement request. Validated here on the status thread (anything else is refused and
-// counted), queued to the loop as an OperatorCommand kAcknowledge, taken by the modules in one
-// cycle (core/creep/creep_module.hpp); the answer waits until the loop has taken it and a status
-// of the modules published after it shows what was cleared. Not real-time.
+// of the measurement request. Changes the machine: only root and the admin group may (the
+// registry's default, daemon/command.hpp). Validated here on the status server's command thread
+// (anything else is refused and counted), queued to the loop as an OperatorCommand kAcknowledge,
+// taken by the modules in one cycle (core/creep/creep_module.hpp); the answer waits until the
+// loop has taken it and a status of the modules published after it shows what was cleared. Not
+// real-time.
 #pragma once
 
 #include <string>

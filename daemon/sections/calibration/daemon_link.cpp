@@ -5,6 +5,7 @@
 #include <time.h>
 
 #include <atomic>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <fstream>
@@ -157,7 +158,7 @@ using core::OperatorCommand;
 using core::OperatorCommandKind;
 
 std::uint32_t next_sequence() {
-  static std::uint32_t seq = 0;  // the status thread only
+  static std::uint32_t seq = 0;  // the command thread only
   return ++seq;
 }
 
@@ -319,13 +320,28 @@ std::string handle_calibrate_command(std::string_view args, CommandContext& ctx)
   return first_line(s) + body + "-- " + tc::hint(s) + "\n";
 }
 
+CommandAccess calibrate_access(std::string_view args) noexcept {
+  // Words are case-insensitive in the script language (tools/calibrate/script.cpp).
+  const auto is_status = [](std::string_view a) {
+    constexpr std::string_view kStatus = "status";
+    if (a.size() != kStatus.size()) return false;
+    for (std::size_t i = 0; i < a.size(); ++i) {
+      if (std::tolower(static_cast<unsigned char>(a[i])) != kStatus[i]) return false;
+    }
+    return true;
+  };
+  return args.empty() || is_status(args) ? CommandAccess::kReadOnly
+                                         : CommandAccess::kChangesMachine;
+}
+
 namespace {
 [[maybe_unused]] const int kHook = register_startup_hook(
     "calibration",
     [](core::engine::Engine& engine, const RegisterReader& read, core::TimeNs now_ns) {
       return calibration_startup(engine, read, now_ns, clock_s(CLOCK_REALTIME));
     });
-[[maybe_unused]] const int kVerb = register_command_handler("calibrate", handle_calibrate_command);
+[[maybe_unused]] const int kVerb =
+    register_command_handler("calibrate", handle_calibrate_command, &calibrate_access);
 }  // namespace
 
 }  // namespace nccomp::daemon::sections

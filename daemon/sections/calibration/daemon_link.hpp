@@ -5,8 +5,10 @@
 // - at start-up: adopt a newer offline calibration ([calibration] state_file), then tell the
 //   calibrator what the NC's axis registers hold (read back where the bus can);
 // - the operator's commands ("calibrate ..." on the status socket): parsed and validated here on
-//   the status thread, queued to the loop as OperatorCommand events, answered from the
-//   module's published snapshot. Not real-time (SnapshotSink::publish() is, on the loop thread).
+//   the status server's command thread, queued to the loop as OperatorCommand events, answered
+//   from the module's published snapshot. Every command but the status ("calibrate" or
+//   "calibrate status") feeds the machine: only root and the admin group may (calibrate_access).
+//   Not real-time (SnapshotSink::publish() is, on the loop thread).
 #pragma once
 
 #include <string>
@@ -36,5 +38,10 @@ std::vector<std::string> calibration_startup(core::engine::Engine& engine,
 
 /// The "calibrate" verb's handler.
 std::string handle_calibrate_command(std::string_view args, CommandContext& ctx);
+
+/// The "calibrate" verb's access rule: read-only for the status ("" or "status", what `nccomp
+/// calibrate --daemon` polls), else it changes the machine (begin, touches, facets, discard,
+/// recalibrate, and anything the calibrator takes in future).
+CommandAccess calibrate_access(std::string_view args) noexcept;
 
 }  // namespace nccomp::daemon::sections

@@ -166,6 +166,7 @@ void parse_output(TableReader& r, cc::CreepConfig& c, cc::CreepRegisterNames& na
   names.restart_path = r.string("restart_path_register", "");
   o.write_resolution_um = positive(r, "write_resolution_um", o.write_resolution_um, 1e6);
   o.refresh_interval_s = r.number("refresh_interval_s", o.refresh_interval_s, 0.0, 86400.0);
+  o.request_rearm_s = r.number("request_rearm_s", o.request_rearm_s, 0.0, 60.0);
 }
 
 void parse_limiter(TableReader& r, core::LimiterConfig& l) {

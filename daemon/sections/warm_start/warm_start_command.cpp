@@ -14,7 +14,7 @@ namespace nccomp::daemon::sections {
 namespace {
 
 std::uint32_t next_sequence() {
-  static std::uint32_t seq = 0;  // the status thread only
+  static std::uint32_t seq = 0;  // the command thread only
   return ++seq;
 }
 

@@ -1,10 +1,11 @@
 // The "warm-start" verb of nccompd's status socket (docs/daemon.md, "Warm start"): `nccomp
 // warm-start` declares the machine's warm start now ("warm-start" or "warm-start now"), or makes
 // the machine cold so that its next axis motion is the warm start ("warm-start at-next-motion").
-// Validated here on the status thread (anything else is refused and counted), queued to the loop
-// as an OperatorCommand kWarmStart, taken by the engine's machine context
-// (core/engine/context.hpp); the answer waits until the loop has taken it (EngineCounters).
-// Not real-time.
+// Changes the machine: only root and the admin group may (the registry's default,
+// daemon/command.hpp). Validated here on the status server's command thread (anything else is
+// refused and counted), queued to the loop as an OperatorCommand kWarmStart, taken by the
+// engine's machine context (core/engine/context.hpp); the answer waits until the loop has taken
+// it (EngineCounters). Not real-time.
 #pragma once
 
 #include <string>

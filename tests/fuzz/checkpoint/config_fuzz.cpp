@@ -7,6 +7,7 @@
 #include <string_view>
 #include <vector>
 
+#include "formats/toml_guard.hpp"
 #include "tools/plan/checkpoints_toml.hpp"
 #include "tools/plan/plan_output.hpp"
 
@@ -15,7 +16,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   const std::string_view text(reinterpret_cast<const char*>(data), size);
   toml::table root;
   try {
-    root = toml::parse(text, std::string_view("fuzz.toml"));
+    root = nccomp::formats::parse_toml(text, std::string_view("fuzz.toml"));
   } catch (const toml::parse_error&) {
     return 0;
   }

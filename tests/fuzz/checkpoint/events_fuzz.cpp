@@ -85,6 +85,35 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   comp->configure(cfg, *plan, limits);
   StepOutput out;
   std::vector<Event> events;
+  // The live target is always one of the table's values or between two of them: of the table as
+  // it is or as it was (it is recomputed only at the finishing tool's next sample, so after a
+  // probe it may still show an older table's value). lo / hi: every table value of this input
+  // so far [µm]; a probe or a part start (which change the table) ends its cycle, so no table
+  // goes unseen.
+  double lo = 0.0;
+  double hi = 0.0;
+  const auto widen = [&] {
+    for (std::size_t i = 0; i < comp->size(); ++i) {
+      lo = std::min(lo, comp->register_value_um(i));
+      hi = std::max(hi, comp->register_value_um(i));
+    }
+  };
+  widen();
+  const auto step = [&] {
+    out.clear();
+    comp->step(static_cast<TimeNs>(p - data) * 1000, events, out);
+    events.clear();
+    for (const OffsetWrite& w : out.writes) {
+      if (!std::isfinite(w.value_um) || std::fabs(w.value_um) > limits.max_abs_um) {
+        __builtin_trap();
+      }
+    }
+    widen();
+    const double target = comp->live_target_um();
+    if (std::isfinite(target) && (target < lo - 1e-9 || target > hi + 1e-9)) {
+      __builtin_trap();
+    }
+  };
   while (p < end) {
     const std::uint8_t kind = *p++;
     switch (kind % 5) {
@@ -105,37 +134,18 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         m.wall_angle_deg = take_double(p, end);
         m.ball_radius_mm = take_double(p, end);
         events.emplace_back(m);
+        step();
         break;
       }
       case 2:
         events.emplace_back(ProgramEvent{0, ProgramEventKind::kPartStart, 1});
+        step();
         break;
       case 3:
         events.emplace_back(ToolChange{0, (kind & 0x80) ? 1 : 2, false});
         break;
-      default: {
-        out.clear();
-        comp->step(static_cast<TimeNs>(p - data) * 1000, events, out);
-        events.clear();
-        for (const OffsetWrite& w : out.writes) {
-          if (!std::isfinite(w.value_um) || std::fabs(w.value_um) > limits.max_abs_um) {
-            __builtin_trap();
-          }
-        }
-        // The live target is always one of the table's values or between two of them.
-        const double target = comp->live_target_um();
-        if (std::isfinite(target)) {
-          double lo = 0.0;
-          double hi = 0.0;
-          for (std::size_t i = 0; i < comp->size(); ++i) {
-            lo = std::min(lo, comp->register_value_um(i));
-            hi = std::max(hi, comp->register_value_um(i));
-          }
-          if (target < lo - 1e-9 || target > hi + 1e-9) {
-            __builtin_trap();
-          }
-        }
-      }
+      default:
+        step();
     }
   }
   out.clear();

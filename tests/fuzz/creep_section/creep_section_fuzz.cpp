@@ -12,6 +12,7 @@
 #include "core/creep/creep_module.hpp"
 #include "core/engine/engine.hpp"
 #include "daemon/sections/creep/creep_section.hpp"
+#include "formats/toml_guard.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   namespace cfg = nccomp::daemon::config;
@@ -19,7 +20,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   const std::string_view text(reinterpret_cast<const char*>(data), size);
   toml::table root;
   try {
-    root = toml::parse(text, std::string_view("fuzz.toml"));
+    root = nccomp::formats::parse_toml(text, std::string_view("fuzz.toml"));
   } catch (const toml::parse_error&) {
     return 0;
   }

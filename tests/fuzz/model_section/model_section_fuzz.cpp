@@ -20,6 +20,7 @@
 
 #include "core/engine/engine.hpp"
 #include "daemon/sections/model/model_section.hpp"
+#include "formats/toml_guard.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   namespace cfg = nccomp::daemon::config;
@@ -41,7 +42,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       "[[model.apply]]\nterm = \"part_trend\"\nregister = \"r0\"\npoint = 0\n";
   toml::table root;
   try {
-    root = toml::parse(daemon_text, std::string_view(dir + "/nccompd.toml"));
+    root = nccomp::formats::parse_toml(daemon_text, std::string_view(dir + "/nccompd.toml"));
   } catch (const toml::parse_error&) {
     return 0;
   }

@@ -2,14 +2,19 @@
 // write: can-utils (cansend, candump, cangen, canplayer) and python3-can. Needs a vcan0 that is
 // up and `ip` rights: run through tests/hil/can/run_hil.sh (a VM where the kernel has no CAN).
 #include <gtest/gtest.h>
+#include <net/if.h>
+#include <sys/ioctl.h>
+#include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <fstream>
 #include <functional>
 #include <memory>
@@ -122,6 +127,11 @@ std::vector<core::Event> drain(CanBus& bus) {
 
 std::string format_event(const core::Event& ev) {
   char b[512];
+  // A faulted measurement (a rejected frame of it): " fault=invalid" / " fault=out_of_range".
+  const core::InputFault fault = core::fault_of(ev);
+  const char* f = fault == core::InputFault::kNone      ? ""
+                  : fault == core::InputFault::kInvalid ? " fault=invalid"
+                                                        : " fault=out_of_range";
   std::visit(
       [&](const auto& e) {
         using E = std::decay_t<decltype(e)>;
@@ -132,20 +142,20 @@ std::string format_event(const core::Event& ev) {
                         e.position_mm[0], e.position_mm[1], e.position_mm[2], e.program_path_mm,
                         e.tool, e.normal[0], e.normal[1], e.normal[2], e.cutting ? 1 : 0);
         } else if constexpr (std::is_same_v<E, core::ToolMeasurement>) {
-          std::snprintf(b, sizeof b, "tool_measurement tool=%d broken=%d wear_um=%.2f", e.tool,
-                        e.broken ? 1 : 0, e.wear_um[0]);
+          std::snprintf(b, sizeof b, "tool_measurement tool=%d broken=%d wear_um=%.2f%s", e.tool,
+                        e.broken ? 1 : 0, e.wear_um[0], f);
         } else if constexpr (std::is_same_v<E, core::ProbeMeasurement>) {
           std::snprintf(b, sizeof b,
                         "probe_measurement part=%d checkpoint=%d raw_deviation_um=%.3f "
-                        "wall_angle_deg=%.2f ball_radius_mm=%.3f",
+                        "wall_angle_deg=%.2f ball_radius_mm=%.3f%s",
                         e.part, e.checkpoint, e.raw_deviation_um, e.wall_angle_deg,
-                        e.ball_radius_mm);
+                        e.ball_radius_mm, f);
         } else if constexpr (std::is_same_v<E, core::CalibrationTouch>) {
           std::snprintf(b, sizeof b,
                         "calibration_touch probe=%d axis=%d direction=%d variant=%d "
-                        "trigger_position_mm=%.4f",
+                        "trigger_position_mm=%.4f%s",
                         static_cast<int>(e.probe), e.axis, e.direction, e.variant,
-                        e.trigger_position_mm);
+                        e.trigger_position_mm, f);
         } else if constexpr (std::is_same_v<E, core::ToolChange>) {
           std::snprintf(b, sizeof b, "tool_change tool=%d sister=%d", e.tool, e.sister ? 1 : 0);
         } else if constexpr (std::is_same_v<E, core::ProgramEvent>) {
@@ -487,6 +497,37 @@ TEST_F(CanHil, ErrorPassiveAndBusOffInjectedWritesHeldUntilRestart) {
   EXPECT_EQ(s.bus.state, LinkState::kUp);
 }
 
+// Issue 17, finding 4, over vcan. GIVEN degraded_alarm_after_s = 0.3 and the reference map (axis
+// frames mapped), WHEN no axis frame comes, THEN the input is stale; WHEN the NC node sends axis
+// samples every 20 ms, THEN it clears; WHEN the controller then stays error-passive (the link
+// "degraded", frames still arriving), THEN the input is stale again, and clears at error-active.
+TEST_F(CanHil, NoAxisFramesOrErrorPassiveBeyondTheDegradedTimeIsStaleInput) {
+  CanConfig cfg = reference();
+  cfg.degraded_alarm_after_s = 0.3;
+  const CanMapping mapping = cfg.mapping;
+  start(std::move(cfg));
+  ASSERT_TRUE(wait_until([&] { return st().bus.input_stale; }));
+  EXPECT_EQ(st().bus.state, LinkState::kUp);
+  std::atomic<bool> sending{true};
+  std::thread nc_thread([&] {
+    sim::can_nc::CanNcNode nc(mapping, kIf);
+    const core::Event axis = sample_events()[0];
+    while (sending.load()) {
+      nc.send_event(axis);
+      std::this_thread::sleep_for(20ms);
+    }
+  });
+  EXPECT_TRUE(wait_until([&] { return !st().bus.input_stale; }));
+  ASSERT_EQ(sh("cansend vcan0 20000004#0030000000000000"), 0);  // error-passive
+  EXPECT_TRUE(wait_until([&] { return st().bus.input_stale; }));
+  EXPECT_EQ(st().bus.state, LinkState::kDegraded);
+  EXPECT_FALSE(st().bus.alarm);  // the offsets' alarm is another matter
+  ASSERT_EQ(sh("cansend vcan0 20000004#0040000000000000"), 0);  // error-active
+  EXPECT_TRUE(wait_until([&] { return !st().bus.input_stale; }));
+  sending.store(false);
+  nc_thread.join();
+}
+
 TEST_F(CanHil, BusOffWithDaemonRestartRequestsRestartOverNetlink) {
   CanConfig c = reference();
   c.restart = RestartMode::kDaemon;
@@ -501,6 +542,90 @@ TEST_F(CanHil, BusOffWithDaemonRestartRequestsRestartOverNetlink) {
   ASSERT_EQ(sh("cansend vcan0 160#0200D204"), 0);
   ASSERT_TRUE(wait_until([&] { return st().bus.state == LinkState::kUp; }));
   EXPECT_EQ(st().can.bus_recoveries, 1U);
+}
+
+// Reconnect back-off (issue 17, finding 7): with waits from `min_s` doubling to `max_s`, at most
+// ceil(log2(max / min)) + t / max attempts fit in t seconds after the fault (the waits below the
+// cap, then one per capped wait).
+int max_attempts(double min_s, double max_s, double t_s) {
+  return static_cast<int>(std::ceil(std::log2(max_s / min_s))) + static_cast<int>(t_s / max_s);
+}
+
+// GIVEN restart = "daemon" on vcan (every restart request refused), restart_delay_s 0.01 and
+// reconnect_max_s 0.2, WHEN the bus stays off for 2 s, THEN the requests follow the back-off
+// (at most 15; a fixed 0.01 s period would make 200) and status shows it at the cap.
+TEST_F(CanHil, BusOffRestartRequestsBackOffToTheCap) {
+  CanConfig c = reference();
+  c.restart = RestartMode::kDaemon;
+  c.restart_delay_s = 0.01;
+  c.reconnect_max_s = 0.2;
+  c.reconnect_reset_after_s = 60.0;
+  start(std::move(c));
+  const auto t0 = std::chrono::steady_clock::now();
+  ASSERT_EQ(sh("cansend vcan0 20000040#0000000000000000"), 0);
+  std::this_thread::sleep_for(2s);
+  const CanStatus s = st();
+  const double t = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::printf("%llu restart requests in %.2f s (bound %d)\n",
+              static_cast<unsigned long long>(s.can.restart_requests), t,
+              max_attempts(0.01, 0.2, t));
+  EXPECT_LE(s.can.restart_requests, static_cast<std::uint64_t>(max_attempts(0.01, 0.2, t)));
+  EXPECT_GE(s.can.restart_requests, 4U);
+  EXPECT_EQ(s.can.restart_failures, s.can.restart_requests);
+  // One wait for the bus-off, one after each refused request.
+  EXPECT_EQ(s.can.reconnect_backoffs, 1 + s.can.restart_failures);
+  EXPECT_EQ(s.can.reconnect_backoff_ms, 200U);
+  EXPECT_EQ(s.bus.state, LinkState::kDown);
+  ASSERT_EQ(sh("cansend vcan0 160#0200D204"), 0);  // traffic: the controller is back
+  ASSERT_TRUE(wait_until([&] { return st().bus.state == LinkState::kUp; }));
+}
+
+// GIVEN an interface that goes down and up every 10 ms (a loose connector; toggled with
+// SIOCSIFFLAGS from a thread, as fork + exec of `ip` is too slow in the emulated VM), link_check_s
+// 0.01 and reconnect_max_s 0.2, WHEN it flaps for 2 s, THEN the driver rebinds on the back-off
+// schedule (at most 15), not after every loss, and is back once the interface stays up.
+TEST_F(CanHil, FlappingInterfaceIsReboundOnTheBackOffSchedule) {
+  CanConfig c = reference();
+  c.link_check_s = 0.01;
+  c.reconnect_max_s = 0.2;
+  c.reconnect_reset_after_s = 60.0;
+  c.alarm_after_s = 60.0;
+  start(std::move(c));
+  std::atomic<bool> stop{false};
+  std::atomic<int> flaps{0};
+  const auto t0 = std::chrono::steady_clock::now();
+  std::thread flapper([&] {
+    const int fd = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+    ifreq ifr{};
+    std::strncpy(ifr.ifr_name, kIf.c_str(), IFNAMSIZ - 1);
+    while (!stop.load() && ::ioctl(fd, SIOCGIFFLAGS, &ifr) == 0) {
+      ifr.ifr_flags = static_cast<short>(ifr.ifr_flags & ~IFF_UP);
+      (void)::ioctl(fd, SIOCSIFFLAGS, &ifr);
+      std::this_thread::sleep_for(2ms);
+      ifr.ifr_flags = static_cast<short>(ifr.ifr_flags | IFF_UP);
+      (void)::ioctl(fd, SIOCSIFFLAGS, &ifr);
+      ++flaps;
+      std::this_thread::sleep_for(8ms);
+    }
+    ::close(fd);
+  });
+  std::this_thread::sleep_for(2s);
+  const std::uint64_t rebinds = st().bus.counters.reconnects;
+  const double t = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  stop.store(true);
+  flapper.join();
+  const CanStatus s = st();
+  std::printf("%d flaps, %llu interface losses, %llu rebinds in %.2f s (bound %d)\n", flaps.load(),
+              static_cast<unsigned long long>(s.can.interface_down),
+              static_cast<unsigned long long>(rebinds), t, max_attempts(0.01, 0.2, t));
+  ASSERT_GE(flaps.load(), 20) << "the interface did not flap";
+  ASSERT_GE(s.can.interface_down, 2U) << "the flapping was not seen";
+  EXPECT_LE(rebinds, static_cast<std::uint64_t>(max_attempts(0.01, 0.2, t)));
+  EXPECT_GE(s.can.reconnect_backoffs, s.can.interface_down);
+  ASSERT_EQ(sh("ip link set vcan0 up"), 0);
+  ASSERT_TRUE(wait_until([&] { return st().bus.state == LinkState::kUp; }));
+  ASSERT_EQ(sh("cansend vcan0 160#0200D204"), 0);
+  ASSERT_TRUE(wait_until([&] { return st().bus.counters.events_decoded == 1; }));
 }
 
 TEST_F(CanHil, InterfaceDownAndUpWhileRunningResendsPendingOffset) {
@@ -750,7 +875,13 @@ TEST_F(CanHil, MalformedFramesRejectedAndCountedPerReason) {
   ASSERT_EQ(sh("cansend vcan0 160#R"), 0);                 // RTR on a mapped ID: filtered
   ASSERT_EQ(sh("cansend vcan0 7A0#0011223344556677"), 0);  // unmapped: filtered
   ASSERT_EQ(sh("cansend vcan0 160#0200D204"), 0);          // one good frame
-  ASSERT_TRUE(wait_until([&] { return st().bus.counters.events_decoded == 1; }));
+  // Two events: the good temperature and the probe measurement whose completing frame was NaN,
+  // passed on faulted (its method raises the alarm) instead of dropped in silence.
+  ASSERT_TRUE(wait_until([&] { return st().bus.counters.events_decoded == 2; }));
+  const auto got = drain(*bus_);
+  ASSERT_EQ(got.size(), 2U);
+  EXPECT_EQ(core::fault_of(got[0]), core::InputFault::kInvalid);
+  EXPECT_TRUE(std::holds_alternative<core::ProbeMeasurement>(got[0]));
   const auto s = st();
   EXPECT_EQ(s.can.rejected_wrong_length, 1U);
   EXPECT_EQ(s.can.rejected_out_of_range, 2U);
@@ -795,9 +926,10 @@ TEST_F(CanHil, CangenFloodOnMappedIdOverflowCountedNoCrash) {
     return s.bus.counters.frames_rx + s.can.rx_overflow >= kFrames + 1;
   }));
   EXPECT_EQ(s.bus.counters.frames_rx + s.can.rx_overflow, static_cast<std::uint64_t>(kFrames + 1));
-  EXPECT_EQ(
-      s.bus.counters.events_decoded + s.bus.counters.events_dropped + s.bus.counters.malformed,
-      s.bus.counters.frames_rx);
+  // Every frame received is one event: a valid tool measurement, a rejected one passed on
+  // faulted (also counted malformed), or the temperature.
+  EXPECT_EQ(s.bus.counters.events_decoded + s.bus.counters.events_dropped,
+            s.bus.counters.frames_rx);
   EXPECT_EQ(s.bus.counters.events_decoded, 64U);  // the ring's capacity, nobody drained it
   EXPECT_GT(s.bus.counters.events_dropped, 0U);
   EXPECT_GT(s.can.rx_overflow, 0U);

@@ -10,6 +10,10 @@
 // the next good measurement is accepted and crept in; a second acknowledge with nothing latched
 // is counted and changes nothing, a malformed request is refused with the reason and counted, an
 // unknown option is a usage error, and without a daemon the command fails with exit status 1.
+// Privilege separation (root only: the test switches users and groups in forked children; group
+// "users" stands for nccomp, "adm" for [status] admin_group): a member of the status group only
+// gets the status, but `nccomp acknowledge` is refused (exit status 3, the reason; logged with
+// uid, user name and pid) and the NC's alarm stays; a member of the admin group acknowledges.
 #include <fcntl.h>
 #include <gtest/gtest.h>
 #include <signal.h>
@@ -32,6 +36,7 @@
 
 #include "daemon/status.hpp"
 #include "sim/modbus_nc/nc_server.hpp"
+#include "tests/support/run_as.hpp"
 
 extern char** environ;
 
@@ -171,7 +176,7 @@ std::string config_text(std::uint16_t port) {
   s << "[daemon]\nrate_hz = 200\n"
     << "[state]\ndirectory = \"state\"\nmin_interval_s = 0.05\n"
     << "[measurement_log]\ndirectory = \"log\"\n"
-    << "[status]\nsocket_path = \"status.sock\"\n"
+    << "[status]\nsocket_path = \"status.sock\"\nadmin_group = \"adm\"\n"
     << "[modbus]\ntransport = \"tcp\"\nhost = \"127.0.0.1\"\nport = " << port << "\n"
     << "poll_rate_hz = 200\nresponse_timeout_s = 0.5\n"
     << "[modbus.axis]\n"
@@ -256,8 +261,62 @@ TEST(NccompAcknowledge, TheOperatorLiftsABrokenToolHaltAndTheNextMeasurementIsAc
   EXPECT_EQ(holding_i32(nc, kLength), -50);
   EXPECT_EQ(number(daemon.status(), "measurements_accepted"), 1.0);
 
-  // The operator has checked the tool: it is fine. `nccomp acknowledge`.
-  const CliRun ack = nccomp(d, {"acknowledge", "--socket", socket});
+  // The operator has checked the tool: it is fine. `nccomp acknowledge`: by a member of the
+  // admin group when the test can switch users (root), else by the daemon's own user.
+  const bool as_root = ::geteuid() == 0;
+  CliRun ack;
+  pid_t refused_pid = -1;
+  pid_t admin_pid = -1;
+  if (as_root) {
+    const auto users = nccomp::test::gid_of("users");
+    const auto adm = nccomp::test::gid_of("adm");
+    const auto nogroup = nccomp::test::gid_of("nogroup");
+    ASSERT_TRUE(users && adm && nogroup) << "groups users, adm, nogroup";
+    ASSERT_EQ(::chown(socket.c_str(), static_cast<uid_t>(-1), *users), 0);  // systemd's Group=
+    const nccomp::test::Identity op{65534, *nogroup, {*users}};
+    const nccomp::test::Identity admin{65534, *nogroup, {*users, *adm}};
+    const std::string name = nccomp::test::user_name_of(65534);
+    EXPECT_NE(nccomp::test::request_as(op, socket, "json").answer.find("\"halted\":1"),
+              std::string::npos);
+    const std::string why =
+        "permission denied: 'acknowledge' changes the machine; uid 65534 (" + name +
+        ") is not root and not in group 'adm' ([status] admin_group)\n  an administrator grants "
+        "it with: usermod -aG adm " +
+        name + " (effective at the user's next login)";
+#ifdef NCCOMP_BIN
+    const auto refused =
+        nccomp::test::run_as(op, {NCCOMP_BIN, "acknowledge", "--socket", socket},
+                             (d.path / "cli.out").string(), (d.path / "cli.err").string());
+    EXPECT_EQ(refused.exit_code, 3);
+    EXPECT_EQ(slurp(d.path / "cli.out"), "");
+    EXPECT_EQ(slurp(d.path / "cli.err"), "nccomp: error: " + why + "\n");
+    std::printf("%s", slurp(d.path / "cli.err").c_str());
+#else
+    const auto refused = nccomp::test::request_as(op, socket, "acknowledge");
+    EXPECT_EQ(refused.answer, "error: " + why + "\n");
+#endif
+    // Refused: the halt and the NC's alarm flag stay.
+    std::this_thread::sleep_for(300ms);
+    EXPECT_EQ(holding(nc, kAlarm), 1);
+    EXPECT_EQ(number(daemon.status(), "halted"), 1.0);
+#ifdef NCCOMP_BIN
+    const auto allowed =
+        nccomp::test::run_as(admin, {NCCOMP_BIN, "acknowledge", "--socket", socket},
+                             (d.path / "cli.out").string(), (d.path / "cli.err").string());
+    ack.exit_code = allowed.exit_code;
+    ack.out = slurp(d.path / "cli.out");
+    ack.err = slurp(d.path / "cli.err");
+#else
+    const auto allowed = nccomp::test::request_as(admin, socket, "acknowledge");
+    ack.out = allowed.answer;
+    ack.exit_code = allowed.exit_code == 0 && ack.out.rfind("ok ", 0) == 0 ? 0 : 1;
+#endif
+    refused_pid = refused.pid;
+    admin_pid = allowed.pid;
+  } else {
+    ack = nccomp(d, {"acknowledge", "--socket", socket});
+  }
+  const std::string refused_count = as_root ? "1" : "0";
   EXPECT_EQ(ack.exit_code, 0) << ack.out << ack.err;
   std::printf("%s", ack.out.c_str());
   EXPECT_EQ(ack.out,
@@ -265,7 +324,8 @@ TEST(NccompAcknowledge, TheOperatorLiftsABrokenToolHaltAndTheNextMeasurementIsAc
             "23)\n"
             "  creep: now halted 0, latched alarm none, acknowledgements taken 1\n"
             "  acknowledge commands taken by the loop: 1; operator commands refused by the "
-            "daemon: 0\n");
+            "daemon: " +
+                refused_count + "\n");
   // The NC sees the alarm fall and the overdue measurement asked for.
   ASSERT_TRUE(wait_until([&] { return holding(nc, kAlarm) == 0; }, 2000ms));
   ASSERT_TRUE(wait_until([&] { return holding(nc, kRequest) == 1; }, 2000ms));
@@ -292,7 +352,8 @@ TEST(NccompAcknowledge, TheOperatorLiftsABrokenToolHaltAndTheNextMeasurementIsAc
             "ok acknowledged: creep: nothing latched\n"
             "  creep: now halted 0, latched alarm none, acknowledgements taken 2\n"
             "  acknowledge commands taken by the loop: 2; operator commands refused by the "
-            "daemon: 0\n");
+            "daemon: " +
+                refused_count + "\n");
   EXPECT_EQ(holding_i32(nc, kLength), -70);
 
   // A malformed request on the socket: refused with the reason, counted.
@@ -321,6 +382,18 @@ TEST(NccompAcknowledge, TheOperatorLiftsABrokenToolHaltAndTheNextMeasurementIsAc
   EXPECT_NE(log.find("operator command refused: acknowledge: unknown argument 'creep'"),
             std::string::npos)
       << log;
+  if (as_root) {
+    const std::string name = nccomp::test::user_name_of(65534);
+    EXPECT_NE(log.find("operator command refused: 'acknowledge' from uid 65534 (" + name +
+                       ") pid " + std::to_string(refused_pid) + ": permission denied: uid 65534 (" +
+                       name + ") is not root and not in group 'adm' ([status] admin_group)\n"),
+              std::string::npos)
+        << log;
+    EXPECT_NE(log.find("operator command from uid 65534 (" + name + ") pid " +
+                       std::to_string(admin_pid) + ": acknowledge\n"),
+              std::string::npos)
+        << log;
+  }
   EXPECT_EQ(daemon.stop(), 0);
   nc.stop();
 

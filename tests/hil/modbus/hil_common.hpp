@@ -43,11 +43,16 @@ struct Collected {
   std::vector<core::ToolChange> tool_changes;
   std::vector<core::TemperatureSample> temperatures;
   std::size_t other{0};
+  // Counters consumed without an event (core::EventOrigin::counter_only): for the engine's
+  // cursors only, not events.
+  std::size_t counter_only{0};
 
   void drain(mb::ModbusBus& bus) {
     core::Event e;
     while (bus.rx().try_pop(e)) {
-      if (auto* a = std::get_if<core::AxisSample>(&e)) {
+      if (const core::EventOrigin* o = core::origin_of(e); o != nullptr && o->counter_only) {
+        ++counter_only;
+      } else if (auto* a = std::get_if<core::AxisSample>(&e)) {
         axis.push_back(*a);
       } else if (auto* t = std::get_if<core::ToolMeasurement>(&e)) {
         tool_measurements.push_back(*t);

@@ -213,11 +213,22 @@ class PeerProcess {
 /// A raw TCP server on 127.0.0.1 (ephemeral port): each received request (bytes as read) is
 /// passed to `respond`, whose returned bytes are sent back (empty = no answer). With
 /// hang_up_on_request(true) it closes the connection on every request instead (a peer that
-/// accepts and hangs up).
+/// accepts and hangs up); a `hang_up` predicate does so for the requests it returns true for.
+/// Responders and predicates get the request and, in their two-argument form, how many requests
+/// its connection received before it.
 class RawTcpServer {
  public:
   using Responder = std::function<std::vector<std::uint8_t>(const std::vector<std::uint8_t>&)>;
-  explicit RawTcpServer(Responder respond) : respond_(std::move(respond)) {
+  using ConnectionResponder =
+      std::function<std::vector<std::uint8_t>(const std::vector<std::uint8_t>&, int)>;
+  using HangUp = std::function<bool(const std::vector<std::uint8_t>&, int)>;
+  explicit RawTcpServer(Responder respond, HangUp hang_up = nullptr)
+      : RawTcpServer(
+            ConnectionResponder([r = std::move(respond)](const std::vector<std::uint8_t>& req,
+                                                         int) { return r(req); }),
+            std::move(hang_up)) {}
+  RawTcpServer(ConnectionResponder respond, HangUp hang_up)
+      : respond_(std::move(respond)), hang_up_if_(std::move(hang_up)) {
     listen_ = socket(AF_INET, SOCK_STREAM, 0);
     sockaddr_in a{};
     a.sin_family = AF_INET;
@@ -252,6 +263,13 @@ class RawTcpServer {
  private:
   void run() {
     std::vector<int> clients;
+    std::vector<int> served;  // requests per client, same order
+    const auto drop = [&](int fd) {
+      close(fd);
+      const auto it = std::find(clients.begin(), clients.end(), fd);
+      served.erase(served.begin() + (it - clients.begin()));
+      clients.erase(it);
+    };
     for (;;) {
       std::vector<pollfd> p{{stop_[0], POLLIN, 0}, {listen_, POLLIN, 0}};
       for (int c : clients) {
@@ -265,6 +283,7 @@ class RawTcpServer {
       }
       if (p[1].revents != 0) {
         clients.push_back(accept(listen_, nullptr, nullptr));
+        served.push_back(0);
         ++connections_;
       }
       for (std::size_t i = 2; i < p.size(); ++i) {
@@ -274,18 +293,17 @@ class RawTcpServer {
         std::vector<std::uint8_t> req(260);
         const ssize_t n = recv(p[i].fd, req.data(), req.size(), 0);
         if (n <= 0) {
-          close(p[i].fd);
-          clients.erase(std::find(clients.begin(), clients.end(), p[i].fd));
+          drop(p[i].fd);
           break;
         }
         req.resize(static_cast<std::size_t>(n));
         ++requests_;
-        if (hang_up_.load()) {
-          close(p[i].fd);
-          clients.erase(std::find(clients.begin(), clients.end(), p[i].fd));
+        const int before = served[i - 2]++;
+        if (hang_up_.load() || (hang_up_if_ && hang_up_if_(req, before))) {
+          drop(p[i].fd);
           break;
         }
-        const std::vector<std::uint8_t> rsp = respond_(req);
+        const std::vector<std::uint8_t> rsp = respond_(req, before);
         if (!rsp.empty()) {
           (void)!send(p[i].fd, rsp.data(), rsp.size(), MSG_NOSIGNAL);
         }
@@ -295,7 +313,8 @@ class RawTcpServer {
       close(c);
     }
   }
-  Responder respond_;
+  ConnectionResponder respond_;
+  HangUp hang_up_if_;
   int listen_{-1};
   int stop_[2]{-1, -1};
   std::uint16_t port_{0};

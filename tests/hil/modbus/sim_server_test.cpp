@@ -8,7 +8,9 @@
 #include <chrono>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <cstring>
+#include <limits>
 #include <string_view>
 #include <thread>
 
@@ -495,6 +497,90 @@ address = 65299
   EXPECT_EQ(st.offsets_pending, 1U);  // illegal value: kept, retried, alarmed
   EXPECT_TRUE(got.temperatures.empty());
   EXPECT_TRUE(got.tool_changes.empty());
+  bus->stop();
+}
+
+// Issue 17, finding 4. GIVEN the driver on the NC server with degraded_alarm_after_s = 0.5, up and
+// decoding valid samples, WHEN the NC answers every read with exception 4 (server failure), THEN
+// the link stays "degraded" (an exception is an answer: no reconnect, not down) and the driver
+// raises input_stale; it clears once the NC answers again. WHEN the NC answers but publishes a
+// NaN X position, THEN the link is up, the samples are counted invalid and the input is stale
+// just the same; valid samples clear it. WHEN the laser's wear register holds +inf as its counter
+// advances, THEN exactly one tool measurement comes out, faulted, its wear 0.
+TEST(ModbusHilSim, ExceptionsOnEveryReadOrOnlyNaNPositionsMakeTheInputStale) {
+  NcServer server(ServerConfig{});
+  const auto put_x = [&](float x) {
+    std::uint32_t bits = 0;
+    std::memcpy(&bits, &x, sizeof bits);
+    server.update([&](Tables& t) {
+      t.input[0] = static_cast<std::uint16_t>(bits >> 16);
+      t.input[1] = static_cast<std::uint16_t>(bits & 0xFFFF);
+    });
+  };
+  put_x(12.5F);
+  server.start();
+  const std::string map = R"(
+[modbus.axis]
+x_mm = { table = "input", address = 0, type = "float32" }
+[modbus.tool_measurement]
+sequence = { table = "input", address = 10, type = "uint16" }
+tool = { table = "input", address = 11 }
+wear_um = { table = "input", address = 12, type = "float32" }
+)";
+  auto bus = make_bus(tcp_header(server.port(), "degraded_alarm_after_s = 0.5") + map);
+  bus->start();
+  Collected got;
+  ASSERT_TRUE(wait_until([&] {
+    got.drain(*bus);
+    return got.axis.size() >= 5;
+  }));
+  EXPECT_FALSE(bus->status().input_stale);
+
+  const auto t0 = std::chrono::steady_clock::now();
+  server.set_read_exception(4);
+  ASSERT_TRUE(wait_until([&] { return bus->status().input_stale; }));
+  std::printf("every read answered with exception 4 -> input_stale after %.3f s (0.5 s set)\n",
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+  auto st = bus->modbus_status();
+  EXPECT_EQ(st.bus.state, drivers::LinkState::kDegraded);
+  EXPECT_GE(st.exceptions[4], 5U);
+  EXPECT_EQ(st.bus.counters.reconnects, 0U);
+  EXPECT_FALSE(st.bus.alarm);  // offsets are not the question: nothing is pending
+  server.set_read_exception(0);
+  ASSERT_TRUE(wait_until([&] { return !bus->status().input_stale; }));
+  EXPECT_EQ(bus->status().state, drivers::LinkState::kUp);
+
+  put_x(std::nanf(""));
+  ASSERT_TRUE(wait_until([&] { return bus->status().input_stale; }));
+  st = bus->modbus_status();
+  EXPECT_EQ(st.bus.state, drivers::LinkState::kUp);
+  EXPECT_GE(st.values_invalid, 5U);
+  put_x(7.0F);
+  ASSERT_TRUE(wait_until([&] { return !bus->status().input_stale; }));
+
+  got.drain(*bus);
+  got.tool_measurements.clear();
+  const float inf = std::numeric_limits<float>::infinity();
+  std::uint32_t bits = 0;
+  std::memcpy(&bits, &inf, sizeof bits);
+  server.update([&](Tables& t) {
+    t.input[11] = 3;
+    t.input[12] = static_cast<std::uint16_t>(bits >> 16);
+    t.input[13] = static_cast<std::uint16_t>(bits & 0xFFFF);
+    t.input[10] = 1;
+  });
+  ASSERT_TRUE(wait_until([&] {
+    got.drain(*bus);
+    return !got.tool_measurements.empty();
+  }));
+  const std::uint64_t polls = bus->modbus_status().polls;
+  ASSERT_TRUE(wait_until([&] { return bus->modbus_status().polls >= polls + 20; }));
+  got.drain(*bus);
+  ASSERT_EQ(got.tool_measurements.size(), 1U);
+  EXPECT_EQ(got.tool_measurements[0].fault, core::InputFault::kInvalid);
+  EXPECT_EQ(got.tool_measurements[0].tool, 3);
+  EXPECT_EQ(got.tool_measurements[0].wear_um[0], 0.0);
+  EXPECT_FALSE(bus->status().input_stale);
   bus->stop();
 }
 

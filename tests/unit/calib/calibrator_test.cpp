@@ -8,6 +8,7 @@
 #include <string>
 
 #include "core/calib/facet.hpp"
+#include "tests/support/alloc_counter.hpp"
 #include "tests/unit/calib/sim_machine.hpp"
 #include "tests/unit/calib/test_config.hpp"
 
@@ -215,6 +216,47 @@ TEST(Calibration, OperatorInputIsValidated) {
   out.clear();
   c.step(0, {&be, 1}, out);
   EXPECT_TRUE(has_alarm(out, AlarmCode::kCalibrationInvalidInput));
+}
+
+// Issue 17, finding 4. GIVEN an initial calibration waiting for reference touches, WHEN a touch
+// arrives faulted (the driver read NaN / inf / a position beyond the map's range: InputFault, its
+// position 0 as the engine delivers it), THEN the calibration raises its invalid-input code 49 as
+// an alarm (subject the axis, value NaN) and takes nothing from it: the set in progress keeps its
+// touches, and the intact touches that follow complete it without a scatter alarm.
+TEST(Calibration, AFaultedTouchAlarmsAndIsNotTaken) {
+  const auto cfg = test_config();
+  Calibrator c;
+  c.configure(cfg);
+  SimMachine m(cfg, test_errors(), 0.0, 0.0, 0.1, 5);
+  StepOutput out;
+  c.begin_calibration(0, out);
+  const Event first = m.reference_touch(0, 1, 0);
+  c.step(0, {&first, 1}, out);
+  core::CalibrationTouch bad = m.reference_touch(0, 1, 0);
+  bad.trigger_position_mm = 0.0;
+  bad.fault = core::InputFault::kInvalid;
+  const Event be = bad;
+  out.clear();
+  {
+    const AllocationScope scope;  // the loop's path: allocation-free
+    c.step(0, {&be, 1}, out);
+    EXPECT_EQ(scope.count(), 0U);
+  }
+  ASSERT_EQ(out.alarms.size(), 1U);
+  EXPECT_EQ(out.alarms[0].code, AlarmCode::kCalibrationInvalidInput);
+  EXPECT_EQ(out.alarms[0].severity, core::Severity::kAlarm);
+  EXPECT_EQ(out.alarms[0].subject, 0);
+  EXPECT_TRUE(std::isnan(out.alarms[0].value));
+  EXPECT_EQ(c.touch_progress().count[0], 1);
+  out.clear();
+  for (std::size_t slot = 0; slot < 4; ++slot) {
+    for (int i = slot == 0 ? 1 : 0; i < 3; ++i) {
+      const Event e = m.reference_touch(slot, 1, 0);
+      c.step(0, {&e, 1}, out);
+    }
+  }
+  EXPECT_FALSE(has_alarm(out, AlarmCode::kTouchScatter));
+  EXPECT_EQ(c.phase(), Phase::kTestGrindLateral);
 }
 
 TEST(Calibration, ConfigErrorsNameTheKey) {

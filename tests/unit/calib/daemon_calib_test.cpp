@@ -10,6 +10,10 @@
 //   the request register follows; after SIGTERM and a restart mid-creep the registers continue
 //   where the NC is (no dip), the drift model and history are back; a daemon with
 //   [calibration] state_file adopts an offline calibration of `nccomp calibrate`.
+// Privilege separation (root only: users and groups switched in forked children): a member of
+//   the status group only may read the calibration status, but the touches it fabricates are
+//   refused (logged with uid, user name and pid) and the axis offsets stay; the same touches
+//   from a member of the admin group recalibrate.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -17,6 +21,7 @@
 #include <string>
 
 #include "core/calib/state.hpp"
+#include "tests/support/run_as.hpp"
 #include "tests/unit/calib/daemon_process.hpp"
 #include "tools/calibrate/session.hpp"
 
@@ -221,6 +226,78 @@ TEST(NccompdCalibration, AdoptsAnOfflineCalibrationFromStateFile) {
   Daemon d(dir.path);
   d.start();
   EXPECT_NE(d.log_text().find("is not newer than the calibration the daemon holds"),
+            std::string::npos)
+      << d.log_text();
+  EXPECT_EQ(d.stop(), 0);
+}
+
+TEST(NccompdCalibration, OnlyTheAdminGroupFeedsTheCalibrator) {
+  if (::geteuid() != 0) {
+    GTEST_SKIP() << "switching to other users and groups needs root (CI runs as root)";
+  }
+  const auto users = nccomp::test::gid_of("users");  // stands for nccomp
+  const auto adm = nccomp::test::gid_of("adm");      // stands for nccomp-admin
+  const auto nogroup = nccomp::test::gid_of("nogroup");
+  ASSERT_TRUE(users && adm && nogroup) << "groups users, adm, nogroup";
+  TempDir dir;
+  std::string cfg = config_text();
+  const std::string sock_key = "socket_path = \"status.sock\"\n";
+  cfg.insert(cfg.find(sock_key) + sock_key.size(), "admin_group = \"adm\"\n");
+  dir.write("nccompd.toml", cfg);
+  Daemon d(dir.path);
+  d.start();
+  ASSERT_EQ(::chown(d.socket().c_str(), static_cast<uid_t>(-1), *users), 0);
+  SimMachine m(test_config(), test_errors(), 0.2, 0.2, 0.1, 23);
+  calibrate(d, m);  // by root
+  const double base_x = register_output(wait_settled(d), "X_offset");
+
+  // A member of the status group only: the calibration status yes, fabricated touches no.
+  const nccomp::test::Identity op{65534, *nogroup, {*users}};
+  const nccomp::test::Identity admin{65534, *nogroup, {*users, *adm}};
+  const std::string name = nccomp::test::user_name_of(65534);
+  EXPECT_EQ(
+      nccomp::test::request_as(op, d.socket(), "calibrate status").answer.rfind("ok ready", 0), 0U);
+  m.set_drift([](double) { return std::array<double, 4>{15.0, 15.0, 0.0, 0.0}; });
+  std::vector<std::string> touches;
+  for (std::size_t slot = 0; slot < 4; ++slot) {
+    for (int i = 0; i < 2; ++i) touches.push_back(touch_line(m.machine_touch(slot, 1, 0)));
+  }
+  pid_t refused_pid = -1;
+  for (const auto& t : touches) {
+    const auto r = nccomp::test::request_as(op, d.socket(), "calibrate " + t);
+    EXPECT_EQ(r.answer.rfind("error: permission denied: 'calibrate' changes the machine; uid "
+                             "65534 (" +
+                                 name + ") is not root and not in group 'adm'",
+                             0),
+              0U)
+        << r.answer;
+    refused_pid = r.pid;
+  }
+  EXPECT_EQ(nccomp::test::request_as(op, d.socket(), "calibrate recalibrate")
+                .answer.rfind("error: permission denied: ", 0),
+            0U);
+  std::this_thread::sleep_for(500ms);
+  std::string j = raw_request(d.socket(), "json");
+  EXPECT_NEAR(register_output(j, "X_offset"), base_x, 1e-9) << j;
+  EXPECT_EQ(text(j, "phase"), "ready");
+  EXPECT_NE(d.log_text().find("operator command refused: 'calibrate " + touches.back() +
+                              "' from uid 65534 (" + name + ") pid " + std::to_string(refused_pid) +
+                              ": permission denied"),
+            std::string::npos)
+      << d.log_text();
+
+  // The same touches from a member of the admin group: taken, the drift creeps in.
+  pid_t admin_pid = -1;
+  for (const auto& t : touches) {
+    const auto r = nccomp::test::request_as(admin, d.socket(), "calibrate " + t);
+    EXPECT_EQ(r.answer.rfind("ok ", 0), 0U) << r.answer;
+    admin_pid = r.pid;
+  }
+  j = wait_json(
+      d, [&](const std::string& js) { return register_output(js, "X_offset") > base_x + 10.0; });
+  EXPECT_GT(register_output(j, "X_offset"), base_x + 10.0) << j;
+  EXPECT_NE(d.log_text().find("operator command from uid 65534 (" + name + ") pid " +
+                              std::to_string(admin_pid) + ": calibrate " + touches.back()),
             std::string::npos)
       << d.log_text();
   EXPECT_EQ(d.stop(), 0);

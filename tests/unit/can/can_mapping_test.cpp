@@ -14,6 +14,7 @@
 #include "drivers/can/can_bus.hpp"
 #include "drivers/can/can_config.hpp"
 #include "drivers/can/can_mapping.hpp"
+#include "drivers/input_watch.hpp"
 #include "tests/support/alloc_counter.hpp"
 
 namespace nccomp::drivers::can {
@@ -129,6 +130,68 @@ TEST(CanConfig, AlarmAfterSecondsParsedDefaultedAndRangeChecked) {
   EXPECT_NE(e.find("test.toml:3: can.alarm_after_s: must be in [0, 3600], got -1"),
             std::string::npos)
       << e;
+}
+
+// The recovery back-off's cap and reset time: 5 s and max(10 s, cap) by default; a reset time
+// below the cap is refused with its key.
+TEST(CanConfig, ReconnectBackOffKeysParsedDefaultedAndChecked) {
+  const CanConfig d = parse_can_config(kHead, "test.toml");
+  EXPECT_DOUBLE_EQ(d.reconnect_max_s, 5.0);
+  EXPECT_DOUBLE_EQ(d.reconnect_reset_after_s, 10.0);
+  const CanConfig c =
+      parse_can_config(kHead + "reconnect_max_s = 2\nreconnect_reset_after_s = 4\n", "test.toml");
+  EXPECT_DOUBLE_EQ(c.reconnect_max_s, 2.0);
+  EXPECT_DOUBLE_EQ(c.reconnect_reset_after_s, 4.0);
+  EXPECT_DOUBLE_EQ(
+      parse_can_config(kHead + "reconnect_max_s = 30\n", "test.toml").reconnect_reset_after_s,
+      30.0);
+  const std::string e = parse_error(kHead + "reconnect_max_s = 30\nreconnect_reset_after_s = 20\n");
+  EXPECT_NE(e.find("test.toml:4: can.reconnect_reset_after_s: smaller than reconnect_max_s"),
+            std::string::npos)
+      << e;
+}
+
+TEST(CanConfig, DegradedAlarmAfterSecondsParsedDefaultedAndRangeChecked) {
+  EXPECT_DOUBLE_EQ(load_can_config(reference_path()).degraded_alarm_after_s, 5.0);
+  EXPECT_DOUBLE_EQ(parse_can_config(kHead, "test.toml").degraded_alarm_after_s, 5.0);
+  EXPECT_DOUBLE_EQ(parse_can_config(kHead + "degraded_alarm_after_s = 0.5\n", "test.toml")
+                       .degraded_alarm_after_s,
+                   0.5);
+  const std::string e = parse_error(kHead + "degraded_alarm_after_s = 0\n");
+  EXPECT_NE(e.find("test.toml:3: can.degraded_alarm_after_s: must be in [0.01, 3600], got 0"),
+            std::string::npos)
+      << e;
+}
+
+// The stale-input rule both drivers use (drivers/input_watch.hpp), after 2 s. GIVEN a watch
+// started at 0, WHEN the link stays healthy but no valid axis sample comes (all NaN), THEN the
+// input is stale after 2 s, not before; WHEN samples come again it is not; WHEN the link stays
+// degraded (never healthy) while samples keep coming, THEN it is stale again after 2 s; without
+// axis signals in the map only the link counts; start() grants a fresh 2 s.
+TEST(InputWatch, StaleAfterTheDegradedTimeWithoutAHealthyLinkOrAValidAxisSample) {
+  constexpr core::TimeNs kS = 1'000'000'000;
+  InputWatch w(2 * kS, true);
+  w.start(0);
+  for (core::TimeNs t = 0; t <= 2 * kS; t += kS / 10) {
+    w.link_ok(t);
+    EXPECT_FALSE(w.stale(t)) << t;
+  }
+  w.link_ok(2 * kS + 1);
+  EXPECT_TRUE(w.stale(2 * kS + 1));
+  w.axis_ok(3 * kS);
+  w.link_ok(3 * kS);
+  EXPECT_FALSE(w.stale(3 * kS));
+  w.axis_ok(5 * kS);
+  EXPECT_FALSE(w.stale(5 * kS));
+  w.axis_ok(5 * kS + 1);
+  EXPECT_TRUE(w.stale(5 * kS + 1));  // the link last healthy at 3 s
+  InputWatch no_axis(2 * kS, false);
+  no_axis.start(0);
+  no_axis.link_ok(10 * kS);
+  EXPECT_FALSE(no_axis.stale(11 * kS));
+  EXPECT_TRUE(no_axis.stale(12 * kS + 1));
+  no_axis.start(20 * kS);
+  EXPECT_FALSE(no_axis.stale(22 * kS));
 }
 
 TEST(CanConfig, FdReferenceMapParses) {
@@ -353,6 +416,79 @@ TEST_F(DecoderTest, ProbeMeasurementCompletedByTheNextGoodFrameAfterARejectedOne
   EXPECT_NEAR(p.ball_radius_mm, 3.0, 1e-12);
   EXPECT_NEAR(p.raw_deviation_um, -7.5, 1e-12);
   EXPECT_NEAR(p.wall_angle_deg, 40.0, 1e-9);
+}
+
+// Issue 17, finding 4, over CAN. GIVEN the reference map, WHEN a measurement's frame is rejected
+// (a wear beyond max = 5000 µm, a NaN deviation, a touch on axis 3, a frame of the wrong length),
+// THEN the measurement is not lost in silence: the frame is counted as rejected (its reason) and
+// the measurement is emitted faulted (kOutOfRange / kInvalid) with every value 0, by the rejected
+// frame if it completes the event, else by the frame that does; identity fields the rejected
+// frame carried are unknown (tool 0, checkpoint -1), never an earlier measurement's; the next
+// intact measurement is an ordinary one. Allocation-free.
+TEST_F(DecoderTest, ARejectedMeasurementFrameEmitsAFaultedMeasurement) {
+  // Tool 3, wear 6000 µm = 600000 counts (> max 5000).
+  auto r = feed(0x110, {0x03, 0x00, 0x00, 0x00, 0xC0, 0x27, 0x09, 0x00});
+  EXPECT_EQ(r.reject, RejectReason::kOutOfRange);
+  ASSERT_TRUE(r.emitted);
+  auto m = std::get<core::ToolMeasurement>(out_);
+  EXPECT_EQ(m.fault, core::InputFault::kOutOfRange);
+  EXPECT_EQ(m.tool, 0);  // carried by the rejected frame: unknown
+  EXPECT_EQ(m.wear_um[0], 0.0);
+  EXPECT_EQ(m.time_ns, 1000);
+  // Tool 3, 12.34 µm: an ordinary measurement again.
+  r = feed(0x110, {0x03, 0x00, 0x00, 0x00, 0xD2, 0x04, 0x00, 0x00});
+  ASSERT_TRUE(r.emitted);
+  m = std::get<core::ToolMeasurement>(out_);
+  EXPECT_EQ(m.fault, core::InputFault::kNone);
+  EXPECT_EQ(m.tool, 3);
+  EXPECT_NEAR(m.wear_um[0], 12.34, 1e-9);
+
+  // Probe: part 5, checkpoint 3, r 3 mm, then a NaN deviation in the completing frame.
+  ASSERT_FALSE(feed(0x120, {0x05, 0, 0, 0, 0x03, 0x00, 0xB8, 0x0B}).emitted);
+  r = feed(0x121, {0x00, 0x00, 0xC0, 0x7F, 0xA0, 0x0F, 0, 0});
+  EXPECT_EQ(r.reject, RejectReason::kNotFinite);
+  ASSERT_TRUE(r.emitted);
+  auto p = std::get<core::ProbeMeasurement>(out_);
+  EXPECT_EQ(p.fault, core::InputFault::kInvalid);
+  EXPECT_EQ(p.checkpoint, 3);
+  EXPECT_EQ(p.part, 5);
+  EXPECT_EQ(p.raw_deviation_um, 0.0);
+  EXPECT_EQ(p.ball_radius_mm, 0.0);
+  // A first frame of the wrong length: the completing frame delivers the measurement faulted,
+  // with its checkpoint unknown (not the 3 of the measurement before).
+  EXPECT_EQ(feed(0x120, {0x06, 0, 0}).reject, RejectReason::kWrongLength);
+  const float dev = -7.5F;
+  const auto b = std::bit_cast<std::array<std::uint8_t, 4>>(dev);
+  r = feed(0x121, {b[0], b[1], b[2], b[3], 0xA0, 0x0F, 0, 0});
+  EXPECT_EQ(r.reject, RejectReason::kNone);
+  ASSERT_TRUE(r.emitted);
+  p = std::get<core::ProbeMeasurement>(out_);
+  EXPECT_EQ(p.fault, core::InputFault::kInvalid);
+  EXPECT_EQ(p.checkpoint, -1);
+  EXPECT_EQ(p.raw_deviation_um, 0.0);
+  // Both frames intact: an ordinary measurement.
+  ASSERT_FALSE(feed(0x120, {0x07, 0, 0, 0, 0x04, 0x00, 0xB8, 0x0B}).emitted);
+  ASSERT_TRUE(feed(0x121, {b[0], b[1], b[2], b[3], 0xA0, 0x0F, 0, 0}).emitted);
+  p = std::get<core::ProbeMeasurement>(out_);
+  EXPECT_EQ(p.fault, core::InputFault::kNone);
+  EXPECT_EQ(p.checkpoint, 4);
+  EXPECT_NEAR(p.raw_deviation_um, -7.5, 1e-12);
+
+  // Touch on axis 3 (none such): faulted, allocation-free.
+  test::AllocationScope scope;
+  r = feed(0x130, {0x07 | 0x08, 0, 0, 0, 0x10, 0, 0, 0});
+  EXPECT_EQ(scope.count(), 0U);
+  EXPECT_EQ(r.reject, RejectReason::kOutOfRange);
+  ASSERT_TRUE(r.emitted);
+  const auto& t = std::get<core::CalibrationTouch>(out_);
+  EXPECT_EQ(t.fault, core::InputFault::kOutOfRange);
+  EXPECT_EQ(t.trigger_position_mm, 0.0);
+  EXPECT_EQ(t.direction, 1);
+
+  // Other events are dropped as before: a temperature beyond max emits nothing.
+  r = feed(0x160, {0x01, 0x00, 0x20, 0x4E});
+  EXPECT_EQ(r.reject, RejectReason::kOutOfRange);
+  EXPECT_FALSE(r.emitted);
 }
 
 TEST_F(DecoderTest, BigEndianTriggerPosition) {

@@ -324,6 +324,36 @@ TEST(Learning, InvalidProbeInputsAlarm) {
   EXPECT_TRUE(out.records.empty());
 }
 
+// Issue 17, finding 4. GIVEN a checkpoint whose wall is vertical (α 0°, so a reading of all zeros
+// would pass every check), WHEN the probe's reading arrives faulted (the driver read NaN / inf / a
+// value beyond the map's range: InputFault, its values 0 as the engine delivers them), THEN S1
+// raises its invalid-reading alarm (32, severity alarm, subject the checkpoint, value NaN), learns
+// nothing and writes nothing, as for any invalid reading; an intact reading next is learned.
+TEST(Learning, AFaultedReadingAlarmsAndChangesNothing) {
+  for (const auto fault : {InputFault::kInvalid, InputFault::kOutOfRange}) {
+    CheckpointCompensator comp;
+    auto plan = line_plan(1);
+    plan[0].alpha_deg = 0.0;
+    comp.configure(base_config(), plan, wide_limits());
+    ProbeMeasurement m;
+    m.part = 1;
+    m.checkpoint = 0;
+    m.fault = fault;
+    const StepOutput out = run(comp, {part_start(1), m});
+    ASSERT_EQ(out.alarms.size(), 1U);
+    EXPECT_EQ(out.alarms[0].code, AlarmCode::kProbeInvalidInput);
+    EXPECT_EQ(out.alarms[0].severity, Severity::kAlarm);
+    EXPECT_EQ(out.alarms[0].subject, 0);
+    EXPECT_TRUE(std::isnan(out.alarms[0].value));
+    EXPECT_EQ(comp.counters().invalid, 1U);
+    EXPECT_EQ(comp.learned_count(0), 0U);
+    EXPECT_TRUE(out.records.empty());
+    (void)run(comp, {test::probe(2, 0, 6.0, 0, 0.0)});
+    EXPECT_EQ(comp.learned_count(0), 1U);
+    EXPECT_DOUBLE_EQ(comp.register_value_um(0), -6.0);
+  }
+}
+
 TEST(Learning, ModeBWritesTheSemiFinishingValueBeforeFinishing) {
   CheckpointCompensator comp;
   CompensatorConfig cfg = base_config();
@@ -935,6 +965,9 @@ TEST(RealTime, StepAllocatesNothing) {
   probes.emplace_back(test::probe_at(plan.checkpoints[0], 1, 250.0));  // implausible
   probes.emplace_back(probe(1, 999, 1.0));                             // unknown checkpoint
   probes.emplace_back(probe(1, 1, 1.0, 0, 7.0));                       // α not the plan's
+  ProbeMeasurement faulted = probe(1, 2, 0.0);
+  faulted.fault = InputFault::kInvalid;
+  probes.emplace_back(faulted);  // its value did not arrive intact
   const Event start = part_start(1);
   StepOutput out;
   nccomp::test::AllocationScope scope;
@@ -953,7 +986,7 @@ TEST(RealTime, StepAllocatesNothing) {
   EXPECT_EQ(scope.count(), 0U);
   EXPECT_EQ(comp.counters().missed, 0U);
   EXPECT_EQ(comp.counters().triggers, 4 * plan.checkpoints.size());
-  EXPECT_EQ(comp.counters().invalid, 4U * 2U);
+  EXPECT_EQ(comp.counters().invalid, 4U * 3U);
   EXPECT_EQ(comp.counters().implausible, 4U);
   EXPECT_GT(comp.counters().updates, 0U);
 }

@@ -162,6 +162,23 @@ TEST(OffsetLimiter, GivenANonFiniteNcValue_WhenReset_ThenTheOutputStaysFinite) {
   }
 }
 
+// GIVEN an origin beyond max_abs_um (reset() to what an NC held: 250 µm against 100), WHEN
+// slewed toward a target inside, THEN the first value is the bound itself (never 245 µm, which
+// lies beyond it), then max_step_um per write as usual; the same from below.
+TEST(OffsetLimiter, GivenOriginBeyondAbsolute_WhenSlewed_ThenNeverReturnsAValueBeyondIt) {
+  auto l = make(100.0, 5.0, 1000.0);
+  l.reset(250.0, 0);
+  auto r = l.apply(0.0, 1000 * kMs);
+  EXPECT_EQ(r.verdict, LimitVerdict::kSlewed);
+  EXPECT_DOUBLE_EQ(r.value_um, 100.0);
+  r = l.apply(0.0, 2000 * kMs);
+  EXPECT_DOUBLE_EQ(r.value_um, 95.0);
+  l.reset(-1e30, 3000 * kMs);
+  r = l.apply(-20.0, 4000 * kMs);
+  EXPECT_DOUBLE_EQ(r.value_um, -100.0);
+  EXPECT_LE(std::fabs(r.value_um), l.config().max_abs_um);
+}
+
 TEST(OffsetLimiter, ApplyAllocatesNothing) {
   auto l = make();
   test::AllocationScope scope;

@@ -4,6 +4,7 @@
 
 #include <cmath>
 
+#include "tests/support/alloc_counter.hpp"
 #include "tests/unit/creep/rig.hpp"
 
 namespace nccomp::core::creep {
@@ -296,6 +297,49 @@ TEST(CreepToolLife, AMeasurementOfAnotherToolIsLoggedNotApplied) {
   EXPECT_EQ(r.count(AlarmCode::kEventInvalid), 1U);
   r.run_to(100.0);
   EXPECT_NEAR(r.z(), 0.0, 0.0);
+}
+
+// Issue 17, finding 4. GIVEN a fresh tool (nothing measured yet, so a wear of 0 would be
+// plausible), WHEN the laser's result arrives faulted (the driver read NaN / inf / a value beyond
+// the map's range: InputFault, its values 0 as the engine delivers them), whatever tool number
+// came with it (the active tool 1, or 0 when the tool number itself was unreadable), THEN the
+// creep module raises its broken-or-mismeasured alarm (23, severity alarm, value NaN) and halts
+// as for an impossible measurement, logs the measurement with no value, and applies nothing; a
+// second faulted one while halted is a warning (51), as any measurement while halted.
+TEST(CreepToolLife, AFaultedMeasurementIsAMismeasurementAndChangesNothing) {
+  for (const auto fault : {InputFault::kInvalid, InputFault::kOutOfRange}) {
+    for (const std::int32_t tool : {1, 0}) {
+      Rig r(base_config());
+      r.run_to(100.0);
+      ToolMeasurement m;
+      m.time_ns = r.now_ns;
+      m.tool = tool;
+      m.fault = fault;
+      const Event e = m;
+      r.out.clear();
+      {
+        const nccomp::test::AllocationScope scope;  // the loop's path: allocation-free
+        r.comp.step(r.now_ns, {&e, 1}, r.out);
+        EXPECT_EQ(scope.count(), 0U);
+      }
+      for (const auto& a : r.out.alarms) r.alarms.push_back(a);
+      for (const auto& rec : r.out.records) r.records.push_back(rec);
+      EXPECT_TRUE(r.comp.halted()) << tool;
+      ASSERT_EQ(r.count(AlarmCode::kToolBrokenOrMismeasured), 1U) << tool;
+      EXPECT_EQ(r.alarms.back().severity, Severity::kAlarm);
+      EXPECT_EQ(r.alarms.back().subject, 1);
+      EXPECT_TRUE(std::isnan(r.alarms.back().value));
+      ASSERT_EQ(r.records.size(), 1U);
+      EXPECT_TRUE(std::isnan(r.records[0].measured_um));
+      EXPECT_EQ(r.comp.state().measured_um[0], 0.0);
+      r.events.emplace_back(m);
+      r.step();
+      EXPECT_EQ(r.count(AlarmCode::kToolBrokenOrMismeasured), 1U);
+      EXPECT_EQ(r.count(AlarmCode::kEventInvalid), 1U);
+      r.run_to(200.0);
+      EXPECT_EQ(r.z(), 0.0);
+    }
+  }
 }
 
 }  // namespace

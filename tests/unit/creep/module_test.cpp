@@ -166,6 +166,9 @@ TEST(CreepEngineModule, LoadStateRefusesForeignBytes) {
   EXPECT_FALSE(m.load_state(bytes));
   s.committed_um[0] = 3.0;
   std::memcpy(bytes.data(), &s, sizeof(s));
+  const AdoptedOutputs nothing_adopted{};
+  std::memcpy(bytes.data() + sizeof(CreepState) + sizeof(ToolMemory), &nothing_adopted,
+              sizeof(nothing_adopted));
   // A bool byte that is neither 0 nor 1 (corrupt file) is refused before it is loaded.
   bytes[offsetof(CreepState, halted)] = std::byte{7};
   EXPECT_FALSE(m.load_state(bytes));

@@ -8,6 +8,7 @@
 
 #include <cmath>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "tests/unit/creep/rig.hpp"
@@ -121,10 +122,11 @@ TEST(CreepRequest, ARefusalThatDoesNotHaltIsAskedForAgainOneIntervalLater) {
     const char* what;
     AlarmCode code;
   };
-  const Case cases[] = {{"excessive increment, continue with the sister", AlarmCode::kToolExcessivelyWorn},
-                        {"beyond the limiter's absolute bound", AlarmCode::kOffsetBeyondAbsoluteLimit},
-                        {"wrong number of support points", AlarmCode::kEventInvalid},
-                        {"another tool", AlarmCode::kEventInvalid}};
+  const Case cases[] = {
+      {"excessive increment, continue with the sister", AlarmCode::kToolExcessivelyWorn},
+      {"beyond the limiter's absolute bound", AlarmCode::kOffsetBeyondAbsoluteLimit},
+      {"wrong number of support points", AlarmCode::kEventInvalid},
+      {"another tool", AlarmCode::kEventInvalid}};
   for (std::size_t k = 0; k < std::size(cases); ++k) {
     SCOPED_TRACE(cases[k].what);
     auto c = interval_config();
@@ -159,8 +161,8 @@ TEST(CreepRequest, ARefusalThatDoesNotHaltIsAskedForAgainOneIntervalLater) {
       }
     });
     EXPECT_EQ(trips, (std::vector<double>{100.0, 200.0, 300.0, 400.0, 500.0, 600.0}));
-    EXPECT_EQ(request_writes(r),
-              (std::vector<double>{0.0, 1.0, 0.0, 1.0, 0.0, 1.0, 0.0, 1.0, 0.0, 1.0, 0.0, 1.0, 0.0}));
+    EXPECT_EQ(request_writes(r), (std::vector<double>{0.0, 1.0, 0.0, 1.0, 0.0, 1.0, 0.0, 1.0, 0.0,
+                                                      1.0, 0.0, 1.0, 0.0}));
     EXPECT_FALSE(r.comp.halted());
     EXPECT_EQ(r.count(cases[k].code), 5U);
     EXPECT_EQ(r.comp.counters().measurements_accepted, 1U);
@@ -236,6 +238,72 @@ TEST(CreepRequest, TheHoldSurvivesARestart) {
   h2.run_to(500.0);
   EXPECT_TRUE(h2.comp.halted());
   EXPECT_NEAR(request_level(h2), 0.0, 0.0);
+}
+
+// A request restored high at start-up (nccompd stopped while it was up, the NC still holds it,
+// and its answer may have been lost): rearm_request() (the daemon's creep start-up hook) writes
+// the register 0 for request_rearm_s and 1 again, so that an NC that reacts to the rising edge
+// sees one; a measurement that arrives meanwhile answers the request and ends it. Without
+// rearm_request() (the NC reads 0) or with request_rearm_s = 0 the register is written 1 at once.
+TEST(CreepRequest, ARequestRestoredHighIsLoweredForRequestRearmSAndRaisedAgain) {
+  auto c = interval_config();
+  c.output.request_rearm_s = 1.0;
+  Rig before(c);
+  before.run_to(100.0);
+  ASSERT_NEAR(request_level(before), 1.0, 0.0);
+  const CreepState saved = before.comp.export_state();
+  ASSERT_TRUE(saved.measurement_due_flag);
+
+  const auto restart = [&](const CreepConfig& config, bool rearm) {
+    auto r = std::make_unique<Rig>(config);
+    r->comp.import_state(saved);
+    r->program_path_mm = before.program_path_mm;
+    r->writes.clear();
+    if (rearm) r->comp.rearm_request();
+    return r;
+  };
+
+  // Re-armed: 0 from the first step, for 1 s (100 steps of 10 ms from the first), then 1.
+  auto r = restart(c, true);
+  EXPECT_TRUE(r->comp.rearming());
+  r->advance(0.01);
+  EXPECT_EQ(request_writes(*r), (std::vector<double>{0.0}));
+  for (int k = 1; k < 100; ++k) r->advance(0.01);
+  EXPECT_EQ(request_writes(*r), (std::vector<double>{0.0}));
+  EXPECT_TRUE(r->comp.rearming());
+  r->advance(0.01);
+  EXPECT_EQ(request_writes(*r), (std::vector<double>{0.0, 1.0}));
+  EXPECT_FALSE(r->comp.rearming());
+  EXPECT_TRUE(r->comp.state().measurement_due_flag);    // the state never changed
+  EXPECT_EQ(r->count(AlarmCode::kMeasurementDue), 0U);  // not a new request
+
+  // The measurement arrives while the register is held low: it answers the request, which
+  // then stays low until the next interval is used up.
+  auto m = restart(c, true);
+  for (int k = 0; k < 30; ++k) m->advance(0.01);
+  m->measure({5.0});
+  EXPECT_FALSE(m->comp.state().measurement_due_flag);
+  EXPECT_FALSE(m->comp.rearming());
+  for (int k = 0; k < 200; ++k) m->advance(0.01);
+  EXPECT_EQ(request_writes(*m), (std::vector<double>{0.0}));
+  EXPECT_EQ(m->comp.counters().measurements_accepted, 1U);
+
+  // Not re-armed, or request_rearm_s = 0: the restored request is written 1 at once.
+  auto plain = restart(c, false);
+  plain->advance(0.01);
+  EXPECT_EQ(request_writes(*plain), (std::vector<double>{1.0}));
+  auto off_config = c;
+  off_config.output.request_rearm_s = 0.0;
+  auto off = restart(off_config, true);
+  EXPECT_FALSE(off->comp.rearming());
+  off->advance(0.01);
+  EXPECT_EQ(request_writes(*off), (std::vector<double>{1.0}));
+
+  // A request that is low is not re-armed.
+  Rig low(c);
+  low.run_to(50.0);
+  low.comp.rearm_request();
+  EXPECT_FALSE(low.comp.rearming());
 }
 
 }  // namespace

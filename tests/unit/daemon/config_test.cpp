@@ -220,6 +220,35 @@ TEST(ConfigLoader, IncludesResolveRelativeToTheIncludingFile) {
   EXPECT_EQ(registers_section(*r.config).registers.size(), 1U);
 }
 
+TEST(ConfigLoader, StatusAdminGroupAndClientLimits) {
+  TempDir d;
+  auto defaults = load_file(d.write("a.toml", "[status]\nsocket_path = \"s.sock\"\n"));
+  ASSERT_TRUE(defaults.config) << defaults.diagnostics.to_string();
+  EXPECT_EQ(status_section(*defaults.config).admin_group, "nccomp-admin");
+  EXPECT_DOUBLE_EQ(status_section(*defaults.config).client_timeout_s, 2.0);
+  EXPECT_EQ(status_section(*defaults.config).max_clients, 32);
+  auto set = load_file(d.write(
+      "b.toml",
+      "[status]\nadmin_group = \"cnc_setters\"\nclient_timeout_s = 0.5\nmax_clients = 4\n"));
+  ASSERT_TRUE(set.config) << set.diagnostics.to_string();
+  EXPECT_EQ(status_section(*set.config).admin_group, "cnc_setters");
+  EXPECT_DOUBLE_EQ(status_section(*set.config).client_timeout_s, 0.5);
+  EXPECT_EQ(status_section(*set.config).max_clients, 4);
+  const auto f = d.write("c.toml",
+                         "[status]\nadmin_group = \"cnc setters\"\nclient_timeout_s = 0\n"
+                         "max_clients = 0\n");
+  auto bad = load_file(f);
+  EXPECT_FALSE(bad.config);
+  const auto& items = bad.diagnostics.items();
+  ASSERT_EQ(items.size(), 3U) << bad.diagnostics.to_string();
+  EXPECT_EQ(items[0].where.file, f);
+  EXPECT_EQ(items[0].where.line, 2);
+  EXPECT_EQ(items[0].where.key_path, "status.admin_group");
+  EXPECT_NE(items[0].message.find("expected a group name"), std::string::npos) << items[0].message;
+  EXPECT_EQ(items[1].where.key_path, "status.client_timeout_s");
+  EXPECT_EQ(items[2].where.key_path, "status.max_clients");
+}
+
 TEST(ConfigLoader, ErrorsInIncludedFilesNameThatFile) {
   TempDir d;
   const auto inc = d.write("inc.toml", "[status]\n\nprometheus_port = 70000\n");

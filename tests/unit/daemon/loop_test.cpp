@@ -339,6 +339,42 @@ TEST(Loop, SlowCycleIsCountedAsAnOverrun) {
   EXPECT_TRUE(noted) << "the overrun note (missed deadlines, lateness in us) for the logger";
 }
 
+// The engine keeps its event cursors per bus (docs/daemon.md, "Events while nccompd was down"):
+// the loop stamps every numbered event with the index of the bus it drained it from.
+TEST(Loop, NumberedEventsCarryTheirBusIndexToTheEnginesCursors) {
+  core::rt::ConfigSwap<Runtime> swap(make_runtime(100.0, 100.0, false, 1));
+  LoopbackBus first(16, 16);
+  LoopbackBus second(16, 16);
+  first.start();
+  second.start();
+  core::ProgramEvent part_start;
+  part_start.origin = core::EventOrigin{3, 0, true, false};
+  core::ToolMeasurement m;
+  m.tool = 7;
+  m.wear_um[0] = 1.0;
+  m.origin = core::EventOrigin{12, 0, true, false};  // the driver leaves the bus to the loop
+  ASSERT_TRUE(first.inject(part_start));
+  ASSERT_TRUE(second.inject(m));
+  LoopOptions o;
+  o.rate_hz = 1000.0;
+  Loop loop(o, swap, {&first, &second}, nullptr, nullptr);
+  loop.start();
+  const auto end = std::chrono::steady_clock::now() + 5s;
+  while (loop.stats().engine.events_accepted < 2 && std::chrono::steady_clock::now() < end) {
+    std::this_thread::sleep_for(2ms);
+  }
+  loop.stop();
+  first.stop();
+  second.stop();
+  const core::engine::EventCursors& c = swap.current().engine->event_cursors();
+  EXPECT_TRUE(c.bus(0)[4].known);
+  EXPECT_EQ(c.bus(0)[4].sequence, 3U);
+  EXPECT_FALSE(c.bus(0)[0].known);
+  EXPECT_TRUE(c.bus(1)[0].known);
+  EXPECT_EQ(c.bus(1)[0].sequence, 12U);
+  EXPECT_FALSE(c.bus(1)[4].known);
+}
+
 TEST(Loop, HoldWritesNothingAndPersistsNothing) {
   Rig rig;
   rig.loop->set_hold(true);

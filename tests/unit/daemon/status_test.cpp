@@ -1,20 +1,34 @@
 // GIVEN a running loop and the status server, WHEN clients ask over the Unix socket and the
 // Prometheus port, THEN they get the loop's numbers; the socket is mode 0660.
+// WHEN clients trickle bytes to both, THEN many others are answered meanwhile and the tricklers
+// are cut off at their deadline; clients beyond max_clients are turned away, not queued.
+// WHEN users switched to in forked children (root only) send commands, THEN only root and
+// members of the admin group run those that change the machine, each logged with uid, user name
+// and pid, refusals too; read-only verbs and status are for everyone who can open the socket.
 #include "daemon/status.hpp"
 
 #include <arpa/inet.h>
 #include <gtest/gtest.h>
 #include <netinet/in.h>
+#include <poll.h>
+#include <spdlog/sinks/base_sink.h>
+#include <spdlog/spdlog.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
+#include <sys/un.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <atomic>
 #include <chrono>
+#include <cstring>
 #include <filesystem>
+#include <mutex>
 #include <thread>
 
 #include "core/engine/ramp_module.hpp"
 #include "daemon/loopback_bus.hpp"
+#include "tests/support/run_as.hpp"
 
 namespace nccomp::daemon {
 namespace {
@@ -65,9 +79,7 @@ class CountingBus final : public drivers::Bus {
   LoopbackBus inner_{64, 64};
 };
 
-TEST(StatusServer, AnswersTextJsonAndPrometheus) {
-  const fs::path dir = fs::temp_directory_path() / ("nccomp_status_" + std::to_string(::getpid()));
-  fs::create_directories(dir);
+std::unique_ptr<Runtime> ramp_runtime() {
   auto rt = std::make_unique<Runtime>();
   rt->engine = std::make_unique<core::engine::Engine>();
   std::vector<std::unique_ptr<core::engine::Module>> m;
@@ -76,24 +88,52 @@ TEST(StatusServer, AnswersTextJsonAndPrometheus) {
   rt->engine->configure({{"T1", core::engine::RegisterKind::kToolLengthWear, {200.0, 5.0, 5000.0}}},
                         std::move(m));
   rt->register_bus = {0};
-  core::rt::ConfigSwap<Runtime> swap(std::move(rt));
-  CountingBus bus;
-  bus.start();
-  Loop loop(LoopOptions{}, swap, {&bus}, nullptr, nullptr);
-  EventLogger logger(loop);
-  logger.start();
-  loop.start();
+  return rt;
+}
 
-  StatusContext c;
-  c.loop = &loop;
-  c.buses = {{"loopback", &bus}};
-  c.logger = &logger;
-  c.register_names = [] { return std::vector<std::string>{"T1_length_wear"}; };
-  c.config_path = "test.toml";
-  c.state_path = "state.bin";
-  StatusServer server(c);
-  const std::string sock = (dir / "s.sock").string();
-  server.start(sock, "127.0.0.1", -1);  // -1: any free port (tests)
+// A loop ramping register T1 to 3 µm on a counting loopback bus, and what status needs of it.
+struct Rig {
+  Rig() {
+    fs::create_directories(dir);
+    bus.start();
+    logger.start();
+    loop.start();
+  }
+  ~Rig() {
+    loop.stop();
+    logger.stop();
+    bus.stop();
+    fs::remove_all(dir);
+  }
+  StatusContext context() {
+    StatusContext c;
+    c.loop = &loop;
+    c.buses = {{"loopback", &bus}};
+    c.logger = &logger;
+    c.register_names = [] { return std::vector<std::string>{"T1_length_wear"}; };
+    c.config_path = "test.toml";
+    c.state_path = "state.bin";
+    return c;
+  }
+  std::string socket() const { return (dir / "s.sock").string(); }
+
+  static inline int n = 0;
+  fs::path dir = fs::temp_directory_path() /
+                 ("nccomp_status_" + std::to_string(::getpid()) + "_" + std::to_string(n++));
+  core::rt::ConfigSwap<Runtime> swap{ramp_runtime()};
+  CountingBus bus;
+  Loop loop{LoopOptions{}, swap, {&bus}, nullptr, nullptr};
+  EventLogger logger{loop};
+};
+
+TEST(StatusServer, AnswersTextJsonAndPrometheus) {
+  Rig rig;
+  StatusServer server(rig.context());
+  const std::string sock = rig.socket();
+  StatusServerOptions o;
+  o.socket_path = sock;
+  o.prometheus_port = -1;  // any free port (tests)
+  server.start(o);
   struct stat st {};
   ASSERT_EQ(::stat(sock.c_str(), &st), 0);
   EXPECT_EQ(st.st_mode & 0777, 0660U);
@@ -129,13 +169,263 @@ TEST(StatusServer, AnswersTextJsonAndPrometheus) {
             std::string::npos)
       << http;
   EXPECT_EQ(http_get(server.prometheus_port(), "/other").rfind("HTTP/1.0 404", 0), 0U);
+  // One unknown request, one 404: the server counts them.
+  EXPECT_NE(query_status(sock, "json").find("\"bad_requests\":2}"), std::string::npos);
 
   server.stop();
   EXPECT_FALSE(fs::exists(sock));
-  loop.stop();
-  logger.stop();
-  bus.stop();
-  fs::remove_all(dir);
+}
+
+int connect_unix(const std::string& path) {
+  sockaddr_un a{};
+  a.sun_family = AF_UNIX;
+  std::strncpy(a.sun_path, path.c_str(), sizeof(a.sun_path) - 1);
+  const int fd = ::socket(AF_UNIX, SOCK_STREAM, 0);
+  if (::connect(fd, reinterpret_cast<const sockaddr*>(&a), sizeof a) != 0) {
+    ::close(fd);
+    return -1;
+  }
+  return fd;
+}
+
+int connect_tcp(int port) {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_port = htons(static_cast<std::uint16_t>(port));
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  if (::connect(fd, reinterpret_cast<const sockaddr*>(&a), sizeof a) != 0) {
+    ::close(fd);
+    return -1;
+  }
+  return fd;
+}
+
+// A client that sends one byte every 0.5 s and never completes its request, until the server
+// answers or closes (or 30 s pass); then it reads what the server said last.
+class Trickler {
+ public:
+  explicit Trickler(int fd) : fd_(fd), thread_([this] { run(); }) {}
+  ~Trickler() { join(); }
+  [[nodiscard]] bool cut_off() const { return cut_off_.load(); }
+  /// Waits for the end; what the server sent.
+  std::string join() {
+    if (thread_.joinable()) thread_.join();
+    return received_;
+  }
+
+ private:
+  void run() {
+    const auto end = std::chrono::steady_clock::now() + 30s;
+    while (std::chrono::steady_clock::now() < end) {
+      if (::send(fd_, "x", 1, MSG_NOSIGNAL) != 1) break;
+      pollfd p{fd_, POLLIN, 0};
+      if (::poll(&p, 1, 500) == 1) break;  // the server speaks or closes
+    }
+    char buf[512];
+    ssize_t n = 0;
+    while ((n = ::recv(fd_, buf, sizeof buf, 0)) > 0) {
+      received_.append(buf, static_cast<std::size_t>(n));
+    }
+    cut_off_.store(true);
+    ::close(fd_);
+  }
+  int fd_;
+  std::atomic<bool> cut_off_{false};
+  std::string received_;
+  std::thread thread_;
+};
+
+TEST(StatusServer, TricklingClientsDelayNobodyAndAreCutOffAtTheirDeadline) {
+  Rig rig;
+  StatusServer server(rig.context());
+  const std::string sock = rig.socket();
+  StatusServerOptions o;
+  o.socket_path = sock;
+  o.prometheus_port = -1;
+  o.client_timeout_s = 4.0;
+  server.start(o);
+  const int ufd = connect_unix(sock);
+  const int tfd = connect_tcp(server.prometheus_port());
+  ASSERT_GE(ufd, 0);
+  ASSERT_GE(tfd, 0);
+  Trickler on_socket(ufd);
+  Trickler on_metrics(tfd);
+  std::this_thread::sleep_for(600ms);  // both are in the middle of their requests
+
+  // 24 clients at once, Unix socket and HTTP, while the tricklers hold their connections.
+  std::vector<std::string> answers(24);
+  std::vector<std::thread> clients;
+  for (std::size_t i = 0; i < answers.size(); ++i) {
+    clients.emplace_back([&, i] {
+      try {
+        answers[i] = i < 20 ? query_status(sock, i % 2 == 0 ? "text" : "json")
+                            : http_get(server.prometheus_port(), "/metrics");
+      } catch (const std::exception& e) {
+        answers[i] = e.what();
+      }
+    });
+  }
+  for (auto& t : clients) t.join();
+  const bool held = !on_socket.cut_off() && !on_metrics.cut_off();
+  EXPECT_TRUE(held) << "the tricklers were cut off before the others were answered";
+  for (std::size_t i = 0; i < answers.size(); ++i) {
+    const char* want = i >= 20      ? "nccompd_loop_cycles_total"
+                       : i % 2 == 0 ? "nccompd pid "
+                                    : "{\"daemon\":";
+    EXPECT_NE(answers[i].find(want), std::string::npos) << "client " << i << ": " << answers[i];
+  }
+
+  // At their deadline (4 s after connecting) the tricklers are told why and cut off.
+  EXPECT_EQ(on_socket.join(), "error: no complete request within 4 s\n");
+  EXPECT_EQ(on_metrics.join().rfind("HTTP/1.0 408 Request Timeout", 0), 0U);
+  const std::string json = query_status(sock, "json");
+  EXPECT_NE(json.find("\"status_server\":{\"clients\":27,\"timed_out\":2,\"turned_away\":0,"),
+            std::string::npos)
+      << json;
+}
+
+TEST(StatusServer, ClientsBeyondMaxClientsAreTurnedAwayNotQueued) {
+  Rig rig;
+  StatusServer server(rig.context());
+  const std::string sock = rig.socket();
+  StatusServerOptions o;
+  o.socket_path = sock;
+  o.max_clients = 3;
+  o.client_timeout_s = 30.0;
+  server.start(o);
+  std::vector<int> idle;
+  for (int i = 0; i < 3; ++i) idle.push_back(connect_unix(sock));
+  EXPECT_EQ(query_status(sock, "text"),
+            "error: busy: 3 clients are being served ([status] max_clients); try again\n");
+  // One idle client goes away: its place is free again.
+  ::close(idle.back());
+  idle.pop_back();
+  std::string text;
+  for (int i = 0; i < 200 && text.rfind("nccompd pid ", 0) != 0; ++i) {
+    std::this_thread::sleep_for(10ms);
+    text = query_status(sock, "text");
+  }
+  EXPECT_EQ(text.rfind("nccompd pid ", 0), 0U) << text;
+  for (const int fd : idle) ::close(fd);
+}
+
+// The log lines of the process, kept for a test to read.
+class CaptureSink final : public spdlog::sinks::base_sink<std::mutex> {
+ public:
+  std::string text() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return text_;
+  }
+
+ protected:
+  void sink_it_(const spdlog::details::log_msg& m) override {
+    text_.append(m.payload.data(), m.payload.size());
+    text_ += '\n';
+  }
+  void flush_() override {}
+
+ private:
+  std::string text_;
+};
+
+// Adds a CaptureSink to the default logger for its lifetime: a logger's sinks are not guarded
+// against changes while it logs, so it must outlive the threads that log.
+struct CapturedLog {
+  CapturedLog() { spdlog::default_logger()->sinks().push_back(sink); }
+  ~CapturedLog() {
+    auto& sinks = spdlog::default_logger()->sinks();
+    sinks.erase(std::remove(sinks.begin(), sinks.end(), sink), sinks.end());
+  }
+  std::shared_ptr<CaptureSink> sink = std::make_shared<CaptureSink>();
+};
+
+std::atomic<int> g_changes{0};
+std::atomic<int> g_looks{0};
+// A verb registered with the default access (it changes the machine), and a read-only one.
+[[maybe_unused]] const int kChangeVerb =
+    register_command_handler("test-change", [](std::string_view args, CommandContext&) {
+      g_changes.fetch_add(1);
+      return "ok changed " + std::string(args) + "\n";
+    });
+[[maybe_unused]] const int kLookVerb = register_command_handler(
+    "test-look",
+    [](std::string_view, CommandContext&) {
+      g_looks.fetch_add(1);
+      return std::string("ok looked\n");
+    },
+    &read_only);
+
+TEST(StatusServer, OnlyRootAndTheAdminGroupChangeTheMachine) {
+  if (::geteuid() != 0) {
+    GTEST_SKIP() << "switching to other users and groups needs root (CI runs as root)";
+  }
+  // Two groups of every Debian host stand for nccomp (may open the socket) and nccomp-admin.
+  const auto status_gid = nccomp::test::gid_of("users");
+  const auto admin_gid = nccomp::test::gid_of("adm");
+  const auto other_gid = nccomp::test::gid_of("nogroup");
+  ASSERT_TRUE(status_gid && admin_gid && other_gid) << "groups users, adm, nogroup";
+  const uid_t nobody = 65534;
+  const std::string name = nccomp::test::user_name_of(nobody);
+  CapturedLog captured;  // before the threads that log, removed after they stopped
+  Rig rig;
+  StatusServer server(rig.context());
+  const std::string sock = rig.socket();
+  StatusServerOptions o;
+  o.socket_path = sock;
+  o.policy = CommandPolicy{"adm", ::geteuid()};
+  server.start(o);
+  // As systemd's Group=: the socket belongs to the status group (mode 0660).
+  ASSERT_EQ(::chown(sock.c_str(), static_cast<uid_t>(-1), *status_gid), 0);
+
+  const nccomp::test::Identity op{nobody, *other_gid, {*status_gid}};
+  const nccomp::test::Identity admin{nobody, *other_gid, {*status_gid, *admin_gid}};
+  const nccomp::test::Identity admin_egid{nobody, *admin_gid, {*status_gid}};
+  const nccomp::test::Identity outsider{nobody, *other_gid, {}};
+
+  // A member of the status group only: status and read-only verbs yes, changes no.
+  const auto refused = nccomp::test::request_as(op, sock, "test-change now");
+  EXPECT_EQ(refused.exit_code, 0);
+  EXPECT_EQ(refused.answer,
+            "error: permission denied: 'test-change' changes the machine; uid 65534 (" + name +
+                ") is not root and not in group 'adm' ([status] admin_group)\n"
+                "  an administrator grants it with: usermod -aG adm " +
+                name + " (effective at the user's next login)\n");
+  EXPECT_EQ(g_changes.load(), 0);
+  EXPECT_EQ(nccomp::test::request_as(op, sock, "test-look").answer, "ok looked\n");
+  EXPECT_EQ(g_looks.load(), 1);
+  EXPECT_EQ(nccomp::test::request_as(op, sock, "text").answer.rfind("nccompd pid ", 0), 0U);
+
+  // A member of the admin group (supplementary, or as effective group), and root.
+  const auto allowed = nccomp::test::request_as(admin, sock, "test-change now");
+  EXPECT_EQ(allowed.answer, "ok changed now\n");
+  const auto allowed_egid = nccomp::test::request_as(admin_egid, sock, "test-change again");
+  EXPECT_EQ(allowed_egid.answer, "ok changed again\n");
+  EXPECT_EQ(query_status(sock, "test-change as root"), "ok changed as root\n");
+  EXPECT_EQ(g_changes.load(), 3);
+
+  // Not in the status group: the socket's mode keeps it out (connect fails: exit 11).
+  EXPECT_EQ(nccomp::test::request_as(outsider, sock, "text").exit_code, 11);
+
+  const std::string log = captured.sink->text();
+  EXPECT_NE(log.find("operator command refused: 'test-change now' from uid 65534 (" + name +
+                     ") pid " + std::to_string(refused.pid) + ": permission denied: uid 65534 (" +
+                     name + ") is not root and not in group 'adm' ([status] admin_group)\n"),
+            std::string::npos)
+      << log;
+  EXPECT_NE(log.find("operator command from uid 65534 (" + name + ") pid " +
+                     std::to_string(allowed.pid) + ": test-change now\n"),
+            std::string::npos)
+      << log;
+  EXPECT_NE(log.find("operator command from uid 65534 (" + name + ") pid " +
+                     std::to_string(allowed_egid.pid) + ": test-change again\n"),
+            std::string::npos)
+      << log;
+  EXPECT_NE(log.find("operator command from uid 0 (root) pid " + std::to_string(::getpid()) +
+                     ": test-change as root\n"),
+            std::string::npos)
+      << log;
+  EXPECT_EQ(log.find("test-look"), std::string::npos) << "read-only commands are not logged";
 }
 
 }  // namespace

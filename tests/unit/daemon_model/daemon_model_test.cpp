@@ -95,7 +95,7 @@ TEST(EngineTrims, TheRegisterGetsTargetPlusTrimThroughItsLimits) {
   // 10 + 9 = 19: admissible, sent.
   trim->value_um_ = 9.0;
   e.step(3'000'000, {}, out);
-  EXPECT_DOUBLE_EQ(last_write(out, NAN), 19.0);
+  EXPECT_DOUBLE_EQ(last_write(out, std::nan("")), 19.0);
   // A NaN trim: refused, nothing changes.
   trim->value_um_ = std::nan("");
   e.step(4'000'000, {}, out);
@@ -115,7 +115,7 @@ TEST(EngineTrims, TheStepLimitAppliesToTheSum) {
   std::vector<double> sent;
   for (int k = 1; k <= 3; ++k) {
     e.step(k * 1'000'000, {}, out);
-    sent.push_back(last_write(out, NAN));
+    sent.push_back(last_write(out, std::nan("")));
   }
   // 0 → 8 in steps of at most 5 µm.
   EXPECT_DOUBLE_EQ(sent[0], 5.0);
@@ -133,7 +133,7 @@ TEST(EngineTrims, ARestartDoesNotApplyTheTrimTwice) {
     e.configure(one_register(100.0, 100.0), std::move(mods));
     core::StepOutput out;
     e.step(1'000'000, {}, out);
-    EXPECT_DOUBLE_EQ(last_write(out, NAN), 13.0);
+    EXPECT_DOUBLE_EQ(last_write(out, std::nan("")), 13.0);
     state.resize(e.state_capacity());
     state.resize(e.export_state(state));
     ASSERT_FALSE(state.empty());
@@ -152,7 +152,7 @@ TEST(EngineTrims, ARestartDoesNotApplyTheTrimTwice) {
   EXPECT_DOUBLE_EQ(e.register_state(0).output_um, 13.0);  // not 16
   e.resend_all();
   e.step(8'000'000, {}, out);
-  EXPECT_DOUBLE_EQ(last_write(out, NAN), 13.0);
+  EXPECT_DOUBLE_EQ(last_write(out, std::nan("")), 13.0);
 }
 
 /// A fitted model: a constant per checkpoint (not applied) and part_trend = 0.02 µm per part ×

@@ -2,6 +2,7 @@
 // own documented name (docs/*.md alarm tables), not the "code_N" fallback.
 #include <gtest/gtest.h>
 
+#include <limits>
 #include <set>
 #include <string>
 #include <utility>
@@ -44,6 +45,10 @@ TEST(AlarmNames, EveryCodeHasItsDocumentedName) {
       {AlarmCode::kRegisterUnknown, "register_unknown"},
       {AlarmCode::kOffsetWriteDropped, "offset_write_dropped"},
       {AlarmCode::kBusAlarm, "bus_alarm"},
+      {AlarmCode::kRegisterBeyondLimit, "register_beyond_limit"},
+      {AlarmCode::kRegisterAdopted, "register_adopted"},
+      {AlarmCode::kRegisterHeldWithoutState, "register_held_without_state"},
+      {AlarmCode::kBusInputStale, "bus_input_stale"},
   };
   std::set<std::string> seen;
   for (const auto& [code, name] : expected) {
@@ -120,6 +125,111 @@ TEST(BusAlarmWatch, ReportsEachRiseAndFallOnceWithBusLinkStateAndReason) {
   EXPECT_NE(c[0].message.find("an offset write is undelivered beyond alarm_after_s (link up"),
             std::string::npos)
       << c[0].message;
+}
+
+// Issue 17, finding 4. GIVEN a Modbus bus whose NC answers every read with an exception (link
+// "degraded", never down), WHEN its driver sets input_stale (degraded beyond
+// degraded_alarm_after_s), THEN the main thread reports bus_input_stale (55, subject the bus,
+// value 1, severity alarm) once with a line naming the bus, its link state and counters, nothing
+// while it stays, and on the fall one info (value 0) with how long it lasted and the faults and
+// malformed frames meanwhile; the offset alarm (54) is tracked apart.
+TEST(BusAlarmWatch, InputStaleRisesAndFallsOnceWithWhatHappenedMeanwhile) {
+  const std::vector<std::string> names{"modbus"};
+  std::vector<drivers::BusStatus> st(1);
+  st[0].state = drivers::LinkState::kDegraded;
+  st[0].counters.frames_rx = 100;
+  st[0].counters.faults = 40;
+  BusAlarmWatch w;
+  EXPECT_TRUE(w.update(names, st, 1'000'000'000).empty());
+  st[0].input_stale = true;
+  auto c = w.update(names, st, 2'000'000'000);
+  ASSERT_EQ(c.size(), 1U);
+  EXPECT_EQ(c[0].event.code, AlarmCode::kBusInputStale);
+  EXPECT_EQ(static_cast<unsigned>(c[0].event.code), 55U);
+  EXPECT_EQ(c[0].event.severity, core::Severity::kAlarm);
+  EXPECT_EQ(c[0].event.subject, 0);
+  EXPECT_EQ(c[0].event.value, 1.0);
+  EXPECT_EQ(c[0].message,
+            "bus modbus: ALARM: input from the NC is stale: the link not healthy or no valid axis "
+            "sample for longer than degraded_alarm_after_s; positions and measurements are not "
+            "arriving (link degraded; frames rx 100, faults 40, malformed 0; its counters in "
+            "`nccomp status`)");
+  st[0].counters.frames_rx = 160;
+  st[0].counters.faults = 100;
+  EXPECT_TRUE(w.update(names, st, 3'000'000'000).empty());
+  st[0].alarm = true;  // the offset alarm too: its own report
+  c = w.update(names, st, 3'500'000'000);
+  ASSERT_EQ(c.size(), 1U);
+  EXPECT_EQ(c[0].event.code, AlarmCode::kBusAlarm);
+  st[0].alarm = false;
+  st[0].input_stale = false;
+  st[0].state = drivers::LinkState::kUp;
+  st[0].counters.faults = 130;
+  st[0].counters.frames_rx = 200;
+  c = w.update(names, st, 9'250'000'000);
+  ASSERT_EQ(c.size(), 2U);
+  EXPECT_EQ(c[0].event.code, AlarmCode::kBusInputStale);
+  EXPECT_EQ(c[0].event.severity, core::Severity::kInfo);
+  EXPECT_EQ(c[0].event.value, 0.0);
+  EXPECT_EQ(c[0].message,
+            "bus modbus: input stale cleared after 7.2 s (link up; meanwhile faults 90, "
+            "malformed 0, frames rx 100)");
+  EXPECT_EQ(c[1].event.code, AlarmCode::kBusAlarm);
+  EXPECT_TRUE(w.update(names, st, 10'000'000'000).empty());
+}
+
+// Issue 17, finding 4: logged once per burst. GIVEN the log's burst filter, WHEN the same alarm
+// (NaN measurement of tool 5) comes 5 times 100 ms apart, THEN only the first is logged and,
+// 2 s after the last, one end line says 5 in 0.4 s; a different value, subject or code is its
+// own burst; info lines are always logged; a clear (info, same code and subject) ends the rise's
+// burst at once, so a new rise is logged; a single alarm gives no end line.
+TEST(AlarmBursts, OneLineWhenABurstStartsAndOneWithTheCountWhenItEnds) {
+  using Burst = AlarmBursts::Burst;
+  constexpr core::TimeNs kMs = 1'000'000;
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const core::AlarmEvent broken{0, core::Severity::kAlarm, AlarmCode::kToolBrokenOrMismeasured, 5,
+                                nan};
+  AlarmBursts b;
+  std::vector<Burst> ended;
+  int logged = 0;
+  for (int k = 0; k < 5; ++k) {
+    logged += b.add(broken, k * 100 * kMs, ended) ? 1 : 0;
+  }
+  EXPECT_EQ(logged, 1);
+  core::AlarmEvent other = broken;
+  other.subject = 6;
+  EXPECT_TRUE(b.add(other, 450 * kMs, ended));
+  other = broken;
+  other.value = 1.0;
+  EXPECT_TRUE(b.add(other, 460 * kMs, ended));
+  const core::AlarmEvent due{0, core::Severity::kInfo, AlarmCode::kMeasurementDue, 5, 1.0};
+  EXPECT_TRUE(b.add(due, 470 * kMs, ended));
+  EXPECT_TRUE(b.add(due, 480 * kMs, ended));
+  b.expire(2399 * kMs, ended);
+  EXPECT_TRUE(ended.empty());
+  b.expire(2400 * kMs, ended);
+  ASSERT_EQ(ended.size(), 1U);
+  EXPECT_EQ(ended[0].count, 5U);
+  EXPECT_EQ(burst_end_line(ended[0]),
+            "end of burst: tool_broken_or_mismeasured (code 23, alarm) subject 5 value nan: 5 in "
+            "0.4 s (only the first was logged)");
+  ended.clear();
+  b.expire(5000 * kMs, ended);  // the single ones end without a line
+  EXPECT_TRUE(ended.empty());
+
+  const core::AlarmEvent rise{0, core::Severity::kAlarm, AlarmCode::kBusInputStale, 0, 1.0};
+  const core::AlarmEvent clear{0, core::Severity::kInfo, AlarmCode::kBusInputStale, 0, 0.0};
+  EXPECT_TRUE(b.add(rise, 6000 * kMs, ended));
+  EXPECT_FALSE(b.add(rise, 6100 * kMs, ended));
+  EXPECT_TRUE(b.add(clear, 6200 * kMs, ended));
+  ASSERT_EQ(ended.size(), 1U);
+  EXPECT_EQ(ended[0].count, 2U);
+  EXPECT_TRUE(b.add(rise, 6300 * kMs, ended));
+  ended.clear();
+  EXPECT_FALSE(b.add(rise, 6400 * kMs, ended));
+  b.expire(std::numeric_limits<core::TimeNs>::max(), ended);  // the logger stops
+  ASSERT_EQ(ended.size(), 1U);
+  EXPECT_EQ(ended[0].count, 2U);
 }
 
 }  // namespace

@@ -793,9 +793,10 @@ TEST(ShippedConfig, StatusShowsTheWearOfEveryRememberedTool) {
     m.tool = tool;
     m.wear_um[0] = wear;
     ASSERT_TRUE(bus.inject(m));
+    const int n = tool;  // clang 14 cannot capture a structured binding
     ASSERT_TRUE(wait_for([&] {
-      return render_json(c).find("\"tool\":" + std::to_string(tool) + ",") != std::string::npos &&
-             render_json(c).find("\"measurements_accepted\":" + std::to_string(tool)) !=
+      return render_json(c).find("\"tool\":" + std::to_string(n) + ",") != std::string::npos &&
+             render_json(c).find("\"measurements_accepted\":" + std::to_string(n)) !=
                  std::string::npos;
     })) << render_json(c);
   }

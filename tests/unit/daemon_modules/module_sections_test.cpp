@@ -256,6 +256,50 @@ TEST(CheckpointsStartup, TheEnginesLimitersStartFromTheValuesReadBack) {
   }
 }
 
+// GIVEN the boss table (reconcile_prefer = "daemon") started without any state and an NC that
+// holds a compensation (checkpoint 0 at -6 µm, checkpoint 40 at +80 µm, the live register at
+// -3 µm), WHEN nccompd's start-up offers the values read back to the fresh module
+// (Engine::adopt_without_state(), then the "checkpoints" hook), THEN the module adopts them as its
+// table (the hook finds no mismatch), and neither the next cycles nor the next part start write
+// anything but what the NC holds (before, "daemon" rewrote the table from zeros).
+TEST(CheckpointsStartup, WithoutStateTheNcsTableIsAdoptedNotRewrittenFromZeros) {
+  TempDir d;
+  auto r = load_file(d.write("a.toml", "include = [\"" + kBoss + "\"]\n" + registers(76, 20, -1)));
+  ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+  auto engine = config::build_engine(*r.config);
+  auto nc = [](std::uint16_t reg) -> std::optional<double> {
+    if (reg == 20) return -6.0;
+    if (reg == 60) return 80.0;
+    if (reg == 19) return -3.0;
+    return 0.0;
+  };
+  std::size_t adopted = 0;
+  for (std::size_t i = 0; i < engine->register_count(); ++i) {
+    const auto v = nc(static_cast<std::uint16_t>(i));
+    ASSERT_TRUE(engine->anchor_register(i, *v, 0).anchored);
+    const auto what = engine->adopt_without_state(i, v, true, 0);
+    adopted += what == core::engine::StartupAdoption::kAdopted ? 1U : 0U;
+  }
+  EXPECT_EQ(adopted, 57U);  // 56 table registers and the live one
+  const auto rep = reconcile_checkpoints(*engine, nc, 0);
+  ASSERT_EQ(rep.size(), 1U);
+  EXPECT_EQ(rep[0].mismatched, 0U) << rep[0].message;
+  core::StepOutput out;
+  std::vector<core::OffsetWrite> writes;
+  for (int k = 1; k <= 5; ++k) {
+    std::vector<core::Event> ev;
+    if (k == 2) ev.push_back(core::ProgramEvent{0, core::ProgramEventKind::kPartStart, 1});
+    engine->step(k * 1'000'000, ev, out);
+    for (const auto& w : out.writes) writes.push_back(w);
+  }
+  for (const auto& w : writes) {
+    EXPECT_DOUBLE_EQ(w.value_um, *nc(w.register_index)) << "register " << w.register_index;
+  }
+  EXPECT_DOUBLE_EQ(engine->register_state(20).output_um, -6.0);
+  EXPECT_DOUBLE_EQ(engine->register_state(60).output_um, 80.0);
+  EXPECT_EQ(engine->counters().writes_forwarded, 0U);
+}
+
 TEST(CheckpointsSection, ErrorsCarryFileLineColumnAndRegistersAreChecked) {
   TempDir d;
   const std::string bad_text = registers(4, 2, -1) + R"(

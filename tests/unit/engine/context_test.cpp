@@ -41,23 +41,28 @@ TEST(MachineContextPath, ToolMemorySisterAndTheUnnamedTool) {
   EXPECT_DOUBLE_EQ(ctx.cut_path_mm(), 9.0);
   // Tool 6 (event; the tool goes there in rapid, not cutting), 4 mm; tool 5 back: its 9 mm
   // continue.
-  feed(ctx, t += kS, {sample(50, 0, 5, false), ToolChange{t, 6, false}});
+  t += kS;  // before the events that carry it (argument order is unspecified)
+  feed(ctx, t, {sample(50, 0, 5, false), ToolChange{t, 6, false}});
   for (int k = 0; k < 5; ++k) feed(ctx, t += kS, {sample(100 + k, 0, 6)});
   EXPECT_DOUBLE_EQ(ctx.cut_path_mm(), 4.0);
-  feed(ctx, t += kS, {sample(50, 0, 6, false), ToolChange{t, 5, false}});
+  t += kS;
+  feed(ctx, t, {sample(50, 0, 6, false), ToolChange{t, 5, false}});
   EXPECT_DOUBLE_EQ(ctx.cut_path_mm(), 9.0);
   EXPECT_DOUBLE_EQ(ctx.cut_path_mm(6), 4.0);
   // A sister replaces tool 5: path 0, tool 5 forgotten.
-  feed(ctx, t += kS, {ToolChange{t, 7, true}});
+  t += kS;
+  feed(ctx, t, {ToolChange{t, 7, true}});
   EXPECT_DOUBLE_EQ(ctx.cut_path_mm(), 0.0);
   EXPECT_TRUE(std::isnan(ctx.cut_path_mm(5)));
   // An interruption stops the count until the second cutting sample after the resume.
   feed(ctx, t += kS, {sample(0, 0, 7, false)});
   feed(ctx, t += kS, {sample(0, 0, 7)});
   feed(ctx, t += kS, {sample(2, 0, 7)});
-  feed(ctx, t += kS, {ProgramEvent{t, ProgramEventKind::kInterruption, 3}, sample(4, 0, 7)});
+  t += kS;
+  feed(ctx, t, {ProgramEvent{t, ProgramEventKind::kInterruption, 3}, sample(4, 0, 7)});
   feed(ctx, t += kS, {sample(6, 0, 7)});
-  feed(ctx, t += kS, {ProgramEvent{t, ProgramEventKind::kResume, 3}, sample(8, 0, 7)});
+  t += kS;
+  feed(ctx, t, {ProgramEvent{t, ProgramEventKind::kResume, 3}, sample(8, 0, 7)});
   feed(ctx, t += kS, {sample(10, 0, 7)});
   EXPECT_DOUBLE_EQ(ctx.cut_path_mm(), 4.0);  // 0→2 and 8→10
   // An NC that names no tool: one unnamed tool, whose path records of any tool get.

@@ -155,6 +155,75 @@ TEST(Engine, InvalidEventsAreCountedAlarmedAndNotForwarded) {
   EXPECT_EQ(invalid_alarms, 4);
 }
 
+// Keeps a copy of every event it is stepped with.
+class RecordingModule final : public Module {
+ public:
+  std::string_view name() const noexcept override { return "rec"; }
+  void attach(const RegisterTable& /*registers*/) override { seen.reserve(16); }
+  void step(TimeNs /*now_ns*/, std::span<const Event> events,
+            StepOutput& /*out*/) noexcept override {
+    for (const Event& e : events) {
+      if (seen.size() < seen.capacity()) seen.push_back(e);
+    }
+  }
+  std::vector<Event> seen;
+};
+
+// Issue 17, finding 4. GIVEN faulted measurements (the NC reported them, the driver could not use
+// their values) whose value fields still hold NaN / inf / an absurd value, WHEN the engine steps
+// them, THEN they reach the modules (so that each method can raise its alarm) with the fault and
+// every value field 0, are not counted invalid; a fault code outside the enum is invalid.
+TEST(Engine, FaultedMeasurementsReachTheModulesWithEveryValueZero) {
+  Engine e;
+  std::vector<std::unique_ptr<Module>> m;
+  auto rec = std::make_unique<RecordingModule>();
+  RecordingModule* r = rec.get();
+  m.push_back(std::move(rec));
+  e.configure({reg("a")}, std::move(m));
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const double inf = std::numeric_limits<double>::infinity();
+  ToolMeasurement tm;
+  tm.tool = 5;
+  tm.point_count = 2;
+  tm.wear_um[0] = nan;
+  tm.wear_um[1] = 3000.0;
+  tm.fault = InputFault::kInvalid;
+  ProbeMeasurement pm;
+  pm.checkpoint = 4;
+  pm.raw_deviation_um = inf;
+  pm.wall_angle_deg = -inf;
+  pm.ball_radius_mm = nan;
+  pm.position_mm = {nan, 1.0, 2.0};
+  pm.fault = InputFault::kOutOfRange;
+  CalibrationTouch ct;
+  ct.axis = 2;
+  ct.trigger_position_mm = nan;
+  ct.fault = InputFault::kInvalid;
+  ToolMeasurement bad_code;
+  bad_code.fault = static_cast<InputFault>(7);
+  const std::vector<Event> ev{tm, pm, ct, bad_code};
+  StepOutput out;
+  e.step(kMs, ev, out);
+  EXPECT_EQ(e.counters().events_accepted, 3U);
+  EXPECT_EQ(e.counters().events_invalid, 1U);
+  ASSERT_EQ(r->seen.size(), 3U);
+  const auto& t = std::get<ToolMeasurement>(r->seen[0]);
+  EXPECT_EQ(t.fault, InputFault::kInvalid);
+  EXPECT_EQ(t.tool, 5);
+  for (double w : t.wear_um) EXPECT_EQ(w, 0.0);
+  const auto& p = std::get<ProbeMeasurement>(r->seen[1]);
+  EXPECT_EQ(p.fault, InputFault::kOutOfRange);
+  EXPECT_EQ(p.checkpoint, 4);
+  EXPECT_EQ(p.raw_deviation_um, 0.0);
+  EXPECT_EQ(p.wall_angle_deg, 0.0);
+  EXPECT_EQ(p.ball_radius_mm, 0.0);
+  for (double x : p.position_mm) EXPECT_EQ(x, 0.0);
+  const auto& c = std::get<CalibrationTouch>(r->seen[2]);
+  EXPECT_EQ(c.fault, InputFault::kInvalid);
+  EXPECT_EQ(c.axis, 2);
+  EXPECT_EQ(c.trigger_position_mm, 0.0);
+}
+
 TEST(Engine, EventsBeyondCapacityAreCountedNotForwarded) {
   Engine e;
   std::vector<std::unique_ptr<Module>> m;
@@ -282,6 +351,34 @@ TEST(EngineState, EveryTruncationIsRejectedAndLeavesTheEngineUnchanged) {
   EXPECT_NEAR(e2->register_state(1).output_um, 2.0, 1e-9);
 }
 
+TEST(EngineState, AnOutputBeyondTheRegistersAbsoluteLimitIsRefused) {
+  // Found by fuzz_state_import: a state whose register output lies beyond max_abs_um (a larger
+  // limit before, or a corrupt file) was taken, and the limiter slewed from there: every write
+  // lay beyond the limit.
+  auto e1 = ramp_engine(40.0, 100.0);
+  StepOutput out;
+  for (int k = 0; k <= 500; ++k) e1->step(k * kMs, {}, out);
+  ASSERT_NEAR(e1->register_state(1).output_um, 40.0, 1e-9);
+  std::vector<std::byte> buf(e1->state_capacity());
+  const std::size_t n = e1->export_state(buf);
+
+  Engine e2;
+  std::vector<std::unique_ptr<Module>> m;
+  m.push_back(std::make_unique<RampModule>(RampConfig{"ramp", "a", 0.0, 10.0, 100.0}));
+  e2.configure({reg("b"), reg("a", 30.0)}, std::move(m));
+  EXPECT_FALSE(e2.import_state(std::span<const std::byte>(buf.data(), n), 0));
+  EXPECT_DOUBLE_EQ(e2.register_state(1).output_um, 0.0);
+  for (int k = 1; k <= 200; ++k) {
+    e2.step(k * kMs, {}, out);
+    for (const auto& w : out.writes) EXPECT_LE(std::fabs(w.value_um), 30.0);
+  }
+  // At the limit itself it is taken.
+  Engine e3;
+  e3.configure({reg("b"), reg("a", 40.0)}, {});
+  EXPECT_TRUE(e3.import_state(std::span<const std::byte>(buf.data(), n), 0));
+  EXPECT_NEAR(e3.register_state(1).output_um, 40.0, 1e-9);
+}
+
 TEST(EngineState, ImportSkipsRegistersAndModulesTheConfigNoLongerHas) {
   auto e1 = ramp_engine(10.0, 100.0);
   StepOutput out;
@@ -310,7 +407,10 @@ TEST(EngineRealtime, StepExportImportAllocateNothing) {
   AxisSample s;
   AxisSample bad;
   bad.position_mm[0] = std::numeric_limits<double>::quiet_NaN();
-  const std::vector<Event> ev{s, bad, ToolChange{}, ProgramEvent{}};
+  ToolMeasurement faulted;
+  faulted.wear_um[0] = std::numeric_limits<double>::quiet_NaN();
+  faulted.fault = InputFault::kInvalid;
+  const std::vector<Event> ev{s, bad, ToolChange{}, ProgramEvent{}, faulted};
   e->step(0, ev, out);  // warm-up
   nccomp::test::AllocationScope scope;
   std::size_t n = 0;

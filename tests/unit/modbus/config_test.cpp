@@ -102,6 +102,39 @@ TEST(ModbusConfig, MinimalDefaults) {
   EXPECT_EQ(c.blocks[0].count, 2);
 }
 
+// The reconnect back-off: 0.1 s doubling to 5 s, back to 0.1 s after 10 s healthy; the reset
+// time is at least the cap (defaulted to it above 10 s, refused below it when given).
+TEST(ModbusConfig, ReconnectBackOffKeys) {
+  const ModbusConfig d = parse_modbus_config(kMinimal, "t.toml");
+  EXPECT_DOUBLE_EQ(d.reconnect_min_s, 0.1);
+  EXPECT_DOUBLE_EQ(d.reconnect_max_s, 5.0);
+  EXPECT_DOUBLE_EQ(d.reconnect_reset_after_s, 10.0);
+  const std::string head = "[modbus]\ntransport = \"tcp\"\n";
+  const std::string axis = "[modbus.axis]\nx_mm = { table = \"input\", address = 0 }\n";
+  const ModbusConfig c = parse_modbus_config(
+      head + "reconnect_min_s = 0.5\nreconnect_max_s = 30\nreconnect_reset_after_s = 60\n" + axis,
+      "t.toml");
+  EXPECT_DOUBLE_EQ(c.reconnect_reset_after_s, 60.0);
+  EXPECT_DOUBLE_EQ(
+      parse_modbus_config(head + "reconnect_max_s = 30\n" + axis, "t.toml").reconnect_reset_after_s,
+      30.0);
+  EXPECT_EQ(error_of(head + "reconnect_max_s = 30\nreconnect_reset_after_s = 20\n" + axis),
+            "t.toml:4: modbus.reconnect_reset_after_s: smaller than reconnect_max_s");
+  EXPECT_EQ(error_of(head + "reconnect_min_s = 2\nreconnect_max_s = 1\n" + axis),
+            "t.toml:4: modbus.reconnect_max_s: smaller than reconnect_min_s");
+}
+
+TEST(ModbusConfig, DegradedAlarmAfterParsedDefaultedAndRangeChecked) {
+  EXPECT_DOUBLE_EQ(parse_modbus_config(kMinimal, "t.toml").degraded_alarm_after_s, 5.0);
+  const std::string head = "[modbus]\ntransport = \"tcp\"\n";
+  const std::string axis = "[modbus.axis]\nx_mm = { table = \"input\", address = 0 }\n";
+  EXPECT_DOUBLE_EQ(parse_modbus_config(head + "degraded_alarm_after_s = 0.5\n" + axis, "t.toml")
+                       .degraded_alarm_after_s,
+                   0.5);
+  EXPECT_THAT(error_of(head + "degraded_alarm_after_s = 0\n" + axis),
+              HasSubstr("t.toml:3: modbus.degraded_alarm_after_s:"));
+}
+
 TEST(ModbusConfig, UnknownKeyNamesFileLineAndPath) {
   EXPECT_EQ(error_of(std::string(kMinimal) + "pol_rate_hz = 5\n"),
             "t.toml:6: modbus.axis.pol_rate_hz: unknown signal");

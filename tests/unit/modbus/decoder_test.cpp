@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <limits>
 #include <variant>
 #include <vector>
 
@@ -49,6 +50,13 @@ void put_float(std::span<std::uint16_t> b, std::size_t at, float v, bool low_fir
   b[at + 1] = low_first ? hi : lo;
 }
 
+/// An event to deliver, not a counter the decoder consumed without one (counter_only: the
+/// engine's cursor follows it, nothing else sees it).
+bool delivered(const core::Event& e) {
+  const core::EventOrigin* o = core::origin_of(e);
+  return o == nullptr || !o->counter_only;
+}
+
 struct ModbusDecoder : ::testing::Test {
   ModbusConfig config = parse_modbus_config(kMap, "t.toml");
   PollDecoder dec{config};
@@ -64,7 +72,7 @@ struct ModbusDecoder : ::testing::Test {
   std::vector<T> events_of(std::span<const core::Event> ev) {
     std::vector<T> out;
     for (const auto& e : ev) {
-      if (const auto* p = std::get_if<T>(&e)) {
+      if (const auto* p = std::get_if<T>(&e); p != nullptr && delivered(e)) {
         out.push_back(*p);
       }
     }
@@ -176,16 +184,25 @@ TEST_F(ModbusDecoder, Uint32CounterAndRangeChecks) {
   EXPECT_EQ(t[0].direction, -1);
   EXPECT_NEAR(t[0].trigger_position_mm, 10.0, 1e-12);
   EXPECT_EQ(dec.counters().events_lost, 0U);
-  // WHEN the NC sends axis 5 (no such axis) THEN the event is consumed and counted invalid
+  // WHEN the NC sends axis 5 (no such axis) THEN the event is consumed, counted invalid and
+  // delivered once as a faulted touch without a position (its method raises the alarm)
   touch()[1] = 0x0001;
   touch()[2] = 5;
-  EXPECT_TRUE(events_of<core::CalibrationTouch>(dec.decode(3, ok)).empty());
+  t = events_of<core::CalibrationTouch>(dec.decode(3, ok));
+  ASSERT_EQ(t.size(), 1U);
+  EXPECT_EQ(t[0].fault, core::InputFault::kInvalid);
+  EXPECT_EQ(t[0].axis, 0);  // unknown: the default
+  EXPECT_EQ(t[0].trigger_position_mm, 0.0);
   EXPECT_EQ(dec.counters().values_invalid, 1U);
-  // and direction 0 is invalid too
+  EXPECT_TRUE(events_of<core::CalibrationTouch>(dec.decode(4, ok)).empty());  // not re-read
+  // and direction 0 is invalid too; the faulted touch still carries a valid direction
   touch()[1] = 0x0002;
   touch()[2] = 0;
   touch()[3] = 0;
-  EXPECT_TRUE(events_of<core::CalibrationTouch>(dec.decode(4, ok)).empty());
+  t = events_of<core::CalibrationTouch>(dec.decode(5, ok));
+  ASSERT_EQ(t.size(), 1U);
+  EXPECT_EQ(t[0].fault, core::InputFault::kInvalid);
+  EXPECT_EQ(t[0].direction, 1);
   EXPECT_EQ(dec.counters().values_invalid, 2U);
 }
 
@@ -246,7 +263,7 @@ TEST(ModbusDecoderRestart, BackwardIsARestartForwardIsEventsWrapOnlyNearTheTop) 
   const auto tool_measurements = [](std::span<const core::Event> ev) {
     std::vector<core::ToolMeasurement> out;
     for (const core::Event& e : ev) {
-      if (const auto* p = std::get_if<core::ToolMeasurement>(&e)) {
+      if (const auto* p = std::get_if<core::ToolMeasurement>(&e); p != nullptr && delivered(e)) {
         out.push_back(*p);
       }
     }
@@ -355,6 +372,155 @@ TEST_F(ModbusDecoderReconnect, UnchangedCounterAtTheFirstReadAfterAReconnectIsCo
   EXPECT_EQ(dec.counters().sequence_resets, 0U);
 }
 
+// The engine's event cursors (docs/daemon.md, "Events while nccompd was down"): every counter the
+// decoder consumes reaches the engine with an event, a counter it consumes without one as a
+// counter_only event, so that a restarted daemon can resume from it.
+TEST_F(ModbusDecoder, EveryConsumedCounterReachesTheEngineAlsoWithoutAnEvent) {
+  // GIVEN the tool measurement counter at 7 and the uint32 touch counter at 0x00010002
+  meas()[0] = 7;
+  touch()[0] = 0x0001;
+  touch()[1] = 0x0002;
+  // WHEN the first poll takes them as the baseline THEN nothing is delivered, but each counter
+  // leaves as a counter_only event of its kind
+  const auto first = dec.decode(1, ok);
+  std::vector<std::pair<std::size_t, core::EventOrigin>> origins;
+  for (const core::Event& e : first) {
+    if (const core::EventOrigin* o = core::origin_of(e)) {
+      origins.emplace_back(e.index(), *o);
+    }
+  }
+  ASSERT_EQ(origins.size(), 2U);
+  EXPECT_EQ(core::numbered_kind(first[1]), 0);  // tool measurement, then the touch
+  EXPECT_TRUE(origins[0].second.numbered && origins[0].second.counter_only);
+  EXPECT_EQ(origins[0].second.sequence, 7U);
+  EXPECT_TRUE(origins[1].second.numbered && origins[1].second.counter_only);
+  EXPECT_EQ(origins[1].second.sequence, 0x00010002U);
+  EXPECT_EQ(core::numbered_kind(first[2]), 2);
+  // WHEN the tool measurement counter moves to 8 THEN its event carries 8 and is delivered
+  meas()[0] = 8;
+  meas()[1] = 3;
+  put_float(meas(), 2, 4.5F, false);
+  const auto tm = events_of<core::ToolMeasurement>(dec.decode(2, ok));
+  ASSERT_EQ(tm.size(), 1U);
+  EXPECT_TRUE(tm[0].origin.numbered);
+  EXPECT_FALSE(tm[0].origin.counter_only);
+  EXPECT_EQ(tm[0].origin.sequence, 8U);
+  // WHEN the NC restarts with no event since (counter 0) THEN the 0 leaves as counter_only
+  meas()[0] = 0;
+  const auto after_restart = dec.decode(3, ok);
+  EXPECT_TRUE(events_of<core::ToolMeasurement>(after_restart).empty());
+  ASSERT_EQ(after_restart.size(), 2U);  // the axis sample and the counter
+  const core::EventOrigin* o = core::origin_of(after_restart[1]);
+  ASSERT_NE(o, nullptr);
+  EXPECT_TRUE(o->counter_only);
+  EXPECT_EQ(o->sequence, 0U);
+  EXPECT_EQ(dec.counters().sequence_resets, 1U);
+}
+
+// GIVEN the engine's cursor of the tool measurement counter restored from the state (nccompd
+// was down), WHEN its first read finds `after` (the newest event's values: tool 8, 33 µm), THEN
+// `delivered` events come out, `lost` are counted lost while down, and the report says so.
+struct ResumeCase {
+  const char* what;
+  std::uint32_t cursor;
+  std::uint32_t after;
+  std::size_t delivered;
+  std::uint64_t lost;
+  bool nc_restarted;
+  std::uint32_t events;
+  std::uint64_t unchanged;  // sequence_unchanged_after_reconnect
+};
+
+TEST(ModbusDecoderResume, TheNewestEventSinceTheCursorIsDeliveredOnceTheOthersCountedLost) {
+  const ModbusConfig config = parse_modbus_config(kMap, "t.toml");
+  const std::array<ResumeCase, 7> cases = {{
+      {"nothing while down", 5, 5, 0, 0, false, 0, 1},
+      {"nothing while down, counter 0: no doubt", 0, 0, 0, 0, false, 0, 0},
+      {"one while down", 5, 6, 1, 0, false, 1, 0},
+      {"three while down: the newest delivered, two lost", 5, 8, 1, 2, false, 3, 0},
+      {"through the top of the range", 65534, 1, 1, 2, false, 3, 0},
+      {"the NC restarted, two since", 5, 2, 1, 1, true, 2, 0},
+      {"the NC restarted, none since", 5, 0, 0, 0, true, 0, 0},
+  }};
+  for (const ResumeCase& c : cases) {
+    SCOPED_TRACE(::testing::Message() << c.what << ": " << c.cursor << " -> " << c.after);
+    PollDecoder dec(config);
+    core::EventCursorSet cursors{};
+    cursors[0] = core::EventCursor{true, c.cursor};  // the tool measurement; the touch unknown
+    dec.resume(cursors);
+    const std::vector<std::uint8_t> ok(config.blocks.size(), 1);
+    std::span<std::uint16_t> meas = dec.block(1);
+    meas[0] = static_cast<std::uint16_t>(c.after);
+    meas[1] = 8;
+    put_float(meas, 2, 33.0F, false);
+    std::vector<core::ToolMeasurement> tm;
+    for (const core::Event& e : dec.decode(1, ok)) {
+      if (const auto* p = std::get_if<core::ToolMeasurement>(&e); p != nullptr && delivered(e)) {
+        tm.push_back(*p);
+      }
+    }
+    ASSERT_EQ(tm.size(), c.delivered);
+    if (c.delivered == 1U) {
+      EXPECT_EQ(tm[0].tool, 8);
+      EXPECT_DOUBLE_EQ(tm[0].wear_um[0], 33.0);
+      EXPECT_EQ(tm[0].origin.sequence, c.after);
+    }
+    EXPECT_EQ(dec.counters().events_lost_while_down, c.lost);
+    EXPECT_EQ(dec.counters().events_recovered_after_start, c.delivered);
+    EXPECT_EQ(dec.counters().events_lost, 0U);
+    EXPECT_EQ(dec.counters().sequence_resets, c.nc_restarted ? 1U : 0U);
+    EXPECT_EQ(dec.counters().sequence_unchanged_after_reconnect, c.unchanged);
+    const ResumeReport& r = dec.resume_reports()[static_cast<std::size_t>(Group::kToolMeasurement)];
+    EXPECT_TRUE(r.done);
+    EXPECT_EQ(r.cursor, c.cursor);
+    EXPECT_EQ(r.counter, c.after);
+    EXPECT_EQ(r.nc_restarted, c.nc_restarted);
+    EXPECT_EQ(r.events, c.events);
+    EXPECT_EQ(r.delivered, c.delivered == 1U);
+    // The touch had no cursor: its first read is the baseline, nothing reported.
+    EXPECT_FALSE(dec.resume_reports()[static_cast<std::size_t>(Group::kCalibrationTouch)].done);
+    // Never twice: the next poll with the same counter delivers nothing, and later events
+    // are counted as usual (not as while down).
+    EXPECT_EQ(dec.decode(2, ok).size(), 1U);  // the axis sample only
+    meas[0] = static_cast<std::uint16_t>(c.after + 3U);
+    EXPECT_EQ(dec.decode(3, ok).size(), 2U);
+    EXPECT_EQ(dec.counters().events_lost, 2U);
+    EXPECT_EQ(dec.counters().events_lost_while_down, c.lost);
+  }
+}
+
+// The newest event published while nccompd was down has an invalid value: like any invalid
+// measurement it is delivered once, marked faulted with its values cleared (its method raises its
+// alarm and changes nothing), and its counter becomes the cursor; the one before it is lost.
+TEST(ModbusDecoderResume, ANewestEventWithInvalidValuesIsDeliveredFaulted) {
+  const ModbusConfig config = parse_modbus_config(kMap, "t.toml");
+  PollDecoder dec(config);
+  core::EventCursorSet cursors{};
+  cursors[0] = core::EventCursor{true, 5};
+  dec.resume(cursors);
+  const std::vector<std::uint8_t> ok(config.blocks.size(), 1);
+  std::span<std::uint16_t> meas = dec.block(1);
+  meas[0] = 7;
+  put_float(meas, 2, std::nanf(""), false);
+  int measurements = 0;
+  for (const core::Event& e : dec.decode(1, ok)) {
+    if (const auto* t = std::get_if<core::ToolMeasurement>(&e)) {
+      ++measurements;
+      EXPECT_EQ(t->fault, core::InputFault::kInvalid);
+      EXPECT_EQ(t->wear_um[0], 0.0);
+      EXPECT_EQ(t->origin.sequence, 7U);
+    }
+  }
+  EXPECT_EQ(measurements, 1);
+  EXPECT_EQ(dec.counters().values_invalid, 1U);
+  EXPECT_EQ(dec.counters().events_lost_while_down, 1U);
+  EXPECT_EQ(dec.counters().events_recovered_after_start, 1U);
+  const ResumeReport& r = dec.resume_reports()[static_cast<std::size_t>(Group::kToolMeasurement)];
+  EXPECT_TRUE(r.done);
+  EXPECT_EQ(r.events, 2U);
+  EXPECT_TRUE(r.delivered);
+}
+
 TEST_F(ModbusDecoderReconnect, AReconnectBeforeTheFirstReadIsJustTheBaseline) {
   dec.note_reconnect();
   meas()[0] = 7;
@@ -435,15 +601,25 @@ max = 80
   EXPECT_EQ(dec.counters().values_out_of_range, 3U);
   put_float(axis, 0, 5.0F, false);
 
-  // An event whose second wear point is 3276.7 µm (> 500): dropped, its counter consumed, so
-  // the next poll does not read it again.
+  // An event whose second wear point is 3276.7 µm (> 500): delivered once as a faulted
+  // measurement of tool 4 without values, its counter consumed, so the next poll does not read
+  // it again.
   meas[0] = 1;
   meas[1] = 4;
   meas[2] = 25;     // 2.5 µm
   meas[3] = 32767;  // 3276.7 µm
   ev = dec.decode(7, ok);
-  EXPECT_EQ(count(ev, core::ToolMeasurement{}), 0U);
+  ASSERT_EQ(count(ev, core::ToolMeasurement{}), 1U);
+  for (const auto& e : ev) {
+    if (const auto* m = std::get_if<core::ToolMeasurement>(&e)) {
+      EXPECT_EQ(m->fault, core::InputFault::kOutOfRange);
+      EXPECT_EQ(m->tool, 4);
+      EXPECT_EQ(m->wear_um[0], 0.0);
+      EXPECT_EQ(m->wear_um[1], 0.0);
+    }
+  }
   EXPECT_EQ(dec.counters().values_out_of_range, 4U);
+  EXPECT_EQ(dec.counters().values_invalid, 1U);  // out of range is not counted twice
   EXPECT_EQ(count(dec.decode(8, ok), core::ToolMeasurement{}), 0U);
   EXPECT_EQ(dec.counters().values_out_of_range, 4U);
   // The next event is plausible: delivered, nothing lost.
@@ -451,6 +627,7 @@ max = 80
   meas[3] = 30;
   ev = dec.decode(9, ok);
   ASSERT_EQ(count(ev, core::ToolMeasurement{}), 1U);
+  EXPECT_EQ(std::get<core::ToolMeasurement>(ev.back()).fault, core::InputFault::kNone);
   EXPECT_EQ(dec.counters().events_lost, 0U);
 
   // A temperature of 95 °C (> 80): no sample; back to 22 °C: a sample.
@@ -623,4 +800,101 @@ broken = { address = 7 }
 }
 
 }  // namespace
+// Issue 17, finding 4: a measurement whose value arrives NaN, ±inf or beyond the map's range is
+// not lost in silence. GIVEN a laser (float32 wear), a probe (float32 deviation, within ±500 µm)
+// and a touch probe (float32 trigger position), WHEN each publishes a bad value with its counter
+// advanced, THEN each measurement comes out exactly once, marked faulted (kInvalid for NaN / inf,
+// kOutOfRange beyond min / max), with every value field 0 and its identity (tool, checkpoint,
+// axis) as received, counted once; a good value next is an ordinary measurement again.
+TEST(ModbusDecoderFault, BadMeasuredValuesAreDeliveredOnceAsFaultedMeasurements) {
+  const ModbusConfig c = parse_modbus_config(R"([modbus]
+transport = "tcp"
+[modbus.tool_measurement]
+sequence = { address = 0, type = "uint16" }
+tool = { address = 1 }
+wear_um = { address = 2, type = "float32" }
+[modbus.probe_measurement]
+sequence = { address = 4, type = "uint16" }
+part = { address = 5 }
+checkpoint = { address = 6 }
+raw_deviation_um = { address = 7, type = "float32", min = -500, max = 500 }
+wall_angle_deg = { address = 9, type = "int16", scale = 0.1 }
+ball_radius_mm = { address = 10, type = "uint16", scale = 0.001 }
+[modbus.calibration_touch]
+sequence = { address = 11, type = "uint16" }
+axis = { address = 12 }
+direction = { address = 13, type = "int16" }
+trigger_position_mm = { address = 14, type = "float32" }
+)",
+                                             "t.toml");
+  ASSERT_EQ(c.blocks.size(), 1U);  // holding 0..15: one request
+  PollDecoder dec(c);
+  std::vector<std::uint8_t> ok(1, 1);
+  auto b = dec.block(0);
+  b[1] = 7;      // tool 7
+  b[5] = 42;     // part 42
+  b[6] = 3;      // checkpoint 3
+  b[10] = 2000;  // r 2 mm
+  b[12] = 1;     // axis Y
+  b[13] = static_cast<std::uint16_t>(-1 & 0xFFFF);
+  dec.decode(1, ok);  // baselines
+  const auto only = [](std::span<const core::Event> ev) {
+    EXPECT_EQ(ev.size(), 1U);
+    return ev.empty() ? core::Event{} : ev[0];
+  };
+  const float inf = std::numeric_limits<float>::infinity();
+  std::uint16_t seq = 0;
+  for (const float bad : {std::nanf(""), inf, -inf}) {
+    ++seq;
+    b[0] = seq;
+    put_float(b, 2, bad, false);
+    const core::Event e = only(dec.decode(10 + seq, ok));
+    const auto& m = std::get<core::ToolMeasurement>(e);
+    EXPECT_EQ(m.fault, core::InputFault::kInvalid) << bad;
+    EXPECT_EQ(m.tool, 7);
+    EXPECT_EQ(m.wear_um[0], 0.0);
+    EXPECT_EQ(m.time_ns, 10 + seq);
+    EXPECT_EQ(dec.counters().values_invalid, seq);
+    EXPECT_TRUE(dec.decode(20 + seq, ok).empty()) << "read again";
+  }
+  b[0] = ++seq;
+  put_float(b, 2, 12.5F, false);
+  auto m = std::get<core::ToolMeasurement>(only(dec.decode(30, ok)));
+  EXPECT_EQ(m.fault, core::InputFault::kNone);
+  EXPECT_EQ(m.wear_um[0], 12.5);
+
+  // The probe: 800 µm is beyond max = 500, NaN is invalid.
+  b[4] = 1;
+  put_float(b, 7, 800.0F, false);
+  auto p = std::get<core::ProbeMeasurement>(only(dec.decode(31, ok)));
+  EXPECT_EQ(p.fault, core::InputFault::kOutOfRange);
+  EXPECT_EQ(p.checkpoint, 3);
+  EXPECT_EQ(p.part, 42);
+  EXPECT_EQ(p.raw_deviation_um, 0.0);
+  EXPECT_EQ(p.ball_radius_mm, 0.0);
+  EXPECT_EQ(dec.counters().values_out_of_range, 1U);
+  b[4] = 2;
+  put_float(b, 7, std::nanf(""), false);
+  p = std::get<core::ProbeMeasurement>(only(dec.decode(32, ok)));
+  EXPECT_EQ(p.fault, core::InputFault::kInvalid);
+  EXPECT_EQ(dec.counters().values_invalid, 4U);
+  // The touch: +inf trigger position.
+  b[11] = 1;
+  put_float(b, 14, inf, false);
+  auto t = std::get<core::CalibrationTouch>(only(dec.decode(34, ok)));
+  EXPECT_EQ(t.fault, core::InputFault::kInvalid);
+  EXPECT_EQ(t.axis, 1);
+  EXPECT_EQ(t.direction, -1);
+  EXPECT_EQ(t.trigger_position_mm, 0.0);
+  EXPECT_EQ(dec.counters().values_invalid, 5U);
+  EXPECT_EQ(dec.counters().values_out_of_range, 1U);
+  // Faulted or not, decoding allocates nothing.
+  b[11] = 2;
+  const nccomp::test::AllocationScope scope;
+  const auto ev = dec.decode(35, ok);
+  EXPECT_EQ(scope.count(), 0U);
+  ASSERT_EQ(ev.size(), 1U);
+  EXPECT_EQ(std::get<core::CalibrationTouch>(ev[0]).fault, core::InputFault::kInvalid);
+}
+
 }  // namespace nccomp::drivers::modbus

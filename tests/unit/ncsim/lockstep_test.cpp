@@ -3,6 +3,7 @@
 // writing offsets with libmodbus in between, like nccompd's sync / flush.
 #include <gtest/gtest.h>
 #include <modbus/modbus.h>
+#include <poll.h>
 #include <sys/socket.h>
 #include <sys/un.h>
 #include <unistd.h>
@@ -213,6 +214,101 @@ TEST(NcsimLockstep, SameTicksGiveTheSameResultAndAnEarlyByeEndsTheRun) {
   EXPECT_EQ(c.summary.cycles, 20U);
   EXPECT_NE(slurp(::testing::TempDir() + "/ncsim_ls_c/result.json").find("\"sim_time_s\":0.095"),
             std::string::npos);
+}
+
+// --lockstep-outage (a daemon restart, docs/ncsim.md): GIVEN register 8 as the NC's measure
+// request, WHEN the fake daemon raises it at 0.05 s, THEN ncsim stops ticking once it is in
+// force (nc.latency_s later); the
+// daemon goes away without BYE (killed), ncsim machines 0.5 s alone (100 cycles, publishing: the
+// laser measures every 8 mm meanwhile) and takes the daemon back; its next TICK is 100 cycles
+// later, the tool measurement counter moved meanwhile, and the run completes.
+TEST(NcsimLockstep, AnOutageMachinesOnWithoutTheDaemonAndTakesItBack) {
+  const SimConfig c = load_sim_config(
+      kConfig,
+      {"ncsim.modbus_port=0", "ncsim.lockstep_rate_hz=200", "program.mould_face.size_x_mm=10",
+       "program.mould_face.size_y_mm=1", "program.mould_face.measure_interval_mm=8",
+       "program.mould_face.laser_trip_s=0.2", "nc.measure_request_register=8"});
+  RunOptions o;
+  o.program = ProgramKind::kMouldFace;
+  o.out_dir = ::testing::TempDir() + "/ncsim_ls_outage";
+  o.lockstep_socket = ::testing::TempDir() + "/ncsim_ls_outage.sock";
+  o.connect_timeout_s = 10.0;
+  o.outage_at_request = 1;
+  o.outage_after_s = 0.0;
+  o.outage_s = 0.5;
+  std::promise<std::uint16_t> port;
+  o.on_ready = [&](std::uint16_t p) { port.set_value(p); };
+  RunSummary summary;
+  std::thread sim([&] { summary = run(c, o); });
+  const std::uint16_t p = port.get_future().get();
+
+  modbus_t* ctx = modbus_new_tcp("127.0.0.1", p);
+  ASSERT_EQ(modbus_connect(ctx), 0);
+  const auto counter = [&] {
+    std::uint16_t r = 0;
+    EXPECT_EQ(modbus_read_input_registers(ctx, 100, 1, &r), 1);
+    return r;
+  };
+  std::vector<std::uint64_t> cycles;
+  std::uint16_t counter_at_pause = 0;
+  std::uint16_t counter_back = 0;
+  int fd = connect_seqpacket(o.lockstep_socket);
+  ASSERT_GE(fd, 0);
+  bool reconnected = false;
+  for (;;) {
+    pollfd pf{fd, POLLIN, 0};
+    if (::poll(&pf, 1, 1000) == 0) {
+      // No TICK for 1 s: the outage. Go away without BYE, come back.
+      ASSERT_FALSE(reconnected);
+      counter_at_pause = counter();
+      close(fd);
+      fd = connect_seqpacket(o.lockstep_socket);
+      ASSERT_GE(fd, 0);
+      reconnected = true;
+      continue;
+    }
+    unsigned char buf[64];
+    const ssize_t n = recv(fd, buf, sizeof(buf), 0);
+    ASSERT_GT(n, 0);
+    LockstepMessage m{};
+    std::string why;
+    ASSERT_TRUE(parse_lockstep_message(buf, static_cast<std::size_t>(n), m, why)) << why;
+    if (m.type == static_cast<std::uint32_t>(LockstepType::kBye)) {
+      break;
+    }
+    if (reconnected && counter_back == 0) {
+      counter_back = counter();
+    }
+    cycles.push_back(m.cycle);
+    if (m.cycle == 10) {  // 0.05 s: the request (1 µm in register 8, float32 at 234)
+      std::uint16_t z[2];
+      ASSERT_EQ(mb::encode(1.0, mb::Encoding{mb::ValueType::kFloat32, mb::WordOrder::kLowFirst}, z),
+                mb::EncodeResult::kOk);
+      ASSERT_EQ(modbus_write_registers(ctx, 234, 2, z), 2);
+    }
+    LockstepMessage done{kLockstepMagic, 2, m.cycle, m.time_ns};
+    ASSERT_EQ(send(fd, &done, sizeof(done), 0), static_cast<ssize_t>(sizeof(done)));
+  }
+  close(fd);
+  modbus_close(ctx);
+  modbus_free(ctx);
+  sim.join();
+  EXPECT_TRUE(summary.completed);
+  ASSERT_TRUE(reconnected);
+  // The request written in cycle 10 is in force nc.latency_s later: ncsim stopped after that
+  // cycle, went on alone for 100 cycles and ticked the one after them next.
+  const auto in_force = static_cast<std::uint64_t>(10 + std::llround(c.nc.latency_s * 200.0));
+  std::size_t gap = 0;
+  for (std::size_t i = 1; i < cycles.size(); ++i) {
+    if (cycles[i] != cycles[i - 1] + 1) {
+      EXPECT_EQ(cycles[i - 1], in_force);
+      EXPECT_EQ(cycles[i], in_force + 101U);
+      ++gap;
+    }
+  }
+  EXPECT_EQ(gap, 1U);
+  EXPECT_EQ(counter_at_pause, 0U);
+  EXPECT_GE(counter_back, 1U) << "the laser measured while the daemon was away";
 }
 
 }  // namespace
