@@ -23,6 +23,7 @@
 #include "daemon/command.hpp"
 #include "daemon/config/builtin_sections.hpp"
 #include "daemon/config/config.hpp"
+#include "daemon/cpu_placement.hpp"
 #include "daemon/events_while_down.hpp"
 #include "daemon/lockstep.hpp"
 #include "daemon/logging.hpp"
@@ -182,6 +183,8 @@ int run_daemon(const DaemonOptions& options) {
 
   const auto& dsec = cfg::daemon_section(*config);
   const auto& ssec = cfg::state_section(*config);
+  // Before any thread starts: the loop's CPU(s) apart from the other threads' (cpu_placement.hpp).
+  const std::vector<int> loop_cpus = place_threads(dsec.cpu_affinity);
 
   // State: absent → fresh; valid → resumed; corrupt or unusable → hold (offsets stay as the NC
   // has them) and an alarm, never a guess.
@@ -429,7 +432,7 @@ int run_daemon(const DaemonOptions& options) {
   lo.overrun_policy = dsec.overrun_policy;
   lo.max_events_per_cycle = dsec.max_events_per_cycle;
   lo.sched_fifo_priority = dsec.sched_fifo_priority;
-  lo.cpu_affinity = dsec.cpu_affinity;
+  lo.cpu_affinity = loop_cpus;
   lo.prefault_stack_kib = dsec.prefault_stack_kib;
   lo.state_min_interval_s = ssec.min_interval_s;
   lo.state_buffer_bytes = blob_bytes;
@@ -563,7 +566,7 @@ int run_daemon(const DaemonOptions& options) {
   }
   if (rep.affinity_requested) {
     if (rep.affinity_errno == 0) {
-      spdlog::info("loop thread: pinned to CPU(s) {}", fmt::join(dsec.cpu_affinity, ","));
+      spdlog::info("loop thread: pinned to CPU(s) {}", fmt::join(loop_cpus, ","));
     } else {
       spdlog::warn("loop thread: CPU affinity refused: {}", std::strerror(rep.affinity_errno));
     }

@@ -1,6 +1,13 @@
 #include "daemon/config/config.hpp"
 
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <stdexcept>
 #include <utility>
@@ -166,9 +173,22 @@ struct Loader {
       diag.error(from, key, "'" + path + "' is included twice (or includes itself)");
       return;
     }
-    if (!fs::is_regular_file(path, ec)) {
+    // The reason as the system gives it: a configuration the service's user may not read must
+    // say "Permission denied", not look like a missing file.
+    std::string why;
+    struct stat sb {};
+    if (::stat(path.c_str(), &sb) != 0) {
+      why = std::strerror(errno);
+    } else if (!S_ISREG(sb.st_mode)) {
+      why = "not a regular file";
+    } else if (const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC); fd < 0) {
+      why = std::strerror(errno);
+    } else {
+      ::close(fd);
+    }
+    if (!why.empty()) {
       Where w = from != nullptr ? where_of(from, key) : Where{path, 0, 0, ""};
-      diag.error(std::move(w), "cannot read '" + path + "': no such file");
+      diag.error(std::move(w), "cannot read '" + path + "': " + why);
       return;
     }
     open_files.insert(id);

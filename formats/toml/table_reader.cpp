@@ -49,8 +49,19 @@ void TableReader::error(std::string_view key, std::string message) {
   diag_.error(where(key), std::move(message));
 }
 
+namespace {
+void (*g_key_observer)(const std::string&) = nullptr;
+}  // namespace
+
+void TableReader::set_key_observer(void (*observer)(const std::string&)) noexcept {
+  g_key_observer = observer;
+}
+
 const toml::node* TableReader::get(std::string_view key) {
   known_.insert(std::string(key));
+  if (g_key_observer != nullptr) {
+    g_key_observer(path(key));
+  }
   return table_.get(key);
 }
 

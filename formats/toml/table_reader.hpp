@@ -82,6 +82,10 @@ class TableReader {
   /// Reports unknown keys (also done by the destructor if not called).
   void finish();
 
+  /// Test hook (the man page check, tests/unit/docs): called with the key path of every key a
+  /// section parser asks a TableReader for, present or not. Not thread-safe; nullptr = off.
+  static void set_key_observer(void (*observer)(const std::string& key_path)) noexcept;
+
  private:
   const toml::node* get(std::string_view key);
   const toml::table& table_;

@@ -32,6 +32,7 @@ namespace {
 using nccomp::tools::CommandError;
 using nccomp::tools::kExitFailure;
 using nccomp::tools::kExitInvalidInput;
+using nccomp::tools::kExitUsage;
 namespace cal = nccomp::tools::calibrate;
 
 struct Options {
@@ -255,7 +256,7 @@ void run_daemon(const Options& o) {
 void run(const Options& o) {
   if (!o.daemon.empty()) {
     if (!o.state.empty() || o.epoch_s >= 0.0) {
-      throw CommandError(kExitInvalidInput,
+      throw CommandError(kExitUsage,
                          "--state and --epoch are offline options: the daemon keeps its own state "
                          "(adopt an offline state with [calibration] state_file)");
     }
@@ -263,7 +264,7 @@ void run(const Options& o) {
     return;
   }
   if (o.config.empty()) {
-    throw CommandError(kExitInvalidInput, "--config FILE or --daemon SOCKET is required");
+    throw CommandError(kExitUsage, "--config FILE or --daemon SOCKET is required");
   }
   nccomp::core::calib::CalibrationConfig config;
   try {

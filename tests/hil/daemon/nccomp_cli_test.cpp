@@ -196,8 +196,9 @@ TEST(NccompCli, StatusTalksToTheRunningDaemon) {
 
   const CliRun metrics = nccomp(d, {"status", "--config", cfg, "--metrics"});
   EXPECT_EQ(metrics.exit_code, 0) << metrics.err;
-  EXPECT_NE(metrics.out.find("nccompd_register_output_um{register=\"T1_length_wear\"} 7.5\n"),
-            std::string::npos)
+  EXPECT_NE(
+      metrics.out.find("nccompd_register_output_meters{register=\"T1_length_wear\"} 7.5e-06\n"),
+      std::string::npos)
       << metrics.out;
   EXPECT_NE(metrics.out.find("nccompd_bus_up{bus=\"loopback\"} 1\n"), std::string::npos)
       << metrics.out;

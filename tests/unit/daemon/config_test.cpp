@@ -4,6 +4,9 @@
 
 #include <gtest/gtest.h>
 
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -148,6 +151,42 @@ TEST(ConfigLoader, UnknownKeyNamesFileLineAndKeyPath) {
   EXPECT_EQ(e.where.key_path, "daemon.realtime.lock_memry");
   EXPECT_EQ(e.message, "unknown key");
   EXPECT_EQ(format(e), f + ":5:14: daemon.realtime.lock_memry: unknown key");
+}
+
+// The service's user (nccomp) could not read a root-owned /etc/nccompd, and the daemon said
+// "no such file" (issue 20): the reason must be the system's. Root reads everything, so as root
+// the load runs in a child that drops to nobody.
+TEST(ConfigLoader, AFileTheUserMayNotReadIsReportedAsPermissionDenied) {
+  TempDir dir;
+  const std::string file = dir.write("nccompd.toml", "[daemon]\nrate_hz = 1000\n");
+  fs::permissions(file, fs::perms::owner_read | fs::perms::owner_write);
+  fs::permissions(dir.path(), fs::perms::owner_all);
+  int pipefd[2];
+  ASSERT_EQ(::pipe(pipefd), 0);
+  const pid_t pid = ::fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    ::close(pipefd[0]);
+    if (::geteuid() == 0 && (::setgid(65534) != 0 || ::setuid(65534) != 0)) {
+      ::_exit(2);
+    }
+    const auto r = load_file(file);
+    const std::string text = r.config ? "loaded" : r.diagnostics.to_string();
+    (void)!::write(pipefd[1], text.data(), text.size());
+    ::_exit(0);
+  }
+  ::close(pipefd[1]);
+  std::string text;
+  char buf[512];
+  for (ssize_t n; (n = ::read(pipefd[0], buf, sizeof(buf))) > 0;) {
+    text.append(buf, static_cast<std::size_t>(n));
+  }
+  ::close(pipefd[0]);
+  int st = 0;
+  ::waitpid(pid, &st, 0);
+  ASSERT_TRUE(WIFEXITED(st) && WEXITSTATUS(st) == 0) << "child could not drop to nobody";
+  EXPECT_EQ(text, file + ": cannot read '" + file + "': Permission denied\n");
+  fs::permissions(dir.path(), fs::perms::owner_all | fs::perms::group_all | fs::perms::others_all);
 }
 
 TEST(ConfigLoader, UnknownSectionListsTheKnownOnes) {
