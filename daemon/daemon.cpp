@@ -23,6 +23,7 @@
 #include "daemon/commands/command.hpp"
 #include "daemon/config/builtin_sections.hpp"
 #include "daemon/config/config.hpp"
+#include "daemon/cpu_placement.hpp"
 #include "daemon/events_while_down.hpp"
 #include "daemon/lockstep.hpp"
 #include "daemon/logging.hpp"
@@ -93,7 +94,7 @@ std::vector<BusEntry> make_buses(const cfg::Config& c) {
 std::unique_ptr<Runtime> make_runtime(const cfg::Config& c, const std::vector<BusEntry>& buses,
                                       bool dry_run_cli, std::uint64_t generation) {
   auto rt = std::make_unique<Runtime>();
-  cfg::Diagnostics diag;
+  formats::Diagnostics diag;
   rt->engine = cfg::build_engine(c, diag);
   if (!rt->engine) {
     // The engine's refusal, located: "file:line:column: key.path: message".
@@ -188,6 +189,7 @@ class Daemon {
   int run() {
     if (!block_signals()) return 1;
     if (const int rc = configure(); rc != 0) return rc;
+    place_cpus();
     restore_state();
     lock_memory();
     read_back_registers();
@@ -202,6 +204,7 @@ class Daemon {
   const cfg::DaemonSection& dsec() const { return cfg::daemon_section(*config_); }
   bool block_signals();
   int configure();
+  void place_cpus();
   void restore_state();
   void lock_memory();
   void read_back_registers();
@@ -233,6 +236,7 @@ class Daemon {
   std::unique_ptr<Runtime> runtime_;  // until the loop's ConfigSwap takes it
   std::mutex names_mu_;
   std::shared_ptr<const std::vector<std::string>> names_;
+  std::vector<int> loop_cpus_;  // LoopOptions::cpu_affinity (cpu_placement.hpp)
   std::string state_path_;
   std::string state_problem_;  // not empty: offsets are held
   std::uint64_t sequence_{0};
@@ -294,6 +298,9 @@ int Daemon::configure() {
   names_ = std::make_shared<const std::vector<std::string>>(register_names(*config_));
   return 0;
 }
+
+// Before any thread starts: the loop's CPU(s) apart from the other threads' (cpu_placement.hpp).
+void Daemon::place_cpus() { loop_cpus_ = place_threads(dsec().cpu_affinity); }
 
 // State: absent → fresh; valid → resumed; corrupt or unusable → hold (offsets stay as the NC has
 // them) and an alarm, never a guess.
@@ -580,7 +587,7 @@ LoopOptions Daemon::loop_options() {
   lo.overrun_policy = dsec().overrun_policy;
   lo.max_events_per_cycle = dsec().max_events_per_cycle;
   lo.sched_fifo_priority = dsec().sched_fifo_priority;
-  lo.cpu_affinity = dsec().cpu_affinity;
+  lo.cpu_affinity = loop_cpus_;
   lo.prefault_stack_kib = dsec().prefault_stack_kib;
   lo.state_min_interval_s = cfg::state_section(*config_).min_interval_s;
   lo.state_buffer_bytes = blob_bytes_;
@@ -703,7 +710,7 @@ void Daemon::log_loop_start(const LoopSetupReport& rep) {
   }
   if (rep.affinity_requested) {
     if (rep.affinity_errno == 0) {
-      spdlog::info("loop thread: pinned to CPU(s) {}", fmt::join(dsec().cpu_affinity, ","));
+      spdlog::info("loop thread: pinned to CPU(s) {}", fmt::join(loop_cpus_, ","));
     } else {
       spdlog::warn("loop thread: CPU affinity refused: {}", std::strerror(rep.affinity_errno));
     }
@@ -796,7 +803,7 @@ void Daemon::reload() {
   std::string refused;
   if (!next.config) {
     for (const auto& d : next.diagnostics.items()) {
-      spdlog::error("reload: {}", cfg::format(d));
+      spdlog::error("reload: {}", formats::format(d));
     }
     refused = std::to_string(next.diagnostics.items().size()) + " error(s)";
   } else {

@@ -6,6 +6,7 @@
 #include <spdlog/spdlog.h>
 #include <sys/stat.h>
 #include <systemd/sd-daemon.h>
+#include <systemd/sd-journal.h>
 
 #include <chrono>
 #include <cstdio>
@@ -14,6 +15,12 @@
 #include <limits>
 
 namespace nccomp::daemon {
+
+namespace {
+// Set once by setup_logging() before any thread logs: alarms then go to the journal with their
+// code, name, subject and value as fields (journalctl NCCOMP_ALARM_CODE=54).
+bool g_journal_fields = false;
+}  // namespace
 
 bool stderr_is_journal() {
   const char* js = std::getenv("JOURNAL_STREAM");
@@ -49,6 +56,7 @@ std::string setup_logging(const config::LogSection& section) {
   logger->set_level(spdlog::level::from_str(section.level == "warning" ? "warn" : section.level));
   logger->flush_on(spdlog::level::info);
   spdlog::set_default_logger(logger);
+  g_journal_fields = journal;
   return journal ? "journal" : "terminal";
 }
 
@@ -238,6 +246,33 @@ std::string burst_end_line(const AlarmBursts::Burst& b) {
       a.value, b.count, static_cast<double>(b.last_ns - b.first_ns) / 1e9);
 }
 
+namespace {
+
+// To the journal, the alarm's code, name, severity, subject and value go as fields too
+// (journalctl -u nccompd NCCOMP_ALARM_CODE=54); the terminal gets the line only.
+void log_alarm_line(const core::AlarmEvent& a) {
+  const auto level = level_of(a.severity);
+  if (!g_journal_fields || !spdlog::default_logger()->should_log(level)) {
+    spdlog::log(level, "{} {} (code {}) subject {} value {}", severity_name(a.severity),
+                alarm_name(a.code), static_cast<unsigned>(a.code), a.subject, a.value);
+    return;
+  }
+  const std::string name = alarm_name(a.code);
+  const int priority = a.severity == core::Severity::kAlarm     ? LOG_ERR
+                       : a.severity == core::Severity::kWarning ? LOG_WARNING
+                                                                : LOG_INFO;
+  const std::string message =
+      fmt::format("{} {} (code {}) subject {} value {}", severity_name(a.severity), name,
+                  static_cast<unsigned>(a.code), a.subject, a.value);
+  sd_journal_send("MESSAGE=%s", message.c_str(), "PRIORITY=%d", priority,
+                  "SYSLOG_IDENTIFIER=nccompd", "NCCOMP_ALARM_CODE=%u",
+                  static_cast<unsigned>(a.code), "NCCOMP_ALARM_NAME=%s", name.c_str(),
+                  "NCCOMP_ALARM_SEVERITY=%s", severity_name(a.severity), "NCCOMP_ALARM_SUBJECT=%d",
+                  static_cast<int>(a.subject), "NCCOMP_ALARM_VALUE=%g", a.value, nullptr);
+}
+
+}  // namespace
+
 void EventLogger::log_alarm(const core::AlarmEvent& a) {
   std::vector<AlarmBursts::Burst> ended;
   bool log = false;
@@ -253,9 +288,7 @@ void EventLogger::log_alarm(const core::AlarmEvent& a) {
     spdlog::log(level_of(b.alarm.severity), "{}", burst_end_line(b));
   }
   if (log) {
-    spdlog::log(level_of(a.severity), "{} {} (code {}) subject {} value {}",
-                severity_name(a.severity), alarm_name(a.code), static_cast<unsigned>(a.code),
-                a.subject, a.value);
+    log_alarm_line(a);
   }
 }
 

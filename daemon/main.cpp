@@ -1,7 +1,13 @@
-// nccompd — the compensation daemon. See docs/daemon.md.
+// nccompd — the compensation daemon. See docs/daemon.md and nccompd(8).
+// Exit status: 0 stopped by a signal (or the lock-step peer's BYE), also after --help and
+// --version; 1 a start-up or run-time failure; 2 a usage error (an unknown option, a missing
+// value); 3 an invalid configuration.
 #include <CLI/CLI.hpp>
 
+#include <string>
+
 #include "daemon/daemon.hpp"
+#include "nccomp_version.hpp"
 
 int main(int argc, char** argv) {
   CLI::App app{"nccompd — real-time compensation daemon for CNC machine tools"};
@@ -19,8 +25,13 @@ int main(int argc, char** argv) {
   app.add_flag("--print-status-socket", options.print_status_socket,
                "Print the configuration's status socket path and exit")
       ->excludes(check);
-  app.set_version_flag("--version", "nccompd 0.1.0");
-  CLI11_PARSE(app, argc, argv);
+  app.set_version_flag("--version", std::string("nccompd ") + nccomp::kVersion);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    // --help / --version print and exit 0; CLI11's own codes for usage errors are 100+.
+    return app.exit(e) == 0 ? 0 : 2;
+  }
   if (options.check_config) {
     return nccomp::daemon::check_config(options);
   }

@@ -16,6 +16,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <span>
 #include <sstream>
 #include <system_error>
 
@@ -379,13 +380,37 @@ std::string render_text(const StatusContext& c) {
   return o.str();
 }
 
+namespace {
+
+// A sample value in the Prometheus text format (NaN and infinities spelled its way).
+std::string prom_num(double v) {
+  if (std::isnan(v)) return "NaN";
+  if (std::isinf(v)) return v > 0 ? "+Inf" : "-Inf";
+  char buf[40];
+  std::snprintf(buf, sizeof buf, "%.10g", v);
+  return buf;
+}
+
+// Edges [µs] of the wake-up latency histogram: bucket edges of LatencyHistogram, so the counts
+// are exact (StatusMetrics.LatencyEdgesAreBucketEdges).
+constexpr std::array<std::uint64_t, 14> kLatencyEdgesUs = {
+    10, 20, 50, 100, 200, 500, 1000, 2000, 4000, 8000, 16000, 32000, 64000, 128000};
+
+}  // namespace
+
+std::span<const std::uint64_t> prometheus_latency_edges_us() { return kLatencyEdgesUs; }
+
 std::string render_prometheus(const StatusContext& c) {
   const View v = gather(c);
   const auto& s = v.s;
   std::ostringstream o;
+  auto family = [&](const std::string& name, const char* type, const std::string& help) {
+    o << "# HELP nccompd_" << name << " " << help << "\n# TYPE nccompd_" << name << " " << type
+      << "\n";
+  };
   auto counter = [&](const char* name, const char* help, std::uint64_t value) {
-    o << "# HELP nccompd_" << name << " " << help << "\n# TYPE nccompd_" << name
-      << " counter\nnccompd_" << name << " " << value << "\n";
+    family(name, "counter", help);
+    o << "nccompd_" << name << " " << value << "\n";
   };
   counter("loop_cycles_total", "Loop cycles run.", s.cycles);
   counter("loop_overruns_total", "Cycles that finished after the next deadline.", s.overruns);
@@ -405,59 +430,96 @@ std::string render_prometheus(const StatusContext& c) {
     counter("status_clients_turned_away_total", "Status clients refused as busy.",
             c.server->turned_away.load());
   }
-  o << "# HELP nccompd_loop_rate_hz Measured loop rate.\n# TYPE nccompd_loop_rate_hz gauge\n"
-    << "nccompd_loop_rate_hz " << num(v.measured_rate_hz) << "\n";
-  o << "# HELP nccompd_loop_latency_us Wake-up latency quantiles since start.\n"
-       "# TYPE nccompd_loop_latency_us gauge\n"
-    << "nccompd_loop_latency_us{quantile=\"0.5\"} " << num(v.p50) << "\n"
-    << "nccompd_loop_latency_us{quantile=\"0.99\"} " << num(v.p99) << "\n"
-    << "nccompd_loop_latency_us{quantile=\"0.999\"} " << num(v.p999) << "\n"
-    << "nccompd_loop_latency_us{quantile=\"1\"} " << num(v.max_us) << "\n";
-  o << "# HELP nccompd_hold 1 while offsets are held (state corrupt).\n# TYPE nccompd_hold gauge\n"
-    << "nccompd_hold " << (s.hold ? 1 : 0) << "\n";
-  o << "# HELP nccompd_register_output_um Offset last sent per register.\n"
-       "# TYPE nccompd_register_output_um gauge\n";
-  for (std::size_t i = 0; i < v.r.count; ++i) {
-    o << "nccompd_register_output_um{register=\"" << reg_name(v, i) << "\"} "
-      << num(v.r.regs[i].output_um) << "\n";
+  family("loop_rate_hertz", "gauge", "Measured loop rate since start.");
+  o << "nccompd_loop_rate_hertz " << prom_num(v.measured_rate_hz) << "\n";
+  {
+    const auto& h = c.loop->latency();
+    std::array<std::uint64_t, kLatencyEdgesUs.size()> below{};
+    std::uint64_t total = 0;
+    h.count_below_us(kLatencyEdgesUs, below, total);
+    family("loop_wake_latency_seconds", "histogram",
+           "Wake-up latency of the loop thread after its deadline, since start.");
+    for (std::size_t i = 0; i < kLatencyEdgesUs.size(); ++i) {
+      o << "nccompd_loop_wake_latency_seconds_bucket{le=\""
+        << prom_num(static_cast<double>(kLatencyEdgesUs[i]) / 1e6) << "\"} " << below[i] << "\n";
+    }
+    o << "nccompd_loop_wake_latency_seconds_bucket{le=\"+Inf\"} " << total << "\n"
+      << "nccompd_loop_wake_latency_seconds_sum " << prom_num(h.sum_s()) << "\n"
+      << "nccompd_loop_wake_latency_seconds_count " << total << "\n";
+    family("loop_wake_latency_max_seconds", "gauge", "Largest wake-up latency since start.");
+    o << "nccompd_loop_wake_latency_max_seconds " << prom_num(static_cast<double>(h.max_ns()) / 1e9)
+      << "\n";
   }
-  o << "# HELP nccompd_register_held 1 while a register is held at start-up (nothing written).\n"
-       "# TYPE nccompd_register_held gauge\n";
+  family("hold", "gauge", "1 while offsets are held (state corrupt).");
+  o << "nccompd_hold " << (s.hold ? 1 : 0) << "\n";
+  family("register_output_meters", "gauge", "Offset last sent per register.");
+  for (std::size_t i = 0; i < v.r.count; ++i) {
+    o << "nccompd_register_output_meters{register=\"" << reg_name(v, i) << "\"} "
+      << prom_num(v.r.regs[i].output_um * 1e-6) << "\n";
+  }
+  family("register_held", "gauge", "1 while a register is held at start-up (nothing written).");
   for (std::size_t i = 0; i < v.r.count; ++i) {
     o << "nccompd_register_held{register=\"" << reg_name(v, i) << "\"} "
       << (v.r.regs[i].hold == core::engine::RegisterHold::kNone ? 0 : 1) << "\n";
   }
-  o << "# HELP nccompd_module_value A compensation module's status value (unit in the key).\n"
-       "# TYPE nccompd_module_value gauge\n";
+  family("module_value", "gauge", "A compensation module's status value (unit in the key).");
   for (std::size_t i = 0; i < v.m.count; ++i) {
     const auto& m = v.m.modules[i];
     for (std::size_t k = 0; k < m.count; ++k) {
       const auto& sv = m.values[k];
       if (sv.text == nullptr && std::isfinite(sv.value)) {
         o << "nccompd_module_value{module=\"" << m.name.data() << "\",key=\"" << sv.key << "\"} "
-          << num(sv.value) << "\n";
+          << prom_num(sv.value) << "\n";
       }
     }
   }
-  o << "# HELP nccompd_bus_up 1 while the bus link is up.\n# TYPE nccompd_bus_up gauge\n";
+  family("bus_up", "gauge", "1 while the bus link is up.");
   for (const auto& [name, bus] : c.buses) {
     o << "nccompd_bus_up{bus=\"" << name << "\"} "
       << (bus->status().state == drivers::LinkState::kUp ? 1 : 0) << "\n";
   }
-  o << "# HELP nccompd_bus_faults_total Bus faults.\n# TYPE nccompd_bus_faults_total counter\n";
+  family("bus_faults_total", "counter", "Bus faults.");
   for (const auto& [name, bus] : c.buses) {
     o << "nccompd_bus_faults_total{bus=\"" << name << "\"} " << bus->status().counters.faults
       << "\n";
   }
-  o << "# HELP nccompd_bus_counter_total Driver-specific bus counters (fault kinds, rejects).\n"
-       "# TYPE nccompd_bus_counter_total counter\n";
+  // Driver-specific values: the counts as one counter family (event = the driver's name); each
+  // gauge as its own family (nccompd_bus_<name>, milliseconds as seconds), its samples for every
+  // bus together.
+  std::string counts;
+  struct Gauge {
+    std::string family, help, samples;
+  };
+  std::vector<Gauge> gauges;
   for (const auto& [name, bus] : c.buses) {
     std::array<drivers::BusCounterValue, drivers::kMaxBusExtraCounters> extra{};
     const std::size_t n_extra = std::min(bus->extra_counters(extra), extra.size());
     for (std::size_t e = 0; e < n_extra; ++e) {
-      o << "nccompd_bus_counter_total{bus=\"" << name << "\",counter=\"" << extra[e].name << "\"} "
-        << extra[e].value << "\n";
+      const std::string_view key = extra[e].name;
+      if (!extra[e].gauge) {
+        counts += "nccompd_bus_events_total{bus=\"" + name + "\",event=\"" + std::string(key) +
+                  "\"} " + std::to_string(extra[e].value) + "\n";
+        continue;
+      }
+      const bool ms = key.ends_with("_ms");
+      const std::string family_name =
+          "bus_" + std::string(ms ? key.substr(0, key.size() - 3) : key) + (ms ? "_seconds" : "");
+      const double value = static_cast<double>(extra[e].value) * (ms ? 1e-3 : 1.0);
+      auto it = std::find_if(gauges.begin(), gauges.end(),
+                             [&](const Gauge& g) { return g.family == family_name; });
+      if (it == gauges.end()) {
+        it = gauges.insert(
+            gauges.end(),
+            Gauge{family_name, "The driver's " + family_name.substr(4) + " now.", {}});
+      }
+      it->samples += "nccompd_" + family_name + "{bus=\"" + name + "\"} " + prom_num(value) + "\n";
     }
+  }
+  family("bus_events_total", "counter", "Driver-specific bus events (fault kinds, rejects).");
+  o << counts;
+  for (const Gauge& g : gauges) {
+    family(g.family, "gauge", g.help);
+    o << g.samples;
   }
   return o.str();
 }

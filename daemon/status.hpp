@@ -20,6 +20,7 @@
 #include <deque>
 #include <functional>
 #include <mutex>
+#include <span>
 #include <string>
 #include <thread>
 #include <utility>
@@ -73,7 +74,10 @@ struct StatusServerOptions {
 
 [[nodiscard]] std::string render_json(const StatusContext& c);
 [[nodiscard]] std::string render_text(const StatusContext& c);
+/// The Prometheus text format (version 0.0.4); `promtool check metrics` passes on it.
 [[nodiscard]] std::string render_prometheus(const StatusContext& c);
+/// The `le` edges [µs] of nccompd_loop_wake_latency_seconds (exposed for tests).
+[[nodiscard]] std::span<const std::uint64_t> prometheus_latency_edges_us();
 [[nodiscard]] const char* link_state_name(drivers::LinkState s);
 
 class StatusServer {

@@ -49,6 +49,8 @@ void LatencyHistogram::record(TimeNs latency_ns) noexcept {
   // Single writer: load + store is enough and cheaper than a locked read-modify-write.
   counts_[b].store(counts_[b].load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);
   total_.store(total_.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);
+  sum_ns_.store(sum_ns_.load(std::memory_order_relaxed) + static_cast<std::uint64_t>(l),
+                std::memory_order_relaxed);
   if (l > max_ns_.load(std::memory_order_relaxed)) {
     max_ns_.store(l, std::memory_order_relaxed);
   }
@@ -56,6 +58,34 @@ void LatencyHistogram::record(TimeNs latency_ns) noexcept {
 
 std::uint64_t LatencyHistogram::count() const noexcept {
   return total_.load(std::memory_order_relaxed);
+}
+
+double LatencyHistogram::sum_s() const noexcept {
+  return static_cast<double>(sum_ns_.load(std::memory_order_relaxed)) / 1e9;
+}
+
+bool LatencyHistogram::is_edge_us(std::uint64_t us) noexcept {
+  const std::size_t b = bucket_of(us);
+  return b == 0 ? us == 0 : upper_edge_us(b - 1) == us;
+}
+
+void LatencyHistogram::count_below_us(std::span<const std::uint64_t> edges_us,
+                                      std::span<std::uint64_t> out,
+                                      std::uint64_t& total) const noexcept {
+  std::size_t e = 0;
+  std::uint64_t seen = 0;
+  for (std::size_t b = 0; b < kBuckets; ++b) {
+    // Bucket b holds the samples from its lower edge up to, not including, upper_edge_us(b).
+    const std::uint64_t lower_us = b == 0 ? 0 : upper_edge_us(b - 1);
+    while (e < edges_us.size() && e < out.size() && edges_us[e] <= lower_us) {
+      out[e++] = seen;
+    }
+    seen += counts_[b].load(std::memory_order_relaxed);
+  }
+  for (; e < edges_us.size() && e < out.size(); ++e) {
+    out[e] = seen;
+  }
+  total = seen;
 }
 
 double LatencyHistogram::quantile_us(double q) const noexcept {
@@ -83,6 +113,7 @@ void LatencyHistogram::reset() noexcept {
   }
   total_.store(0, std::memory_order_relaxed);
   max_ns_.store(0, std::memory_order_relaxed);
+  sum_ns_.store(0, std::memory_order_relaxed);
 }
 
 }  // namespace nccomp::daemon

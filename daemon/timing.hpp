@@ -6,6 +6,7 @@
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
+#include <span>
 
 #include "core/common/types.hpp"
 #include "daemon/config/builtin_sections.hpp"
@@ -63,6 +64,14 @@ class LatencyHistogram {
   /// edge of the bucket holding the q-quantile); 0 if empty.
   [[nodiscard]] double quantile_us(double q) const noexcept;
   [[nodiscard]] std::uint64_t count() const noexcept;
+  /// Any thread: the sum of the recorded latencies [s] (a Prometheus histogram's _sum).
+  [[nodiscard]] double sum_s() const noexcept;
+  /// Any thread, one pass: out[i] = the samples below edges_us[i] (ascending bucket edges, see
+  /// is_edge_us: then the count is exact), `total` = all samples, so out[i] <= total.
+  void count_below_us(std::span<const std::uint64_t> edges_us, std::span<std::uint64_t> out,
+                      std::uint64_t& total) const noexcept;
+  /// True if `us` is the lower edge of a bucket: a sample is counted below it exactly.
+  [[nodiscard]] static bool is_edge_us(std::uint64_t us) noexcept;
   [[nodiscard]] std::int64_t max_ns() const noexcept {
     return max_ns_.load(std::memory_order_relaxed);
   }
@@ -77,6 +86,7 @@ class LatencyHistogram {
   std::array<std::atomic<std::uint64_t>, kBuckets> counts_{};
   std::atomic<std::uint64_t> total_{0};
   std::atomic<std::int64_t> max_ns_{0};
+  std::atomic<std::uint64_t> sum_ns_{0};
 };
 
 }  // namespace nccomp::daemon

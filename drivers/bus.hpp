@@ -41,10 +41,13 @@ struct BusCounters {
 
 /// One driver-specific counter for `nccomp status` (text, JSON, metrics): a fault kind, a
 /// per-reason reject, an exception code. `name` is a static snake_case string owned by the driver
-/// ("bus_off", "exception_illegal_address", "rx_overflow").
+/// ("bus_off", "exception_illegal_address", "rx_overflow"). A gauge (a value now, which may go
+/// down: offsets pending, the current back-off) says so, so the metrics do not export it as a
+/// counter; a gauge's unit is in its name (`_ms`).
 struct BusCounterValue {
   const char* name{""};
   std::uint64_t value{0};
+  bool gauge{false};
 };
 
 /// At most this many driver-specific counters are shown per bus.

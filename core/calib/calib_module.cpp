@@ -8,6 +8,8 @@
 #include <utility>
 #include <variant>
 
+#include "core/common/config_issue.hpp"
+
 namespace nccomp::core::calib {
 
 CalibrationModule::CalibrationModule(CalibrationConfig config, std::string name)
@@ -19,27 +21,27 @@ void CalibrationModule::attach(const engine::RegisterTable& registers) {
                                                         {"register_z", config_.register_z}};
   for (const auto& [key, index] : regs) {
     if (index >= registers.size()) {
-      throw std::invalid_argument("calibration." + std::string(key) + ": register " +
-                                  std::to_string(index) + " is not in the register table (" +
-                                  std::to_string(registers.size()) + " registers)");
+      throw ConfigInvalid("calibration." + std::string(key),
+                          "register " + std::to_string(index) + " is not in the register table (" +
+                              std::to_string(registers.size()) + " registers)");
     }
     if (registers[index].kind != engine::RegisterKind::kAxisOffset) {
-      throw std::invalid_argument("calibration." + std::string(key) + ": register " +
-                                  std::to_string(index) + " (\"" + registers[index].name +
-                                  "\") must be of kind axis_offset");
+      throw ConfigInvalid("calibration." + std::string(key), "register " + std::to_string(index) +
+                                                                 " (\"" + registers[index].name +
+                                                                 "\") must be of kind axis_offset");
     }
   }
   if (config_.request_register >= 0) {
     const auto index = static_cast<std::size_t>(config_.request_register);
     if (index >= registers.size()) {
-      throw std::invalid_argument("calibration.request_register: register " +
-                                  std::to_string(index) + " is not in the register table (" +
-                                  std::to_string(registers.size()) + " registers)");
+      throw ConfigInvalid("calibration.request_register",
+                          "register " + std::to_string(index) + " is not in the register table (" +
+                              std::to_string(registers.size()) + " registers)");
     }
     if (registers[index].kind != engine::RegisterKind::kFlag) {
-      throw std::invalid_argument("calibration.request_register: register " +
-                                  std::to_string(index) + " (\"" + registers[index].name +
-                                  "\") must be of kind flag");
+      throw ConfigInvalid("calibration.request_register", "register " + std::to_string(index) +
+                                                              " (\"" + registers[index].name +
+                                                              "\") must be of kind flag");
     }
   }
   calib_.configure(config_);

@@ -1,5 +1,5 @@
 // Calibration and recalibration (S3) as an engine module (core/engine/engine.hpp): the daemon
-// builds one from the `[calibration]` config section (tools/calibrate/config_toml.hpp reads it),
+// builds one from the `[calibration]` config section (formats/calib/config_toml.hpp reads it),
 // the engine steps it with the validated events, limits its absolute targets per register and
 // persists its state with the rest of the engine's.
 //
@@ -27,7 +27,7 @@ class CalibrationModule final : public engine::Module {
   [[nodiscard]] std::string_view name() const noexcept override { return name_; }
 
   /// Not real-time. Checks register_x/y/z against the table (they must exist and be of kind
-  /// axis_offset) and configures the calibrator. Throws std::invalid_argument naming the key.
+  /// axis_offset) and configures the calibrator. Throws core::ConfigInvalid naming the key.
   void attach(const engine::RegisterTable& registers) override;
 
   /// Real-time safe: runs the cycle's OperatorCommand events (in order), then

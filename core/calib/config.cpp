@@ -2,102 +2,107 @@
 
 #include <cmath>
 #include <sstream>
-#include <stdexcept>
+#include <string>
+
+#include "core/common/config_issue.hpp"
 
 namespace nccomp::core::calib {
 
 namespace {
 
-[[noreturn]] void fail(const char* key, const std::string& why, double value) {
-  std::ostringstream s;
-  s << "calibration." << key << ": " << why << ", got " << value;
-  throw std::invalid_argument(s.str());
-}
+// Each check adds an issue "calibration.<key>": why, got value.
+class Checker {
+ public:
+  void fail(const char* key, const std::string& why, double value) {
+    std::ostringstream s;
+    s << why << ", got " << value;
+    issues_.add(std::string("calibration.") + key, s.str());
+  }
+  void finite(double v, const char* key) {
+    if (!std::isfinite(v)) fail(key, "must be a finite number", v);
+  }
+  void positive(double v, const char* key) {
+    if (!std::isfinite(v) || v <= 0.0) fail(key, "must be a positive finite number", v);
+  }
+  void non_negative(double v, const char* key) {
+    if (!std::isfinite(v) || v < 0.0) fail(key, "must be a finite number >= 0", v);
+  }
+  void throw_if_any() { issues_.throw_if_any(); }
 
-void finite(double v, const char* key) {
-  if (!std::isfinite(v)) {
-    fail(key, "must be a finite number", v);
-  }
-}
-void positive(double v, const char* key) {
-  if (!std::isfinite(v) || v <= 0.0) {
-    fail(key, "must be a positive finite number", v);
-  }
-}
-void non_negative(double v, const char* key) {
-  if (!std::isfinite(v) || v < 0.0) {
-    fail(key, "must be a finite number >= 0", v);
-  }
-}
+ private:
+  ConfigIssues issues_;
+};
 
 }  // namespace
 
 void validate(const CalibrationConfig& c) {
+  Checker k;
   if (c.register_x == c.register_y || c.register_x == c.register_z ||
       c.register_y == c.register_z) {
-    fail("register_x", "register_x, register_y and register_z must differ", c.register_x);
+    k.fail("register_x", "register_x, register_y and register_z must differ", c.register_x);
   }
-  finite(c.reference_x_lateral_mm, "reference_x_lateral_mm");
-  finite(c.reference_x_axial_mm, "reference_x_axial_mm");
-  finite(c.reference_y_mm, "reference_y_mm");
-  finite(c.reference_z_mm, "reference_z_mm");
-  non_negative(c.reference_contact_mm, "reference_contact_mm");
-  non_negative(c.reference_axial_contact_mm, "reference_axial_contact_mm");
+  k.finite(c.reference_x_lateral_mm, "reference_x_lateral_mm");
+  k.finite(c.reference_x_axial_mm, "reference_x_axial_mm");
+  k.finite(c.reference_y_mm, "reference_y_mm");
+  k.finite(c.reference_z_mm, "reference_z_mm");
+  k.non_negative(c.reference_contact_mm, "reference_contact_mm");
+  k.non_negative(c.reference_axial_contact_mm, "reference_axial_contact_mm");
   if (c.touches_per_axis < 1 || c.touches_per_axis > 8) {
-    fail("touches_per_axis", "must be 1..8", c.touches_per_axis);
+    k.fail("touches_per_axis", "must be 1..8", c.touches_per_axis);
   }
-  positive(c.max_scatter_um, "max_scatter_um");
-  positive(c.touch_set_timeout_s, "touch_set_timeout_s");
-  positive(c.blank_radius_mm, "blank_radius_mm");
-  positive(c.facet_gain_um_per_um, "facet_gain_um_per_um");
-  positive(c.facet_tolerance_um, "facet_tolerance_um");
+  k.positive(c.max_scatter_um, "max_scatter_um");
+  k.positive(c.touch_set_timeout_s, "touch_set_timeout_s");
+  k.positive(c.blank_radius_mm, "blank_radius_mm");
+  k.positive(c.facet_gain_um_per_um, "facet_gain_um_per_um");
+  k.positive(c.facet_tolerance_um, "facet_tolerance_um");
   if (c.max_test_grinds < 1 || c.max_test_grinds > 50) {
-    fail("max_test_grinds", "must be 1..50", c.max_test_grinds);
+    k.fail("max_test_grinds", "must be 1..50", c.max_test_grinds);
   }
-  positive(c.plausibility_um, "plausibility_um");
-  non_negative(c.recalibration_interval_s, "recalibration_interval_s");
+  k.positive(c.plausibility_um, "plausibility_um");
+  k.non_negative(c.recalibration_interval_s, "recalibration_interval_s");
   if (c.creep_shape == ProfileShape::kTable) {
-    fail("creep_shape", "must be linear, cosine, smoothstep or step",
-         static_cast<double>(c.creep_shape));
+    k.fail("creep_shape", "must be linear, cosine, smoothstep or step",
+           static_cast<double>(c.creep_shape));
   }
   if (c.creep_shape != ProfileShape::kStep) {
-    positive(c.creep_duration_s, "creep_duration_s");
+    k.positive(c.creep_duration_s, "creep_duration_s");
   } else {
-    non_negative(c.creep_duration_s, "creep_duration_s");
+    k.non_negative(c.creep_duration_s, "creep_duration_s");
   }
-  positive(c.thermal_time_constant_s, "thermal_time_constant_s");
+  k.positive(c.thermal_time_constant_s, "thermal_time_constant_s");
   if (c.temperature_sensor < -1 || c.temperature_sensor > 255) {
-    fail("temperature_sensor", "must be -1 (none) or a sensor index 0..255", c.temperature_sensor);
-  }
-  if (c.prediction == Prediction::kTemperature && c.temperature_sensor < 0) {
-    fail("temperature_sensor", "prediction = \"temperature\" needs a mapped sensor",
-         c.temperature_sensor);
+    k.fail("temperature_sensor", "must be -1 (none) or a sensor index 0..255",
+           c.temperature_sensor);
+  } else if (c.prediction == Prediction::kTemperature && c.temperature_sensor < 0) {
+    k.fail("temperature_sensor", "prediction = \"temperature\" needs a mapped sensor",
+           c.temperature_sensor);
   }
   if (!std::isfinite(c.temperature_forgetting) || c.temperature_forgetting <= 0.0 ||
       c.temperature_forgetting > 1.0) {
-    fail("temperature_forgetting", "must be in (0, 1]", c.temperature_forgetting);
+    k.fail("temperature_forgetting", "must be in (0, 1]", c.temperature_forgetting);
   }
-  positive(c.max_temperature_slope_um_per_c, "max_temperature_slope_um_per_c");
-  positive(c.write_period_s, "write_period_s");
-  non_negative(c.write_deadband_um, "write_deadband_um");
-  positive(c.max_abs_um, "max_abs_um");
-  positive(c.max_step_um, "max_step_um");
-  positive(c.max_rate_um_per_s, "max_rate_um_per_s");
+  k.positive(c.max_temperature_slope_um_per_c, "max_temperature_slope_um_per_c");
+  k.positive(c.write_period_s, "write_period_s");
+  k.non_negative(c.write_deadband_um, "write_deadband_um");
+  k.positive(c.max_abs_um, "max_abs_um");
+  k.positive(c.max_step_um, "max_step_um");
+  k.positive(c.max_rate_um_per_s, "max_rate_um_per_s");
   if (c.touch_positions != TouchPositions::kMachine &&
       c.touch_positions != TouchPositions::kProgram) {
-    fail("touch_positions", "must be machine or program", static_cast<double>(c.touch_positions));
+    k.fail("touch_positions", "must be machine or program", static_cast<double>(c.touch_positions));
   }
   if (c.request_register < -1 || c.request_register > 65535) {
-    fail("request_register", "must be -1 (none) or a register index 0..65535", c.request_register);
-  }
-  if (c.request_register == c.register_x || c.request_register == c.register_y ||
-      c.request_register == c.register_z) {
-    fail("request_register", "must differ from register_x, register_y and register_z",
-         c.request_register);
+    k.fail("request_register", "must be -1 (none) or a register index 0..65535",
+           c.request_register);
+  } else if (c.request_register == c.register_x || c.request_register == c.register_y ||
+             c.request_register == c.register_z) {
+    k.fail("request_register", "must differ from register_x, register_y and register_z",
+           c.request_register);
   }
   if (c.plausibility_um > c.max_abs_um) {
-    fail("plausibility_um", "must not exceed max_abs_um", c.plausibility_um);
+    k.fail("plausibility_um", "must not exceed max_abs_um", c.plausibility_um);
   }
+  k.throw_if_any();
 }
 
 const char* to_string(FacetRule rule) noexcept {

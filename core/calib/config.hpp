@@ -1,7 +1,7 @@
 // Configuration of calibration and thermal recalibration (S3). CalibrationConfig maps 1:1 onto
 // the `[calibration]` TOML table documented in docs/calibration.md: one field per key, same
 // name, units in the names. validate() is the single place where a config is judged; it names
-// the offending key by its TOML path ("calibration.blank_radius_mm").
+// each offending key by its TOML path ("calibration.blank_radius_mm") in a core::ConfigIssue.
 #pragma once
 
 #include <cstdint>
@@ -128,7 +128,8 @@ struct CalibrationConfig {
   std::string state_file{};
 };
 
-/// Throws std::invalid_argument naming the offending key ("calibration.<key>") and its value.
+/// Throws core::ConfigInvalid (a std::invalid_argument) with every offending key
+/// ("calibration.<key>") and why, with its value.
 void validate(const CalibrationConfig& config);
 
 /// Name ↔ enum for the TOML strings (nullptr / false for an unknown name).

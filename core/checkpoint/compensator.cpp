@@ -8,13 +8,14 @@
 #include <utility>
 
 #include "core/checkpoint/probe.hpp"
+#include "core/common/config_issue.hpp"
 
 namespace nccomp::core::checkpoint {
 
 namespace {
 
 [[noreturn]] void fail(const std::string& key, const std::string& reason) {
-  throw std::invalid_argument("checkpoints." + key + ": " + reason);
+  throw ConfigInvalid("checkpoints." + key, reason);
 }
 
 std::string num(double v) {
@@ -23,11 +24,12 @@ std::string num(double v) {
   return s.str();
 }
 
-void require_range(double v, double lo, double hi, bool lo_open, const std::string& key) {
+void require_range(ConfigIssues& issues, double v, double lo, double hi, bool lo_open,
+                   const std::string& key) {
   const bool ok = std::isfinite(v) && (lo_open ? v > lo : v >= lo) && v <= hi;
   if (!ok) {
-    fail(key, std::string("must be in ") + (lo_open ? "(" : "[") + num(lo) + ", " + num(hi) +
-                  "], got " + num(v));
+    issues.add("checkpoints." + key, std::string("must be in ") + (lo_open ? "(" : "[") + num(lo) +
+                                         ", " + num(hi) + "], got " + num(v));
   }
 }
 
@@ -58,61 +60,67 @@ const char* trigger_mode_name(TriggerMode m) noexcept {
 
 void CheckpointCompensator::configure(const CompensatorConfig& c, std::vector<Checkpoint> plan,
                                       const LimiterConfig& limits) {
-  require_range(c.ewma_weight, 1.0, 1e6, false, "ewma_weight");
-  require_range(c.dead_band_um, 0.0, kHuge, false, "dead_band_um");
-  require_range(c.feedback, 0.0, 1.0, true, "feedback");
-  require_range(c.plausible_um, 0.0, kHuge, true, "plausible_um");
-  require_range(c.outlier_sigma, 0.0, kHuge, true, "outlier_sigma");
+  ConfigIssues issues;
+  require_range(issues, c.ewma_weight, 1.0, 1e6, false, "ewma_weight");
+  require_range(issues, c.dead_band_um, 0.0, kHuge, false, "dead_band_um");
+  require_range(issues, c.feedback, 0.0, 1.0, true, "feedback");
+  require_range(issues, c.plausible_um, 0.0, kHuge, true, "plausible_um");
+  require_range(issues, c.outlier_sigma, 0.0, kHuge, true, "outlier_sigma");
   if (c.outlier_min_history < 2 || c.outlier_min_history > kHistoryDepth) {
-    fail("outlier_min_history", "must be in [2, " + std::to_string(kHistoryDepth) + "], got " +
-                                    std::to_string(c.outlier_min_history));
+    issues.add("checkpoints.outlier_min_history", "must be in [2, " +
+                                                      std::to_string(kHistoryDepth) + "], got " +
+                                                      std::to_string(c.outlier_min_history));
   }
-  require_range(c.probe_repeatability_um, 0.0, kHuge, false, "probe_repeatability_um");
-  require_range(c.write_threshold_um, 0.0, kHuge, false, "write_threshold_um");
-  require_range(c.reconcile_tolerance_um, 0.0, kHuge, false, "reconcile_tolerance_um");
-  require_range(c.xy_tolerance_mm, 0.0, kHuge, true, "xy_tolerance_mm");
-  require_range(c.z_band_mm, 0.0, kHuge, true, "z_band_mm");
+  require_range(issues, c.probe_repeatability_um, 0.0, kHuge, false, "probe_repeatability_um");
+  require_range(issues, c.write_threshold_um, 0.0, kHuge, false, "write_threshold_um");
+  require_range(issues, c.reconcile_tolerance_um, 0.0, kHuge, false, "reconcile_tolerance_um");
+  require_range(issues, c.xy_tolerance_mm, 0.0, kHuge, true, "xy_tolerance_mm");
+  require_range(issues, c.z_band_mm, 0.0, kHuge, true, "z_band_mm");
   if (c.creep_shape == ProfileShape::kTable) {
-    fail("creep_shape",
-         "\"table\" is not available for checkpoints; use linear, cosine or "
-         "smoothstep");
+    issues.add("checkpoints.creep_shape",
+               "\"table\" is not available for checkpoints; use linear, cosine or "
+               "smoothstep");
   }
   if (plan.empty() || plan.size() > kMaxCheckpoints) {
-    fail("plan", "needs 1 to " + std::to_string(kMaxCheckpoints) + " checkpoints, got " +
-                     std::to_string(plan.size()));
+    issues.add("checkpoints.plan", "needs 1 to " + std::to_string(kMaxCheckpoints) +
+                                       " checkpoints, got " + std::to_string(plan.size()));
   }
-  const std::size_t last_register = c.register_base + plan.size() - 1;
+  const std::size_t last_register = c.register_base + std::max<std::size_t>(plan.size(), 1) - 1;
   if (last_register > 0xFFFF) {
-    fail("register_base", std::to_string(c.register_base) + " + " + std::to_string(plan.size()) +
-                              " checkpoints exceeds the register range 0..65535");
+    issues.add("checkpoints.register_base", std::to_string(c.register_base) + " + " +
+                                                std::to_string(plan.size()) +
+                                                " checkpoints exceeds the register range 0..65535");
   }
   if (c.active_register < -1 || c.active_register > 0xFFFF) {
-    fail("active_register",
-         "must be -1 (table only) or 0..65535, got " + std::to_string(c.active_register));
+    issues.add("checkpoints.active_register",
+               "must be -1 (table only) or 0..65535, got " + std::to_string(c.active_register));
   }
-  if (c.active_register >= c.register_base &&
+  if (!plan.empty() && c.active_register >= c.register_base &&
       static_cast<std::size_t>(c.active_register) <= last_register) {
-    fail("active_register",
-         std::to_string(c.active_register) + " lies inside the checkpoint table (registers " +
-             std::to_string(c.register_base) + ".." + std::to_string(last_register) + ")");
+    issues.add("checkpoints.active_register",
+               std::to_string(c.active_register) + " lies inside the checkpoint table (registers " +
+                   std::to_string(c.register_base) + ".." + std::to_string(last_register) + ")");
   }
   if (c.apply != ApplyMode::kStep && c.apply != ApplyMode::kCreep && c.apply != ApplyMode::kTable) {
-    fail("apply", "unknown apply mode");
+    issues.add("checkpoints.apply", "unknown apply mode");
   }
   // A live apply mode without a live register would do nothing at all, silently: the NC would
   // switch offset numbers at the checkpoints (a step) while the config says "creep".
   if (c.apply != ApplyMode::kTable && c.active_register < 0) {
-    fail("apply", std::string("\"") + apply_mode_name(c.apply) +
-                      "\" drives the live radius wear register, but active_register = -1 "
-                      "(table only: the NC program selects each checkpoint's offset itself, a "
-                      "step at every checkpoint, and nothing creeps); set active_register to "
-                      "the finishing tool's radius wear register, or apply = \"table\"");
+    issues.add("checkpoints.apply",
+               std::string("\"") + apply_mode_name(c.apply) +
+                   "\" drives the live radius wear register, but active_register = -1 "
+                   "(table only: the NC program selects each checkpoint's offset itself, a "
+                   "step at every checkpoint, and nothing creeps); set active_register to "
+                   "the finishing tool's radius wear register, or apply = \"table\"");
   }
   if (c.apply == ApplyMode::kTable && c.active_register >= 0) {
-    fail("apply", "\"table\" writes no live register, but active_register = " +
-                      std::to_string(c.active_register) +
-                      " is set; use apply = \"creep\" or \"step\", or active_register = -1");
+    issues.add("checkpoints.apply",
+               "\"table\" writes no live register, but active_register = " +
+                   std::to_string(c.active_register) +
+                   " is set; use apply = \"creep\" or \"step\", or active_register = -1");
   }
+  issues.throw_if_any();
   for (std::size_t i = 0; i < plan.size(); ++i) {
     const Checkpoint& p = plan[i];
     if (p.id != static_cast<std::int32_t>(i)) {

@@ -146,9 +146,9 @@ class CheckpointCompensator {
  public:
   CheckpointCompensator() = default;
 
-  /// Validates the config (throws std::invalid_argument naming the key, "checkpoints.<key>")
-  /// and allocates all state for the plan's checkpoints. Learned values start at zero. Not
-  /// real-time.
+  /// Validates the config (throws core::ConfigInvalid with every refused key,
+  /// "checkpoints.<key>") and allocates all state for the plan's checkpoints. Learned values start
+  /// at zero. Not real-time.
   void configure(const CompensatorConfig& config, std::vector<Checkpoint> plan,
                  const LimiterConfig& limits);
 

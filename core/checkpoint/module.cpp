@@ -7,6 +7,8 @@
 #include <type_traits>
 #include <utility>
 
+#include "core/common/config_issue.hpp"
+
 namespace nccomp::core::checkpoint {
 
 namespace {
@@ -43,23 +45,25 @@ void CheckpointModule::attach(const engine::RegisterTable& registers) {
   const std::size_t n = plan_.size();
   const std::size_t first = config_.register_base;
   if (n == 0 || first + n > registers.size()) {
-    throw std::invalid_argument("checkpoints: registers " + std::to_string(first) + ".." +
-                                std::to_string(first + n - 1) + " are needed for " +
-                                std::to_string(n) + " checkpoints, the register table has " +
-                                std::to_string(registers.size()));
+    throw ConfigInvalid("checkpoints.register_base", "registers " + std::to_string(first) + ".." +
+                                                         std::to_string(first + n - 1) +
+                                                         " are needed for " + std::to_string(n) +
+                                                         " checkpoints, the register table has " +
+                                                         std::to_string(registers.size()));
   }
   for (std::size_t i = first; i < first + n; ++i) {
     if (registers[i].kind != engine::RegisterKind::kCheckpoint) {
-      throw std::invalid_argument("checkpoints: register " + std::to_string(i) + " (\"" +
-                                  registers[i].name + "\") must be of kind checkpoint");
+      throw ConfigInvalid("checkpoints.register_base", "register " + std::to_string(i) + " (\"" +
+                                                           registers[i].name +
+                                                           "\") must be of kind checkpoint");
     }
   }
   LimiterConfig limits = registers[first].limits;
   if (config_.active_register >= 0) {
     const auto a = static_cast<std::size_t>(config_.active_register);
     if (a >= registers.size() || registers[a].kind != engine::RegisterKind::kToolRadiusWear) {
-      throw std::invalid_argument("checkpoints: active_register " + std::to_string(a) +
-                                  " must be a register of kind tool_radius_wear");
+      throw ConfigInvalid("checkpoints.active_register",
+                          "register " + std::to_string(a) + " must be of kind tool_radius_wear");
     }
     limits = registers[a].limits;
   }

@@ -27,6 +27,7 @@ class CheckpointModule final : public engine::Module {
   [[nodiscard]] std::string_view name() const noexcept override { return name_; }
   /// Checks that the table has the registers of the right kinds and configures the compensator
   /// with the limits of the register it writes live (or of the first checkpoint register).
+  /// Throws core::ConfigInvalid naming checkpoints.register_base / active_register.
   void attach(const engine::RegisterTable& registers) override;
   /// Real-time safe.
   void step(TimeNs now_ns, std::span<const Event> events, StepOutput& out) noexcept override;

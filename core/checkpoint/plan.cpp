@@ -11,6 +11,7 @@
 #include <string>
 
 #include "core/checkpoint/probe.hpp"
+#include "core/common/config_issue.hpp"
 
 namespace nccomp::core::checkpoint {
 
@@ -23,7 +24,7 @@ constexpr double kMergeDistanceMm = 1e-3;
 constexpr double kMaxCoordinateMm = 1e6;
 
 [[noreturn]] void fail(const std::string& key, const std::string& reason) {
-  throw std::invalid_argument("checkpoints." + key + ": " + reason);
+  throw ConfigInvalid("checkpoints." + key, reason);
 }
 
 std::string num(double v) {

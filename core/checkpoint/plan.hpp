@@ -150,8 +150,8 @@ struct Plan {
   double alpha_max_deg{0.0};
 };
 
-/// Validates the config and builds the plan. Throws std::invalid_argument naming the key
-/// (e.g. "checkpoints.depth_step_mm") and the offending value.
+/// Validates the config and builds the plan. Throws core::ConfigInvalid (a std::invalid_argument)
+/// naming the key (e.g. "checkpoints.depth_step_mm") and why, with the offending value.
 Plan make_plan(const PlanConfig& config);
 
 /// Parses a contour CSV: a header row starting with `x_mm,y_mm`, optionally followed by the

@@ -1,7 +1,7 @@
 // Configuration of the creeping wear correction (S0). The structs map 1:1 onto the `[creep]`
 // TOML table documented in docs/creep.md: one struct per sub-table, one field per key, units in
-// the names. validate() is the single place where a config is judged; it names the offending key
-// by its TOML path (e.g. "creep.edge.edge_points").
+// the names. validate() is the single place where a config is judged; it names each offending key
+// by its TOML path (e.g. "creep.edge.edge_points") in a core::ConfigIssue.
 #pragma once
 
 #include <array>
@@ -255,8 +255,8 @@ struct CreepConfig {
   std::vector<Transition> transitions;
 };
 
-/// Throws std::invalid_argument naming the key (TOML path) and the value when config is invalid.
-/// Not real-time.
+/// Throws core::ConfigInvalid (a std::invalid_argument) with every refused key (TOML path) and
+/// why. Not real-time.
 void validate(const CreepConfig& config);
 
 /// Engagement angle [deg] of support point i of n (0° = tool axis / tip, 90° = side).

@@ -10,6 +10,7 @@
 #include <string_view>
 #include <utility>
 
+#include "core/common/config_issue.hpp"
 #include "core/creep/state_v1.hpp"
 #include "core/creep/state_v2.hpp"
 
@@ -102,9 +103,8 @@ engine::RegisterKind kind_for(std::size_t channel) {
 
 void check_index(std::int32_t index, const char* key, const engine::RegisterTable& t) {
   if (index >= 0 && static_cast<std::size_t>(index) >= t.size()) {
-    throw std::invalid_argument(std::string(key) + ": register index " + std::to_string(index) +
-                                " does not exist (" + std::to_string(t.size()) +
-                                " [[registers]] configured)");
+    throw ConfigInvalid(key, "register index " + std::to_string(index) + " does not exist (" +
+                                 std::to_string(t.size()) + " [[registers]] configured)");
   }
 }
 
@@ -113,8 +113,7 @@ void resolve(const std::string& name, std::int32_t& index, const char* key,
   if (name.empty()) return;
   const int i = t.find(name);
   if (i < 0) {
-    throw std::invalid_argument(std::string(key) + ": no register named '" + name +
-                                "' in [[registers]]");
+    throw ConfigInvalid(key, "no register named '" + name + "' in [[registers]]");
   }
   index = i;
 }
@@ -146,9 +145,10 @@ void CreepModule::attach(const engine::RegisterTable& registers) {
     if (r < 0) continue;
     const auto& spec = registers[static_cast<std::size_t>(r)];
     if (spec.kind != kind_for(ch)) {
-      throw std::invalid_argument(std::string(kChannelKeys[ch]) + ": register '" + spec.name +
-                                  "' is of kind " + std::string(engine::to_string(spec.kind)) +
-                                  ", expected " + std::string(engine::to_string(kind_for(ch))));
+      throw ConfigInvalid(kChannelKeys[ch], "register '" + spec.name + "' is of kind " +
+                                                std::string(engine::to_string(spec.kind)) +
+                                                ", expected " +
+                                                std::string(engine::to_string(kind_for(ch))));
     }
     if (first) {
       c.limiter = spec.limits;
@@ -174,11 +174,11 @@ void CreepModule::attach(const engine::RegisterTable& registers) {
     if (index < 0) continue;
     const auto& spec = registers[static_cast<std::size_t>(index)];
     if (spec.kind != engine::RegisterKind::kFlag) {
-      throw std::invalid_argument(std::string(key) + ": register '" + spec.name + "' is of kind " +
-                                  std::string(engine::to_string(spec.kind)) + ", expected flag");
+      throw ConfigInvalid(key, "register '" + spec.name + "' is of kind " +
+                                   std::string(engine::to_string(spec.kind)) + ", expected flag");
     }
   }
-  comp_.configure(c);  // validates: std::invalid_argument naming the key
+  comp_.configure(c);  // validates: core::ConfigInvalid naming the keys
   ++generation_;
 }
 

@@ -46,7 +46,7 @@ class CreepModule final : public engine::Module {
   /// axis_offset, radius → tool_radius_wear, length → tool_length_wear); takes the most
   /// restrictive limits of the offset registers it drives as its own limiter (so a measurement
   /// the engine would reject is refused before it changes any state); validates and configures
-  /// the core. Throws std::invalid_argument naming the key.
+  /// the core. Throws core::ConfigInvalid naming the key.
   void attach(const engine::RegisterTable& registers) override;
 
   /// Real-time safe.

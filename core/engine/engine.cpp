@@ -698,14 +698,22 @@ bool Engine::release_register(std::size_t i, TimeNs now_ns) noexcept {
     // limiter slews toward later targets.
     const double goal_um = (r.has_target ? r.target_um : 0.0) + r.trim_um;
     const double bound = r.limiter.config().max_abs_um;
+    r.resend_as_is = false;
     if ((r.has_target || r.has_trim) && r.limiter.admissible(goal_um)) {
       r.limiter.reset(goal_um, now_ns);
     } else {
-      r.limiter.reset(std::clamp(r.limiter.output_um(), -bound, bound), now_ns);
+      const double at_bound = std::clamp(r.limiter.output_um(), -bound, bound);
+      r.limiter.reset(at_bound, now_ns);
+      // The NC still holds the value beyond the limit, and the goal may equal what was last
+      // sent (a restored target beyond a narrowed limit): the bound is written once all the same.
+      r.sent_um = at_bound;
+      r.sent = true;
+      r.resend_as_is = true;
     }
+  } else {
+    // Without state the limiter starts from what the NC holds (anchored): it slews as usual.
+    r.resend_as_is = false;
   }
-  // Without state the limiter starts from what the NC holds (anchored): it slews as usual.
-  r.resend_as_is = false;
   hold_register(i, RegisterHold::kNone, AlarmCode::kNone, 0.0);
   ++register_generation_;
   return true;

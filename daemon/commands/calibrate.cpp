@@ -12,13 +12,13 @@
 #include "client/protocol.hpp"
 #include "core/calib/state.hpp"
 #include "daemon/sections/calibration/daemon_link.hpp"
-#include "tools/calibrate/render.hpp"
-#include "tools/calibrate/script.hpp"
+#include "formats/calib/render.hpp"
+#include "formats/calib/script.hpp"
 
 namespace nccomp::daemon::commands {
 
 namespace cal = core::calib;
-namespace tc = tools::calibrate;
+namespace tc = formats::calib;
 
 namespace {
 
@@ -183,7 +183,7 @@ std::string handle_calibrate_command(std::string_view args, CommandContext& ctx)
 }
 
 CommandAccess calibrate_access(std::string_view args) noexcept {
-  // Words are case-insensitive in the script language (tools/calibrate/script.cpp).
+  // Words are case-insensitive in the script language (formats/calib/script.cpp).
   const auto is_status = [](std::string_view a) {
     constexpr std::string_view kStatus = "status";
     if (a.size() != kStatus.size()) return false;

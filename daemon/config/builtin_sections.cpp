@@ -10,12 +10,17 @@
 
 namespace nccomp::daemon::config {
 
+using formats::Diagnostics;
+using formats::TableReader;
+using formats::Where;
+using formats::where_of;
+
 namespace {
 
 const toml::table* as_table(const toml::node& node, std::string_view name, Diagnostics& diag) {
   const auto* t = node.as_table();
   if (t == nullptr) {
-    diag.error(&node, std::string(name), "expected a table ([" + std::string(name) + "])");
+    diag.error(&node, std::string(name), "must be a table ([" + std::string(name) + "])");
   }
   return t;
 }
@@ -181,7 +186,7 @@ class StatusParser final : public SectionParser {
       s->admin_group = r.string("admin_group", "nccomp-admin");
       if (!valid_group_name(s->admin_group)) {
         diag.error(r.where("admin_group"),
-                   "expected a group name: a letter or '_', then letters, digits, '_', '-' or "
+                   "must be a group name: a letter or '_', then letters, digits, '_', '-' or "
                    "'.', at most 32 characters");
       }
       s->client_timeout_s = r.number("client_timeout_s", 2.0, 0.1, 60.0);
@@ -199,7 +204,7 @@ class RegistersParser final : public SectionParser {
     auto s = std::make_unique<RegistersSection>();
     const auto* arr = node.as_array();
     if (arr == nullptr || !arr->is_array_of_tables()) {
-      diag.error(&node, "registers", "expected an array of tables ([[registers]])");
+      diag.error(&node, "registers", "must be an array of tables ([[registers]])");
       return s;
     }
     std::set<std::string> names;
@@ -263,7 +268,7 @@ class RampParser final : public SectionParser {
     auto s = std::make_unique<RampSection>();
     const auto* arr = node.as_array();
     if (arr == nullptr || !arr->is_array_of_tables()) {
-      diag.error(&node, "ramp", "expected an array of tables ([[ramp]])");
+      diag.error(&node, "ramp", "must be an array of tables ([[ramp]])");
       return s;
     }
     std::set<std::string> names;

@@ -81,7 +81,7 @@ struct RegisterEntry {
   core::engine::RegisterSpec spec;
   /// Name of the bus section that takes this register's writes.
   std::string bus;
-  Where where;
+  formats::Where where;
 };
 
 struct RegistersSection final : Section {
@@ -90,7 +90,7 @@ struct RegistersSection final : Section {
 
 struct RampEntry {
   core::engine::RampConfig config;
-  Where where;
+  formats::Where where;
 };
 
 struct RampSection final : Section {
@@ -117,6 +117,6 @@ std::unique_ptr<core::engine::Engine> build_engine(const Config& c);
 /// The same, for `nccomp check-config` and nccompd: an engine refusal (e.g. two modules writing
 /// one register) is reported to diag at the file, line and key it concerns (the key of the module
 /// section that names the register, and where the other one is), and nullptr is returned.
-std::unique_ptr<core::engine::Engine> build_engine(const Config& c, Diagnostics& diag);
+std::unique_ptr<core::engine::Engine> build_engine(const Config& c, formats::Diagnostics& diag);
 
 }  // namespace nccomp::daemon::config

@@ -16,95 +16,18 @@
 
 #include <toml++/toml.h>
 
-#include <cstdint>
 #include <map>
 #include <memory>
-#include <optional>
-#include <set>
 #include <string>
 #include <string_view>
 #include <vector>
 
 #include "core/engine/engine.hpp"
 #include "drivers/bus.hpp"
+#include "formats/toml/diagnostics.hpp"
+#include "formats/toml/table_reader.hpp"
 
 namespace nccomp::daemon::config {
-
-/// A position in a config file, kept by sections for errors found after parsing.
-struct Where {
-  std::string file;
-  int line{0};
-  int column{0};
-  std::string key_path;
-};
-
-struct Diagnostic {
-  Where where;
-  std::string message;
-};
-
-/// "file:line:column: key.path: message" (the compilers' format, so editors jump to it).
-[[nodiscard]] std::string format(const Diagnostic& d);
-
-/// Collects errors; parsing continues after an error so the operator sees all of them at once.
-class Diagnostics {
- public:
-  void error(Where where, std::string message);
-  /// An error at node's source position.
-  void error(const toml::node* node, std::string key_path, std::string message);
-  [[nodiscard]] bool ok() const noexcept { return items_.empty(); }
-  [[nodiscard]] const std::vector<Diagnostic>& items() const noexcept { return items_; }
-  /// All errors, one per line.
-  [[nodiscard]] std::string to_string() const;
-
- private:
-  std::vector<Diagnostic> items_;
-};
-
-[[nodiscard]] Where where_of(const toml::node* node, std::string key_path);
-
-/// Reads one TOML table with typed, range-checked accessors and reports unknown keys.
-/// Every accessor marks its key as known; finish() reports the keys nobody asked for.
-class TableReader {
- public:
-  TableReader(const toml::table& table, std::string key_path, Diagnostics& diag);
-  TableReader(const TableReader&) = delete;
-  TableReader& operator=(const TableReader&) = delete;
-  ~TableReader();
-
-  /// A finite number (integer or float) in [min, max]; def if absent (nullopt def = required).
-  double number(std::string_view key, std::optional<double> def, double min, double max);
-  std::int64_t integer(std::string_view key, std::optional<std::int64_t> def, std::int64_t min,
-                       std::int64_t max);
-  bool boolean(std::string_view key, std::optional<bool> def);
-  std::string string(std::string_view key, std::optional<std::string> def);
-  /// One of `choices`; reports the allowed ones otherwise.
-  std::string choice(std::string_view key, std::optional<std::string> def,
-                     const std::vector<std::string>& choices);
-  /// Integers in [min, max]; empty if absent.
-  std::vector<std::int64_t> integer_list(std::string_view key, std::int64_t min, std::int64_t max);
-  /// Finite numbers (integers or floats) in [min, max]; empty if absent.
-  std::vector<double> number_list(std::string_view key, double min, double max);
-  /// A sub-table (nullptr if absent; an error if present and not a table).
-  const toml::table* table(std::string_view key);
-  /// An array of tables (nullptr if absent; an error if present with any non-table element).
-  const toml::array* table_array(std::string_view key);
-
-  [[nodiscard]] std::string path(std::string_view key) const;
-  [[nodiscard]] Where where(std::string_view key) const;
-  [[nodiscard]] const toml::table& node() const noexcept { return table_; }
-  [[nodiscard]] Diagnostics& diagnostics() noexcept { return diag_; }
-  /// Reports unknown keys (also done by the destructor if not called).
-  void finish();
-
- private:
-  const toml::node* get(std::string_view key);
-  const toml::table& table_;
-  std::string path_;
-  Diagnostics& diag_;
-  std::set<std::string, std::less<>> known_;
-  bool finished_{false};
-};
 
 /// Parsed content of one section. Section parsers derive their own type from it.
 class Section {
@@ -122,11 +45,12 @@ class SectionParser {
   [[nodiscard]] virtual std::string_view name() const noexcept = 0;
   /// Parses the section's node (a table, or an array of tables for [[name]] sections). Report
   /// problems to diag (with where_of()/TableReader) and return what could be parsed.
-  virtual std::unique_ptr<Section> parse(const toml::node& node, Diagnostics& diag) const = 0;
+  virtual std::unique_ptr<Section> parse(const toml::node& node,
+                                         formats::Diagnostics& diag) const = 0;
   /// The section's value when the file does not have it; nullptr = the section stays absent.
   [[nodiscard]] virtual std::unique_ptr<Section> absent() const { return nullptr; }
   /// After every section is parsed: checks references to other sections.
-  virtual void cross_check(const Config& config, Diagnostics& diag) const {
+  virtual void cross_check(const Config& config, formats::Diagnostics& diag) const {
     (void)config;
     (void)diag;
   }
@@ -171,7 +95,7 @@ class Config {
 
   /// Where a key is, and its value as text when it is a string or an integer ("" otherwise).
   struct KeyInfo {
-    Where where;
+    formats::Where where;
     std::string value;
   };
   /// Every key of every section ("creep.output.z_register", "registers[8].name", tables
@@ -198,7 +122,7 @@ class Config {
 
 struct LoadResult {
   std::unique_ptr<Config> config;  // null if there were errors
-  Diagnostics diagnostics;
+  formats::Diagnostics diagnostics;
 };
 
 /// Loads path and its includes, parses every section, cross-checks. Never throws for bad input.

@@ -24,6 +24,7 @@
 #include <cstring>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <variant>
 
 namespace nccomp::drivers::can {
@@ -276,6 +277,8 @@ void CanBus::publish(std::int64_t now_ns) noexcept {
   status_.store(st_);
 }
 
+static_assert(std::string_view(kCanCounterNames.back()) == "reconnect_backoff_ms");
+
 std::size_t CanBus::extra_counters(std::span<BusCounterValue> out) const {
   const CanCounters c = status_.load().can;
   const std::array<std::uint64_t, kCanCounterNames.size()> values{
@@ -294,7 +297,8 @@ std::size_t CanBus::extra_counters(std::span<BusCounterValue> out) const {
       c.reconnect_backoffs,    c.reconnect_backoff_ms};
   const std::size_t n = std::min(out.size(), values.size());
   for (std::size_t i = 0; i < n; ++i) {
-    out[i] = BusCounterValue{kCanCounterNames[i], values[i]};
+    // The last one, reconnect_backoff_ms, is the back-off now: a gauge.
+    out[i] = BusCounterValue{kCanCounterNames[i], values[i], i + 1 == values.size()};
   }
   return n;
 }

@@ -8,7 +8,7 @@
 #include <limits>
 #include <sstream>
 
-#include "formats/toml_guard.hpp"
+#include "formats/toml/guard.hpp"
 
 namespace nccomp::drivers::can {
 namespace {

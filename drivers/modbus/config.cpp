@@ -9,7 +9,7 @@
 
 #include <toml++/toml.h>
 
-#include "formats/toml_guard.hpp"
+#include "formats/toml/guard.hpp"
 
 namespace nccomp::drivers::modbus {
 namespace {

@@ -94,7 +94,7 @@ std::size_t modbus_counters(const ModbusStatus& st, std::span<BusCounterValue> o
   };
   const std::size_t n = std::min(out.size(), values.size());
   for (std::size_t i = 0; i < n; ++i) {
-    out[i] = BusCounterValue{kModbusCounterNames[i], values[i]};
+    out[i] = BusCounterValue{kModbusCounterNames[i], values[i], i >= kModbusFirstGauge};
   }
   return n;
 }

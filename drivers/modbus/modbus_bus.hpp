@@ -42,6 +42,7 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <string_view>
 #include <thread>
 #include <vector>
 
@@ -159,6 +160,10 @@ inline constexpr auto kModbusCounterNames = std::to_array<const char*>({
     "io_sched_errno",          // errno of a refused io_sched_fifo_priority (1 = EPERM), else 0
     "io_affinity_errno",       // errno of a refused io_cpu_affinity (22 = EINVAL), else 0
 });
+
+/// kModbusCounterNames from this index on are gauges, not counts.
+inline constexpr std::size_t kModbusFirstGauge = kModbusCounterNames.size() - 5;
+static_assert(std::string_view(kModbusCounterNames[kModbusFirstGauge]) == "offsets_pending");
 
 /// Fills `out` with the counters of `st` in kModbusCounterNames order; returns how many.
 std::size_t modbus_counters(const ModbusStatus& st, std::span<BusCounterValue> out) noexcept;

@@ -6,8 +6,8 @@
 //                                    second and print what was decoded, the counters, and the
 //                                    values the NC's offset registers hold now
 //
-// Exit codes: 0 ok, 1 config refused (the message names file, line and key path), 2 usage,
-// 3 --read could not reach the NC.
+// Exit codes: 0 ok, 1 --read could not reach the NC (or decoded no axis sample), 2 usage,
+// 3 config refused (the message names file, line and key path).
 #include <modbus/modbus.h>
 
 #include <chrono>
@@ -19,6 +19,7 @@
 
 #include "drivers/modbus/config.hpp"
 #include "drivers/modbus/modbus_bus.hpp"
+#include "nccomp_version.hpp"
 
 namespace mb = nccomp::drivers::modbus;
 
@@ -160,7 +161,7 @@ int read_once(const mb::ModbusConfig& c) {
   if (samples == 0) {
     std::printf("no axis sample decoded (errno %d: %s)\n", st.last_errno,
                 modbus_strerror(st.last_errno));
-    return 3;
+    return 1;
   }
   std::printf("last sample:");
   static const char* const kAxes[] = {"x", "y", "z", "a", "b", "c"};
@@ -182,7 +183,7 @@ int read_once(const mb::ModbusConfig& c) {
     if (ctx != nullptr) {
       modbus_free(ctx);
     }
-    return 3;
+    return 1;
   }
   modbus_set_slave(ctx, c.unit_id);
   std::printf("offset registers on the NC now:\n");
@@ -205,8 +206,26 @@ int read_once(const mb::ModbusConfig& c) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc < 2 || argc > 3 || (argc == 3 && std::string(argv[2]) != "--read")) {
-    std::fprintf(stderr, "usage: modbus_map CONFIG.toml [--read]\n");
+  constexpr const char* kUsage =
+      "usage: modbus_map CONFIG.toml [--read]\n"
+      "       modbus_map --help | --version\n";
+  if (argc == 2 && (std::string(argv[1]) == "--help" || std::string(argv[1]) == "-h")) {
+    std::printf(
+        "modbus_map — the commissioning view of a [modbus] register map\n%s\n"
+        "  CONFIG.toml   a file with the [modbus] table (or including it)\n"
+        "  --read        also connect with the real driver, poll for one second and print what\n"
+        "                was decoded and what the NC's offset registers hold\n"
+        "Exit status: 0 ok, 1 --read could not reach the NC, 2 usage, 3 the map is invalid.\n",
+        kUsage);
+    return 0;
+  }
+  if (argc == 2 && std::string(argv[1]) == "--version") {
+    std::printf("modbus_map %s\n", nccomp::kVersion);
+    return 0;
+  }
+  if (argc < 2 || argc > 3 || (argc == 3 && std::string(argv[2]) != "--read") ||
+      argv[1][0] == '-') {
+    std::fprintf(stderr, "%s", kUsage);
     return 2;
   }
   mb::ModbusConfig c;
@@ -214,7 +233,7 @@ int main(int argc, char** argv) {
     c = mb::load_modbus_config(argv[1]);
   } catch (const mb::ConfigError& e) {
     std::fprintf(stderr, "modbus_map: %s\n", e.what());
-    return 1;
+    return 3;
   }
   print_plan(c);
   return argc == 3 ? read_once(c) : 0;

@@ -13,16 +13,35 @@
 #include <pthread.h>
 #include <signal.h>
 
+#include "nccomp_version.hpp"
 #include "sim/modbus_nc/nc_server.hpp"
 
 namespace {
 
+constexpr const char* kUsage =
+    "usage: modbus_nc [--bind ADDR] [--port N] [--unit N] [--set TABLE:ADDRESS=VALUE ...]\n"
+    "       modbus_nc --rtu DEVICE [--baud N] [--unit N] [--set TABLE:ADDRESS=VALUE ...]\n"
+    "       modbus_nc --help | --version\n";
+
 [[noreturn]] void usage(const std::string& why) {
-  std::fprintf(stderr,
-               "modbus_nc: %s\nusage: modbus_nc [--bind ADDR] [--port N] [--rtu DEVICE] "
-               "[--baud N] [--unit N] [--set TABLE:ADDRESS=VALUE ...]\n",
-               why.c_str());
+  std::fprintf(stderr, "modbus_nc: %s\n%s", why.c_str(), kUsage);
   std::exit(2);
+}
+
+void help() {
+  std::printf(
+      "modbus_nc — the NC side of Modbus as a stand-alone server (commissioning, demos, tests)\n"
+      "%s\n"
+      "  --bind ADDR            TCP address to listen on (default 127.0.0.1)\n"
+      "  --port N               TCP port (default 1502; 0 = any free port, printed)\n"
+      "  --rtu DEVICE           serve Modbus RTU on a serial device instead of TCP\n"
+      "  --baud N               RTU baud rate (default 115200)\n"
+      "  --unit N               unit (slave) id, 1..247 (default 1)\n"
+      "  --set TABLE:ADDR=VALUE preset a value; TABLE is coil, discrete_input, holding or input\n"
+      "  -h, --help             this help; --version the version\n"
+      "Serves until SIGINT or SIGTERM. Exit status: 0 stopped by a signal, 1 the server could "
+      "not start, 2 usage.\n",
+      kUsage);
 }
 
 long number(const std::string& s, long lo, long hi, const std::string& what) {
@@ -51,6 +70,14 @@ int main(int argc, char** argv) {
   std::vector<Set> sets;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
+    if (a == "--help" || a == "-h") {
+      help();
+      return 0;
+    }
+    if (a == "--version") {
+      std::printf("modbus_nc %s\n", nccomp::kVersion);
+      return 0;
+    }
     if (i + 1 >= argc) {
       usage("missing value after " + a);
     }

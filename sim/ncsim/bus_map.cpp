@@ -2,7 +2,7 @@
 
 #include <string_view>
 
-#include "formats/toml_guard.hpp"
+#include "formats/toml/guard.hpp"
 #include "sim/ncsim/config.hpp"
 
 namespace nccomp::sim::ncsim {

@@ -10,8 +10,8 @@
 #include <set>
 #include <sstream>
 
-#include "formats/toml_guard.hpp"
-#include "tools/plan/checkpoints_toml.hpp"
+#include "formats/checkpoints/checkpoints_toml.hpp"
+#include "formats/toml/guard.hpp"
 
 namespace nccomp::sim::ncsim {
 namespace {
@@ -662,7 +662,7 @@ SimConfig parse_sim_config(std::string_view text, const std::string& file,
       if (!w.checkpoints_file.empty() && wants(ProgramKind::kSideWall)) {
         const std::string path = resolve(base_dir, w.checkpoints_file);
         try {
-          w.plan = tools::checkpoints::load_checkpoints_file(path, std::nullopt).plan;
+          w.plan = formats::checkpoints::load_checkpoints_file(path, std::nullopt).plan;
         } catch (const std::exception& e) {
           throw ConfigError(where(file, root.source()) +
                             ": program.side_wall.checkpoints_file: " + e.what());

@@ -15,20 +15,48 @@
 #include <string>
 #include <vector>
 
+#include "nccomp_version.hpp"
 #include "sim/ncsim/config.hpp"
 #include "sim/ncsim/result.hpp"
 #include "sim/ncsim/run.hpp"
 
 namespace {
 
+constexpr const char* kUsage =
+    "usage: ncsim --config FILE --program mould_face|side_wall|roll|touch --bus modbus|can "
+    "--out DIR [--speed FACTOR | --lockstep SOCKET] [--parts N] [--seed N] "
+    "[--set effect.key=value ...] [--wait-client SECONDS] [--continue DIR] "
+    "[--lockstep-outage N,AFTER_S,DOWN_S]\n"
+    "       ncsim --help | --version\n";
+
 [[noreturn]] void usage(const std::string& why) {
-  std::fprintf(stderr,
-               "ncsim: %s\nusage: ncsim --config FILE --program mould_face|side_wall|roll|touch "
-               "--bus modbus|can --out DIR [--speed FACTOR | --lockstep SOCKET] [--parts N] "
-               "[--seed N] [--set effect.key=value ...] [--wait-client SECONDS] [--continue DIR] "
-               "[--lockstep-outage N,AFTER_S,DOWN_S]\n",
-               why.c_str());
+  std::fprintf(stderr, "ncsim: %s\n%s", why.c_str(), kUsage);
   std::exit(2);
+}
+
+void help() {
+  std::printf(
+      "ncsim — the virtual NC: machines a part, models the machine and serves the NC side of "
+      "Modbus or CAN\n%s\n"
+      "  --config FILE           ncsim's configuration (TOML; e.g. "
+      "/usr/share/nccomp-sim/config/ncsim.toml)\n"
+      "  --program NAME          mould_face, side_wall, roll or touch\n"
+      "  --bus modbus|can        the bus the daemon talks to (default modbus)\n"
+      "  --out DIR               result directory (surface, writes, summary)\n"
+      "  --speed FACTOR          real time x FACTOR (default 1)\n"
+      "  --lockstep SOCKET       clock master on a Unix socket: nccompd --lockstep SOCKET\n"
+      "  --parts N, --seed N     shorthands for --set ncsim.parts=N, --set ncsim.seed=N\n"
+      "  --set KEY=VALUE         override a config key, e.g. --set wear.rate_um_per_m=2\n"
+      "  --wait-client SECONDS   speed mode: wait this long for the daemon's first poll "
+      "(default 10)\n"
+      "  --continue DIR          start where the run whose result is in DIR ended\n"
+      "  --lockstep-outage N,AFTER_S,DOWN_S\n"
+      "                          lock-step, Modbus: AFTER_S after the N-th measure request, "
+      "wait for the daemon to go away, machine DOWN_S without it, wait for it to come back\n"
+      "  -h, --help              this help; --version the version\n"
+      "Exit status: 0 done, 1 run-time error, 2 usage, 3 config error, 4 the daemon ended a "
+      "lock-step run early.\n",
+      kUsage);
 }
 
 }  // namespace
@@ -44,7 +72,12 @@ int main(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--help" || a == "-h") {
-      usage("help");
+      help();
+      return 0;
+    }
+    if (a == "--version") {
+      std::printf("ncsim %s\n", nccomp::kVersion);
+      return 0;
     }
     if (i + 1 >= argc) {
       usage("missing value after " + a);

@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "drivers/modbus/config.hpp"
+#include "nccomp_version.hpp"
 #include "sim/ncsim/lockstep.hpp"
 
 int main(int argc, char** argv) {
@@ -24,19 +25,51 @@ int main(int argc, char** argv) {
   std::string map_path;
   std::string sock;
   int port = -1;
-  for (int i = 1; i + 1 < argc; i += 2) {
+  constexpr const char* kUsage =
+      "usage: ncsim_peer --map FILE [--port N] --lockstep SOCKET\n"
+      "       ncsim_peer --help | --version\n";
+  const auto usage = [&](const std::string& why) {
+    std::fprintf(stderr, "ncsim_peer: %s\n%s", why.c_str(), kUsage);
+    return 2;
+  };
+  for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
+    if (a == "--help" || a == "-h") {
+      std::printf(
+          "ncsim_peer — a minimal lock-step peer of ncsim: one Modbus poll per TICK, then DONE\n"
+          "%s\n"
+          "  --map FILE         the [modbus] map ncsim serves (e.g. reference-nc-modbus.toml)\n"
+          "  --port N           the NC's Modbus TCP port on 127.0.0.1 (default: the map's)\n"
+          "  --lockstep SOCKET  ncsim's lock-step socket (ncsim --lockstep SOCKET)\n"
+          "Exit status: 0 the run ended (BYE), 1 no connection, 2 usage, 3 the map is invalid.\n",
+          kUsage);
+      return 0;
+    }
+    if (a == "--version") {
+      std::printf("ncsim_peer %s\n", nccomp::kVersion);
+      return 0;
+    }
+    if (i + 1 >= argc) {
+      return usage("missing value after " + a);
+    }
+    const std::string v = argv[++i];
     if (a == "--map") {
-      map_path = argv[i + 1];
+      map_path = v;
     } else if (a == "--port") {
-      port = std::atoi(argv[i + 1]);
+      char* end = nullptr;
+      const long p = std::strtol(v.c_str(), &end, 10);
+      if (v.empty() || *end != '\0' || p < 1 || p > 65535) {
+        return usage("--port wants 1..65535, got '" + v + "'");
+      }
+      port = static_cast<int>(p);
     } else if (a == "--lockstep") {
-      sock = argv[i + 1];
+      sock = v;
+    } else {
+      return usage("unknown option " + a);
     }
   }
   if (map_path.empty() || sock.empty()) {
-    std::fprintf(stderr, "usage: ncsim_peer --map FILE [--port N] --lockstep SOCKET\n");
-    return 2;
+    return usage("--map and --lockstep are required");
   }
   drivers::modbus::ModbusConfig map;
   try {

@@ -8,7 +8,7 @@
 #include <sstream>
 #include <stdexcept>
 
-#include "formats/toml_guard.hpp"
+#include "formats/toml/guard.hpp"
 #include "sim/ncsim/config.hpp"
 
 namespace nccomp::sim::ncsim {

@@ -8,7 +8,7 @@
 #include <sstream>
 #include <utility>
 
-#include "formats/toml_guard.hpp"
+#include "formats/toml/guard.hpp"
 
 namespace nccomp::tools::model_io {
 

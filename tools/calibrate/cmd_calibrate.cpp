@@ -22,9 +22,9 @@
 
 #include "client/protocol.hpp"
 #include "client/status_client.hpp"
-#include "tools/calibrate/config_toml.hpp"
-#include "tools/calibrate/facet_import.hpp"
-#include "tools/calibrate/script.hpp"
+#include "formats/calib/config_toml.hpp"
+#include "formats/calib/facet_import.hpp"
+#include "formats/calib/script.hpp"
 #include "tools/calibrate/session.hpp"
 #include "tools/nccomp/command.hpp"
 
@@ -33,6 +33,7 @@ namespace {
 using nccomp::tools::CommandError;
 using nccomp::tools::kExitFailure;
 using nccomp::tools::kExitInvalidInput;
+using nccomp::tools::kExitUsage;
 namespace cal = nccomp::tools::calibrate;
 namespace client = nccomp::client;
 
@@ -241,7 +242,7 @@ void run_daemon(const Options& o) {
 void run(const Options& o) {
   if (!o.daemon.empty()) {
     if (!o.state.empty() || o.epoch_s >= 0.0) {
-      throw CommandError(kExitInvalidInput,
+      throw CommandError(kExitUsage,
                          "--state and --epoch are offline options: the daemon keeps its own state "
                          "(adopt an offline state with [calibration] state_file)");
     }
@@ -249,11 +250,11 @@ void run(const Options& o) {
     return;
   }
   if (o.config.empty()) {
-    throw CommandError(kExitInvalidInput, "--config FILE or --daemon SOCKET is required");
+    throw CommandError(kExitUsage, "--config FILE or --daemon SOCKET is required");
   }
   nccomp::core::calib::CalibrationConfig config;
   try {
-    config = cal::load_calibration_config_file(o.config);
+    config = nccomp::formats::calib::load_calibration_config_file(o.config);
   } catch (const std::invalid_argument& e) {
     throw CommandError(kExitInvalidInput, e.what());
   }

@@ -7,8 +7,8 @@
 
 #include "core/calib/snapshot.hpp"
 #include "core/calib/state.hpp"
-#include "tools/calibrate/facet_import.hpp"
-#include "tools/calibrate/render.hpp"
+#include "formats/calib/facet_import.hpp"
+#include "formats/calib/render.hpp"
 
 namespace nccomp::tools::calibrate {
 

@@ -11,9 +11,13 @@
 #include "core/calib/calibrator.hpp"
 #include "core/calib/snapshot.hpp"
 #include "core/common/output.hpp"
-#include "tools/calibrate/script.hpp"
+#include "formats/calib/script.hpp"
 
 namespace nccomp::tools::calibrate {
+
+// The command language, its errors and the operator text are formats (formats/calib), shared with
+// the daemon's calibrate verb.
+using namespace formats::calib;
 
 class Session {
  public:

@@ -9,7 +9,8 @@
 #include <stdexcept>
 
 #include "daemon/config/builtin_sections.hpp"
-#include "formats/toml_guard.hpp"
+#include "formats/toml/guard.hpp"
+#include "formats/toml/table_reader.hpp"
 
 namespace nccomp::tools::mqtt {
 
@@ -84,12 +85,12 @@ std::string read_password_file(const std::string& path) {
   return line;
 }
 
-std::optional<PublishConfig> load_publish_config(const std::string& path, cfg::Diagnostics& diag) {
+std::optional<PublishConfig> load_publish_config(const std::string& path, nccomp::formats::Diagnostics& diag) {
   toml::table root;
   try {
     root = formats::parse_toml_file(path);
   } catch (const toml::parse_error& e) {
-    cfg::Where w;
+    nccomp::formats::Where w;
     w.file = path;
     w.line = static_cast<int>(e.source().begin.line);
     w.column = static_cast<int>(e.source().begin.column);
@@ -114,13 +115,13 @@ std::optional<PublishConfig> load_publish_config(const std::string& path, cfg::D
   bool missing = false;
   for (const char* required : {"publish", "broker"}) {
     if (root.get(required) == nullptr) {
-      diag.error(cfg::Where{path, 1, 1, required}, "required section is missing");
+      diag.error(nccomp::formats::Where{path, 1, 1, required}, "required section is missing");
       missing = true;
     }
   }
   if (missing) return std::nullopt;
   {
-    cfg::TableReader r(section("publish"), "publish", diag);
+    nccomp::formats::TableReader r(section("publish"), "publish", diag);
     c.site = r.string("site", std::nullopt);
     c.machine = r.string("machine", std::nullopt);
     for (const char* key : {"site", "machine"}) {
@@ -135,7 +136,7 @@ std::optional<PublishConfig> load_publish_config(const std::string& path, cfg::D
     r.finish();
   }
   {
-    cfg::TableReader r(section("source"), "source", diag);
+    nccomp::formats::TableReader r(section("source"), "source", diag);
     c.log_directory = resolve(base, r.string("log_directory", c.log_directory));
     c.log_poll_s = r.number("poll_s", 0.2, 0.01, 60.0);
     c.status_socket = resolve(base, r.string("status_socket", c.status_socket));
@@ -143,7 +144,7 @@ std::optional<PublishConfig> load_publish_config(const std::string& path, cfg::D
     r.finish();
   }
   {
-    cfg::TableReader r(section("broker"), "broker", diag);
+    nccomp::formats::TableReader r(section("broker"), "broker", diag);
     BrokerOptions& b = c.broker;
     b.uri = r.string("uri", std::nullopt);
     b.client_id = r.string("client_id", "");
@@ -166,7 +167,7 @@ std::optional<PublishConfig> load_publish_config(const std::string& path, cfg::D
     if (b.client_id.empty()) b.client_id = "nccomp-publish-" + c.site + "-" + c.machine;
   }
   {
-    cfg::TableReader r(section("queue"), "queue", diag);
+    nccomp::formats::TableReader r(section("queue"), "queue", diag);
     c.queue_directory = resolve(base, r.string("directory", c.queue_directory));
     c.max_messages = r.integer("max_messages", 3'600'000, 16, std::int64_t{1} << 40);
     c.queue_fsync_interval_s = r.number("fsync_interval_s", 1.0, 0.0, 3600.0);

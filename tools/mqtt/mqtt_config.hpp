@@ -9,6 +9,7 @@
 #include <string_view>
 
 #include "daemon/config/config.hpp"
+#include "formats/toml/diagnostics.hpp"
 
 namespace nccomp::tools::mqtt {
 
@@ -51,7 +52,7 @@ struct PublishConfig {
 
 /// Reads and validates the file; nullopt with every error in diag.
 [[nodiscard]] std::optional<PublishConfig> load_publish_config(const std::string& path,
-                                                               daemon::config::Diagnostics& diag);
+                                                               nccomp::formats::Diagnostics& diag);
 
 /// Checks broker options that do not depend on a file position (the command line of `nccomp
 /// collect`): an error message, or "" if they are fine.

@@ -27,7 +27,7 @@ void setup(CLI::App& app) {
   sub->add_flag("--check", *check, "Validate the configuration and the password file, then exit");
   sub->callback([config, check] {
     namespace mq = nccomp::tools::mqtt;
-    nccomp::daemon::config::Diagnostics diag;
+    nccomp::formats::Diagnostics diag;
     auto c = mq::load_publish_config(*config, diag);
     if (!c) {
       std::cerr << diag.to_string();

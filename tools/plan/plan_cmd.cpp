@@ -6,14 +6,15 @@
 #include <string>
 
 #include "core/checkpoint/plan.hpp"
+#include "formats/checkpoints/checkpoints_toml.hpp"
 #include "tools/nccomp/command.hpp"
-#include "tools/plan/checkpoints_toml.hpp"
 #include "tools/plan/plan_output.hpp"
 
 namespace {
 
 using nccomp::tools::CommandError;
 namespace ck = nccomp::tools::checkpoints;
+namespace fc = nccomp::formats::checkpoints;
 
 struct PlanOptions {
   std::string config;
@@ -40,9 +41,9 @@ void write_file(const std::string& path, const std::string& what,
 void run(const PlanOptions& o) {
   ck::CheckpointsConfig cfg;
   try {
-    cfg = ck::load_checkpoints_file(
+    cfg = fc::load_checkpoints_file(
         o.config, o.contour.empty() ? std::nullopt : std::optional<std::string>(o.contour));
-  } catch (const ck::ConfigError& e) {
+  } catch (const nccomp::formats::DiagnosticsError& e) {
     throw CommandError(nccomp::tools::kExitInvalidInput,
                        std::string("invalid config\n") + e.what());
   }

@@ -4,9 +4,12 @@
 #include <ostream>
 
 #include "core/checkpoint/plan.hpp"
-#include "tools/plan/checkpoints_toml.hpp"
+#include "formats/checkpoints/checkpoints_toml.hpp"
 
 namespace nccomp::tools::checkpoints {
+
+using formats::checkpoints::CheckpointsConfig;
+using formats::checkpoints::GcodeConfig;
 
 /// One row per checkpoint in machining order (header first).
 void write_plan_csv(std::ostream& os, const core::checkpoint::Plan& plan,

@@ -6,44 +6,23 @@
 #include <vector>
 
 #include "core/calib/calib_module.hpp"
+#include "core/common/config_issue.hpp"
 #include "daemon/config/builtin_sections.hpp"
 #include "daemon/sections/calibration/daemon_link.hpp"
-#include "tools/calibrate/config_toml.hpp"
+#include "formats/calib/config_toml.hpp"
 
 namespace nccomp::daemon::sections {
 
-namespace {
-
-/// A loader / core message at the key it names, without the "<file>:<line>: " the loader puts in
-/// front (the diagnostic carries the position itself).
-void report(const CalibrationSection& s, const std::string& file, std::string message,
-            config::Diagnostics& diag) {
-  if (!file.empty() && message.rfind(file, 0) == 0) {
-    const auto cut = message.find(": ", file.size());
-    if (cut != std::string::npos) message.erase(0, cut + 2);
-  }
-  report_at_key(s.key_positions, s.where, std::move(message), "calibration.", diag);
-}
-
-}  // namespace
-
 std::unique_ptr<CalibrationSection> parse_calibration_section(const toml::node& node,
-                                                              config::Diagnostics& diag) {
+                                                              formats::Diagnostics& diag) {
   auto s = std::make_unique<CalibrationSection>();
-  s->where = config::where_of(&node, "calibration");
+  s->where = formats::where_of(&node, "calibration");
   if (node.as_table() == nullptr) {
-    diag.error(&node, "calibration", "expected a table ([calibration])");
+    diag.error(&node, "calibration", "must be a table ([calibration])");
     return s;
   }
-  record_positions(node, "calibration", s->key_positions);
-  const auto& src = node.source();
-  const std::string file = src.path ? *src.path : std::string();
-  try {
-    s->config = tools::calibrate::load_calibration_node(node, file);
-  } catch (const std::invalid_argument& e) {
-    // The loader stops at the first problem.
-    report(*s, file, e.what(), diag);
-  }
+  formats::record_positions(node, "calibration", s->key_positions);
+  s->config = formats::calib::parse_calibration(node, diag);
   return s;
 }
 
@@ -57,10 +36,10 @@ class CalibrationParser final : public config::SectionParser {
  public:
   std::string_view name() const noexcept override { return "calibration"; }
   std::unique_ptr<config::Section> parse(const toml::node& node,
-                                         config::Diagnostics& diag) const override {
+                                         formats::Diagnostics& diag) const override {
     return parse_calibration_section(node, diag);
   }
-  void cross_check(const config::Config& config, config::Diagnostics& diag) const override {
+  void cross_check(const config::Config& config, formats::Diagnostics& diag) const override {
     const auto* s = calibration_section(config);
     if (s == nullptr) return;
     std::vector<core::engine::RegisterSpec> specs;
@@ -70,8 +49,10 @@ class CalibrationParser final : public config::SectionParser {
     try {
       auto m = std::make_unique<core::calib::CalibrationModule>(s->config);
       m->attach(core::engine::RegisterTable(specs));
+    } catch (const core::ConfigInvalid& e) {
+      formats::report(s->key_positions, s->where, e, diag);
     } catch (const std::invalid_argument& e) {
-      report(*s, "", e.what(), diag);
+      diag.error(s->where, e.what());  // not a key's fault
     }
   }
   void add_modules(const config::Config& config,

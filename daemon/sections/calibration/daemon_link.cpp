@@ -10,12 +10,12 @@
 
 #include "core/calib/state.hpp"
 #include "core/rt/seqlock.hpp"
-#include "tools/calibrate/render.hpp"
+#include "formats/calib/render.hpp"
 
 namespace nccomp::daemon::sections {
 
 namespace cal = core::calib;
-namespace tc = tools::calibrate;
+namespace tc = formats::calib;
 
 namespace {
 

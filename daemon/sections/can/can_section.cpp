@@ -12,6 +12,10 @@
 #include "drivers/can/can_config.hpp"
 
 namespace nccomp::daemon::config {
+
+using formats::Diagnostics;
+using formats::Where;
+using formats::where_of;
 namespace {
 
 namespace cn = drivers::can;
@@ -28,7 +32,7 @@ class CanParser final : public SectionParser {
   std::unique_ptr<Section> parse(const toml::node& node, Diagnostics& diag) const override {
     const auto* t = node.as_table();
     if (t == nullptr) {
-      diag.error(&node, "can", "expected a table ([can])");
+      diag.error(&node, "can", "must be a table ([can])");
       return nullptr;
     }
     const Where table_where = where_of(t, "can");

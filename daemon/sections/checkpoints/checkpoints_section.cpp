@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "core/checkpoint/plan.hpp"
+#include "core/common/config_issue.hpp"
 #include "daemon/config/builtin_sections.hpp"
 
 namespace nccomp::daemon::sections {
@@ -14,47 +15,30 @@ namespace nccomp::daemon::sections {
 namespace {
 
 namespace fs = std::filesystem;
-namespace ck = tools::checkpoints;
-
-/// The key a CheckpointModule::attach() message is about (its messages name no key path).
-config::Where attach_error_position(const CheckpointsSection& s, std::string_view message) {
-  const std::string key = message.find("active_register") != std::string_view::npos
-                              ? "checkpoints.active_register"
-                              : "checkpoints.register_base";
-  if (auto it = s.key_positions.find(key); it != s.key_positions.end()) {
-    return it->second;
-  }
-  return s.where;  // the key is absent: its default is what did not fit
-}
+namespace ck = formats::checkpoints;
 
 }  // namespace
 
 std::unique_ptr<CheckpointsSection> parse_checkpoints_section(const toml::node& node,
-                                                              config::Diagnostics& diag) {
+                                                              formats::Diagnostics& diag) {
   auto s = std::make_unique<CheckpointsSection>();
-  s->where = config::where_of(&node, "checkpoints");
+  s->where = formats::where_of(&node, "checkpoints");
   const auto* table = node.as_table();
   if (table == nullptr) {
-    diag.error(&node, "checkpoints", "expected a table ([checkpoints])");
+    diag.error(&node, "checkpoints", "must be a table ([checkpoints])");
     return s;
   }
-  record_positions(node, "checkpoints", s->key_positions);
+  formats::record_positions(node, "checkpoints", s->key_positions);
   const auto& src = node.source();
   const std::string file = src.path ? *src.path : std::string();
   const fs::path base_dir = fs::path(file).parent_path();
-  std::vector<ck::ConfigIssue> issues;
-  s->config = ck::parse_checkpoints(*table, file, base_dir, issues);
-  for (auto& i : issues) {
-    config::Where w;
-    w.file = i.file.empty() ? file : i.file;
-    w.line = i.line;
-    w.column = i.column;
-    w.key_path = i.key_path;
-    diag.error(std::move(w), std::move(i.message));
-  }
-  if (issues.empty()) {
+  const std::size_t errors_before = diag.items().size();
+  s->config = ck::parse_checkpoints(*table, file, base_dir, diag);
+  if (diag.items().size() == errors_before) {
     try {
       s->checkpoint_count = core::checkpoint::make_plan(s->config.plan).checkpoints.size();
+    } catch (const core::ConfigInvalid& e) {
+      formats::report(s->key_positions, s->where, e, diag);
     } catch (const std::exception& e) {
       diag.error(s->where, e.what());
     }
@@ -72,10 +56,10 @@ class CheckpointsParser final : public config::SectionParser {
  public:
   std::string_view name() const noexcept override { return "checkpoints"; }
   std::unique_ptr<config::Section> parse(const toml::node& node,
-                                         config::Diagnostics& diag) const override {
+                                         formats::Diagnostics& diag) const override {
     return parse_checkpoints_section(node, diag);
   }
-  void cross_check(const config::Config& config, config::Diagnostics& diag) const override {
+  void cross_check(const config::Config& config, formats::Diagnostics& diag) const override {
     const auto* s = checkpoints_section(config);
     if (s == nullptr) return;
     std::vector<core::engine::RegisterSpec> specs;
@@ -85,8 +69,10 @@ class CheckpointsParser final : public config::SectionParser {
     try {
       auto m = ck::make_checkpoint_module(s->config);
       m->attach(core::engine::RegisterTable(specs));
+    } catch (const core::ConfigInvalid& e) {
+      formats::report(s->key_positions, s->where, e, diag);
     } catch (const std::exception& e) {
-      diag.error(attach_error_position(*s, e.what()), e.what());
+      diag.error(s->where, e.what());  // not a key's fault
     }
   }
   void add_modules(const config::Config& config,

@@ -11,7 +11,6 @@
 
 #include "core/creep/toolpath.hpp"
 #include "daemon/config/builtin_sections.hpp"
-#include "daemon/sections/common/key_positions.hpp"
 
 namespace nccomp::daemon::sections {
 
@@ -19,9 +18,9 @@ namespace {
 
 namespace fs = std::filesystem;
 namespace cc = core::creep;
-using config::Diagnostics;
-using config::TableReader;
-using config::Where;
+using formats::Diagnostics;
+using formats::TableReader;
+using formats::Where;
 
 // Largest accepted toolpath file: kMaxToolpathRows rows of a generous 64 bytes each. A bigger
 // file is refused before it is read (and /dev/zero or a FIFO is not a regular file).
@@ -246,7 +245,7 @@ void parse_deflection(const toml::array& arr, cc::CreepConfig& c, Diagnostics& d
     d.lateral_um = r.number_list("lateral_um", -1e6, 1e6);
     for (const char* k : {"wear_um", "normal_um", "lateral_um"}) {
       if (r.node().get(k) == nullptr) {
-        diag.error(r.where(k), "required key is missing");
+        diag.error(r.where(k), "missing required key");
       }
     }
     c.deflection.push_back(std::move(d));
@@ -270,19 +269,15 @@ void parse_transitions(const toml::array& arr, cc::CreepConfig& c, Diagnostics& 
 
 }  // namespace
 
-Where locate_creep_key(const CreepSection& section, std::string_view message) {
-  return locate_key(section.key_positions, section.where, message, "creep.");
-}
-
 std::unique_ptr<CreepSection> parse_creep_section(const toml::node& node, Diagnostics& diag) {
   auto s = std::make_unique<CreepSection>();
-  s->where = config::where_of(&node, "creep");
+  s->where = formats::where_of(&node, "creep");
   const auto* table = node.as_table();
   if (table == nullptr) {
-    diag.error(&node, "creep", "expected a table ([creep])");
+    diag.error(&node, "creep", "must be a table ([creep])");
     return s;
   }
-  record_positions(node, "creep", s->key_positions);
+  formats::record_positions(node, "creep", s->key_positions);
   const std::size_t errors_before = diag.items().size();
   auto& c = s->module.creep;
   {
@@ -363,8 +358,8 @@ std::unique_ptr<CreepSection> parse_creep_section(const toml::node& node, Diagno
   }
   try {
     cc::validate(probe);
-  } catch (const std::invalid_argument& e) {
-    report_at_key(s->key_positions, s->where, e.what(), "creep.", diag);
+  } catch (const core::ConfigInvalid& e) {
+    formats::report(s->key_positions, s->where, e, diag);
   }
   return s;
 }
@@ -388,14 +383,16 @@ class CreepParser final : public config::SectionParser {
     for (const auto& e : config::registers_section(config).registers) {
       specs.push_back(e.spec);
     }
-    // The module's own attach() is the one judge of names, kinds and limits; its message names
-    // the key, mapped back to the key's position in the file.
+    // The module's own attach() is the one judge of names, kinds and limits; each issue names
+    // its key, mapped to the key's position in the file.
     // (On the heap: the module holds the memory of 8 tools, ~100 kB.)
     auto m = std::make_unique<cc::CreepModule>(s->module);
     try {
       m->attach(core::engine::RegisterTable(specs));
+    } catch (const core::ConfigInvalid& e) {
+      formats::report(s->key_positions, s->where, e, diag);
     } catch (const std::invalid_argument& e) {
-      report_at_key(s->key_positions, s->where, e.what(), "creep.", diag);
+      diag.error(s->where, e.what());  // not a key's fault (e.g. the limiter's own refusal)
     }
   }
   void add_modules(const config::Config& config,

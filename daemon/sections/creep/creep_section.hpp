@@ -8,8 +8,8 @@
 //   predictive creeping    a creeping profile and [creep.predict] enabled = true
 //
 // Errors name file:line:column and the key path; values are range-checked here, cross-field
-// rules by core::creep::validate() (its message is mapped back to the key's position), register
-// names and kinds against [[registers]] in cross_check(). Not real-time.
+// rules by core::creep::validate() (each issue's key mapped to its position), register names and
+// kinds against [[registers]] in cross_check(). Not real-time.
 #pragma once
 
 #include <memory>
@@ -17,7 +17,7 @@
 
 #include "core/creep/creep_module.hpp"
 #include "daemon/config/config.hpp"
-#include "daemon/sections/common/key_positions.hpp"
+#include "formats/toml/key_positions.hpp"
 
 namespace nccomp::daemon::sections {
 
@@ -29,18 +29,14 @@ struct CreepSection final : config::Section {
   std::string toolpath_file;
   /// Position of the [creep] table and of every key below it ("creep.edge.edge_points",
   /// "creep.deflection[0].wear_um[2]"), for errors found after parsing.
-  config::Where where;
-  KeyPositions key_positions;
+  formats::Where where;
+  formats::KeyPositions key_positions;
 };
 
 /// Parses one `[creep]` node. creep.edge.toolpath_file is relative to the directory of the file
 /// that holds the table. Problems go to diag; the result is meaningful only if none was added.
 std::unique_ptr<CreepSection> parse_creep_section(const toml::node& node,
-                                                  config::Diagnostics& diag);
-
-/// The position of the key a core error message names ("creep config: creep.edge.edge_points
-/// must be ..." → the position of creep.edge.edge_points, or of its nearest parent present).
-config::Where locate_creep_key(const CreepSection& section, std::string_view message);
+                                                  formats::Diagnostics& diag);
 
 /// The [creep] section of a loaded config (nullptr if absent).
 const CreepSection* creep_section(const config::Config& config);

@@ -25,6 +25,10 @@
 #include "drivers/modbus/modbus_bus.hpp"
 
 namespace nccomp::daemon::config {
+
+using formats::Diagnostics;
+using formats::Where;
+using formats::where_of;
 namespace {
 
 namespace mb = drivers::modbus;
@@ -60,7 +64,7 @@ class ModbusParser final : public SectionParser {
   std::unique_ptr<Section> parse(const toml::node& node, Diagnostics& diag) const override {
     const auto* t = node.as_table();
     if (t == nullptr) {
-      diag.error(&node, "modbus", "expected a table ([modbus])");
+      diag.error(&node, "modbus", "must be a table ([modbus])");
       return nullptr;
     }
     const Where table_where = where_of(t, "modbus");

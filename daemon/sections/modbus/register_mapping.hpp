@@ -20,14 +20,15 @@ namespace nccomp::daemon::config {
 /// One offset mapping of a bus section: the logical register it writes, and where it is.
 struct MappedRegister {
   std::uint32_t register_index{0};
-  Where where;
+  formats::Where where;
 };
 
 /// Reports both directions of a register / mapping mismatch for bus `bus`. `map_key` names the
 /// mapping entries in messages (e.g. "[[modbus.offset]] register_index").
 inline void check_register_mapping(const Config& config, std::string_view bus,
                                    std::string_view map_key,
-                                   const std::vector<MappedRegister>& mapped, Diagnostics& diag) {
+                                   const std::vector<MappedRegister>& mapped,
+                                   formats::Diagnostics& diag) {
   const auto& regs = registers_section(config).registers;
   std::map<std::uint32_t, const MappedRegister*> by_index;
   for (const MappedRegister& m : mapped) {
@@ -35,7 +36,7 @@ inline void check_register_mapping(const Config& config, std::string_view bus,
   }
   for (std::size_t i = 0; i < regs.size(); ++i) {
     if (regs[i].bus == bus && by_index.find(static_cast<std::uint32_t>(i)) == by_index.end()) {
-      Where w = regs[i].where;
+      formats::Where w = regs[i].where;
       w.key_path += ".bus";
       diag.error(std::move(w), "register '" + regs[i].spec.name + "' (index " + std::to_string(i) +
                                    ") goes to bus '" + std::string(bus) + "', but no " +

@@ -13,15 +13,15 @@ class MeasurementContextParser final : public config::SectionParser {
  public:
   std::string_view name() const noexcept override { return "measurement_context"; }
   std::unique_ptr<config::Section> parse(const toml::node& node,
-                                         config::Diagnostics& diag) const override {
+                                         formats::Diagnostics& diag) const override {
     auto s = std::make_unique<MeasurementContextSection>();
-    s->where = config::where_of(&node, "measurement_context");
+    s->where = formats::where_of(&node, "measurement_context");
     const auto* table = node.as_table();
     if (table == nullptr) {
-      diag.error(&node, "measurement_context", "expected a table ([measurement_context])");
+      diag.error(&node, "measurement_context", "must be a table ([measurement_context])");
       return s;
     }
-    config::TableReader r(*table, "measurement_context", diag);
+    formats::TableReader r(*table, "measurement_context", diag);
     s->options.temperature_sensor = static_cast<int>(r.integer("temperature_sensor", 0, -1, 255));
     s->options.warm_start_idle_s = r.number("warm_start_idle_s", 7200.0, 60.0, 7.0 * 86400.0);
     s->where = r.where("temperature_sensor");
@@ -44,9 +44,9 @@ core::engine::ContextOptions measurement_context_options(const config::Config& c
   return s != nullptr ? s->options : core::engine::ContextOptions{};
 }
 
-config::Where measurement_context_where(const config::Config& config) {
+formats::Where measurement_context_where(const config::Config& config) {
   const auto* s = config.find<MeasurementContextSection>("measurement_context");
-  return s != nullptr ? s->where : config::Where{};
+  return s != nullptr ? s->where : formats::Where{};
 }
 
 std::size_t MeasurementContextModule::status(

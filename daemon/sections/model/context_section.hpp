@@ -16,13 +16,13 @@ namespace nccomp::daemon::sections {
 
 struct MeasurementContextSection final : config::Section {
   core::engine::ContextOptions options;
-  config::Where where;
+  formats::Where where;
 };
 
 /// The options in force for a config: its [measurement_context] section, or the defaults.
 core::engine::ContextOptions measurement_context_options(const config::Config& config);
 /// Where the temperature sensor is set (for errors that refer to it); empty if defaulted.
-config::Where measurement_context_where(const config::Config& config);
+formats::Where measurement_context_where(const config::Config& config);
 
 /// The module that hands the options to the engine and reports the context's status:
 /// machine_time_s, idle_s, warm_starts, cold (1/0), tool, cut_path_mm, temp_c.

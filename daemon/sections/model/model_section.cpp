@@ -16,7 +16,7 @@ namespace {
 
 namespace fs = std::filesystem;
 namespace cm = core::model;
-using config::TableReader;
+using formats::TableReader;
 
 /// Why a term cannot be evaluated in the loop as configured, or "" when it can. The loop knows
 /// time_s, part, tool, temp_c, x/y/z and path_mm (the engine's machine context), kind / point /
@@ -78,12 +78,12 @@ std::string loop_context_problem(const cm::TermSpec& spec, bool each_cycle, cons
 }  // namespace
 
 std::unique_ptr<ModelSection> parse_model_section(const toml::node& node,
-                                                  config::Diagnostics& diag) {
+                                                  formats::Diagnostics& diag) {
   auto s = std::make_unique<ModelSection>();
-  s->where = config::where_of(&node, "model");
+  s->where = formats::where_of(&node, "model");
   const auto* table = node.as_table();
   if (table == nullptr) {
-    diag.error(&node, "model", "expected a table ([model])");
+    diag.error(&node, "model", "must be a table ([model])");
     return s;
   }
   TableReader r(*table, "model", diag);
@@ -115,7 +115,7 @@ std::unique_ptr<ModelSection> parse_model_section(const toml::node& node,
     const std::string path = "model.inputs[" + std::to_string(i) + "]";
     TableReader q(*t, path, diag);
     ModelInputConfig in;
-    in.where = config::where_of(ins->get(i), path);
+    in.where = formats::where_of(ins->get(i), path);
     in.column = q.string("column", std::nullopt);
     in.input.sensor = static_cast<int>(q.integer("sensor", std::nullopt, 0, 255));
     q.finish();
@@ -154,7 +154,7 @@ std::unique_ptr<ModelSection> parse_model_section(const toml::node& node,
     const std::string path = "model.apply[" + std::to_string(i) + "]";
     TableReader q(*t, path, diag);
     ModelApplyConfig a;
-    a.where = config::where_of(arr->get(i), path);
+    a.where = formats::where_of(arr->get(i), path);
     a.term = q.string("term", std::nullopt);
     a.register_name = q.string("register", std::nullopt);
     a.apply.gain = q.number("gain", -1.0, -1e3, 1e3);
@@ -259,10 +259,10 @@ class ModelParser final : public config::SectionParser {
  public:
   std::string_view name() const noexcept override { return "model"; }
   std::unique_ptr<config::Section> parse(const toml::node& node,
-                                         config::Diagnostics& diag) const override {
+                                         formats::Diagnostics& diag) const override {
     return parse_model_section(node, diag);
   }
-  void cross_check(const config::Config& config, config::Diagnostics& diag) const override {
+  void cross_check(const config::Config& config, formats::Diagnostics& diag) const override {
     const auto* s = model_section(config);
     if (s == nullptr) return;
     // temp_c is one column: the log records it from the measurement context's sensor, and the

@@ -17,13 +17,13 @@ struct ModelApplyConfig {
   std::string term;
   std::string register_name;
   core::model::ModelApply apply;  // register_index resolved in cross_check() / add_modules()
-  config::Where where;
+  formats::Where where;
 };
 
 struct ModelInputConfig {
   std::string column;
   core::model::ModelInput input;  // column resolved against the model's extra columns
-  config::Where where;
+  formats::Where where;
 };
 
 struct ModelSection final : config::Section {
@@ -36,15 +36,15 @@ struct ModelSection final : config::Section {
   /// fitted on.
   int temperature_sensor{-1};
   bool has_temperature_sensor{false};
-  config::Where temperature_where;
+  formats::Where temperature_where;
   std::vector<ModelApplyConfig> applies;
   std::vector<ModelInputConfig> inputs;
-  config::Where where;
+  formats::Where where;
 };
 
 /// Parses one `[model]` node; `file` is relative to the file holding the table.
 std::unique_ptr<ModelSection> parse_model_section(const toml::node& node,
-                                                  config::Diagnostics& diag);
+                                                  formats::Diagnostics& diag);
 
 /// The [model] section of a loaded config (nullptr if absent).
 const ModelSection* model_section(const config::Config& config);

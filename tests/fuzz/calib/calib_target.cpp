@@ -9,8 +9,8 @@
 
 #include "core/calib/calibrator.hpp"
 #include "core/calib/state.hpp"
-#include "tools/calibrate/config_toml.hpp"
-#include "tools/calibrate/script.hpp"
+#include "formats/calib/config_toml.hpp"
+#include "formats/calib/script.hpp"
 #include "tools/calibrate/session.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
@@ -64,7 +64,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     }
     default: {
       try {
-        (void)cal::load_calibration_config_text(text, "fuzz.toml");
+        (void)nccomp::formats::calib::load_calibration_config_text(text, "fuzz.toml");
       } catch (const std::invalid_argument&) {
       }
       break;

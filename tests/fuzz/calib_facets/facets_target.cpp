@@ -12,10 +12,10 @@
 
 #include "core/calib/calibrator.hpp"
 #include "core/calib/state.hpp"
-#include "tools/calibrate/facet_import.hpp"
+#include "formats/calib/facet_import.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
-  namespace cal = nccomp::tools::calibrate;
+  namespace cal = nccomp::formats::calib;
   namespace cc = nccomp::core::calib;
   const std::string_view text(reinterpret_cast<const char*>(data), size);
   std::vector<cal::FacetMeasurement> rows;

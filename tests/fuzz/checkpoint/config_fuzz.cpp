@@ -7,12 +7,13 @@
 #include <string_view>
 #include <vector>
 
-#include "formats/toml_guard.hpp"
-#include "tools/plan/checkpoints_toml.hpp"
+#include "formats/checkpoints/checkpoints_toml.hpp"
+#include "formats/toml/guard.hpp"
 #include "tools/plan/plan_output.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   namespace ck = nccomp::tools::checkpoints;
+  namespace fc = nccomp::formats::checkpoints;
   const std::string_view text(reinterpret_cast<const char*>(data), size);
   toml::table root;
   try {
@@ -22,11 +23,11 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   }
   const toml::table* t = root["checkpoints"].as_table();
   if (t == nullptr) return 0;
-  std::vector<ck::ConfigIssue> issues;
+  nccomp::formats::Diagnostics diag;
   // A base directory without files: contour_csv can only fail cleanly.
-  const ck::CheckpointsConfig c = ck::parse_checkpoints(*t, "fuzz.toml", "/nonexistent", issues);
-  if (!issues.empty()) {
-    for (const auto& i : issues) (void)ck::format_issue(i);
+  const fc::CheckpointsConfig c = fc::parse_checkpoints(*t, "fuzz.toml", "/nonexistent", diag);
+  if (!diag.ok()) {
+    (void)diag.to_string();
     return 0;
   }
   const auto plan = nccomp::core::checkpoint::make_plan(c.plan);  // validated: must not throw

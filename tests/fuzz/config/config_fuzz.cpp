@@ -22,7 +22,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     }
   } else {
     for (const auto& d : r.diagnostics.items()) {
-      (void)cfg::format(d);
+      (void)nccomp::formats::format(d);
     }
   }
   return 0;

@@ -60,17 +60,17 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   write(dir() / "inc.toml", inc_part);
   auto r = cfg::load_file((dir() / "main.toml").string());
   if (r.config) {
-    cfg::Diagnostics diag;
+    nccomp::formats::Diagnostics diag;
     auto engine = cfg::build_engine(*r.config, diag);
     if (engine) {
       (void)engine->register_count();
     }
     for (const auto& d : diag.items()) {
-      (void)cfg::format(d);
+      (void)nccomp::formats::format(d);
     }
   } else {
     for (const auto& d : r.diagnostics.items()) {
-      (void)cfg::format(d);
+      (void)nccomp::formats::format(d);
     }
   }
   return 0;

@@ -12,7 +12,7 @@
 #include "core/creep/creep_module.hpp"
 #include "core/engine/engine.hpp"
 #include "daemon/sections/creep/creep_section.hpp"
-#include "formats/toml_guard.hpp"
+#include "formats/toml/guard.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   namespace cfg = nccomp::daemon::config;
@@ -28,10 +28,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   if (node == nullptr) {
     return 0;
   }
-  cfg::Diagnostics diag;
+  nccomp::formats::Diagnostics diag;
   auto section = nccomp::daemon::sections::parse_creep_section(*node, diag);
   for (const auto& d : diag.items()) {
-    (void)cfg::format(d);
+    (void)nccomp::formats::format(d);
   }
   if (!diag.ok()) {
     return 0;

@@ -15,7 +15,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   auto r = cfg::load_string(text, "fuzz.toml", "/nonexistent-nccomp-fuzz");
   if (!r.config) {
     for (const auto& d : r.diagnostics.items()) {
-      (void)cfg::format(d);
+      (void)nccomp::formats::format(d);
     }
     return 0;
   }

@@ -21,7 +21,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       std::string(reinterpret_cast<const char*>(data), size);
   auto r = cfg::load_string(text, "fuzz.toml", "/nonexistent-nccomp-fuzz");
   if (!r.config) {
-    for (const auto& d : r.diagnostics.items()) (void)cfg::format(d);
+    for (const auto& d : r.diagnostics.items()) (void)nccomp::formats::format(d);
     return 0;
   }
   std::unique_ptr<core::engine::Engine> e;

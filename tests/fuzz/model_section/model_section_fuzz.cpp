@@ -20,7 +20,7 @@
 
 #include "core/engine/engine.hpp"
 #include "daemon/sections/model/model_section.hpp"
-#include "formats/toml_guard.hpp"
+#include "formats/toml/guard.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   namespace cfg = nccomp::daemon::config;
@@ -46,9 +46,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   } catch (const toml::parse_error&) {
     return 0;
   }
-  cfg::Diagnostics diag;
+  nccomp::formats::Diagnostics diag;
   auto section = nccomp::daemon::sections::parse_model_section(*root.get("model"), diag);
-  for (const auto& d : diag.items()) (void)cfg::format(d);
+  for (const auto& d : diag.items()) (void)nccomp::formats::format(d);
   if (!diag.ok()) return 0;
   const core::LimiterConfig lim{100.0, 10.0, 1000.0};
   std::vector<core::engine::RegisterSpec> regs{

@@ -629,7 +629,7 @@ TEST(NccompdCan, MalformedCountedPerReasonAndUnmappedFloodNeverReachesTheDaemon)
   EXPECT_EQ(can_counter(st, "rejected_not_finite"), 1) << st;
   const std::string metrics = daemon.status("metrics").value_or("");
   EXPECT_NE(
-      metrics.find("nccompd_bus_counter_total{bus=\"can\",counter=\"rejected_not_finite\"} 1"),
+      metrics.find("nccompd_bus_events_total{bus=\"can\",event=\"rejected_not_finite\"} 1"),
       std::string::npos)
       << metrics;
 

@@ -316,10 +316,13 @@ TEST(NccompdLoudInput, ANaNWearRaisesTheCreepAlarmAndABurstIsLoggedOnce) {
   EXPECT_TRUE(daemon.running());
   EXPECT_EQ(daemon.stop(), 0);
 
-  // Every measurement is in the measurement log, without a value.
+  // Every measurement is in the measurement log, without a value (measured_um empty, applied_um
+  // 0; then the v2 columns machine, utc, session).
   const std::string rows = slurp(d.path / "log" / "measurements.csv");
   EXPECT_EQ(count(rows, ",tool_wear,"), 7U) << rows;
-  EXPECT_TRUE(std::regex_search(rows, std::regex(",tool_wear,0,[^\n]*,,0[.0]*\n"))) << rows;
+  EXPECT_TRUE(std::regex_search(
+      rows, std::regex(",tool_wear,0,[^\n]*,,0[.0]*,[^,\n]*,[^,\n]*,[0-9]+\n")))
+      << rows;
 }
 
 }  // namespace

@@ -486,9 +486,11 @@ std::optional<std::string> run_as_unprivileged(const fs::path& dir, rlim_t rtpri
     ::execve(NCCOMPD_BIN, const_cast<char* const*>(argv), environ);
     ::_exit(121);
   }
-  // Until the loop runs (its set-up is logged before READY), then stop it.
+  // Until the loop runs (its set-up is logged before READY), then stop it. Up to 120 s: in the
+  // system test's VM (tests/system, emulated CPU) the sanitizer build takes tens of seconds to
+  // start.
   std::string text;
-  for (int i = 0; i < 200 && text.find("loop running at") == std::string::npos; ++i) {
+  for (int i = 0; i < 2400 && text.find("loop running at") == std::string::npos; ++i) {
     int early = 0;
     if (::waitpid(pid, &early, WNOHANG) == pid) {
       if (WIFEXITED(early) && WEXITSTATUS(early) == kCannotSetLimits) {

@@ -297,10 +297,10 @@ TEST(ModbusNccompdCounters, FaultCountersOfTheDriverAreInTheDaemonsStatus) {
                                                         << text;
   // Metrics: one series per counter.
   const std::string metrics = daemon.status("metrics");
-  EXPECT_NE(metrics.find("nccompd_bus_counter_total{bus=\"modbus\",counter=\"events_lost\"} 2\n"),
+  EXPECT_NE(metrics.find("nccompd_bus_events_total{bus=\"modbus\",event=\"events_lost\"} 2\n"),
             std::string::npos)
       << metrics;
-  EXPECT_NE(metrics.find("nccompd_bus_counter_total{bus=\"modbus\",counter=\"verify_mismatches\"} "
+  EXPECT_NE(metrics.find("nccompd_bus_events_total{bus=\"modbus\",event=\"verify_mismatches\"} "
                          "1\n"),
             std::string::npos)
       << metrics;

@@ -16,8 +16,8 @@
 #include <sstream>
 
 #include "core/calib/facet.hpp"
+#include "formats/calib/facet_import.hpp"
 #include "sim/ncsim/simulation.hpp"
-#include "tools/calibrate/facet_import.hpp"
 
 namespace nccomp::test::calib {
 namespace {
@@ -93,7 +93,7 @@ TEST(NcsimTouchRequests, ReferenceTouchesGrindsNominalsAndWarmUpFollowTheRequest
   ASSERT_EQ(sim.write_offset(80.0, 6, 20.0), WriteResult::kAccepted);
   ASSERT_EQ(sim.write_offset(80.0, 5, 2.0), WriteResult::kAccepted);
   sim.advance_to(core::from_seconds(200.0));
-  auto rows = tools::calibrate::parse_facet_export(read(exp), exp);
+  auto rows = formats::calib::parse_facet_export(read(exp), exp);
   ASSERT_EQ(rows.size(), 1u);  // one grind: the same Δx is not ground twice
   EXPECT_EQ(rows[0].face, core::calib::Face::kLateral);
   EXPECT_NEAR(rows[0].chord_plus_mm, core::calib::chord_from_depth_mm(5.0, 0.1 + 0.003), 1e-6);
@@ -104,14 +104,14 @@ TEST(NcsimTouchRequests, ReferenceTouchesGrindsNominalsAndWarmUpFollowTheRequest
   // A new Δx (+23) → a second grind with equal facets.
   ASSERT_EQ(sim.write_offset(200.0, 6, 23.0), WriteResult::kAccepted);
   sim.advance_to(core::from_seconds(300.0));
-  rows = tools::calibrate::parse_facet_export(read(exp), exp);
+  rows = formats::calib::parse_facet_export(read(exp), exp);
   ASSERT_EQ(rows.size(), 2u);
   EXPECT_NEAR(rows[1].chord_plus_mm, rows[1].chord_minus_mm, 1e-9);
   // End face with Δx = +31: equal facets at once.
   ASSERT_EQ(sim.write_offset(300.0, 6, 31.0), WriteResult::kAccepted);
   ASSERT_EQ(sim.write_offset(300.0, 5, 3.0), WriteResult::kAccepted);
   sim.advance_to(core::from_seconds(400.0));
-  rows = tools::calibrate::parse_facet_export(read(exp), exp);
+  rows = formats::calib::parse_facet_export(read(exp), exp);
   ASSERT_EQ(rows.size(), 3u);
   EXPECT_EQ(rows[2].face, core::calib::Face::kEndFace);
   EXPECT_NEAR(rows[2].chord_plus_mm, rows[2].chord_minus_mm, 1e-9);

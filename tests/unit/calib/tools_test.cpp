@@ -2,17 +2,22 @@
 // on the documented example files.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <fstream>
 #include <sstream>
 #include <stdexcept>
 #include <string>
 
-#include "tools/calibrate/config_toml.hpp"
-#include "tools/calibrate/script.hpp"
+#include "formats/calib/config_toml.hpp"
+#include "formats/calib/render.hpp"
+#include "formats/calib/script.hpp"
 #include "tools/calibrate/session.hpp"
 
 namespace nccomp::tools::calibrate {
 namespace {
+
+using formats::calib::load_calibration_config_file;
+using formats::calib::load_calibration_config_text;
 
 std::string error_of(const std::string& toml) {
   try {
@@ -57,19 +62,24 @@ touches_per_axis = 3
 
 TEST(CalibrationToml, ErrorsNameFileLineAndKey) {
   EXPECT_EQ(error_of("[calibration]\n\nplausibilty_um = 5\n"),
-            "m.toml:3: calibration.plausibilty_um: unknown key");
+            "m.toml:3:18: calibration.plausibilty_um: unknown key");
   EXPECT_EQ(error_of("[calibration]\nfacet_rule = \"guess\"\n"),
-            "m.toml:2: calibration.facet_rule: must be \"exact\" or \"proportional\"");
+            "m.toml:2:14: calibration.facet_rule: must be one of \"exact\", \"proportional\", "
+            "got \"guess\"");
   EXPECT_EQ(error_of("[calibration]\nregister_x = 70000\n"),
-            "m.toml:2: calibration.register_x: must be in 0..65535, got 70000");
+            "m.toml:2:14: calibration.register_x: must be an integer in [0, 65535], got 70000");
   EXPECT_EQ(error_of("[calibration]\nblank_radius_mm = \"5\"\n"),
-            "m.toml:2: calibration.blank_radius_mm: must be a number");
+            "m.toml:2:19: calibration.blank_radius_mm: must be a finite number");
+  // Every error, not only the first.
+  EXPECT_EQ(error_of("[calibration]\nregister_x = 70000\nfacet_rulez = 1\n"),
+            "m.toml:2:14: calibration.register_x: must be an integer in [0, 65535], got 70000\n"
+            "m.toml:3:15: calibration.facet_rulez: unknown key");
   EXPECT_NE(error_of("[calibration]\nblank_radius_mm = -5.0\n").find("calibration.blank_radius_mm"),
             std::string::npos);
   EXPECT_NE(error_of("[calibration]\nprediction = \"temperature\"\n")
                 .find("calibration.temperature_sensor"),
             std::string::npos);
-  EXPECT_NE(error_of("calibration = 3\n").find("m.toml:1: calibration: must be a table"),
+  EXPECT_NE(error_of("calibration = 3\n").find("m.toml:1:15: calibration: must be a table"),
             std::string::npos);
   EXPECT_NE(error_of("[calibration\n").find("m.toml:1"), std::string::npos);
 }
@@ -151,6 +161,16 @@ TEST(Session, ExampleScriptsCalibrateAndRecalibrate) {
   EXPECT_EQ(b.calibrator().model(core::calib::Slot::kXLateral).touch_sets, 3);
   // No slewing from zero after the import: the registers resume at the saved corrections.
   EXPECT_EQ(log2.str().find("offset-slew-limited"), std::string::npos) << log2.str();
+}
+
+// The dates were computed with Python's datetime (UTC), independently of this code.
+TEST(Render, UtcTimes) {
+  EXPECT_EQ(formats::calib::format_utc(1795766400.0), "2026-11-27 08:00:00 UTC");
+  EXPECT_EQ(formats::calib::format_utc(1795788723.9), "2026-11-27 14:12:03 UTC");
+  EXPECT_EQ(formats::calib::format_utc(951868799.0), "2000-02-29 23:59:59 UTC");
+  EXPECT_EQ(formats::calib::format_utc(0.0), "1970-01-01 00:00:00 UTC");
+  EXPECT_EQ(formats::calib::format_utc(-1.0), "1969-12-31 23:59:59 UTC");
+  EXPECT_EQ(formats::calib::format_utc(std::nan("")), "never");
 }
 
 TEST(Session, TimeCannotGoBack) {

@@ -1,4 +1,4 @@
-#include "tools/plan/checkpoints_toml.hpp"
+#include "formats/checkpoints/checkpoints_toml.hpp"
 
 #include <gtest/gtest.h>
 
@@ -14,14 +14,19 @@ namespace nccomp::tools::checkpoints {
 namespace {
 
 namespace cp = core::checkpoint;
+using formats::checkpoints::CheckpointsConfig;
+using formats::checkpoints::load_checkpoints_file;
+using formats::checkpoints::make_checkpoint_module;
+using formats::checkpoints::parse_checkpoints;
+using Issue = formats::Diagnostic;
 
 const std::string kData = NCCOMP_CHECKPOINT_DATA;
 
-std::vector<ConfigIssue> issues_of(const std::string& text) {
-  std::vector<ConfigIssue> issues;
+std::vector<Issue> issues_of(const std::string& text) {
+  formats::Diagnostics diag;
   const toml::table root = toml::parse(std::string_view(text), std::string_view("test.toml"));
-  (void)parse_checkpoints(*root["checkpoints"].as_table(), "test.toml", kData, issues);
-  return issues;
+  (void)parse_checkpoints(*root["checkpoints"].as_table(), "test.toml", kData, diag);
+  return diag.items();
 }
 
 TEST(CheckpointsToml, ExampleConfigMapsEveryKey) {
@@ -89,16 +94,16 @@ TEST(CheckpointsToml, EveryProblemIsReportedWithLineAndKey) {
   ASSERT_EQ(issues.size(), 5U);
   const auto find = [&](const std::string& key) {
     for (const auto& i : issues) {
-      if (i.key_path == key) return i;
+      if (i.where.key_path == key) return i;
     }
-    return ConfigIssue{};
+    return Issue{};
   };
-  EXPECT_EQ(find("checkpoints.contour[2]").line, 2);
-  EXPECT_EQ(find("checkpoints.depth_step_mm").line, 3);
+  EXPECT_EQ(find("checkpoints.contour[2]").where.line, 2);
+  EXPECT_EQ(find("checkpoints.depth_step_mm").where.line, 3);
   EXPECT_NE(find("checkpoints.material").message.find("\"inside\""), std::string::npos);
   EXPECT_EQ(find("checkpoints.colour").message, "unknown key");
   EXPECT_EQ(find("checkpoints.apply").message, "must be a string");
-  EXPECT_EQ(format_issue(find("checkpoints.colour")),
+  EXPECT_EQ(formats::format(find("checkpoints.colour")),
             "test.toml:5:10: checkpoints.colour: unknown key");
 }
 
@@ -108,14 +113,14 @@ TEST(CheckpointsToml, SemanticErrorsFromTheCoreCarryTheKeysLine) {
       "contour = [[0,0],[100,0],[100,60],[0,60]]\n"
       "z_end_mm = 10\n");
   ASSERT_EQ(issues.size(), 1U);
-  EXPECT_EQ(issues[0].key_path, "checkpoints.z_end_mm");
-  EXPECT_EQ(issues[0].line, 3);
+  EXPECT_EQ(issues[0].where.key_path, "checkpoints.z_end_mm");
+  EXPECT_EQ(issues[0].where.line, 3);
   issues = issues_of(
       "[checkpoints]\ncontour = [[0,0],[100,0],[100,60],[0,60]]\n"
       "register_base = 20\nactive_register = 22\n");
   ASSERT_EQ(issues.size(), 1U);
-  EXPECT_EQ(issues[0].key_path, "checkpoints.active_register");
-  EXPECT_EQ(issues[0].line, 4);
+  EXPECT_EQ(issues[0].where.key_path, "checkpoints.active_register");
+  EXPECT_EQ(issues[0].where.line, 4);
   issues = issues_of("[checkpoints]\nz_end_mm = -5\n");
   ASSERT_EQ(issues.size(), 1U);
   EXPECT_NE(issues[0].message.find("exactly one of contour"), std::string::npos);
@@ -126,12 +131,14 @@ TEST(CheckpointsToml, SemanticErrorsFromTheCoreCarryTheKeysLine) {
 
 TEST(CheckpointsToml, ApplyFollowsTheLiveRegisterAndAContradictionNamesItsLine) {
   const std::string contour = "[checkpoints]\ncontour = [[0,0],[100,0],[100,60],[0,60]]\n";
-  std::vector<ConfigIssue> issues;
+  std::vector<Issue> issues;
   // Table only by default; with a live register the default is creep.
   auto parse = [&](const std::string& text) {
-    issues.clear();
+    formats::Diagnostics diag;
     const toml::table root = toml::parse(std::string_view(text), std::string_view("test.toml"));
-    return parse_checkpoints(*root["checkpoints"].as_table(), "test.toml", kData, issues);
+    auto c = parse_checkpoints(*root["checkpoints"].as_table(), "test.toml", kData, diag);
+    issues = diag.items();
+    return c;
   };
   EXPECT_EQ(parse(contour).compensator.apply, cp::ApplyMode::kTable);
   EXPECT_TRUE(issues.empty());
@@ -142,16 +149,16 @@ TEST(CheckpointsToml, ApplyFollowsTheLiveRegisterAndAContradictionNamesItsLine) 
   // The trap: creep asked for, no live register.
   (void)parse(contour + "ewma_weight = 2\napply = \"creep\"\n");
   ASSERT_EQ(issues.size(), 1U);
-  EXPECT_EQ(format_issue(issues[0]).rfind(
+  EXPECT_EQ(formats::format(issues[0]).rfind(
                 "test.toml:4:9: checkpoints.apply: \"creep\" drives the live radius wear "
                 "register, but active_register = -1",
                 0),
             0U)
-      << format_issue(issues[0]);
+      << formats::format(issues[0]);
   (void)parse(contour + "apply = \"table\"\nactive_register = 19\n");
   ASSERT_EQ(issues.size(), 1U);
-  EXPECT_EQ(issues[0].key_path, "checkpoints.apply");
-  EXPECT_EQ(issues[0].line, 3);
+  EXPECT_EQ(issues[0].where.key_path, "checkpoints.apply");
+  EXPECT_EQ(issues[0].where.line, 3);
 }
 
 TEST(CheckpointsToml, ModeBRefusesAnAveragingWeight) {
@@ -159,8 +166,8 @@ TEST(CheckpointsToml, ModeBRefusesAnAveragingWeight) {
       "[checkpoints]\ncontour = [[0,0],[100,0],[100,60],[0,60]]\n"
       "learning_mode = \"semi_finishing\"\newma_weight = 3\n");
   ASSERT_EQ(issues.size(), 1U);
-  EXPECT_EQ(issues[0].key_path, "checkpoints.ewma_weight");
-  EXPECT_EQ(issues[0].line, 4);
+  EXPECT_EQ(issues[0].where.key_path, "checkpoints.ewma_weight");
+  EXPECT_EQ(issues[0].where.line, 4);
   EXPECT_NE(issues[0].message.find("mode B applies each blank's own"), std::string::npos);
   EXPECT_TRUE(issues_of("[checkpoints]\ncontour = [[0,0],[100,0],[100,60],[0,60]]\n"
                         "learning_mode = \"semi_finishing\"\n")
@@ -174,11 +181,11 @@ TEST(CheckpointsToml, InlineContourVerticesCarryAlphaAndCornerMarks) {
       "           [130, 30], { x_mm = 100, y_mm = 60, alpha_deg = 3, corner = true },\n"
       "           { x_mm = 0, y_mm = 60, corner = false }]\n"
       "wall_angle_deg = 3\nz_start_mm = -2\nz_end_mm = -2\n";
-  std::vector<ConfigIssue> issues;
+  formats::Diagnostics diag;
   const toml::table root = toml::parse(std::string_view(text), std::string_view("test.toml"));
   const CheckpointsConfig c =
-      parse_checkpoints(*root["checkpoints"].as_table(), "test.toml", kData, issues);
-  ASSERT_TRUE(issues.empty()) << format_issue(issues[0]);
+      parse_checkpoints(*root["checkpoints"].as_table(), "test.toml", kData, diag);
+  ASSERT_TRUE(diag.ok()) << diag.to_string();
   ASSERT_EQ(c.plan.contour.size(), 5U);
   EXPECT_TRUE(std::isnan(c.plan.contour[0].alpha_deg));
   EXPECT_DOUBLE_EQ(c.plan.contour[1].alpha_deg, 5.0);
@@ -214,13 +221,13 @@ TEST(CheckpointsToml, InlineContourVerticesCarryAlphaAndCornerMarks) {
       " { x_mm = 100, y_mm = 60, alpha_deg = 95 },\n { x_mm = 0, y_mm = 60, corner = 1 },\n"
       " { x_mm = 0, y_mm = 30, colour = 2 }, \"x\"]\n");
   ASSERT_EQ(bad.size(), 5U);
-  EXPECT_EQ(format_issue(bad[0]), "test.toml:3:2: checkpoints.contour[1]: needs x_mm and y_mm");
-  EXPECT_EQ(bad[1].key_path, "checkpoints.contour[2].alpha_deg");
-  EXPECT_EQ(bad[1].line, 4);
-  EXPECT_EQ(bad[2].key_path, "checkpoints.contour[3].corner");
+  EXPECT_EQ(formats::format(bad[0]), "test.toml:3:2: checkpoints.contour[1]: needs x_mm and y_mm");
+  EXPECT_EQ(bad[1].where.key_path, "checkpoints.contour[2].alpha_deg");
+  EXPECT_EQ(bad[1].where.line, 4);
+  EXPECT_EQ(bad[2].where.key_path, "checkpoints.contour[3].corner");
   EXPECT_EQ(bad[2].message, "must be true or false");
-  EXPECT_EQ(bad[3].key_path, "checkpoints.contour[4].colour");
-  EXPECT_EQ(bad[4].key_path, "checkpoints.contour[5]");
+  EXPECT_EQ(bad[3].where.key_path, "checkpoints.contour[4].colour");
+  EXPECT_EQ(bad[4].where.key_path, "checkpoints.contour[5]");
   EXPECT_NE(bad[4].message.find("or a table"), std::string::npos);
 }
 
@@ -248,7 +255,8 @@ TEST(CheckpointsToml, ContourOverrideReplacesTheFilesContour) {
   const CheckpointsConfig c =
       load_checkpoints_file(kData + "/boss.toml", kData + "/boss_contour.csv");
   EXPECT_EQ(c.plan.contour.size(), 5U);
-  EXPECT_THROW((void)load_checkpoints_file(kData + "/boss.toml", kData + "/nope.csv"), ConfigError);
+  EXPECT_THROW((void)load_checkpoints_file(kData + "/boss.toml", kData + "/nope.csv"),
+               formats::DiagnosticsError);
 }
 
 }  // namespace

@@ -6,6 +6,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "core/common/config_issue.hpp"
 #include "tests/support/alloc_counter.hpp"
 #include "tests/unit/creep/rig.hpp"
 
@@ -301,9 +302,11 @@ TEST(CreepConfigCheck, ErrorsNameTheTomlKey) {
   c = base_config();
   c.edge.normal_source = NormalSource::kToolpath;
   c.toolpath = {true, false, {{0.0, {0.0, 0.0, 1.0}}, {0.0, {0.0, 0.0, 1.0}}}};
-  EXPECT_NE(error_of(c).find("toolpath_file row 2"), std::string::npos);
+  EXPECT_NE(
+      error_of(c).find("creep.edge.toolpath_file: row 2: path_mm must be strictly increasing"),
+      std::string::npos);
   c.toolpath = {false, true, {{0.0, {0.0, 0.0, 1.0}, 1.0}, {5.0, {0.0, 0.0, 1.0}, 1.0}}};
-  EXPECT_NE(error_of(c).find("creep.edge.toolpath_file needs at least 2 rows with normals"),
+  EXPECT_NE(error_of(c).find("creep.edge.toolpath_file: needs at least 2 rows with normals"),
             std::string::npos);  // a removal-only file gives no normals
   c = base_config();
   c.interval.basis = IntervalBasis::kMaterial;
@@ -311,12 +314,32 @@ TEST(CreepConfigCheck, ErrorsNameTheTomlKey) {
   c.toolpath = {true, false, {{0.0, {0.0, 0.0, 1.0}}, {5.0, {0.0, 0.0, 1.0}}}};
   EXPECT_NE(error_of(c).find("creep.interval.removal_source"), std::string::npos);
   c.toolpath = {true, true, {{0.0, {0.0, 0.0, 1.0}, -1.0}, {5.0, {0.0, 0.0, 1.0}, 1.0}}};
-  EXPECT_NE(error_of(c).find("toolpath_file row 1 removal_mm2 must be a finite number >= 0"),
-            std::string::npos)
+  EXPECT_NE(
+      error_of(c).find("creep.edge.toolpath_file: row 1: removal_mm2 must be a finite number >= 0"),
+      std::string::npos)
       << error_of(c);
   c = base_config();
   c.limiter.max_step_um = -1.0;
   EXPECT_NE(error_of(c).find("creep.limiter.max_step_um"), std::string::npos);
+}
+
+TEST(CreepConfigCheck, EveryIssueIsReportedWithItsKeyAndReason) {
+  auto c = base_config();
+  c.creep_length_mm = -2.0;
+  c.edge.edge_points = 40;
+  c.limiter.max_step_um = -1.0;
+  try {
+    validate(c);
+    FAIL() << "validate() accepted three bad values";
+  } catch (const core::ConfigInvalid& e) {
+    ASSERT_EQ(e.issues().size(), 3U) << e.what();
+    EXPECT_EQ(e.issues()[0].key, "creep.creep_length_mm");
+    EXPECT_EQ(e.issues()[0].reason.rfind("must be a positive finite number, got -2", 0), 0U)
+        << e.issues()[0].reason;
+    EXPECT_EQ(e.issues()[1].key, "creep.edge.edge_points");
+    EXPECT_EQ(e.issues()[1].reason, "must be 1..32, got 40");
+    EXPECT_EQ(e.issues()[2].key, "creep.limiter.max_step_um");
+  }
   WearCompensator w;
   EXPECT_THROW(w.configure(c), std::invalid_argument);
 }

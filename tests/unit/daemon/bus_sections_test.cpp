@@ -14,6 +14,9 @@
 #include "drivers/modbus/modbus_bus.hpp"
 
 namespace nccomp::daemon::config {
+
+using formats::Diagnostic;
+using formats::format;
 namespace {
 
 namespace fs = std::filesystem;

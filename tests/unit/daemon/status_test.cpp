@@ -21,10 +21,14 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <mutex>
+#include <string>
 #include <thread>
+#include <vector>
 
 #include "client/status_client.hpp"
 #include "core/engine/ramp_module.hpp"
@@ -64,21 +68,23 @@ std::string http_get(int port, const std::string& path) {
 /// A loopback bus that also reports driver-specific counters (as the CAN and Modbus drivers do).
 class CountingBus final : public drivers::Bus {
  public:
+  CountingBus() = default;
+  explicit CountingBus(std::vector<drivers::BusCounterValue> values) : values_(std::move(values)) {}
   void start() override { inner_.start(); }
   void stop() override { inner_.stop(); }
   core::rt::SpscRing<core::Event>& rx() override { return inner_.rx(); }
   core::rt::SpscRing<core::OffsetWrite>& tx() override { return inner_.tx(); }
   [[nodiscard]] drivers::BusStatus status() const override { return inner_.status(); }
   [[nodiscard]] std::size_t extra_counters(std::span<drivers::BusCounterValue> out) const override {
-    const drivers::BusCounterValue values[] = {{"bus_off", 2}, {"rx_overflow", 0}};
     std::size_t n = 0;
-    for (const auto& v : values) {
+    for (const auto& v : values_) {
       if (n < out.size()) out[n++] = v;
     }
     return n;
   }
 
  private:
+  std::vector<drivers::BusCounterValue> values_{{"bus_off", 2}, {"rx_overflow", 0}};
   LoopbackBus inner_{64, 64};
 };
 
@@ -164,11 +170,11 @@ TEST(StatusServer, AnswersTextJsonAndPrometheus) {
   EXPECT_NE(client::query(sock, "bogus").find("error: unknown request 'bogus'"), std::string::npos);
   const std::string http = http_get(server.prometheus_port(), "/metrics");
   EXPECT_EQ(http.rfind("HTTP/1.0 200 OK", 0), 0U) << http;
-  EXPECT_NE(http.find("nccompd_register_output_um{register=\"T1_length_wear\"} 3\n"),
+  EXPECT_NE(http.find("nccompd_register_output_meters{register=\"T1_length_wear\"} 3e-06\n"),
             std::string::npos)
       << http;
   EXPECT_NE(http.find("nccompd_bus_up{bus=\"loopback\"} 1\n"), std::string::npos);
-  EXPECT_NE(http.find("nccompd_bus_counter_total{bus=\"loopback\",counter=\"bus_off\"} 2\n"),
+  EXPECT_NE(http.find("nccompd_bus_events_total{bus=\"loopback\",event=\"bus_off\"} 2\n"),
             std::string::npos)
       << http;
   EXPECT_EQ(http_get(server.prometheus_port(), "/other").rfind("HTTP/1.0 404", 0), 0U);
@@ -177,6 +183,95 @@ TEST(StatusServer, AnswersTextJsonAndPrometheus) {
 
   server.stop();
   EXPECT_FALSE(fs::exists(sock));
+}
+
+TEST(StatusMetrics, LatencyEdgesAreBucketEdges) {
+  const auto edges = prometheus_latency_edges_us();
+  ASSERT_FALSE(edges.empty());
+  for (std::size_t i = 0; i < edges.size(); ++i) {
+    EXPECT_TRUE(LatencyHistogram::is_edge_us(edges[i])) << edges[i];
+    if (i > 0) {
+      EXPECT_GT(edges[i], edges[i - 1]);
+    }
+  }
+  // Not every value is an edge above 1024 µs: 5000 µs lies inside [4992, 5056).
+  EXPECT_FALSE(LatencyHistogram::is_edge_us(5000));
+  EXPECT_TRUE(LatencyHistogram::is_edge_us(4992));
+}
+
+// The metrics as Prometheus' own linter reads them: `promtool check metrics` (Debian's
+// prometheus package) passes: base units spelled out, counters only for counts, the latency a
+// histogram; a driver's gauges are gauges (in seconds where the driver counts milliseconds),
+// one family across buses.
+TEST(StatusMetrics, PromtoolCheckMetricsPasses) {
+  if (::system("command -v promtool >/dev/null 2>&1") != 0) {
+    GTEST_SKIP() << "promtool missing (Debian's prometheus package; scripts/setup installs it)";
+  }
+  Rig rig;
+  CountingBus second(
+      {{"bus_off", 0}, {"offsets_pending", 4, true}, {"reconnect_backoff_ms", 250, true}});
+  CountingBus third({{"offsets_pending", 0, true}, {"reconnect_backoff_ms", 1500, true}});
+  second.start();
+  third.start();
+  StatusContext c = rig.context();
+  c.buses.push_back({"second", &second});
+  c.buses.push_back({"third", &third});
+  // Some latency samples first.
+  for (int i = 0; i < 500 && rig.loop.latency().count() < 50; ++i) {
+    std::this_thread::sleep_for(10ms);
+  }
+  const std::string metrics = render_prometheus(c);
+  second.stop();
+  third.stop();
+  const fs::path file = rig.dir / "metrics.txt";
+  {
+    std::FILE* f = std::fopen(file.c_str(), "w");
+    ASSERT_NE(f, nullptr);
+    std::fwrite(metrics.data(), 1, metrics.size(), f);
+    std::fclose(f);
+  }
+  const std::string cmd = "promtool check metrics <" + file.string() + " 2>&1";
+  std::FILE* p = ::popen(cmd.c_str(), "r");
+  ASSERT_NE(p, nullptr);
+  std::string lint;
+  char buf[512];
+  std::size_t n = 0;
+  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) lint.append(buf, n);
+  const int status = ::pclose(p);
+  EXPECT_EQ(status, 0) << lint << "\n" << metrics;
+  EXPECT_EQ(lint, "") << metrics;
+
+  // The gauges: one family each, every bus in it, milliseconds as seconds.
+  EXPECT_NE(metrics.find("# TYPE nccompd_bus_reconnect_backoff_seconds gauge\n"
+                         "nccompd_bus_reconnect_backoff_seconds{bus=\"second\"} 0.25\n"
+                         "nccompd_bus_reconnect_backoff_seconds{bus=\"third\"} 1.5\n"),
+            std::string::npos)
+      << metrics;
+  EXPECT_NE(metrics.find("nccompd_bus_offsets_pending{bus=\"second\"} 4\n"), std::string::npos);
+  EXPECT_EQ(metrics.find("counter=\"offsets_pending\""), std::string::npos) << metrics;
+  EXPECT_EQ(metrics.find("_ms"), std::string::npos) << metrics;
+  EXPECT_EQ(metrics.find("_us"), std::string::npos) << metrics;
+  // The histogram: cumulative, +Inf = _count = the samples recorded.
+  const std::string inf = "nccompd_loop_wake_latency_seconds_bucket{le=\"+Inf\"} ";
+  const auto at = metrics.find(inf);
+  ASSERT_NE(at, std::string::npos) << metrics;
+  const std::uint64_t total = std::stoull(metrics.substr(at + inf.size()));
+  EXPECT_GE(total, 1U);
+  EXPECT_NE(metrics.find("nccompd_loop_wake_latency_seconds_count " + std::to_string(total) + "\n"),
+            std::string::npos)
+      << metrics;
+  std::uint64_t prev = 0;
+  for (const std::uint64_t e : prometheus_latency_edges_us()) {
+    char le[64];
+    std::snprintf(le, sizeof le, "{le=\"%.10g\"} ", static_cast<double>(e) / 1e6);
+    const auto b = metrics.find(std::string("nccompd_loop_wake_latency_seconds_bucket") + le);
+    ASSERT_NE(b, std::string::npos) << le << metrics;
+    const std::uint64_t v = std::stoull(metrics.substr(
+        b + std::strlen("nccompd_loop_wake_latency_seconds_bucket") + std::strlen(le)));
+    EXPECT_GE(v, prev) << le;
+    EXPECT_LE(v, total) << le;
+    prev = v;
+  }
 }
 
 int connect_unix(const std::string& path) {

@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <vector>
 
 namespace nccomp::daemon {
@@ -108,6 +109,37 @@ TEST(LatencyHistogram, QuantilesOfKnownData) {
   EXPECT_EQ(h.count(), 1001U);
   h.reset();
   EXPECT_EQ(h.count(), 0U);
+}
+
+// The Prometheus histogram's buckets: samples below each edge, counted by hand from the data.
+TEST(LatencyHistogram, CountsBelowEdgesAndSumOfKnownData) {
+  LatencyHistogram h;
+  // 3 samples at 9.999 µs, 2 at 10 µs, 1 at 1999 µs, 1 at 2000 µs, 1 at 7999.9 µs, 1 at 1 s.
+  for (int i = 0; i < 3; ++i) h.record(9'999);
+  for (int i = 0; i < 2; ++i) h.record(10'000);
+  h.record(1'999'000);
+  h.record(2'000'000);
+  h.record(7'999'900);
+  h.record(1'000'000'000);
+  const std::array<std::uint64_t, 6> edges = {10, 11, 2000, 2016, 8000, 128000};
+  for (const std::uint64_t e : edges) {
+    ASSERT_TRUE(LatencyHistogram::is_edge_us(e)) << e;
+  }
+  std::array<std::uint64_t, 6> below{};
+  std::uint64_t total = 0;
+  h.count_below_us(edges, below, total);
+  EXPECT_EQ(below[0], 3U);  // < 10 µs
+  EXPECT_EQ(below[1], 5U);  // < 11 µs
+  EXPECT_EQ(below[2], 6U);  // < 2000 µs: 1999 µs is in bucket [1984, 2000)
+  EXPECT_EQ(below[3], 7U);  // < 2016 µs
+  EXPECT_EQ(below[4], 8U);  // < 8000 µs: 7999.9 µs is in bucket [7936, 8000)
+  EXPECT_EQ(below[5], 8U);  // < 128 ms
+  EXPECT_EQ(total, 9U);
+  EXPECT_DOUBLE_EQ(
+      h.sum_s(),
+      (3 * 9'999 + 2 * 10'000 + 1'999'000 + 2'000'000 + 7'999'900 + 1'000'000'000) / 1e9);
+  h.reset();
+  EXPECT_DOUBLE_EQ(h.sum_s(), 0.0);
 }
 
 }  // namespace

@@ -330,11 +330,10 @@ register_base = 2
 )";
   const auto few = d.write("few.toml", text);
   const std::string e2 = errors_of(few);
-  EXPECT_NE(
-      e2.find(few + ":" + std::to_string(line_of(text, "register_base =")) +
-              ":17: checkpoints.register_base: checkpoints: registers 2..17 are needed for 16 "
-              "checkpoints, the register table has 4"),
-      std::string::npos)
+  EXPECT_NE(e2.find(few + ":" + std::to_string(line_of(text, "register_base =")) +
+                    ":17: checkpoints.register_base: registers 2..17 are needed for 16 "
+                    "checkpoints, the register table has 4"),
+            std::string::npos)
       << e2;
 }
 

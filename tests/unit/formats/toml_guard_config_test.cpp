@@ -1,6 +1,6 @@
 // GIVEN config texts that reach a defect of toml++ 3.3.0, WHEN nccompd's config loader reads
 // them (as text, as a file, as an included file), THEN it refuses them with one located error
-// from the guard (formats/toml_guard.hpp), never with whatever Debian's toml++ makes of them.
+// from the guard (formats/toml/guard.hpp), never with whatever Debian's toml++ makes of them.
 #include <gtest/gtest.h>
 #include <unistd.h>
 
@@ -12,6 +12,8 @@
 #include "daemon/config/config.hpp"
 
 namespace nccomp::daemon::config {
+
+using formats::format;
 namespace {
 
 std::string only_error(const LoadResult& r) {

@@ -4,7 +4,7 @@
 // toml++ is compiled from its headers here with its assertions on, under ASan/UBSan (dev): an
 // input that slipped through aborts the test. Valid TOML (non-ASCII text in strings and
 // comments, nested arrays at the start of a line, the shipped configs) parses as before.
-#include "formats/toml_guard.hpp"
+#include "formats/toml/guard.hpp"
 
 #include <gtest/gtest.h>
 #include <unistd.h>

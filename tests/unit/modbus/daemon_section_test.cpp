@@ -14,6 +14,8 @@
 #include "drivers/modbus/modbus_bus.hpp"
 
 namespace nccomp::daemon::config {
+
+using formats::Diagnostic;
 namespace {
 
 namespace fs = std::filesystem;

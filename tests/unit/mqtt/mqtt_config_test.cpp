@@ -13,7 +13,7 @@ namespace {
 using test::TempDir;
 
 TEST(PublishConfig, TheShippedExampleLoadsWithItsDefaults) {
-  daemon::config::Diagnostics diag;
+  nccomp::formats::Diagnostics diag;
   const auto c =
       load_publish_config(std::string(NCCOMP_SOURCE_DIR) + "/config/nccomp-publish.toml", diag);
   ASSERT_TRUE(c) << diag.to_string();
@@ -38,7 +38,7 @@ pasword_file = "x"
 max_messages = 3
 [extra]
 )");
-  daemon::config::Diagnostics diag;
+  nccomp::formats::Diagnostics diag;
   EXPECT_FALSE(load_publish_config(f, diag));
   const auto& items = diag.items();
   ASSERT_EQ(items.size(), 6U) << diag.to_string();
@@ -53,10 +53,10 @@ max_messages = 3
   EXPECT_EQ(items[4].where.key_path, "broker.pasword_file");
   EXPECT_EQ(items[4].message, "unknown key");
   EXPECT_EQ(items[5].where.key_path, "queue.max_messages");
-  EXPECT_EQ(daemon::config::format(items[5]).rfind(f + ":9:16: queue.max_messages: ", 0), 0U)
-      << daemon::config::format(items[5]);
+  EXPECT_EQ(nccomp::formats::format(items[5]).rfind(f + ":9:16: queue.max_messages: ", 0), 0U)
+      << nccomp::formats::format(items[5]);
 
-  daemon::config::Diagnostics none;
+  nccomp::formats::Diagnostics none;
   EXPECT_FALSE(load_publish_config(d.write("q.toml", "[queue]\n"), none));
   ASSERT_EQ(none.items().size(), 2U);
   EXPECT_EQ(none.items()[0].where.key_path, "publish");

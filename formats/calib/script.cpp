@@ -1,10 +1,10 @@
-#include "tools/calibrate/script.hpp"
+#include "formats/calib/script.hpp"
 
 #include <charconv>
 #include <cmath>
 #include <vector>
 
-namespace nccomp::tools::calibrate {
+namespace nccomp::formats::calib {
 
 namespace {
 
@@ -254,4 +254,4 @@ Command parse_line(std::string_view line, std::size_t line_no) {
   throw ScriptError(line_no, "unknown command '" + std::string(w[0]) + "' (try 'help')");
 }
 
-}  // namespace nccomp::tools::calibrate
+}  // namespace nccomp::formats::calib

@@ -25,7 +25,7 @@
 #include "core/calib/calibrator.hpp"
 #include "core/common/types.hpp"
 
-namespace nccomp::tools::calibrate {
+namespace nccomp::formats::calib {
 
 struct CmdTime {
   double time_s{0.0};
@@ -86,4 +86,4 @@ const char* script_help() noexcept;
 /// Phase by its name ("ready", "test-grind-lateral", ...); false if unknown.
 bool parse_phase(std::string_view name, core::calib::Phase& out) noexcept;
 
-}  // namespace nccomp::tools::calibrate
+}  // namespace nccomp::formats::calib

@@ -1,11 +1,11 @@
-#include "tools/calibrate/facet_import.hpp"
+#include "formats/calib/facet_import.hpp"
 
 #include <charconv>
 #include <cmath>
 #include <fstream>
 #include <sstream>
 
-namespace nccomp::tools::calibrate {
+namespace nccomp::formats::calib {
 
 namespace {
 
@@ -163,4 +163,4 @@ std::vector<FacetMeasurement> read_facet_export(const std::string& path) {
   return parse_facet_export(s.str(), path);
 }
 
-}  // namespace nccomp::tools::calibrate
+}  // namespace nccomp::formats::calib

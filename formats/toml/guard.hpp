@@ -22,6 +22,7 @@
 #pragma once
 
 #include <toml++/toml.h>
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <fstream>
@@ -327,7 +328,13 @@ inline toml::table parse_toml_file(std::string_view path) {
     throw toml::parse_error("File could not be opened for reading", toml::source_position{},
                             std::make_shared<const std::string>(path));
   }
-  const std::string text{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+  // read() rather than istreambuf_iterator: GCC 12 at -O3 (the package build) reports a false
+  // -Wnull-dereference inside the latter.
+  std::string text;
+  std::array<char, 65536> buf{};
+  while (in.read(buf.data(), buf.size()) || in.gcount() > 0) {
+    text.append(buf.data(), static_cast<std::size_t>(in.gcount()));
+  }
   return parse_toml(text, path);
 }
 

@@ -1,24 +1,23 @@
 // The `[checkpoints]` table of the operator config (docs/checkpoints.md) → the S1 plan and
-// compensator configs, one key per struct member. Shared by `nccomp plan` and, through the
-// library nccomp_checkpoints_toml, by whatever loads the daemon's config. Not real-time.
+// compensator configs, one key per struct member. Read by `nccomp plan`, the daemon's
+// [checkpoints] section and ncsim, so that all of them agree on the plan. Every problem is
+// reported at its file:line:column and key path, all of them. Not real-time.
 #pragma once
 
 #include <toml++/toml.h>
 
 #include <filesystem>
-#include <optional>
-#include <stdexcept>
-#include <string>
-#include <string_view>
-#include <vector>
-
 #include <memory>
+#include <optional>
+#include <string>
+#include <vector>
 
 #include "core/checkpoint/compensator.hpp"
 #include "core/checkpoint/module.hpp"
 #include "core/checkpoint/plan.hpp"
+#include "formats/toml/diagnostics.hpp"
 
-namespace nccomp::tools::checkpoints {
+namespace nccomp::formats::checkpoints {
 
 /// `[checkpoints.gcode]`: how `nccomp plan` writes the probing program (never read by the daemon).
 struct GcodeConfig {
@@ -43,40 +42,17 @@ struct CheckpointsConfig {
   std::string contour_source;
 };
 
-/// One problem in the config: position in the file, key path, message.
-struct ConfigIssue {
-  std::string file;
-  int line{0};
-  int column{0};
-  std::string key_path;
-  std::string message;
-};
-
-/// "file:line:column: key.path: message".
-std::string format_issue(const ConfigIssue& issue);
-
-/// Thrown by load_checkpoints_file with every issue, one per line.
-class ConfigError : public std::runtime_error {
- public:
-  explicit ConfigError(std::vector<ConfigIssue> issues);
-  [[nodiscard]] const std::vector<ConfigIssue>& issues() const noexcept { return issues_; }
-
- private:
-  std::vector<ConfigIssue> issues_;
-};
-
-/// Parses the `[checkpoints]` table (unknown keys are issues). A relative contour_csv is
-/// resolved against base_dir. Problems are appended to issues (parsing goes on after one, so the
-/// operator sees all of them); the returned value is valid only if no issue was added. Then the
-/// plan is built once (make_plan) and the compensator validated, and their errors are issues too.
+/// Parses the `[checkpoints]` table (unknown keys are errors); `file` names the inline contour's
+/// source. A relative contour_csv is resolved against base_dir. Every problem goes to diag
+/// (parsing goes on after one); the result is valid only if diag got none. Then the plan is built
+/// once (make_plan) and the compensator validated, their issues reported at their keys.
 /// contour_csv_override (if set) replaces the table's contour / contour_csv keys.
 CheckpointsConfig parse_checkpoints(
     const toml::table& table, const std::string& file, const std::filesystem::path& base_dir,
-    std::vector<ConfigIssue>& issues,
-    const std::optional<std::string>& contour_csv_override = std::nullopt);
+    Diagnostics& diag, const std::optional<std::string>& contour_csv_override = std::nullopt);
 
 /// Loads `path`, takes its `[checkpoints]` table and parses it; contour_csv_override (if set)
-/// replaces the contour. Throws ConfigError.
+/// replaces the contour. Throws DiagnosticsError with every error.
 CheckpointsConfig load_checkpoints_file(const std::string& path,
                                         const std::optional<std::string>& contour_csv_override);
 
@@ -89,4 +65,4 @@ std::unique_ptr<core::checkpoint::CheckpointModule> make_checkpoint_module(
 /// naming the file (and line).
 std::vector<core::checkpoint::ContourPoint> read_contour_csv(const std::filesystem::path& path);
 
-}  // namespace nccomp::tools::checkpoints
+}  // namespace nccomp::formats::checkpoints

@@ -21,7 +21,7 @@
 
 #include "core/calib/calibrator.hpp"
 
-namespace nccomp::tools::calibrate {
+namespace nccomp::formats::calib {
 
 struct FacetMeasurement {
   core::calib::Face face{core::calib::Face::kLateral};
@@ -42,4 +42,4 @@ std::vector<FacetMeasurement> parse_facet_export(std::string_view text, const st
 /// Reads and parses a file (size limit checked before reading it all).
 std::vector<FacetMeasurement> read_facet_export(const std::string& path);
 
-}  // namespace nccomp::tools::calibrate
+}  // namespace nccomp::formats::calib

@@ -8,7 +8,7 @@
 #include "core/calib/snapshot.hpp"
 #include "core/common/types.hpp"
 
-namespace nccomp::tools::calibrate {
+namespace nccomp::formats::calib {
 
 /// "X", "Y", "Z" for 0..2, "-" otherwise.
 const char* axis_name(std::int32_t axis) noexcept;
@@ -34,4 +34,4 @@ std::string status_block(const core::calib::CalibSnapshot& s, const std::string&
 /// "2026-11-22 06:12:03 UTC" (wall clock [Unix s]); "never" for NaN.
 std::string format_utc(double wall_s);
 
-}  // namespace nccomp::tools::calibrate
+}  // namespace nccomp::formats::calib
