@@ -704,11 +704,14 @@ bool Engine::release_register(std::size_t i, TimeNs now_ns) noexcept {
     } else {
       const double at_bound = std::clamp(r.limiter.output_um(), -bound, bound);
       r.limiter.reset(at_bound, now_ns);
-      // The NC still holds the value beyond the limit, and the goal may equal what was last
-      // sent (a restored target beyond a narrowed limit): the bound is written once all the same.
-      r.sent_um = at_bound;
-      r.sent = true;
-      r.resend_as_is = true;
+      // A restored target beyond a narrowed limit may equal what was last sent: the NC still
+      // holds it, so the bound is written once all the same. Without a target nothing is
+      // written until a module asks for a value (then it slews from the bound).
+      if (r.has_target || r.has_trim) {
+        r.sent_um = at_bound;
+        r.sent = true;
+        r.resend_as_is = true;
+      }
     }
   } else {
     // Without state the limiter starts from what the NC holds (anchored): it slews as usual.

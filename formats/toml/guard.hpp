@@ -8,7 +8,9 @@
 //     parse_value(), the same kind;
 //   - a character U+00A1..U+0499, U+2C5E..U+2FFF, U+3001..U+3057 or U+FB26..U+FEFE (é, µ, °,
 //     U+FE00 ...) where toml++ asks whether it is whitespace: outside strings and comments, and
-//     in a multi-line "..." string right after a backslash or after a line-ending backslash.
+//     in a multi-line "..." string right after a backslash or after a line-ending backslash;
+//     also after a quote that directly follows a bare key or value (`i = 5"°`), where toml++
+//     reads on to the end of the bad token.
 //     Its lookup table reaches __builtin_unreachable() there: undefined behaviour (upstream
 //     issues 190 and 295, pull request 305).
 // Debian's library is built without assertions and by GCC (no assumption), so there the first
@@ -235,6 +237,7 @@ inline std::optional<TomlDefect> find_toml_defect(std::string_view text) {
   Mode mode = Mode::kLineStart;
   std::string open;         // the [ and { open in a value, innermost last
   bool array_slot = false;  // in an array after '[' or ',': toml++ parses a value next
+  bool bare = false;         // the last character belongs to a bare key or value token
   while (r.next(c)) {
     if (mode == Mode::kLineStart) {
       if (c == ' ' || c == '\t' || c == '\n' || c == '\r') continue;
@@ -263,7 +266,14 @@ inline std::optional<TomlDefect> find_toml_defect(std::string_view text) {
         mode = Mode::kKey;
       }
     }
-    if (c == '"' || c == '\'') {
+    // A quote right after a bare key or value character (`i = 5"x`) opens no string: toml++
+    // reads on to the end of the bad token and asks "whitespace?" of every character there.
+    const bool in_token = bare;
+    bare = (mode == Mode::kKey || mode == Mode::kValue) &&
+           ((c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') ||
+            c == '_' || c == '-' || c == '+' || c == ':' || c >= 0x80 ||
+            (c == '.' && mode == Mode::kValue) || (in_token && (c == '"' || c == '\'')));
+    if ((c == '"' || c == '\'') && !in_token) {
       array_slot = false;
       bool stop = false;
       if (auto d = skip_string(c, stop)) return d;

@@ -87,6 +87,18 @@ TEST(TomlGuard, CharactersWithoutAWhitespaceAnswerAreRefusedOutsideStrings) {
   EXPECT_EQ(refusal("a = [1,\n  2\xE3\x80\x81]").line, 2U);  // U+3001
 }
 
+TEST(TomlGuard, AQuoteRightAfterABareTokenOpensNoString) {
+  // Found by fuzz_model_map (minimized): after the bad number `5"` toml++ reads on to the end of
+  // the token and asks "whitespace?" of the degree sign. Refused (toml++'s own error comes
+  // first, at the quote); with the guard treating the quote as a string, UBSan stops here.
+  const auto v = refusal("i=5\"\xC2\xB0");
+  EXPECT_EQ(v.line, 1U);
+  EXPECT_LE(v.column, 5U);
+  EXPECT_EQ(refusal("ab\"\xC2\xB0\" = 1").line, 1U);
+  // A quoted key after a dot and a string value after '=' are strings as before.
+  EXPECT_NO_THROW((void)parse_toml("a.\"t2(\xC2\xB0" "C)\" = \"\xC2\xB0\"", "t.toml"));
+}
+
 TEST(TomlGuard, MultiLineStringEscapesThatReachTheTableAreRefused) {
   // A backslash followed by such a character (an unknown escape anyway) ...
   const auto e = refusal("s = \"\"\"a\\\xC2\xB5\"\"\"");
