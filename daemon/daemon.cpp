@@ -20,7 +20,7 @@
 #include <mutex>
 #include <optional>
 
-#include "daemon/command.hpp"
+#include "daemon/commands/command.hpp"
 #include "daemon/config/builtin_sections.hpp"
 #include "daemon/config/config.hpp"
 #include "daemon/cpu_placement.hpp"
@@ -31,6 +31,7 @@
 #include "daemon/measurement_log.hpp"
 #include "daemon/state_store.hpp"
 #include "daemon/status.hpp"
+#include "daemon/timing.hpp"
 
 namespace nccomp::daemon {
 
@@ -64,6 +65,14 @@ std::string pick_dir(const cfg::Config& c, const std::string& configured, const 
     return s.substr(0, s.find(':'));
   }
   return fallback;
+}
+
+// The status socket: [status] socket_path, else in systemd's RuntimeDirectory, else in /run.
+std::string status_socket_path(const cfg::Config& c) {
+  const auto& s = cfg::status_section(c);
+  return s.socket_path.empty()
+             ? pick_dir(c, "", "RUNTIME_DIRECTORY", "/run/nccompd") + "/status.sock"
+             : c.resolve(s.socket_path);
 }
 
 struct BusEntry {
@@ -123,111 +132,216 @@ std::vector<std::string> register_names(const cfg::Config& c) {
 
 void notify(const std::string& s) { (void)sd_notify(0, s.c_str()); }
 
-}  // namespace
-
-namespace {
 std::vector<std::pair<std::string, StartupHook>>& hook_storage() {
   static std::vector<std::pair<std::string, StartupHook>> hooks;
   return hooks;
 }
-}  // namespace
 
-int register_startup_hook(std::string name, StartupHook hook) {
-  hook_storage().emplace_back(std::move(name), std::move(hook));
-  return 0;
+/// Loads the configuration; on errors prints them and "nccompd: N error(s) in FILE" to standard
+/// error and returns null.
+std::unique_ptr<cfg::Config> load_config(const std::string& path) {
+  auto loaded = cfg::load_file(path);
+  if (!loaded.config) {
+    std::cerr << loaded.diagnostics.to_string() << "nccompd: " << loaded.diagnostics.items().size()
+              << " error(s) in " << path << "\n";
+  }
+  return std::move(loaded.config);
 }
 
-const std::vector<std::pair<std::string, StartupHook>>& startup_hooks() { return hook_storage(); }
+/// What the registers' read-back at start-up found (anchor_registers, adopt_without_state).
+struct ReadBackCounts {
+  std::size_t anchored{0};
+  std::size_t differ{0};
+  std::size_t beyond{0};
+  std::size_t adopted{0};
+  std::size_t held{0};
+};
 
-int run_daemon(const DaemonOptions& options) {
-  // Signals are blocked before any thread exists, so every thread inherits the mask and the main
-  // thread alone receives them through the signalfd.
+/// The main thread's state while it runs the loop (Daemon::run_until_stopped).
+struct RunState {
+  HeartbeatWatch heartbeat{0};
+  bool watchdog{false};
+  std::uint64_t watchdog_usec{0};
+  std::chrono::steady_clock::time_point last_feed;
+  std::chrono::steady_clock::time_point last_status;
+  bool stalled_logged{false};
+  std::uint64_t sync_timeouts_logged{0};
+  std::uint64_t flush_timeouts_logged{0};
+  BusAlarmWatch bus_alarms;
+  std::vector<std::string> bus_names;
+  std::vector<drivers::BusStatus> bus_statuses;
+};
+
+/// nccompd's process from start to stop, as a sequence of steps (run()). Members are declared in
+/// the order the steps create them: they are destroyed in the reverse order, the loop before the
+/// buses, rings and persister it uses.
+class Daemon {
+ public:
+  explicit Daemon(const DaemonOptions& options)
+      : options_(options), lockstep_(!options.lockstep_socket.empty()) {}
+  ~Daemon() {
+    if (sfd_ >= 0) close(sfd_);
+  }
+  Daemon(const Daemon&) = delete;
+  Daemon& operator=(const Daemon&) = delete;
+
+  /// The process exit status (run_daemon's).
+  int run() {
+    if (!block_signals()) return 1;
+    if (const int rc = configure(); rc != 0) return rc;
+    place_cpus();
+    restore_state();
+    lock_memory();
+    read_back_registers();
+    if (!start_buses()) return 1;
+    start_persister_and_log();
+    if (!start_loop_and_status()) return 1;
+    run_until_stopped();
+    return shut_down();
+  }
+
+ private:
+  const cfg::DaemonSection& dsec() const { return cfg::daemon_section(*config_); }
+  bool block_signals();
+  int configure();
+  void place_cpus();
+  void restore_state();
+  void lock_memory();
+  void read_back_registers();
+  RegisterReader register_reader();
+  ReadBackCounts anchor_registers(const RegisterReader& read, core::TimeNs now);
+  void adopt_without_state(const RegisterReader& read, core::TimeNs now, ReadBackCounts& n);
+  void run_startup_hooks(const RegisterReader& read, core::TimeNs now);
+  bool start_buses();
+  void start_persister_and_log();
+  bool start_loop_and_status();
+  LoopOptions loop_options();
+  bool connect_lockstep();
+  bool start_status();
+  void log_loop_start(const LoopSetupReport& rep);
+  void run_until_stopped();
+  bool lockstep_ended(RunState& rs);
+  bool handle_signal();
+  void reload();
+  void watch_buses(RunState& rs);
+  void feed_watchdog(RunState& rs, std::chrono::steady_clock::time_point now);
+  void update_status_line(RunState& rs, std::chrono::steady_clock::time_point now);
+  int shut_down();
+
+  const DaemonOptions& options_;
+  const bool lockstep_;
+  int sfd_{-1};
+  std::shared_ptr<const cfg::Config> config_;
+  std::vector<BusEntry> buses_;
+  std::unique_ptr<Runtime> runtime_;  // until the loop's ConfigSwap takes it
+  std::mutex names_mu_;
+  std::shared_ptr<const std::vector<std::string>> names_;
+  std::vector<int> loop_cpus_;  // LoopOptions::cpu_affinity (cpu_placement.hpp)
+  std::string state_path_;
+  std::string state_problem_;  // not empty: offsets are held
+  std::uint64_t sequence_{0};
+  bool state_imported_{false};
+  std::map<std::uint16_t, std::optional<double>> read_back_;  // each register read once
+  EventsWhileDownLog::Buses event_buses_;
+  EventsWhileDownLog events_while_down_;
+  std::size_t blob_bytes_{0};
+  std::unique_ptr<StatePersister> persister_;
+  std::unique_ptr<MeasurementLogWriter> mlog_;
+  std::unique_ptr<core::rt::ConfigSwap<Runtime>> swap_;
+  std::vector<drivers::Bus*> bus_ptrs_;
+  CommandBus commands_;
+  LockstepPeer peer_;
+  std::unique_ptr<Loop> loop_;
+  std::unique_ptr<EventLogger> logger_;
+  StatusContext sc_;
+  std::unique_ptr<StatusServer> status_;
+  std::uint64_t generation_{1};
+};
+
+// Signals are blocked before any thread exists, so every thread inherits the mask and the main
+// thread alone receives them through the signalfd.
+bool Daemon::block_signals() {
   sigset_t mask;
   sigemptyset(&mask);
   sigaddset(&mask, SIGTERM);
   sigaddset(&mask, SIGINT);
   sigaddset(&mask, SIGHUP);
   pthread_sigmask(SIG_BLOCK, &mask, nullptr);
-  const int sfd = signalfd(-1, &mask, SFD_CLOEXEC);
-  if (sfd < 0) {
+  sfd_ = signalfd(-1, &mask, SFD_CLOEXEC);
+  if (sfd_ < 0) {
     std::cerr << "nccompd: signalfd: " << std::strerror(errno) << "\n";
-    return 1;
+    return false;
   }
+  return true;
+}
 
-  auto loaded = cfg::load_file(options.config_path);
-  if (!loaded.config) {
-    std::cerr << loaded.diagnostics.to_string() << "nccompd: " << loaded.diagnostics.items().size()
-              << " error(s) in " << options.config_path << "\n";
+// The configuration, the logging it asks for, the buses (not started) and the engine.
+int Daemon::configure() {
+  config_ = load_config(options_.config_path);
+  if (!config_) {
     return 3;
   }
-  std::shared_ptr<const cfg::Config> config = std::move(loaded.config);
-  const std::string log_target = setup_logging(cfg::log_section(*config));
-  spdlog::info("nccompd starting: config {}, logging to {}", options.config_path, log_target);
-
-  std::vector<BusEntry> buses;
-  std::unique_ptr<Runtime> runtime;
+  const std::string log_target = setup_logging(cfg::log_section(*config_));
+  spdlog::info("nccompd starting: config {}, logging to {}", options_.config_path, log_target);
   try {
-    buses = make_buses(*config);
-    runtime = make_runtime(*config, buses, options.dry_run, 1);
+    buses_ = make_buses(*config_);
+    runtime_ = make_runtime(*config_, buses_, options_.dry_run, 1);
   } catch (const std::exception& e) {
     spdlog::error("configuration refused: {}", e.what());
     return 3;
   }
-  if (runtime->dry_run) {
+  if (runtime_->dry_run) {
     spdlog::warn(
         "DRY RUN: offsets are computed and logged, nothing is written to the NC, and the state "
         "file keeps what the NC has");
   }
-  std::mutex names_mu;
-  auto names = std::make_shared<const std::vector<std::string>>(register_names(*config));
+  names_ = std::make_shared<const std::vector<std::string>>(register_names(*config_));
+  return 0;
+}
 
-  const auto& dsec = cfg::daemon_section(*config);
-  const auto& ssec = cfg::state_section(*config);
-  // Before any thread starts: the loop's CPU(s) apart from the other threads' (cpu_placement.hpp).
-  const std::vector<int> loop_cpus = place_threads(dsec.cpu_affinity);
+// Before any thread starts: the loop's CPU(s) apart from the other threads' (cpu_placement.hpp).
+void Daemon::place_cpus() { loop_cpus_ = place_threads(dsec().cpu_affinity); }
 
-  // State: absent → fresh; valid → resumed; corrupt or unusable → hold (offsets stay as the NC
-  // has them) and an alarm, never a guess.
-  const std::string state_dir =
-      pick_dir(*config, ssec.directory, "STATE_DIRECTORY", "/var/lib/nccompd");
-  const std::string state_path = state_dir + "/state.bin";
+// State: absent → fresh; valid → resumed; corrupt or unusable → hold (offsets stay as the NC has
+// them) and an alarm, never a guess.
+void Daemon::restore_state() {
+  const std::string state_dir = pick_dir(*config_, cfg::state_section(*config_).directory,
+                                         "STATE_DIRECTORY", "/var/lib/nccompd");
+  state_path_ = state_dir + "/state.bin";
   std::error_code ec;
   fs::create_directories(state_dir, ec);
-  std::string state_problem;
-  std::uint64_t sequence = 0;
-  bool state_imported = false;
-  {
-    const StateFile sf = read_state_file(state_path);
-    if (sf.status == StateFileStatus::kAbsent) {
-      spdlog::info("no state file at {}: starting fresh", state_path);
-    } else if (sf.status == StateFileStatus::kCorrupt) {
-      state_problem = "state file " + state_path + " is corrupt: " + sf.reason;
+  const StateFile sf = read_state_file(state_path_);
+  if (sf.status == StateFileStatus::kAbsent) {
+    spdlog::info("no state file at {}: starting fresh", state_path_);
+  } else if (sf.status == StateFileStatus::kCorrupt) {
+    state_problem_ = "state file " + state_path_ + " is corrupt: " + sf.reason;
+  } else {
+    std::size_t skipped = 0;
+    // In lock-step the peer's clock starts near 0: restored limiters start there too.
+    const core::TimeNs resume_ns = lockstep_ ? 0 : monotonic_ns();
+    if (runtime_->engine->import_state(sf.payload, resume_ns, &skipped)) {
+      sequence_ = sf.sequence;
+      state_imported_ = true;
+      spdlog::info("state resumed from {} (write #{}, {} bytes, {} unknown entries skipped)",
+                   state_path_, sf.sequence, sf.payload.size(), skipped);
     } else {
-      std::size_t skipped = 0;
-      // In lock-step the peer's clock starts near 0: restored limiters start there too.
-      const core::TimeNs resume_ns = options.lockstep_socket.empty() ? monotonic_ns() : 0;
-      if (runtime->engine->import_state(sf.payload, resume_ns, &skipped)) {
-        sequence = sf.sequence;
-        state_imported = true;
-        spdlog::info("state resumed from {} (write #{}, {} bytes, {} unknown entries skipped)",
-                     state_path, sf.sequence, sf.payload.size(), skipped);
-      } else {
-        state_problem = "state file " + state_path + " has a valid checksum but does not parse";
-      }
+      state_problem_ = "state file " + state_path_ + " has a valid checksum but does not parse";
     }
   }
-  if (!state_problem.empty()) {
+  if (!state_problem_.empty()) {
     spdlog::error(
         "{}; offsets are HELD (nothing is written to the NC). Restore or remove the file "
         "and restart nccompd.",
-        state_problem);
+        state_problem_);
   }
+}
 
-  if (dsec.lock_memory && kSanitizerBuild) {
+void Daemon::lock_memory() {
+  if (dsec().lock_memory && kSanitizerBuild) {
     spdlog::warn(
         "lock_memory ignored: this is a sanitizer build (its shadow memory is terabytes of "
         "reserved address space that mlockall would try to make resident)");
-  } else if (dsec.lock_memory) {
+  } else if (dsec().lock_memory) {
     if (mlockall(MCL_CURRENT | MCL_FUTURE) == 0) {
       spdlog::info("memory locked (mlockall)");
     } else {
@@ -237,205 +351,246 @@ int run_daemon(const DaemonOptions& options) {
           std::strerror(errno));
     }
   }
+}
 
-  // Start-up hooks of the sections (S1: the NC's checkpoint registers against the learned
-  // table), before the buses start: a bus that can read its offset registers back (Modbus)
-  // does it now on this thread; the others say they cannot, and the hooks fall back to
-  // rewriting what the NC must hold.
-  {
-    // Each register is read once: the anchoring below and every hook see the same value.
-    std::map<std::uint16_t, std::optional<double>> read_back;
-    const RegisterReader read = [&](std::uint16_t index) -> std::optional<double> {
-      if (const auto it = read_back.find(index); it != read_back.end()) {
-        return it->second;
-      }
-      std::optional<double> v;
-      const int b = index < runtime->register_bus.size() ? runtime->register_bus[index] : -1;
-      if (b >= 0 && static_cast<std::size_t>(b) < buses.size()) {
-        v = buses[static_cast<std::size_t>(b)].bus->read_offset(index);
-      }
-      read_back.emplace(index, v);
-      return v;
-    };
-    const core::TimeNs hook_now = options.lockstep_socket.empty() ? monotonic_ns() : 0;
-    // Every register the NC returns: its limiter starts from the NC's value, not from the state's
-    // (docs/daemon.md, "State and crashes"). Differences beyond 0.1 µm (the reference map's
-    // counts) are logged.
-    auto& engine = *runtime->engine;
-    std::size_t anchored = 0;
-    std::size_t differ = 0;
-    std::size_t beyond = 0;
-    for (std::size_t i = 0; i < engine.register_count() && i <= 0xFFFFU; ++i) {
-      const auto v = read(static_cast<std::uint16_t>(i));
-      const auto a = v ? engine.anchor_register(i, *v, hook_now) : core::engine::AnchorResult{};
-      if (!a.anchored) {
-        continue;
-      }
-      ++anchored;
-      if (a.known && std::fabs(*v - a.before_um) > 0.1) {
-        ++differ;
-        spdlog::warn(
-            "register {} ({}): the NC holds {:.3f} um, the state {:.3f} um ({:+.3f} um); the next "
-            "writes start from the NC's value",
-            i, engine.register_spec(i).name, *v, a.before_um, *v - a.before_um);
-      }
-      if (a.beyond_limit) {
-        ++beyond;
-        spdlog::error(
-            "register {} ({}): the NC holds {:.3f} um, beyond max_abs_um {:.3f}: nothing is "
-            "written "
-            "to it (alarm register_beyond_limit, code 60) until the NC's register is corrected and "
-            "nccompd restarted, or `nccomp register release {}` writes the daemon's value in one "
-            "move",
-            i, engine.register_spec(i).name, *v, engine.register_spec(i).limits.max_abs_um,
-            engine.register_spec(i).name);
-      }
-    }
-    // Modules without usable state take what the NC holds as their starting point, or the
-    // register is held (docs/daemon.md, "Start without usable state"). Not in hold mode (a
-    // corrupt state file): nothing is written then anyway, and the file may still be restored.
-    std::size_t adopted = 0;
-    std::size_t held = 0;
-    for (std::size_t i = 0; state_problem.empty() && i < engine.register_count() && i <= 0xFFFFU;
-         ++i) {
-      const int b = i < runtime->register_bus.size() ? runtime->register_bus[i] : -1;
-      const bool readable = b >= 0 && static_cast<std::size_t>(b) < buses.size() &&
-                            buses[static_cast<std::size_t>(b)].bus->reads_back();
-      const auto v = read(static_cast<std::uint16_t>(i));
-      const auto what = engine.adopt_without_state(i, v, readable, hook_now);
-      if (what == core::engine::StartupAdoption::kNotNeeded ||
-          what == core::engine::StartupAdoption::kFlag) {
-        continue;
-      }
-      const auto k = static_cast<std::size_t>(engine.register_writer(i));
-      const auto source = engine.module_state(k);
-      const std::string_view why =
-          source == core::engine::ModuleStateSource::kRestored
-              ? "the register is held without state since an earlier start"
-          : source == core::engine::ModuleStateSource::kUnreadable
-              ? "its entry in the state file could not be read"
-          : state_imported ? "it is not in the state file: added to the configuration since"
-                           : "no state file";
-      const std::string& name = engine.register_spec(i).name;
-      const std::string_view module = engine.module(k).name();
-      if (what == core::engine::StartupAdoption::kAdopted) {
-        ++adopted;
-        if (std::fabs(*v) > 0.1) {
-          spdlog::warn(
-              "register {} ({}): module {} has no usable state ({}); the NC's {:.3f} um is its "
-              "starting point: nothing is written to the register until a new measurement "
-              "(register_adopted, code 61)",
-              i, name, module, why, *v);
-        }
-      } else if (what == core::engine::StartupAdoption::kHeld) {
-        ++held;
-        spdlog::warn(
-            "register {} ({}): module {} has no usable state ({}) and {}: nothing is written to "
-            "it (alarm register_held_without_state, code 62) until `nccomp register release {}`",
-            i, name, module, why,
-            v ? fmt::format("cannot adopt the NC's {:.3f} um", *v)
-              : std::string("the NC did not answer the read-back"),
-            name);
-      } else {
-        spdlog::warn(
-            "register {} ({}): module {} has no usable state ({}) and bus {} cannot read it back: "
-            "the module's values are written as it computes them from nothing; if the NC holds "
-            "an offset there that must be kept, stop nccompd and see docs/daemon.md",
-            i, name, module, why,
-            b >= 0 && static_cast<std::size_t>(b) < buses.size()
-                ? buses[static_cast<std::size_t>(b)].name
-                : std::string("?"));
-      }
-    }
-    if (anchored == 0) {
-      spdlog::info(
-          "registers: none can be read back from the NC; the limiters start from the values in "
-          "the state file (0 without one){}",
-          held > 0 ? fmt::format("; {} held without state", held) : std::string{});
-    } else {
-      spdlog::info(
-          "registers: {} of {} read back from the NC, {} differ from the state, {} beyond "
-          "max_abs_um (held), {} adopted without state, {} held without state; their limiters "
-          "start from the NC's values",
-          anchored, engine.register_count(), differ, beyond, adopted, held);
-    }
-    for (const auto& [hook_name, hook] : startup_hooks()) {
-      try {
-        for (const auto& line : hook(*runtime->engine, read, hook_now)) {
-          spdlog::info("{}", line);
-        }
-      } catch (const std::exception& e) {
-        spdlog::error("start-up of {}: {}", hook_name, e.what());
-      }
-    }
+// Before the buses start: a bus that can read its offset registers back (Modbus) does it now on
+// this thread; the others say they cannot, and the start-up hooks of the sections (S1: the NC's
+// checkpoint registers against the learned table) fall back to rewriting what the NC must hold.
+// Then the events the NC published while nccompd was down: the buses resume from the engine's
+// event cursors (restored with the state), their first reads are logged while running.
+void Daemon::read_back_registers() {
+  const RegisterReader read = register_reader();
+  const core::TimeNs now = lockstep_ ? 0 : monotonic_ns();
+  ReadBackCounts n = anchor_registers(read, now);
+  adopt_without_state(read, now, n);
+  if (n.anchored == 0) {
+    spdlog::info(
+        "registers: none can be read back from the NC; the limiters start from the values in "
+        "the state file (0 without one){}",
+        n.held > 0 ? fmt::format("; {} held without state", n.held) : std::string{});
+  } else {
+    spdlog::info(
+        "registers: {} of {} read back from the NC, {} differ from the state, {} beyond "
+        "max_abs_um (held), {} adopted without state, {} held without state; their limiters "
+        "start from the NC's values",
+        n.anchored, runtime_->engine->register_count(), n.differ, n.beyond, n.adopted, n.held);
   }
+  run_startup_hooks(read, now);
 
-  // Events the NC published while nccompd was down: the buses resume from the engine's event
-  // cursors (restored with the state), and their first reads are logged in the loop below.
-  EventsWhileDownLog::Buses event_buses;
-  for (auto& b : buses) {
-    event_buses.emplace_back(b.name, b.bus.get());
+  for (auto& b : buses_) {
+    event_buses_.emplace_back(b.name, b.bus.get());
   }
-  EventsWhileDownLog events_while_down;
   for (const EventsLine& l :
-       events_while_down.resume(runtime->engine->event_cursors(), event_buses)) {
+       events_while_down_.resume(runtime_->engine->event_cursors(), event_buses_)) {
     spdlog::info("{}", l.text);
   }
+}
 
-  const bool lockstep = !options.lockstep_socket.empty();
-  for (auto& b : buses) {
+// Each register is read once: the anchoring, the adoption and every hook see the same value.
+RegisterReader Daemon::register_reader() {
+  return [this](std::uint16_t index) -> std::optional<double> {
+    if (const auto it = read_back_.find(index); it != read_back_.end()) {
+      return it->second;
+    }
+    std::optional<double> v;
+    const int b = index < runtime_->register_bus.size() ? runtime_->register_bus[index] : -1;
+    if (b >= 0 && static_cast<std::size_t>(b) < buses_.size()) {
+      v = buses_[static_cast<std::size_t>(b)].bus->read_offset(index);
+    }
+    read_back_.emplace(index, v);
+    return v;
+  };
+}
+
+// Every register the NC returns: its limiter starts from the NC's value, not from the state's
+// (docs/daemon.md, "State and crashes"). Differences beyond 0.1 µm (the reference map's counts)
+// are logged.
+ReadBackCounts Daemon::anchor_registers(const RegisterReader& read, core::TimeNs now) {
+  auto& engine = *runtime_->engine;
+  ReadBackCounts n;
+  for (std::size_t i = 0; i < engine.register_count() && i <= 0xFFFFU; ++i) {
+    const auto v = read(static_cast<std::uint16_t>(i));
+    const auto a = v ? engine.anchor_register(i, *v, now) : core::engine::AnchorResult{};
+    if (!a.anchored) {
+      continue;
+    }
+    ++n.anchored;
+    const std::string& name = engine.register_spec(i).name;
+    if (a.known && std::fabs(*v - a.before_um) > 0.1) {
+      ++n.differ;
+      spdlog::warn(
+          "register {} ({}): the NC holds {:.3f} um, the state {:.3f} um ({:+.3f} um); the next "
+          "writes start from the NC's value",
+          i, name, *v, a.before_um, *v - a.before_um);
+    }
+    if (a.beyond_limit) {
+      ++n.beyond;
+      spdlog::error(
+          "register {} ({}): the NC holds {:.3f} um, beyond max_abs_um {:.3f}: nothing is "
+          "written "
+          "to it (alarm register_beyond_limit, code 60) until the NC's register is corrected and "
+          "nccompd restarted, or `nccomp register release {}` writes the daemon's value in one "
+          "move",
+          i, name, *v, engine.register_spec(i).limits.max_abs_um, name);
+    }
+  }
+  return n;
+}
+
+// Modules without usable state take what the NC holds as their starting point, or the register
+// is held (docs/daemon.md, "Start without usable state"). Not in hold mode (a corrupt state
+// file): nothing is written then anyway, and the file may still be restored.
+void Daemon::adopt_without_state(const RegisterReader& read, core::TimeNs now, ReadBackCounts& n) {
+  namespace eng = core::engine;
+  auto& engine = *runtime_->engine;
+  for (std::size_t i = 0; state_problem_.empty() && i < engine.register_count() && i <= 0xFFFFU;
+       ++i) {
+    const int b = i < runtime_->register_bus.size() ? runtime_->register_bus[i] : -1;
+    const bool known_bus = b >= 0 && static_cast<std::size_t>(b) < buses_.size();
+    const bool readable = known_bus && buses_[static_cast<std::size_t>(b)].bus->reads_back();
+    const auto v = read(static_cast<std::uint16_t>(i));
+    const auto what = engine.adopt_without_state(i, v, readable, now);
+    if (what == eng::StartupAdoption::kNotNeeded || what == eng::StartupAdoption::kFlag) {
+      continue;
+    }
+    const auto k = static_cast<std::size_t>(engine.register_writer(i));
+    const auto source = engine.module_state(k);
+    const std::string_view why =
+        source == eng::ModuleStateSource::kRestored
+            ? "the register is held without state since an earlier start"
+        : source == eng::ModuleStateSource::kUnreadable
+            ? "its entry in the state file could not be read"
+        : state_imported_ ? "it is not in the state file: added to the configuration since"
+                          : "no state file";
+    const std::string& name = engine.register_spec(i).name;
+    const std::string_view module = engine.module(k).name();
+    if (what == eng::StartupAdoption::kAdopted) {
+      ++n.adopted;
+      if (std::fabs(*v) > 0.1) {
+        spdlog::warn(
+            "register {} ({}): module {} has no usable state ({}); the NC's {:.3f} um is its "
+            "starting point: nothing is written to the register until a new measurement "
+            "(register_adopted, code 61)",
+            i, name, module, why, *v);
+      }
+    } else if (what == eng::StartupAdoption::kHeld) {
+      ++n.held;
+      spdlog::warn(
+          "register {} ({}): module {} has no usable state ({}) and {}: nothing is written to "
+          "it (alarm register_held_without_state, code 62) until `nccomp register release {}`",
+          i, name, module, why,
+          v ? fmt::format("cannot adopt the NC's {:.3f} um", *v)
+            : std::string("the NC did not answer the read-back"),
+          name);
+    } else {
+      spdlog::warn(
+          "register {} ({}): module {} has no usable state ({}) and bus {} cannot read it back: "
+          "the module's values are written as it computes them from nothing; if the NC holds "
+          "an offset there that must be kept, stop nccompd and see docs/daemon.md",
+          i, name, module, why,
+          known_bus ? buses_[static_cast<std::size_t>(b)].name : std::string("?"));
+    }
+  }
+}
+
+void Daemon::run_startup_hooks(const RegisterReader& read, core::TimeNs now) {
+  for (const auto& [hook_name, hook] : startup_hooks()) {
     try {
-      b.bus->set_lockstep(lockstep);
+      for (const auto& line : hook(*runtime_->engine, read, now)) {
+        spdlog::info("{}", line);
+      }
+    } catch (const std::exception& e) {
+      spdlog::error("start-up of {}: {}", hook_name, e.what());
+    }
+  }
+}
+
+bool Daemon::start_buses() {
+  for (auto& b : buses_) {
+    try {
+      b.bus->set_lockstep(lockstep_);
       b.bus->start();
       spdlog::info("bus {} started", b.name);
     } catch (const std::exception& e) {
       spdlog::error("bus {} failed to start: {}", b.name, e.what());
-      for (auto& o : buses) {
+      for (auto& o : buses_) {
         o.bus->stop();
       }
-      return 1;
+      return false;
     }
   }
+  return true;
+}
 
-  const std::size_t blob_bytes =
-      std::max<std::size_t>(64 * 1024, 4 * runtime->engine->state_capacity());
-  StatePersister persister(state_path, blob_bytes);
-  persister.start(sequence);
-
-  std::unique_ptr<MeasurementLogWriter> mlog;
-  const auto& msec = cfg::measurement_log_section(*config);
-  if (msec.enabled) {
-    const std::string dir = pick_dir(*config, msec.directory, "LOGS_DIRECTORY", "/var/log/nccompd");
-    MeasurementLogOptions mo;
-    mo.directory = dir;
-    mo.max_file_bytes = msec.max_file_bytes;
-    mo.keep_files = msec.keep_files;
-    const std::string machine = msec.machine_id.empty() ? host_machine_id() : msec.machine_id;
-    mo.machine_id = machine;
-    mo.context_columns = msec.context_columns;
-    mo.monotonic_record_clock = !lockstep;  // the peer's TICKs are not CLOCK_MONOTONIC
-    mo.fsync_interval_s = msec.fsync_interval_s;
-    mlog = std::make_unique<MeasurementLogWriter>(std::move(mo));
-    try {
-      mlog->start();
-      spdlog::info("measurement log: {} (machine {}, {} context column(s))", mlog->current_path(),
-                   machine, msec.context_columns.size());
-    } catch (const std::exception& e) {
-      spdlog::warn("measurement log disabled: {}", e.what());
-      mlog.reset();
-    }
+void Daemon::start_persister_and_log() {
+  blob_bytes_ = std::max<std::size_t>(64 * 1024, 4 * runtime_->engine->state_capacity());
+  persister_ = std::make_unique<StatePersister>(state_path_, blob_bytes_);
+  persister_->start(sequence_);
+  const auto& msec = cfg::measurement_log_section(*config_);
+  if (!msec.enabled) {
+    return;
   }
+  MeasurementLogOptions mo;
+  mo.directory = pick_dir(*config_, msec.directory, "LOGS_DIRECTORY", "/var/log/nccompd");
+  mo.max_file_bytes = msec.max_file_bytes;
+  mo.keep_files = msec.keep_files;
+  const std::string machine = msec.machine_id.empty() ? host_machine_id() : msec.machine_id;
+  mo.machine_id = machine;
+  mo.context_columns = msec.context_columns;
+  mo.monotonic_record_clock = !lockstep_;  // the peer's TICKs are not CLOCK_MONOTONIC
+  mo.fsync_interval_s = msec.fsync_interval_s;
+  mlog_ = std::make_unique<MeasurementLogWriter>(std::move(mo));
+  try {
+    mlog_->start();
+    spdlog::info("measurement log: {} (machine {}, {} context column(s))", mlog_->current_path(),
+                 machine, msec.context_columns.size());
+  } catch (const std::exception& e) {
+    spdlog::warn("measurement log disabled: {}", e.what());
+    mlog_.reset();
+  }
+}
 
-  core::rt::ConfigSwap<Runtime> swap(std::move(runtime));
+// The loop thread (with the operator commands' ring and, in lock-step, the peer), the event
+// logger and the status server; then the loop starts.
+bool Daemon::start_loop_and_status() {
+  swap_ = std::make_unique<core::rt::ConfigSwap<Runtime>>(std::move(runtime_));
+  const LoopOptions lo = loop_options();
+  for (auto& b : buses_) {
+    bus_ptrs_.push_back(b.bus.get());
+  }
+  // Operator commands (`nccomp calibrate --daemon`): the command thread queues them as events,
+  // the loop drains them like a bus's (last in the list: register indices map to the buses above).
+  bus_ptrs_.push_back(&commands_);
+  if (lockstep_ && !connect_lockstep()) {
+    return false;
+  }
+  loop_ = std::make_unique<Loop>(lo, *swap_, bus_ptrs_, persister_.get(), mlog_.get());
+  loop_->set_hold(!state_problem_.empty());
+  logger_ = std::make_unique<EventLogger>(*loop_);
+  logger_->start();
+  if (!state_problem_.empty()) {
+    logger_->raise(core::AlarmEvent{monotonic_ns(), core::Severity::kAlarm,
+                                    core::AlarmCode::kStateCorrupt, -1, 0.0});
+  }
+  if (!start_status()) {
+    return false;
+  }
+  log_loop_start(loop_->start());
+  notify("READY=1\nSTATUS=running: loop " + std::to_string(static_cast<int>(dsec().rate_hz)) +
+         " Hz" + (state_problem_.empty() ? "" : ", OFFSETS HELD (state corrupt)"));
+  return true;
+}
+
+LoopOptions Daemon::loop_options() {
   LoopOptions lo;
-  lo.rate_hz = dsec.rate_hz;
-  lo.overrun_policy = dsec.overrun_policy;
-  lo.max_events_per_cycle = dsec.max_events_per_cycle;
-  lo.sched_fifo_priority = dsec.sched_fifo_priority;
-  lo.cpu_affinity = loop_cpus;
-  lo.prefault_stack_kib = dsec.prefault_stack_kib;
-  lo.state_min_interval_s = ssec.min_interval_s;
-  lo.state_buffer_bytes = blob_bytes;
+  lo.rate_hz = dsec().rate_hz;
+  lo.overrun_policy = dsec().overrun_policy;
+  lo.max_events_per_cycle = dsec().max_events_per_cycle;
+  lo.sched_fifo_priority = dsec().sched_fifo_priority;
+  lo.cpu_affinity = loop_cpus_;
+  lo.prefault_stack_kib = dsec().prefault_stack_kib;
+  lo.state_min_interval_s = cfg::state_section(*config_).min_interval_s;
+  lo.state_buffer_bytes = blob_bytes_;
   // Benchmarks preload a counting malloc (bench/daemon/alloc_preload): if it is there, the loop
   // counts its thread's allocations and frees after warm-up (status: allocations_after_warmup).
   using CountFn = std::uint64_t (*)() noexcept;
@@ -456,67 +611,54 @@ int run_daemon(const DaemonOptions& options) {
       spdlog::warn("TEST HOOK NCCOMPD_TEST_STALL_AFTER_CYCLES: the loop stalls after {} cycles", n);
     }
   }
-  std::vector<drivers::Bus*> bus_ptrs;
-  for (auto& b : buses) {
-    bus_ptrs.push_back(b.bus.get());
+  if (lockstep_) {
+    lo.lockstep = &peer_;
   }
-  // Operator commands (`nccomp calibrate --daemon`): the command thread queues them as events, the
-  // loop drains them like a bus's (last in the list: register indices map to the buses above).
-  CommandBus commands;
-  bus_ptrs.push_back(&commands);
-  LockstepPeer peer;
-  if (lockstep) {
-    try {
-      spdlog::info("lock-step: connecting to {}", options.lockstep_socket);
-      peer.connect(options.lockstep_socket, options.lockstep_connect_timeout_s);
-      spdlog::info(
-          "lock-step: connected; the peer's TICKs drive the loop (rate_hz {} is the "
-          "peer's lockstep_rate_hz)",
-          dsec.rate_hz);
-    } catch (const std::exception& e) {
-      spdlog::error("{}", e.what());
-      persister.stop();
-      if (mlog) {
-        mlog->stop();
-      }
-      for (auto& b : buses) {
-        b.bus->stop();
-      }
-      return 1;
-    }
-    lo.lockstep = &peer;
-  }
-  Loop loop(lo, swap, bus_ptrs, &persister, mlog.get());
-  loop.set_hold(!state_problem.empty());
-  EventLogger logger(loop);
-  logger.start();
-  if (!state_problem.empty()) {
-    logger.raise(core::AlarmEvent{monotonic_ns(), core::Severity::kAlarm,
-                                  core::AlarmCode::kStateCorrupt, -1, 0.0});
-  }
+  return lo;
+}
 
-  StatusContext sc;
-  sc.loop = &loop;
-  for (auto& b : buses) {
-    sc.buses.emplace_back(b.name, b.bus.get());
+bool Daemon::connect_lockstep() {
+  try {
+    spdlog::info("lock-step: connecting to {}", options_.lockstep_socket);
+    peer_.connect(options_.lockstep_socket, options_.lockstep_connect_timeout_s);
+    spdlog::info(
+        "lock-step: connected; the peer's TICKs drive the loop (rate_hz {} is the "
+        "peer's lockstep_rate_hz)",
+        dsec().rate_hz);
+  } catch (const std::exception& e) {
+    spdlog::error("{}", e.what());
+    persister_->stop();
+    if (mlog_) {
+      mlog_->stop();
+    }
+    for (auto& b : buses_) {
+      b.bus->stop();
+    }
+    return false;
   }
-  sc.logger = &logger;
-  sc.persister = &persister;
-  sc.measurement_log = mlog.get();
-  sc.register_names = [&names_mu, &names] {
-    std::lock_guard<std::mutex> lock(names_mu);
-    return *names;
+  return true;
+}
+
+bool Daemon::start_status() {
+  sc_.loop = loop_.get();
+  for (auto& b : buses_) {
+    sc_.buses.emplace_back(b.name, b.bus.get());
+  }
+  sc_.logger = logger_.get();
+  sc_.persister = persister_.get();
+  sc_.measurement_log = mlog_.get();
+  sc_.register_names = [this] {
+    std::lock_guard<std::mutex> lock(names_mu_);
+    return *names_;
   };
-  sc.state_problem = [state_problem] { return state_problem; };
-  sc.config_path = options.config_path;
-  sc.state_path = state_path;
-  StatusServer status(sc);
-  set_command_context(CommandContext{&commands, &loop, sc.register_names});
-  const auto& stsec = cfg::status_section(*config);
-  const std::string sock =
-      stsec.socket_path.empty()
-          ? pick_dir(*config, "", "RUNTIME_DIRECTORY", "/run/nccompd") + "/status.sock"
-          : config->resolve(stsec.socket_path);
+  sc_.state_problem = [problem = state_problem_] { return problem; };
+  sc_.config_path = options_.config_path;
+  sc_.state_path = state_path_;
+  status_ = std::make_unique<StatusServer>(sc_);
+  set_command_context(CommandContext{&commands_, loop_.get(), sc_.register_names});
+  const auto& stsec = cfg::status_section(*config_);
+  const std::string sock = status_socket_path(*config_);
+  std::error_code ec;
   fs::create_directories(fs::path(sock).parent_path(), ec);
   try {
     StatusServerOptions so;
@@ -526,11 +668,11 @@ int run_daemon(const DaemonOptions& options) {
     so.policy = CommandPolicy{stsec.admin_group, ::geteuid()};
     so.client_timeout_s = stsec.client_timeout_s;
     so.max_clients = stsec.max_clients;
-    status.start(so);
+    status_->start(so);
     spdlog::info("status socket {}{}; commands that change the machine: root and group {}", sock,
-                 status.prometheus_port() > 0
+                 status_->prometheus_port() > 0
                      ? fmt::format(", Prometheus on {}:{}", stsec.prometheus_address,
-                                   status.prometheus_port())
+                                   status_->prometheus_port())
                      : std::string{},
                  stsec.admin_group);
     if (!group_exists(stsec.admin_group)) {
@@ -541,32 +683,34 @@ int run_daemon(const DaemonOptions& options) {
     }
   } catch (const std::exception& e) {
     spdlog::error("status: {}", e.what());
-    logger.stop();
-    persister.stop();
-    for (auto& b : buses) {
+    logger_->stop();
+    persister_->stop();
+    for (auto& b : buses_) {
       b.bus->stop();
     }
-    return 1;
+    return false;
   }
+  return true;
+}
 
-  const LoopSetupReport rep = loop.start();
-  if (lockstep) {
+void Daemon::log_loop_start(const LoopSetupReport& rep) {
+  if (lockstep_) {
     spdlog::info("loop running in lock-step: one cycle per TICK of the peer");
   } else {
-    spdlog::info("loop running at {} Hz, overrun policy {}", dsec.rate_hz,
-                 dsec.overrun_policy == cfg::OverrunPolicy::kRestart ? "restart" : "skip_missed");
+    spdlog::info("loop running at {} Hz, overrun policy {}", dsec().rate_hz,
+                 dsec().overrun_policy == cfg::OverrunPolicy::kRestart ? "restart" : "skip_missed");
   }
   if (rep.sched_requested) {
     if (rep.sched_errno == 0) {
-      spdlog::info("loop thread: SCHED_FIFO priority {}", dsec.sched_fifo_priority);
+      spdlog::info("loop thread: SCHED_FIFO priority {}", dsec().sched_fifo_priority);
     } else {
       spdlog::warn("loop thread: SCHED_FIFO priority {} refused: {} (running SCHED_OTHER)",
-                   dsec.sched_fifo_priority, std::strerror(rep.sched_errno));
+                   dsec().sched_fifo_priority, std::strerror(rep.sched_errno));
     }
   }
   if (rep.affinity_requested) {
     if (rep.affinity_errno == 0) {
-      spdlog::info("loop thread: pinned to CPU(s) {}", fmt::join(loop_cpus, ","));
+      spdlog::info("loop thread: pinned to CPU(s) {}", fmt::join(loop_cpus_, ","));
     } else {
       spdlog::warn("loop thread: CPU affinity refused: {}", std::strerror(rep.affinity_errno));
     }
@@ -574,189 +718,280 @@ int run_daemon(const DaemonOptions& options) {
   if (rep.prefaulted_kib > 0) {
     spdlog::info("loop thread: {} KiB of stack pre-faulted", rep.prefaulted_kib);
   }
+}
 
-  notify("READY=1\nSTATUS=running: loop " + std::to_string(static_cast<int>(dsec.rate_hz)) + " Hz" +
-         (state_problem.empty() ? "" : ", OFFSETS HELD (state corrupt)"));
-  std::uint64_t watchdog_usec = 0;
-  const bool watchdog = sd_watchdog_enabled(0, &watchdog_usec) > 0 && watchdog_usec > 0;
-  if (watchdog) {
+// Until a signal stops it (or, in lock-step, the peer ends the run): every pass (at most 100 ms
+// apart) takes a signal, reclaims a replaced configuration, watches the buses' alarms and first
+// reads, feeds the systemd watchdog and updates the status line. Never from the loop thread.
+void Daemon::run_until_stopped() {
+  RunState rs;
+  rs.watchdog = sd_watchdog_enabled(0, &rs.watchdog_usec) > 0 && rs.watchdog_usec > 0;
+  if (rs.watchdog) {
     spdlog::info("systemd watchdog: {} ms; fed while the loop heartbeat advances",
-                 watchdog_usec / 1000);
+                 rs.watchdog_usec / 1000);
   }
-
-  std::uint64_t generation = 1;
-  HeartbeatWatch heartbeat(loop.heartbeat());
-  auto last_feed = std::chrono::steady_clock::now();
-  auto last_status = last_feed;
-  bool stalled_logged = false;
-  std::uint64_t sync_timeouts_logged = 0;
-  std::uint64_t flush_timeouts_logged = 0;
-  // The buses' alarm flags (drivers::BusStatus::alarm) become the daemon's alarm bus_alarm
-  // (code 54) on each rise and fall: logged and in the status's alarm list. Looked at every pass
-  // of this loop (at most 100 ms apart: the poll below), never from the loop thread.
-  BusAlarmWatch bus_alarms;
-  std::vector<std::string> bus_names;
-  for (const auto& b : buses) {
-    bus_names.push_back(b.name);
+  rs.heartbeat = HeartbeatWatch(loop_->heartbeat());
+  rs.last_feed = std::chrono::steady_clock::now();
+  rs.last_status = rs.last_feed;
+  for (const auto& b : buses_) {
+    rs.bus_names.push_back(b.name);
   }
-  std::vector<drivers::BusStatus> bus_statuses(buses.size());
+  rs.bus_statuses.resize(buses_.size());
   for (;;) {
-    if (lockstep) {
-      const LoopStats ls = loop.stats();
-      if (ls.sync_timeouts != sync_timeouts_logged || ls.flush_timeouts != flush_timeouts_logged) {
-        const auto bi = static_cast<std::size_t>(std::max(ls.last_timeout_bus, 0));
-        spdlog::warn(
-            "lock-step: bus {} did not answer in time at cycle {} ({} sync, {} flush timeouts "
-            "so far); the cycles completed anyway",
-            bi < buses.size() ? buses[bi].name : std::string("?"), ls.last_timeout_cycle,
-            ls.sync_timeouts, ls.flush_timeouts);
-        sync_timeouts_logged = ls.sync_timeouts;
-        flush_timeouts_logged = ls.flush_timeouts;
-      }
-      if (loop.finished()) {
-        spdlog::info("lock-step: run ended after {} cycles: {}", ls.cycles,
-                     to_string(loop.lockstep_end()));
-        break;
-      }
+    if (lockstep_ && lockstep_ended(rs)) {
+      break;
     }
-    pollfd pfd{sfd, POLLIN, 0};
-    const int pr = poll(&pfd, 1, 100);
-    if (pr > 0 && (pfd.revents & POLLIN) != 0) {
-      signalfd_siginfo si{};
-      if (read(sfd, &si, sizeof si) == static_cast<ssize_t>(sizeof si)) {
-        if (si.ssi_signo == SIGTERM || si.ssi_signo == SIGINT) {
-          spdlog::info("signal {}: stopping", si.ssi_signo == SIGTERM ? "SIGTERM" : "SIGINT");
-          break;
-        }
-        if (si.ssi_signo == SIGHUP) {
-          notify("RELOADING=1\nSTATUS=reloading " + options.config_path);
-          spdlog::info("SIGHUP: reloading {}", options.config_path);
-          auto next = cfg::load_file(options.config_path);
-          std::string refused;
-          if (!next.config) {
-            for (const auto& d : next.diagnostics.items()) {
-              spdlog::error("reload: {}", formats::format(d));
-            }
-            refused = std::to_string(next.diagnostics.items().size()) + " error(s)";
-          } else {
-            try {
-              auto rt = make_runtime(*next.config, buses, options.dry_run, generation + 1);
-              if (rt->engine->state_capacity() > blob_bytes) {
-                throw std::invalid_argument("the new engine's state needs " +
-                                            std::to_string(rt->engine->state_capacity()) +
-                                            " bytes, more than this process reserved; restart");
-              }
-              ++generation;
-              {
-                std::lock_guard<std::mutex> lock(names_mu);
-                names =
-                    std::make_shared<const std::vector<std::string>>(register_names(*next.config));
-              }
-              swap.publish(std::move(rt));
-              spdlog::info(
-                  "reload: configuration {} accepted (loop settings, buses, state, log "
-                  "and status settings take effect at the next restart)",
-                  generation);
-            } catch (const std::exception& e) {
-              refused = e.what();
-            }
-          }
-          if (!refused.empty()) {
-            spdlog::error("reload refused ({}); configuration {} keeps running", refused,
-                          generation);
-          }
-          notify("READY=1\nSTATUS=running: configuration " + std::to_string(generation) +
-                 (refused.empty() ? "" : " (last reload refused)"));
-        }
-      }
+    if (handle_signal()) {
+      break;
     }
-    swap.reclaim();
-    for (std::size_t i = 0; i < buses.size(); ++i) {
-      bus_statuses[i] = buses[i].bus->status();
-    }
-    for (const BusAlarmChange& c : bus_alarms.update(bus_names, bus_statuses, monotonic_ns())) {
-      if (c.event.severity == core::Severity::kAlarm) {
-        spdlog::error("{}", c.message);
-      } else {
-        spdlog::info("{}", c.message);
-      }
-      logger.raise(c.event);
-    }
-    for (const EventsLine& l : events_while_down.poll(event_buses)) {
-      if (l.warning) {
-        spdlog::warn("{}", l.text);
-      } else {
-        spdlog::info("{}", l.text);
-      }
-    }
+    swap_->reclaim();
+    watch_buses(rs);
     const auto now = std::chrono::steady_clock::now();
-    if (watchdog && now - last_feed >= std::chrono::microseconds(watchdog_usec / 2)) {
-      const std::uint64_t beat = loop.heartbeat();
-      if (heartbeat.advanced(beat)) {
-        notify("WATCHDOG=1");
-        stalled_logged = false;
-      } else if (!stalled_logged) {
-        // No feed: systemd restarts the daemon when WatchdogSec runs out.
-        spdlog::error("loop heartbeat stalled at {}: not feeding the systemd watchdog", beat);
-        stalled_logged = true;
-      }
-      last_feed = now;
+    feed_watchdog(rs, now);
+    update_status_line(rs, now);
+  }
+}
+
+bool Daemon::lockstep_ended(RunState& rs) {
+  const LoopStats ls = loop_->stats();
+  if (ls.sync_timeouts != rs.sync_timeouts_logged ||
+      ls.flush_timeouts != rs.flush_timeouts_logged) {
+    const auto bi = static_cast<std::size_t>(std::max(ls.last_timeout_bus, 0));
+    spdlog::warn(
+        "lock-step: bus {} did not answer in time at cycle {} ({} sync, {} flush timeouts "
+        "so far); the cycles completed anyway",
+        bi < buses_.size() ? buses_[bi].name : std::string("?"), ls.last_timeout_cycle,
+        ls.sync_timeouts, ls.flush_timeouts);
+    rs.sync_timeouts_logged = ls.sync_timeouts;
+    rs.flush_timeouts_logged = ls.flush_timeouts;
+  }
+  if (loop_->finished()) {
+    spdlog::info("lock-step: run ended after {} cycles: {}", ls.cycles,
+                 to_string(loop_->lockstep_end()));
+    return true;
+  }
+  return false;
+}
+
+// Waits up to 100 ms for a signal; true for SIGTERM / SIGINT (stop). SIGHUP reloads.
+bool Daemon::handle_signal() {
+  pollfd pfd{sfd_, POLLIN, 0};
+  const int pr = poll(&pfd, 1, 100);
+  if (pr <= 0 || (pfd.revents & POLLIN) == 0) {
+    return false;
+  }
+  signalfd_siginfo si{};
+  if (read(sfd_, &si, sizeof si) != static_cast<ssize_t>(sizeof si)) {
+    return false;
+  }
+  if (si.ssi_signo == SIGTERM || si.ssi_signo == SIGINT) {
+    spdlog::info("signal {}: stopping", si.ssi_signo == SIGTERM ? "SIGTERM" : "SIGINT");
+    return true;
+  }
+  if (si.ssi_signo == SIGHUP) {
+    reload();
+  }
+  return false;
+}
+
+// A new configured engine built here and swapped in at a cycle boundary; a bad configuration is
+// refused and the running one keeps running.
+void Daemon::reload() {
+  notify("RELOADING=1\nSTATUS=reloading " + options_.config_path);
+  spdlog::info("SIGHUP: reloading {}", options_.config_path);
+  auto next = cfg::load_file(options_.config_path);
+  std::string refused;
+  if (!next.config) {
+    for (const auto& d : next.diagnostics.items()) {
+      spdlog::error("reload: {}", formats::format(d));
     }
-    if (now - last_status >= std::chrono::seconds(10)) {
-      const LoopStats s = loop.stats();
-      char buf[200];
-      std::snprintf(buf, sizeof buf,
-                    "STATUS=running: %llu cycles, %llu overruns, latency p99 %.0f us%s%s",
-                    static_cast<unsigned long long>(s.cycles),
-                    static_cast<unsigned long long>(s.overruns), loop.latency().quantile_us(0.99),
-                    s.dry_run ? ", dry run" : "", s.hold ? ", OFFSETS HELD" : "");
-      notify(buf);
-      last_status = now;
+    refused = std::to_string(next.diagnostics.items().size()) + " error(s)";
+  } else {
+    try {
+      auto rt = make_runtime(*next.config, buses_, options_.dry_run, generation_ + 1);
+      if (rt->engine->state_capacity() > blob_bytes_) {
+        throw std::invalid_argument("the new engine's state needs " +
+                                    std::to_string(rt->engine->state_capacity()) +
+                                    " bytes, more than this process reserved; restart");
+      }
+      ++generation_;
+      {
+        std::lock_guard<std::mutex> lock(names_mu_);
+        names_ = std::make_shared<const std::vector<std::string>>(register_names(*next.config));
+      }
+      swap_->publish(std::move(rt));
+      spdlog::info(
+          "reload: configuration {} accepted (loop settings, buses, state, log "
+          "and status settings take effect at the next restart)",
+          generation_);
+    } catch (const std::exception& e) {
+      refused = e.what();
     }
   }
+  if (!refused.empty()) {
+    spdlog::error("reload refused ({}); configuration {} keeps running", refused, generation_);
+  }
+  notify("READY=1\nSTATUS=running: configuration " + std::to_string(generation_) +
+         (refused.empty() ? "" : " (last reload refused)"));
+}
 
+// The buses' alarm flags (drivers::BusStatus::alarm) become the daemon's alarm bus_alarm (code
+// 54) on each rise and fall: logged and in the status's alarm list. Then the first reads of
+// events published while nccompd was down.
+void Daemon::watch_buses(RunState& rs) {
+  for (std::size_t i = 0; i < buses_.size(); ++i) {
+    rs.bus_statuses[i] = buses_[i].bus->status();
+  }
+  for (const BusAlarmChange& c :
+       rs.bus_alarms.update(rs.bus_names, rs.bus_statuses, monotonic_ns())) {
+    if (c.event.severity == core::Severity::kAlarm) {
+      spdlog::error("{}", c.message);
+    } else {
+      spdlog::info("{}", c.message);
+    }
+    logger_->raise(c.event);
+  }
+  for (const EventsLine& l : events_while_down_.poll(event_buses_)) {
+    if (l.warning) {
+      spdlog::warn("{}", l.text);
+    } else {
+      spdlog::info("{}", l.text);
+    }
+  }
+}
+
+// Fed at half its interval while the loop's heartbeat advances: a stalled loop is restarted by
+// systemd when WatchdogSec runs out.
+void Daemon::feed_watchdog(RunState& rs, std::chrono::steady_clock::time_point now) {
+  if (!rs.watchdog || now - rs.last_feed < std::chrono::microseconds(rs.watchdog_usec / 2)) {
+    return;
+  }
+  const std::uint64_t beat = loop_->heartbeat();
+  if (rs.heartbeat.advanced(beat)) {
+    notify("WATCHDOG=1");
+    rs.stalled_logged = false;
+  } else if (!rs.stalled_logged) {
+    spdlog::error("loop heartbeat stalled at {}: not feeding the systemd watchdog", beat);
+    rs.stalled_logged = true;
+  }
+  rs.last_feed = now;
+}
+
+// systemd's status line, every 10 s.
+void Daemon::update_status_line(RunState& rs, std::chrono::steady_clock::time_point now) {
+  if (now - rs.last_status < std::chrono::seconds(10)) {
+    return;
+  }
+  const LoopStats s = loop_->stats();
+  char buf[200];
+  std::snprintf(buf, sizeof buf,
+                "STATUS=running: %llu cycles, %llu overruns, latency p99 %.0f us%s%s",
+                static_cast<unsigned long long>(s.cycles),
+                static_cast<unsigned long long>(s.overruns), loop_->latency().quantile_us(0.99),
+                s.dry_run ? ", dry run" : "", s.hold ? ", OFFSETS HELD" : "");
+  notify(buf);
+  rs.last_status = now;
+}
+
+int Daemon::shut_down() {
   notify("STOPPING=1\nSTATUS=stopping");
-  loop.stop();
+  loop_->stop();
   // The persister first: it writes what the loop queued before it stopped, which is older than
   // the final state below (written after it, the queued one would overwrite the final one).
-  persister.stop();
+  persister_->stop();
   // The loop is stopped: its engine can be read from this thread. Persist the final state (not in
   // hold mode: the corrupt file stays for inspection; in dry run only the state as the NC has it,
   // never the dry run's values). The NC keeps its offsets as they are.
-  if (state_problem.empty()) {
-    std::vector<std::byte> buf(std::max(swap.current().engine->state_capacity(), blob_bytes));
-    const std::size_t n = loop.final_state(buf);
+  if (state_problem_.empty()) {
+    std::vector<std::byte> buf(std::max(swap_->current().engine->state_capacity(), blob_bytes_));
+    const std::size_t n = loop_->final_state(buf);
     if (n > 0) {
-      persister.write_now(std::span<const std::byte>(buf.data(), n));
+      persister_->write_now(std::span<const std::byte>(buf.data(), n));
     }
   }
-  const auto ps = persister.stats();
-  status.stop();
+  const auto ps = persister_->stats();
+  status_->stop();
   set_command_context(CommandContext{});
-  logger.stop();
-  if (mlog) {
-    mlog->stop();
+  logger_->stop();
+  if (mlog_) {
+    mlog_->stop();
   }
-  for (auto& b : buses) {
+  for (auto& b : buses_) {
     b.bus->stop();
   }
-  const LoopStats s = loop.stats();
+  const LoopStats s = loop_->stats();
   spdlog::info("stopped after {} cycles ({} overruns); state written {} times, last #{}{}",
                s.cycles, s.overruns, ps.writes, ps.sequence,
                ps.failures > 0 ? fmt::format(", {} failures: {}", ps.failures, ps.last_error)
                                : std::string{});
-  close(sfd);
-  if (lockstep) {
-    const LockstepEnd end = loop.lockstep_end();
+  close(sfd_);
+  sfd_ = -1;
+  if (lockstep_) {
+    const LockstepEnd end = loop_->lockstep_end();
     if (end == LockstepEnd::kBadMessage || end == LockstepEnd::kBadSequence ||
         end == LockstepEnd::kSocketError) {
       spdlog::error("lock-step ended abnormally: {} (detail {})", to_string(end),
                     end == LockstepEnd::kBadMessage
-                        ? std::string(to_string(static_cast<LockstepDecode>(peer.end_detail())))
-                        : std::to_string(peer.end_detail()));
+                        ? std::string(to_string(static_cast<LockstepDecode>(peer_.end_detail())))
+                        : std::to_string(peer_.end_detail()));
       return 1;
     }
   }
+  return 0;
+}
+
+}  // namespace
+
+int register_startup_hook(std::string name, StartupHook hook) {
+  hook_storage().emplace_back(std::move(name), std::move(hook));
+  return 0;
+}
+
+const std::vector<std::pair<std::string, StartupHook>>& startup_hooks() { return hook_storage(); }
+
+int run_daemon(const DaemonOptions& options) {
+  Daemon daemon(options);
+  return daemon.run();
+}
+
+int check_config(const DaemonOptions& options) {
+  const std::string& file = options.config_path;
+  auto result = cfg::load_file(file);
+  if (result.config) {
+    // Engine-level refusals (e.g. two modules writing one register) are reported like every
+    // other error: file:line:column: key.path: message.
+    auto engine = cfg::build_engine(*result.config, result.diagnostics);
+    if (engine) {
+      std::cout << file << ": OK\n  files:";
+      for (const auto& f : result.config->files()) {
+        std::cout << " " << f;
+      }
+      std::cout << "\n  sections:";
+      for (const auto& s : result.config->section_names()) {
+        std::cout << " " << s;
+      }
+      const auto& d = cfg::daemon_section(*result.config);
+      std::cout << "\n  loop: " << d.rate_hz << " Hz" << (d.dry_run ? " (dry run)" : "")
+                << "\n  registers: " << engine->register_count()
+                << "\n  modules: " << engine->module_count();
+      for (std::size_t i = 0; i < engine->module_count(); ++i) {
+        std::cout << (i == 0 ? " (" : ", ") << engine->module(i).name();
+      }
+      std::cout << (engine->module_count() > 0 ? ")" : "") << "\n";
+      return 0;
+    }
+  }
+  std::cerr << result.diagnostics.to_string() << "nccompd: " << result.diagnostics.items().size()
+            << " error(s) in " << file << "\n";
+  return 3;
+}
+
+int print_status_socket(const DaemonOptions& options) {
+  const auto config = load_config(options.config_path);
+  if (!config) {
+    return 3;
+  }
+  std::cout << status_socket_path(*config) << "\n";
   return 0;
 }
 

@@ -18,12 +18,25 @@ int main(int argc, char** argv) {
   app.add_option("--lockstep", options.lockstep_socket,
                  "Lock-step with a simulated NC (ncsim --lockstep SOCKET): its TICKs drive the "
                  "loop; exits 0 when it says BYE or closes the socket");
+  auto* check =
+      app.add_flag("--check-config", options.check_config,
+                   "Check the configuration as a start would (every section, the cross-checks, the "
+                   "engine), print every error and exit 0 or 3; touches no bus and no state");
+  app.add_flag("--print-status-socket", options.print_status_socket,
+               "Print the configuration's status socket path and exit")
+      ->excludes(check);
   app.set_version_flag("--version", std::string("nccompd ") + nccomp::kVersion);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     // --help / --version print and exit 0; CLI11's own codes for usage errors are 100+.
     return app.exit(e) == 0 ? 0 : 2;
+  }
+  if (options.check_config) {
+    return nccomp::daemon::check_config(options);
+  }
+  if (options.print_status_socket) {
+    return nccomp::daemon::print_status_socket(options);
   }
   return nccomp::daemon::run_daemon(options);
 }

@@ -20,7 +20,8 @@
 #include <sstream>
 #include <system_error>
 
-#include "daemon/command.hpp"
+#include "client/protocol.hpp"
+#include "daemon/commands/command.hpp"
 
 namespace nccomp::daemon {
 
@@ -571,17 +572,6 @@ std::string http_response(const std::string& status, const std::string& body) {
 }
 
 // Client side: blocking.
-void send_all(int fd, const std::string& s) {
-  std::size_t off = 0;
-  while (off < s.size()) {
-    const ssize_t n = ::send(fd, s.data() + off, s.size() - off, MSG_NOSIGNAL);
-    if (n <= 0) {
-      return;
-    }
-    off += static_cast<std::size_t>(n);
-  }
-}
-
 Clock::time_point deadline_after(double s) {
   return Clock::now() +
          std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(s));
@@ -831,11 +821,11 @@ void StatusServer::read_request(Client& c) {
     jobs_cv_.notify_one();
     return;
   }
-  if (req == "json") {
+  if (req == client::kStatusJson) {
     reply(render_json(context_));
-  } else if (req == "metrics") {
+  } else if (req == client::kStatusMetrics) {
     reply(render_prometheus(context_));
-  } else if (req == "text" || req.empty()) {
+  } else if (req == client::kStatusText || req.empty()) {
     reply(render_text(context_));
   } else {
     counters_.bad_requests.fetch_add(1);
@@ -954,40 +944,6 @@ void StatusServer::run() {
   for (auto& c : clients) {
     if (c.fd >= 0) ::close(c.fd);
   }
-}
-
-std::string query_status(const std::string& socket_path, const std::string& request) {
-  sockaddr_un addr{};
-  addr.sun_family = AF_UNIX;
-  if (socket_path.size() >= sizeof(addr.sun_path)) {
-    throw std::system_error(ENAMETOOLONG, std::generic_category(), "socket path");
-  }
-  std::memcpy(addr.sun_path, socket_path.c_str(), socket_path.size() + 1);
-  const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
-  if (fd < 0) {
-    sys_fail("socket");
-  }
-  if (::connect(fd, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) != 0) {
-    const int e = errno;
-    ::close(fd);
-    throw std::system_error(e, std::generic_category(),
-                            "cannot connect to '" + socket_path + "' (is nccompd running?)");
-  }
-  send_all(fd, request + "\n");
-  ::shutdown(fd, SHUT_WR);
-  timeval tv{5, 0};
-  ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
-  std::string out;
-  char buf[4096];
-  for (;;) {
-    const ssize_t n = ::recv(fd, buf, sizeof buf, 0);
-    if (n <= 0) {
-      break;
-    }
-    out.append(buf, static_cast<std::size_t>(n));
-  }
-  ::close(fd);
-  return out;
 }
 
 }  // namespace nccomp::daemon

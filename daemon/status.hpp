@@ -2,8 +2,9 @@
 // and an optional Prometheus text endpoint on a loopback TCP port. Reads the loop's seqlock
 // snapshots and counters, never blocks the loop.
 //
-// Protocol on the Unix socket: the client sends one line, "text", "json" or "metrics", or an
-// operator command (daemon/command.hpp); the daemon answers and closes the connection.
+// Protocol on the Unix socket (client/protocol.hpp): the client sends one line, "text", "json" or
+// "metrics", or an operator command (daemon/commands/command.hpp); the daemon answers and closes
+// the connection. The client side is client/status_client.hpp.
 //
 // Threads: one I/O thread multiplexes every client with poll(): non-blocking reads and writes,
 // each client with a deadline (client_timeout_s for its request, the same again for taking the
@@ -25,7 +26,7 @@
 #include <utility>
 #include <vector>
 
-#include "daemon/command.hpp"
+#include "daemon/commands/command.hpp"
 #include "daemon/logging.hpp"
 #include "daemon/loop.hpp"
 #include "daemon/measurement_log.hpp"
@@ -126,8 +127,5 @@ class StatusServer {
   std::deque<Job> jobs_;
   std::vector<std::pair<std::uint64_t, std::string>> finished_;
 };
-
-/// Client side (`nccomp status`): sends request, returns the answer. Throws std::system_error.
-[[nodiscard]] std::string query_status(const std::string& socket_path, const std::string& request);
 
 }  // namespace nccomp::daemon

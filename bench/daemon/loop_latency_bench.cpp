@@ -15,7 +15,7 @@
 
 #include "core/engine/ramp_module.hpp"
 #include "daemon/loop.hpp"
-#include "daemon/loopback_bus.hpp"
+#include "drivers/loopback/loopback_bus.hpp"
 #ifdef NCCOMP_COUNT_ALLOCATIONS
 #include "tests/support/alloc_counter.hpp"
 #endif
@@ -56,7 +56,7 @@ int main(int argc, char** argv) {
                         std::move(modules));
   rt->register_bus = {0};
   core::rt::ConfigSwap<daemon::Runtime> swap(std::move(rt));
-  daemon::LoopbackBus bus(1024, 1024);
+  drivers::loopback::LoopbackBus bus(1024, 1024);
   bus.start();
   daemon::LoopOptions o;
   o.rate_hz = rate_hz;

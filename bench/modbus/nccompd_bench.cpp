@@ -35,7 +35,7 @@
 #include <thread>
 #include <vector>
 
-#include "daemon/status.hpp"
+#include "client/status_client.hpp"
 #include "sim/modbus_nc/nc_server.hpp"
 
 extern char** environ;
@@ -122,7 +122,7 @@ struct Snapshot {
 std::optional<Snapshot> snapshot(const std::string& socket) {
   std::string j;
   try {
-    j = nccomp::daemon::query_status(socket, "json");
+    j = nccomp::client::query(socket, "json");
   } catch (const std::exception&) {
     return std::nullopt;
   }

@@ -6,7 +6,7 @@
 #include <utility>
 #include <vector>
 
-#include "daemon/loopback_bus.hpp"
+#include "drivers/loopback/loopback_bus.hpp"
 
 namespace nccomp::daemon::config {
 
@@ -342,7 +342,7 @@ class LoopbackParser final : public SectionParser {
   bool provides_bus() const noexcept override { return true; }
   std::unique_ptr<drivers::Bus> make_bus(const Config& config) const override {
     const auto& s = typed<LoopbackSection>(config, "loopback");
-    return std::make_unique<LoopbackBus>(s.rx_capacity, s.tx_capacity);
+    return std::make_unique<drivers::loopback::LoopbackBus>(s.rx_capacity, s.tx_capacity);
   }
 };
 

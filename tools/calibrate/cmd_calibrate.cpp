@@ -20,10 +20,11 @@
 
 #include <thread>
 
+#include "client/protocol.hpp"
+#include "client/status_client.hpp"
 #include "formats/calib/config_toml.hpp"
 #include "formats/calib/facet_import.hpp"
 #include "formats/calib/script.hpp"
-#include "tools/calibrate/daemon_client.hpp"
 #include "tools/calibrate/session.hpp"
 #include "tools/nccomp/command.hpp"
 
@@ -34,6 +35,7 @@ using nccomp::tools::kExitFailure;
 using nccomp::tools::kExitInvalidInput;
 using nccomp::tools::kExitUsage;
 namespace cal = nccomp::tools::calibrate;
+namespace client = nccomp::client;
 
 struct Options {
   std::string config;
@@ -76,30 +78,14 @@ void write_atomically(const std::string& path, const std::string& text) {
 // ---------------------------------------------------------------------------------------------
 // Against a running daemon.
 
-struct Answer {
-  bool ok{false};
-  std::string phase;
-  std::string text;  // what to show (the "ok ..." line removed)
-};
-
-Answer ask(const std::string& socket, const std::string& command) {
-  std::string reply;
+client::CalibrateAnswer ask(const std::string& socket, const std::string& command) {
   try {
-    reply = cal::daemon_request(socket, command);
+    // 15 s: the daemon answers within 5 s once the loop took the command.
+    return client::parse_calibrate_answer(
+        client::query(socket, client::calibrate_request(command), 15.0));
   } catch (const std::exception& e) {
     throw CommandError(kExitFailure, e.what());
   }
-  Answer a;
-  if (reply.rfind("ok ", 0) == 0) {
-    a.ok = true;
-    const auto nl = reply.find('\n');
-    const std::string head = reply.substr(3, nl == std::string::npos ? nl : nl - 3);
-    a.phase = head.substr(0, head.find(' '));
-    a.text = nl == std::string::npos ? "" : reply.substr(nl + 1);
-  } else {
-    a.text = reply;
-  }
-  return a;
 }
 
 // The command text without a comment (the daemon parses it again).
@@ -124,7 +110,7 @@ void run_daemon(const Options& o) {
     in = &file;
     source = o.script;
   }
-  Answer first = ask(o.daemon, "");
+  client::CalibrateAnswer first = ask(o.daemon, "");
   if (!first.ok) {
     throw CommandError(kExitFailure, o.daemon + ": " + first.text);
   }
@@ -184,7 +170,7 @@ void run_daemon(const Options& o) {
             const std::string want = nccomp::core::calib::to_string(c.phase);
             const auto end =
                 std::chrono::steady_clock::now() + std::chrono::duration<double>(c.timeout_s);
-            Answer a = ask(o.daemon, "");
+            client::CalibrateAnswer a = ask(o.daemon, "");
             while (a.ok && a.phase != want && std::chrono::steady_clock::now() < end) {
               std::this_thread::sleep_for(std::chrono::milliseconds(100));
               a = ask(o.daemon, "");
@@ -229,7 +215,7 @@ void run_daemon(const Options& o) {
     if (send.empty()) {
       continue;
     }
-    const Answer a = ask(o.daemon, send);
+    const client::CalibrateAnswer a = ask(o.daemon, send);
     if (!a.ok) {
       // The daemon's "error: ..." with the prompt after it.
       const auto nl = a.text.find('\n');

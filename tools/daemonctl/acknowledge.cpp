@@ -9,6 +9,7 @@
 #include <memory>
 #include <string>
 
+#include "client/protocol.hpp"
 #include "tools/daemonctl/status_socket.hpp"
 #include "tools/nccomp/command.hpp"
 
@@ -28,7 +29,7 @@ void setup(CLI::App& app) {
   sub->add_option("-c,--config", o->config, "Take the socket path from this configuration");
   sub->callback([o] {
     const std::string path = nccomp::tools::status_socket_path(o->socket, o->config);
-    std::cout << nccomp::tools::operator_command(path, "acknowledge");
+    std::cout << nccomp::tools::operator_command(path, nccomp::client::acknowledge_request());
   });
 }
 

@@ -8,6 +8,7 @@
 #include <memory>
 #include <string>
 
+#include "client/protocol.hpp"
 #include "tools/daemonctl/status_socket.hpp"
 #include "tools/nccomp/command.hpp"
 
@@ -33,7 +34,8 @@ void setup(CLI::App& app) {
   release->add_option("-c,--config", o->config, "Take the socket path from this configuration");
   release->callback([o] {
     const std::string path = nccomp::tools::status_socket_path(o->socket, o->config);
-    std::cout << nccomp::tools::operator_command(path, "register release " + o->name);
+    std::cout << nccomp::tools::operator_command(path,
+                                                 nccomp::client::register_release_request(o->name));
   });
 }
 

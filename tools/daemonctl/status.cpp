@@ -6,7 +6,8 @@
 #include <memory>
 #include <string>
 
-#include "daemon/status.hpp"
+#include "client/protocol.hpp"
+#include "client/status_client.hpp"
 #include "tools/daemonctl/status_socket.hpp"
 #include "tools/nccomp/command.hpp"
 
@@ -29,19 +30,16 @@ void setup(CLI::App& app) {
   sub->callback([o] {
     std::string answer;
     const std::string path = nccomp::tools::status_socket_path(o->socket, o->config);
+    namespace client = nccomp::client;
     try {
-      answer = nccomp::daemon::query_status(path, o->json      ? "json"
-                                                  : o->metrics ? "metrics"
-                                                               : "text");
+      answer = client::query(path, o->json      ? client::kStatusJson
+                                   : o->metrics ? client::kStatusMetrics
+                                                : client::kStatusText);
     } catch (const std::exception& e) {
       throw nccomp::tools::CommandError(nccomp::tools::kExitFailure, e.what());
     }
-    if (answer.empty()) {
-      throw nccomp::tools::CommandError(nccomp::tools::kExitFailure, "no answer from " + path);
-    }
-    if (answer.rfind("error: ", 0) == 0) {  // e.g. busy: max_clients are being served
-      while (!answer.empty() && answer.back() == '\n') answer.pop_back();
-      throw nccomp::tools::CommandError(nccomp::tools::kExitFailure, answer.substr(7));
+    if (client::is_error(answer)) {  // e.g. busy: max_clients are being served
+      throw nccomp::tools::CommandError(nccomp::tools::kExitFailure, client::error_reason(answer));
     }
     std::cout << answer;
   });

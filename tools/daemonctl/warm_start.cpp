@@ -8,6 +8,7 @@
 #include <memory>
 #include <string>
 
+#include "client/protocol.hpp"
 #include "tools/daemonctl/status_socket.hpp"
 #include "tools/nccomp/command.hpp"
 
@@ -30,7 +31,7 @@ void setup(CLI::App& app) {
   sub->callback([o] {
     const std::string path = nccomp::tools::status_socket_path(o->socket, o->config);
     std::cout << nccomp::tools::operator_command(
-        path, o->at_next_motion ? "warm-start at-next-motion" : "warm-start now");
+        path, nccomp::client::warm_start_request(o->at_next_motion));
   });
 }
 

@@ -5,8 +5,9 @@
 #include <chrono>
 #include <ctime>
 
+#include "client/protocol.hpp"
+#include "client/status_client.hpp"
 #include "daemon/measurement_log.hpp"
-#include "daemon/status.hpp"
 
 namespace nccomp::tools::mqtt {
 
@@ -177,7 +178,7 @@ void Publisher::poll_log() {
 void Publisher::poll_status() {
   std::string answer;
   try {
-    answer = daemon::query_status(config_.status_socket, "json");
+    answer = client::query(config_.status_socket, client::kStatusJson);
   } catch (const std::exception& e) {
     if (daemon_reachable_ || last_warned_.count("status") == 0) {
       warn_every("status",

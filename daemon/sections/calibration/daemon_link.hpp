@@ -4,20 +4,16 @@
 //   models and creeps survive a daemon restart and a reboot;
 // - at start-up: adopt a newer offline calibration ([calibration] state_file), then tell the
 //   calibrator what the NC's axis registers hold (read back where the bus can);
-// - the operator's commands ("calibrate ..." on the status socket): parsed and validated here on
-//   the status server's command thread, queued to the loop as OperatorCommand events, answered
-//   from the module's published snapshot. Every command but the status ("calibrate" or
-//   "calibrate status") feeds the machine: only root and the admin group may (calibrate_access).
-//   Not real-time (SnapshotSink::publish() is, on the loop thread).
+// - the snapshot every module publishes, from which the "calibrate" verb answers
+//   (daemon/commands/calibrate.hpp).
+// Not real-time (SnapshotSink::publish() is, on the loop thread).
 #pragma once
 
 #include <string>
-#include <string_view>
 #include <vector>
 
 #include "core/calib/calib_module.hpp"
 #include "core/engine/engine.hpp"
-#include "daemon/command.hpp"
 #include "daemon/daemon.hpp"
 
 namespace nccomp::daemon::sections {
@@ -35,13 +31,5 @@ core::calib::CalibSnapshot latest_calibration_snapshot();
 std::vector<std::string> calibration_startup(core::engine::Engine& engine,
                                              const RegisterReader& read, core::TimeNs now_ns,
                                              double wall_now_s);
-
-/// The "calibrate" verb's handler.
-std::string handle_calibrate_command(std::string_view args, CommandContext& ctx);
-
-/// The "calibrate" verb's access rule: read-only for the status ("" or "status", what `nccomp
-/// calibrate --daemon` polls), else it changes the machine (begin, touches, facets, discard,
-/// recalibrate, and anything the calibrator takes in future).
-CommandAccess calibrate_access(std::string_view args) noexcept;
 
 }  // namespace nccomp::daemon::sections

@@ -25,7 +25,7 @@ using formats::TableReader;
 /// update = "cycle".
 std::string loop_context_problem(const cm::TermSpec& spec, bool each_cycle, const cm::Model& model,
                                  const std::vector<ModelInputConfig>& inputs,
-                                 const ModelApply& apply) {
+                                 const core::model::ModelApply& apply) {
   const std::vector<std::string>& extras = model.extra_columns();
   std::vector<int> cols;
   if (spec.form != cm::Form::kConstant) cols.push_back(spec.column);
@@ -227,12 +227,12 @@ const ModelSection* model_section(const config::Config& config) {
   return config.find<ModelSection>("model");
 }
 
-std::unique_ptr<ModelModule> make_model_module(
+std::unique_ptr<core::model::ModelModule> make_model_module(
     const ModelSection& s, const std::vector<core::engine::RegisterSpec>& registers) {
-  std::vector<ModelApply> applies;
+  std::vector<core::model::ModelApply> applies;
   const core::engine::RegisterTable table(registers);
   for (std::size_t i = 0; i < s.applies.size(); ++i) {
-    ModelApply a = s.applies[i].apply;
+    core::model::ModelApply a = s.applies[i].apply;
     const int idx = table.find(s.applies[i].register_name);
     if (idx < 0) {
       throw std::invalid_argument("model.apply[" + std::to_string(i) +
@@ -243,12 +243,12 @@ std::unique_ptr<ModelModule> make_model_module(
     a.register_index = static_cast<std::uint16_t>(idx);
     applies.push_back(a);
   }
-  std::vector<ModelInput> inputs;
+  std::vector<core::model::ModelInput> inputs;
   for (const auto& in : s.inputs) {
     if (in.input.column >= 0) inputs.push_back(in.input);
   }
-  auto m =
-      std::make_unique<ModelModule>(s.model, std::move(applies), s.each_cycle, std::move(inputs));
+  auto m = std::make_unique<core::model::ModelModule>(s.model, std::move(applies), s.each_cycle,
+                                                      std::move(inputs));
   m->attach(table);
   return m;
 }

@@ -8,21 +8,21 @@
 #include <vector>
 
 #include "core/model/model.hpp"
+#include "core/model/model_module.hpp"
 #include "daemon/config/config.hpp"
-#include "daemon/sections/model/model_module.hpp"
 
 namespace nccomp::daemon::sections {
 
 struct ModelApplyConfig {
   std::string term;
   std::string register_name;
-  ModelApply apply;  // register_index resolved in cross_check() / add_modules()
+  core::model::ModelApply apply;  // register_index resolved in cross_check() / add_modules()
   formats::Where where;
 };
 
 struct ModelInputConfig {
   std::string column;
-  ModelInput input;  // column resolved against the model's extra columns
+  core::model::ModelInput input;  // column resolved against the model's extra columns
   formats::Where where;
 };
 
@@ -51,7 +51,7 @@ const ModelSection* model_section(const config::Config& config);
 
 /// The engine module of a parsed section, registers resolved against `registers` (throws
 /// std::invalid_argument naming the entry when a register is missing).
-std::unique_ptr<ModelModule> make_model_module(
+std::unique_ptr<core::model::ModelModule> make_model_module(
     const ModelSection& s, const std::vector<core::engine::RegisterSpec>& registers);
 
 }  // namespace nccomp::daemon::sections

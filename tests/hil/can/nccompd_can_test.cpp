@@ -42,8 +42,8 @@
 #include <thread>
 #include <vector>
 
+#include "client/status_client.hpp"
 #include "daemon/lockstep.hpp"
-#include "daemon/status.hpp"
 
 extern char** environ;
 
@@ -148,7 +148,7 @@ class Daemon {
   }
   std::optional<std::string> status(const std::string& what = "json") const {
     try {
-      auto s = nccomp::daemon::query_status((dir_ / "status.sock").string(), what);
+      auto s = nccomp::client::query((dir_ / "status.sock").string(), what);
       if (!s.empty()) {
         return s;
       }

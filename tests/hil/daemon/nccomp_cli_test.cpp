@@ -2,7 +2,8 @@
 // - `nccomp check-config` on the shipped config, THEN exit 0 and the summary (files, sections,
 //   registers, modules); on a file with errors, THEN exit 3 and every error as
 //   file:line:column: key.path: message on stderr, the engine's refusals (two modules on one
-//   register) included;
+//   register) included; it runs `nccompd --check-config` (the one NCCOMPD names, if set), which
+//   starts nothing;
 // - `nccomp status` against a running nccompd (loopback bus, commissioning ramp), THEN exit 0 and
 //   the text, JSON and Prometheus forms with the daemon's numbers; without a daemon, THEN exit 1
 //   and the reason.
@@ -155,6 +156,74 @@ TEST(NccompCli, CheckConfigLocatesEngineRefusals) {
             std::string::npos)
       << r.err;
   EXPECT_NE(r.err.find("nccomp: error: 1 error(s) in " + f), std::string::npos) << r.err;
+}
+
+// nccompd --check-config is the check `nccomp check-config` runs: the summary of a start that
+// does not happen (no state directory, no measurement log, no status socket); its errors end with
+// nccompd's count line. --print-status-socket gives the socket the configuration names.
+TEST(NccompdCheckConfig, LoadsAsAStartWouldAndStartsNothing) {
+  TempDir d;
+  const auto cfg = d.write("nccompd.toml",
+                           "[daemon]\nrate_hz = 500\n[state]\ndirectory = \"state\"\n"
+                           "[measurement_log]\ndirectory = \"log\"\n"
+                           "[status]\nsocket_path = \"run/status.sock\"\n[loopback]\n"
+                           "[[registers]]\nname = \"T1_length_wear\"\nkind = \"tool_length_wear\"\n"
+                           "bus = \"loopback\"\nmax_abs_um = 200\nmax_step_um = 5\n"
+                           "max_rate_um_per_s = 50\n");
+  const fs::path out = d.path / "nccompd.out";
+  const fs::path err = d.path / "nccompd.err";
+  EXPECT_EQ(wait_exit(spawn({NCCOMPD_BIN, "--config", cfg, "--check-config"}, out, err)), 0)
+      << slurp(err);
+  // [log] is not in the file: the section with its defaults, as in a start.
+  EXPECT_EQ(slurp(out), cfg + ": OK\n  files: " + cfg +
+                            "\n  sections: daemon log loopback measurement_log registers state "
+                            "status"
+                            "\n  loop: 500 Hz\n  registers: 1\n  modules: 0\n");
+  EXPECT_EQ(slurp(err), "");
+  EXPECT_FALSE(fs::exists(d.path / "state"));
+  EXPECT_FALSE(fs::exists(d.path / "log"));
+  EXPECT_FALSE(fs::exists(d.path / "run"));
+
+  EXPECT_EQ(wait_exit(spawn({NCCOMPD_BIN, "--config", cfg, "--print-status-socket"}, out, err)), 0);
+  EXPECT_EQ(slurp(out), (d.path / "run" / "status.sock").string() + "\n");
+
+  const auto bad = d.write("bad.toml", "[daemon]\nrate_hz = 0\n");
+  EXPECT_EQ(wait_exit(spawn({NCCOMPD_BIN, "--config", bad, "--check-config"}, out, err)), 3);
+  EXPECT_EQ(slurp(out), "");
+  EXPECT_EQ(slurp(err), bad + ":2:11: daemon.rate_hz: must be a number in [1, 10000], got 0\n" +
+                            "nccompd: 1 error(s) in " + bad + "\n");
+}
+
+// `nccomp check-config` runs the nccompd that NCCOMPD names and passes its output and exit status
+// through, nccompd's count line as nccomp's error; an NCCOMPD that is no program is an error.
+TEST(NccompCli, CheckConfigRunsTheNccompdNamedByNCCOMPD) {
+  TempDir d;
+  const std::string ok = d.write("ok.sh", "#!/bin/sh\necho \"checked: $*\"\n");
+  const std::string bad = d.write("bad.sh",
+                                  "#!/bin/sh\necho \"f.toml:1:1: a.b: wrong\" >&2\n"
+                                  "echo \"nccompd: 1 error(s) in f.toml\" >&2\nexit 3\n");
+  fs::permissions(ok, fs::perms::owner_all);
+  fs::permissions(bad, fs::perms::owner_all);
+
+  ::setenv("NCCOMPD", ok.c_str(), 1);
+  const CliRun r = nccomp(d, {"check-config", "f.toml"});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.out, "checked: --config f.toml --check-config\n");
+  EXPECT_EQ(r.err, "");
+  EXPECT_EQ(nccomp(d, {"check-config", "--quiet", "f.toml"}).out, "");
+
+  ::setenv("NCCOMPD", bad.c_str(), 1);
+  const CliRun e = nccomp(d, {"check-config", "f.toml"});
+  EXPECT_EQ(e.exit_code, 3);
+  EXPECT_EQ(e.out, "");
+  EXPECT_EQ(e.err, "f.toml:1:1: a.b: wrong\nnccomp: error: 1 error(s) in f.toml\n");
+
+  const std::string none = (d.path / "none").string();
+  ::setenv("NCCOMPD", none.c_str(), 1);
+  const CliRun m = nccomp(d, {"check-config", "f.toml"});
+  ::unsetenv("NCCOMPD");
+  EXPECT_EQ(m.exit_code, 1);
+  EXPECT_EQ(m.err, "nccomp: error: NCCOMPD=" + none + " is not an executable file\n");
 }
 
 TEST(NccompCli, StatusTalksToTheRunningDaemon) {

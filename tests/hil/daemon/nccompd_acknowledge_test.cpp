@@ -34,7 +34,7 @@
 #include <thread>
 #include <vector>
 
-#include "daemon/status.hpp"
+#include "client/status_client.hpp"
 #include "sim/modbus_nc/nc_server.hpp"
 #include "tests/support/run_as.hpp"
 
@@ -111,7 +111,7 @@ CliRun nccomp(const TempDir& d, const std::vector<std::string>& args) {
 // directly (what `nccomp acknowledge` sends), the daemon under TSan.
 CliRun nccomp(const TempDir& d, const std::vector<std::string>& /*args*/) {
   CliRun r;
-  r.out = nccomp::daemon::query_status((d.path / "status.sock").string(), "acknowledge");
+  r.out = nccomp::client::query((d.path / "status.sock").string(), "acknowledge");
   r.exit_code = r.out.rfind("error: ", 0) == 0 ? 1 : 0;
   return r;
 }
@@ -138,7 +138,7 @@ class Daemon {
   }
   std::string status() const {
     try {
-      return nccomp::daemon::query_status((dir_ / "status.sock").string(), "json");
+      return nccomp::client::query((dir_ / "status.sock").string(), "json");
     } catch (const std::exception&) {
       return {};
     }
@@ -357,7 +357,7 @@ TEST(NccompAcknowledge, TheOperatorLiftsABrokenToolHaltAndTheNextMeasurementIsAc
   EXPECT_EQ(holding_i32(nc, kLength), -70);
 
   // A malformed request on the socket: refused with the reason, counted.
-  const std::string bad = nccomp::daemon::query_status(socket, "acknowledge creep");
+  const std::string bad = nccomp::client::query(socket, "acknowledge creep");
   EXPECT_EQ(bad, "error: acknowledge: unknown argument 'creep' (expected nothing or 'all')\n");
 #ifdef NCCOMP_BIN
   const CliRun usage = nccomp(d, {"acknowledge", "--socket", socket, "--all-of-them"});

@@ -27,7 +27,7 @@
 #include <thread>
 #include <vector>
 
-#include "daemon/status.hpp"
+#include "client/status_client.hpp"
 #include "sim/modbus_nc/nc_server.hpp"
 
 extern char** environ;
@@ -92,7 +92,7 @@ class Daemon {
   }
   std::string status() const {
     try {
-      return nccomp::daemon::query_status((dir_ / "status.sock").string(), "json");
+      return nccomp::client::query((dir_ / "status.sock").string(), "json");
     } catch (const std::exception&) {
       return {};
     }
@@ -208,7 +208,7 @@ TEST(NccompdBusAlarm, ALinkDownBeyondAlarmAfterIsLoggedAndListedAndItsClearToo) 
             std::string::npos)
       << st;
   // What `nccomp status` prints: the bus line says ALARM, the alarm list has bus_alarm.
-  const std::string text = nccomp::daemon::query_status((d.path / "status.sock").string(), "text");
+  const std::string text = nccomp::client::query((d.path / "status.sock").string(), "text");
   EXPECT_TRUE(std::regex_search(text, std::regex("\n  modbus +(down|connecting) +ALARM"))) << text;
   EXPECT_TRUE(
       std::regex_search(text, std::regex("\n +[0-9.]+ s  alarm +bus_alarm +subject 0 value 1\n")))
@@ -243,7 +243,7 @@ TEST(NccompdBusAlarm, ALinkDownBeyondAlarmAfterIsLoggedAndListedAndItsClearToo) 
   EXPECT_EQ(count(log, kRiseLog), 1U);
   EXPECT_EQ(count(log, kClearLog), 1U);
   EXPECT_TRUE(daemon.running());
-  const std::string text2 = nccomp::daemon::query_status((d.path / "status.sock").string(), "text");
+  const std::string text2 = nccomp::client::query((d.path / "status.sock").string(), "text");
   EXPECT_TRUE(
       std::regex_search(text2, std::regex("\n +[0-9.]+ s  info +bus_alarm +subject 0 value 0\n")))
       << text2;

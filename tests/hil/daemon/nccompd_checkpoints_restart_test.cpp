@@ -38,7 +38,7 @@
 #include <thread>
 #include <vector>
 
-#include "daemon/status.hpp"
+#include "client/status_client.hpp"
 #include "sim/modbus_nc/nc_server.hpp"
 
 extern char** environ;
@@ -150,7 +150,7 @@ class Daemon {
   }
   std::string status(const std::string& what = "json") const {
     try {
-      return nccomp::daemon::query_status((dir_ / "status.sock").string(), what);
+      return nccomp::client::query((dir_ / "status.sock").string(), what);
     } catch (const std::exception&) {
       return {};
     }

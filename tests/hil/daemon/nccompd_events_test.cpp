@@ -28,7 +28,7 @@
 #include <thread>
 #include <vector>
 
-#include "daemon/status.hpp"
+#include "client/status_client.hpp"
 #include "sim/modbus_nc/nc_server.hpp"
 
 extern char** environ;
@@ -96,7 +96,7 @@ class Daemon {
   }
   std::string status() const {
     try {
-      return nccomp::daemon::query_status((dir_ / "status.sock").string(), "json");
+      return nccomp::client::query((dir_ / "status.sock").string(), "json");
     } catch (const std::exception&) {
       return {};
     }

@@ -36,7 +36,7 @@
 #include <thread>
 #include <vector>
 
-#include "daemon/status.hpp"
+#include "client/status_client.hpp"
 #include "sim/modbus_nc/nc_server.hpp"
 
 extern char** environ;
@@ -103,7 +103,7 @@ class Daemon {
   }
   std::string status() const {
     try {
-      return nccomp::daemon::query_status((dir_ / "status.sock").string(), "json");
+      return nccomp::client::query((dir_ / "status.sock").string(), "json");
     } catch (const std::exception&) {
       return {};
     }
@@ -209,7 +209,7 @@ TEST(NccompdLoudInput, AnNcThatAnswersEveryReadWithAnExceptionRaisesBusInputStal
   })) << st;
   EXPECT_NE(st.find("\"state\":\"degraded\""), std::string::npos) << st;
   // What `nccomp status` prints meanwhile (for docs/daemon.md).
-  const std::string text = nccomp::daemon::query_status((d.path / "status.sock").string(), "text");
+  const std::string text = nccomp::client::query((d.path / "status.sock").string(), "text");
   EXPECT_TRUE(std::regex_search(
       text, std::regex("\n +[0-9.]+ s  alarm +bus_input_stale +subject 0 value 1\n")))
       << text;

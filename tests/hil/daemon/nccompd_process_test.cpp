@@ -27,11 +27,11 @@
 #include <utility>
 #include <vector>
 
+#include "client/status_client.hpp"
 #include "core/engine/engine.hpp"
 #include "daemon/config/builtin_sections.hpp"
 #include "daemon/config/config.hpp"
 #include "daemon/state_store.hpp"
-#include "daemon/status.hpp"
 
 extern char** environ;
 
@@ -100,7 +100,7 @@ class Daemon {
   }
   std::optional<std::string> status(const std::string& what = "json") const {
     try {
-      auto s = nccomp::daemon::query_status((dir_ / "status.sock").string(), what);
+      auto s = nccomp::client::query((dir_ / "status.sock").string(), what);
       if (!s.empty()) {
         return s;
       }

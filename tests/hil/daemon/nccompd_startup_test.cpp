@@ -36,8 +36,8 @@
 #include <thread>
 #include <vector>
 
+#include "client/status_client.hpp"
 #include "daemon/state_store.hpp"
-#include "daemon/status.hpp"
 #include "sim/modbus_nc/nc_server.hpp"
 
 extern char** environ;
@@ -159,7 +159,7 @@ class Daemon {
   }
   std::string request(const std::string& what = "json") const {
     try {
-      return nccomp::daemon::query_status((dir_ / "status.sock").string(), what);
+      return nccomp::client::query((dir_ / "status.sock").string(), what);
     } catch (const std::exception&) {
       return {};
     }

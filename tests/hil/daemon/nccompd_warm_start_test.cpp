@@ -27,7 +27,7 @@
 #include <thread>
 #include <vector>
 
-#include "daemon/status.hpp"
+#include "client/status_client.hpp"
 #include "sim/modbus_nc/nc_server.hpp"
 
 extern char** environ;
@@ -125,9 +125,8 @@ CliRun nccomp(const TempDir& d, const std::vector<std::string>& args) {
   bool next_motion = false;
   for (const auto& a : args) next_motion = next_motion || a == "--at-next-motion";
   CliRun r;
-  r.out =
-      nccomp::daemon::query_status((d.path / "status.sock").string(),
-                                   next_motion ? "warm-start at-next-motion" : "warm-start now");
+  r.out = nccomp::client::query((d.path / "status.sock").string(),
+                                next_motion ? "warm-start at-next-motion" : "warm-start now");
   r.exit_code = r.out.rfind("error: ", 0) == 0 ? 1 : 0;
   return r;
 }
@@ -154,7 +153,7 @@ class Daemon {
   }
   std::string status() const {
     try {
-      return nccomp::daemon::query_status((dir_ / "status.sock").string(), "json");
+      return nccomp::client::query((dir_ / "status.sock").string(), "json");
     } catch (const std::exception&) {
       return {};
     }
@@ -229,7 +228,7 @@ TEST(NccompWarmStart, TheOperatorDeclaresAWarmStartNowOrAtTheNextMotion) {
   EXPECT_EQ(number(daemon.status(), "cold"), 0.0);
 
   // A malformed request on the socket: refused with the reason, counted, nothing changes.
-  const std::string bad = nccomp::daemon::query_status(socket, "warm-start tomorrow");
+  const std::string bad = nccomp::client::query(socket, "warm-start tomorrow");
   EXPECT_EQ(bad,
             "error: warm-start: unknown argument 'tomorrow' (expected nothing, 'now' or "
             "'at-next-motion')\n");

@@ -4,7 +4,7 @@
 // it acknowledges, WHEN the NC skips two tool-measurement events and publishes an absurd X,
 // THEN the Modbus driver's own counters (exceptions per code, lost events, out-of-range values,
 // verify mismatches, pending offsets, connect attempts) are in the running daemon's status: the
-// JSON `nccomp status --json` prints (daemon::query_status, the call the CLI makes), the text
+// JSON `nccomp status --json` prints (client::query, the call the CLI makes), the text
 // status (non-zero ones) and the Prometheus metrics.
 //
 // The I/O thread's real-time policy in the running daemon: with [modbus] io_sched_fifo_priority
@@ -37,7 +37,7 @@
 #include <thread>
 #include <vector>
 
-#include "daemon/status.hpp"
+#include "client/status_client.hpp"
 #include "sim/modbus_nc/nc_server.hpp"
 
 extern char** environ;
@@ -156,7 +156,7 @@ class Daemon {
   }
   [[nodiscard]] std::string status(const std::string& what) const {
     try {
-      return nccomp::daemon::query_status((dir_ / "status.sock").string(), what);
+      return nccomp::client::query((dir_ / "status.sock").string(), what);
     } catch (const std::exception&) {
       return {};
     }

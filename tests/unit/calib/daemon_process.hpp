@@ -25,9 +25,10 @@
 #include <thread>
 #include <vector>
 
+#include "client/protocol.hpp"
+#include "client/status_client.hpp"
 #include "tests/unit/calib/sim_machine.hpp"
 #include "tests/unit/calib/test_config.hpp"
-#include "tools/calibrate/daemon_client.hpp"
 
 extern char** environ;
 
@@ -133,7 +134,7 @@ class Daemon {
   [[nodiscard]] bool alive() const { return pid_ > 0 && ::kill(pid_, 0) == 0; }
   [[nodiscard]] std::optional<std::string> ask(const std::string& command) const {
     try {
-      return tools::calibrate::daemon_request(socket(), command, 10.0);
+      return client::query(socket(), client::calibrate_request(command), 10.0);
     } catch (const std::exception&) {
       return std::nullopt;
     }

@@ -12,7 +12,7 @@
 #include <string>
 #include <vector>
 
-#include "daemon/command.hpp"
+#include "daemon/commands/command.hpp"
 
 namespace nccomp::daemon {
 namespace {

@@ -17,12 +17,14 @@
 #include <thread>
 
 #include "daemon/loop.hpp"
-#include "daemon/loopback_bus.hpp"
+#include "drivers/loopback/loopback_bus.hpp"
 #include "drivers/modbus/config.hpp"
 #include "drivers/modbus/modbus_bus.hpp"
 
 namespace nccomp::daemon {
 namespace {
+
+using drivers::loopback::LoopbackBus;
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;

@@ -16,12 +16,14 @@
 #include <vector>
 
 #include "core/engine/ramp_module.hpp"
-#include "daemon/loopback_bus.hpp"
+#include "drivers/loopback/loopback_bus.hpp"
 #include "drivers/write_receipts.hpp"
 #include "tests/support/alloc_counter.hpp"
 
 namespace nccomp::daemon {
 namespace {
+
+using drivers::loopback::LoopbackBus;
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;

@@ -30,12 +30,15 @@
 #include <thread>
 #include <vector>
 
+#include "client/status_client.hpp"
 #include "core/engine/ramp_module.hpp"
-#include "daemon/loopback_bus.hpp"
+#include "drivers/loopback/loopback_bus.hpp"
 #include "tests/support/run_as.hpp"
 
 namespace nccomp::daemon {
 namespace {
+
+using drivers::loopback::LoopbackBus;
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
@@ -148,7 +151,7 @@ TEST(StatusServer, AnswersTextJsonAndPrometheus) {
   // Wait until the ramp has reached 3 µm and the register snapshot shows it.
   std::string json;
   for (int i = 0; i < 500; ++i) {
-    json = query_status(sock, "json");
+    json = client::query(sock, "json");
     if (json.find("\"output_um\":3,") != std::string::npos) {
       break;
     }
@@ -160,11 +163,11 @@ TEST(StatusServer, AnswersTextJsonAndPrometheus) {
   // Driver-specific counters: all of them in JSON and metrics, only the non-zero ones in text.
   EXPECT_NE(json.find("\"counters\":{\"bus_off\":2,\"rx_overflow\":0}}"), std::string::npos)
       << json;
-  const std::string text = query_status(sock, "text");
+  const std::string text = client::query(sock, "text");
   EXPECT_NE(text.find("T1_length_wear                3.000 um"), std::string::npos) << text;
   EXPECT_NE(text.find("bus_off 2\n"), std::string::npos) << text;
   EXPECT_EQ(text.find("rx_overflow"), std::string::npos) << text;
-  EXPECT_NE(query_status(sock, "bogus").find("error: unknown request 'bogus'"), std::string::npos);
+  EXPECT_NE(client::query(sock, "bogus").find("error: unknown request 'bogus'"), std::string::npos);
   const std::string http = http_get(server.prometheus_port(), "/metrics");
   EXPECT_EQ(http.rfind("HTTP/1.0 200 OK", 0), 0U) << http;
   EXPECT_NE(http.find("nccompd_register_output_meters{register=\"T1_length_wear\"} 3e-06\n"),
@@ -176,7 +179,7 @@ TEST(StatusServer, AnswersTextJsonAndPrometheus) {
       << http;
   EXPECT_EQ(http_get(server.prometheus_port(), "/other").rfind("HTTP/1.0 404", 0), 0U);
   // One unknown request, one 404: the server counts them.
-  EXPECT_NE(query_status(sock, "json").find("\"bad_requests\":2}"), std::string::npos);
+  EXPECT_NE(client::query(sock, "json").find("\"bad_requests\":2}"), std::string::npos);
 
   server.stop();
   EXPECT_FALSE(fs::exists(sock));
@@ -354,7 +357,7 @@ TEST(StatusServer, TricklingClientsDelayNobodyAndAreCutOffAtTheirDeadline) {
   for (std::size_t i = 0; i < answers.size(); ++i) {
     clients.emplace_back([&, i] {
       try {
-        answers[i] = i < 20 ? query_status(sock, i % 2 == 0 ? "text" : "json")
+        answers[i] = i < 20 ? client::query(sock, i % 2 == 0 ? "text" : "json")
                             : http_get(server.prometheus_port(), "/metrics");
       } catch (const std::exception& e) {
         answers[i] = e.what();
@@ -374,7 +377,7 @@ TEST(StatusServer, TricklingClientsDelayNobodyAndAreCutOffAtTheirDeadline) {
   // At their deadline (4 s after connecting) the tricklers are told why and cut off.
   EXPECT_EQ(on_socket.join(), "error: no complete request within 4 s\n");
   EXPECT_EQ(on_metrics.join().rfind("HTTP/1.0 408 Request Timeout", 0), 0U);
-  const std::string json = query_status(sock, "json");
+  const std::string json = client::query(sock, "json");
   EXPECT_NE(json.find("\"status_server\":{\"clients\":27,\"timed_out\":2,\"turned_away\":0,"),
             std::string::npos)
       << json;
@@ -391,7 +394,7 @@ TEST(StatusServer, ClientsBeyondMaxClientsAreTurnedAwayNotQueued) {
   server.start(o);
   std::vector<int> idle;
   for (int i = 0; i < 3; ++i) idle.push_back(connect_unix(sock));
-  EXPECT_EQ(query_status(sock, "text"),
+  EXPECT_EQ(client::query(sock, "text"),
             "error: busy: 3 clients are being served ([status] max_clients); try again\n");
   // One idle client goes away: its place is free again.
   ::close(idle.back());
@@ -399,7 +402,7 @@ TEST(StatusServer, ClientsBeyondMaxClientsAreTurnedAwayNotQueued) {
   std::string text;
   for (int i = 0; i < 200 && text.rfind("nccompd pid ", 0) != 0; ++i) {
     std::this_thread::sleep_for(10ms);
-    text = query_status(sock, "text");
+    text = client::query(sock, "text");
   }
   EXPECT_EQ(text.rfind("nccompd pid ", 0), 0U) << text;
   for (const int fd : idle) ::close(fd);
@@ -496,7 +499,7 @@ TEST(StatusServer, OnlyRootAndTheAdminGroupChangeTheMachine) {
   EXPECT_EQ(allowed.answer, "ok changed now\n");
   const auto allowed_egid = nccomp::test::request_as(admin_egid, sock, "test-change again");
   EXPECT_EQ(allowed_egid.answer, "ok changed again\n");
-  EXPECT_EQ(query_status(sock, "test-change as root"), "ok changed as root\n");
+  EXPECT_EQ(client::query(sock, "test-change as root"), "ok changed as root\n");
   EXPECT_EQ(g_changes.load(), 3);
 
   // Not in the status group: the socket's mode keeps it out (connect fails: exit 11).

@@ -17,9 +17,9 @@
 
 #include "core/engine/engine.hpp"
 #include "core/model/model.hpp"
+#include "core/model/model_module.hpp"
 #include "daemon/config/builtin_sections.hpp"
 #include "daemon/measurement_log.hpp"
-#include "daemon/sections/model/model_module.hpp"
 #include "daemon/sections/model/model_section.hpp"
 #include "tests/support/alloc_counter.hpp"
 #include "tests/unit/daemon_modules/temp_dir.hpp"
@@ -30,6 +30,8 @@ namespace {
 
 namespace ce = core::engine;
 namespace cm = core::model;
+using cm::ModelApply;
+using cm::ModelModule;
 using testing::TempDir;
 
 /// Writes a fixed target (base) or a fixed trim on register 0 each step.

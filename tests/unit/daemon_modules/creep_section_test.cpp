@@ -18,8 +18,8 @@
 #include "daemon/config/builtin_sections.hpp"
 #include "daemon/logging.hpp"
 #include "daemon/loop.hpp"
-#include "daemon/loopback_bus.hpp"
 #include "daemon/status.hpp"
+#include "drivers/loopback/loopback_bus.hpp"
 #include "tests/unit/daemon_modules/temp_dir.hpp"
 
 namespace nccomp::daemon::sections {
@@ -755,7 +755,7 @@ TEST(ShippedConfig, StatusShowsTheWearOfEveryRememberedTool) {
     names.push_back(e.spec.name);
   }
   core::rt::ConfigSwap<Runtime> swap(std::move(rt));
-  LoopbackBus bus(256, 256);
+  drivers::loopback::LoopbackBus bus(256, 256);
   bus.start();
   Loop loop(LoopOptions{}, swap, {&bus}, nullptr, nullptr);
   EventLogger logger(loop);

@@ -13,12 +13,14 @@
 #include "daemon/config/builtin_sections.hpp"
 #include "daemon/logging.hpp"
 #include "daemon/loop.hpp"
-#include "daemon/loopback_bus.hpp"
 #include "daemon/status.hpp"
+#include "drivers/loopback/loopback_bus.hpp"
 #include "tests/unit/daemon_modules/temp_dir.hpp"
 
 namespace nccomp::daemon {
 namespace {
+
+using drivers::loopback::LoopbackBus;
 
 using namespace std::chrono_literals;
 

@@ -1,9 +1,11 @@
-// Operator commands on the status socket (docs/daemon.md, "Operator commands"). A request line
-// whose first word is a registered verb ("calibrate begin", ...) goes to that verb's handler
-// instead of the status renderer. Handlers run on the status server's command thread (one
-// request at a time) and reach the loop only through the CommandBus: an SPSC ring of core events
-// that the loop drains like a bus's receive ring, so the loop thread takes commands without
-// allocation or locks.
+// Operator commands on the status socket (docs/daemon.md, "Operator commands"): the verb registry.
+// A request line whose first word is a registered verb ("calibrate begin", ...) goes to that
+// verb's handler instead of the status renderer. The verbs live beside this file, one per file
+// (acknowledge, warm-start, register, calibrate), and register themselves at static
+// initialisation; their request syntax is client/protocol.hpp's. Handlers run on the status
+// server's command thread (one request at a time) and reach the loop only through the CommandBus:
+// an SPSC ring of core events that the loop drains like a bus's receive ring, so the loop thread
+// takes commands without allocation or locks.
 //
 // Privilege separation: every verb is registered with an access rule, "changes the machine" by
 // default. dispatch_command() runs a changing command only for root, the daemon's own user or a
@@ -96,11 +98,15 @@ using AccessRule = CommandAccess (*)(std::string_view args);
 /// the first line is "ok ..." or "error: <what>".
 using CommandHandler = std::function<std::string(std::string_view args, CommandContext& ctx)>;
 
-/// Registers a verb (static initialisation of a section's object file). Throws on a duplicate.
+/// Registers a verb (static initialisation of the verb's object file). Throws on a duplicate.
 /// A verb changes the machine unless its registration says otherwise (read_only, or a rule
 /// that looks at the arguments).
 int register_command_handler(std::string verb, CommandHandler handler,
                              AccessRule access = &changes_machine);
+
+/// A handler's refusal: counted (CommandBus::refused) unless count is false, logged as a warning,
+/// answered "error: <why>\n".
+std::string refuse(CommandContext& ctx, const std::string& why, bool count = true);
 
 /// The registered verbs, sorted.
 [[nodiscard]] std::vector<std::string> registered_verbs();

@@ -1,4 +1,4 @@
-#include "daemon/sections/register_release/register_command.hpp"
+#include "daemon/commands/register_release.hpp"
 
 #include <fmt/format.h>
 #include <fmt/ranges.h>
@@ -9,9 +9,10 @@
 #include <thread>
 #include <vector>
 
+#include "client/protocol.hpp"
 #include "daemon/loop.hpp"
 
-namespace nccomp::daemon::sections {
+namespace nccomp::daemon::commands {
 
 namespace {
 
@@ -20,12 +21,6 @@ namespace eng = core::engine;
 std::uint32_t next_sequence() {
   static std::uint32_t seq = 0;  // the status thread only
   return ++seq;
-}
-
-std::string refused(CommandContext& ctx, const std::string& why) {
-  if (ctx.bus != nullptr) ctx.bus->count_refused();
-  spdlog::warn("operator command refused: {}", why);
-  return "error: " + why + "\n";
 }
 
 /// What a held register waits for, as the answer and the log say it.
@@ -52,19 +47,19 @@ std::string release_text(const eng::RegisterState& r) {
 
 std::string handle_register_command(std::string_view args, CommandContext& ctx) {
   if (ctx.bus == nullptr || ctx.loop == nullptr || !ctx.register_names) {
-    return refused(ctx, "this process takes no operator commands");
+    return refuse(ctx, "this process takes no operator commands");
   }
   constexpr std::string_view kRelease = "release";
   if (args.substr(0, kRelease.size()) != kRelease ||
       (args.size() > kRelease.size() && args[kRelease.size()] != ' ')) {
     const std::string shown(args.substr(0, 40));
-    return refused(ctx, "register: unknown argument '" + shown + (args.size() > 40 ? "...'" : "'") +
-                            " (expected 'release NAME' or 'release all')");
+    return refuse(ctx, "register: unknown argument '" + shown + (args.size() > 40 ? "...'" : "'") +
+                           " (expected 'release NAME' or 'release all')");
   }
   std::string_view what = args.substr(std::min(args.size(), kRelease.size()));
   while (!what.empty() && what.front() == ' ') what.remove_prefix(1);
   if (what.empty()) {
-    return refused(ctx, "register release: name the register (or 'all')");
+    return refuse(ctx, "register release: name the register (or 'all')");
   }
   const std::vector<std::string> names = ctx.register_names();
   int index = -1;
@@ -74,7 +69,7 @@ std::string handle_register_command(std::string_view args, CommandContext& ctx) 
     }
     if (index < 0) {
       const std::string shown(what.substr(0, 60));
-      return refused(ctx, "register release: no register named '" + shown + "' in [[registers]]");
+      return refuse(ctx, "register release: no register named '" + shown + "' in [[registers]]");
     }
   }
   // What is held now (the loop publishes every 10 cycles; the engine decides again when it
@@ -85,15 +80,15 @@ std::string handle_register_command(std::string_view args, CommandContext& ctx) 
   oc.kind = core::OperatorCommandKind::kRegisterRelease;
   oc.value = {static_cast<double>(index), 0.0};
   if (!ctx.bus->push(oc)) {
-    return refused(ctx, "register release: the loop does not take commands (its queue is full)");
+    return refuse(ctx, "register release: the loop does not take commands (its queue is full)");
   }
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(3);
   LoopStats st = ctx.loop->stats();
   while (st.engine.last_release_sequence != oc.sequence) {
     if (std::chrono::steady_clock::now() > deadline) {
-      return refused(ctx,
-                     "register release: no answer from the loop within 3 s (is it running, or in "
-                     "lock-step waiting for the NC?)");
+      return refuse(ctx,
+                    "register release: no answer from the loop within 3 s (is it running, or in "
+                    "lock-step waiting for the NC?)");
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(1));
     st = ctx.loop->stats();
@@ -123,7 +118,8 @@ std::string handle_register_command(std::string_view args, CommandContext& ctx) 
 }
 
 namespace {
-[[maybe_unused]] const int kVerb = register_command_handler("register", handle_register_command);
+[[maybe_unused]] const int kVerb =
+    register_command_handler(std::string(client::kRegisterVerb), handle_register_command);
 }  // namespace
 
-}  // namespace nccomp::daemon::sections
+}  // namespace nccomp::daemon::commands

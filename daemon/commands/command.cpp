@@ -1,4 +1,4 @@
-#include "daemon/command.hpp"
+#include "daemon/commands/command.hpp"
 
 #include <grp.h>
 #include <pwd.h>
@@ -164,6 +164,12 @@ int register_command_handler(std::string verb, CommandHandler handler, AccessRul
     throw std::logic_error("operator command verb registered twice");
   }
   return 0;
+}
+
+std::string refuse(CommandContext& ctx, const std::string& why, bool count) {
+  if (count && ctx.bus != nullptr) ctx.bus->count_refused();
+  spdlog::warn("operator command refused: {}", why);
+  return "error: " + why + "\n";
 }
 
 std::vector<std::string> registered_verbs() {

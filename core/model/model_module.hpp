@@ -22,7 +22,7 @@
 #include "core/engine/engine.hpp"
 #include "core/model/model.hpp"
 
-namespace nccomp::daemon::sections {
+namespace nccomp::core::model {
 
 /// One fitted term mapped onto one register: trim_um = gain × term(context). Entries on the
 /// same register add up.
@@ -33,15 +33,15 @@ struct ModelApply {
   /// Context columns fixed by the entry (kind, point, tool, angle); NaN = from the loop /
   /// unknown. A fixed tool also selects that tool's cut path.
   double kind{1.0};
-  double point{core::model::kUnknown};
-  double tool{core::model::kUnknown};
-  double angle_deg{core::model::kUnknown};
+  double point{kUnknown};
+  double tool{kUnknown};
+  double angle_deg{kUnknown};
 };
 
 /// An extra model column fed from a TemperatureSample sensor (any scalar the bus map publishes
 /// on a sensor channel: an ambient temperature, a second structure temperature, …).
 struct ModelInput {
-  int column{-1};  // Row index (≥ core::model::kStandardColumns)
+  int column{-1};  // Row index (≥ kStandardColumns)
   int sensor{0};
 };
 
@@ -50,7 +50,7 @@ class ModelModule final : public core::engine::Module {
   /// update_each_cycle: re-evaluate every cycle (time / temperature / position / path terms);
   /// otherwise at start-up, part start, tool change and warm start only (the trim is constant
   /// over a part).
-  ModelModule(core::model::Model model, std::vector<ModelApply> applies, bool update_each_cycle,
+  ModelModule(Model model, std::vector<ModelApply> applies, bool update_each_cycle,
               std::vector<ModelInput> inputs = {});
   ModelModule(const ModelModule&) = delete;
   ModelModule& operator=(const ModelModule&) = delete;
@@ -76,11 +76,11 @@ class ModelModule final : public core::engine::Module {
  private:
   void evaluate(core::TimeNs now_ns, core::StepOutput& out) noexcept;
 
-  core::model::Model model_;
+  Model model_;
   std::vector<ModelApply> applies_;
   std::vector<ModelInput> inputs_;
   std::vector<double> trims_um_;
-  core::model::EvalState state_;
+  EvalState state_;
   bool each_cycle_;
   core::engine::MachineContext own_context_;
   const core::engine::MachineContext* context_{&own_context_};
@@ -96,4 +96,4 @@ class ModelModule final : public core::engine::Module {
   bool dirty_{true};  // publish on the first step (start-up, restart)
 };
 
-}  // namespace nccomp::daemon::sections
+}  // namespace nccomp::core::model

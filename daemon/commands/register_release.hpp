@@ -11,12 +11,12 @@
 #include <string>
 #include <string_view>
 
-#include "daemon/command.hpp"
+#include "daemon/commands/command.hpp"
 
-namespace nccomp::daemon::sections {
+namespace nccomp::daemon::commands {
 
 /// The "register" verb's handler: "ok released ..." with what each released register was held
 /// for, "ok ... not held: nothing to release", or "error: ...".
 std::string handle_register_command(std::string_view args, CommandContext& ctx);
 
-}  // namespace nccomp::daemon::sections
+}  // namespace nccomp::daemon::commands

@@ -1,4 +1,4 @@
-#include "daemon/sections/model/model_module.hpp"
+#include "core/model/model_module.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -7,15 +7,14 @@
 #include <string>
 #include <utility>
 
-namespace nccomp::daemon::sections {
+namespace nccomp::core::model {
 
 namespace {
 constexpr std::uint32_t kLegacyMagic = 0x4D4F444CU;  // "MODL": the state before the context
-namespace cm = core::model;
-constexpr std::size_t col(cm::Column c) { return static_cast<std::size_t>(c); }
+constexpr std::size_t col(Column c) { return static_cast<std::size_t>(c); }
 }  // namespace
 
-ModelModule::ModelModule(cm::Model model, std::vector<ModelApply> applies, bool update_each_cycle,
+ModelModule::ModelModule(Model model, std::vector<ModelApply> applies, bool update_each_cycle,
                          std::vector<ModelInput> inputs)
     : model_(std::move(model)),
       applies_(std::move(applies)),
@@ -31,8 +30,8 @@ ModelModule::ModelModule(cm::Model model, std::vector<ModelApply> applies, bool 
     }
   }
   for (const auto& in : inputs_) {
-    if (in.column < static_cast<int>(cm::kStandardColumns) ||
-        in.column >= static_cast<int>(cm::kStandardColumns + model_.extra_columns().size()) ||
+    if (in.column < static_cast<int>(kStandardColumns) ||
+        in.column >= static_cast<int>(kStandardColumns + model_.extra_columns().size()) ||
         in.sensor < 0 || in.sensor >= static_cast<int>(core::engine::kTemperatureSensors)) {
       throw std::invalid_argument("model: input column " + std::to_string(in.column) +
                                   " / sensor " + std::to_string(in.sensor) + " out of range");
@@ -80,35 +79,35 @@ void ModelModule::evaluate(core::TimeNs now_ns, core::StepOutput& out) noexcept 
   // The context of "now"; unknown columns are NaN, and a term whose column is unknown
   // contributes nothing (e.g. part_trend before the first part start).
   const core::engine::MachineContext& c = *context_;
-  cm::Row row = cm::unknown_row();
-  row[col(cm::Column::kTime)] = c.machine_time_s(now_ns);
+  Row row = unknown_row();
+  row[col(Column::kTime)] = c.machine_time_s(now_ns);
   if (c.has_part()) {
-    row[col(cm::Column::kPart)] = c.part();
+    row[col(Column::kPart)] = c.part();
   } else if (has_restored_part_) {
-    row[col(cm::Column::kPart)] = restored_part_;
+    row[col(Column::kPart)] = restored_part_;
   }
-  row[col(cm::Column::kTemp)] = c.temp_c();
-  row[col(cm::Column::kX)] = c.position_mm()[0];
-  row[col(cm::Column::kY)] = c.position_mm()[1];
-  row[col(cm::Column::kZ)] = c.position_mm()[2];
+  row[col(Column::kTemp)] = c.temp_c();
+  row[col(Column::kX)] = c.position_mm()[0];
+  row[col(Column::kY)] = c.position_mm()[1];
+  row[col(Column::kZ)] = c.position_mm()[2];
   for (const ModelInput& in : inputs_) {
     row[static_cast<std::size_t>(in.column)] = c.temperature_c(in.sensor);
   }
-  cm::advance_state(model_.specs(), row, state_);
-  const double tool = c.has_tool() ? static_cast<double>(c.tool()) : cm::kUnknown;
-  const double path_mm = c.has_tool() ? c.cut_path_mm() : cm::kUnknown;
+  advance_state(model_.specs(), row, state_);
+  const double tool = c.has_tool() ? static_cast<double>(c.tool()) : kUnknown;
+  const double path_mm = c.has_tool() ? c.cut_path_mm() : kUnknown;
   for (std::size_t i = 0; i < applies_.size(); ++i) {
     const ModelApply& a = applies_[i];
-    row[col(cm::Column::kKind)] = a.kind;
-    row[col(cm::Column::kPoint)] = a.point;
-    row[col(cm::Column::kAngle)] = a.angle_deg;
+    row[col(Column::kKind)] = a.kind;
+    row[col(Column::kPoint)] = a.point;
+    row[col(Column::kAngle)] = a.angle_deg;
     if (!std::isnan(a.tool)) {
       // A term of one tool: its number and its own cut path (NaN until the context knows it).
-      row[col(cm::Column::kTool)] = a.tool;
-      row[col(cm::Column::kPath)] = c.cut_path_mm(static_cast<std::int32_t>(a.tool));
+      row[col(Column::kTool)] = a.tool;
+      row[col(Column::kPath)] = c.cut_path_mm(static_cast<std::int32_t>(a.tool));
     } else {
-      row[col(cm::Column::kTool)] = tool;
-      row[col(cm::Column::kPath)] = path_mm;
+      row[col(Column::kTool)] = tool;
+      row[col(Column::kPath)] = path_mm;
     }
     trims_um_[i] = a.gain * model_.evaluate_term(a.term_index, row, state_);
   }
@@ -165,4 +164,4 @@ std::size_t ModelModule::status(std::span<core::engine::StatusValue> out) const 
   return n;
 }
 
-}  // namespace nccomp::daemon::sections
+}  // namespace nccomp::core::model

@@ -1,4 +1,4 @@
-#include "daemon/sections/acknowledge/acknowledge_command.hpp"
+#include "daemon/commands/acknowledge.hpp"
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
@@ -8,22 +8,17 @@
 #include <cstdint>
 #include <thread>
 
+#include "client/protocol.hpp"
 #include "daemon/logging.hpp"
 #include "daemon/loop.hpp"
 
-namespace nccomp::daemon::sections {
+namespace nccomp::daemon::commands {
 
 namespace {
 
 std::uint32_t next_sequence() {
   static std::uint32_t seq = 0;  // the command thread only
   return ++seq;
-}
-
-std::string refused(CommandContext& ctx, const std::string& why) {
-  if (ctx.bus != nullptr) ctx.bus->count_refused();
-  spdlog::warn("operator command refused: {}", why);
-  return "error: " + why + "\n";
 }
 
 const core::engine::StatusValue* find(const ModuleSnapshot& m, std::string_view key) {
@@ -64,27 +59,27 @@ std::string cleared(const ModuleSnapshot& m, const core::engine::StatusValue& la
 
 std::string handle_acknowledge_command(std::string_view args, CommandContext& ctx) {
   if (ctx.bus == nullptr || ctx.loop == nullptr) {
-    return refused(ctx, "this process takes no operator commands");
+    return refuse(ctx, "this process takes no operator commands");
   }
   if (!args.empty() && args != "all") {
     const std::string shown(args.substr(0, 40));
-    return refused(ctx, "acknowledge: unknown argument '" + shown +
-                            (args.size() > 40 ? "...'" : "'") + " (expected nothing or 'all')");
+    return refuse(ctx, "acknowledge: unknown argument '" + shown +
+                           (args.size() > 40 ? "...'" : "'") + " (expected nothing or 'all')");
   }
   core::OperatorCommand oc;
   oc.sequence = next_sequence();
   oc.kind = core::OperatorCommandKind::kAcknowledge;
   oc.code = {0, 0, 0, 0};  // every module
   if (!ctx.bus->push(oc)) {
-    return refused(ctx, "acknowledge: the loop does not take commands (its queue is full)");
+    return refuse(ctx, "acknowledge: the loop does not take commands (its queue is full)");
   }
   // The loop runs it at its next cycle (every module steps with it in that cycle); the engine
   // publishes the sequence it took last. 3 s in all: less than the client's 5 s timeout.
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(3);
   const auto no_answer = [&] {
-    return refused(ctx,
-                   "acknowledge: no answer from the loop within 3 s (is it running, or in "
-                   "lock-step waiting for the NC?)");
+    return refuse(ctx,
+                  "acknowledge: no answer from the loop within 3 s (is it running, or in "
+                  "lock-step waiting for the NC?)");
   };
   LoopStats st = ctx.loop->stats();
   while (st.engine.last_acknowledge_sequence != oc.sequence) {
@@ -130,7 +125,7 @@ std::string handle_acknowledge_command(std::string_view args, CommandContext& ct
 
 namespace {
 [[maybe_unused]] const int kVerb =
-    register_command_handler("acknowledge", handle_acknowledge_command);
+    register_command_handler(std::string(client::kAcknowledgeVerb), handle_acknowledge_command);
 }  // namespace
 
-}  // namespace nccomp::daemon::sections
+}  // namespace nccomp::daemon::commands

@@ -13,7 +13,7 @@
 
 #include "drivers/bus.hpp"
 
-namespace nccomp::daemon {
+namespace nccomp::drivers::loopback {
 
 class LoopbackBus final : public drivers::Bus {
  public:
@@ -57,4 +57,4 @@ class LoopbackBus final : public drivers::Bus {
   std::thread thread_;
 };
 
-}  // namespace nccomp::daemon
+}  // namespace nccomp::drivers::loopback

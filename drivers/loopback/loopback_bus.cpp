@@ -1,10 +1,10 @@
-#include "daemon/loopback_bus.hpp"
+#include "drivers/loopback/loopback_bus.hpp"
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 
-namespace nccomp::daemon {
+namespace nccomp::drivers::loopback {
 
 LoopbackBus::LoopbackBus(std::size_t rx_capacity, std::size_t tx_capacity)
     : rx_(rx_capacity), tx_(tx_capacity) {}
@@ -87,4 +87,4 @@ void LoopbackBus::run() {
   }
 }
 
-}  // namespace nccomp::daemon
+}  // namespace nccomp::drivers::loopback

@@ -1,4 +1,4 @@
-#include "daemon/sections/warm_start/warm_start_command.hpp"
+#include "daemon/commands/warm_start.hpp"
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
@@ -7,9 +7,10 @@
 #include <cstdint>
 #include <thread>
 
+#include "client/protocol.hpp"
 #include "daemon/loop.hpp"
 
-namespace nccomp::daemon::sections {
+namespace nccomp::daemon::commands {
 
 namespace {
 
@@ -18,17 +19,11 @@ std::uint32_t next_sequence() {
   return ++seq;
 }
 
-std::string refused(CommandContext& ctx, const std::string& why) {
-  if (ctx.bus != nullptr) ctx.bus->count_refused();
-  spdlog::warn("operator command refused: {}", why);
-  return "error: " + why + "\n";
-}
-
 }  // namespace
 
 std::string handle_warm_start_command(std::string_view args, CommandContext& ctx) {
   if (ctx.bus == nullptr || ctx.loop == nullptr) {
-    return refused(ctx, "this process takes no operator commands");
+    return refuse(ctx, "this process takes no operator commands");
   }
   std::int8_t code = 0;
   if (args.empty() || args == "now") {
@@ -37,16 +32,16 @@ std::string handle_warm_start_command(std::string_view args, CommandContext& ctx
     code = 1;
   } else {
     const std::string shown(args.substr(0, 40));
-    return refused(ctx, "warm-start: unknown argument '" + shown +
-                            (args.size() > 40 ? "...'" : "'") +
-                            " (expected nothing, 'now' or 'at-next-motion')");
+    return refuse(ctx, "warm-start: unknown argument '" + shown +
+                           (args.size() > 40 ? "...'" : "'") +
+                           " (expected nothing, 'now' or 'at-next-motion')");
   }
   core::OperatorCommand oc;
   oc.sequence = next_sequence();
   oc.kind = core::OperatorCommandKind::kWarmStart;
   oc.code = {code, 0, 0, 0};
   if (!ctx.bus->push(oc)) {
-    return refused(ctx, "warm-start: the loop does not take commands (its queue is full)");
+    return refuse(ctx, "warm-start: the loop does not take commands (its queue is full)");
   }
   // The loop runs it at its next cycle; the engine publishes the sequence it took last. 3 s:
   // less than the client's 5 s receive timeout.
@@ -54,9 +49,9 @@ std::string handle_warm_start_command(std::string_view args, CommandContext& ctx
   core::engine::EngineCounters e = ctx.loop->stats().engine;
   while (e.last_warm_start_sequence != oc.sequence) {
     if (std::chrono::steady_clock::now() > deadline) {
-      return refused(ctx,
-                     "warm-start: no answer from the loop within 3 s (is it running, or in "
-                     "lock-step waiting for the NC?)");
+      return refuse(ctx,
+                    "warm-start: no answer from the loop within 3 s (is it running, or in "
+                    "lock-step waiting for the NC?)");
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(1));
     e = ctx.loop->stats().engine;
@@ -75,7 +70,7 @@ std::string handle_warm_start_command(std::string_view args, CommandContext& ctx
 
 namespace {
 [[maybe_unused]] const int kVerb =
-    register_command_handler("warm-start", handle_warm_start_command);
+    register_command_handler(std::string(client::kWarmStartVerb), handle_warm_start_command);
 }  // namespace
 
-}  // namespace nccomp::daemon::sections
+}  // namespace nccomp::daemon::commands
