@@ -534,7 +534,8 @@ void Daemon::start_persister_and_log() {
   mo.directory = pick_dir(*config_, msec.directory, "LOGS_DIRECTORY", "/var/log/nccompd");
   mo.max_file_bytes = msec.max_file_bytes;
   mo.keep_files = msec.keep_files;
-  const std::string machine = msec.machine_id.empty() ? host_machine_id() : msec.machine_id;
+  const std::string machine =
+      msec.machine_id.empty() ? formats::measurement_log::host_machine_id() : msec.machine_id;
   mo.machine_id = machine;
   mo.context_columns = msec.context_columns;
   mo.monotonic_record_clock = !lockstep_;  // the peer's TICKs are not CLOCK_MONOTONIC

@@ -17,20 +17,12 @@
 
 namespace nccomp::daemon {
 
+namespace ml = formats::measurement_log;
+
 namespace {
 
 constexpr std::int64_t kNsPerS = 1'000'000'000;
 constexpr std::size_t kMaxBatchBytes = 64 * 1024;
-
-// Unknown values (NaN) are empty cells; `decimals` keeps the row short and exact enough.
-void cell(std::string& s, double v, int decimals) {
-  s += ',';
-  if (std::isfinite(v)) {
-    char buf[48];
-    std::snprintf(buf, sizeof buf, "%.*f", decimals, v);
-    s += buf;
-  }
-}
 
 std::int64_t clock_ns(clockid_t id) {
   timespec ts{};
@@ -46,130 +38,12 @@ std::int64_t monotonic_to_realtime_ns() {
   return r - (m0 + (m1 - m0) / 2);
 }
 
-/// Reads up to `n` bytes at `offset`.
-std::string read_at(int fd, std::uint64_t offset, std::size_t n) {
-  std::string s(n, '\0');
-  std::size_t got = 0;
-  while (got < n) {
-    const ssize_t k = ::pread(fd, s.data() + got, n - got, static_cast<off_t>(offset + got));
-    if (k < 0 && errno == EINTR) continue;
-    if (k <= 0) break;
-    got += static_cast<std::size_t>(k);
-  }
-  s.resize(got);
-  return s;
-}
-
-const char* kind_name(core::MeasurementKind k) {
-  switch (k) {
-    case core::MeasurementKind::kToolWear:
-      return "tool_wear";
-    case core::MeasurementKind::kContour:
-      return "contour";
-    case core::MeasurementKind::kCalib:
-      return "calib";
-  }
-  return "unknown";
-}
-
 }  // namespace
-
-std::string host_machine_id() {
-  char buf[256] = {};
-  if (::gethostname(buf, sizeof buf - 1) != 0) buf[0] = '\0';
-  std::string id(buf);
-  id = id.substr(0, id.find('.'));
-  for (char& ch : id) {
-    const bool ok = (ch >= 'a' && ch <= 'z') || (ch >= 'A' && ch <= 'Z') ||
-                    (ch >= '0' && ch <= '9') || ch == '_' || ch == '-';
-    if (!ok) ch = '-';
-  }
-  if (id.size() > 64) id.resize(64);
-  if (id.empty() || id.front() == '-' || id.front() == '_') id = "machine" + id;
-  return id.substr(0, 64);
-}
-
-std::string measurement_csv_header(const std::vector<ContextColumn>& columns) {
-  std::string h = kMeasurementCsvV1Header;
-  h += ',';
-  h += kMeasurementCsvV2Columns;
-  for (const ContextColumn& c : columns) {
-    h += ',';
-    h += c.name;
-  }
-  return h;
-}
-
-std::string format_utc(std::int64_t unix_ns) {
-  std::int64_t s = unix_ns / kNsPerS;
-  std::int64_t ms = (unix_ns % kNsPerS) / 1'000'000;
-  if (ms < 0) {
-    ms += 1000;
-    --s;
-  }
-  const std::time_t t = static_cast<std::time_t>(s);
-  std::tm tm{};
-  gmtime_r(&t, &tm);
-  char buf[96];
-  std::snprintf(buf, sizeof buf, "%04d-%02d-%02dT%02d:%02d:%02d.%03dZ", tm.tm_year + 1900,
-                tm.tm_mon + 1, tm.tm_mday, tm.tm_hour, tm.tm_min, tm.tm_sec, static_cast<int>(ms));
-  return buf;
-}
-
-double last_row_time_s(std::string_view tail, bool whole) noexcept {
-  // The last complete line that starts with a finite number followed by a comma.
-  std::size_t end = tail.size();
-  while (end > 0) {
-    while (end > 0 && (tail[end - 1] == '\n' || tail[end - 1] == '\r')) --end;
-    std::size_t begin = end;
-    while (begin > 0 && tail[begin - 1] != '\n') --begin;
-    if (begin == 0 && !whole) break;  // the first line of a tail may be cut
-    const std::string_view line = tail.substr(begin, end - begin);
-    const std::size_t comma = line.find(',');
-    if (comma != std::string_view::npos && comma > 0 && comma < 40) {
-      char num[48];
-      line.copy(num, comma);
-      num[comma] = '\0';
-      char* stop = nullptr;
-      const double v = std::strtod(num, &stop);
-      if (stop == num + comma && std::isfinite(v)) return v;
-    }
-    end = begin;
-  }
-  return -std::numeric_limits<double>::infinity();
-}
-
-std::string format_measurement_row(const core::MeasurementRecord& r, std::string_view machine,
-                                   std::string_view utc, std::size_t context_count) {
-  std::string s;
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.6f", core::seconds(r.time_ns));
-  s += buf;
-  s += ',' + std::to_string(r.part) + ',' + std::to_string(r.tool) + ',' + kind_name(r.kind) + ',' +
-       std::to_string(r.point);
-  for (double p : r.position_mm) {
-    cell(s, p, 4);
-  }
-  cell(s, r.angle_deg, 4);
-  cell(s, r.path_mm, 3);
-  cell(s, r.temp_c, 3);
-  cell(s, r.measured_um, 4);
-  cell(s, r.applied_um, 4);
-  s += ',';
-  s += machine;
-  s += ',';
-  s += utc;
-  s += ',' + std::to_string(r.session);
-  for (std::size_t k = 0; k < context_count && k < r.context.size(); ++k) {
-    cell(s, r.context[k], 4);
-  }
-  return s;
-}
 
 MeasurementLogWriter::MeasurementLogWriter(MeasurementLogOptions options)
     : options_(std::move(options)),
       directory_(options_.directory),
-      header_(measurement_csv_header(options_.context_columns)),
+      header_(ml::csv_header(options_.context_columns)),
       ring_(options_.ring_capacity) {
   if (options_.context_columns.size() > core::kMaxContextValues) {
     throw std::invalid_argument("measurement log: at most " +
@@ -206,7 +80,7 @@ void MeasurementLogWriter::open_current(bool may_rotate) {
   file_bytes_ = ::fstat(fd_, &st) == 0 ? static_cast<std::uint64_t>(st.st_size) : 0U;
   if (file_bytes_ > 0) {
     // A file of another format (v1, other context columns) is kept as it is: rotated away.
-    if (may_rotate && read_at(fd_, 0, header_.size() + 1) != header_ + "\n") {
+    if (may_rotate && ml::read_at(fd_, 0, header_.size() + 1) != header_ + "\n") {
       rotate();
       return;
     }
@@ -215,7 +89,7 @@ void MeasurementLogWriter::open_current(bool may_rotate) {
     std::uint64_t keep = file_bytes_;
     while (keep > 0) {
       const std::size_t n = static_cast<std::size_t>(std::min<std::uint64_t>(keep, 4096));
-      const std::size_t nl = read_at(fd_, keep - n, n).rfind('\n');
+      const std::size_t nl = ml::read_at(fd_, keep - n, n).rfind('\n');
       if (nl != std::string::npos) {
         keep = keep - n + nl + 1;
         break;
@@ -229,7 +103,7 @@ void MeasurementLogWriter::open_current(bool may_rotate) {
   }
   if (file_bytes_ > 0) {
     const std::size_t n = static_cast<std::size_t>(std::min<std::uint64_t>(file_bytes_, 4096));
-    last_time_s_ = last_row_time_s(read_at(fd_, file_bytes_ - n, n), n == file_bytes_);
+    last_time_s_ = ml::last_row_time_s(ml::read_at(fd_, file_bytes_ - n, n), n == file_bytes_);
     return;
   }
   last_time_s_ = -std::numeric_limits<double>::infinity();
@@ -315,7 +189,7 @@ void MeasurementLogWriter::write_row(const core::MeasurementRecord& r,
   const std::int64_t real_ns =
       options_.monotonic_record_clock ? r.clock_ns + mono_to_real_ns : clock_ns(CLOCK_REALTIME);
   const std::string row =
-      format_measurement_row(r, options_.machine_id, format_utc(real_ns), context_count_);
+      ml::format_row(r, options_.machine_id, ml::format_utc(real_ns), context_count_);
   // As written (6 decimals): the comparison sees what a reader of the file will see.
   const double t_s = std::strtod(row.c_str(), nullptr);
   const bool back_in_time = t_s < last_time_s_;

@@ -2,10 +2,7 @@
 // loop (SPSC) → CSV rows in <directory>/measurements.csv, rotated by size to .1, .2, ... The
 // input of `nccomp analyze` and of `nccomp publish`. Unknown values are empty cells.
 //
-// Format v2: the v1 columns in their v1 order, then machine, utc, session and the configured
-// context columns. The column set marks the version (a v2 header has machine, utc and session);
-// a reader that only knows v1 reads a v2 file unchanged (extra columns are ignored), which a
-// version comment line or a changed column order would break.
+// The format (columns, rows, machine ids): formats/measurement_log.
 //
 // time_s: the records leave the engine with the time since the machine's warm start
 // (core/engine/context.hpp), so time_s starts again near 0 at every warm start (and session
@@ -38,21 +35,12 @@
 #include "core/common/types.hpp"
 #include "core/engine/context.hpp"
 #include "core/rt/spsc_ring.hpp"
+#include "formats/measurement_log/measurement_log.hpp"
 
 namespace nccomp::daemon {
 
-/// The v1 columns, in order.
-inline constexpr const char* kMeasurementCsvV1Header =
-    "time_s,part,tool,kind,point,x_mm,y_mm,z_mm,angle_deg,path_mm,temp_c,measured_um,applied_um";
-/// The columns v2 adds after the v1 columns (then the context columns).
-inline constexpr const char* kMeasurementCsvV2Columns = "machine,utc,session";
-
-/// A context column of the log: a named value of the machine context (a bus input).
-struct ContextColumn {
-  std::string name;
-  /// The TemperatureSample channel (sensor 0 … 255) whose last value is logged.
-  int sensor{0};
-};
+/// A context column of the log (the format's).
+using ContextColumn = formats::measurement_log::ContextColumn;
 
 struct MeasurementLogOptions {
   std::string directory;
@@ -69,27 +57,6 @@ struct MeasurementLogOptions {
   /// Rows are flushed to the disk (fdatasync) at least this often [s]; 0 = after every batch.
   double fsync_interval_s{1.0};
 };
-
-/// The machine id when the config names none: the host name up to its first '.', characters
-/// other than [A-Za-z0-9._-] replaced by '-' ("machine" if there is no host name).
-[[nodiscard]] std::string host_machine_id();
-
-/// The header row for these context columns (v2).
-[[nodiscard]] std::string measurement_csv_header(const std::vector<ContextColumn>& columns);
-
-/// ISO 8601 UTC with milliseconds, e.g. "2024-05-06T07:08:09.123Z", of a CLOCK_REALTIME time.
-[[nodiscard]] std::string format_utc(std::int64_t unix_ns);
-
-/// One CSV row (no newline): the v1 cells, then machine, utc, session and the first
-/// `context_count` context values.
-[[nodiscard]] std::string format_measurement_row(const core::MeasurementRecord& r,
-                                                 std::string_view machine, std::string_view utc,
-                                                 std::size_t context_count);
-
-/// time_s of the last complete data row in `tail`, the end of a log file (`whole`: the tail is
-/// the whole file, so its first line is complete); −inf if there is none (a header only, bytes
-/// that are no row). Any bytes are accepted.
-[[nodiscard]] double last_row_time_s(std::string_view tail, bool whole) noexcept;
 
 class MeasurementLogWriter {
  public:

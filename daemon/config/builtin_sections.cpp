@@ -125,7 +125,7 @@ class MeasurementLogParser final : public SectionParser {
       s->keep_files = static_cast<int>(r.integer("keep_files", 8, 1, 1000));
       s->fsync_interval_s = r.number("fsync_interval_s", 1.0, 0.0, 3600.0);
       s->machine_id = r.string("machine_id", "");
-      if (!s->machine_id.empty() && !valid_machine_id(s->machine_id)) {
+      if (!s->machine_id.empty() && !formats::measurement_log::valid_machine_id(s->machine_id)) {
         diag.error(r.where("machine_id"),
                    "'" + s->machine_id +
                        "' is not a machine id: 1 to 64 letters, digits, '.', '_' or '-', "
@@ -137,12 +137,12 @@ class MeasurementLogParser final : public SectionParser {
                                                      " context columns, at most " +
                                                      std::to_string(core::kMaxContextValues));
         }
-        const std::string v2 =
-            std::string(kMeasurementCsvV1Header) + ',' + kMeasurementCsvV2Columns + ",seq";
+        const std::string v2 = std::string(formats::measurement_log::kV1Header) + ',' +
+                               formats::measurement_log::kV2Columns + ",seq";
         for (std::size_t i = 0; i < a->size(); ++i) {
           const std::string path = "measurement_log.context_columns[" + std::to_string(i) + "]";
           TableReader c(*(*a)[i].as_table(), path, diag);
-          ContextColumn col;
+          formats::measurement_log::ContextColumn col;
           col.name = c.string("name", std::nullopt);
           col.sensor = static_cast<int>(c.integer("sensor", std::nullopt, 0, 255));
           const bool snake = !col.name.empty() && col.name.size() <= 64 &&
@@ -156,7 +156,7 @@ class MeasurementLogParser final : public SectionParser {
           } else if (("," + v2 + ",").find("," + col.name + ",") != std::string::npos) {
             diag.error(c.where("name"), "'" + col.name + "' is a column of the log already");
           }
-          for (const ContextColumn& other : s->context_columns) {
+          for (const formats::measurement_log::ContextColumn& other : s->context_columns) {
             if (other.name == col.name) {
               diag.error(c.where("name"), "'" + col.name + "' named twice");
             }
@@ -362,18 +362,6 @@ void register_builtin_sections() {
 const DaemonSection& daemon_section(const Config& c) { return typed<DaemonSection>(c, "daemon"); }
 const StateSection& state_section(const Config& c) { return typed<StateSection>(c, "state"); }
 const LogSection& log_section(const Config& c) { return typed<LogSection>(c, "log"); }
-bool valid_machine_id(std::string_view id) {
-  if (id.empty() || id.size() > 64) return false;
-  const auto alnum = [](char ch) {
-    return (ch >= 'a' && ch <= 'z') || (ch >= 'A' && ch <= 'Z') || (ch >= '0' && ch <= '9');
-  };
-  if (!alnum(id.front())) return false;
-  for (char ch : id) {
-    if (!alnum(ch) && ch != '.' && ch != '_' && ch != '-') return false;
-  }
-  return true;
-}
-
 const MeasurementLogSection& measurement_log_section(const Config& c) {
   return typed<MeasurementLogSection>(c, "measurement_log");
 }

@@ -10,7 +10,7 @@
 #include "core/engine/engine.hpp"
 #include "core/engine/ramp_module.hpp"
 #include "daemon/config/config.hpp"
-#include "daemon/measurement_log.hpp"
+#include "formats/measurement_log/measurement_log.hpp"
 
 namespace nccomp::daemon::config {
 
@@ -56,11 +56,8 @@ struct MeasurementLogSection final : Section {
   /// The log's `machine` column (and the MQTT topics'); empty = the host name.
   std::string machine_id;
   /// Context columns after the v2 columns: a name and the sensor channel whose value is logged.
-  std::vector<ContextColumn> context_columns;
+  std::vector<formats::measurement_log::ContextColumn> context_columns;
 };
-
-/// A machine id: 1 … 64 of [A-Za-z0-9._-], starting with a letter or digit.
-[[nodiscard]] bool valid_machine_id(std::string_view id);
 
 struct StatusSection final : Section {
   /// Empty = $RUNTIME_DIRECTORY/status.sock (systemd) or /run/nccompd/status.sock.

@@ -9,8 +9,7 @@
 #include <memory>
 #include <string>
 
-#include "daemon/config/builtin_sections.hpp"
-#include "daemon/measurement_log.hpp"
+#include "formats/measurement_log/measurement_log.hpp"
 #include "tools/mqtt/collector.hpp"
 #include "tools/mqtt/mqtt_config.hpp"
 #include "tools/mqtt/mqtt_link.hpp"
@@ -139,9 +138,9 @@ void setup(CLI::App& app) {
   sub->callback([o] {
     namespace mq = nccomp::tools::mqtt;
     if (o->broker.client_id.empty()) {
-      o->broker.client_id = "nccomp-collect-" + nccomp::daemon::host_machine_id();
+      o->broker.client_id = "nccomp-collect-" + nccomp::formats::measurement_log::host_machine_id();
     }
-    if (!o->site.empty() && !nccomp::daemon::config::valid_machine_id(o->site)) {
+    if (!o->site.empty() && !nccomp::formats::measurement_log::valid_machine_id(o->site)) {
       throw nccomp::tools::CommandError(nccomp::tools::kExitUsage,
                                         "--site '" + o->site + "' is not a topic level");
     }

@@ -11,8 +11,7 @@
 #include <fstream>
 #include <system_error>
 
-#include "daemon/config/builtin_sections.hpp"
-#include "daemon/measurement_log.hpp"
+#include "formats/measurement_log/measurement_log.hpp"
 #include "tools/mqtt/log_source.hpp"
 
 namespace nccomp::tools::mqtt {
@@ -134,8 +133,8 @@ CollectorStore::Result CollectorStore::add(const std::string& topic, const std::
   };
   const auto levels = split(topic, '/');
   if (levels.size() != 4 || levels[0] != "nccomp" || levels[3] != "measurements" ||
-      !daemon::config::valid_machine_id(levels[1]) ||
-      !daemon::config::valid_machine_id(levels[2])) {
+      !formats::measurement_log::valid_machine_id(levels[1]) ||
+      !formats::measurement_log::valid_machine_id(levels[2])) {
     return refuse("not a topic nccomp/<site>/<machine>/measurements");
   }
   const std::string& site = levels[1];
@@ -152,9 +151,9 @@ CollectorStore::Result CollectorStore::add(const std::string& topic, const std::
     return refuse("no sequence number (seq, an integer > 0)");
   }
   const auto seq = seq_it->get<std::uint64_t>();
-  for (const std::string& c :
-       split(std::string(daemon::kMeasurementCsvV1Header) + "," + daemon::kMeasurementCsvV2Columns,
-             ',')) {
+  for (const std::string& c : split(std::string(formats::measurement_log::kV1Header) + "," +
+                                        formats::measurement_log::kV2Columns,
+                                    ',')) {
     if (!j.contains(c)) return refuse("no column '" + c + "' (not a v2 row)");
   }
   const auto m = j.find("machine");

@@ -12,9 +12,12 @@
 #include <stdexcept>
 #include <system_error>
 
+#include "formats/measurement_log/measurement_log.hpp"
+
 namespace nccomp::tools::mqtt {
 
 namespace fs = std::filesystem;
+using formats::measurement_log::read_at;
 
 namespace {
 
@@ -31,19 +34,6 @@ std::vector<std::string> split(const std::string& line) {
     b = e + 1;
   }
   return out;
-}
-
-std::string read_at(int fd, std::uint64_t offset, std::size_t n) {
-  std::string s(n, '\0');
-  std::size_t got = 0;
-  while (got < n) {
-    const ssize_t k = ::pread(fd, s.data() + got, n - got, static_cast<off_t>(offset + got));
-    if (k < 0 && errno == EINTR) continue;
-    if (k <= 0) break;
-    got += static_cast<std::size_t>(k);
-  }
-  s.resize(got);
-  return s;
 }
 
 std::uint64_t head_hash(int fd, std::uint64_t offset) {

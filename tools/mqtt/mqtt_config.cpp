@@ -8,13 +8,13 @@
 #include <fstream>
 #include <stdexcept>
 
-#include "daemon/config/builtin_sections.hpp"
+#include "formats/measurement_log/measurement_log.hpp"
 #include "formats/toml/guard.hpp"
 #include "formats/toml/table_reader.hpp"
 
 namespace nccomp::tools::mqtt {
 
-namespace cfg = daemon::config;
+namespace ml = formats::measurement_log;
 
 namespace {
 
@@ -85,7 +85,8 @@ std::string read_password_file(const std::string& path) {
   return line;
 }
 
-std::optional<PublishConfig> load_publish_config(const std::string& path, nccomp::formats::Diagnostics& diag) {
+std::optional<PublishConfig> load_publish_config(const std::string& path,
+                                                 nccomp::formats::Diagnostics& diag) {
   toml::table root;
   try {
     root = formats::parse_toml_file(path);
@@ -126,7 +127,7 @@ std::optional<PublishConfig> load_publish_config(const std::string& path, nccomp
     c.machine = r.string("machine", std::nullopt);
     for (const char* key : {"site", "machine"}) {
       const std::string& v = std::string_view(key) == "site" ? c.site : c.machine;
-      if (r.node().get(key) != nullptr && !cfg::valid_machine_id(v)) {
+      if (r.node().get(key) != nullptr && !ml::valid_machine_id(v)) {
         diag.error(r.where(key), "'" + v +
                                      "' is not a topic level: 1 to 64 letters, digits, '.', '_' "
                                      "or '-', starting with a letter or digit");

@@ -1,5 +1,5 @@
 // The configuration of `nccomp publish` (config/nccomp-publish.toml, docs/mqtt.md) and the
-// broker options `nccomp collect` shares with it. TOML read with the daemon's TableReader: every
+// broker options `nccomp collect` shares with it. TOML read with formats/ TableReader: every
 // error names file:line:column and key path, unknown keys and sections are refused.
 #pragma once
 
@@ -8,7 +8,6 @@
 #include <string>
 #include <string_view>
 
-#include "daemon/config/config.hpp"
 #include "formats/toml/diagnostics.hpp"
 
 namespace nccomp::tools::mqtt {

@@ -7,7 +7,7 @@
 
 #include "client/protocol.hpp"
 #include "client/status_client.hpp"
-#include "daemon/measurement_log.hpp"
+#include "formats/measurement_log/measurement_log.hpp"
 
 namespace nccomp::tools::mqtt {
 
@@ -240,7 +240,7 @@ void Publisher::heartbeat(bool online) {
   p["seq"] = ++heartbeat_seq_;
   p["machine"] = config_.machine;
   p["site"] = config_.site;
-  p["utc"] = daemon::format_utc(real_ns());
+  p["utc"] = formats::measurement_log::format_utc(real_ns());
   p["online"] = online;
   p["daemon"] = daemon_reachable_ ? daemon_summary_ : nlohmann::ordered_json(nullptr);
   nlohmann::ordered_json q;

@@ -2,7 +2,7 @@
 
 #include <cmath>
 
-#include "daemon/measurement_log.hpp"
+#include "formats/measurement_log/measurement_log.hpp"
 
 namespace nccomp::tools::mqtt {
 
@@ -35,7 +35,7 @@ std::vector<StatusMessage> digest_status(const nlohmann::json& status, StatusMem
     keys.insert(key);
     if (memory.alarm_keys.count(key) != 0) continue;
     nlohmann::ordered_json p;
-    p["utc"] = daemon::format_utc(
+    p["utc"] = formats::measurement_log::format_utc(
         real_now_ns - static_cast<std::int64_t>(std::llround((mono_now_s - t_s) * 1e9)));
     p["event"] = "alarm";
     p["time_s"] = a.at("time_s");
@@ -49,7 +49,7 @@ std::vector<StatusMessage> digest_status(const nlohmann::json& status, StatusMem
   }
   memory.alarm_keys = std::move(keys);
   // Acknowledgements: a module's count grew (a new daemon starts from its own count).
-  const std::string now_utc = daemon::format_utc(real_now_ns);
+  const std::string now_utc = formats::measurement_log::format_utc(real_now_ns);
   nlohmann::json model = nullptr;
   for (const auto& m : status.at("modules")) {
     const std::string name = m.at("name").get<std::string>();

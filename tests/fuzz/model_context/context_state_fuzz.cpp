@@ -78,7 +78,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   if (e->import_state(std::span<const std::byte>(bytes, size), 0)) run(*e, 0);
   // 3. The input as the tail of a log file.
   const std::string_view tail(reinterpret_cast<const char*>(data), size);
-  const double t = nccomp::daemon::last_row_time_s(tail, size % 2 == 0);
+  const double t = nccomp::formats::measurement_log::last_row_time_s(tail, size % 2 == 0);
   if (!(std::isinf(t) || std::isfinite(t))) __builtin_trap();
   return 0;
 }

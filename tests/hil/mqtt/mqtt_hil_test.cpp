@@ -401,7 +401,8 @@ TEST_F(MqttHil, BrokerRestartsAndANetworkCutLoseNothingAndDeliverInOrderOnce) {
   EXPECT_EQ(collected_points("m1"), range(0, total));
   // The sequence numbers are 1…total, the collector's log is a v2 log with the context column.
   const auto lines = lines_of(dir_ / "out" / "s1" / "m1.csv");
-  EXPECT_EQ(lines.front(), nccomp::daemon::measurement_csv_header({{"spindle_rpm", 3}}) + ",seq");
+  EXPECT_EQ(lines.front(),
+            nccomp::formats::measurement_log::csv_header({{"spindle_rpm", 3}}) + ",seq");
   EXPECT_EQ(lines.back().substr(lines.back().rfind(',') + 1), std::to_string(total));
   const auto hb = heartbeat("m1");
   ASSERT_TRUE(hb.is_object());

@@ -1,7 +1,7 @@
 // GIVEN measurement records, WHEN the writer thread logs them, THEN the CSV has the v2 header
-// (the v1 columns, then machine, utc, session and the context columns), empty cells for unknown
-// values, UTC derived from the record's monotonic time, whole rows only (a partial row left by a
-// crash is cut when the file is opened again), and rotates by size keeping keep_files files.
+// (formats/measurement_log), UTC derived from the record's monotonic time, whole rows only (a
+// partial row left by a crash is cut when the file is opened again), and rotates by size keeping
+// keep_files files.
 #include "daemon/measurement_log.hpp"
 
 #include <gtest/gtest.h>
@@ -26,6 +26,7 @@ namespace nccomp::daemon {
 namespace {
 
 namespace fs = std::filesystem;
+namespace ml = formats::measurement_log;
 
 struct TempDir {
   fs::path path;
@@ -55,35 +56,6 @@ std::int64_t now_ns(clockid_t id) {
   timespec ts{};
   clock_gettime(id, &ts);
   return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
-
-TEST(MeasurementLog, RowFormatHasEmptyCellsForUnknownsAndTheV2Columns) {
-  core::MeasurementRecord r;
-  r.time_ns = 1'500'000'000;
-  r.part = 3;
-  r.tool = 12;
-  r.kind = core::MeasurementKind::kContour;
-  r.point = 7;
-  r.position_mm = {1.0, 2.5, -3.0};
-  r.angle_deg = 5.0;
-  r.measured_um = 4.25;
-  r.applied_um = 1.0;
-  r.session = 42;
-  r.context[0] = 31.25;
-  r.context[2] = 8000.0;
-  EXPECT_EQ(format_measurement_row(r, "mill-7", "2024-05-06T07:08:09.123Z", 3),
-            "1.500000,3,12,contour,7,1.0000,2.5000,-3.0000,5.0000,,,4.2500,1.0000,mill-7,"
-            "2024-05-06T07:08:09.123Z,42,31.2500,,8000.0000");
-  EXPECT_EQ(
-      measurement_csv_header({{"spindle_temp_c", 3}, {"bed_temp_c", 1}}),
-      std::string(kMeasurementCsvV1Header) + ",machine,utc,session,spindle_temp_c,bed_temp_c");
-}
-
-TEST(MeasurementLog, UtcIsIso8601WithMilliseconds) {
-  EXPECT_EQ(format_utc(0), "1970-01-01T00:00:00.000Z");
-  // 2024-02-29T23:59:59.999 UTC = 1709251199 s (a leap day).
-  EXPECT_EQ(format_utc(1'709'251'199'999'000'000), "2024-02-29T23:59:59.999Z");
-  EXPECT_EQ(format_utc(-1'000'000), "1969-12-31T23:59:59.999Z");
 }
 
 TEST(MeasurementLog, UtcComesFromTheRecordsMonotonicTimeNotFromTheTimeOfWriting) {
@@ -159,7 +131,7 @@ TEST(MeasurementLog, RotatesBySizeAndKeepsHeaderInEveryFile) {
   EXPECT_TRUE(fs::exists(dir.path / "measurements.csv.1"));
   EXPECT_TRUE(fs::exists(dir.path / "measurements.csv.2"));
   EXPECT_FALSE(fs::exists(dir.path / "measurements.csv.3"));
-  const std::string header = measurement_csv_header({});
+  const std::string header = ml::csv_header({});
   for (const char* name : {"measurements.csv", "measurements.csv.1", "measurements.csv.2"}) {
     const auto lines = read_lines(dir.path / name);
     ASSERT_FALSE(lines.empty()) << name;
@@ -180,7 +152,7 @@ TEST(MeasurementLog, AV1FileOrOtherColumnsAreRotatedAwayNotAppendedTo) {
   fs::create_directories(dir.path);
   {
     std::ofstream v1(dir.path / "measurements.csv");
-    v1 << kMeasurementCsvV1Header << "\n1.000000,0,0,tool_wear,0,,,,,,,1.0000,0.0000\n";
+    v1 << ml::kV1Header << "\n1.000000,0,0,tool_wear,0,,,,,,,1.0000,0.0000\n";
   }
   MeasurementLogOptions o;
   o.directory = dir.path.string();
@@ -197,10 +169,10 @@ TEST(MeasurementLog, AV1FileOrOtherColumnsAreRotatedAwayNotAppendedTo) {
   }
   const auto old = read_lines(dir.path / "measurements.csv.1");
   ASSERT_EQ(old.size(), 2U);
-  EXPECT_EQ(old[0], kMeasurementCsvV1Header);
+  EXPECT_EQ(old[0], ml::kV1Header);
   const auto now = read_lines(dir.path / "measurements.csv");
   ASSERT_EQ(now.size(), 2U);
-  EXPECT_EQ(now[0], std::string(kMeasurementCsvV1Header) + ",machine,utc,session,bed_temp_c");
+  EXPECT_EQ(now[0], std::string(ml::kV1Header) + ",machine,utc,session,bed_temp_c");
   EXPECT_EQ(now[1].rfind("5.000000,", 0), 0U);
   EXPECT_EQ(fields(now[1]), fields(now[0]));
   // The same columns again: a restart appends.
@@ -219,7 +191,7 @@ TEST(MeasurementLog, AV1FileOrOtherColumnsAreRotatedAwayNotAppendedTo) {
 TEST(MeasurementLog, APartialRowLeftByACrashIsCutWhenTheFileIsOpened) {
   TempDir dir("nccomp_mlog_cut");
   fs::create_directories(dir.path);
-  const std::string header = measurement_csv_header({});
+  const std::string header = ml::csv_header({});
   {
     std::ofstream f(dir.path / "measurements.csv");
     f << header << "\n1.000000,0,0,tool_wear,0,,,,,,,1.0000,0.0000,m,2024-01-01T00:00:00.000Z,0\n"
@@ -245,7 +217,7 @@ TEST(MeasurementLog, AKilledWriterLeavesOnlyWholeRowsAndLosesAtMostTheUnwrittenO
   // parent then reopens the log. The rows are the first n ones in order (nothing skipped), and
   // after a restart every line is a whole row.
   TempDir dir("nccomp_mlog_kill");
-  const std::string header = measurement_csv_header({{"a_c", 0}});
+  const std::string header = ml::csv_header({{"a_c", 0}});
   const pid_t pid = ::fork();
   ASSERT_GE(pid, 0);
   if (pid == 0) {

@@ -805,10 +805,10 @@ TEST(MeasurementLogTime, AWarmStartStartsANewFileAndARestartContinuesTheCurrentO
   const auto warm = read_lines(dir + "/measurements.csv.1");
   const auto current = read_lines(dir + "/measurements.csv");
   ASSERT_EQ(older.size(), 5U);
-  EXPECT_EQ(older[0], measurement_csv_header({}));
+  EXPECT_EQ(older[0], formats::measurement_log::csv_header({}));
   EXPECT_EQ(older[4].rfind("250.000000,", 0), 0U) << older[4];
   ASSERT_EQ(warm.size(), 3U);
-  EXPECT_EQ(warm[0], measurement_csv_header({}));
+  EXPECT_EQ(warm[0], formats::measurement_log::csv_header({}));
   EXPECT_EQ(warm[1].rfind("5.000000,", 0), 0U) << warm[1];
   EXPECT_EQ(warm[2].rfind("9.000000,", 0), 0U) << warm[2];
   ASSERT_EQ(current.size(), 2U);
@@ -865,7 +865,7 @@ TEST(MeasurementRows, S1ProbeRowsCarryTheFinishingToolsCutPathAndTheSensor) {
   EXPECT_DOUBLE_EQ(rec.temp_c, 22.75);
   // Since the warm start, the first motion at 100.1 s.
   EXPECT_EQ(rec.time_ns, 59'900'000'000);
-  const std::string row = format_measurement_row(rec, "m", "", 0);
+  const std::string row = formats::measurement_log::format_row(rec, "m", "", 0);
   EXPECT_EQ(row.rfind("59.900000,1,12,contour,5,", 0), 0U) << row;
   EXPECT_NE(row.find(",40.000,22.750,"), std::string::npos) << row;
 }

@@ -7,7 +7,7 @@
 
 #include <sstream>
 
-#include "daemon/measurement_log.hpp"
+#include "formats/measurement_log/measurement_log.hpp"
 #include "tests/unit/mqtt/temp_dir.hpp"
 #include "tools/analyze/model_io.hpp"
 
@@ -60,7 +60,7 @@ TEST(CollectorStore, OneLogPerMachineNoRowTwiceAlsoAfterARestart) {
   }
   const auto lines = test::read_lines(d.path() / "s1" / "m1.csv");
   ASSERT_EQ(lines.size(), 5U);
-  EXPECT_EQ(lines[0], daemon::measurement_csv_header({}) + ",seq");
+  EXPECT_EQ(lines[0], formats::measurement_log::csv_header({}) + ",seq");
   EXPECT_EQ(lines[3], "3.0,1,12,contour,5,,,,,,,2.5,0.0,m1,2024-05-06T07:00:00.000Z,4,5");
   EXPECT_EQ(test::read_lines(d.path() / "s1" / "m2.csv").size(), 2U);
   // The collected log is a v2 log nccomp analyze reads: session 5 restarts time_s.
@@ -107,7 +107,7 @@ TEST(CollectorStore, OtherColumnsStartANewFileAndKeepTheOld) {
   EXPECT_EQ(test::read_lines(d.path() / "s1" / "m1.csv.1").size(), 2U);
   const auto now = test::read_lines(d.path() / "s1" / "m1.csv");
   ASSERT_EQ(now.size(), 2U);
-  EXPECT_EQ(now[0], daemon::measurement_csv_header({}) + ",spindle_rpm,seq");
+  EXPECT_EQ(now[0], formats::measurement_log::csv_header({}) + ",spindle_rpm,seq");
 }
 
 }  // namespace

@@ -7,7 +7,7 @@
 
 #include <filesystem>
 
-#include "daemon/measurement_log.hpp"
+#include "formats/measurement_log/measurement_log.hpp"
 #include "tests/unit/mqtt/temp_dir.hpp"
 
 namespace nccomp::tools::mqtt {
@@ -16,7 +16,7 @@ namespace {
 using test::TempDir;
 namespace fs = std::filesystem;
 
-const std::string kHeader = daemon::measurement_csv_header({{"spindle_rpm", 3}});
+const std::string kHeader = formats::measurement_log::csv_header({{"spindle_rpm", 3}});
 
 std::string row(int point, const std::string& machine = "m1") {
   return std::to_string(point) + ".000000,7,12,contour," + std::to_string(point) +
@@ -93,8 +93,8 @@ TEST(LogSource, AFileRotatedAwayUnreadAV1FileAndABadRowAreReported) {
   EXPECT_EQ(points(s.poll(100, problems)), (std::vector<int>{1}));
   // The file the cursor is in is deleted (keep_files exceeded) before the rest was read.
   fs::remove(d.path() / "measurements.csv");
-  d.write("measurements.csv.1",
-          std::string(daemon::kMeasurementCsvV1Header) + "\n1.0,0,0,tool_wear,0,,,,,,,1.0,0.0\n");
+  d.write("measurements.csv.1", std::string(formats::measurement_log::kV1Header) +
+                                    "\n1.0,0,0,tool_wear,0,,,,,,,1.0,0.0\n");
   d.write("measurements.csv", kHeader + "\n" + row(8) + "x\n" + row(9));
   const auto rows = s.poll(100, problems);
   EXPECT_EQ(points(rows), (std::vector<int>{8, 9}));
