@@ -26,7 +26,11 @@ void OffsetLimiter::configure(const LimiterConfig& config) {
 }
 
 void OffsetLimiter::reset(double current_um, TimeNs now_ns) noexcept {
-  output_um_ = std::isfinite(current_um) ? current_um : 0.0;
+  // A non-finite value says nothing about what the NC holds: the last value known is kept
+  // rather than 0, which the next writes would take for the NC's register.
+  if (std::isfinite(current_um)) {
+    output_um_ = current_um;
+  }
   last_ns_ = now_ns;
   has_time_ = true;
 }
@@ -63,7 +67,9 @@ LimitResult OffsetLimiter::apply(double target_um, TimeNs now_ns) noexcept {
     ++counters_.passed;
   }
   output_um_ = out;
-  last_ns_ = now_ns;
+  // The clock never goes back: after a write stamped earlier than the last one, the next write's
+  // rate budget still counts from the latest time a value was sent.
+  last_ns_ = has_time_ ? std::max(last_ns_, now_ns) : now_ns;
   has_time_ = true;
   return {out, verdict};
 }

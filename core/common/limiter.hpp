@@ -59,8 +59,8 @@ class OffsetLimiter {
   /// offending field).
   void configure(const LimiterConfig& config);
 
-  /// Sets the output to the value the NC holds now (start-up, after restart or read-back).
-  /// Real-time safe.
+  /// Sets the output to the value the NC holds now (start-up, after restart or read-back); a
+  /// non-finite value keeps the last output (only the time is taken). Real-time safe.
   void reset(double current_um, TimeNs now_ns) noexcept;
 
   /// Limits one write toward target_um at time now_ns. Real-time safe: no allocation, no locks,

@@ -113,6 +113,20 @@ TEST(OffsetLimiter, GivenAWriteStampedBeforeTheLastOne_WhenApplied_ThenNothingMo
   EXPECT_EQ(l.counters().slewed, 2U);
 }
 
+// Pins: the early write does not move the clock back. reset at 10 s, a write stamped 0 s (no
+// move), then one at 10.01 s: 10 ms since the last real write allow 50 µm/s × 0.01 s = 0.5 µm,
+// not the 5 µm max_step that 10.01 s counted from the early stamp would allow.
+TEST(OffsetLimiter,
+     GivenAWriteStampedBeforeTheLastOne_WhenTheNextComes_ThenItsBudgetCountsFromTheLatest) {
+  OffsetLimiter l;
+  l.configure({200.0, 5.0, 50.0});
+  l.reset(0.0, 10'000 * kMs);
+  EXPECT_DOUBLE_EQ(l.apply(10.0, 0).value_um, 0.0);
+  const auto r = l.apply(10.0, 10'010 * kMs);
+  EXPECT_EQ(r.verdict, LimitVerdict::kSlewed);
+  EXPECT_NEAR(r.value_um, 0.5, 1e-9);
+}
+
 // Pins: ±max_abs_um itself is inside the limit (apply() agrees with admissible(), which the
 // modules use to refuse a measurement before it changes state); one ulp beyond is rejected.
 TEST(OffsetLimiter, GivenExactlyTheAbsoluteLimit_WhenApplied_ThenPassed) {
@@ -157,6 +171,9 @@ TEST(OffsetLimiter, GivenANonFiniteNcValue_WhenReset_ThenTheOutputStaysFinite) {
       EXPECT_FALSE(r.rejected());
       EXPECT_LE(std::fabs(r.value_um - before), 5.0);
     }
+    // The last known value is kept (42 µm), not 0: a non-finite read-back says nothing about
+    // the register, and 0 would be taken for what the NC holds.
+    EXPECT_DOUBLE_EQ(held, 42.0);
     // Nothing was counted for the reset: it is not a write.
     EXPECT_EQ(l.counters().rejected_non_finite, 0U);
   }
