@@ -192,6 +192,7 @@ std::string render_json(const StatusContext& c) {
     const auto& k = st.counters;
     o << (i ? "," : "") << "{\"name\":\"" << json_escape(c.buses[i].first) << "\",\"state\":\""
       << link_state_name(st.state) << "\",\"alarm\":" << (st.alarm ? "true" : "false")
+      << ",\"input_stale\":" << (st.input_stale ? "true" : "false")
       << ",\"frames_rx\":" << k.frames_rx << ",\"frames_tx\":" << k.frames_tx
       << ",\"events_decoded\":" << k.events_decoded << ",\"events_dropped\":" << k.events_dropped
       << ",\"malformed\":" << k.malformed << ",\"offsets_written\":" << k.offsets_written
@@ -326,10 +327,11 @@ std::string render_text(const StatusContext& c) {
     const auto& k = st.counters;
     std::snprintf(
         buf, sizeof buf,
-        "  %-10s %-10s%s rx %llu, tx %llu, events %llu (dropped %llu, malformed "
+        "  %-10s %-10s%s%s rx %llu, tx %llu, events %llu (dropped %llu, malformed "
         "%llu), offsets %llu (failed %llu), reconnects %llu, faults %llu\n",
         name.c_str(), link_state_name(st.state), st.alarm ? " ALARM" : "",
-        static_cast<unsigned long long>(k.frames_rx), static_cast<unsigned long long>(k.frames_tx),
+        st.input_stale ? " INPUT STALE" : "", static_cast<unsigned long long>(k.frames_rx),
+        static_cast<unsigned long long>(k.frames_tx),
         static_cast<unsigned long long>(k.events_decoded),
         static_cast<unsigned long long>(k.events_dropped),
         static_cast<unsigned long long>(k.malformed),
@@ -477,6 +479,13 @@ std::string render_prometheus(const StatusContext& c) {
   for (const auto& [name, bus] : c.buses) {
     o << "nccompd_bus_up{bus=\"" << name << "\"} "
       << (bus->status().state == drivers::LinkState::kUp ? 1 : 0) << "\n";
+  }
+  family("bus_input_stale", "gauge",
+         "1 while the bus's input is stale (no usable sample for longer than "
+         "degraded_alarm_after_s).");
+  for (const auto& [name, bus] : c.buses) {
+    o << "nccompd_bus_input_stale{bus=\"" << name << "\"} " << (bus->status().input_stale ? 1 : 0)
+      << "\n";
   }
   family("bus_faults_total", "counter", "Bus faults.");
   for (const auto& [name, bus] : c.buses) {

@@ -207,12 +207,19 @@ TEST(NccompdLoudInput, AnNcThatAnswersEveryReadWithAnExceptionRaisesBusInputStal
     return st.find("\"code\":55,\"name\":\"bus_input_stale\",\"subject\":0,\"value\":1") !=
            std::string::npos;
   })) << st;
-  EXPECT_NE(st.find("\"state\":\"degraded\""), std::string::npos) << st;
-  // What `nccomp status` prints meanwhile (for docs/daemon.md).
-  const std::string text = nccomp::client::query((d.path / "status.sock").string(), "text");
+  EXPECT_NE(st.find("\"state\":\"degraded\",\"alarm\":false,\"input_stale\":true"),
+            std::string::npos)
+      << st;
+  // What `nccomp status` prints meanwhile (for docs/daemon.md), and the metrics.
+  const std::string sock = (d.path / "status.sock").string();
+  const std::string text = nccomp::client::query(sock, "text");
   EXPECT_TRUE(std::regex_search(
       text, std::regex("\n +[0-9.]+ s  alarm +bus_input_stale +subject 0 value 1\n")))
       << text;
+  EXPECT_TRUE(std::regex_search(text, std::regex("\n  modbus +degraded +INPUT STALE rx "))) << text;
+  EXPECT_NE(
+      nccomp::client::query(sock, "metrics").find("nccompd_bus_input_stale{bus=\"modbus\"} 1\n"),
+      std::string::npos);
   std::printf("%s", text.substr(text.find("buses:")).c_str());
   EXPECT_GE(number(st, "exception_server_failure"), 10.0) << st;
   std::this_thread::sleep_for(1000ms);  // still answering with exceptions: reported once
@@ -234,6 +241,10 @@ TEST(NccompdLoudInput, AnNcThatAnswersEveryReadWithAnExceptionRaisesBusInputStal
     return st.find("\"code\":55,\"name\":\"bus_input_stale\",\"subject\":0,\"value\":0") !=
            std::string::npos;
   })) << st;
+  EXPECT_NE(st.find("\"input_stale\":false"), std::string::npos) << st;
+  EXPECT_NE(
+      nccomp::client::query(sock, "metrics").find("nccompd_bus_input_stale{bus=\"modbus\"} 0\n"),
+      std::string::npos);
   print_lines(log, {"bus_input_stale", "input from the NC is stale", "input stale cleared"});
   EXPECT_TRUE(daemon.running());
   EXPECT_EQ(daemon.stop(), 0);
@@ -320,8 +331,8 @@ TEST(NccompdLoudInput, ANaNWearRaisesTheCreepAlarmAndABurstIsLoggedOnce) {
   // 0; then the v2 columns machine, utc, session).
   const std::string rows = slurp(d.path / "log" / "measurements.csv");
   EXPECT_EQ(count(rows, ",tool_wear,"), 7U) << rows;
-  EXPECT_TRUE(std::regex_search(
-      rows, std::regex(",tool_wear,0,[^\n]*,,0[.0]*,[^,\n]*,[^,\n]*,[0-9]+\n")))
+  EXPECT_TRUE(
+      std::regex_search(rows, std::regex(",tool_wear,0,[^\n]*,,0[.0]*,[^,\n]*,[^,\n]*,[0-9]+\n")))
       << rows;
 }
 
