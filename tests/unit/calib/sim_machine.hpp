@@ -1,7 +1,7 @@
 // A simulated grinding machine with known errors for the S3 tests and benchmarks: the truth
 // against which the calibrator is judged. Shared by tests/unit/calib and bench/calib.
 //
-// Model (docs/calibration.md, "How the simulation is built"):
+// Model (the model is described here; docs/calibration.md describes the method it checks):
 // - static axis errors E_x (lateral), E_xa (axial, along the stylus), E_y, E_z [µm];
 // - the reference probe triggers late by its pretravel p_lat / p_ax in the approach direction,
 //   the same in every lateral direction;
