@@ -44,6 +44,7 @@
 
 #include "client/status_client.hpp"
 #include "daemon/lockstep.hpp"
+#include "tests/support/nccompd_process.hpp"
 
 extern char** environ;
 
@@ -107,66 +108,9 @@ struct TempDir {
   fs::path path;
 };
 
-class Daemon {
+class Daemon : public nccomp::test::NccompdProcess {
  public:
-  explicit Daemon(fs::path dir) : dir_(std::move(dir)) {}
-  ~Daemon() {
-    if (pid_ > 0) {
-      ::kill(pid_, SIGKILL);
-      ::waitpid(pid_, nullptr, 0);
-    }
-  }
-  void start(std::vector<std::string> extra_args = {}) {
-    std::vector<std::string> args{NCCOMPD_BIN, "--config", (dir_ / "nccompd.toml").string()};
-    args.insert(args.end(), extra_args.begin(), extra_args.end());
-    std::vector<char*> argv;
-    for (auto& a : args) {
-      argv.push_back(a.data());
-    }
-    argv.push_back(nullptr);
-    posix_spawn_file_actions_t fa;
-    posix_spawn_file_actions_init(&fa);
-    const std::string log = (dir_ / "nccompd.log").string();
-    posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-    posix_spawn_file_actions_adddup2(&fa, 1, 2);
-    ASSERT_EQ(posix_spawn(&pid_, NCCOMPD_BIN, &fa, nullptr, argv.data(), environ), 0);
-    posix_spawn_file_actions_destroy(&fa);
-  }
-  void signal(int sig) const { ASSERT_EQ(::kill(pid_, sig), 0); }
-  int wait(std::chrono::milliseconds limit = 20000ms) {
-    // Checked at least once: wait(0ms) says whether it is still running (-1).
-    const auto end = std::chrono::steady_clock::now() + limit;
-    do {
-      int st = 0;
-      if (::waitpid(pid_, &st, WNOHANG) == pid_) {
-        pid_ = -1;
-        return WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
-      }
-      std::this_thread::sleep_for(10ms);
-    } while (std::chrono::steady_clock::now() < end);
-    return -1;
-  }
-  std::optional<std::string> status(const std::string& what = "json") const {
-    try {
-      auto s = nccomp::client::query((dir_ / "status.sock").string(), what);
-      if (!s.empty()) {
-        return s;
-      }
-    } catch (const std::exception&) {
-    }
-    return std::nullopt;
-  }
-  std::string log() const {
-    // Through a stringstream: GCC 12 at -O2 flags istreambuf_iterator (-Wnull-dereference).
-    std::ifstream in(dir_ / "nccompd.log");
-    std::ostringstream s;
-    s << in.rdbuf();
-    return s.str();
-  }
-
- private:
-  fs::path dir_;
-  pid_t pid_{-1};
+  explicit Daemon(fs::path dir) : NccompdProcess(std::move(dir), NCCOMPD_BIN) {}
 };
 
 int sh(const std::string& cmd) {
@@ -304,7 +248,7 @@ TEST(NccompdCan, RealTimeOffsetFrameCarriesTheScaledValue) {
   std::string st;
   const auto end2 = std::chrono::steady_clock::now() + 5s;
   while (std::chrono::steady_clock::now() < end2) {
-    st = daemon.status().value_or("");
+    st = daemon.status();
     if (st.find("{\"name\":\"can\",\"state\":\"up\"") != std::string::npos &&
         number(st, "offsets_written") >= 1) {
       break;
@@ -400,7 +344,7 @@ TEST(NccompdCan, LockstepWritesPrecedeSyncAckOfTheirCycle) {
     }
     ASSERT_EQ(value, std::min(k - 1, 123)) << "cycle " << k;
   }
-  const std::string st = daemon.status().value_or("");
+  const std::string st = daemon.status();
   EXPECT_EQ(number(st, "events_in"), kTicks) << st;
   peer.send(LockstepType::kBye, kTicks, 0);
   EXPECT_EQ(daemon.wait(), 0) << daemon.log();
@@ -493,7 +437,7 @@ TEST(NccompdCan, FaultsWhileRunningCountedInStatusAlarmAndPendingOffsetResent) {
   // Polled in process (the same socket and JSON as the CLI; a CLI start per poll is slow under
   // TCG and ASan); the CLI's own output is checked at the start and at the end.
   const auto status = [&] {
-    st = daemon.status().value_or("");
+    st = daemon.status();
     return st;
   };
   ASSERT_TRUE(wait_until(
@@ -613,7 +557,7 @@ TEST(NccompdCan, MalformedCountedPerReasonAndUnmappedFloodNeverReachesTheDaemon)
   daemon.start();
   std::string st;
   const auto status = [&] {
-    st = daemon.status().value_or("");
+    st = daemon.status();
     return st;
   };
   ASSERT_TRUE(wait_until(
@@ -628,7 +572,7 @@ TEST(NccompdCan, MalformedCountedPerReasonAndUnmappedFloodNeverReachesTheDaemon)
   EXPECT_EQ(can_counter(st, "rejected_wrong_length"), 1) << st;
   EXPECT_EQ(can_counter(st, "rejected_out_of_range"), 1) << st;
   EXPECT_EQ(can_counter(st, "rejected_not_finite"), 1) << st;
-  const std::string metrics = daemon.status("metrics").value_or("");
+  const std::string metrics = daemon.status("metrics");
   EXPECT_NE(metrics.find("nccompd_bus_events_total{bus=\"can\",event=\"rejected_not_finite\"} 1"),
             std::string::npos)
       << metrics;

@@ -40,6 +40,7 @@
 
 #include "client/status_client.hpp"
 #include "sim/modbus_nc/nc_server.hpp"
+#include "tests/support/nccompd_process.hpp"
 
 extern char** environ;
 
@@ -113,58 +114,9 @@ struct TempDir {
   fs::path path;
 };
 
-class Daemon {
+class Daemon : public nccomp::test::NccompdProcess {
  public:
-  explicit Daemon(fs::path dir) : dir_(std::move(dir)) {}
-  ~Daemon() {
-    if (pid_ > 0) {
-      ::kill(pid_, SIGKILL);
-      ::waitpid(pid_, nullptr, 0);
-    }
-  }
-  void start() {
-    std::vector<std::string> args{NCCOMPD_BIN, "--config", (dir_ / "nccompd.toml").string()};
-    std::vector<char*> argv;
-    for (auto& a : args) argv.push_back(a.data());
-    argv.push_back(nullptr);
-    posix_spawn_file_actions_t fa;
-    posix_spawn_file_actions_init(&fa);
-    const std::string log = (dir_ / "nccompd.log").string();
-    posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-    posix_spawn_file_actions_adddup2(&fa, 1, 2);
-    ASSERT_EQ(posix_spawn(&pid_, NCCOMPD_BIN, &fa, nullptr, argv.data(), environ), 0);
-    posix_spawn_file_actions_destroy(&fa);
-  }
-  void signal(int sig) const { ASSERT_EQ(::kill(pid_, sig), 0); }
-  int wait(std::chrono::milliseconds limit = 10000ms) {
-    const auto end = std::chrono::steady_clock::now() + limit;
-    while (std::chrono::steady_clock::now() < end) {
-      int st = 0;
-      if (::waitpid(pid_, &st, WNOHANG) == pid_) {
-        pid_ = -1;
-        return WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
-      }
-      std::this_thread::sleep_for(10ms);
-    }
-    return -1;
-  }
-  std::string status(const std::string& what = "json") const {
-    try {
-      return nccomp::client::query((dir_ / "status.sock").string(), what);
-    } catch (const std::exception&) {
-      return {};
-    }
-  }
-  std::string log() const {
-    std::ifstream in(dir_ / "nccompd.log");
-    std::ostringstream s;
-    s << in.rdbuf();
-    return s.str();
-  }
-
- private:
-  fs::path dir_;
-  pid_t pid_{-1};
+  explicit Daemon(fs::path dir) : NccompdProcess(std::move(dir), NCCOMPD_BIN) {}
 };
 
 double number(const std::string& json, const std::string& key) {

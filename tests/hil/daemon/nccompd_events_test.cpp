@@ -30,6 +30,7 @@
 
 #include "client/status_client.hpp"
 #include "sim/modbus_nc/nc_server.hpp"
+#include "tests/support/nccompd_process.hpp"
 
 extern char** environ;
 
@@ -53,59 +54,9 @@ struct TempDir {
   fs::path path;
 };
 
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
-class Daemon {
+class Daemon : public nccomp::test::NccompdProcess {
  public:
-  explicit Daemon(fs::path dir) : dir_(std::move(dir)) {}
-  ~Daemon() {
-    if (pid_ > 0) {
-      kill();
-    }
-  }
-  void start() {
-    std::vector<std::string> args{NCCOMPD_BIN, "--config", (dir_ / "nccompd.toml").string()};
-    std::vector<char*> argv;
-    for (auto& a : args) argv.push_back(a.data());
-    argv.push_back(nullptr);
-    posix_spawn_file_actions_t fa;
-    posix_spawn_file_actions_init(&fa);
-    const std::string log = (dir_ / "nccompd.log").string();
-    posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-    posix_spawn_file_actions_adddup2(&fa, 1, 2);
-    ASSERT_EQ(posix_spawn(&pid_, NCCOMPD_BIN, &fa, nullptr, argv.data(), environ), 0);
-    posix_spawn_file_actions_destroy(&fa);
-  }
-  /// SIGKILL: no final state write, as a crash or the systemd watchdog.
-  void kill() {
-    ::kill(pid_, SIGKILL);
-    ::waitpid(pid_, nullptr, 0);
-    pid_ = -1;
-  }
-  int stop() {
-    ::kill(pid_, SIGTERM);
-    int st = 0;
-    ::waitpid(pid_, &st, 0);
-    pid_ = -1;
-    return WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
-  }
-  std::string status() const {
-    try {
-      return nccomp::client::query((dir_ / "status.sock").string(), "json");
-    } catch (const std::exception&) {
-      return {};
-    }
-  }
-  std::string log() const { return slurp(dir_ / "nccompd.log"); }
-
- private:
-  fs::path dir_;
-  pid_t pid_{-1};
+  explicit Daemon(fs::path dir) : NccompdProcess(std::move(dir), NCCOMPD_BIN) {}
 };
 
 double number(const std::string& json, const std::string& key) {

@@ -45,6 +45,7 @@
 #include "client/status_client.hpp"
 #include "daemon/lockstep.hpp"
 #include "sim/modbus_nc/nc_server.hpp"
+#include "tests/support/nccompd_process.hpp"
 
 extern char** environ;
 
@@ -96,66 +97,9 @@ struct TempDir {
   fs::path path;
 };
 
-class Daemon {
+class Daemon : public nccomp::test::NccompdProcess {
  public:
-  explicit Daemon(fs::path dir) : dir_(std::move(dir)) {}
-  ~Daemon() {
-    if (pid_ > 0) {
-      ::kill(pid_, SIGKILL);
-      ::waitpid(pid_, nullptr, 0);
-    }
-  }
-  void start(std::vector<std::string> extra_args = {}) {
-    std::vector<std::string> args{NCCOMPD_BIN, "--config", (dir_ / "nccompd.toml").string()};
-    args.insert(args.end(), extra_args.begin(), extra_args.end());
-    std::vector<char*> argv;
-    for (auto& a : args) {
-      argv.push_back(a.data());
-    }
-    argv.push_back(nullptr);
-    posix_spawn_file_actions_t fa;
-    posix_spawn_file_actions_init(&fa);
-    const std::string log = (dir_ / "nccompd.log").string();
-    posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-    posix_spawn_file_actions_adddup2(&fa, 1, 2);
-    ASSERT_EQ(posix_spawn(&pid_, NCCOMPD_BIN, &fa, nullptr, argv.data(), environ), 0);
-    posix_spawn_file_actions_destroy(&fa);
-  }
-  void signal(int sig) const { ASSERT_EQ(::kill(pid_, sig), 0); }
-  /// Exit status (128 + signal if killed); -1 if it did not end within `limit`.
-  int wait(std::chrono::milliseconds limit = 10000ms) {
-    const auto end = std::chrono::steady_clock::now() + limit;
-    while (std::chrono::steady_clock::now() < end) {
-      int st = 0;
-      if (::waitpid(pid_, &st, WNOHANG) == pid_) {
-        pid_ = -1;
-        return WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
-      }
-      std::this_thread::sleep_for(10ms);
-    }
-    return -1;
-  }
-  std::optional<std::string> status(const std::string& what = "json") const {
-    try {
-      auto s = nccomp::client::query((dir_ / "status.sock").string(), what);
-      if (!s.empty()) {
-        return s;
-      }
-    } catch (const std::exception&) {
-    }
-    return std::nullopt;
-  }
-  std::string log() const {
-    // Through a stringstream: GCC 12 at -O2 flags istreambuf_iterator (-Wnull-dereference).
-    std::ifstream in(dir_ / "nccompd.log");
-    std::ostringstream s;
-    s << in.rdbuf();
-    return s.str();
-  }
-
- private:
-  fs::path dir_;
-  pid_t pid_{-1};
+  explicit Daemon(fs::path dir) : NccompdProcess(std::move(dir), NCCOMPD_BIN) {}
 };
 
 double number(const std::string& json, const std::string& key) {
@@ -260,7 +204,7 @@ TEST(NccompdModbus, RealTimeEventsInOffsetsOutStatusShowsTheBus) {
   // A tool measurement published by the NC is one more event in the engine.
   std::string before;
   for (int i = 0; i < 100 && before.empty(); ++i) {
-    before = daemon.status().value_or("");
+    before = daemon.status();
     std::this_thread::sleep_for(20ms);
   }
   ASSERT_FALSE(before.empty()) << daemon.log();
@@ -268,7 +212,7 @@ TEST(NccompdModbus, RealTimeEventsInOffsetsOutStatusShowsTheBus) {
   std::string after;
   const auto end2 = std::chrono::steady_clock::now() + 5s;
   while (std::chrono::steady_clock::now() < end2) {
-    after = daemon.status().value_or("");
+    after = daemon.status();
     if (number(after, "events_accepted") > number(before, "events_accepted")) {
       break;
     }
@@ -279,7 +223,7 @@ TEST(NccompdModbus, RealTimeEventsInOffsetsOutStatusShowsTheBus) {
   EXPECT_NE(after.find("{\"name\":\"modbus\",\"state\":\"up\",\"alarm\":false"), std::string::npos)
       << after;
   EXPECT_GE(number(after, "offsets_written"), 1);
-  const std::string text = daemon.status("text").value_or("");
+  const std::string text = daemon.status("text");
   EXPECT_NE(text.find("modbus"), std::string::npos) << text;
   daemon.signal(SIGTERM);
   EXPECT_EQ(daemon.wait(), 0) << daemon.log();
@@ -360,7 +304,7 @@ TEST(NccompdModbus, LockstepOffsetsAreOnTheNcAtEveryDone) {
     // write of cycle k is on the NC when DONE(k) arrives.
     ASSERT_EQ(holding_i32(nc, 200), std::min(k - 1, 123)) << "cycle " << k;
   }
-  const std::string st = daemon.status().value_or("");
+  const std::string st = daemon.status();
   // One axis sample per cycle (one poll per TICK) and the tool measurement: nothing lost,
   // nothing doubled.
   EXPECT_EQ(number(st, "events_in"), kTicks + 1) << st;
@@ -391,11 +335,11 @@ TEST(NccompdModbus, KillNineMidCreepContinuesWithoutDoubling) {
     daemon.start();
     // The daemon runs and has seen the NC (an axis sample) before the measurement.
     const auto end = std::chrono::steady_clock::now() + 15s;
-    while (number(daemon.status().value_or(""), "events_accepted") < 1 &&
+    while (number(daemon.status(), "events_accepted") < 1 &&
            std::chrono::steady_clock::now() < end) {
       std::this_thread::sleep_for(20ms);
     }
-    ASSERT_GE(number(daemon.status().value_or(""), "events_accepted"), 1) << daemon.log();
+    ASSERT_GE(number(daemon.status(), "events_accepted"), 1) << daemon.log();
     publish_tool_measurement(nc, 1, 1, 10.0F);
     // Kill at about 40 % of the creep (4 s for the whole increment).
     const auto end2 = std::chrono::steady_clock::now() + 20s;
@@ -417,7 +361,7 @@ TEST(NccompdModbus, KillNineMidCreepContinuesWithoutDoubling) {
   std::string first;
   const auto end = std::chrono::steady_clock::now() + 15s;
   while (std::chrono::steady_clock::now() < end) {
-    first = daemon.status().value_or("");
+    first = daemon.status();
     if (number(first, "cycles") >= 10) {
       break;
     }
@@ -438,7 +382,7 @@ TEST(NccompdModbus, KillNineMidCreepContinuesWithoutDoubling) {
   }
   ASSERT_EQ(std::abs(holding_i32(nc, 200)), kFull) << daemon.log();
   std::this_thread::sleep_for(1500ms);  // past a refresh interval (1 s): it stays there
-  const std::string last = daemon.status().value_or("");
+  const std::string last = daemon.status();
   daemon.signal(SIGTERM);
   EXPECT_EQ(daemon.wait(), 0) << daemon.log();
   nc.stop();
@@ -506,7 +450,7 @@ TEST(NccompdModbus, RealStartAfterDryRunResumesFromWhatTheNcHolds) {
     std::string s;
     const auto end = std::chrono::steady_clock::now() + 15s;
     while (std::chrono::steady_clock::now() < end) {
-      s = dry.status().value_or("");
+      s = dry.status();
       if (number(s, "output_um") >= 30.0) {
         break;
       }
@@ -578,7 +522,7 @@ TEST(NccompdModbus, SlowPollNeverStepsTheNcPastMaxStepNorAcrossAnOutage) {
   }
   ASSERT_GE(holding_i32(nc, 200), 500) << daemon.log();
   // Slewing, and the register waits for the NC (20 Hz) rather than the limiter's rate.
-  const std::string slewing = daemon.status().value_or("");
+  const std::string slewing = daemon.status();
   EXPECT_NE(slewing.find("\"slewing\":true"), std::string::npos) << slewing;
   nc.stop();  // the NC goes away: timeouts, a reconnect back-off, the loop keeps stepping
   std::this_thread::sleep_for(1s);
@@ -588,7 +532,7 @@ TEST(NccompdModbus, SlowPollNeverStepsTheNcPastMaxStepNorAcrossAnOutage) {
     std::this_thread::sleep_for(10ms);
   }
   EXPECT_EQ(holding_i32(nc, 200), 1500) << daemon.log();
-  const std::string s = daemon.status().value_or("");
+  const std::string s = daemon.status();
   EXPECT_GT(number(s, "writes_awaiting_nc"), 1000.0) << s;
   EXPECT_GE(number(s, "reconnects"), 1.0) << s;
   daemon.signal(SIGTERM);

@@ -32,6 +32,7 @@
 #include "daemon/config/builtin_sections.hpp"
 #include "daemon/config/config.hpp"
 #include "daemon/state_store.hpp"
+#include "tests/support/nccompd_process.hpp"
 
 extern char** environ;
 
@@ -55,84 +56,9 @@ std::string config_text(double target_um, double rate_um_per_s, const std::strin
   return s.str();
 }
 
-class Daemon {
+class Daemon : public nccomp::test::NccompdProcess {
  public:
-  explicit Daemon(fs::path dir) : dir_(std::move(dir)) {}
-  ~Daemon() {
-    if (pid_ > 0) {
-      ::kill(pid_, SIGKILL);
-      ::waitpid(pid_, nullptr, 0);
-    }
-  }
-  /// Extra environment for the child ("NAME=value").
-  std::vector<std::string> env;
-  void start(std::vector<std::string> extra_args = {}) {
-    std::vector<std::string> args{NCCOMPD_BIN, "--config", (dir_ / "nccompd.toml").string()};
-    args.insert(args.end(), extra_args.begin(), extra_args.end());
-    std::vector<char*> argv;
-    for (auto& a : args) {
-      argv.push_back(a.data());
-    }
-    argv.push_back(nullptr);
-    posix_spawn_file_actions_t fa;
-    posix_spawn_file_actions_init(&fa);
-    const std::string log = (dir_ / "nccompd.log").string();
-    posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-    posix_spawn_file_actions_adddup2(&fa, 1, 2);
-    std::vector<char*> envp;
-    for (char** e = environ; *e != nullptr; ++e) {
-      envp.push_back(*e);
-    }
-    for (auto& e : env) {
-      envp.push_back(e.data());
-    }
-    envp.push_back(nullptr);
-    ASSERT_EQ(posix_spawn(&pid_, NCCOMPD_BIN, &fa, nullptr, argv.data(), envp.data()), 0);
-    posix_spawn_file_actions_destroy(&fa);
-  }
-  void signal(int sig) const { ASSERT_EQ(::kill(pid_, sig), 0); }
-  /// Waits for the process to end; its exit status (128 + signal if killed).
-  int wait() {
-    int st = 0;
-    ::waitpid(pid_, &st, 0);
-    pid_ = -1;
-    return WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
-  }
-  std::optional<std::string> status(const std::string& what = "json") const {
-    try {
-      auto s = nccomp::client::query((dir_ / "status.sock").string(), what);
-      if (!s.empty()) {
-        return s;
-      }
-    } catch (const std::exception&) {
-    }
-    return std::nullopt;
-  }
-  /// Polls the status until pred(json) holds or the time is up.
-  template <typename P>
-  std::string wait_status(P pred, std::chrono::seconds limit = 20s) const {
-    const auto end = std::chrono::steady_clock::now() + limit;
-    std::string last;
-    while (std::chrono::steady_clock::now() < end) {
-      if (auto s = status()) {
-        last = *s;
-        if (pred(last)) {
-          return last;
-        }
-      }
-      std::this_thread::sleep_for(20ms);
-    }
-    ADD_FAILURE() << "status condition not reached; last status: " << last << "\nlog:\n" << log();
-    return last;
-  }
-  std::string log() const {
-    std::ifstream in(dir_ / "nccompd.log");
-    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-  }
-
- private:
-  fs::path dir_;
-  pid_t pid_{-1};
+  explicit Daemon(fs::path dir) : NccompdProcess(std::move(dir), NCCOMPD_BIN) {}
 };
 
 double number(const std::string& json, const std::string& key) {
@@ -204,7 +130,7 @@ TEST(NccompdProcess, KillNineMidRampResumesWithoutDoubling) {
   // Target reached exactly once: 30 µm, not 30 + what was done before the kill.
   EXPECT_DOUBLE_EQ(number(done, "output_um"), 30.0);
   std::this_thread::sleep_for(300ms);
-  const auto later = p.status();
+  const auto later = p.try_status();
   ASSERT_TRUE(later);
   EXPECT_DOUBLE_EQ(number(*later, "output_um"), 30.0);
   EXPECT_NE(p.log().find("state resumed from"), std::string::npos) << p.log();
@@ -226,7 +152,7 @@ TEST(NccompdProcess, CorruptStateHoldsOffsetsWithAnAlarm) {
   EXPECT_NE(s.find("\"name\":\"state_corrupt\""), std::string::npos) << s;
   EXPECT_EQ(number(s, "writes_sent"), 0.0);
   EXPECT_EQ(number(s, "output_um"), 0.0);
-  const auto text = p.status("text");
+  const auto text = p.try_status("text");
   ASSERT_TRUE(text);
   EXPECT_NE(text->find("HOLD: offsets are held"), std::string::npos) << *text;
   p.signal(SIGTERM);
@@ -389,7 +315,7 @@ TEST(NccompdProcess, StalledLoopStopsFeedingTheWatchdog) {
   ASSERT_EQ(number(s, "cycles"), 800) << s;
   const auto stalled_seen = std::chrono::steady_clock::now();
   std::this_thread::sleep_for(1500ms);  // 15 feed periods
-  const auto later = p.status();
+  const auto later = p.try_status();
   ASSERT_TRUE(later) << "the status thread must keep answering";
   EXPECT_EQ(number(*later, "cycles"), 800) << *later;
   p.signal(SIGTERM);

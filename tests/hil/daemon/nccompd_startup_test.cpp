@@ -39,6 +39,7 @@
 #include "client/status_client.hpp"
 #include "daemon/state_store.hpp"
 #include "sim/modbus_nc/nc_server.hpp"
+#include "tests/support/nccompd_process.hpp"
 
 extern char** environ;
 
@@ -122,58 +123,9 @@ struct TempDir {
   fs::path path;
 };
 
-class Daemon {
+class Daemon : public nccomp::test::NccompdProcess {
  public:
-  explicit Daemon(fs::path dir) : dir_(std::move(dir)) {}
-  ~Daemon() {
-    if (pid_ > 0) {
-      ::kill(pid_, SIGKILL);
-      ::waitpid(pid_, nullptr, 0);
-    }
-  }
-  void start() {
-    std::vector<std::string> args{NCCOMPD_BIN, "--config", (dir_ / "nccompd.toml").string()};
-    std::vector<char*> argv;
-    for (auto& a : args) argv.push_back(a.data());
-    argv.push_back(nullptr);
-    posix_spawn_file_actions_t fa;
-    posix_spawn_file_actions_init(&fa);
-    const std::string log = (dir_ / "nccompd.log").string();
-    posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-    posix_spawn_file_actions_adddup2(&fa, 1, 2);
-    ASSERT_EQ(posix_spawn(&pid_, NCCOMPD_BIN, &fa, nullptr, argv.data(), environ), 0);
-    posix_spawn_file_actions_destroy(&fa);
-  }
-  void signal(int sig) const { ASSERT_EQ(::kill(pid_, sig), 0); }
-  int wait(std::chrono::milliseconds limit = 10000ms) {
-    const auto end = std::chrono::steady_clock::now() + limit;
-    while (std::chrono::steady_clock::now() < end) {
-      int st = 0;
-      if (::waitpid(pid_, &st, WNOHANG) == pid_) {
-        pid_ = -1;
-        return WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
-      }
-      std::this_thread::sleep_for(10ms);
-    }
-    return -1;
-  }
-  std::string request(const std::string& what = "json") const {
-    try {
-      return nccomp::client::query((dir_ / "status.sock").string(), what);
-    } catch (const std::exception&) {
-      return {};
-    }
-  }
-  std::string log() const {
-    std::ifstream in(dir_ / "nccompd.log");
-    std::ostringstream s;
-    s << in.rdbuf();
-    return s.str();
-  }
-
- private:
-  fs::path dir_;
-  pid_t pid_{-1};
+  explicit Daemon(fs::path dir) : NccompdProcess(std::move(dir), NCCOMPD_BIN) {}
 };
 
 double number(const std::string& json, const std::string& key) {
@@ -245,7 +197,7 @@ void publish_tool_measurement(NcServer& nc, std::uint16_t seq, std::uint16_t too
 /// Waits until the daemon runs with its bus up and has seen the NC's axis sample.
 void wait_running(const Daemon& d) {
   ASSERT_TRUE(wait_until([&] {
-    const std::string s = d.request();
+    const std::string s = d.status();
     return s.find("\"state\":\"up\"") != std::string::npos && number(s, "events_accepted") >= 1 &&
            number(s, "cycles") >= 40;
   })) << d.log();
@@ -304,10 +256,10 @@ TEST(NccompdStartup, RegistersBeyondMaxAbsAreNeverWrittenUntilReleasedAndNeverBe
         << log;
   }
   EXPECT_NE(log.find("3 beyond max_abs_um (held)"), std::string::npos) << log;
-  const std::string st = daemon.request();
+  const std::string st = daemon.status();
   EXPECT_NE(st.find("\"name\":\"T1_radius_wear\",\"output_um\":250,"), std::string::npos) << st;
   EXPECT_NE(st.find("\"hold\":\"beyond_limit\"}"), std::string::npos) << st;
-  const std::string text = daemon.request("text");
+  const std::string text = daemon.status("text");
   EXPECT_NE(text.find("T1_radius_wear"), std::string::npos);
   EXPECT_NE(text.find("BLOCKED: the NC holds a value beyond max_abs_um"), std::string::npos)
       << text;
@@ -316,7 +268,7 @@ TEST(NccompdStartup, RegistersBeyondMaxAbsAreNeverWrittenUntilReleasedAndNeverBe
 
   // The operator releases the radius register: the creep module's value (0 without wear) is
   // written in one move; the other two stay untouched.
-  const std::string answer = daemon.request("register release T1_radius_wear");
+  const std::string answer = daemon.status("register release T1_radius_wear");
   EXPECT_EQ(answer.rfind("ok released 1 register(s)", 0), 0U) << answer;
   EXPECT_NE(answer.find("T1_radius_wear (1): was held beyond max_abs_um (the NC holds 250.000 "
                         "um); 0.000 um is written in one move"),
@@ -334,10 +286,10 @@ TEST(NccompdStartup, RegistersBeyondMaxAbsAreNeverWrittenUntilReleasedAndNeverBe
             std::string::npos)
       << daemon.log();
   // Nothing left to release there; an unknown register is refused.
-  EXPECT_EQ(daemon.request("register release T1_radius_wear")
+  EXPECT_EQ(daemon.status("register release T1_radius_wear")
                 .rfind("ok register release T1_radius_wear: nothing is held", 0),
             0U);
-  EXPECT_EQ(daemon.request("register release T9")
+  EXPECT_EQ(daemon.status("register release T9")
                 .rfind("error: register release: no register "
                        "named 'T9' in [[registers]]",
                        0),
@@ -359,7 +311,7 @@ TEST(NccompdStartup, RegistersBeyondMaxAbsAreNeverWrittenUntilReleasedAndNeverBe
     EXPECT_NE(out.find("X_axis_offset (2): was held beyond max_abs_um"), std::string::npos) << out;
   }
 #else
-  EXPECT_EQ(daemon.request("register release all").rfind("ok released 2 register(s)", 0), 0U);
+  EXPECT_EQ(daemon.status("register release all").rfind("ok released 2 register(s)", 0), 0U);
 #endif
   ASSERT_TRUE(wait_until([&] {
     return holding_i32(nc, kLength) == 0 && !received_um(nc, 0, kAxisX).empty() &&
@@ -476,7 +428,7 @@ TEST(NccompdStartup, WithoutAStateFileTheNcsWearIsAdoptedAndTheNextMeasurementCr
       << log;
   // The creep module took the NC's compensation as the wear in force (33 µm, the sign of the
   // tool registers is -1).
-  const std::string st = daemon.request();
+  const std::string st = daemon.status();
   EXPECT_DOUBLE_EQ(number(st, "wear_in_force_um"), 33.0) << st;
   // The next laser measurement, 40 µm: an increment of 7 µm from the adopted 33, crept in.
   expect_creep_from_held(nc, daemon, 1);
@@ -675,7 +627,7 @@ TEST(NccompdStartup, AnNcThatDidNotAnswerAtStartUpIsNotWrittenAndARestartAdoptsI
   EXPECT_NE(log.find("warning register_held_without_state (code 62) subject 0 value nan"),
             std::string::npos)
       << log;
-  EXPECT_NE(daemon.request().find("\"hold\":\"without_state\""), std::string::npos);
+  EXPECT_NE(daemon.status().find("\"hold\":\"without_state\""), std::string::npos);
   // The operator restarts nccompd now that the NC answers: the module adopts its -33.0 µm.
   daemon.signal(SIGTERM);
   EXPECT_EQ(daemon.wait(), 0) << daemon.log();
@@ -691,7 +643,7 @@ TEST(NccompdStartup, AnNcThatDidNotAnswerAtStartUpIsNotWrittenAndARestartAdoptsI
                              "point"),
             std::string::npos)
       << again.log();
-  EXPECT_EQ(again.request().find("\"hold\":\"without_state\""), std::string::npos);
+  EXPECT_EQ(again.status().find("\"hold\":\"without_state\""), std::string::npos);
   again.signal(SIGTERM);
   EXPECT_EQ(again.wait(), 0) << again.log();
   nc.stop();

@@ -29,6 +29,7 @@
 
 #include "client/status_client.hpp"
 #include "sim/modbus_nc/nc_server.hpp"
+#include "tests/support/nccompd_process.hpp"
 
 extern char** environ;
 
@@ -132,37 +133,9 @@ CliRun nccomp(const TempDir& d, const std::vector<std::string>& args) {
 }
 #endif
 
-class Daemon {
+class Daemon : public nccomp::test::NccompdProcess {
  public:
-  explicit Daemon(fs::path dir) : dir_(std::move(dir)) {}
-  ~Daemon() {
-    if (pid_ > 0) {
-      ::kill(pid_, SIGKILL);
-      ::waitpid(pid_, nullptr, 0);
-    }
-  }
-  void start() {
-    const fs::path log = dir_ / "nccompd.log";
-    pid_ = spawn({NCCOMPD_BIN, "--config", (dir_ / "nccompd.toml").string()}, log, log, true);
-  }
-  int stop() {
-    ::kill(pid_, SIGTERM);
-    const int rc = wait_exit(pid_);
-    pid_ = -1;
-    return rc;
-  }
-  std::string status() const {
-    try {
-      return nccomp::client::query((dir_ / "status.sock").string(), "json");
-    } catch (const std::exception&) {
-      return {};
-    }
-  }
-  std::string log() const { return slurp(dir_ / "nccompd.log"); }
-
- private:
-  fs::path dir_;
-  pid_t pid_{-1};
+  explicit Daemon(fs::path dir) : NccompdProcess(std::move(dir), NCCOMPD_BIN) {}
 };
 
 double number(const std::string& json, const std::string& key) {
