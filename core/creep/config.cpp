@@ -229,6 +229,20 @@ void validate(const CreepConfig& c) {
     k.positive(c.predict.max_um, "creep.predict.max_um");
   }
 
+  if (c.estimator.enabled) {
+    const auto& est = c.estimator;
+    k.positive(est.measurement_sigma_um, "creep.estimator.measurement_sigma_um");
+    k.non_negative(est.wear_noise_um_per_sqrt_m, "creep.estimator.wear_noise_um_per_sqrt_m");
+    k.non_negative(est.rate_noise_um_per_mm_per_sqrt_m,
+                   "creep.estimator.rate_noise_um_per_mm_per_sqrt_m");
+    k.positive(est.initial_rate_sigma_um_per_mm, "creep.estimator.initial_rate_sigma_um_per_mm");
+    if (!std::isfinite(est.gate_sigmas) || est.gate_sigmas < 0.0 ||
+        (est.gate_sigmas > 0.0 && est.gate_sigmas < 2.0)) {
+      k.fail("creep.estimator.gate_sigmas",
+             "must be 0 (no gate) or a finite number >= 2, got " + num(est.gate_sigmas));
+    }
+  }
+
   k.non_negative(c.entry.sister_offset_um, "creep.entry.sister_offset_um");
   k.positive(c.entry.sister_length_mm, "creep.entry.sister_length_mm");
   k.non_negative(c.entry.sister_restart_back_mm, "creep.entry.sister_restart_back_mm");

@@ -222,6 +222,19 @@ void parse_predict(TableReader& r, cc::PredictConfig& p) {
   p.max_um = positive(r, "max_um", p.max_um, 1e6);
 }
 
+void parse_estimator(TableReader& r, cc::EstimatorConfig& e) {
+  e.enabled = r.boolean("enabled", e.enabled);
+  e.measurement_sigma_um = positive(r, "measurement_sigma_um", e.measurement_sigma_um, 1e3);
+  e.wear_noise_um_per_sqrt_m =
+      r.number("wear_noise_um_per_sqrt_m", e.wear_noise_um_per_sqrt_m, 0.0, 1e3);
+  e.rate_noise_um_per_mm_per_sqrt_m =
+      r.number("rate_noise_um_per_mm_per_sqrt_m", e.rate_noise_um_per_mm_per_sqrt_m, 0.0, 1e3);
+  e.initial_rate_sigma_um_per_mm =
+      positive(r, "initial_rate_sigma_um_per_mm", e.initial_rate_sigma_um_per_mm, 1e3);
+  // 0 < k < 2 is refused by core::creep::validate() (it would refuse good measurements).
+  e.gate_sigmas = r.number("gate_sigmas", e.gate_sigmas, 0.0, 1e3);
+}
+
 void parse_entry(TableReader& r, cc::EntryConfig& e) {
   e.sister_offset_um = r.number("sister_offset_um", e.sister_offset_um, 0.0, 1e6);
   e.sister_length_mm = positive(r, "sister_length_mm", e.sister_length_mm);
@@ -335,6 +348,10 @@ std::unique_ptr<CreepSection> parse_creep_section(const toml::node& node, Diagno
     if (const auto* t = r.table("predict")) {
       TableReader q(*t, "creep.predict", diag);
       parse_predict(q, c.predict);
+    }
+    if (const auto* t = r.table("estimator")) {
+      TableReader q(*t, "creep.estimator", diag);
+      parse_estimator(q, c.estimator);
     }
     if (const auto* t = r.table("entry")) {
       TableReader q(*t, "creep.entry", diag);
