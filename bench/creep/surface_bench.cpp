@@ -4,6 +4,7 @@
 // markdown tables, or with --json one JSON object per PHM 2010 row and strategy (one a line).
 //
 //   bench_creep_surface [--json] [--wear-noise UM_PER_SQRT_M] [--rate-noise UM_PER_MM_PER_SQRT_M]
+//                       [--max-sigma UM]
 //                       [PHM_DIR]
 #include <cmath>
 #include <cstdio>
@@ -140,18 +141,23 @@ int main(int argc, char** argv) {
   std::string phm_dir = NCCOMP_PHM_DIR;
   // The estimator of the PHM runs: the documented defaults unless given (docs/estimation.md).
   nccomp::core::creep::EstimatorConfig est;
+  // "Measured when needed": the bound on the estimate's σ (the laser's σ: measure when the
+  // estimate is no better than one measurement).
+  double max_sigma_um = 1.0;
   for (int a = 1; a < argc; ++a) {
     const std::string arg = argv[a];
     if (arg == "--json") {
       g_json = true;
     } else if (arg == "--wear-noise" && a + 1 < argc) {
       est.wear_noise_um_per_sqrt_m = std::stod(argv[++a]);
+    } else if (arg == "--max-sigma" && a + 1 < argc) {
+      max_sigma_um = std::stod(argv[++a]);
     } else if (arg == "--rate-noise" && a + 1 < argc) {
       est.rate_noise_um_per_mm_per_sqrt_m = std::stod(argv[++a]);
     } else if (arg.starts_with("-")) {
-      std::fprintf(
-          stderr,
-          "usage: bench_creep_surface [--json] [--wear-noise X] [--rate-noise X] [PHM_DIR]\n");
+      std::fprintf(stderr,
+                   "usage: bench_creep_surface [--json] [--wear-noise X] [--rate-noise X] "
+                   "[--max-sigma X] [PHM_DIR]\n");
       return 2;
     } else {
       phm_dir = arg;
@@ -257,6 +263,7 @@ int main(int argc, char** argv) {
         sc.noise_um = 1.0;
         sc.seed = 2010;
         sc.estimator = est;
+        sc.max_sigma_um = max_sigma_um;
         sc.wear_um = [v, tan_g](double, double s) {
           const double c = s / 108.0;  // cuts done since cut 1
           const auto i = std::min(static_cast<std::size_t>(c), v.size() - 2);
@@ -282,7 +289,8 @@ int main(int argc, char** argv) {
   }
   if (g_json) return 0;
   // strategies(): 0 none, 1 step, 2 creeping linear, 3 creeping cosine, 4 predictive,
-  // 5 creeping + estimator, 6 predictive + estimator, 7 and 8 the same fed noise-free.
+  // 5 creeping + estimator, 6 predictive + estimator, 7 and 8 the same fed noise-free,
+  // 9 predictive + estimator measured when needed.
   std::printf(
       "\n### PHM 2010 summary (step = prior art, creep = creeping linear, pred = predictive "
       "creeping)\n\n"
@@ -339,6 +347,22 @@ int main(int argc, char** argv) {
         "(target ≤ 0.02)\n",
         passes_l, rows, worst_ce, worst_pe, sum_ce / sum_step, sum_pe / sum_step, along_ce,
         along_pe);
+  }
+  std::printf(
+      "\n### PHM 2010, measured when needed (interval basis \"uncertainty\", max_sigma_um = %g, "
+      "between %.0f and %.0f mm = 1 and 20 cuts) against predictive + estimator measured every "
+      "10 cuts\n\n"
+      "| cutter | L [passes] | every 10 cuts: RMS [µm] / measurements | when needed: RMS [µm] / "
+      "measurements | fewer measurements | step along a pass [µm] |\n"
+      "| --- | --- | --- | --- | --- | --- |\n",
+      max_sigma_um, 108.0, 2160.0);
+  for (const auto& row : summary) {
+    if (row.k != 10) continue;
+    const auto& r = row.r;
+    std::printf("| %s | %d | %.3f / %d | %.3f / %d | %.0f %% | %.4f |\n", row.cutter.c_str(),
+                row.passes_l, r[6].rms_second_half_um, r[6].measurements, r[9].rms_second_half_um,
+                r[9].measurements, 100.0 * (1.0 - double(r[9].measurements) / r[6].measurements),
+                r[9].max_step_along_um);
   }
   return 0;
 }

@@ -49,6 +49,11 @@ struct Scenario {
   /// [creep.estimator] of the estimator strategies (enabled by the strategy); its
   /// measurement_sigma_um is set to noise_um unless that is 0.
   EstimatorConfig estimator{};
+  /// "Measured when needed" (interval basis uncertainty): the bound on the estimate's σ [µm] and
+  /// the limits of the path between measurements [mm].
+  double max_sigma_um{1.0};
+  double min_interval_mm{108.0};
+  double max_interval_mm{2160.0};
 };
 
 struct Strategy {
@@ -60,6 +65,8 @@ struct Strategy {
   /// Fed noise-free measurements (the config, σ included, stays that of the noisy run): the
   /// limit of what a measurement every k cuts can know.
   bool noise_free{false};
+  /// Measured when the module asks (interval basis uncertainty), not every measure_every_passes.
+  bool on_request{false};
 };
 
 struct Result {
@@ -86,6 +93,8 @@ inline const std::vector<Strategy>& strategies() {
       {"predictive creeping, estimator", true, ProfileShape::kLinear, true, true},
       {"creeping, estimator, noise-free", true, ProfileShape::kLinear, false, true, true},
       {"predictive creeping, estimator, noise-free", true, ProfileShape::kLinear, true, true, true},
+      {"predictive creeping, estimator, measured when needed", true, ProfileShape::kLinear, true,
+       true, false, true},
   };
   return s;
 }
@@ -118,6 +127,12 @@ inline Result run(const Scenario& sc, const Strategy& st) {
   c.estimator = sc.estimator;
   c.estimator.enabled = st.estimator;
   if (sc.noise_um > 0.0) c.estimator.measurement_sigma_um = sc.noise_um;
+  if (st.on_request) {
+    c.interval.basis = IntervalBasis::kUncertainty;
+    c.interval.max_sigma_um = sc.max_sigma_um;
+    c.interval.min_interval_mm = sc.min_interval_mm;
+    c.interval.max_interval_mm = sc.max_interval_mm;
+  }
   WearCompensator comp;
   comp.configure(c);
   StepOutput out;
@@ -173,7 +188,7 @@ inline Result run(const Scenario& sc, const Strategy& st) {
       const double theta_deg = std::acos(std::clamp(nrm[2], 0.0, 1.0)) * 180.0 / std::numbers::pi;
       ev.clear();
       now += from_seconds(sc.ds_mm / sc.feed_mm_per_s);
-      if (s >= next_meas) {
+      if (st.on_request ? comp.state().measurement_due_flag : s >= next_meas) {
         // The NC interrupts here; the laser measures; machining resumes at the same position.
         next_meas += interval_mm;
         ToolMeasurement m;

@@ -193,8 +193,16 @@ void validate(const CreepConfig& c) {
     case IntervalBasis::kTime:
       k.positive(iv.interval_s, "creep.interval.interval_s");
       break;
+    case IntervalBasis::kUncertainty:
+      if (!c.estimator.enabled) {
+        k.fail("creep.interval.basis", "\"uncertainty\" needs [creep.estimator] enabled = true");
+      }
+      k.positive(iv.max_sigma_um, "creep.interval.max_sigma_um");
+      [[fallthrough]];
     case IntervalBasis::kAdaptive:
-      k.positive(iv.target_increment_um, "creep.interval.target_increment_um");
+      if (iv.basis == IntervalBasis::kAdaptive) {
+        k.positive(iv.target_increment_um, "creep.interval.target_increment_um");
+      }
       k.positive(iv.min_interval_mm, "creep.interval.min_interval_mm");
       k.positive(iv.max_interval_mm, "creep.interval.max_interval_mm");
       if (iv.max_interval_mm < iv.min_interval_mm) {

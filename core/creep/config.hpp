@@ -75,6 +75,9 @@ enum class IntervalBasis : std::uint8_t {
   kTime = 2,      // every interval_s of cutting time
   kAdaptive = 3,  // target_increment_um / fitted wear rate, within [min, max]_interval_mm
   kMaterial = 4,  // every interval_mm3 of material removed (cross-section × cut path)
+  /// When the estimator's σ predicted to the cut path now exceeds max_sigma_um, within
+  /// [min, max]_interval_mm (needs [creep.estimator]).
+  kUncertainty = 5,
 };
 
 /// Where the removal cross-section of the interval basis "material" comes from.
@@ -164,6 +167,9 @@ struct IntervalConfig {
   double removal_mm3_per_mm{0.025};
   RemovalSource removal_source{RemovalSource::kConstant};
   double interval_mm3{50.0};
+  /// basis uncertainty: a measurement is requested when the estimate's standard deviation
+  /// predicted to the cut path now exceeds this [µm].
+  double max_sigma_um{2.0};
 };
 
 /// [creep.tool_life]

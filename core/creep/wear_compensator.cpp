@@ -219,6 +219,7 @@ void WearCompensator::select_tool_tables() noexcept {
       transition_index_[transition_count_++] = static_cast<std::uint8_t>(k);
     }
   }
+  update_uncertainty_interval();  // the tool's own estimate
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1201,6 +1202,7 @@ void WearCompensator::on_measurement(TimeNs now_ns, const ToolMeasurement& m,
     s_.estimate_path_mm = s_.cut_path_mm;
     s_.estimate_valid = true;
     s_.rate_known = true;
+    update_uncertainty_interval();
   } else {
     s_.estimate_valid = false;  // switched on later: starts from the measured state
   }
@@ -1273,11 +1275,45 @@ double WearCompensator::interval_path_mm() const noexcept {
       if (!(max_rate > 0.0)) return iv.max_interval_mm;
       return std::clamp(iv.target_increment_um / max_rate, iv.min_interval_mm, iv.max_interval_mm);
     }
+    case IntervalBasis::kUncertainty:
+      return uncertainty_interval_mm_;
     case IntervalBasis::kOff:
     case IntervalBasis::kTime:
       break;
   }
   return std::numeric_limits<double>::infinity();
+}
+
+void WearCompensator::update_uncertainty_interval() noexcept {
+  const auto& iv = config_.interval;
+  if (iv.basis != IntervalBasis::kUncertainty) return;
+  // Path since the last measurement at which some support point's σ exceeds max_sigma_um. The
+  // variance grows monotonically with the path (a cubic): bisect within the limits.
+  const auto too_uncertain = [&](double since_mm) {
+    for (std::size_t i = 0; i < points_; ++i) {
+      double from_mm = 0.0;
+      auto kf = estimator_at(i, from_mm);
+      const double d = std::max(0.0, s_.last_measurement_cut_path_mm + since_mm - from_mm);
+      kf.predict(estimation::cv_transition(d), estimator_noise(config_.estimator, d));
+      if (std::sqrt(std::max(0.0, kf.covariance()(0, 0))) > iv.max_sigma_um) return true;
+    }
+    return false;
+  };
+  double lo = iv.min_interval_mm;
+  double hi = iv.max_interval_mm;
+  if (too_uncertain(lo)) {
+    uncertainty_interval_mm_ = lo;
+    return;
+  }
+  if (!too_uncertain(hi)) {
+    uncertainty_interval_mm_ = hi;
+    return;
+  }
+  for (int it = 0; it < 40; ++it) {  // 2^-40 of the span: far below a path sample
+    const double mid = 0.5 * (lo + hi);
+    (too_uncertain(mid) ? hi : lo) = mid;
+  }
+  uncertainty_interval_mm_ = hi;
 }
 
 double WearCompensator::next_measurement_path_mm() const noexcept {

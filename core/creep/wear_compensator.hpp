@@ -209,7 +209,12 @@ class WearCompensator {
   /// Material removed by a cut of d_mm from sample `from` to sample `to` [mm³].
   [[nodiscard]] double removal_mm3(const AxisSample& from, const AxisSample& to,
                                    double d_mm) const noexcept;
+  /// Selects the active tool's deflection table and transitions, and derives its interval.
   void select_tool_tables() noexcept;
+  /// Interval basis uncertainty: the path after the last measurement at which the estimate's
+  /// σ reaches max_sigma_um (within the limits), kept in uncertainty_interval_mm_: it changes
+  /// only with the estimator's state, so it is not searched in every cycle.
+  void update_uncertainty_interval() noexcept;
 
   CreepConfig config_{};
   ProfileTable table_{};
@@ -241,6 +246,7 @@ class WearCompensator {
   bool rearm_started_{false};
   TimeNs rearm_until_ns_{0};
   int deflection_index_{-1};
+  double uncertainty_interval_mm_{0.0};
   std::array<std::uint8_t, kMaxTransitions> transition_index_{};
   std::size_t transition_count_{0};
 

@@ -180,7 +180,8 @@ void parse_interval(TableReader& r, cc::IntervalConfig& iv, bool have_toolpath) 
                                       {"path", cc::IntervalBasis::kPath},
                                       {"time", cc::IntervalBasis::kTime},
                                       {"adaptive", cc::IntervalBasis::kAdaptive},
-                                      {"material", cc::IntervalBasis::kMaterial}},
+                                      {"material", cc::IntervalBasis::kMaterial},
+                                      {"uncertainty", cc::IntervalBasis::kUncertainty}},
                                      iv.basis);
   iv.interval_mm = positive(r, "interval_mm", iv.interval_mm);
   iv.interval_s = positive(r, "interval_s", iv.interval_s);
@@ -197,6 +198,7 @@ void parse_interval(TableReader& r, cc::IntervalConfig& iv, bool have_toolpath) 
                           "\"toolpath\" needs creep.edge.toolpath_file with a removal_mm2 column");
   }
   iv.interval_mm3 = positive(r, "interval_mm3", iv.interval_mm3);
+  iv.max_sigma_um = positive(r, "max_sigma_um", iv.max_sigma_um, 1e3);
   if (iv.max_interval_mm < iv.min_interval_mm) {
     r.diagnostics().error(r.where("max_interval_mm"), "must be >= min_interval_mm");
   }

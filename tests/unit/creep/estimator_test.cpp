@@ -404,3 +404,52 @@ TEST(CreepRealTime, EngineStepWithTheEstimatorAllocatesNothing) {
 
 }  // namespace
 }  // namespace nccomp::core::creep
+
+namespace nccomp::core::creep {
+namespace {
+
+TEST(CreepEstimator, UncertaintyIntervalAsksForAMeasurementWhenSigmaReachesTheBound) {
+  // GIVEN a new tool (wear 0 ± 1 µm, rate 0 ± 0.01 µm/mm, no process noise) and a bound of
+  // 2 µm: σ(d)² = 1 + 1e-4·d² reaches 4 at d = sqrt(3e4) = 173.2 mm.
+  CreepConfig c = estimator_config();
+  c.interval.basis = IntervalBasis::kUncertainty;
+  c.interval.max_sigma_um = 2.0;
+  c.interval.min_interval_mm = 10.0;
+  c.interval.max_interval_mm = 1000.0;
+  testing::Rig r(c);
+  EXPECT_NEAR(r.comp.next_measurement_path_mm(), std::sqrt(3e4), 1e-6);
+  r.run_to(173.0);
+  EXPECT_EQ(r.count(AlarmCode::kMeasurementDue), 0U);
+  r.run_to(173.5);
+  EXPECT_EQ(r.count(AlarmCode::kMeasurementDue), 1U);
+  // WHEN it is measured at d0 = 173.5 mm, THEN the next request comes where the posterior's
+  // σ reaches 2 again: P⁻ = [[1 + 1e-4·d0², 1e-4·d0], [·, 1e-4]], K = P⁻h/(P⁻ww + 1),
+  // P⁺ = (I − Kh)P⁻, and σ²(d) = P⁺ww + 2d·P⁺wr + d²·P⁺rr = 4 solved for d.
+  const double d0 = 173.5;
+  const double pww = 1.0 + 1e-4 * d0 * d0;
+  const double pwr = 1e-4 * d0;
+  const double prr = 1e-4;
+  const double s = pww + 1.0;
+  const double aww = pww - pww * pww / s;
+  const double awr = pwr - pww * pwr / s;
+  const double arr = prr - pwr * pwr / s;
+  const double d =
+      (-2.0 * awr + std::sqrt(4.0 * awr * awr + 4.0 * arr * (4.0 - aww))) / (2.0 * arr);
+  r.measure({3.0});
+  ASSERT_EQ(r.comp.counters().measurements_accepted, 1U);
+  EXPECT_NEAR(r.comp.next_measurement_path_mm(), d0 + d, 1e-6);
+  // The limits hold: a bound the estimate never reaches asks at max_interval_mm, one it is
+  // already beyond at min_interval_mm.
+  c.interval.max_sigma_um = 1e3;
+  testing::Rig far(c);
+  EXPECT_NEAR(far.comp.next_measurement_path_mm(), 1000.0, 0.0);
+  c.interval.max_sigma_um = 0.5;
+  testing::Rig near(c);
+  EXPECT_NEAR(near.comp.next_measurement_path_mm(), 10.0, 0.0);
+  // It needs the estimator.
+  c.estimator.enabled = false;
+  EXPECT_THROW(validate(c), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace nccomp::core::creep

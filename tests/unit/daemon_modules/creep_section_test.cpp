@@ -392,6 +392,32 @@ gate_sigmas = 1.5
                                "number >= 2, got 1.5"),
             std::string::npos)
       << errors_of(g2);
+
+  // Measuring when needed: the interval basis "uncertainty" and its bound; it needs the estimator.
+  const std::string text3 = std::string(kRegisters) + R"(
+[creep]
+creep_length_mm = 50
+[creep.output]
+z_register = "Z_wear_offset"
+[creep.interval]
+basis = "uncertainty"
+max_sigma_um = 1.5
+[creep.estimator]
+enabled = true
+)";
+  auto r3 = load_file(d.write("when_needed.toml", text3));
+  ASSERT_TRUE(r3.config) << r3.diagnostics.to_string();
+  const auto& iv = creep_section(*r3.config)->module.creep.interval;
+  EXPECT_EQ(iv.basis, core::creep::IntervalBasis::kUncertainty);
+  EXPECT_DOUBLE_EQ(iv.max_sigma_um, 1.5);
+  std::string text4 = text3;
+  text4.replace(text4.find("enabled = true"), 14, "enabled = false");
+  const auto g4 = d.write("when_needed_off.toml", text4);
+  EXPECT_NE(errors_of(g4).find(at(g4, text4, "basis = \"uncertainty\"") +
+                               "creep.interval.basis: \"uncertainty\" needs [creep.estimator] "
+                               "enabled = true"),
+            std::string::npos)
+      << errors_of(g4);
 }
 
 TEST(CreepSection, CrossFieldRulesPointAtTheKey) {
