@@ -5,7 +5,9 @@
 // (bench/creep/engine_cycle.hpp; the unit test CreepRealTime.EngineStepWithTheCreepModule-
 // AllocatesNothing runs the same cycle). Its peer in the same run: the creep module alone
 // (CreepModule::step on the same stream). Each call is timed on its own (steady_clock); the
-// timer's own cost is measured the same way and reported, not subtracted.
+// timer's own cost is measured the same way and reported, not subtracted. The same engine cycle
+// with [creep.estimator] on (a Kalman filter per support point, updated at each measurement) is
+// timed in the same run (issue 22).
 //
 //   bench_creep_cost [CYCLES]
 #include <algorithm>
@@ -82,9 +84,11 @@ int main(int argc, char** argv) {
   const std::size_t cycles = argc > 1 ? std::stoul(argv[1]) : 200000;
   auto engine = std::make_unique<EngineCycle>(true);
   auto alone = std::make_unique<EngineCycle>(false);
-  std::vector<double> e_step, e_meas, m_step, m_meas;
+  auto with_estimator = std::make_unique<EngineCycle>(true, true);
+  std::vector<double> e_step, e_meas, m_step, m_meas, k_step, k_meas;
   run(*engine, cycles, e_step, e_meas);
   run(*alone, cycles, m_step, m_meas);
+  run(*with_estimator, cycles, k_step, k_meas);
   std::vector<double> t_timer(cycles);
   for (std::size_t i = 0; i < cycles; ++i) {
     const auto t0 = Clock::now();
@@ -96,6 +100,8 @@ int main(int argc, char** argv) {
   const Stats ms = stats(m_step);
   const Stats mm = stats(m_meas);
   const Stats t = stats(t_timer);
+  const Stats ks = stats(k_step);
+  const Stats km = stats(k_meas);
   std::printf("| cycle | n | median [ns] | p99 [ns] | p99.9 [ns] | max [ns] |\n");
   std::printf("| --- | --- | --- | --- | --- | --- |\n");
   const auto row = [](const char* what, std::size_t n, const Stats& s) {
@@ -107,6 +113,8 @@ int main(int argc, char** argv) {
   row("  the same + 16-point measurement (fold, 16 records)", e_meas.size(), em);
   row("peer: CreepModule::step() alone, same stream", cycles, ms);
   row("  the same + 16-point measurement", m_meas.size(), mm);
+  row("Engine::step() with the creep module and [creep.estimator], same stream", cycles, ks);
+  row("  the same + 16-point measurement (16 filter updates)", k_meas.size(), km);
   row("timer alone (steady_clock pair)", cycles, t);
   std::printf("\nengine / module alone, median: %.2f; p99.9: %.2f\n", es.median_ns / ms.median_ns,
               es.p999_ns / ms.p999_ns);

@@ -19,7 +19,9 @@
 
 namespace nccomp::bench::creep {
 
-inline core::creep::CreepModuleConfig engine_cycle_module_config() {
+/// estimator: [creep.estimator] on as well (gate off, so that every measurement of the cycle,
+/// whose first ones jump, takes the accepted path with the filter's update).
+inline core::creep::CreepModuleConfig engine_cycle_module_config(bool estimator = false) {
   using namespace nccomp::core;
   using namespace nccomp::core::creep;
   CreepModuleConfig m;
@@ -35,6 +37,8 @@ inline core::creep::CreepModuleConfig engine_cycle_module_config() {
   c.output.channel_register = {-1, -1, -1, -1, -1};
   c.interval.basis = IntervalBasis::kAdaptive;
   c.predict.enabled = true;
+  c.estimator.enabled = estimator;
+  c.estimator.gate_sigmas = 0.0;
   c.deflection = {{0, {0.0, 20.0, 50.0}, {0.0, 2.0, 6.0}, {0.0, 1.0, 4.0}}};
   c.tool_life.min_expected_increment_um = 100.0;
   m.registers.channel = {"X_wear", "Y_wear", "Z_wear", "", ""};
@@ -61,8 +65,9 @@ class EngineCycle {
   /// Not real-time: configures the engine (through_engine) or only the module (its peer in the
   /// cost benchmark: CreepModule::step() without the engine's validation, limiters and write
   /// batching), and brings 4 creeps into progress (throws if not).
-  explicit EngineCycle(bool through_engine = true) : through_engine_(through_engine) {
-    auto m = std::make_unique<core::creep::CreepModule>(engine_cycle_module_config());
+  explicit EngineCycle(bool through_engine = true, bool estimator = false)
+      : through_engine_(through_engine) {
+    auto m = std::make_unique<core::creep::CreepModule>(engine_cycle_module_config(estimator));
     module_ = m.get();
     if (through_engine_) {
       std::vector<std::unique_ptr<core::engine::Module>> mods;

@@ -1,8 +1,11 @@
 // Surface quality of creeping wear correction (issue 3, "Measured"): a synthetic flat face and a
 // curved face, and the real PHM 2010 milling wear curves, each finished while the tool wears and
-// corrected by the real core with five strategies. Prints markdown tables.
+// corrected by the real core with today's strategies and the estimator's (issue 22). Prints
+// markdown tables, or with --json one JSON object per PHM 2010 row and strategy (one a line).
 //
-//   bench_creep_surface [PHM_DIR]
+//   bench_creep_surface [--json] [--wear-noise UM_PER_SQRT_M] [--rate-noise UM_PER_MM_PER_SQRT_M]
+//                       [--max-sigma UM]
+//                       [PHM_DIR]
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -18,7 +21,10 @@ namespace {
 
 using namespace nccomp::bench::creep;
 
+bool g_json = false;
+
 void print_header(const Scenario& sc) {
+  if (g_json) return;
   std::printf("\n### %s\n\n", sc.name.c_str());
   std::printf(
       "%d passes of %.0f mm, path sample spacing Δs = %.2f mm, measured every %d passes "
@@ -38,11 +44,13 @@ std::vector<Result> print_rows(const Scenario& sc) {
   for (const auto& st : strategies()) {
     const Result r = run(sc, st);
     all.push_back(r);
+    if (g_json) continue;
     std::printf("| %s | %.4f | %.3f | %.4f | %.3f | %.3f | %.3f |\n", st.name.c_str(),
                 r.max_step_along_um, r.max_step_across_um, r.max_jump_um, r.rms_um,
                 r.rms_second_half_um, r.max_abs_um);
   }
   const Result& first = all.front();
+  if (g_json) return all;
   std::printf(
       "\n%d measurements; measured increment between measurements h: mean %.3f µm, "
       "max %.3f µm; h·Δs/L with the max h = %.4f µm\n",
@@ -130,11 +138,37 @@ std::map<std::string, std::vector<double>> read_percut(const std::string& path) 
 }  // namespace
 
 int main(int argc, char** argv) {
-  const std::string phm_dir = argc > 1 ? argv[1] : NCCOMP_PHM_DIR;
-  std::printf(
-      "## Synthetic faces\n\nTrue wear g(s) = 8·(1 − exp(−s/300 mm)) + 0.004·s µm "
-      "(break-in, then linear); on the curved face w(θ, s) = g(s)·(0.6 + 0.8·sin θ) at "
-      "engagement angle θ.\n");
+  std::string phm_dir = NCCOMP_PHM_DIR;
+  // The estimator of the PHM runs: the documented defaults unless given (docs/estimation.md).
+  nccomp::core::creep::EstimatorConfig est;
+  // "Measured when needed": the bound on the estimate's σ (the laser's σ: measure when the
+  // estimate is no better than one measurement).
+  double max_sigma_um = 1.0;
+  for (int a = 1; a < argc; ++a) {
+    const std::string arg = argv[a];
+    if (arg == "--json") {
+      g_json = true;
+    } else if (arg == "--wear-noise" && a + 1 < argc) {
+      est.wear_noise_um_per_sqrt_m = std::stod(argv[++a]);
+    } else if (arg == "--max-sigma" && a + 1 < argc) {
+      max_sigma_um = std::stod(argv[++a]);
+    } else if (arg == "--rate-noise" && a + 1 < argc) {
+      est.rate_noise_um_per_mm_per_sqrt_m = std::stod(argv[++a]);
+    } else if (arg.starts_with("-")) {
+      std::fprintf(stderr,
+                   "usage: bench_creep_surface [--json] [--wear-noise X] [--rate-noise X] "
+                   "[--max-sigma X] [PHM_DIR]\n");
+      return 2;
+    } else {
+      phm_dir = arg;
+    }
+  }
+  if (!g_json) {
+    std::printf(
+        "## Synthetic faces\n\nTrue wear g(s) = 8·(1 − exp(−s/300 mm)) + 0.004·s µm "
+        "(break-in, then linear); on the curved face w(θ, s) = g(s)·(0.6 + 0.8·sin θ) at "
+        "engagement angle θ.\n");
+  }
   Scenario flat;
   flat.name = "Flat face (tool axis normal to the face, wear at the tip, Z offset)";
   flat.wear_um = [](double, double s) { return 8.0 * (1.0 - std::exp(-s / 300.0)) + 0.004 * s; };
@@ -185,14 +219,23 @@ int main(int argc, char** argv) {
       }
     }
   }
-  std::printf(
-      "\n## PHM 2010 milling wear (real)\n\nVB of the rotating envelope (max over the "
-      "three flutes; c4/c6 from the per-flute tables, checked equal to "
-      "phm2010_wear_percut.csv; c1 from that file). Radial wear = (VB − VB at cut 1)·tan γ "
-      "with clearance angle γ = %.0f° (tan γ = %.4f), linear in path within a cut; one "
-      "cut = one pass of 108 mm (the data are successive face-milling cuts; the model lays them "
-      "side by side as raster passes); radius-wear register (one support point).\n",
-      gamma_deg, tan_g);
+  if (!g_json) {
+    std::printf(
+        "\n## PHM 2010 milling wear (real)\n\nVB of the rotating envelope (max over the "
+        "three flutes; c4/c6 from the per-flute tables, checked equal to "
+        "phm2010_wear_percut.csv; c1 from that file). Radial wear = (VB − VB at cut 1)·tan γ "
+        "with clearance angle γ = %.0f° (tan γ = %.4f), linear in path within a cut; one "
+        "cut = one pass of 108 mm (the data are successive face-milling cuts; the model lays them "
+        "side by side as raster passes); radius-wear register (one support point).\n",
+        gamma_deg, tan_g);
+    std::printf(
+        "\nEstimator ([creep.estimator]): measurement_sigma_um = σ = 1, "
+        "wear_noise_um_per_sqrt_m = %g, rate_noise_um_per_mm_per_sqrt_m = %g, "
+        "initial_rate_sigma_um_per_mm = %g, gate_sigmas = %g; the noise-free rows feed the same "
+        "filter the true wear.\n",
+        est.wear_noise_um_per_sqrt_m, est.rate_noise_um_per_mm_per_sqrt_m,
+        est.initial_rate_sigma_um_per_mm, est.gate_sigmas);
+  }
   // One cut = one pass of 108 mm. The creep length follows docs/creep.md's advice for raster
   // finishing: 2 and 3 pass lengths.
   struct Row {
@@ -219,6 +262,8 @@ int main(int argc, char** argv) {
         sc.tool_registers = true;
         sc.noise_um = 1.0;
         sc.seed = 2010;
+        sc.estimator = est;
+        sc.max_sigma_um = max_sigma_um;
         sc.wear_um = [v, tan_g](double, double s) {
           const double c = s / 108.0;  // cuts done since cut 1
           const auto i = std::min(static_cast<std::size_t>(c), v.size() - 2);
@@ -228,11 +273,24 @@ int main(int argc, char** argv) {
         print_header(sc);
         auto all = print_rows(sc);
         const double h = all.front().max_increment_um;
+        if (g_json) {
+          for (std::size_t i = 0; i < all.size(); ++i) {
+            std::printf(
+                "{\"cutter\": \"%s\", \"k\": %d, \"creep_length_passes\": %d, \"strategy\": "
+                "\"%s\", \"rms_second_half_um\": %.6f, \"max_step_along_pass_um\": %.6f, "
+                "\"measurements\": %d, \"refused\": %d}\n",
+                name, k, passes_l, strategies()[i].name.c_str(), all[i].rms_second_half_um,
+                all[i].max_step_along_um, all[i].measurements, all[i].refused);
+          }
+        }
         summary.push_back({name, k, passes_l, h, h * sc.ds_mm / sc.creep_length_mm, all});
       }
     }
   }
-  // strategies(): 0 none, 1 step, 2 creeping linear, 3 creeping cosine, 4 predictive.
+  if (g_json) return 0;
+  // strategies(): 0 none, 1 step, 2 creeping linear, 3 creeping cosine, 4 predictive,
+  // 5 creeping + estimator, 6 predictive + estimator, 7 and 8 the same fed noise-free,
+  // 9 predictive + estimator measured when needed.
   std::printf(
       "\n### PHM 2010 summary (step = prior art, creep = creeping linear, pred = predictive "
       "creeping)\n\n"
@@ -250,6 +308,61 @@ int main(int argc, char** argv) {
         r[4].max_step_along_um, r[0].max_step_across_um, r[1].max_step_across_um,
         r[2].max_step_across_um, r[4].max_step_across_um, r[1].rms_second_half_um,
         r[2].rms_second_half_um, r[4].rms_second_half_um);
+  }
+  std::printf(
+      "\n### PHM 2010 with the estimator (issue 22): RMS in the second half [µm]; limit = the same "
+      "strategy fed noise-free measurements\n\n"
+      "| cutter | k | L [passes] | step | creep | pred | creep + est | limit | ratio | pred + "
+      "est | limit | ratio | step along a pass: creep + est / pred + est [µm] | refused |\n"
+      "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
+  for (const int passes_l : {2, 3}) {
+    double sum_step = 0.0, sum_ce = 0.0, sum_pe = 0.0, worst_ce = 0.0, worst_pe = 0.0;
+    double along_ce = 0.0, along_pe = 0.0;
+    int rows = 0;
+    for (const auto& row : summary) {
+      if (row.passes_l != passes_l) continue;
+      const auto& r = row.r;
+      const double ratio_ce = r[5].rms_second_half_um / r[7].rms_second_half_um;
+      const double ratio_pe = r[6].rms_second_half_um / r[8].rms_second_half_um;
+      std::printf(
+          "| %s | %d | %d | %.3f | %.3f | %.3f | %.3f | %.3f | %.2f | %.3f | %.3f | %.2f | %.4f / "
+          "%.4f | %d / %d |\n",
+          row.cutter.c_str(), row.k, row.passes_l, r[1].rms_second_half_um, r[2].rms_second_half_um,
+          r[4].rms_second_half_um, r[5].rms_second_half_um, r[7].rms_second_half_um, ratio_ce,
+          r[6].rms_second_half_um, r[8].rms_second_half_um, ratio_pe, r[5].max_step_along_um,
+          r[6].max_step_along_um, r[5].refused, r[6].refused);
+      sum_step += r[1].rms_second_half_um;
+      sum_ce += r[5].rms_second_half_um;
+      sum_pe += r[6].rms_second_half_um;
+      worst_ce = std::max(worst_ce, ratio_ce);
+      worst_pe = std::max(worst_pe, ratio_pe);
+      along_ce = std::max(along_ce, r[5].max_step_along_um);
+      along_pe = std::max(along_pe, r[6].max_step_along_um);
+      ++rows;
+    }
+    std::printf(
+        "\nL = %d passes, %d rows: worst ratio to the noise-free limit creep + est %.3f, pred + "
+        "est %.3f (target ≤ 1.15); mean RMS / mean RMS of step: creep + est %.3f, pred + est "
+        "%.3f (target ≤ 0.7); max step along a pass creep + est %.4f, pred + est %.4f µm "
+        "(target ≤ 0.02)\n",
+        passes_l, rows, worst_ce, worst_pe, sum_ce / sum_step, sum_pe / sum_step, along_ce,
+        along_pe);
+  }
+  std::printf(
+      "\n### PHM 2010, measured when needed (interval basis \"uncertainty\", max_sigma_um = %g, "
+      "between %.0f and %.0f mm = 1 and 20 cuts) against predictive + estimator measured every "
+      "10 cuts\n\n"
+      "| cutter | L [passes] | every 10 cuts: RMS [µm] / measurements | when needed: RMS [µm] / "
+      "measurements | fewer measurements | step along a pass [µm] |\n"
+      "| --- | --- | --- | --- | --- | --- |\n",
+      max_sigma_um, 108.0, 2160.0);
+  for (const auto& row : summary) {
+    if (row.k != 10) continue;
+    const auto& r = row.r;
+    std::printf("| %s | %d | %.3f / %d | %.3f / %d | %.0f %% | %.4f |\n", row.cutter.c_str(),
+                row.passes_l, r[6].rms_second_half_um, r[6].measurements, r[9].rms_second_half_um,
+                r[9].measurements, 100.0 * (1.0 - double(r[9].measurements) / r[6].measurements),
+                r[9].max_step_along_um);
   }
   return 0;
 }

@@ -46,6 +46,14 @@ struct Scenario {
   std::uint64_t seed{1};
   /// Measurements the predictive strategy fits its wear rate to.
   std::size_t predict_window{5};
+  /// [creep.estimator] of the estimator strategies (enabled by the strategy); its
+  /// measurement_sigma_um is set to noise_um unless that is 0.
+  EstimatorConfig estimator{};
+  /// "Measured when needed" (interval basis uncertainty): the bound on the estimate's σ [µm] and
+  /// the limits of the path between measurements [mm].
+  double max_sigma_um{1.0};
+  double min_interval_mm{108.0};
+  double max_interval_mm{2160.0};
 };
 
 struct Strategy {
@@ -53,6 +61,12 @@ struct Strategy {
   bool apply{true};
   ProfileShape profile{ProfileShape::kLinear};
   bool predict{false};
+  bool estimator{false};
+  /// Fed noise-free measurements (the config, σ included, stays that of the noisy run): the
+  /// limit of what a measurement every k cuts can know.
+  bool noise_free{false};
+  /// Measured when the module asks (interval basis uncertainty), not every measure_every_passes.
+  bool on_request{false};
 };
 
 struct Result {
@@ -65,6 +79,7 @@ struct Result {
   double mean_increment_um{0.0};  // h: mean measured increment between measurements
   double max_increment_um{0.0};
   int measurements{0};
+  int refused{0};  // measurements refused (the estimator's gate, plausibility)
 };
 
 inline const std::vector<Strategy>& strategies() {
@@ -74,6 +89,12 @@ inline const std::vector<Strategy>& strategies() {
       {"creeping, linear", true, ProfileShape::kLinear, false},
       {"creeping, cosine", true, ProfileShape::kCosine, false},
       {"predictive creeping, linear", true, ProfileShape::kLinear, true},
+      {"creeping, estimator", true, ProfileShape::kLinear, false, true},
+      {"predictive creeping, estimator", true, ProfileShape::kLinear, true, true},
+      {"creeping, estimator, noise-free", true, ProfileShape::kLinear, false, true, true},
+      {"predictive creeping, estimator, noise-free", true, ProfileShape::kLinear, true, true, true},
+      {"predictive creeping, estimator, measured when needed", true, ProfileShape::kLinear, true,
+       true, false, true},
   };
   return s;
 }
@@ -103,6 +124,15 @@ inline Result run(const Scenario& sc, const Strategy& st) {
   c.predict.enabled = st.predict;
   c.predict.window = sc.predict_window;
   c.predict.max_um = 50.0;
+  c.estimator = sc.estimator;
+  c.estimator.enabled = st.estimator;
+  if (sc.noise_um > 0.0) c.estimator.measurement_sigma_um = sc.noise_um;
+  if (st.on_request) {
+    c.interval.basis = IntervalBasis::kUncertainty;
+    c.interval.max_sigma_um = sc.max_sigma_um;
+    c.interval.min_interval_mm = sc.min_interval_mm;
+    c.interval.max_interval_mm = sc.max_interval_mm;
+  }
   WearCompensator comp;
   comp.configure(c);
   StepOutput out;
@@ -158,7 +188,7 @@ inline Result run(const Scenario& sc, const Strategy& st) {
       const double theta_deg = std::acos(std::clamp(nrm[2], 0.0, 1.0)) * 180.0 / std::numbers::pi;
       ev.clear();
       now += from_seconds(sc.ds_mm / sc.feed_mm_per_s);
-      if (s >= next_meas) {
+      if (st.on_request ? comp.state().measurement_due_flag : s >= next_meas) {
         // The NC interrupts here; the laser measures; machining resumes at the same position.
         next_meas += interval_mm;
         ToolMeasurement m;
@@ -167,7 +197,9 @@ inline Result run(const Scenario& sc, const Strategy& st) {
         m.point_count = static_cast<std::uint8_t>(sc.edge_points);
         double inc_max = 0.0;
         for (std::size_t p = 0; p < sc.edge_points; ++p) {
-          const double w = sc.wear_um(support_angle_deg(p, sc.edge_points), s) + noise(rng);
+          const double e = noise(rng);  // drawn in every strategy: the same noise sequence
+          const double w =
+              sc.wear_um(support_angle_deg(p, sc.edge_points), s) + (st.noise_free ? 0.0 : e);
           m.wear_um[p] = w;
           inc_max = std::max(inc_max, w - last_measured[p]);
           last_measured[p] = w;
@@ -231,6 +263,7 @@ inline Result run(const Scenario& sc, const Strategy& st) {
   r.rms_second_half_um =
       count_after > 0 ? std::sqrt(sum_sq_after / static_cast<double>(count_after)) : 0.0;
   r.mean_increment_um = r.measurements > 0 ? inc_sum / r.measurements : 0.0;
+  r.refused = static_cast<int>(comp.counters().measurements_refused);
   return r;
 }
 

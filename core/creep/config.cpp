@@ -193,8 +193,16 @@ void validate(const CreepConfig& c) {
     case IntervalBasis::kTime:
       k.positive(iv.interval_s, "creep.interval.interval_s");
       break;
+    case IntervalBasis::kUncertainty:
+      if (!c.estimator.enabled) {
+        k.fail("creep.interval.basis", "\"uncertainty\" needs [creep.estimator] enabled = true");
+      }
+      k.positive(iv.max_sigma_um, "creep.interval.max_sigma_um");
+      [[fallthrough]];
     case IntervalBasis::kAdaptive:
-      k.positive(iv.target_increment_um, "creep.interval.target_increment_um");
+      if (iv.basis == IntervalBasis::kAdaptive) {
+        k.positive(iv.target_increment_um, "creep.interval.target_increment_um");
+      }
       k.positive(iv.min_interval_mm, "creep.interval.min_interval_mm");
       k.positive(iv.max_interval_mm, "creep.interval.max_interval_mm");
       if (iv.max_interval_mm < iv.min_interval_mm) {
@@ -227,6 +235,20 @@ void validate(const CreepConfig& c) {
                                          std::to_string(c.predict.window));
     }
     k.positive(c.predict.max_um, "creep.predict.max_um");
+  }
+
+  if (c.estimator.enabled) {
+    const auto& est = c.estimator;
+    k.positive(est.measurement_sigma_um, "creep.estimator.measurement_sigma_um");
+    k.non_negative(est.wear_noise_um_per_sqrt_m, "creep.estimator.wear_noise_um_per_sqrt_m");
+    k.non_negative(est.rate_noise_um_per_mm_per_sqrt_m,
+                   "creep.estimator.rate_noise_um_per_mm_per_sqrt_m");
+    k.positive(est.initial_rate_sigma_um_per_mm, "creep.estimator.initial_rate_sigma_um_per_mm");
+    if (!std::isfinite(est.gate_sigmas) || est.gate_sigmas < 0.0 ||
+        (est.gate_sigmas > 0.0 && est.gate_sigmas < 2.0)) {
+      k.fail("creep.estimator.gate_sigmas",
+             "must be 0 (no gate) or a finite number >= 2, got " + num(est.gate_sigmas));
+    }
   }
 
   k.non_negative(c.entry.sister_offset_um, "creep.entry.sister_offset_um");

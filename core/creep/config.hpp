@@ -75,6 +75,9 @@ enum class IntervalBasis : std::uint8_t {
   kTime = 2,      // every interval_s of cutting time
   kAdaptive = 3,  // target_increment_um / fitted wear rate, within [min, max]_interval_mm
   kMaterial = 4,  // every interval_mm3 of material removed (cross-section × cut path)
+  /// When the estimator's σ predicted to the cut path now exceeds max_sigma_um, within
+  /// [min, max]_interval_mm (needs [creep.estimator]).
+  kUncertainty = 5,
 };
 
 /// Where the removal cross-section of the interval basis "material" comes from.
@@ -164,6 +167,9 @@ struct IntervalConfig {
   double removal_mm3_per_mm{0.025};
   RemovalSource removal_source{RemovalSource::kConstant};
   double interval_mm3{50.0};
+  /// basis uncertainty: a measurement is requested when the estimate's standard deviation
+  /// predicted to the cut path now exceeds this [µm].
+  double max_sigma_um{2.0};
 };
 
 /// [creep.tool_life]
@@ -189,6 +195,27 @@ struct PredictConfig {
   std::size_t window{5};
   /// Cap on the predicted growth between two measurements [µm].
   double max_um{20.0};
+};
+
+/// [creep.estimator]: a Kalman filter per support point (issue 22) estimates the wear and its
+/// rate per mm of cut path from the noisy laser measurements; the creep (and the prediction)
+/// then goes toward the estimate instead of the raw measurement. Off: today's strategies.
+struct EstimatorConfig {
+  bool enabled{false};
+  /// Standard deviation of one laser measurement [µm].
+  double measurement_sigma_um{1.0};
+  /// Process noise: random walk of the wear itself, the standard deviation of the change the
+  /// rate does not explain over 1 m of cut path [µm per sqrt(m)].
+  double wear_noise_um_per_sqrt_m{0.0};
+  /// Random walk of the wear rate: its standard deviation after 1 m of cut path
+  /// [µm/mm per sqrt(m)].
+  double rate_noise_um_per_mm_per_sqrt_m{0.0005};
+  /// Prior of a new tool's wear rate: its standard deviation [µm/mm] (the mean is 0, or the
+  /// rate fitted before the estimator was switched on).
+  double initial_rate_sigma_um_per_mm{0.01};
+  /// A measurement whose innovation exceeds this many standard deviations of the predicted one
+  /// is refused (plausibility alarm 23, nothing changes); 0 = no gate.
+  double gate_sigmas{5.0};
 };
 
 /// [creep.entry]: tangential entry of a sister tool and retract / re-feed (claims 14, feature 11).
@@ -250,6 +277,7 @@ struct CreepConfig {
   IntervalConfig interval{};
   ToolLifeConfig tool_life{};
   PredictConfig predict{};
+  EstimatorConfig estimator{};
   EntryConfig entry{};
   std::vector<DeflectionTable> deflection;
   std::vector<Transition> transitions;

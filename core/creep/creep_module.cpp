@@ -13,6 +13,7 @@
 #include "core/common/config_issue.hpp"
 #include "core/creep/state_v1.hpp"
 #include "core/creep/state_v2.hpp"
+#include "core/creep/state_v3.hpp"
 
 namespace nccomp::core::creep {
 
@@ -323,12 +324,30 @@ struct LayoutV2 {
     v2::upgrade(o, removal, n);
   }
 };
+struct LayoutV3 {
+  using State = v3::CreepState;
+  using Memory = v3::ToolMemory;
+  static constexpr std::size_t kBytes = v3::kModuleStateBytes;
+  static bool loadable(const std::byte* p) noexcept { return v3::state_bytes_loadable(p); }
+  static void upgrade(const State& o, double removal, CreepState& n) noexcept {
+    v3::upgrade(o, removal, n);
+  }
+};
 /// The current layout without the AdoptedOutputs (written before start-up adoption existed).
 constexpr std::size_t kBytesWithoutAdoption = sizeof(CreepState) + sizeof(ToolMemory);
+constexpr std::size_t kAdoption = sizeof(AdoptedOutputs);
+// Every layout is told apart by its size (version 3 with or without the AdoptedOutputs).
 static_assert(LayoutV1::kBytes != LayoutV2::kBytes && LayoutV1::kBytes != kBytesWithoutAdoption &&
               LayoutV2::kBytes != kBytesWithoutAdoption &&
-              LayoutV1::kBytes != kBytesWithoutAdoption + sizeof(AdoptedOutputs) &&
-              LayoutV2::kBytes != kBytesWithoutAdoption + sizeof(AdoptedOutputs));
+              LayoutV1::kBytes != kBytesWithoutAdoption + kAdoption &&
+              LayoutV2::kBytes != kBytesWithoutAdoption + kAdoption);
+static_assert(LayoutV3::kBytes != LayoutV1::kBytes && LayoutV3::kBytes != LayoutV2::kBytes &&
+              LayoutV3::kBytes + kAdoption != LayoutV1::kBytes &&
+              LayoutV3::kBytes + kAdoption != LayoutV2::kBytes &&
+              LayoutV3::kBytes != kBytesWithoutAdoption &&
+              LayoutV3::kBytes != kBytesWithoutAdoption + kAdoption &&
+              LayoutV3::kBytes + kAdoption != kBytesWithoutAdoption &&
+              LayoutV3::kBytes + kAdoption != kBytesWithoutAdoption + kAdoption);
 
 }  // namespace
 
@@ -340,6 +359,12 @@ bool CreepModule::load_state_old(std::span<const std::byte> bytes) noexcept {
   using OldMemory = typename Layout::Memory;
   const std::byte* p = bytes.data();
   if (!Layout::loadable(p)) return false;
+  // Version 3 may carry the AdoptedOutputs after its tool memory.
+  AdoptedOutputs adoption{};
+  if (bytes.size() == Layout::kBytes + kAdoption &&
+      !adoption_bytes_loadable(p + Layout::kBytes, kAdoption, adoption)) {
+    return false;
+  }
   for (std::size_t k = 0; k < kMaxToolMemory; ++k) {
     const std::size_t at = sizeof(OldState) + offsetof(OldMemory, state) + k * sizeof(OldState);
     std::int32_t tool = 0;
@@ -370,7 +395,7 @@ bool CreepModule::load_state_old(std::span<const std::byte> bytes) noexcept {
   }
   if (!comp_.restore_tool_memory(scratch_memory_)) return false;
   (void)comp_.restore_state(st);  // cannot fail: checked above
-  comp_.restore_adoption(AdoptedOutputs{});
+  comp_.restore_adoption(adoption);
   alarm_cause_ = AlarmCode::kNone;
   warning_cause_ = AlarmCode::kNone;
   ++generation_;
@@ -380,6 +405,9 @@ bool CreepModule::load_state_old(std::span<const std::byte> bytes) noexcept {
 bool CreepModule::load_state(std::span<const std::byte> bytes) noexcept {
   if (bytes.size() == LayoutV1::kBytes) return load_state_old<LayoutV1>(bytes);
   if (bytes.size() == LayoutV2::kBytes) return load_state_old<LayoutV2>(bytes);
+  if (bytes.size() == LayoutV3::kBytes || bytes.size() == LayoutV3::kBytes + kAdoption) {
+    return load_state_old<LayoutV3>(bytes);
+  }
   AdoptedOutputs adoption{};
   if (bytes.size() == state_capacity()) {
     if (!adoption_bytes_loadable(bytes.data() + kBytesWithoutAdoption, sizeof(AdoptedOutputs),
@@ -419,9 +447,14 @@ std::size_t CreepModule::status(std::span<engine::StatusValue> out) const noexce
     if (s.measured_um[i] > s.measured_um[k]) k = i;
   }
   const double in_force_um = comp_.applied_wear_um(k);
-  const char* mode = c.profile == ProfileShape::kStep ? "step"
-                     : c.predict.enabled              ? "predictive creeping"
-                                                      : "creeping";
+  const bool est = c.estimator.enabled;
+  const char* mode = c.profile == ProfileShape::kStep ? (est ? "step, estimator" : "step")
+                     : c.predict.enabled
+                         ? (est ? "predictive creeping, estimator" : "predictive creeping")
+                         : (est ? "creeping, estimator" : "creeping");
+  double estimate_um = kNaN;
+  double sigma_um = kNaN;
+  (void)comp_.wear_estimate(k, estimate_um, sigma_um);
   // Remembered tools, the most recently used first.
   std::array<std::size_t, kMaxToolMemory> order{};
   std::size_t remembered = 0;
@@ -451,16 +484,22 @@ std::size_t CreepModule::status(std::span<engine::StatusValue> out) const noexce
       {"measurements_accepted", static_cast<double>(comp_.counters().measurements_accepted),
        nullptr},
       {"measurements_refused", static_cast<double>(comp_.counters().measurements_refused), nullptr},
+      {"wear_estimate_um", estimate_um, nullptr},
+      {"wear_sigma_um", sigma_um, nullptr},
   };
+  // The estimator's two values only when it is on.
+  const std::size_t n_core = std::size(core_values) - (est ? 0U : 2U);
   // A status holds at most out.size() values (engine::kMaxStatusValues): every remembered tool
   // is shown; beyond five of them these make room, the first first.
-  constexpr std::array<const char*, 4> kYield{"measurements_refused", "measurements_accepted",
-                                              "wear_rate_um_per_mm", "cut_path_mm"};
-  const std::size_t total = std::size(core_values) + remembered;
+  constexpr std::array<const char*, 6> kYield{"measurements_refused", "measurements_accepted",
+                                              "wear_rate_um_per_mm",  "cut_path_mm",
+                                              "wear_sigma_um",        "wear_estimate_um"};
+  const std::size_t total = n_core + remembered;
   const std::size_t drop =
       std::min(kYield.size(), total > out.size() ? total - out.size() : std::size_t{0});
   std::size_t w = 0;
-  for (const auto& v : core_values) {
+  for (std::size_t j = 0; j < n_core; ++j) {
+    const auto& v = core_values[j];
     bool dropped = false;
     for (std::size_t d = 0; d < drop; ++d)
       dropped = dropped || std::string_view(v.key) == kYield[d];

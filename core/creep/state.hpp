@@ -58,7 +58,7 @@ struct HistoryEntry {
 };
 
 struct CreepState {
-  static constexpr std::uint32_t kVersion = 3;
+  static constexpr std::uint32_t kVersion = 4;
   std::uint32_t version{kVersion};
   /// Edge support points the state was built with (must match the config on import).
   std::uint32_t edge_points{1};
@@ -130,6 +130,20 @@ struct CreepState {
   double refused_cut_path_mm{0.0};
   double refused_cut_time_s{0.0};
   double refused_removed_mm3{0.0};
+
+  // Version 4: the wear estimator ([creep.estimator]), per support point. Its state (wear [µm]
+  // and wear rate [µm/mm of cut path]) and covariance hold at cut path estimate_path_mm (the
+  // last accepted measurement). Until estimate_valid it starts, at the next measurement, from
+  // the last measured wear and the fitted rate: a new tool, a state of an older layout, or a
+  // tool measured while the estimator was off.
+  std::array<double, kMaxEdgePoints> estimate_wear_um{};
+  std::array<double, kMaxEdgePoints> estimate_rate_um_per_mm{};
+  /// Covariance [[p_ww, p_wr], [p_wr, p_rr]] in µm², µm²/mm, (µm/mm)².
+  std::array<double, kMaxEdgePoints> estimate_p_ww{};
+  std::array<double, kMaxEdgePoints> estimate_p_wr{};
+  std::array<double, kMaxEdgePoints> estimate_p_rr{};
+  double estimate_path_mm{0.0};
+  bool estimate_valid{false};
 };
 
 static_assert(std::is_trivially_copyable_v<CreepState>);
@@ -216,7 +230,9 @@ inline bool state_bytes_loadable(const std::byte* bytes, std::size_t size) noexc
          is_bool(offsetof(CreepState, alarm_flag)) &&
          is_bool(offsetof(CreepState, measurement_due_flag)) &&
          is_bool(offsetof(CreepState, tool_change_flag)) &&
-         is_bool(offsetof(CreepState, normal_held)) && is_bool(offsetof(CreepState, request_held));
+         is_bool(offsetof(CreepState, normal_held)) &&
+         is_bool(offsetof(CreepState, request_held)) &&
+         is_bool(offsetof(CreepState, estimate_valid));
 }
 
 /// The same for a ToolMemory (every remembered state). Real-time safe.

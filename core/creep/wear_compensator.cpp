@@ -134,6 +134,21 @@ StateProblem WearCompensator::check_state(const CreepState& st) const noexcept {
   if (bad(st.refused_removed_mm3) || st.refused_removed_mm3 < 0.0) {
     return {"refused_removed_mm3", -1};
   }
+  if (st.estimate_valid) {
+    if (bad(st.estimate_path_mm) || st.estimate_path_mm < 0.0 ||
+        st.estimate_path_mm > st.cut_path_mm + kTiny) {
+      return {"estimate_path_mm", -1};
+    }
+    for (std::size_t i = 0; i < points_; ++i) {
+      const double ww = st.estimate_p_ww[i];
+      const double wr = st.estimate_p_wr[i];
+      const double rr = st.estimate_p_rr[i];
+      if (bad(st.estimate_wear_um[i]) || bad(st.estimate_rate_um_per_mm[i]) || bad(ww) || bad(wr) ||
+          bad(rr) || ww < 0.0 || rr < 0.0 || wr * wr > ww * rr * (1.0 + 1e-9) + 1e-300) {
+        return {"estimate", static_cast<int>(i)};
+      }
+    }
+  }
   return {};
 }
 
@@ -204,6 +219,7 @@ void WearCompensator::select_tool_tables() noexcept {
       transition_index_[transition_count_++] = static_cast<std::uint8_t>(k);
     }
   }
+  update_uncertainty_interval();  // the tool's own estimate
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -378,6 +394,52 @@ double WearCompensator::applied_wear_um(std::size_t i) const noexcept {
     if (c.active) w += slot_value_um(c, i);
   }
   return w;
+}
+
+estimation::KalmanFilter<2> WearCompensator::estimator_at(std::size_t i,
+                                                          double& path_mm) const noexcept {
+  estimation::KalmanFilter<2> kf;
+  Eigen::Matrix2d p;
+  if (s_.estimate_valid) {
+    p << s_.estimate_p_ww[i], s_.estimate_p_wr[i], s_.estimate_p_wr[i], s_.estimate_p_rr[i];
+    kf.reset(Eigen::Vector2d(s_.estimate_wear_um[i], s_.estimate_rate_um_per_mm[i]), p);
+    path_mm = s_.estimate_path_mm;
+    return kf;
+  }
+  // No estimate yet: start from what is known, so a restart, an upgrade or switching the
+  // estimator on neither resets the wear nor applies it twice.
+  const auto& e = config_.estimator;
+  const double sw = e.measurement_sigma_um;
+  const double sr = e.initial_rate_sigma_um_per_mm;
+  p << sw * sw, 0.0, 0.0, sr * sr;
+  kf.reset(Eigen::Vector2d(s_.measured_um[i], s_.rate_known ? s_.rate_um_per_mm[i] : 0.0), p);
+  path_mm = s_.last_measurement_cut_path_mm;
+  return kf;
+}
+
+namespace {
+
+/// Process noise densities of [creep.estimator] per mm of cut path (keys per sqrt(m)).
+Eigen::Matrix2d estimator_noise(const EstimatorConfig& e, double d_mm) noexcept {
+  const double ql = e.wear_noise_um_per_sqrt_m * e.wear_noise_um_per_sqrt_m / 1000.0;
+  const double qr = e.rate_noise_um_per_mm_per_sqrt_m * e.rate_noise_um_per_mm_per_sqrt_m / 1000.0;
+  return estimation::cv_process_noise(d_mm, ql, qr);
+}
+
+}  // namespace
+
+bool WearCompensator::wear_estimate(std::size_t i, double& wear_um,
+                                    double& sigma_um) const noexcept {
+  wear_um = kNaN;
+  sigma_um = kNaN;
+  if (!config_.estimator.enabled || !s_.estimate_valid || i >= points_) return false;
+  double path = 0.0;
+  auto kf = estimator_at(i, path);
+  const double d = std::max(0.0, s_.cut_path_mm - path);
+  kf.predict(estimation::cv_transition(d), estimator_noise(config_.estimator, d));
+  wear_um = kf.state()(0);
+  sigma_um = std::sqrt(std::max(0.0, kf.covariance()(0, 0)));
+  return true;
 }
 
 std::size_t WearCompensator::creeps_in_progress() const noexcept {
@@ -1023,6 +1085,35 @@ void WearCompensator::on_measurement(TimeNs now_ns, const ToolMeasurement& m,
     return;
   }
 
+  // The estimator, predicted to this cut path: a measurement beyond its gate at any support point
+  // is implausible (alarm 23, value: the largest innovation [µm]) and changes nothing.
+  if (config_.estimator.enabled) {
+    const auto& e = config_.estimator;
+    const double r = e.measurement_sigma_um * e.measurement_sigma_um;
+    const Eigen::RowVector2d h(1.0, 0.0);
+    bool gated = false;
+    double worst_innovation_um = 0.0;
+    for (std::size_t i = 0; i < points_; ++i) {
+      double path = 0.0;
+      auto& kf = estimate_scratch_[i];
+      kf = estimator_at(i, path);
+      const double d = std::max(0.0, s_.cut_path_mm - path);
+      kf.predict(estimation::cv_transition(d), estimator_noise(e, d));
+      const double innovation = w[i] - kf.predicted_measurement(h);
+      if (!kf.update(h, w[i], r, e.gate_sigmas).accepted) {
+        gated = true;
+        if (std::fabs(innovation) > std::fabs(worst_innovation_um)) {
+          worst_innovation_um = innovation;
+        }
+      }
+    }
+    if (gated) {
+      ++counters_.measurements_gated;
+      halt(now_ns, AlarmCode::kToolBrokenOrMismeasured, worst_innovation_um, out);
+      return;
+    }
+  }
+
   if (creeps_in_progress() > 0) {
     double remaining = 0.0;
     for (std::size_t i = 0; i < points_; ++i) {
@@ -1070,7 +1161,9 @@ void WearCompensator::on_measurement(TimeNs now_ns, const ToolMeasurement& m,
       const auto& c = s_.creeps[k];
       if (c.active) target += c.delta_um[i];
     }
-    delta[i] = w[i] - target;
+    // With the estimator the creep goes toward its estimate, not the raw measurement.
+    const double goal = config_.estimator.enabled ? estimate_scratch_[i].state()(0) : w[i];
+    delta[i] = goal - target;
     s_.measured_um[i] = w[i];
   }
   const double interval_mm = s_.creep_path_mm - s_.last_measurement_creep_path_mm;
@@ -1095,6 +1188,24 @@ void WearCompensator::on_measurement(TimeNs now_ns, const ToolMeasurement& m,
   h.cut_path_mm = s_.cut_path_mm;
   h.wear_um = w;
   fit_rates();
+  if (config_.estimator.enabled) {
+    for (std::size_t i = 0; i < points_; ++i) {
+      const auto& kf = estimate_scratch_[i];
+      s_.estimate_wear_um[i] = kf.state()(0);
+      s_.estimate_rate_um_per_mm[i] = kf.state()(1);
+      s_.estimate_p_ww[i] = kf.covariance()(0, 0);
+      s_.estimate_p_wr[i] = kf.covariance()(0, 1);
+      s_.estimate_p_rr[i] = kf.covariance()(1, 1);
+      // The prediction and the adaptive interval use the estimated rate (wear does not heal).
+      s_.rate_um_per_mm[i] = std::max(0.0, kf.state()(1));
+    }
+    s_.estimate_path_mm = s_.cut_path_mm;
+    s_.estimate_valid = true;
+    s_.rate_known = true;
+    update_uncertainty_interval();
+  } else {
+    s_.estimate_valid = false;  // switched on later: starts from the measured state
+  }
 
   start_creep(delta, moving, out, now_ns);
   if (config_.entry.retract_um > 0.0) {
@@ -1164,11 +1275,45 @@ double WearCompensator::interval_path_mm() const noexcept {
       if (!(max_rate > 0.0)) return iv.max_interval_mm;
       return std::clamp(iv.target_increment_um / max_rate, iv.min_interval_mm, iv.max_interval_mm);
     }
+    case IntervalBasis::kUncertainty:
+      return uncertainty_interval_mm_;
     case IntervalBasis::kOff:
     case IntervalBasis::kTime:
       break;
   }
   return std::numeric_limits<double>::infinity();
+}
+
+void WearCompensator::update_uncertainty_interval() noexcept {
+  const auto& iv = config_.interval;
+  if (iv.basis != IntervalBasis::kUncertainty) return;
+  // Path since the last measurement at which some support point's σ exceeds max_sigma_um. The
+  // variance grows monotonically with the path (a cubic): bisect within the limits.
+  const auto too_uncertain = [&](double since_mm) {
+    for (std::size_t i = 0; i < points_; ++i) {
+      double from_mm = 0.0;
+      auto kf = estimator_at(i, from_mm);
+      const double d = std::max(0.0, s_.last_measurement_cut_path_mm + since_mm - from_mm);
+      kf.predict(estimation::cv_transition(d), estimator_noise(config_.estimator, d));
+      if (std::sqrt(std::max(0.0, kf.covariance()(0, 0))) > iv.max_sigma_um) return true;
+    }
+    return false;
+  };
+  double lo = iv.min_interval_mm;
+  double hi = iv.max_interval_mm;
+  if (too_uncertain(lo)) {
+    uncertainty_interval_mm_ = lo;
+    return;
+  }
+  if (!too_uncertain(hi)) {
+    uncertainty_interval_mm_ = hi;
+    return;
+  }
+  for (int it = 0; it < 40; ++it) {  // 2^-40 of the span: far below a path sample
+    const double mid = 0.5 * (lo + hi);
+    (too_uncertain(mid) ? hi : lo) = mid;
+  }
+  uncertainty_interval_mm_ = hi;
 }
 
 double WearCompensator::next_measurement_path_mm() const noexcept {

@@ -26,6 +26,7 @@
 #include "core/common/types.hpp"
 #include "core/creep/config.hpp"
 #include "core/creep/state.hpp"
+#include "core/estimation/kalman.hpp"
 
 namespace nccomp::core::creep {
 
@@ -42,6 +43,8 @@ struct CreepCounters {
   std::uint64_t creeps_folded{0};
   std::uint64_t creeps_superposed{0};
   std::uint64_t events_invalid{0};
+  /// Measurements refused by the estimator's gate (also counted in measurements_refused).
+  std::uint64_t measurements_gated{0};
   /// Axis samples that named another tool than the active one without a tool-change event.
   std::uint64_t implicit_tool_changes{0};
 };
@@ -132,6 +135,10 @@ class WearCompensator {
     return s_.channel_output_um[static_cast<std::size_t>(c)];
   }
   [[nodiscard]] std::size_t creeps_in_progress() const noexcept;
+  /// The estimator's wear at support point i predicted to the current cut path [µm] and its
+  /// standard deviation [µm]; false (both NaN) while it has no estimate (estimator off, or no
+  /// measurement since it was switched on / the tool was loaded).
+  bool wear_estimate(std::size_t i, double& wear_um, double& sigma_um) const noexcept;
   [[nodiscard]] double cut_path_mm() const noexcept { return s_.cut_path_mm; }
   /// Cut path at which the next measurement falls due [mm] (bases path and adaptive, and
   /// material with a constant cross-section; +inf otherwise): one interval after the last
@@ -160,6 +167,10 @@ class WearCompensator {
   void start_entry(double offset_um, double length_mm) noexcept;
   void retire_finished_creeps() noexcept;
   void fit_rates() noexcept;
+  /// The estimator of support point i as saved, or (not yet valid) its prior from the last
+  /// measured wear and the fitted rate at the last measurement's cut path.
+  [[nodiscard]] estimation::KalmanFilter<2> estimator_at(std::size_t i,
+                                                         double& path_mm) const noexcept;
   /// Cut path between two measurements [mm] (bases path and adaptive, and material with a
   /// constant cross-section; +inf otherwise).
   [[nodiscard]] double interval_path_mm() const noexcept;
@@ -198,7 +209,12 @@ class WearCompensator {
   /// Material removed by a cut of d_mm from sample `from` to sample `to` [mm³].
   [[nodiscard]] double removal_mm3(const AxisSample& from, const AxisSample& to,
                                    double d_mm) const noexcept;
+  /// Selects the active tool's deflection table and transitions, and derives its interval.
   void select_tool_tables() noexcept;
+  /// Interval basis uncertainty: the path after the last measurement at which the estimate's
+  /// σ reaches max_sigma_um (within the limits), kept in uncertainty_interval_mm_: it changes
+  /// only with the estimator's state, so it is not searched in every cycle.
+  void update_uncertainty_interval() noexcept;
 
   CreepConfig config_{};
   ProfileTable table_{};
@@ -211,6 +227,8 @@ class WearCompensator {
   /// A measurement was accepted while channels are held: the fade starts in compute_targets().
   bool fade_pending_{false};
   CreepCounters counters_{};
+  /// The estimators after the update of the measurement being judged (stored only if accepted).
+  std::array<estimation::KalmanFilter<2>, kMaxEdgePoints> estimate_scratch_{};
   std::array<OffsetLimiter, kChannelCount> limiters_{};
 
   // Kinematics of the last axis sample (not persisted: re-anchored by the first sample).
@@ -228,6 +246,7 @@ class WearCompensator {
   bool rearm_started_{false};
   TimeNs rearm_until_ns_{0};
   int deflection_index_{-1};
+  double uncertainty_interval_mm_{0.0};
   std::array<std::uint8_t, kMaxTransitions> transition_index_{};
   std::size_t transition_count_{0};
 

@@ -180,7 +180,8 @@ void parse_interval(TableReader& r, cc::IntervalConfig& iv, bool have_toolpath) 
                                       {"path", cc::IntervalBasis::kPath},
                                       {"time", cc::IntervalBasis::kTime},
                                       {"adaptive", cc::IntervalBasis::kAdaptive},
-                                      {"material", cc::IntervalBasis::kMaterial}},
+                                      {"material", cc::IntervalBasis::kMaterial},
+                                      {"uncertainty", cc::IntervalBasis::kUncertainty}},
                                      iv.basis);
   iv.interval_mm = positive(r, "interval_mm", iv.interval_mm);
   iv.interval_s = positive(r, "interval_s", iv.interval_s);
@@ -197,6 +198,7 @@ void parse_interval(TableReader& r, cc::IntervalConfig& iv, bool have_toolpath) 
                           "\"toolpath\" needs creep.edge.toolpath_file with a removal_mm2 column");
   }
   iv.interval_mm3 = positive(r, "interval_mm3", iv.interval_mm3);
+  iv.max_sigma_um = positive(r, "max_sigma_um", iv.max_sigma_um, 1e3);
   if (iv.max_interval_mm < iv.min_interval_mm) {
     r.diagnostics().error(r.where("max_interval_mm"), "must be >= min_interval_mm");
   }
@@ -220,6 +222,19 @@ void parse_predict(TableReader& r, cc::PredictConfig& p) {
   p.window = static_cast<std::size_t>(
       r.integer("window", 5, 2, static_cast<std::int64_t>(cc::kMaxRateWindow)));
   p.max_um = positive(r, "max_um", p.max_um, 1e6);
+}
+
+void parse_estimator(TableReader& r, cc::EstimatorConfig& e) {
+  e.enabled = r.boolean("enabled", e.enabled);
+  e.measurement_sigma_um = positive(r, "measurement_sigma_um", e.measurement_sigma_um, 1e3);
+  e.wear_noise_um_per_sqrt_m =
+      r.number("wear_noise_um_per_sqrt_m", e.wear_noise_um_per_sqrt_m, 0.0, 1e3);
+  e.rate_noise_um_per_mm_per_sqrt_m =
+      r.number("rate_noise_um_per_mm_per_sqrt_m", e.rate_noise_um_per_mm_per_sqrt_m, 0.0, 1e3);
+  e.initial_rate_sigma_um_per_mm =
+      positive(r, "initial_rate_sigma_um_per_mm", e.initial_rate_sigma_um_per_mm, 1e3);
+  // 0 < k < 2 is refused by core::creep::validate() (it would refuse good measurements).
+  e.gate_sigmas = r.number("gate_sigmas", e.gate_sigmas, 0.0, 1e3);
 }
 
 void parse_entry(TableReader& r, cc::EntryConfig& e) {
@@ -335,6 +350,10 @@ std::unique_ptr<CreepSection> parse_creep_section(const toml::node& node, Diagno
     if (const auto* t = r.table("predict")) {
       TableReader q(*t, "creep.predict", diag);
       parse_predict(q, c.predict);
+    }
+    if (const auto* t = r.table("estimator")) {
+      TableReader q(*t, "creep.estimator", diag);
+      parse_estimator(q, c.estimator);
     }
     if (const auto* t = r.table("entry")) {
       TableReader q(*t, "creep.entry", diag);

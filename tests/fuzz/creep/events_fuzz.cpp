@@ -81,6 +81,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   // Without a normal: the lateral deflection across the feed direction, toward either side.
   c.edge.material_side = static_cast<MaterialSide>((iv / 8) % 3);
   c.predict.enabled = (mode & 1) != 0;
+  // The wear estimator (gate 3σ, so that the gate's refusals are reached too).
+  c.estimator.enabled = (iv & 0x80) != 0;
+  c.estimator.gate_sigmas = 3.0;
   c.entry.sister_offset_um = 5.0;
   c.entry.retract_um = (mode & 2) != 0 ? 3.0 : 0.0;
   c.tool_life.wear_limit_um = 100.0;

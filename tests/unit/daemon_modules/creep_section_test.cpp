@@ -332,6 +332,94 @@ normal_um = [0, 1]
   EXPECT_NE(e.find("creep.deflection[0].lateral_um: missing required key"), std::string::npos) << e;
 }
 
+TEST(CreepSection, EstimatorKeysFromTheDocsExampleAndTheirErrors) {
+  // docs/estimation.md's example, key for key; then every refused value with file:line:column.
+  const std::string md = read(std::string(NCCOMP_SOURCE_DIR) + "/docs/estimation.md");
+  const auto h = md.find("### Example");
+  const auto b = md.find("```toml\n", h);
+  const auto e = md.find("```", b + 8);
+  ASSERT_TRUE(h != std::string::npos && b != std::string::npos && e != std::string::npos);
+  TempDir d;
+  const auto f = d.write("a.toml", std::string(kRegisters) + md.substr(b + 8, e - b - 8));
+  auto r = load_file(f);
+  ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+  const auto& est = creep_section(*r.config)->module.creep.estimator;
+  EXPECT_TRUE(est.enabled);
+  EXPECT_DOUBLE_EQ(est.measurement_sigma_um, 1.0);
+  EXPECT_DOUBLE_EQ(est.wear_noise_um_per_sqrt_m, 0.0);
+  EXPECT_DOUBLE_EQ(est.rate_noise_um_per_mm_per_sqrt_m, 0.0005);
+  EXPECT_DOUBLE_EQ(est.initial_rate_sigma_um_per_mm, 0.01);
+  EXPECT_DOUBLE_EQ(est.gate_sigmas, 5.0);
+
+  const std::string text = std::string(kRegisters) + R"(
+[creep]
+creep_length_mm = 50
+[creep.output]
+z_register = "Z_wear_offset"
+[creep.estimator]
+enabled = true
+measurement_sigma_um = 0
+rate_noise_um_per_mm_per_sqrt_m = -0.1
+gate_sigmas = 1.5
+sigma_um = 1
+)";
+  const auto g = d.write("bad.toml", text);
+  const std::string err = errors_of(g);
+  EXPECT_NE(err.find(at(g, text, "measurement_sigma_um = 0") +
+                     "creep.estimator.measurement_sigma_um: must be"),
+            std::string::npos)
+      << err;
+  EXPECT_NE(err.find(at(g, text, "rate_noise_um_per_mm_per_sqrt_m = -0.1") +
+                     "creep.estimator.rate_noise_um_per_mm_per_sqrt_m: must be a number in [0, "),
+            std::string::npos)
+      << err;
+  EXPECT_NE(err.find(at(g, text, "sigma_um = 1") + "creep.estimator.sigma_um: unknown key"),
+            std::string::npos)
+      << err;
+  // The gate's own rule is core::creep::validate()'s, pointed at the key.
+  const std::string text2 = std::string(kRegisters) + R"(
+[creep]
+creep_length_mm = 50
+[creep.output]
+z_register = "Z_wear_offset"
+[creep.estimator]
+enabled = true
+gate_sigmas = 1.5
+)";
+  const auto g2 = d.write("gate.toml", text2);
+  EXPECT_NE(errors_of(g2).find(at(g2, text2, "gate_sigmas = 1.5") +
+                               "creep.estimator.gate_sigmas: must be 0 (no gate) or a finite "
+                               "number >= 2, got 1.5"),
+            std::string::npos)
+      << errors_of(g2);
+
+  // Measuring when needed: the interval basis "uncertainty" and its bound; it needs the estimator.
+  const std::string text3 = std::string(kRegisters) + R"(
+[creep]
+creep_length_mm = 50
+[creep.output]
+z_register = "Z_wear_offset"
+[creep.interval]
+basis = "uncertainty"
+max_sigma_um = 1.5
+[creep.estimator]
+enabled = true
+)";
+  auto r3 = load_file(d.write("when_needed.toml", text3));
+  ASSERT_TRUE(r3.config) << r3.diagnostics.to_string();
+  const auto& iv = creep_section(*r3.config)->module.creep.interval;
+  EXPECT_EQ(iv.basis, core::creep::IntervalBasis::kUncertainty);
+  EXPECT_DOUBLE_EQ(iv.max_sigma_um, 1.5);
+  std::string text4 = text3;
+  text4.replace(text4.find("enabled = true"), 14, "enabled = false");
+  const auto g4 = d.write("when_needed_off.toml", text4);
+  EXPECT_NE(errors_of(g4).find(at(g4, text4, "basis = \"uncertainty\"") +
+                               "creep.interval.basis: \"uncertainty\" needs [creep.estimator] "
+                               "enabled = true"),
+            std::string::npos)
+      << errors_of(g4);
+}
+
 TEST(CreepSection, CrossFieldRulesPointAtTheKey) {
   TempDir d;
   const std::string text = std::string(kRegisters) + R"(

@@ -1,0 +1,455 @@
+// [creep.estimator] (issue 22): the creep goes toward the Kalman filter's estimate, a measurement
+// beyond the gate raises the plausibility alarm and changes nothing, the filter's state survives
+// a restart (and a state of layout version 3 is converted), the config is checked, the status
+// shows the estimate, and the engine's step stays allocation-free.
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cmath>
+#include <cstring>
+#include <memory>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "bench/creep/engine_cycle.hpp"
+#include "core/common/config_issue.hpp"
+#include "core/creep/creep_module.hpp"
+#include "core/creep/state_v3.hpp"
+#include "tests/support/alloc_counter.hpp"
+#include "tests/unit/creep/rig.hpp"
+
+namespace nccomp::core::creep {
+namespace {
+
+using engine::RegisterKind;
+using engine::RegisterSpec;
+
+/// σ = 1 µm, no process noise, a new tool's rate prior σ 0.01 µm/mm, gate 5σ.
+CreepConfig estimator_config() {
+  CreepConfig c = testing::base_config();
+  c.estimator.enabled = true;
+  c.estimator.measurement_sigma_um = 1.0;
+  c.estimator.wear_noise_um_per_sqrt_m = 0.0;
+  c.estimator.rate_noise_um_per_mm_per_sqrt_m = 0.0;
+  c.estimator.initial_rate_sigma_um_per_mm = 0.01;
+  c.estimator.gate_sigmas = 5.0;
+  return c;
+}
+
+TEST(CreepEstimator, TheCreepGoesTowardTheFiltersEstimateNotTheRawMeasurement) {
+  // GIVEN a new tool: prior wear 0 ± 1 µm, rate 0 ± 0.01 µm/mm. After 100 mm the predicted
+  // covariance is [[1 + 100²·1e-4, 100·1e-4], [·, 1e-4]] = [[2, 0.01], [0.01, 1e-4]], so a
+  // measurement of 6 µm (r = 1) gets the gains K = (2/3, 0.01/3): wear 4 µm, rate 0.02 µm/mm.
+  testing::Rig r(estimator_config());
+  r.run_to(100.0);
+  r.measure({6.0});
+  EXPECT_EQ(r.comp.counters().measurements_accepted, 1U);
+  EXPECT_NEAR(r.comp.state().measured_um[0], 6.0, 0.0);  // the raw value is kept (logged, judged)
+  EXPECT_NEAR(r.comp.state().estimate_wear_um[0], 4.0, 1e-12);
+  EXPECT_NEAR(r.comp.state().estimate_rate_um_per_mm[0], 0.02, 1e-14);
+  // THEN the creep goes to 4 µm over 50 mm (half way: 2 µm), not to 6.
+  r.run_to(125.0);
+  EXPECT_NEAR(r.z(), -2.0, 1e-9);
+  r.run_to(160.0);
+  EXPECT_NEAR(r.z(), -4.0, 1e-9);
+  // The status value: the estimate predicted to the cut path now (60 mm on) and its σ from
+  // P⁺ = [[2/3, 0.01/3], [·, 1e-4 − 1e-4/3]]: var = 2/3 + 2·60·0.01/3 + 60²·(2e-4/3).
+  double w = 0.0;
+  double sigma = 0.0;
+  ASSERT_TRUE(r.comp.wear_estimate(0, w, sigma));
+  EXPECT_NEAR(w, 4.0 + 0.02 * 60.0, 1e-9);
+  EXPECT_NEAR(sigma, std::sqrt(2.0 / 3.0 + 2.0 * 60.0 * 0.01 / 3.0 + 3600.0 * 2e-4 / 3.0), 1e-9);
+  // Without the estimator the same measurement creeps to 6 µm.
+  CreepConfig off = estimator_config();
+  off.estimator.enabled = false;
+  testing::Rig plain(off);
+  plain.run_to(100.0);
+  plain.measure({6.0});
+  plain.run_to(160.0);
+  EXPECT_NEAR(plain.z(), -6.0, 1e-9);
+  EXPECT_FALSE(plain.comp.wear_estimate(0, w, sigma));
+  EXPECT_TRUE(std::isnan(w));
+}
+
+TEST(CreepEstimator, AMeasurementBeyondTheGateRaisesThePlausibilityAlarmAndChangesNothing) {
+  // After the first measurement (wear 4 µm, rate 0.02 µm/mm at 100 mm) the prediction at 200 mm
+  // is 6 µm with variance 2/3 + 2·100·0.01/3 + 100²·(2e-4/3) = 2/3 + 2/3 + 2/3 = 2, so S = 3 and
+  // the gate at 5σ is 6 ± 8.66 µm. 20 µm (14 µm off) is within today's plausibility checks
+  // (5 × 50 µm) but beyond the gate.
+  testing::Rig r(estimator_config());
+  r.run_to(100.0);
+  r.measure({6.0});
+  r.run_to(200.0);
+  const CreepState before = r.comp.export_state();
+  const double z_before = r.z();
+  r.measure({20.0});
+  EXPECT_EQ(r.comp.counters().measurements_gated, 1U);
+  EXPECT_EQ(r.comp.counters().measurements_refused, 1U);
+  EXPECT_EQ(r.comp.counters().measurements_accepted, 1U);
+  ASSERT_EQ(r.count(AlarmCode::kToolBrokenOrMismeasured), 1U);
+  EXPECT_NEAR(r.alarms.back().value, 14.0, 1e-9);  // the innovation [µm]
+  EXPECT_TRUE(r.comp.halted());
+  const CreepState& after = r.comp.state();
+  EXPECT_EQ(after.measurements, before.measurements);
+  EXPECT_EQ(after.measured_um[0], before.measured_um[0]);
+  EXPECT_EQ(after.committed_um[0], before.committed_um[0]);
+  EXPECT_EQ(after.estimate_wear_um[0], before.estimate_wear_um[0]);
+  EXPECT_EQ(after.estimate_rate_um_per_mm[0], before.estimate_rate_um_per_mm[0]);
+  EXPECT_EQ(after.estimate_p_ww[0], before.estimate_p_ww[0]);
+  EXPECT_EQ(after.estimate_path_mm, before.estimate_path_mm);
+  EXPECT_EQ(r.z(), z_before);
+  // 14.6 µm (8.6 µm off, just within 5·sqrt(3) = 8.66) is absorbed: the gate, not another check,
+  // refused 20.
+  testing::Rig ok(estimator_config());
+  ok.run_to(100.0);
+  ok.measure({6.0});
+  ok.run_to(200.0);
+  ok.measure({14.6});
+  EXPECT_EQ(ok.comp.counters().measurements_accepted, 2U);
+  EXPECT_EQ(ok.comp.counters().measurements_gated, 0U);
+  // With the gate off (0) the 20 µm is absorbed too.
+  CreepConfig no_gate = estimator_config();
+  no_gate.estimator.gate_sigmas = 0.0;
+  testing::Rig g(no_gate);
+  g.run_to(100.0);
+  g.measure({6.0});
+  g.run_to(200.0);
+  g.measure({20.0});
+  EXPECT_EQ(g.comp.counters().measurements_accepted, 2U);
+  EXPECT_FALSE(g.comp.halted());
+}
+
+std::vector<RegisterSpec> registers() {
+  const LimiterConfig lim{100.0, 50.0, 1e5};
+  return {{"X_offset", RegisterKind::kAxisOffset, lim},
+          {"Y_offset", RegisterKind::kAxisOffset, lim},
+          {"Z_offset", RegisterKind::kAxisOffset, lim}};
+}
+
+CreepModuleConfig module_config(const CreepConfig& c) {
+  CreepModuleConfig m;
+  m.creep = c;
+  m.creep.output.warning_register = -1;
+  m.creep.output.alarm_register = -1;
+  m.creep.output.measurement_due_register = -1;
+  m.creep.output.tool_change_register = -1;
+  return m;
+}
+
+/// Drives a module directly (as the engine does after validation).
+struct ModuleRig {
+  CreepModule module;
+  std::vector<RegisterSpec> specs{registers()};
+  StepOutput out;
+  TimeNs now{0};
+  double path{0.0};
+
+  explicit ModuleRig(const CreepConfig& c) : module(module_config(c)) {
+    module.attach(engine::RegisterTable(specs));
+    std::array<Event, 1> ev{ToolChange{now, 1, false}};
+    step(ev);
+    advance(0.0);  // the first sample anchors the path
+  }
+  void step(std::span<const Event> ev) {
+    out.clear();
+    module.step(now, ev, out);
+  }
+  void advance(double ds) {
+    now += 10'000'000;
+    path += ds;
+    AxisSample a;
+    a.time_ns = now;
+    a.program_path_mm = path;
+    a.tool = 1;
+    a.cutting = true;
+    std::array<Event, 1> ev{a};
+    step(ev);
+  }
+  void run_to(double p) {
+    while (path + 0.5 <= p + 1e-9) advance(0.5);
+  }
+  void measure(double w) {
+    ToolMeasurement m;
+    m.tool = 1;
+    m.wear_um[0] = w;
+    now += 1'000'000;
+    std::array<Event, 1> ev{m};
+    step(ev);
+  }
+  [[nodiscard]] double z() const { return module.compensator().channel_output_um(Channel::kZ); }
+};
+
+TEST(CreepEstimator, TheFiltersStateSurvivesARestartWithoutResetOrDouble) {
+  // GIVEN a run with three measurements, saved in the middle of a creep; WHEN a fresh process
+  // loads the saved bytes and both carry on with the same path and measurements; THEN the
+  // filter's state, the offsets and the next estimate are identical (no reset to the prior, no
+  // measurement absorbed twice).
+  CreepConfig c = estimator_config();
+  c.estimator.rate_noise_um_per_mm_per_sqrt_m = 0.01;
+  ModuleRig a(c);
+  const std::array<double, 3> wear{3.0, 5.5, 7.0};
+  for (std::size_t k = 0; k < wear.size(); ++k) {
+    a.run_to(100.0 * static_cast<double>(k + 1));
+    a.measure(wear[k]);
+  }
+  a.run_to(320.0);  // 20 of 50 mm into the last creep
+  std::vector<std::byte> bytes(a.module.state_capacity());
+  ASSERT_EQ(a.module.save_state(bytes), bytes.size());
+  ModuleRig b(c);
+  ASSERT_TRUE(b.module.load_state(bytes));
+  const auto& sa = a.module.compensator().state();
+  const auto& sb = b.module.compensator().state();
+  ASSERT_TRUE(sb.estimate_valid);
+  EXPECT_EQ(sb.estimate_wear_um[0], sa.estimate_wear_um[0]);
+  EXPECT_EQ(sb.estimate_rate_um_per_mm[0], sa.estimate_rate_um_per_mm[0]);
+  EXPECT_EQ(sb.estimate_p_ww[0], sa.estimate_p_ww[0]);
+  EXPECT_EQ(sb.estimate_p_wr[0], sa.estimate_p_wr[0]);
+  EXPECT_EQ(sb.estimate_p_rr[0], sa.estimate_p_rr[0]);
+  EXPECT_EQ(sb.estimate_path_mm, sa.estimate_path_mm);
+  // The restarted process re-anchors its path on the first sample: the NC's program path is
+  // wherever it is, the cut path continues from the saved one.
+  b.path = 5000.0;
+  b.advance(0.0);
+  for (int i = 0; i < 160; ++i) {  // 80 mm: the creep ends, then the next measurement
+    a.advance(0.5);
+    b.advance(0.5);
+    ASSERT_NEAR(b.z(), a.z(), 1e-12) << i;
+  }
+  a.measure(9.0);
+  b.measure(9.0);
+  EXPECT_EQ(sb.estimate_wear_um[0], sa.estimate_wear_um[0]);
+  EXPECT_EQ(sb.estimate_p_ww[0], sa.estimate_p_ww[0]);
+  for (int i = 0; i < 120; ++i) {
+    a.advance(0.5);
+    b.advance(0.5);
+  }
+  EXPECT_NEAR(b.z(), a.z(), 1e-12);
+  EXPECT_NEAR(a.z(), -sa.estimate_wear_um[0], 1e-9);  // the creep ended on the estimate
+}
+
+TEST(CreepEstimator, AStateOfLayoutVersion3IsConvertedAndTheFilterStartsFromIt) {
+  // A version-3 state (before the estimator), with what was adopted at start-up after it: the
+  // wear, the fitted rate, the creeps and the adoption are kept; the filter is not yet valid and
+  // starts, at the next measurement, from the last measured wear (22 µm at 120 mm) and the
+  // fitted rate (0.1 µm/mm) with the prior covariance diag(σ², σ_r0²) = diag(1, 1e-4).
+  CreepConfig c = estimator_config();
+  ModuleRig m(c);
+  v3::CreepState s;
+  s.edge_points = 1;
+  s.tool = 1;
+  s.cut_path_mm = 130.0;
+  s.creep_path_mm = 130.0;
+  s.committed_um[0] = 22.0;
+  s.measured_um[0] = 22.0;
+  s.rate_um_per_mm[0] = 0.1;
+  s.rate_known = true;
+  s.measurements = 2;
+  s.last_measurement_cut_path_mm = 120.0;
+  s.last_measurement_creep_path_mm = 120.0;
+  s.channel_output_um[2] = -22.0;
+  s.normal_held = false;
+  v3::ToolMemory mem;
+  mem.tool[2] = 7;
+  mem.last_use[2] = 1;
+  mem.use_counter = 1;
+  mem.state[2].edge_points = 1;
+  mem.state[2].tool = 7;
+  mem.state[2].measured_um[0] = 9.0;
+  mem.state[2].committed_um[0] = 9.0;
+  AdoptedOutputs adopted;
+  adopted.held[2] = 1;
+  adopted.held_um[2] = -21.5;
+  std::vector<std::byte> bytes(v3::kModuleStateBytes + sizeof(AdoptedOutputs));
+  std::memcpy(bytes.data(), &s, sizeof s);
+  std::memcpy(bytes.data() + sizeof s, &mem, sizeof mem);
+  std::memcpy(bytes.data() + v3::kModuleStateBytes, &adopted, sizeof adopted);
+  ASSERT_NE(bytes.size(), m.module.state_capacity());
+  {
+    nccomp::test::AllocationScope scope;
+    ASSERT_TRUE(m.module.load_state(bytes));
+    EXPECT_EQ(scope.count(), 0U);
+  }
+  const auto& comp = m.module.compensator();
+  const auto& st = comp.state();
+  EXPECT_EQ(st.version, CreepState::kVersion);
+  EXPECT_FALSE(st.estimate_valid);
+  EXPECT_NEAR(st.committed_um[0], 22.0, 0.0);
+  EXPECT_NEAR(st.cut_path_mm, 130.0, 0.0);
+  EXPECT_EQ(comp.adoption().held[2], 1);
+  EXPECT_NEAR(comp.adoption().held_um[2], -21.5, 0.0);
+  EXPECT_EQ(comp.tool_memory().tool[2], 7);
+  EXPECT_EQ(comp.tool_memory().state[2].version, CreepState::kVersion);
+  // Without the AdoptedOutputs (a version-3 state written before adoption existed) it loads too.
+  ModuleRig m2(c);
+  ASSERT_TRUE(m2.module.load_state(std::span(bytes).first(v3::kModuleStateBytes)));
+  EXPECT_EQ(m2.module.compensator().adoption().held[2], 0);
+  // The next measurement, 24 µm at 140 mm (d = 20 mm): predicted wear 22 + 0.1·20 = 24 with
+  // P⁻ = [[1 + 400·1e-4, 20·1e-4], [·, 1e-4]] = [[1.04, 0.002], [·, 1e-4]]: innovation 0, so
+  // the estimate stays 24 and its variance is 1.04·1/(2.04).
+  m.path = 0.0;
+  m.advance(0.0);
+  m.run_to(10.0);
+  m.measure(24.0);
+  ASSERT_TRUE(st.estimate_valid);
+  EXPECT_EQ(comp.counters().measurements_accepted, 1U);
+  EXPECT_NEAR(st.estimate_wear_um[0], 24.0, 1e-9);
+  EXPECT_NEAR(st.estimate_rate_um_per_mm[0], 0.1, 1e-12);
+  EXPECT_NEAR(st.estimate_p_ww[0], 1.04 / 2.04, 1e-12);
+  // A version-3-sized blob with a corrupt bool is refused and changes nothing.
+  ModuleRig fresh(c);
+  bytes[offsetof(v3::CreepState, request_held)] = std::byte{2};
+  EXPECT_FALSE(fresh.module.load_state(bytes));
+  EXPECT_EQ(fresh.module.compensator().state().measurements, 0U);
+}
+
+TEST(CreepEstimator, ACorruptFilterStateIsRefused) {
+  CreepConfig c = estimator_config();
+  WearCompensator comp;
+  comp.configure(c);
+  CreepState s = comp.export_state();
+  s.estimate_valid = true;
+  s.estimate_p_ww[0] = 1.0;
+  s.estimate_p_rr[0] = 1e-4;
+  EXPECT_EQ(comp.check_state(s).field, nullptr);
+  s.estimate_p_wr[0] = 0.02;  // |p_wr| > sqrt(p_ww·p_rr) = 0.01: not a covariance
+  ASSERT_NE(comp.check_state(s).field, nullptr);
+  EXPECT_EQ(std::string_view(comp.check_state(s).field), "estimate");
+  s.estimate_p_wr[0] = 0.0;
+  s.estimate_wear_um[0] = kNaN;
+  EXPECT_NE(comp.check_state(s).field, nullptr);
+  s.estimate_wear_um[0] = 0.0;
+  s.estimate_path_mm = 10.0;  // ahead of the tool's cut path (0)
+  ASSERT_NE(comp.check_state(s).field, nullptr);
+  EXPECT_EQ(std::string_view(comp.check_state(s).field), "estimate_path_mm");
+}
+
+TEST(CreepEstimator, ConfigErrorsNameTheKey) {
+  const auto issues = [](const CreepConfig& c) {
+    try {
+      validate(c);
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  CreepConfig c = estimator_config();
+  EXPECT_EQ(issues(c), "");
+  c.estimator.measurement_sigma_um = 0.0;
+  c.estimator.rate_noise_um_per_mm_per_sqrt_m = -1.0;
+  c.estimator.gate_sigmas = 1.5;
+  const std::string e = issues(c);
+  EXPECT_NE(e.find("creep.estimator.measurement_sigma_um"), std::string::npos) << e;
+  EXPECT_NE(e.find("creep.estimator.rate_noise_um_per_mm_per_sqrt_m"), std::string::npos) << e;
+  EXPECT_NE(e.find("creep.estimator.gate_sigmas: must be 0 (no gate) or a finite number >= 2"),
+            std::string::npos)
+      << e;
+  c = estimator_config();
+  c.estimator.initial_rate_sigma_um_per_mm = std::nan("");
+  EXPECT_NE(issues(c).find("creep.estimator.initial_rate_sigma_um_per_mm"), std::string::npos);
+  c.estimator.enabled = false;  // off: not judged
+  EXPECT_EQ(issues(c), "");
+}
+
+TEST(CreepEstimator, StatusShowsTheEstimateAndItsSigma) {
+  ModuleRig m(estimator_config());
+  std::array<engine::StatusValue, engine::kMaxStatusValues> v{};
+  const auto find = [&](std::size_t n, std::string_view key) -> const engine::StatusValue* {
+    for (std::size_t i = 0; i < n; ++i) {
+      if (std::string_view(v[i].key) == key) return &v[i];
+    }
+    return nullptr;
+  };
+  std::size_t n = m.module.status(v);
+  ASSERT_NE(find(n, "wear_estimate_um"), nullptr);
+  EXPECT_TRUE(std::isnan(find(n, "wear_estimate_um")->value));  // no measurement yet
+  EXPECT_STREQ(find(n, "mode")->text, "creeping, estimator");
+  m.run_to(100.0);
+  m.measure(6.0);
+  m.run_to(160.0);
+  n = m.module.status(v);
+  EXPECT_NEAR(find(n, "wear_estimate_um")->value, 5.2, 1e-9);  // as in the first test
+  EXPECT_NEAR(find(n, "wear_sigma_um")->value,
+              std::sqrt(2.0 / 3.0 + 2.0 * 60.0 * 0.01 / 3.0 + 3600.0 * 2e-4 / 3.0), 1e-9);
+  CreepConfig off = estimator_config();
+  off.estimator.enabled = false;
+  ModuleRig p(off);
+  n = p.module.status(v);
+  EXPECT_EQ(find(n, "wear_estimate_um"), nullptr);
+  EXPECT_EQ(find(n, "wear_sigma_um"), nullptr);
+  EXPECT_STREQ(find(n, "mode")->text, "creeping");
+}
+
+TEST(CreepRealTime, EngineStepWithTheEstimatorAllocatesNothing) {
+  // The costed cycle (16 support points, 4 creeps, prediction) with the estimator on: each
+  // measurement runs 16 filters' predict and update.
+  auto rig = std::make_unique<bench::creep::EngineCycle>(true, true);
+  const auto& k = rig->module().compensator().counters();
+  const auto accepted = k.measurements_accepted;
+  std::array<engine::StatusValue, engine::kMaxStatusValues> status{};
+  nccomp::test::AllocationScope scope;
+  for (int i = 0; i < 1000; ++i) {
+    if (i % 50 == 25) {
+      rig->measure(rig->next_wear_base_um());
+    } else {
+      rig->cycle();
+    }
+    (void)rig->module().status(status);
+  }
+  EXPECT_EQ(scope.count(), 0U);
+  EXPECT_EQ(scope.frees(), 0U);
+  EXPECT_EQ(k.measurements_accepted, accepted + 20U);
+  EXPECT_TRUE(rig->module().compensator().state().estimate_valid);
+}
+
+}  // namespace
+}  // namespace nccomp::core::creep
+
+namespace nccomp::core::creep {
+namespace {
+
+TEST(CreepEstimator, UncertaintyIntervalAsksForAMeasurementWhenSigmaReachesTheBound) {
+  // GIVEN a new tool (wear 0 ± 1 µm, rate 0 ± 0.01 µm/mm, no process noise) and a bound of
+  // 2 µm: σ(d)² = 1 + 1e-4·d² reaches 4 at d = sqrt(3e4) = 173.2 mm.
+  CreepConfig c = estimator_config();
+  c.interval.basis = IntervalBasis::kUncertainty;
+  c.interval.max_sigma_um = 2.0;
+  c.interval.min_interval_mm = 10.0;
+  c.interval.max_interval_mm = 1000.0;
+  testing::Rig r(c);
+  EXPECT_NEAR(r.comp.next_measurement_path_mm(), std::sqrt(3e4), 1e-6);
+  r.run_to(173.0);
+  EXPECT_EQ(r.count(AlarmCode::kMeasurementDue), 0U);
+  r.run_to(173.5);
+  EXPECT_EQ(r.count(AlarmCode::kMeasurementDue), 1U);
+  // WHEN it is measured at d0 = 173.5 mm, THEN the next request comes where the posterior's
+  // σ reaches 2 again: P⁻ = [[1 + 1e-4·d0², 1e-4·d0], [·, 1e-4]], K = P⁻h/(P⁻ww + 1),
+  // P⁺ = (I − Kh)P⁻, and σ²(d) = P⁺ww + 2d·P⁺wr + d²·P⁺rr = 4 solved for d.
+  const double d0 = 173.5;
+  const double pww = 1.0 + 1e-4 * d0 * d0;
+  const double pwr = 1e-4 * d0;
+  const double prr = 1e-4;
+  const double s = pww + 1.0;
+  const double aww = pww - pww * pww / s;
+  const double awr = pwr - pww * pwr / s;
+  const double arr = prr - pwr * pwr / s;
+  const double d =
+      (-2.0 * awr + std::sqrt(4.0 * awr * awr + 4.0 * arr * (4.0 - aww))) / (2.0 * arr);
+  r.measure({3.0});
+  ASSERT_EQ(r.comp.counters().measurements_accepted, 1U);
+  EXPECT_NEAR(r.comp.next_measurement_path_mm(), d0 + d, 1e-6);
+  // The limits hold: a bound the estimate never reaches asks at max_interval_mm, one it is
+  // already beyond at min_interval_mm.
+  c.interval.max_sigma_um = 1e3;
+  testing::Rig far(c);
+  EXPECT_NEAR(far.comp.next_measurement_path_mm(), 1000.0, 0.0);
+  c.interval.max_sigma_um = 0.5;
+  testing::Rig near(c);
+  EXPECT_NEAR(near.comp.next_measurement_path_mm(), 10.0, 0.0);
+  // It needs the estimator.
+  c.estimator.enabled = false;
+  EXPECT_THROW(validate(c), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace nccomp::core::creep
