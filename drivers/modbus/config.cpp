@@ -4,12 +4,14 @@
 #include <cmath>
 #include <fstream>
 #include <limits>
+#include <optional>
 #include <sstream>
 #include <string>
 
 #include <toml++/toml.h>
 
 #include "formats/toml/guard.hpp"
+#include "formats/toml/table_reader.hpp"
 
 namespace nccomp::drivers::modbus {
 namespace {
@@ -71,143 +73,22 @@ std::string table_name(Table t) {
   return "?";
 }
 
-class Reader {
- public:
-  explicit Reader(std::string_view file) : file_(file) {}
+using formats::Diagnostics;
+using formats::TableReader;
 
-  [[noreturn]] void fail(const toml::node* where, const std::string& path,
-                         const std::string& what) const {
-    int line = 0;
-    int column = 0;
-    std::string file = file_;
-    if (where != nullptr && where->source().begin.line > 0) {
-      line = static_cast<int>(where->source().begin.line);
-      column = static_cast<int>(where->source().begin.column);
-      // Included files: the node knows which file it came from.
-      if (where->source().path && !where->source().path->empty()) {
-        file = *where->source().path;
-      }
-    }
-    throw ConfigError(std::move(file), line, column, path, what);
+template <typename E, std::size_t N>
+std::vector<std::pair<std::string, E>> names_of(
+    const std::array<std::pair<std::string_view, E>, N>& options) {
+  std::vector<std::pair<std::string, E>> v;
+  for (const auto& [name, e] : options) {
+    v.emplace_back(std::string(name), e);
   }
+  return v;
+}
 
-  /// Refuses keys of `t` not in `allowed`.
-  template <std::size_t N>
-  void check_keys(const toml::table& t, const std::string& path,
-                  const std::array<std::string_view, N>& allowed) const {
-    for (auto&& [k, v] : t) {
-      if (std::find(allowed.begin(), allowed.end(), k.str()) == allowed.end()) {
-        fail(&v, join(path, k.str()), "unknown key");
-      }
-    }
-  }
-
-  static std::string join(const std::string& path, std::string_view key) {
-    return path.empty() ? std::string(key) : path + "." + std::string(key);
-  }
-
-  std::string str(const toml::table& t, const std::string& path, std::string_view key,
-                  const std::string& dflt) const {
-    const toml::node* n = t.get(key);
-    if (n == nullptr) {
-      return dflt;
-    }
-    if (!n->is_string()) {
-      fail(n, join(path, key), "expected a string");
-    }
-    return std::string(*n->value<std::string_view>());
-  }
-
-  bool boolean(const toml::table& t, const std::string& path, std::string_view key,
-               bool dflt) const {
-    const toml::node* n = t.get(key);
-    if (n == nullptr) {
-      return dflt;
-    }
-    if (!n->is_boolean()) {
-      fail(n, join(path, key), "expected true or false");
-    }
-    return *n->value<bool>();
-  }
-
-  std::int64_t integer(const toml::table& t, const std::string& path, std::string_view key,
-                       std::int64_t dflt, std::int64_t lo, std::int64_t hi) const {
-    const toml::node* n = t.get(key);
-    if (n == nullptr) {
-      return dflt;
-    }
-    if (!n->is_integer()) {
-      fail(n, join(path, key), "expected an integer");
-    }
-    const std::int64_t v = *n->value<std::int64_t>();
-    if (v < lo || v > hi) {
-      fail(n, join(path, key),
-           "value " + std::to_string(v) + " outside " + std::to_string(lo) + ".." +
-               std::to_string(hi));
-    }
-    return v;
-  }
-
-  double number(const toml::table& t, const std::string& path, std::string_view key, double dflt,
-                double lo, double hi) const {
-    const toml::node* n = t.get(key);
-    if (n == nullptr) {
-      return dflt;
-    }
-    double v = 0.0;
-    if (n->is_integer()) {
-      v = static_cast<double>(*n->value<std::int64_t>());
-    } else if (n->is_floating_point()) {
-      v = *n->value<double>();
-    } else {
-      fail(n, join(path, key), "expected a number");
-    }
-    if (!std::isfinite(v) || v < lo || v > hi) {
-      std::ostringstream s;
-      s << "value " << v << " outside " << lo << ".." << hi;
-      fail(n, join(path, key), s.str());
-    }
-    return v;
-  }
-
-  const toml::table* sub_table(const toml::table& t, const std::string& path,
-                               std::string_view key) const {
-    const toml::node* n = t.get(key);
-    if (n == nullptr) {
-      return nullptr;
-    }
-    if (!n->is_table()) {
-      fail(n, join(path, key), "expected a table");
-    }
-    return n->as_table();
-  }
-
-  template <typename E, std::size_t N>
-  E choice(const toml::table& t, const std::string& path, std::string_view key, E dflt,
-           const std::array<std::pair<std::string_view, E>, N>& options) const {
-    const toml::node* n = t.get(key);
-    if (n == nullptr) {
-      return dflt;
-    }
-    if (!n->is_string()) {
-      fail(n, join(path, key), "expected a string");
-    }
-    const std::string_view v = *n->value<std::string_view>();
-    std::string list;
-    for (const auto& [name, e] : options) {
-      if (name == v) {
-        return e;
-      }
-      list += (list.empty() ? "" : ", ") + std::string(name);
-    }
-    fail(n, join(path, key), "unknown value '" + std::string(v) + "' (expected " + list + ")");
-  }
-
-  std::string_view file() const { return file_; }
-
- private:
-  std::string file_;
-};
+std::string join(const std::string& path, std::string_view key) {
+  return path.empty() ? std::string(key) : path + "." + std::string(key);
+}
 
 constexpr std::array<std::pair<std::string_view, Table>, 4> kTables = {{
     {"coil", Table::kCoil},
@@ -232,88 +113,68 @@ constexpr std::array<std::pair<std::string_view, ByteOrder>, 2> kByteOrders = {{
     {"swapped", ByteOrder::kSwapped},
 }};
 
-/// Encoding keys shared by signals and offsets. `bits_allowed`: coils / discrete inputs.
-Encoding read_encoding(const Reader& r, const toml::table& t, const std::string& path,
-                       Table table) {
+/// Encoding keys shared by signals and offsets (of the table `r` reads).
+Encoding read_encoding(TableReader& r, Table table) {
   Encoding e;
   const ValueType dflt = is_bit_table(table) ? ValueType::kBool : ValueType::kInt16;
-  e.type = r.choice(t, path, "type", dflt, kTypes);
+  e.type = r.pick("type", dflt, names_of(kTypes));
   if (is_bit_table(table) && e.type != ValueType::kBool) {
-    r.fail(t.get("type"), Reader::join(path, "type"),
-           "a " + table_name(table) + " is one bit: type must be bool");
+    r.error("type", "a " + table_name(table) + " is one bit: type must be bool");
   }
   if (!is_bit_table(table) && e.type == ValueType::kBool) {
-    r.fail(t.get("type"), Reader::join(path, "type"),
-           "bool is for coil / discrete_input; use uint16 (non-zero = true) for registers");
+    r.error("type",
+            "bool is for coil / discrete_input; use uint16 (non-zero = true) for registers");
   }
-  e.word_order = r.choice(t, path, "word_order", WordOrder::kHighFirst, kWordOrders);
-  e.byte_order = r.choice(t, path, "byte_order", ByteOrder::kBigEndian, kByteOrders);
-  e.scale = r.number(t, path, "scale", 1.0, -1e12, 1e12);
+  e.word_order = r.pick("word_order", WordOrder::kHighFirst, names_of(kWordOrders));
+  e.byte_order = r.pick("byte_order", ByteOrder::kBigEndian, names_of(kByteOrders));
+  e.scale = r.number("scale", 1.0, -1e12, 1e12);
   if (std::fabs(e.scale) < 1e-12) {
-    r.fail(t.get("scale"), Reader::join(path, "scale"), "scale must not be 0");
+    r.error("scale", "must not be 0");
+    e.scale = 1.0;
   }
-  e.offset = r.number(t, path, "offset", 0.0, -1e12, 1e12);
+  e.offset = r.number("offset", 0.0, -1e12, 1e12);
   return e;
 }
 
-constexpr std::array<std::string_view, 9> kSignalKeys = {
-    "table", "address", "type", "word_order", "byte_order", "scale", "offset", "min", "max"};
-
-constexpr std::array<std::string_view, 10> kProfileSignalKeys = {
-    "table", "address", "type", "word_order", "byte_order",
-    "scale", "offset",  "min",  "max",        "count"};
-
 /// The plausibility range `min` / `max` of a signal (physical units, after scale and offset).
-void read_range(const Reader& r, const toml::table& t, const std::string& path, SignalMap& s) {
-  const toml::node* lo = t.get("min");
-  const toml::node* hi = t.get("max");
-  if (lo == nullptr && hi == nullptr) {
+void read_range(TableReader& r, SignalMap& s) {
+  const bool has_min = r.node().get("min") != nullptr;
+  const bool has_max = r.node().get("max") != nullptr;
+  if (!has_min && !has_max) {
     return;
   }
   if (is_bit_table(s.table)) {
-    r.fail(lo != nullptr ? lo : hi, Reader::join(path, lo != nullptr ? "min" : "max"),
-           "a " + table_name(s.table) + " is one bit: min / max do not apply");
+    (void)r.value("min");
+    (void)r.value("max");
+    r.error(has_min ? "min" : "max",
+            "a " + table_name(s.table) + " is one bit: min / max do not apply");
+    return;
   }
   constexpr double kLimit = 1e300;
-  s.min = r.number(t, path, "min", s.min, -kLimit, kLimit);
-  s.max = r.number(t, path, "max", s.max, -kLimit, kLimit);
+  s.min = r.number("min", s.min, -kLimit, kLimit);
+  s.max = r.number("max", s.max, -kLimit, kLimit);
   if (s.min > s.max) {
     std::ostringstream m;
     m << "max " << s.max << " is below min " << s.min;
-    r.fail(hi != nullptr ? hi : lo, Reader::join(path, hi != nullptr ? "max" : "min"), m.str());
+    r.error(has_max ? "max" : "min", m.str());
   }
 }
 
-/// `allow_count`: the signal may be a run of `count` consecutive values (a wear profile).
-SignalMap read_signal(const Reader& r, const toml::node& n, const std::string& path,
-                      const toml::table* flat_parent = nullptr, bool allow_count = false) {
-  const toml::table* t = flat_parent != nullptr ? flat_parent : n.as_table();
-  if (t == nullptr) {
-    r.fail(&n, path, "expected a table { table = ..., address = ..., type = ... }");
-  }
-  if (flat_parent == nullptr) {
-    if (allow_count) {
-      r.check_keys(*t, path, kProfileSignalKeys);
-    } else {
-      r.check_keys(*t, path, kSignalKeys);
-    }
-  }
+/// The signal keys of table `r` reads. `allow_count`: the signal may be a run of `count`
+/// consecutive values (a wear profile).
+SignalMap read_signal(TableReader& r, bool allow_count = false) {
   SignalMap s;
   s.mapped = true;
-  s.table = r.choice(*t, path, "table", Table::kHolding, kTables);
-  if (t->get("address") == nullptr) {
-    r.fail(&n, Reader::join(path, "address"), "missing");
-  }
-  s.address = static_cast<std::uint16_t>(r.integer(*t, path, "address", 0, 0, 65535));
-  s.encoding = read_encoding(r, *t, path, s.table);
-  read_range(r, *t, path, s);
+  s.table = r.pick("table", Table::kHolding, names_of(kTables));
+  s.address = static_cast<std::uint16_t>(r.integer("address", std::nullopt, 0, 65535));
+  s.encoding = read_encoding(r, s.table);
+  read_range(r, s);
   if (allow_count) {
     s.count = static_cast<std::uint8_t>(
-        r.integer(*t, path, "count", 1, 1, static_cast<std::int64_t>(core::kMaxEdgePoints)));
+        r.integer("count", 1, 1, static_cast<std::int64_t>(core::kMaxEdgePoints)));
   }
   if (static_cast<std::uint32_t>(s.address) + span(s) > 65536U) {
-    r.fail(t->get("address"), Reader::join(path, "address"),
-           "value does not fit below address 65535");
+    r.error("address", "does not fit below address 65535");
   }
   return s;
 }
@@ -364,6 +225,29 @@ ConfigError::ConfigError(std::string file, int line, int column, std::string key
       key_path_(std::move(key_path)),
       message_(std::move(message)) {}
 
+ConfigError::ConfigError(formats::Diagnostics diagnostics, std::string_view file)
+    : ConfigError(diagnostics.ok() ? formats::Diagnostic{{std::string(file), 0, 0, ""}, "refused"}
+                                   : diagnostics.items().front()) {
+  std::string all;
+  for (const formats::Diagnostic& d : diagnostics.items()) {
+    formats::Diagnostic named = d;
+    if (named.where.file.empty()) {
+      named.where.file = std::string(file);
+    }
+    all += (all.empty() ? "" : "\n") + formats::format(named);
+  }
+  what_ = all;
+  diagnostics_ = std::move(diagnostics);
+}
+
+ConfigError::ConfigError(const formats::Diagnostic& first)
+    : ConfigError(first.where.file, first.where.line, first.where.column, first.where.key_path,
+                  first.message) {}
+
+const char* ConfigError::what() const noexcept {
+  return what_.empty() ? std::runtime_error::what() : what_.c_str();
+}
+
 ModbusConfig parse_modbus_config(std::string_view toml_text, std::string_view file,
                                  const ParseOptions& options) {
   toml::table root;
@@ -375,321 +259,31 @@ ModbusConfig parse_modbus_config(std::string_view toml_text, std::string_view fi
   }
   const toml::node* mnode = root.get("modbus");
   if (mnode == nullptr || !mnode->is_table()) {
-    Reader(file).fail(mnode, "modbus", "missing [modbus] table");
+    Diagnostics diag;
+    diag.error(mnode != nullptr ? mnode : &root, "modbus", "missing [modbus] table");
+    throw ConfigError(std::move(diag), file);
   }
   return parse_modbus_table(*mnode->as_table(), file, options);
 }
 
 ModbusConfig parse_modbus_table(const toml::table& m, std::string_view file,
                                 const ParseOptions& options) {
-  const std::string table_file =
-      m.source().path && !m.source().path->empty() ? *m.source().path : std::string(file);
-  const Reader r(table_file);
-  const toml::node* mnode = &m;
-  const std::string mp = "modbus";
-  static constexpr auto kTopKeys = std::to_array<std::string_view>({"transport",
-                                                                    "host",
-                                                                    "port",
-                                                                    "device",
-                                                                    "baud",
-                                                                    "parity",
-                                                                    "data_bits",
-                                                                    "stop_bits",
-                                                                    "rs485",
-                                                                    "unit_id",
-                                                                    "response_timeout_s",
-                                                                    "byte_timeout_s",
-                                                                    "poll_rate_hz",
-                                                                    "offset_write_rate_hz",
-                                                                    "reconnect_min_s",
-                                                                    "reconnect_max_s",
-                                                                    "reconnect_reset_after_s",
-                                                                    "dead_after_failures",
-                                                                    "verify_writes",
-                                                                    "alarm_after_s",
-                                                                    "degraded_alarm_after_s",
-                                                                    "rx_capacity",
-                                                                    "tx_capacity",
-                                                                    "merge_gap_registers",
-                                                                    "io_sched_fifo_priority",
-                                                                    "io_cpu_affinity",
-                                                                    "axis",
-                                                                    "tool_measurement",
-                                                                    "probe_measurement",
-                                                                    "calibration_touch",
-                                                                    "tool_change",
-                                                                    "program_event",
-                                                                    "temperature",
-                                                                    "offset"});
-  r.check_keys(m, mp, kTopKeys);
+  Diagnostics diag;
+  auto c = read_modbus_table(m, file, options, diag);
+  if (!c) {
+    throw ConfigError(std::move(diag), file);
+  }
+  return std::move(*c);
+}
 
-  ModbusConfig c;
-  static constexpr std::array<std::pair<std::string_view, Transport>, 2> kTransports = {{
-      {"tcp", Transport::kTcp},
-      {"rtu", Transport::kRtu},
-  }};
-  c.transport = r.choice(m, mp, "transport", Transport::kTcp, kTransports);
-  if (m.get("transport") == nullptr) {
-    r.fail(mnode, "modbus.transport", "missing (tcp or rtu)");
-  }
-  c.host = r.str(m, mp, "host", c.host);
-  c.port = static_cast<std::uint16_t>(r.integer(m, mp, "port", 502, 1, 65535));
-  c.device = r.str(m, mp, "device", "");
-  c.baud = static_cast<std::uint32_t>(r.integer(m, mp, "baud", 19200, 300, 4000000));
-  static constexpr std::array<std::pair<std::string_view, Parity>, 3> kParities = {{
-      {"none", Parity::kNone},
-      {"even", Parity::kEven},
-      {"odd", Parity::kOdd},
-  }};
-  c.parity = r.choice(m, mp, "parity", Parity::kEven, kParities);
-  c.data_bits = static_cast<std::uint8_t>(r.integer(m, mp, "data_bits", 8, 7, 8));
-  c.stop_bits = static_cast<std::uint8_t>(r.integer(m, mp, "stop_bits", 1, 1, 2));
-  c.rs485 = r.boolean(m, mp, "rs485", false);
-  if (c.transport == Transport::kRtu && c.device.empty()) {
-    r.fail(mnode, "modbus.device", "missing: RTU needs a serial device path");
-  }
-  if (c.transport == Transport::kTcp && c.host.empty()) {
-    r.fail(m.get("host"), "modbus.host", "must not be empty");
-  }
-  c.unit_id = static_cast<std::uint8_t>(r.integer(m, mp, "unit_id", 1, 0, 247));
-  c.response_timeout_s = r.number(m, mp, "response_timeout_s", 0.5, 0.001, 60.0);
-  c.byte_timeout_s = r.number(m, mp, "byte_timeout_s", 0.5, 0.0001, 60.0);
-  c.poll_rate_defaulted = m.get("poll_rate_hz") == nullptr;
-  c.poll_rate_hz = r.number(m, mp, "poll_rate_hz", options.default_poll_rate_hz, 0.01, 10000.0);
-  if (options.max_poll_rate_hz > 0.0 && c.poll_rate_hz > options.max_poll_rate_hz + 1e-9) {
-    std::ostringstream s;
-    s << c.poll_rate_hz << " Hz is faster than the loop ("
-      << (options.rate_source.empty() ? "loop rate" : options.rate_source) << " = "
-      << options.max_poll_rate_hz
-      << " Hz), which takes at most one sample per cycle: the extra polls only load the NC "
-         "and the bus; at most "
-      << options.max_poll_rate_hz << " Hz (leave poll_rate_hz out to poll at the loop rate)";
-    r.fail(m.get("poll_rate_hz"), "modbus.poll_rate_hz", s.str());
-  }
-  c.offset_write_rate_hz = r.number(m, mp, "offset_write_rate_hz", 0.0, 0.0, 10000.0);
-  c.reconnect_min_s = r.number(m, mp, "reconnect_min_s", 0.1, 0.001, 600.0);
-  c.reconnect_max_s = r.number(m, mp, "reconnect_max_s", 5.0, 0.001, 600.0);
-  if (c.reconnect_max_s < c.reconnect_min_s) {
-    r.fail(m.get("reconnect_max_s"), "modbus.reconnect_max_s", "smaller than reconnect_min_s");
-  }
-  // Shorter than the cap, a peer that drops each connection just after that long would get
-  // reconnects more often than reconnect_max_s allows.
-  c.reconnect_reset_after_s =
-      r.number(m, mp, "reconnect_reset_after_s", std::max(10.0, c.reconnect_max_s), 0.001, 86400.0);
-  if (c.reconnect_reset_after_s < c.reconnect_max_s) {
-    r.fail(m.get("reconnect_reset_after_s"), "modbus.reconnect_reset_after_s",
-           "smaller than reconnect_max_s");
-  }
-  c.dead_after_failures =
-      static_cast<std::uint32_t>(r.integer(m, mp, "dead_after_failures", 3, 1, 1000));
-  c.verify_writes = r.boolean(m, mp, "verify_writes", false);
-  c.alarm_after_s = r.number(m, mp, "alarm_after_s", 1.0, 0.0, 3600.0);
-  c.degraded_alarm_after_s = r.number(m, mp, "degraded_alarm_after_s", 5.0, 0.01, 3600.0);
-  const auto pow2 = [&](std::string_view key, std::int64_t dflt) {
-    const std::int64_t v = r.integer(m, mp, key, dflt, 2, 1 << 20);
-    if ((v & (v - 1)) != 0) {
-      r.fail(m.get(key), Reader::join(mp, key), "must be a power of two");
-    }
-    return static_cast<std::size_t>(v);
-  };
-  c.rx_capacity = pow2("rx_capacity", 1024);
-  c.tx_capacity = pow2("tx_capacity", 256);
-  c.merge_gap_registers =
-      static_cast<std::uint32_t>(r.integer(m, mp, "merge_gap_registers", 0, 0, 125));
+namespace {
 
-  // Real-time policy of the I/O thread (applied by the thread itself, see modbus_bus.hpp).
-  c.io_sched_fifo_priority = static_cast<int>(r.integer(m, mp, "io_sched_fifo_priority", 0, 0, 99));
-  if (c.io_sched_fifo_priority > 0 && options.loop_sched_fifo_priority >= 0 &&
-      c.io_sched_fifo_priority >= options.loop_sched_fifo_priority) {
-    const std::string src = options.loop_priority_source.empty()
-                                ? std::string("the loop's priority")
-                                : std::string(options.loop_priority_source);
-    std::ostringstream s;
-    s << c.io_sched_fifo_priority << " is not below the loop thread's SCHED_FIFO priority (" << src
-      << " = " << options.loop_sched_fifo_priority;
-    if (options.loop_sched_fifo_priority == 0) {
-      s << ": the loop runs at normal scheduling, so any SCHED_FIFO I/O thread would preempt "
-           "it); raise the loop's priority above this one, or set 0 here";
-    } else {
-      s << "): the loop must always preempt the driver's I/O thread; at most "
-        << options.loop_sched_fifo_priority - 1 << " (0 = off)";
-    }
-    r.fail(m.get("io_sched_fifo_priority"), "modbus.io_sched_fifo_priority", s.str());
-  }
-  if (const toml::node* n = m.get("io_cpu_affinity"); n != nullptr) {
-    const auto* arr = n->as_array();
-    if (arr == nullptr) {
-      r.fail(n, "modbus.io_cpu_affinity", "expected an array of CPU numbers (e.g. [1])");
-    }
-    for (std::size_t i = 0; i < arr->size(); ++i) {
-      const toml::node& e = *arr->get(i);
-      const std::string ep = "modbus.io_cpu_affinity[" + std::to_string(i) + "]";
-      if (!e.is_integer()) {
-        r.fail(&e, ep, "expected an integer (a CPU number)");
-      }
-      const std::int64_t cpu = *e.value<std::int64_t>();
-      if (cpu < 0 || cpu > 1023) {
-        r.fail(&e, ep, "value " + std::to_string(cpu) + " outside 0..1023");
-      }
-      if (std::find(c.io_cpu_affinity.begin(), c.io_cpu_affinity.end(), cpu) !=
-          c.io_cpu_affinity.end()) {
-        r.fail(&e, ep, "CPU " + std::to_string(cpu) + " is listed twice");
-      }
-      c.io_cpu_affinity.push_back(static_cast<int>(cpu));
-    }
-  }
-
-  std::vector<Claim> claims;
-  const auto claim = [&](const SignalMap& s, const std::string& path, const toml::node* n) {
-    const std::uint32_t first = s.address;
-    claims.push_back({s.table, first, first + span(s) - 1U, path,
-                      n != nullptr ? static_cast<int>(n->source().begin.line) : 0});
-  };
-
-  // Signal groups.
-  for (std::size_t gi = 0; gi < kGroupCount; ++gi) {
-    const auto g = static_cast<Group>(gi);
-    const std::string gp = mp + "." + std::string(kGroupKeys[gi]);
-    const toml::table* gt = r.sub_table(m, mp, kGroupKeys[gi]);
-    if (gt == nullptr) {
-      continue;
-    }
-    GroupMap& gm = c.groups[gi];
-    gm.present = true;
-    for (auto&& [k, v] : *gt) {
-      const auto& keys = kFieldKeys[gi];
-      const auto it = std::find(
-          keys.begin(), keys.begin() + static_cast<std::ptrdiff_t>(kFieldCounts[gi]), k.str());
-      if (it == keys.begin() + static_cast<std::ptrdiff_t>(kFieldCounts[gi])) {
-        r.fail(&v, Reader::join(gp, k.str()), "unknown signal");
-      }
-      const auto fi = static_cast<std::size_t>(it - keys.begin());
-      const std::string fp = Reader::join(gp, k.str());
-      gm.fields[fi] = read_signal(r, v, fp, nullptr,
-                                  g == Group::kToolMeasurement && fi == tool_meas_field::kWear);
-      claim(gm.fields[fi], fp, &v);
-    }
-    for (std::size_t fi = 0; fi < kFieldCounts[gi]; ++fi) {
-      if (required(g, fi) && !gm.fields[fi].mapped) {
-        r.fail(gt, Reader::join(gp, kFieldKeys[gi][fi]), "missing (required for this group)");
-      }
-    }
-    if (g == Group::kAxis) {
-      // Axes fill AxisSample.position_mm from X on: a gap would leave an axis undefined.
-      bool gap = false;
-      for (std::size_t a = axis_field::kX; a <= axis_field::kC; ++a) {
-        if (!gm.fields[a].mapped) {
-          gap = true;
-        } else if (gap) {
-          r.fail(gt->get(kFieldKeys[gi][a]), Reader::join(gp, kFieldKeys[gi][a]),
-                 "axes must be mapped in order x, y, z, a, b, c without gaps");
-        }
-      }
-      const bool nx = gm.fields[axis_field::kNormalX].mapped;
-      if (nx != gm.fields[axis_field::kNormalY].mapped ||
-          nx != gm.fields[axis_field::kNormalZ].mapped) {
-        r.fail(gt, gp + ".normal_x", "normal_x, normal_y and normal_z go together");
-      }
-    } else {
-      const SignalMap& seq = gm.fields[0];
-      const std::string sp = gp + ".sequence";
-      if (seq.encoding.type != ValueType::kUint16 && seq.encoding.type != ValueType::kUint32) {
-        r.fail(gt->get("sequence"), sp, "a sequence counter must be uint16 or uint32");
-      }
-      if (is_bit_table(seq.table)) {
-        r.fail(gt->get("sequence"), sp, "a sequence counter must be in holding or input");
-      }
-      if (!std::isinf(seq.min) || !std::isinf(seq.max)) {
-        const toml::table* st = gt->get("sequence")->as_table();
-        const bool has_min = st != nullptr && st->get("min") != nullptr;
-        r.fail(st != nullptr ? st->get(has_min ? "min" : "max") : gt,
-               sp + (has_min ? ".min" : ".max"),
-               "a sequence counter has no range: it counts events and wraps");
-      }
-      for (std::size_t fi = 1; fi < kFieldCounts[gi]; ++fi) {
-        if (gm.fields[fi].mapped && gm.fields[fi].table != seq.table) {
-          r.fail(gt->get(kFieldKeys[gi][fi]), Reader::join(gp, kFieldKeys[gi][fi]),
-                 "must be in the same table as sequence (" + table_name(seq.table) +
-                     ") so that the event is read in one request");
-        }
-      }
-    }
-  }
-
-  // Temperatures.
-  if (const toml::node* tn = m.get("temperature")) {
-    const toml::array* arr = tn->as_array();
-    if (arr == nullptr) {
-      r.fail(tn, "modbus.temperature", "expected an array of tables [[modbus.temperature]]");
-    }
-    for (std::size_t i = 0; i < arr->size(); ++i) {
-      const std::string tp = "modbus.temperature[" + std::to_string(i) + "]";
-      const toml::table* t = (*arr)[i].as_table();
-      if (t == nullptr) {
-        r.fail(&(*arr)[i], tp, "expected a table");
-      }
-      static constexpr std::array<std::string_view, 10> kTempKeys = {
-          "sensor",     "table", "address", "type", "word_order",
-          "byte_order", "scale", "offset",  "min",  "max"};
-      r.check_keys(*t, tp, kTempKeys);
-      TemperatureMap tm;
-      if (t->get("sensor") == nullptr) {
-        r.fail(t, tp + ".sensor", "missing");
-      }
-      tm.sensor = static_cast<std::uint8_t>(r.integer(*t, tp, "sensor", 0, 0, 255));
-      for (const auto& other : c.temperatures) {
-        if (other.sensor == tm.sensor) {
-          r.fail(t->get("sensor"), tp + ".sensor", "sensor mapped twice");
-        }
-      }
-      tm.value = read_signal(r, *t, tp, t);
-      claim(tm.value, tp, t);
-      c.temperatures.push_back(tm);
-    }
-  }
-
-  // Offsets.
-  if (const toml::node* on = m.get("offset")) {
-    const toml::array* arr = on->as_array();
-    if (arr == nullptr) {
-      r.fail(on, "modbus.offset", "expected an array of tables [[modbus.offset]]");
-    }
-    for (std::size_t i = 0; i < arr->size(); ++i) {
-      const std::string op = "modbus.offset[" + std::to_string(i) + "]";
-      const toml::table* t = (*arr)[i].as_table();
-      if (t == nullptr) {
-        r.fail(&(*arr)[i], op, "expected a table");
-      }
-      static constexpr std::array<std::string_view, 7> kOffsetKeys = {
-          "register_index", "address", "type", "word_order", "byte_order", "scale", "offset"};
-      r.check_keys(*t, op, kOffsetKeys);
-      for (std::string_view req : {"register_index", "address"}) {
-        if (t->get(req) == nullptr) {
-          r.fail(t, Reader::join(op, req), "missing");
-        }
-      }
-      OffsetMap om;
-      om.register_index =
-          static_cast<std::uint16_t>(r.integer(*t, op, "register_index", 0, 0, 65535));
-      for (const auto& other : c.offsets) {
-        if (other.register_index == om.register_index) {
-          r.fail(t->get("register_index"), op + ".register_index", "register_index mapped twice");
-        }
-      }
-      om.address = static_cast<std::uint16_t>(r.integer(*t, op, "address", 0, 0, 65535));
-      om.encoding = read_encoding(r, *t, op, Table::kHolding);
-      if (static_cast<std::uint32_t>(om.address) + width(om.encoding.type) > 65536U) {
-        r.fail(t->get("address"), op + ".address", "value does not fit below address 65535");
-      }
-      SignalMap as_signal;
-      as_signal.table = Table::kHolding;
-      as_signal.address = om.address;
-      as_signal.encoding = om.encoding;
-      claim(as_signal, op, t);
-      c.offsets.push_back(om);
-    }
-  }
-
+/// The checks of the whole map (overlaps, read blocks, RTU bus time); fills c.blocks and the
+/// signals' block positions, and the offset write rate.
+void check_map(const toml::table& m, const toml::node* mnode, const std::string& mp,
+               const ParseOptions& options, ModbusConfig& c, std::vector<Claim>& claims,
+               Diagnostics& diag) {
+  const std::string table_file = m.source().path ? *m.source().path : std::string();
   // Overlaps: sort the claimed ranges per table and compare neighbours.
   std::sort(claims.begin(), claims.end(), [](const Claim& a, const Claim& b) {
     return a.table != b.table ? a.table < b.table : a.first < b.first;
@@ -701,7 +295,7 @@ ModbusConfig parse_modbus_table(const toml::table& m, std::string_view file,
       std::ostringstream s;
       s << table_name(b.table) << " address " << b.first << " overlaps " << a.path << " (line "
         << a.line << ")";
-      throw ConfigError(std::string(r.file()), b.line, 0, b.path, s.str());
+      diag.error(formats::Where{table_file, b.line, 0, b.path}, s.str());
     }
   }
 
@@ -729,7 +323,7 @@ ModbusConfig parse_modbus_table(const toml::table& m, std::string_view file,
           << "); place them closer together";
         const std::size_t dot = path.rfind('.');
         const toml::node* n = dot == std::string::npos ? nullptr : m.get(path.substr(dot + 1));
-        r.fail(n != nullptr ? n : mnode, path, s.str());
+        diag.error(n != nullptr ? n : mnode, path, s.str());
       }
       const std::size_t bi = c.blocks.size();
       c.blocks.push_back({table, static_cast<std::uint16_t>(lo), static_cast<std::uint16_t>(span)});
@@ -761,7 +355,7 @@ ModbusConfig parse_modbus_table(const toml::table& m, std::string_view file,
     plan(sigs, "modbus.temperature");
   }
   if (c.blocks.empty()) {
-    r.fail(mnode, "modbus", "no signal mapped: nothing to poll");
+    diag.error(mnode, "modbus", "no signal mapped: nothing to poll");
   }
 
   // Merge close blocks of one table (fewer requests: on RTU each costs two frame gaps). Every
@@ -842,7 +436,7 @@ ModbusConfig parse_modbus_table(const toml::table& m, std::string_view file,
         << c.poll_bus_time_s * 1e3 << " ms per poll for " << c.blocks.size()
         << " read requests); at most " << 0.9 / c.poll_bus_time_s << " Hz";
       const toml::node* n = m.get("poll_rate_hz");
-      r.fail(n != nullptr ? n : mnode, "modbus.poll_rate_hz", s.str());
+      diag.error(n != nullptr ? n : mnode, "modbus.poll_rate_hz", s.str());
     }
     const double budget_hz =
         c.write_bus_time_s > 0.0 ? (0.9 - load) / c.write_bus_time_s : c.poll_rate_hz;
@@ -852,10 +446,274 @@ ModbusConfig parse_modbus_table(const toml::table& m, std::string_view file,
       std::ostringstream s;
       s << c.offset_write_rate_hz << " Hz does not fit the bus time the polls leave at " << c.baud
         << " baud; at most " << budget_hz << " Hz";
-      r.fail(m.get("offset_write_rate_hz"), "modbus.offset_write_rate_hz", s.str());
+      diag.error(m.get("offset_write_rate_hz"), "modbus.offset_write_rate_hz", s.str());
     }
   } else if (c.offset_write_rate_hz <= 0.0) {
     c.offset_write_rate_hz = c.poll_rate_hz;
+  }
+}
+
+/// An event group's or the axes' table: its signals (each a sub-table), the group's rules.
+void read_group(const toml::table& m, Group g, const std::string& mp, ModbusConfig& c,
+                Diagnostics& diag, std::vector<Claim>& claims) {
+  const std::size_t gi = static_cast<std::size_t>(g);
+  const std::string gp = mp + "." + std::string(kGroupKeys[gi]);
+  const toml::table* gt = m.get_as<toml::table>(kGroupKeys[gi]);
+  GroupMap& gm = c.groups[gi];
+  gm.present = true;
+  const auto& keys = kFieldKeys[gi];
+  const auto keys_end = keys.begin() + static_cast<std::ptrdiff_t>(kFieldCounts[gi]);
+  for (auto&& [k, v] : *gt) {
+    const auto it = std::find(keys.begin(), keys_end, k.str());
+    const std::string fp = join(gp, k.str());
+    if (it == keys_end) {
+      diag.error(&v, fp, "unknown signal");
+      continue;
+    }
+    const auto* st = v.as_table();
+    if (st == nullptr) {
+      diag.error(&v, fp, "must be a table { table = ..., address = ..., type = ... }");
+      continue;
+    }
+    const auto fi = static_cast<std::size_t>(it - keys.begin());
+    TableReader r(*st, fp, diag);
+    gm.fields[fi] = read_signal(r, g == Group::kToolMeasurement && fi == tool_meas_field::kWear);
+    claims.push_back({gm.fields[fi].table, gm.fields[fi].address,
+                      gm.fields[fi].address + span(gm.fields[fi]) - 1U, fp,
+                      static_cast<int>(v.source().begin.line)});
+  }
+  for (std::size_t fi = 0; fi < kFieldCounts[gi]; ++fi) {
+    if (required(g, fi) && !gm.fields[fi].mapped) {
+      diag.error(gt, join(gp, keys[fi]), "missing required key (this group needs it)");
+    }
+  }
+  if (g == Group::kAxis) {
+    // Axes fill AxisSample.position_mm from X on: a gap would leave an axis undefined.
+    bool gap = false;
+    for (std::size_t a = axis_field::kX; a <= axis_field::kC; ++a) {
+      if (!gm.fields[a].mapped) {
+        gap = true;
+      } else if (gap) {
+        diag.error(gt->get(keys[a]), join(gp, keys[a]),
+                   "axes must be mapped in order x, y, z, a, b, c without gaps");
+      }
+    }
+    const bool nx = gm.fields[axis_field::kNormalX].mapped;
+    if (nx != gm.fields[axis_field::kNormalY].mapped ||
+        nx != gm.fields[axis_field::kNormalZ].mapped) {
+      diag.error(gt, gp + ".normal_x", "normal_x, normal_y and normal_z go together");
+    }
+    return;
+  }
+  const SignalMap& seq = gm.fields[0];
+  if (!seq.mapped) {
+    return;  // reported above
+  }
+  const std::string sp = gp + ".sequence";
+  if (seq.encoding.type != ValueType::kUint16 && seq.encoding.type != ValueType::kUint32) {
+    diag.error(gt->get("sequence"), sp, "a sequence counter must be uint16 or uint32");
+  }
+  if (is_bit_table(seq.table)) {
+    diag.error(gt->get("sequence"), sp, "a sequence counter must be in holding or input");
+  }
+  if (!std::isinf(seq.min) || !std::isinf(seq.max)) {
+    const toml::table* st = gt->get("sequence")->as_table();
+    const bool has_min = st != nullptr && st->get("min") != nullptr;
+    diag.error(st != nullptr ? st->get(has_min ? "min" : "max") : gt,
+               sp + (has_min ? ".min" : ".max"),
+               "a sequence counter has no range: it counts events and wraps");
+  }
+  for (std::size_t fi = 1; fi < kFieldCounts[gi]; ++fi) {
+    if (gm.fields[fi].mapped && gm.fields[fi].table != seq.table) {
+      diag.error(gt->get(keys[fi]), join(gp, keys[fi]),
+                 "must be in the same table as sequence (" + table_name(seq.table) +
+                     ") so that the event is read in one request");
+    }
+  }
+}
+
+}  // namespace
+
+std::optional<ModbusConfig> read_modbus_table(const toml::table& m, std::string_view file,
+                                              const ParseOptions& options,
+                                              formats::Diagnostics& out) {
+  Diagnostics diag;
+  const toml::node* mnode = &m;
+  const std::string mp = "modbus";
+  ModbusConfig c;
+  std::vector<Claim> claims;
+  {
+    TableReader r(m, mp, diag);
+    static constexpr std::array<std::pair<std::string_view, Transport>, 2> kTransports = {{
+        {"tcp", Transport::kTcp},
+        {"rtu", Transport::kRtu},
+    }};
+    if (m.get("transport") == nullptr) {
+      r.error("transport", "missing required key (tcp or rtu)");
+    }
+    c.transport = r.pick("transport", Transport::kTcp, names_of(kTransports));
+    c.host = r.string("host", c.host);
+    c.port = static_cast<std::uint16_t>(r.integer("port", 502, 1, 65535));
+    c.device = r.string("device", "");
+    c.baud = static_cast<std::uint32_t>(r.integer("baud", 19200, 300, 4000000));
+    static constexpr std::array<std::pair<std::string_view, Parity>, 3> kParities = {{
+        {"none", Parity::kNone},
+        {"even", Parity::kEven},
+        {"odd", Parity::kOdd},
+    }};
+    c.parity = r.pick("parity", Parity::kEven, names_of(kParities));
+    c.data_bits = static_cast<std::uint8_t>(r.integer("data_bits", 8, 7, 8));
+    c.stop_bits = static_cast<std::uint8_t>(r.integer("stop_bits", 1, 1, 2));
+    c.rs485 = r.boolean("rs485", false);
+    if (c.transport == Transport::kRtu && c.device.empty()) {
+      r.error("device", "missing required key: RTU needs a serial device path");
+    }
+    if (c.transport == Transport::kTcp && c.host.empty()) {
+      r.error("host", "must not be empty");
+    }
+    c.unit_id = static_cast<std::uint8_t>(r.integer("unit_id", 1, 0, 247));
+    c.response_timeout_s = r.number("response_timeout_s", 0.5, 0.001, 60.0);
+    c.byte_timeout_s = r.number("byte_timeout_s", 0.5, 0.0001, 60.0);
+    c.poll_rate_defaulted = m.get("poll_rate_hz") == nullptr;
+    c.poll_rate_hz = r.number("poll_rate_hz", options.default_poll_rate_hz, 0.01, 10000.0);
+    if (options.max_poll_rate_hz > 0.0 && c.poll_rate_hz > options.max_poll_rate_hz + 1e-9) {
+      std::ostringstream s;
+      s << c.poll_rate_hz << " Hz is faster than the loop ("
+        << (options.rate_source.empty() ? "loop rate" : options.rate_source) << " = "
+        << options.max_poll_rate_hz
+        << " Hz), which takes at most one sample per cycle: the extra polls only load the NC "
+           "and the bus; at most "
+        << options.max_poll_rate_hz << " Hz (leave poll_rate_hz out to poll at the loop rate)";
+      r.error("poll_rate_hz", s.str());
+    }
+    c.offset_write_rate_hz = r.number("offset_write_rate_hz", 0.0, 0.0, 10000.0);
+    c.reconnect_min_s = r.number("reconnect_min_s", 0.1, 0.001, 600.0);
+    c.reconnect_max_s = r.number("reconnect_max_s", 5.0, 0.001, 600.0);
+    if (c.reconnect_max_s < c.reconnect_min_s) {
+      r.error("reconnect_max_s", "smaller than reconnect_min_s");
+    }
+    // Shorter than the cap, a peer that drops each connection just after that long would get
+    // reconnects more often than reconnect_max_s allows.
+    c.reconnect_reset_after_s =
+        r.number("reconnect_reset_after_s", std::max(10.0, c.reconnect_max_s), 0.001, 86400.0);
+    if (c.reconnect_reset_after_s < c.reconnect_max_s) {
+      r.error("reconnect_reset_after_s", "smaller than reconnect_max_s");
+    }
+    c.dead_after_failures =
+        static_cast<std::uint32_t>(r.integer("dead_after_failures", 3, 1, 1000));
+    c.verify_writes = r.boolean("verify_writes", false);
+    c.alarm_after_s = r.number("alarm_after_s", 1.0, 0.0, 3600.0);
+    c.degraded_alarm_after_s = r.number("degraded_alarm_after_s", 5.0, 0.01, 3600.0);
+    const auto pow2 = [&](std::string_view key, std::int64_t dflt) {
+      std::int64_t v = r.integer(key, dflt, 2, 1 << 20);
+      if ((v & (v - 1)) != 0) {
+        r.error(key, "must be a power of two");
+        v = dflt;
+      }
+      return static_cast<std::size_t>(v);
+    };
+    c.rx_capacity = pow2("rx_capacity", 1024);
+    c.tx_capacity = pow2("tx_capacity", 256);
+    c.merge_gap_registers = static_cast<std::uint32_t>(r.integer("merge_gap_registers", 0, 0, 125));
+
+    // Real-time policy of the I/O thread (applied by the thread itself, see modbus_bus.hpp).
+    c.io_sched_fifo_priority = static_cast<int>(r.integer("io_sched_fifo_priority", 0, 0, 99));
+    if (c.io_sched_fifo_priority > 0 && options.loop_sched_fifo_priority >= 0 &&
+        c.io_sched_fifo_priority >= options.loop_sched_fifo_priority) {
+      const std::string src = options.loop_priority_source.empty()
+                                  ? std::string("the loop's priority")
+                                  : std::string(options.loop_priority_source);
+      std::ostringstream s;
+      s << c.io_sched_fifo_priority << " is not below the loop thread's SCHED_FIFO priority ("
+        << src << " = " << options.loop_sched_fifo_priority;
+      if (options.loop_sched_fifo_priority == 0) {
+        s << ": the loop runs at normal scheduling, so any SCHED_FIFO I/O thread would preempt "
+             "it); raise the loop's priority above this one, or set 0 here";
+      } else {
+        s << "): the loop must always preempt the driver's I/O thread; at most "
+          << options.loop_sched_fifo_priority - 1 << " (0 = off)";
+      }
+      r.error("io_sched_fifo_priority", s.str());
+    }
+    for (const std::int64_t cpu : r.integer_list("io_cpu_affinity", 0, 1023)) {
+      if (std::find(c.io_cpu_affinity.begin(), c.io_cpu_affinity.end(), cpu) !=
+          c.io_cpu_affinity.end()) {
+        r.error("io_cpu_affinity", "CPU " + std::to_string(cpu) + " is listed twice");
+        continue;
+      }
+      c.io_cpu_affinity.push_back(static_cast<int>(cpu));
+    }
+
+    // Signal groups.
+    for (std::size_t gi = 0; gi < kGroupCount; ++gi) {
+      if (r.table(kGroupKeys[gi]) != nullptr) {
+        read_group(m, static_cast<Group>(gi), mp, c, diag, claims);
+      }
+    }
+
+    // Temperatures.
+    if (const toml::array* arr = r.table_array("temperature")) {
+      for (std::size_t i = 0; i < arr->size(); ++i) {
+        const std::string tp = "modbus.temperature[" + std::to_string(i) + "]";
+        const toml::table& t = *(*arr)[i].as_table();
+        TableReader tr(t, tp, diag);
+        TemperatureMap tm;
+        tm.sensor = static_cast<std::uint8_t>(tr.integer("sensor", std::nullopt, 0, 255));
+        for (const auto& other : c.temperatures) {
+          if (other.sensor == tm.sensor && t.get("sensor") != nullptr) {
+            tr.error("sensor", "sensor mapped twice");
+          }
+        }
+        tm.value = read_signal(tr);
+        claims.push_back({tm.value.table, tm.value.address, tm.value.address + span(tm.value) - 1U,
+                          tp, static_cast<int>(t.source().begin.line)});
+        c.temperatures.push_back(tm);
+      }
+    }
+
+    // Offsets.
+    if (const toml::array* arr = r.table_array("offset")) {
+      for (std::size_t i = 0; i < arr->size(); ++i) {
+        const std::string op = "modbus.offset[" + std::to_string(i) + "]";
+        const toml::table& t = *(*arr)[i].as_table();
+        TableReader tr(t, op, diag);
+        OffsetMap om;
+        om.register_index =
+            static_cast<std::uint16_t>(tr.integer("register_index", std::nullopt, 0, 65535));
+        for (const auto& other : c.offsets) {
+          if (other.register_index == om.register_index && t.get("register_index") != nullptr) {
+            tr.error("register_index", "register_index mapped twice");
+          }
+        }
+        om.address = static_cast<std::uint16_t>(tr.integer("address", std::nullopt, 0, 65535));
+        om.encoding = read_encoding(tr, Table::kHolding);
+        if (static_cast<std::uint32_t>(om.address) + width(om.encoding.type) > 65536U) {
+          tr.error("address", "does not fit below address 65535");
+        }
+        SignalMap as_signal;
+        as_signal.table = Table::kHolding;
+        as_signal.address = om.address;
+        as_signal.encoding = om.encoding;
+        claims.push_back({Table::kHolding, om.address, om.address + span(as_signal) - 1U, op,
+                          static_cast<int>(t.source().begin.line)});
+        c.offsets.push_back(om);
+      }
+    }
+  }
+  // The checks of the whole map need every entry read: after an error they would only repeat it.
+  if (diag.ok()) {
+    check_map(m, mnode, mp, options, c, claims, diag);
+  }
+  // Tables built in memory carry no file name: the caller's.
+  for (const formats::Diagnostic& d : diag.items()) {
+    formats::Where w = d.where;
+    if (w.file.empty()) {
+      w.file = std::string(file);
+    }
+    out.error(std::move(w), d.message);
+  }
+  if (!diag.ok()) {
+    return std::nullopt;
   }
   return c;
 }

@@ -5,7 +5,8 @@
 // Parsing and validation are not real-time (they allocate); the driver uses the validated
 // result, whose read blocks and field positions are precomputed so that a poll only indexes.
 //
-// Rules enforced here (each refusal names file, line and key path):
+// Rules enforced here (each refusal names file, line, column and key path; every error of a map
+// is reported, not only the first):
 // - unknown keys and unknown signals are errors;
 // - addresses + width must fit 0..65535; no two mapped items may share a register or bit;
 // - an event group (sequence counter + its value registers) must lie in one table and within
@@ -19,6 +20,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <limits>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <string_view>
@@ -28,16 +30,22 @@
 
 #include "core/common/types.hpp"
 #include "drivers/modbus/encoding.hpp"
+#include "formats/toml/diagnostics.hpp"
 
 namespace nccomp::drivers::modbus {
 
-/// A refused config: what() is "file:line: key.path: message". The parts are kept separately
-/// too, so that the daemon's config loader can report the error in its own format
-/// (file:line:column: key.path: message) beside the errors of other sections.
+/// A refused config: what() is every error, one per line ("file:line:column: key.path:
+/// message"). The first error's parts are kept separately too, and every error as
+/// diagnostics().
 class ConfigError : public std::runtime_error {
  public:
   using std::runtime_error::runtime_error;
   ConfigError(std::string file, int line, int column, std::string key_path, std::string message);
+  /// Every error of a map read by read_modbus_table(); errors without a file name get `file`.
+  ConfigError(formats::Diagnostics diagnostics, std::string_view file);
+
+  [[nodiscard]] const char* what() const noexcept override;
+  [[nodiscard]] const formats::Diagnostics& diagnostics() const noexcept { return diagnostics_; }
 
   [[nodiscard]] const std::string& file() const noexcept { return file_; }
   /// 0 when the error has no single position (e.g. the whole map's bus budget).
@@ -53,6 +61,9 @@ class ConfigError : public std::runtime_error {
   int column_{0};
   std::string key_path_;
   std::string message_;
+  explicit ConfigError(const formats::Diagnostic& first);
+  std::string what_;
+  formats::Diagnostics diagnostics_;
 };
 
 enum class Transport : std::uint8_t { kTcp, kRtu };
@@ -237,6 +248,11 @@ ModbusConfig parse_modbus_config(std::string_view toml_text, std::string_view fi
 /// column and key path. Throws ConfigError. Not real-time.
 ModbusConfig parse_modbus_table(const toml::table& modbus, std::string_view file,
                                 const ParseOptions& options = {});
+/// The same, reporting every error of the map to `diag` (file:line:column, key path) instead of
+/// throwing; nullopt if there was one. The daemon's [modbus] section uses it. Not real-time.
+std::optional<ModbusConfig> read_modbus_table(const toml::table& modbus, std::string_view file,
+                                              const ParseOptions& options,
+                                              formats::Diagnostics& diag);
 /// Reads and parses a file. Throws ConfigError.
 ModbusConfig load_modbus_config(const std::string& path);
 

@@ -42,21 +42,6 @@ struct ModbusSection final : Section {
   std::vector<MappedRegister> mapped;
 };
 
-/// Reports a refused map at its file:line:column and key path.
-void report(const mb::ConfigError& e, Where w, Diagnostics& diag) {
-  if (!e.file().empty()) {
-    w.file = e.file();
-  }
-  if (e.line() > 0) {
-    w.line = e.line();
-    w.column = e.column();
-  }
-  if (!e.key_path().empty()) {
-    w.key_path = e.key_path();
-  }
-  diag.error(std::move(w), e.message().empty() ? e.what() : e.message());
-}
-
 class ModbusParser final : public SectionParser {
  public:
   std::string_view name() const noexcept override { return "modbus"; }
@@ -71,15 +56,13 @@ class ModbusParser final : public SectionParser {
     auto s = std::make_unique<ModbusSection>();
     s->table = t;
     s->file = table_where.file;
-    try {
-      mb::ParseOptions provisional;
-      provisional.default_poll_rate_hz =
-          0.01;  // the lowest allowed; cross_check() sets the real one
-      s->config = mb::parse_modbus_table(*t, table_where.file, provisional);
-    } catch (const mb::ConfigError& e) {
-      report(e, table_where, diag);
+    mb::ParseOptions provisional;
+    provisional.default_poll_rate_hz = 0.01;  // the lowest allowed; cross_check() sets the real one
+    auto parsed = mb::read_modbus_table(*t, table_where.file, provisional, diag);
+    if (!parsed) {
       return nullptr;
     }
+    s->config = std::move(*parsed);
     // Positions of the offset mappings, for the cross-check's messages (the driver's config
     // keeps indices only).
     if (const auto* arr = t->get_as<toml::array>("offset")) {
@@ -110,10 +93,8 @@ class ModbusParser final : public SectionParser {
     options.rate_source = "daemon.rate_hz";
     options.loop_sched_fifo_priority = daemon.sched_fifo_priority;
     options.loop_priority_source = "daemon.realtime.sched_fifo_priority";
-    try {
-      s->config = mb::parse_modbus_table(*s->table, s->file, options);
-    } catch (const mb::ConfigError& e) {
-      report(e, where_of(s->table, "modbus"), diag);
+    if (auto parsed = mb::read_modbus_table(*s->table, s->file, options, diag)) {
+      s->config = std::move(*parsed);
     }
   }
 

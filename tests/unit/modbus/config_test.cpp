@@ -119,9 +119,9 @@ TEST(ModbusConfig, ReconnectBackOffKeys) {
       parse_modbus_config(head + "reconnect_max_s = 30\n" + axis, "t.toml").reconnect_reset_after_s,
       30.0);
   EXPECT_EQ(error_of(head + "reconnect_max_s = 30\nreconnect_reset_after_s = 20\n" + axis),
-            "t.toml:4: modbus.reconnect_reset_after_s: smaller than reconnect_max_s");
+            "t.toml:4:27: modbus.reconnect_reset_after_s: smaller than reconnect_max_s");
   EXPECT_EQ(error_of(head + "reconnect_min_s = 2\nreconnect_max_s = 1\n" + axis),
-            "t.toml:4: modbus.reconnect_max_s: smaller than reconnect_min_s");
+            "t.toml:4:19: modbus.reconnect_max_s: smaller than reconnect_min_s");
 }
 
 TEST(ModbusConfig, DegradedAlarmAfterParsedDefaultedAndRangeChecked) {
@@ -131,21 +131,23 @@ TEST(ModbusConfig, DegradedAlarmAfterParsedDefaultedAndRangeChecked) {
   EXPECT_DOUBLE_EQ(parse_modbus_config(head + "degraded_alarm_after_s = 0.5\n" + axis, "t.toml")
                        .degraded_alarm_after_s,
                    0.5);
-  EXPECT_THAT(error_of(head + "degraded_alarm_after_s = 0\n" + axis),
-              HasSubstr("t.toml:3: modbus.degraded_alarm_after_s:"));
+  EXPECT_THAT(
+      error_of(head + "degraded_alarm_after_s = 0\n" + axis),
+      HasSubstr(
+          "t.toml:3:26: modbus.degraded_alarm_after_s: must be a number in [0.01, 3600], got 0"));
 }
 
 TEST(ModbusConfig, UnknownKeyNamesFileLineAndPath) {
   EXPECT_EQ(error_of(std::string(kMinimal) + "pol_rate_hz = 5\n"),
-            "t.toml:6: modbus.axis.pol_rate_hz: unknown signal");
+            "t.toml:6:15: modbus.axis.pol_rate_hz: unknown signal");
   EXPECT_EQ(error_of("[modbus]\ntransport = \"tcp\"\npol_rate_hz = 5\n"),
-            "t.toml:3: modbus.pol_rate_hz: unknown key");
+            "t.toml:3:15: modbus.pol_rate_hz: unknown key");
   EXPECT_THAT(error_of(R"([modbus]
 transport = "tcp"
 [modbus.axis]
 x_mm = { table = "input", address = 0, typ = "int32" }
 )"),
-              "t.toml:4: modbus.axis.x_mm.typ: unknown key");
+              "t.toml:4:46: modbus.axis.x_mm.typ: unknown key");
 }
 
 TEST(ModbusConfig, RefusesOverlapsWithBothKeyPaths) {
@@ -182,19 +184,19 @@ transport = "tcp"
 [modbus.axis]
 x_mm = { address = 65535, type = "int32" }
 )"),
-            "t.toml:4: modbus.axis.x_mm.address: value does not fit below address 65535");
+            "t.toml:4:20: modbus.axis.x_mm.address: does not fit below address 65535");
   EXPECT_EQ(error_of(R"([modbus]
 transport = "tcp"
 [modbus.axis]
 x_mm = { address = 70000 }
 )"),
-            "t.toml:4: modbus.axis.x_mm.address: value 70000 outside 0..65535");
+            "t.toml:4:20: modbus.axis.x_mm.address: must be an integer in [0, 65535], got 70000");
   EXPECT_THAT(error_of(R"([modbus]
 transport = "tcp"
 [modbus.axis]
 x_mm = { address = 0, type = "int8" }
 )"),
-              HasSubstr("modbus.axis.x_mm.type: unknown value 'int8' (expected bool, int16"));
+              HasSubstr("modbus.axis.x_mm.type: must be one of \"bool\", \"int16\""));
   EXPECT_THAT(error_of(R"([modbus]
 transport = "tcp"
 [modbus.axis]
@@ -207,7 +209,7 @@ transport = "tcp"
 [modbus.axis]
 x_mm = { address = 0, scale = 0 }
 )"),
-              HasSubstr("modbus.axis.x_mm.scale: scale must not be 0"));
+              HasSubstr("modbus.axis.x_mm.scale: must not be 0"));
 }
 
 TEST(ModbusConfig, EventGroupMustBeOneRequest) {
@@ -238,7 +240,7 @@ transport = "tcp"
 [modbus.tool_change]
 sequence = { address = 10, type = "uint16" }
 )"),
-              HasSubstr("modbus.tool_change.tool: missing (required for this group)"));
+              HasSubstr("modbus.tool_change.tool: missing required key (this group needs it)"));
 }
 
 TEST(ModbusConfig, AxesInOrderAndNormalsTogether) {
@@ -263,7 +265,8 @@ TEST(ModbusConfig, MissingOrDuplicateItems) {
               HasSubstr("modbus.transport: missing"));
   EXPECT_THAT(error_of("[other]\n"), HasSubstr("modbus: missing [modbus] table"));
   EXPECT_THAT(error_of("[modbus]\ntransport = \"tcp\"\n"), HasSubstr("no signal mapped"));
-  EXPECT_THAT(error_of(std::string(kMinimal) + R"(
+  EXPECT_THAT(
+      error_of(std::string(kMinimal) + R"(
 [[modbus.offset]]
 register_index = 3
 address = 10
@@ -271,9 +274,9 @@ address = 10
 register_index = 3
 address = 20
 )"),
-              HasSubstr("t.toml:11: modbus.offset[1].register_index: register_index mapped twice"));
+      HasSubstr("t.toml:11:18: modbus.offset[1].register_index: register_index mapped twice"));
   EXPECT_THAT(error_of("[modbus]\ntransport = \"rtu\"\n[modbus.axis]\nx_mm = { address = 0 }\n"),
-              HasSubstr("modbus.device: missing: RTU needs a serial device path"));
+              HasSubstr("modbus.device: missing required key: RTU needs a serial device path"));
   EXPECT_THAT(error_of("[modbus]\ntransport = \"tcp\"\nrx_capacity = 1000\n"),
               HasSubstr("modbus.rx_capacity: must be a power of two"));
   EXPECT_THAT(error_of("[modbus]\ntransport = [\n"), HasSubstr("t.toml:"));
@@ -318,26 +321,26 @@ max = 80
 
   const std::string head = "[modbus]\ntransport = \"tcp\"\n[modbus.axis]\n";
   EXPECT_EQ(error_of(head + "x_mm = { address = 0, min = 5, max = -5 }\n"),
-            "t.toml:4: modbus.axis.x_mm.max: max -5 is below min 5");
+            "t.toml:4:38: modbus.axis.x_mm.max: max -5 is below min 5");
   EXPECT_EQ(error_of(head + "x_mm = { address = 0, min = \"low\" }\n"),
-            "t.toml:4: modbus.axis.x_mm.min: expected a number");
+            "t.toml:4:29: modbus.axis.x_mm.min: must be a number");
   EXPECT_EQ(error_of(head + "x_mm = { address = 0, max = nan }\n"),
-            "t.toml:4: modbus.axis.x_mm.max: value nan outside -1e+300..1e+300");
+            "t.toml:4:29: modbus.axis.x_mm.max: must be a number in [-1e+300, 1e+300], got nan");
   EXPECT_EQ(error_of(head + "x_mm = { address = 0 }\ncutting = { table = \"coil\", address = 1, "
                             "max = 1 }\n"),
-            "t.toml:5: modbus.axis.cutting.max: a coil is one bit: min / max do not apply");
+            "t.toml:5:48: modbus.axis.cutting.max: a coil is one bit: min / max do not apply");
   EXPECT_EQ(
       error_of("[modbus]\ntransport = \"tcp\"\n[modbus.tool_change]\n"
                "sequence = { address = 0, type = \"uint16\", min = 0 }\ntool = { address = 1 }\n"),
-      "t.toml:4: modbus.tool_change.sequence.min: a sequence counter has no range: it counts "
+      "t.toml:4:50: modbus.tool_change.sequence.min: a sequence counter has no range: it counts "
       "events and wraps");
   EXPECT_EQ(error_of("[modbus]\ntransport = \"tcp\"\n[modbus.axis]\nx_mm = { address = 0 }\n"
                      "[[modbus.temperature]]\nsensor = 0\naddress = 9\nmin = 30\nmax = 20\n"),
-            "t.toml:9: modbus.temperature[0].max: max 20 is below min 30");
+            "t.toml:9:7: modbus.temperature[0].max: max 20 is below min 30");
   // Offsets are bounded by the engine's limiter and the register's encoding, not here.
   EXPECT_EQ(error_of("[modbus]\ntransport = \"tcp\"\n[modbus.axis]\nx_mm = { address = 0 }\n"
                      "[[modbus.offset]]\nregister_index = 0\naddress = 9\nmax = 20\n"),
-            "t.toml:8: modbus.offset[0].max: unknown key");
+            "t.toml:8:7: modbus.offset[0].max: unknown key");
 }
 
 TEST(ModbusConfig, PollRateDefaultsToTheLoopRateAndIsNotFasterThanIt) {
@@ -425,23 +428,23 @@ TEST(ModbusConfig, IoThreadPriorityAndAffinityAreValidatedAgainstTheLoop) {
     return std::string("(accepted)");
   };
   EXPECT_EQ(error_with("io_sched_fifo_priority = 100"),
-            "t.toml:3: modbus.io_sched_fifo_priority: value 100 outside 0..99");
+            "t.toml:3:26: modbus.io_sched_fifo_priority: must be an integer in [0, 99], got 100");
   EXPECT_EQ(error_with("io_sched_fifo_priority = -1"),
-            "t.toml:3: modbus.io_sched_fifo_priority: value -1 outside 0..99");
+            "t.toml:3:26: modbus.io_sched_fifo_priority: must be an integer in [0, 99], got -1");
   EXPECT_EQ(error_with("io_sched_fifo_priority = \"high\""),
-            "t.toml:3: modbus.io_sched_fifo_priority: expected an integer");
+            "t.toml:3:26: modbus.io_sched_fifo_priority: must be an integer");
   EXPECT_EQ(error_with("io_sched_fifo_priority = 1.5"),
-            "t.toml:3: modbus.io_sched_fifo_priority: expected an integer");
+            "t.toml:3:26: modbus.io_sched_fifo_priority: must be an integer");
   EXPECT_EQ(error_with("io_cpu_affinity = 1"),
-            "t.toml:3: modbus.io_cpu_affinity: expected an array of CPU numbers (e.g. [1])");
+            "t.toml:3:19: modbus.io_cpu_affinity: must be an array of integers");
   EXPECT_EQ(error_with("io_cpu_affinity = [0, \"1\"]"),
-            "t.toml:3: modbus.io_cpu_affinity[1]: expected an integer (a CPU number)");
+            "t.toml:3:23: modbus.io_cpu_affinity[1]: must be an integer");
   EXPECT_EQ(error_with("io_cpu_affinity = [1024]"),
-            "t.toml:3: modbus.io_cpu_affinity[0]: value 1024 outside 0..1023");
+            "t.toml:3:20: modbus.io_cpu_affinity[0]: must be an integer in [0, 1023], got 1024");
   EXPECT_EQ(error_with("io_cpu_affinity = [-1]"),
-            "t.toml:3: modbus.io_cpu_affinity[0]: value -1 outside 0..1023");
+            "t.toml:3:20: modbus.io_cpu_affinity[0]: must be an integer in [0, 1023], got -1");
   EXPECT_EQ(error_with("io_cpu_affinity = [1, 1]"),
-            "t.toml:3: modbus.io_cpu_affinity[1]: CPU 1 is listed twice");
+            "t.toml:3:19: modbus.io_cpu_affinity: CPU 1 is listed twice");
 
   // nccompd: the loop at SCHED_FIFO 50.
   ParseOptions loop;
@@ -454,20 +457,20 @@ TEST(ModbusConfig, IoThreadPriorityAndAffinityAreValidatedAgainstTheLoop) {
   const std::string not_below =
       ": the loop must always preempt the driver's I/O thread; at most 49 (0 = off)";
   EXPECT_EQ(error_with("io_sched_fifo_priority = 50", loop),
-            "t.toml:3: modbus.io_sched_fifo_priority: 50 is not below the loop thread's "
+            "t.toml:3:26: modbus.io_sched_fifo_priority: 50 is not below the loop thread's "
             "SCHED_FIFO priority (daemon.realtime.sched_fifo_priority = 50)" +
                 not_below);
   EXPECT_EQ(error_with("io_sched_fifo_priority = 80", loop),
-            "t.toml:3: modbus.io_sched_fifo_priority: 80 is not below the loop thread's "
+            "t.toml:3:26: modbus.io_sched_fifo_priority: 80 is not below the loop thread's "
             "SCHED_FIFO priority (daemon.realtime.sched_fifo_priority = 50)" +
                 not_below);
   // The loop at normal scheduling: any SCHED_FIFO I/O thread would preempt it.
   loop.loop_sched_fifo_priority = 0;
   EXPECT_EQ(error_with("io_sched_fifo_priority = 1", loop),
-            "t.toml:3: modbus.io_sched_fifo_priority: 1 is not below the loop thread's SCHED_FIFO "
-            "priority (daemon.realtime.sched_fifo_priority = 0: the loop runs at normal "
-            "scheduling, so any SCHED_FIFO I/O thread would preempt it); raise the loop's "
-            "priority above this one, or set 0 here");
+            "t.toml:3:26: modbus.io_sched_fifo_priority: 1 is not below the loop thread's "
+            "SCHED_FIFO priority (daemon.realtime.sched_fifo_priority = 0: the loop runs at normal "
+            "scheduling, so any SCHED_FIFO I/O thread would preempt it); raise the loop's priority "
+            "above this one, or set 0 here");
   c = parse_modbus_config(with("io_sched_fifo_priority = 0\nio_cpu_affinity = [0]"), "t.toml",
                           loop);
   EXPECT_EQ(c.io_cpu_affinity, (std::vector<int>{0}));
@@ -503,7 +506,7 @@ x_mm = { address = 0, type = "int32" }
   EXPECT_DOUBLE_EQ(rtu_frame_gap_s(fast), 0.00175);
   // WHEN 100 Hz is asked of 9600 baud THEN it is refused with the achievable rate.
   EXPECT_THAT(error_of(base("poll_rate_hz = 100")),
-              HasSubstr("t.toml:6: modbus.poll_rate_hz: 100 Hz needs"));
+              HasSubstr("t.toml:6:16: modbus.poll_rate_hz: 100 Hz needs"));
   // An explicit offset write rate beyond the bus budget is refused too.
   EXPECT_THAT(error_of(base("poll_rate_hz = 10\noffset_write_rate_hz = 50") + R"(
 [[modbus.offset]]
@@ -512,6 +515,33 @@ address = 100
 type = "int32"
 )"),
               HasSubstr("modbus.offset_write_rate_hz: 50 Hz does not fit"));
+}
+
+}  // namespace
+}  // namespace nccomp::drivers::modbus
+
+namespace nccomp::drivers::modbus {
+namespace {
+
+// GIVEN a map with four mistakes in different tables, THEN all four are reported, each at its
+// file:line:column and key path (parse_modbus_config's what(), one per line, and
+// read_modbus_table's diagnostics), not only the first.
+TEST(ModbusConfig, EveryErrorOfAMapIsReportedNotOnlyTheFirst) {
+  const std::string text =
+      "[modbus]\ntransport = \"tcp\"\nport = 0\nunit_id = 300\n[modbus.axis]\n"
+      "x_mm = { address = 70000 }\ny_mm = { address = 1, type = \"int8\" }\n";
+  EXPECT_EQ(error_of(text),
+            "t.toml:3:8: modbus.port: must be an integer in [1, 65535], got 0\n"
+            "t.toml:4:11: modbus.unit_id: must be an integer in [0, 247], got 300\n"
+            "t.toml:6:20: modbus.axis.x_mm.address: must be an integer in [0, 65535], got 70000\n"
+            "t.toml:7:30: modbus.axis.y_mm.type: must be one of \"bool\", \"int16\", \"uint16\", "
+            "\"int32\", \"uint32\", \"float32\", got \"int8\"");
+  const toml::table root = toml::parse(std::string_view(text), std::string_view("t.toml"));
+  formats::Diagnostics diag;
+  EXPECT_FALSE(read_modbus_table(*root["modbus"].as_table(), "t.toml", {}, diag));
+  ASSERT_EQ(diag.items().size(), 4U);
+  EXPECT_EQ(diag.items()[2].where.key_path, "modbus.axis.x_mm.address");
+  EXPECT_EQ(diag.items()[2].where.line, 6);
 }
 
 }  // namespace

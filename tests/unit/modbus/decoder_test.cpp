@@ -777,15 +777,16 @@ transport = "tcp"
 [modbus.axis]
 x_mm = { address = 0, count = 2 }
 )"),
-            "t.toml:4: modbus.axis.x_mm.count: unknown key");
-  EXPECT_EQ(err(R"([modbus]
+            "t.toml:4:31: modbus.axis.x_mm.count: unknown key");
+  EXPECT_EQ(
+      err(R"([modbus]
 transport = "tcp"
 [modbus.tool_measurement]
 sequence = { address = 0, type = "uint16" }
 tool = { address = 1 }
 wear_um = { address = 2, count = 33 }
 )"),
-            "t.toml:6: modbus.tool_measurement.wear_um.count: value 33 outside 1..32");
+      "t.toml:6:34: modbus.tool_measurement.wear_um.count: must be an integer in [1, 32], got 33");
   // The profile's registers are claimed: a signal inside it overlaps.
   EXPECT_EQ(err(R"([modbus]
 transport = "tcp"
