@@ -93,7 +93,8 @@ HttpReply PageService::handle(const HttpRequest& request) {
   };
   static constexpr Route kRoutes[] = {{"/", "GET"},           {"/page.js", "GET"},
                                       {"/page.css", "GET"},   {"/api/status", "GET"},
-                                      {"/api/report", "GET"}, {"/api/action", "POST"}};
+                                      {"/api/report", "GET"}, {"/api/action", "POST"},
+                                      {"/favicon.ico", "GET"}};
   std::string_view path = request.path;
   std::string_view method_wanted;
   for (const auto& r : kRoutes) {
@@ -116,6 +117,12 @@ HttpReply PageService::handle(const HttpRequest& request) {
     return r;
   }
   if (path == "/api/report") return report();
+  if (path == "/favicon.ico") {
+    HttpReply r;  // no icon: answered, so that browsers asking for one are not bad requests
+    r.status = 204;
+    r.content_type = "image/x-icon";
+    return r;
+  }
   if (path.substr(0, kPlotPrefix.size()) == kPlotPrefix) {
     HttpReply r = plot(path.substr(kPlotPrefix.size()));
     if (r.status != 200) ++bad_requests_;

@@ -113,7 +113,7 @@ function renderAlarms(alarms) {
     const li = el('li', null, 'sev-' + a.severity);
     li.dataset.code = a.code;
     li.textContent = a.name + ' (code ' + a.code + ', ' + a.severity + ') subject ' + a.subject +
-      ', value ' + a.value + ', at ' + fixed(a.time_s, 3) + ' s';
+      ', value ' + a.value + ', at ' + fixed(a.time_s, 3) + ' s (daemon clock)';
     return li;
   });
   if (!items.length) items.push(el('li', 'none', 'none'));
