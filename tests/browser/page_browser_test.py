@@ -9,7 +9,9 @@ its status socket. The test plays the laser over Modbus and checks, in the brows
      the loop's cycle count within 2 s of cycles (it moves);
   2. a broken-tool alarm raised by the daemon appears on the page within 1 s of the NC's alarm
      register rising, without a reload;
-  3. acknowledge from a browser run by `nobody` (not root, not in the admin group) is refused with
+  3. the latest analysis report (--report-dir: the committed FL_THERMAL analysis under
+     bench/model/figures/) with its figures from summary.json and every plot loaded;
+  4. acknowledge from a browser run by `nobody` (not root, not in the admin group) is refused with
      the reason and the daemon stays halted; cancelling the dialog sends nothing; acknowledge from
      root's browser, confirmed in the dialog, lifts the halt (status and NC flag) and both logs
      name who did it.
@@ -197,7 +199,7 @@ def browser(work, user=None):
     opts = webdriver.ChromeOptions()
     opts.binary_location = CHROMIUM
     for a in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
-              "--window-size=1280,1400", "--no-first-run", "--disable-extensions"):
+              "--window-size=1280,1000", "--no-first-run", "--disable-extensions"):
         opts.add_argument(a)
     if user is None:
         opts.add_argument("--user-data-dir=" + tempfile.mkdtemp(dir=work, prefix="chrome-"))
@@ -265,8 +267,11 @@ def main():
     daemon = start("nccompd", [ARGS.nccompd, "--config", "nccompd.toml"], work)
     check(wait_until(lambda: (s := status_json()) and s["buses"][0]["state"] == "up"
                      and s["loop"]["cycles"] >= 20, 20), "nccompd runs on the NC")
+    # A copy, named relative to the page's directory (the screenshots show the name).
+    report_dir = os.path.join(work, "analysis")
+    shutil.copytree(os.path.join(ARGS.source, "bench/model/figures/fl_thermal_ch1"), report_dir)
     page = start("nccomp-page", [ARGS.page, "--listen", "127.0.0.1:0", "--socket", SOCKET,
-                                 "--admin-group", "adm"], work)
+                                 "--admin-group", "adm", "--report-dir", "analysis"], work)
 
     def page_port():
         for line in open(page.log_path):
@@ -311,6 +316,22 @@ def main():
               f"loop cycles: page {shown['cycles']}, status {cycles} (within {2 * RATE_HZ}, 2 s)")
         root.save_screenshot(os.path.join(work, "page-live.png"))
 
+        # The report: the figures of its summary.json, every plot of plots/ shown and loaded.
+        with open(os.path.join(report_dir, "summary.json")) as f:
+            summary = json.load(f)
+        plots = sorted(n for n in os.listdir(os.path.join(report_dir, "plots")) if n.endswith(".svg"))
+        check(wait_until(lambda: (t := text(root, "#report-meta")) and
+                         f"final {summary['final_rms_um']:.3f} um" in t.replace("µ", "u"), 5),
+              f"the report's final RMS {summary['final_rms_um']:.3f} um is shown")
+        rows = root.execute_script("return document.querySelectorAll('#report-effects tbody tr').length")
+        check(rows == len(summary["effects"]), f"{rows} effects shown, {len(summary['effects'])} in the report")
+        loaded = lambda: root.execute_script(
+            "return [...document.querySelectorAll('#report-plots img')]"
+            ".map((i) => [i.alt, i.complete && i.naturalWidth > 0])")
+        check(wait_until(lambda: (l := loaded()) and [a for a, _ in l] == plots and all(ok for _, ok in l), 10),
+              f"every plot is shown and loaded: {plots}")
+        root.find_element(By.ID, "report-card").screenshot(os.path.join(work, "page-report.png"))
+
         # A broken tool: the daemon halts and raises alarm 23; the page shows it within 1 s of
         # the NC's alarm register rising, without a reload.
         check(wait_until(lambda: nc.hr(REQUEST)[0] == 1, 10), "the next measurement is due")
@@ -324,6 +345,7 @@ def main():
               "the page shows the creep module halted")
         check(root.execute_script("return performance.getEntriesByType('navigation').length") == 1,
               "no reload")
+        root.execute_script("window.scrollTo(0, 0)")
         root.save_screenshot(os.path.join(work, "page-alarm.png"))
 
         # nobody's browser: the dialog, confirmed; refused by the page, the daemon still halted.

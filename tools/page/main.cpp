@@ -1,8 +1,8 @@
 // nccomp-page: the operator's web page of one nccompd (docs/operator-page.md). A process of its
 // own beside the daemon: it reads the daemon's status socket, never the loop, and serves the
 // page on 127.0.0.1 unless told otherwise.
-// Exit status: 0 stopped by SIGTERM / SIGINT; 1 cannot listen; 2 bad options (CLI11's usage
-// status for an unknown option).
+// Exit status: 0 stopped by SIGTERM / SIGINT (also --help, --version); 1 cannot listen; 2 a
+// usage error (an unknown option, a bad --listen).
 #include <arpa/inet.h>
 #include <signal.h>
 
@@ -92,7 +92,12 @@ int main(int argc, char** argv) {
   app.add_option("--max-watchers", max_watchers, "Pages watching at once")
       ->capture_default_str()
       ->check(CLI::Range(1, 64));
-  CLI11_PARSE(app, argc, argv);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    // --help prints and exits 0; CLI11's own codes for usage errors are 100+.
+    return app.exit(e) == 0 ? 0 : 2;
+  }
 
   std::string host;
   int port = 0;

@@ -165,6 +165,8 @@ function render(snap) {
   actionsAllowed = !!page.actions;
   $('ack').disabled = !actionsAllowed;
   $('ack').title = actionsAllowed ? '' : 'actions are off on this page (listening beyond this host)';
+  $('ack-who').textContent = 'Allowed: root and members of group ' + page.admin_group +
+    ' (the user running this browser). nccomp-page and nccompd log who acknowledged.';
   $('page-counters').textContent = 'nccomp-page: ' + page.actions_done + ' action(s) done, ' +
     page.actions_refused + ' refused, ' + page.bad_requests + ' bad request(s); acknowledge: ' +
     'root and group ' + page.admin_group;
