@@ -238,12 +238,15 @@ def text(d, css):
 READ_PAGE = """
 const q = (s) => { const e = document.querySelector(s); return e ? e.textContent : null; };
 const regs = {};
-for (const tr of document.querySelectorAll('#registers tr[data-register]'))
+const limits = {};
+for (const tr of document.querySelectorAll('#registers tr[data-register]')) {
   regs[tr.dataset.register] = tr.querySelector('.output').textContent;
+  limits[tr.dataset.register] = tr.querySelector('.limits').textContent;
+}
 const creep = {};
 for (const td of document.querySelectorAll("[data-module='creep'] td[data-name]"))
   creep[td.dataset.name] = td.textContent;
-return {cycles: document.body.dataset.cycles, regs: regs, rate: q("#loop td[data-name='rate']"),
+return {cycles: document.body.dataset.cycles, regs: regs, limits: limits, rate: q("#loop td[data-name='rate']"),
         creep: creep, updated: q('#updated')};
 """
 
@@ -305,6 +308,15 @@ def main():
             check(shown["regs"][r["name"]] == f"{r['output_um']:.3f}",
                   f"register {r['name']}: page {shown['regs'][r['name']]} = status "
                   f"{r['output_um']:.3f}")
+        # Limits: the config's for the length register; a flag shows only its absolute limit.
+        check(shown["limits"]["T1_length_wear"] == "|x| ≤ 200 µm, step ≤ 5 µm, rate ≤ 50 µm/s",
+              f"T1_length_wear's limits as configured: {shown['limits']['T1_length_wear']}")
+        for r in st["registers"]:
+            want = f"|x| ≤ {r['max_abs_um']:g} µm"
+            if r["kind"] != "flag":
+                want += f", step ≤ {r['max_step_um']:g} µm, rate ≤ {r['max_rate_um_per_s']:g} µm/s"
+            check(shown["limits"][r["name"]] == want,
+                  f"register {r['name']} limits: page '{shown['limits'][r['name']]}' = status")
         check(shown["rate"].startswith(f"{st['loop']['rate_hz']:.1f} Hz configured"),
               f"the configured loop rate: {shown['rate']}")
         creep = module(st, "creep")

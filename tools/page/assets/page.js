@@ -33,8 +33,11 @@ function fillBody(table, rows) {
 function limitsText(r) {
   const parts = [];
   if (typeof r.max_abs_um === 'number') parts.push('|x| ≤ ' + r.max_abs_um + ' µm');
-  if (typeof r.max_step_um === 'number') parts.push('step ≤ ' + r.max_step_um + ' µm');
-  if (typeof r.max_rate_um_per_s === 'number') parts.push('rate ≤ ' + r.max_rate_um_per_s + ' µm/s');
+  // A flag is written as asked: only max_abs_um applies to it.
+  if (r.kind !== 'flag') {
+    if (typeof r.max_step_um === 'number') parts.push('step ≤ ' + r.max_step_um + ' µm');
+    if (typeof r.max_rate_um_per_s === 'number') parts.push('rate ≤ ' + r.max_rate_um_per_s + ' µm/s');
+  }
   return parts.length ? parts.join(', ') : 'not reported';
 }
 
