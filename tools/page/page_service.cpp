@@ -103,6 +103,13 @@ HttpReply PageService::handle(const HttpRequest& request) {
   if (method_wanted.empty() && path.substr(0, kPlotPrefix.size()) == kPlotPrefix) {
     method_wanted = "GET";
   }
+  // Another site's name resolved to this host (DNS rebinding) reads and acts as nobody.
+  if (!options_.allowed_hosts.empty() &&
+      std::find(options_.allowed_hosts.begin(), options_.allowed_hosts.end(), request.host) ==
+          options_.allowed_hosts.end()) {
+    return error(403, "Host '" + request.host + "' is not this page's address (open the page as " +
+                          "http://" + options_.allowed_hosts.front() + "/)");
+  }
   if (method_wanted.empty()) return error(404, "no such page: " + request.path);
   if (request.method != method_wanted && !(method_wanted == "GET" && request.method == "HEAD")) {
     HttpReply r = error(405, "method " + request.method + " not allowed on " + request.path +
@@ -152,12 +159,6 @@ HttpReply PageService::action(const HttpRequest& request) {
   if (!request.origin.empty() && request.origin != "http://" + request.host) {
     return error(403, "cross-origin request refused: Origin '" + request.origin +
                           "' is not this page (http://" + request.host + ")");
-  }
-  if (!options_.allowed_hosts.empty() &&
-      std::find(options_.allowed_hosts.begin(), options_.allowed_hosts.end(), request.host) ==
-          options_.allowed_hosts.end()) {
-    return error(403, "Host '" + request.host + "' is not this page's address (open the page as " +
-                          "http://" + options_.allowed_hosts.front() + "/)");
   }
   if (request.body.size() > options_.max_body_bytes) {
     return error(413, "an action's body is at most " + std::to_string(options_.max_body_bytes) +
@@ -252,7 +253,7 @@ HttpReply PageService::action(const HttpRequest& request) {
   return r;
 }
 
-std::string PageService::page_json() const {
+nlohmann::json PageService::page_json() const {
   std::string report_mtime;
   if (!options_.report_dir.empty()) {
     std::error_code ec;
@@ -265,8 +266,7 @@ std::string PageService::page_json() const {
               {"actions", options_.actions},
               {"admin_group", options_.admin_group},
               {"report", !options_.report_dir.empty()},
-              {"report_version", report_mtime}}
-      .dump();
+              {"report_version", report_mtime}};
 }
 
 std::string PageService::snapshot() {
@@ -285,7 +285,7 @@ std::string PageService::snapshot() {
     s["ok"] = false;
     s["error"] = e.what();
   }
-  s["page"] = json::parse(page_json());
+  s["page"] = page_json();
   return s.dump();
 }
 

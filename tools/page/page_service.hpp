@@ -12,6 +12,7 @@
 #include <cstdint>
 #include <functional>
 #include <mutex>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -104,7 +105,7 @@ class PageService {
   HttpReply report() const;
   HttpReply plot(std::string_view name) const;
   HttpReply error(int status, const std::string& message);
-  std::string page_json() const;
+  nlohmann::json page_json() const;
   void poll_loop();
 
   PageOptions options_;

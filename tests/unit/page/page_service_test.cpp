@@ -192,6 +192,11 @@ TEST(PageService, EveryBadActionIsA4xxWithItsReasonAndTheDaemonIsNeverAsked) {
   EXPECT_EQ(f.acks(), 0);
   EXPECT_TRUE(f.asked_uids.empty());
   EXPECT_EQ(s.actions_refused(), 0U);
+  // Nor is the status read under another site's name.
+  auto rebound_get = get("/api/status");
+  rebound_get.host = "evil.example:8470";
+  EXPECT_EQ(s.handle(rebound_get).status, 403);
+  EXPECT_TRUE(f.requests.empty());
 }
 
 TEST(PageService, AnAllowedUserAcknowledgesAndTheLogNamesThem) {
