@@ -1,6 +1,7 @@
 #include "tools/page/page_service.hpp"
 
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <ctime>
 #include <exception>
