@@ -72,7 +72,14 @@ void PageServer::serve(PageService& service) {
     security_headers(res, r.content_type);
     res.set_content(r.body, r.content_type.c_str());
   };
-  server_->Get("/events", [this, &service](const httplib::Request&, httplib::Response& res) {
+  server_->Get("/events", [this, &service](const httplib::Request& req, httplib::Response& res) {
+    const HttpReply judged = service.handle(to_request(req));
+    if (judged.status != 200) {
+      res.status = judged.status;
+      security_headers(res, judged.content_type);
+      res.set_content(judged.body, judged.content_type.c_str());
+      return;
+    }
     security_headers(res, "text/event-stream");
     if (watchers_.fetch_add(1) >= max_watchers_) {
       watchers_.fetch_sub(1);

@@ -92,10 +92,14 @@ HttpReply PageService::handle(const HttpRequest& request) {
     std::string_view path;
     std::string_view method;
   };
-  static constexpr Route kRoutes[] = {{"/", "GET"},           {"/page.js", "GET"},
-                                      {"/page.css", "GET"},   {"/api/status", "GET"},
-                                      {"/api/report", "GET"}, {"/api/action", "POST"},
-                                      {"/favicon.ico", "GET"}};
+  static constexpr Route kRoutes[] = {{"/", "GET"},
+                                      {"/page.js", "GET"},
+                                      {"/page.css", "GET"},
+                                      {"/api/status", "GET"},
+                                      {"/api/report", "GET"},
+                                      {"/api/action", "POST"},
+                                      {"/favicon.ico", "GET"},
+                                      {"/events", "GET"}};
   std::string_view path = request.path;
   std::string_view method_wanted;
   for (const auto& r : kRoutes) {
@@ -124,6 +128,7 @@ HttpReply PageService::handle(const HttpRequest& request) {
     r.body = snapshot();
     return r;
   }
+  if (path == "/events") return HttpReply{};  // allowed: the server streams it (page_server)
   if (path == "/api/report") return report();
   if (path == "/favicon.ico") {
     HttpReply r;  // no icon: answered, so that browsers asking for one are not bad requests

@@ -72,9 +72,10 @@ class PageService {
   PageService(const PageService&) = delete;
   PageService& operator=(const PageService&) = delete;
 
-  /// Every route but /events: the page, its script and style, /api/status, /api/report,
+  /// Every route: the page, its script and style, /api/status, /api/report,
   /// /report/plots/NAME.svg and POST /api/action. Bad input gets a 4xx reply with
-  /// {"error": "..."} and is counted; nothing throws.
+  /// {"error": "..."} and is counted; nothing throws. GET /events is only judged here (200 with
+  /// no body: the server then streams next_snapshot()).
   [[nodiscard]] HttpReply handle(const HttpRequest& request);
 
   /// A snapshot now: {"time_utc", "ok", "status" (the daemon's JSON) or "error", "page"}.

@@ -123,6 +123,14 @@ TEST(PageServer, EventsStreamSnapshotsAndTurnAwayWatchersBeyondTheLimit) {
   EXPECT_EQ(second->body, "{\"error\":\"busy: 1 pages are watching (--max-watchers)\"}\n");
   done = true;
   watcher.join();
+  // Under another site's name (DNS rebinding): no stream.
+  httplib::Client evil("127.0.0.1", r.port);
+  evil.set_default_headers({{"Host", "evil.example:" + std::to_string(r.port)}});
+  const auto rebound = evil.Get("/events", [](const char* data, std::size_t n) {
+    return std::string(data, n).find("data:") == std::string::npos;  // a stream: cancelled
+  });
+  ASSERT_TRUE(rebound);
+  EXPECT_EQ(rebound->status, 403);
 }
 
 TEST(PageServer, AnActionsUserIsTheUidOfTheConnectingProcess) {
