@@ -6,6 +6,8 @@
 #   /usr/bin/ncsim, ncsim_peer, modbus_nc, can_nc      (nccomp-sim)
 #   /lib/systemd/system/nccompd.service, /usr/lib/sysusers.d/nccompd.conf,
 #   /usr/lib/tmpfiles.d/nccompd.conf (group and mode of /etc/nccompd: readable by the service)
+#   /usr/bin/nccomp-page, /lib/systemd/system/nccomp-page.service,
+#   /usr/lib/sysusers.d/nccomp-page.conf (the operator page, docs/operator-page.md)
 #   /etc/nccompd/nccompd.toml, reference-nc-modbus.toml
 #   /usr/share/doc/nccomp/*.md, examples/*.toml; /usr/share/man/man{1,5,8}
 #   /usr/share/bash-completion/completions/nccomp
@@ -33,6 +35,9 @@ set(NCCOMP_TMPFILESDIR "${_tmpfilesdir}" CACHE PATH "Directory of the tmpfiles.d
 install(FILES systemd/nccompd.service DESTINATION "${NCCOMP_SYSTEMD_UNITDIR}")
 install(FILES systemd/nccompd.sysusers.conf DESTINATION "${NCCOMP_SYSUSERSDIR}" RENAME nccompd.conf)
 install(FILES systemd/nccompd.tmpfiles.conf DESTINATION "${NCCOMP_TMPFILESDIR}" RENAME nccompd.conf)
+install(FILES systemd/nccomp-page.service DESTINATION "${NCCOMP_SYSTEMD_UNITDIR}")
+install(FILES systemd/nccomp-page.sysusers.conf DESTINATION "${NCCOMP_SYSUSERSDIR}"
+        RENAME nccomp-page.conf)
 
 # The operator's configuration (conffiles in the package). Readable by the service through
 # tmpfiles.d (root:nccomp 0640), applied after the user exists: systemd-tmpfiles --create.
@@ -41,8 +46,10 @@ install(FILES config/nccompd.toml config/reference-nc-modbus.toml
 
 install(FILES README.md docs/calibration.md docs/can.md docs/checkpoints.md
               docs/closing-the-loop.md docs/config.md docs/creep.md docs/daemon.md docs/grinding.md
-              docs/modbus.md docs/report.md
+              docs/modbus.md docs/report.md docs/operator-page.md
         DESTINATION "${CMAKE_INSTALL_DOCDIR}")
+install(FILES docs/images/operator-page-alarm.png docs/images/operator-page-report.png
+        DESTINATION "${CMAKE_INSTALL_DOCDIR}/images")
 install(FILES config/nccompd.toml config/nccompd-loopback.toml config/reference-nc-modbus.toml
               config/reference-nc-can.toml config/reference-nc-can-fd.toml
         DESTINATION "${CMAKE_INSTALL_DOCDIR}/examples")

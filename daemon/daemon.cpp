@@ -122,6 +122,14 @@ std::unique_ptr<Runtime> make_runtime(const cfg::Config& c, const std::vector<Bu
   return rt;
 }
 
+std::vector<core::engine::RegisterSpec> register_specs(const cfg::Config& c) {
+  std::vector<core::engine::RegisterSpec> specs;
+  for (const auto& r : cfg::registers_section(c).registers) {
+    specs.push_back(r.spec);
+  }
+  return specs;
+}
+
 std::vector<std::string> register_names(const cfg::Config& c) {
   std::vector<std::string> names;
   for (const auto& r : cfg::registers_section(c).registers) {
@@ -236,6 +244,7 @@ class Daemon {
   std::unique_ptr<Runtime> runtime_;  // until the loop's ConfigSwap takes it
   std::mutex names_mu_;
   std::shared_ptr<const std::vector<std::string>> names_;
+  std::shared_ptr<const std::vector<core::engine::RegisterSpec>> specs_;  // under names_mu_
   std::vector<int> loop_cpus_;  // LoopOptions::cpu_affinity (cpu_placement.hpp)
   std::string state_path_;
   std::string state_problem_;  // not empty: offsets are held
@@ -296,6 +305,8 @@ int Daemon::configure() {
         "file keeps what the NC has");
   }
   names_ = std::make_shared<const std::vector<std::string>>(register_names(*config_));
+  specs_ =
+      std::make_shared<const std::vector<core::engine::RegisterSpec>>(register_specs(*config_));
   return 0;
 }
 
@@ -652,6 +663,10 @@ bool Daemon::start_status() {
     std::lock_guard<std::mutex> lock(names_mu_);
     return *names_;
   };
+  sc_.register_specs = [this] {
+    std::lock_guard<std::mutex> lock(names_mu_);
+    return *specs_;
+  };
   sc_.state_problem = [problem = state_problem_] { return problem; };
   sc_.config_path = options_.config_path;
   sc_.state_path = state_path_;
@@ -819,6 +834,8 @@ void Daemon::reload() {
       {
         std::lock_guard<std::mutex> lock(names_mu_);
         names_ = std::make_shared<const std::vector<std::string>>(register_names(*next.config));
+        specs_ = std::make_shared<const std::vector<core::engine::RegisterSpec>>(
+            register_specs(*next.config));
       }
       swap_->publish(std::move(rt));
       spdlog::info(

@@ -76,6 +76,7 @@ struct View {
   RegisterSnapshot r;
   ModulesSnapshot m;
   std::vector<std::string> names;
+  std::vector<core::engine::RegisterSpec> specs;
   double rate_hz{0.0};
   double measured_rate_hz{0.0};
   double p50{0}, p99{0}, p999{0}, max_us{0};
@@ -88,6 +89,7 @@ View gather(const StatusContext& c) {
   v.r = c.loop->registers();
   v.m = c.loop->modules();
   v.names = c.register_names ? c.register_names() : std::vector<std::string>{};
+  v.specs = c.register_specs ? c.register_specs() : std::vector<core::engine::RegisterSpec>{};
   v.rate_hz = v.s.period_ns > 0 ? 1e9 / static_cast<double>(v.s.period_ns) : 0.0;
   const double span_s = core::seconds(v.s.last_wake_ns - v.s.started_ns);
   v.measured_rate_hz = span_s > 0 ? static_cast<double>(v.s.cycles - 1) / span_s : 0.0;
@@ -165,7 +167,16 @@ std::string render_json(const StatusContext& c) {
       << "\",\"output_um\":" << num(r.output_um)
       << ",\"target_um\":" << (r.has_target ? num(r.target_um) : "null")
       << ",\"slewing\":" << (r.slewing ? "true" : "false")
-      << ",\"awaiting_nc\":" << (r.awaiting_nc ? "true" : "false") << ",\"hold\":"
+      << ",\"awaiting_nc\":" << (r.awaiting_nc ? "true" : "false");
+    if (i < v.specs.size()) {
+      // What the limiter allows this register (a flag: only max_abs_um applies).
+      const auto& spec = v.specs[i];
+      o << ",\"kind\":\"" << core::engine::to_string(spec.kind)
+        << "\",\"max_abs_um\":" << num(spec.limits.max_abs_um)
+        << ",\"max_step_um\":" << num(spec.limits.max_step_um)
+        << ",\"max_rate_um_per_s\":" << num(spec.limits.max_rate_um_per_s);
+    }
+    o << ",\"hold\":"
       << (r.hold == core::engine::RegisterHold::kNone
               ? std::string("null")
               : "\"" + std::string(core::engine::to_string(r.hold)) + "\"")

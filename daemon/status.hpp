@@ -26,6 +26,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/engine/engine.hpp"
 #include "daemon/commands/command.hpp"
 #include "daemon/logging.hpp"
 #include "daemon/loop.hpp"
@@ -51,6 +52,8 @@ struct StatusContext {
   const MeasurementLogWriter* measurement_log{nullptr};
   /// Thread-safe providers (the configuration can be reloaded while status runs).
   std::function<std::vector<std::string>()> register_names;
+  /// Each register's kind and limiter limits, in index order (empty: not shown).
+  std::function<std::vector<core::engine::RegisterSpec>()> register_specs;
   std::function<std::string()> state_problem;  // empty when the state is fine
   std::string config_path;
   std::string state_path;

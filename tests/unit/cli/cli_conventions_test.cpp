@@ -1,5 +1,5 @@
 // GIVEN every binary the packages install (nccompd, nccomp, ncsim, ncsim_peer, modbus_nc,
-// can_nc, modbus_map), WHEN each runs as a process:
+// can_nc, modbus_map, nccomp-page), WHEN each runs as a process:
 // - with --help, THEN exit 0 and a help text on stdout;
 // - with --version, THEN exit 0 and "<name> <version>" where the version is the newest entry of
 //   debian/changelog (read here, independently of the build's generated header);
@@ -104,9 +104,9 @@ struct Binary {
 
 const std::vector<Binary>& binaries() {
   static const std::vector<Binary> b = {
-      {"nccompd", NCCOMPD_BIN},       {"nccomp", NCCOMP_BIN},       {"ncsim", NCSIM_BIN},
-      {"ncsim_peer", NCSIM_PEER_BIN}, {"modbus_nc", MODBUS_NC_BIN}, {"can_nc", CAN_NC_BIN},
-      {"modbus_map", MODBUS_MAP_BIN}};
+      {"nccompd", NCCOMPD_BIN},       {"nccomp", NCCOMP_BIN},          {"ncsim", NCSIM_BIN},
+      {"ncsim_peer", NCSIM_PEER_BIN}, {"modbus_nc", MODBUS_NC_BIN},    {"can_nc", CAN_NC_BIN},
+      {"modbus_map", MODBUS_MAP_BIN}, {"nccomp-page", NCCOMP_PAGE_BIN}};
   return b;
 }
 
@@ -165,6 +165,8 @@ TEST_F(CliConventions, AnUnknownOptionIsAUsageErrorWithStatus2) {
   EXPECT_EQ(run({MODBUS_MAP_BIN}).exit_code, 2);
   EXPECT_EQ(run({NCSIM_PEER_BIN, "--map", "m.toml"}).exit_code, 2);
   EXPECT_EQ(run({NCCOMPD_BIN, "--config"}).exit_code, 2);
+  EXPECT_EQ(run({NCCOMP_PAGE_BIN, "--listen", "localhost"}).exit_code, 2);
+  EXPECT_EQ(run({NCCOMP_PAGE_BIN, "--poll-interval-s", "0"}).exit_code, 2);
 }
 
 TEST_F(CliConventions, EverySubcommandAnswersHelpWithZeroAndAnUnknownOptionWith2) {

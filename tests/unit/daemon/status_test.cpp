@@ -120,6 +120,10 @@ struct Rig {
     c.buses = {{"loopback", &bus}};
     c.logger = &logger;
     c.register_names = [] { return std::vector<std::string>{"T1_length_wear"}; };
+    c.register_specs = [] {
+      return std::vector<core::engine::RegisterSpec>{
+          {"T1_length_wear", core::engine::RegisterKind::kToolLengthWear, {200.0, 5.0, 5000.0}}};
+    };
     c.config_path = "test.toml";
     c.state_path = "state.bin";
     return c;
@@ -158,6 +162,11 @@ TEST(StatusServer, AnswersTextJsonAndPrometheus) {
     std::this_thread::sleep_for(10ms);
   }
   EXPECT_NE(json.find("\"name\":\"T1_length_wear\",\"output_um\":3,"), std::string::npos) << json;
+  // Each register's kind and limits (the operator page shows them).
+  EXPECT_NE(json.find("\"awaiting_nc\":false,\"kind\":\"tool_length_wear\",\"max_abs_um\":200,"
+                      "\"max_step_um\":5,\"max_rate_um_per_s\":5000,\"hold\":null}"),
+            std::string::npos)
+      << json;
   EXPECT_NE(json.find("\"buses\":[{\"name\":\"loopback\",\"state\":\"up\""), std::string::npos);
   EXPECT_NE(json.find("\"rate_hz\":1000,"), std::string::npos);
   // Driver-specific counters: all of them in JSON and metrics, only the non-zero ones in text.
