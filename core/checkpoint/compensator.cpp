@@ -706,6 +706,35 @@ bool CheckpointCompensator::adopt_register_value(std::size_t i, double nc_value_
   return true;
 }
 
+bool CheckpointCompensator::rebase(std::size_t first, std::size_t last, double delta_um,
+                                   TimeNs now_ns) noexcept {
+  if (first > last || last >= points_.size() || !std::isfinite(delta_um)) {
+    return false;
+  }
+  for (std::size_t i = first; i <= last; ++i) {
+    if (!limiter_.admissible(points_[i].offset_um + delta_um)) {
+      return false;
+    }
+  }
+  for (std::size_t i = first; i <= last; ++i) {
+    LearnedPoint& p = points_[i];
+    p.offset_um += delta_um;
+    p.applied_um += delta_um;
+    p.learned_um -= delta_um;
+    for (std::uint32_t k = 0; k < p.history_n; ++k) p.history[k] -= delta_um;
+    mark_dirty(i);
+  }
+  if (config_.active_register >= 0 && first == 0 && last + 1 == points_.size()) {
+    if (std::isfinite(live_target_um_)) live_target_um_ += delta_um;
+    if (std::isfinite(live_written_um_)) {
+      live_written_um_ += delta_um;
+      limiter_.reset(live_written_um_, now_ns);
+    }
+  }
+  ++generation_;
+  return true;
+}
+
 void CheckpointCompensator::export_state(CheckpointState& out) const {
   out.version = 1;
   out.part_counter = part_counter_;
