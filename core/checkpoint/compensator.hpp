@@ -189,8 +189,11 @@ class CheckpointCompensator {
   /// −delta_um. Checkpoints first … last (the live register: all of them) move their offset and
   /// the value their wall was cut with by delta_um, and what they learned (the error left for
   /// them, its history) by −delta_um, so the learning continues on the residual; the live value
-  /// and its limiter move with them (no slew of S1's own). False, nothing changed, if an offset
-  /// would leave the absolute limit. Real-time safe.
+  /// and its limiter move with them (no slew of S1's own). Mode A then takes the last part's
+  /// error less the trim as the residual (the average lagged the trend the trim now predicts)
+  /// and updates the offset from it as a probe would (feedback, dead band): the register moves
+  /// at S1's next write, through the limiter. False, nothing changed, if an offset would leave
+  /// the absolute limit. Real-time safe.
   bool rebase(std::size_t first, std::size_t last, double delta_um, TimeNs now_ns) noexcept;
 
   /// The value of checkpoint i's register [µm] (after the repeatability rule).

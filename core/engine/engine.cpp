@@ -929,9 +929,12 @@ std::size_t Engine::export_state(std::span<std::byte> buf) const noexcept {
     w.put(kTrimsVersion);
     w.put(static_cast<std::uint32_t>(regs_.size()));
     for (std::size_t i = 0; i < regs_.size(); ++i) {
+      // Imported but not stepped yet (a reload before the first cycle): the trims in force are
+      // still the imported ones; the next engine hands them over.
+      const bool imported = handover_pending_ && handover_known_[i] != 0;
       w.put_name(specs_[i].name);
-      w.put(regs_[i].has_trim ? regs_[i].trim_um : 0.0);
-      w.put(trim_identity(i));
+      w.put(imported ? handover_trim_um_[i] : (regs_[i].has_trim ? regs_[i].trim_um : 0.0));
+      w.put(imported ? handover_identity_[i] : trim_identity(i));
     }
     if (!w.ok()) {
       return 0;

@@ -207,3 +207,25 @@ TEST(TrimHandover, TheHandoverStepAllocatesNothing) {
 
 }  // namespace
 }  // namespace nccomp::core::engine
+
+namespace nccomp::core::engine {
+namespace {
+
+// Found by the e2e rollback: a reload swapped in before the first cycle of a restarted daemon
+// exported an engine that had imported the model's trim but not yet stepped: trim 0, identity 0.
+// The next engine saw nothing to hand over and the learner's residual (≈ 0) became the total.
+TEST(TrimHandover, AnEngineSwappedOutBeforeItsFirstStepPassesTheImportedTrimsOn) {
+  const Model m(-50.0, 7);
+  Machine with(8.0, &m);
+  with.run(20);
+  Machine restarted(8.0, &m);
+  restarted.take_over(with);  // a restart with the model: imported, never stepped
+  Machine none(8.0, nullptr);
+  none.take_over(restarted);  // the reload's swap in the first cycle
+  none.run(20);
+  EXPECT_DOUBLE_EQ(none.nc_um, -42.0);
+  EXPECT_DOUBLE_EQ(none.learner->value_, -42.0);
+}
+
+}  // namespace
+}  // namespace nccomp::core::engine
