@@ -733,6 +733,10 @@ bool CheckpointCompensator::rebase(std::size_t first, std::size_t last, double d
         p.offset_um = candidate;
       }
     }
+    // The errors before describe another split of the compensation (a trend the trim took, or
+    // gave back): the next reading counts in full, and the outlier rule waits for new ones.
+    p.count = 0;
+    p.history_n = 0;
     mark_dirty(i);
   }
   if (config_.active_register >= 0 && first == 0 && last + 1 == points_.size()) {

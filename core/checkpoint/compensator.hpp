@@ -192,8 +192,10 @@ class CheckpointCompensator {
   /// and its limiter move with them (no slew of S1's own). Mode A then takes the last part's
   /// error less the trim as the residual (the average lagged the trend the trim now predicts)
   /// and updates the offset from it as a probe would (feedback, dead band): the register moves
-  /// at S1's next write, through the limiter. False, nothing changed, if an offset would leave
-  /// the absolute limit. Real-time safe.
+  /// at S1's next write, through the limiter. The history is cleared and the next reading
+  /// counts in full (as a first one): the errors before belong to another split of the
+  /// compensation. False, nothing changed, if an offset would leave the absolute limit.
+  /// Real-time safe.
   bool rebase(std::size_t first, std::size_t last, double delta_um, TimeNs now_ns) noexcept;
 
   /// The value of checkpoint i's register [µm] (after the repeatability rule).
