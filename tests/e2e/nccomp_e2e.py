@@ -1249,8 +1249,8 @@ def scenario_model_handover(b, source, work):
                 model ([model] + [[model.apply]] on T1_radius_wear) while it runs (parts 13-18);
       restart:  the daemon restarted with the model config and its state (parts 19-24);
       rollback: the daemon with the model, and a SIGHUP back to the config without (25-30).
-    The swap lands in the first part of its run (during its approach; where exactly depends on
-    the machine's load). Checks: the first part that starts after the new configuration runs is
+    The swap lands in the first part of its run, before its first cut (checked: each part's
+    approach is made 3 s long for that). Checks: the first part that starts after the new configuration runs is
     cut within 1.5x the checkpoint error (RMS) of the parts after it; the part the swap landed in
     is cut with at most half the error of the last part before the load (S1 alone), and within
     1.5x the later parts' error after the rollback, where no part may be worse than 1.5x the
@@ -1276,6 +1276,10 @@ def scenario_model_handover(b, source, work):
         c.done()
         return
     before_parts, _, _ = wall_figures(before, 0)
+    # The continued runs wait 3 s of machine time before each part's first cut, so that the
+    # reload (taken while ncsim ticks) lands before part 13's / 25's finishing starts.
+    approach_s = 3.0
+    sets = sets + ["program.side_wall.approach_s=%g" % approach_s]
     with_model = {"model.file": '"%s"' % model, "model.update": '"cycle"',
                   "model.apply.term": '"tool_wear"'}
     load, load_swap = run_continued(b, source, work, "handover_load", "nccompd-walls.toml", {},
@@ -1296,6 +1300,9 @@ def scenario_model_handover(b, source, work):
         if label != "restart":
             c.that("configuration 2 is running" in r.daemon_log and swap_s is not None,
                    "%s: the running daemon swapped the configuration in" % label)
+            c.that(swap_s is not None and swap_s < approach_s,
+                   "%s: the swap ran before the first part's first cut (by t = %s s, the cut "
+                   "starts at %g s)" % (label, swap_s, approach_s))
         times = part_times(r)
         parts = sorted(times)
         after = [p for p in parts if times[p][0] >= (swap_s or 0.0)]
