@@ -706,6 +706,50 @@ bool CheckpointCompensator::adopt_register_value(std::size_t i, double nc_value_
   return true;
 }
 
+bool CheckpointCompensator::rebase(std::size_t first, std::size_t last, double delta_um,
+                                   TimeNs now_ns) noexcept {
+  if (first > last || last >= points_.size() || !std::isfinite(delta_um)) {
+    return false;
+  }
+  for (std::size_t i = first; i <= last; ++i) {
+    if (!limiter_.admissible(points_[i].offset_um + delta_um)) {
+      return false;
+    }
+  }
+  const bool mode_a = config_.learning_mode == LearningMode::kPreviousPart;
+  for (std::size_t i = first; i <= last; ++i) {
+    LearnedPoint& p = points_[i];
+    p.offset_um += delta_um;
+    p.applied_um += delta_um;
+    p.learned_um -= delta_um;
+    for (std::uint32_t k = 0; k < p.history_n; ++k) p.history[k] -= delta_um;
+    if (mode_a && p.history_n > 0) {
+      // The average lags a trend the trims now predict: the residual is the last part's error
+      // less the new trim. Applied as an update is (feedback, dead band), at S1's next write.
+      p.learned_um = p.history[p.history_n - 1];
+      const double candidate = p.offset_um + config_.feedback * (-p.learned_um - p.offset_um);
+      if (std::fabs(candidate - p.offset_um) >= config_.dead_band_um &&
+          limiter_.admissible(candidate)) {
+        p.offset_um = candidate;
+      }
+    }
+    // The errors before describe another split of the compensation (a trend the trim took, or
+    // gave back): the next reading counts in full, and the outlier rule waits for new ones.
+    p.count = 0;
+    p.history_n = 0;
+    mark_dirty(i);
+  }
+  if (config_.active_register >= 0 && first == 0 && last + 1 == points_.size()) {
+    if (std::isfinite(live_target_um_)) live_target_um_ += delta_um;
+    if (std::isfinite(live_written_um_)) {
+      live_written_um_ += delta_um;
+      limiter_.reset(live_written_um_, now_ns);
+    }
+  }
+  ++generation_;
+  return true;
+}
+
 void CheckpointCompensator::export_state(CheckpointState& out) const {
   out.version = 1;
   out.part_counter = part_counter_;

@@ -185,6 +185,19 @@ class CheckpointCompensator {
   /// learned against it. False (nothing changed) for a value the limiter refuses. Not real-time.
   bool adopt_register_value(std::size_t i, double nc_value_um) noexcept;
 
+  /// Trim handover (core/engine/engine.hpp): another module's trim on these values changed by
+  /// −delta_um. Checkpoints first … last (the live register: all of them) move their offset and
+  /// the value their wall was cut with by delta_um, and what they learned (the error left for
+  /// them, its history) by −delta_um, so the learning continues on the residual; the live value
+  /// and its limiter move with them (no slew of S1's own). Mode A then takes the last part's
+  /// error less the trim as the residual (the average lagged the trend the trim now predicts)
+  /// and updates the offset from it as a probe would (feedback, dead band): the register moves
+  /// at S1's next write, through the limiter. The history is cleared and the next reading
+  /// counts in full (as a first one): the errors before belong to another split of the
+  /// compensation. False, nothing changed, if an offset would leave the absolute limit.
+  /// Real-time safe.
+  bool rebase(std::size_t first, std::size_t last, double delta_um, TimeNs now_ns) noexcept;
+
   /// The value of checkpoint i's register [µm] (after the repeatability rule).
   [[nodiscard]] double register_value_um(std::size_t i) const noexcept;
   [[nodiscard]] double learned_um(std::size_t i) const noexcept { return points_[i].learned_um; }

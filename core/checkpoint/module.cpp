@@ -91,6 +91,25 @@ bool CheckpointModule::adopt_output(std::uint16_t register_index, double nc_valu
       static_cast<std::size_t>(register_index - config_.register_base), nc_value_um);
 }
 
+bool CheckpointModule::rebase_output(std::uint16_t register_index, double delta_um,
+                                     TimeNs now_ns) noexcept {
+  const std::size_t n = compensator_.size();
+  if (n == 0) {
+    return false;
+  }
+  if (config_.active_register >= 0 && register_index == config_.active_register) {
+    return compensator_.rebase(0, n - 1, delta_um, now_ns);
+  }
+  if (register_index < config_.register_base) {
+    return false;
+  }
+  const auto i = static_cast<std::size_t>(register_index - config_.register_base);
+  if (i >= n) {
+    return false;
+  }
+  return compensator_.rebase(i, i, delta_um, now_ns);
+}
+
 std::size_t CheckpointModule::state_capacity() const noexcept {
   return sizeof(Header) + plan_.size() * sizeof(Record);
 }

@@ -51,6 +51,11 @@ class CheckpointModule final : public engine::Module {
   /// the NC's value (it is written again only while finishing, from the adopted table).
   bool adopt_output(std::uint16_t register_index, double nc_value_um, TimeNs now_ns) override;
 
+  /// Trim handover (core/engine/engine.hpp): the live register rebases every checkpoint, a
+  /// table register its checkpoint (CheckpointCompensator::rebase()). Real-time safe.
+  bool rebase_output(std::uint16_t register_index, double delta_um,
+                     TimeNs now_ns) noexcept override;
+
   [[nodiscard]] CheckpointCompensator& compensator() noexcept { return compensator_; }
   [[nodiscard]] const CheckpointCompensator& compensator() const noexcept { return compensator_; }
 

@@ -30,6 +30,27 @@ constexpr std::string_view kCursorsEntry = "@cursors";
 /// Registers whose write was in flight (write receipts), by name: u32 count, then name and u8
 /// (1 = in flight) per register, a fixed size like "@holds". An older engine skips it.
 constexpr std::string_view kInFlightEntry = "@inflight";
+/// Trim handover: u32 version, u32 count, then per register its name, the f64 sum of its trims
+/// (0 without any) and the u64 identity of what computed them (0: no trim). An older engine
+/// skips it; a state without it hands nothing over.
+constexpr std::string_view kTrimsEntry = "@trims";
+constexpr std::uint32_t kTrimsVersion = 1;
+
+/// splitmix64's finaliser: spreads a module's name hash and trim identity over 64 bits.
+std::uint64_t mix64(std::uint64_t x) noexcept {
+  x += 0x9e3779b97f4a7c15ULL;
+  x = (x ^ (x >> 30U)) * 0xbf58476d1ce4e5b9ULL;
+  x = (x ^ (x >> 27U)) * 0x94d049bb133111ebULL;
+  return x ^ (x >> 31U);
+}
+
+std::uint64_t fnv1a(std::string_view s) noexcept {
+  std::uint64_t h = 0xcbf29ce484222325ULL;
+  for (const char c : s) {
+    h = (h ^ static_cast<unsigned char>(c)) * 0x100000001b3ULL;
+  }
+  return h;
+}
 
 // Little helpers for the state bytes. Native byte order: the state never leaves the machine.
 class Writer {
@@ -239,6 +260,10 @@ void Engine::configure(std::vector<RegisterSpec> registers,
   for (const auto& r : specs_) {
     capacity += sizeof(std::uint16_t) + r.name.size() + sizeof(std::uint8_t);
   }
+  capacity += sizeof(std::uint16_t) + kTrimsEntry.size() + 3 * sizeof(std::uint32_t);
+  for (const auto& r : specs_) {
+    capacity += sizeof(std::uint16_t) + r.name.size() + sizeof(double) + sizeof(std::uint64_t);
+  }
   // The context's options: from the one module that sets them (the daemon's
   // [measurement_context] section), else from the engine options.
   ContextOptions context_options = options.context;
@@ -288,6 +313,10 @@ void Engine::configure(std::vector<RegisterSpec> registers,
   valid_.clear();
   valid_.reserve(options.max_events_per_step);
   trims_.assign(modules_.size() * regs_.size(), std::numeric_limits<double>::quiet_NaN());
+  handover_trim_um_.assign(regs_.size(), 0.0);
+  handover_identity_.assign(regs_.size(), 0);
+  handover_known_.assign(regs_.size(), 0);
+  handover_pending_ = false;
   state_capacity_ = capacity;
   counters_ = {};
   write_cursor_ = 0;
@@ -493,6 +522,10 @@ void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out)
     }
   }
 
+  if (handover_pending_) {
+    hand_over_trims(now_ns);
+  }
+
   // Every register with a target converges through its limiter, whether or not a module wrote
   // this cycle: a slewed target keeps moving without the module repeating it. The scan starts
   // where the last full cycle stopped, so with more pending registers than one StepOutput holds
@@ -588,6 +621,45 @@ void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out)
                                out.records.overflows() + out.trims.overflows() +
                                scratch_.trims.overflows() + scratch_.writes.overflows() +
                                scratch_.alarms.overflows() + scratch_.records.overflows();
+}
+
+std::uint64_t Engine::trim_identity(std::size_t i) const noexcept {
+  const std::size_t n = regs_.size();
+  std::uint64_t id = 0;
+  for (std::size_t m = 0; m < modules_.size(); ++m) {
+    if (!std::isnan(trims_[m * n + i])) {
+      id ^= mix64(fnv1a(modules_[m]->name()) ^ modules_[m]->trim_identity());
+    }
+  }
+  return id;
+}
+
+void Engine::hand_over_trims(TimeNs now_ns) noexcept {
+  handover_pending_ = false;
+  for (std::size_t i = 0; i < regs_.size(); ++i) {
+    if (handover_known_[i] == 0) {
+      continue;
+    }
+    handover_known_[i] = 0;
+    Reg& r = regs_[i];
+    const double now_trim_um = r.has_trim ? r.trim_um : 0.0;
+    const double delta_um = now_trim_um - handover_trim_um_[i];
+    if (trim_identity(i) == handover_identity_[i] || !std::isfinite(delta_um) ||
+        !(std::fabs(delta_um) > 0.0)) {
+      continue;
+    }
+    const int w = writer_[i];
+    if (w >= 0 && specs_[i].kind != RegisterKind::kFlag &&
+        modules_[static_cast<std::size_t>(w)]->rebase_output(static_cast<std::uint16_t>(i),
+                                                             -delta_um, now_ns)) {
+      r.target_um = (r.has_target ? r.target_um : 0.0) - delta_um;
+      r.has_target = true;
+      ++register_generation_;
+      ++counters_.handover_rebases;
+    } else {
+      ++counters_.handover_unabsorbed;
+    }
+  }
 }
 
 void Engine::resend_all() noexcept {
@@ -807,7 +879,7 @@ std::size_t Engine::export_state(std::span<std::byte> buf) const noexcept {
     w.put(r.target_um);
     w.put(static_cast<std::uint8_t>(r.has_target ? 1 : 0));
   }
-  w.put(static_cast<std::uint32_t>(modules_.size() + 4));
+  w.put(static_cast<std::uint32_t>(modules_.size() + 5));
   w.put_name(kContextEntry);
   w.put(static_cast<std::uint32_t>(MachineContext::kStateBytes));
   if (!w.ok() || w.rest().size() < MachineContext::kStateBytes) {
@@ -842,6 +914,27 @@ std::size_t Engine::export_state(std::span<std::byte> buf) const noexcept {
           (r.in_flight != 0 && specs_[i].kind != RegisterKind::kFlag) || r.resend_as_is;
       w.put_name(specs_[i].name);
       w.put(static_cast<std::uint8_t>(unsure ? 1 : 0));
+    }
+    if (!w.ok()) {
+      return 0;
+    }
+    const auto n32 = static_cast<std::uint32_t>(w.size() - begin);
+    std::memcpy(len_at.data(), &n32, sizeof(n32));
+  }
+  {
+    w.put_name(kTrimsEntry);
+    const std::span<std::byte> len_at = w.rest();
+    w.put(std::uint32_t{0});
+    const std::size_t begin = w.size();
+    w.put(kTrimsVersion);
+    w.put(static_cast<std::uint32_t>(regs_.size()));
+    for (std::size_t i = 0; i < regs_.size(); ++i) {
+      // Imported but not stepped yet (a reload before the first cycle): the trims in force are
+      // still the imported ones; the next engine hands them over.
+      const bool imported = handover_pending_ && handover_known_[i] != 0;
+      w.put_name(specs_[i].name);
+      w.put(imported ? handover_trim_um_[i] : (regs_[i].has_trim ? regs_[i].trim_um : 0.0));
+      w.put(imported ? handover_identity_[i] : trim_identity(i));
     }
     if (!w.ok()) {
       return 0;
@@ -995,6 +1088,35 @@ bool Engine::import_state(std::span<const std::byte> bytes, TimeNs now_ns,
           }
         }
         if (!fr.at_end()) {
+          return false;
+        }
+        continue;
+      }
+      if (name == kTrimsEntry) {
+        Reader tr(blob);
+        std::uint32_t tversion = 0;
+        std::uint32_t count = 0;
+        if (!tr.get(tversion) || tversion != kTrimsVersion || !tr.get(count)) {
+          return false;
+        }
+        for (std::uint32_t k2 = 0; k2 < count; ++k2) {
+          std::string_view reg;
+          double trim_um = 0.0;
+          std::uint64_t identity = 0;
+          if (!tr.get_name(reg) || !tr.get(trim_um) || !tr.get(identity) ||
+              !std::isfinite(trim_um)) {
+            return false;
+          }
+          const int idx = RegisterTable(specs_).find(reg);
+          if (pass == 1 && idx >= 0) {
+            const auto i = static_cast<std::size_t>(idx);
+            handover_trim_um_[i] = trim_um;
+            handover_identity_[i] = identity;
+            handover_known_[i] = 1;
+            handover_pending_ = true;
+          }
+        }
+        if (!tr.at_end()) {
           return false;
         }
         continue;

@@ -49,6 +49,13 @@
 //   write puts the limiter back on the NC's value; a write of unknown fate is sent again as it
 //   is (within max_step_um of either value the NC may hold). Registers in flight are saved with
 //   the state (entry "@inflight") and sent again as they are after an import (reload, restart).
+// - Trim handover: each register's sum of trims is saved with the state (entry "@trims") with the
+//   identity of what computed it (Module::trim_identity(), e.g. the model file). In the first
+//   step after import_state() (a reload, a restart), a register whose trims now come from
+//   something else (a model loaded, replaced or taken out) keeps its total: the difference
+//   new − old is taken off the writing module's state (Module::rebase_output()) and off the
+//   register's target, so the new trims predict and the writer learns what is left. The same
+//   trims as saved (a restart of the same configuration) are not rebased.
 //
 // Lifecycle: configure() allocates and validates (throws std::invalid_argument naming what is
 // wrong); step(), export_state(), import_state() are real-time safe: no allocation, no locks, no
@@ -198,6 +205,20 @@ class Module {
     (void)now_ns;
     return false;
   }
+  /// Real-time safe. What this module's trims are computed from (e.g. a hash of a fitted model
+  /// and its register mapping); 0 = the module publishes no trims. A trim whose identity differs
+  /// from the one saved with the state is a handover ("Trim handover" in the file comment).
+  [[nodiscard]] virtual std::uint64_t trim_identity() const noexcept { return 0; }
+  /// Real-time safe. Trim handover: shift everything this module has learned for register
+  /// register_index (one of written_registers()) by delta_um, so its target moves by exactly
+  /// delta_um and its later learning continues from there. False (the default): it cannot.
+  virtual bool rebase_output(std::uint16_t register_index, double delta_um,
+                             TimeNs now_ns) noexcept {
+    (void)register_index;
+    (void)delta_um;
+    (void)now_ns;
+    return false;
+  }
 };
 
 struct EngineOptions {
@@ -242,6 +263,11 @@ struct EngineCounters {
   std::uint64_t release_commands{0};
   std::uint32_t last_release_sequence{0};
   std::uint32_t last_release_count{0};
+  /// Trim handovers ("Trim handover" in the file comment): registers whose writing module took
+  /// the change of trim into its own state, and registers where none could (no writer, or it
+  /// refused): their total moves by the change, through the limiter.
+  std::uint64_t handover_rebases{0};
+  std::uint64_t handover_unabsorbed{0};
 };
 
 /// What Engine::anchor_register() / adopt_register() found and did.
@@ -468,6 +494,14 @@ class Engine {
   /// Registers whose notice is still to be raised (step() skips the scan while 0).
   std::size_t notices_pending_{0};
   std::uint64_t write_sequence_{0};
+  /// Trim handover: per register, the sum of trims and its identity in the imported state
+  /// (known = the register was in its "@trims" entry); pending until the first step after it.
+  [[nodiscard]] std::uint64_t trim_identity(std::size_t i) const noexcept;
+  void hand_over_trims(TimeNs now_ns) noexcept;
+  std::vector<double> handover_trim_um_;
+  std::vector<std::uint64_t> handover_identity_;
+  std::vector<std::uint8_t> handover_known_;
+  bool handover_pending_{false};
   bool hold_{false};
   bool receipts_{false};
 };

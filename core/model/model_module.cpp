@@ -12,6 +12,61 @@ namespace nccomp::core::model {
 namespace {
 constexpr std::uint32_t kLegacyMagic = 0x4D4F444CU;  // "MODL": the state before the context
 constexpr std::size_t col(Column c) { return static_cast<std::size_t>(c); }
+
+/// FNV-1a over the bytes of what the trims are computed from.
+class Fnv {
+ public:
+  void bytes(const void* p, std::size_t n) noexcept {
+    const auto* b = static_cast<const unsigned char*>(p);
+    for (std::size_t i = 0; i < n; ++i) h_ = (h_ ^ b[i]) * 0x100000001b3ULL;
+  }
+  template <typename T>
+  void value(const T& v) noexcept {
+    bytes(&v, sizeof v);
+  }
+  void text(const std::string& s) noexcept {
+    value(s.size());
+    bytes(s.data(), s.size());
+  }
+  [[nodiscard]] std::uint64_t get() const noexcept { return h_ == 0 ? 1 : h_; }
+
+ private:
+  std::uint64_t h_{0xcbf29ce484222325ULL};
+};
+
+std::uint64_t identity_of(const Model& model, const std::vector<ModelApply>& applies,
+                          const std::vector<ModelInput>& inputs, bool each_cycle) {
+  Fnv f;
+  for (const std::string& e : model.extra_columns()) f.text(e);
+  for (const Term& t : model.terms()) {
+    const TermSpec& s = t.spec;
+    f.text(s.name);
+    f.value(s.form);
+    f.value(s.column);
+    f.value(s.per);
+    f.value(s.kind_mask);
+    f.value(s.degree);
+    f.value(s.center);
+    f.value(s.scale);
+    for (const auto& g : t.groups) f.value(g);
+    for (const double c : t.coef) f.value(c);
+  }
+  for (const ModelApply& a : applies) {
+    f.value(a.term_index);
+    f.value(a.register_index);
+    f.value(a.gain);
+    f.value(a.kind);
+    f.value(a.point);
+    f.value(a.tool);
+    f.value(a.angle_deg);
+  }
+  for (const ModelInput& in : inputs) {
+    f.value(in.column);
+    f.value(in.sensor);
+  }
+  f.value(each_cycle);
+  return f.get();
+}
 }  // namespace
 
 ModelModule::ModelModule(Model model, std::vector<ModelApply> applies, bool update_each_cycle,
@@ -21,7 +76,8 @@ ModelModule::ModelModule(Model model, std::vector<ModelApply> applies, bool upda
       inputs_(std::move(inputs)),
       trims_um_(applies_.size(), 0.0),
       state_(model_.make_state()),
-      each_cycle_(update_each_cycle) {
+      each_cycle_(update_each_cycle),
+      identity_(identity_of(model_, applies_, inputs_, each_cycle_)) {
   for (const auto& a : applies_) {
     if (a.term_index >= model_.terms().size()) {
       throw std::invalid_argument("model: term index " + std::to_string(a.term_index) +

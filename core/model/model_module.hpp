@@ -68,6 +68,11 @@ class ModelModule final : public core::engine::Module {
   bool load_state(std::span<const std::byte> bytes) noexcept override;
   std::size_t status(std::span<core::engine::StatusValue> out) const noexcept override;
 
+  /// A hash of the model's terms and coefficients, the apply entries and the inputs: a reload
+  /// or restart with another model hands the trims over (core/engine/engine.hpp, "Trim
+  /// handover"), the same model does not. Real-time safe.
+  [[nodiscard]] std::uint64_t trim_identity() const noexcept override { return identity_; }
+
   /// The trim last published for apply entry i [µm].
   [[nodiscard]] double trim_um(std::size_t i) const noexcept { return trims_um_[i]; }
   /// The context the module evaluates with (the engine's once attached).
@@ -82,6 +87,7 @@ class ModelModule final : public core::engine::Module {
   std::vector<double> trims_um_;
   EvalState state_;
   bool each_cycle_;
+  std::uint64_t identity_{0};
   core::engine::MachineContext own_context_;
   const core::engine::MachineContext* context_{&own_context_};
   bool bound_{false};

@@ -1120,6 +1120,237 @@ def scenario_model_loop(b, source, work):
     c.done()
 
 
+
+def run_continued(b, source, work, name, daemon_cfg, daemon_overrides, parts, sets,
+                  continue_from, state_from, reload_cfg=None, reload_overrides=None,
+                  timeout_s=240.0):
+    """Lock-step over Modbus: ncsim continues the run in continue_from (`--continue`) for `parts`
+    more side walls, and nccompd starts from the state of the run in state_from (its state/
+    directory, as after a restart of the daemon). reload_cfg: the daemon is started first, and
+    before ncsim ticks its config file is replaced by reload_cfg (staged with reload_overrides)
+    and it gets SIGHUP, so the RUNNING daemon swaps in the new configuration with its state at a
+    cycle boundary (the reload is taken while ncsim already ticks: where it lands is read back).
+    Returns (RunResult, swap_s): swap_s, the machine time [s] by which the new configuration ran
+    (an upper bound: the loop's cycles when the daemon's log said so), None without reload."""
+    run_dir = os.path.join(work, name)
+    shutil.rmtree(run_dir, ignore_errors=True)
+    os.makedirs(run_dir)
+    out_dir = os.path.join(run_dir, "out")
+    port = free_port()
+    sock_dir = tempfile.mkdtemp(prefix="nccomp-e2e-")
+    sock = os.path.join(sock_dir, "ls.sock")
+    status_sock = os.path.join(sock_dir, "status.sock")
+
+    def staged(cfg, overrides, into):
+        o = {"nccompd.toml": dict(overrides or {})}
+        o["nccompd.toml"]["status.socket_path"] = '"%s"' % status_sock
+        os.makedirs(into, exist_ok=True)
+        return stage_configs(source, into, cfg, "ncsim-demo.toml", port, o)
+
+    daemon_path, ncsim_path = staged(daemon_cfg, daemon_overrides, run_dir)
+    shutil.copytree(os.path.join(state_from, "state"), os.path.join(run_dir, "state"))
+    sim_argv = [b.ncsim, "--config", ncsim_path, "--program", "side_wall", "--bus", "modbus",
+                "--out", out_dir, "--seed", "1", "--parts", str(parts), "--continue",
+                continue_from, "--lockstep", sock]
+    for x in sets:
+        sim_argv += ["--set", x]
+    daemon_argv = [b.nccompd, "--config", daemon_path, "--lockstep", sock]
+    t0 = time.monotonic()
+    sim = daemon = None
+    swap_s = None
+    try:
+        daemon = Proc("nccompd", daemon_argv, os.path.join(run_dir, "nccompd.log"), run_dir)
+        if reload_cfg is not None:
+            deadline = time.monotonic() + 30.0
+            while "lock-step: connecting" not in daemon.log() and daemon.running():
+                if time.monotonic() > deadline:
+                    raise RuntimeError("%s: nccompd did not reach lock-step\n%s" %
+                                       (name, daemon.log()[-3000:]))
+                time.sleep(0.02)
+            # Signals are blocked from the start: SIGHUP waits in the daemon's signalfd.
+            reload_path, _ = staged(reload_cfg, reload_overrides, os.path.join(run_dir, "reload"))
+            shutil.copyfile(reload_path, daemon_path)
+            os.kill(daemon.p.pid, signal.SIGHUP)
+        sim = Proc("ncsim", sim_argv, os.path.join(run_dir, "ncsim.log"), run_dir)
+        if reload_cfg is not None:
+            deadline = time.monotonic() + timeout_s
+            while ("configuration 2 is running" not in daemon.log() and daemon.running() and
+                   time.monotonic() < deadline):
+                time.sleep(0.01)
+            st = subprocess.run([b.nccomp, "status", "--json", "--socket", status_sock],
+                                capture_output=True, text=True, timeout=30)
+            try:
+                swap_s = json.loads(st.stdout)["loop"]["cycles"] / 250.0
+            except (ValueError, KeyError):
+                swap_s = None
+        sim_rc = sim.wait(timeout_s)
+        if sim_rc is None:
+            raise RuntimeError("%s: ncsim did not finish within %.0f s\nncsim:\n%s\nnccompd:\n%s" %
+                               (name, timeout_s, sim.log()[-3000:], daemon.log()[-3000:]))
+        daemon_rc = daemon.wait(15.0)
+        if daemon_rc is None:
+            daemon_rc = daemon.stop()
+            raise RuntimeError("%s: nccompd did not end after ncsim's BYE\n%s" %
+                               (name, daemon.log()[-3000:]))
+    finally:
+        for p in (daemon, sim):
+            if p is not None:
+                p.stop()
+        shutil.rmtree(sock_dir, ignore_errors=True)
+    rep = subprocess.run([b.nccomp, "report", out_dir, "--json"], capture_output=True, text=True,
+                         timeout=120)
+    if rep.returncode != 0:
+        raise RuntimeError("%s: nccomp report failed (%d): %s" % (name, rep.returncode,
+                                                                  rep.stderr))
+    result = RunResult(name, run_dir, out_dir, sim_rc, daemon_rc, sim.log(), daemon.log(),
+                       json.loads(rep.stdout), time.monotonic() - t0)
+    print("%s: ncsim %d, nccompd %d, %.1f s wall%s" % (
+        name, sim_rc, daemon_rc, result.wall_s,
+        "" if swap_s is None else "; new configuration running by t = %.2f s" % swap_s))
+    return result, swap_s
+
+
+RADIUS_REGISTER = 1  # T1_radius_wear in config/demo/nccompd-walls*.toml
+
+
+def part_times(r):
+    """{part: (start_s, end_s)} from ncsim's probe rows: a part ends with its last probe, the next
+    one starts there (the first at 0)."""
+    ends = {}
+    for m in read_csv_rows(os.path.join(r.out_dir, "measurements.csv")):
+        if m["kind"] == "probe":
+            ends[int(m["part"])] = float(m["t_s"])
+    out, start = {}, 0.0
+    for p in sorted(ends):
+        out[p] = (start, ends[p])
+        start = ends[p]
+    return out
+
+
+def handover_figures(r, first_after):
+    """(largest change of the radius register between successive writes the NC took, over the
+    run; the same within part first_after; per-part checkpoint RMS)."""
+    times = part_times(r)
+    writes = [w for w in r.writes() if w[1] == RADIUS_REGISTER]
+    steps = [(writes[k][0], abs(writes[k][2] - writes[k - 1][2])) for k in range(1, len(writes))]
+    t0, t1 = times.get(first_after, (0.0, 0.0))
+    largest = max((d for _, d in steps), default=0.0)
+    at_switch = max((d for t, d in steps if t0 <= t <= t1), default=0.0)
+    per_part, _, _ = wall_figures(r, 0)
+    return largest, at_switch, per_part
+
+
+def scenario_model_handover(b, source, work):
+    """Issue 19 item 1, on ncsim over Modbus in lock-step: 12 side walls with ncsim's tool wear
+    switched on (an effect the declared model lacks), S1 checkpoints only; `nccomp analyze` on
+    the daemon's log; then the machine continues (ncsim --continue, the worn tool) in three more
+    runs of 6 parts, each daemon starting from the previous one's state:
+      load:     the daemon runs without the model, and a SIGHUP swaps in the config with the
+                model ([model] + [[model.apply]] on T1_radius_wear) while it runs (parts 13-18);
+      restart:  the daemon restarted with the model config and its state (parts 19-24);
+      rollback: the daemon with the model, and a SIGHUP back to the config without (25-30).
+    The swap lands in the first part of its run, before its first cut (checked: each part's
+    approach is made 3 s long for that). Checks: the first part that starts after the new configuration runs is
+    cut within 1.5x the checkpoint error (RMS) of the parts after it; the part the swap landed in
+    is cut with at most half the error of the last part before the load (S1 alone), and within
+    1.5x the later parts' error after the rollback, where no part may be worse than 1.5x the
+    worst of parts 2-12 (S1 alone, before the model); no write of the radius register changes it
+    by more than its max_step_um (20 um); no alarm."""
+    sets = ["wear.enabled=true", "wear.rate_um_per_m=20"]
+    c = Check("model_handover")
+    before = run_machining(b, source, work, "handover_before", "nccompd-walls.toml",
+                           "ncsim-demo.toml", program="side_wall", parts=12, sets=sets,
+                           echo=print)
+    c.that(before.ncsim_rc == 0 and before.daemon_rc == 0,
+           "before: ncsim exit %d, nccompd exit %d" % (before.ncsim_rc, before.daemon_rc))
+    log = os.path.join(before.run_dir, "log", "measurements.csv")
+    out = os.path.join(before.run_dir, "analysis")
+    a = subprocess.run([b.nccomp, "analyze", "--log", log, "--config",
+                        os.path.join(source, "config", "demo", "model-declared.toml"),
+                        "--out", out], capture_output=True, text=True, timeout=300)
+    print(a.stdout)
+    model = os.path.join(out, "model.toml")
+    c.that(a.returncode == 0 and os.path.exists(model),
+           "nccomp analyze exit %d %s" % (a.returncode, a.stderr[-500:]))
+    if a.returncode != 0:
+        c.done()
+        return
+    before_parts, _, _ = wall_figures(before, 0)
+    # The continued runs wait 3 s of machine time before each part's first cut, so that the
+    # reload (taken while ncsim ticks) lands before part 13's / 25's finishing starts.
+    approach_s = 3.0
+    sets = sets + ["program.side_wall.approach_s=%g" % approach_s]
+    with_model = {"model.file": '"%s"' % model, "model.update": '"cycle"',
+                  "model.apply.term": '"tool_wear"'}
+    load, load_swap = run_continued(b, source, work, "handover_load", "nccompd-walls.toml", {},
+                                    6, sets, before.out_dir, before.run_dir,
+                                    reload_cfg="nccompd-walls-model.toml",
+                                    reload_overrides=with_model)
+    restart, _ = run_continued(b, source, work, "handover_restart", "nccompd-walls-model.toml",
+                               with_model, 6, sets, load.out_dir, load.run_dir)
+    rollback, back_swap = run_continued(b, source, work, "handover_rollback",
+                                        "nccompd-walls-model.toml", with_model, 6, sets,
+                                        restart.out_dir, restart.run_dir,
+                                        reload_cfg="nccompd-walls.toml", reload_overrides={})
+    rows = []
+    for label, r, swap_s in (("load", load, load_swap), ("restart", restart, 0.0),
+                             ("rollback", rollback, back_swap)):
+        c.that(r.ncsim_rc == 0 and r.daemon_rc == 0,
+               "%s: ncsim exit %d, nccompd exit %d" % (label, r.ncsim_rc, r.daemon_rc))
+        if label != "restart":
+            c.that("configuration 2 is running" in r.daemon_log and swap_s is not None,
+                   "%s: the running daemon swapped the configuration in" % label)
+            c.that(swap_s is not None and swap_s < approach_s,
+                   "%s: the swap ran before the first part's first cut (by t = %s s, the cut "
+                   "starts at %g s)" % (label, swap_s, approach_s))
+        times = part_times(r)
+        parts = sorted(times)
+        after = [p for p in parts if times[p][0] >= (swap_s or 0.0)]
+        if len(after) < 2:
+            c.that(False, "%s: parts after the switch (%s)" % (label, after))
+            continue
+        p0 = after[0]
+        landed = next(p for p in parts if times[p][1] >= (swap_s or 0.0))
+        largest, at_switch, per_part = handover_figures(r, p0)
+        later = [per_part[p][0] for p in after[1:]]
+        later_rms = math.sqrt(sum(x * x for x in later) / len(later))
+        print("%s: parts %s; swap in part %d (%.3f um); first part after it %d: %.3f um; parts "
+              "%d-%d: %.3f um; largest radius change in part %d %.3f um, in the run %.3f um" % (
+                  label, " ".join("%d:%.2f" % (p, per_part[p][0]) for p in parts), landed,
+                  per_part[landed][0], p0, per_part[p0][0], after[1], after[-1], later_rms, p0,
+                  at_switch, largest))
+        rows.append((label, landed, per_part[landed][0], p0, per_part[p0][0], later_rms,
+                     at_switch, largest))
+        c.that(r.alarms("alarm") == [], "%s: no alarm (%s)" % (label, r.alarms("alarm")))
+        c.that(largest <= 20.0 + 1e-6, "%s: no write beyond max_step_um 20 (largest %.3f um)" % (
+            label, largest))
+        c.that(per_part[p0][0] <= 1.5 * later_rms,
+               "%s: part %d within 1.5x the later parts' error: %.3f um against %.3f um" % (
+                   label, p0, per_part[p0][0], later_rms))
+        if label == "load":
+            last = before_parts[max(before_parts)][0]
+            c.that(per_part[landed][0] <= 0.5 * last,
+                   "load: part %d (the swap landed in it) at most half the error of part %d "
+                   "before, S1 alone: %.3f um against %.3f um" % (landed, max(before_parts),
+                                                                  per_part[landed][0], last))
+        elif label == "rollback":
+            c.that(per_part[landed][0] <= 1.5 * later_rms,
+                   "rollback: part %d (the swap landed in it) within 1.5x the later parts' "
+                   "error: %.3f um against %.3f um" % (landed, per_part[landed][0], later_rms))
+            # S1 alone again: no part worse than S1 alone was before the model (parts 2-12).
+            worst_before = max(before_parts[p][0] for p in before_parts if p >= 2)
+            worst = max(per_part[p][0] for p in parts)
+            c.that(worst <= 1.5 * worst_before,
+                   "rollback: every part within 1.5x the worst of parts 2-12 before the model "
+                   "(S1 alone): %.3f um against %.3f um" % (worst, worst_before))
+    print("| switch | part the swap landed in | its RMS [um] | first part after the switch | "
+          "its RMS [um] | later parts' RMS [um] | largest radius change in that part [um] | "
+          "largest in the run [um] |")
+    for row in rows:
+        print("| %s | %d | %.3f | %d | %.3f | %.3f | %.3f | %.3f |" % row)
+    c.done()
+
+
 # Over CAN the runs are shorter than over Modbus: lock-step inside the TCG VM costs ~6-10 ms of
 # CPU per cycle (Debug + ASan), so the demo's 54 s face at 250 Hz (13 450 cycles) would take
 # minutes per run. Here: a 30 x 10 mm face (11 passes, 330 mm of cut) at 6000 mm/min, the loop at
@@ -1212,6 +1443,7 @@ SCENARIOS = {
     "roll": scenario_roll,
     "undeclared_effect": scenario_undeclared_effect,
     "model_loop": scenario_model_loop,
+    "model_handover": scenario_model_handover,
     "can_modes": scenario_can_modes,
     "calib_touch": scenario_calib_touch,
 }

@@ -1020,3 +1020,50 @@ TEST(RealTime, StepAllocatesNothing) {
 
 }  // namespace
 }  // namespace nccomp::core::checkpoint
+
+namespace nccomp::core::checkpoint {
+namespace {
+
+// GIVEN mode A with an average over 3 parts following a wear trend (true error 2, 4, 6 µm at
+// parts 1-3: the average lags at 3.78 µm) WHEN a trim of −5 µm takes over the register
+// (rebase by +5) THEN the residual is part 3's error less the trim's share, 6 − 5 = 1 µm, and
+// the offset cancels it (−1 µm), not the lagging average less 5 (1.22 µm); part 3's applied
+// value moves with the trim (−2.67 + 5); the history restarts, the next reading counts in full.
+TEST(Compensator, ARebaseTakesTheLastPartsErrorLessTheTrimAsTheResidual) {
+  CheckpointCompensator comp;
+  CompensatorConfig cfg;
+  cfg.ewma_weight = 3.0;
+  cfg.dead_band_um = 0.0;
+  cfg.probe_repeatability_um = 0.0;
+  comp.configure(cfg, test::line_plan(1), test::wide_limits());
+  StepOutput out;
+  double applied = 0.0;
+  for (int part = 1; part <= 3; ++part) {
+    std::vector<Event> ev = {test::part_start(part)};
+    comp.step(0, ev, out);
+    applied = comp.register_value_um(0);
+    ev = {test::probe(part, 0, 2.0 * part + applied)};
+    comp.step(0, ev, out);
+  }
+  const double lagging = 2.0 + (4.0 - 2.0) / 3.0;
+  ASSERT_NEAR(comp.learned_um(0), lagging + (6.0 - lagging) / 3.0, 1e-9);
+  ASSERT_TRUE(comp.rebase(0, 0, 5.0, 0));
+  EXPECT_NEAR(comp.learned_um(0), 1.0, 1e-9);
+  EXPECT_NEAR(comp.register_value_um(0), -1.0, 1e-9);
+  EXPECT_NEAR(comp.point(0).applied_um, applied + 5.0, 1e-9);
+  EXPECT_EQ(comp.point(0).history_n, 0U);
+  EXPECT_EQ(comp.learned_count(0), 0U);
+  // An offset the limit refuses changes nothing.
+  EXPECT_FALSE(comp.rebase(0, 0, 500.0, 0));
+  EXPECT_NEAR(comp.register_value_um(0), -1.0, 1e-9);
+  // Part 4 (true error 8, the trim took 5 + 2 more along the path): its residual 1.5 µm is
+  // taken in full, not as a third of it.
+  std::vector<Event> ev = {test::part_start(4)};
+  comp.step(0, ev, out);
+  ev = {test::probe(4, 0, 1.5 + comp.register_value_um(0))};
+  comp.step(0, ev, out);
+  EXPECT_NEAR(comp.register_value_um(0), -1.5, 1e-9);
+}
+
+}  // namespace
+}  // namespace nccomp::core::checkpoint

@@ -9,6 +9,7 @@
 #include <memory>
 #include <stdexcept>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "core/engine/engine.hpp"
@@ -208,6 +209,74 @@ TEST(Module, EngineStepAllocatesNothing) {
     (void)eng->export_state(buf);
   }
   EXPECT_EQ(scope.count(), 0U);
+}
+
+}  // namespace
+}  // namespace nccomp::core::checkpoint
+
+namespace nccomp::core::checkpoint {
+namespace {
+
+// A model's trim of the live register (as the [model] section publishes it).
+class LiveTrim final : public engine::Module {
+ public:
+  explicit LiveTrim(double trim_um) : trim_um_(trim_um) {}
+  std::string_view name() const noexcept override { return "model"; }
+  void attach(const engine::RegisterTable& /*registers*/) override {}
+  void step(TimeNs now_ns, std::span<const Event> /*events*/, StepOutput& out) noexcept override {
+    out.trims.push(OffsetWrite{now_ns, 0, trim_um_});
+  }
+  std::uint64_t trim_identity() const noexcept override { return 3; }
+  double trim_um_;
+};
+
+// GIVEN S1 learned errors 6, −4, 2 µm (offsets −6, 4, −2) and part 2 was finished with them
+// WHEN a model trimming the live register by −5 µm is handed S1's state before part 2 is probed
+// THEN S1 keeps only the residual (−1, 9, 3), part 2's probe (0 µm: the wall was right) changes
+// nothing, and part 3 is cut with the same −6, 4, −2 in total (not −11, −1, −7).
+TEST(Module, AModelTakingOverTheLiveRegisterLeavesTheTotalAndS1LearnsTheResidual) {
+  auto a = make_engine(3);
+  StepOutput out;
+  TimeNs t = 0;
+  std::vector<Event> ev = {probe(1, 0, 6.0), probe(1, 1, -4.0), probe(1, 2, 2.0)};
+  a->step(t, ev, out);
+  ev = {part_start(2)};
+  a->step(t += 1'000'000, ev, out);
+  for (double x : {5.0, 15.0, 25.0, 35.0}) {
+    ev = {sample(x, 0, -5, x, 12, t += 1'000'000)};
+    a->step(t, ev, out);
+  }
+  std::vector<std::byte> buf(a->state_capacity());
+  buf.resize(a->export_state(buf));
+
+  auto b = std::make_unique<engine::Engine>();
+  std::vector<std::unique_ptr<engine::Module>> mods;
+  mods.push_back(std::make_unique<CheckpointModule>(module_config(), line_plan(3)));
+  mods.push_back(std::make_unique<LiveTrim>(-5.0));
+  b->configure(registers(3), std::move(mods));
+  ASSERT_TRUE(b->import_state(buf, t));
+  b->step(t += 1'000'000, {}, out);  // the swap's cycle
+  EXPECT_EQ(b->counters().handover_rebases, 1U);
+  ev = {probe(2, 0, 0.0), probe(2, 1, 0.0), probe(2, 2, 0.0)};
+  b->step(t += 1'000'000, ev, out);
+  const auto& s1 = dynamic_cast<const CheckpointModule&>(b->module(0)).compensator();
+  EXPECT_NEAR(s1.register_value_um(0), -1.0, 1e-9);
+  EXPECT_NEAR(s1.register_value_um(1), 9.0, 1e-9);
+  EXPECT_NEAR(s1.register_value_um(2), 3.0, 1e-9);
+  EXPECT_NEAR(s1.learned_um(0), 1.0, 1e-9);
+  // Part 3: pre-positioned, then past checkpoints 1 and 2: the totals S1 learned before.
+  ev = {part_start(3)};
+  b->step(t += 1'000'000, ev, out);
+  const auto total = [&] {
+    const engine::RegisterState r = b->register_state(0);
+    return r.target_um + r.trim_um;
+  };
+  EXPECT_NEAR(total(), -6.0, 1e-9);
+  for (const auto& [x, want] : {std::pair{11.0, -6.0}, {21.0, 4.0}, {31.0, -2.0}}) {
+    ev = {sample(x, 0, -5, x, 12, t += 1'000'000)};
+    b->step(t, ev, out);
+    EXPECT_NEAR(total(), want, 1e-9) << x;
+  }
 }
 
 }  // namespace

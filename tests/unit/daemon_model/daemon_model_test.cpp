@@ -975,3 +975,32 @@ TEST(ModelInputs, TheFlThermalModelRunsInTheLoopWithItsExtraColumnsOnSensors) {
 
 }  // namespace
 }  // namespace nccomp::daemon::sections
+
+namespace nccomp::daemon::sections {
+namespace {
+
+// The trim handover (core/engine/engine.hpp) tells "another model" from "the same model again"
+// by the module's trim identity: equal for an equal model and mapping, different when a
+// coefficient, a gain or the register changes.
+TEST(ModelHandover, TheTrimIdentityFollowsTheModelAndItsMapping) {
+  const auto identity = [](cm::Model model, double gain, std::uint16_t reg) {
+    ModelApply a;
+    a.term_index = 1;
+    a.register_index = reg;
+    a.gain = gain;
+    a.point = 0.0;
+    return ModelModule(std::move(model), {a}, false).trim_identity();
+  };
+  const std::uint64_t base = identity(trend_model(), -1.0, 0);
+  EXPECT_NE(base, 0U);
+  EXPECT_EQ(identity(trend_model(), -1.0, 0), base);
+  cm::Model refit = trend_model();
+  std::vector<cm::Term> terms = refit.terms();
+  terms[1].coef[0] = 0.021;
+  EXPECT_NE(identity(cm::Model({}, terms), -1.0, 0), base);
+  EXPECT_NE(identity(trend_model(), -2.0, 0), base);
+  EXPECT_NE(identity(trend_model(), -1.0, 1), base);
+}
+
+}  // namespace
+}  // namespace nccomp::daemon::sections
