@@ -580,8 +580,12 @@ double Calibrator::predict(std::size_t slot, double t_s) const noexcept {
              (m.anchor_drift_um - m.asymptote_um) * std::exp(-dt / config_.thermal_time_constant_s);
     }
     case Prediction::kEstimator: {
+      // Bounded like a touch: between touches the estimate moves the axis by at most what one
+      // recalibration could from the last measured drift.
       const double mean = estimate(slot, t_s).mean_um;
-      return std::isfinite(mean) ? mean : m.anchor_drift_um;
+      return std::isfinite(mean) ? std::clamp(mean, m.anchor_drift_um - config_.plausibility_um,
+                                              m.anchor_drift_um + config_.plausibility_um)
+                                 : m.anchor_drift_um;
     }
     case Prediction::kTemperature:
       if (std::isfinite(temp_c_) && std::isfinite(m.anchor_temp_c)) {

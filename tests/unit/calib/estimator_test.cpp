@@ -158,6 +158,27 @@ TEST(DriftEstimator, FirstHourIsPredictedFromEarlierShifts) {
   EXPECT_NEAR(t.predicted_drift_um(Slot::kXLateral, half_hour), 0.0, 1e-9);
 }
 
+// GIVEN earlier shifts that reached 18 µm at 3 h and plausibility_um 10 WHEN the next shift has
+// no touch yet THEN the prediction stops at 10 µm from the last measured drift (0).
+TEST(DriftEstimator, PredictionIsBoundedByThePlausibilityFromTheLastTouch) {
+  auto cfg = estimator_config();
+  cfg.plausibility_um = 10.0;
+  Calibrator c;
+  c.configure(cfg);
+  SimMachine m(cfg, test_errors(), 0.0, 0.0, 0.1, 5);
+  TimeNs now = 0;
+  run_calibrated_shift(c, m, now, 6.0, 3);
+  StepOutput out;
+  m.set_drift([](double) { return std::array<double, 4>{}; });
+  ASSERT_TRUE(run_initial_calibration(c, m, now, out));
+  const TimeNs t_nom = core::from_seconds(c.nominal(Slot::kXLateral).time_s);
+  EXPECT_NEAR(c.predicted_drift_um(Slot::kXLateral, t_nom + core::from_seconds(3600.0)), 6.0, 1e-9);
+  EXPECT_NEAR(c.estimated_drift(Slot::kXLateral, t_nom + core::from_seconds(3.0 * 3600.0)).mean_um,
+              18.0, 1e-9);
+  EXPECT_DOUBLE_EQ(c.predicted_drift_um(Slot::kXLateral, t_nom + core::from_seconds(3.0 * 3600.0)),
+                   10.0);
+}
+
 // GIVEN an estimate that expects Y 3 ± 6.1 µm at 1 h WHEN a touch set reads Y 45 µm (a change
 // of 42 µm, within plausibility_um 50, beyond 5 σ) THEN alarm 40 and nothing changes: estimate,
 // registers, earlier-shift drift.
