@@ -104,9 +104,10 @@ DriftEstimate start_estimate(double t_s, bool with_prior, double slope_um_per_c,
   e.x = {0.0, with_prior ? 1.0 : 0.0, slope ? slope_um_per_c : 0.0};
   e.p = {};
   const double g = with_prior ? p.prior_gain_sigma : 0.0;
+  constexpr std::size_t kDiag = kEstimatorStates + 1;  // row-major stride of the diagonal
   e.p[0] = p.touch_noise_um * p.touch_noise_um;
-  e.p[4] = g * g;
-  e.p[8] = p.slope_sigma_um_per_c * p.slope_sigma_um_per_c;
+  e.p[kDiag] = g * g;
+  e.p[2 * kDiag] = p.slope_sigma_um_per_c * p.slope_sigma_um_per_c;
   return e;
 }
 
