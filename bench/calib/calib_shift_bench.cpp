@@ -4,16 +4,18 @@
 // first-order warm-up, and the real FL_THERMAL spindle drift (../shared/data/
 // fl_thermal_spindle_drift, see its SOURCE.md).
 //
-//   bench_calib_shift [--data ../shared/data/fl_thermal_spindle_drift/data.csv]
+//   bench_calib_shift [--data ../shared/data/fl_thermal_spindle_drift/data.csv] [--json]
 //   (default: the one beside the source tree this was built from)
 //
-// Prints markdown tables (bench/results/calib.md).
+// Prints markdown tables (bench/results/calib.md); --json prints the FL_THERMAL rows only, one
+// object per line: {"axis","strategy","shift","rms_um","first_hour_max_um"}.
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <functional>
+#include <span>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -115,15 +117,22 @@ struct Strategy {
   bool recalibrate;
   nccomp::core::ProfileShape shape;
   Prediction prediction;
+  bool temperature_slope{false};  // estimator: also the t5 temperature slope
+  double level_noise_um_per_h{6.0};
+  double gate_sigmas{5.0};
 };
 
-const std::array<Strategy, 5> kStrategies{{
+const std::array<Strategy, 7> kStrategies{{
     {"none", false, nccomp::core::ProfileShape::kStep, Prediction::kNone},
     {"hourly, step", true, nccomp::core::ProfileShape::kStep, Prediction::kNone},
     {"hourly, creep", true, nccomp::core::ProfileShape::kCosine, Prediction::kNone},
     {"hourly, creep + time model", true, nccomp::core::ProfileShape::kCosine, Prediction::kTime},
     {"hourly, creep + temperature model", true, nccomp::core::ProfileShape::kCosine,
      Prediction::kTemperature},
+    {"hourly, creep + estimator", true, nccomp::core::ProfileShape::kCosine,
+     Prediction::kEstimator},
+    {"hourly, creep + estimator with temperature", true, nccomp::core::ProfileShape::kCosine,
+     Prediction::kEstimator, true},
 }};
 
 struct AxisStats {
@@ -131,13 +140,18 @@ struct AxisStats {
   double max_um{0.0};
   double max_jump_um{0.0};  // largest change of the applied correction within one second
   double rms_after_first_touch_um{0.0};
+  double first_hour_max_um{0.0};  // before the first touch
 };
 
 using DriftFn = std::function<std::array<double, 4>(double t_s)>;  // from shift start
 using TempFn = std::function<double(double t_s)>;
 
+// carried: the calibration state the machine ends its previous shift with; it is replaced by
+// this shift's final state. Only the earlier shifts' drift in it
+// (CalibState::shifts) outlives the new calibration at the shift start.
 std::array<AxisStats, 3> run_shift(const Strategy& s, const DriftFn& drift, const TempFn& temp,
-                                   double tau_s, double hours) {
+                                   double tau_s, double hours,
+                                   nccomp::core::calib::CalibState* carried = nullptr) {
   auto cfg = nccomp::test::calib::test_config();
   cfg.touches_per_axis = 1;
   cfg.creep_shape = s.shape;
@@ -147,8 +161,19 @@ std::array<AxisStats, 3> run_shift(const Strategy& s, const DriftFn& drift, cons
   cfg.temperature_sensor = temp ? 0 : -1;
   cfg.recalibration_interval_s = 3600.0;
   cfg.plausibility_um = 50.0;
+  // Estimator noises chosen a priori (docs/calibration.md), not fitted to these data: touch
+  // σ 0.5 µm on the touch and on the nominal, so about 0.7 µm on the drift.
+  cfg.estimator_touch_noise_um = 0.7;
+  cfg.estimator_prior_gain_sigma = 0.5;
+  cfg.estimator_prior_forgetting = 0.8;
+  cfg.estimator_slope_sigma_um_per_c = s.temperature_slope ? 1.0 : 0.0;
+  cfg.estimator_level_noise_um_per_h = s.level_noise_um_per_h;
+  cfg.estimator_gate_sigmas = s.gate_sigmas;
   Calibrator c;
   c.configure(cfg);
+  if (carried != nullptr) {
+    c.import_state(*carried);
+  }
   SimMachine m(cfg, nccomp::test::calib::test_errors(), kTouchNoiseUm, kChordNoiseUm, 0.1, 42);
   StepOutput out;
   // Calibrate (and take the nominals) at the start of the shift, on the machine as it is then.
@@ -205,6 +230,8 @@ std::array<AxisStats, 3> run_shift(const Strategy& s, const DriftFn& drift, cons
       st[a].max_um = std::max(st[a].max_um, std::fabs(err));
       if (k >= 3600) {
         sum2_late[a] += err * err;
+      } else {
+        st[a].first_hour_max_um = std::max(st[a].first_hour_max_um, std::fabs(err));
       }
       if (k > 0) {
         st[a].max_jump_um = std::max(st[a].max_jump_um, std::fabs(corr - prev[a]));
@@ -215,6 +242,9 @@ std::array<AxisStats, 3> run_shift(const Strategy& s, const DriftFn& drift, cons
   for (std::size_t a = 0; a < 3; ++a) {
     st[a].rms_um = std::sqrt(sum2[a] / static_cast<double>(steps));
     st[a].rms_after_first_touch_um = std::sqrt(sum2_late[a] / static_cast<double>(steps - 3600));
+  }
+  if (carried != nullptr) {
+    *carried = c.export_state();
   }
   return st;
 }
@@ -234,8 +264,8 @@ void first_order_table() {
       "| X max error | largest 1-s change of the applied X correction |\n"
       "|---|---|---|---|---|---|\n");
   for (const auto& s : kStrategies) {
-    if (s.prediction == Prediction::kTemperature) {
-      continue;  // no temperature in this simulation
+    if (s.prediction == Prediction::kTemperature || s.prediction == Prediction::kEstimator) {
+      continue;  // no temperature, no earlier shifts in this simulation
     }
     const std::array<double, 3> taus{5400.0, 3600.0, 10800.0};
     const std::array<const char*, 3> tau_names{"1.5 h (true)", "1 h", "3 h"};
@@ -323,27 +353,23 @@ double interp(const std::vector<double>& t, const std::vector<double>& y, double
   return y[i - 1] + f * (y[i] - y[i - 1]);
 }
 
-void thermal_tables(const std::string& path) {
-  const Thermal d = load_thermal(path);
-  std::printf("## 8-hour shifts driven by the FL_THERMAL spindle drift\n\n");
-  std::printf(
-      "X <- ch3 (radial, largest), Y <- ch1 (radial), Z <- ch5 (axial growth), each "
-      "relative to its value at the shift start (the nominals are taken then); "
-      "temperature sensor <- t5 (spindle bearing / motor area, follows the speed). "
-      "Touch noise %.1f um, touches every hour, creep 600 s cosine, time model tau 1 h.\n\n",
-      kTouchNoiseUm);
-  const std::array<double, 5> starts{0.0, 8.0, 16.0, 24.0, 32.0};
-  std::printf("| strategy | axis |");
-  for (const double s : starts) {
-    std::printf(" shift %.0f-%.0f h RMS / max |", s, s + 8.0);
-  }
-  std::printf(" mean RMS |\n|---|---|");
-  for (std::size_t i = 0; i <= starts.size(); ++i) {
-    std::printf("---|");
-  }
-  std::printf("\n");
-  for (const auto& s : kStrategies) {
+struct Row {
+  const char* strategy;
+  std::size_t axis;
+  std::array<AxisStats, 5> shift;
+};
+
+constexpr std::array<const char*, 3> kAxisNames{"X (ch3)", "Y (ch1)", "Z (ch5)"};
+
+std::vector<Row> thermal_rows(const Thermal& d, const std::array<double, 5>& starts,
+                              std::span<const Strategy> strategies) {
+  std::vector<Row> rows;
+  for (const auto& s : strategies) {
     std::array<std::array<AxisStats, 3>, 5> res{};
+    // The shifts run in the data set's order on one machine: the state each ends with goes into
+    // the next, so shift k is seeded by shifts 0..k-1 (shift 0 by none) and scored on its own
+    // data only. A default state is a new machine.
+    nccomp::core::calib::CalibState carried{};
     for (std::size_t k = 0; k < starts.size(); ++k) {
       const double t_start = starts[k] * 3600.0;
       const std::array<double, 3> zero{interp(d.t_s, d.ch3, t_start), interp(d.t_s, d.ch1, t_start),
@@ -357,17 +383,130 @@ void thermal_tables(const std::string& path) {
       const TempFn temp = [&d, t_start](double t) {
         return interp(d.t_s, d.t5, t_start + std::max(0.0, t));
       };
-      res[k] = run_shift(s, drift, temp, 3600.0, 8.0);
+      res[k] = run_shift(s, drift, temp, 3600.0, 8.0, &carried);
     }
     for (std::size_t a = 0; a < 3; ++a) {
-      std::printf("| %s | %s |", s.name, a == 0 ? "X (ch3)" : (a == 1 ? "Y (ch1)" : "Z (ch5)"));
-      double mean = 0.0;
+      Row r{s.name, a, {}};
       for (std::size_t k = 0; k < starts.size(); ++k) {
-        std::printf(" %.2f / %.2f |", res[k][a].rms_um, res[k][a].max_um);
-        mean += res[k][a].rms_um / static_cast<double>(starts.size());
+        r.shift[k] = res[k][a];
       }
-      std::printf(" %.2f |\n", mean);
+      rows.push_back(r);
     }
+  }
+  return rows;
+}
+
+void thermal_tables(const std::string& path, bool json) {
+  const Thermal d = load_thermal(path);
+  const std::array<double, 5> starts{0.0, 8.0, 16.0, 24.0, 32.0};
+  const std::vector<Row> rows = thermal_rows(d, starts, kStrategies);
+  if (json) {
+    // One object per strategy, axis and shift, then per strategy and axis over all shifts
+    // ("all": mean RMS, largest first-hour error) and over the seeded shifts 8-40 h.
+    for (const auto& r : rows) {
+      const auto emit = [&](const std::string& shift, double rms, double first) {
+        std::printf(
+            "{\"axis\":\"%c\",\"strategy\":\"%s\",\"shift\":\"%s\",\"rms_um\":%.4f,"
+            "\"first_hour_max_um\":%.4f}\n",
+            "XYZ"[r.axis], r.strategy, shift.c_str(), rms, first);
+      };
+      double mean = 0.0;
+      double first = 0.0;
+      double mean_seeded = 0.0;
+      double first_seeded = 0.0;
+      for (std::size_t k = 0; k < starts.size(); ++k) {
+        const auto& st = r.shift[k];
+        emit(std::to_string(static_cast<int>(starts[k])) + "-" +
+                 std::to_string(static_cast<int>(starts[k] + 8.0)) + " h",
+             st.rms_um, st.first_hour_max_um);
+        mean += st.rms_um / static_cast<double>(starts.size());
+        first = std::max(first, st.first_hour_max_um);
+        if (k > 0) {
+          mean_seeded += st.rms_um / static_cast<double>(starts.size() - 1);
+          first_seeded = std::max(first_seeded, st.first_hour_max_um);
+        }
+      }
+      emit("all", mean, first);
+      emit("8-40 h", mean_seeded, first_seeded);
+    }
+    return;
+  }
+  std::printf("## 8-hour shifts driven by the FL_THERMAL spindle drift\n\n");
+  std::printf(
+      "X <- ch3 (radial, largest), Y <- ch1 (radial), Z <- ch5 (axial growth), each "
+      "relative to its value at the shift start (the nominals are taken then); "
+      "temperature sensor <- t5 (spindle bearing / motor area, follows the speed). "
+      "Touch noise %.1f um, touches every hour, creep 600 s cosine, time model tau 1 h. "
+      "The shifts run in order on one machine; the estimator is seeded by the shifts before "
+      "(shift 0-8 h by none).\n\n",
+      kTouchNoiseUm);
+  std::printf("| strategy | axis |");
+  for (const double s : starts) {
+    std::printf(" shift %.0f-%.0f h RMS / max |", s, s + 8.0);
+  }
+  std::printf(" mean RMS |\n|---|---|");
+  for (std::size_t i = 0; i <= starts.size(); ++i) {
+    std::printf("---|");
+  }
+  std::printf("\n");
+  for (const auto& r : rows) {
+    std::printf("| %s | %s |", r.strategy, kAxisNames[r.axis]);
+    double mean = 0.0;
+    for (std::size_t k = 0; k < starts.size(); ++k) {
+      std::printf(" %.2f / %.2f |", r.shift[k].rms_um, r.shift[k].max_um);
+      mean += r.shift[k].rms_um / static_cast<double>(starts.size());
+    }
+    std::printf(" %.2f |\n", mean);
+  }
+  std::printf(
+      "\n### Largest error in the first hour (before the first touch)\n\n| strategy | axis |");
+  for (const double s : starts) {
+    std::printf(" shift %.0f-%.0f h |", s, s + 8.0);
+  }
+  std::printf(" largest |\n|---|---|");
+  for (std::size_t i = 0; i <= starts.size(); ++i) {
+    std::printf("---|");
+  }
+  std::printf("\n");
+  for (const auto& r : rows) {
+    std::printf("| %s | %s |", r.strategy, kAxisNames[r.axis]);
+    double worst = 0.0;
+    for (std::size_t k = 0; k < starts.size(); ++k) {
+      std::printf(" %.2f |", r.shift[k].first_hour_max_um);
+      worst = std::max(worst, r.shift[k].first_hour_max_um);
+    }
+    std::printf(" %.2f |\n", worst);
+  }
+  std::printf(
+      "\n### Estimator: sensitivity to the level noise and the gate\n\n"
+      "The rows above use estimator_level_noise_um_per_h = 6, estimator_gate_sigmas = 5. "
+      "Mean RMS over the five shifts / largest first-hour error [um].\n\n"
+      "| temperature | level noise [um/h] | gate [sigma] | X | Y | Z "
+      "|\n|---|---|---|---|---|---|\n");
+  std::vector<Strategy> variants;
+  for (const bool temperature : {false, true}) {
+    for (const double level : {1.0, 3.0, 6.0, 10.0}) {
+      for (const double gate : {0.0, 5.0}) {
+        variants.push_back({"", true, nccomp::core::ProfileShape::kCosine, Prediction::kEstimator,
+                            temperature, level, gate});
+      }
+    }
+  }
+  const std::vector<Row> sens = thermal_rows(d, starts, variants);
+  for (std::size_t i = 0; i < variants.size(); ++i) {
+    std::printf("| %s | %.0f | %s |", variants[i].temperature_slope ? "t5" : "-",
+                variants[i].level_noise_um_per_h, variants[i].gate_sigmas > 0.0 ? "5" : "off");
+    for (std::size_t a = 0; a < 3; ++a) {
+      const Row& r = sens[i * 3 + a];
+      double mean = 0.0;
+      double worst = 0.0;
+      for (const auto& st : r.shift) {
+        mean += st.rms_um / static_cast<double>(r.shift.size());
+        worst = std::max(worst, st.first_hour_max_um);
+      }
+      std::printf(" %.2f / %.2f |", mean, worst);
+    }
+    std::printf("\n");
   }
   std::printf("\n");
 }
@@ -376,19 +515,24 @@ void thermal_tables(const std::string& path) {
 
 int main(int argc, char** argv) {
   std::string data = NCCOMP_FL_THERMAL_CSV;
+  bool json = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--data" && i + 1 < argc) {
       data = argv[++i];
+    } else if (a == "--json") {
+      json = true;
     } else {
-      std::fprintf(stderr, "usage: bench_calib_shift [--data FL_THERMAL/data.csv]\n");
+      std::fprintf(stderr, "usage: bench_calib_shift [--data FL_THERMAL/data.csv] [--json]\n");
       return 2;
     }
   }
   try {
-    facet_table();
-    first_order_table();
-    thermal_tables(data);
+    if (!json) {
+      facet_table();
+      first_order_table();
+    }
+    thermal_tables(data, json);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_calib_shift: %s\n", e.what());
     return 1;

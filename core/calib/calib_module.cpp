@@ -210,19 +210,35 @@ bool CalibrationModule::load_state(std::span<const std::byte> bytes) noexcept {
   if (bytes.empty()) {
     return true;
   }
-  if (bytes.size() != sizeof(CalibState) && bytes.size() != kStateBytes) {
+  // Version 2, version 1 (a prefix of version 2's bytes), each with or without the values
+  // written.
+  constexpr std::size_t kWrittenBytes = 3 * sizeof(double);
+  const bool v1 =
+      bytes.size() == kCalibStateV1Bytes || bytes.size() == kCalibStateV1Bytes + kWrittenBytes;
+  if (bytes.size() != sizeof(CalibState) && bytes.size() != kStateBytes && !v1) {
     return false;
   }
+  const std::size_t state_bytes = v1 ? kCalibStateV1Bytes : sizeof(CalibState);
   CalibState s;
-  std::memcpy(&s, bytes.data(), sizeof s);
+  std::memcpy(&s, bytes.data(), state_bytes);
+  if (v1) {
+    if (s.version != 1) {
+      return false;
+    }
+    s.version = CalibState::kVersion;  // for the checks of the version-1 fields
+    if (state_problem(s) != nullptr) {
+      return false;
+    }
+    convert_from_v1(s);
+  }
   if (state_problem(s) != nullptr) {
     return false;
   }
   calib_.import_state_unchecked(s);
-  if (bytes.size() == kStateBytes) {
+  if (bytes.size() == state_bytes + kWrittenBytes) {
     for (std::size_t a = 0; a < 3; ++a) {
       double w = kNaN;
-      std::memcpy(&w, bytes.data() + sizeof s + a * sizeof(double), sizeof w);
+      std::memcpy(&w, bytes.data() + state_bytes + a * sizeof(double), sizeof w);
       calib_.restore_written(a, w);  // NaN (never written) is ignored
     }
   }
@@ -232,6 +248,10 @@ bool CalibrationModule::load_state(std::span<const std::byte> bytes) noexcept {
 
 std::size_t CalibrationModule::status(std::span<engine::StatusValue> out) const noexcept {
   const auto& c = calib_;
+  std::array<EstimatedDrift, kAxisCount> est{};
+  for (std::size_t a = 0; a < kAxisCount; ++a) {
+    est[a] = c.estimated_drift(static_cast<Slot>(kAxisSlot[a]), c.last_step_ns());
+  }
   const engine::StatusValue values[] = {
       {"phase", 0.0, to_string(c.phase())},
       {"request", 0.0, to_string(c.request())},
@@ -242,6 +262,12 @@ std::size_t CalibrationModule::status(std::span<engine::StatusValue> out) const 
       {"y_last_drift_um", c.model(Slot::kY).anchor_drift_um, nullptr},
       {"z_last_drift_um", c.model(Slot::kZ).anchor_drift_um, nullptr},
       {"grind_dx_um", c.grind_correction_um(), nullptr},
+      {"x_estimate_um", est[0].mean_um, nullptr},
+      {"x_estimate_sigma_um", est[0].sigma_um, nullptr},
+      {"y_estimate_um", est[1].mean_um, nullptr},
+      {"y_estimate_sigma_um", est[1].sigma_um, nullptr},
+      {"z_estimate_um", est[2].mean_um, nullptr},
+      {"z_estimate_sigma_um", est[2].sigma_um, nullptr},
       {"commands_refused", static_cast<double>(snapshot_.commands_refused), nullptr},
   };
   std::size_t w = 0;

@@ -5,6 +5,7 @@
 #include <stdexcept>
 #include <variant>
 
+#include "core/calib/drift_estimator.hpp"
 #include "core/calib/facet.hpp"
 #include "core/common/profile.hpp"
 
@@ -24,6 +25,11 @@ constexpr std::int32_t slot_axis(std::size_t slot) {
 
 /// Temperature spread below which a slope is not learned [°C²] (0.1 °C standard deviation).
 constexpr double kMinTemperatureVariance = 0.01;
+
+EstimatorParams estimator_params(const CalibrationConfig& c) noexcept {
+  return {c.estimator_touch_noise_um, c.estimator_level_noise_um_per_h,
+          c.estimator_prior_gain_sigma, c.estimator_slope_sigma_um_per_c, c.estimator_gate_sigmas};
+}
 
 }  // namespace
 
@@ -59,7 +65,12 @@ void Calibrator::set_clock_offset_s(double wall_minus_monotonic_s) noexcept {
 
 void Calibrator::begin_calibration(TimeNs now_ns, StepOutput& out) noexcept {
   (void)out;
+  // Earlier shifts and the learned temperature slopes outlive a new calibration.
+  const ShiftHistory shifts = state_.shifts;
+  const auto estimates = state_.estimates;
   state_ = CalibState{};
+  state_.shifts = shifts;
+  state_.estimates = estimates;
   state_.phase = Phase::kReferenceTouches;
   state_.result.time_s = seconds(now_ns);
   set_ = TouchSet{};
@@ -399,7 +410,15 @@ void Calibrator::evaluate_reference(TimeNs now_ns, StepOutput& out) noexcept {
 }
 
 void Calibrator::evaluate_nominals(double now_s, TimeNs now_ns, StepOutput& out) noexcept {
+  // New nominals start a new shift: the one before joins the estimator's prior.
+  fold_shift(state_.shifts, config_.estimator_prior_forgetting);
+  const bool with_prior = has_prior(state_.shifts);
   for (std::size_t s = 0; s < kSlotCount; ++s) {
+    // The temperature slope is a property of the machine: the one the last shift learned
+    // starts the next.
+    const auto& last = state_.estimates[s];
+    state_.estimates[s] = start_estimate(now_s, with_prior, last.valid == 1 ? last.x[2] : 0.0,
+                                         estimator_params(config_));
     auto& n = state_.nominals[s];
     n.valid = 1;
     n.direction = set_.direction[s];
@@ -446,9 +465,29 @@ void Calibrator::evaluate_recalibration(double now_s, TimeNs now_ns, StepOutput&
       plausible = false;
     }
   }
+  std::array<DriftEstimate, kSlotCount> estimates = state_.estimates;
+  if (plausible && config_.prediction == Prediction::kEstimator) {
+    const EstimatorParams p = estimator_params(config_);
+    for (std::size_t s = 0; s < kSlotCount; ++s) {
+      auto& e = estimates[s];
+      if (e.valid != 1) {  // switched to the estimator after the nominals
+        e = start_estimate(state_.nominals[s].time_s, has_prior(state_.shifts), 0.0, p);
+      }
+      const double prior = prior_drift_um(state_.shifts, s, now_s - state_.nominals[s].time_s);
+      const auto r = update_estimate(e, prior, temperature_delta(s), now_s, drift[s], p);
+      if (!r.accepted) {
+        // Beyond the gate: the estimate does not absorb it, and nothing is applied.
+        out.alarm(now_ns, Severity::kAlarm, AlarmCode::kRecalibrationImplausible, slot_axis(s),
+                  drift[s] - correction(s, now_s));
+        plausible = false;
+      }
+    }
+  }
   if (!plausible) {
     return;  // crashed probe, bent stylus, dirt on the sphere: nothing applied
   }
+  state_.estimates = estimates;
+  add_shift_point(state_.shifts, now_s - state_.nominals[kX].time_s, drift);
   for (std::size_t s = 0; s < kSlotCount; ++s) {
     const double before = correction(s, now_s);
     update_model(s, now_s, drift[s]);
@@ -540,6 +579,14 @@ double Calibrator::predict(std::size_t slot, double t_s) const noexcept {
       return m.asymptote_um +
              (m.anchor_drift_um - m.asymptote_um) * std::exp(-dt / config_.thermal_time_constant_s);
     }
+    case Prediction::kEstimator: {
+      // Bounded like a touch: between touches the estimate moves the axis by at most what one
+      // recalibration could from the last measured drift.
+      const double mean = estimate(slot, t_s).mean_um;
+      return std::isfinite(mean) ? std::clamp(mean, m.anchor_drift_um - config_.plausibility_um,
+                                              m.anchor_drift_um + config_.plausibility_um)
+                                 : m.anchor_drift_um;
+    }
     case Prediction::kTemperature:
       if (std::isfinite(temp_c_) && std::isfinite(m.anchor_temp_c)) {
         // Bounded like a touch: a broken sensor cannot move the axis by more than a
@@ -551,6 +598,31 @@ double Calibrator::predict(std::size_t slot, double t_s) const noexcept {
       return m.anchor_drift_um;
   }
   return m.anchor_drift_um;
+}
+
+double Calibrator::temperature_delta(std::size_t slot) const noexcept {
+  const double d = temp_c_ - state_.nominals[slot].temp_c;
+  if (!(config_.estimator_slope_sigma_um_per_c > 0.0) || !std::isfinite(d)) {
+    return 0.0;
+  }
+  // Bounded like the temperature model: a broken sensor cannot move the axis by more than a
+  // recalibration could.
+  const double max_slope = config_.max_temperature_slope_um_per_c;
+  return std::clamp(d, -config_.plausibility_um / max_slope, config_.plausibility_um / max_slope);
+}
+
+EstimatedDrift Calibrator::estimate(std::size_t slot, double t_s) const noexcept {
+  const auto& e = state_.estimates[slot];
+  if (e.valid != 1 || state_.nominals[slot].valid != 1) {
+    return {};
+  }
+  const double prior = prior_drift_um(state_.shifts, slot, t_s - state_.nominals[slot].time_s);
+  return predict_estimate(e, prior, temperature_delta(slot), std::max(t_s, e.time_s),
+                          estimator_params(config_));
+}
+
+EstimatedDrift Calibrator::estimated_drift(Slot slot, TimeNs now_ns) const noexcept {
+  return estimate(static_cast<std::size_t>(slot), seconds(now_ns));
 }
 
 double Calibrator::correction(std::size_t slot, double t_s) const noexcept {
@@ -592,6 +664,7 @@ void Calibrator::step(TimeNs now_ns, std::span<const Event> events, StepOutput& 
     return;
   }
   const double now_s = seconds(now_ns);
+  last_step_ns_ = now_ns;
   for (std::size_t a = 0; a < kAxisCount; ++a) {
     if (std::isfinite(pending_sync_[a])) {
       sync_register(a, pending_sync_[a], now_ns);

@@ -30,6 +30,7 @@
 #include <span>
 
 #include "core/calib/config.hpp"
+#include "core/calib/drift_estimator.hpp"
 #include "core/calib/state.hpp"
 #include "core/common/limiter.hpp"
 #include "core/common/output.hpp"
@@ -124,6 +125,11 @@ class Calibrator {
   [[nodiscard]] double drift_correction_um(Slot slot, TimeNs now_ns) const noexcept;
   /// Predicted drift of a slot at now_ns (no creep) [µm].
   [[nodiscard]] double predicted_drift_um(Slot slot, TimeNs now_ns) const noexcept;
+  /// The drift estimator's estimate of a slot at now_ns and its σ [µm] (NaN unless the
+  /// estimator has a state: prediction = "estimator", nominals taken).
+  [[nodiscard]] EstimatedDrift estimated_drift(Slot slot, TimeNs now_ns) const noexcept;
+  /// Time of the last step() [ns] (0 before the first).
+  [[nodiscard]] TimeNs last_step_ns() const noexcept { return last_step_ns_; }
   /// Register target of axis 0..2 (base + drift correction) [µm]; NaN before calibration.
   [[nodiscard]] double target_um(std::size_t axis, TimeNs now_ns) const noexcept;
   /// Last value written to axis 0..2 [µm] (NaN before the first write).
@@ -160,6 +166,9 @@ class Calibrator {
   void update_model(std::size_t slot, double t_s, double drift_um) noexcept;
   [[nodiscard]] double predict(std::size_t slot, double t_s) const noexcept;
   [[nodiscard]] double correction(std::size_t slot, double t_s) const noexcept;
+  [[nodiscard]] EstimatedDrift estimate(std::size_t slot, double t_s) const noexcept;
+  /// Mapped temperature minus the one at the slot's nominals, 0 unless the estimator uses it.
+  [[nodiscard]] double temperature_delta(std::size_t slot) const noexcept;
   [[nodiscard]] double mean(std::size_t slot) const noexcept;
   [[nodiscard]] double scatter(std::size_t slot) const noexcept;
   [[nodiscard]] bool base_valid() const noexcept;
@@ -175,6 +184,7 @@ class Calibrator {
   TouchSet set_{};
   double clock_offset_s_{0.0};
   double temp_c_{kNaN};
+  TimeNs last_step_ns_{0};
   std::array<OffsetLimiter, kAxisCount> limiters_{};
   std::array<double, kAxisCount> written_um_{kNaN, kNaN, kNaN};
   std::array<bool, kAxisCount> slewing_{};

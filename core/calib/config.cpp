@@ -82,6 +82,20 @@ void validate(const CalibrationConfig& c) {
     k.fail("temperature_forgetting", "must be in (0, 1]", c.temperature_forgetting);
   }
   k.positive(c.max_temperature_slope_um_per_c, "max_temperature_slope_um_per_c");
+  k.positive(c.estimator_touch_noise_um, "estimator_touch_noise_um");
+  k.non_negative(c.estimator_level_noise_um_per_h, "estimator_level_noise_um_per_h");
+  k.non_negative(c.estimator_prior_gain_sigma, "estimator_prior_gain_sigma");
+  if (!std::isfinite(c.estimator_prior_forgetting) || c.estimator_prior_forgetting <= 0.0 ||
+      c.estimator_prior_forgetting > 1.0) {
+    k.fail("estimator_prior_forgetting", "must be in (0, 1]", c.estimator_prior_forgetting);
+  }
+  k.non_negative(c.estimator_slope_sigma_um_per_c, "estimator_slope_sigma_um_per_c");
+  if (c.prediction == Prediction::kEstimator && c.estimator_slope_sigma_um_per_c > 0.0 &&
+      c.temperature_sensor < 0) {
+    k.fail("temperature_sensor", "estimator_slope_sigma_um_per_c > 0 needs a mapped sensor",
+           c.temperature_sensor);
+  }
+  k.non_negative(c.estimator_gate_sigmas, "estimator_gate_sigmas");
   k.positive(c.write_period_s, "write_period_s");
   k.non_negative(c.write_deadband_um, "write_deadband_um");
   k.positive(c.max_abs_um, "max_abs_um");
@@ -123,6 +137,8 @@ const char* to_string(Prediction prediction) noexcept {
       return "time";
     case Prediction::kTemperature:
       return "temperature";
+    case Prediction::kEstimator:
+      return "estimator";
   }
   return "?";
 }
@@ -161,6 +177,8 @@ bool parse_prediction(const std::string& s, Prediction& out) noexcept {
     out = Prediction::kTime;
   } else if (s == "temperature") {
     out = Prediction::kTemperature;
+  } else if (s == "estimator") {
+    out = Prediction::kEstimator;
   } else {
     return false;
   }

@@ -22,6 +22,9 @@ enum class Prediction : std::uint8_t {
   kNone = 0,         // hold the last measured drift (the seed: corrections lag the drift)
   kTime = 1,         // first-order thermal model in time (time constant configured)
   kTemperature = 2,  // drift linear in the mapped temperature, slope learned from the touches
+  /// Kalman estimate of the drift: the mean drift of earlier shifts (by time since the nominals)
+  /// scaled by a gain, plus a random-walk level and a temperature slope (drift_estimator.hpp).
+  kEstimator = 3,
 };
 
 /// In which coordinates the NC reports a touch's trigger position.
@@ -108,6 +111,21 @@ struct CalibrationConfig {
   double temperature_forgetting{0.8};
   /// Slopes learned beyond ± this are clamped [µm/°C].
   double max_temperature_slope_um_per_c{20.0};
+
+  // --- prediction = "estimator" (docs/calibration.md, "Drift estimator") --------------------
+  /// Standard deviation of one touch set's drift reading (touch and nominal noise) [µm].
+  double estimator_touch_noise_um{0.7};
+  /// Standard deviation of the level's random walk over one hour [µm]; it grows with √hours.
+  double estimator_level_noise_um_per_h{6.0};
+  /// Prior standard deviation of the gain on the earlier shifts' mean drift (prior gain 1).
+  double estimator_prior_gain_sigma{0.5};
+  /// Weight kept per shift by the earlier shifts' mean drift, in (0, 1].
+  double estimator_prior_forgetting{0.8};
+  /// Prior standard deviation of the temperature slope [µm/°C]; 0 = temperature not used.
+  double estimator_slope_sigma_um_per_c{0.0};
+  /// A touch set beyond this many σ of the estimate's prediction changes nothing (alarm
+  /// 'implausible'); 0 = no gate.
+  double estimator_gate_sigmas{5.0};
 
   /// Logical register (kind flag) that gets the RequestCode the calibrator waits for; the NC or
   /// PLC polls it to start its touch cycle or test grind. −1 = none.

@@ -97,8 +97,40 @@ struct HistoryEntry {
   std::array<double, kSlotCount> drift_um{};
 };
 
+/// Knots of the earlier shifts' mean drift: every kPriorStepS after the nominals, up to 12 h.
+inline constexpr std::size_t kPriorKnots = 24;
+inline constexpr double kPriorStepS = 1800.0;
+/// State of the drift estimator: x = [level, gain, slope].
+inline constexpr int kEstimatorStates = 3;
+
+/// Kalman estimate of one slot's drift (prediction = "estimator"): drift(t) = level +
+/// gain · prior(t − nominal time) + slope · (T − T at the nominals).
+struct DriftEstimate {
+  std::int32_t valid{0};
+  /// Time the state refers to (last touch set, or the nominals).
+  double time_s{kNaN};
+  std::array<double, kEstimatorStates> x{};
+  /// Covariance, row-major.
+  std::array<double, kEstimatorStates * kEstimatorStates> p{};
+};
+
+/// Drift of earlier shifts (one shift = from one nominal set to the next) at the knots
+/// j · kPriorStepS (j = 1..kPriorKnots) after the nominals, per slot: exponentially weighted sums,
+/// so sum / weight is the mean; and the shift in progress, folded in at the next nominals.
+struct ShiftHistory {
+  std::int32_t shifts{0};
+  std::array<std::array<double, kPriorKnots>, kSlotCount> sum_um{};
+  std::array<double, kPriorKnots> weight{};
+  /// The shift in progress: its drift interpolated at the knots passed so far (linear between
+  /// touch sets), and its last touch set (time since the nominals, drift per slot).
+  std::int32_t current_knots{0};
+  std::array<std::array<double, kPriorKnots>, kSlotCount> current_um{};
+  double last_since_s{0.0};
+  std::array<double, kSlotCount> last_drift_um{};
+};
+
 struct CalibState {
-  static constexpr std::int32_t kVersion = 1;
+  static constexpr std::int32_t kVersion = 2;
   std::int32_t version{kVersion};
   Phase phase{Phase::kUncalibrated};
   CalibrationResult result{};
@@ -112,8 +144,18 @@ struct CalibState {
   std::int32_t history_count{0};
   std::int32_t history_next{0};
   double last_set_time_s{kNaN};
+  // --- version 2 (appended, so a version-1 state is a prefix of the bytes) ---
+  std::array<DriftEstimate, kSlotCount> estimates{};
+  ShiftHistory shifts{};
 };
 static_assert(std::is_trivially_copyable_v<CalibState>);
+/// Bytes of a version-1 CalibState (everything before `estimates`).
+inline constexpr std::size_t kCalibStateV1Bytes = offsetof(CalibState, estimates);
+
+/// Converts a version-1 state (version 1, version-2 fields at their defaults): the drift
+/// history since the nominals becomes the shift in progress, so that it is folded into the
+/// earlier shifts' drift at the next nominals. Sets version 2. Real-time safe.
+void convert_from_v1(CalibState& state) noexcept;
 
 /// Adds delta_s to every time field (monotonic ↔ wall clock).
 void shift_times(CalibState& state, double delta_s) noexcept;

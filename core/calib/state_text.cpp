@@ -1,3 +1,4 @@
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <cstdlib>
@@ -6,6 +7,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "core/calib/drift_estimator.hpp"
 #include "core/calib/state.hpp"
 
 namespace nccomp::core::calib {
@@ -14,9 +16,11 @@ namespace {
 
 constexpr std::string_view kHeader = "nccomp_calib_state";
 
+const char* state_problem_v1(const CalibState& s) noexcept;
+
 // One walk over every field, shared by writer and reader, so they cannot drift apart.
 template <typename State, typename F>
-void visit_fields(State& s, F&& f) {
+void visit_fields(State& s, std::int64_t version, F&& f) {
   f(std::string("phase"), s.phase);
   auto& r = s.result;
   f(std::string("result.dx_touch_lateral_um"), r.dx_touch_lateral_um);
@@ -77,6 +81,36 @@ void visit_fields(State& s, F&& f) {
     }
   }
   f(std::string("last_set_time_s"), s.last_set_time_s);
+  if (version < 2) {
+    return;
+  }
+  for (std::size_t i = 0; i < kSlotCount; ++i) {
+    const std::string n = "estimate." + std::to_string(i) + ".";
+    auto& e = s.estimates[i];
+    f(n + "valid", e.valid);
+    f(n + "time_s", e.time_s);
+    for (std::size_t k = 0; k < e.x.size(); ++k) {
+      f(n + "x." + std::to_string(k), e.x[k]);
+    }
+    for (std::size_t k = 0; k < e.p.size(); ++k) {
+      f(n + "p." + std::to_string(k), e.p[k]);
+    }
+  }
+  auto& h = s.shifts;
+  f(std::string("shifts.count"), h.shifts);
+  f(std::string("shifts.current_knots"), h.current_knots);
+  f(std::string("shifts.last_since_s"), h.last_since_s);
+  for (std::size_t k = 0; k < kSlotCount; ++k) {
+    f("shifts.last_drift_um." + std::to_string(k), h.last_drift_um[k]);
+  }
+  for (std::size_t j = 0; j < kPriorKnots; ++j) {
+    const std::string n = "shifts.knot." + std::to_string(j) + ".";
+    f(n + "weight", h.weight[j]);
+    for (std::size_t k = 0; k < kSlotCount; ++k) {
+      f(n + "sum_um." + std::to_string(k), h.sum_um[k][j]);
+      f(n + "current_um." + std::to_string(k), h.current_um[k][j]);
+    }
+  }
 }
 
 std::string format_double(double v) {
@@ -154,12 +188,36 @@ void shift_times(CalibState& s, double delta_s) noexcept {
     h.time_s += delta_s;
   }
   s.last_set_time_s += delta_s;
+  for (auto& e : s.estimates) {
+    e.time_s += delta_s;
+  }
+}
+
+void convert_from_v1(CalibState& s) noexcept {
+  s.version = CalibState::kVersion;
+  s.estimates = {};
+  s.shifts = {};
+  // Version 1 kept the drift of the touch sets since the nominals in the history only.
+  const double t0 = s.nominals[0].time_s;
+  if (s.phase != Phase::kReady || !std::isfinite(t0)) {
+    return;
+  }
+  const auto n = static_cast<std::size_t>(std::clamp(s.history_count, 0, 64));
+  for (std::size_t i = 0; i < n; ++i) {
+    const auto first = static_cast<std::size_t>(
+        (s.history_next - s.history_count + static_cast<std::int32_t>(kHistorySize)) %
+        static_cast<std::int32_t>(kHistorySize));
+    const auto& h = s.history[(first + i) % kHistorySize];
+    if (std::isfinite(h.time_s) && h.time_s > t0) {
+      add_shift_point(s.shifts, h.time_s - t0, h.drift_um);
+    }
+  }
 }
 
 std::string to_text(const CalibState& state) {
   std::ostringstream out;
   out << kHeader << ' ' << CalibState::kVersion << '\n';
-  visit_fields(state, [&](const std::string& key, const auto& v) {
+  visit_fields(state, CalibState::kVersion, [&](const std::string& key, const auto& v) {
     using T = std::decay_t<decltype(v)>;
     out << key << ' ';
     if constexpr (std::is_same_v<T, Phase>) {
@@ -178,6 +236,7 @@ CalibState from_text(std::string_view text) {
   std::map<std::string, std::pair<std::string, std::size_t>> values;
   std::size_t line_no = 0;
   bool header = false;
+  std::int64_t version = 0;
   while (!text.empty()) {
     const auto nl = text.find('\n');
     std::string_view line = text.substr(0, nl);
@@ -199,7 +258,8 @@ CalibState from_text(std::string_view text) {
       if (key != kHeader) {
         fail(line_no, key, "not a calibration state (expected header 'nccomp_calib_state')");
       }
-      if (parse_int(value, line_no, key) != CalibState::kVersion) {
+      version = parse_int(value, line_no, key);
+      if (version != 1 && version != CalibState::kVersion) {
         fail(line_no, key, "unsupported version '" + std::string(value) + "'");
       }
       header = true;
@@ -214,7 +274,7 @@ CalibState from_text(std::string_view text) {
   }
   CalibState s;
   std::size_t used = 0;
-  visit_fields(s, [&](const std::string& key, auto& v) {
+  visit_fields(s, version, [&](const std::string& key, auto& v) {
     using T = std::decay_t<decltype(v)>;
     const auto it = values.find(key);
     if (it == values.end()) {
@@ -243,20 +303,26 @@ CalibState from_text(std::string_view text) {
     for (const auto& [key, value] : values) {
       bool known = false;
       const std::string& name = key;  // clang 14 cannot capture a structured binding
-      visit_fields(s, [&](const std::string& k, const auto&) { known = known || k == name; });
+      visit_fields(s, version,
+                   [&](const std::string& k, const auto&) { known = known || k == name; });
       if (!known) {
         fail(value.second, key, "unknown key");
       }
+    }
+  }
+  if (version == 1) {
+    if (state_problem_v1(s) == nullptr) {
+      convert_from_v1(s);
     }
   }
   validate(s);
   return s;
 }
 
-const char* state_problem(const CalibState& s) noexcept {
-  if (s.version != CalibState::kVersion) {
-    return "version: unsupported";
-  }
+namespace {
+
+// The checks of the version-1 fields.
+const char* state_problem_v1(const CalibState& s) noexcept {
   if (static_cast<int>(s.phase) > static_cast<int>(Phase::kReady)) {
     return "phase: unknown";
   }
@@ -307,6 +373,52 @@ const char* state_problem(const CalibState& s) noexcept {
           std::isfinite(m.sum_tt) && std::isfinite(m.sum_td) && m.sum_w >= 0.0)) {
       return "model.N: fit sums must be finite (sum_w >= 0)";
     }
+  }
+  return nullptr;
+}
+
+}  // namespace
+
+const char* state_problem(const CalibState& s) noexcept {
+  if (s.version != CalibState::kVersion) {
+    return "version: unsupported";
+  }
+  if (const char* p = state_problem_v1(s)) {
+    return p;
+  }
+  for (const auto& e : s.estimates) {
+    if (e.valid != 0 && e.valid != 1) {
+      return "estimate.N.valid: must be 0 or 1";
+    }
+    if (e.valid == 1) {
+      bool finite = std::isfinite(e.time_s);
+      for (const double v : e.x) finite = finite && std::isfinite(v);
+      for (const double v : e.p) finite = finite && std::isfinite(v);
+      if (!finite) {
+        return "estimate.N: a valid estimate needs finite time, state and covariance";
+      }
+      for (std::size_t k = 0; k < e.x.size(); ++k) {
+        if (e.p[k * e.x.size() + k] < 0.0) {
+          return "estimate.N.p: negative variance";
+        }
+      }
+    }
+  }
+  const auto& h = s.shifts;
+  if (h.shifts < 0 || h.current_knots < 0 ||
+      h.current_knots > static_cast<std::int32_t>(kPriorKnots)) {
+    return "shifts: count must be >= 0, current_knots 0..24";
+  }
+  bool finite = std::isfinite(h.last_since_s) && h.last_since_s >= 0.0;
+  for (const double v : h.last_drift_um) finite = finite && std::isfinite(v);
+  for (std::size_t j = 0; j < kPriorKnots; ++j) {
+    finite = finite && std::isfinite(h.weight[j]) && h.weight[j] >= 0.0;
+    for (std::size_t k = 0; k < kSlotCount; ++k) {
+      finite = finite && std::isfinite(h.sum_um[k][j]) && std::isfinite(h.current_um[k][j]);
+    }
+  }
+  if (!finite) {
+    return "shifts: weights (>= 0), sums, drifts and last_since_s (>= 0) must be finite";
   }
   return nullptr;
 }

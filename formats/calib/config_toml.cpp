@@ -93,12 +93,23 @@ CalibrationConfig parse_calibration(const toml::node& calibration, Diagnostics& 
         r.pick<core::calib::Prediction>("prediction", c.prediction,
                                         {{"none", core::calib::Prediction::kNone},
                                          {"time", core::calib::Prediction::kTime},
-                                         {"temperature", core::calib::Prediction::kTemperature}});
+                                         {"temperature", core::calib::Prediction::kTemperature},
+                                         {"estimator", core::calib::Prediction::kEstimator}});
     c.thermal_time_constant_s = r.number("thermal_time_constant_s", c.thermal_time_constant_s);
     c.temperature_sensor = i32("temperature_sensor", c.temperature_sensor, -1, 255);
     c.temperature_forgetting = r.number("temperature_forgetting", c.temperature_forgetting);
     c.max_temperature_slope_um_per_c =
         r.number("max_temperature_slope_um_per_c", c.max_temperature_slope_um_per_c);
+    c.estimator_touch_noise_um = r.number("estimator_touch_noise_um", c.estimator_touch_noise_um);
+    c.estimator_level_noise_um_per_h =
+        r.number("estimator_level_noise_um_per_h", c.estimator_level_noise_um_per_h);
+    c.estimator_prior_gain_sigma =
+        r.number("estimator_prior_gain_sigma", c.estimator_prior_gain_sigma);
+    c.estimator_prior_forgetting =
+        r.number("estimator_prior_forgetting", c.estimator_prior_forgetting);
+    c.estimator_slope_sigma_um_per_c =
+        r.number("estimator_slope_sigma_um_per_c", c.estimator_slope_sigma_um_per_c);
+    c.estimator_gate_sigmas = r.number("estimator_gate_sigmas", c.estimator_gate_sigmas);
     c.write_period_s = r.number("write_period_s", c.write_period_s);
     c.write_deadband_um = r.number("write_deadband_um", c.write_deadband_um);
     c.max_abs_um = r.number("max_abs_um", c.max_abs_um);

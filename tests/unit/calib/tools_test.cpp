@@ -79,6 +79,29 @@ TEST(CalibrationToml, ErrorsNameFileLineAndKey) {
   EXPECT_NE(error_of("[calibration]\nprediction = \"temperature\"\n")
                 .find("calibration.temperature_sensor"),
             std::string::npos);
+  // The estimator's keys (issue 22 item 3).
+  const auto est = load_calibration_config_text(
+      "[calibration]\nprediction = \"estimator\"\ntemperature_sensor = 2\n"
+      "estimator_touch_noise_um = 0.4\nestimator_level_noise_um_per_h = 4.5\n"
+      "estimator_prior_gain_sigma = 0.3\nestimator_prior_forgetting = 0.9\n"
+      "estimator_slope_sigma_um_per_c = 0.25\nestimator_gate_sigmas = 6\n",
+      "m.toml");
+  EXPECT_EQ(est.prediction, core::calib::Prediction::kEstimator);
+  EXPECT_DOUBLE_EQ(est.estimator_touch_noise_um, 0.4);
+  EXPECT_DOUBLE_EQ(est.estimator_level_noise_um_per_h, 4.5);
+  EXPECT_DOUBLE_EQ(est.estimator_prior_gain_sigma, 0.3);
+  EXPECT_DOUBLE_EQ(est.estimator_prior_forgetting, 0.9);
+  EXPECT_DOUBLE_EQ(est.estimator_slope_sigma_um_per_c, 0.25);
+  EXPECT_DOUBLE_EQ(est.estimator_gate_sigmas, 6.0);
+  EXPECT_EQ(error_of("[calibration]\nestimator_touch_noise_um = \"x\"\n"),
+            "m.toml:2:28: calibration.estimator_touch_noise_um: must be a finite number");
+  EXPECT_NE(error_of("[calibration]\nestimator_prior_forgetting = 0\n")
+                .find("calibration.estimator_prior_forgetting: must be in (0, 1], got 0"),
+            std::string::npos);
+  EXPECT_NE(error_of("[calibration]\nprediction = \"estimator\"\n"
+                     "estimator_slope_sigma_um_per_c = 1\n")
+                .find("calibration.temperature_sensor"),
+            std::string::npos);
   EXPECT_NE(error_of("calibration = 3\n").find("m.toml:1:15: calibration: must be a table"),
             std::string::npos);
   EXPECT_NE(error_of("[calibration\n").find("m.toml:1"), std::string::npos);
