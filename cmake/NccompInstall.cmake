@@ -7,7 +7,10 @@
 #   /lib/systemd/system/nccompd.service, /usr/lib/sysusers.d/nccompd.conf,
 #   /usr/lib/tmpfiles.d/nccompd.conf (group and mode of /etc/nccompd: readable by the service)
 #   /usr/bin/nccomp-page, /lib/systemd/system/nccomp-page.service,
-#   /usr/lib/sysusers.d/nccomp-page.conf (the operator page, docs/operator-page.md)
+#   /usr/lib/sysusers.d/nccomp-page.conf (the operator page, docs/operator-page.md),
+#   /lib/systemd/system/nccomp-publish.service, /usr/lib/sysusers.d/nccomp-publish.conf,
+#   /usr/lib/tmpfiles.d/nccomp-publish.conf, /etc/nccomp/nccomp-publish.toml (the MQTT
+#   publisher, docs/mqtt.md)
 #   /etc/nccompd/nccompd.toml, reference-nc-modbus.toml
 #   /usr/share/doc/nccomp/*.md, examples/*.toml; /usr/share/man/man{1,5,8}
 #   /usr/share/bash-completion/completions/nccomp
@@ -38,20 +41,29 @@ install(FILES systemd/nccompd.tmpfiles.conf DESTINATION "${NCCOMP_TMPFILESDIR}" 
 install(FILES systemd/nccomp-page.service DESTINATION "${NCCOMP_SYSTEMD_UNITDIR}")
 install(FILES systemd/nccomp-page.sysusers.conf DESTINATION "${NCCOMP_SYSUSERSDIR}"
         RENAME nccomp-page.conf)
+install(FILES systemd/nccomp-publish.service DESTINATION "${NCCOMP_SYSTEMD_UNITDIR}")
+install(FILES systemd/nccomp-publish.sysusers.conf DESTINATION "${NCCOMP_SYSUSERSDIR}"
+        RENAME nccomp-publish.conf)
+install(FILES systemd/nccomp-publish.tmpfiles.conf DESTINATION "${NCCOMP_TMPFILESDIR}"
+        RENAME nccomp-publish.conf)
 
 # The operator's configuration (conffiles in the package). Readable by the service through
 # tmpfiles.d (root:nccomp 0640), applied after the user exists: systemd-tmpfiles --create.
 install(FILES config/nccompd.toml config/reference-nc-modbus.toml
         DESTINATION "${CMAKE_INSTALL_FULL_SYSCONFDIR}/nccompd")
+# The MQTT publisher's (nccomp-publish.service): root:nccomp-publish 0640 through its tmpfiles.d.
+install(FILES config/nccomp-publish.toml DESTINATION "${CMAKE_INSTALL_FULL_SYSCONFDIR}/nccomp")
 
 install(FILES README.md docs/calibration.md docs/can.md docs/checkpoints.md
               docs/closing-the-loop.md docs/config.md docs/creep.md docs/daemon.md docs/grinding.md
-              docs/modbus.md docs/report.md docs/operator-page.md
+              docs/modbus.md docs/report.md docs/operator-page.md docs/mqtt.md
+              docs/estimation.md
         DESTINATION "${CMAKE_INSTALL_DOCDIR}")
 install(FILES docs/images/operator-page-alarm.png docs/images/operator-page-report.png
         DESTINATION "${CMAKE_INSTALL_DOCDIR}/images")
 install(FILES config/nccompd.toml config/nccompd-loopback.toml config/reference-nc-modbus.toml
               config/reference-nc-can.toml config/reference-nc-can-fd.toml
+              config/nccomp-publish.toml
         DESTINATION "${CMAKE_INSTALL_DOCDIR}/examples")
 # The drop-in for [can] restart = "daemon" (docs/can.md): an example, never active by itself.
 install(FILES systemd/nccompd-can-restart.conf DESTINATION "${CMAKE_INSTALL_DOCDIR}/examples")

@@ -80,6 +80,35 @@ else
   fi
 fi
 
+# --- publisher_config: /etc/nccomp readable by the MQTT publisher's user only -----------------
+if ! $installed; then
+  fail publisher_config "skipped: install failed"
+elif ! getent passwd nccomp-publish >/dev/null; then
+  fail publisher_config "no user nccomp-publish after install"
+else
+  # The operator's step (docs/mqtt.md): the broker password, then the permissions applied.
+  echo secret >/etc/nccomp/publish.password
+  systemd-tmpfiles --create nccomp-publish.conf
+  dir=$(stat -c '%U:%G %a' /etc/nccomp)
+  file=$(stat -c '%U:%G %a' /etc/nccomp/nccomp-publish.toml)
+  pw=$(stat -c '%U:%G %a' /etc/nccomp/publish.password)
+  groups=$(id -nG nccomp-publish)
+  if [ "$dir" != "root:nccomp-publish 750" ] || [ "$file" != "root:nccomp-publish 640" ] ||
+     [ "$pw" != "root:nccomp-publish 640" ]; then
+    fail publisher_config "/etc/nccomp $dir, nccomp-publish.toml $file, password $pw (want root:nccomp-publish 750 / 640)"
+  elif [[ " $groups " != *" nccomp "* ]]; then
+    fail publisher_config "user nccomp-publish is in '$groups', not in nccomp (the log and the status socket)"
+  elif ! msg=$(runuser -u nccomp-publish -- nccomp publish --config /etc/nccomp/nccomp-publish.toml --check 2>&1); then
+    fail publisher_config "user nccomp-publish cannot load its config: $msg"
+  elif runuser -u nobody -- cat /etc/nccomp/publish.password >/dev/null 2>&1; then
+    fail publisher_config "user nobody can read the broker password"
+  elif ! systemd-analyze verify nccomp-publish.service >"$out/publish-verify.txt" 2>&1; then
+    fail publisher_config "systemd-analyze verify: $(head -3 "$out/publish-verify.txt" | tr '\n' ' ')"
+  else
+    pass publisher_config "/etc/nccomp $dir, config and password $file; groups '$groups'; --check as nccomp-publish: OK; unit verifies"
+  fi
+fi
+
 # --- start_ready: against the Modbus NC server on loopback, systemctl start returns at READY --
 running=false
 if ! $installed; then
