@@ -234,7 +234,10 @@ ConfigError::ConfigError(formats::Diagnostics diagnostics, std::string_view file
     if (named.where.file.empty()) {
       named.where.file = std::string(file);
     }
-    all += (all.empty() ? "" : "\n") + formats::format(named);
+    if (!all.empty()) {
+      all += '\n';
+    }
+    all += formats::format(named);
   }
   what_ = all;
   diagnostics_ = std::move(diagnostics);
