@@ -505,12 +505,22 @@ Mapping read_mapping_text(std::string_view text, std::string_view source) {
            ": measured_um and points must have the same, non-zero length");
     }
   }
+  // A scale applies to a column read from the file, once: one mapped under [columns] or
+  // [extra], or measured_um read from [wide]. A scale of anything else would silently do nothing.
+  const auto* scales = table("scale");
   for (const auto& [k, v] : m.scale) {
     const std::string& column = k;  // clang 14 cannot capture a structured binding
-    const bool known =
-        is_target(k) || std::any_of(m.extra.begin(), m.extra.end(),
-                                    [&](const auto& e) { return e.first == column; });
-    if (!known) fail(std::string(source) + ": scale." + k + ": no such mapped column");
+    auto named = [&](const auto& list) {
+      return std::any_of(list.begin(), list.end(),
+                         [&](const auto& e) { return e.first == column; });
+    };
+    const bool mapped =
+        named(m.columns) || named(m.extra) || (column == "measured_um" && !m.wide_measured.empty());
+    if (!mapped) {
+      fail(where(source, *scales->get(column), "scale." + column) +
+           (named(m.constant) ? ": a [constant] is not scaled (write it in the target unit)"
+                              : ": not a column mapped under [columns], [extra] or [wide]"));
+    }
   }
   return m;
 }
@@ -717,6 +727,13 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
     if (trim(line).empty()) continue;
     nf = split_csv(line, fields);
     if (nf == 0) csv_fail(source, line_no, "", "bad quoting");
+    if (nf > header.size()) {
+      // Reading on would shift every column after the extra field (e.g. a decimal comma).
+      csv_fail(source, line_no, "",
+               "the row has " + std::to_string(nf) + " fields, the header " +
+                   std::to_string(header.size()) +
+                   " (a decimal comma or an unquoted comma in a field?)");
+    }
     values.fill(cm::kUnknown);
     double measured = cm::kUnknown;
     double applied = mapped ? 0.0 : cm::kUnknown;
@@ -837,10 +854,11 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
             csv_fail(source, line_no, mapping.wide_measured[w],
                      "'" + std::string(cell) + "' is not a finite number");
           }
+          // A measured_um under [columns] got its scale when read (its target's scale).
+          y *= measured_scale;
         }
         values[static_cast<std::size_t>(cm::Column::kPoint)] = mapping.wide_points[w];
       }
-      if (std::isfinite(y)) y *= measured_scale;
       for (std::size_t c : present) cols[c].push_back(values[c]);
       data.target_um.push_back(y + (std::isfinite(applied) ? applied : 0.0));
       data.order_s.push_back(std::isfinite(t_s) ? t_s + order_offset : cm::kUnknown);

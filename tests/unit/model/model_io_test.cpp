@@ -194,3 +194,63 @@ TEST(ModelFile, RefusesBadTerms) {
   EXPECT_EQ(err("[model]\nalpha = 0.9\n[[model.term]]\nname = \"a\"\nform = \"constant\"\n"),
             "c.toml:2:9: model.alpha: must be within (0, 0.5)");
 }
+
+// Issue 21: a [scale] on measured_um mapped under [columns] was applied twice (37.1 → 37 101).
+TEST(ReadLog, AppliesAScaleOnceWhereverTheColumnIsMapped) {
+  const io::Mapping cols = io::read_mapping_text(
+      "[columns]\ntime_s = \"t\"\nmeasured_um = \"dev_mm\"\n[scale]\nmeasured_um = 1000.0\n"
+      "[constant]\nkind = \"contour\"\n",
+      "map.toml");
+  std::istringstream in("t,dev_mm\n0,0.0371\n1,-0.002\n");
+  cm::Dataset d;
+  io::read_log(in, "a.csv", cols, d);
+  ASSERT_EQ(d.rows(), 2U);
+  EXPECT_NEAR(d.target_um[0], 37.1, 1e-9);
+  EXPECT_NEAR(d.target_um[1], -2.0, 1e-9);
+
+  const io::Mapping wide = io::read_mapping_text(
+      "[columns]\ntime_s = \"t\"\n[scale]\nmeasured_um = 1000.0\n[constant]\nkind = \"contour\"\n"
+      "[wide]\nmeasured_um = [\"p1\", \"p2\"]\npoints = [1, 2]\n",
+      "map.toml");
+  std::istringstream in2("t,p1,p2\n0,0.0371,0.001\n");
+  cm::Dataset d2;
+  io::read_log(in2, "b.csv", wide, d2);
+  ASSERT_EQ(d2.rows(), 2U);
+  EXPECT_NEAR(d2.target_um[0], 37.1, 1e-9);
+  EXPECT_NEAR(d2.target_um[1], 1.0, 1e-9);
+}
+
+// Issue 21: a row with more fields than the header (a decimal comma) was read with its columns
+// shifted.
+TEST(ReadLog, RefusesARowWithMoreFieldsThanTheHeader) {
+  const std::string h = std::string(kHeader) + "\n";
+  EXPECT_EQ(error_of(h + "1,1,1,contour,1,0,0,0,0,0,,1,0\n2,1,1,contour,1,0,0,0,0,0,,37,1,0\n"),
+            "log.csv:3: the row has 14 fields, the header 13 (a decimal comma or an unquoted "
+            "comma in a field?)");
+  const io::Mapping m = io::read_mapping_text(
+      "[columns]\ntime_s = \"t\"\nmeasured_um = \"dev\"\n[constant]\nkind = \"contour\"\n",
+      "map.toml");
+  EXPECT_EQ(error_of("t,dev\n0,37.1\n1,37,1\n", m),
+            "log.csv:3: the row has 3 fields, the header 2 (a decimal comma or an unquoted "
+            "comma in a field?)");
+}
+
+// Issue 21: a scale of a column the mapping does not read did nothing, silently.
+TEST(ReadMapping, RefusesAScaleOfAColumnItDoesNotRead) {
+  auto err = [](const std::string& text) {
+    try {
+      io::read_mapping_text(text, "map.toml");
+    } catch (const io::ModelIoError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  EXPECT_EQ(err("[columns]\nmeasured_um = \"d\"\n[scale]\nx_mm = 2.0\n"),
+            "map.toml:4:8: scale.x_mm: not a column mapped under [columns], [extra] or [wide]");
+  EXPECT_EQ(err("[columns]\nmeasured_um = \"d\"\n[constant]\ntool = 3\n[scale]\ntool = 2.0\n"),
+            "map.toml:6:8: scale.tool: a [constant] is not scaled (write it in the target unit)");
+  EXPECT_EQ(err("[columns]\nmeasured_um = \"d\"\n[scale]\nspeed = 2.0\n"),
+            "map.toml:4:9: scale.speed: not a column mapped under [columns], [extra] or [wide]");
+  EXPECT_EQ(err("[columns]\nmeasured_um = \"d\"\n[extra]\nspeed = \"rpm\"\n[scale]\nspeed = 2.0\n"),
+            "");
+}
