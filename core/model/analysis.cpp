@@ -626,6 +626,22 @@ double lag1_autocorrelation(const Dataset& data, const std::vector<double>& resi
   return den > 0.0 ? num / den : 0.0;
 }
 
+bool is_temperature_column(int column, const std::vector<std::string>& extras,
+                           const SearchOptions& options) {
+  for (const auto& [c, temperature] : options.column_is_temperature) {
+    if (c == column) return temperature;
+  }
+  if (column == static_cast<int>(Column::kTemp)) return true;
+  const std::string name = column_name(column, extras);
+  return name.size() > 2 && name.compare(name.size() - 2, 2, "_c") == 0;
+}
+
+std::string linear_effect_name(int column, const std::vector<std::string>& extras,
+                               const SearchOptions& options) {
+  return is_temperature_column(column, extras, options) ? "thermal_drift"
+                                                        : "linear_" + column_name(column, extras);
+}
+
 std::vector<Candidate> make_candidates(const Dataset& data, const std::vector<std::uint8_t>& use,
                                        const SearchOptions& options,
                                        const std::vector<TermSpec>& declared) {
@@ -673,7 +689,9 @@ std::vector<Candidate> make_candidates(const Dataset& data, const std::vector<st
   const Range temp = column_range(data, static_cast<int>(Column::kTemp), use, km);
   if (varies(temp)) add("thermal_drift", Form::kLinear, static_cast<int>(Column::kTemp), 1, {});
   for (int col : options.linear_columns) {
-    if (varies(column_range(data, col, use, km))) add("thermal_drift", Form::kLinear, col, 1, {});
+    if (varies(column_range(data, col, use, km))) {
+      add(linear_effect_name(col, data.extra_columns, options), Form::kLinear, col, 1, {});
+    }
   }
   for (int col : options.lag_columns) {
     if (varies(column_range(data, col, use, km)) && varies(time)) {

@@ -59,8 +59,11 @@ struct SearchOptions {
   std::uint8_t kind_mask{0x7};
   /// Effect names never to try (e.g. "periodic_y").
   std::vector<std::string> exclude;
-  /// Extra columns tried as thermal_drift linear in that column (temperatures).
+  /// Columns tried as an effect linear in that column: named thermal_drift for a temperature
+  /// (is_temperature_column), linear_<column> otherwise.
   std::vector<int> linear_columns;
+  /// Columns declared a temperature (true) or not (false), overriding the naming rule.
+  std::vector<std::pair<int, bool>> column_is_temperature;
   /// Extra columns tried as thermal_drift, first-order lag of that column (speed, power).
   std::vector<int> lag_columns;
   /// Split every candidate per group of these columns (e.g. tool: one wear curve per tool).
@@ -168,6 +171,15 @@ double noise_floor_um(const Dataset& data, const std::vector<double>& residual,
 /// Lag-1 autocorrelation of the residual within each (kind, point, tool) series in row order.
 double lag1_autocorrelation(const Dataset& data, const std::vector<double>& residual,
                             const std::vector<std::uint8_t>& use);
+
+/// Whether `column` holds a temperature: as declared in options.column_is_temperature, else
+/// temp_c and every column whose name ends in _c (°C, the unit-suffix convention).
+bool is_temperature_column(int column, const std::vector<std::string>& extras,
+                           const SearchOptions& options);
+
+/// Name of the effect linear in `column`: thermal_drift for a temperature, linear_<column>.
+std::string linear_effect_name(int column, const std::vector<std::string>& extras,
+                               const SearchOptions& options);
 
 /// The candidate effects for this data set (the effect names of issue 11). `declared`: the
 /// model's declared terms; a term that applies to tool_wear rows makes `tool_wear` in the form

@@ -54,6 +54,23 @@ void run(const Options& opt) {
     cfg = io::read_model_text(read_text(opt.config), opt.config, false);
     for (const auto& m : opt.maps) maps.push_back(io::read_mapping_file(m));
     data.extra_columns = cfg.extra_columns;
+    auto& kinds = cfg.config.search.column_is_temperature;
+    for (std::size_t i = 0; i < maps.size(); ++i) {
+      for (const auto& [name, temperature] : maps[i].column_kind) {
+        const int c = cm::column_index(name, cfg.extra_columns);
+        if (c < 0) continue;  // a column this model does not use
+        bool found = false;
+        for (const auto& [k, t] : kinds) {
+          if (k != c) continue;
+          found = true;
+          if (t != temperature) {
+            throw io::ModelIoError(opt.maps[i] + ": column_kind." + name +
+                                   ": declared otherwise in " + opt.config + " or another map");
+          }
+        }
+        if (!found) kinds.emplace_back(c, temperature);
+      }
+    }
     for (std::size_t i = 0; i < opt.logs.size(); ++i) {
       std::ifstream in(opt.logs[i], std::ios::binary);
       if (!in) throw io::ModelIoError(opt.logs[i] + ": cannot open");

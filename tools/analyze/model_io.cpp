@@ -107,6 +107,28 @@ int resolve_column(const std::string& name, std::vector<std::string>& extras, co
   return cm::column_index(name, extras);
 }
 
+constexpr std::array<std::string_view, 12> kEffectNames = {
+    "thermal_drift", "level_change", "position_x", "position_y",     "position_z", "periodic_x",
+    "periodic_y",    "periodic_z",   "tool_wear",  "wear_nonlinear", "part_trend", "contact_angle"};
+
+// A `column_kind` table: column = "temperature" | "other" (how a linear effect in it is named).
+std::vector<std::pair<std::string, bool>> read_column_kinds(const toml::node& n,
+                                                            std::string_view source,
+                                                            const std::string& key) {
+  const auto* t = n.as_table();
+  if (t == nullptr) fail(where(source, n, key) + ": must be a table of column = \"temperature\"");
+  std::vector<std::pair<std::string, bool>> out;
+  for (const auto& [k, v] : *t) {
+    const std::string name(k.str());
+    const std::string kind = get_string(v, source, key + "." + name);
+    if (kind != "temperature" && kind != "other") {
+      fail(where(source, v, key + "." + name) + ": '" + kind + "' is not temperature or other");
+    }
+    out.emplace_back(name, kind == "temperature");
+  }
+  return out;
+}
+
 std::string fmt_double(double v) {
   char buf[40];
   std::snprintf(buf, sizeof buf, "%.17g", v);
@@ -285,7 +307,8 @@ ModelFile read_model_table(const toml::table& root, std::string_view source, boo
     const auto* st = sn->as_table();
     if (st == nullptr) fail(where(source, *sn, "model.search") + ": must be a table");
     check_keys(*st, source, "model.search",
-               {"kinds", "exclude", "linear_columns", "lag_columns", "period_min_mm", "per"});
+               {"kinds", "exclude", "linear_columns", "lag_columns", "period_min_mm", "per",
+                "column_kind"});
     cm::SearchOptions& so = cfg.search;
     if (const auto* n = st->get("per")) {
       const auto names = get_strings(*n, source, "model.search.per");
@@ -305,6 +328,29 @@ ModelFile read_model_table(const toml::table& root, std::string_view source, boo
           const int c = resolve_column(name, out.extra_columns, *n, source, key);
           (std::string_view(list) == "linear_columns" ? so.linear_columns : so.lag_columns)
               .push_back(c);
+        }
+      }
+    }
+    if (const auto* n = st->get("column_kind")) {
+      for (const auto& [name, temperature] :
+           read_column_kinds(*n, source, "model.search.column_kind")) {
+        const int c =
+            resolve_column(name, out.extra_columns, *n, source, "model.search.column_kind." + name);
+        so.column_is_temperature.emplace_back(c, temperature);
+      }
+    }
+    if (const auto* n = st->get("exclude")) {
+      // A misspelt name would exclude nothing, silently.
+      for (const auto& name : so.exclude) {
+        bool known =
+            std::find(kEffectNames.begin(), kEffectNames.end(), name) != kEffectNames.end();
+        for (int c : so.linear_columns) {
+          known = known || name == "linear_" + cm::column_name(c, out.extra_columns);
+        }
+        if (!known) {
+          fail(where(source, *n, "model.search.exclude") + ": no effect is called '" + name +
+               "' (thermal_drift, level_change, position_x|y|z, periodic_x|y|z, tool_wear, "
+               "wear_nonlinear, part_trend, contact_angle, linear_<column> of linear_columns)");
         }
       }
     }
@@ -426,6 +472,13 @@ std::string write_model_toml(const core::model::Model& model,
       o << (i ? ", " : "") << quote(so.exclude[i]);
     o << "]\n";
   }
+  if (!so.column_is_temperature.empty()) {
+    o << "\n[model.search.column_kind]\n";
+    for (const auto& [c, temperature] : so.column_is_temperature) {
+      o << quote(cm::column_name(c, ex)) << " = " << (temperature ? "\"temperature\"" : "\"other\"")
+        << "\n";
+    }
+  }
   return o.str();
 }
 
@@ -442,7 +495,7 @@ Mapping read_mapping_text(std::string_view text, std::string_view source) {
       << e.description();
     throw ModelIoError(s.str());
   }
-  check_keys(root, source, "", {"columns", "extra", "scale", "constant", "wide"});
+  check_keys(root, source, "", {"columns", "extra", "scale", "constant", "wide", "column_kind"});
   Mapping m;
   auto table = [&](const char* name) -> const toml::table* {
     const auto* n = root.get(name);
@@ -488,6 +541,19 @@ Mapping read_mapping_text(std::string_view text, std::string_view source) {
       } else {
         m.constant.emplace_back(name, get_number(v, source, key));
       }
+    }
+  }
+  if (const auto* n = root.get("column_kind")) {
+    for (auto& [name, temperature] : read_column_kinds(*n, source, "column_kind")) {
+      const std::string& column = name;  // clang 14 cannot capture a structured binding
+      const bool mapped =
+          is_target(column) || std::any_of(m.extra.begin(), m.extra.end(),
+                                           [&](const auto& e) { return e.first == column; });
+      if (!mapped) {
+        fail(where(source, *n->as_table()->get(column), "column_kind." + column) +
+             ": not a log column nor a column of [extra]");
+      }
+      m.column_kind.emplace_back(name, temperature);
     }
   }
   if (const auto* t = table("wide")) {

@@ -254,3 +254,53 @@ TEST(ReadMapping, RefusesAScaleOfAColumnItDoesNotRead) {
   EXPECT_EQ(err("[columns]\nmeasured_um = \"d\"\n[extra]\nspeed = \"rpm\"\n[scale]\nspeed = 2.0\n"),
             "");
 }
+
+// Issue 21: an exclude naming no effect excluded nothing, silently; a column's kind (temperature
+// or not) is declared in the config or the map and survives model.toml.
+TEST(ModelFile, RefusesAnUnknownExcludeAndKeepsColumnKinds) {
+  const std::string head = "[[model.term]]\nname = \"a\"\nform = \"constant\"\n[model.search]\n";
+  auto err = [](const std::string& text) {
+    try {
+      io::read_model_text(text, "c.toml", false);
+    } catch (const io::ModelIoError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  EXPECT_EQ(err(head + "exclude = [\"thermal_drfit\"]\n").substr(0, 76),
+            "c.toml:5:11: model.search.exclude: no effect is called 'thermal_drfit' (ther");
+  EXPECT_EQ(err(head + "linear_columns = [\"depth_mm\"]\nexclude = [\"linear_depth_mm\"]\n"), "");
+  EXPECT_EQ(err(head + "exclude = [\"linear_depth_mm\"]\n").substr(0, 71),
+            "c.toml:5:11: model.search.exclude: no effect is called 'linear_depth_mm");
+  EXPECT_EQ(err(head + "column_kind = { t2 = \"warm\" }\n"),
+            "c.toml:5:22: model.search.column_kind.t2: 'warm' is not temperature or other");
+
+  const io::ModelFile f =
+      io::read_model_text(head +
+                              "linear_columns = [\"t2\", \"depth_c\"]\n"
+                              "column_kind = { t2 = \"temperature\", depth_c = \"other\" }\n",
+                          "c.toml", false);
+  const auto& so = f.config.search;
+  ASSERT_EQ(f.extra_columns, (std::vector<std::string>{"t2", "depth_c"}));
+  EXPECT_EQ(cm::linear_effect_name(so.linear_columns[0], f.extra_columns, so), "thermal_drift");
+  EXPECT_EQ(cm::linear_effect_name(so.linear_columns[1], f.extra_columns, so), "linear_depth_c");
+  // Written back into model.toml and read again: the same declaration.
+  const cm::Model m(f.extra_columns, {});
+  const io::ModelFile back = io::read_model_text(
+      io::write_model_toml(m, f.config, {}) + "[[model.term]]\nname = \"a\"\nform = \"constant\"\n",
+      "model.toml", false);
+  EXPECT_EQ(back.config.search.column_is_temperature, so.column_is_temperature);
+
+  const io::Mapping map = io::read_mapping_text(
+      "[columns]\nmeasured_um = \"d\"\n[extra]\nt2 = \"T2\"\n[column_kind]\nt2 = \"temperature\"\n",
+      "map.toml");
+  EXPECT_EQ(map.column_kind, (std::vector<std::pair<std::string, bool>>{{"t2", true}}));
+  try {
+    io::read_mapping_text("[columns]\nmeasured_um = \"d\"\n[column_kind]\nt3 = \"other\"\n",
+                          "map.toml");
+    ADD_FAILURE() << "t3 is not mapped";
+  } catch (const io::ModelIoError& e) {
+    EXPECT_EQ(std::string(e.what()),
+              "map.toml:4:6: column_kind.t3: not a log column nor a column of [extra]");
+  }
+}
