@@ -37,12 +37,19 @@ struct Dataset {
   /// warm start); mapped foreign CSVs keep their time_s. Empty, or of another length than the
   /// rows: time_s itself.
   std::vector<double> order_s;
+  /// Where each row was read, for messages: files[row_file[i]], line row_line[i] (0 = not from a
+  /// file; vectors shorter than the rows: rows built in memory).
+  std::vector<std::string> files;
+  std::vector<std::uint32_t> row_file;
+  std::vector<std::uint32_t> row_line;
 
   Dataset();
   [[nodiscard]] std::size_t rows() const { return target_um.size(); }
   [[nodiscard]] Row row(std::size_t i) const;
   /// Values of one column (empty if the column is absent).
   [[nodiscard]] const std::vector<double>& column(int index) const;
+  /// "file:line" of row i, or "row <i+1>" when it was not read from a file.
+  [[nodiscard]] std::string where(std::size_t i) const;
 };
 
 /// One term the search may add.
@@ -88,6 +95,10 @@ struct AnalysisConfig {
   bool ar1_correction{true};
   /// Rows used for the non-linear grid search (the fits use all rows).
   std::size_t search_rows{10000};
+  /// A row is an outlier when it differs from both neighbours of its (kind, point, tool) series
+  /// by more than this many noise standard deviations (robust, from the median absolute
+  /// successive difference), in the same direction; 0 = no outlier rule.
+  double outlier_sigmas{10.0};
 };
 
 struct ErrorStats {
@@ -124,7 +135,22 @@ struct TriedCandidate {
   bool refitted{false};
 };
 
+/// Something the figures do not say by themselves (summary.json `warnings`).
+struct Warning {
+  std::string code;  // saturated, collinear, … (docs/analyze.md)
+  std::string message;
+};
+
+/// What a least-squares fit found besides its coefficients.
+struct FitInfo {
+  std::size_t rows{0};        // rows that entered the fit
+  std::size_t parameters{0};  // coefficients
+  std::size_t rank{0};        // of the design: below parameters = collinear coefficients
+};
+
 struct AnalysisResult {
+  /// In the order found; see Warning.
+  std::vector<Warning> warnings;
   FitStats declared;
   std::vector<AddedEffect> effects;
   /// Per search step (one more than effects when the search stopped on its own).
@@ -138,7 +164,11 @@ struct AnalysisResult {
   /// Residuals [µm] of every row: declared model, final model (both fitted on the fitted rows).
   std::vector<double> declared_residual_um;
   std::vector<double> final_residual_um;
-  std::vector<std::uint8_t> heldout;  // 1 = held-out row
+  /// 0 fitted, 1 held out, 2 in neither: a held-out row of a group no fitted row has
+  /// (heldout_unseen_group), or an outlier.
+  std::vector<std::uint8_t> heldout;
+  /// Rows the robust rule took out of every fit and figure (row indices, in order).
+  std::vector<std::size_t> outliers;
   double split_time_s{0.0};
 };
 
@@ -156,9 +186,9 @@ class AnalysisError : public std::exception {
 double f_distribution_upper_tail(double f, double d1, double d2);
 
 /// Least-squares fit of `specs` on the rows where use[i] != 0. Groups are discovered from those
-/// rows. Throws AnalysisError if nothing can be fitted.
+/// rows. Throws AnalysisError if nothing can be fitted or a coefficient is not finite.
 Model fit_terms(const Dataset& data, const std::vector<TermSpec>& specs,
-                const std::vector<std::uint8_t>& use);
+                const std::vector<std::uint8_t>& use, FitInfo* info = nullptr);
 
 /// Residual target − prediction of every row (rows in order; lag filters run over all rows).
 std::vector<double> residuals(const Dataset& data, const Model& model);

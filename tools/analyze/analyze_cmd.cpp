@@ -109,18 +109,30 @@ void run(const Options& opt) {
 
   std::cout << "rows: " << data.rows() << " (fitted " << result.declared.fitted.rows
             << ", held out " << result.declared.heldout.rows << ")\n";
+  // No held-out rows: no held-out figure (an RMS over nothing would read as 0 µm).
+  auto heldout = [](const cm::ErrorStats& e) {
+    std::ostringstream o;
+    if (e.rows > 0) {
+      o << e.rms_um << " µm";
+    } else {
+      o << "n/a";
+    }
+    return o.str();
+  };
   std::cout << "declared model: RMS " << result.declared.fitted.rms_um << " µm, held-out RMS "
-            << result.declared.heldout.rms_um << " µm\n";
+            << heldout(result.declared.heldout) << "\n";
   for (const auto& e : result.effects) {
     std::cout << "added " << e.spec.name << " ("
               << cm::column_name(e.spec.column, data.extra_columns) << ", "
               << cm::form_name(e.spec.form) << "): RMS " << e.before.fitted.rms_um << " -> "
-              << e.after.fitted.rms_um << " µm, held-out " << e.before.heldout.rms_um << " -> "
-              << e.after.heldout.rms_um << " µm, p = " << e.p_value << "\n";
+              << e.after.fitted.rms_um << " µm, held-out " << heldout(e.before.heldout) << " -> "
+              << heldout(e.after.heldout) << ", p = " << e.p_value << "\n";
   }
   std::cout << "final RMS " << result.final_stats.fitted.rms_um << " µm (held-out "
-            << result.final_stats.heldout.rms_um << " µm), noise floor " << result.noise_floor_um
+            << heldout(result.final_stats.heldout) << "), noise floor " << result.noise_floor_um
             << " µm\n";
+  for (const auto& w : result.warnings)
+    std::cout << "warning " << w.code << ": " << w.message << "\n";
   std::cout << "wrote " << (out / "summary.json").string() << ", " << (out / "report.md").string()
             << ", " << (out / "model.toml").string() << "\n";
 }

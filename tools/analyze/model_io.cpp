@@ -170,7 +170,7 @@ ModelFile read_model_table(const toml::table& root, std::string_view source, boo
   if (model == nullptr) fail(std::string(source) + ": no [model] table");
   check_keys(*model, source, "model",
              {"heldout_fraction", "alpha", "max_effects", "search_rows", "ar1_correction",
-              "lookahead", "term", "search"});
+              "lookahead", "outlier_sigmas", "term", "search"});
   ModelFile out;
   cm::AnalysisConfig& cfg = out.config;
   for (const char* flag : {"ar1_correction", "lookahead"}) {
@@ -191,6 +191,13 @@ ModelFile read_model_table(const toml::table& root, std::string_view source, boo
     cfg.alpha = get_number(*n, source, "model.alpha");
     if (!(cfg.alpha > 0.0 && cfg.alpha < 0.5)) {
       fail(where(source, *n, "model.alpha") + ": must be within (0, 0.5)");
+    }
+  }
+  if (const auto* n = model->get("outlier_sigmas")) {
+    cfg.outlier_sigmas = get_number(*n, source, "model.outlier_sigmas");
+    const double v = cfg.outlier_sigmas;
+    if (v < 0.0 || (v > 0.0 && v < 3.0) || v > 1e3) {
+      fail(where(source, *n, "model.outlier_sigmas") + ": must be 0 (off) or within [3, 1000]");
     }
   }
   if (const auto* n = model->get("max_effects")) {
@@ -399,6 +406,7 @@ std::string write_model_toml(const core::model::Model& model,
   o << "search_rows = " << config.search_rows << "\n";
   o << "ar1_correction = " << (config.ar1_correction ? "true" : "false") << "\n";
   o << "lookahead = " << (config.lookahead ? "true" : "false") << "\n";
+  o << "outlier_sigmas = " << fmt_double(config.outlier_sigmas) << "\n";
   for (const cm::Term& t : model.terms()) {
     const cm::TermSpec& s = t.spec;
     o << "\n[[model.term]]\n";
@@ -758,6 +766,10 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
   // times: several of them are often parallel series (two cutters, two gauges), not one after
   // another.
   data.order_s.resize(start_rows, cm::kUnknown);
+  data.row_file.resize(start_rows, 0);
+  data.row_line.resize(start_rows, 0);
+  const auto file_index = static_cast<std::uint32_t>(data.files.size());
+  data.files.emplace_back(source);
   double previous_end = -std::numeric_limits<double>::infinity();
   for (const double v : data.order_s) {
     if (std::isfinite(v)) previous_end = std::max(previous_end, v);
@@ -928,6 +940,8 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
       for (std::size_t c : present) cols[c].push_back(values[c]);
       data.target_um.push_back(y + (std::isfinite(applied) ? applied : 0.0));
       data.order_s.push_back(std::isfinite(t_s) ? t_s + order_offset : cm::kUnknown);
+      data.row_file.push_back(file_index);
+      data.row_line.push_back(static_cast<std::uint32_t>(line_no));
       if (std::isfinite(t_s)) order_end = std::max(order_end, t_s + order_offset);
     }
   }
