@@ -162,7 +162,7 @@ std::size_t row_entries(const std::vector<TermSpec>& specs, const Layout& layout
 // Minimum-norm least squares of the normal equations after equilibration (columns of very
 // different scale: seconds since warm start next to a constant).
 Eigen::VectorXd solve_normal(const Eigen::MatrixXd& a, const Eigen::VectorXd& rhs,
-                             std::size_t* rank) {
+                             std::size_t* rank, std::vector<double>* variance) {
   const Eigen::Index p = a.rows();
   Eigen::VectorXd d(p);
   for (Eigen::Index i = 0; i < p; ++i) {
@@ -173,6 +173,14 @@ Eigen::VectorXd solve_normal(const Eigen::MatrixXd& a, const Eigen::VectorXd& rh
   cod.setThreshold(1e-11);
   const Eigen::VectorXd z = cod.solve(d.asDiagonal() * rhs);
   if (rank != nullptr) *rank = static_cast<std::size_t>(cod.rank());
+  if (variance != nullptr) {
+    // (X'X)⁺ = D (D X'X D)⁺ D.
+    const Eigen::MatrixXd inv = cod.pseudoInverse();
+    variance->resize(static_cast<std::size_t>(p));
+    for (Eigen::Index i = 0; i < p; ++i) {
+      (*variance)[static_cast<std::size_t>(i)] = d(i) * d(i) * inv(i, i);
+    }
+  }
   return d.asDiagonal() * z;
 }
 
@@ -660,6 +668,55 @@ std::vector<std::size_t> find_outliers(const Dataset& data, const std::vector<do
   return out;
 }
 
+// Two-sided 95 % quantile of Student's t with df degrees of freedom (t² is F(1, df)).
+double t95(double df) {
+  double lo = 0.0;
+  double hi = 1e3;
+  for (int i = 0; i < 100; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    (f_distribution_upper_tail(mid * mid, 1.0, df) > 0.05 ? lo : hi) = mid;
+  }
+  return 0.5 * (lo + hi);
+}
+
+// coef_ci95 of each added effect: the model's fit on the fitted rows, its residual variance,
+// the variance widened by (1 + ρ)/(1 − ρ) for an AR(1) residual like the F-test's rows.
+void set_confidence_intervals(const Dataset& data, const std::vector<TermSpec>& specs,
+                              const std::vector<std::uint8_t>& use,
+                              const std::vector<double>& residual, const AnalysisConfig& config,
+                              AnalysisResult& result) {
+  if (result.effects.empty()) return;
+  FitInfo info;
+  info.want_variance = true;
+  const Model m = fit_terms(data, specs, use, &info);
+  double rss = 0.0;
+  for (std::size_t i = 0; i < residual.size(); ++i) {
+    if (use[i] != 0U && std::isfinite(residual[i])) rss += residual[i] * residual[i];
+  }
+  const double rho = config.ar1_correction
+                         ? std::clamp(lag1_autocorrelation(data, residual, use), 0.0, 0.999)
+                         : 0.0;
+  const double df = (dz(info.rows) - dz(info.rank)) * (1.0 - rho) / (1.0 + rho);
+  const bool known = df >= 1.0;
+  const double s2 = known ? rss / (dz(info.rows) - dz(info.rank)) * (1.0 + rho) / (1.0 - rho) : 0.0;
+  const double t = known ? t95(df) : 0.0;
+  std::size_t offset = 0;
+  const std::size_t first_effect = specs.size() - result.effects.size();
+  for (std::size_t k = 0; k < specs.size(); ++k) {
+    const Term& term = m.terms()[k];
+    if (k >= first_effect) {
+      auto& ci = result.effects[k - first_effect].coef_ci95;
+      for (std::size_t j = 0; j < term.coef.size(); ++j) {
+        const double half = known
+                                ? t * std::sqrt(s2 * std::max(0.0, info.coef_variance[offset + j]))
+                                : std::numeric_limits<double>::infinity();
+        ci.push_back({term.coef[j] - half, term.coef[j] + half});
+      }
+    }
+    offset += term.coef.size();
+  }
+}
+
 void warn_fit(const FitInfo& info, const std::string& what, std::vector<Warning>& out) {
   if (info.parameters >= info.rows) {
     out.push_back({"saturated", what + " has " + std::to_string(info.parameters) +
@@ -747,8 +804,12 @@ Model fit_terms(const Dataset& data, const std::vector<TermSpec>& specs,
   }
   a.triangularView<Eigen::StrictlyLower>() = a.transpose().triangularView<Eigen::StrictlyLower>();
   std::size_t rank = 0;
-  const Eigen::VectorXd beta = solve_normal(a, rhs, &rank);
-  if (info != nullptr) *info = FitInfo{fitted_rows, layout.parameters, rank};
+  std::vector<double> variance;
+  const bool want_variance = info != nullptr && info->want_variance;
+  const Eigen::VectorXd beta = solve_normal(a, rhs, &rank, want_variance ? &variance : nullptr);
+  if (info != nullptr) {
+    *info = FitInfo{fitted_rows, layout.parameters, rank, want_variance, std::move(variance)};
+  }
   std::vector<Term> terms;
   for (std::size_t t = 0; t < specs.size(); ++t) {
     Term term;
@@ -1245,6 +1306,7 @@ AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
   std::vector<std::uint8_t> all_rows(n);
   for (std::size_t i = 0; i < n; ++i) all_rows[i] = std::isfinite(data.target_um[i]) ? 1 : 0;
   result.fitted_model = model;
+  set_confidence_intervals(data, specs, use, residual, config, result);
   result.final_model = fit_terms(data, specs, all_rows);
   if (!result.effects.empty()) warn_fit(info, "the final model", result.warnings);
   return result;

@@ -121,6 +121,9 @@ struct AddedEffect {
   FitStats after;
   double p_value{1.0};  // adjusted (see file comment)
   double f_statistic{0.0};
+  /// 95 % confidence interval [low, high] of each coefficient of the final fit on the fitted
+  /// rows (t distribution; widened for an AR(1) residual when ar1_correction is on).
+  std::vector<std::array<double, 2>> coef_ci95;
 };
 
 /// A candidate tried at one search step, for the report.
@@ -146,6 +149,11 @@ struct FitInfo {
   std::size_t rows{0};        // rows that entered the fit
   std::size_t parameters{0};  // coefficients
   std::size_t rank{0};        // of the design: below parameters = collinear coefficients
+  /// Set by the caller to get coef_variance.
+  bool want_variance{false};
+  /// Per coefficient (Model order), diagonal of the pseudo-inverse of X'X: its variance is this
+  /// times the residual variance.
+  std::vector<double> coef_variance;
 };
 
 struct AnalysisResult {

@@ -142,7 +142,12 @@ std::string summary_json(const cm::Dataset& data, const cm::AnalysisResult& resu
       << ", \"rms_after_um\": " << num(e.after.fitted.rms_um)
       << ", \"heldout_rms_before_um\": " << heldout_rms(e.before.heldout)
       << ", \"heldout_rms_after_um\": " << heldout_rms(e.after.heldout)
-      << ", \"p_value\": " << num(e.p_value, 4) << "}";
+      << ", \"p_value\": " << num(e.p_value, 4) << ", \"coef_ci95\": [";
+    for (std::size_t k = 0; k < e.coef_ci95.size(); ++k) {
+      o << (k ? ", " : "") << "[" << num(e.coef_ci95[k][0], 8) << ", " << num(e.coef_ci95[k][1], 8)
+        << "]";
+    }
+    o << "]}";
   }
   o << (result.effects.empty() ? "" : "\n  ") << "],\n";
   o << "  \"final_rms_um\": " << num(result.final_stats.fitted.rms_um) << ",\n";
