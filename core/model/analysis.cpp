@@ -1179,7 +1179,7 @@ AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
         throw AnalysisError("candidate '" + t_out.name + "' (" + t_out.column + ", " +
                             std::string(form_name(t_out.form)) +
                             "): share of the residual removed " +
-                            std::to_string(t_out.rss_reduction_fraction) +
+                            fmt_g(t_out.rss_reduction_fraction) +
                             " is not within [0, 1] (numerically unusable columns)");
       }
       tried.push_back(t_out);

@@ -248,13 +248,17 @@ std::string residual_svg(const cm::Dataset& data, const cm::AnalysisResult& resu
       const double px = ox + (x[i] - xlo) / (xhi - xlo) * kPanelW;
       const double py = y0 - r[i] / ymax * (kPanelH / 2.0);
       o << "<circle cx=\"" << num(px, 5) << "\" cy=\"" << num(py, 5) << "\" r=\"1.6\" fill=\""
-        << (result.heldout[i] != 0U ? "#e07000" : "#1f5fa8") << "\" fill-opacity=\"0.6\"/>\n";
+        << (result.heldout[i] == 0U   ? "#1f5fa8"
+            : result.heldout[i] == 1U ? "#e07000"
+                                      : "#999999")
+        << "\" fill-opacity=\"0.6\"/>\n";
     }
     o << "</g>\n";
   }
   o << "<text x=\"60\" y=\"" << kH - 8
     << "\"><tspan fill=\"#1f5fa8\">● fitted rows</tspan>  <tspan fill=\"#e07000\">● held-out "
-       "rows</tspan></text>\n";
+       "rows</tspan>  <tspan fill=\"#999999\">● left out (outliers, unseen "
+       "groups)</tspan></text>\n";
   o << "</svg>\n";
   return o.str();
 }
@@ -339,7 +343,7 @@ std::string report_markdown(const cm::Dataset& data, const cm::AnalysisResult& r
   }
   o << "## Residual against each context column\n\n";
   o << "Left: the declared model; right: after the added effects. Blue: fitted rows; orange: "
-       "held-out rows.\n\n";
+       "held-out rows; grey: rows left out (outliers, held-out rows of unseen groups).\n\n";
   for (int c : plotted) {
     const std::string name = cm::column_name(c, ex);
     o << "![residual vs " << name << "](plots/residual_" << safe_name(name) << ".svg)\n\n";
