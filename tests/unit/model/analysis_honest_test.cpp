@@ -1,6 +1,8 @@
-// Issue 21: GIVEN inputs that used to give a silent wrong number (absurd values, a saturated
-// model, a linear effect misnamed or dropped by exclude) WHEN analysed THEN the analysis refuses
-// or warns by name, and the effects are named by what they are.
+// Issue 21: GIVEN inputs that used to give a silent wrong number or a figure without its caveat
+// (absurd values, a saturated or collinear model, a linear effect misnamed or dropped by exclude,
+// held-out rows that cannot be predicted, an outlier, an aliased period) WHEN analysed THEN the
+// analysis refuses or warns by name, leaves out and lists what it cannot use, names effects by
+// what they are, and gives each coefficient a 95 % interval that holds in about 95 % of logs.
 #include <gtest/gtest.h>
 
 #include <algorithm>
