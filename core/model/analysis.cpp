@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <map>
 #include <memory>
@@ -160,7 +161,8 @@ std::size_t row_entries(const std::vector<TermSpec>& specs, const Layout& layout
 
 // Minimum-norm least squares of the normal equations after equilibration (columns of very
 // different scale: seconds since warm start next to a constant).
-Eigen::VectorXd solve_normal(const Eigen::MatrixXd& a, const Eigen::VectorXd& rhs) {
+Eigen::VectorXd solve_normal(const Eigen::MatrixXd& a, const Eigen::VectorXd& rhs,
+                             std::size_t* rank, std::vector<double>* variance) {
   const Eigen::Index p = a.rows();
   Eigen::VectorXd d(p);
   for (Eigen::Index i = 0; i < p; ++i) {
@@ -170,6 +172,15 @@ Eigen::VectorXd solve_normal(const Eigen::MatrixXd& a, const Eigen::VectorXd& rh
   Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(as);
   cod.setThreshold(1e-11);
   const Eigen::VectorXd z = cod.solve(d.asDiagonal() * rhs);
+  if (rank != nullptr) *rank = static_cast<std::size_t>(cod.rank());
+  if (variance != nullptr) {
+    // (X'X)⁺ = D (D X'X D)⁺ D.
+    const Eigen::MatrixXd inv = cod.pseudoInverse();
+    variance->resize(static_cast<std::size_t>(p));
+    for (Eigen::Index i = 0; i < p; ++i) {
+      (*variance)[static_cast<std::size_t>(i)] = d(i) * d(i) * inv(i, i);
+    }
+  }
   return d.asDiagonal() * z;
 }
 
@@ -193,14 +204,25 @@ std::size_t parameter_count(const Model& m) {
   return p;
 }
 
+// `what` names the model in errors (the declared model, a candidate).
 FitStats stats_of(const Dataset& data, const Model& model, const std::vector<std::uint8_t>& heldout,
-                  std::vector<double>* residual_out) {
+                  std::vector<double>* residual_out, const std::string& what) {
   std::vector<double> r = residuals(data, model);
+  for (std::size_t i = 0; i < r.size(); ++i) {
+    // A prediction that overflowed would otherwise leave its row out of the RMS, silently.
+    if (std::isfinite(data.target_um[i]) && !std::isfinite(r[i])) {
+      throw AnalysisError(what + ": the prediction at " + data.where(i) +
+                          " is not a finite number (a context value too large for the term)");
+    }
+  }
   FitStats s;
   s.fitted = error_stats(r, heldout, 0);
   s.heldout = error_stats(r, heldout, 1);
   s.rss = s.fitted.rms_um * s.fitted.rms_um * dz(s.fitted.rows);
   s.parameters = parameter_count(model);
+  if (!std::isfinite(s.rss) || !std::isfinite(s.heldout.rms_um)) {
+    throw AnalysisError(what + ": the RMS is not a finite number (values too large)");
+  }
   if (residual_out != nullptr) *residual_out = std::move(r);
   return s;
 }
@@ -366,28 +388,30 @@ Eigen::MatrixXd candidate_basis(const Dataset& data, const SearchSet& set, const
   return b;
 }
 
+// Squared norm of the residual's projection on the columns of b: an orthonormal basis of b by
+// a rank-revealing QR, so the result never exceeds the residual's own SS (solving b'b for
+// ill-conditioned columns gave shares of 10^10 on real data).
+double projected_ss(const SearchSet& set, const Eigen::MatrixXd& b) {
+  if (b.cols() == 0 || b.squaredNorm() <= 1e-12 * dz(set.rows.size())) return 0.0;
+  Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(b);
+  qr.setThreshold(1e-9);
+  const Eigen::Index rank = qr.rank();
+  if (rank == 0) return 0.0;
+  const Eigen::VectorXd qtr = (qr.householderQ().transpose() * set.r).head(rank);
+  return qtr.squaredNorm();
+}
+
 // RSS reduction on the search rows when the candidate joins the model (exact: the candidate's
 // basis is orthogonalised against the model's columns first).
 double exact_reduction(const SearchSet& set, Eigen::MatrixXd b) {
   if (set.q.cols() > 0) b -= set.q * (set.q.transpose() * b);
-  const Eigen::MatrixXd btb = b.transpose() * b;
-  const Eigen::VectorXd btr = b.transpose() * set.r;
-  if (btb.trace() <= 1e-12 * dz(set.rows.size())) return 0.0;
-  Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(btb);
-  cod.setThreshold(1e-9);
-  const Eigen::VectorXd c = cod.solve(btr);
-  return std::max(0.0, c.dot(btr));
+  return projected_ss(set, b);
 }
 
 // Cheap score for wide grids: projection of the residual on the centred candidate basis alone.
 double cheap_reduction(const SearchSet& set, Eigen::MatrixXd b) {
   b.rowwise() -= b.colwise().mean();
-  const Eigen::MatrixXd btb = b.transpose() * b;
-  const Eigen::VectorXd btr = b.transpose() * set.r;
-  if (btb.trace() <= 1e-12 * dz(set.rows.size())) return 0.0;
-  Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(btb);
-  cod.setThreshold(1e-9);
-  return std::max(0.0, cod.solve(btr).dot(btr));
+  return projected_ss(set, b);
 }
 
 void set_parameter(TermSpec& s, double v) {
@@ -467,6 +491,34 @@ std::pair<double, double> search_candidate(const Dataset& data, const SearchSet&
   return {best_v, best_score};
 }
 
+// Periods of a sine candidate's grid that explain the residual within 2 % as well as the chosen
+// one, away from its peak: positions on a lattice cannot tell them apart (aliasing).
+std::vector<double> equivalent_periods(const Dataset& data, const SearchSet& set,
+                                       const Candidate& cand) {
+  std::vector<double> out;
+  const auto& g = cand.grid;
+  if (cand.spec.form != Form::kSine || g.size() < 3) return out;
+  const double best = exact_reduction(set, candidate_basis(data, set, cand.spec));
+  if (!(best > 0.0)) return out;
+  std::vector<double> score(g.size());
+  for (std::size_t i = 0; i < g.size(); ++i) {
+    TermSpec s = cand.spec;
+    s.scale = g[i];
+    score[i] = cheap_reduction(set, candidate_basis(data, set, s));
+  }
+  const double df = std::fabs(1.0 / g[1] - 1.0 / g[0]);
+  for (std::size_t i = 0; i < g.size(); ++i) {
+    const bool peak =
+        (i == 0 || score[i] >= score[i - 1]) && (i + 1 == g.size() || score[i] >= score[i + 1]);
+    if (!peak || score[i] < 0.9 * best) continue;
+    if (std::fabs(1.0 / g[i] - 1.0 / cand.spec.scale) <= 2.0 * df) continue;  // the chosen one
+    TermSpec s = cand.spec;
+    s.scale = g[i];
+    if (exact_reduction(set, candidate_basis(data, set, s)) >= 0.98 * best) out.push_back(g[i]);
+  }
+  return out;
+}
+
 }  // namespace
 
 Dataset::Dataset() : columns(kStandardColumns) {}
@@ -479,11 +531,208 @@ Row Dataset::row(std::size_t i) const {
   return r;
 }
 
+std::string Dataset::where(std::size_t i) const {
+  if (i < row_line.size() && i < row_file.size() && row_line[i] > 0 && row_file[i] < files.size()) {
+    return files[row_file[i]] + ":" + std::to_string(row_line[i]);
+  }
+  return "row " + std::to_string(i + 1);
+}
+
 const std::vector<double>& Dataset::column(int index) const {
   static const std::vector<double> kEmpty;
   if (index < 0 || uz(index) >= columns.size()) return kEmpty;
   return columns[uz(index)];
 }
+
+namespace {
+
+constexpr double kMaxTargetUm = 1e6;       // 1 m: no machine's deviation
+constexpr double kMaxContextValue = 1e15;  // beyond it, squares of sums lose every digit
+
+std::string fmt_g(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.6g", v);
+  return buf;
+}
+
+// Values no measurement has are errors before they become an RMS of inf.
+void check_magnitudes(const Dataset& data) {
+  for (std::size_t i = 0; i < data.rows(); ++i) {
+    const double y = data.target_um[i];
+    if (std::isfinite(y) && std::fabs(y) > kMaxTargetUm) {
+      throw AnalysisError(data.where(i) + ": measured_um + applied_um = " + fmt_g(y) +
+                          " µm is beyond ±1e6 µm (1 m): not a deviation (check the value and its "
+                          "[scale])");
+    }
+  }
+  for (std::size_t c = 0; c < data.columns.size(); ++c) {
+    const auto& v = data.columns[c];
+    for (std::size_t i = 0; i < v.size(); ++i) {
+      if (std::isfinite(v[i]) && std::fabs(v[i]) > kMaxContextValue) {
+        throw AnalysisError(data.where(i) + ": column '" +
+                            column_name(static_cast<int>(c), data.extra_columns) +
+                            "' = " + std::to_string(v[i]) + " is beyond ±1e15");
+      }
+    }
+  }
+}
+
+// Held-out rows of a group (of a declared term's `per` columns) that no fitted row has: the
+// model fitted on the earlier rows predicts 0 for that term there, and the held-out error would
+// measure the missing group, not the model. They are set to 2 (in neither part) and reported.
+void leave_out_unseen_groups(const Dataset& data, const std::vector<TermSpec>& declared,
+                             std::vector<std::uint8_t>& heldout, std::vector<Warning>& out) {
+  const auto& kind = data.column(static_cast<int>(Column::kKind));
+  auto applies = [&](const TermSpec& s, std::size_t i) {
+    return kind.empty() || !std::isfinite(kind[i]) || kind[i] < 0.0 || kind[i] > 7.0 ||
+           (s.kind_mask & (1U << static_cast<unsigned>(kind[i]))) != 0U;
+  };
+  std::string groups;
+  std::size_t listed = 0;
+  std::size_t rows = 0;
+  std::vector<std::uint8_t> unseen(data.rows(), 0);
+  for (const TermSpec& s : declared) {
+    if (s.per[0] < 0 && s.per[1] < 0) continue;
+    std::map<std::array<double, 2>, int> fitted;  // 0 seen in fitted rows, 1 only held out
+    for (int want : {0, 1}) {
+      for (std::size_t i = 0; i < data.rows(); ++i) {
+        if (heldout[i] != want || !std::isfinite(data.target_um[i]) || !applies(s, i)) continue;
+        bool ok = false;
+        const auto key = group_key(s, data.row(i), ok);
+        if (!ok) continue;
+        const auto [it, added] = fitted.emplace(key, want);
+        if (it->second == 1) unseen[i] = 1;
+        if (added && want == 1) {
+          if (listed++ < 5) {
+            groups += std::string(groups.empty() ? "" : ", ") + s.name + " " +
+                      column_name(s.per[0], data.extra_columns) + " " + fmt_g(key[0]);
+            if (s.per[1] >= 0) {
+              groups += " " + column_name(s.per[1], data.extra_columns) + " " + fmt_g(key[1]);
+            }
+          }
+        }
+      }
+    }
+  }
+  for (std::size_t i = 0; i < data.rows(); ++i) {
+    if (unseen[i] != 0U) {
+      heldout[i] = 2;
+      ++rows;
+    }
+  }
+  if (rows == 0) return;
+  out.push_back({"heldout_unseen_group",
+                 std::to_string(rows) + " held-out rows belong to " + std::to_string(listed) +
+                     " groups no fitted row has (" + groups + (listed > 5 ? ", …" : "") +
+                     "): fitted on the earlier rows, the model predicts nothing for them, so "
+                     "they are left out of the held-out figures (the final model, fitted on all "
+                     "rows, has these groups)"});
+}
+
+// Isolated spikes of the declared model's residual (a probe that hit a chip): a row that differs
+// from both neighbours of its (kind, point, tool) series, in the same direction, by more than
+// `sigmas` noise standard deviations. A step or a trend moves the neighbours too, so they stay.
+std::vector<std::size_t> find_outliers(const Dataset& data, const std::vector<double>& residual,
+                                       const std::vector<std::uint8_t>& heldout, double sigmas) {
+  const auto& kind = data.column(static_cast<int>(Column::kKind));
+  const auto& point = data.column(static_cast<int>(Column::kPoint));
+  const auto& tool = data.column(static_cast<int>(Column::kTool));
+  std::map<std::tuple<double, double, double>, std::vector<std::size_t>> series;
+  for (std::size_t i = 0; i < data.rows(); ++i) {
+    if (heldout[i] == 2U || !std::isfinite(residual[i])) continue;
+    series[std::make_tuple(kind.empty() ? 0.0 : kind[i], point.empty() ? 0.0 : point[i],
+                           tool.empty() ? 0.0 : tool[i])]
+        .push_back(i);
+  }
+  std::vector<double> diffs;
+  for (const auto& [key, rows] : series) {
+    for (std::size_t k = 1; k < rows.size(); ++k) {
+      diffs.push_back(std::fabs(residual[rows[k]] - residual[rows[k - 1]]));
+    }
+  }
+  std::vector<std::size_t> out;
+  if (diffs.size() < 8) return out;
+  const auto mid = diffs.begin() + static_cast<std::ptrdiff_t>(diffs.size() / 2);
+  std::nth_element(diffs.begin(), mid, diffs.end());
+  // Median |e_i − e_{i−1}| of normal noise σ√2 is 0.6745 σ√2; 1 nm: below any probe.
+  const double sigma = *mid / (0.6745 * std::sqrt(2.0));
+  const double limit = std::max(sigmas * sigma, 1e-3);
+  for (const auto& [key, rows] : series) {
+    for (std::size_t k = 1; k + 1 < rows.size(); ++k) {
+      const double a = residual[rows[k]] - residual[rows[k - 1]];
+      const double b = residual[rows[k]] - residual[rows[k + 1]];
+      if (a * b > 0.0 && std::min(std::fabs(a), std::fabs(b)) > limit) out.push_back(rows[k]);
+    }
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+// Two-sided 95 % quantile of Student's t with df degrees of freedom (t² is F(1, df)).
+double t95(double df) {
+  double lo = 0.0;
+  double hi = 1e3;
+  for (int i = 0; i < 100; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    (f_distribution_upper_tail(mid * mid, 1.0, df) > 0.05 ? lo : hi) = mid;
+  }
+  return 0.5 * (lo + hi);
+}
+
+// coef_ci95 of each added effect: the model's fit on the fitted rows, its residual variance,
+// the variance widened by (1 + ρ)/(1 − ρ) for an AR(1) residual like the F-test's rows.
+void set_confidence_intervals(const Dataset& data, const std::vector<TermSpec>& specs,
+                              const std::vector<std::uint8_t>& use,
+                              const std::vector<double>& residual, const AnalysisConfig& config,
+                              AnalysisResult& result) {
+  if (result.effects.empty()) return;
+  FitInfo info;
+  info.want_variance = true;
+  const Model m = fit_terms(data, specs, use, &info);
+  double rss = 0.0;
+  for (std::size_t i = 0; i < residual.size(); ++i) {
+    if (use[i] != 0U && std::isfinite(residual[i])) rss += residual[i] * residual[i];
+  }
+  const double rho = config.ar1_correction
+                         ? std::clamp(lag1_autocorrelation(data, residual, use), 0.0, 0.999)
+                         : 0.0;
+  const double df = (dz(info.rows) - dz(info.rank)) * (1.0 - rho) / (1.0 + rho);
+  const bool known = df >= 1.0;
+  const double s2 = known ? rss / (dz(info.rows) - dz(info.rank)) * (1.0 + rho) / (1.0 - rho) : 0.0;
+  const double t = known ? t95(df) : 0.0;
+  std::size_t offset = 0;
+  const std::size_t first_effect = specs.size() - result.effects.size();
+  for (std::size_t k = 0; k < specs.size(); ++k) {
+    const Term& term = m.terms()[k];
+    if (k >= first_effect) {
+      auto& ci = result.effects[k - first_effect].coef_ci95;
+      for (std::size_t j = 0; j < term.coef.size(); ++j) {
+        const double half = known
+                                ? t * std::sqrt(s2 * std::max(0.0, info.coef_variance[offset + j]))
+                                : std::numeric_limits<double>::infinity();
+        ci.push_back({term.coef[j] - half, term.coef[j] + half});
+      }
+    }
+    offset += term.coef.size();
+  }
+}
+
+void warn_fit(const FitInfo& info, const std::string& what, std::vector<Warning>& out) {
+  if (info.parameters >= info.rows) {
+    out.push_back({"saturated", what + " has " + std::to_string(info.parameters) +
+                                    " coefficients for " + std::to_string(info.rows) +
+                                    " fitted rows: its fitted RMS says nothing (it can be 0 for "
+                                    "any data); only held-out figures do"});
+  } else if (info.rank < info.parameters) {
+    out.push_back({"collinear", what + " has " + std::to_string(info.parameters) +
+                                    " coefficients but the data determine only " +
+                                    std::to_string(info.rank) +
+                                    " combinations: some terms (or groups) cannot be told apart, "
+                                    "their coefficients are one of many equally good splits"});
+  }
+}
+
+}  // namespace
 
 double f_distribution_upper_tail(double f, double d1, double d2) {
   if (!(f > 0.0)) return 1.0;
@@ -493,7 +742,7 @@ double f_distribution_upper_tail(double f, double d1, double d2) {
 }
 
 Model fit_terms(const Dataset& data, const std::vector<TermSpec>& specs,
-                const std::vector<std::uint8_t>& use) {
+                const std::vector<std::uint8_t>& use, FitInfo* info) {
   // Terms proportional to the tool wear: the wear terms are fitted first on the tool_wear rows
   // (they see no other rows, so this is their joint fit too), and their prediction is the basis.
   std::unique_ptr<Model> wear_ref;
@@ -529,10 +778,12 @@ Model fit_terms(const Dataset& data, const std::vector<TermSpec>& specs,
   state.lag_input.assign(specs.size(), kUnknown);
   std::vector<Entry> entries;
   entries.reserve(specs.size() * kMaxBasis);
+  std::size_t fitted_rows = 0;
   for (std::size_t i = 0; i < data.rows(); ++i) {
     const Row row = data.row(i);
     advance_state(specs, row, state);
     if (use[i] == 0U || !std::isfinite(data.target_um[i])) continue;
+    ++fitted_rows;
     set_wear_aux(specs, row, wear_ref.get(), state);
     row_entries(specs, layout, row, state, entries);
     const double y = data.target_um[i];
@@ -552,7 +803,13 @@ Model fit_terms(const Dataset& data, const std::vector<TermSpec>& specs,
     }
   }
   a.triangularView<Eigen::StrictlyLower>() = a.transpose().triangularView<Eigen::StrictlyLower>();
-  const Eigen::VectorXd beta = solve_normal(a, rhs);
+  std::size_t rank = 0;
+  std::vector<double> variance;
+  const bool want_variance = info != nullptr && info->want_variance;
+  const Eigen::VectorXd beta = solve_normal(a, rhs, &rank, want_variance ? &variance : nullptr);
+  if (info != nullptr) {
+    *info = FitInfo{fitted_rows, layout.parameters, rank, want_variance, std::move(variance)};
+  }
   std::vector<Term> terms;
   for (std::size_t t = 0; t < specs.size(); ++t) {
     Term term;
@@ -561,6 +818,12 @@ Model fit_terms(const Dataset& data, const std::vector<TermSpec>& specs,
     const std::size_t n = layout.groups[t].size() * basis_count(specs[t].form, specs[t].degree);
     for (std::size_t k = 0; k < n; ++k) {
       term.coef.push_back(beta(static_cast<Eigen::Index>(layout.offset[t] + k)));
+      if (!std::isfinite(term.coef.back())) {
+        throw AnalysisError("term '" + specs[t].name + "' (" +
+                            column_name(specs[t].column, data.extra_columns) + ", " +
+                            std::string(form_name(specs[t].form)) +
+                            "): a coefficient is not a finite number (values too large)");
+      }
     }
     terms.push_back(std::move(term));
   }
@@ -626,6 +889,22 @@ double lag1_autocorrelation(const Dataset& data, const std::vector<double>& resi
   return den > 0.0 ? num / den : 0.0;
 }
 
+bool is_temperature_column(int column, const std::vector<std::string>& extras,
+                           const SearchOptions& options) {
+  for (const auto& [c, temperature] : options.column_is_temperature) {
+    if (c == column) return temperature;
+  }
+  if (column == static_cast<int>(Column::kTemp)) return true;
+  const std::string name = column_name(column, extras);
+  return name.size() > 2 && name.compare(name.size() - 2, 2, "_c") == 0;
+}
+
+std::string linear_effect_name(int column, const std::vector<std::string>& extras,
+                               const SearchOptions& options) {
+  return is_temperature_column(column, extras, options) ? "thermal_drift"
+                                                        : "linear_" + column_name(column, extras);
+}
+
 std::vector<Candidate> make_candidates(const Dataset& data, const std::vector<std::uint8_t>& use,
                                        const SearchOptions& options,
                                        const std::vector<TermSpec>& declared) {
@@ -673,7 +952,9 @@ std::vector<Candidate> make_candidates(const Dataset& data, const std::vector<st
   const Range temp = column_range(data, static_cast<int>(Column::kTemp), use, km);
   if (varies(temp)) add("thermal_drift", Form::kLinear, static_cast<int>(Column::kTemp), 1, {});
   for (int col : options.linear_columns) {
-    if (varies(column_range(data, col, use, km))) add("thermal_drift", Form::kLinear, col, 1, {});
+    if (varies(column_range(data, col, use, km))) {
+      add(linear_effect_name(col, data.extra_columns, options), Form::kLinear, col, 1, {});
+    }
   }
   for (int col : options.lag_columns) {
     if (varies(column_range(data, col, use, km)) && varies(time)) {
@@ -794,14 +1075,16 @@ std::vector<Candidate> make_candidates(const Dataset& data, const std::vector<st
 AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
   const std::size_t n = data.rows();
   if (n < 10) throw AnalysisError("the log has " + std::to_string(n) + " rows; at least 10 needed");
+  check_magnitudes(data);
   AnalysisResult result;
   // Time-ordered split: the latest rows are held out of every fit (in the order over all
   // files when the reader gave one: time_s starts again at every warm start).
   std::vector<double> times;
   const auto& tc =
       data.order_s.size() == n ? data.order_s : data.column(static_cast<int>(Column::kTime));
-  for (double v : tc) {
-    if (std::isfinite(v)) times.push_back(v);
+  // Rows without a measurement are in neither part: they would move the split.
+  for (std::size_t i = 0; i < tc.size(); ++i) {
+    if (std::isfinite(tc[i]) && std::isfinite(data.target_um[i])) times.push_back(tc[i]);
   }
   result.heldout.assign(n, 0);
   if (!times.empty() && config.heldout_fraction > 0.0) {
@@ -812,17 +1095,39 @@ AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
       if (std::isfinite(tc[i]) && tc[i] >= result.split_time_s) result.heldout[i] = 1;
     }
   }
+  leave_out_unseen_groups(data, config.declared, result.heldout, result.warnings);
   std::vector<std::uint8_t> use(n);
   for (std::size_t i = 0; i < n; ++i) {
     use[i] = result.heldout[i] == 0U && std::isfinite(data.target_um[i]) ? 1 : 0;
   }
 
   std::vector<TermSpec> specs = config.declared;
-  Model model = fit_terms(data, specs, use);
+  FitInfo info;
+  Model model = fit_terms(data, specs, use, &info);
+  if (config.outlier_sigmas > 0.0) {
+    result.outliers =
+        find_outliers(data, residuals(data, model), result.heldout, config.outlier_sigmas);
+    if (!result.outliers.empty()) {
+      for (std::size_t i : result.outliers) {
+        result.heldout[i] = 2;
+        use[i] = 0;
+      }
+      model = fit_terms(data, specs, use, &info);
+    }
+  }
+  warn_fit(info, "the declared model", result.warnings);
   std::vector<double> residual;
-  FitStats current = stats_of(data, model, result.heldout, &residual);
+  FitStats current = stats_of(data, model, result.heldout, &residual, "the declared model");
   result.declared = current;
   result.declared_residual_um = residual;
+  if (current.heldout.rows == 0) {
+    result.warnings.push_back(
+        {"heldout_empty",
+         times.empty() ? "no row has both time_s and a measurement: nothing is held out, no "
+                         "held-out figure is given and only the F-test decides"
+                       : "heldout_fraction = 0: nothing is held out, no held-out figure is given "
+                         "and only the F-test decides"});
+  }
 
   std::vector<Candidate> all = make_candidates(data, use, config.search, config.declared);
   struct Ranked {
@@ -868,6 +1173,15 @@ AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
               ? c.spec.center
               : c.spec.scale;
       t_out.rss_reduction_fraction = rk.reduction / set.rss;
+      // A projection cannot remove more than the residual: anything else is a numerical failure,
+      // and must not rank first.
+      if (!(t_out.rss_reduction_fraction >= 0.0 && t_out.rss_reduction_fraction <= 1.0 + 1e-9)) {
+        throw AnalysisError("candidate '" + t_out.name + "' (" + t_out.column + ", " +
+                            std::string(form_name(t_out.form)) +
+                            "): share of the residual removed " +
+                            fmt_g(t_out.rss_reduction_fraction) +
+                            " is not within [0, 1] (numerically unusable columns)");
+      }
       tried.push_back(t_out);
     }
     return ranked;
@@ -877,6 +1191,7 @@ AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
     Model model;
     std::vector<double> residual;
     FitStats stats;
+    FitInfo info;
     double p_adj{1.0};
     double f{0.0};
   };
@@ -886,8 +1201,11 @@ AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
     Trial t;
     t.specs = base_specs;
     t.specs.push_back(c.spec);
-    t.model = fit_terms(data, t.specs, use);
-    t.stats = stats_of(data, t.model, result.heldout, &t.residual);
+    t.model = fit_terms(data, t.specs, use, &t.info);
+    t.stats = stats_of(data, t.model, result.heldout, &t.residual,
+                       "candidate '" + c.spec.name + "' (" +
+                           column_name(c.spec.column, data.extra_columns) + ", " +
+                           std::string(form_name(c.spec.form)) + ")");
     const double extra = c.grid.empty() ? 0.0 : 1.0;
     const double df1 =
         dz(t.stats.parameters > base.parameters ? t.stats.parameters - base.parameters : 1) + extra;
@@ -910,6 +1228,20 @@ AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
     return before.heldout.rows == 0 || after.heldout.rms_um < before.heldout.rms_um;
   };
   auto accept = [&](const Candidate& c, const Trial& t) {
+    if (c.spec.form == Form::kSine) {
+      const SearchSet set = make_search_set(data, model, use, residual, config.search_rows);
+      const std::vector<double> alias = equivalent_periods(data, set, c);
+      if (!alias.empty()) {
+        const std::string col = column_name(c.spec.column, data.extra_columns);
+        std::string list;
+        for (double p : alias) list += (list.empty() ? "" : ", ") + fmt_g(p);
+        result.warnings.push_back(
+            {"period_ambiguous",
+             c.spec.name + ": periods " + list + " (" + col + ") fit the samples as well as the " +
+                 fmt_g(c.spec.scale) + " chosen (within 2 %): the " + col +
+                 " positions measured cannot tell them apart (aliasing); measure between them"});
+      }
+    }
     AddedEffect e;
     e.spec = c.spec;
     e.before = current;
@@ -919,6 +1251,7 @@ AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
     result.effects.push_back(e);
     specs = t.specs;
     model = t.model;
+    info = t.info;
     residual = t.residual;
     current = t.stats;
   };
@@ -970,10 +1303,12 @@ AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
   result.final_stats = current;
   result.final_residual_um = residual;
   result.noise_floor_um = noise_floor_um(data, residual, use);
-  result.fitted_model = model;
   std::vector<std::uint8_t> all_rows(n);
   for (std::size_t i = 0; i < n; ++i) all_rows[i] = std::isfinite(data.target_um[i]) ? 1 : 0;
+  result.fitted_model = model;
+  set_confidence_intervals(data, specs, use, residual, config, result);
   result.final_model = fit_terms(data, specs, all_rows);
+  if (!result.effects.empty()) warn_fit(info, "the final model", result.warnings);
   return result;
 }
 

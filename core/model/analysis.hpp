@@ -37,12 +37,19 @@ struct Dataset {
   /// warm start); mapped foreign CSVs keep their time_s. Empty, or of another length than the
   /// rows: time_s itself.
   std::vector<double> order_s;
+  /// Where each row was read, for messages: files[row_file[i]], line row_line[i] (0 = not from a
+  /// file; vectors shorter than the rows: rows built in memory).
+  std::vector<std::string> files;
+  std::vector<std::uint32_t> row_file;
+  std::vector<std::uint32_t> row_line;
 
   Dataset();
   [[nodiscard]] std::size_t rows() const { return target_um.size(); }
   [[nodiscard]] Row row(std::size_t i) const;
   /// Values of one column (empty if the column is absent).
   [[nodiscard]] const std::vector<double>& column(int index) const;
+  /// "file:line" of row i, or "row <i+1>" when it was not read from a file.
+  [[nodiscard]] std::string where(std::size_t i) const;
 };
 
 /// One term the search may add.
@@ -59,8 +66,11 @@ struct SearchOptions {
   std::uint8_t kind_mask{0x7};
   /// Effect names never to try (e.g. "periodic_y").
   std::vector<std::string> exclude;
-  /// Extra columns tried as thermal_drift linear in that column (temperatures).
+  /// Columns tried as an effect linear in that column: named thermal_drift for a temperature
+  /// (is_temperature_column), linear_<column> otherwise.
   std::vector<int> linear_columns;
+  /// Columns declared a temperature (true) or not (false), overriding the naming rule.
+  std::vector<std::pair<int, bool>> column_is_temperature;
   /// Extra columns tried as thermal_drift, first-order lag of that column (speed, power).
   std::vector<int> lag_columns;
   /// Split every candidate per group of these columns (e.g. tool: one wear curve per tool).
@@ -85,6 +95,10 @@ struct AnalysisConfig {
   bool ar1_correction{true};
   /// Rows used for the non-linear grid search (the fits use all rows).
   std::size_t search_rows{10000};
+  /// A row is an outlier when it differs from both neighbours of its (kind, point, tool) series
+  /// by more than this many noise standard deviations (robust, from the median absolute
+  /// successive difference), in the same direction; 0 = no outlier rule.
+  double outlier_sigmas{10.0};
 };
 
 struct ErrorStats {
@@ -107,6 +121,9 @@ struct AddedEffect {
   FitStats after;
   double p_value{1.0};  // adjusted (see file comment)
   double f_statistic{0.0};
+  /// 95 % confidence interval [low, high] of each coefficient of the final fit on the fitted
+  /// rows (t distribution; widened for an AR(1) residual when ar1_correction is on).
+  std::vector<std::array<double, 2>> coef_ci95;
 };
 
 /// A candidate tried at one search step, for the report.
@@ -121,7 +138,27 @@ struct TriedCandidate {
   bool refitted{false};
 };
 
+/// Something the figures do not say by themselves (summary.json `warnings`).
+struct Warning {
+  std::string code;  // saturated, collinear, … (docs/analyze.md)
+  std::string message;
+};
+
+/// What a least-squares fit found besides its coefficients.
+struct FitInfo {
+  std::size_t rows{0};        // rows that entered the fit
+  std::size_t parameters{0};  // coefficients
+  std::size_t rank{0};        // of the design: below parameters = collinear coefficients
+  /// Set by the caller to get coef_variance.
+  bool want_variance{false};
+  /// Per coefficient (Model order), diagonal of the pseudo-inverse of X'X: its variance is this
+  /// times the residual variance.
+  std::vector<double> coef_variance;
+};
+
 struct AnalysisResult {
+  /// In the order found; see Warning.
+  std::vector<Warning> warnings;
   FitStats declared;
   std::vector<AddedEffect> effects;
   /// Per search step (one more than effects when the search stopped on its own).
@@ -135,7 +172,11 @@ struct AnalysisResult {
   /// Residuals [µm] of every row: declared model, final model (both fitted on the fitted rows).
   std::vector<double> declared_residual_um;
   std::vector<double> final_residual_um;
-  std::vector<std::uint8_t> heldout;  // 1 = held-out row
+  /// 0 fitted, 1 held out, 2 in neither: a held-out row of a group no fitted row has
+  /// (heldout_unseen_group), or an outlier.
+  std::vector<std::uint8_t> heldout;
+  /// Rows the robust rule took out of every fit and figure (row indices, in order).
+  std::vector<std::size_t> outliers;
   double split_time_s{0.0};
 };
 
@@ -153,9 +194,9 @@ class AnalysisError : public std::exception {
 double f_distribution_upper_tail(double f, double d1, double d2);
 
 /// Least-squares fit of `specs` on the rows where use[i] != 0. Groups are discovered from those
-/// rows. Throws AnalysisError if nothing can be fitted.
+/// rows. Throws AnalysisError if nothing can be fitted or a coefficient is not finite.
 Model fit_terms(const Dataset& data, const std::vector<TermSpec>& specs,
-                const std::vector<std::uint8_t>& use);
+                const std::vector<std::uint8_t>& use, FitInfo* info = nullptr);
 
 /// Residual target − prediction of every row (rows in order; lag filters run over all rows).
 std::vector<double> residuals(const Dataset& data, const Model& model);
@@ -168,6 +209,15 @@ double noise_floor_um(const Dataset& data, const std::vector<double>& residual,
 /// Lag-1 autocorrelation of the residual within each (kind, point, tool) series in row order.
 double lag1_autocorrelation(const Dataset& data, const std::vector<double>& residual,
                             const std::vector<std::uint8_t>& use);
+
+/// Whether `column` holds a temperature: as declared in options.column_is_temperature, else
+/// temp_c and every column whose name ends in _c (°C, the unit-suffix convention).
+bool is_temperature_column(int column, const std::vector<std::string>& extras,
+                           const SearchOptions& options);
+
+/// Name of the effect linear in `column`: thermal_drift for a temperature, linear_<column>.
+std::string linear_effect_name(int column, const std::vector<std::string>& extras,
+                               const SearchOptions& options);
 
 /// The candidate effects for this data set (the effect names of issue 11). `declared`: the
 /// model's declared terms; a term that applies to tool_wear rows makes `tool_wear` in the form

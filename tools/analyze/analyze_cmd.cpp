@@ -54,6 +54,23 @@ void run(const Options& opt) {
     cfg = io::read_model_text(read_text(opt.config), opt.config, false);
     for (const auto& m : opt.maps) maps.push_back(io::read_mapping_file(m));
     data.extra_columns = cfg.extra_columns;
+    auto& kinds = cfg.config.search.column_is_temperature;
+    for (std::size_t i = 0; i < maps.size(); ++i) {
+      for (const auto& [name, temperature] : maps[i].column_kind) {
+        const int c = cm::column_index(name, cfg.extra_columns);
+        if (c < 0) continue;  // a column this model does not use
+        bool found = false;
+        for (const auto& [k, t] : kinds) {
+          if (k != c) continue;
+          found = true;
+          if (t != temperature) {
+            throw io::ModelIoError(opt.maps[i] + ": column_kind." + name +
+                                   ": declared otherwise in " + opt.config + " or another map");
+          }
+        }
+        if (!found) kinds.emplace_back(c, temperature);
+      }
+    }
     for (std::size_t i = 0; i < opt.logs.size(); ++i) {
       std::ifstream in(opt.logs[i], std::ios::binary);
       if (!in) throw io::ModelIoError(opt.logs[i] + ": cannot open");
@@ -92,18 +109,30 @@ void run(const Options& opt) {
 
   std::cout << "rows: " << data.rows() << " (fitted " << result.declared.fitted.rows
             << ", held out " << result.declared.heldout.rows << ")\n";
+  // No held-out rows: no held-out figure (an RMS over nothing would read as 0 µm).
+  auto heldout = [](const cm::ErrorStats& e) {
+    std::ostringstream o;
+    if (e.rows > 0) {
+      o << e.rms_um << " µm";
+    } else {
+      o << "n/a";
+    }
+    return o.str();
+  };
   std::cout << "declared model: RMS " << result.declared.fitted.rms_um << " µm, held-out RMS "
-            << result.declared.heldout.rms_um << " µm\n";
+            << heldout(result.declared.heldout) << "\n";
   for (const auto& e : result.effects) {
     std::cout << "added " << e.spec.name << " ("
               << cm::column_name(e.spec.column, data.extra_columns) << ", "
               << cm::form_name(e.spec.form) << "): RMS " << e.before.fitted.rms_um << " -> "
-              << e.after.fitted.rms_um << " µm, held-out " << e.before.heldout.rms_um << " -> "
-              << e.after.heldout.rms_um << " µm, p = " << e.p_value << "\n";
+              << e.after.fitted.rms_um << " µm, held-out " << heldout(e.before.heldout) << " -> "
+              << heldout(e.after.heldout) << ", p = " << e.p_value << "\n";
   }
   std::cout << "final RMS " << result.final_stats.fitted.rms_um << " µm (held-out "
-            << result.final_stats.heldout.rms_um << " µm), noise floor " << result.noise_floor_um
+            << heldout(result.final_stats.heldout) << "), noise floor " << result.noise_floor_um
             << " µm\n";
+  for (const auto& w : result.warnings)
+    std::cout << "warning " << w.code << ": " << w.message << "\n";
   std::cout << "wrote " << (out / "summary.json").string() << ", " << (out / "report.md").string()
             << ", " << (out / "model.toml").string() << "\n";
 }

@@ -107,6 +107,28 @@ int resolve_column(const std::string& name, std::vector<std::string>& extras, co
   return cm::column_index(name, extras);
 }
 
+constexpr std::array<std::string_view, 12> kEffectNames = {
+    "thermal_drift", "level_change", "position_x", "position_y",     "position_z", "periodic_x",
+    "periodic_y",    "periodic_z",   "tool_wear",  "wear_nonlinear", "part_trend", "contact_angle"};
+
+// A `column_kind` table: column = "temperature" | "other" (how a linear effect in it is named).
+std::vector<std::pair<std::string, bool>> read_column_kinds(const toml::node& n,
+                                                            std::string_view source,
+                                                            const std::string& key) {
+  const auto* t = n.as_table();
+  if (t == nullptr) fail(where(source, n, key) + ": must be a table of column = \"temperature\"");
+  std::vector<std::pair<std::string, bool>> out;
+  for (const auto& [k, v] : *t) {
+    const std::string name(k.str());
+    const std::string kind = get_string(v, source, key + "." + name);
+    if (kind != "temperature" && kind != "other") {
+      fail(where(source, v, key + "." + name) + ": '" + kind + "' is not temperature or other");
+    }
+    out.emplace_back(name, kind == "temperature");
+  }
+  return out;
+}
+
 std::string fmt_double(double v) {
   char buf[40];
   std::snprintf(buf, sizeof buf, "%.17g", v);
@@ -148,7 +170,7 @@ ModelFile read_model_table(const toml::table& root, std::string_view source, boo
   if (model == nullptr) fail(std::string(source) + ": no [model] table");
   check_keys(*model, source, "model",
              {"heldout_fraction", "alpha", "max_effects", "search_rows", "ar1_correction",
-              "lookahead", "term", "search"});
+              "lookahead", "outlier_sigmas", "term", "search"});
   ModelFile out;
   cm::AnalysisConfig& cfg = out.config;
   for (const char* flag : {"ar1_correction", "lookahead"}) {
@@ -169,6 +191,13 @@ ModelFile read_model_table(const toml::table& root, std::string_view source, boo
     cfg.alpha = get_number(*n, source, "model.alpha");
     if (!(cfg.alpha > 0.0 && cfg.alpha < 0.5)) {
       fail(where(source, *n, "model.alpha") + ": must be within (0, 0.5)");
+    }
+  }
+  if (const auto* n = model->get("outlier_sigmas")) {
+    cfg.outlier_sigmas = get_number(*n, source, "model.outlier_sigmas");
+    const double v = cfg.outlier_sigmas;
+    if (v < 0.0 || (v > 0.0 && v < 3.0) || v > 1e3) {
+      fail(where(source, *n, "model.outlier_sigmas") + ": must be 0 (off) or within [3, 1000]");
     }
   }
   if (const auto* n = model->get("max_effects")) {
@@ -285,7 +314,8 @@ ModelFile read_model_table(const toml::table& root, std::string_view source, boo
     const auto* st = sn->as_table();
     if (st == nullptr) fail(where(source, *sn, "model.search") + ": must be a table");
     check_keys(*st, source, "model.search",
-               {"kinds", "exclude", "linear_columns", "lag_columns", "period_min_mm", "per"});
+               {"kinds", "exclude", "linear_columns", "lag_columns", "period_min_mm", "per",
+                "column_kind"});
     cm::SearchOptions& so = cfg.search;
     if (const auto* n = st->get("per")) {
       const auto names = get_strings(*n, source, "model.search.per");
@@ -305,6 +335,29 @@ ModelFile read_model_table(const toml::table& root, std::string_view source, boo
           const int c = resolve_column(name, out.extra_columns, *n, source, key);
           (std::string_view(list) == "linear_columns" ? so.linear_columns : so.lag_columns)
               .push_back(c);
+        }
+      }
+    }
+    if (const auto* n = st->get("column_kind")) {
+      for (const auto& [name, temperature] :
+           read_column_kinds(*n, source, "model.search.column_kind")) {
+        const int c =
+            resolve_column(name, out.extra_columns, *n, source, "model.search.column_kind." + name);
+        so.column_is_temperature.emplace_back(c, temperature);
+      }
+    }
+    if (const auto* n = st->get("exclude")) {
+      // A misspelt name would exclude nothing, silently.
+      for (const auto& name : so.exclude) {
+        bool known =
+            std::find(kEffectNames.begin(), kEffectNames.end(), name) != kEffectNames.end();
+        for (int c : so.linear_columns) {
+          known = known || name == "linear_" + cm::column_name(c, out.extra_columns);
+        }
+        if (!known) {
+          fail(where(source, *n, "model.search.exclude") + ": no effect is called '" + name +
+               "' (thermal_drift, level_change, position_x|y|z, periodic_x|y|z, tool_wear, "
+               "wear_nonlinear, part_trend, contact_angle, linear_<column> of linear_columns)");
         }
       }
     }
@@ -353,6 +406,7 @@ std::string write_model_toml(const core::model::Model& model,
   o << "search_rows = " << config.search_rows << "\n";
   o << "ar1_correction = " << (config.ar1_correction ? "true" : "false") << "\n";
   o << "lookahead = " << (config.lookahead ? "true" : "false") << "\n";
+  o << "outlier_sigmas = " << fmt_double(config.outlier_sigmas) << "\n";
   for (const cm::Term& t : model.terms()) {
     const cm::TermSpec& s = t.spec;
     o << "\n[[model.term]]\n";
@@ -426,6 +480,13 @@ std::string write_model_toml(const core::model::Model& model,
       o << (i ? ", " : "") << quote(so.exclude[i]);
     o << "]\n";
   }
+  if (!so.column_is_temperature.empty()) {
+    o << "\n[model.search.column_kind]\n";
+    for (const auto& [c, temperature] : so.column_is_temperature) {
+      o << quote(cm::column_name(c, ex)) << " = " << (temperature ? "\"temperature\"" : "\"other\"")
+        << "\n";
+    }
+  }
   return o.str();
 }
 
@@ -442,7 +503,7 @@ Mapping read_mapping_text(std::string_view text, std::string_view source) {
       << e.description();
     throw ModelIoError(s.str());
   }
-  check_keys(root, source, "", {"columns", "extra", "scale", "constant", "wide"});
+  check_keys(root, source, "", {"columns", "extra", "scale", "constant", "wide", "column_kind"});
   Mapping m;
   auto table = [&](const char* name) -> const toml::table* {
     const auto* n = root.get(name);
@@ -490,6 +551,19 @@ Mapping read_mapping_text(std::string_view text, std::string_view source) {
       }
     }
   }
+  if (const auto* n = root.get("column_kind")) {
+    for (auto& [name, temperature] : read_column_kinds(*n, source, "column_kind")) {
+      const std::string& column = name;  // clang 14 cannot capture a structured binding
+      const bool mapped =
+          is_target(column) || std::any_of(m.extra.begin(), m.extra.end(),
+                                           [&](const auto& e) { return e.first == column; });
+      if (!mapped) {
+        fail(where(source, *n->as_table()->get(column), "column_kind." + column) +
+             ": not a log column nor a column of [extra]");
+      }
+      m.column_kind.emplace_back(name, temperature);
+    }
+  }
   if (const auto* t = table("wide")) {
     check_keys(*t, source, "wide", {"measured_um", "points"});
     const auto* mu = t->get("measured_um");
@@ -505,12 +579,22 @@ Mapping read_mapping_text(std::string_view text, std::string_view source) {
            ": measured_um and points must have the same, non-zero length");
     }
   }
+  // A scale applies to a column read from the file, once: one mapped under [columns] or
+  // [extra], or measured_um read from [wide]. A scale of anything else would silently do nothing.
+  const auto* scales = table("scale");
   for (const auto& [k, v] : m.scale) {
     const std::string& column = k;  // clang 14 cannot capture a structured binding
-    const bool known =
-        is_target(k) || std::any_of(m.extra.begin(), m.extra.end(),
-                                    [&](const auto& e) { return e.first == column; });
-    if (!known) fail(std::string(source) + ": scale." + k + ": no such mapped column");
+    auto named = [&](const auto& list) {
+      return std::any_of(list.begin(), list.end(),
+                         [&](const auto& e) { return e.first == column; });
+    };
+    const bool mapped =
+        named(m.columns) || named(m.extra) || (column == "measured_um" && !m.wide_measured.empty());
+    if (!mapped) {
+      fail(where(source, *scales->get(column), "scale." + column) +
+           (named(m.constant) ? ": a [constant] is not scaled (write it in the target unit)"
+                              : ": not a column mapped under [columns], [extra] or [wide]"));
+    }
   }
   return m;
 }
@@ -682,6 +766,10 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
   // times: several of them are often parallel series (two cutters, two gauges), not one after
   // another.
   data.order_s.resize(start_rows, cm::kUnknown);
+  data.row_file.resize(start_rows, 0);
+  data.row_line.resize(start_rows, 0);
+  const auto file_index = static_cast<std::uint32_t>(data.files.size());
+  data.files.emplace_back(source);
   double previous_end = -std::numeric_limits<double>::infinity();
   for (const double v : data.order_s) {
     if (std::isfinite(v)) previous_end = std::max(previous_end, v);
@@ -717,6 +805,13 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
     if (trim(line).empty()) continue;
     nf = split_csv(line, fields);
     if (nf == 0) csv_fail(source, line_no, "", "bad quoting");
+    if (nf > header.size()) {
+      // Reading on would shift every column after the extra field (e.g. a decimal comma).
+      csv_fail(source, line_no, "",
+               "the row has " + std::to_string(nf) + " fields, the header " +
+                   std::to_string(header.size()) +
+                   " (a decimal comma or an unquoted comma in a field?)");
+    }
     values.fill(cm::kUnknown);
     double measured = cm::kUnknown;
     double applied = mapped ? 0.0 : cm::kUnknown;
@@ -837,13 +932,16 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
             csv_fail(source, line_no, mapping.wide_measured[w],
                      "'" + std::string(cell) + "' is not a finite number");
           }
+          // A measured_um under [columns] got its scale when read (its target's scale).
+          y *= measured_scale;
         }
         values[static_cast<std::size_t>(cm::Column::kPoint)] = mapping.wide_points[w];
       }
-      if (std::isfinite(y)) y *= measured_scale;
       for (std::size_t c : present) cols[c].push_back(values[c]);
       data.target_um.push_back(y + (std::isfinite(applied) ? applied : 0.0));
       data.order_s.push_back(std::isfinite(t_s) ? t_s + order_offset : cm::kUnknown);
+      data.row_file.push_back(file_index);
+      data.row_line.push_back(static_cast<std::uint32_t>(line_no));
       if (std::isfinite(t_s)) order_end = std::max(order_end, t_s + order_offset);
     }
   }

@@ -62,6 +62,8 @@ struct Mapping {
   /// Wide files: one measurement row per listed header, point = the matching `wide_points`.
   std::vector<std::string> wide_measured;
   std::vector<double> wide_points;
+  /// Column → is a temperature (`[column_kind]`: how a linear effect in it is named).
+  std::vector<std::pair<std::string, bool>> column_kind;
   bool empty() const { return columns.empty() && extra.empty() && constant.empty(); }
 };
 

@@ -18,6 +18,9 @@ std::string num(double v, int digits = 6) {
   return buf;
 }
 
+// A held-out RMS over no rows is no figure (it would read as 0 µm, "better").
+std::string heldout_rms(const cm::ErrorStats& s) { return s.rows > 0 ? num(s.rms_um) : "null"; }
+
 std::string json_string(const std::string& s) {
   std::string o = "\"";
   for (char c : s) {
@@ -137,13 +140,36 @@ std::string summary_json(const cm::Dataset& data, const cm::AnalysisResult& resu
       << ", \"params\": " << params_json(e.spec, result.fitted_model, data.extra_columns)
       << ", \"rms_before_um\": " << num(e.before.fitted.rms_um)
       << ", \"rms_after_um\": " << num(e.after.fitted.rms_um)
-      << ", \"heldout_rms_before_um\": " << num(e.before.heldout.rms_um)
-      << ", \"heldout_rms_after_um\": " << num(e.after.heldout.rms_um)
-      << ", \"p_value\": " << num(e.p_value, 4) << "}";
+      << ", \"heldout_rms_before_um\": " << heldout_rms(e.before.heldout)
+      << ", \"heldout_rms_after_um\": " << heldout_rms(e.after.heldout)
+      << ", \"p_value\": " << num(e.p_value, 4) << ", \"coef_ci95\": [";
+    for (std::size_t k = 0; k < e.coef_ci95.size(); ++k) {
+      o << (k ? ", " : "") << "[" << num(e.coef_ci95[k][0], 8) << ", " << num(e.coef_ci95[k][1], 8)
+        << "]";
+    }
+    o << "]}";
   }
   o << (result.effects.empty() ? "" : "\n  ") << "],\n";
   o << "  \"final_rms_um\": " << num(result.final_stats.fitted.rms_um) << ",\n";
-  o << "  \"noise_floor_um\": " << num(result.noise_floor_um) << "\n}\n";
+  o << "  \"noise_floor_um\": " << num(result.noise_floor_um) << ",\n";
+  o << "  \"outliers\": [";
+  for (std::size_t k = 0; k < result.outliers.size(); ++k) {
+    const std::size_t i = result.outliers[k];
+    const bool from_file = i < data.row_line.size() && data.row_line[i] > 0 &&
+                           i < data.row_file.size() && data.row_file[i] < data.files.size();
+    o << (k ? "," : "")
+      << "\n    {\"file\": " << (from_file ? json_string(data.files[data.row_file[i]]) : "null")
+      << ", \"line\": " << (from_file ? std::to_string(data.row_line[i]) : "null")
+      << ", \"row\": " << i + 1 << ", \"value_um\": " << num(data.target_um[i])
+      << ", \"residual_um\": " << num(result.declared_residual_um[i]) << "}";
+  }
+  o << (result.outliers.empty() ? "" : "\n  ") << "],\n";
+  o << "  \"warnings\": [";
+  for (std::size_t i = 0; i < result.warnings.size(); ++i) {
+    o << (i ? "," : "") << "\n    {\"code\": " << json_string(result.warnings[i].code)
+      << ", \"message\": " << json_string(result.warnings[i].message) << "}";
+  }
+  o << (result.warnings.empty() ? "" : "\n  ") << "]\n}\n";
   return o.str();
 }
 
@@ -222,13 +248,17 @@ std::string residual_svg(const cm::Dataset& data, const cm::AnalysisResult& resu
       const double px = ox + (x[i] - xlo) / (xhi - xlo) * kPanelW;
       const double py = y0 - r[i] / ymax * (kPanelH / 2.0);
       o << "<circle cx=\"" << num(px, 5) << "\" cy=\"" << num(py, 5) << "\" r=\"1.6\" fill=\""
-        << (result.heldout[i] != 0U ? "#e07000" : "#1f5fa8") << "\" fill-opacity=\"0.6\"/>\n";
+        << (result.heldout[i] == 0U   ? "#1f5fa8"
+            : result.heldout[i] == 1U ? "#e07000"
+                                      : "#999999")
+        << "\" fill-opacity=\"0.6\"/>\n";
     }
     o << "</g>\n";
   }
   o << "<text x=\"60\" y=\"" << kH - 8
     << "\"><tspan fill=\"#1f5fa8\">● fitted rows</tspan>  <tspan fill=\"#e07000\">● held-out "
-       "rows</tspan></text>\n";
+       "rows</tspan>  <tspan fill=\"#999999\">● left out (outliers, unseen "
+       "groups)</tspan></text>\n";
   o << "</svg>\n";
   return o.str();
 }
@@ -258,6 +288,20 @@ std::string report_markdown(const cm::Dataset& data, const cm::AnalysisResult& r
     << (logs_in_sequence(data) ? " with nccompd's logs one after another" : "") << ").\n\n";
   o << "Noise floor (successive differences of the final residual per series): **"
     << num(result.noise_floor_um, 3) << " µm**.\n\n";
+  if (!result.outliers.empty()) {
+    o << "## Outliers (left out of every fit and figure)\n\n| row | value [µm] | residual of the "
+         "declared model [µm] |\n| --- | --- | --- |\n";
+    for (std::size_t i : result.outliers) {
+      o << "| " << data.where(i) << " | " << num(data.target_um[i], 5) << " | "
+        << num(result.declared_residual_um[i], 5) << " |\n";
+    }
+    o << "\n";
+  }
+  if (!result.warnings.empty()) {
+    o << "## Warnings\n\n";
+    for (const auto& w : result.warnings) o << "- **" << w.code << "**: " << w.message << "\n";
+    o << "\n";
+  }
   o << "## Error before and after each step\n\n";
   o << "| step | effect | column | form | parameter | fitted RMS [µm] | fitted max [µm] | held-out "
        "RMS [µm] | held-out max [µm] | p (adjusted) |\n";
@@ -267,7 +311,8 @@ std::string report_markdown(const cm::Dataset& data, const cm::AnalysisResult& r
                  const std::string& p) {
     o << "| " << step << " | " << eff << " | " << col << " | " << form << " | " << par << " | "
       << num(s.fitted.rms_um, 4) << " | " << num(s.fitted.max_um, 4) << " | "
-      << num(s.heldout.rms_um, 4) << " | " << num(s.heldout.max_um, 4) << " | " << p << " |\n";
+      << (s.heldout.rows > 0 ? num(s.heldout.rms_um, 4) : "—") << " | "
+      << (s.heldout.rows > 0 ? num(s.heldout.max_um, 4) : "—") << " | " << p << " |\n";
   };
   row("0", "declared model", "", "", "", result.declared, "");
   for (std::size_t i = 0; i < result.effects.size(); ++i) {
@@ -298,7 +343,7 @@ std::string report_markdown(const cm::Dataset& data, const cm::AnalysisResult& r
   }
   o << "## Residual against each context column\n\n";
   o << "Left: the declared model; right: after the added effects. Blue: fitted rows; orange: "
-       "held-out rows.\n\n";
+       "held-out rows; grey: rows left out (outliers, held-out rows of unseen groups).\n\n";
   for (int c : plotted) {
     const std::string name = cm::column_name(c, ex);
     o << "![residual vs " << name << "](plots/residual_" << safe_name(name) << ".svg)\n\n";

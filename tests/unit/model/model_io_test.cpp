@@ -194,3 +194,113 @@ TEST(ModelFile, RefusesBadTerms) {
   EXPECT_EQ(err("[model]\nalpha = 0.9\n[[model.term]]\nname = \"a\"\nform = \"constant\"\n"),
             "c.toml:2:9: model.alpha: must be within (0, 0.5)");
 }
+
+// Issue 21: a [scale] on measured_um mapped under [columns] was applied twice (37.1 → 37 101).
+TEST(ReadLog, AppliesAScaleOnceWhereverTheColumnIsMapped) {
+  const io::Mapping cols = io::read_mapping_text(
+      "[columns]\ntime_s = \"t\"\nmeasured_um = \"dev_mm\"\n[scale]\nmeasured_um = 1000.0\n"
+      "[constant]\nkind = \"contour\"\n",
+      "map.toml");
+  std::istringstream in("t,dev_mm\n0,0.0371\n1,-0.002\n");
+  cm::Dataset d;
+  io::read_log(in, "a.csv", cols, d);
+  ASSERT_EQ(d.rows(), 2U);
+  EXPECT_NEAR(d.target_um[0], 37.1, 1e-9);
+  EXPECT_NEAR(d.target_um[1], -2.0, 1e-9);
+
+  const io::Mapping wide = io::read_mapping_text(
+      "[columns]\ntime_s = \"t\"\n[scale]\nmeasured_um = 1000.0\n[constant]\nkind = \"contour\"\n"
+      "[wide]\nmeasured_um = [\"p1\", \"p2\"]\npoints = [1, 2]\n",
+      "map.toml");
+  std::istringstream in2("t,p1,p2\n0,0.0371,0.001\n");
+  cm::Dataset d2;
+  io::read_log(in2, "b.csv", wide, d2);
+  ASSERT_EQ(d2.rows(), 2U);
+  EXPECT_NEAR(d2.target_um[0], 37.1, 1e-9);
+  EXPECT_NEAR(d2.target_um[1], 1.0, 1e-9);
+}
+
+// Issue 21: a row with more fields than the header (a decimal comma) was read with its columns
+// shifted.
+TEST(ReadLog, RefusesARowWithMoreFieldsThanTheHeader) {
+  const std::string h = std::string(kHeader) + "\n";
+  EXPECT_EQ(error_of(h + "1,1,1,contour,1,0,0,0,0,0,,1,0\n2,1,1,contour,1,0,0,0,0,0,,37,1,0\n"),
+            "log.csv:3: the row has 14 fields, the header 13 (a decimal comma or an unquoted "
+            "comma in a field?)");
+  const io::Mapping m = io::read_mapping_text(
+      "[columns]\ntime_s = \"t\"\nmeasured_um = \"dev\"\n[constant]\nkind = \"contour\"\n",
+      "map.toml");
+  EXPECT_EQ(error_of("t,dev\n0,37.1\n1,37,1\n", m),
+            "log.csv:3: the row has 3 fields, the header 2 (a decimal comma or an unquoted "
+            "comma in a field?)");
+}
+
+// Issue 21: a scale of a column the mapping does not read did nothing, silently.
+TEST(ReadMapping, RefusesAScaleOfAColumnItDoesNotRead) {
+  auto err = [](const std::string& text) {
+    try {
+      io::read_mapping_text(text, "map.toml");
+    } catch (const io::ModelIoError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  EXPECT_EQ(err("[columns]\nmeasured_um = \"d\"\n[scale]\nx_mm = 2.0\n"),
+            "map.toml:4:8: scale.x_mm: not a column mapped under [columns], [extra] or [wide]");
+  EXPECT_EQ(err("[columns]\nmeasured_um = \"d\"\n[constant]\ntool = 3\n[scale]\ntool = 2.0\n"),
+            "map.toml:6:8: scale.tool: a [constant] is not scaled (write it in the target unit)");
+  EXPECT_EQ(err("[columns]\nmeasured_um = \"d\"\n[scale]\nspeed = 2.0\n"),
+            "map.toml:4:9: scale.speed: not a column mapped under [columns], [extra] or [wide]");
+  EXPECT_EQ(err("[columns]\nmeasured_um = \"d\"\n[extra]\nspeed = \"rpm\"\n[scale]\nspeed = 2.0\n"),
+            "");
+}
+
+// Issue 21: an exclude naming no effect excluded nothing, silently; a column's kind (temperature
+// or not) is declared in the config or the map and survives model.toml.
+TEST(ModelFile, RefusesAnUnknownExcludeAndKeepsColumnKinds) {
+  const std::string head = "[[model.term]]\nname = \"a\"\nform = \"constant\"\n[model.search]\n";
+  auto err = [](const std::string& text) {
+    try {
+      io::read_model_text(text, "c.toml", false);
+    } catch (const io::ModelIoError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  EXPECT_EQ(err(head + "exclude = [\"thermal_drfit\"]\n").substr(0, 76),
+            "c.toml:5:11: model.search.exclude: no effect is called 'thermal_drfit' (ther");
+  EXPECT_EQ(err(head + "linear_columns = [\"depth_mm\"]\nexclude = [\"linear_depth_mm\"]\n"), "");
+  EXPECT_EQ(err(head + "exclude = [\"linear_depth_mm\"]\n").substr(0, 71),
+            "c.toml:5:11: model.search.exclude: no effect is called 'linear_depth_mm");
+  EXPECT_EQ(err(head + "column_kind = { t2 = \"warm\" }\n"),
+            "c.toml:5:22: model.search.column_kind.t2: 'warm' is not temperature or other");
+
+  const io::ModelFile f =
+      io::read_model_text(head +
+                              "linear_columns = [\"t2\", \"depth_c\"]\n"
+                              "column_kind = { t2 = \"temperature\", depth_c = \"other\" }\n",
+                          "c.toml", false);
+  const auto& so = f.config.search;
+  ASSERT_EQ(f.extra_columns, (std::vector<std::string>{"t2", "depth_c"}));
+  EXPECT_EQ(cm::linear_effect_name(so.linear_columns[0], f.extra_columns, so), "thermal_drift");
+  EXPECT_EQ(cm::linear_effect_name(so.linear_columns[1], f.extra_columns, so), "linear_depth_c");
+  // Written back into model.toml and read again: the same declaration.
+  const cm::Model m(f.extra_columns, {});
+  const io::ModelFile back = io::read_model_text(
+      io::write_model_toml(m, f.config, {}) + "[[model.term]]\nname = \"a\"\nform = \"constant\"\n",
+      "model.toml", false);
+  EXPECT_EQ(back.config.search.column_is_temperature, so.column_is_temperature);
+
+  const io::Mapping map = io::read_mapping_text(
+      "[columns]\nmeasured_um = \"d\"\n[extra]\nt2 = \"T2\"\n[column_kind]\nt2 = \"temperature\"\n",
+      "map.toml");
+  EXPECT_EQ(map.column_kind, (std::vector<std::pair<std::string, bool>>{{"t2", true}}));
+  try {
+    io::read_mapping_text("[columns]\nmeasured_um = \"d\"\n[column_kind]\nt3 = \"other\"\n",
+                          "map.toml");
+    ADD_FAILURE() << "t3 is not mapped";
+  } catch (const io::ModelIoError& e) {
+    EXPECT_EQ(std::string(e.what()),
+              "map.toml:4:6: column_kind.t3: not a log column nor a column of [extra]");
+  }
+}
