@@ -10,14 +10,14 @@
 #include <vector>
 
 #include "core/model/analysis.hpp"
-#include "tools/analyze/model_io.hpp"
+#include "formats/model/model_io.hpp"
 #include "tools/analyze/report.hpp"
 #include "tools/nccomp/command.hpp"
 
 namespace {
 
 namespace cm = nccomp::core::model;
-namespace io = nccomp::tools::model_io;
+namespace io = nccomp::formats::model_io;
 using nccomp::tools::CommandError;
 
 struct Options {

@@ -8,7 +8,7 @@
 
 #include "daemon/config/builtin_sections.hpp"
 #include "daemon/sections/model/context_section.hpp"
-#include "tools/analyze/model_io.hpp"
+#include "formats/model/model_io.hpp"
 
 namespace nccomp::daemon::sections {
 
@@ -101,7 +101,7 @@ std::unique_ptr<ModelSection> parse_model_section(const toml::node& node,
     if (p.is_relative() && src.path) p = fs::path(*src.path).parent_path() / p;
     s->file = p.lexically_normal().string();
     try {
-      s->model = tools::model_io::load_model_file(s->file);
+      s->model = formats::model_io::load_model_file(s->file);
       s->loaded = true;
     } catch (const std::exception& e) {
       diag.error(r.where("file"), std::string("cannot load the model: ") + e.what());
@@ -160,7 +160,7 @@ std::unique_ptr<ModelSection> parse_model_section(const toml::node& node,
     a.apply.gain = q.number("gain", -1.0, -1e3, 1e3);
     const std::string kind =
         q.choice("kind", std::string("contour"), {"tool_wear", "contour", "calib"});
-    a.apply.kind = static_cast<double>(tools::model_io::kind_from_name(kind));
+    a.apply.kind = static_cast<double>(formats::model_io::kind_from_name(kind));
     if (t->contains("point")) {
       a.apply.point = static_cast<double>(q.integer("point", std::nullopt, -1000000, 1000000));
     }

@@ -5,9 +5,9 @@
 #include <sstream>
 #include <string>
 
-#include "tools/analyze/model_io.hpp"
+#include "formats/model/model_io.hpp"
 
-namespace io = nccomp::tools::model_io;
+namespace io = nccomp::formats::model_io;
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   if (size == 0) return 0;

@@ -5,9 +5,9 @@
 #include <string>
 
 #include "core/model/model.hpp"
-#include "tools/analyze/model_io.hpp"
+#include "formats/model/model_io.hpp"
 
-namespace io = nccomp::tools::model_io;
+namespace io = nccomp::formats::model_io;
 namespace cm = nccomp::core::model;
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {

@@ -21,9 +21,9 @@
 #include "daemon/config/builtin_sections.hpp"
 #include "daemon/measurement_log.hpp"
 #include "daemon/sections/model/model_section.hpp"
+#include "formats/model/model_io.hpp"
 #include "tests/support/alloc_counter.hpp"
 #include "tests/unit/daemon_modules/temp_dir.hpp"
-#include "tools/analyze/model_io.hpp"
 
 namespace nccomp::daemon::sections {
 namespace {
@@ -178,7 +178,7 @@ cm::Model trend_model() {
 }
 
 std::string model_toml() {
-  return tools::model_io::write_model_toml(trend_model(), cm::AnalysisConfig{}, {"test"});
+  return formats::model_io::write_model_toml(trend_model(), cm::AnalysisConfig{}, {"test"});
 }
 
 std::string registers_toml() {
@@ -584,7 +584,7 @@ TEST(ModelTimeOrigin, AWarmUpTermEvaluatesTheSameAfterARestartAsTheLogsTimeS) {
 TEST(ModelSection, TermsTheLoopCannotEvaluateAsConfiguredAreRefused) {
   TempDir d;
   d.write("fit/model.toml",
-          tools::model_io::write_model_toml(position_model(), cm::AnalysisConfig{}, {"test"}));
+          formats::model_io::write_model_toml(position_model(), cm::AnalysisConfig{}, {"test"}));
   const auto load = [&](const std::string& name, const std::string& update,
                         const std::string& term) {
     return config::load_file(d.write(
@@ -645,7 +645,7 @@ cm::Model extra_model() {
 TEST(ModelInputs, ExtraColumnsFedFromSensorsAreCompensated) {
   TempDir d;
   d.write("fit/model.toml",
-          tools::model_io::write_model_toml(extra_model(), cm::AnalysisConfig{}, {"test"}));
+          formats::model_io::write_model_toml(extra_model(), cm::AnalysisConfig{}, {"test"}));
   const std::string text = registers_toml() +
                            "[model]\nfile = \"fit/model.toml\"\nupdate = \"cycle\"\n"
                            "[[model.inputs]]\ncolumn = \"ambient_c\"\nsensor = 1\n"
@@ -685,7 +685,7 @@ TEST(ModelInputs, ExtraColumnsFedFromSensorsAreCompensated) {
 TEST(ModelInputs, UnmappedColumnsWrongInputsAndAnotherTemperatureSensorAreRefused) {
   TempDir d;
   d.write("fit/model.toml",
-          tools::model_io::write_model_toml(extra_model(), cm::AnalysisConfig{}, {"test"}));
+          formats::model_io::write_model_toml(extra_model(), cm::AnalysisConfig{}, {"test"}));
   const auto load = [&](const std::string& name, const std::string& body) {
     return config::load_file(d.write(
         name,
@@ -924,7 +924,7 @@ TEST(ModelInputs, TheFlThermalModelRunsInTheLoopWithItsExtraColumnsOnSensors) {
   // is sensor 1, the spindle speed is published on sensor channel 5.
   const std::string model =
       std::string(NCCOMP_SOURCE_DIR) + "/bench/model/figures/fl_thermal_ch1/model.toml";
-  const cm::Model fitted = tools::model_io::load_model_file(model);
+  const cm::Model fitted = formats::model_io::load_model_file(model);
   TempDir d;
   const std::string head = registers_toml() + "[model]\nfile = \"" + model +
                            "\"\nupdate = \"cycle\"\n"

@@ -15,8 +15,8 @@
 #include <vector>
 
 #include "core/model/analysis.hpp"
+#include "formats/model/model_io.hpp"
 #include "tests/unit/model/synth.hpp"
-#include "tools/analyze/model_io.hpp"
 
 namespace cm = nccomp::core::model;
 namespace synth = nccomp::test::synth;
@@ -128,7 +128,7 @@ TEST(AbsurdValues, AreErrorsNamingTheRow) {
   }
   std::istringstream in(csv);
   cm::Dataset d;
-  nccomp::tools::model_io::read_log(in, "log.csv", {}, d);
+  nccomp::formats::model_io::read_log(in, "log.csv", {}, d);
   cm::AnalysisConfig c;
   c.declared = {constant_per(kPoint)};
   EXPECT_EQ(analysis_error(d, c),

@@ -12,8 +12,8 @@
 #include <vector>
 
 #include "core/model/analysis.hpp"
+#include "formats/model/model_io.hpp"
 #include "tests/unit/model/synth.hpp"
-#include "tools/analyze/model_io.hpp"
 
 namespace cm = nccomp::core::model;
 namespace synth = nccomp::test::synth;
@@ -206,10 +206,11 @@ TEST(ProportionalToToolWear, IsTheMeasuredWearCurveNotALineInPath) {
               0.1);
   // The model file keeps the form and the reference point, and reads back the same.
   const std::string text =
-      nccomp::tools::model_io::write_model_toml(r.final_model, synth::config(opt), {});
+      nccomp::formats::model_io::write_model_toml(r.final_model, synth::config(opt), {});
   EXPECT_NE(text.find("form = \"wear\""), std::string::npos) << text;
-  const cm::Model back(nccomp::tools::model_io::read_model_text(text, "m.toml", true).extra_columns,
-                       nccomp::tools::model_io::read_model_text(text, "m.toml", true).fitted_terms);
+  const cm::Model back(
+      nccomp::formats::model_io::read_model_text(text, "m.toml", true).extra_columns,
+      nccomp::formats::model_io::read_model_text(text, "m.toml", true).fitted_terms);
   EXPECT_NEAR(back.evaluate_term(last, row, st), r.final_model.evaluate_term(last, row, st), 1e-9);
 }
 
@@ -226,9 +227,9 @@ TEST(SeveralFiles, TheHeldOutRowsAreTheLastFileWhenTimeStartsAgainAtAWarmStart) 
   opt.seed = 2;
   synth::write_csv(day2, synth::generate(opt));
   cm::Dataset d;
-  nccomp::tools::model_io::read_log(day1, "day1.csv", {}, d);
+  nccomp::formats::model_io::read_log(day1, "day1.csv", {}, d);
   const std::size_t n1 = d.rows();
-  nccomp::tools::model_io::read_log(day2, "day2.csv", {}, d);
+  nccomp::formats::model_io::read_log(day2, "day2.csv", {}, d);
   ASSERT_EQ(d.order_s.size(), d.rows());
   cm::AnalysisConfig c = synth::config();
   c.heldout_fraction = 0.25;
@@ -242,7 +243,7 @@ TEST(SeveralFiles, TheHeldOutRowsAreTheLastFileWhenTimeStartsAgainAtAWarmStart) 
   EXPECT_EQ(held_day2, d.rows() / 4);
   // The same files through a column mapping (foreign CSVs, often parallel series such as two
   // cutters) keep their own times: the split takes the last quarter of the time of both.
-  nccomp::tools::model_io::Mapping m;
+  nccomp::formats::model_io::Mapping m;
   for (const auto& name : cm::kStandardColumnNames) {
     if (name != "kind") m.columns.emplace_back(name, name);
   }
@@ -253,8 +254,8 @@ TEST(SeveralFiles, TheHeldOutRowsAreTheLastFileWhenTimeStartsAgainAtAWarmStart) 
   day1.seekg(0);
   day2.clear();
   day2.seekg(0);
-  nccomp::tools::model_io::read_log(day1, "day1.csv", m, p);
-  nccomp::tools::model_io::read_log(day2, "day2.csv", m, p);
+  nccomp::formats::model_io::read_log(day1, "day1.csv", m, p);
+  nccomp::formats::model_io::read_log(day2, "day2.csv", m, p);
   ASSERT_EQ(p.order_s.size(), p.rows());
   for (std::size_t i = 0; i < p.rows(); ++i) {
     ASSERT_DOUBLE_EQ(p.order_s[i], p.columns[0][i]) << i;

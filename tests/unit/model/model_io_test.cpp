@@ -4,11 +4,11 @@
 
 #include <sstream>
 
+#include "formats/model/model_io.hpp"
 #include "tests/unit/model/synth.hpp"
-#include "tools/analyze/model_io.hpp"
 
 namespace cm = nccomp::core::model;
-namespace io = nccomp::tools::model_io;
+namespace io = nccomp::formats::model_io;
 
 namespace {
 

@@ -8,8 +8,8 @@
 #include <sstream>
 
 #include "formats/measurement_log/measurement_log.hpp"
+#include "formats/model/model_io.hpp"
 #include "tests/unit/mqtt/temp_dir.hpp"
-#include "tools/analyze/model_io.hpp"
 
 namespace nccomp::tools::mqtt {
 namespace {
@@ -66,7 +66,7 @@ TEST(CollectorStore, OneLogPerMachineNoRowTwiceAlsoAfterARestart) {
   // The collected log is a v2 log nccomp analyze reads: session 5 restarts time_s.
   std::ifstream in(d.path() / "s1" / "m1.csv");
   core::model::Dataset data;
-  model_io::read_log(in, "m1.csv", {}, data);
+  formats::model_io::read_log(in, "m1.csv", {}, data);
   EXPECT_EQ(data.rows(), 4U);
 }
 

@@ -1,5 +1,5 @@
-// Files of the compensation model (library nccomp_model_io, linked by `nccomp analyze` and, to
-// load the fitted model, by the daemon):
+// Files of the compensation model (formats/model, in nccomp_formats: read and written by
+// `nccomp analyze`, model.toml loaded by the daemon's [model] section):
 //   - the `[model]` TOML table: declared terms, search options, fitted coefficients;
 //   - the measurement log CSV (architecture.md, v1) and foreign CSVs through a column mapping.
 // Every reader validates its input and throws ModelIoError naming the file, line / key and
@@ -17,7 +17,7 @@
 #include "core/model/analysis.hpp"
 #include "core/model/model.hpp"
 
-namespace nccomp::tools::model_io {
+namespace nccomp::formats::model_io {
 
 class ModelIoError : public std::runtime_error {
  public:
@@ -81,4 +81,4 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
 /// Measurement kind from its log name (tool_wear / contour / calib); -1 if unknown.
 int kind_from_name(std::string_view name) noexcept;
 
-}  // namespace nccomp::tools::model_io
+}  // namespace nccomp::formats::model_io

@@ -1,4 +1,4 @@
-#include "tools/analyze/model_io.hpp"
+#include "formats/model/model_io.hpp"
 
 #include <algorithm>
 #include <charconv>
@@ -10,7 +10,7 @@
 
 #include "formats/toml/guard.hpp"
 
-namespace nccomp::tools::model_io {
+namespace nccomp::formats::model_io {
 
 namespace cm = core::model;
 
@@ -951,4 +951,4 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
   if (data.rows() == start_rows) csv_fail(source, line_no, "", "no data rows");
 }
 
-}  // namespace nccomp::tools::model_io
+}  // namespace nccomp::formats::model_io
