@@ -67,9 +67,10 @@ LimitResult OffsetLimiter::apply(double target_um, TimeNs now_ns) noexcept {
     ++counters_.passed;
   }
   output_um_ = out;
-  // The clock never goes back: after a write stamped earlier than the last one, the next write's
-  // rate budget still counts from the latest time a value was sent.
-  last_ns_ = has_time_ ? std::max(last_ns_, now_ns) : now_ns;
+  // An earlier stamp than the last one moves the clock back with it: a clock that restarted (a
+  // state from before a reboot, a lock-step peer's clock) must not freeze the output until it
+  // catches up. The write with the earlier stamp itself was allowed no change (dt clamped to 0).
+  last_ns_ = now_ns;
   has_time_ = true;
   return {out, verdict};
 }
