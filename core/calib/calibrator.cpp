@@ -25,6 +25,10 @@ constexpr std::int32_t slot_axis(std::size_t slot) {
 
 /// Temperature spread below which a slope is not learned [°C²] (0.1 °C standard deviation).
 constexpr double kMinTemperatureVariance = 0.01;
+// The first-order model's asymptote is refitted from two touches only when the second lies at
+// least this share of the rise after the first (1 − e^(−Δt/τ) ≥ 0.2, Δt ≥ 0.22 τ): the touch noise
+// is then amplified at most 5 times.
+constexpr double kMinAsymptoteSpread = 0.2;
 
 EstimatorParams estimator_params(const CalibrationConfig& c) noexcept {
   return {c.estimator_touch_noise_um, c.estimator_level_noise_um_per_h,
@@ -533,9 +537,12 @@ void Calibrator::update_model(std::size_t slot, double t_s, double drift_um) noe
   const double tau = config_.thermal_time_constant_s;
   if (m.anchored == 1 && t_s > m.anchor_time_s) {
     // First order: d(t) = A + (d0 − A)·exp(−Δt/τ). The last two touches fix A, so each touch
-    // re-aims the prediction; a limited A keeps two noisy close touches from extrapolating wild.
+    // re-aims the prediction. A from two touches carries their noise times 1/(1 − e^(−Δt/τ)):
+    // touches closer than kMinAsymptoteSpread of the rise (an on-demand set a minute after the
+    // last) keep the earlier A instead of extrapolating their noise (0.9 µm at 45 s of a 30 min
+    // rise gave A = −36 µm); a limited A bounds the rest.
     const double a = std::exp(-(t_s - m.anchor_time_s) / tau);
-    if (1.0 - a > 1e-3) {
+    if (1.0 - a >= kMinAsymptoteSpread) {
       const double asymptote = (drift_um - a * m.anchor_drift_um) / (1.0 - a);
       m.asymptote_um = std::clamp(asymptote, drift_um - config_.plausibility_um,
                                   drift_um + config_.plausibility_um);

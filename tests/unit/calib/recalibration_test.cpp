@@ -127,6 +127,41 @@ TEST(Recalibration, TracksWarmUpDrift) {
   EXPECT_GT(step.max_write_change_um, 2.0);
 }
 
+// GIVEN the first-order time model (τ = 30 min) and a touch set 60 s after the nominals that
+// measures 0.9 µm (what touch noise looks like: the machine has not drifted), THEN the prediction
+// an hour later stays at that reading: two sets that close fix the asymptote only with their
+// noise amplified 1 / (1 − e^(−60/1800)) = 30 times (it ran to the plausibility bound before:
+// the e2e's Y axis had 18 µm of error after an operator's on-demand recalibration).
+TEST(Recalibration, TwoCloseTouchSetsDoNotExtrapolateTheirNoise) {
+  auto cfg = test_config();
+  cfg.prediction = Prediction::kTime;
+  cfg.thermal_time_constant_s = 1800.0;
+  cfg.touches_per_axis = 1;
+  cfg.recalibration_interval_s = 900.0;
+  Calibrator c;
+  c.configure(cfg);
+  SimMachine m(cfg, test_errors(), 0.0, 0.0, 0.1, 3);
+  TimeNs now = 0;
+  StepOutput out;
+  ASSERT_TRUE(run_initial_calibration(c, m, now, out));
+  for (int i = 0; i < 60; ++i) {
+    out.clear();
+    c.step(now, {}, out);
+    now += core::from_seconds(1.0);
+  }
+  m.set_drift([](double) { return std::array<double, 4>{0.9, 0.9, 0.9, 0.9}; });
+  out.clear();
+  run_touch_set(c, m, now, out);
+  for (int i = 0; i < 3600; ++i) {
+    now += core::from_seconds(1.0);
+    out.clear();
+    c.step(now, {}, out);
+  }
+  for (const Slot s : {Slot::kXLateral, Slot::kY, Slot::kZ}) {
+    EXPECT_NEAR(c.predicted_drift_um(s, now), 0.9, 1.0) << static_cast<int>(s);
+  }
+}
+
 TEST(Recalibration, TemperatureModelLearnsTheSlope) {
   auto cfg = test_config();
   cfg.prediction = Prediction::kTemperature;
