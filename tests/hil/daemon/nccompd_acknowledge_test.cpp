@@ -61,15 +61,15 @@ struct TempDir {
   fs::path path;
 };
 
-std::string slurp(const fs::path& p) {
+[[maybe_unused]] std::string slurp(const fs::path& p) {
   std::ifstream in(p);
   std::ostringstream s;
   s << in.rdbuf();
   return s.str();
 }
 
-pid_t spawn(const std::vector<std::string>& args, const fs::path& out, const fs::path& err,
-            bool append) {
+[[maybe_unused]] pid_t spawn(const std::vector<std::string>& args, const fs::path& out,
+                             const fs::path& err, bool append) {
   std::vector<std::string> a = args;
   std::vector<char*> argv;
   for (auto& s : a) argv.push_back(s.data());
@@ -85,7 +85,7 @@ pid_t spawn(const std::vector<std::string>& args, const fs::path& out, const fs:
   return pid;
 }
 
-int wait_exit(pid_t pid) {
+[[maybe_unused]] int wait_exit(pid_t pid) {
   int st = 0;
   ::waitpid(pid, &st, 0);
   return WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
