@@ -449,8 +449,9 @@ ReadBackCounts Daemon::anchor_registers(const RegisterReader& read, core::TimeNs
 }
 
 // Modules without usable state take what the NC holds as their starting point, or the register
-// is held (docs/daemon.md, "Start without usable state"). Not in hold mode (a corrupt state
-// file): nothing is written then anyway, and the file may still be restored.
+// is held (docs/daemon.md, "Start-up: registers beyond the limits and modules without state"). Not
+// in hold mode (a corrupt state file): nothing is written then anyway, and the file may still be
+// restored.
 void Daemon::adopt_without_state(const RegisterReader& read, core::TimeNs now, ReadBackCounts& n) {
   namespace eng = core::engine;
   auto& engine = *runtime_->engine;

@@ -1,5 +1,5 @@
-// Start-up of the S0 modules (docs/creep.md, "the request"): a measurement request that was up
-// when nccompd stopped must not stick. If the NC still holds its request register at 1 (or the
+// Start-up of the S0 modules (docs/creep.md, "`[creep.interval]`"): a measurement request that was
+// up when nccompd stopped must not stick. If the NC still holds its request register at 1 (or the
 // bus cannot read it back), the NC may already have reacted to that rising edge and its answer
 // may be lost: the module lowers the register for request_rearm_s and raises it again
 // (WearCompensator::rearm_request()). A measurement the bus delivers meanwhile (one published
