@@ -20,6 +20,11 @@
 # config pins nothing.
 # IO_CPU (optional, with CPU): also keep the Modbus I/O thread on that CPU ([modbus]
 # io_cpu_affinity = [IO_CPU], at normal priority), away from the loop's.
+# NCCOMPD_BENCH_SAME_CPU=1 (optional, without CPU): the shipped config places the loop thread on
+# a CPU of its own (the highest allowed) and everything else on the others; with this setting
+# cyclictest runs pinned to the CPU the daemon logged for its loop (both measure the same vCPU's
+# disturbances), and the NC stand-in (sim/modbus_nc, which on a machine is another box) is moved
+# to the other CPUs. The daemon's config stays the shipped one.
 # NCCOMPD_BENCH_RUN_DIR (optional): the daemon's runtime directory (its status socket) instead
 # of a temporary one, for a companion process to find it (bench/mqtt/run_loop_ab.sh).
 # Needs root (SCHED_FIFO and mlockall without the unit's rlimits) and cyclictest (rt-tests).
@@ -63,13 +68,32 @@ fi
 ncpid=$!
 sleep 0.5
 
-cyclictest -q -t1 "${pin[@]}" -p "$prio" -i 1000 -D "${secs}s" -m -h 30000 --histfile="$tmp/cyc.hist" \
-  > "$tmp/cyc.out" 2>&1 &
-cpid=$!
+same_cpu=${NCCOMPD_BENCH_SAME_CPU:-0}
+start_cyclictest() {
+  cyclictest -q -t1 "${pin[@]}" -p "$prio" -i 1000 -D "${secs}s" -m -h 30000 \
+    --histfile="$tmp/cyc.hist" > "$tmp/cyc.out" 2>&1 &
+  cpid=$!
+}
+[ "$same_cpu" = 1 ] || start_cyclictest
 STATE_DIRECTORY="$tmp/state" LOGS_DIRECTORY="$tmp/log" RUNTIME_DIRECTORY="$run" \
   LD_PRELOAD="$build/bench/daemon/libnccomp_alloc_preload.so" \
   "$build/daemon/nccompd" --config "$tmp/nccompd.toml" > "$tmp/nccompd.log" 2>&1 &
 dpid=$!
+if [ "$same_cpu" = 1 ]; then
+  [ -z "$cpu" ]
+  loop_cpu=""
+  for _ in $(seq 50); do
+    loop_cpu=$(sed -n 's/.*loop thread: pinned to CPU(s) \([0-9][0-9]*\)$/\1/p' "$tmp/nccompd.log")
+    [ -n "$loop_cpu" ] && break
+    sleep 0.1
+  done
+  [ -n "$loop_cpu" ] || { echo "nccompd logged no loop CPU" >&2; cat "$tmp/nccompd.log" >&2; exit 1; }
+  others=$(/usr/bin/python3 -c 'import os, sys; print(",".join(str(c) for c in sorted(os.sched_getaffinity(0)) if c != int(sys.argv[1])))' "$loop_cpu")
+  [ -n "$others" ] && taskset -a -p -c "$others" "$ncpid" > /dev/null
+  pin=(-a "$loop_cpu")
+  cpu=$loop_cpu
+  start_cyclictest
+fi
 sleep "$secs"
 "$build/tools/nccomp" status --socket "$run/status.sock" --json > "$tmp/status.json"
 "$build/tools/nccomp" status --socket "$run/status.sock" > "$tmp/status.txt"
@@ -84,7 +108,7 @@ echo "== nccomp status (at ${secs} s)"
 sed -n '1,6p' "$tmp/status.txt"
 sed -n '/^buses:/,/^state:/p' "$tmp/status.txt"
 echo "== summary"
-/usr/bin/python3 - "$tmp/cyc.hist" "$tmp/status.json" "$prio" "$cpu" "$io_cpu" <<'PY'
+/usr/bin/python3 - "$tmp/cyc.hist" "$tmp/status.json" "$prio" "$cpu" "$io_cpu" "$same_cpu" <<'PY'
 import json, re, sys
 hist, status, prio = sys.argv[1], sys.argv[2], sys.argv[3]
 counts, maxlat, overflow = {}, None, 0
@@ -110,7 +134,8 @@ s = json.load(open(status))
 loop = s['loop']
 lat = loop['latency_us']
 d = {'p50': lat['p50'], 'p99': lat['p99'], 'p99.9': lat['p99_9'], 'max': lat['max']}
-print(f"priority {prio}, 1000 Hz" + (f", both pinned to CPU {sys.argv[4]}" if len(sys.argv) > 4 and sys.argv[4] else ", not pinned")
+same = len(sys.argv) > 6 and sys.argv[6] == '1'
+print(f"priority {prio}, 1000 Hz" + (f", shipped CPU placement: loop on CPU {sys.argv[4]} (as logged), cyclictest pinned there, NC stand-in on the other CPUs" if same else f", both pinned to CPU {sys.argv[4]}" if len(sys.argv) > 4 and sys.argv[4] else ", not pinned")
       + (f", Modbus I/O thread on CPU {sys.argv[5]}" if len(sys.argv) > 5 and sys.argv[5] else ""))
 print(f"nccompd   cycles={loop['cycles']} overruns={loop['overruns']} "
       f"missed={loop['missed_deadlines']} max_cycle_us={loop['max_cycle_us']:.1f} "
