@@ -312,14 +312,11 @@ void EventLogger::drain() {
   while (loop_.notes().try_pop(n)) {
     switch (n.code) {
       case NoteCode::kOverrun:
-        ++overruns_unlogged_;
-        if (n.time_ns - overrun_log_ns_ >= 1'000'000'000) {
+        if (const std::uint64_t count = overruns_.add(n.time_ns); count > 0) {
           spdlog::warn(
               "loop overrun: woke {:.0f} us late, {} deadline(s) skipped ({} overrun(s) "
               "since the last message)",
-              n.b, n.a, overruns_unlogged_);
-          overrun_log_ns_ = n.time_ns;
-          overruns_unlogged_ = 0;
+              n.b, n.a, count);
         }
         break;
       case NoteCode::kConfigSwapped:
@@ -333,8 +330,12 @@ void EventLogger::drain() {
         spdlog::error("state export failed: the engine needs {} bytes", n.a);
         break;
       case NoteCode::kWriteDropped:
-        spdlog::warn("offset write to register {} ({} um) dropped: bus TX ring full or no bus", n.a,
-                     n.b);
+        if (const std::uint64_t count = writes_dropped_.add(n.time_ns); count > 0) {
+          spdlog::warn(
+              "offset write to register {} ({} um) dropped: bus TX ring full or no bus ({} "
+              "dropped write(s) since the last message)",
+              n.a, n.b, count);
+        }
         break;
       case NoteCode::kDryRunEntered:
         spdlog::warn(
@@ -434,6 +435,15 @@ void EventLogger::run() {
     drain();
     end_bursts(stopping ? std::numeric_limits<core::TimeNs>::max() : steady_ns());
     if (stopping) {
+      // What the last second's summaries had not said yet.
+      if (overruns_.pending() > 0) {
+        spdlog::warn("loop overrun: {} more overrun(s) since the last message",
+                     overruns_.pending());
+      }
+      if (writes_dropped_.pending() > 0) {
+        spdlog::warn("offset writes dropped: {} more since the last message",
+                     writes_dropped_.pending());
+      }
       return;
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(20));

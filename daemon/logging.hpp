@@ -57,6 +57,36 @@ class AlarmBursts {
 /// T s (only the first was logged)".
 [[nodiscard]] std::string burst_end_line(const AlarmBursts::Burst& b);
 
+/// Summarises a kind of loop note that can come every cycle (an overrun, a dropped offset
+/// write): at most one log line per interval, carrying how many came since the last line, so
+/// that a bus falling behind at 1 kHz does not flood the journal. Not thread-safe (the logger's
+/// thread only).
+class NoteThrottle {
+ public:
+  explicit NoteThrottle(core::TimeNs interval_ns = 1'000'000'000) : interval_ns_(interval_ns) {}
+  /// Counts one note at `time_ns`; returns how many notes the line to log now stands for
+  /// (this one included), or 0 when this one is only counted.
+  std::uint64_t add(core::TimeNs time_ns) noexcept {
+    ++unlogged_;
+    if (logged_once_ && time_ns - last_ns_ < interval_ns_) {
+      return 0;
+    }
+    logged_once_ = true;
+    last_ns_ = time_ns;
+    const std::uint64_t n = unlogged_;
+    unlogged_ = 0;
+    return n;
+  }
+  /// Notes counted but not yet logged (for a last line at stop).
+  [[nodiscard]] std::uint64_t pending() const noexcept { return unlogged_; }
+
+ private:
+  core::TimeNs interval_ns_;
+  core::TimeNs last_ns_{0};
+  bool logged_once_{false};
+  std::uint64_t unlogged_{0};
+};
+
 class EventLogger {
  public:
   static constexpr std::size_t kKeepAlarms = 32;
@@ -83,9 +113,9 @@ class EventLogger {
   AlarmBursts bursts_;  // under mu_
   std::atomic<bool> stop_{false};
   std::thread thread_;
-  // Overrun notes are summarised: at most one message per second.
-  std::int64_t overrun_log_ns_{0};
-  std::uint64_t overruns_unlogged_{0};
+  // Overrun and dropped-write notes are summarised: at most one message per second each.
+  NoteThrottle overruns_;
+  NoteThrottle writes_dropped_;
 };
 
 /// One change of a bus's alarm flag (drivers::BusStatus::alarm), as the main thread reports it:

@@ -1,6 +1,7 @@
 // GIVEN the loop's deadline policy and latency histogram, WHEN fed with a fake clock, THEN the
 // loop recovers from an overrun without a burst and the quantiles are the data's.
 #include "daemon/timing.hpp"
+#include "daemon/logging.hpp"
 
 #include <gtest/gtest.h>
 
@@ -144,3 +145,37 @@ TEST(LatencyHistogram, CountsBelowEdgesAndSumOfKnownData) {
 
 }  // namespace
 }  // namespace nccomp::daemon
+
+namespace {
+
+using nccomp::daemon::NoteThrottle;
+
+TEST(NoteThrottle, TheFirstNoteIsLoggedAtOnceAndTheRestOncePerIntervalWithTheirCount) {
+  NoteThrottle t(1'000'000'000);
+  EXPECT_EQ(t.add(5'000'000'000), 1U);  // the first one: a line at once
+  // A note every millisecond for the next 2.5 s: one line per second, each counting all notes
+  // since the previous line (1000 each), none in between.
+  std::uint64_t lines = 0;
+  std::uint64_t counted = 0;
+  for (int ms = 1; ms <= 2500; ++ms) {
+    const std::uint64_t n = t.add(5'000'000'000 + static_cast<std::int64_t>(ms) * 1'000'000);
+    if (n > 0) {
+      ++lines;
+      counted += n;
+      EXPECT_EQ(n, 1000U) << "at " << ms << " ms";
+    }
+  }
+  EXPECT_EQ(lines, 2U);
+  EXPECT_EQ(counted + t.pending(), 2500U);  // nothing lost: 500 still pending
+  EXPECT_EQ(t.pending(), 500U);
+}
+
+TEST(NoteThrottle, ANoteAfterAQuietIntervalIsLoggedAtOnce) {
+  NoteThrottle t(1'000'000'000);
+  EXPECT_EQ(t.add(0), 1U);
+  EXPECT_EQ(t.add(999'999'999), 0U);
+  EXPECT_EQ(t.add(3'000'000'000), 2U);
+  EXPECT_EQ(t.pending(), 0U);
+}
+
+}  // namespace
