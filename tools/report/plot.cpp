@@ -131,7 +131,7 @@ std::string plot_svg(const Report& r, const ResultTables& t) {
   fig.panel_width_px = 800.0;
   fig.panel_height_px = 400.0;
   // A readable file even for a few hundred passes of a thousand samples.
-  fig.max_points = 120000;
+  fig.max_points = 60000;
   fig.panels.push_back(std::move(panel));
   const std::string first = n > 1 ? ", first " + group_word : "";
   const std::string last = n > 1 ? ", last " + group_word : "";
