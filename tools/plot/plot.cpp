@@ -18,6 +18,7 @@ constexpr double kTitleFont = 15.0;
 constexpr double kPanelTitleFont = 13.0;
 constexpr double kLegendRow = 18.0;
 constexpr double kNoteRow = 16.0;
+constexpr double kMaxTicks = 1000.0;
 
 __attribute__((format(printf, 1, 2))) std::string fmt(const char* f, ...) {
   char buf[512];
@@ -55,9 +56,11 @@ struct AxisLayout {
   std::string title;
   bool zero_line{false};
   [[nodiscard]] double value(double raw) const { return (raw - origin) / per_unit; }
-  [[nodiscard]] double frac(double raw) const {
-    return (value(raw) - ticks.first) / (ticks.last - ticks.first);
+  // Halves: no overflow even for a range from -1e308 to 1e308.
+  [[nodiscard]] double tick_frac(double v) const {
+    return (v / 2.0 - ticks.first / 2.0) / (ticks.last / 2.0 - ticks.first / 2.0);
   }
+  [[nodiscard]] double frac(double raw) const { return tick_frac(value(raw)); }
   [[nodiscard]] double widest_label() const {
     double w = 0.0;
     for (const auto& l : labels) w = std::max(w, text_width(l, kFont));
@@ -70,6 +73,7 @@ std::string with_unit(const std::string& title, const std::string& unit) {
 }
 
 std::string utc_label(double t_s, double step_s) {
+  if (!(std::fabs(t_s) < 253402300800.0)) return format_number(t_s, step_s);  // past year 9999
   const auto t = static_cast<std::time_t>(std::llround(t_s));
   std::tm tm{};
   gmtime_r(&t, &tm);
@@ -96,8 +100,9 @@ Ticks utc_ticks(double lo, double hi, int target) {
   t.first = std::floor(lo / step) * step;
   t.last = std::ceil(hi / step) * step;
   if (t.last <= t.first) t.last = t.first + step;
-  const auto n = static_cast<long long>(std::llround((t.last - t.first) / step));
-  for (long long i = 0; i <= n; ++i) t.values.push_back(t.first + static_cast<double>(i) * step);
+  const double n = std::round((t.last - t.first) / step);
+  if (!(n <= kMaxTicks)) return nice_ticks(lo, hi, target);
+  for (double i = 0; i <= n; ++i) t.values.push_back(t.first + i * step);
   return t;
 }
 
@@ -108,7 +113,9 @@ AxisLayout make_axis(const Axis& a, Range r, int target) {
     r.add(0.0);
     l.zero_line = true;
   }
-  switch (a.scale) {
+  Scale scale = a.scale;
+  if (scale == Scale::kElapsedTime && !std::isfinite(r.hi - r.lo)) scale = Scale::kLinear;
+  switch (scale) {
     case Scale::kLinear:
       l.ticks = nice_ticks(r.lo, r.hi, target);
       l.title = with_unit(a.title, a.unit);
@@ -130,8 +137,8 @@ AxisLayout make_axis(const Axis& a, Range r, int target) {
     }
   }
   for (double v : l.ticks.values) {
-    l.labels.push_back(a.scale == Scale::kUtcTime ? utc_label(v, l.ticks.step)
-                                                  : format_number(v, l.ticks.step));
+    l.labels.push_back(scale == Scale::kUtcTime ? utc_label(v, l.ticks.step)
+                                                : format_number(v, l.ticks.step));
   }
   return l;
 }
@@ -208,9 +215,14 @@ Ticks nice_ticks(double lo, double hi, int target) {
   t.step = nice_step(hi - lo, target);
   t.first = std::floor(lo / t.step) * t.step;
   t.last = std::ceil(hi / t.step) * t.step;
-  const auto n = static_cast<long long>(std::llround((t.last - t.first) / t.step));
-  for (long long i = 0; i <= n; ++i) {
-    const double v = t.first + static_cast<double>(i) * t.step;
+  const double n = std::round((t.last - t.first) / t.step);
+  if (!(n >= 1.0 && n <= kMaxTicks)) {
+    // Beyond what doubles resolve (a span overflowing, or far below the values' precision):
+    // the two ends only.
+    return Ticks{lo, hi, std::isfinite(hi - lo) ? hi - lo : HUGE_VAL, {lo, hi}};
+  }
+  for (double i = 0; i <= n; ++i) {
+    const double v = t.first + i * t.step;
     t.values.push_back(std::fabs(v) < t.step * 1e-9 ? 0.0 : v);
   }
   return t;
@@ -443,8 +455,7 @@ std::string render_svg(const Figure& f) {
            xml_escape(pa.title) + "</text>\n";
     }
     for (std::size_t i = 0; i < s.x.ticks.values.size(); ++i) {
-      const double x =
-          L + (s.x.ticks.values[i] - s.x.ticks.first) / (s.x.ticks.last - s.x.ticks.first) * pw;
+      const double x = L + s.x.tick_frac(s.x.ticks.values[i]) * pw;
       o += fmt("<line x1=\"%.1f\" y1=\"%.1f\" x2=\"%.1f\" y2=\"%.1f\" stroke=\"#e4e4e4\"/>\n", x,
                top, x, bottom + 4.0);
       o += fmt("<text class=\"tick-label\" x=\"%.1f\" y=\"%.1f\" text-anchor=\"middle\">", x,
@@ -452,8 +463,7 @@ std::string render_svg(const Figure& f) {
            xml_escape(s.x.labels[i]) + "</text>\n";
     }
     for (std::size_t i = 0; i < s.y.ticks.values.size(); ++i) {
-      const double yy = bottom - (s.y.ticks.values[i] - s.y.ticks.first) /
-                                     (s.y.ticks.last - s.y.ticks.first) * ph;
+      const double yy = bottom - s.y.tick_frac(s.y.ticks.values[i]) * ph;
       o += fmt("<line x1=\"%.1f\" y1=\"%.1f\" x2=\"%.1f\" y2=\"%.1f\" stroke=\"#e4e4e4\"/>\n",
                L - 4.0, yy, R, yy);
       o += fmt("<text class=\"tick-label\" x=\"%.1f\" y=\"%.1f\" text-anchor=\"end\">", L - 7.0,
@@ -462,8 +472,7 @@ std::string render_svg(const Figure& f) {
     }
     if (has_y2) {
       for (std::size_t i = 0; i < s.y2.ticks.values.size(); ++i) {
-        const double yy = bottom - (s.y2.ticks.values[i] - s.y2.ticks.first) /
-                                       (s.y2.ticks.last - s.y2.ticks.first) * ph;
+        const double yy = bottom - s.y2.tick_frac(s.y2.ticks.values[i]) * ph;
         o += fmt("<line x1=\"%.1f\" y1=\"%.1f\" x2=\"%.1f\" y2=\"%.1f\" stroke=\"#a04600\"/>\n", R,
                  yy, R + 4.0, yy);
         o += fmt("<text class=\"tick-label\" x=\"%.1f\" y=\"%.1f\" fill=\"#a04600\">", R + 7.0,
