@@ -66,7 +66,8 @@ struct Figure {
   std::vector<std::string> notes;
   double panel_width_px{400.0};
   double panel_height_px{240.0};
-  /// Point budget of the whole figure, shared by its series (decimation keeps the extremes).
+  /// Point budget of the whole figure, shared by its series, at least 100 each (decimation
+  /// keeps the extremes).
   std::size_t max_points{120000};
 };
 

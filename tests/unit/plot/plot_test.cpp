@@ -303,10 +303,9 @@ TEST(PlotData, ExtremeFiniteValuesStayInsideTheCanvas) {
   const std::vector<std::vector<double>> cases = {{-big, big},      {1e-300, 2e-300}, {5, 5, 5},
                                                   {1e15, 1e15 + 1}, {-1e20, 3e20},    {0}};
   for (const auto& v : cases) {
-    for (const auto scale : {plot::Scale::kLinear, plot::Scale::kElapsedTime,
-                             plot::Scale::kUtcTime}) {
-      SCOPED_TRACE(std::to_string(v.front()) + " scale " +
-                   std::to_string(static_cast<int>(scale)));
+    for (const auto scale :
+         {plot::Scale::kLinear, plot::Scale::kElapsedTime, plot::Scale::kUtcTime}) {
+      SCOPED_TRACE(std::to_string(v.front()) + " scale " + std::to_string(static_cast<int>(scale)));
       const std::string s = plot::render_svg(scatter(v, v, plot::Axis{"t", "s", scale}));
       expect_inside(s);
       EXPECT_EQ(s.find("nan"), std::string::npos);
