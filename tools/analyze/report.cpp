@@ -1,13 +1,18 @@
 #include "tools/analyze/report.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <sstream>
+#include <string_view>
+
+#include "tools/plot/plot.hpp"
 
 namespace nccomp::tools::analyze {
 
 namespace cm = core::model;
+namespace plot = tools::plot;
 
 namespace {
 
@@ -45,22 +50,6 @@ std::string unit_suffix(const std::string& column) {
   const std::string s = column.substr(u + 1);
   if (s == "s" || s == "mm" || s == "c" || s == "deg" || s == "um" || s == "rpm") return "_" + s;
   return "";
-}
-
-std::string xml(const std::string& s) {
-  std::string o;
-  for (char c : s) {
-    if (c == '<') {
-      o += "&lt;";
-    } else if (c == '>') {
-      o += "&gt;";
-    } else if (c == '&') {
-      o += "&amp;";
-    } else {
-      o += c;
-    }
-  }
-  return o;
 }
 
 const cm::Term* find_term(const cm::Model& model, const cm::TermSpec& spec) {
@@ -194,73 +183,58 @@ std::vector<int> plotted_columns(const cm::Dataset& data) {
 std::string residual_svg(const cm::Dataset& data, const cm::AnalysisResult& result, int column) {
   const auto& x = data.column(column);
   const std::string name = cm::column_name(column, data.extra_columns);
-  constexpr double kW = 900.0;
-  constexpr double kH = 320.0;
-  constexpr double kPanelW = 400.0;
-  constexpr double kPanelH = 240.0;
-  constexpr double kTop = 40.0;
-  constexpr std::size_t kMaxPoints = 1500;
-  double xlo = HUGE_VAL;
-  double xhi = -HUGE_VAL;
-  double ymax = 0.0;
-  for (std::size_t i = 0; i < x.size(); ++i) {
-    if (!std::isfinite(x[i])) continue;
-    xlo = std::min(xlo, x[i]);
-    xhi = std::max(xhi, x[i]);
-    for (double r : {result.declared_residual_um[i], result.final_residual_um[i]}) {
-      if (std::isfinite(r)) ymax = std::max(ymax, std::fabs(r));
+  // Axis title and unit from the column's name: x_mm → "x [mm]", temp_c → "temp [°C]".
+  plot::Axis x_axis{name, "", plot::Scale::kLinear, false};
+  static const std::array<std::pair<const char*, const char*>, 6> kUnits = {
+      {{"_mm", "mm"}, {"_um", "µm"}, {"_c", "°C"}, {"_deg", "°"}, {"_rpm", "rpm"}, {"_s", "s"}}};
+  for (const auto& [suffix, unit] : kUnits) {
+    const std::string_view sv(suffix);
+    if (name.size() > sv.size() && name.compare(name.size() - sv.size(), sv.size(), sv) == 0) {
+      x_axis.title = name.substr(0, name.size() - sv.size());
+      x_axis.unit = unit;
+      break;
     }
   }
-  if (!(xhi > xlo)) xhi = xlo + 1.0;
-  if (!(ymax > 0.0)) ymax = 1.0;
-  ymax *= 1.05;
-  const std::size_t stride = std::max<std::size_t>(1, x.size() / kMaxPoints);
-  std::ostringstream o;
-  o << "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" << kW << "\" height=\"" << kH
-    << "\" font-family=\"sans-serif\" font-size=\"12\">\n";
-  o << "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n";
+  if (column == static_cast<int>(cm::Column::kTime)) {
+    // Seconds since 1970 (≥ 2001-09-09) are wall-clock time: shown as UTC dates.
+    double lo = HUGE_VAL;
+    for (double v : x) lo = std::isfinite(v) ? std::min(lo, v) : lo;
+    x_axis.title = "time";
+    x_axis.scale =
+        lo >= 1e9 && std::isfinite(lo) ? plot::Scale::kUtcTime : plot::Scale::kElapsedTime;
+  }
+  plot::Figure fig;
+  fig.title = "residual vs " + name;
+  fig.max_points = 6000;
   const std::array<std::pair<const std::vector<double>*, const char*>, 2> panels = {
       std::pair{&result.declared_residual_um, "declared model"},
       std::pair{&result.final_residual_um, "after the added effects"}};
-  for (std::size_t p = 0; p < 2; ++p) {
-    const double ox = 60.0 + static_cast<double>(p) * (kPanelW + 60.0);
-    const auto& r = *panels[p].first;
-    o << "<g>\n<text x=\"" << ox << "\" y=\"20\" font-weight=\"bold\">residual [µm] vs "
-      << xml(name) << " — " << panels[p].second << "</text>\n";
-    o << "<rect x=\"" << ox << "\" y=\"" << kTop << "\" width=\"" << kPanelW << "\" height=\""
-      << kPanelH << "\" fill=\"none\" stroke=\"#444\"/>\n";
-    const double y0 = kTop + kPanelH / 2.0;
-    o << "<line x1=\"" << ox << "\" y1=\"" << y0 << "\" x2=\"" << ox + kPanelW << "\" y2=\"" << y0
-      << "\" stroke=\"#aaa\" stroke-dasharray=\"4 3\"/>\n";
-    o << "<text x=\"" << ox - 5 << "\" y=\"" << kTop + 10 << "\" text-anchor=\"end\">"
-      << num(ymax, 3) << "</text>\n";
-    o << "<text x=\"" << ox - 5 << "\" y=\"" << y0 + 4 << "\" text-anchor=\"end\">0</text>\n";
-    o << "<text x=\"" << ox - 5 << "\" y=\"" << kTop + kPanelH << "\" text-anchor=\"end\">"
-      << num(-ymax, 3) << "</text>\n";
-    o << "<text x=\"" << ox << "\" y=\"" << kTop + kPanelH + 16 << "\">" << num(xlo, 5)
-      << "</text>\n";
-    o << "<text x=\"" << ox + kPanelW << "\" y=\"" << kTop + kPanelH + 16
-      << "\" text-anchor=\"end\">" << num(xhi, 5) << "</text>\n";
-    o << "<text x=\"" << ox + kPanelW / 2 << "\" y=\"" << kTop + kPanelH + 32
-      << "\" text-anchor=\"middle\">" << xml(name) << "</text>\n";
-    for (std::size_t i = 0; i < x.size(); i += stride) {
-      if (!std::isfinite(x[i]) || !std::isfinite(r[i])) continue;
-      const double px = ox + (x[i] - xlo) / (xhi - xlo) * kPanelW;
-      const double py = y0 - r[i] / ymax * (kPanelH / 2.0);
-      o << "<circle cx=\"" << num(px, 5) << "\" cy=\"" << num(py, 5) << "\" r=\"1.6\" fill=\""
-        << (result.heldout[i] == 0U   ? "#1f5fa8"
-            : result.heldout[i] == 1U ? "#e07000"
-                                      : "#999999")
-        << "\" fill-opacity=\"0.6\"/>\n";
+  // Held-out code 0 fitted, 1 held out, else left out.
+  const std::array<const char*, 3> colours = {"#1f5fa8", "#e07000", "#999999"};
+  for (const auto& [residual, title] : panels) {
+    plot::Panel p;
+    p.title = title;
+    p.x = x_axis;
+    p.y = plot::Axis{"residual", "µm", plot::Scale::kLinear, true};
+    for (std::size_t g = 0; g < colours.size(); ++g) {
+      plot::Series s;
+      s.mark = plot::Mark::kPoints;
+      s.colour = colours[g];
+      s.opacity = 0.6;
+      for (std::size_t i = 0; i < x.size() && i < residual->size() && i < result.heldout.size();
+           ++i) {
+        if (std::min<std::size_t>(result.heldout[i], 2) != g) continue;
+        s.x.push_back(x[i]);
+        s.y.push_back((*residual)[i]);
+      }
+      p.series.push_back(std::move(s));
     }
-    o << "</g>\n";
+    fig.panels.push_back(std::move(p));
   }
-  o << "<text x=\"60\" y=\"" << kH - 8
-    << "\"><tspan fill=\"#1f5fa8\">● fitted rows</tspan>  <tspan fill=\"#e07000\">● held-out "
-       "rows</tspan>  <tspan fill=\"#999999\">● left out (outliers, unseen "
-       "groups)</tspan></text>\n";
-  o << "</svg>\n";
-  return o.str();
+  fig.legend = {{"fitted rows", colours[0], plot::Mark::kPoints, false},
+                {"held-out rows", colours[1], plot::Mark::kPoints, false},
+                {"left out (outliers, unseen groups)", colours[2], plot::Mark::kPoints, false}};
+  return plot::render_svg(fig);
 }
 
 namespace {

@@ -9,9 +9,11 @@
 #include <filesystem>
 #include <fstream>
 #include <numbers>
+#include <optional>
 #include <string>
 #include <vector>
 
+#include "tests/unit/plot/svg_check.hpp"
 #include "tools/report/report.hpp"
 
 namespace {
@@ -374,6 +376,48 @@ TEST(ReportOutput, JsonCarriesTheFiguresAndSvgHasOneLinePerPassAndOffset) {
   const std::string text = rp::report_text(r);
   EXPECT_NE(text.find("5.000 um between neighbouring passes along x_mm"), std::string::npos)
       << text;
+}
+
+// The plot scales (viewBox, width 100 %), everything is inside it, the axes carry their units,
+// and the legend and the figures sit in bands under the plot, not on the data.
+TEST(ReportOutput, SvgIsInsideItsCanvasWithUnitsAndTheLegendOffTheData) {
+  TempDir d;
+  auto off = [](int p, double x) { return p >= 2 && x > 40.0 ? -1200.0 : 0.0; };
+  auto err = [&](int p, double x) { return 5.0 + 0.01 * x * p + off(p, x) / 400.0; };
+  d.write("surface.csv", surface_csv(5, err, off));
+  d.write("result.json", result_json("mould_face", "\"surface.csv\""));
+  rp::ResultTables tables;
+  const auto r = rp::load_report(d.path.string(), &tables);
+  namespace svg = nccomp::test::svg;
+  const auto doc = svg::parse(rp::plot_svg(r, tables));
+  const auto vb = svg::view_box(doc);
+  ASSERT_TRUE(vb.has_value());
+  EXPECT_EQ(doc[0].get("width"), "100%");
+  std::optional<svg::Box> frame;
+  for (const auto& e : doc) {
+    const auto b = svg::box(e);
+    if (b) {
+      EXPECT_TRUE(b->inside(*vb)) << "<" << e.tag << "> '" << e.text << "'";
+    }
+    if (e.tag == "rect" && e.get("fill") == "none") frame = b;
+  }
+  ASSERT_TRUE(frame.has_value());
+  std::vector<std::string> titles;
+  for (const auto* t : svg::texts(doc, "axis-title")) titles.push_back(t->text);
+  EXPECT_EQ(titles, (std::vector<std::string>{"path [mm]", "error (+ = material left) [µm]",
+                                              "offset in force, dashed [µm]"}));
+  // The offset axis reaches −1 200 µm, written without an exponent.
+  bool grouped = false;
+  for (const auto* t : svg::texts(doc, "tick-label")) grouped = grouped || t->text == "-1 200";
+  EXPECT_TRUE(grouped);
+  std::size_t below = 0;
+  for (const char* cls : {"legend", "note"}) {
+    for (const auto* t : svg::texts(doc, cls)) {
+      EXPECT_FALSE(svg::box(*t)->intersects(*frame)) << t->text;
+      ++below;
+    }
+  }
+  EXPECT_EQ(below, 4U + 2U);  // error / offset × first / last pass; the pass count, the figures
 }
 
 }  // namespace
