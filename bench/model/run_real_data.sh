@@ -2,20 +2,24 @@
 # Runs `nccomp analyze` on the two real data sets of ../shared/data (beside the checkout; or
 # $NCCOMP_DATA) and copies the reports and
 # figures used by docs/closing-the-loop.md into bench/model/figures/.
-#   bench/model/run_real_data.sh [path/to/nccomp]
+#   bench/model/run_real_data.sh [path/to/nccomp]   (default: build/release/tools/nccomp)
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
-nccomp="${1:-build/release/tools/nccomp}"
-data="${NCCOMP_DATA:-$(cd "$here/../../.." && pwd)/shared/data}"
+nccomp="build/release/tools/nccomp"
+[ $# -ge 1 ] && nccomp="$(realpath "$1")"
+# From the checkout's root with relative paths, so that the reports and model files name their
+# inputs as ../shared/data/... and bench/model/..., not as this machine's directories.
+cd "$here/../.."
+data="${NCCOMP_DATA:-../shared/data}"
 out="${TMPDIR:-/tmp}/nccomp_closing_the_loop"
 rm -rf "$out"
 "$nccomp" analyze \
-  --log "$data/phm2010_milling_wear/c4_wear.csv" --map "$here/phm2010/c4.map.toml" \
-  --log "$data/phm2010_milling_wear/c6_wear.csv" --map "$here/phm2010/c6.map.toml" \
-  --config "$here/phm2010/phm.toml" --out "$out/phm2010"
+  --log "$data/phm2010_milling_wear/c4_wear.csv" --map bench/model/phm2010/c4.map.toml \
+  --log "$data/phm2010_milling_wear/c6_wear.csv" --map bench/model/phm2010/c6.map.toml \
+  --config bench/model/phm2010/phm.toml --out "$out/phm2010"
 for ch in 1 3 5; do
   "$nccomp" analyze --log "$data/fl_thermal_spindle_drift/data.csv" \
-    --map "$here/fl_thermal/ch$ch.map.toml" --config "$here/fl_thermal/fl_thermal.toml" \
+    --map "bench/model/fl_thermal/ch$ch.map.toml" --config bench/model/fl_thermal/fl_thermal.toml \
     --out "$out/fl_thermal_ch$ch"
 done
 rm -rf "$here/figures"
