@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <sstream>
+#include <type_traits>
 #include <utility>
 
 namespace nccomp::formats {
@@ -51,10 +52,39 @@ void TableReader::error(std::string_view key, std::string message) {
 
 namespace {
 void (*g_key_observer)(const std::string&) = nullptr;
+void (*g_default_observer)(const std::string&, const std::string&) = nullptr;
 }  // namespace
 
 void TableReader::set_key_observer(void (*observer)(const std::string&)) noexcept {
   g_key_observer = observer;
+}
+
+void TableReader::set_default_observer(void (*observer)(const std::string&,
+                                                        const std::string&)) noexcept {
+  g_default_observer = observer;
+}
+
+void TableReader::note_default(std::string_view key, const std::string& text) const {
+  if (g_default_observer != nullptr) {
+    g_default_observer(path(key), text);
+  }
+}
+
+template <typename T>
+void TableReader::note_default(std::string_view key, const std::optional<T>& def) const {
+  if (g_default_observer == nullptr || !def) {
+    return;
+  }
+  if constexpr (std::is_same_v<T, bool>) {
+    note_default(key, *def ? "true" : "false");
+  } else if constexpr (std::is_same_v<T, std::string>) {
+    note_default(key, *def);
+  } else {
+    std::ostringstream s;
+    s.precision(17);
+    s << *def;
+    note_default(key, s.str());
+  }
 }
 
 const toml::node* TableReader::get(std::string_view key) {
@@ -69,6 +99,7 @@ const toml::node* TableReader::value(std::string_view key) { return get(key); }
 
 double TableReader::number(std::string_view key, std::optional<double> def, double min,
                            double max) {
+  note_default(key, def);
   const toml::node* n = get(key);
   if (n == nullptr) {
     if (!def) {
@@ -90,6 +121,7 @@ double TableReader::number(std::string_view key, std::optional<double> def, doub
 }
 
 double TableReader::number(std::string_view key, std::optional<double> def) {
+  note_default(key, def);
   const toml::node* n = get(key);
   if (n == nullptr) {
     if (!def) {
@@ -111,6 +143,7 @@ double TableReader::number(std::string_view key, std::optional<double> def) {
 
 std::int64_t TableReader::integer(std::string_view key, std::optional<std::int64_t> def,
                                   std::int64_t min, std::int64_t max) {
+  note_default(key, def);
   const toml::node* n = get(key);
   if (n == nullptr) {
     if (!def) {
@@ -133,6 +166,7 @@ std::int64_t TableReader::integer(std::string_view key, std::optional<std::int64
 }
 
 bool TableReader::boolean(std::string_view key, std::optional<bool> def) {
+  note_default(key, def);
   const toml::node* n = get(key);
   if (n == nullptr) {
     if (!def) {
@@ -150,6 +184,7 @@ bool TableReader::boolean(std::string_view key, std::optional<bool> def) {
 }
 
 std::string TableReader::string(std::string_view key, std::optional<std::string> def) {
+  note_default(key, def);
   const toml::node* n = get(key);
   if (n == nullptr) {
     if (!def) {

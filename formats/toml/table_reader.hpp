@@ -85,9 +85,17 @@ class TableReader {
   /// Test hook (the man page check, tests/unit/docs): called with the key path of every key a
   /// section parser asks a TableReader for, present or not. Not thread-safe; nullptr = off.
   static void set_key_observer(void (*observer)(const std::string& key_path)) noexcept;
+  /// Test hook (the man page check of defaults): called with the key path and the default a
+  /// parser passes for it (numbers as written by `<<` at 17 digits, strings as they are, booleans
+  /// as true/false), whether or not the key is present. Not thread-safe; nullptr = off.
+  static void set_default_observer(void (*observer)(const std::string& key_path,
+                                                    const std::string& default_text)) noexcept;
 
  private:
   const toml::node* get(std::string_view key);
+  void note_default(std::string_view key, const std::string& text) const;
+  template <typename T>
+  void note_default(std::string_view key, const std::optional<T>& def) const;
   const toml::table& table_;
   std::string path_;
   Diagnostics& diag_;

@@ -5,7 +5,10 @@
 //   [measurement_context]) and every key a TableReader-based section parser asks for (present or
 //   not: its full key list) is documented;
 // - every documented key is known to the parsers: written into a configuration, it is not
-//   refused as an unknown key (while two made-up keys in the same table are).
+//   refused as an unknown key (while two made-up keys in the same table are);
+// - every default the page gives as a literal ("*key* = _number_, default 0.5", a quoted string,
+//   true/false) is the default a parser passes to its TableReader for that key (where a parser
+//   passes one: keys whose default is computed from other keys are not checked).
 //
 // The page documents a table with a heading "## [a.b]" ("## [[a.b]]" for an array of tables; a
 // segment in capitals stands for any name: [modbus.GROUP.SIGNAL] is every Modbus signal) and each
@@ -17,6 +20,8 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -86,7 +91,18 @@ struct ManPage {
   std::set<std::string> tables;  // "daemon.realtime", "registers", "modbus.GROUP.SIGNAL"
   std::set<std::string> arrays;  // the tables written [[...]]
   std::map<std::string, std::set<std::string>> keys;  // table ("" = top level) -> key names
+  /// "table.key" -> the literal after "default" on the key's line (number, "string", true/false).
+  std::map<std::string, std::string> defaults;
 };
+
+/// The literal a "default ..." names: a quoted string (with its quotes), true/false or a number;
+/// empty if the default is not a literal (e.g. "default: none", "default the NC's value").
+std::string default_literal(const std::string& line) {
+  static const std::regex def(
+      R"(, default ("[^"]*"|true|false|-?[0-9]+(\.[0-9]+)?(e-?[0-9]+)?)(?=[ ,;(]|$))");
+  std::smatch m;
+  return std::regex_search(line, m, def) ? m[1].str() : std::string{};
+}
 
 ManPage read_man_page() {
   ManPage m;
@@ -108,6 +124,9 @@ ManPage read_man_page() {
       table.clear();
     } else if (std::regex_search(line, mm, key)) {
       m.keys[table].insert(mm[1].str());
+      if (const std::string d = default_literal(line); !d.empty()) {
+        m.defaults[table.empty() ? mm[1].str() : table + "." + mm[1].str()] = d;
+      }
     }
   }
   return m;
@@ -133,6 +152,28 @@ bool documented(const ManPage& m, const std::string& path) {
 
 std::vector<std::string>* g_observed = nullptr;
 void observe(const std::string& key_path) { g_observed->push_back(key_path); }
+
+std::map<std::string, std::set<std::string>>* g_defaults = nullptr;
+void observe_default(const std::string& key_path, const std::string& text) {
+  (*g_defaults)[strip_indices(key_path)].insert(text);
+}
+
+/// The page's literal and a parser's default text name the same value.
+bool same_default(const std::string& page, const std::string& parser) {
+  if (page.size() >= 2 && page.front() == '"') {
+    return page.substr(1, page.size() - 2) == parser;
+  }
+  if (page == "true" || page == "false") {
+    return page == parser;
+  }
+  char* end = nullptr;
+  const double a = std::strtod(page.c_str(), &end);
+  const double b = std::strtod(parser.c_str(), &end);
+  if (end == parser.c_str() || *end != '\0') {
+    return false;
+  }
+  return std::fabs(a - b) <= 1e-12 * std::max(1.0, std::fabs(a));
+}
 
 /// The shipped configurations, copied with the files they include (config/ and
 /// sim/ncsim/config/ keep their relative places), loaded with the key observer on.
@@ -294,6 +335,47 @@ TEST_F(ManConfigKeys, EveryKnownKeyIsDocumentedAndEveryDocumentedKeyIsKnown) {
                                       << inst->path << " of " << inst->file << ")";
     }
   }
+}
+
+TEST_F(ManConfigKeys, EveryLiteralDefaultOnThePageIsTheParsersDefault) {
+  const ManPage page = read_man_page();
+  ASSERT_GT(page.defaults.size(), 100U) << "man/nccompd.toml.5.scd: no defaults found";
+  std::map<std::string, std::set<std::string>> defaults;  // key path -> parsers' defaults
+  g_defaults = &defaults;
+  nccomp::formats::TableReader::set_default_observer(&observe_default);
+  for (const fs::path& main : mains()) {
+    (void)cfg::load_file(main.string());
+  }
+  nccomp::formats::TableReader::set_default_observer(nullptr);
+  g_defaults = nullptr;
+  ASSERT_GT(defaults.size(), 100U) << "the parsers reported almost no defaults";
+
+  std::size_t checked = 0;
+  for (const auto& [doc_key, literal] : page.defaults) {
+    const auto dot = doc_key.rfind('.');
+    const std::string table = dot == std::string::npos ? "" : doc_key.substr(0, dot);
+    const std::string name = dot == std::string::npos ? doc_key : doc_key.substr(dot + 1);
+    std::set<std::string> seen;
+    for (const auto& [path, texts] : defaults) {
+      const auto pd = path.rfind('.');
+      const std::string ptable = pd == std::string::npos ? "" : path.substr(0, pd);
+      const std::string pname = pd == std::string::npos ? path : path.substr(pd + 1);
+      if (pname == name && (table.empty() ? ptable.empty() : matches(table, ptable))) {
+        seen.insert(texts.begin(), texts.end());
+      }
+    }
+    if (seen.empty()) {
+      continue;  // the parser computes this default itself (or reads the key without one)
+    }
+    ++checked;
+    const bool found = std::any_of(seen.begin(), seen.end(),
+                                   [&](const std::string& t) { return same_default(literal, t); });
+    std::string list;
+    for (const auto& t : seen) list += (list.empty() ? "" : ", ") + t;
+    EXPECT_TRUE(found) << "nccompd.toml(5) says " << doc_key << " defaults to " << literal
+                       << "; the parser's default: " << list;
+  }
+  EXPECT_GT(checked, 80U) << "too few documented defaults could be compared";
 }
 
 }  // namespace
