@@ -81,6 +81,8 @@ std::string alarm_name(core::AlarmCode code) {
       return "tool_broken_or_mismeasured";
     case AlarmCode::kMeasurementDue:
       return "measurement_due";
+    case AlarmCode::kMeasurementNoiseInconsistent:
+      return "measurement_noise_inconsistent";
     case AlarmCode::kProbeImplausible:
       return "probe_implausible";
     case AlarmCode::kProbeOutlier:

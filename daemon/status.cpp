@@ -18,6 +18,7 @@
 #include <cstring>
 #include <span>
 #include <sstream>
+#include <string_view>
 #include <system_error>
 
 #include "client/protocol.hpp"
@@ -483,6 +484,25 @@ std::string render_prometheus(const StatusContext& c) {
       if (sv.text == nullptr && std::isfinite(sv.value)) {
         o << "nccompd_module_value{module=\"" << m.name.data() << "\",key=\"" << sv.key << "\"} "
           << prom_num(sv.value) << "\n";
+      }
+    }
+  }
+  // The uncertainty of an estimated compensation value: a status key <stem>_sigma_um is the
+  // standard deviation of <stem>_estimate_um (S0: wear_sigma_um of wear_estimate_um), in metres
+  // as the registers' outputs.
+  family("module_sigma_meters", "gauge",
+         "Standard deviation of a module's estimated compensation value (the key).");
+  constexpr std::string_view kSigmaSuffix = "_sigma_um";
+  for (std::size_t i = 0; i < v.m.count; ++i) {
+    const auto& m = v.m.modules[i];
+    for (std::size_t k = 0; k < m.count; ++k) {
+      const auto& sv = m.values[k];
+      const std::string_view key(sv.key);
+      if (sv.text == nullptr && std::isfinite(sv.value) && key.size() > kSigmaSuffix.size() &&
+          key.ends_with(kSigmaSuffix)) {
+        o << "nccompd_module_sigma_meters{module=\"" << m.name.data() << "\",key=\""
+          << key.substr(0, key.size() - kSigmaSuffix.size()) << "_estimate_um\"} "
+          << prom_num(sv.value * 1e-6) << "\n";
       }
     }
   }

@@ -1,6 +1,7 @@
 // Surface quality of creeping wear correction (issue 3, "Measured"): a synthetic flat face and a
 // curved face, and the real PHM 2010 milling wear curves, each finished while the tool wears and
-// corrected by the real core with today's strategies and the estimator's (issue 22). Prints
+// corrected by the real core with today's strategies and the estimator's (issue 22), its process
+// noise configured or learned from the two other PHM cutters (held out). Prints
 // markdown tables, or with --json one JSON object per PHM 2010 row and strategy (one a line).
 //
 //   bench_creep_surface [--json] [--wear-noise UM_PER_SQRT_M] [--rate-noise UM_PER_MM_PER_SQRT_M]
@@ -264,12 +265,22 @@ int main(int argc, char** argv) {
         sc.seed = 2010;
         sc.estimator = est;
         sc.max_sigma_um = max_sigma_um;
-        sc.wear_um = [v, tan_g](double, double s) {
-          const double c = s / 108.0;  // cuts done since cut 1
-          const auto i = std::min(static_cast<std::size_t>(c), v.size() - 2);
-          const double t = std::min(1.0, c - static_cast<double>(i));
-          return (v[i] + t * (v[i + 1] - v[i]) - v[0]) * tan_g;
+        const auto wear_of = [tan_g](const std::vector<double>& vb_c) {
+          return [vb_c, tan_g](double s) {
+            const double c = s / 108.0;  // cuts done since cut 1
+            const auto i = std::min(static_cast<std::size_t>(c), vb_c.size() - 2);
+            const double t = std::min(1.0, c - static_cast<double>(i));
+            return (vb_c[i] + t * (vb_c[i + 1] - vb_c[i]) - vb_c[0]) * tan_g;
+          };
         };
+        const auto own = wear_of(v);
+        sc.wear_um = [own](double, double s) { return own(s); };
+        // The learned process noise is held out: learned from the two other cutters.
+        for (const char* other : {"c1", "c4", "c6"}) {
+          if (std::string(other) == name) continue;
+          sc.family.push_back(wear_of(vb[other]));
+          sc.family_length_mm.push_back(108.0 * static_cast<double>(vb[other].size() - 1));
+        }
         print_header(sc);
         auto all = print_rows(sc);
         const double h = all.front().max_increment_um;
@@ -278,9 +289,11 @@ int main(int argc, char** argv) {
             std::printf(
                 "{\"cutter\": \"%s\", \"k\": %d, \"creep_length_passes\": %d, \"strategy\": "
                 "\"%s\", \"rms_second_half_um\": %.6f, \"max_step_along_pass_um\": %.6f, "
-                "\"measurements\": %d, \"refused\": %d}\n",
+                "\"measurements\": %d, \"refused\": %d, \"rate_noise_um_per_mm_per_sqrt_m\": "
+                "%.6g}\n",
                 name, k, passes_l, strategies()[i].name.c_str(), all[i].rms_second_half_um,
-                all[i].max_step_along_um, all[i].measurements, all[i].refused);
+                all[i].max_step_along_um, all[i].measurements, all[i].refused,
+                all[i].rate_noise_um_per_mm_per_sqrt_m);
           }
         }
         summary.push_back({name, k, passes_l, h, h * sc.ds_mm / sc.creep_length_mm, all});
@@ -290,7 +303,8 @@ int main(int argc, char** argv) {
   if (g_json) return 0;
   // strategies(): 0 none, 1 step, 2 creeping linear, 3 creeping cosine, 4 predictive,
   // 5 creeping + estimator, 6 predictive + estimator, 7 and 8 the same fed noise-free,
-  // 9 predictive + estimator measured when needed.
+  // 9 predictive + estimator measured when needed; 10, 11, 12 the same as 6, 8, 9 with the
+  // process noise learned from the two other cutters.
   std::printf(
       "\n### PHM 2010 summary (step = prior art, creep = creeping linear, pred = predictive "
       "creeping)\n\n"
@@ -363,6 +377,50 @@ int main(int argc, char** argv) {
                 row.passes_l, r[6].rms_second_half_um, r[6].measurements, r[9].rms_second_half_um,
                 r[9].measurements, 100.0 * (1.0 - double(r[9].measurements) / r[6].measurements),
                 r[9].max_step_along_um);
+  }
+  std::printf(
+      "\n### PHM 2010, process noise learned from the tool family (held out: each cutter's q from "
+      "the two others, measured as it is)\n\n"
+      "| cutter | k | L [passes] | learned rate noise [µm/mm/√m] | step | pred + est (config q) | "
+      "pred + est, learned q | limit | ratio | step along a pass [µm] | refused |\n"
+      "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
+  for (const int passes_l : {2, 3}) {
+    double sum_step = 0.0, sum_pl = 0.0, worst = 0.0, along = 0.0;
+    int rows = 0;
+    for (const auto& row : summary) {
+      if (row.passes_l != passes_l) continue;
+      const auto& r = row.r;
+      const double ratio = r[10].rms_second_half_um / r[11].rms_second_half_um;
+      std::printf("| %s | %d | %d | %.5f | %.3f | %.3f | %.3f | %.3f | %.2f | %.4f | %d |\n",
+                  row.cutter.c_str(), row.k, row.passes_l, r[10].rate_noise_um_per_mm_per_sqrt_m,
+                  r[1].rms_second_half_um, r[6].rms_second_half_um, r[10].rms_second_half_um,
+                  r[11].rms_second_half_um, ratio, r[10].max_step_along_um, r[10].refused);
+      sum_step += r[1].rms_second_half_um;
+      sum_pl += r[10].rms_second_half_um;
+      worst = std::max(worst, ratio);
+      along = std::max(along, r[10].max_step_along_um);
+      ++rows;
+    }
+    std::printf(
+        "\nL = %d passes, %d rows, learned q: worst ratio to the noise-free limit %.3f (target ≤ "
+        "1.15); mean RMS / mean RMS of step %.3f (target ≤ 0.7); max step along a pass %.4f µm "
+        "(target ≤ 0.02)\n",
+        passes_l, rows, worst, sum_pl / sum_step, along);
+  }
+  std::printf(
+      "\n### PHM 2010, learned q, measured when needed (max_sigma_um = %g) against learned q "
+      "measured every 10 cuts\n\n"
+      "| cutter | L [passes] | every 10 cuts: RMS [µm] / measurements | when needed: RMS [µm] / "
+      "measurements | fewer measurements | step along a pass [µm] |\n"
+      "| --- | --- | --- | --- | --- | --- |\n",
+      max_sigma_um);
+  for (const auto& row : summary) {
+    if (row.k != 10) continue;
+    const auto& r = row.r;
+    std::printf(
+        "| %s | %d | %.3f / %d | %.3f / %d | %.0f %% | %.4f |\n", row.cutter.c_str(), row.passes_l,
+        r[10].rms_second_half_um, r[10].measurements, r[12].rms_second_half_um, r[12].measurements,
+        100.0 * (1.0 - double(r[12].measurements) / r[10].measurements), r[12].max_step_along_um);
   }
   return 0;
 }

@@ -54,6 +54,13 @@ struct Scenario {
   double max_sigma_um{1.0};
   double min_interval_mm{108.0};
   double max_interval_mm{2160.0};
+  /// The tool family's earlier tools (the strategies with a learned process noise): their true
+  /// wear [µm] at cut path s [mm] and their life [mm]. Each is cut, measured every
+  /// measure_every_passes with noise of its own (the same for every strategy) and replaced by its
+  /// sister before the scored tool starts, so the scored tool's filter starts with the q learned
+  /// from them (family_min_tools = their number).
+  std::vector<std::function<double(double)>> family;
+  std::vector<double> family_length_mm;
 };
 
 struct Strategy {
@@ -67,6 +74,8 @@ struct Strategy {
   bool noise_free{false};
   /// Measured when the module asks (interval basis uncertainty), not every measure_every_passes.
   bool on_request{false};
+  /// [creep.estimator] learn_rate_noise: the Scenario's family is cut first.
+  bool learned{false};
 };
 
 struct Result {
@@ -80,6 +89,8 @@ struct Result {
   double max_increment_um{0.0};
   int measurements{0};
   int refused{0};  // measurements refused (the estimator's gate, plausibility)
+  /// The rate noise the scored tool's filter runs with [µm/mm per sqrt(m)] (learned or config).
+  double rate_noise_um_per_mm_per_sqrt_m{0.0};
 };
 
 inline const std::vector<Strategy>& strategies() {
@@ -95,6 +106,12 @@ inline const std::vector<Strategy>& strategies() {
       {"predictive creeping, estimator, noise-free", true, ProfileShape::kLinear, true, true, true},
       {"predictive creeping, estimator, measured when needed", true, ProfileShape::kLinear, true,
        true, false, true},
+      {"predictive creeping, estimator, learned q", true, ProfileShape::kLinear, true, true, false,
+       false, true},
+      {"predictive creeping, estimator, learned q, noise-free", true, ProfileShape::kLinear, true,
+       true, true, false, true},
+      {"predictive creeping, estimator, learned q, measured when needed", true,
+       ProfileShape::kLinear, true, true, false, true, true},
   };
   return s;
 }
@@ -133,6 +150,11 @@ inline Result run(const Scenario& sc, const Strategy& st) {
     c.interval.min_interval_mm = sc.min_interval_mm;
     c.interval.max_interval_mm = sc.max_interval_mm;
   }
+  const bool learn = st.learned && !sc.family.empty();
+  if (learn) {
+    c.estimator.learn_rate_noise = true;
+    c.estimator.family_min_tools = sc.family.size();
+  }
   WearCompensator comp;
   comp.configure(c);
   StepOutput out;
@@ -140,6 +162,46 @@ inline Result run(const Scenario& sc, const Strategy& st) {
   TimeNs now = 0;
   ev.emplace_back(ToolChange{now, 1, false});
   comp.step(now, ev, out);
+  std::int32_t tool = 1;
+  std::uint64_t refused_before = 0;
+  if (learn) {
+    // The family's earlier tools: cut in 5 mm samples (only the measurements' positions matter
+    // to what is learned), measured every measure_every_passes, then replaced by their sister.
+    const double step_mm = 5.0;
+    const double every_mm = sc.measure_every_passes * sc.pass_length_mm;
+    for (std::size_t h = 0; h < sc.family.size(); ++h) {
+      std::mt19937_64 rng_h(sc.seed + 1000 + h);
+      std::normal_distribution<double> noise_h(0.0, sc.noise_um);
+      double next = every_mm - 0.5 * sc.pass_length_mm;
+      for (double s = 0.0; s <= sc.family_length_mm[h]; s += step_mm) {
+        ev.clear();
+        now += from_seconds(step_mm / sc.feed_mm_per_s);
+        if (s >= next) {
+          next += every_mm;
+          ToolMeasurement m;
+          m.time_ns = now;
+          m.tool = tool;
+          m.point_count = static_cast<std::uint8_t>(sc.edge_points);
+          const double w = sc.family[h](s) + noise_h(rng_h);
+          for (std::size_t p = 0; p < sc.edge_points; ++p) m.wear_um[p] = w;
+          ev.emplace_back(m);
+        }
+        AxisSample a;
+        a.time_ns = now;
+        a.position_mm = {s, 0.0, 0.0, 0.0, 0.0, 0.0};
+        a.program_path_mm = s;
+        a.tool = tool;
+        ev.emplace_back(a);
+        out.clear();
+        comp.step(now, ev, out);
+      }
+      ev.clear();
+      ev.emplace_back(ToolChange{now, ++tool, true});
+      out.clear();
+      comp.step(now, ev, out);
+    }
+    refused_before = comp.counters().measurements_refused;
+  }
 
   std::mt19937_64 rng(sc.seed);
   std::normal_distribution<double> noise(0.0, sc.noise_um);
@@ -168,6 +230,7 @@ inline Result run(const Scenario& sc, const Strategy& st) {
     return w[i0] + t * (w[i0 + 1] - w[i0]);
   };
   Result r;
+  r.rate_noise_um_per_mm_per_sqrt_m = std::sqrt(comp.rate_q() * 1000.0);
   double sum_sq = 0.0;
   std::size_t count = 0;
   double sum_sq_after = 0.0;
@@ -193,7 +256,7 @@ inline Result run(const Scenario& sc, const Strategy& st) {
         next_meas += interval_mm;
         ToolMeasurement m;
         m.time_ns = now;
-        m.tool = 1;
+        m.tool = tool;
         m.point_count = static_cast<std::uint8_t>(sc.edge_points);
         double inc_max = 0.0;
         for (std::size_t p = 0; p < sc.edge_points; ++p) {
@@ -213,7 +276,7 @@ inline Result run(const Scenario& sc, const Strategy& st) {
       a.time_ns = now;
       a.position_mm = {x, j * 1.0, 0.0, 0.0, 0.0, 0.0};
       a.program_path_mm = s;
-      a.tool = 1;
+      a.tool = tool;
       a.has_normal = true;
       a.normal = nrm;
       ev.emplace_back(a);
@@ -263,7 +326,7 @@ inline Result run(const Scenario& sc, const Strategy& st) {
   r.rms_second_half_um =
       count_after > 0 ? std::sqrt(sum_sq_after / static_cast<double>(count_after)) : 0.0;
   r.mean_increment_um = r.measurements > 0 ? inc_sum / r.measurements : 0.0;
-  r.refused = static_cast<int>(comp.counters().measurements_refused);
+  r.refused = static_cast<int>(comp.counters().measurements_refused - refused_before);
   return r;
 }
 

@@ -311,6 +311,9 @@ enum class AlarmCode : std::uint16_t {
   kToolExcessivelyWorn = 22,
   kToolBrokenOrMismeasured = 23,
   kMeasurementDue = 24,
+  // The estimator's normalised innovations disagree with the configured measurement σ (or the
+  // process noise): value = their mean, subject = the tool (docs/estimation.md, "Checking σ").
+  kMeasurementNoiseInconsistent = 25,
   // S1 checkpoints
   kProbeImplausible = 30,
   kProbeOutlier = 31,

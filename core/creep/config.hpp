@@ -23,6 +23,8 @@ inline constexpr std::size_t kMaxDeflectionRows = 16;
 inline constexpr std::size_t kMaxTransitions = 16;
 /// Measurements kept for fitting the wear rate (adaptive interval, predictive creeping).
 inline constexpr std::size_t kMaxRateWindow = 8;
+/// Upper bound of [creep.estimator] family_min_tools.
+inline constexpr std::size_t kMaxFamilyMinTools = 1000;
 /// Slope continuity at a measurement while the offset moves (superpose): the new increment's
 /// profile is entered with zero slope over this fraction of its span (its steepest slope is then
 /// 1 / (1 − kBlendFraction / 2) = 1.11 times the profile's); a folded creep's slope fades out over
@@ -216,6 +218,12 @@ struct EstimatorConfig {
   /// A measurement whose innovation exceeds this many standard deviations of the predicted one
   /// is refused (plausibility alarm 23, nothing changes); 0 = no gate.
   double gate_sigmas{5.0};
+  /// Learn the rate's process noise from the tool family's finished tools (every tool of this
+  /// module; a tool is finished when a sister replaces it): a new tool's filter starts with the
+  /// family's estimate once family_min_tools tools are finished, with
+  /// rate_noise_um_per_mm_per_sqrt_m until then.
+  bool learn_rate_noise{false};
+  std::size_t family_min_tools{3};
 };
 
 /// [creep.entry]: tangential entry of a sister tool and retract / re-feed (claims 14, feature 11).

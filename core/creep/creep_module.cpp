@@ -14,6 +14,7 @@
 #include "core/creep/state_v1.hpp"
 #include "core/creep/state_v2.hpp"
 #include "core/creep/state_v3.hpp"
+#include "core/creep/state_v4.hpp"
 
 namespace nccomp::core::creep {
 
@@ -333,6 +334,15 @@ struct LayoutV3 {
     v3::upgrade(o, removal, n);
   }
 };
+struct LayoutV4 {
+  using State = v4::CreepState;
+  using Memory = v4::ToolMemory;
+  static constexpr std::size_t kBytes = v4::kModuleStateBytes;
+  static bool loadable(const std::byte* p) noexcept { return v4::state_bytes_loadable(p); }
+  static void upgrade(const State& o, double removal, CreepState& n) noexcept {
+    v4::upgrade(o, removal, n);
+  }
+};
 /// The current layout without the AdoptedOutputs (written before start-up adoption existed).
 constexpr std::size_t kBytesWithoutAdoption = sizeof(CreepState) + sizeof(ToolMemory);
 constexpr std::size_t kAdoption = sizeof(AdoptedOutputs);
@@ -348,6 +358,17 @@ static_assert(LayoutV3::kBytes != LayoutV1::kBytes && LayoutV3::kBytes != Layout
               LayoutV3::kBytes != kBytesWithoutAdoption + kAdoption &&
               LayoutV3::kBytes + kAdoption != kBytesWithoutAdoption &&
               LayoutV3::kBytes + kAdoption != kBytesWithoutAdoption + kAdoption);
+static_assert(LayoutV4::kBytes != LayoutV1::kBytes && LayoutV4::kBytes != LayoutV2::kBytes &&
+              LayoutV4::kBytes != LayoutV3::kBytes &&
+              LayoutV4::kBytes != LayoutV3::kBytes + kAdoption &&
+              LayoutV4::kBytes + kAdoption != LayoutV1::kBytes &&
+              LayoutV4::kBytes + kAdoption != LayoutV2::kBytes &&
+              LayoutV4::kBytes + kAdoption != LayoutV3::kBytes &&
+              LayoutV4::kBytes + kAdoption != LayoutV3::kBytes + kAdoption &&
+              LayoutV4::kBytes != kBytesWithoutAdoption &&
+              LayoutV4::kBytes != kBytesWithoutAdoption + kAdoption &&
+              LayoutV4::kBytes + kAdoption != kBytesWithoutAdoption &&
+              LayoutV4::kBytes + kAdoption != kBytesWithoutAdoption + kAdoption);
 
 }  // namespace
 
@@ -359,7 +380,7 @@ bool CreepModule::load_state_old(std::span<const std::byte> bytes) noexcept {
   using OldMemory = typename Layout::Memory;
   const std::byte* p = bytes.data();
   if (!Layout::loadable(p)) return false;
-  // Version 3 may carry the AdoptedOutputs after its tool memory.
+  // Versions 3 and 4 may carry the AdoptedOutputs after its tool memory.
   AdoptedOutputs adoption{};
   if (bytes.size() == Layout::kBytes + kAdoption &&
       !adoption_bytes_loadable(p + Layout::kBytes, kAdoption, adoption)) {
@@ -407,6 +428,9 @@ bool CreepModule::load_state(std::span<const std::byte> bytes) noexcept {
   if (bytes.size() == LayoutV2::kBytes) return load_state_old<LayoutV2>(bytes);
   if (bytes.size() == LayoutV3::kBytes || bytes.size() == LayoutV3::kBytes + kAdoption) {
     return load_state_old<LayoutV3>(bytes);
+  }
+  if (bytes.size() == LayoutV4::kBytes || bytes.size() == LayoutV4::kBytes + kAdoption) {
+    return load_state_old<LayoutV4>(bytes);
   }
   AdoptedOutputs adoption{};
   if (bytes.size() == state_capacity()) {
@@ -486,14 +510,23 @@ std::size_t CreepModule::status(std::span<engine::StatusValue> out) const noexce
       {"measurements_refused", static_cast<double>(comp_.counters().measurements_refused), nullptr},
       {"wear_estimate_um", estimate_um, nullptr},
       {"wear_sigma_um", sigma_um, nullptr},
+      {"nis_mean", comp_.nis_mean(k), nullptr},
+      {"measurement_sigma_estimate_um", comp_.measurement_sigma_estimate_um(k), nullptr},
+      {"rate_noise_um_per_mm_per_sqrt_m", std::sqrt(comp_.rate_q() * 1000.0), nullptr},
   };
-  // The estimator's two values only when it is on.
-  const std::size_t n_core = std::size(core_values) - (est ? 0U : 2U);
+  // The estimator's values only when it is on.
+  const std::size_t n_core = std::size(core_values) - (est ? 0U : 5U);
   // A status holds at most out.size() values (engine::kMaxStatusValues): every remembered tool
-  // is shown; beyond five of them these make room, the first first.
-  constexpr std::array<const char*, 6> kYield{"measurements_refused", "measurements_accepted",
-                                              "wear_rate_um_per_mm",  "cut_path_mm",
-                                              "wear_sigma_um",        "wear_estimate_um"};
+  // is shown; beyond five of them (none with the estimator) these make room, the first first.
+  constexpr std::array<const char*, 9> kYield{"measurements_refused",
+                                              "measurements_accepted",
+                                              "wear_rate_um_per_mm",
+                                              "cut_path_mm",
+                                              "rate_noise_um_per_mm_per_sqrt_m",
+                                              "measurement_sigma_estimate_um",
+                                              "nis_mean",
+                                              "wear_sigma_um",
+                                              "wear_estimate_um"};
   const std::size_t total = n_core + remembered;
   const std::size_t drop =
       std::min(kYield.size(), total > out.size() ? total - out.size() : std::size_t{0});

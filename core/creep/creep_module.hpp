@@ -62,8 +62,9 @@ class CreepModule final : public engine::Module {
   /// Real-time safe: false if the bytes are not a state valid for this config (the module then
   /// keeps its fresh state). A state written by version 1 of the layout (before the eased
   /// superposition) or version 2 (before the held normal and the request hold) is converted
-  /// (core/creep/state_v1.hpp, state_v2.hpp); version 3 (before the wear estimator) too, with or
-  /// without its AdoptedOutputs (state_v3.hpp); one without the AdoptedOutputs (before start-up
+  /// (core/creep/state_v1.hpp, state_v2.hpp); version 3 (before the wear estimator) and 4
+  /// (before the learned process noise) too, with or without their AdoptedOutputs
+  /// (state_v3.hpp, state_v4.hpp); one without the AdoptedOutputs (before start-up
   /// adoption) loads with nothing adopted.
   bool load_state(std::span<const std::byte> bytes) noexcept override;
   /// Advances on every discrete change (measurement, tool change, halt), every 1 mm of cut
@@ -78,9 +79,11 @@ class CreepModule final : public engine::Module {
   /// measured wear of every remembered tool (`T<n>_wear_um`, most recently used first;
   /// `memory_slot_<k>_wear_um` for a tool number beyond 9999). With [creep.estimator] on, also
   /// wear_estimate_um and wear_sigma_um (the estimate at the current cut path and its standard
-  /// deviation, NaN before its first measurement) before the remembered tools. With more than
-  /// five remembered tools (three with the estimator) counters make room (refused, accepted,
-  /// rate, cut path, then the estimator's σ and estimate) so that all fit into
+  /// deviation, NaN before its first measurement), nis_mean and measurement_sigma_estimate_um
+  /// (the check of σ, WearCompensator::nis_mean()) and rate_noise_um_per_mm_per_sqrt_m (the
+  /// process noise in use, configured or learned) before the remembered tools. With more than
+  /// five remembered tools (any with the estimator) counters make room (refused, accepted, rate,
+  /// cut path, then the estimator's values from the last) so that all fit into
   /// engine::kMaxStatusValues (20).
   std::size_t status(std::span<engine::StatusValue> out) const noexcept override;
   /// The offset and flag registers of [creep.output] (valid after attach()).

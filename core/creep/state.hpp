@@ -57,8 +57,18 @@ struct HistoryEntry {
   std::array<double, kMaxEdgePoints> wear_um{};
 };
 
+/// The tool family's learned process noise (issue 22): every tool of this module is of one
+/// family; a finished tool (replaced by a sister) adds its estimate of the rate's random-walk
+/// density, WearCompensator::finished_tool_rate_q().
+struct FamilyNoise {
+  /// Finished tools that gave an estimate.
+  std::uint32_t tools{0};
+  /// Sum of their estimates [(µm/mm)² per mm of cut path].
+  double rate_q_sum{0.0};
+};
+
 struct CreepState {
-  static constexpr std::uint32_t kVersion = 4;
+  static constexpr std::uint32_t kVersion = 5;
   std::uint32_t version{kVersion};
   /// Edge support points the state was built with (must match the config on import).
   std::uint32_t edge_points{1};
@@ -144,6 +154,22 @@ struct CreepState {
   std::array<double, kMaxEdgePoints> estimate_p_rr{};
   double estimate_path_mm{0.0};
   bool estimate_valid{false};
+
+  // Version 5: the process noise learned from the tool family, and the check of σ against the
+  // residuals (issue 22).
+  /// Random-walk density of the wear rate this tool's filter uses [(µm/mm)² per mm]; NaN: the
+  /// configured rate_noise_um_per_mm_per_sqrt_m. Fixed when the tool starts (the family's
+  /// estimate then), so the filter of a tool does not change under it.
+  double rate_q{kNaN};
+  /// This tool's accepted measurements per support point: the sum of the normalised innovation
+  /// squares ν²/S, and of ν² − H·P⁻·Hᵀ (an unbiased estimate of σ² each) [µm²].
+  std::array<double, kMaxEdgePoints> nis_sum{};
+  std::array<double, kMaxEdgePoints> residual_var_sum_um2{};
+  std::uint32_t nis_count{0};
+  /// The warning "measurement noise inconsistent" was raised for this tool (once per tool).
+  bool noise_warned{false};
+  /// The family's statistics (carried across tool changes, the current ones in force).
+  FamilyNoise family{};
 };
 
 static_assert(std::is_trivially_copyable_v<CreepState>);
@@ -232,7 +258,8 @@ inline bool state_bytes_loadable(const std::byte* bytes, std::size_t size) noexc
          is_bool(offsetof(CreepState, tool_change_flag)) &&
          is_bool(offsetof(CreepState, normal_held)) &&
          is_bool(offsetof(CreepState, request_held)) &&
-         is_bool(offsetof(CreepState, estimate_valid));
+         is_bool(offsetof(CreepState, estimate_valid)) &&
+         is_bool(offsetof(CreepState, noise_warned));
 }
 
 /// The same for a ToolMemory (every remembered state). Real-time safe.

@@ -134,6 +134,14 @@ StateProblem WearCompensator::check_state(const CreepState& st) const noexcept {
   if (bad(st.refused_removed_mm3) || st.refused_removed_mm3 < 0.0) {
     return {"refused_removed_mm3", -1};
   }
+  if (!std::isnan(st.rate_q) && (bad(st.rate_q) || st.rate_q < 0.0)) return {"rate_q", -1};
+  if (st.nis_count > 0) {
+    for (std::size_t i = 0; i < points_; ++i) {
+      if (bad(st.nis_sum[i]) || st.nis_sum[i] < 0.0) return {"nis_sum", static_cast<int>(i)};
+      if (bad(st.residual_var_sum_um2[i])) return {"residual_var_sum_um2", static_cast<int>(i)};
+    }
+  }
+  if (bad(st.family.rate_q_sum)) return {"family", -1};
   if (st.estimate_valid) {
     if (bad(st.estimate_path_mm) || st.estimate_path_mm < 0.0 ||
         st.estimate_path_mm > st.cut_path_mm + kTiny) {
@@ -417,16 +425,67 @@ estimation::KalmanFilter<2> WearCompensator::estimator_at(std::size_t i,
   return kf;
 }
 
-namespace {
-
-/// Process noise densities of [creep.estimator] per mm of cut path (keys per sqrt(m)).
-Eigen::Matrix2d estimator_noise(const EstimatorConfig& e, double d_mm) noexcept {
-  const double ql = e.wear_noise_um_per_sqrt_m * e.wear_noise_um_per_sqrt_m / 1000.0;
-  const double qr = e.rate_noise_um_per_mm_per_sqrt_m * e.rate_noise_um_per_mm_per_sqrt_m / 1000.0;
-  return estimation::cv_process_noise(d_mm, ql, qr);
+double WearCompensator::rate_q() const noexcept {
+  if (std::isfinite(s_.rate_q)) return s_.rate_q;
+  const double rn = config_.estimator.rate_noise_um_per_mm_per_sqrt_m;
+  return rn * rn / 1000.0;  // the key is per sqrt(m), the filter's clock is mm
 }
 
-}  // namespace
+Eigen::Matrix2d WearCompensator::estimator_noise(double d_mm) const noexcept {
+  const double wn = config_.estimator.wear_noise_um_per_sqrt_m;
+  return estimation::cv_process_noise(d_mm, wn * wn / 1000.0, rate_q());
+}
+
+double WearCompensator::finished_tool_rate_q(const CreepState& st) const noexcept {
+  // The model's rate is a random walk from 0 at the tool's start: after L mm of cut path
+  // E[rate²] = q·L. The rate is the least-squares slope of the remembered measurements (not the
+  // filter's, which depends on the q being learned); its noise variance σ²/Sxx is subtracted,
+  // so the estimate is unbiased and may be negative for one tool (the family's mean is clamped).
+  const std::size_t first = st.history_has_origin ? 1U : 0U;
+  if (st.history_count < first + 3) return kNaN;
+  const double n = static_cast<double>(st.history_count - first);
+  const double length_mm = st.last_measurement_cut_path_mm;
+  if (!(length_mm > 0.0)) return kNaN;
+  double mean_x = 0.0;
+  for (std::size_t h = first; h < st.history_count; ++h) mean_x += st.history[h].cut_path_mm;
+  mean_x /= n;
+  double sxx = 0.0;
+  for (std::size_t h = first; h < st.history_count; ++h) {
+    const double dx = st.history[h].cut_path_mm - mean_x;
+    sxx += dx * dx;
+  }
+  if (!(sxx > 1e-9)) return kNaN;
+  const double sigma = config_.estimator.measurement_sigma_um;
+  double q = 0.0;
+  for (std::size_t i = 0; i < points_; ++i) {
+    double mean_y = 0.0;
+    for (std::size_t h = first; h < st.history_count; ++h) mean_y += st.history[h].wear_um[i];
+    mean_y /= n;
+    double sxy = 0.0;
+    for (std::size_t h = first; h < st.history_count; ++h) {
+      sxy += (st.history[h].cut_path_mm - mean_x) * (st.history[h].wear_um[i] - mean_y);
+    }
+    const double slope = sxy / sxx;
+    q += (slope * slope - sigma * sigma / sxx) / length_mm;
+  }
+  return q / static_cast<double>(points_);
+}
+
+double WearCompensator::family_rate_q() const noexcept {
+  const auto& f = s_.family;
+  if (f.tools == 0) return kNaN;
+  return std::max(0.0, f.rate_q_sum / static_cast<double>(f.tools));
+}
+
+double WearCompensator::nis_mean(std::size_t i) const noexcept {
+  if (i >= points_ || s_.nis_count == 0) return kNaN;
+  return s_.nis_sum[i] / static_cast<double>(s_.nis_count);
+}
+
+double WearCompensator::measurement_sigma_estimate_um(std::size_t i) const noexcept {
+  if (i >= points_ || s_.nis_count == 0) return kNaN;
+  return std::sqrt(std::max(0.0, s_.residual_var_sum_um2[i] / static_cast<double>(s_.nis_count)));
+}
 
 bool WearCompensator::wear_estimate(std::size_t i, double& wear_um,
                                     double& sigma_um) const noexcept {
@@ -436,7 +495,7 @@ bool WearCompensator::wear_estimate(std::size_t i, double& wear_um,
   double path = 0.0;
   auto kf = estimator_at(i, path);
   const double d = std::max(0.0, s_.cut_path_mm - path);
-  kf.predict(estimation::cv_transition(d), estimator_noise(config_.estimator, d));
+  kf.predict(estimation::cv_transition(d), estimator_noise(d));
   wear_um = kf.state()(0);
   sigma_um = std::sqrt(std::max(0.0, kf.covariance()(0, 0)));
   return true;
@@ -1098,8 +1157,11 @@ void WearCompensator::on_measurement(TimeNs now_ns, const ToolMeasurement& m,
       auto& kf = estimate_scratch_[i];
       kf = estimator_at(i, path);
       const double d = std::max(0.0, s_.cut_path_mm - path);
-      kf.predict(estimation::cv_transition(d), estimator_noise(e, d));
+      kf.predict(estimation::cv_transition(d), estimator_noise(d));
       const double innovation = w[i] - kf.predicted_measurement(h);
+      const double s = kf.innovation_variance(h, r);
+      nis_scratch_[i] = innovation * innovation / s;
+      residual_scratch_[i] = innovation * innovation - (s - r);
       if (!kf.update(h, w[i], r, e.gate_sigmas).accepted) {
         gated = true;
         if (std::fabs(innovation) > std::fabs(worst_innovation_um)) {
@@ -1203,6 +1265,7 @@ void WearCompensator::on_measurement(TimeNs now_ns, const ToolMeasurement& m,
     s_.estimate_valid = true;
     s_.rate_known = true;
     update_uncertainty_interval();
+    check_noise(now_ns, out);
   } else {
     s_.estimate_valid = false;  // switched on later: starts from the measured state
   }
@@ -1214,6 +1277,28 @@ void WearCompensator::on_measurement(TimeNs now_ns, const ToolMeasurement& m,
   if (tl.wear_limit_um > 0.0 && max_wear >= tl.wear_limit_um) {
     s_.tool_change_flag = true;
     out.alarm(now_ns, Severity::kWarning, AlarmCode::kToolLifeReached, s_.tool, max_wear);
+  }
+}
+
+void WearCompensator::check_noise(TimeNs now_ns, StepOutput& out) noexcept {
+  ++s_.nis_count;
+  for (std::size_t i = 0; i < points_; ++i) {
+    s_.nis_sum[i] += nis_scratch_[i];
+    s_.residual_var_sum_um2[i] += residual_scratch_[i];
+  }
+  const std::uint32_t n = s_.nis_count;
+  if (s_.noise_warned || n < kNisMinCount) return;
+  // With the right σ and process noise each ν²/S is χ²(1): mean 1, variance 2, so the mean of n
+  // has the standard deviation sqrt(2/n). Beyond 3 of them the configured noise is wrong.
+  const double band = 3.0 * std::sqrt(2.0 / static_cast<double>(n));
+  double worst = 1.0;
+  for (std::size_t i = 0; i < points_; ++i) {
+    const double m = s_.nis_sum[i] / static_cast<double>(n);
+    if (std::fabs(m - 1.0) > std::fabs(worst - 1.0)) worst = m;
+  }
+  if (std::fabs(worst - 1.0) > band) {
+    s_.noise_warned = true;
+    out.alarm(now_ns, Severity::kWarning, AlarmCode::kMeasurementNoiseInconsistent, s_.tool, worst);
   }
 }
 
@@ -1294,7 +1379,7 @@ void WearCompensator::update_uncertainty_interval() noexcept {
       double from_mm = 0.0;
       auto kf = estimator_at(i, from_mm);
       const double d = std::max(0.0, s_.last_measurement_cut_path_mm + since_mm - from_mm);
-      kf.predict(estimation::cv_transition(d), estimator_noise(config_.estimator, d));
+      kf.predict(estimation::cv_transition(d), estimator_noise(d));
       if (std::sqrt(std::max(0.0, kf.covariance()(0, 0))) > iv.max_sigma_um) return true;
     }
     return false;
@@ -1388,6 +1473,16 @@ void WearCompensator::on_tool_change(TimeNs /*now_ns*/, const ToolChange& c,
   const auto held_normal = s_.held_normal;
   const bool normal_held = s_.normal_held;
   const std::uint64_t seq = s_.next_seq;
+  // The family outlives its tools; a tool replaced by its sister is finished and adds its
+  // estimate of the rate's process noise.
+  FamilyNoise family = s_.family;
+  if (c.sister && s_.tool != 0 && config_.estimator.enabled) {
+    const double q = finished_tool_rate_q(s_);
+    if (std::isfinite(q)) {
+      ++family.tools;
+      family.rate_q_sum += q;
+    }
+  }
   if (s_.tool != 0) {
     // The outgoing tool: remembered until it comes back, forgotten when a sister replaces it.
     std::size_t slot = kMaxToolMemory;
@@ -1430,6 +1525,12 @@ void WearCompensator::on_tool_change(TimeNs /*now_ns*/, const ToolChange& c,
     fresh.history_has_origin = true;
     fresh.last_measurement_program_path_mm = restart_mm;
     s_ = fresh;
+  }
+  s_.family = family;
+  if (!restored) {
+    // A new tool's filter runs with the family's process noise once enough tools are finished.
+    const auto& e = config_.estimator;
+    s_.rate_q = e.learn_rate_noise && family.tools >= e.family_min_tools ? family_rate_q() : kNaN;
   }
   s_.channel_output_um = held_um;
   s_.held_normal = held_normal;

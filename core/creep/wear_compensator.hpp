@@ -37,6 +37,9 @@ struct StateProblem {
   int index{-1};
 };
 
+/// Accepted measurements of a tool before its normalised innovations are judged (check_noise()).
+inline constexpr std::uint32_t kNisMinCount = 10;
+
 struct CreepCounters {
   std::uint64_t measurements_accepted{0};
   std::uint64_t measurements_refused{0};
@@ -139,6 +142,22 @@ class WearCompensator {
   /// standard deviation [µm]; false (both NaN) while it has no estimate (estimator off, or no
   /// measurement since it was switched on / the tool was loaded).
   bool wear_estimate(std::size_t i, double& wear_um, double& sigma_um) const noexcept;
+  /// Mean normalised innovation square ν²/S of this tool's accepted measurements at support
+  /// point i (1 when σ and the process noise fit the measurements); NaN before the first.
+  [[nodiscard]] double nis_mean(std::size_t i) const noexcept;
+  /// The measurement σ the residuals of this tool suggest: sqrt(mean(ν² − H·P⁻·Hᵀ)) at support
+  /// point i [µm] (0 if that mean is negative); NaN before the first measurement.
+  [[nodiscard]] double measurement_sigma_estimate_um(std::size_t i) const noexcept;
+  /// Random-walk density of the wear rate the active tool's filter uses [(µm/mm)² per mm]: the
+  /// family's when it started with it, else the configured rate_noise_um_per_mm_per_sqrt_m.
+  [[nodiscard]] double rate_q() const noexcept;
+  /// The family's estimate of that density (mean over its finished tools, ≥ 0); NaN without a
+  /// finished tool.
+  [[nodiscard]] double family_rate_q() const noexcept;
+  /// One finished tool's estimate of that density from its remembered measurements: the
+  /// least-squares rate r at its last measurement, L mm into its life, (r² − σ²/Sxx)/L; NaN
+  /// with fewer than three measurements. Real-time safe (at most kMaxRateWindow per point).
+  [[nodiscard]] double finished_tool_rate_q(const CreepState& st) const noexcept;
   [[nodiscard]] double cut_path_mm() const noexcept { return s_.cut_path_mm; }
   /// Cut path at which the next measurement falls due [mm] (bases path and adaptive, and
   /// material with a constant cross-section; +inf otherwise): one interval after the last
@@ -167,6 +186,12 @@ class WearCompensator {
   void start_entry(double offset_um, double length_mm) noexcept;
   void retire_finished_creeps() noexcept;
   void fit_rates() noexcept;
+  /// After an accepted measurement with the estimator: adds its normalised innovations to the
+  /// tool's sums and raises kMeasurementNoiseInconsistent (once per tool) when their mean is
+  /// beyond 3 standard deviations of a χ²(1) mean from 1, after kNisMinCount measurements.
+  void check_noise(TimeNs now_ns, StepOutput& out) noexcept;
+  /// Process noise of the filter over d_mm of cut path (config wear noise, rate_q()).
+  [[nodiscard]] Eigen::Matrix2d estimator_noise(double d_mm) const noexcept;
   /// The estimator of support point i as saved, or (not yet valid) its prior from the last
   /// measured wear and the fitted rate at the last measurement's cut path.
   [[nodiscard]] estimation::KalmanFilter<2> estimator_at(std::size_t i,
@@ -229,6 +254,9 @@ class WearCompensator {
   CreepCounters counters_{};
   /// The estimators after the update of the measurement being judged (stored only if accepted).
   std::array<estimation::KalmanFilter<2>, kMaxEdgePoints> estimate_scratch_{};
+  /// Their ν²/S and ν² − H·P⁻·Hᵀ [µm²] (added to the state only if accepted).
+  std::array<double, kMaxEdgePoints> nis_scratch_{};
+  std::array<double, kMaxEdgePoints> residual_scratch_{};
   std::array<OffsetLimiter, kChannelCount> limiters_{};
 
   // Kinematics of the last axis sample (not persisted: re-anchored by the first sample).

@@ -235,6 +235,10 @@ void parse_estimator(TableReader& r, cc::EstimatorConfig& e) {
       positive(r, "initial_rate_sigma_um_per_mm", e.initial_rate_sigma_um_per_mm, 1e3);
   // 0 < k < 2 is refused by core::creep::validate() (it would refuse good measurements).
   e.gate_sigmas = r.number("gate_sigmas", e.gate_sigmas, 0.0, 1e3);
+  e.learn_rate_noise = r.boolean("learn_rate_noise", e.learn_rate_noise);
+  e.family_min_tools = static_cast<std::size_t>(
+      r.integer("family_min_tools", static_cast<std::int64_t>(e.family_min_tools), 1,
+                static_cast<std::int64_t>(cc::kMaxFamilyMinTools)));
 }
 
 void parse_entry(TableReader& r, cc::EntryConfig& e) {

@@ -7,7 +7,9 @@
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <memory>
+#include <random>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -16,6 +18,7 @@
 #include "core/common/config_issue.hpp"
 #include "core/creep/creep_module.hpp"
 #include "core/creep/state_v3.hpp"
+#include "core/creep/state_v4.hpp"
 #include "tests/support/alloc_counter.hpp"
 #include "tests/unit/creep/rig.hpp"
 
@@ -338,7 +341,10 @@ TEST(CreepEstimator, ConfigErrorsNameTheKey) {
   c.estimator.measurement_sigma_um = 0.0;
   c.estimator.rate_noise_um_per_mm_per_sqrt_m = -1.0;
   c.estimator.gate_sigmas = 1.5;
+  c.estimator.family_min_tools = 0;
   const std::string e = issues(c);
+  EXPECT_NE(e.find("creep.estimator.family_min_tools: must be 1..1000, got 0"), std::string::npos)
+      << e;
   EXPECT_NE(e.find("creep.estimator.measurement_sigma_um"), std::string::npos) << e;
   EXPECT_NE(e.find("creep.estimator.rate_noise_um_per_mm_per_sqrt_m"), std::string::npos) << e;
   EXPECT_NE(e.find("creep.estimator.gate_sigmas: must be 0 (no gate) or a finite number >= 2"),
@@ -449,6 +455,264 @@ TEST(CreepEstimator, UncertaintyIntervalAsksForAMeasurementWhenSigmaReachesTheBo
   // It needs the estimator.
   c.estimator.enabled = false;
   EXPECT_THROW(validate(c), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace nccomp::core::creep
+
+namespace nccomp::core::creep {
+namespace {
+
+/// The estimator of these tests without process noise and without the gate, and a tool life
+/// that takes the test's deliberately noisy measurements.
+CreepConfig family_config() {
+  CreepConfig c = estimator_config();
+  c.estimator.gate_sigmas = 0.0;
+  c.tool_life.noise_um = 100.0;
+  return c;
+}
+
+/// Measures tool `r.tool` at cut paths 100, 200, … (steps of 100 mm from `from_mm` of program
+/// path) with the wear given by `wear(j)`, j = 1, 2, …
+template <class F>
+void measure_every_100_mm(testing::Rig& r, double from_mm, int count, F wear) {
+  for (int j = 1; j <= count; ++j) {
+    r.run_to(from_mm + 100.0 * j);
+    r.measure({wear(j)});
+  }
+}
+
+TEST(CreepEstimatorFamily, AFinishedToolsRateNoiseIsLearnedAndANewToolStartsWithIt) {
+  // GIVEN tools measured at 100, 200, 300, 400 mm of their cut path without noise: the
+  // least-squares rate of the four is the true slope a, Sxx = 150² + 50² + 50² + 150² = 50000,
+  // so one finished tool estimates q = (a² − σ²/Sxx) / 400 with σ = 1.
+  CreepConfig c = family_config();
+  c.estimator.rate_noise_um_per_mm_per_sqrt_m = 0.0005;  // q = 2.5e-10 per mm until learned
+  c.estimator.learn_rate_noise = true;
+  c.estimator.family_min_tools = 2;
+  const double q_config = 0.0005 * 0.0005 / 1000.0;
+  const double q1 = (0.05 * 0.05 - 1.0 / 50000.0) / 400.0;
+  const double q2 = (0.02 * 0.02 - 1.0 / 50000.0) / 400.0;
+  testing::Rig r(c);
+  EXPECT_NEAR(r.comp.rate_q(), q_config, 1e-24);
+  measure_every_100_mm(r, 0.0, 4, [](int j) { return 0.05 * 100.0 * j; });
+  EXPECT_NEAR(r.comp.finished_tool_rate_q(r.comp.state()), q1, 1e-18);
+  // WHEN its sister replaces it: the family has one tool, fewer than family_min_tools, so the
+  // sister still runs with the configured noise.
+  r.tool_change(2, true);
+  EXPECT_EQ(r.comp.state().family.tools, 1U);
+  EXPECT_NEAR(r.comp.family_rate_q(), q1, 1e-18);
+  EXPECT_NEAR(r.comp.rate_q(), q_config, 1e-24);
+  measure_every_100_mm(r, 400.0, 4, [](int j) { return 0.02 * 100.0 * j; });
+  r.tool_change(3, true);
+  const double q_family = 0.5 * (q1 + q2);
+  EXPECT_EQ(r.comp.state().family.tools, 2U);
+  EXPECT_NEAR(r.comp.family_rate_q(), q_family, 1e-18);
+  // THEN the third tool's filter runs with the family's q: from the prior diag(1, 1e-4) over
+  // 100 mm, P⁻_ww = 1 + 100²·1e-4 + q·100³/3, and after a measurement P⁺_ww = P⁻/(P⁻ + 1).
+  EXPECT_NEAR(r.comp.rate_q(), q_family, 1e-18);
+  r.run_to(900.0);
+  r.measure({1.0});
+  const double p_minus = 2.0 + q_family * 1e6 / 3.0;
+  EXPECT_NEAR(r.comp.state().estimate_p_ww[0], p_minus / (p_minus + 1.0), 1e-12);
+  // Without learning the same history leaves the configured noise in force.
+  CreepConfig off = c;
+  off.estimator.learn_rate_noise = false;
+  testing::Rig o(off);
+  measure_every_100_mm(o, 0.0, 4, [](int j) { return 0.05 * 100.0 * j; });
+  o.tool_change(2, true);
+  measure_every_100_mm(o, 400.0, 4, [](int j) { return 0.02 * 100.0 * j; });
+  o.tool_change(3, true);
+  EXPECT_EQ(o.comp.state().family.tools, 2U);
+  EXPECT_NEAR(o.comp.rate_q(), q_config, 1e-24);
+}
+
+TEST(CreepEstimatorFamily, TheFamilySurvivesARestartAndToolsComingBackKeepTheirOwnNoise) {
+  CreepConfig c = family_config();
+  c.estimator.learn_rate_noise = true;
+  c.estimator.family_min_tools = 1;
+  testing::Rig r(c);
+  measure_every_100_mm(r, 0.0, 4, [](int j) { return 0.05 * 100.0 * j; });
+  r.tool_change(2, true);  // finished: the family knows one tool, tool 2 starts with its q
+  const double q1 = (0.05 * 0.05 - 1.0 / 50000.0) / 400.0;
+  ASSERT_NEAR(r.comp.rate_q(), q1, 1e-18);
+  r.tool_change(7, false);  // tool 2 remembered; tool 7 new, also with the family's q
+  EXPECT_NEAR(r.comp.rate_q(), q1, 1e-18);
+  const CreepState saved = r.comp.export_state();
+  WearCompensator b;
+  b.configure(c);
+  b.import_state(saved);
+  EXPECT_EQ(b.state().family.tools, 1U);
+  EXPECT_NEAR(b.family_rate_q(), q1, 1e-18);
+  EXPECT_NEAR(b.rate_q(), q1, 1e-18);
+  // A corrupt learned noise is refused with the state.
+  CreepState bad = saved;
+  bad.rate_q = -1.0;
+  EXPECT_EQ(std::string_view(b.check_state(bad).field), "rate_q");
+  bad = saved;
+  bad.family.rate_q_sum = std::numeric_limits<double>::infinity();
+  EXPECT_EQ(std::string_view(b.check_state(bad).field), "family");
+}
+
+/// An independent level + rate Kalman filter (plain arithmetic, no Eigen), q = 0, measured
+/// every d mm: the normalised innovation squares and the residual variances of a sequence.
+struct ReferenceFilter {
+  double w{0.0}, r{0.0}, pww{1.0}, pwr{0.0}, prr{1e-4};
+  double nis_sum{0.0}, resid_sum{0.0};
+  int n{0};
+  void measure(double d, double z, double sigma2) {
+    w += r * d;
+    pww += 2.0 * d * pwr + d * d * prr;
+    pwr += d * prr;
+    const double s = pww + sigma2;
+    const double nu = z - w;
+    nis_sum += nu * nu / s;
+    resid_sum += nu * nu - pww;
+    ++n;
+    const double kw = pww / s;
+    const double kr = pwr / s;
+    w += kw * nu;
+    r += kr * nu;
+    const double pww0 = pww, pwr0 = pwr;
+    pww -= kw * pww0;
+    pwr -= kw * pwr0;
+    prr -= kr * pwr0;
+  }
+  [[nodiscard]] double nis_mean() const { return nis_sum / n; }
+};
+
+TEST(CreepEstimatorNoise, TheNisMeanIsTrackedAndAWrongSigmaIsReportedOnce) {
+  // GIVEN σ configured 1 µm, but the laser scatters ±3 µm around a constant 10 µm.
+  testing::Rig r(family_config());
+  ReferenceFilter ref;
+  for (int j = 1; j <= 15; ++j) {
+    const double z = 10.0 + (j % 2 == 0 ? 3.0 : -3.0);
+    r.run_to(100.0 * j);
+    r.measure({z});
+    ref.measure(100.0, z, 1.0);
+    ASSERT_EQ(r.comp.counters().measurements_accepted, static_cast<std::uint64_t>(j));
+    EXPECT_NEAR(r.comp.nis_mean(0), ref.nis_mean(), 1e-9) << j;
+    EXPECT_NEAR(r.comp.measurement_sigma_estimate_um(0), std::sqrt(ref.resid_sum / j), 1e-9) << j;
+    // THEN from the 10th measurement on (not before) the warning is raised, once per tool.
+    const auto warned = r.count(AlarmCode::kMeasurementNoiseInconsistent);
+    if (j < 10) {
+      EXPECT_EQ(warned, 0U) << j;
+    } else {
+      EXPECT_EQ(warned, 1U) << j;
+    }
+    if (j == 10) {
+      ASSERT_GT(ref.nis_mean() - 1.0, 3.0 * std::sqrt(2.0 / 10.0));
+      const AlarmEvent* a = nullptr;
+      for (const auto& x : r.alarms) {
+        if (x.code == AlarmCode::kMeasurementNoiseInconsistent) a = &x;
+      }
+      ASSERT_NE(a, nullptr);
+      EXPECT_NEAR(a->value, ref.nis_mean(), 1e-9);
+      EXPECT_EQ(a->severity, Severity::kWarning);
+      EXPECT_EQ(a->subject, 1);
+      EXPECT_FALSE(r.comp.state().warning_flag);  // a log line, not the warning register
+    }
+  }
+  // A new tool counts afresh.
+  r.tool_change(2, true);
+  EXPECT_TRUE(std::isnan(r.comp.nis_mean(0)));
+  EXPECT_EQ(r.comp.state().nis_count, 0U);
+  EXPECT_FALSE(r.comp.state().noise_warned);
+}
+
+TEST(CreepEstimatorNoise, ATooLargeSigmaIsReportedWhenTheMeanIsBeyondTheBandBelow) {
+  // GIVEN exact measurements of a wear rate of 0.01 µm/mm with σ configured 1 µm: ν²/S falls
+  // toward 0.
+  // The warning comes at the first n ≥ 10 where 1 − mean > 3·sqrt(2/n), computed here with the
+  // reference filter.
+  testing::Rig r(family_config());
+  ReferenceFilter ref;
+  int expected_at = 0;
+  for (int j = 1; j <= 40; ++j) {
+    r.run_to(100.0 * j);
+    r.measure({1.0 * j});
+    ref.measure(100.0, 1.0 * j, 1.0);
+    if (expected_at == 0 && j >= 10 && std::fabs(ref.nis_mean() - 1.0) > 3.0 * std::sqrt(2.0 / j)) {
+      expected_at = j;
+    }
+    EXPECT_EQ(r.count(AlarmCode::kMeasurementNoiseInconsistent),
+              expected_at != 0 && j >= expected_at ? 1U : 0U)
+        << j;
+  }
+  ASSERT_GT(expected_at, 10);
+  ASSERT_LT(expected_at, 40);
+}
+
+TEST(CreepEstimatorNoise, ConsistentNoiseRaisesNoWarning) {
+  // Gaussian noise of the configured σ (seeded) on a straight wear line: 200 measurements.
+  testing::Rig r(family_config());
+  std::mt19937_64 rng(22);
+  std::normal_distribution<double> noise(0.0, 1.0);
+  for (int j = 1; j <= 200; ++j) {
+    r.run_to(100.0 * j);
+    r.measure({0.01 * 100.0 * j + noise(rng)});
+  }
+  EXPECT_EQ(r.comp.counters().measurements_accepted, 200U);
+  EXPECT_EQ(r.count(AlarmCode::kMeasurementNoiseInconsistent), 0U);
+  EXPECT_NEAR(r.comp.nis_mean(0), 1.0, 3.0 * std::sqrt(2.0 / 200.0));
+}
+
+TEST(CreepEstimatorFamily, AStateOfLayoutVersion4IsConverted) {
+  // A version-4 state with a valid filter: kept as it is; the tool uses the configured noise
+  // (rate_q NaN), the σ check starts from zero and the family is empty.
+  CreepConfig c = family_config();
+  ModuleRig m(c);
+  v4::CreepState s;
+  s.edge_points = 1;
+  s.tool = 1;
+  s.cut_path_mm = 130.0;
+  s.creep_path_mm = 130.0;
+  s.committed_um[0] = 22.0;
+  s.measured_um[0] = 22.0;
+  s.measurements = 2;
+  s.last_measurement_cut_path_mm = 120.0;
+  s.last_measurement_creep_path_mm = 120.0;
+  s.estimate_wear_um[0] = 21.5;
+  s.estimate_rate_um_per_mm[0] = 0.1;
+  s.estimate_p_ww[0] = 0.5;
+  s.estimate_p_wr[0] = 0.001;
+  s.estimate_p_rr[0] = 1e-5;
+  s.estimate_path_mm = 120.0;
+  s.estimate_valid = true;
+  v4::ToolMemory mem;
+  mem.tool[1] = 4;
+  mem.last_use[1] = 1;
+  mem.use_counter = 1;
+  mem.state[1].edge_points = 1;
+  mem.state[1].tool = 4;
+  mem.state[1].measured_um[0] = 9.0;
+  std::vector<std::byte> bytes(v4::kModuleStateBytes + sizeof(AdoptedOutputs));
+  std::memcpy(bytes.data(), &s, sizeof s);
+  std::memcpy(bytes.data() + sizeof s, &mem, sizeof mem);
+  AdoptedOutputs none;
+  std::memcpy(bytes.data() + v4::kModuleStateBytes, &none, sizeof none);
+  ASSERT_NE(bytes.size(), m.module.state_capacity());
+  {
+    nccomp::test::AllocationScope scope;
+    ASSERT_TRUE(m.module.load_state(bytes));
+    EXPECT_EQ(scope.count(), 0U);
+  }
+  const auto& st = m.module.compensator().state();
+  EXPECT_EQ(st.version, CreepState::kVersion);
+  EXPECT_TRUE(st.estimate_valid);
+  EXPECT_EQ(st.estimate_wear_um[0], 21.5);
+  EXPECT_EQ(st.estimate_p_wr[0], 0.001);
+  EXPECT_TRUE(std::isnan(st.rate_q));
+  EXPECT_EQ(st.nis_count, 0U);
+  EXPECT_EQ(st.family.tools, 0U);
+  EXPECT_EQ(m.module.compensator().tool_memory().state[1].measured_um[0], 9.0);
+  ModuleRig m2(c);
+  EXPECT_TRUE(m2.module.load_state(std::span(bytes).first(v4::kModuleStateBytes)));
+  // A corrupt bool is refused, nothing changes.
+  ModuleRig fresh(c);
+  bytes[offsetof(v4::CreepState, estimate_valid)] = std::byte{2};
+  EXPECT_FALSE(fresh.module.load_state(bytes));
+  EXPECT_EQ(fresh.module.compensator().state().measurements, 0U);
 }
 
 }  // namespace

@@ -2,6 +2,7 @@
 // limiters, state persisted and restored through the engine's export / import.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
 #include <cstddef>
 #include <cstring>
@@ -445,6 +446,50 @@ TEST(CreepEngineModule, StatusShowsTheWearOfEveryRememberedTool) {
   nccomp::test::AllocationScope scope;
   EXPECT_EQ(m.status(v), engine::kMaxStatusValues);
   EXPECT_EQ(scope.count(), 0U);
+}
+
+TEST(CreepEngineModule, WithTheEstimatorEveryRememberedToolStillFitsInTheStatus) {
+  // The estimator's five values make 20 of the spindle tool's own: each remembered tool makes
+  // room for itself, the counters first, then the estimator's values from the last.
+  CreepModuleConfig c = module_config();
+  c.creep.estimator.enabled = true;
+  c.creep.estimator.gate_sigmas = 0.0;  // the first measurements jump from 0 µm
+  EngineRig r(c);
+  const auto& m = dynamic_cast<const CreepModule&>(r.engine.module(0));
+  r.advance(0.0);
+  r.measure(12.0);
+  auto keys = status_keys(m);
+  ASSERT_EQ(keys.size(), engine::kMaxStatusValues);
+  EXPECT_EQ(std::vector<std::string>(keys.end() - 5, keys.end()),
+            (std::vector<std::string>{"wear_estimate_um", "wear_sigma_um", "nis_mean",
+                                      "measurement_sigma_estimate_um",
+                                      "rate_noise_um_per_mm_per_sqrt_m"}));
+  EXPECT_NEAR(status_value(m, "nis_mean"), m.compensator().nis_mean(0), 0.0);
+  // After the first measurement from the prior diag(1, 1e-4) at 0 mm: S = 2, ν = 12.
+  EXPECT_NEAR(status_value(m, "nis_mean"), 144.0 / 2.0, 1e-9);
+  EXPECT_NEAR(status_value(m, "rate_noise_um_per_mm_per_sqrt_m"), 0.0005, 1e-12);
+  std::int32_t tool = 1;
+  for (const std::int32_t t : {2, 3, 4, 5, 6, 7, 8, 9}) {
+    r.ev.emplace_back(ToolChange{r.now, t, false});
+    r.tool = t;
+    r.advance(0.0);
+    r.measure(1.0 + t);
+    tool = t;
+  }
+  keys = status_keys(m);
+  ASSERT_EQ(keys.size(), engine::kMaxStatusValues);
+  for (const std::int32_t t : {1, 2, 3, 4, 5, 6, 7, 8}) {
+    EXPECT_NEAR(status_value(m, "T" + std::to_string(t) + "_wear_um"), t == 1 ? 12.0 : 1.0 + t, 0.0)
+        << t;
+  }
+  EXPECT_EQ(tool, 9);
+  // 15 + 5 + 8 = 28 values: the first 8 of the yield list make room, wear_estimate_um stays.
+  for (const char* gone : {"measurements_refused", "measurements_accepted", "wear_rate_um_per_mm",
+                           "cut_path_mm", "rate_noise_um_per_mm_per_sqrt_m",
+                           "measurement_sigma_estimate_um", "nis_mean", "wear_sigma_um"}) {
+    EXPECT_TRUE(std::find(keys.begin(), keys.end(), gone) == keys.end()) << gone;
+  }
+  EXPECT_TRUE(std::find(keys.begin(), keys.end(), "wear_estimate_um") != keys.end());
 }
 
 // ---- real time: the engine's step with the creep module ---------------------------------------

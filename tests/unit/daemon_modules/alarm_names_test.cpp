@@ -25,6 +25,7 @@ TEST(AlarmNames, EveryCodeHasItsDocumentedName) {
       {AlarmCode::kToolExcessivelyWorn, "tool_excessively_worn"},
       {AlarmCode::kToolBrokenOrMismeasured, "tool_broken_or_mismeasured"},
       {AlarmCode::kMeasurementDue, "measurement_due"},
+      {AlarmCode::kMeasurementNoiseInconsistent, "measurement_noise_inconsistent"},
       {AlarmCode::kProbeImplausible, "probe_implausible"},
       {AlarmCode::kProbeOutlier, "probe_outlier"},
       {AlarmCode::kProbeInvalidInput, "probe_invalid_input"},

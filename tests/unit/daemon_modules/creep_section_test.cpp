@@ -7,6 +7,8 @@
 
 #include <chrono>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <functional>
 #include <sstream>
@@ -350,6 +352,8 @@ TEST(CreepSection, EstimatorKeysFromTheDocsExampleAndTheirErrors) {
   EXPECT_DOUBLE_EQ(est.rate_noise_um_per_mm_per_sqrt_m, 0.0005);
   EXPECT_DOUBLE_EQ(est.initial_rate_sigma_um_per_mm, 0.01);
   EXPECT_DOUBLE_EQ(est.gate_sigmas, 5.0);
+  EXPECT_TRUE(est.learn_rate_noise);
+  EXPECT_EQ(est.family_min_tools, 3U);
 
   const std::string text = std::string(kRegisters) + R"(
 [creep]
@@ -362,6 +366,7 @@ measurement_sigma_um = 0
 rate_noise_um_per_mm_per_sqrt_m = -0.1
 gate_sigmas = 1.5
 sigma_um = 1
+family_min_tools = 0
 )";
   const auto g = d.write("bad.toml", text);
   const std::string err = errors_of(g);
@@ -374,6 +379,9 @@ sigma_um = 1
             std::string::npos)
       << err;
   EXPECT_NE(err.find(at(g, text, "sigma_um = 1") + "creep.estimator.sigma_um: unknown key"),
+            std::string::npos)
+      << err;
+  EXPECT_NE(err.find(at(g, text, "family_min_tools = 0") + "creep.estimator.family_min_tools: "),
             std::string::npos)
       << err;
   // The gate's own rule is core::creep::validate()'s, pointed at the key.
@@ -903,6 +911,99 @@ TEST(ShippedConfig, StatusShowsTheWearOfEveryRememberedTool) {
   loop.stop();
   logger.stop();
   bus.stop();
+}
+
+// With [creep.estimator] on: the check of σ (nis_mean, measurement_sigma_estimate_um) and the
+// rate noise in use in the text and JSON status, and the estimate's σ as its own metric, in
+// metres, which Prometheus' linter accepts.
+TEST(ShippedConfig, TheEstimatorsSigmaCheckIsInTheStatusAndItsSigmaIsAMetric) {
+  using namespace std::chrono_literals;
+  TempDir d;
+  std::string text = shipped_config_on_loopback();
+  const auto est = text.find("[creep.estimator]");
+  ASSERT_NE(est, std::string::npos);
+  const auto on = text.find("enabled = false", est);
+  ASSERT_NE(on, std::string::npos);
+  text.replace(on, 15, "enabled = true");
+  auto loaded = config::load_file(d.write("nccompd.toml", text));
+  ASSERT_TRUE(loaded.config) << loaded.diagnostics.to_string();
+  auto rt = std::make_unique<Runtime>();
+  rt->engine = config::build_engine(*loaded.config);
+  std::vector<std::string> names;
+  for (const auto& e : config::registers_section(*loaded.config).registers) {
+    rt->register_bus.push_back(0);
+    names.push_back(e.spec.name);
+  }
+  core::rt::ConfigSwap<Runtime> swap(std::move(rt));
+  drivers::loopback::LoopbackBus bus(256, 256);
+  bus.start();
+  Loop loop(LoopOptions{}, swap, {&bus}, nullptr, nullptr);
+  EventLogger logger(loop);
+  logger.start();
+  loop.start();
+  StatusContext c;
+  c.loop = &loop;
+  c.buses = {{"loopback", &bus}};
+  c.logger = &logger;
+  c.register_names = [names] { return names; };
+  c.config_path = "nccompd.toml";
+  c.state_path = "state.bin";
+  ASSERT_TRUE(bus.inject(core::ToolChange{0, 1, false}));
+  double path = 0.0;
+  for (int j = 1; j <= 2; ++j) {
+    for (int k = 0; k < 3; ++k) {
+      core::AxisSample a;
+      a.tool = 1;
+      a.program_path_mm = path;
+      path += 1.0;
+      ASSERT_TRUE(bus.inject(a));
+    }
+    core::ToolMeasurement m;
+    m.tool = 1;
+    m.wear_um[0] = 2.0 * j;
+    ASSERT_TRUE(bus.inject(m));
+  }
+  bool done = false;
+  for (int i = 0; i < 500 && !done; ++i) {
+    done = render_json(c).find("\"measurements_accepted\":2") != std::string::npos;
+    if (!done) std::this_thread::sleep_for(10ms);
+  }
+  ASSERT_TRUE(done) << render_json(c);
+  const std::string status = render_text(c);
+  const std::string json = render_json(c);
+  const std::string prom = render_prometheus(c);
+  loop.stop();
+  logger.stop();
+  bus.stop();
+  EXPECT_NE(status.find("mode creeping, estimator"), std::string::npos) << status;
+  for (const char* key :
+       {"nis_mean", "measurement_sigma_estimate_um", "rate_noise_um_per_mm_per_sqrt_m"}) {
+    EXPECT_NE(status.find(std::string(", ") + key + " "), std::string::npos) << key << status;
+    EXPECT_NE(json.find(std::string("\"") + key + "\":"), std::string::npos) << key << json;
+  }
+  // The configured rate noise, as shipped (nothing learned yet).
+  EXPECT_NE(json.find("\"rate_noise_um_per_mm_per_sqrt_m\":0.0005"), std::string::npos) << json;
+  const auto number_after = [](const std::string& s, const std::string& key) {
+    const auto p = s.find(key);
+    return p == std::string::npos ? std::nan("") : std::stod(s.substr(p + key.size()));
+  };
+  const double sigma_um = number_after(json, "\"wear_sigma_um\":");
+  ASSERT_TRUE(std::isfinite(sigma_um) && sigma_um > 0.0) << json;
+  const double sigma_m =
+      number_after(prom, "nccompd_module_sigma_meters{module=\"creep\",key=\"wear_estimate_um\"} ");
+  EXPECT_NEAR(sigma_m, sigma_um * 1e-6, 1e-5 * sigma_um * 1e-6) << prom;  // JSON: 6 digits
+  if (::system("command -v promtool >/dev/null 2>&1") == 0) {
+    const auto file = d.write("metrics.txt", prom);
+    const std::string cmd = "promtool check metrics <" + file + " 2>&1";
+    std::FILE* p = ::popen(cmd.c_str(), "r");
+    ASSERT_NE(p, nullptr);
+    std::string lint;
+    char buf[512];
+    std::size_t n = 0;
+    while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) lint.append(buf, n);
+    EXPECT_EQ(::pclose(p), 0) << lint;
+    EXPECT_EQ(lint, "") << prom;
+  }
 }
 
 }  // namespace
