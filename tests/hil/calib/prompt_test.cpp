@@ -2,6 +2,7 @@
 // branch, a wrong line retyped), and against a running nccompd (--daemon: a script with await,
 // a pipe with --interactive, facet chords from a device export, a bad export refused at its line).
 #include <gtest/gtest.h>
+#include <poll.h>
 #include <pty.h>
 
 #include <cmath>
@@ -11,7 +12,7 @@
 #include <vector>
 
 #include "core/calib/state.hpp"
-#include "tests/unit/calib/daemon_process.hpp"
+#include "tests/hil/calib/daemon_process.hpp"
 
 namespace nccomp::test::calib {
 namespace {
