@@ -80,13 +80,14 @@ TEST(CalibratePrompt, TerminalPromptShowsTheNextStepAndLetsAWrongLineBeRetyped) 
       out.text.find("-- not calibrated: 'begin' starts an initial calibration\r\ncalibrate> "),
       std::string::npos)
       << out.text;
-  EXPECT_NE(out.text.find("error: line 2: axis must be x, y or z, got 'q'"), std::string::npos)
+  EXPECT_NE(out.text.find("error: line 2, column 17: axis must be x, y or z, got 'q'"),
+            std::string::npos)
       << out.text;
   EXPECT_NE(out.text.find("-- touch the reference disk with the reference probe (X lateral 1/2, "
                           "X axial 0/2, Y 0/2, Z 0/2)"),
             std::string::npos)
       << out.text;
-  EXPECT_NE(out.text.find("error: line 4: unknown command 'bogus' (try 'help')"),
+  EXPECT_NE(out.text.find("error: line 4, column 1: unknown command 'bogus' (try 'help')"),
             std::string::npos);
   EXPECT_NE(out.text.find("saved state " + state), std::string::npos);
   std::ifstream in(state);
