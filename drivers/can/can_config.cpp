@@ -48,11 +48,8 @@ std::vector<std::string> event_names() {
   return names;
 }
 
-/// One [[can.rx]] frame and its signals; nullopt if any of it was refused (the map's checks
-/// would only judge the defaults that stand in for refused values).
-std::optional<RxFrame> read_rx_frame(const toml::table& ft, const std::string& fp,
-                                     Diagnostics& diag) {
-  const std::size_t errors_before = diag.items().size();
+/// One [[can.rx]] frame and its signals.
+RxFrame read_rx_frame(const toml::table& ft, const std::string& fp, Diagnostics& diag) {
   RxFrame f;
   {
     TableReader r(ft, fp, diag);
@@ -78,16 +75,11 @@ std::optional<RxFrame> read_rx_frame(const toml::table& ft, const std::string& f
       }
     }
   }
-  if (diag.items().size() != errors_before) {
-    return std::nullopt;
-  }
   return f;
 }
 
-/// One [[can.offset]] register; nullopt if any of it was refused.
-std::optional<TxRegister> read_offset(const toml::table& ot, const std::string& op,
-                                      Diagnostics& diag) {
-  const std::size_t errors_before = diag.items().size();
+/// One [[can.offset]] register.
+TxRegister read_offset(const toml::table& ot, const std::string& op, Diagnostics& diag) {
   TxRegister reg;
   {
     TableReader r(ot, op, diag);
@@ -107,10 +99,24 @@ std::optional<TxRegister> read_offset(const toml::table& ot, const std::string& 
       reg.ack = TxAck{static_cast<std::uint32_t>(r.integer("ack_id", 0, 0, kMaxId)), reg.extended};
     }
   }
-  if (diag.items().size() != errors_before) {
-    return std::nullopt;
-  }
   return reg;
+}
+
+/// The tables of an array, each read by `read`; only those read without an error are kept: the
+/// map's checks would judge the defaults that stand in for refused values.
+template <typename T, typename Read>
+void read_entries(const toml::array* tables, const std::string& path, Diagnostics& diag,
+                  std::vector<T>& out, Read read) {
+  if (tables == nullptr) {
+    return;
+  }
+  for (std::size_t i = 0; i < tables->size(); ++i) {
+    const std::size_t errors_before = diag.items().size();
+    T entry = read(*tables->get(i)->as_table(), path + "[" + std::to_string(i) + "]", diag);
+    if (diag.items().size() == errors_before) {
+      out.push_back(std::move(entry));
+    }
+  }
 }
 
 }  // namespace
@@ -146,47 +152,20 @@ std::optional<CanConfig> read_can_table(const toml::table& can, std::string_view
     }
     c.alarm_after_s = r.number("alarm_after_s", 1.0, 0.0, 3600.0);
     c.degraded_alarm_after_s = r.number("degraded_alarm_after_s", 5.0, 0.01, 3600.0);
-    const auto pow2 = [&](std::string_view key, std::int64_t dflt) {
-      std::int64_t v = r.integer(key, dflt, 2, 1 << 20);
-      if ((v & (v - 1)) != 0) {
-        r.error(key, "must be a power of two");
-        v = dflt;
-      }
-      return static_cast<std::uint32_t>(v);
-    };
-    c.rx_ring_events = pow2("rx_ring_events", 4096);
-    c.tx_ring_writes = pow2("tx_ring_writes", 256);
+    c.rx_ring_events =
+        static_cast<std::uint32_t>(r.power_of_two("rx_ring_events", 4096, 2, 1 << 20));
+    c.tx_ring_writes =
+        static_cast<std::uint32_t>(r.power_of_two("tx_ring_writes", 256, 2, 1 << 20));
     c.socket_rcvbuf_bytes =
         static_cast<std::uint32_t>(r.integer("socket_rcvbuf_bytes", 0, 0, 1 << 28));
-    if (const toml::array* rx = r.table_array("rx")) {
-      for (std::size_t i = 0; i < rx->size(); ++i) {
-        const std::string fp = "can.rx[" + std::to_string(i) + "]";
-        if (auto f = read_rx_frame(*rx->get(i)->as_table(), fp, diag)) {
-          c.mapping.rx.push_back(std::move(*f));
-        }
-      }
-    }
-    if (const toml::array* offs = r.table_array("offset")) {
-      for (std::size_t i = 0; i < offs->size(); ++i) {
-        const std::string op = "can.offset[" + std::to_string(i) + "]";
-        if (auto reg = read_offset(*offs->get(i)->as_table(), op, diag)) {
-          c.mapping.offsets.push_back(std::move(*reg));
-        }
-      }
-    }
+    read_entries(r.table_array("rx"), "can.rx", diag, c.mapping.rx, read_rx_frame);
+    read_entries(r.table_array("offset"), "can.offset", diag, c.mapping.offsets, read_offset);
   }
   // The map's checks see the entries read without error, so each of their reports is a real one.
   formats::KeyPositions positions;
   formats::record_positions(can, "can", positions);
   (void)validate_mapping(c.mapping, diag, &positions);
-  // Tables built in memory carry no file name: the caller's.
-  for (const formats::Diagnostic& d : diag.items()) {
-    formats::Where w = d.where;
-    if (w.file.empty()) {
-      w.file = std::string(file);
-    }
-    out.error(std::move(w), d.message);
-  }
+  out.append(diag, file);
   if (!diag.ok()) {
     return std::nullopt;
   }

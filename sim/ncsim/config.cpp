@@ -117,9 +117,7 @@ bool read_data(Diagnostics& diag, F&& read) {
     read();
     return true;
   } catch (const formats::DiagnosticsError& e) {
-    for (const formats::Diagnostic& d : e.diagnostics().items()) {
-      diag.error(d.where, d.message);
-    }
+    diag.append(e.diagnostics(), "");
     return false;
   }
 }
