@@ -34,11 +34,6 @@ std::string first_line(const cal::CalibSnapshot& s) {
   return fmt::format("ok {} {}\n", cal::to_string(s.state.phase), cal::to_string(s.request));
 }
 
-std::string strip_line_prefix(std::string what) {
-  if (what.rfind("line 1: ", 0) == 0) what.erase(0, 8);
-  return what;
-}
-
 }  // namespace
 
 std::string handle_calibrate_command(std::string_view args, CommandContext& ctx) {
@@ -59,7 +54,7 @@ std::string handle_calibrate_command(std::string_view args, CommandContext& ctx)
   try {
     cmd = tc::parse_line(args, 1);
   } catch (const tc::ScriptError& e) {
-    return refuse(ctx, "calibrate: " + strip_line_prefix(e.what()));
+    return refuse(ctx, "calibrate: " + e.diagnostic().message);
   }
   OperatorCommand oc;
   oc.sequence = next_sequence();

@@ -1,15 +1,18 @@
 // The [can] section of a config file: interface, timing and the signal map (can_mapping.hpp).
-// Parsed with toml++; unknown keys are errors; every error names file, line and key path.
-// Not real-time (allocates, throws MappingError).
+// Read with formats/ TableReader: unknown keys are errors, every error of a map is reported (not
+// only the first), each naming file:line:column and key path in the one wording of formats/.
+// Not real-time (allocates).
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <string_view>
 
 #include <toml++/toml.h>
 
 #include "drivers/can/can_mapping.hpp"
+#include "formats/toml/diagnostics.hpp"
 
 namespace nccomp::drivers::can {
 
@@ -55,13 +58,18 @@ struct CanConfig {
   CanMapping mapping;
 };
 
-/// Parses the [can] table of TOML text (other top-level tables are ignored: they belong to
-/// other parts of the daemon). file names the source in error messages. Validates the mapping.
-CanConfig parse_can_config(std::string_view toml_text, const std::string& file);
-/// Parses an already parsed [can] table (the daemon's config loader hands it over). Errors name
-/// the file the table was parsed from (its source path), else file_name.
+/// Reads an already parsed [can] table (the daemon's config loader hands it over), reporting every
+/// error to `diag` (file:line:column, key path; errors on nodes without a source path name
+/// `file`); nullopt if there was one. Validates the mapping.
+std::optional<CanConfig> read_can_table(const toml::table& can, std::string_view file,
+                                        formats::Diagnostics& diag);
+/// The same, throwing formats::DiagnosticsError (every error, one per line).
 CanConfig parse_can_table(const toml::table& can, const std::string& file_name);
-/// Reads and parses a file (error if it cannot be read).
+/// Parses the [can] table of TOML text (other top-level tables are ignored: they belong to
+/// other parts of the daemon). file names the source in messages. Throws
+/// formats::DiagnosticsError.
+CanConfig parse_can_config(std::string_view toml_text, const std::string& file);
+/// Reads and parses a file. Throws formats::DiagnosticsError (also if it cannot be read).
 CanConfig load_can_config(const std::string& path);
 
 }  // namespace nccomp::drivers::can

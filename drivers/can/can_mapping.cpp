@@ -12,23 +12,6 @@
 
 namespace nccomp::drivers::can {
 
-MappingError::MappingError(std::string file, int line, int column, std::string key_path,
-                           std::string message)
-    : std::runtime_error([&] {
-        std::ostringstream s;
-        s << file << ':' << line << ": ";
-        if (!key_path.empty()) {
-          s << key_path << ": ";
-        }
-        s << message;
-        return s.str();
-      }()),
-      file_(std::move(file)),
-      line_(line),
-      column_(column),
-      key_path_(std::move(key_path)),
-      message_(std::move(message)) {}
-
 namespace {
 
 struct FieldInfo {
@@ -97,11 +80,32 @@ const FieldInfo* field_info(EventKind kind, Field field) noexcept {
   return nullptr;
 }
 
-[[noreturn]] void fail(const CanMapping& m, const Origin& o, const std::string& key,
-                       const std::string& msg) {
-  throw MappingError(m.file.empty() ? "<config>" : m.file, static_cast<int>(o.line), 0,
-                     key.empty() ? o.key_path : o.key_path + "." + key, msg);
-}
+/// Reports a problem of the mapping element at `o`, about its key `key` ("" = the element).
+class Reporter {
+ public:
+  Reporter(const CanMapping& m, formats::Diagnostics& diag, const formats::KeyPositions* positions)
+      : m_(m), diag_(diag), positions_(positions) {}
+
+  void error(const Origin& o, const std::string& key, std::string message) {
+    const std::string path = key.empty() ? o.key_path : o.key_path + "." + key;
+    Origin fallback = o;
+    if (fallback.file.empty()) {
+      fallback.file = m_.file;
+    }
+    formats::Where w =
+        positions_ != nullptr ? formats::position_of(*positions_, path, fallback) : fallback;
+    w.key_path = path;
+    diag_.error(std::move(w), std::move(message));
+    ++count_;
+  }
+  [[nodiscard]] std::size_t count() const noexcept { return count_; }
+
+ private:
+  const CanMapping& m_;
+  formats::Diagnostics& diag_;
+  const formats::KeyPositions* positions_;
+  std::size_t count_{0};
+};
 
 std::string hex(std::uint32_t id) {
   std::ostringstream s;
@@ -109,58 +113,68 @@ std::string hex(std::uint32_t id) {
   return s.str();
 }
 
-void check_layout(const CanMapping& m, const Origin& o, const std::string& key,
-                  const SignalLayout& l, std::size_t length_bytes,
-                  std::bitset<kMaxPayloadBytes * 8>* used) {
+/// Reports the first problem of a layout (the later checks depend on the earlier ones) and marks
+/// its bits in `used`; false if it reported one.
+bool check_layout(Reporter& rep, const Origin& o, const std::string& key, const SignalLayout& l,
+                  std::size_t length_bytes, std::bitset<kMaxPayloadBytes * 8>* used) {
   const std::string k = key.empty() ? std::string() : key + ".";
   if (l.length_bits == 0 || l.length_bits > 64) {
-    fail(m, o, k + "length_bits", "must be 1..64, got " + std::to_string(l.length_bits));
+    rep.error(o, k + "length_bits", "must be 1..64, got " + std::to_string(l.length_bits));
+    return false;
   }
   if (l.type == ValueType::kFloat && l.length_bits != 32 && l.length_bits != 64) {
-    fail(m, o, k + "length_bits",
-         "a float signal is 32 or 64 bits, got " + std::to_string(l.length_bits));
+    rep.error(o, k + "length_bits",
+              "a float signal is 32 or 64 bits, got " + std::to_string(l.length_bits));
+    return false;
   }
   if (!std::isfinite(l.scale) || std::fabs(l.scale) < 1e-300) {
-    fail(m, o, k + "scale", "must be finite and non-zero");
+    rep.error(o, k + "scale", "must be finite and non-zero");
+    return false;
   }
   if (!std::isfinite(l.offset)) {
-    fail(m, o, k + "offset", "must be finite");
+    rep.error(o, k + "offset", "must be finite");
+    return false;
   }
   std::array<std::uint16_t, 64> pos{};
   const std::size_t frame_bits = length_bytes * 8;
   if (signal_bit_positions(l, frame_bits, pos) == 0) {
-    fail(m, o, k + "start_bit",
-         "signal (start_bit " + std::to_string(l.start_bit) + ", length_bits " +
-             std::to_string(l.length_bits) + ") overflows the " + std::to_string(length_bytes) +
-             "-byte frame");
+    rep.error(o, k + "start_bit",
+              "signal (start_bit " + std::to_string(l.start_bit) + ", length_bits " +
+                  std::to_string(l.length_bits) + ") overflows the " +
+                  std::to_string(length_bytes) + "-byte frame");
+    return false;
   }
   if (used != nullptr) {
     for (std::size_t i = 0; i < l.length_bits; ++i) {
       if (used->test(pos[i])) {
-        fail(m, o, k + "start_bit",
-             "overlaps another signal of the frame at bit " + std::to_string(pos[i]));
+        rep.error(o, k + "start_bit",
+                  "overlaps another signal of the frame at bit " + std::to_string(pos[i]));
+        return false;
       }
+    }
+    for (std::size_t i = 0; i < l.length_bits; ++i) {
       used->set(pos[i]);
     }
   }
+  return true;
 }
 
-void check_id(const CanMapping& m, const Origin& o, const std::string& key, std::uint32_t id,
+void check_id(Reporter& rep, const Origin& o, const std::string& key, std::uint32_t id,
               bool extended) {
   const std::uint32_t max = extended ? kMaxExtendedId : kMaxStandardId;
   if (id > max) {
-    fail(m, o, key,
-         hex(id) + " exceeds the " + std::string(extended ? "29" : "11") + "-bit ID range (max " +
-             hex(max) + ")");
+    rep.error(o, key,
+              hex(id) + " exceeds the " + std::string(extended ? "29" : "11") +
+                  "-bit ID range (max " + hex(max) + ")");
   }
 }
 
-void check_length(const CanMapping& m, const Origin& o, std::size_t length_bytes) {
+void check_length(Reporter& rep, const CanMapping& m, const Origin& o, std::size_t length_bytes) {
   if (!valid_payload_length(length_bytes, m.fd)) {
-    fail(m, o, "length_bytes",
-         std::to_string(length_bytes) +
-             (m.fd ? " is not a CAN FD payload length (0-8, 12, 16, 20, 24, 32, 48, 64)"
-                   : " exceeds 8 bytes (classic CAN; set can.fd = true for CAN FD)"));
+    rep.error(o, "length_bytes",
+              std::to_string(length_bytes) +
+                  (m.fd ? " is not a CAN FD payload length (0-8, 12, 16, 20, 24, 32, 48, 64)"
+                        : " exceeds 8 bytes (classic CAN; set can.fd = true for CAN FD)"));
   }
 }
 
@@ -521,36 +535,40 @@ bool valid_payload_length(std::size_t n, bool fd) noexcept {
 // ---------------------------------------------------------------------------------------------
 // Validation
 
-void validate_mapping(CanMapping& m) {
+bool validate_mapping(CanMapping& m, formats::Diagnostics& diag,
+                      const formats::KeyPositions* positions) {
+  Reporter rep(m, diag, positions);
   std::set<std::uint32_t> rx_ids;
   std::set<std::pair<EventKind, Field>> mapped;
   int max_axis = 2;
   for (auto& f : m.rx) {
-    check_id(m, f.origin, "id", f.id, f.extended);
-    check_length(m, f.origin, f.length_bytes);
+    check_id(rep, f.origin, "id", f.id, f.extended);
+    check_length(rep, m, f.origin, f.length_bytes);
     if (!rx_ids.insert(id_key(f.id, f.extended)).second) {
-      fail(m, f.origin, "id", "frame ID " + hex(f.id) + " is mapped twice");
+      rep.error(f.origin, "id", "frame ID " + hex(f.id) + " is mapped twice");
     }
     if (f.signals.empty()) {
-      fail(m, f.origin, "signal", "a received frame needs at least one signal");
+      rep.error(f.origin, "signal", "a received frame needs at least one signal");
     }
     std::bitset<kMaxPayloadBytes * 8> used;
     for (auto& s : f.signals) {
       const auto field = field_from_name(f.event, s.name);
       if (!field) {
-        fail(m, s.origin, "name",
-             "unknown signal '" + s.name + "' for event " + std::string(event_kind_name(f.event)) +
-                 " (known: " + field_names(f.event) + ")");
+        rep.error(s.origin, "name",
+                  "unknown signal '" + s.name + "' for event " +
+                      std::string(event_kind_name(f.event)) + " (known: " + field_names(f.event) +
+                      ")");
+        continue;
       }
       s.field = *field;
       if (!mapped.insert({f.event, *field}).second) {
-        fail(m, s.origin, "name",
-             "signal '" + s.name + "' of " + std::string(event_kind_name(f.event)) +
-                 " is mapped by more than one frame");
+        rep.error(s.origin, "name",
+                  "signal '" + s.name + "' of " + std::string(event_kind_name(f.event)) +
+                      " is mapped by more than one frame");
       }
-      check_layout(m, s.origin, "", s.layout, f.length_bytes, &used);
+      (void)check_layout(rep, s.origin, "", s.layout, f.length_bytes, &used);
       if (std::isnan(s.min) || std::isnan(s.max) || s.min > s.max) {
-        fail(m, s.origin, "min", "min must be <= max");
+        rep.error(s.origin, "min", "min must be <= max");
       }
       if (f.event == EventKind::kAxisSample) {
         const int axis = static_cast<int>(*field) - static_cast<int>(Field::kXmm);
@@ -564,26 +582,27 @@ void validate_mapping(CanMapping& m) {
   std::set<std::uint16_t> regs;
   std::set<std::uint32_t> tx_ids;
   for (auto& r : m.offsets) {
-    check_id(m, r.origin, "id", r.id, r.extended);
-    check_length(m, r.origin, r.length_bytes);
+    check_id(rep, r.origin, "id", r.id, r.extended);
+    check_length(rep, m, r.origin, r.length_bytes);
     if (!regs.insert(r.register_index).second) {
-      fail(m, r.origin, "register",
-           "register " + std::to_string(r.register_index) + " is mapped twice");
+      rep.error(r.origin, "register",
+                "register " + std::to_string(r.register_index) + " is mapped twice");
     }
     const std::uint32_t k = id_key(r.id, r.extended);
     if (rx_ids.count(k) != 0 || !tx_ids.insert(k).second) {
-      fail(m, r.origin, "id", "frame ID " + hex(r.id) + " is already used by another frame");
+      rep.error(r.origin, "id", "frame ID " + hex(r.id) + " is already used by another frame");
     }
-    check_layout(m, r.origin, "value", r.value, r.length_bytes, nullptr);
+    (void)check_layout(rep, r.origin, "value", r.value, r.length_bytes, nullptr);
     if (r.ack) {
-      check_id(m, r.origin, "ack_id", r.ack->id, r.ack->extended);
+      check_id(rep, r.origin, "ack_id", r.ack->id, r.ack->extended);
       const std::uint32_t a = id_key(r.ack->id, r.ack->extended);
       if (rx_ids.count(a) != 0 || !tx_ids.insert(a).second) {
-        fail(m, r.origin, "ack_id",
-             "acknowledge ID " + hex(r.ack->id) + " is already used by another frame");
+        rep.error(r.origin, "ack_id",
+                  "acknowledge ID " + hex(r.ack->id) + " is already used by another frame");
       }
     }
   }
+  return rep.count() == 0;
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -4,8 +4,9 @@
 // codec and the validation run in unit tests and fuzz targets.
 //
 // Lifecycle: a CanMapping is built (by parse_can_config() or by code) and validated once with
-// validate_mapping() (allocates, throws MappingError naming the key path). FrameDecoder and
-// encode_offset() then run on the I/O thread: real-time safe, no allocation, no locks, no I/O.
+// validate_mapping() (allocates, reports every problem as a Diagnostic naming file:line:column and
+// key path). FrameDecoder and encode_offset() then run on the I/O thread: real-time safe, no
+// allocation, no locks, no I/O.
 #pragma once
 
 #include <array>
@@ -13,12 +14,13 @@
 #include <cstdint>
 #include <optional>
 #include <span>
-#include <stdexcept>
 #include <string>
 #include <string_view>
 #include <vector>
 
 #include "core/common/types.hpp"
+#include "formats/toml/diagnostics.hpp"
+#include "formats/toml/key_positions.hpp"
 
 namespace nccomp::drivers::can {
 
@@ -26,30 +28,6 @@ namespace nccomp::drivers::can {
 inline constexpr std::size_t kMaxPayloadBytes = 64;
 inline constexpr std::uint32_t kMaxStandardId = 0x7FF;
 inline constexpr std::uint32_t kMaxExtendedId = 0x1FFFFFFF;
-
-/// Thrown for an invalid mapping or config; what() is "file:line: key.path: message". The parts
-/// are kept separately too, so that the daemon's config loader can report the error in its own
-/// format (file:line:column: key.path: message).
-class MappingError : public std::runtime_error {
- public:
-  using std::runtime_error::runtime_error;
-  MappingError(std::string file, int line, int column, std::string key_path, std::string message);
-
-  [[nodiscard]] const std::string& file() const noexcept { return file_; }
-  /// 0 when unknown.
-  [[nodiscard]] int line() const noexcept { return line_; }
-  [[nodiscard]] int column() const noexcept { return column_; }
-  [[nodiscard]] const std::string& key_path() const noexcept { return key_path_; }
-  /// The message without the position.
-  [[nodiscard]] const std::string& message() const noexcept { return message_; }
-
- private:
-  std::string file_;
-  int line_{0};
-  int column_{0};
-  std::string key_path_;
-  std::string message_;
-};
 
 enum class ByteOrder : std::uint8_t {
   kLittleEndian = 0,  // Intel: start_bit is the least significant bit
@@ -135,11 +113,9 @@ std::optional<Field> field_from_name(EventKind kind, std::string_view name) noex
 /// Comma-separated list of valid signal names of an event kind (for error messages).
 std::string field_names(EventKind kind);
 
-/// Where a mapping element came from, for error messages.
-struct Origin {
-  std::string key_path;  // e.g. "can.rx[2].signal[0]"
-  std::uint32_t line{0};
-};
+/// Where a mapping element came from: its table's file:line:column and key path (e.g.
+/// "can.rx[2].signal[0]"), for error messages.
+using Origin = formats::Where;
 
 struct RxSignal {
   std::string name;
@@ -192,10 +168,13 @@ struct CanMapping {
   std::string file;  // config file name, for error messages
 };
 
-/// Checks the whole mapping; throws MappingError naming file, line and key path of the first
-/// problem: unknown signal names, overlapping signals, signals overflowing the frame, bad IDs,
-/// duplicate IDs / registers, lengths not allowed for the frame type. Sets axis_count.
-void validate_mapping(CanMapping& mapping);
+/// Checks the whole mapping and reports every problem to diag: unknown signal names, overlapping
+/// signals, signals overflowing the frame, bad IDs, duplicate IDs / registers, lengths not
+/// allowed for the frame type. Each names the key's file:line:column from `positions` (the
+/// parsed [can] table's, see formats::record_positions) where it is there, else the element's
+/// origin, with the key path. Sets axis_count. Returns false if it reported anything.
+bool validate_mapping(CanMapping& mapping, formats::Diagnostics& diag,
+                      const formats::KeyPositions* positions = nullptr);
 
 /// Valid CAN (FD) payload lengths: 0–8, 12, 16, 20, 24, 32, 48, 64.
 bool valid_payload_length(std::size_t length_bytes, bool fd) noexcept;

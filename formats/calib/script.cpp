@@ -2,6 +2,7 @@
 
 #include <charconv>
 #include <cmath>
+#include <utility>
 #include <vector>
 
 namespace nccomp::formats::calib {
@@ -27,7 +28,18 @@ std::vector<std::string_view> split(std::string_view line) {
   return words;
 }
 
-double number(std::string_view w, std::size_t line, const char* what) {
+/// The line being parsed: refusals name its number and the offending word's column.
+struct At {
+  std::string_view text;
+  std::size_t line;
+
+  [[noreturn]] void refuse(std::string_view word, std::string why) const {
+    throw ScriptError(line, static_cast<std::size_t>(word.data() - text.data()) + 1,
+                      std::move(why));
+  }
+};
+
+double number(std::string_view w, const At& at, const char* what) {
   double v = 0.0;
   const char* first = w.data();
   if (!w.empty() && w.front() == '+') {
@@ -35,16 +47,15 @@ double number(std::string_view w, std::size_t line, const char* what) {
   }
   const auto res = std::from_chars(first, w.data() + w.size(), v);
   if (res.ec != std::errc() || res.ptr != w.data() + w.size() || !std::isfinite(v)) {
-    throw ScriptError(line,
-                      std::string(what) + " must be a finite number, got '" + std::string(w) + "'");
+    at.refuse(w, std::string(what) + " must be a finite number, got '" + std::string(w) + "'");
   }
   return v;
 }
 
 void expect_words(const std::vector<std::string_view>& w, std::size_t lo, std::size_t hi,
-                  std::size_t line, const char* usage) {
+                  const At& at, const char* usage) {
   if (w.size() < lo || w.size() > hi) {
-    throw ScriptError(line, std::string("usage: ") + usage);
+    at.refuse(w.front(), std::string("usage: ") + usage);
   }
 }
 
@@ -59,6 +70,27 @@ std::string lower(std::string_view w) {
 }
 
 }  // namespace
+
+ScriptError::ScriptError(std::size_t line, std::size_t column, std::string why)
+    : formats::DiagnosticsError(
+          [&] {
+            formats::Diagnostics d;
+            d.error(formats::Where{"", static_cast<int>(line), static_cast<int>(column), ""}, why);
+            return d;
+          }(),
+          ""),
+      text_("line " + std::to_string(line) +
+            (column > 0 ? ", column " + std::to_string(column) : std::string()) + ": " + why) {}
+
+const formats::Diagnostic& ScriptError::diagnostic() const noexcept {
+  return diagnostics().items().front();
+}
+
+std::string ScriptError::in_file(std::string_view file) const {
+  formats::Diagnostic d = diagnostic();
+  d.where.file = std::string(file);
+  return formats::format(d);
+}
 
 const char* script_help() noexcept {
   return "commands:\n"
@@ -92,47 +124,47 @@ Command parse_line(std::string_view line, std::size_t line_no) {
     line = line.substr(0, hash);
   }
   const auto w = split(line);
+  const At at{line, line_no};
   if (w.empty()) {
     return CmdEmpty{};
   }
   const std::string verb = lower(w[0]);
   if (verb == "time") {
-    expect_words(w, 2, 2, line_no, "time <s>");
-    const double t = number(w[1], line_no, "time");
+    expect_words(w, 2, 2, at, "time <s>");
+    const double t = number(w[1], at, "time");
     if (t < 0.0 || t > 1e9) {
-      throw ScriptError(line_no, "time must be in 0..1e9 s");
+      at.refuse(w[1], "time must be in 0..1e9 s");
     }
     return CmdTime{t};
   }
   if (verb == "wait") {
-    expect_words(w, 2, 2, line_no, "wait <s>");
-    const double d = number(w[1], line_no, "wait");
+    expect_words(w, 2, 2, at, "wait <s>");
+    const double d = number(w[1], at, "wait");
     if (d < 0.0 || d > 7.0 * 86400.0) {
-      throw ScriptError(line_no, "wait must be in 0..604800 s");
+      at.refuse(w[1], "wait must be in 0..604800 s");
     }
     return CmdWait{d};
   }
   if (verb == "temperature") {
-    expect_words(w, 3, 3, line_no, "temperature <sensor> <degC>");
+    expect_words(w, 3, 3, at, "temperature <sensor> <degC>");
     int s = -1;
     const auto res = std::from_chars(w[1].data(), w[1].data() + w[1].size(), s);
     if (res.ec != std::errc() || res.ptr != w[1].data() + w[1].size() || s < 0 || s > 255) {
-      throw ScriptError(line_no,
-                        "sensor must be an integer 0..255, got '" + std::string(w[1]) + "'");
+      at.refuse(w[1], "sensor must be an integer 0..255, got '" + std::string(w[1]) + "'");
     }
-    const double t = number(w[2], line_no, "temperature");
+    const double t = number(w[2], at, "temperature");
     if (t < -50.0 || t > 200.0) {
-      throw ScriptError(line_no, "temperature must be in -50..200 degC");
+      at.refuse(w[2], "temperature must be in -50..200 degC");
     }
     return CmdTemperature{static_cast<std::uint8_t>(s), t};
   }
   if (verb == "begin") {
-    expect_words(w, 1, 1, line_no, "begin");
+    expect_words(w, 1, 1, at, "begin");
     return CmdBegin{};
   }
   if (verb == "touch") {
     const char* usage = "touch reference|machine x|y|z +|- [lateral|axial] <trigger_mm>";
-    expect_words(w, 5, 6, line_no, usage);
+    expect_words(w, 5, 6, at, usage);
     CmdTouch c;
     const std::string probe = lower(w[1]);
     if (probe == "reference") {
@@ -140,8 +172,7 @@ Command parse_line(std::string_view line, std::size_t line_no) {
     } else if (probe == "machine") {
       c.touch.probe = core::ProbeKind::kMachineProbe;
     } else {
-      throw ScriptError(line_no,
-                        "probe must be 'reference' or 'machine', got '" + std::string(w[1]) + "'");
+      at.refuse(w[1], "probe must be 'reference' or 'machine', got '" + std::string(w[1]) + "'");
     }
     const std::string axis = lower(w[2]);
     if (axis == "x") {
@@ -151,14 +182,14 @@ Command parse_line(std::string_view line, std::size_t line_no) {
     } else if (axis == "z") {
       c.touch.axis = 2;
     } else {
-      throw ScriptError(line_no, "axis must be x, y or z, got '" + std::string(w[2]) + "'");
+      at.refuse(w[2], "axis must be x, y or z, got '" + std::string(w[2]) + "'");
     }
     if (w[3] == "+") {
       c.touch.direction = 1;
     } else if (w[3] == "-") {
       c.touch.direction = -1;
     } else {
-      throw ScriptError(line_no, "direction must be + or -, got '" + std::string(w[3]) + "'");
+      at.refuse(w[3], "direction must be + or -, got '" + std::string(w[3]) + "'");
     }
     std::size_t pos = 4;
     if (w.size() == 6) {
@@ -167,23 +198,22 @@ Command parse_line(std::string_view line, std::size_t line_no) {
         c.touch.variant = 0;
       } else if (variant == "axial") {
         if (c.touch.axis != 0) {
-          throw ScriptError(line_no, "only X is touched axially (along the stylus)");
+          at.refuse(w[4], "only X is touched axially (along the stylus)");
         }
         c.touch.variant = 1;
       } else {
-        throw ScriptError(line_no,
-                          "variant must be lateral or axial, got '" + std::string(w[4]) + "'");
+        at.refuse(w[4], "variant must be lateral or axial, got '" + std::string(w[4]) + "'");
       }
       pos = 5;
     }
-    c.touch.trigger_position_mm = number(w[pos], line_no, "trigger position");
+    c.touch.trigger_position_mm = number(w[pos], at, "trigger position");
     if (std::fabs(c.touch.trigger_position_mm) > 1e5) {
-      throw ScriptError(line_no, "trigger position beyond +-100000 mm");
+      at.refuse(w[pos], "trigger position beyond +-100000 mm");
     }
     return c;
   }
   if (verb == "facets") {
-    expect_words(w, 4, 4, line_no, "facets lateral|end-face <chord_plus_mm> <chord_minus_mm>");
+    expect_words(w, 4, 4, at, "facets lateral|end-face <chord_plus_mm> <chord_minus_mm>");
     CmdFacets c;
     const std::string face = lower(w[1]);
     if (face == "lateral") {
@@ -191,58 +221,56 @@ Command parse_line(std::string_view line, std::size_t line_no) {
     } else if (face == "end-face") {
       c.face = core::calib::Face::kEndFace;
     } else {
-      throw ScriptError(line_no,
-                        "face must be lateral or end-face, got '" + std::string(w[1]) + "'");
+      at.refuse(w[1], "face must be lateral or end-face, got '" + std::string(w[1]) + "'");
     }
-    c.chord_plus_mm = number(w[2], line_no, "chord_plus_mm");
-    c.chord_minus_mm = number(w[3], line_no, "chord_minus_mm");
+    c.chord_plus_mm = number(w[2], at, "chord_plus_mm");
+    c.chord_minus_mm = number(w[3], at, "chord_minus_mm");
     if (c.chord_plus_mm <= 0.0 || c.chord_minus_mm <= 0.0) {
-      throw ScriptError(line_no, "chords must be positive [mm]");
+      at.refuse(c.chord_plus_mm <= 0.0 ? w[2] : w[3], "chords must be positive [mm]");
     }
     return c;
   }
   if (verb == "facets-file") {
-    expect_words(w, 2, 3, line_no, "facets-file <path> [row]");
+    expect_words(w, 2, 3, at, "facets-file <path> [row]");
     CmdFacetsFile c;
     c.path = std::string(w[1]);
     if (w.size() == 3) {
       std::size_t row = 0;
       const auto res = std::from_chars(w[2].data(), w[2].data() + w[2].size(), row);
       if (res.ec != std::errc() || res.ptr != w[2].data() + w[2].size() || row < 1 || row > 10000) {
-        throw ScriptError(line_no,
-                          "row must be an integer 1..10000, got '" + std::string(w[2]) + "'");
+        at.refuse(w[2], "row must be an integer 1..10000, got '" + std::string(w[2]) + "'");
       }
       c.row = row;
     }
     return c;
   }
   if (verb == "recalibrate") {
-    expect_words(w, 1, 1, line_no, "recalibrate");
+    expect_words(w, 1, 1, at, "recalibrate");
     return CmdRecalibrate{};
   }
   if (verb == "await") {
-    expect_words(w, 2, 3, line_no, "await <phase> [timeout_s]");
+    expect_words(w, 2, 3, at, "await <phase> [timeout_s]");
     CmdAwait c;
     if (!parse_phase(lower(w[1]), c.phase)) {
-      throw ScriptError(line_no,
-                        "phase must be uncalibrated, reference-touches, test-grind-lateral, "
-                        "test-grind-end-face, nominal-touches or ready, got '" +
-                            std::string(w[1]) + "'");
+      at.refuse(w[1],
+                "phase must be uncalibrated, reference-touches, test-grind-lateral, "
+                "test-grind-end-face, nominal-touches or ready, got '" +
+                    std::string(w[1]) + "'");
     }
     if (w.size() == 3) {
-      c.timeout_s = number(w[2], line_no, "timeout");
+      c.timeout_s = number(w[2], at, "timeout");
       if (c.timeout_s <= 0.0 || c.timeout_s > 86400.0) {
-        throw ScriptError(line_no, "timeout must be in (0, 86400] s");
+        at.refuse(w[2], "timeout must be in (0, 86400] s");
       }
     }
     return c;
   }
   if (verb == "status") {
-    expect_words(w, 1, 1, line_no, "status");
+    expect_words(w, 1, 1, at, "status");
     return CmdStatus{};
   }
   if (verb == "discard") {
-    expect_words(w, 1, 1, line_no, "discard");
+    expect_words(w, 1, 1, at, "discard");
     return CmdDiscard{};
   }
   if (verb == "help") {
@@ -251,7 +279,7 @@ Command parse_line(std::string_view line, std::size_t line_no) {
   if (verb == "quit" || verb == "exit") {
     return CmdQuit{};
   }
-  throw ScriptError(line_no, "unknown command '" + std::string(w[0]) + "' (try 'help')");
+  at.refuse(w[0], "unknown command '" + std::string(w[0]) + "' (try 'help')");
 }
 
 }  // namespace nccomp::formats::calib

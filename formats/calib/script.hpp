@@ -17,13 +17,13 @@
 
 #include <cstddef>
 #include <cstdint>
-#include <stdexcept>
 #include <string>
 #include <string_view>
 #include <variant>
 
 #include "core/calib/calibrator.hpp"
 #include "core/common/types.hpp"
+#include "formats/toml/diagnostics.hpp"
 
 namespace nccomp::formats::calib {
 
@@ -66,18 +66,23 @@ using Command =
     std::variant<CmdEmpty, CmdTime, CmdWait, CmdTemperature, CmdBegin, CmdTouch, CmdFacets,
                  CmdStatus, CmdDiscard, CmdHelp, CmdQuit, CmdFacetsFile, CmdRecalibrate, CmdAwait>;
 
-/// A malformed line: what() is "line N: <why>".
-class ScriptError : public std::invalid_argument {
+/// A malformed line, or a command that cannot run now, as the one diagnostics type: one
+/// Diagnostic with the line, the column of the offending word (0 where the whole line is meant)
+/// and the reason, and no file: the caller names the script with in_file(). what() is "line N,
+/// column C: reason" (for a prompt, which has no file).
+class ScriptError : public formats::DiagnosticsError {
  public:
-  ScriptError(std::size_t line, const std::string& why)
-      : std::invalid_argument("line " + std::to_string(line) + ": " + why), line_(line) {}
-  [[nodiscard]] std::size_t line() const noexcept { return line_; }
+  ScriptError(std::size_t line, std::size_t column, std::string why);
+  [[nodiscard]] const formats::Diagnostic& diagnostic() const noexcept;
+  /// "file:line:column: reason".
+  [[nodiscard]] std::string in_file(std::string_view file) const;
+  [[nodiscard]] const char* what() const noexcept override { return text_.c_str(); }
 
  private:
-  std::size_t line_;
+  std::string text_;
 };
 
-/// Parses one line; throws ScriptError naming the line and the offending word.
+/// Parses one line; throws ScriptError naming the line and the offending word's column.
 Command parse_line(std::string_view line, std::size_t line_no);
 
 /// The help text listing the commands.

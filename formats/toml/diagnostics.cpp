@@ -28,6 +28,13 @@ void Diagnostics::error(const toml::node* node, std::string key_path, std::strin
   error(where_of(node, std::move(key_path)), std::move(message));
 }
 
+void Diagnostics::append(const Diagnostics& other, std::string_view file) {
+  for (Diagnostic item : other.items()) {
+    if (item.where.file.empty()) item.where.file = std::string(file);
+    items_.push_back(std::move(item));
+  }
+}
+
 std::string Diagnostics::to_string() const {
   std::string out;
   for (const auto& d : items_) {
@@ -39,12 +46,9 @@ std::string Diagnostics::to_string() const {
 
 namespace {
 
-Diagnostics with_file(Diagnostics d, const std::string& file) {
+Diagnostics with_file(const Diagnostics& d, const std::string& file) {
   Diagnostics out;
-  for (Diagnostic item : d.items()) {
-    if (item.where.file.empty()) item.where.file = file;
-    out.error(std::move(item.where), std::move(item.message));
-  }
+  out.append(d, file);
   return out;
 }
 

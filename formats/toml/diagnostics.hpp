@@ -9,6 +9,7 @@
 
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace nccomp::formats {
@@ -36,6 +37,9 @@ class Diagnostics {
   void error(Where where, std::string message);
   /// An error at node's source position.
   void error(const toml::node* node, std::string key_path, std::string message);
+  /// Appends every error of `other`; those without a file name (tables built in memory) get
+  /// `file`.
+  void append(const Diagnostics& other, std::string_view file);
   [[nodiscard]] bool ok() const noexcept { return items_.empty(); }
   [[nodiscard]] const std::vector<Diagnostic>& items() const noexcept { return items_; }
   /// All errors, one per line.

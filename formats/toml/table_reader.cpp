@@ -165,6 +165,16 @@ std::int64_t TableReader::integer(std::string_view key, std::optional<std::int64
   return v;
 }
 
+std::int64_t TableReader::power_of_two(std::string_view key, std::int64_t def, std::int64_t min,
+                                       std::int64_t max) {
+  const std::int64_t v = integer(key, def, min, max);
+  if (v <= 0 || (v & (v - 1)) != 0) {
+    error(key, "must be a power of two");
+    return def;
+  }
+  return v;
+}
+
 bool TableReader::boolean(std::string_view key, std::optional<bool> def) {
   note_default(key, def);
   const toml::node* n = get(key);

@@ -40,6 +40,9 @@ class TableReader {
   double number(std::string_view key, std::optional<double> def);
   std::int64_t integer(std::string_view key, std::optional<std::int64_t> def, std::int64_t min,
                        std::int64_t max);
+  /// An integer in [min, max] that is a power of two (ring capacities); def if absent or wrong.
+  std::int64_t power_of_two(std::string_view key, std::int64_t def, std::int64_t min,
+                            std::int64_t max);
   bool boolean(std::string_view key, std::optional<bool> def);
   std::string string(std::string_view key, std::optional<std::string> def);
   /// One of `choices`; reports the allowed ones otherwise.

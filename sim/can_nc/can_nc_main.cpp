@@ -165,7 +165,7 @@ int main(int argc, char** argv) {
   dc::CanConfig c;
   try {
     c = dc::load_can_config(argv[1]);
-  } catch (const dc::MappingError& e) {
+  } catch (const nccomp::formats::DiagnosticsError& e) {
     std::fprintf(stderr, "can_nc: %s\n", e.what());
     return 3;
   }

@@ -2,8 +2,8 @@
 
 #include <string_view>
 
+#include "formats/toml/diagnostics.hpp"
 #include "formats/toml/guard.hpp"
-#include "sim/ncsim/config.hpp"
 
 namespace nccomp::sim::ncsim {
 namespace {
@@ -18,9 +18,7 @@ toml::table parse(const std::string& text, const std::string& file) {
   try {
     return formats::parse_toml(text, file);
   } catch (const toml::parse_error& e) {
-    throw ConfigError(file + ":" + std::to_string(e.source().begin.line) + ":" +
-                      std::to_string(e.source().begin.column) + ": " +
-                      std::string(e.description()));
+    throw formats::DiagnosticsError(e, file);
   }
 }
 
@@ -47,7 +45,9 @@ void merge(toml::node& into, toml::node& from, const std::string& path, const st
     }
     return;
   }
-  throw ConfigError(place(from, file) + ": " + path + ": already defined at " + place(into, ""));
+  formats::Diagnostics diag;
+  diag.error(&from, path, "already defined at " + place(into, ""));
+  throw formats::DiagnosticsError(std::move(diag), file);
 }
 
 }  // namespace

@@ -13,8 +13,8 @@
 
 namespace nccomp::sim::ncsim {
 
-/// Parses the map and appends the extras (texts[i] read from files[i]). Throws ConfigError
-/// (sim/ncsim/config.hpp) with file:line:column.
+/// Parses the map and appends the extras (texts[i] read from files[i]). Throws
+/// formats::DiagnosticsError with file:line:column.
 toml::table merged_bus_map(const std::string& text, const std::string& file,
                            const std::vector<std::string>& extra_texts,
                            const std::vector<std::string>& extra_files);

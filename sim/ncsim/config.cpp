@@ -11,137 +11,76 @@
 #include <sstream>
 
 #include "formats/checkpoints/checkpoints_toml.hpp"
+#include "formats/toml/diagnostics.hpp"
 #include "formats/toml/guard.hpp"
+#include "formats/toml/table_reader.hpp"
 
 namespace nccomp::sim::ncsim {
 namespace {
 
 namespace fs = std::filesystem;
 
-std::string where(const std::string& file, const toml::source_region& r) {
-  // A value from --set carries its own source name: say so rather than point into the file.
-  if (r.path && *r.path == "--set") {
-    return "--set";
-  }
-  return file + ":" + std::to_string(r.begin.line) + ":" + std::to_string(r.begin.column);
+using formats::Diagnostics;
+using formats::TableReader;
+
+const toml::table& or_empty(const toml::table* t) {
+  static const toml::table kEmpty;
+  return t != nullptr ? *t : kEmpty;
 }
 
-/// One TOML table being read: typed getters with range checks, unknown keys refused at the end.
+/// ncsim's tables read with the one TableReader: a key absent from the file keeps the value the
+/// config already holds (its default, or an earlier program's), and every error is collected.
 class Reader {
  public:
-  Reader(const toml::table* t, std::string path, const std::string& file)
-      : t_(t), path_(std::move(path)), file_(file) {}
-
-  [[noreturn]] void fail(std::string_view key, const std::string& msg) const {
-    const toml::node* n = t_ != nullptr ? t_->get(key) : nullptr;
-    const std::string pos = n != nullptr    ? where(file_, n->source())
-                            : t_ != nullptr ? where(file_, t_->source())
-                                            : file_;
-    throw ConfigError(pos + ": " + key_path(key) + ": " + msg);
-  }
-  std::string key_path(std::string_view key) const {
-    return path_.empty() ? std::string(key) : path_ + "." + std::string(key);
-  }
+  Reader(const toml::table* t, std::string path, Diagnostics& diag)
+      : r_(or_empty(t), std::move(path), diag) {}
 
   void number(std::string_view key, double& out, double lo, double hi) {
-    const toml::node* n = take(key);
-    if (n == nullptr) {
-      return;
-    }
-    std::optional<double> v = n->value<double>();
-    if (!v || !n->is_number()) {
-      fail(key, "must be a number");
-    }
-    if (!std::isfinite(*v) || *v < lo || *v > hi) {
-      std::ostringstream s;
-      s << "must be in " << lo << " .. " << hi << ", got " << *v;
-      fail(key, s.str());
-    }
-    out = *v;
+    out = r_.number(key, out, lo, hi);
   }
   void integer(std::string_view key, std::int32_t& out, std::int64_t lo, std::int64_t hi) {
-    const toml::node* n = take(key);
-    if (n == nullptr) {
-      return;
-    }
-    if (!n->is_integer()) {
-      fail(key, "must be an integer");
-    }
-    const std::int64_t v = *n->value<std::int64_t>();
-    if (v < lo || v > hi) {
-      fail(key, "must be in " + std::to_string(lo) + " .. " + std::to_string(hi) + ", got " +
-                    std::to_string(v));
-    }
-    out = static_cast<std::int32_t>(v);
+    out = static_cast<std::int32_t>(r_.integer(key, out, lo, hi));
   }
-  void boolean(std::string_view key, bool& out) {
-    const toml::node* n = take(key);
-    if (n == nullptr) {
-      return;
-    }
-    if (!n->is_boolean()) {
-      fail(key, "must be true or false");
-    }
-    out = *n->value<bool>();
-  }
-  void string(std::string_view key, std::string& out) {
-    const toml::node* n = take(key);
-    if (n == nullptr) {
-      return;
-    }
-    if (!n->is_string()) {
-      fail(key, "must be a string");
-    }
-    out = *n->value<std::string>();
-  }
+  void boolean(std::string_view key, bool& out) { out = r_.boolean(key, out); }
+  void string(std::string_view key, std::string& out) { out = r_.string(key, out); }
   void vec3(std::string_view key, Vec3& out, double lo, double hi) {
-    const toml::node* n = take(key);
-    if (n == nullptr) {
+    const toml::node* n = r_.node().get(key);
+    const std::vector<double> v = r_.number_list(key, lo, hi);
+    if (n == nullptr || !n->is_array()) {
       return;
     }
-    const toml::array* a = n->as_array();
-    if (a == nullptr || a->size() != 3) {
-      fail(key, "must be an array of 3 numbers [x, y, z]");
-    }
-    for (std::size_t i = 0; i < 3; ++i) {
-      const auto v = (*a)[i].value<double>();
-      if (!v || !std::isfinite(*v) || *v < lo || *v > hi) {
-        fail(key, "element " + std::to_string(i) + " must be a number in range");
-      }
-      out[i] = *v;
+    if (n->as_array()->size() != 3) {
+      r_.error(key, "must be an array of 3 numbers [x, y, z]");
+    } else if (v.size() == 3) {
+      out = Vec3{v[0], v[1], v[2]};
     }
   }
+  /// Register indices.
   void int_list(std::string_view key, std::vector<std::int32_t>& out) {
-    const toml::node* n = take(key);
-    if (n == nullptr) {
-      return;
-    }
-    const toml::array* a = n->as_array();
-    if (a == nullptr) {
-      fail(key, "must be an array of integers");
-    }
-    out.clear();
-    for (const auto& e : *a) {
-      const auto v = e.value<std::int64_t>();
-      if (!e.is_integer() || *v < 0 || *v > 65535) {
-        fail(key, "elements must be register indices 0 .. 65535");
-      }
-      out.push_back(static_cast<std::int32_t>(*v));
+    const bool present = r_.node().contains(key);
+    const std::vector<std::int64_t> v = r_.integer_list(key, 0, 65535);
+    if (present) {
+      out.assign(v.begin(), v.end());
     }
   }
+  /// File names.
   void string_list(std::string_view key, std::vector<std::string>& out) {
-    const toml::node* n = take(key);
+    const toml::node* n = r_.value(key);
     if (n == nullptr) {
       return;
     }
     const toml::array* a = n->as_array();
     if (a == nullptr) {
-      fail(key, "must be an array of strings");
+      r_.error(key, "must be an array of strings");
+      return;
     }
     out.clear();
-    for (const auto& e : *a) {
+    for (std::size_t i = 0; i < a->size(); ++i) {
+      const toml::node& e = *a->get(i);
       if (!e.is_string() || e.value<std::string>()->empty()) {
-        fail(key, "elements must be non-empty strings (file names)");
+        r_.diagnostics().error(&e, r_.path(key) + "[" + std::to_string(i) + "]",
+                               "must be a non-empty string (a file name)");
+        continue;
       }
       out.push_back(*e.value<std::string>());
     }
@@ -149,59 +88,39 @@ class Reader {
   template <typename E>
   void choice(std::string_view key, E& out,
               std::initializer_list<std::pair<std::string_view, E>> options) {
-    std::string s;
-    const bool had = t_ != nullptr && t_->contains(key);
-    string(key, s);
-    if (!had) {
-      return;
-    }
-    std::string names;
+    std::vector<std::pair<std::string, E>> names;
     for (const auto& [name, value] : options) {
-      if (s == name) {
-        out = value;
-        return;
-      }
-      // Appended piecewise: GCC 12 warns (-Wrestrict, a false positive) on "\"" + string.
-      if (!names.empty()) {
-        names.append(", ");
-      }
-      names.append(1, '"').append(name).append(1, '"');
+      names.emplace_back(std::string(name), value);
     }
-    fail(key, "must be one of " + names + ", got \"" + s + "\"");
+    out = r_.pick(key, out, names);
   }
-  /// A sub-table (nullptr if absent); refuses a non-table.
-  const toml::table* table(std::string_view key) {
-    const toml::node* n = take(key);
-    if (n == nullptr) {
-      return nullptr;
-    }
-    if (!n->is_table()) {
-      fail(key, "must be a table");
-    }
-    return n->as_table();
-  }
-  void finish() const {
-    if (t_ == nullptr) {
-      return;
-    }
-    for (const auto& [k, v] : *t_) {
-      if (used_.count(std::string(k.str())) == 0) {
-        throw ConfigError(where(file_, v.source()) + ": " + key_path(k.str()) + ": unknown key");
-      }
-    }
-  }
-  const std::string& path() const { return path_; }
+  /// A sub-table (nullptr if absent or not a table).
+  const toml::table* table(std::string_view key) { return r_.table(key); }
+  void error(std::string_view key, std::string message) { r_.error(key, std::move(message)); }
+  void finish() { r_.finish(); }
 
  private:
-  const toml::node* take(std::string_view key) {
-    used_.insert(std::string(key));
-    return t_ != nullptr ? t_->get(key) : nullptr;
-  }
-  const toml::table* t_;
-  std::string path_;
-  const std::string& file_;
-  std::set<std::string> used_;
+  TableReader r_;
 };
+
+/// A data file's error at its line (0: the whole file).
+[[noreturn]] void data_error(const std::string& path, std::size_t line, std::string message) {
+  Diagnostics d;
+  d.error(formats::Where{path, static_cast<int>(line), 0, ""}, std::move(message));
+  throw formats::DiagnosticsError(std::move(d), path);
+}
+
+/// Runs a data file's reader; its errors join the config's. False if there was one.
+template <typename F>
+bool read_data(Diagnostics& diag, F&& read) {
+  try {
+    read();
+    return true;
+  } catch (const formats::DiagnosticsError& e) {
+    diag.append(e.diagnostics(), "");
+    return false;
+  }
+}
 
 std::string resolve(const std::string& base_dir, const std::string& p) {
   if (p.empty() || fs::path(p).is_absolute()) {
@@ -210,20 +129,24 @@ std::string resolve(const std::string& base_dir, const std::string& p) {
   return (fs::path(base_dir) / p).lexically_normal().string();
 }
 
-std::string read_text(const std::string& path, const std::string& what) {
+std::optional<std::string> read_text(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) {
-    throw ConfigError(what + ": cannot read " + path);
+    return std::nullopt;
   }
   std::ostringstream s;
   s << in.rdbuf();
   return s.str();
 }
 
-void apply_override(toml::table& root, const std::string& spec) {
+/// Applies one --set; what it cannot apply is reported.
+void apply_override(toml::table& root, const std::string& spec, Diagnostics& diag) {
+  const auto refuse = [&](const std::string& why) {
+    diag.error(formats::Where{"--set", 0, 0, ""}, spec + ": " + why);
+  };
   const auto eq = spec.find('=');
   if (eq == std::string::npos || eq == 0) {
-    throw ConfigError("--set " + spec + ": expected KEY=VALUE");
+    return refuse("expected KEY=VALUE");
   }
   std::string key = spec.substr(0, eq);
   const std::string value = spec.substr(eq + 1);
@@ -242,7 +165,7 @@ void apply_override(toml::table& root, const std::string& spec) {
   }
   for (const auto& p : parts) {
     if (p.empty()) {
-      throw ConfigError("--set " + spec + ": empty key part");
+      return refuse("empty key part");
     }
   }
   if (kEffects.count(parts.front()) != 0) {
@@ -256,7 +179,7 @@ void apply_override(toml::table& root, const std::string& spec) {
       n = t->get(parts[i]);
     }
     if (!n->is_table()) {
-      throw ConfigError("--set " + spec + ": " + parts[i] + " is not a table");
+      return refuse(parts[i] + " is not a table");
     }
     t = n->as_table();
   }
@@ -279,16 +202,16 @@ void apply_override(toml::table& root, const std::string& spec) {
       toml::table v = formats::parse_toml(std::string_view(quoted), std::string_view("--set"));
       t->insert_or_assign(parts.back(), std::move(*v.get("v")));
     } catch (const toml::parse_error&) {
-      throw ConfigError("--set " + spec + ": the value is neither TOML nor a plain string");
+      return refuse("the value is neither TOML nor a plain string");
     }
   }
 }
 
-void read_effects(const toml::table* eff, const std::string& file, const std::string& base,
-                  bool read_files, EffectsConfig& e) {
-  Reader r(eff, "effects", file);
+void read_effects(const toml::table* eff, const std::string& base, bool read_files,
+                  EffectsConfig& e, Diagnostics& diag) {
+  Reader r(eff, "effects", diag);
   {
-    Reader w(r.table("wear"), "effects.wear", file);
+    Reader w(r.table("wear"), "effects.wear", diag);
     WearConfig& c = e.wear;
     w.boolean("enabled", c.enabled);
     w.choice("curve", c.curve,
@@ -314,48 +237,53 @@ void read_effects(const toml::table* eff, const std::string& file, const std::st
     }
     if (c.curve == WearCurve::kTable) {
       if (phm_file.empty()) {
-        w.fail("phm_file", "curve = \"phm2010\" needs phm_file (c4_wear.csv or c6_wear.csv)");
+        w.error("phm_file", "curve = \"phm2010\" needs phm_file (c4_wear.csv or c6_wear.csv)");
+      } else if (column != "max" && column != "flute_1" && column != "flute_2" &&
+                 column != "flute_3") {
+        w.error("phm_column",
+                "must be one of \"flute_1\", \"flute_2\", \"flute_3\", \"max\", got \"" + column +
+                    "\"");
+      } else {
+        const std::string path = resolve(base, phm_file);
+        (void)read_data(diag, [&] {
+          const auto cols = read_csv_columns(path, {"cut", "flute_1", "flute_2", "flute_3"});
+          Curve curve;
+          double vb0 = std::numeric_limits<double>::quiet_NaN();
+          for (std::size_t i = 0; i < cols[0].size(); ++i) {
+            const double cut = cols[0][i];
+            double vb = 0.0;
+            if (column == "max") {
+              vb = std::max({cols[1][i], cols[2][i], cols[3][i]});
+            } else {
+              vb = cols[static_cast<std::size_t>(column.back() - '0')][i];
+            }
+            if (cut < start_cut) {
+              continue;
+            }
+            if (std::isnan(vb0)) {
+              vb0 = vb;
+            }
+            const double x = (cut - start_cut) * path_per_cut_mm;
+            if (!curve.x.empty() && !(x > curve.x.back())) {
+              data_error(path, 0, "cut numbers must increase");
+            }
+            curve.x.push_back(x);
+            curve.y.push_back((vb - vb0) * radial_per_vb);
+          }
+          if (curve.x.size() < 2) {
+            data_error(path, 0, "fewer than 2 cuts from start_cut on");
+          }
+          c.table = std::move(curve);
+          c.table_source = path + " (" + column + ", from cut " + std::to_string(start_cut) + ", " +
+                           std::to_string(path_per_cut_mm) + " mm per cut, radial = VB x " +
+                           std::to_string(radial_per_vb) + ")";
+        });
       }
-      if (column != "max" && column != "flute_1" && column != "flute_2" && column != "flute_3") {
-        w.fail("phm_column", "must be \"flute_1\", \"flute_2\", \"flute_3\" or \"max\"");
-      }
-      const std::string path = resolve(base, phm_file);
-      const auto cols = read_csv_columns(path, {"cut", "flute_1", "flute_2", "flute_3"});
-      Curve curve;
-      double vb0 = std::numeric_limits<double>::quiet_NaN();
-      for (std::size_t i = 0; i < cols[0].size(); ++i) {
-        const double cut = cols[0][i];
-        double vb = 0.0;
-        if (column == "max") {
-          vb = std::max({cols[1][i], cols[2][i], cols[3][i]});
-        } else {
-          vb = cols[static_cast<std::size_t>(column.back() - '0')][i];
-        }
-        if (cut < start_cut) {
-          continue;
-        }
-        if (std::isnan(vb0)) {
-          vb0 = vb;
-        }
-        const double x = (cut - start_cut) * path_per_cut_mm;
-        if (!curve.x.empty() && !(x > curve.x.back())) {
-          throw ConfigError(path + ": cut numbers must increase");
-        }
-        curve.x.push_back(x);
-        curve.y.push_back((vb - vb0) * radial_per_vb);
-      }
-      if (curve.x.size() < 2) {
-        throw ConfigError(path + ": fewer than 2 cuts from start_cut on");
-      }
-      c.table = std::move(curve);
-      c.table_source = path + " (" + column + ", from cut " + std::to_string(start_cut) + ", " +
-                       std::to_string(path_per_cut_mm) + " mm per cut, radial = VB x " +
-                       std::to_string(radial_per_vb) + ")";
     }
     w.finish();
   }
   {
-    Reader p(r.table("pushoff"), "effects.pushoff", file);
+    Reader p(r.table("pushoff"), "effects.pushoff", diag);
     PushoffConfig& c = e.pushoff;
     p.boolean("enabled", c.enabled);
     p.number("base_um", c.base_um, 0.0, 1e3);
@@ -365,7 +293,7 @@ void read_effects(const toml::table* eff, const std::string& file, const std::st
     p.finish();
   }
   {
-    Reader h(r.table("hardness"), "effects.hardness", file);
+    Reader h(r.table("hardness"), "effects.hardness", diag);
     h.boolean("enabled", e.hardness.enabled);
     h.number("amplitude", e.hardness.amplitude, 0.0, 0.9);
     h.number("wavelength_mm", e.hardness.wavelength_mm, 1.0, 1e5);
@@ -373,7 +301,7 @@ void read_effects(const toml::table* eff, const std::string& file, const std::st
     h.finish();
   }
   {
-    Reader t(r.table("thermal"), "effects.thermal", file);
+    Reader t(r.table("thermal"), "effects.thermal", diag);
     ThermalConfig& c = e.thermal;
     t.boolean("enabled", c.enabled);
     t.choice("mode", c.mode,
@@ -400,43 +328,46 @@ void read_effects(const toml::table* eff, const std::string& file, const std::st
     }
     if (c.mode == ThermalMode::kReplay) {
       if (replay_file.empty()) {
-        t.fail("replay_file", "mode = \"replay\" needs replay_file (FL_THERMAL data.csv)");
+        t.error("replay_file", "mode = \"replay\" needs replay_file (FL_THERMAL data.csv)");
+      } else {
+        const std::string path = resolve(base, replay_file);
+        (void)read_data(diag, [&] {
+          std::vector<std::string> names{"時間"};
+          for (const auto& ch : channels) {
+            if (!ch.empty()) {
+              names.push_back(ch);
+            }
+          }
+          names.push_back(temps[0]);
+          names.push_back(temps[1]);
+          const auto cols = read_csv_columns(path, names);
+          for (std::size_t i = 1; i < cols[0].size(); ++i) {
+            if (!(cols[0][i] > cols[0][i - 1])) {
+              data_error(path, i + 2, "time must increase");
+            }
+          }
+          std::size_t k = 1;
+          for (std::size_t a = 0; a < 3; ++a) {
+            if (channels[a].empty()) {
+              continue;
+            }
+            Curve cv{cols[0], cols[k]};
+            for (double& v : cv.y) {
+              v *= sign[a];
+            }
+            c.replay_um[a] = std::move(cv);
+            ++k;
+          }
+          c.replay_temperature_c[0] = Curve{cols[0], cols[k]};
+          c.replay_temperature_c[1] = Curve{cols[0], cols[k + 1]};
+          c.replay_source = path;
+        });
       }
-      const std::string path = resolve(base, replay_file);
-      std::vector<std::string> names{"時間"};
-      for (const auto& ch : channels) {
-        if (!ch.empty()) {
-          names.push_back(ch);
-        }
-      }
-      names.push_back(temps[0]);
-      names.push_back(temps[1]);
-      const auto cols = read_csv_columns(path, names);
-      std::size_t k = 1;
-      for (std::size_t a = 0; a < 3; ++a) {
-        if (channels[a].empty()) {
-          continue;
-        }
-        Curve cv{cols[0], cols[k]};
-        for (double& v : cv.y) {
-          v *= sign[a];
-        }
-        c.replay_um[a] = std::move(cv);
-        ++k;
-      }
-      c.replay_temperature_c[0] = Curve{cols[0], cols[k]};
-      c.replay_temperature_c[1] = Curve{cols[0], cols[k + 1]};
-      for (std::size_t i = 1; i < cols[0].size(); ++i) {
-        if (!(cols[0][i] > cols[0][i - 1])) {
-          throw ConfigError(path + ":" + std::to_string(i + 2) + ": time must increase");
-        }
-      }
-      c.replay_source = path;
     }
     t.finish();
   }
   {
-    Reader p(r.table("pitch"), "effects.pitch", file);
+    Reader p(r.table("pitch"), "effects.pitch", diag);
     p.boolean("enabled", e.pitch.enabled);
     p.vec3("amplitude_um", e.pitch.amplitude_um, -100.0, 100.0);
     p.number("pitch_mm", e.pitch.pitch_mm, 0.1, 1e3);
@@ -445,13 +376,13 @@ void read_effects(const toml::table* eff, const std::string& file, const std::st
   }
   for (auto [name, cfg] :
        {std::pair{"probe_noise", &e.probe_noise}, std::pair{"laser_noise", &e.laser_noise}}) {
-    Reader n(r.table(name), std::string("effects.") + name, file);
+    Reader n(r.table(name), std::string("effects.") + name, diag);
     n.boolean("enabled", cfg->enabled);
     n.number("sigma_um", cfg->sigma_um, 0.0, 1e3);
     n.finish();
   }
   {
-    Reader b(r.table("broken_tool"), "effects.broken_tool", file);
+    Reader b(r.table("broken_tool"), "effects.broken_tool", diag);
     b.boolean("enabled", e.broken_tool.enabled);
     b.number("at_path_mm", e.broken_tool.at_path_mm, 0.0, 1e9);
     b.number("wear_jump_um", e.broken_tool.wear_jump_um, 0.0, 1e5);
@@ -459,7 +390,7 @@ void read_effects(const toml::table* eff, const std::string& file, const std::st
     b.finish();
   }
   {
-    Reader o(r.table("probe_outlier"), "effects.probe_outlier", file);
+    Reader o(r.table("probe_outlier"), "effects.probe_outlier", diag);
     o.boolean("enabled", e.probe_outlier.enabled);
     o.integer("part", e.probe_outlier.part, 1, 1000000);
     o.integer("checkpoint", e.probe_outlier.checkpoint, 0, 100000);
@@ -491,7 +422,7 @@ std::vector<std::vector<double>> read_csv_columns(const std::string& path,
                                                   const std::vector<std::string>& columns) {
   std::ifstream in(path, std::ios::binary);
   if (!in) {
-    throw ConfigError("cannot read " + path);
+    data_error(path, 0, "cannot read the file");
   }
   std::string line;
   std::size_t line_no = 0;
@@ -499,8 +430,7 @@ std::vector<std::vector<double>> read_csv_columns(const std::string& path,
   // docs/grinding.md allow them) come before the header.
   for (;;) {
     if (!std::getline(in, line)) {
-      throw ConfigError(path + ":" + std::to_string(line_no + 1) +
-                        ": empty file, expected a header");
+      data_error(path, line_no + 1, "empty file, expected a header");
     }
     ++line_no;
     const auto first = line.find_first_not_of(" \t\r");
@@ -544,8 +474,7 @@ std::vector<std::vector<double>> read_csv_columns(const std::string& path,
       }
     }
     if (found == header.size()) {
-      throw ConfigError(path + ":" + std::to_string(line_no) + ": no column \"" + want +
-                        "\" in the header");
+      data_error(path, line_no, "no column \"" + want + "\" in the header");
     }
     idx.push_back(found);
   }
@@ -559,21 +488,20 @@ std::vector<std::vector<double>> read_csv_columns(const std::string& path,
     const auto cells = split(line);
     for (std::size_t k = 0; k < idx.size(); ++k) {
       if (idx[k] >= cells.size()) {
-        throw ConfigError(path + ":" + std::to_string(line_no) + ": missing column \"" +
-                          columns[k] + "\"");
+        data_error(path, line_no, "missing column \"" + columns[k] + "\"");
       }
       const std::string cell = trim(cells[idx[k]]);
       char* end = nullptr;
       const double v = std::strtod(cell.c_str(), &end);
       if (cell.empty() || *end != '\0' || !std::isfinite(v)) {
-        throw ConfigError(path + ":" + std::to_string(line_no) + ": column \"" + columns[k] +
-                          "\": not a finite number: \"" + cell + "\"");
+        data_error(path, line_no,
+                   "column \"" + columns[k] + "\": not a finite number: \"" + cell + "\"");
       }
       out[k].push_back(v);
     }
   }
   if (out.front().empty()) {
-    throw ConfigError(path + ": no data rows");
+    data_error(path, 0, "no data rows");
   }
   return out;
 }
@@ -586,19 +514,21 @@ SimConfig parse_sim_config(std::string_view text, const std::string& file,
   try {
     root = formats::parse_toml(text, file);
   } catch (const toml::parse_error& e) {
-    throw ConfigError(where(file, e.source()) + ": " + std::string(e.description()));
+    throw formats::DiagnosticsError(e, file);
   }
+  Diagnostics diag;
   for (const auto& o : overrides) {
-    apply_override(root, o);
+    apply_override(root, o, diag);
   }
   SimConfig c;
   c.file = file;
-  Reader top(&root, "", file);
+  Reader top(&root, "", diag);
   {
-    Reader n(top.table("ncsim"), "ncsim", file);
+    Reader n(top.table("ncsim"), "ncsim", diag);
     n.string("bus_map", c.bus_map_file);
     if (c.bus_map_file.empty()) {
-      n.fail("bus_map", "required: the daemon's register map (reference-nc-modbus.toml)");
+      n.error("bus_map",
+              "missing required key: the daemon's register map (reference-nc-modbus.toml)");
     }
     n.string_list("bus_map_extra", c.bus_map_extra_files);
     n.string("can_bus_map", c.can_bus_map_file);
@@ -613,10 +543,31 @@ SimConfig parse_sim_config(std::string_view text, const std::string& file,
     n.integer("parts", c.parts, 1, 100000);
     n.integer("first_part", c.first_part, 1, 1000000);
     n.number("tool_cut_path_mm", c.tool_cut_path_mm, 0.0, 1e9);
+    // The maps' files: resolved against the config's folder, read unless only the text is checked.
+    const auto read_map = [&](std::string_view key, std::string& f) {
+      f = resolve(base_dir, f);
+      std::optional<std::string> map_text;
+      if (read_files && !(map_text = read_text(f))) {
+        n.error(key, "cannot read " + f);
+      }
+      return map_text.value_or(std::string{});
+    };
+    if (!c.bus_map_file.empty()) {
+      c.bus_map_text = read_map("bus_map", c.bus_map_file);
+    }
+    for (auto& f : c.bus_map_extra_files) {
+      c.bus_map_extra_texts.push_back(read_map("bus_map_extra", f));
+    }
+    if (!c.can_bus_map_file.empty()) {
+      c.can_bus_map_text = read_map("can_bus_map", c.can_bus_map_file);
+    }
+    for (auto& f : c.can_bus_map_extra_files) {
+      c.can_bus_map_extra_texts.push_back(read_map("can_bus_map_extra", f));
+    }
     n.finish();
   }
   {
-    Reader n(top.table("nc"), "nc", file);
+    Reader n(top.table("nc"), "nc", diag);
     NcConfig& nc = c.nc;
     n.number("latency_s", nc.latency_s, 0.0, 60.0);
     n.number("offset_limit_um", nc.offset_limit_um, 0.0, 1e6);
@@ -632,11 +583,11 @@ SimConfig parse_sim_config(std::string_view text, const std::string& file,
     n.integer("tool", nc.tool, 1, 9999);
     n.finish();
   }
-  read_effects(top.table("effects"), file, base_dir, read_files, c.effects);
+  read_effects(top.table("effects"), base_dir, read_files, c.effects, diag);
   {
-    Reader p(top.table("program"), "program", file);
+    Reader p(top.table("program"), "program", diag);
     {
-      Reader m(p.table("mould_face"), "program.mould_face", file);
+      Reader m(p.table("mould_face"), "program.mould_face", diag);
       MouldFaceConfig& f = c.mould_face;
       m.number("size_x_mm", f.size_x_mm, 1.0, 1e4);
       m.number("size_y_mm", f.size_y_mm, 0.0, 1e4);
@@ -652,7 +603,7 @@ SimConfig parse_sim_config(std::string_view text, const std::string& file,
       m.finish();
     }
     {
-      Reader s(p.table("side_wall"), "program.side_wall", file);
+      Reader s(p.table("side_wall"), "program.side_wall", diag);
       SideWallConfig& w = c.side_wall;
       s.string("checkpoints_file", w.checkpoints_file);
       s.number("feed_mm_per_min", w.feed_mm_per_min, 1.0, 1e6);
@@ -664,15 +615,14 @@ SimConfig parse_sim_config(std::string_view text, const std::string& file,
         try {
           w.plan = formats::checkpoints::load_checkpoints_file(path, std::nullopt).plan;
         } catch (const std::exception& e) {
-          throw ConfigError(where(file, root.source()) +
-                            ": program.side_wall.checkpoints_file: " + e.what());
+          s.error("checkpoints_file", e.what());
         }
         w.checkpoints_file = path;
       }
       s.finish();
     }
     {
-      Reader t(p.table("touch"), "program.touch", file);
+      Reader t(p.table("touch"), "program.touch", diag);
       TouchConfig& tc = c.touch;
       t.integer("cycles", tc.cycles, 0, 10000);
       t.number("cycle_interval_s", tc.cycle_interval_s, 0.0, 1e6);
@@ -705,7 +655,7 @@ SimConfig parse_sim_config(std::string_view text, const std::string& file,
       t.finish();
     }
     {
-      Reader g(p.table("roll"), "program.roll", file);
+      Reader g(p.table("roll"), "program.roll", diag);
       RollConfig& rc = c.roll;
       std::string profile;
       g.string("trajectory_file", rc.trajectory_file);
@@ -716,22 +666,27 @@ SimConfig parse_sim_config(std::string_view text, const std::string& file,
       g.integer("passes", rc.passes, 1, 1000);
       if (!rc.trajectory_file.empty() && wants(ProgramKind::kRoll)) {
         rc.trajectory_file = resolve(base_dir, rc.trajectory_file);
-        auto t = read_csv_columns(rc.trajectory_file, {"z_mm", "u_mm"});
-        rc.z_mm = std::move(t[0]);
-        rc.u_mm = std::move(t[1]);
         if (profile.empty()) {
-          g.fail("profile_file", "the roll program needs the target profile (z_mm,u_mm)");
-        }
-        auto p2 = read_csv_columns(resolve(base_dir, profile), {"z_mm", "u_mm"});
-        rc.target_z_mm = std::move(p2[0]);
-        rc.target_u_mm = std::move(p2[1]);
-        for (const auto* zs : {&rc.z_mm, &rc.target_z_mm}) {
-          for (std::size_t i = 1; i < zs->size(); ++i) {
-            if (!((*zs)[i] > (*zs)[i - 1])) {
-              g.fail("trajectory_file",
-                     "z_mm must increase strictly (row " + std::to_string(i + 2) + ")");
+          g.error("profile_file", "the roll program needs the target profile (z_mm,u_mm)");
+        } else {
+          (void)read_data(diag, [&] {
+            auto t = read_csv_columns(rc.trajectory_file, {"z_mm", "u_mm"});
+            const std::string profile_path = resolve(base_dir, profile);
+            auto p2 = read_csv_columns(profile_path, {"z_mm", "u_mm"});
+            for (const auto& [zs, path] :
+                 {std::pair{&t[0], rc.trajectory_file}, std::pair{&p2[0], profile_path}}) {
+              for (std::size_t i = 1; i < zs->size(); ++i) {
+                if (!((*zs)[i] > (*zs)[i - 1])) {
+                  data_error(path, 0,
+                             "z_mm must increase strictly (row " + std::to_string(i + 2) + ")");
+                }
+              }
             }
-          }
+            rc.z_mm = std::move(t[0]);
+            rc.u_mm = std::move(t[1]);
+            rc.target_z_mm = std::move(p2[0]);
+            rc.target_u_mm = std::move(p2[1]);
+          });
         }
       }
       g.finish();
@@ -739,35 +694,28 @@ SimConfig parse_sim_config(std::string_view text, const std::string& file,
     p.finish();
   }
   top.finish();
-  c.bus_map_file = resolve(base_dir, c.bus_map_file);
-  if (read_files) {
-    c.bus_map_text = read_text(c.bus_map_file, "ncsim.bus_map");
-  }
-  for (auto& f : c.bus_map_extra_files) {
-    f = resolve(base_dir, f);
-    if (read_files) {
-      c.bus_map_extra_texts.push_back(read_text(f, "ncsim.bus_map_extra"));
+  if (!diag.ok()) {
+    // A value from --set carries "--set" as its file: its line and column say nothing.
+    Diagnostics named;
+    for (formats::Diagnostic d : diag.items()) {
+      if (d.where.file == "--set") {
+        d.where.line = 0;
+        d.where.column = 0;
+      }
+      named.error(std::move(d.where), std::move(d.message));
     }
-  }
-  if (!c.can_bus_map_file.empty()) {
-    c.can_bus_map_file = resolve(base_dir, c.can_bus_map_file);
-    if (read_files) {
-      c.can_bus_map_text = read_text(c.can_bus_map_file, "ncsim.can_bus_map");
-    }
-  }
-  for (auto& f : c.can_bus_map_extra_files) {
-    f = resolve(base_dir, f);
-    if (read_files) {
-      c.can_bus_map_extra_texts.push_back(read_text(f, "ncsim.can_bus_map_extra"));
-    }
+    throw formats::DiagnosticsError(std::move(named), file);
   }
   return c;
 }
 
 SimConfig load_sim_config(const std::string& path, const std::vector<std::string>& overrides,
                           std::optional<ProgramKind> program) {
-  const std::string text = read_text(path, "ncsim config");
-  return parse_sim_config(text, path, fs::path(path).parent_path().string(), overrides, true,
+  const std::optional<std::string> text = read_text(path);
+  if (!text) {
+    data_error(path, 0, "cannot read the file");
+  }
+  return parse_sim_config(*text, path, fs::path(path).parent_path().string(), overrides, true,
                           program);
 }
 

@@ -168,6 +168,11 @@ int main(int argc, char** argv) {
       sets = std::move(all);
     }
     config = load_sim_config(config_path, sets, opt.program);
+  } catch (const nccomp::formats::DiagnosticsError& e) {
+    for (const nccomp::formats::Diagnostic& d : e.diagnostics().items()) {
+      std::fprintf(stderr, "ncsim: %s\n", nccomp::formats::format(d).c_str());
+    }
+    return 3;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "ncsim: %s\n", e.what());
     return 3;

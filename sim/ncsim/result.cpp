@@ -8,7 +8,9 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "formats/toml/diagnostics.hpp"
 #include "formats/toml/guard.hpp"
+#include "formats/toml/table_reader.hpp"
 #include "sim/ncsim/config.hpp"
 
 namespace nccomp::sim::ncsim {
@@ -235,34 +237,39 @@ std::vector<std::string> continuation_overrides(const std::string& dir) {
   try {
     t = formats::parse_toml_file(path);
   } catch (const toml::parse_error& e) {
-    const auto& b = e.source().begin;
-    throw ConfigError(path + ":" + std::to_string(b.line) + ":" + std::to_string(b.column) + ": " +
-                      std::string(e.description()) + " (--continue needs the end_state.toml " +
-                      "of a finished mould_face or side_wall run)");
+    formats::Diagnostics diag;
+    diag.error(formats::Where{path, static_cast<int>(e.source().begin.line),
+                              static_cast<int>(e.source().begin.column), ""},
+               std::string(e.description()) +
+                   " (--continue needs the end_state.toml of a finished mould_face "
+                   "or side_wall run)");
+    throw formats::DiagnosticsError(std::move(diag), path);
   }
-  const toml::table* n = t["ncsim"].as_table();
-  if (n == nullptr || t.size() != 1) {
-    throw ConfigError(path + ": expected only an [ncsim] table");
-  }
+  formats::Diagnostics diag;
   std::vector<std::string> out;
-  for (const auto& [k, v] : *n) {
-    const std::string key(k.str());
-    if (key == "first_part" && v.is_integer()) {
-      out.push_back("ncsim.first_part=" + std::to_string(*v.value<std::int64_t>()));
-    } else if (key == "tool_cut_path_mm" && v.is_number()) {
-      char b[64];
-      std::snprintf(b, sizeof(b), "%.17g", *v.value<double>());
-      // Always a float literal for the TOML override.
-      std::string val = b;
-      if (val.find_first_of(".eEn") == std::string::npos) {
-        val += ".0";
+  {
+    formats::TableReader top(t, "", diag);
+    if (const toml::table* n = top.table("ncsim")) {
+      formats::TableReader r(*n, "ncsim", diag);
+      if (n->contains("first_part")) {
+        out.push_back("ncsim.first_part=" + std::to_string(r.integer("first_part", 1, 1, 1000000)));
       }
-      out.push_back("ncsim.tool_cut_path_mm=" + val);
-    } else {
-      throw ConfigError(path + ": ncsim." + key +
-                        ": unknown key or wrong type (first_part: integer, tool_cut_path_mm: "
-                        "number)");
+      if (n->contains("tool_cut_path_mm")) {
+        char b[64];
+        std::snprintf(b, sizeof(b), "%.17g", r.number("tool_cut_path_mm", 0.0, 0.0, 1e9));
+        // Always a float literal for the TOML override.
+        std::string val = b;
+        if (val.find_first_of(".eEn") == std::string::npos) {
+          val += ".0";
+        }
+        out.push_back("ncsim.tool_cut_path_mm=" + val);
+      }
+    } else if (!t.contains("ncsim")) {
+      top.error("ncsim", "missing [ncsim] table");
     }
+  }
+  if (!diag.ok()) {
+    throw formats::DiagnosticsError(std::move(diag), path);
   }
   return out;
 }

@@ -20,8 +20,8 @@ struct RunInfo {
 void write_result(const std::string& dir, const Simulation& sim, const RunInfo& info);
 
 /// `ncsim --continue DIR`: the --set overrides that start a run where the run in DIR ended
-/// (DIR/end_state.toml: ncsim.first_part, ncsim.tool_cut_path_mm). Throws ConfigError naming the
-/// file and the key.
+/// (DIR/end_state.toml: ncsim.first_part, ncsim.tool_cut_path_mm). Throws formats::DiagnosticsError
+/// naming the file and the key.
 std::vector<std::string> continuation_overrides(const std::string& dir);
 
 /// The effects as result.json shows them: {"wear": {"enabled": true, ...}, ...}.

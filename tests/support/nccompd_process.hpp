@@ -1,7 +1,7 @@
 // nccompd as a child process of a test: started with a config in a test directory, its stdout and
 // stderr appended to <dir>/nccompd.log, asked through its status socket (<dir>/status.sock, the
 // test configs put it there), signalled, stopped and reaped. One helper for every whole-process
-// test of the daemon (tests/hil/daemon, tests/hil/can, tests/hil/modbus, tests/unit/calib).
+// test of the daemon (tests/hil/daemon, tests/hil/can, tests/hil/modbus, tests/hil/calib).
 // The binary's path comes from the test target (NCCOMPD_BIN).
 #pragma once
 

@@ -122,14 +122,17 @@ void run_daemon(const Options& o) {
   std::string line;
   std::size_t line_no = 0;
   std::size_t errors = 0;
-  const auto fail = [&](const std::string& what) {
+  // column: of the offending word, 0 for the whole line.
+  const auto fail = [&](const std::string& what, std::size_t column = 0) {
     ++errors;
     if (interactive) {
       std::cout << "error: " << what << '\n';
       return;
     }
-    throw CommandError(kExitInvalidInput,
-                       source + ": line " + std::to_string(line_no) + ": " + what);
+    throw CommandError(
+        kExitInvalidInput,
+        nccomp::formats::format(nccomp::formats::Diagnostic{
+            {source, static_cast<int>(line_no), static_cast<int>(column), ""}, what}));
   };
   while (true) {
     if (interactive) {
@@ -143,9 +146,7 @@ void run_daemon(const Options& o) {
     try {
       cmd = cal::parse_line(line, line_no);
     } catch (const cal::ScriptError& e) {
-      std::string what = e.what();
-      what.erase(0, what.find(": ") + 2);  // "line N: " is added by fail()
-      fail(what);
+      fail(e.diagnostic().message, static_cast<std::size_t>(e.diagnostic().where.column));
       continue;
     }
     std::string send;
@@ -308,7 +309,7 @@ void run(const Options& o) {
         continue;
       }
       // A script stops at its first bad line and saves nothing: the operator fixes the file.
-      throw CommandError(kExitInvalidInput, source + ": " + e.what());
+      throw CommandError(kExitInvalidInput, e.in_file(source));
     }
   }
   std::cout << "-- " << session.hint() << '\n';

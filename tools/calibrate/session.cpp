@@ -95,7 +95,7 @@ bool Session::run(const Command& command, std::size_t line_no) {
           return true;
         } else if constexpr (std::is_same_v<T, CmdTime>) {
           if (c.time_s < t) {
-            throw ScriptError(line_no,
+            throw ScriptError(line_no, 0,
                               fmt::format("time {} s is before the current {} s", c.time_s, t));
           }
           now_ns_ = core::from_seconds(c.time_s);
@@ -157,10 +157,10 @@ bool Session::run(const Command& command, std::size_t line_no) {
           try {
             rows = read_facet_export(c.path);
           } catch (const std::invalid_argument& e) {
-            throw ScriptError(line_no, e.what());
+            throw ScriptError(line_no, 0, e.what());
           }
           if (c.row > rows.size()) {
-            throw ScriptError(line_no,
+            throw ScriptError(line_no, 0,
                               fmt::format("{}: has {} rows, not {}", c.path, rows.size(), c.row));
           }
           const FacetMeasurement& m = rows[c.row == 0 ? rows.size() - 1 : c.row - 1];
@@ -175,7 +175,7 @@ bool Session::run(const Command& command, std::size_t line_no) {
           step({});
           report(false);
         } else if constexpr (std::is_same_v<T, CmdAwait>) {
-          throw ScriptError(line_no,
+          throw ScriptError(line_no, 0,
                             "await needs --daemon (offline the clock moves only with time and "
                             "wait)");
         } else if constexpr (std::is_same_v<T, CmdStatus>) {

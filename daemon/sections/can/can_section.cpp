@@ -1,6 +1,7 @@
-// [can] in nccompd's config: parsed by the CAN driver's own parser (one definition of the signal
-// map for the daemon, ncsim and the HIL tests), its errors turned into the loader's diagnostics
-// (file:line:column: key path), cross-checked against [[registers]], and the bus built from it.
+// [can] in nccompd's config: read by the CAN driver's own reader (one definition of the signal
+// map for the daemon, ncsim and the HIL tests), which reports every error of the map into the
+// loader's diagnostics (file:line:column: key path), cross-checked against [[registers]], and the
+// bus built from it.
 // Not real-time.
 #include <memory>
 #include <string>
@@ -37,23 +38,11 @@ class CanParser final : public SectionParser {
     }
     const Where table_where = where_of(t, "can");
     auto s = std::make_unique<CanSection>();
-    try {
-      s->config = cn::parse_can_table(*t, table_where.file);
-    } catch (const cn::MappingError& e) {
-      Where w = table_where;
-      if (!e.file().empty()) {
-        w.file = e.file();
-      }
-      if (e.line() > 0) {
-        w.line = e.line();
-        w.column = e.column();
-      }
-      if (!e.key_path().empty()) {
-        w.key_path = e.key_path();
-      }
-      diag.error(std::move(w), e.message().empty() ? e.what() : e.message());
+    auto parsed = cn::read_can_table(*t, table_where.file, diag);
+    if (!parsed) {
       return nullptr;
     }
+    s->config = std::move(*parsed);
     // Positions of the offset mappings, for the cross-check's messages.
     if (const auto* arr = t->get_as<toml::array>("offset")) {
       for (std::size_t i = 0; i < arr->size(); ++i) {

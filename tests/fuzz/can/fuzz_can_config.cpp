@@ -1,5 +1,5 @@
 // Fuzz target: the [can] config parser and mapping validation (any bytes: parsed or refused with
-// MappingError, never a crash), and the frame decoder on the reference map (any payload).
+// DiagnosticsError, never a crash), and the frame decoder on the reference map (any payload).
 #include <cstddef>
 #include <cstdint>
 #include <span>
@@ -26,7 +26,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     for (const auto& r : c.mapping.offsets) {
       (void)dc::encode_offset(r, static_cast<double>(size) - 100.0, p);
     }
-  } catch (const dc::MappingError&) {
+  } catch (const nccomp::formats::DiagnosticsError&) {
   }
   return 0;
 }

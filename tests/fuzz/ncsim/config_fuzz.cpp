@@ -31,7 +31,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   }
   try {
     (void)parse_sim_config(text, "fuzz.toml", "/nonexistent", sets, false);
-  } catch (const ConfigError&) {
+  } catch (const nccomp::formats::DiagnosticsError&) {
   }
   try {
     const toml::table root = merged_bus_map(kMap, "map.toml", {text}, {"extra.toml"});

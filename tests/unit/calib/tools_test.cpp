@@ -127,26 +127,38 @@ TEST(Script, ParsesEveryCommand) {
   EXPECT_TRUE(std::holds_alternative<CmdBegin>(parse_line("begin", 7)));
 }
 
+// Each refusal is one Diagnostic: the line, the column of the offending word, the reason; the
+// caller names the script's file (file:line:column, as every other format's errors).
 TEST(Script, ErrorsNameLineAndWord) {
   const auto msg = [](const std::string& line) -> std::string {
     try {
       (void)parse_line(line, 12);
     } catch (const ScriptError& e) {
-      return e.what();
+      return e.in_file("s.txt");
     }
     return "";
   };
-  EXPECT_EQ(msg("touch machine w + 1.0"), "line 12: axis must be x, y or z, got 'w'");
+  EXPECT_EQ(msg("touch machine w + 1.0"), "s.txt:12:15: axis must be x, y or z, got 'w'");
   EXPECT_EQ(msg("touch machine y + axial 1.0"),
-            "line 12: only X is touched axially (along the stylus)");
+            "s.txt:12:19: only X is touched axially (along the stylus)");
   EXPECT_EQ(msg("touch machine x + 1.0x"),
-            "line 12: trigger position must be a finite number, got '1.0x'");
+            "s.txt:12:19: trigger position must be a finite number, got '1.0x'");
   EXPECT_EQ(msg("facets lateral 1.9 nan"),
-            "line 12: chord_minus_mm must be a finite number, got 'nan'");
-  EXPECT_EQ(msg("facets lateral 1.9 -2"), "line 12: chords must be positive [mm]");
-  EXPECT_EQ(msg("temperature 300 20"), "line 12: sensor must be an integer 0..255, got '300'");
-  EXPECT_EQ(msg("grind"), "line 12: unknown command 'grind' (try 'help')");
-  EXPECT_NE(msg("touch machine x +").find("usage: touch"), std::string::npos);
+            "s.txt:12:20: chord_minus_mm must be a finite number, got 'nan'");
+  EXPECT_EQ(msg("facets lateral 1.9 -2"), "s.txt:12:20: chords must be positive [mm]");
+  EXPECT_EQ(msg("temperature 300 20"), "s.txt:12:13: sensor must be an integer 0..255, got '300'");
+  EXPECT_EQ(msg("  grind"), "s.txt:12:3: unknown command 'grind' (try 'help')");
+  EXPECT_NE(msg("touch machine x +").find("s.txt:12:1: usage: touch"), std::string::npos);
+  try {
+    (void)parse_line("touch machine w + 1.0", 12);
+    FAIL() << "accepted axis w";
+  } catch (const ScriptError& e) {
+    // A prompt has no file: what() names line and column.
+    EXPECT_EQ(std::string(e.what()), "line 12, column 15: axis must be x, y or z, got 'w'");
+    EXPECT_EQ(e.diagnostic().where.line, 12);
+    EXPECT_EQ(e.diagnostic().where.column, 15);
+    EXPECT_EQ(e.diagnostic().message, "axis must be x, y or z, got 'w'");
+  }
 }
 
 std::string run_script(Session& s, const std::string& path) {

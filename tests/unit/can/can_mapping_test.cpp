@@ -28,7 +28,7 @@ std::string reference_path() {
 std::string parse_error(const std::string& text) {
   try {
     (void)parse_can_config(text, "test.toml");
-  } catch (const MappingError& e) {
+  } catch (const formats::DiagnosticsError& e) {
     return e.what();
   }
   return "";
@@ -127,7 +127,7 @@ TEST(CanConfig, AlarmAfterSecondsParsedDefaultedAndRangeChecked) {
   EXPECT_DOUBLE_EQ(parse_can_config(kHead + "alarm_after_s = 0.25\n", "test.toml").alarm_after_s,
                    0.25);
   const std::string e = parse_error(kHead + "alarm_after_s = -1\n");
-  EXPECT_NE(e.find("test.toml:3: can.alarm_after_s: must be in [0, 3600], got -1"),
+  EXPECT_NE(e.find("test.toml:3:17: can.alarm_after_s: must be a number in [0, 3600], got -1"),
             std::string::npos)
       << e;
 }
@@ -146,7 +146,7 @@ TEST(CanConfig, ReconnectBackOffKeysParsedDefaultedAndChecked) {
       parse_can_config(kHead + "reconnect_max_s = 30\n", "test.toml").reconnect_reset_after_s,
       30.0);
   const std::string e = parse_error(kHead + "reconnect_max_s = 30\nreconnect_reset_after_s = 20\n");
-  EXPECT_NE(e.find("test.toml:4: can.reconnect_reset_after_s: smaller than reconnect_max_s"),
+  EXPECT_NE(e.find("test.toml:4:27: can.reconnect_reset_after_s: smaller than reconnect_max_s"),
             std::string::npos)
       << e;
 }
@@ -158,8 +158,9 @@ TEST(CanConfig, DegradedAlarmAfterSecondsParsedDefaultedAndRangeChecked) {
                        .degraded_alarm_after_s,
                    0.5);
   const std::string e = parse_error(kHead + "degraded_alarm_after_s = 0\n");
-  EXPECT_NE(e.find("test.toml:3: can.degraded_alarm_after_s: must be in [0.01, 3600], got 0"),
-            std::string::npos)
+  EXPECT_NE(
+      e.find("test.toml:3:26: can.degraded_alarm_after_s: must be a number in [0.01, 3600], got 0"),
+      std::string::npos)
       << e;
 }
 
@@ -215,7 +216,7 @@ TEST(CanConfig, OverlapRefusedWithKeyPathAndLine) {
       "[[can.rx.signal]]\nname = \"tool\"\nstart_bit = 0\nlength_bits = 16\n"
       "[[can.rx.signal]]\nname = \"sister\"\nstart_bit = 15\nlength_bits = 1\n";
   const std::string e = parse_error(text);
-  EXPECT_NE(e.find("test.toml:10: can.rx[0].signal[1].start_bit: overlaps another signal"),
+  EXPECT_NE(e.find("test.toml:12:13: can.rx[0].signal[1].start_bit: overlaps another signal"),
             std::string::npos)
       << e;
 }
@@ -237,7 +238,7 @@ TEST(CanConfig, UnknownSignalNameRefusedListingKnownOnes) {
                            "[[can.rx.signal]]\nname = \"tool_number\"\nstart_bit = 0\n"
                            "length_bits = 16\n";
   const std::string e = parse_error(text);
-  EXPECT_NE(e.find("test.toml:6: can.rx[0].signal[0].name: unknown signal 'tool_number' for "
+  EXPECT_NE(e.find("test.toml:7:8: can.rx[0].signal[0].name: unknown signal 'tool_number' for "
                    "event tool_change (known: tool, sister)"),
             std::string::npos)
       << e;
@@ -245,7 +246,7 @@ TEST(CanConfig, UnknownSignalNameRefusedListingKnownOnes) {
 
 TEST(CanConfig, UnknownKeyRefused) {
   const std::string e = parse_error(kHead + "ack_timout_s = 0.1\n");
-  EXPECT_NE(e.find("test.toml:3: can.ack_timout_s: unknown key"), std::string::npos) << e;
+  EXPECT_NE(e.find("test.toml:3:16: can.ack_timout_s: unknown key"), std::string::npos) << e;
 }
 
 TEST(CanConfig, DuplicateIdsAndRegistersRefused) {
@@ -279,7 +280,7 @@ TEST(CanConfig, FdLengthsNeedFdAndValidLengths) {
 }
 
 TEST(CanConfig, BadValuesNameTheirKey) {
-  EXPECT_NE(parse_error("[can]\n").find("test.toml:1: can.interface: required key missing"),
+  EXPECT_NE(parse_error("[can]\n").find("test.toml:1:1: can.interface: missing required key"),
             std::string::npos);
   EXPECT_NE(parse_error(kHead + "rx_ring_events = 1000\n")
                 .find("can.rx_ring_events: must be a power of two"),
@@ -292,7 +293,9 @@ TEST(CanConfig, BadValuesNameTheirKey) {
           .find("can.rx[0].id: 0x800 exceeds the 11-bit ID range"),
       std::string::npos);
   EXPECT_NE(parse_error(kHead + "[[can.rx]]\nid = 1\nevent = \"spindle\"\n")
-                .find("can.rx[0].event: unknown event"),
+                .find("can.rx[0].event: must be one of \"axis_sample\", \"tool_measurement\", "
+                      "\"probe_measurement\", \"calibration_touch\", \"tool_change\", "
+                      "\"program_event\", \"temperature\", got \"spindle\""),
             std::string::npos);
   EXPECT_NE(parse_error("[can\n").find("test.toml:1:"), std::string::npos);
   EXPECT_NE(parse_error(kHead + "[[can.rx]]\nid = 1\nevent = \"temperature\"\n"
@@ -300,6 +303,64 @@ TEST(CanConfig, BadValuesNameTheirKey) {
                                 "length_bits = 16\ntype = \"float\"\n")
                 .find("a float signal is 32 or 64 bits"),
             std::string::npos);
+}
+
+// GIVEN a map with mistakes of every kind (a value out of range, a bad choice inside a frame, an
+// unknown key, two signals sharing a bit, a standard ID beyond 11 bits), WHEN it is read, THEN
+// each is reported at its key's file:line:column, not only the first.
+TEST(CanConfig, EveryErrorOfAMapIsReportedNotOnlyTheFirst) {
+  const std::string text =
+      "[can]\ninterface = \"vcan0\"\nack_retries = 200\nack_timout_s = 0.1\n"
+      "[[can.rx]]\nid = 0x10\nevent = \"tool_change\"\n"
+      "[[can.rx.signal]]\nname = \"tool\"\nstart_bit = 0\nlength_bits = 16\ntype = \"int\"\n"
+      "[[can.rx]]\nid = 0x20\nevent = \"temperature\"\n"
+      "[[can.rx.signal]]\nname = \"sensor\"\nstart_bit = 0\nlength_bits = 8\n"
+      "[[can.rx.signal]]\nname = \"temperature_c\"\nstart_bit = 4\nlength_bits = 16\n"
+      "[[can.offset]]\nregister = 0\nid = 0x900\n"
+      "[can.offset.value]\nstart_bit = 0\nlength_bits = 32\ntype = \"signed\"\n";
+  try {
+    (void)parse_can_config(text, "t.toml");
+    FAIL() << "accepted";
+  } catch (const formats::DiagnosticsError& e) {
+    EXPECT_EQ(std::string(e.what()),
+              "t.toml:3:15: can.ack_retries: must be an integer in [0, 100], got 200\n"
+              "t.toml:12:8: can.rx[0].signal[0].type: must be one of \"unsigned\", \"signed\", "
+              "\"float\", got \"int\"\n"
+              "t.toml:4:16: can.ack_timout_s: unknown key\n"
+              "t.toml:22:13: can.rx[1].signal[1].start_bit: overlaps another signal of the frame "
+              "at bit 4\n"
+              "t.toml:26:6: can.offset[0].id: 0x900 exceeds the 11-bit ID range (max 0x7FF)");
+  }
+  const toml::table root = toml::parse(std::string_view(text), std::string_view("t.toml"));
+  formats::Diagnostics diag;
+  EXPECT_FALSE(read_can_table(*root["can"].as_table(), "t.toml", diag));
+  ASSERT_EQ(diag.items().size(), 5U) << diag.to_string();
+  EXPECT_EQ(diag.items()[3].where.key_path, "can.rx[1].signal[1].start_bit");
+  EXPECT_EQ(diag.items()[3].where.file, "t.toml");
+  EXPECT_EQ(diag.items()[3].where.line, 22);
+  EXPECT_EQ(diag.items()[3].where.column, 13);
+}
+
+// GIVEN a map built in code (no TOML positions), WHEN it is validated, THEN every problem is
+// reported with the element's own place and the key path below it.
+TEST(CanConfig, ValidatingAMapBuiltInCodeReportsEveryProblemAtItsElement) {
+  CanMapping m;
+  m.file = "built.toml";
+  RxFrame f;
+  f.id = 0x800;  // beyond 11 bits
+  f.event = EventKind::kToolChange;
+  f.origin = {"", 5, 1, "can.rx[0]"};
+  RxSignal s;
+  s.name = "tool_number";
+  s.origin = {"", 8, 1, "can.rx[0].signal[0]"};
+  f.signals.push_back(s);
+  m.rx.push_back(f);
+  formats::Diagnostics diag;
+  EXPECT_FALSE(validate_mapping(m, diag));
+  EXPECT_EQ(diag.to_string(),
+            "built.toml:5:1: can.rx[0].id: 0x800 exceeds the 11-bit ID range (max 0x7FF)\n"
+            "built.toml:8:1: can.rx[0].signal[0].name: unknown signal 'tool_number' for event "
+            "tool_change (known: tool, sister)\n");
 }
 
 class DecoderTest : public ::testing::Test {

@@ -24,7 +24,7 @@ std::string header() {
 std::string error_of(const std::string& text, const std::vector<std::string>& sets = {}) {
   try {
     (void)parse_sim_config(text, "t.toml", ".", sets);
-  } catch (const ConfigError& e) {
+  } catch (const formats::DiagnosticsError& e) {
     return e.what();
   }
   return "";
@@ -56,13 +56,13 @@ TEST(NcsimConfig, SetSwitchesAnEffectAndTopLevelKeys) {
 
 TEST(NcsimConfig, RefusalsNameFileLineAndKey) {
   EXPECT_EQ(error_of(header() + "[effects.wear]\nrate_um_per_m = -1\n"),
-            "t.toml:4:17: effects.wear.rate_um_per_m: must be in 0 .. 10000, got -1");
+            "t.toml:4:17: effects.wear.rate_um_per_m: must be a number in [0, 10000], got -1");
   EXPECT_EQ(error_of(header() + "[effects.wear]\nrate = 1\n"),
             "t.toml:4:8: effects.wear.rate: unknown key");
   EXPECT_EQ(error_of(header() + "[effects.thermal]\nmode = \"cubic\"\n"),
             "t.toml:4:8: effects.thermal.mode: must be one of \"first_order\", \"replay\", got "
             "\"cubic\"");
-  EXPECT_NE(error_of("[ncsim]\n").find("ncsim.bus_map: required"), std::string::npos);
+  EXPECT_NE(error_of("[ncsim]\n").find("ncsim.bus_map: missing required key"), std::string::npos);
   EXPECT_NE(error_of(header() + "[nc\n").find("t.toml:3:"), std::string::npos);
   EXPECT_NE(error_of(header(), {"nosuch.key=1"}).find("nosuch: unknown key"), std::string::npos);
   EXPECT_EQ(error_of(header() + "[effects.wear]\nenabled = true\n", {"wear.rate=1"}),
@@ -74,6 +74,17 @@ TEST(NcsimConfig, RefusalsNameFileLineAndKey) {
             std::string::npos);
 }
 
+// GIVEN a config with several mistakes in different tables and one in a --set, WHEN it is
+// parsed, THEN each is reported (file:line:column or --set, key path), not only the first.
+TEST(NcsimConfig, EveryErrorOfAConfigIsReportedNotOnlyTheFirst) {
+  EXPECT_EQ(error_of(header() + "[effects.wear]\nrate_um_per_m = -1\nrate = 1\n[nc]\ntool = 0\n",
+                     {"thermal.enabled=maybe"}),
+            "t.toml:7:8: nc.tool: must be an integer in [1, 9999], got 0\n"
+            "t.toml:4:17: effects.wear.rate_um_per_m: must be a number in [0, 10000], got -1\n"
+            "t.toml:5:8: effects.wear.rate: unknown key\n"
+            "--set: effects.thermal.enabled: must be true or false");
+}
+
 TEST(NcsimConfig, CsvReaderNamesLineAndColumn) {
   const std::string path = ::testing::TempDir() + "/ncsim_bad.csv";
   {
@@ -83,7 +94,7 @@ TEST(NcsimConfig, CsvReaderNamesLineAndColumn) {
   try {
     (void)read_csv_columns(path, {"z_mm", "u_mm"});
     FAIL() << "accepted a bad number";
-  } catch (const ConfigError& e) {
+  } catch (const formats::DiagnosticsError& e) {
     EXPECT_EQ(std::string(e.what()), path + ":3: column \"u_mm\": not a finite number: \"abc\"");
   }
   // '#' comments and blank lines are skipped, before the header as well.
@@ -100,7 +111,7 @@ TEST(NcsimConfig, CsvReaderNamesLineAndColumn) {
   try {
     (void)read_csv_columns(path, {"z_mm", "w_mm"});
     FAIL() << "accepted a missing column";
-  } catch (const ConfigError& e) {
+  } catch (const formats::DiagnosticsError& e) {
     EXPECT_EQ(std::string(e.what()), path + ":1: no column \"w_mm\" in the header");
   }
 }
@@ -143,7 +154,7 @@ TEST(NcsimConfig, BusMapExtraFilesAreAppended) {
   try {
     (void)merged_bus_map(c.bus_map_text, c.bus_map_file, {"\n[modbus]\nport = 1\n"}, {"y.toml"});
     FAIL() << "accepted modbus.port twice";
-  } catch (const ConfigError& e) {
+  } catch (const formats::DiagnosticsError& e) {
     const std::string w = e.what();
     EXPECT_EQ(w.rfind("y.toml:3:8: modbus.port: already defined at ", 0), 0U) << w;
     EXPECT_NE(w.find("reference-nc-modbus.toml:"), std::string::npos) << w;
@@ -194,15 +205,15 @@ TEST(NcsimConfig, ContinueReadsTheEndStateOfARun) {
   try {
     (void)continuation_overrides(dir);
     FAIL() << "accepted an unknown key";
-  } catch (const ConfigError& e) {
-    EXPECT_NE(std::string(e.what()).find("end_state.toml: ncsim.wear_um: unknown key"),
+  } catch (const formats::DiagnosticsError& e) {
+    EXPECT_NE(std::string(e.what()).find("end_state.toml:3:11: ncsim.wear_um: unknown key"),
               std::string::npos)
         << e.what();
   }
   try {
     (void)continuation_overrides(dir + "/nowhere");
     FAIL() << "accepted a missing directory";
-  } catch (const ConfigError& e) {
+  } catch (const formats::DiagnosticsError& e) {
     EXPECT_NE(std::string(e.what()).find("--continue needs the end_state.toml"), std::string::npos)
         << e.what();
   }

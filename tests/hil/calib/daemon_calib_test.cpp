@@ -21,8 +21,8 @@
 #include <string>
 
 #include "core/calib/state.hpp"
+#include "tests/hil/calib/daemon_process.hpp"
 #include "tests/support/run_as.hpp"
-#include "tests/unit/calib/daemon_process.hpp"
 #include "tools/calibrate/session.hpp"
 
 namespace nccomp::test::calib {
@@ -106,7 +106,7 @@ TEST(NccompdCalibration, OperatorCalibratesOverTheSocketAndRecalibrationsTrack) 
   EXPECT_NEAR(value_after(*a, "ALARM 40 recalibration-implausible axis Y: "), 70.0, 0.6) << *a;
   EXPECT_NE(a->find("um, nothing applied"), std::string::npos) << *a;
   std::this_thread::sleep_for(300ms);
-  j = raw_request(d.socket(), "json");
+  j = d.json();
   EXPECT_NEAR(register_output(j, "Y_offset"), base_y - 5.0, 0.5) << j;
   a = d.ask("status");
   EXPECT_NEAR(value_after(*a, "X lateral: nominal "), 118.0, 0.01) << *a;
@@ -136,7 +136,7 @@ TEST(NccompdCalibration, RestartMidCreepContinuesWhereTheNcIs) {
       for (int i = 0; i < 2; ++i) (void)d.ask(touch_line(m.machine_touch(slot, 1, 0)));
     }
     std::this_thread::sleep_for(1500ms);  // mid-creep (4 s)
-    j = raw_request(d.socket(), "json");
+    j = d.json();
     before_x = register_output(j, "X_offset");
     EXPECT_GT(before_x, base_x + 2.0) << j;
     EXPECT_LT(before_x, base_x + 18.0) << j;
@@ -150,7 +150,7 @@ TEST(NccompdCalibration, RestartMidCreepContinuesWhereTheNcIs) {
   std::string j;
   const auto end = std::chrono::steady_clock::now() + 8s;
   while (std::chrono::steady_clock::now() < end) {
-    j = raw_request(d.socket(), "json");
+    j = d.json();
     const double x = register_output(j, "X_offset");
     if (std::isfinite(x)) lowest = std::min(lowest, x);
     if (std::fabs(x - (base_x + 20.0)) < 0.3) break;
@@ -277,7 +277,7 @@ TEST(NccompdCalibration, OnlyTheAdminGroupFeedsTheCalibrator) {
                 .answer.rfind("error: permission denied: ", 0),
             0U);
   std::this_thread::sleep_for(500ms);
-  std::string j = raw_request(d.socket(), "json");
+  std::string j = d.json();
   EXPECT_NEAR(register_output(j, "X_offset"), base_x, 1e-9) << j;
   EXPECT_EQ(text(j, "phase"), "ready");
   EXPECT_NE(d.log_text().find("operator command refused: 'calibrate " + touches.back() +

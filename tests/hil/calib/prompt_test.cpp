@@ -2,6 +2,7 @@
 // branch, a wrong line retyped), and against a running nccompd (--daemon: a script with await,
 // a pipe with --interactive, facet chords from a device export, a bad export refused at its line).
 #include <gtest/gtest.h>
+#include <poll.h>
 #include <pty.h>
 
 #include <cmath>
@@ -11,7 +12,7 @@
 #include <vector>
 
 #include "core/calib/state.hpp"
-#include "tests/unit/calib/daemon_process.hpp"
+#include "tests/hil/calib/daemon_process.hpp"
 
 namespace nccomp::test::calib {
 namespace {
@@ -79,13 +80,14 @@ TEST(CalibratePrompt, TerminalPromptShowsTheNextStepAndLetsAWrongLineBeRetyped) 
       out.text.find("-- not calibrated: 'begin' starts an initial calibration\r\ncalibrate> "),
       std::string::npos)
       << out.text;
-  EXPECT_NE(out.text.find("error: line 2: axis must be x, y or z, got 'q'"), std::string::npos)
+  EXPECT_NE(out.text.find("error: line 2, column 17: axis must be x, y or z, got 'q'"),
+            std::string::npos)
       << out.text;
   EXPECT_NE(out.text.find("-- touch the reference disk with the reference probe (X lateral 1/2, "
                           "X axial 0/2, Y 0/2, Z 0/2)"),
             std::string::npos)
       << out.text;
-  EXPECT_NE(out.text.find("error: line 4: unknown command 'bogus' (try 'help')"),
+  EXPECT_NE(out.text.find("error: line 4, column 1: unknown command 'bogus' (try 'help')"),
             std::string::npos);
   EXPECT_NE(out.text.find("saved state " + state), std::string::npos);
   std::ifstream in(state);

@@ -1,21 +1,14 @@
 // Helpers of the whole-process calibration tests (daemon_calib_test.cpp, prompt_test.cpp): an
-// nccompd process on the loopback bus with the machine of test_config(), requests on its status
-// socket, JSON values.
+// nccompd process (tests/support/nccompd_process.hpp) on the loopback bus with the machine of
+// test_config(), calibrate requests on its status socket, JSON values.
 #pragma once
 
-#include <fcntl.h>
 #include <gtest/gtest.h>
-#include <poll.h>
-#include <signal.h>
-#include <spawn.h>
-#include <sys/socket.h>
-#include <sys/un.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <chrono>
 #include <cmath>
-#include <cstring>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <optional>
@@ -23,14 +16,12 @@
 #include <sstream>
 #include <string>
 #include <thread>
-#include <vector>
 
 #include "client/protocol.hpp"
 #include "client/status_client.hpp"
+#include "tests/support/nccompd_process.hpp"
 #include "tests/unit/calib/sim_machine.hpp"
 #include "tests/unit/calib/test_config.hpp"
-
-extern char** environ;
 
 namespace nccomp::test::calib {
 
@@ -86,23 +77,13 @@ struct TempDir {
   fs::path path;
 };
 
+/// nccompd with the calibration: up once the calibration module answers; a sanitizer report in
+/// its log fails the test when it stops.
 class Daemon {
  public:
-  explicit Daemon(fs::path dir) : dir_(std::move(dir)) {}
-  ~Daemon() { kill_now(); }
+  explicit Daemon(fs::path dir) : process_(std::move(dir), NCCOMPD_BIN) {}
   void start() {
-    std::vector<std::string> args{NCCOMPD_BIN, "--config", (dir_ / "nccompd.toml").string()};
-    std::vector<char*> argv;
-    for (auto& a : args) argv.push_back(a.data());
-    argv.push_back(nullptr);
-    posix_spawn_file_actions_t fa;
-    posix_spawn_file_actions_init(&fa);
-    const std::string log = (dir_ / "nccompd.log").string();
-    posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-    posix_spawn_file_actions_adddup2(&fa, 1, 2);
-    ASSERT_EQ(posix_spawn(&pid_, NCCOMPD_BIN, &fa, nullptr, argv.data(), environ), 0);
-    posix_spawn_file_actions_destroy(&fa);
-    // Up once the calibration module answers.
+    ASSERT_TRUE(process_.start()) << "cannot spawn " << NCCOMPD_BIN;
     const auto end = std::chrono::steady_clock::now() + 20s;
     while (std::chrono::steady_clock::now() < end) {
       if (const auto a = ask(""); a && a->rfind("ok ", 0) == 0) return;
@@ -110,28 +91,16 @@ class Daemon {
     }
     FAIL() << "nccompd did not answer 'calibrate'\n" << log_text();
   }
+  /// SIGTERM; the exit status, -1 if it did not end within 10 s.
   int stop() {
-    ::kill(pid_, SIGTERM);
-    for (int i = 0; i < 1000; ++i) {
-      int st = 0;
-      if (::waitpid(pid_, &st, WNOHANG) == pid_) {
-        pid_ = -1;
-        // A sanitizer build of nccompd (ASan / TSan presets) reports into the log.
-        EXPECT_EQ(log_text().find("Sanitizer"), std::string::npos) << log_text();
-        return WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
-      }
-      std::this_thread::sleep_for(10ms);
+    const int status = process_.stop(10s);
+    if (status >= 0) {
+      // A sanitizer build of nccompd (ASan / TSan presets) reports into the log.
+      EXPECT_EQ(log_text().find("Sanitizer"), std::string::npos) << log_text();
     }
-    return -1;
+    return status;
   }
-  void kill_now() {
-    if (pid_ > 0) {
-      ::kill(pid_, SIGKILL);
-      ::waitpid(pid_, nullptr, 0);
-      pid_ = -1;
-    }
-  }
-  [[nodiscard]] bool alive() const { return pid_ > 0 && ::kill(pid_, 0) == 0; }
+  [[nodiscard]] bool alive() { return process_.running(); }
   [[nodiscard]] std::optional<std::string> ask(const std::string& command) const {
     try {
       return client::query(socket(), client::calibrate_request(command), 10.0);
@@ -139,43 +108,14 @@ class Daemon {
       return std::nullopt;
     }
   }
-  [[nodiscard]] std::string socket() const { return (dir_ / "status.sock").string(); }
-  [[nodiscard]] std::string log_text() const {
-    std::ifstream in(dir_ / "nccompd.log");
-    std::ostringstream s;
-    s << in.rdbuf();
-    return s.str();
-  }
+  /// The status JSON, "" when there was no answer.
+  [[nodiscard]] std::string json() const { return process_.status("json"); }
+  [[nodiscard]] std::string socket() const { return process_.socket(); }
+  [[nodiscard]] std::string log_text() const { return process_.log(); }
 
  private:
-  fs::path dir_;
-  pid_t pid_{-1};
+  test::NccompdProcess process_;
 };
-
-inline std::string raw_request(const std::string& socket, const std::string& line) {
-  // daemon_request() prefixes "calibrate "; a status request goes through a bare socket.
-  sockaddr_un addr{};
-  addr.sun_family = AF_UNIX;
-  std::memcpy(addr.sun_path, socket.c_str(), socket.size() + 1);
-  const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
-  if (fd < 0) return "";
-  if (::connect(fd, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) != 0) {
-    ::close(fd);
-    return "";
-  }
-  const std::string req = line + "\n";
-  (void)::send(fd, req.data(), req.size(), MSG_NOSIGNAL);
-  ::shutdown(fd, SHUT_WR);
-  std::string out;
-  char buf[4096];
-  for (;;) {
-    const ssize_t n = ::recv(fd, buf, sizeof buf, 0);
-    if (n <= 0) break;
-    out.append(buf, static_cast<std::size_t>(n));
-  }
-  ::close(fd);
-  return out;
-}
 
 inline double register_output(const std::string& json, const std::string& name) {
   const std::regex re("\"name\":\"" + name + "\",\"output_um\":(-?[0-9.eE+-]+)");
@@ -228,7 +168,7 @@ inline std::string wait_json(const Daemon& d, Pred pred,
   const auto end = std::chrono::steady_clock::now() + limit;
   std::string j;
   while (std::chrono::steady_clock::now() < end) {
-    j = raw_request(d.socket(), "json");
+    j = d.json();
     if (!j.empty() && pred(j)) break;
     std::this_thread::sleep_for(20ms);
   }
@@ -251,9 +191,9 @@ inline std::string wait_settled(const Daemon& d, std::chrono::milliseconds limit
       }
     }
     if (settled == 3) {
-      const double c0 = number(raw_request(d.socket(), "json"), "cycles");
+      const double c0 = number(d.json(), "cycles");
       while (std::chrono::steady_clock::now() < end) {
-        const std::string j = raw_request(d.socket(), "json");
+        const std::string j = d.json();
         if (number(j, "cycles") >= c0 + 20) return j;
         std::this_thread::sleep_for(10ms);
       }
@@ -261,7 +201,7 @@ inline std::string wait_settled(const Daemon& d, std::chrono::milliseconds limit
     std::this_thread::sleep_for(20ms);
   }
   ADD_FAILURE() << "the calibration registers did not settle\n" << d.ask("status").value_or("");
-  return raw_request(d.socket(), "json");
+  return d.json();
 }
 
 // The whole initial calibration through the socket; returns the last answer.
