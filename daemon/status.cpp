@@ -460,12 +460,14 @@ std::string render_prometheus(const StatusContext& c) {
   counter("handover_unabsorbed_total",
           "Registers whose total moved by a handover's change, through the limiter.",
           s.handover.unabsorbed);
-  family("last_handover_trim_change_um", "gauge",
-         "Largest change of a register's trims at the last handover [um].");
-  o << "nccompd_last_handover_trim_change_um " << prom_num(s.handover.last_trim_change_um) << "\n";
-  family("last_handover_unabsorbed_um", "gauge",
-         "Largest change no module absorbed at the last handover [um].");
-  o << "nccompd_last_handover_unabsorbed_um " << prom_num(s.handover.last_unabsorbed_um) << "\n";
+  family("last_handover_trim_change_meters", "gauge",
+         "Largest change of a register's trims at the last handover.");
+  o << "nccompd_last_handover_trim_change_meters "
+    << prom_num(s.handover.last_trim_change_um * 1e-6) << "\n";
+  family("last_handover_unabsorbed_meters", "gauge",
+         "Largest change no module absorbed at the last handover.");
+  o << "nccompd_last_handover_unabsorbed_meters " << prom_num(s.handover.last_unabsorbed_um * 1e-6)
+    << "\n";
   if (c.server != nullptr) {
     counter("status_clients_timed_out_total", "Status clients cut off at their deadline.",
             c.server->timed_out.load());
