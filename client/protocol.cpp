@@ -16,6 +16,14 @@ std::string calibrate_request(std::string_view command) {
   return std::string(kCalibrateVerb) + " " + std::string(command);
 }
 
+std::string model_load_request(std::string_view path) {
+  return std::string(kModelVerb) + " load " + std::string(path);
+}
+
+std::string model_rollback_request() { return std::string(kModelVerb) + " rollback"; }
+
+std::string model_status_request() { return std::string(kModelVerb) + " status"; }
+
 bool is_error(std::string_view answer) noexcept { return answer.starts_with(kErrorPrefix); }
 
 std::string error_reason(std::string_view answer) {

@@ -24,6 +24,7 @@ inline constexpr std::string_view kAcknowledgeVerb = "acknowledge";
 inline constexpr std::string_view kWarmStartVerb = "warm-start";
 inline constexpr std::string_view kRegisterVerb = "register";
 inline constexpr std::string_view kCalibrateVerb = "calibrate";
+inline constexpr std::string_view kModelVerb = "model";
 
 /// "acknowledge": clear every module's latched alarms.
 [[nodiscard]] std::string acknowledge_request();
@@ -33,6 +34,11 @@ inline constexpr std::string_view kCalibrateVerb = "calibrate";
 [[nodiscard]] std::string register_release_request(std::string_view name);
 /// "calibrate COMMAND" (a line of the calibration command language; "" asks for the status).
 [[nodiscard]] std::string calibrate_request(std::string_view command);
+/// "model load PATH" (PATH absolute: the daemon's working directory is not the caller's; the
+/// rest of the line, spaces included), "model rollback", "model status".
+[[nodiscard]] std::string model_load_request(std::string_view path);
+[[nodiscard]] std::string model_rollback_request();
+[[nodiscard]] std::string model_status_request();
 
 /// The prefix of a refusal.
 inline constexpr std::string_view kErrorPrefix = "error: ";

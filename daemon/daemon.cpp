@@ -11,9 +11,11 @@
 
 #include <chrono>
 #include <cmath>
+#include <condition_variable>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <functional>
 #include <iostream>
 #include <map>
 #include <memory>
@@ -29,6 +31,7 @@
 #include "daemon/logging.hpp"
 #include "daemon/loop.hpp"
 #include "daemon/measurement_log.hpp"
+#include "daemon/sections/model/model_section.hpp"
 #include "daemon/state_store.hpp"
 #include "daemon/status.hpp"
 #include "daemon/timing.hpp"
@@ -156,6 +159,46 @@ std::unique_ptr<cfg::Config> load_config(const std::string& path) {
   return std::move(loaded.config);
 }
 
+/// A call from the status server's command thread run on the main thread, which alone reloads
+/// (a model verb's reload must not race a SIGHUP's). One caller at a time (the command thread).
+class MainThreadCalls {
+ public:
+  /// Runs f on the main thread (its next serve(), at most 100 ms away) and waits for it; false
+  /// if the main thread did not take it within `timeout` (f is then never run).
+  bool run(std::function<void()> f, std::chrono::milliseconds timeout) {
+    std::unique_lock<std::mutex> lock(mu_);
+    pending_ = std::move(f);
+    done_ = false;
+    if (!cv_.wait_for(lock, timeout, [this] { return done_ || running_; })) {
+      pending_ = nullptr;
+      return false;
+    }
+    cv_.wait(lock, [this] { return done_; });
+    return true;
+  }
+  /// The main thread: runs the call waiting, if any.
+  void serve() {
+    std::unique_lock<std::mutex> lock(mu_);
+    if (!pending_) return;
+    std::function<void()> f = std::move(pending_);
+    pending_ = nullptr;
+    running_ = true;
+    lock.unlock();
+    f();
+    lock.lock();
+    running_ = false;
+    done_ = true;
+    cv_.notify_all();
+  }
+
+ private:
+  std::mutex mu_;
+  std::condition_variable cv_;
+  std::function<void()> pending_;
+  bool running_{false};
+  bool done_{false};
+};
+
 /// What the registers' read-back at start-up found (anchor_registers, adopt_without_state).
 struct ReadBackCounts {
   std::size_t anchored{0};
@@ -230,7 +273,14 @@ class Daemon {
   void run_until_stopped();
   bool lockstep_ended(RunState& rs);
   bool handle_signal();
-  void reload();
+  /// A new configuration swapped in (SIGHUP, a model verb); "" if accepted, else why not (the
+  /// configuration's errors, one per line).
+  std::string reload(const std::string& why);
+  /// The operator's model choice from the state directory, applied before the first parse.
+  void restore_model_choice();
+  /// model_state_ from a configuration that runs (start-up, every accepted reload).
+  void note_model(const cfg::Config& config);
+  ModelChange change_model(ModelAction action, const std::string& file);
   void watch_buses(RunState& rs);
   void feed_watchdog(RunState& rs, std::chrono::steady_clock::time_point now);
   void update_status_line(RunState& rs, std::chrono::steady_clock::time_point now);
@@ -265,6 +315,12 @@ class Daemon {
   StatusContext sc_;
   std::unique_ptr<StatusServer> status_;
   std::uint64_t generation_{1};
+  /// The model verbs: their calls onto the main thread, the record of the operator's choice in
+  /// the state directory, and the model in force (the command thread reads it).
+  MainThreadCalls main_calls_;
+  std::string model_choice_path_;
+  std::mutex model_mu_;
+  ModelState model_state_;  // under model_mu_
 };
 
 // Signals are blocked before any thread exists, so every thread inherits the mask and the main
@@ -292,6 +348,7 @@ int Daemon::configure() {
   }
   const std::string log_target = setup_logging(cfg::log_section(*config_));
   spdlog::info("nccompd starting: config {}, logging to {}", options_.config_path, log_target);
+  restore_model_choice();
   try {
     buses_ = make_buses(*config_);
     runtime_ = make_runtime(*config_, buses_, options_.dry_run, 1);
@@ -307,7 +364,160 @@ int Daemon::configure() {
   names_ = std::make_shared<const std::vector<std::string>>(register_names(*config_));
   specs_ =
       std::make_shared<const std::vector<core::engine::RegisterSpec>>(register_specs(*config_));
+  note_model(*config_);
   return 0;
+}
+
+void Daemon::restore_model_choice() {
+  const std::string state_dir = pick_dir(*config_, cfg::state_section(*config_).directory,
+                                         "STATE_DIRECTORY", "/var/lib/nccompd");
+  model_choice_path_ = state_dir + "/model-choice";
+  const StateFile f = read_state_file(model_choice_path_);
+  if (f.status == StateFileStatus::kAbsent) return;
+  sections::ModelChoice choice;
+  try {
+    if (f.status != StateFileStatus::kOk) throw std::invalid_argument(f.reason);
+    choice = sections::model_choice_from_text(
+        std::string_view(reinterpret_cast<const char*>(f.payload.data()), f.payload.size()));
+  } catch (const std::exception& e) {
+    spdlog::error("model choice {} is unreadable ({}): the configuration's [model] runs",
+                  model_choice_path_, e.what());
+    return;
+  }
+  sections::set_model_choice(choice);
+  auto again = cfg::load_file(options_.config_path);
+  if (!again.config) {
+    for (const auto& d : again.diagnostics.items()) {
+      spdlog::error("model choice: {}", formats::format(d));
+    }
+    spdlog::error(
+        "the model chosen by nccomp model load / rollback ({}) cannot run: the configuration's "
+        "[model] runs",
+        choice.live.file.empty() ? std::string("none") : choice.live.file);
+    sections::set_model_choice(std::nullopt);
+    return;
+  }
+  const auto* m = sections::model_section(*again.config);
+  if (m != nullptr && m->chosen) {
+    spdlog::info("model: {} (chosen by nccomp model load / rollback, {}); previous {}",
+                 choice.live.file.empty() ? std::string("none") : choice.live.file,
+                 model_choice_path_,
+                 choice.previous.file.empty() ? std::string("none") : choice.previous.file);
+  }
+  config_ = std::move(again.config);
+}
+
+void Daemon::note_model(const cfg::Config& config) {
+  ModelState m;
+  m.generation = generation_;
+  const auto* s = sections::model_section(config);
+  auto choice = sections::model_choice();
+  if (choice && (s == nullptr || !s->chosen)) {
+    // The configuration names another file now (or has no [model]): the operator chose anew.
+    spdlog::info(
+        "model: the configuration's [model] replaces the model chosen by nccomp model "
+        "load / rollback ({})",
+        choice->live.file.empty() ? std::string("none") : choice->live.file);
+    sections::set_model_choice(std::nullopt);
+    choice.reset();
+    std::error_code ec;
+    fs::remove(model_choice_path_, ec);
+  }
+  std::lock_guard<std::mutex> lock(model_mu_);
+  if (s != nullptr) {
+    m.has_section = true;
+    m.configured = s->configured_file;
+    m.chosen = s->chosen && choice.has_value();
+    if (m.chosen) {
+      m.live = choice->live;
+      m.previous = choice->previous;
+    } else {
+      m.live.file = s->file;
+      m.live.since_utc = model_state_.live.file == s->file && !model_state_.live.since_utc.empty()
+                             ? model_state_.live.since_utc
+                             : sections::utc_now();
+      try {
+        m.live.hash = sections::model_file_hash(s->file);
+      } catch (const std::exception&) {
+        m.live.hash.clear();  // it loaded a moment ago; shown as unknown
+      }
+    }
+  }
+  model_state_ = std::move(m);
+}
+
+ModelChange Daemon::change_model(ModelAction action, const std::string& file) {
+  ModelChange out;
+  auto current = cfg::load_file(options_.config_path);
+  if (!current.config) {
+    out.error = "the configuration file does not load:\n" + current.diagnostics.to_string();
+    return out;
+  }
+  const auto* s = sections::model_section(*current.config);
+  if (s == nullptr) {
+    out.error = options_.config_path +
+                ": no [model] section: its [[model.apply]] entries say which term goes onto "
+                "which register";
+    return out;
+  }
+  const auto old = sections::model_choice();
+  ModelState before;
+  {
+    std::lock_guard<std::mutex> lock(model_mu_);
+    before = model_state_;
+  }
+  sections::ModelRecord in_force;
+  if (s->chosen && old) {
+    in_force = old->live;
+  } else {
+    in_force.file = s->file;
+    in_force.since_utc = before.live.file == s->file ? before.live.since_utc : std::string();
+    try {
+      in_force.hash = sections::model_file_hash(s->file);
+    } catch (const std::exception&) {
+    }
+  }
+  sections::ModelChoice next;
+  next.configured = s->configured_file;
+  next.previous = in_force;
+  if (action == ModelAction::kLoad) {
+    next.live.file = file;
+    try {
+      next.live.hash = sections::model_file_hash(file);
+    } catch (const std::exception& e) {
+      out.error = e.what();
+      return out;
+    }
+  } else {
+    next.live = s->chosen && old ? old->previous : sections::ModelRecord{};
+    if (next.live.file.empty() && in_force.file.empty()) {
+      out.error = "no model is live and none is kept to roll back to";
+      return out;
+    }
+  }
+  next.live.since_utc = sections::utc_now();
+  sections::set_model_choice(next);
+  const std::string refused =
+      reload(action == ModelAction::kLoad ? "nccomp model load" : "nccomp model rollback");
+  if (!refused.empty()) {
+    sections::set_model_choice(old);
+    out.error = refused;
+    return out;
+  }
+  const std::string text = sections::to_text(next);
+  try {
+    write_state_file(
+        model_choice_path_,
+        std::span<const std::byte>(reinterpret_cast<const std::byte*>(text.data()), text.size()),
+        generation_);
+  } catch (const std::exception& e) {
+    out.record_error = e.what();
+    spdlog::error("model choice not recorded: {}", e.what());
+  }
+  out.ok = true;
+  std::lock_guard<std::mutex> lock(model_mu_);
+  out.state = model_state_;
+  return out;
 }
 
 // Before any thread starts: the loop's CPU(s) apart from the other threads' (cpu_placement.hpp).
@@ -672,7 +882,20 @@ bool Daemon::start_status() {
   sc_.config_path = options_.config_path;
   sc_.state_path = state_path_;
   status_ = std::make_unique<StatusServer>(sc_);
-  set_command_context(CommandContext{&commands_, loop_.get(), sc_.register_names});
+  CommandContext cc{&commands_, loop_.get(), sc_.register_names, {}, {}};
+  cc.model_state = [this] {
+    std::lock_guard<std::mutex> lock(model_mu_);
+    return model_state_;
+  };
+  cc.change_model = [this](ModelAction action, const std::string& file) {
+    ModelChange change;
+    if (!main_calls_.run([&] { change = change_model(action, file); },
+                         std::chrono::milliseconds(1000))) {
+      change.error = "the daemon's main thread did not take the request within 1 s";
+    }
+    return change;
+  };
+  set_command_context(cc);
   const auto& stsec = cfg::status_section(*config_);
   const std::string sock = status_socket_path(*config_);
   std::error_code ec;
@@ -761,6 +984,7 @@ void Daemon::run_until_stopped() {
     if (handle_signal()) {
       break;
     }
+    main_calls_.serve();
     swap_->reclaim();
     watch_buses(rs);
     const auto now = std::chrono::steady_clock::now();
@@ -806,21 +1030,23 @@ bool Daemon::handle_signal() {
     return true;
   }
   if (si.ssi_signo == SIGHUP) {
-    reload();
+    (void)reload("SIGHUP");
   }
   return false;
 }
 
 // A new configured engine built here and swapped in at a cycle boundary; a bad configuration is
 // refused and the running one keeps running.
-void Daemon::reload() {
+std::string Daemon::reload(const std::string& why) {
   notify("RELOADING=1\nSTATUS=reloading " + options_.config_path);
-  spdlog::info("SIGHUP: reloading {}", options_.config_path);
+  spdlog::info("{}: reloading {}", why, options_.config_path);
   auto next = cfg::load_file(options_.config_path);
   std::string refused;
+  std::string errors;
   if (!next.config) {
     for (const auto& d : next.diagnostics.items()) {
       spdlog::error("reload: {}", formats::format(d));
+      errors += formats::format(d) + "\n";
     }
     refused = std::to_string(next.diagnostics.items().size()) + " error(s)";
   } else {
@@ -839,12 +1065,14 @@ void Daemon::reload() {
             register_specs(*next.config));
       }
       swap_->publish(std::move(rt));
+      note_model(*next.config);
       spdlog::info(
           "reload: configuration {} accepted (loop settings, buses, state, log "
           "and status settings take effect at the next restart)",
           generation_);
     } catch (const std::exception& e) {
       refused = e.what();
+      errors = refused + "\n";
     }
   }
   if (!refused.empty()) {
@@ -852,6 +1080,7 @@ void Daemon::reload() {
   }
   notify("READY=1\nSTATUS=running: configuration " + std::to_string(generation_) +
          (refused.empty() ? "" : " (last reload refused)"));
+  return errors;
 }
 
 // The buses' alarm flags (drivers::BusStatus::alarm) become the daemon's alarm bus_alarm (code

@@ -62,6 +62,19 @@ void thread_faults(std::int64_t& minflt, std::int64_t& majflt) noexcept {
 
 }  // namespace
 
+HandoverStats add_handovers(const HandoverStats& base,
+                            const core::engine::EngineCounters& c) noexcept {
+  HandoverStats h = base;
+  h.handovers += c.handovers;
+  h.rebases += c.handover_rebases;
+  h.unabsorbed += c.handover_unabsorbed;
+  if (c.handovers > 0) {
+    h.last_trim_change_um = c.last_handover_trim_change_um;
+    h.last_unabsorbed_um = c.last_handover_unabsorbed_um;
+  }
+  return h;
+}
+
 Loop::Loop(LoopOptions options, core::rt::ConfigSwap<Runtime>& swap,
            std::vector<drivers::Bus*> buses, StatePersister* persister,
            MeasurementLogWriter* measurement_log)
@@ -294,6 +307,7 @@ void Loop::cycle(core::TimeNs wake_ns, bool stamp) {
     const bool was_dry = old.dry_run;
     const std::uint64_t old_generation = old.engine->state_generation();
     const std::uint64_t old_sequence = old.engine->write_sequence();
+    const core::engine::EngineCounters old_counters = old.engine->counters();
     const std::size_t n = old.engine->export_state(carry_);
     if (n == 0 && old.engine->state_capacity() > 0) {
       note(wake_ns, NoteCode::kStateExportFailed,
@@ -320,6 +334,7 @@ void Loop::cycle(core::TimeNs wake_ns, bool stamp) {
       if (!carried.empty() && !rt.engine->import_state(carried, wake_ns)) {
         note(wake_ns, NoteCode::kStateCarryFailed, static_cast<std::int64_t>(rt.generation), 0.0);
       }
+      handover_base_ = add_handovers(handover_base_, old_counters);
       ++local_.reloads;
       local_.config_generation = rt.generation;
       persisted_generation_ = ~std::uint64_t{0};  // persist under the new configuration soon
@@ -464,6 +479,7 @@ void Loop::cycle(core::TimeNs wake_ns, bool stamp) {
   }
 
   local_.engine = engine.counters();
+  local_.handover = add_handovers(handover_base_, local_.engine);
   if (local_.cycles % 10 == 1) {
     RegisterSnapshot snap;
     snap.config_generation = rt.generation;

@@ -101,6 +101,22 @@ struct LoopSetupReport {
   std::size_t prefaulted_kib{0};
 };
 
+/// Trim handovers (core/engine/engine.hpp, "Trim handover") over every configuration this loop
+/// ran: each reload builds a new engine whose own counters start at 0.
+struct HandoverStats {
+  std::uint64_t handovers{0};
+  std::uint64_t rebases{0};     // registers whose writer took the change
+  std::uint64_t unabsorbed{0};  // registers whose total moved by it, through the limiter
+  /// Of the last handover: the largest change of a register's trims, and the largest one no
+  /// writer took [µm].
+  double last_trim_change_um{0.0};
+  double last_unabsorbed_um{0.0};
+};
+
+/// base, then what engine counters c add to it. Real-time safe.
+[[nodiscard]] HandoverStats add_handovers(const HandoverStats& base,
+                                          const core::engine::EngineCounters& c) noexcept;
+
 struct LoopStats {
   core::TimeNs period_ns{0};
   core::TimeNs started_ns{0};
@@ -131,6 +147,7 @@ struct LoopStats {
   bool hold{false};
   bool dry_run{false};
   core::engine::EngineCounters engine{};
+  HandoverStats handover{};
   // Lock-step only.
   bool lockstep{false};
   std::uint64_t lockstep_cycle{0};      // cycle of the last TICK
@@ -245,6 +262,8 @@ class Loop {
   LoopStats local_{};
   std::uint64_t persisted_generation_{~std::uint64_t{0}};
   core::TimeNs last_export_ns_{0};
+  /// The handovers of the configurations before the running one.
+  HandoverStats handover_base_{};
   std::int64_t minflt_base_{0};
   std::int64_t majflt_base_{0};
   std::uint64_t alloc_base_{0};

@@ -161,6 +161,11 @@ std::string render_json(const StatusContext& c) {
     << ",\"writes_deferred\":" << e.writes_deferred << ",\"writes_blocked\":" << e.writes_blocked
     << ",\"writes_awaiting_nc\":" << e.writes_awaiting_nc
     << ",\"release_commands\":" << e.release_commands << "},";
+  const auto& h = s.handover;
+  o << "\"handover\":{\"handovers\":" << h.handovers << ",\"rebased\":" << h.rebases
+    << ",\"unabsorbed\":" << h.unabsorbed
+    << ",\"last_trim_change_um\":" << num(h.last_trim_change_um)
+    << ",\"last_unabsorbed_um\":" << num(h.last_unabsorbed_um) << "},";
   o << "\"registers\":[";
   for (std::size_t i = 0; i < v.r.count; ++i) {
     const auto& r = v.r.regs[i];
@@ -292,6 +297,17 @@ std::string render_text(const StatusContext& c) {
     << " invalid), " << s.engine.writes_forwarded << " writes (" << s.engine.writes_rejected
     << " rejected, " << s.engine.writes_held << " held), " << s.writes_dropped
     << " dropped at the bus, " << s.engine.writes_awaiting_nc << " waits for the NC\n";
+  if (s.handover.handovers > 0) {
+    // A model loaded, replaced or taken out (docs/closing-the-loop.md, "handover").
+    std::snprintf(buf, sizeof buf,
+                  "handover: %llu (registers rebased %llu, not absorbed %llu); last: largest "
+                  "trim change %.3f um, %.3f um through the limiter\n",
+                  static_cast<unsigned long long>(s.handover.handovers),
+                  static_cast<unsigned long long>(s.handover.rebases),
+                  static_cast<unsigned long long>(s.handover.unabsorbed),
+                  s.handover.last_trim_change_um, s.handover.last_unabsorbed_um);
+    o << buf;
+  }
   o << "registers:\n";
   for (std::size_t i = 0; i < v.r.count; ++i) {
     const auto& r = v.r.regs[i];
@@ -438,6 +454,21 @@ std::string render_prometheus(const StatusContext& c) {
           "Register cycles whose next write waited for the NC to take the last one.",
           s.engine.writes_awaiting_nc);
   counter("alarms_total", "Alarms and warnings raised.", s.alarms);
+  counter("handovers_total", "Model handovers (a model loaded, replaced or taken out).",
+          s.handover.handovers);
+  counter("handover_rebased_total", "Registers whose writing module took a handover's change.",
+          s.handover.rebases);
+  counter("handover_unabsorbed_total",
+          "Registers whose total moved by a handover's change, through the limiter.",
+          s.handover.unabsorbed);
+  family("last_handover_trim_change_meters", "gauge",
+         "Largest change of a register's trims at the last handover.");
+  o << "nccompd_last_handover_trim_change_meters "
+    << prom_num(s.handover.last_trim_change_um * 1e-6) << "\n";
+  family("last_handover_unabsorbed_meters", "gauge",
+         "Largest change no module absorbed at the last handover.");
+  o << "nccompd_last_handover_unabsorbed_meters " << prom_num(s.handover.last_unabsorbed_um * 1e-6)
+    << "\n";
   if (c.server != nullptr) {
     counter("status_clients_timed_out_total", "Status clients cut off at their deadline.",
             c.server->timed_out.load());

@@ -61,6 +61,22 @@ bool CalibrationModule::adopt_output(std::uint16_t register_index, double nc_val
   return false;
 }
 
+bool CalibrationModule::rebase_output(std::uint16_t register_index, double delta_um,
+                                      TimeNs now_ns) noexcept {
+  const std::array<std::uint16_t, 3> reg{config_.register_x, config_.register_y,
+                                         config_.register_z};
+  for (std::size_t a = 0; a < reg.size(); ++a) {
+    if (reg[a] == register_index) {
+      if (!calib_.rebase(a, delta_um, now_ns)) {
+        return false;
+      }
+      ++generation_;
+      return true;
+    }
+  }
+  return false;
+}
+
 void CalibrationModule::run_command(const OperatorCommand& c, TimeNs now_ns,
                                     StepOutput& out) noexcept {
   CommandOutcome o;

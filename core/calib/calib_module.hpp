@@ -72,6 +72,10 @@ class CalibrationModule final : public engine::Module {
   /// (Calibrator::sync_register()); an uncalibrated module writes nothing, so the NC keeps it
   /// until a calibration (or a newer [calibration] state_file) computes the axis offsets.
   bool adopt_output(std::uint16_t register_index, double nc_value_um, TimeNs now_ns) override;
+  /// Trim handover (core/engine/engine.hpp): Calibrator::rebase() of the register's axis.
+  /// Real-time safe.
+  bool rebase_output(std::uint16_t register_index, double delta_um,
+                     TimeNs now_ns) noexcept override;
 
   /// The calibrator, for operator commands (on the loop thread between steps) and status.
   [[nodiscard]] Calibrator& calibrator() noexcept { return calib_; }

@@ -779,6 +779,34 @@ void Calibrator::restore_written(std::size_t axis, double value_um) noexcept {
   }
 }
 
+bool Calibrator::rebase(std::size_t axis, double delta_um, TimeNs now_ns) noexcept {
+  if (!configured_ || axis >= kAxisCount || !std::isfinite(delta_um) || !base_valid() ||
+      (grinding() && axis == 0)) {
+    return false;
+  }
+  const std::size_t slot = kAxisSlot[axis];
+  auto& m = state_.models[slot];
+  const double target = target_um(axis, now_ns);
+  if (m.anchored != 1 || !std::isfinite(target) || !limiters_[axis].admissible(target + delta_um)) {
+    return false;
+  }
+  m.anchor_drift_um += delta_um;
+  m.asymptote_um += delta_um;
+  // The temperature fit as if every drift it saw had been measured in the new split: its
+  // intercept moves, its slope stays (cov(T, d + δ) = cov(T, d)).
+  m.sum_d += delta_um * m.sum_w;
+  m.sum_td += delta_um * m.sum_t;
+  auto& e = state_.estimates[slot];
+  if (e.valid == 1) {
+    e.x[0] += delta_um;  // the level: mean = level + gain · prior + slope · ΔT
+  }
+  // What the NC holds moves with it (the engine moves the register's total by nothing): the
+  // limiter must not slew S3's own value back.
+  const double written = std::isfinite(written_um_[axis]) ? written_um_[axis] : target;
+  sync_register(axis, written + delta_um, now_ns);
+  return true;
+}
+
 // ------------------------------------------------------------------------------------------
 // Persistence.
 

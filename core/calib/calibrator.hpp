@@ -106,6 +106,16 @@ class Calibrator {
   /// next step(), at its time. Non-finite values are ignored. Real-time safe.
   void restore_written(std::size_t axis, double value_um) noexcept;
 
+  /// Trim handover (core/engine/engine.hpp): a model's trim on axis (0..2) changed by −delta_um.
+  /// The axis's drift model moves by delta_um in every prediction mode (the last measured
+  /// drift, the asymptote, the temperature fit's intercept, the estimator's level), so its
+  /// correction, the value written and the limiter move by exactly delta_um; the next touch set
+  /// re-anchors the model on what it measures. With touch_positions = "program" that is the
+  /// drift less the trim (the NC's offset holds both), so S3 learns the residual. False,
+  /// nothing changed: not calibrated, X during a test grind, no touch set since the nominals,
+  /// or a target the limiter refuses. Real-time safe.
+  bool rebase(std::size_t axis, double delta_um, TimeNs now_ns) noexcept;
+
   /// State with times on the wall clock (set_clock_offset_s). Allocation-free.
   [[nodiscard]] CalibState export_state() const noexcept;
   /// Validates (throws std::invalid_argument) and adopts a state exported before a restart.

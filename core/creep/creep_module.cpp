@@ -181,7 +181,70 @@ void CreepModule::attach(const engine::RegisterTable& registers) {
     }
   }
   comp_.configure(c);  // validates: core::ConfigInvalid naming the keys
+  fade_table_ = ProfileTable{};
+  if (c.profile == ProfileShape::kTable) {
+    std::copy(c.profile_table.begin(), c.profile_table.end(), fade_table_.f.begin());
+    fade_table_.n = c.profile_table.size();
+  }
   ++generation_;
+}
+
+bool CreepModule::rebase_output(std::uint16_t register_index, double delta_um,
+                                TimeNs /*now_ns*/) noexcept {
+  const auto& c = comp_.config();
+  std::size_t ch = kChannelCount;
+  for (std::size_t k = 0; k < kChannelCount; ++k) {
+    if (c.output.channel_register[k] >= 0 && c.output.channel_register[k] == register_index) {
+      ch = k;
+    }
+  }
+  if (ch == kChannelCount || !std::isfinite(delta_um)) return false;
+  CreepState s = comp_.export_state();
+  const double output_um = s.channel_output_um[ch] + delta_um;
+  if (!(std::fabs(output_um) <= c.limiter.max_abs_um)) return false;
+  // The change enters the channel as an adoption's difference does: in force at once, then
+  // fading along the creep profile (the creep's way to bring in a change without a step in the
+  // surface). The fade is part of the saved state (AdoptedOutputs), so a restart continues it.
+  AdoptedOutputs a = comp_.adoption();
+  bool held = false;
+  for (const auto h : a.held) held = held || h != 0;
+  if (held) {
+    // Started without state, no measurement since: the channels stay where they are until the
+    // next one, from which the whole difference fades out.
+    a.held[ch] = 1;
+    a.held_um[ch] = output_um;
+  } else {
+    const bool path = c.creep_basis == CreepBasis::kPath || c.creep_basis == CreepBasis::kRatePath;
+    const double clock = path ? s.creep_path_mm : s.creep_time_s;
+    // A fade in progress goes on from what is left of it, over a new span with this change.
+    double rest = 0.0;
+    if (a.fading != 0) {
+      const double u = a.fade_span > 0.0 ? (clock - a.fade_start) / a.fade_span : 1.0;
+      rest = 1.0 - profile_fraction(c.profile, u, &fade_table_);
+    }
+    double largest = 0.0;
+    for (std::size_t k = 0; k < kChannelCount; ++k) {
+      a.fade_um[k] = (a.fading != 0 ? rest * a.fade_um[k] : 0.0) + (k == ch ? delta_um : 0.0);
+      largest = std::max(largest, std::fabs(a.fade_um[k]));
+    }
+    double span = c.creep_length_mm;
+    if (c.creep_basis == CreepBasis::kTime) span = c.creep_time_s;
+    if (c.creep_basis == CreepBasis::kRateTime) span = largest / c.creep_rate_um_per_min * 60.0;
+    if (c.creep_basis == CreepBasis::kRatePath) span = largest / c.creep_rate_um_per_mm;
+    a.fading = largest > 0.0 ? 1 : 0;
+    a.fade_path_based = path ? 1 : 0;
+    a.fade_start = clock;
+    a.fade_span = span;
+  }
+  // The channel's value and its limiter move with the target (no slew of the creep's own): the
+  // register's total does not move.
+  s.channel_output_um[ch] = output_um;
+  const bool rearming = comp_.rearming();
+  if (!comp_.restore_state(s)) return false;
+  comp_.restore_adoption(a);
+  if (rearming) comp_.rearm_request();
+  ++generation_;
+  return true;
 }
 
 void CreepModule::clear_alarm() noexcept {

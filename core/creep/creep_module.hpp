@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "core/common/profile.hpp"
 #include "core/creep/config.hpp"
 #include "core/creep/wear_compensator.hpp"
 #include "core/engine/engine.hpp"
@@ -93,6 +94,18 @@ class CreepModule final : public engine::Module {
   /// alarm and tool change flags read back high stay latched (adopt_flag()). The measurement
   /// request and the restart path are recomputed (false).
   bool adopt_output(std::uint16_t register_index, double nc_value_um, TimeNs now_ns) override;
+  /// Trim handover (core/engine/engine.hpp): a channel register's target moves by delta_um at
+  /// once (its value and limiter with it, the register's total stays), and the shift fades out
+  /// along the creep profile over one creep span from the current creep clock, as an adopted
+  /// value does (AdoptedOutputs, saved with the state). The laser measures the tool itself, not
+  /// the residual of a compensated part: a model's term on this register predicts what the
+  /// creep does not see (the analysis fits the contour error after S0's correction), so the
+  /// change is fed in, without a step. Started without state and not yet measured: the channel
+  /// is held at the shifted value until the next measurement. The kinematics re-anchor on the
+  /// next axis sample (the cut path of one cycle is not counted). False for a flag register or
+  /// a value beyond max_abs_um. Real-time safe.
+  bool rebase_output(std::uint16_t register_index, double delta_um,
+                     TimeNs now_ns) noexcept override;
 
   /// Operator acknowledgement (`nccomp acknowledge`: an OperatorCommand kAcknowledge in step(),
   /// taken before the cycle's other events): WearCompensator::clear_alarm() (halt, alarm and
@@ -132,6 +145,8 @@ class CreepModule final : public engine::Module {
 
   CreepModuleConfig config_;
   WearCompensator comp_;
+  /// The profile table of the creeps (for a handover's fade, rebase_output()).
+  ProfileTable fade_table_{};
   /// Where load_state() decodes the tool memory (56 kB: not on the loop thread's stack).
   ToolMemory scratch_memory_{};
   std::uint64_t generation_{0};

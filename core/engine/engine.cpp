@@ -636,6 +636,9 @@ std::uint64_t Engine::trim_identity(std::size_t i) const noexcept {
 
 void Engine::hand_over_trims(TimeNs now_ns) noexcept {
   handover_pending_ = false;
+  bool any = false;
+  double largest_um = 0.0;
+  double unabsorbed_um = 0.0;
   for (std::size_t i = 0; i < regs_.size(); ++i) {
     if (handover_known_[i] == 0) {
       continue;
@@ -648,6 +651,8 @@ void Engine::hand_over_trims(TimeNs now_ns) noexcept {
         !(std::fabs(delta_um) > 0.0)) {
       continue;
     }
+    any = true;
+    largest_um = std::max(largest_um, std::fabs(delta_um));
     const int w = writer_[i];
     if (w >= 0 && specs_[i].kind != RegisterKind::kFlag &&
         modules_[static_cast<std::size_t>(w)]->rebase_output(static_cast<std::uint16_t>(i),
@@ -658,7 +663,13 @@ void Engine::hand_over_trims(TimeNs now_ns) noexcept {
       ++counters_.handover_rebases;
     } else {
       ++counters_.handover_unabsorbed;
+      unabsorbed_um = std::max(unabsorbed_um, std::fabs(delta_um));
     }
+  }
+  if (any) {
+    ++counters_.handovers;
+    counters_.last_handover_trim_change_um = largest_um;
+    counters_.last_handover_unabsorbed_um = unabsorbed_um;
   }
 }
 

@@ -268,6 +268,13 @@ struct EngineCounters {
   /// refused): their total moves by the change, through the limiter.
   std::uint64_t handover_rebases{0};
   std::uint64_t handover_unabsorbed{0};
+  /// Handovers (first steps after an import in which some register's trims changed identity),
+  /// and of the last one: the largest change of a register's trims [µm] and the largest change
+  /// that no writer absorbed, i.e. moved the register's total through the limiter [µm] (0: all
+  /// absorbed).
+  std::uint64_t handovers{0};
+  double last_handover_trim_change_um{0.0};
+  double last_handover_unabsorbed_um{0.0};
 };
 
 /// What Engine::anchor_register() / adopt_register() found and did.

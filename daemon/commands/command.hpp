@@ -1,7 +1,7 @@
 // Operator commands on the status socket (docs/daemon.md, "Operator commands"): the verb registry.
 // A request line whose first word is a registered verb ("calibrate begin", ...) goes to that
 // verb's handler instead of the status renderer. The verbs live beside this file, one per file
-// (acknowledge, warm-start, register, calibrate), and register themselves at static
+// (acknowledge, warm-start, register, calibrate, model), and register themselves at static
 // initialisation; their request syntax is client/protocol.hpp's. Handlers run on the status
 // server's command thread (one request at a time) and reach the loop only through the CommandBus:
 // an SPSC ring of core events that the loop drains like a bus's receive ring, so the loop thread
@@ -25,6 +25,7 @@
 #include <vector>
 
 #include "core/rt/spsc_ring.hpp"
+#include "daemon/sections/model/model_choice.hpp"
 #include "drivers/bus.hpp"
 
 namespace nccomp::daemon {
@@ -57,11 +58,39 @@ class CommandBus final : public drivers::Bus {
   std::atomic<std::uint64_t> refused_{0};
 };
 
+/// The model the daemon runs (`nccomp model status`; daemon.cpp keeps it).
+struct ModelState {
+  /// The running configuration has a [model] section (else there is no model to change).
+  bool has_section{false};
+  /// Its `file`, and whether the operator's choice (`nccomp model load` / `rollback`) replaces
+  /// it.
+  std::string configured;
+  bool chosen{false};
+  sections::ModelRecord live;      // file "" = no model
+  sections::ModelRecord previous;  // kept for rollback; file "" = none
+  std::uint64_t generation{0};     // the configuration it runs in
+};
+
+enum class ModelAction { kLoad, kRollback };
+
+/// What a model change did: refused (error, nothing changed), or accepted as state.generation.
+struct ModelChange {
+  bool ok{false};
+  std::string error;
+  ModelState state;
+  /// Accepted, but the record in the state directory could not be written ("" = written).
+  std::string record_error;
+};
+
 struct CommandContext {
   CommandBus* bus{nullptr};
   const Loop* loop{nullptr};
   /// The running configuration's register names, by index (a reload may change them).
   std::function<std::vector<std::string>()> register_names;
+  /// The model verbs (daemon.cpp): the model in force, and a change of it, which the daemon
+  /// runs as a reload on its main thread (never two reloads at once) and answers.
+  std::function<ModelState()> model_state;
+  std::function<ModelChange(ModelAction action, const std::string& file)> change_model;
 };
 
 /// Who sent a request: the connecting process's credentials as the kernel recorded them at

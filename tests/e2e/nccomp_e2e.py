@@ -1131,7 +1131,9 @@ def run_continued(b, source, work, name, daemon_cfg, daemon_overrides, parts, se
     and it gets SIGHUP, so the RUNNING daemon swaps in the new configuration with its state at a
     cycle boundary (the reload is taken while ncsim already ticks: where it lands is read back).
     Returns (RunResult, swap_s): swap_s, the machine time [s] by which the new configuration ran
-    (an upper bound: the loop's cycles when the daemon's log said so), None without reload."""
+    (an upper bound: the loop's cycles when the daemon's log said so), None without reload; with
+    a reload, RunResult.handover is `nccomp status --json`'s "handover" object once it counts
+    the handover (or as it was after 10 s)."""
     run_dir = os.path.join(work, name)
     shutil.rmtree(run_dir, ignore_errors=True)
     os.makedirs(run_dir)
@@ -1158,6 +1160,7 @@ def run_continued(b, source, work, name, daemon_cfg, daemon_overrides, parts, se
     t0 = time.monotonic()
     sim = daemon = None
     swap_s = None
+    handover = None
     try:
         daemon = Proc("nccompd", daemon_argv, os.path.join(run_dir, "nccompd.log"), run_dir)
         if reload_cfg is not None:
@@ -1183,6 +1186,20 @@ def run_continued(b, source, work, name, daemon_cfg, daemon_overrides, parts, se
                 swap_s = json.loads(st.stdout)["loop"]["cycles"] / 250.0
             except (ValueError, KeyError):
                 swap_s = None
+            # The handover runs in the swap's cycle; its counters are published at the cycle's
+            # end, which the log line may precede.
+            deadline = time.monotonic() + 10.0
+            while daemon.running():
+                st = subprocess.run([b.nccomp, "status", "--json", "--socket", status_sock],
+                                    capture_output=True, text=True, timeout=30)
+                try:
+                    handover = json.loads(st.stdout)["handover"]
+                except (ValueError, KeyError):
+                    handover = None
+                if (handover is not None and handover["handovers"] > 0) or \
+                        time.monotonic() > deadline:
+                    break
+                time.sleep(0.05)
         sim_rc = sim.wait(timeout_s)
         if sim_rc is None:
             raise RuntimeError("%s: ncsim did not finish within %.0f s\nncsim:\n%s\nnccompd:\n%s" %
@@ -1204,6 +1221,7 @@ def run_continued(b, source, work, name, daemon_cfg, daemon_overrides, parts, se
                                                                   rep.stderr))
     result = RunResult(name, run_dir, out_dir, sim_rc, daemon_rc, sim.log(), daemon.log(),
                        json.loads(rep.stdout), time.monotonic() - t0)
+    result.handover = handover
     print("%s: ncsim %d, nccompd %d, %.1f s wall%s" % (
         name, sim_rc, daemon_rc, result.wall_s,
         "" if swap_s is None else "; new configuration running by t = %.2f s" % swap_s))
@@ -1300,6 +1318,12 @@ def scenario_model_handover(b, source, work):
         if label != "restart":
             c.that("configuration 2 is running" in r.daemon_log and swap_s is not None,
                    "%s: the running daemon swapped the configuration in" % label)
+            # nccomp status counts it: one handover, the radius register rebased by S1.
+            h = r.handover or {}
+            c.that(h.get("handovers") == 1 and h.get("rebased") == 1 and
+                   h.get("unabsorbed") == 0 and h.get("last_trim_change_um", 0.0) > 0.0,
+                   "%s: nccomp status --json shows the handover: %s" % (label, h))
+            print("%s: nccomp status --json handover %s" % (label, json.dumps(h)))
             c.that(swap_s is not None and swap_s < approach_s,
                    "%s: the swap ran before the first part's first cut (by t = %s s, the cut "
                    "starts at %g s)" % (label, swap_s, approach_s))

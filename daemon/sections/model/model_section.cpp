@@ -100,11 +100,22 @@ std::unique_ptr<ModelSection> parse_model_section(const toml::node& node,
     fs::path p(file);
     if (p.is_relative() && src.path) p = fs::path(*src.path).parent_path() / p;
     s->file = p.lexically_normal().string();
+    s->configured_file = s->file;
+    if (const auto choice = model_choice(); choice && choice->configured == s->file) {
+      s->chosen = true;
+      s->file = choice->live.file;
+      s->disabled = s->file.empty();
+    }
     try {
-      s->model = formats::model_io::load_model_file(s->file);
-      s->loaded = true;
+      if (!s->disabled) {
+        s->model = formats::model_io::load_model_file(s->file);
+        s->loaded = true;
+      }
     } catch (const std::exception& e) {
-      diag.error(r.where("file"), std::string("cannot load the model: ") + e.what());
+      diag.error(r.where("file"),
+                 std::string("cannot load the model") +
+                     (s->chosen ? " " + s->file + " (nccomp model load)" : std::string()) + ": " +
+                     e.what());
     }
   }
   // Extra columns of the model fed from sensors (before the applies, which check them).
@@ -299,7 +310,7 @@ class ModelParser final : public config::SectionParser {
   void add_modules(const config::Config& config,
                    std::vector<std::unique_ptr<core::engine::Module>>& modules) const override {
     const auto* s = model_section(config);
-    if (s == nullptr) return;
+    if (s == nullptr || s->disabled) return;
     std::vector<core::engine::RegisterSpec> specs;
     for (const auto& e : config::registers_section(config).registers) specs.push_back(e.spec);
     modules.push_back(make_model_module(*s, specs));

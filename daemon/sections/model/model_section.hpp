@@ -10,6 +10,7 @@
 #include "core/model/model.hpp"
 #include "core/model/model_module.hpp"
 #include "daemon/config/config.hpp"
+#include "daemon/sections/model/model_choice.hpp"
 
 namespace nccomp::daemon::sections {
 
@@ -27,7 +28,13 @@ struct ModelInputConfig {
 };
 
 struct ModelSection final : config::Section {
-  std::string file;  // resolved path of model.toml
+  std::string file;  // resolved path of model.toml in force ("" with disabled)
+  /// The configuration's own `file` (resolved); file differs when the operator's choice
+  /// (model_choice.hpp: `nccomp model load` / `rollback`) replaces it.
+  std::string configured_file;
+  bool chosen{false};
+  /// The operator's choice is no model (rolled back to none): the section adds no module.
+  bool disabled{false};
   core::model::Model model;
   bool loaded{false};
   bool each_cycle{false};

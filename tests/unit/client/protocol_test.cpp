@@ -16,6 +16,9 @@ TEST(ClientProtocol, VerbRequestsAreTheLinesTheDaemonParses) {
   EXPECT_EQ(register_release_request("all"), "register release all");
   EXPECT_EQ(calibrate_request("facets lateral 1.99 1.98"), "calibrate facets lateral 1.99 1.98");
   EXPECT_EQ(calibrate_request(""), "calibrate ");
+  EXPECT_EQ(model_load_request("/srv/fit 2/model.toml"), "model load /srv/fit 2/model.toml");
+  EXPECT_EQ(model_rollback_request(), "model rollback");
+  EXPECT_EQ(model_status_request(), "model status");
 }
 
 TEST(ClientProtocol, ARefusalGivesItsReasonWithoutThePrefixAndLineBreaks) {

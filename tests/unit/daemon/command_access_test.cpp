@@ -65,9 +65,12 @@ TEST(OperatorCommands, EveryVerbButTheCalibrationStatusNeedsTheAdminGroup) {
        {"acknowledge", "acknowledge all", "warm-start", "warm-start now",
         "warm-start at-next-motion", "calibrate begin", "calibrate discard",
         "calibrate recalibrate", "calibrate facets lateral 1.99 1.98",
-        "calibrate touch machine x + lateral 10.0", "calibrate statusx", "calibrate status now"}) {
+        "calibrate touch machine x + lateral 10.0", "calibrate statusx", "calibrate status now",
+        "model load /srv/fit/model.toml", "model rollback", "model", "model status now"}) {
     EXPECT_TRUE(denied(send(line, op))) << line;
   }
+  // The model's status is read-only too.
+  EXPECT_EQ(send("model status", op), "error: this process takes no model commands\n");
   // The calibration status (what `nccomp calibrate --daemon` polls) is read-only: it reaches the
   // handler, which answers that this process (no loop) takes no commands.
   for (const char* line : {"calibrate", "calibrate status", "  calibrate   Status  "}) {

@@ -1004,3 +1004,90 @@ TEST(ModelHandover, TheTrimIdentityFollowsTheModelAndItsMapping) {
 
 }  // namespace
 }  // namespace nccomp::daemon::sections
+
+namespace nccomp::daemon::sections {
+namespace {
+
+// The operator's choice (`nccomp model load` / `rollback`): GIVEN a config whose [model] names
+// fit/model.toml, WHEN a choice for that file names another model THEN the section loads that one
+// (chosen); a choice of no model gives a section that adds no module; a choice made for another
+// configured file is not applied; the record's text form round-trips and refuses what is not it.
+TEST(ModelChoice, AChoiceReplacesTheConfiguredFileWhileTheConfigNamesIt) {
+  TempDir d;
+  d.write("fit/model.toml", model_toml());
+  const std::string other = d.write("fit2/model.toml", model_toml());
+  const std::string cfg = d.write("a.toml", registers_toml() + kApply);
+  const std::string configured =
+      (std::filesystem::path(cfg).parent_path() / "fit/model.toml").lexically_normal().string();
+  ModelChoice c;
+  c.configured = configured;
+  c.live.file = other;
+  set_model_choice(c);
+  auto r = config::load_file(cfg);
+  ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+  const auto* s = model_section(*r.config);
+  ASSERT_NE(s, nullptr);
+  EXPECT_TRUE(s->chosen);
+  EXPECT_EQ(s->file, other);
+  EXPECT_EQ(s->configured_file, configured);
+  EXPECT_TRUE(s->loaded);
+
+  c.live.file.clear();  // rolled back to no model
+  set_model_choice(c);
+  r = config::load_file(cfg);
+  ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+  s = model_section(*r.config);
+  EXPECT_TRUE(s->disabled);
+  std::vector<std::unique_ptr<ce::Module>> mods;
+  for (const auto* p : config::section_parsers()) p->add_modules(*r.config, mods);
+  for (const auto& m : mods) EXPECT_NE(m->name(), "model");
+
+  c.configured = "/elsewhere/model.toml";  // made for another configured file
+  c.live.file = other;
+  set_model_choice(c);
+  r = config::load_file(cfg);
+  ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+  EXPECT_FALSE(model_section(*r.config)->chosen);
+  EXPECT_EQ(model_section(*r.config)->file, configured);
+
+  // A chosen file that is not a model: the configuration's error names it at the file key.
+  c.configured = configured;
+  c.live.file = d.write("bad.toml", "not [ a model\n");
+  set_model_choice(c);
+  r = config::load_file(cfg);
+  EXPECT_FALSE(r.config);
+  EXPECT_NE(r.diagnostics.to_string().find("cannot load the model " + c.live.file +
+                                           " (nccomp model load)"),
+            std::string::npos)
+      << r.diagnostics.to_string();
+  set_model_choice(std::nullopt);
+}
+
+TEST(ModelChoice, TheRecordRoundTripsAndRefusesWhatIsNotIt) {
+  ModelChoice c;
+  c.configured = "/etc/nccompd/fit/model.toml";
+  c.live = {"/srv/fit 2/model.toml", "0123456789abcdef", "2024-05-06T07:08:09Z"};
+  c.previous = {"", "", ""};
+  const ModelChoice back = model_choice_from_text(to_text(c));
+  EXPECT_EQ(back.configured, c.configured);
+  EXPECT_EQ(back.live.file, c.live.file);
+  EXPECT_EQ(back.live.hash, c.live.hash);
+  EXPECT_EQ(back.live.since_utc, c.live.since_utc);
+  EXPECT_EQ(back.previous.file, "");
+  EXPECT_THROW((void)model_choice_from_text("nccomp_model_choice 2\n"), std::invalid_argument);
+  EXPECT_THROW((void)model_choice_from_text(to_text(c) + "extra 1\n"), std::invalid_argument);
+  EXPECT_THROW((void)model_choice_from_text(to_text(c) + "live_file x\n"), std::invalid_argument);
+  std::string missing = to_text(c);
+  missing.erase(missing.find("previous_since"));
+  EXPECT_THROW((void)model_choice_from_text(missing), std::invalid_argument);
+  // The hash is FNV-1a 64 of the bytes: "a" is af63dc4c8601ec8c.
+  TempDir d;
+  EXPECT_EQ(model_file_hash(d.write("a.txt", "a")), "af63dc4c8601ec8c");
+  EXPECT_THROW(
+      (void)model_file_hash(
+          (std::filesystem::path(d.write("b.txt", "")).parent_path() / "missing").string()),
+      std::runtime_error);
+}
+
+}  // namespace
+}  // namespace nccomp::daemon::sections

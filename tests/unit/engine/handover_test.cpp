@@ -130,6 +130,9 @@ TEST(TrimHandover, LoadingAModelKeepsTheTotalAndTheLearnerKeepsOnlyTheResidual) 
   EXPECT_DOUBLE_EQ(after.engine.register_state(0).trim_um, -50.0);
   EXPECT_DOUBLE_EQ(after.total_um(), -42.0);
   EXPECT_EQ(after.engine.counters().handover_rebases, 1U);
+  EXPECT_EQ(after.engine.counters().handovers, 1U);
+  EXPECT_DOUBLE_EQ(after.engine.counters().last_handover_trim_change_um, 50.0);
+  EXPECT_DOUBLE_EQ(after.engine.counters().last_handover_unabsorbed_um, 0.0);
   // And the model predicts from here: 3 µm more wear reach the NC through the limiter.
   after.model->trim_ = -53.0;
   after.run(5);
@@ -175,6 +178,7 @@ TEST(TrimHandover, TheSameModelAfterARestartIsNotRebased) {
   EXPECT_DOUBLE_EQ(restarted.nc_um, -44.0);
   EXPECT_EQ(restarted.engine.counters().handover_rebases, 0U);
   EXPECT_EQ(restarted.engine.counters().handover_unabsorbed, 0U);
+  EXPECT_EQ(restarted.engine.counters().handovers, 0U);
 }
 
 TEST(TrimHandover, AWriterThatCannotRebaseMovesThroughTheLimiterAndIsCounted) {
@@ -189,6 +193,9 @@ TEST(TrimHandover, AWriterThatCannotRebaseMovesThroughTheLimiterAndIsCounted) {
   EXPECT_DOUBLE_EQ(after.largest_write_change_um, 5.0);
   EXPECT_EQ(after.engine.counters().handover_unabsorbed, 1U);
   EXPECT_EQ(after.engine.counters().handover_rebases, 0U);
+  EXPECT_EQ(after.engine.counters().handovers, 1U);
+  EXPECT_DOUBLE_EQ(after.engine.counters().last_handover_trim_change_um, 50.0);
+  EXPECT_DOUBLE_EQ(after.engine.counters().last_handover_unabsorbed_um, 50.0);
 }
 
 TEST(TrimHandover, TheHandoverStepAllocatesNothing) {

@@ -1,0 +1,206 @@
+// Trim handover on S0's registers (core/engine/engine.hpp, "Trim handover";
+// CreepModule::rebase_output()): GIVEN the creep holds Z at −12 µm (12 µm of measured wear,
+// fallback sign −1, linear creeps over 50 mm) WHEN a model whose trim on Z is −10 µm is loaded
+// into the running engine THEN Z does not move at the switch and the trim comes in along the
+// creep profile: −12 − 10 · s / 50 after s mm of cut, −22 from 50 mm on; a restart in the middle
+// with the same model continues the fade; taking the model out fades it back out the same way.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <memory>
+#include <vector>
+
+#include "core/creep/creep_module.hpp"
+#include "tests/support/alloc_counter.hpp"
+#include "tests/unit/creep/rig.hpp"
+
+namespace nccomp::core::creep {
+namespace {
+
+using engine::Engine;
+using engine::RegisterKind;
+using engine::RegisterSpec;
+
+// A model's trim of the Z register (2), with the identity of its model.
+class TrimZ final : public engine::Module {
+ public:
+  TrimZ(double trim, std::uint64_t identity) : trim_(trim), identity_(identity) {}
+  std::string_view name() const noexcept override { return "model"; }
+  void attach(const engine::RegisterTable& /*registers*/) override {}
+  void step(TimeNs now_ns, std::span<const Event> /*events*/, StepOutput& out) noexcept override {
+    out.trims.push(OffsetWrite{now_ns, 2, trim_});
+  }
+  std::uint64_t trim_identity() const noexcept override { return identity_; }
+  double trim_;
+  std::uint64_t identity_;
+};
+
+CreepModuleConfig module_config() {
+  CreepModuleConfig m;
+  m.creep = testing::base_config();  // axes, Z fallback sign −1, 50 mm linear creeps
+  m.creep.output.warning_register = -1;
+  m.creep.output.alarm_register = -1;
+  m.creep.output.measurement_due_register = -1;
+  m.creep.output.tool_change_register = -1;
+  m.creep.tool_life.min_expected_increment_um = 10.0;
+  m.creep.tool_life.excessive_increment_um = 50.0;
+  return m;
+}
+
+struct Rig {
+  Engine engine;
+  StepOutput out;
+  std::vector<Event> ev;
+  TimeNs now{0};
+  double path{0.0};
+  double nc_z_um{0.0};
+  double largest_z_change_um{0.0};
+  std::vector<double> z_writes;
+
+  explicit Rig(const TrimZ* model) {
+    const LimiterConfig lim{100.0, 50.0, 1e5};
+    std::vector<std::unique_ptr<engine::Module>> mods;
+    mods.push_back(std::make_unique<CreepModule>(module_config()));
+    if (model != nullptr) mods.push_back(std::make_unique<TrimZ>(model->trim_, model->identity_));
+    engine.configure({{"X_offset", RegisterKind::kAxisOffset, lim},
+                      {"Y_offset", RegisterKind::kAxisOffset, lim},
+                      {"Z_offset", RegisterKind::kAxisOffset, lim}},
+                     std::move(mods));
+  }
+  void step() {
+    engine.step(now, ev, out);
+    ev.clear();
+    for (const auto& w : out.writes) {
+      if (w.register_index != 2) continue;
+      largest_z_change_um = std::max(largest_z_change_um, std::fabs(w.value_um - nc_z_um));
+      nc_z_um = w.value_um;
+      z_writes.push_back(w.value_um);
+    }
+  }
+  void advance(double ds) {
+    now += 10'000'000;
+    path += ds;
+    AxisSample a;
+    a.time_ns = now;
+    a.program_path_mm = path;
+    a.tool = 1;
+    ev.emplace_back(a);
+    step();
+  }
+  void measure(double w) {
+    ToolMeasurement m;
+    m.tool = 1;
+    m.wear_um[0] = w;
+    now += 1'000'000;
+    ev.emplace_back(m);
+    step();
+  }
+  void take_over(const Rig& from) {
+    now = from.now;
+    path = from.path;
+    nc_z_um = from.nc_z_um;
+    std::vector<std::byte> buf(from.engine.state_capacity());
+    buf.resize(from.engine.export_state(buf));
+    ASSERT_TRUE(engine.import_state(buf, now));
+  }
+  [[nodiscard]] double z_um() const { return engine.register_state(2).output_um; }
+};
+
+// 12 µm of wear measured and crept in: Z at −12.
+void wear_in(Rig& r) {
+  r.ev.emplace_back(ToolChange{r.now, 1, false});
+  r.advance(0.5);
+  r.measure(12.0);
+  for (int i = 0; i < 110; ++i) r.advance(0.5);
+  ASSERT_NEAR(r.z_um(), -12.0, 1e-9);
+}
+
+TEST(CreepHandover, ALoadedTrimDoesNotMoveTheRegisterAndComesInAlongTheCreep) {
+  Rig before(nullptr);
+  wear_in(before);
+  const TrimZ model(-10.0, 7);
+  Rig after(&model);
+  after.take_over(before);
+  for (int i = 0; i < 5; ++i) after.advance(0.0);  // the switch, the machine standing
+  EXPECT_LT(after.largest_z_change_um, 1e-9);
+  EXPECT_NEAR(after.z_um(), -12.0, 1e-9);
+  EXPECT_EQ(after.engine.counters().handover_rebases, 1U);
+  EXPECT_EQ(after.engine.counters().handover_unabsorbed, 0U);
+  EXPECT_DOUBLE_EQ(after.engine.register_state(2).trim_um, -10.0);
+  // Cutting: the creep's channel goes from −2 back to −12 over 50 mm, linearly.
+  for (int i = 0; i < 50; ++i) after.advance(0.5);
+  EXPECT_NEAR(after.z_um(), -17.0, 1e-9);
+  for (int i = 0; i < 60; ++i) after.advance(0.5);
+  EXPECT_NEAR(after.z_um(), -22.0, 1e-9);
+  double prev = -12.0;
+  for (const double v : after.z_writes) {
+    EXPECT_LE(v, prev + 1e-9);  // only ever toward the new total
+    EXPECT_GE(v, -22.0 - 1e-9);
+    prev = v;
+  }
+  EXPECT_GT(after.z_writes.size(), 20U);       // crept, not stepped
+  EXPECT_LT(after.largest_z_change_um, 0.21);  // 10 µm over 50 mm in 0.5 mm steps: 0.1 each
+  // The wear measured stays the creep's: a further 3 µm creep in on top.
+  after.measure(15.0);
+  for (int i = 0; i < 110; ++i) after.advance(0.5);
+  EXPECT_NEAR(after.z_um(), -25.0, 1e-9);
+}
+
+TEST(CreepHandover, ARestartInTheMiddleContinuesTheFadeAndRollbackFadesItOut) {
+  Rig before(nullptr);
+  wear_in(before);
+  const TrimZ model(-10.0, 7);
+  Rig loaded(&model);
+  loaded.take_over(before);
+  loaded.advance(0.0);  // the switch
+  loaded.advance(0.0);  // the kinematics re-anchor after the rebase
+  for (int i = 0; i < 50; ++i) loaded.advance(0.5);
+  ASSERT_NEAR(loaded.z_um(), -17.0, 1e-9);
+
+  // A restart with the same model: no handover, the fade goes on from 25 of 50 mm.
+  Rig restarted(&model);
+  restarted.take_over(loaded);
+  restarted.advance(0.0);  // the kinematics re-anchor on the first sample
+  EXPECT_EQ(restarted.engine.counters().handover_rebases, 0U);
+  EXPECT_NEAR(restarted.z_um(), -17.0, 1e-9);
+  for (int i = 0; i < 25; ++i) restarted.advance(0.5);
+  EXPECT_NEAR(restarted.z_um(), -19.5, 1e-9);
+  for (int i = 0; i < 30; ++i) restarted.advance(0.5);
+  EXPECT_NEAR(restarted.z_um(), -22.0, 1e-9);
+
+  // Rollback: the model's −10 µm goes back into the creep's channel and fades out of it.
+  Rig none(nullptr);
+  none.take_over(restarted);
+  none.largest_z_change_um = 0.0;
+  for (int i = 0; i < 5; ++i) none.advance(0.0);
+  EXPECT_LT(none.largest_z_change_um, 1e-9);
+  EXPECT_NEAR(none.z_um(), -22.0, 1e-9);
+  EXPECT_EQ(none.engine.counters().handover_rebases, 1U);
+  for (int i = 0; i < 50; ++i) none.advance(0.5);
+  EXPECT_NEAR(none.z_um(), -17.0, 1e-9);
+  for (int i = 0; i < 60; ++i) none.advance(0.5);
+  EXPECT_NEAR(none.z_um(), -12.0, 1e-9);
+}
+
+TEST(CreepHandover, TheHandoverStepAllocatesNothing) {
+  Rig before(nullptr);
+  wear_in(before);
+  const TrimZ model(-10.0, 7);
+  Rig after(&model);
+  after.take_over(before);
+  AxisSample a;
+  a.time_ns = after.now + 10'000'000;
+  a.program_path_mm = after.path;
+  a.tool = 1;
+  const std::array<Event, 1> events{a};
+  {
+    const test::AllocationScope scope;
+    after.engine.step(a.time_ns, events, after.out);
+    EXPECT_EQ(scope.count(), 0U);
+    EXPECT_EQ(scope.frees(), 0U);
+  }
+  EXPECT_EQ(after.engine.counters().handover_rebases, 1U);
+}
+
+}  // namespace
+}  // namespace nccomp::core::creep
