@@ -59,6 +59,9 @@ struct Candidate {
   std::vector<double> grid;
   /// Number of effectively independent trials of the grid (for the multiplicity correction).
   double multiplicity{1.0};
+  /// A per-group version of a shared candidate (SearchOptions::group_columns): its grid is
+  /// scored group by group (the groups' rows are disjoint), the best point exactly.
+  bool grouped{false};
 };
 
 struct SearchOptions {
@@ -75,6 +78,12 @@ struct SearchOptions {
   std::vector<int> lag_columns;
   /// Split every candidate per group of these columns (e.g. tool: one wear curve per tool).
   std::array<int, 2> per{-1, -1};
+  /// Columns by which every candidate is also tried per group, one coefficient set per value of
+  /// the column (axis / checkpoint, tool, part family), beside its shared version. Each is one
+  /// more candidate in the multiple-testing correction, and its extra coefficients count in the
+  /// F-test. A column with fewer than 2 or more than kMaxSearchGroups values among the fitted
+  /// rows is not used (warning group_column_unused). Not together with `per`.
+  std::vector<int> group_columns;
   /// Shortest period tried for periodic_x|y|z [mm].
   double period_min_mm{2.0};
 };
@@ -130,6 +139,8 @@ struct AddedEffect {
 struct TriedCandidate {
   std::string name;
   std::string column;
+  /// The candidate's per columns (-1 unused): set for a per-group version.
+  std::array<int, 2> per{-1, -1};
   Form form{Form::kLinear};
   double parameter{0.0};
   double rss_reduction_fraction{0.0};  // on the search rows
@@ -139,6 +150,9 @@ struct TriedCandidate {
 };
 
 /// Something the figures do not say by themselves (summary.json `warnings`).
+/// Most groups of a per-group candidate (SearchOptions::group_columns).
+inline constexpr std::size_t kMaxSearchGroups = 64;
+
 struct Warning {
   std::string code;  // saturated, collinear, … (docs/analyze.md)
   std::string message;
@@ -214,6 +228,11 @@ double lag1_autocorrelation(const Dataset& data, const std::vector<double>& resi
 /// temp_c and every column whose name ends in _c (°C, the unit-suffix convention).
 bool is_temperature_column(int column, const std::vector<std::string>& extras,
                            const SearchOptions& options);
+
+/// The effect's name with its groups, as the reports show it: "thermal_drift" for a shared
+/// term, "thermal_drift per=point" (or "per=tool+point") for a per-group one.
+std::string effect_label(const std::string& name, const std::array<int, 2>& per,
+                         const std::vector<std::string>& extras);
 
 /// Name of the effect linear in `column`: thermal_drift for a temperature, linear_<column>.
 std::string linear_effect_name(int column, const std::vector<std::string>& extras,

@@ -122,8 +122,8 @@ void run(const Options& opt) {
   std::cout << "declared model: RMS " << result.declared.fitted.rms_um << " µm, held-out RMS "
             << heldout(result.declared.heldout) << "\n";
   for (const auto& e : result.effects) {
-    std::cout << "added " << e.spec.name << " ("
-              << cm::column_name(e.spec.column, data.extra_columns) << ", "
+    std::cout << "added " << cm::effect_label(e.spec.name, e.spec.per, data.extra_columns) << " ("
+              << cm::term_column_name(e.spec, data.extra_columns) << ", "
               << cm::form_name(e.spec.form) << "): RMS " << e.before.fitted.rms_um << " -> "
               << e.after.fitted.rms_um << " µm, held-out " << heldout(e.before.heldout) << " -> "
               << heldout(e.after.heldout) << ", p = " << e.p_value << "\n";
