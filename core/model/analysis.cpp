@@ -864,6 +864,62 @@ void set_confidence_intervals(const Dataset& data, const std::vector<TermSpec>& 
   }
 }
 
+// --validate sessions: each session's rows predicted by the declared and the final terms fitted
+// on the other sessions' rows (the outliers left out of every fit and figure, as elsewhere).
+void validate_sessions(const Dataset& data, const std::vector<TermSpec>& declared,
+                       const std::vector<TermSpec>& final_specs, AnalysisResult& result) {
+  const std::size_t n = data.rows();
+  std::uint32_t count = 0;
+  for (const std::uint32_t s : result.session) count = std::max(count, s + 1);
+  if (count < 2) {
+    result.warnings.push_back(
+        {"sessions_too_few", "--validate sessions: the rows form " + std::to_string(count) +
+                                 " session: nothing to hold out (a session is a file, a warm "
+                                 "start of a v2 log, or rows after a gap longer than "
+                                 "session_gap_s)"});
+    return;
+  }
+  std::vector<std::uint8_t> outlier(n, 0);
+  for (const std::size_t i : result.outliers) outlier[i] = 1;
+  double ss_declared = 0.0;
+  double ss_final = 0.0;
+  for (std::uint32_t s = 0; s < count; ++s) {
+    std::vector<std::uint8_t> use(n, 0);
+    std::vector<std::uint8_t> mask(n, 0);
+    SessionFold f;
+    f.session = s;
+    bool any = false;
+    for (std::size_t i = 0; i < n; ++i) {
+      if (!std::isfinite(data.target_um[i]) || outlier[i] != 0U) continue;
+      (result.session[i] == s ? mask : use)[i] = 1;
+      if (result.session[i] == s && !any) {
+        f.first_row = i;
+        any = true;
+      }
+    }
+    if (!any) continue;
+    try {
+      f.declared = error_stats(residuals(data, fit_terms(data, declared, use)), mask, 1);
+      f.final_model = error_stats(residuals(data, fit_terms(data, final_specs, use)), mask, 1);
+    } catch (const AnalysisError& e) {
+      result.warnings.push_back({"session_fold_failed", "--validate sessions: session " +
+                                                            std::to_string(s + 1) + " (from " +
+                                                            data.where(f.first_row) +
+                                                            ") held out: " + e.what()});
+      continue;
+    }
+    auto add = [](ErrorStats& total, double& ss, const ErrorStats& e) {
+      ss += e.rms_um * e.rms_um * dz(e.rows);
+      total.rows += e.rows;
+      total.max_um = std::max(total.max_um, e.max_um);
+      total.rms_um = total.rows > 0 ? std::sqrt(ss / dz(total.rows)) : 0.0;
+    };
+    add(result.sessions_declared, ss_declared, f.declared);
+    add(result.sessions_final, ss_final, f.final_model);
+    result.session_folds.push_back(f);
+  }
+}
+
 void warn_fit(const FitInfo& info, const std::string& what, std::vector<Warning>& out) {
   if (info.parameters >= info.rows) {
     out.push_back({"saturated", what + " has " + std::to_string(info.parameters) +
@@ -1513,7 +1569,34 @@ AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
   set_confidence_intervals(data, specs, use, residual, config, result);
   result.final_model = fit_terms(data, specs, all_rows);
   if (!result.effects.empty()) warn_fit(info, "the final model", result.warnings);
+  result.session = sessions_of(data, config.session_gap_s);
+  if (config.validate_sessions) validate_sessions(data, config.declared, specs, result);
   return result;
+}
+
+std::vector<std::uint32_t> sessions_of(const Dataset& data, double gap_s) {
+  const std::size_t n = data.rows();
+  const auto& t =
+      data.order_s.size() == n ? data.order_s : data.column(static_cast<int>(Column::kTime));
+  const bool by_reader = data.row_session.size() == n;
+  // Reader session → time of its previous row, and the session that row is in.
+  std::map<std::uint32_t, std::pair<double, std::uint32_t>> last;
+  std::vector<std::uint32_t> out(n, 0);
+  std::uint32_t next = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::uint32_t reader = by_reader ? data.row_session[i] : 0U;
+    const double t_s = t.size() == n ? t[i] : kUnknown;
+    auto it = last.find(reader);
+    if (it == last.end()) {
+      it = last.emplace(reader, std::make_pair(t_s, next++)).first;
+    } else if (gap_s > 0.0 && std::isfinite(t_s) && std::isfinite(it->second.first) &&
+               t_s - it->second.first > gap_s) {
+      it->second.second = next++;
+    }
+    if (std::isfinite(t_s)) it->second.first = t_s;
+    out[i] = it->second.second;
+  }
+  return out;
 }
 
 }  // namespace nccomp::core::model

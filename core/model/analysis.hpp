@@ -42,6 +42,9 @@ struct Dataset {
   std::vector<std::string> files;
   std::vector<std::uint32_t> row_file;
   std::vector<std::uint32_t> row_line;
+  /// The reader's session of each row: one per file, and a new one at each warm start of a v2
+  /// log (its `session` grows). Of another length than the rows: one session.
+  std::vector<std::uint32_t> row_session;
 
   Dataset();
   [[nodiscard]] std::size_t rows() const { return target_um.size(); }
@@ -108,6 +111,11 @@ struct AnalysisConfig {
   /// by more than this many noise standard deviations (robust, from the median absolute
   /// successive difference), in the same direction; 0 = no outlier rule.
   double outlier_sigmas{10.0};
+  /// A gap in time longer than this [s] between rows of one file (session) starts a new session;
+  /// 0 = sessions are the files and warm starts only.
+  double session_gap_s{0.0};
+  /// Leave-one-session-out validation of the declared and the final model (--validate sessions).
+  bool validate_sessions{false};
 };
 
 struct ErrorStats {
@@ -170,6 +178,15 @@ struct FitInfo {
   std::vector<double> coef_variance;
 };
 
+/// One fold of the leave-one-session-out validation: the session's rows predicted by the
+/// declared and the final terms fitted on every other session's rows.
+struct SessionFold {
+  std::size_t session{0};
+  std::size_t first_row{0};  // its first row (Dataset::where)
+  ErrorStats declared;
+  ErrorStats final_model;
+};
+
 struct AnalysisResult {
   /// In the order found; see Warning.
   std::vector<Warning> warnings;
@@ -192,6 +209,12 @@ struct AnalysisResult {
   /// Rows the robust rule took out of every fit and figure (row indices, in order).
   std::vector<std::size_t> outliers;
   double split_time_s{0.0};
+  /// Session of every row (sessions_of()), and the folds of --validate sessions with the RMS
+  /// over all their rows (empty / 0 rows when not asked for).
+  std::vector<std::uint32_t> session;
+  std::vector<SessionFold> session_folds;
+  ErrorStats sessions_declared;
+  ErrorStats sessions_final;
 };
 
 /// Raised for inputs the analysis cannot work with (too few rows, too many groups, …).
@@ -244,6 +267,11 @@ std::string linear_effect_name(int column, const std::vector<std::string>& extra
 std::vector<Candidate> make_candidates(const Dataset& data, const std::vector<std::uint8_t>& use,
                                        const SearchOptions& options,
                                        const std::vector<TermSpec>& declared = {});
+
+/// Session of each row, numbered from 0 in order of first appearance: the reader's sessions
+/// (Dataset::row_session), each split where time (order_s, else time_s) jumps by more than
+/// gap_s from the session's previous row (gap_s > 0).
+std::vector<std::uint32_t> sessions_of(const Dataset& data, double gap_s);
 
 /// The whole analysis.
 AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config);

@@ -170,7 +170,7 @@ ModelFile read_model_table(const toml::table& root, std::string_view source, boo
   if (model == nullptr) fail(std::string(source) + ": no [model] table");
   check_keys(*model, source, "model",
              {"heldout_fraction", "alpha", "max_effects", "search_rows", "ar1_correction",
-              "lookahead", "outlier_sigmas", "term", "search"});
+              "lookahead", "outlier_sigmas", "session_gap_s", "term", "search"});
   ModelFile out;
   cm::AnalysisConfig& cfg = out.config;
   for (const char* flag : {"ar1_correction", "lookahead"}) {
@@ -198,6 +198,12 @@ ModelFile read_model_table(const toml::table& root, std::string_view source, boo
     const double v = cfg.outlier_sigmas;
     if (v < 0.0 || (v > 0.0 && v < 3.0) || v > 1e3) {
       fail(where(source, *n, "model.outlier_sigmas") + ": must be 0 (off) or within [3, 1000]");
+    }
+  }
+  if (const auto* n = model->get("session_gap_s")) {
+    cfg.session_gap_s = get_number(*n, source, "model.session_gap_s");
+    if (cfg.session_gap_s < 0.0) {
+      fail(where(source, *n, "model.session_gap_s") + ": must be 0 (off) or a time > 0 [s]");
     }
   }
   if (const auto* n = model->get("max_effects")) {
@@ -447,6 +453,7 @@ std::string write_model_toml(const core::model::Model& model,
   o << "ar1_correction = " << (config.ar1_correction ? "true" : "false") << "\n";
   o << "lookahead = " << (config.lookahead ? "true" : "false") << "\n";
   o << "outlier_sigmas = " << fmt_double(config.outlier_sigmas) << "\n";
+  o << "session_gap_s = " << fmt_double(config.session_gap_s) << "\n";
   for (const cm::Term& t : model.terms()) {
     const cm::TermSpec& s = t.spec;
     o << "\n[[model.term]]\n";
@@ -810,6 +817,10 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
   data.order_s.resize(start_rows, cm::kUnknown);
   data.row_file.resize(start_rows, 0);
   data.row_line.resize(start_rows, 0);
+  // Every file starts a session (a foreign log's file, nccompd's log of a warm start).
+  std::uint32_t reader_session = 0;
+  for (const std::uint32_t s : data.row_session) reader_session = std::max(reader_session, s + 1);
+  data.row_session.resize(start_rows, reader_session);
   const auto file_index = static_cast<std::uint32_t>(data.files.size());
   data.files.emplace_back(source);
   double previous_end = -std::numeric_limits<double>::infinity();
@@ -934,6 +945,7 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
       }
       if (v > session && session >= 0.0) {
         // A new warm start: its time_s counts from 0 again, after this file's rows so far.
+        ++reader_session;
         last_time = -std::numeric_limits<double>::infinity();
         previous_end = order_end;
         order_offset = cm::kUnknown;
@@ -984,6 +996,7 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
       data.order_s.push_back(std::isfinite(t_s) ? t_s + order_offset : cm::kUnknown);
       data.row_file.push_back(file_index);
       data.row_line.push_back(static_cast<std::uint32_t>(line_no));
+      data.row_session.push_back(reader_session);
       if (std::isfinite(t_s)) order_end = std::max(order_end, t_s + order_offset);
     }
   }

@@ -182,6 +182,24 @@ std::string summary_json(const cm::Dataset& data, const cm::AnalysisResult& resu
       << ", \"residual_um\": " << num(result.declared_residual_um[i]) << "}";
   }
   o << (result.outliers.empty() ? "" : "\n  ") << "],\n";
+  if (!result.session_folds.empty()) {
+    // --validate sessions: each session held out in turn.
+    o << "  \"validation\": {\"by\": \"session\", \"declared_rms_um\": "
+      << num(result.sessions_declared.rms_um)
+      << ", \"final_rms_um\": " << num(result.sessions_final.rms_um)
+      << ", \"rows\": " << result.sessions_final.rows << ", \"sessions\": [";
+    for (std::size_t k = 0; k < result.session_folds.size(); ++k) {
+      const cm::SessionFold& f = result.session_folds[k];
+      o << (k ? "," : "") << "\n    {\"session\": " << f.session + 1
+        << ", \"first_row\": " << json_string(data.where(f.first_row))
+        << ", \"rows\": " << f.final_model.rows
+        << ", \"declared_rms_um\": " << num(f.declared.rms_um)
+        << ", \"declared_max_um\": " << num(f.declared.max_um)
+        << ", \"final_rms_um\": " << num(f.final_model.rms_um)
+        << ", \"final_max_um\": " << num(f.final_model.max_um) << "}";
+    }
+    o << "\n  ]},\n";
+  }
   o << "  \"warnings\": [";
   for (std::size_t i = 0; i < result.warnings.size(); ++i) {
     o << (i ? "," : "") << "\n    {\"code\": " << json_string(result.warnings[i].code)
@@ -345,6 +363,22 @@ std::string report_markdown(const cm::Dataset& data, const cm::AnalysisResult& r
   }
   o << "\nAn effect is added when its nested-model F-test p-value, multiplied by the number of "
        "candidates and by its search multiplicity, is below alpha, and the held-out RMS drops.\n";
+  if (!result.session_folds.empty()) {
+    o << "\n## Leave-one-session-out validation\n\n"
+         "Each session held out in turn: its rows predicted by the declared and the final terms "
+         "fitted on every other session's rows.\n\n"
+         "| session | first row | rows | declared RMS [µm] | declared max [µm] | final RMS [µm] | "
+         "final max [µm] |\n| --- | --- | --- | --- | --- | --- | --- |\n";
+    for (const cm::SessionFold& f : result.session_folds) {
+      o << "| " << f.session + 1 << " | " << data.where(f.first_row) << " | " << f.final_model.rows
+        << " | " << num(f.declared.rms_um, 4) << " | " << num(f.declared.max_um, 4) << " | "
+        << num(f.final_model.rms_um, 4) << " | " << num(f.final_model.max_um, 4) << " |\n";
+    }
+    o << "| all | | " << result.sessions_final.rows << " | "
+      << num(result.sessions_declared.rms_um, 4) << " | " << num(result.sessions_declared.max_um, 4)
+      << " | " << num(result.sessions_final.rms_um, 4) << " | "
+      << num(result.sessions_final.max_um, 4) << " |\n";
+  }
   o << "\n## Candidates tried at each step (best first)\n\n";
   for (std::size_t s = 0; s < result.steps.size(); ++s) {
     o << "Step " << s + 1
