@@ -317,10 +317,19 @@ SearchSet make_search_set(const Dataset& data, const Model& model,
   std::size_t n_use = 0;
   for (auto u : use) n_use += u != 0U ? 1U : 0U;
   const std::size_t stride = std::max<std::size_t>(1, (n_use + max_rows - 1) / max_rows);
+  // One row at a pseudo-random place (fixed seed) in each block of `stride` rows: every
+  // stride-th row aliases with the log's cycle (20 checkpoints per part and a stride of 80 took
+  // checkpoint 0 only, so a per-checkpoint candidate looked like the shared one).
+  std::uint64_t lcg = 0x9E3779B97F4A7C15ULL;
+  std::size_t pick = 0;
   std::size_t k = 0;
   for (std::size_t i = 0; i < data.rows(); ++i) {
     if (use[i] == 0U || !std::isfinite(residual[i])) continue;
-    if (k++ % stride == 0) s.rows.push_back(i);
+    if (k % stride == 0) {
+      lcg = lcg * 6364136223846793005ULL + 1442695040888963407ULL;
+      pick = static_cast<std::size_t>((lcg >> 33) % stride);
+    }
+    if (k++ % stride == pick) s.rows.push_back(i);
   }
   s.context.reserve(s.rows.size());
   for (std::size_t i : s.rows) s.context.push_back(data.row(i));

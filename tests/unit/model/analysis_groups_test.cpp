@@ -239,3 +239,33 @@ TEST(PerGroupCandidates, TheModelModuleTakesEachRegistersAxisCoefficientAllocati
   }
   EXPECT_EQ(allocations, 0U);
 }
+
+// The grid searches run on search_rows rows of a large log. GIVEN a log of 20 checkpoints per
+// part, each drifting with temp_c at its own rate (mean 0), larger than search_rows WHEN
+// analysed THEN the search rows hold every checkpoint: the per-checkpoint thermal_drift removes
+// most of the residual there and the shared one almost nothing. (Every 20th fitted row, the
+// subsample before, was checkpoint 0 only: both versions scored the same.)
+TEST(PerGroupCandidates, TheSearchRowsOfALargeLogHoldEveryGroup) {
+  synth::Options opt;
+  opt.seed = 5;
+  opt.parts = 125;
+  opt.points_per_part = 20;
+  opt.noise_um = 0.5;
+  opt.effects = {"thermal_temp_per_point"};
+  cm::AnalysisConfig c = synth::config(opt);
+  c.search.group_columns = {kPoint};
+  c.search_rows = 100;  // 2000 fitted rows: one in 20
+  const cm::AnalysisResult r = cm::analyze(synth::generate(opt), c);
+  ASSERT_FALSE(r.steps.empty());
+  double shared = -1.0;
+  double per_point = -1.0;
+  for (const cm::TriedCandidate& t : r.steps[0]) {
+    if (t.name != "thermal_drift" || t.column != "temp_c") continue;
+    (t.per[0] == kPoint ? per_point : shared) = t.rss_reduction_fraction;
+  }
+  EXPECT_GT(per_point, 0.5);
+  EXPECT_LT(shared, 0.1);
+  ASSERT_FALSE(r.effects.empty());
+  EXPECT_TRUE(is_temp_drift(r.effects[0].spec));
+  EXPECT_EQ(r.effects[0].spec.per[0], kPoint);
+}
