@@ -274,6 +274,26 @@ Range column_range(const Dataset& data, int column, const std::vector<std::uint8
   return r;
 }
 
+// Distinct known values of `column` among the used rows of the kinds in kind_mask.
+std::size_t count_groups(const Dataset& data, int column, const std::vector<std::uint8_t>& use,
+                         std::uint8_t kind_mask) {
+  const auto& c = data.column(column);
+  const auto& kind = data.column(static_cast<int>(Column::kKind));
+  std::vector<double> v;
+  for (std::size_t i = 0; i < c.size(); ++i) {
+    if (use[i] == 0U || !std::isfinite(c[i])) continue;
+    if (!kind.empty() && std::isfinite(kind[i]) && kind[i] >= 0.0 && kind[i] < 8.0 &&
+        (kind_mask & (1U << static_cast<unsigned>(kind[i]))) == 0U) {
+      continue;
+    }
+    v.push_back(c[i]);
+  }
+  std::sort(v.begin(), v.end());
+  return static_cast<std::size_t>(std::unique(v.begin(), v.end()) - v.begin());
+}
+
+// The shared and the per-group version of an effect are one term: once either is in the
+// model, neither is tried again (and the daemon's [[model.apply]] finds it by name).
 bool same_term(const TermSpec& a, const TermSpec& b) {
   return a.name == b.name && a.form == b.form && a.column == b.column;
 }
@@ -297,10 +317,19 @@ SearchSet make_search_set(const Dataset& data, const Model& model,
   std::size_t n_use = 0;
   for (auto u : use) n_use += u != 0U ? 1U : 0U;
   const std::size_t stride = std::max<std::size_t>(1, (n_use + max_rows - 1) / max_rows);
+  // One row at a pseudo-random place (fixed seed) in each block of `stride` rows: every
+  // stride-th row aliases with the log's cycle (20 checkpoints per part and a stride of 80 took
+  // checkpoint 0 only, so a per-checkpoint candidate looked like the shared one).
+  std::uint64_t lcg = 0x9E3779B97F4A7C15ULL;
+  std::size_t pick = 0;
   std::size_t k = 0;
   for (std::size_t i = 0; i < data.rows(); ++i) {
     if (use[i] == 0U || !std::isfinite(residual[i])) continue;
-    if (k++ % stride == 0) s.rows.push_back(i);
+    if (k % stride == 0) {
+      lcg = lcg * 6364136223846793005ULL + 1442695040888963407ULL;
+      pick = static_cast<std::size_t>((lcg >> 33) % stride);
+    }
+    if (k++ % stride == pick) s.rows.push_back(i);
   }
   s.context.reserve(s.rows.size());
   for (std::size_t i : s.rows) s.context.push_back(data.row(i));
@@ -414,6 +443,79 @@ double cheap_reduction(const SearchSet& set, Eigen::MatrixXd b) {
   return projected_ss(set, b);
 }
 
+// Group index of each search row under spec.per (-1 where a per column is unknown) and the
+// number of groups, found once per candidate (candidate_basis() finds them per call).
+std::vector<int> search_row_groups(const SearchSet& set, const TermSpec& spec, int& count) {
+  std::map<std::array<double, 2>, int> ids;
+  std::vector<int> group(set.rows.size(), -1);
+  for (std::size_t j = 0; j < set.rows.size(); ++j) {
+    bool ok = false;
+    const auto key = group_key(spec, set.context[j], ok);
+    if (ok) group[j] = ids.emplace(key, static_cast<int>(ids.size())).first->second;
+  }
+  count = static_cast<int>(ids.size());
+  return group;
+}
+
+// Score of a per-group candidate: the rows of different groups are disjoint, so the residual's
+// projection on the per-group columns (each centred within its group, i.e. orthogonal to a
+// constant per group) is the sum of the groups' own projections: k × k systems instead of a QR
+// of k × groups columns. `b`: the shared basis (n × k). Each group's share is clamped to the
+// group's residual SS, so an ill-conditioned system cannot score more than there is.
+double grouped_reduction(const SearchSet& set, const Eigen::MatrixXd& b,
+                         const std::vector<int>& group, int count) {
+  const Eigen::Index k = b.cols();
+  if (k == 0 || count <= 0 || k > static_cast<Eigen::Index>(kMaxBasis)) return 0.0;
+  struct Acc {
+    double n{0.0};
+    double sr{0.0};
+    double srr{0.0};
+    Eigen::Vector3d sb{Eigen::Vector3d::Zero()};
+    Eigen::Vector3d sbr{Eigen::Vector3d::Zero()};
+    Eigen::Matrix3d sbb{Eigen::Matrix3d::Zero()};
+  };
+  std::vector<Acc> acc(static_cast<std::size_t>(count));
+  for (Eigen::Index j = 0; j < b.rows(); ++j) {
+    const int g = group[static_cast<std::size_t>(j)];
+    if (g < 0) continue;
+    Acc& a = acc[static_cast<std::size_t>(g)];
+    const double r = set.r(j);
+    a.n += 1.0;
+    a.sr += r;
+    a.srr += r * r;
+    for (Eigen::Index u = 0; u < k; ++u) {
+      const double bu = b(j, u);
+      a.sb(u) += bu;
+      a.sbr(u) += bu * r;
+      for (Eigen::Index v = 0; v < k; ++v) a.sbb(u, v) += bu * b(j, v);
+    }
+  }
+  double total = 0.0;
+  for (const Acc& a : acc) {
+    if (a.n < 2.0) continue;
+    const Eigen::MatrixXd c =
+        a.sbb.topLeftCorner(k, k) - a.sb.head(k) * a.sb.head(k).transpose() / a.n;
+    const Eigen::VectorXd cr = a.sbr.head(k) - a.sb.head(k) * (a.sr / a.n);
+    Eigen::VectorXd d(k);
+    for (Eigen::Index u = 0; u < k; ++u) d(u) = c(u, u) > 1e-300 ? 1.0 / std::sqrt(c(u, u)) : 0.0;
+    const Eigen::MatrixXd cs = d.asDiagonal() * c * d.asDiagonal();
+    const Eigen::VectorXd crs = d.asDiagonal() * cr;
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(cs);
+    const double top = es.eigenvalues().maxCoeff();
+    double red = 0.0;
+    for (Eigen::Index u = 0; u < k; ++u) {
+      const double l = es.eigenvalues()(u);
+      if (l > 1e-9 * top && l > 0.0) {
+        const double p = es.eigenvectors().col(u).dot(crs);
+        red += p * p / l;
+      }
+    }
+    const double own = std::max(0.0, a.srr - a.sr * a.sr / a.n);
+    if (std::isfinite(red)) total += std::clamp(red, 0.0, own);
+  }
+  return total;
+}
+
 void set_parameter(TermSpec& s, double v) {
   if (s.form == Form::kStep || s.form == Form::kHinge) {
     s.center = v;
@@ -422,10 +524,64 @@ void set_parameter(TermSpec& s, double v) {
   }
 }
 
+// The grid search of a per-group candidate: every grid point and the golden-section refinement
+// scored by grouped_reduction() (cheap for many groups), the best one exactly.
+std::pair<double, double> search_grouped(const Dataset& data, const SearchSet& set,
+                                         const Candidate& cand) {
+  int count = 0;
+  const std::vector<int> group = search_row_groups(set, cand.spec, count);
+  TermSpec shared = cand.spec;
+  shared.per = {-1, -1};
+  auto score = [&](double v) {
+    TermSpec s = shared;
+    set_parameter(s, v);
+    return grouped_reduction(set, candidate_basis(data, set, s), group, count);
+  };
+  std::size_t best_i = 0;
+  double best_score = -1.0;
+  for (std::size_t i = 0; i < cand.grid.size(); ++i) {
+    const double f = score(cand.grid[i]);
+    if (f > best_score) {
+      best_score = f;
+      best_i = i;
+    }
+  }
+  double best_v = cand.grid[best_i];
+  if (cand.spec.form != Form::kStep && cand.spec.form != Form::kHinge) {
+    double lo = cand.grid[best_i > 0 ? best_i - 1 : 0];
+    double hi = cand.grid[std::min(best_i + 1, cand.grid.size() - 1)];
+    const double phi = 0.5 * (std::sqrt(5.0) - 1.0);
+    double a = hi - phi * (hi - lo);
+    double b = lo + phi * (hi - lo);
+    double fa = score(a);
+    double fb = score(b);
+    for (int it = 0; it < 16; ++it) {
+      if (fa > fb) {
+        hi = b;
+        b = a;
+        fb = fa;
+        a = hi - phi * (hi - lo);
+        fa = score(a);
+      } else {
+        lo = a;
+        a = b;
+        fa = fb;
+        b = lo + phi * (hi - lo);
+        fb = score(b);
+      }
+    }
+    if (std::max(fa, fb) > best_score) best_v = fa > fb ? a : b;
+  }
+  TermSpec s = cand.spec;
+  set_parameter(s, best_v);
+  return {best_v, exact_reduction(set, candidate_basis(data, set, s))};
+}
+
 // Best non-linear parameter of a candidate on the search rows, and its RSS reduction there.
 std::pair<double, double> search_candidate(const Dataset& data, const SearchSet& set,
                                            Candidate& cand) {
   if (cand.grid.empty()) return {0.0, exact_reduction(set, candidate_basis(data, set, cand.spec))};
+  if (cand.grouped) return search_grouped(data, set, cand);
   const bool wide = cand.grid.size() > 60;
   std::vector<std::pair<double, std::size_t>> scored;
   for (std::size_t i = 0; i < cand.grid.size(); ++i) {
@@ -717,6 +873,62 @@ void set_confidence_intervals(const Dataset& data, const std::vector<TermSpec>& 
   }
 }
 
+// --validate sessions: each session's rows predicted by the declared and the final terms fitted
+// on the other sessions' rows (the outliers left out of every fit and figure, as elsewhere).
+void validate_sessions(const Dataset& data, const std::vector<TermSpec>& declared,
+                       const std::vector<TermSpec>& final_specs, AnalysisResult& result) {
+  const std::size_t n = data.rows();
+  std::uint32_t count = 0;
+  for (const std::uint32_t s : result.session) count = std::max(count, s + 1);
+  if (count < 2) {
+    result.warnings.push_back(
+        {"sessions_too_few", "--validate sessions: the rows form " + std::to_string(count) +
+                                 " session: nothing to hold out (a session is a file, a warm "
+                                 "start of a v2 log, or rows after a gap longer than "
+                                 "session_gap_s)"});
+    return;
+  }
+  std::vector<std::uint8_t> outlier(n, 0);
+  for (const std::size_t i : result.outliers) outlier[i] = 1;
+  double ss_declared = 0.0;
+  double ss_final = 0.0;
+  for (std::uint32_t s = 0; s < count; ++s) {
+    std::vector<std::uint8_t> use(n, 0);
+    std::vector<std::uint8_t> mask(n, 0);
+    SessionFold f;
+    f.session = s;
+    bool any = false;
+    for (std::size_t i = 0; i < n; ++i) {
+      if (!std::isfinite(data.target_um[i]) || outlier[i] != 0U) continue;
+      (result.session[i] == s ? mask : use)[i] = 1;
+      if (result.session[i] == s && !any) {
+        f.first_row = i;
+        any = true;
+      }
+    }
+    if (!any) continue;
+    try {
+      f.declared = error_stats(residuals(data, fit_terms(data, declared, use)), mask, 1);
+      f.final_model = error_stats(residuals(data, fit_terms(data, final_specs, use)), mask, 1);
+    } catch (const AnalysisError& e) {
+      result.warnings.push_back({"session_fold_failed", "--validate sessions: session " +
+                                                            std::to_string(s + 1) + " (from " +
+                                                            data.where(f.first_row) +
+                                                            ") held out: " + e.what()});
+      continue;
+    }
+    auto add = [](ErrorStats& total, double& ss, const ErrorStats& e) {
+      ss += e.rms_um * e.rms_um * dz(e.rows);
+      total.rows += e.rows;
+      total.max_um = std::max(total.max_um, e.max_um);
+      total.rms_um = total.rows > 0 ? std::sqrt(ss / dz(total.rows)) : 0.0;
+    };
+    add(result.sessions_declared, ss_declared, f.declared);
+    add(result.sessions_final, ss_final, f.final_model);
+    result.session_folds.push_back(f);
+  }
+}
+
 void warn_fit(const FitInfo& info, const std::string& what, std::vector<Warning>& out) {
   if (info.parameters >= info.rows) {
     out.push_back({"saturated", what + " has " + std::to_string(info.parameters) +
@@ -820,7 +1032,7 @@ Model fit_terms(const Dataset& data, const std::vector<TermSpec>& specs,
       term.coef.push_back(beta(static_cast<Eigen::Index>(layout.offset[t] + k)));
       if (!std::isfinite(term.coef.back())) {
         throw AnalysisError("term '" + specs[t].name + "' (" +
-                            column_name(specs[t].column, data.extra_columns) + ", " +
+                            term_column_name(specs[t], data.extra_columns) + ", " +
                             std::string(form_name(specs[t].form)) +
                             "): a coefficient is not a finite number (values too large)");
       }
@@ -897,6 +1109,14 @@ bool is_temperature_column(int column, const std::vector<std::string>& extras,
   if (column == static_cast<int>(Column::kTemp)) return true;
   const std::string name = column_name(column, extras);
   return name.size() > 2 && name.compare(name.size() - 2, 2, "_c") == 0;
+}
+
+std::string effect_label(const std::string& name, const std::array<int, 2>& per,
+                         const std::vector<std::string>& extras) {
+  if (per[0] < 0) return name;
+  std::string out = name + " per=" + column_name(per[0], extras);
+  if (per[1] >= 0) out += "+" + column_name(per[1], extras);
+  return out;
 }
 
 std::string linear_effect_name(int column, const std::vector<std::string>& extras,
@@ -988,6 +1208,30 @@ std::vector<Candidate> make_candidates(const Dataset& data, const std::vector<st
       add("periodic_" + axis, Form::kSine, static_cast<int>(col), 1, c);
     }
   }
+  // Interactions of a position with a temperature or with time (ball-screw growth ∝ position ×
+  // temperature rise): one term with both main effects, named a*b.
+  std::vector<int> drivers;
+  if (varies(temp)) drivers.push_back(static_cast<int>(Column::kTemp));
+  for (int col : options.linear_columns) {
+    if (is_temperature_column(col, data.extra_columns, options) &&
+        varies(column_range(data, col, use, km))) {
+      drivers.push_back(col);
+    }
+  }
+  if (varies(time)) drivers.push_back(static_cast<int>(Column::kTime));
+  for (const auto& [col, axis] : axes) {
+    const Range r = column_range(data, static_cast<int>(col), use, km);
+    if (!varies(r)) continue;
+    for (int d : drivers) {
+      Candidate c;
+      c.spec.center = column_range(data, d, use, km).mean;
+      c.spec.column_b = static_cast<int>(col);
+      c.spec.center_b = r.mean;
+      add(column_name(d, data.extra_columns) + "*" +
+              column_name(static_cast<int>(col), data.extra_columns),
+          Form::kInteraction, d, 1, c);
+    }
+  }
   // Path: wear linear and non-linear (break-in, acceleration).
   const Range path = column_range(data, static_cast<int>(Column::kPath), use, km);
   if (varies(path)) {
@@ -1069,6 +1313,21 @@ std::vector<Candidate> make_candidates(const Dataset& data, const std::vector<st
     c.spec.scale = angle.sd;
     add("contact_angle", Form::kPoly, static_cast<int>(Column::kAngle), 2, c);
   }
+  // Per-group versions of every candidate (one coefficient set per axis, checkpoint, tool, …):
+  // a rate of opposite signs per group averages out in the shared version.
+  if (options.per[0] < 0 && options.per[1] < 0) {
+    const std::size_t shared = out.size();
+    for (int g : options.group_columns) {
+      const std::size_t groups = count_groups(data, g, use, km);
+      if (groups < 2 || groups > kMaxSearchGroups) continue;
+      for (std::size_t i = 0; i < shared; ++i) {
+        Candidate c = out[i];
+        c.spec.per = {g, -1};
+        c.grouped = true;
+        out.push_back(std::move(c));
+      }
+    }
+  }
   return out;
 }
 
@@ -1130,6 +1389,15 @@ AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
   }
 
   std::vector<Candidate> all = make_candidates(data, use, config.search, config.declared);
+  for (int g : config.search.group_columns) {
+    const std::size_t groups = count_groups(data, g, use, config.search.kind_mask);
+    if (groups >= 2 && groups <= kMaxSearchGroups) continue;
+    result.warnings.push_back(
+        {"group_column_unused", "group_columns: '" + column_name(g, data.extra_columns) + "' has " +
+                                    std::to_string(groups) + " values among the fitted rows (2 … " +
+                                    std::to_string(kMaxSearchGroups) +
+                                    " needed): no per-group candidate of it was tried"});
+  }
   struct Ranked {
     double bic;
     std::size_t index;
@@ -1166,7 +1434,8 @@ AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
       const Candidate& c = cands[rk.index];
       TriedCandidate t_out;
       t_out.name = c.spec.name;
-      t_out.column = column_name(c.spec.column, data.extra_columns);
+      t_out.column = term_column_name(c.spec, data.extra_columns);
+      t_out.per = c.spec.per;
       t_out.form = c.spec.form;
       t_out.parameter =
           c.spec.form == Form::kStep || c.spec.form == Form::kHinge || c.spec.form == Form::kWear
@@ -1204,7 +1473,7 @@ AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
     t.model = fit_terms(data, t.specs, use, &t.info);
     t.stats = stats_of(data, t.model, result.heldout, &t.residual,
                        "candidate '" + c.spec.name + "' (" +
-                           column_name(c.spec.column, data.extra_columns) + ", " +
+                           term_column_name(c.spec, data.extra_columns) + ", " +
                            std::string(form_name(c.spec.form)) + ")");
     const double extra = c.grid.empty() ? 0.0 : 1.0;
     const double df1 =
@@ -1309,7 +1578,34 @@ AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
   set_confidence_intervals(data, specs, use, residual, config, result);
   result.final_model = fit_terms(data, specs, all_rows);
   if (!result.effects.empty()) warn_fit(info, "the final model", result.warnings);
+  result.session = sessions_of(data, config.session_gap_s);
+  if (config.validate_sessions) validate_sessions(data, config.declared, specs, result);
   return result;
+}
+
+std::vector<std::uint32_t> sessions_of(const Dataset& data, double gap_s) {
+  const std::size_t n = data.rows();
+  const auto& t =
+      data.order_s.size() == n ? data.order_s : data.column(static_cast<int>(Column::kTime));
+  const bool by_reader = data.row_session.size() == n;
+  // Reader session → time of its previous row, and the session that row is in.
+  std::map<std::uint32_t, std::pair<double, std::uint32_t>> last;
+  std::vector<std::uint32_t> out(n, 0);
+  std::uint32_t next = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::uint32_t reader = by_reader ? data.row_session[i] : 0U;
+    const double t_s = t.size() == n ? t[i] : kUnknown;
+    auto it = last.find(reader);
+    if (it == last.end()) {
+      it = last.emplace(reader, std::make_pair(t_s, next++)).first;
+    } else if (gap_s > 0.0 && std::isfinite(t_s) && std::isfinite(it->second.first) &&
+               t_s - it->second.first > gap_s) {
+      it->second.second = next++;
+    }
+    if (std::isfinite(t_s)) it->second.first = t_s;
+    out[i] = it->second.second;
+  }
+  return out;
 }
 
 }  // namespace nccomp::core::model

@@ -42,6 +42,9 @@ struct Dataset {
   std::vector<std::string> files;
   std::vector<std::uint32_t> row_file;
   std::vector<std::uint32_t> row_line;
+  /// The reader's session of each row: one per file, and a new one at each warm start of a v2
+  /// log (its `session` grows). Of another length than the rows: one session.
+  std::vector<std::uint32_t> row_session;
 
   Dataset();
   [[nodiscard]] std::size_t rows() const { return target_um.size(); }
@@ -59,6 +62,9 @@ struct Candidate {
   std::vector<double> grid;
   /// Number of effectively independent trials of the grid (for the multiplicity correction).
   double multiplicity{1.0};
+  /// A per-group version of a shared candidate (SearchOptions::group_columns): its grid is
+  /// scored group by group (the groups' rows are disjoint), the best point exactly.
+  bool grouped{false};
 };
 
 struct SearchOptions {
@@ -75,6 +81,12 @@ struct SearchOptions {
   std::vector<int> lag_columns;
   /// Split every candidate per group of these columns (e.g. tool: one wear curve per tool).
   std::array<int, 2> per{-1, -1};
+  /// Columns by which every candidate is also tried per group, one coefficient set per value of
+  /// the column (axis / checkpoint, tool, part family), beside its shared version. Each is one
+  /// more candidate in the multiple-testing correction, and its extra coefficients count in the
+  /// F-test. A column with fewer than 2 or more than kMaxSearchGroups values among the fitted
+  /// rows is not used (warning group_column_unused). Not together with `per`.
+  std::vector<int> group_columns;
   /// Shortest period tried for periodic_x|y|z [mm].
   double period_min_mm{2.0};
 };
@@ -99,6 +111,11 @@ struct AnalysisConfig {
   /// by more than this many noise standard deviations (robust, from the median absolute
   /// successive difference), in the same direction; 0 = no outlier rule.
   double outlier_sigmas{10.0};
+  /// A gap in time longer than this [s] between rows of one file (session) starts a new session;
+  /// 0 = sessions are the files and warm starts only.
+  double session_gap_s{0.0};
+  /// Leave-one-session-out validation of the declared and the final model (--validate sessions).
+  bool validate_sessions{false};
 };
 
 struct ErrorStats {
@@ -130,6 +147,8 @@ struct AddedEffect {
 struct TriedCandidate {
   std::string name;
   std::string column;
+  /// The candidate's per columns (-1 unused): set for a per-group version.
+  std::array<int, 2> per{-1, -1};
   Form form{Form::kLinear};
   double parameter{0.0};
   double rss_reduction_fraction{0.0};  // on the search rows
@@ -139,6 +158,9 @@ struct TriedCandidate {
 };
 
 /// Something the figures do not say by themselves (summary.json `warnings`).
+/// Most groups of a per-group candidate (SearchOptions::group_columns).
+inline constexpr std::size_t kMaxSearchGroups = 64;
+
 struct Warning {
   std::string code;  // saturated, collinear, … (docs/analyze.md)
   std::string message;
@@ -154,6 +176,15 @@ struct FitInfo {
   /// Per coefficient (Model order), diagonal of the pseudo-inverse of X'X: its variance is this
   /// times the residual variance.
   std::vector<double> coef_variance;
+};
+
+/// One fold of the leave-one-session-out validation: the session's rows predicted by the
+/// declared and the final terms fitted on every other session's rows.
+struct SessionFold {
+  std::size_t session{0};
+  std::size_t first_row{0};  // its first row (Dataset::where)
+  ErrorStats declared;
+  ErrorStats final_model;
 };
 
 struct AnalysisResult {
@@ -178,6 +209,12 @@ struct AnalysisResult {
   /// Rows the robust rule took out of every fit and figure (row indices, in order).
   std::vector<std::size_t> outliers;
   double split_time_s{0.0};
+  /// Session of every row (sessions_of()), and the folds of --validate sessions with the RMS
+  /// over all their rows (empty / 0 rows when not asked for).
+  std::vector<std::uint32_t> session;
+  std::vector<SessionFold> session_folds;
+  ErrorStats sessions_declared;
+  ErrorStats sessions_final;
 };
 
 /// Raised for inputs the analysis cannot work with (too few rows, too many groups, …).
@@ -215,6 +252,11 @@ double lag1_autocorrelation(const Dataset& data, const std::vector<double>& resi
 bool is_temperature_column(int column, const std::vector<std::string>& extras,
                            const SearchOptions& options);
 
+/// The effect's name with its groups, as the reports show it: "thermal_drift" for a shared
+/// term, "thermal_drift per=point" (or "per=tool+point") for a per-group one.
+std::string effect_label(const std::string& name, const std::array<int, 2>& per,
+                         const std::vector<std::string>& extras);
+
 /// Name of the effect linear in `column`: thermal_drift for a temperature, linear_<column>.
 std::string linear_effect_name(int column, const std::vector<std::string>& extras,
                                const SearchOptions& options);
@@ -225,6 +267,11 @@ std::string linear_effect_name(int column, const std::vector<std::string>& extra
 std::vector<Candidate> make_candidates(const Dataset& data, const std::vector<std::uint8_t>& use,
                                        const SearchOptions& options,
                                        const std::vector<TermSpec>& declared = {});
+
+/// Session of each row, numbered from 0 in order of first appearance: the reader's sessions
+/// (Dataset::row_session), each split where time (order_s, else time_s) jumps by more than
+/// gap_s from the session's previous row (gap_s > 0).
+std::vector<std::uint32_t> sessions_of(const Dataset& data, double gap_s);
 
 /// The whole analysis.
 AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config);

@@ -7,8 +7,9 @@
 namespace nccomp::core::model {
 
 namespace {
-constexpr std::array<std::string_view, 10> kFormNames = {
-    "constant", "linear", "poly", "exp_rise", "sine", "step", "lag", "exp_growth", "hinge", "wear"};
+constexpr std::array<std::string_view, 11> kFormNames = {
+    "constant", "linear",     "poly",  "exp_rise", "sine",       "step",
+    "lag",      "exp_growth", "hinge", "wear",     "interaction"};
 
 bool same(double a, double b) noexcept {
   // Group keys are integers (tool, point, kind) stored as doubles; exact equality is intended.
@@ -38,6 +39,8 @@ std::size_t basis_count(Form f, int degree) noexcept {
   switch (f) {
     case Form::kSine:
       return 2;
+    case Form::kInteraction:
+      return 3;
     case Form::kPoly:
       return degree < 1 ? 1 : (degree > 3 ? 3 : static_cast<std::size_t>(degree));
     default:
@@ -102,6 +105,17 @@ std::size_t term_basis(const TermSpec& spec, const Row& row, double aux,
       if (!std::isfinite(aux)) return 0;
       out[0] = aux;
       return 1;
+    case Form::kInteraction: {
+      if (spec.column_b < 0 || static_cast<std::size_t>(spec.column_b) >= kMaxColumns) return 0;
+      const double w = row[static_cast<std::size_t>(spec.column_b)];
+      if (!std::isfinite(w)) return 0;
+      const double a = v - spec.center;
+      const double b = w - spec.center_b;
+      out[0] = a;
+      out[1] = b;
+      out[2] = a * b;
+      return 3;
+    }
   }
   return 0;
 }
@@ -213,6 +227,13 @@ int column_index(std::string_view name, const std::vector<std::string>& extras) 
     if (extras[i] == name) return static_cast<int>(kStandardColumns + i);
   }
   return -1;
+}
+
+std::string term_column_name(const TermSpec& spec, const std::vector<std::string>& extras) {
+  if (spec.form == Form::kInteraction) {
+    return column_name(spec.column, extras) + "*" + column_name(spec.column_b, extras);
+  }
+  return column_name(spec.column, extras);
 }
 
 std::string column_name(int index, const std::vector<std::string>& extras) {

@@ -42,7 +42,7 @@ enum class Column : std::uint8_t {
 inline constexpr std::size_t kStandardColumns = 11;
 inline constexpr std::size_t kMaxColumns = 32;
 inline constexpr std::size_t kMaxExtraColumns = kMaxColumns - kStandardColumns;
-/// Basis functions of one term (sine: 2, polynomial: up to 3).
+/// Basis functions of one term (sine: 2, polynomial and interaction: up to 3).
 inline constexpr std::size_t kMaxBasis = 3;
 inline constexpr double kUnknown = std::numeric_limits<double>::quiet_NaN();
 
@@ -73,6 +73,10 @@ enum class Form : std::uint8_t {
   // support point): an error proportional to the tool wear, whatever shape the wear curve has.
   // It may not apply to tool_wear rows itself. `column` is path_mm (what the wear grows with).
   kWear = 9,
+  // [a − center, b − center_b, (a − center)(b − center_b)], a = `column`, b = `column_b`: an
+  // interaction with its main effects (ball-screw growth ∝ position × temperature rise, whatever
+  // the screw's fixed end and reference temperature). Written "a*b".
+  kInteraction = 10,
 };
 
 std::string_view form_name(Form f) noexcept;
@@ -100,7 +104,13 @@ struct TermSpec {
   double center{0.0};
   /// kPoly: scale of u. kExpRise, kExpGrowth: scale length. kSine: period. kLag: time constant [s].
   double scale{1.0};
+  /// kInteraction: the second column b and its centre (`center` is that of `column`).
+  int column_b{-1};
+  double center_b{0.0};
 };
+
+/// The term's column as written in model.toml and the reports: "a*b" for an interaction.
+std::string term_column_name(const TermSpec& spec, const std::vector<std::string>& extras);
 
 /// A fitted term: its spec, its groups and one coefficient per group and basis function.
 struct Term {

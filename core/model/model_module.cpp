@@ -48,6 +48,10 @@ std::uint64_t identity_of(const Model& model, const std::vector<ModelApply>& app
     f.value(s.degree);
     f.value(s.center);
     f.value(s.scale);
+    if (s.form == Form::kInteraction) {  // only here: other models keep their identity
+      f.value(s.column_b);
+      f.value(s.center_b);
+    }
     for (const auto& g : t.groups) f.value(g);
     for (const double c : t.coef) f.value(c);
   }

@@ -170,7 +170,7 @@ ModelFile read_model_table(const toml::table& root, std::string_view source, boo
   if (model == nullptr) fail(std::string(source) + ": no [model] table");
   check_keys(*model, source, "model",
              {"heldout_fraction", "alpha", "max_effects", "search_rows", "ar1_correction",
-              "lookahead", "outlier_sigmas", "term", "search"});
+              "lookahead", "outlier_sigmas", "session_gap_s", "term", "search"});
   ModelFile out;
   cm::AnalysisConfig& cfg = out.config;
   for (const char* flag : {"ar1_correction", "lookahead"}) {
@@ -200,6 +200,12 @@ ModelFile read_model_table(const toml::table& root, std::string_view source, boo
       fail(where(source, *n, "model.outlier_sigmas") + ": must be 0 (off) or within [3, 1000]");
     }
   }
+  if (const auto* n = model->get("session_gap_s")) {
+    cfg.session_gap_s = get_number(*n, source, "model.session_gap_s");
+    if (cfg.session_gap_s < 0.0) {
+      fail(where(source, *n, "model.session_gap_s") + ": must be 0 (off) or a time > 0 [s]");
+    }
+  }
   if (const auto* n = model->get("max_effects")) {
     const double v = get_number(*n, source, "model.max_effects");
     if (v < 0.0 || v > 16.0 || std::floor(v) < v) {
@@ -223,8 +229,8 @@ ModelFile read_model_table(const toml::table& root, std::string_view source, boo
     const auto& t = *arr.get(i)->as_table();
     const std::string key = "model.term[" + std::to_string(i) + "]";
     check_keys(t, source, key,
-               {"name", "form", "column", "per", "kinds", "degree", "center", "scale", "groups",
-                "coef_um"});
+               {"name", "form", "column", "per", "kinds", "degree", "center", "center_b", "scale",
+                "groups", "coef_um"});
     cm::TermSpec s;
     const auto* name = t.get("name");
     if (name == nullptr) fail(where(source, t, key) + ".name: missing");
@@ -235,11 +241,28 @@ ModelFile read_model_table(const toml::table& root, std::string_view source, boo
     const std::string fname = get_string(*form, source, key + ".form");
     if (!cm::parse_form(fname, s.form)) {
       fail(where(source, *form, key + ".form") + ": unknown form '" + fname +
-           "' (constant, linear, poly, exp_rise, sine, step, lag, exp_growth, hinge, wear)");
+           "' (constant, linear, poly, exp_rise, sine, step, lag, exp_growth, hinge, wear, "
+           "interaction)");
     }
     if (const auto* c = t.get("column")) {
-      s.column = resolve_column(get_string(*c, source, key + ".column"), out.extra_columns, *c,
-                                source, key + ".column");
+      const std::string col = get_string(*c, source, key + ".column");
+      const auto star = col.find('*');
+      if (s.form == cm::Form::kInteraction) {
+        if (star == std::string::npos || star == 0 || star + 1 == col.size()) {
+          fail(where(source, *c, key + ".column") + ": '" + col +
+               "': an interaction's column is two columns a*b (e.g. \"temp_c*x_mm\")");
+        }
+        s.column =
+            resolve_column(col.substr(0, star), out.extra_columns, *c, source, key + ".column");
+        s.column_b =
+            resolve_column(col.substr(star + 1), out.extra_columns, *c, source, key + ".column");
+      } else {
+        if (star != std::string::npos) {
+          fail(where(source, *c, key + ".column") + ": '" + col +
+               "': a product of columns needs form = \"interaction\"");
+        }
+        s.column = resolve_column(col, out.extra_columns, *c, source, key + ".column");
+      }
     } else if (s.form != cm::Form::kConstant) {
       fail(where(source, t, key) + ".column: missing (form " + fname + " needs a column)");
     }
@@ -259,6 +282,12 @@ ModelFile read_model_table(const toml::table& root, std::string_view source, boo
       s.degree = static_cast<int>(v);
     }
     if (const auto* c = t.get("center")) s.center = get_number(*c, source, key + ".center");
+    if (const auto* c = t.get("center_b")) {
+      if (s.form != cm::Form::kInteraction) {
+        fail(where(source, *c, key + ".center_b") + ": only for form = \"interaction\"");
+      }
+      s.center_b = get_number(*c, source, key + ".center_b");
+    }
     if (const auto* c = t.get("scale")) {
       s.scale = get_number(*c, source, key + ".scale");
       if (!(s.scale > 0.0)) fail(where(source, *c, key + ".scale") + ": must be > 0");
@@ -315,7 +344,7 @@ ModelFile read_model_table(const toml::table& root, std::string_view source, boo
     if (st == nullptr) fail(where(source, *sn, "model.search") + ": must be a table");
     check_keys(*st, source, "model.search",
                {"kinds", "exclude", "linear_columns", "lag_columns", "period_min_mm", "per",
-                "column_kind"});
+                "group_columns", "column_kind"});
     cm::SearchOptions& so = cfg.search;
     if (const auto* n = st->get("per")) {
       const auto names = get_strings(*n, source, "model.search.per");
@@ -328,15 +357,26 @@ ModelFile read_model_table(const toml::table& root, std::string_view source, boo
       so.kind_mask = kinds_mask(*n, source, "model.search.kinds");
     if (const auto* n = st->get("exclude"))
       so.exclude = get_strings(*n, source, "model.search.exclude");
-    for (const auto* list : {"linear_columns", "lag_columns"}) {
+    for (const auto* list : {"linear_columns", "lag_columns", "group_columns"}) {
       if (const auto* n = st->get(list)) {
         const std::string key = std::string("model.search.") + list;
+        const std::string_view l(list);
+        std::vector<int>& cols = l == "linear_columns" ? so.linear_columns
+                                 : l == "lag_columns"  ? so.lag_columns
+                                                       : so.group_columns;
         for (const auto& name : get_strings(*n, source, key)) {
           const int c = resolve_column(name, out.extra_columns, *n, source, key);
-          (std::string_view(list) == "linear_columns" ? so.linear_columns : so.lag_columns)
-              .push_back(c);
+          if (l == "group_columns" && std::find(cols.begin(), cols.end(), c) != cols.end()) {
+            fail(where(source, *n, key) + ": '" + name + "' named twice");
+          }
+          cols.push_back(c);
         }
       }
+    }
+    if (const auto* n = st->get("group_columns"); n != nullptr && so.per[0] >= 0) {
+      // per already splits every candidate: there is no shared version to set beside it.
+      fail(where(source, *n, "model.search.group_columns") +
+           ": not together with model.search.per (which splits every candidate)");
     }
     if (const auto* n = st->get("column_kind")) {
       for (const auto& [name, temperature] :
@@ -354,10 +394,16 @@ ModelFile read_model_table(const toml::table& root, std::string_view source, boo
         for (int c : so.linear_columns) {
           known = known || name == "linear_" + cm::column_name(c, out.extra_columns);
         }
+        // An interaction a*b of two known columns.
+        const auto star = name.find('*');
+        known = known || (star != std::string::npos &&
+                          cm::column_index(name.substr(0, star), out.extra_columns) >= 0 &&
+                          cm::column_index(name.substr(star + 1), out.extra_columns) >= 0);
         if (!known) {
           fail(where(source, *n, "model.search.exclude") + ": no effect is called '" + name +
                "' (thermal_drift, level_change, position_x|y|z, periodic_x|y|z, tool_wear, "
-               "wear_nonlinear, part_trend, contact_angle, linear_<column> of linear_columns)");
+               "wear_nonlinear, part_trend, contact_angle, linear_<column> of linear_columns, "
+               "a*b of an interaction)");
         }
       }
     }
@@ -407,13 +453,14 @@ std::string write_model_toml(const core::model::Model& model,
   o << "ar1_correction = " << (config.ar1_correction ? "true" : "false") << "\n";
   o << "lookahead = " << (config.lookahead ? "true" : "false") << "\n";
   o << "outlier_sigmas = " << fmt_double(config.outlier_sigmas) << "\n";
+  o << "session_gap_s = " << fmt_double(config.session_gap_s) << "\n";
   for (const cm::Term& t : model.terms()) {
     const cm::TermSpec& s = t.spec;
     o << "\n[[model.term]]\n";
     o << "name = " << quote(s.name) << "\n";
     o << "form = " << quote(cm::form_name(s.form)) << "\n";
     if (s.form != cm::Form::kConstant)
-      o << "column = " << quote(cm::column_name(s.column, ex)) << "\n";
+      o << "column = " << quote(cm::term_column_name(s, ex)) << "\n";
     if (s.per[0] >= 0) {
       o << "per = [" << quote(cm::column_name(s.per[0], ex));
       if (s.per[1] >= 0) o << ", " << quote(cm::column_name(s.per[1], ex));
@@ -431,9 +478,10 @@ std::string write_model_toml(const core::model::Model& model,
     }
     if (s.form == cm::Form::kPoly) o << "degree = " << s.degree << "\n";
     if (s.form == cm::Form::kPoly || s.form == cm::Form::kStep || s.form == cm::Form::kHinge ||
-        s.form == cm::Form::kWear) {
+        s.form == cm::Form::kWear || s.form == cm::Form::kInteraction) {
       o << "center = " << fmt_double(s.center) << "\n";
     }
+    if (s.form == cm::Form::kInteraction) o << "center_b = " << fmt_double(s.center_b) << "\n";
     if (s.form == cm::Form::kPoly || cm::has_nonlinear_parameter(s.form)) {
       if (s.form != cm::Form::kStep && s.form != cm::Form::kHinge)
         o << "scale = " << fmt_double(s.scale) << "\n";
@@ -473,6 +521,7 @@ std::string write_model_toml(const core::model::Model& model,
     if (c >= 0) per.push_back(c);
   }
   list("per", per);
+  list("group_columns", so.group_columns);
   list("lag_columns", so.lag_columns);
   if (!so.exclude.empty()) {
     o << "exclude = [";
@@ -768,6 +817,10 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
   data.order_s.resize(start_rows, cm::kUnknown);
   data.row_file.resize(start_rows, 0);
   data.row_line.resize(start_rows, 0);
+  // Every file starts a session (a foreign log's file, nccompd's log of a warm start).
+  std::uint32_t reader_session = 0;
+  for (const std::uint32_t s : data.row_session) reader_session = std::max(reader_session, s + 1);
+  data.row_session.resize(start_rows, reader_session);
   const auto file_index = static_cast<std::uint32_t>(data.files.size());
   data.files.emplace_back(source);
   double previous_end = -std::numeric_limits<double>::infinity();
@@ -892,6 +945,7 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
       }
       if (v > session && session >= 0.0) {
         // A new warm start: its time_s counts from 0 again, after this file's rows so far.
+        ++reader_session;
         last_time = -std::numeric_limits<double>::infinity();
         previous_end = order_end;
         order_offset = cm::kUnknown;
@@ -942,6 +996,7 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
       data.order_s.push_back(std::isfinite(t_s) ? t_s + order_offset : cm::kUnknown);
       data.row_file.push_back(file_index);
       data.row_line.push_back(static_cast<std::uint32_t>(line_no));
+      data.row_session.push_back(reader_session);
       if (std::isfinite(t_s)) order_end = std::max(order_end, t_s + order_offset);
     }
   }

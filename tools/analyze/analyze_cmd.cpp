@@ -25,6 +25,7 @@ struct Options {
   std::vector<std::string> maps;
   std::string config;
   std::string out = "analysis";
+  std::string validate;
 };
 
 void write_file(const std::filesystem::path& p, const std::string& text) {
@@ -81,6 +82,7 @@ void run(const Options& opt) {
   } catch (const io::ModelIoError& e) {
     throw CommandError(nccomp::tools::kExitInvalidInput, e.what());
   }
+  cfg.config.validate_sessions = opt.validate == "sessions";
   cm::AnalysisResult result;
   try {
     result = cm::analyze(data, cfg.config);
@@ -122,8 +124,8 @@ void run(const Options& opt) {
   std::cout << "declared model: RMS " << result.declared.fitted.rms_um << " µm, held-out RMS "
             << heldout(result.declared.heldout) << "\n";
   for (const auto& e : result.effects) {
-    std::cout << "added " << e.spec.name << " ("
-              << cm::column_name(e.spec.column, data.extra_columns) << ", "
+    std::cout << "added " << cm::effect_label(e.spec.name, e.spec.per, data.extra_columns) << " ("
+              << cm::term_column_name(e.spec, data.extra_columns) << ", "
               << cm::form_name(e.spec.form) << "): RMS " << e.before.fitted.rms_um << " -> "
               << e.after.fitted.rms_um << " µm, held-out " << heldout(e.before.heldout) << " -> "
               << heldout(e.after.heldout) << ", p = " << e.p_value << "\n";
@@ -131,6 +133,11 @@ void run(const Options& opt) {
   std::cout << "final RMS " << result.final_stats.fitted.rms_um << " µm (held-out "
             << heldout(result.final_stats.heldout) << "), noise floor " << result.noise_floor_um
             << " µm\n";
+  if (!result.session_folds.empty()) {
+    std::cout << "leave-one-session-out (" << result.session_folds.size()
+              << " sessions): declared RMS " << result.sessions_declared.rms_um << " µm, final RMS "
+              << result.sessions_final.rms_um << " µm\n";
+  }
   for (const auto& w : result.warnings)
     std::cout << "warning " << w.code << ": " << w.message << "\n";
   std::cout << "wrote " << (out / "summary.json").string() << ", " << (out / "report.md").string()
@@ -148,6 +155,10 @@ void setup(CLI::App& app) {
   sub->add_option("--map", opt->maps,
                   "column mapping TOML for a foreign CSV (one for all logs, or one per --log)");
   sub->add_option("--out", opt->out, "output directory")->capture_default_str();
+  sub->add_option("--validate", opt->validate,
+                  "sessions: hold each session (file, warm start, gap > session_gap_s) out in "
+                  "turn and predict it from the others")
+      ->check(CLI::IsMember({"sessions"}));
   sub->callback([opt] { run(*opt); });
 }
 

@@ -103,6 +103,10 @@ std::string params_json(const cm::TermSpec& spec, const cm::Model& model,
       // coef_um: µm of error per µm of predicted wear at this edge support point.
       o << "\"wear_point\": " << num(spec.center);
       break;
+    case cm::Form::kInteraction:
+      // coef_um: per (a − center_a), (b − center_b), (a − center_a)(b − center_b).
+      o << "\"center_a\": " << num(spec.center, 8) << ", \"center_b\": " << num(spec.center_b, 8);
+      break;
     default:
       break;
   }
@@ -112,6 +116,15 @@ std::string params_json(const cm::TermSpec& spec, const cm::Model& model,
     o << (first ? "" : ", ") << "\"coef_um\": [";
     for (std::size_t i = 0; i < t->coef.size(); ++i) o << (i ? ", " : "") << num(t->coef[i], 8);
     o << "]";
+    if (spec.per[0] >= 0) {
+      // coef_um holds one coefficient set per group, in this order.
+      o << ", \"groups\": [";
+      for (std::size_t g = 0; g < t->groups.size(); ++g) {
+        o << (g ? ", " : "") << "[" << num(t->groups[g][0], 12) << ", " << num(t->groups[g][1], 12)
+          << "]";
+      }
+      o << "]";
+    }
   }
   o << "}";
   return o.str();
@@ -123,8 +136,13 @@ std::string summary_json(const cm::Dataset& data, const cm::AnalysisResult& resu
   o << "  \"effects\": [";
   for (std::size_t i = 0; i < result.effects.size(); ++i) {
     const auto& e = result.effects[i];
-    o << (i ? "," : "") << "\n    {\"name\": " << json_string(e.spec.name)
-      << ", \"column\": " << json_string(cm::column_name(e.spec.column, data.extra_columns))
+    o << (i ? "," : "") << "\n    {\"name\": " << json_string(e.spec.name) << ", \"label\": "
+      << json_string(cm::effect_label(e.spec.name, e.spec.per, data.extra_columns))
+      << ", \"per\": [";
+    for (std::size_t k = 0; k < 2 && e.spec.per[k] >= 0; ++k) {
+      o << (k ? ", " : "") << json_string(cm::column_name(e.spec.per[k], data.extra_columns));
+    }
+    o << "], \"column\": " << json_string(cm::term_column_name(e.spec, data.extra_columns))
       << ", \"form\": " << json_string(std::string(cm::form_name(e.spec.form)))
       << ", \"params\": " << params_json(e.spec, result.fitted_model, data.extra_columns)
       << ", \"rms_before_um\": " << num(e.before.fitted.rms_um)
@@ -153,6 +171,24 @@ std::string summary_json(const cm::Dataset& data, const cm::AnalysisResult& resu
       << ", \"residual_um\": " << num(result.declared_residual_um[i]) << "}";
   }
   o << (result.outliers.empty() ? "" : "\n  ") << "],\n";
+  if (!result.session_folds.empty()) {
+    // --validate sessions: each session held out in turn.
+    o << "  \"validation\": {\"by\": \"session\", \"declared_rms_um\": "
+      << num(result.sessions_declared.rms_um)
+      << ", \"final_rms_um\": " << num(result.sessions_final.rms_um)
+      << ", \"rows\": " << result.sessions_final.rows << ", \"sessions\": [";
+    for (std::size_t k = 0; k < result.session_folds.size(); ++k) {
+      const cm::SessionFold& f = result.session_folds[k];
+      o << (k ? "," : "") << "\n    {\"session\": " << f.session + 1
+        << ", \"first_row\": " << json_string(data.where(f.first_row))
+        << ", \"rows\": " << f.final_model.rows
+        << ", \"declared_rms_um\": " << num(f.declared.rms_um)
+        << ", \"declared_max_um\": " << num(f.declared.max_um)
+        << ", \"final_rms_um\": " << num(f.final_model.rms_um)
+        << ", \"final_max_um\": " << num(f.final_model.max_um) << "}";
+    }
+    o << "\n  ]},\n";
+  }
   o << "  \"warnings\": [";
   for (std::size_t i = 0; i < result.warnings.size(); ++i) {
     o << (i ? "," : "") << "\n    {\"code\": " << json_string(result.warnings[i].code)
@@ -293,14 +329,30 @@ std::string report_markdown(const cm::Dataset& data, const cm::AnalysisResult& r
     const auto& e = result.effects[i];
     // Built with append(): GCC 12 at -O3 reports a false -Wrestrict on "literal" + string.
     std::string effect("+ ");
-    effect.append(e.spec.name);
+    effect.append(cm::effect_label(e.spec.name, e.spec.per, ex));
     std::string params("`");
     params.append(params_json(e.spec, result.fitted_model, ex)).append("`");
-    row(std::to_string(i + 1), effect, cm::column_name(e.spec.column, ex),
+    row(std::to_string(i + 1), effect, cm::term_column_name(e.spec, ex),
         std::string(cm::form_name(e.spec.form)), params, e.after, num(e.p_value, 3));
   }
   o << "\nAn effect is added when its nested-model F-test p-value, multiplied by the number of "
        "candidates and by its search multiplicity, is below alpha, and the held-out RMS drops.\n";
+  if (!result.session_folds.empty()) {
+    o << "\n## Leave-one-session-out validation\n\n"
+         "Each session held out in turn: its rows predicted by the declared and the final terms "
+         "fitted on every other session's rows.\n\n"
+         "| session | first row | rows | declared RMS [µm] | declared max [µm] | final RMS [µm] | "
+         "final max [µm] |\n| --- | --- | --- | --- | --- | --- | --- |\n";
+    for (const cm::SessionFold& f : result.session_folds) {
+      o << "| " << f.session + 1 << " | " << data.where(f.first_row) << " | " << f.final_model.rows
+        << " | " << num(f.declared.rms_um, 4) << " | " << num(f.declared.max_um, 4) << " | "
+        << num(f.final_model.rms_um, 4) << " | " << num(f.final_model.max_um, 4) << " |\n";
+    }
+    o << "| all | | " << result.sessions_final.rows << " | "
+      << num(result.sessions_declared.rms_um, 4) << " | " << num(result.sessions_declared.max_um, 4)
+      << " | " << num(result.sessions_final.rms_um, 4) << " | "
+      << num(result.sessions_final.max_um, 4) << " |\n";
+  }
   o << "\n## Candidates tried at each step (best first)\n\n";
   for (std::size_t s = 0; s < result.steps.size(); ++s) {
     o << "Step " << s + 1
@@ -308,10 +360,10 @@ std::string report_markdown(const cm::Dataset& data, const cm::AnalysisResult& r
          "SS removed | p (adjusted) | held-out better |\n| --- | --- | --- | "
          "--- | --- | --- | --- |\n";
     for (const auto& c : result.steps[s]) {
-      o << "| " << c.name << " | " << c.column << " | " << cm::form_name(c.form) << " | "
-        << num(c.parameter, 5) << " | " << num(c.rss_reduction_fraction, 3) << " | "
-        << (c.refitted ? num(c.p_value, 3) : "—") << " | "
-        << (c.refitted ? (c.heldout_improved ? "yes" : "no") : "—") << " |\n";
+      o << "| " << cm::effect_label(c.name, c.per, ex) << " | " << c.column << " | "
+        << cm::form_name(c.form) << " | " << num(c.parameter, 5) << " | "
+        << num(c.rss_reduction_fraction, 3) << " | " << (c.refitted ? num(c.p_value, 3) : "—")
+        << " | " << (c.refitted ? (c.heldout_improved ? "yes" : "no") : "—") << " |\n";
     }
     o << "\n";
   }

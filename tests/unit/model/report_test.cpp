@@ -24,7 +24,7 @@ TEST(Report, SummaryJsonHasExactlyTheIssueKeys) {
       R"(^\{\n  "declared_rms_um": [-0-9.e]+,\n  "effects": \[\n    \{.*\}\n  \],\n  "final_rms_um": [-0-9.e]+,\n  "noise_floor_um": [-0-9.e]+,\n  "outliers": \[\],\n  "warnings": \[\]\n\}\n$)");
   EXPECT_TRUE(std::regex_match(j, top)) << j;
   const std::regex effect(
-      R"re(\{"name": "part_trend", "column": "part", "form": "linear", "params": \{"coef_um": \[[-0-9.e]+\]\}, "rms_before_um": [-0-9.e]+, "rms_after_um": [-0-9.e]+, "heldout_rms_before_um": [-0-9.e]+, "heldout_rms_after_um": [-0-9.e]+, "p_value": [-0-9.e]+, "coef_ci95": \[\[[-0-9.e]+, [-0-9.e]+\]\]\})re");
+      R"re(\{"name": "part_trend", "label": "part_trend", "per": \[\], "column": "part", "form": "linear", "params": \{"coef_um": \[[-0-9.e]+\]\}, "rms_before_um": [-0-9.e]+, "rms_after_um": [-0-9.e]+, "heldout_rms_before_um": [-0-9.e]+, "heldout_rms_after_um": [-0-9.e]+, "p_value": [-0-9.e]+, "coef_ci95": \[\[[-0-9.e]+, [-0-9.e]+\]\]\})re");
   EXPECT_TRUE(std::regex_search(j, effect)) << j;
   char buf[64];
   std::snprintf(buf, sizeof buf, "\"final_rms_um\": %.6g,", r.final_stats.fitted.rms_um);

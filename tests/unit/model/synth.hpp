@@ -64,6 +64,10 @@ inline double effect_um(const std::string& name, const cm::Row& r, double run_s)
   const double z = r[7];
   if (name == "thermal_drift") return 4.0 * (1.0 - std::exp(-t / 5400.0));
   if (name == "thermal_temp") return 2.5 * (temp - 20.0);
+  // Each checkpoint its own rate, −1.2 … +1.2 µm/K by point mod 5 (mean 0: no shared rate).
+  if (name == "thermal_temp_per_point") {
+    return (0.6 * std::fmod(r[4], 5.0) - 1.2) * (temp - 20.0);
+  }
   if (name == "position_x") {
     const double u = (x - 200.0) / 100.0;
     return 1.2 * u * u + 1.0 * u;
