@@ -281,7 +281,7 @@ std::unique_ptr<ModelSection> parse_model_section(const toml::node& node,
       auto describe = [&](const cm::TermSpec& spec) {
         return spec.name + " (" +
                (spec.form == cm::Form::kConstant ? std::string("constant")
-                                                 : cm::column_name(spec.column, extras) + ", " +
+                                                 : cm::term_column_name(spec, extras) + ", " +
                                                        std::string(cm::form_name(spec.form))) +
                ")";
       };
@@ -289,7 +289,7 @@ std::unique_ptr<ModelSection> parse_model_section(const toml::node& node,
         const cm::TermSpec& spec = terms[k].spec;
         if (spec.name != a.term) continue;
         if (!column.empty() &&
-            (spec.form == cm::Form::kConstant || cm::column_name(spec.column, extras) != column)) {
+            (spec.form == cm::Form::kConstant || cm::term_column_name(spec, extras) != column)) {
           continue;
         }
         if (!form.empty() && cm::form_name(spec.form) != form) continue;

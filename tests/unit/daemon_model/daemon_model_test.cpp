@@ -675,6 +675,10 @@ TEST(ModelSection, AnInteractionWithAPositionNeedsUpdateCycleWhicheverColumnIsTh
       std::vector<core::Event>{core::TemperatureSample{0, 0, 25.0}, sample(150.0, 0.0, 1, true)},
       out);
   EXPECT_NEAR(m->trim_um(0), -5.75, 1e-12);
+  // The entry chooses it by its column as model.toml writes it, a*b.
+  auto by_column = config::load_file(
+      d.write("c.toml", text("cycle") + "column = \"temp_c*x_mm\"\nform = \"interaction\"\n"));
+  EXPECT_TRUE(by_column.config) << by_column.diagnostics.to_string();
 }
 
 TEST(ModelSection, APerGroupTermNeedsItsGroupInEachEntry) {
