@@ -1,5 +1,6 @@
 #include "daemon/sections/model/model_section.hpp"
 
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -142,19 +143,19 @@ std::string loop_context_problem(const cm::Term& term, bool each_cycle, const cm
   }
   // The group columns the entry fixes (kind always) must be those of a group; the loop gives
   // the others.
+  std::array<double, 2> v{cm::kUnknown, cm::kUnknown};
   std::string fixed;
   for (std::size_t k = 0; k < 2; ++k) {
-    const double v = spec.per[k] < 0 ? cm::kUnknown : entry_value(spec.per[k], apply);
-    if (std::isnan(v)) continue;
+    if (spec.per[k] >= 0) v[k] = entry_value(spec.per[k], apply);
+    if (std::isnan(v[k])) continue;
     fixed += (fixed.empty() ? "" : ", ") + cm::column_name(spec.per[k], extras) + " = " +
-             key_value(spec.per[k], v);
+             key_value(spec.per[k], v[k]);
   }
   if (fixed.empty()) return {};
   for (const auto& g : term.groups) {
     bool match = true;
     for (std::size_t k = 0; k < 2; ++k) {
-      const double v = spec.per[k] < 0 ? cm::kUnknown : entry_value(spec.per[k], apply);
-      if (!std::isnan(v) && (v < g[k] || v > g[k])) match = false;
+      if (!std::isnan(v[k]) && (v[k] < g[k] || v[k] > g[k])) match = false;
     }
     if (match) return {};
   }
