@@ -1,6 +1,8 @@
 #include "daemon/sections/model/model_section.hpp"
 
+#include <array>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <stdexcept>
 #include <string>
@@ -18,17 +20,76 @@ namespace fs = std::filesystem;
 namespace cm = core::model;
 using formats::TableReader;
 
+/// The value of column c the entry fixes (kind, point, tool, angle_deg), NaN when the loop
+/// gives it or the entry does not.
+double entry_value(int c, const core::model::ModelApply& apply) {
+  switch (static_cast<cm::Column>(c)) {
+    case cm::Column::kKind:
+      return apply.kind;
+    case cm::Column::kPoint:
+      return apply.point;
+    case cm::Column::kTool:
+      return apply.tool;
+    case cm::Column::kAngle:
+      return apply.angle_deg;
+    default:
+      return cm::kUnknown;
+  }
+}
+
+/// A group key as the entry writes it: a kind by name, a number as it is.
+std::string key_value(int c, double v) {
+  if (c == static_cast<int>(cm::Column::kKind)) {
+    for (const char* kind : {"tool_wear", "contour", "calib"}) {
+      const auto i = static_cast<double>(formats::model_io::kind_from_name(kind));
+      if (!(i < v) && !(v < i)) return kind;
+    }
+  }
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%g", v);
+  return buf;
+}
+
+/// "point = 0, 1, 2" (one group column) or "(kind = calib, point = 0), …" (two): the groups of
+/// a per-group term, for the errors.
+std::string group_list(const cm::Term& term, const std::vector<std::string>& extras) {
+  constexpr std::size_t kShown = 16;
+  const auto& per = term.spec.per;
+  std::string out;
+  const bool both = per[0] >= 0 && per[1] >= 0;
+  for (std::size_t g = 0; g < term.groups.size() && g < kShown; ++g) {
+    std::string key;
+    for (std::size_t k = 0; k < 2; ++k) {
+      if (per[k] < 0) continue;
+      // One column: its name once, before the first value.
+      if (both || g == 0) {
+        key += (key.empty() ? "" : ", ") + cm::column_name(per[k], extras) + " = ";
+      }
+      key += key_value(per[k], term.groups[g][k]);
+    }
+    out += (out.empty() ? "" : ", ") + (both ? "(" + key + ")" : key);
+  }
+  if (term.groups.size() > kShown) {
+    out += ", … (" + std::to_string(term.groups.size()) + " groups)";
+  }
+  return out;
+}
+
 /// Why a term cannot be evaluated in the loop as configured, or "" when it can. The loop knows
 /// time_s, part, tool, temp_c, x/y/z and path_mm (the engine's machine context), kind / point /
 /// tool / angle_deg when the [[model.apply]] entry fixes them, and extra columns mapped by
 /// [[model.inputs]]. Position and path change within a part, so a term of them needs
-/// update = "cycle".
-std::string loop_context_problem(const cm::TermSpec& spec, bool each_cycle, const cm::Model& model,
+/// update = "cycle". A per-group term contributes its group's coefficients, so the entry must
+/// give the group columns the loop does not know (point), each as a value the model has a group
+/// of.
+std::string loop_context_problem(const cm::Term& term, bool each_cycle, const cm::Model& model,
                                  const std::vector<ModelInputConfig>& inputs,
                                  const core::model::ModelApply& apply) {
+  const cm::TermSpec& spec = term.spec;
   const std::vector<std::string>& extras = model.extra_columns();
   std::vector<int> cols;
   if (spec.form != cm::Form::kConstant) cols.push_back(spec.column);
+  if (spec.form == cm::Form::kInteraction) cols.push_back(spec.column_b);
   for (const int c : spec.per) {
     if (c >= 0) cols.push_back(c);
   }
@@ -40,6 +101,7 @@ std::string loop_context_problem(const cm::TermSpec& spec, bool each_cycle, cons
         continue;
       }
       if (w.form != cm::Form::kConstant) cols.push_back(w.column);
+      if (w.form == cm::Form::kInteraction) cols.push_back(w.column_b);
       for (const int c : w.per) {
         if (c >= 0 && c != static_cast<int>(cm::Column::kKind) &&
             c != static_cast<int>(cm::Column::kPoint)) {
@@ -72,7 +134,33 @@ std::string loop_context_problem(const cm::TermSpec& spec, bool each_cycle, cons
              ", which changes within a part: set update = \"cycle\" in [model]";
     }
   }
-  return {};
+  for (std::size_t k = 0; k < 2; ++k) {
+    if (spec.per[k] == static_cast<int>(cm::Column::kPoint) && std::isnan(apply.point)) {
+      return "has one coefficient set per point and the entry gives no point: add point = N "
+             "(the model has " +
+             group_list(term, extras) + "), or it would contribute nothing";
+    }
+  }
+  // The group columns the entry fixes (kind always) must be those of a group; the loop gives
+  // the others.
+  std::array<double, 2> v{cm::kUnknown, cm::kUnknown};
+  std::string fixed;
+  for (std::size_t k = 0; k < 2; ++k) {
+    if (spec.per[k] >= 0) v[k] = entry_value(spec.per[k], apply);
+    if (std::isnan(v[k])) continue;
+    fixed += (fixed.empty() ? "" : ", ") + cm::column_name(spec.per[k], extras) + " = " +
+             key_value(spec.per[k], v[k]);
+  }
+  if (fixed.empty()) return {};
+  for (const auto& g : term.groups) {
+    bool match = true;
+    for (std::size_t k = 0; k < 2; ++k) {
+      if (!std::isnan(v[k]) && (v[k] < g[k] || v[k] > g[k])) match = false;
+    }
+    if (match) return {};
+  }
+  return "has no group " + fixed + " (the model has " + group_list(term, extras) +
+         "): it would contribute nothing";
 }
 
 }  // namespace
@@ -194,7 +282,7 @@ std::unique_ptr<ModelSection> parse_model_section(const toml::node& node,
       auto describe = [&](const cm::TermSpec& spec) {
         return spec.name + " (" +
                (spec.form == cm::Form::kConstant ? std::string("constant")
-                                                 : cm::column_name(spec.column, extras) + ", " +
+                                                 : cm::term_column_name(spec, extras) + ", " +
                                                        std::string(cm::form_name(spec.form))) +
                ")";
       };
@@ -202,7 +290,7 @@ std::unique_ptr<ModelSection> parse_model_section(const toml::node& node,
         const cm::TermSpec& spec = terms[k].spec;
         if (spec.name != a.term) continue;
         if (!column.empty() &&
-            (spec.form == cm::Form::kConstant || cm::column_name(spec.column, extras) != column)) {
+            (spec.form == cm::Form::kConstant || cm::term_column_name(spec, extras) != column)) {
           continue;
         }
         if (!form.empty() && cm::form_name(spec.form) != form) continue;
@@ -222,9 +310,8 @@ std::unique_ptr<ModelSection> parse_model_section(const toml::node& node,
                                               "): choose one with column = … and / or form = …");
       } else {
         a.apply.term_index = static_cast<std::size_t>(found);
-        const std::string problem =
-            loop_context_problem(terms[static_cast<std::size_t>(found)].spec, s->each_cycle,
-                                 s->model, s->inputs, a.apply);
+        const std::string problem = loop_context_problem(
+            terms[static_cast<std::size_t>(found)], s->each_cycle, s->model, s->inputs, a.apply);
         if (!problem.empty()) diag.error(q.where("term"), "term '" + a.term + "' " + problem);
       }
     }

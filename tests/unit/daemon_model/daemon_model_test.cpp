@@ -4,6 +4,7 @@
 // restart does not apply the trim twice, and config errors name file, line and key.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -294,11 +295,11 @@ TEST(ModelSection, ErrorsNameFileLineAndKey) {
   EXPECT_NE(r2.diagnostics.to_string().find("model.file"), std::string::npos)
       << r2.diagnostics.to_string();
 
-  auto r3 = config::load_file(
-      d.write("c.toml", registers_toml() +
-                            "[model]\nfile = \"fit/model.toml\"\n[[model.apply]]\n"
-                            "term = \"part_trend\"\nregister = \"warn\"\n"
-                            "[[model.apply]]\nterm = \"part_trend\"\nregister = \"nope\"\n"));
+  auto r3 = config::load_file(d.write(
+      "c.toml", registers_toml() + "[model]\nfile = \"fit/model.toml\"\n[[model.apply]]\n"
+                                   "term = \"part_trend\"\nregister = \"warn\"\npoint = 0\n"
+                                   "[[model.apply]]\nterm = \"part_trend\"\nregister = \"nope\"\n"
+                                   "point = 1\n"));
   ASSERT_FALSE(r3.config);
   const std::string e3 = r3.diagnostics.to_string();
   EXPECT_NE(e3.find("'warn' is a flag"), std::string::npos) << e3;
@@ -612,6 +613,125 @@ TEST(ModelSection, TermsTheLoopCannotEvaluateAsConfiguredAreRefused) {
     auto r = load(std::string("ok_") + ok + ".toml", "cycle", ok);
     EXPECT_TRUE(r.config) << ok << ": " << r.diagnostics.to_string();
   }
+}
+
+/// The two new kinds of term of the analysis (issue 21): temp_c*x_mm, an interaction (basis
+/// temp_c − 20, x_mm − 100, their product; coef 1, 0.01, 0.001), and thermal_drift linear in
+/// temp_c per point on calib rows (point 0 → 0.5, 1 → −0.3, 2 → 0.1 µm/°C).
+cm::Model interaction_and_group_model() {
+  cm::Term screw;
+  screw.spec.name = "temp_c*x_mm";
+  screw.spec.form = cm::Form::kInteraction;
+  screw.spec.column = static_cast<int>(cm::Column::kTemp);
+  screw.spec.column_b = static_cast<int>(cm::Column::kX);
+  screw.spec.center = 20.0;
+  screw.spec.center_b = 100.0;
+  screw.groups = {{0.0, 0.0}};
+  screw.coef = {1.0, 0.01, 0.001};
+  cm::Term drift;
+  drift.spec.name = "thermal_drift";
+  drift.spec.form = cm::Form::kLinear;
+  drift.spec.column = static_cast<int>(cm::Column::kTemp);
+  drift.spec.per = {static_cast<int>(cm::Column::kPoint), -1};
+  drift.spec.kind_mask = 0x4;
+  drift.groups = {{0.0, 0.0}, {1.0, 0.0}, {2.0, 0.0}};
+  drift.coef = {0.5, -0.3, 0.1};
+  return cm::Model({}, {screw, drift});
+}
+
+/// "name:LINE:8: " of the first `term = ` line of `text` (the value starts in column 8).
+std::string term_where(const std::string& name, const std::string& text) {
+  const std::size_t at = text.find("\nterm = ");
+  const auto line = std::count(text.begin(), text.begin() + static_cast<std::ptrdiff_t>(at), '\n');
+  return name + ":" + std::to_string(line + 2) + ":8: ";
+}
+
+TEST(ModelSection, AnInteractionWithAPositionNeedsUpdateCycleWhicheverColumnIsThePosition) {
+  TempDir d;
+  d.write("fit/model.toml", formats::model_io::write_model_toml(interaction_and_group_model(),
+                                                                cm::AnalysisConfig{}, {"test"}));
+  const auto text = [](const std::string& update) {
+    return registers_toml() + "[model]\nfile = \"fit/model.toml\"\nupdate = \"" + update +
+           "\"\n[[model.apply]]\nterm = \"temp_c*x_mm\"\nregister = \"checkpoint_0\"\n";
+  };
+  // x_mm is the interaction's second column: it changes within a part.
+  auto r = config::load_file(d.write("a.toml", text("part")));
+  EXPECT_FALSE(r.config);
+  const std::string err = r.diagnostics.to_string();
+  EXPECT_NE(err.find(term_where("a.toml", text("part")) +
+                     "model.apply[0].term: term 'temp_c*x_mm' depends on x_mm, which changes "
+                     "within a part: set update = \"cycle\" in [model]"),
+            std::string::npos)
+      << err;
+  auto ok = config::load_file(d.write("b.toml", text("cycle")));
+  ASSERT_TRUE(ok.config) << ok.diagnostics.to_string();
+  auto e = config::build_engine(*ok.config);
+  const auto* m = static_cast<const ModelModule*>(&e->module(0));
+  ASSERT_EQ(m->name(), "model");
+  core::StepOutput out;
+  // 25 °C at x = 150: 1·5 + 0.01·50 + 0.001·5·50 = 5.75 µm, trim −5.75.
+  e->step(
+      1'000'000'000,
+      std::vector<core::Event>{core::TemperatureSample{0, 0, 25.0}, sample(150.0, 0.0, 1, true)},
+      out);
+  EXPECT_NEAR(m->trim_um(0), -5.75, 1e-12);
+  // The entry chooses it by its column as model.toml writes it, a*b.
+  auto by_column = config::load_file(
+      d.write("c.toml", text("cycle") + "column = \"temp_c*x_mm\"\nform = \"interaction\"\n"));
+  EXPECT_TRUE(by_column.config) << by_column.diagnostics.to_string();
+}
+
+TEST(ModelSection, APerGroupTermNeedsItsGroupInEachEntry) {
+  TempDir d;
+  d.write("fit/model.toml", formats::model_io::write_model_toml(interaction_and_group_model(),
+                                                                cm::AnalysisConfig{}, {"test"}));
+  const auto text = [](const std::string& keys) {
+    return registers_toml() +
+           "[model]\nfile = \"fit/model.toml\"\nupdate = \"cycle\"\n[[model.apply]]\n"
+           "term = \"thermal_drift\"\nregister = \"checkpoint_0\"\nkind = \"calib\"\n" +
+           keys;
+  };
+  // No point: the term has no coefficient for the entry, it would contribute 0.
+  auto r = config::load_file(d.write("a.toml", text("")));
+  EXPECT_FALSE(r.config);
+  const std::string err = r.diagnostics.to_string();
+  EXPECT_NE(err.find(term_where("a.toml", text("")) +
+                     "model.apply[0].term: term 'thermal_drift' has one coefficient set per "
+                     "point and the entry gives no point: add point = N (the model has point = 0, "
+                     "1, 2), or it would contribute nothing"),
+            std::string::npos)
+      << err;
+  // A point the model has no group of would contribute 0 too.
+  auto r2 = config::load_file(d.write("b.toml", text("point = 5\n")));
+  EXPECT_FALSE(r2.config);
+  const std::string err2 = r2.diagnostics.to_string();
+  EXPECT_NE(err2.find(term_where("b.toml", text("point = 5\n")) +
+                      "model.apply[0].term: term 'thermal_drift' has no group point = 5 (the model "
+                      "has point = 0, 1, 2): it would contribute nothing"),
+            std::string::npos)
+      << err2;
+  // Two group columns: trend_model's offset has (kind, point) groups of contour rows only.
+  d.write("fit/trend.toml", model_toml());
+  auto r3 = config::load_file(
+      d.write("d.toml", registers_toml() +
+                            "[model]\nfile = \"fit/trend.toml\"\n[[model.apply]]\n"
+                            "term = \"offset\"\nregister = \"checkpoint_0\"\nkind = \"calib\"\n"
+                            "point = 0\n"));
+  EXPECT_FALSE(r3.config);
+  const std::string err3 = r3.diagnostics.to_string();
+  EXPECT_NE(err3.find("model.apply[0].term: term 'offset' has no group kind = calib, point = 0 "
+                      "(the model has (kind = contour, point = 0), (kind = contour, point = 1)): "
+                      "it would contribute nothing"),
+            std::string::npos)
+      << err3;
+  // With its group: that group's coefficient, −1 × −0.3 µm/°C × 25 °C.
+  auto ok = config::load_file(d.write("c.toml", text("point = 1\n")));
+  ASSERT_TRUE(ok.config) << ok.diagnostics.to_string();
+  auto e = config::build_engine(*ok.config);
+  const auto* m = static_cast<const ModelModule*>(&e->module(0));
+  core::StepOutput out;
+  e->step(1'000'000'000, std::vector<core::Event>{core::TemperatureSample{0, 0, 25.0}}, out);
+  EXPECT_NEAR(m->trim_um(0), 7.5, 1e-12);
 }
 
 /// ambient: thermal_drift linear in the extra column ambient_c (−0.88 µm/°C); speed: a
