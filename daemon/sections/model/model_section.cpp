@@ -87,6 +87,20 @@ std::string loop_context_problem(const cm::Term& term, bool each_cycle, const cm
                                  const core::model::ModelApply& apply) {
   const cm::TermSpec& spec = term.spec;
   const std::vector<std::string>& extras = model.extra_columns();
+  // A term is fitted on rows of some kinds only (kind_mask) and evaluates to 0 for the others:
+  // an entry of another kind would apply nothing, silently.
+  if (apply.kind >= 0.0 && apply.kind < 8.0 &&
+      (spec.kind_mask & (1U << static_cast<unsigned>(apply.kind))) == 0U) {
+    std::string fitted;
+    for (const char* k : {"tool_wear", "contour", "calib"}) {
+      const auto i = static_cast<unsigned>(formats::model_io::kind_from_name(k));
+      if ((spec.kind_mask & (1U << i)) != 0U) fitted += std::string(fitted.empty() ? "" : ", ") + k;
+    }
+    return "was fitted on " + fitted + " rows only and contributes nothing to kind = " +
+           key_value(static_cast<int>(cm::Column::kKind), apply.kind) +
+           ": give the entry the kind of the rows the term describes (kind = \"" +
+           fitted.substr(0, fitted.find(',')) + "\")";
+  }
   std::vector<int> cols;
   if (spec.form != cm::Form::kConstant) cols.push_back(spec.column);
   if (spec.form == cm::Form::kInteraction) cols.push_back(spec.column_b);

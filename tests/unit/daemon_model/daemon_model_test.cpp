@@ -681,6 +681,41 @@ TEST(ModelSection, AnInteractionWithAPositionNeedsUpdateCycleWhicheverColumnIsTh
   EXPECT_TRUE(by_column.config) << by_column.diagnostics.to_string();
 }
 
+/// A term fitted on rows of one kind evaluates to 0 for every other kind (core/model/model.cpp):
+/// an entry of another kind must be refused, not accepted to apply nothing. thermal_drift of
+/// interaction_and_group_model() is fitted on calib rows only.
+TEST(ModelSection, ATermFittedOnOtherKindsIsRefusedNotAppliedAsZero) {
+  TempDir d;
+  d.write("fit/model.toml", formats::model_io::write_model_toml(interaction_and_group_model(),
+                                                                cm::AnalysisConfig{}, {"test"}));
+  const auto text = [](const std::string& kind) {
+    return registers_toml() +
+           "[model]\nfile = \"fit/model.toml\"\nupdate = \"cycle\"\n[[model.apply]]\n"
+           "term = \"thermal_drift\"\nregister = \"checkpoint_0\"\npoint = 0\n" +
+           kind;
+  };
+  // No kind: the entry's default, contour.
+  const std::vector<std::pair<std::string, std::string>> refused = {
+      {"", "contour"},
+      {"kind = \"contour\"\n", "contour"},
+      {"kind = \"tool_wear\"\n", "tool_wear"}};
+  for (const auto& [key, named] : refused) {
+    auto r = config::load_file(d.write("a.toml", text(key)));
+    EXPECT_FALSE(r.config) << key;
+    const std::string err = r.diagnostics.to_string();
+    EXPECT_NE(err.find(term_where("a.toml", text(key)) +
+                       "model.apply[0].term: term 'thermal_drift' was fitted on calib rows only "
+                       "and contributes nothing to kind = " +
+                       named +
+                       ": give the entry the kind of the rows the term describes "
+                       "(kind = \"calib\")"),
+              std::string::npos)
+        << err;
+  }
+  auto ok = config::load_file(d.write("b.toml", text("kind = \"calib\"\n")));
+  EXPECT_TRUE(ok.config) << ok.diagnostics.to_string();
+}
+
 TEST(ModelSection, APerGroupTermNeedsItsGroupInEachEntry) {
   TempDir d;
   d.write("fit/model.toml", formats::model_io::write_model_toml(interaction_and_group_model(),
