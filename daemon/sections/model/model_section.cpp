@@ -9,6 +9,7 @@
 #include <utility>
 
 #include "daemon/config/builtin_sections.hpp"
+#include "daemon/sections/calibration/calibration_section.hpp"
 #include "daemon/sections/model/context_section.hpp"
 #include "formats/model/model_io.hpp"
 
@@ -394,6 +395,11 @@ class ModelParser final : public config::SectionParser {
     std::vector<core::engine::RegisterSpec> specs;
     for (const auto& e : config::registers_section(config).registers) specs.push_back(e.spec);
     const core::engine::RegisterTable table(specs);
+    // S3 with touch_positions = "machine" measures the whole drift whatever the NC's offset
+    // holds: a trim on its register would be counted on top of it.
+    const auto* calibration = calibration_section(config);
+    const bool s3_whole_drift = calibration != nullptr && calibration->config.touch_positions ==
+                                                              core::calib::TouchPositions::kMachine;
     for (std::size_t i = 0; i < s->applies.size(); ++i) {
       const auto& a = s->applies[i];
       const int idx = table.find(a.register_name);
@@ -405,6 +411,14 @@ class ModelParser final : public config::SectionParser {
       } else if (specs[static_cast<std::size_t>(idx)].kind == core::engine::RegisterKind::kFlag) {
         diag.error(a.where, "model.apply[" + std::to_string(i) + "].register: '" + a.register_name +
                                 "' is a flag; a trim needs an offset register");
+      } else if (s3_whole_drift &&
+                 (idx == calibration->config.register_x || idx == calibration->config.register_y ||
+                  idx == calibration->config.register_z)) {
+        diag.error(a.where, "model.apply[" + std::to_string(i) + "].register: '" + a.register_name +
+                                "' takes [calibration]'s correction, which measures the whole "
+                                "drift with touch_positions = \"machine\": the term's trim would "
+                                "count it twice; set [calibration] touch_positions = \"program\" "
+                                "(the calibration then learns what the term leaves)");
       }
     }
   }

@@ -716,6 +716,51 @@ TEST(ModelSection, ATermFittedOnOtherKindsIsRefusedNotAppliedAsZero) {
   EXPECT_TRUE(ok.config) << ok.diagnostics.to_string();
 }
 
+/// [calibration] with touch_positions = "machine" measures the whole drift into its X/Y/Z
+/// registers whatever the NC's offset holds (core/calib/calibrator.hpp): a model's trim on one of
+/// them would be counted on top of it, twice. With "program" the touches see the trim and S3
+/// learns what the term leaves: accepted. The [calibration] table is the documented example
+/// (registers 20..22), as given and with "program".
+TEST(ModelSection, ATrimOnACalibrationRegisterNeedsTouchPositionsProgram) {
+  TempDir d;
+  d.write("fit/model.toml", formats::model_io::write_model_toml(interaction_and_group_model(),
+                                                                cm::AnalysisConfig{}, {"test"}));
+  std::ifstream in(std::string(NCCOMP_SOURCE_DIR) + "/tools/calibrate/examples/machine.toml");
+  std::stringstream example;
+  example << in.rdbuf();
+  const std::string machine = example.str();
+  const std::string needle = "touch_positions = \"machine\"";
+  ASSERT_NE(machine.find(needle), std::string::npos);
+  std::string program = machine;
+  program.replace(program.find(needle), needle.size(), "touch_positions = \"program\"");
+  std::string registers = "[loopback]\n";
+  for (int i = 0; i < 23; ++i) {
+    registers += "[[registers]]\nname = \"r" + std::to_string(i) + "\"\nkind = \"" +
+                 (i >= 20 ? "axis_offset" : "tool_length_wear") +
+                 "\"\nbus = \"loopback\"\nmax_abs_um = 100\nmax_step_um = 50\n"
+                 "max_rate_um_per_s = 100000\n";
+  }
+  const std::string model =
+      "[model]\nfile = \"fit/model.toml\"\n[[model.apply]]\nterm = \"thermal_drift\"\n"
+      "register = \"r21\"\nkind = \"calib\"\npoint = 1\n";
+  auto r = config::load_file(d.write("a.toml", registers + machine + model));
+  EXPECT_FALSE(r.config);
+  const std::string err = r.diagnostics.to_string();
+  EXPECT_NE(err.find("model.apply[0].register: 'r21' takes [calibration]'s correction, which "
+                     "measures the whole drift with touch_positions = \"machine\": the term's "
+                     "trim would count it twice; set [calibration] touch_positions = "
+                     "\"program\" (the calibration then learns what the term leaves)"),
+            std::string::npos)
+      << err;
+  auto ok = config::load_file(d.write("b.toml", registers + program + model));
+  EXPECT_TRUE(ok.config) << ok.diagnostics.to_string();
+  // A register [calibration] does not write is no concern of it.
+  std::string other = model;
+  other.replace(other.find("r21"), 3, "r3");
+  auto r3 = config::load_file(d.write("c.toml", registers + machine + other));
+  EXPECT_TRUE(r3.config) << r3.diagnostics.to_string();
+}
+
 TEST(ModelSection, APerGroupTermNeedsItsGroupInEachEntry) {
   TempDir d;
   d.write("fit/model.toml", formats::model_io::write_model_toml(interaction_and_group_model(),
