@@ -52,7 +52,7 @@ TEST(FalseDiscoveries, AtMostFivePercentOverFiftySeeds) {
   EXPECT_LE(discoveries, kSeeds * 5 / 100);
 }
 
-// The two real-data write-ups (docs/closing-the-loop.md) run with ar1_correction = false and offer
+// The two real-data write-ups (bench/results/model.md) run with ar1_correction = false and offer
 // extra columns to the search (a lag and a linear term of a speed column). The same guarantee must
 // hold there: GIVEN logs with no undeclared effect, a spindle-speed column that nothing depends
 // on, and the F-test taking the rows as independent (only the held-out check guards), WHEN
