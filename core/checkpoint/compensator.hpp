@@ -58,7 +58,7 @@ struct CheckpointEstimatorConfig {
   double measurement_sigma_um{1.0};
   /// The deviation's random walk: standard deviation of its change from one part to the next
   /// [µm]. Used until learned (or always, with learn_part_noise = false).
-  double part_noise_um{0.5};
+  double part_noise_um{1.0};
   /// Learn the part noise per checkpoint from its history: q = mean(Δe²) − 2σ², at least 0.
   bool learn_part_noise{true};
   /// Accepted readings in the checkpoint's history before the learned part noise is used.

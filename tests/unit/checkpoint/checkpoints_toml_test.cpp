@@ -273,7 +273,7 @@ TEST(CheckpointsToml, EstimatorKeysFromTheDocsExampleAndTheirErrors) {
                            "[checkpoints.estimator]\n"
                            "enabled = true\n"
                            "measurement_sigma_um = 0.7\n"
-                           "part_noise_um = 0.5\n"
+                           "part_noise_um = 1.0\n"
                            "learn_part_noise = true\n"
                            "learn_min_parts = 5\n"
                            "gate_sigmas = 5\n";
@@ -284,7 +284,7 @@ TEST(CheckpointsToml, EstimatorKeysFromTheDocsExampleAndTheirErrors) {
   const cp::CheckpointEstimatorConfig& e = c.compensator.estimator;
   EXPECT_TRUE(e.enabled);
   EXPECT_DOUBLE_EQ(e.measurement_sigma_um, 0.7);
-  EXPECT_DOUBLE_EQ(e.part_noise_um, 0.5);
+  EXPECT_DOUBLE_EQ(e.part_noise_um, 1.0);
   EXPECT_TRUE(e.learn_part_noise);
   EXPECT_EQ(e.learn_min_parts, 5U);
   EXPECT_DOUBLE_EQ(e.gate_sigmas, 5.0);
