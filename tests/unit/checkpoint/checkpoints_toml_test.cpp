@@ -311,3 +311,24 @@ TEST(CheckpointsToml, EstimatorKeysFromTheDocsExampleAndTheirErrors) {
 
 }  // namespace
 }  // namespace nccomp::tools::checkpoints
+
+namespace nccomp::tools::checkpoints {
+namespace {
+
+// The shipped S1 example (ncsim's side wall) carries the estimator's table, off: it loads, and
+// every key has the documented default.
+TEST(CheckpointsToml, TheShippedSideWallExampleHasTheEstimatorOffWithItsDefaults) {
+  const CheckpointsConfig c = load_checkpoints_file(
+      kData + "/../../../../sim/ncsim/config/side_wall_checkpoints.toml", std::nullopt);
+  const cp::CheckpointEstimatorConfig& e = c.compensator.estimator;
+  const cp::CheckpointEstimatorConfig defaults{};
+  EXPECT_FALSE(e.enabled);
+  EXPECT_DOUBLE_EQ(e.measurement_sigma_um, defaults.measurement_sigma_um);
+  EXPECT_DOUBLE_EQ(e.part_noise_um, defaults.part_noise_um);
+  EXPECT_EQ(e.learn_part_noise, defaults.learn_part_noise);
+  EXPECT_EQ(e.learn_min_parts, defaults.learn_min_parts);
+  EXPECT_DOUBLE_EQ(e.gate_sigmas, defaults.gate_sigmas);
+}
+
+}  // namespace
+}  // namespace nccomp::tools::checkpoints
