@@ -323,11 +323,13 @@ std::string render_text(const StatusContext& c) {
   }
   if (c.shadow) {
     const sections::ShadowStatus sh = c.shadow();
-    o << "model scores: live " << sh.live.parts << " parts, mse " << num(sh.live.mse_um2())
-      << " um^2";
+    const auto mse = [](const sections::ModelScore& m) {
+      return m.parts == 0 ? std::string("-") : num(m.mse_um2()) + " um^2";
+    };
+    o << "model scores: live " << sh.live.parts << " parts, mse " << mse(sh.live);
     if (sh.phase != sections::ShadowPhase::kNone) {
       o << "; " << sections::phase_name(sh.phase) << " " << sh.other_file << " " << sh.other.parts
-        << " parts, mse " << num(sh.other.mse_um2()) << " um^2, p " << num(sh.window.p_value);
+        << " parts, mse " << mse(sh.other) << ", p " << num(sh.window.p_value);
     }
     o << "\n";
   }

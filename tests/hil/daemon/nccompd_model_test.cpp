@@ -317,6 +317,8 @@ TEST(NccompModel, ACandidateInShadowIsPromotedByTheRuleAndTheHistoryPersists) {
   std::uint16_t sequence = 0;
   const auto measure = [&](float wear_um) {
     ++sequence;
+    // One record per measurement: wait until the shadow has scored it.
+    const double before = number(daemon.status(), "rows_scored");
     nc.update([&](Tables& t) {
       std::uint32_t bits = 0;
       std::memcpy(&bits, &wear_um, sizeof bits);
@@ -325,8 +327,6 @@ TEST(NccompModel, ACandidateInShadowIsPromotedByTheRuleAndTheHistoryPersists) {
       t.input[103] = static_cast<std::uint16_t>(bits & 0xFFFF);
       t.input[100] = sequence;
     });
-    // One record per measurement: wait until the shadow has scored it.
-    const double before = number(daemon.status(), "rows_scored");
     return wait_until([&] { return number(daemon.status(), "rows_scored") > before; });
   };
   ASSERT_TRUE(measure(5.0F)) << daemon.log();
@@ -409,6 +409,84 @@ TEST(NccompModel, ACandidateInShadowIsPromotedByTheRuleAndTheHistoryPersists) {
   EXPECT_NE(st.out.find("candidate by uid 0 (root)"), std::string::npos) << st.out;
   EXPECT_NE(st.out.find("promoted by shadow rule"), std::string::npos) << st.out;
   EXPECT_NE(st.out.find("confirmed by shadow rule"), std::string::npos) << st.out;
+  EXPECT_EQ(daemon.stop(), 0) << daemon.log();
+}
+
+// promote = "operator": GIVEN the same daemon, WHEN B passes the rule, THEN it is only announced
+// (A stays live, the register stays), `model promote` before that was refused, and the operator's
+// `model promote` makes B live with the load's handover and records who did it.
+TEST(NccompModel, WithPromoteOperatorTheRuleAnnouncesAndTheOperatorPromotes) {
+  TempDir d;
+  NcServer nc(ServerConfig{});
+  nc.start();
+  nc.update([](Tables& t) { t.input[8] = 1; });
+  fs::create_directories(d.path / "a");
+  fs::create_directories(d.path / "b");
+  std::ofstream(d.path / "a" / "model.toml") << model_text("offset", 0.0, "tool_wear");
+  std::ofstream(d.path / "b" / "model.toml") << model_text("offset", 5.0, "tool_wear");
+  std::ofstream(d.path / "nccompd.toml")
+      << config_text(nc.port(),
+                     "kind = \"tool_wear\"\n[model.shadow]\nmin_parts = 5\npromote = "
+                     "\"operator\"\n");
+  const std::string socket = (d.path / "status.sock").string();
+  const std::string a = (d.path / "a" / "model.toml").string();
+  const std::string b = (d.path / "b" / "model.toml").string();
+  Daemon daemon(d.path);
+  ASSERT_TRUE(daemon.start());
+  ASSERT_TRUE(wait_until([&] { return number(daemon.status(), "cycles") >= 20; })) << daemon.log();
+  std::uint16_t sequence = 0;
+  const auto measure = [&](float wear_um) {
+    ++sequence;
+    const double before = number(daemon.status(), "rows_scored");
+    nc.update([&](Tables& t) {
+      std::uint32_t bits = 0;
+      std::memcpy(&bits, &wear_um, sizeof bits);
+      t.input[101] = 1;
+      t.input[102] = static_cast<std::uint16_t>(bits >> 16);
+      t.input[103] = static_cast<std::uint16_t>(bits & 0xFFFF);
+      t.input[100] = sequence;
+    });
+    return wait_until([&] { return number(daemon.status(), "rows_scored") > before; });
+  };
+  ASSERT_TRUE(measure(5.0F)) << daemon.log();
+  ASSERT_TRUE(wait_until([&] { return holding_i32(nc, kLength) == -50; })) << daemon.log();
+  CliRun cand = nccomp_as_root(d, {"model", "candidate", b, "--socket", socket});
+  ASSERT_EQ(cand.exit_code, 0) << cand.out << cand.err << daemon.log();
+  CliRun early = nccomp_as_root(d, {"model", "promote", "--socket", socket});
+  EXPECT_EQ(early.exit_code, 3) << early.out << early.err;
+  EXPECT_NE(early.err.find("has not been found better yet (0 of 5 parts scored)"),
+            std::string::npos)
+      << early.err;
+  for (int i = 0; i < 5; ++i) ASSERT_TRUE(measure(5.0F)) << daemon.log();
+  ASSERT_TRUE(wait_until([&] {
+    return daemon.status().find("\"phase\":\"announced\"") != std::string::npos;
+  })) << daemon.status();
+  // Announced only: A live, the register where it was.
+  std::this_thread::sleep_for(300ms);
+  CliRun st = nccomp_as_root(d, {"model", "status", "--socket", socket});
+  EXPECT_EQ(st.out.rfind("ok model: " + a, 0), 0U) << st.out;
+  EXPECT_NE(st.out.find("announced by shadow rule"), std::string::npos) << st.out;
+  // nccomp status: A scored on the measurement before the candidate and the five with it.
+  const std::string text = nccomp::client::query(socket, "text");
+  EXPECT_NE(text.find("model scores: live 6 parts, mse 25 um^2; announced " + b +
+                      " 5 parts, mse 0 um^2, p 0.03125\n"),
+            std::string::npos)
+      << text;
+  EXPECT_EQ(holding_i32(nc, kLength), -50);
+  CliRun promote = nccomp_as_root(d, {"model", "promote", "--socket", socket});
+  ASSERT_EQ(promote.exit_code, 0) << promote.out << promote.err << daemon.log();
+  std::printf("%s", promote.out.c_str());
+  EXPECT_EQ(promote.out.rfind("ok model promoted: " + b, 0), 0U) << promote.out;
+  EXPECT_NE(promote.out.find("previous (nccomp model rollback returns to it): " + a),
+            std::string::npos)
+      << promote.out;
+  ASSERT_TRUE(wait_until([&] { return holding_i32(nc, kLength) == 0; }))
+      << holding_i32(nc, kLength) << "\n"
+      << daemon.log();
+  st = nccomp_as_root(d, {"model", "status", "--socket", socket});
+  EXPECT_NE(st.out.find("promoted by uid 0 (root)"), std::string::npos) << st.out;
+  EXPECT_NE(st.out.find("watching the model the promotion replaced: " + a), std::string::npos)
+      << st.out;
   EXPECT_EQ(daemon.stop(), 0) << daemon.log();
 }
 
