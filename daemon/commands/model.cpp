@@ -136,9 +136,7 @@ std::string handle_model_command(std::string_view args, CommandContext& ctx) {
     return refuse(ctx, fmt::format("model {}: refused, nothing changed:\n{}", what, change.error));
   }
   const ModelState& m = change.state;
-  if (action == ModelAction::kCandidate) {
-    spdlog::info("model candidate: {} in shadow beside {} (by {})", file, describe(m.live),
-                 ctx.who);
+  if (action == ModelAction::kCandidate) {  // logged by the daemon with the shadow's history
     return fmt::format(
         "ok model candidate: {} (hash {}) scored in shadow beside the live model {}\n  the rule "
         "decides after {} parts scored by both\n",
