@@ -412,6 +412,71 @@ TEST(NccompModel, ACandidateInShadowIsPromotedByTheRuleAndTheHistoryPersists) {
   EXPECT_EQ(daemon.stop(), 0) << daemon.log();
 }
 
+// Demotion: GIVEN model A live predicting 10 µm of wear (trim +10 µm) and B predicting 5 µm,
+// WHEN the NC measures 5.0 µm five times, THEN B is promoted (register −5 + 5 = 0.0 µm); WHEN the
+// wear then reads 8.0 µm five times (A's error 2 µm, B's 3 µm on every part), THEN the rule
+// demotes B: A is live again, B kept for rollback, the register at −8 + 10 = +2.0 µm through the
+// rollback's handover.
+TEST(NccompModel, APromotedModelIsDemotedWhenTheModelItReplacedDoesBetter) {
+  TempDir d;
+  NcServer nc(ServerConfig{});
+  nc.start();
+  nc.update([](Tables& t) { t.input[8] = 1; });
+  fs::create_directories(d.path / "a");
+  fs::create_directories(d.path / "b");
+  std::ofstream(d.path / "a" / "model.toml") << model_text("offset", 10.0, "tool_wear");
+  std::ofstream(d.path / "b" / "model.toml") << model_text("offset", 5.0, "tool_wear");
+  std::ofstream(d.path / "nccompd.toml")
+      << config_text(nc.port(), "kind = \"tool_wear\"\n[model.shadow]\nmin_parts = 5\n");
+  const std::string socket = (d.path / "status.sock").string();
+  const std::string a = (d.path / "a" / "model.toml").string();
+  const std::string b = (d.path / "b" / "model.toml").string();
+  Daemon daemon(d.path);
+  ASSERT_TRUE(daemon.start());
+  ASSERT_TRUE(wait_until([&] { return number(daemon.status(), "cycles") >= 20; })) << daemon.log();
+  std::uint16_t sequence = 0;
+  const auto measure = [&](float wear_um) {
+    ++sequence;
+    const double before = number(daemon.status(), "rows_scored");
+    nc.update([&](Tables& t) {
+      std::uint32_t bits = 0;
+      std::memcpy(&bits, &wear_um, sizeof bits);
+      t.input[101] = 1;
+      t.input[102] = static_cast<std::uint16_t>(bits >> 16);
+      t.input[103] = static_cast<std::uint16_t>(bits & 0xFFFF);
+      t.input[100] = sequence;
+    });
+    return wait_until([&] { return number(daemon.status(), "rows_scored") > before; });
+  };
+  ASSERT_TRUE(measure(5.0F)) << daemon.log();
+  ASSERT_TRUE(wait_until([&] { return holding_i32(nc, kLength) == 50; }))
+      << holding_i32(nc, kLength) << "\n"
+      << daemon.log();
+  CliRun cand = nccomp_as_root(d, {"model", "candidate", b, "--socket", socket});
+  ASSERT_EQ(cand.exit_code, 0) << cand.out << cand.err << daemon.log();
+  for (int i = 0; i < 5; ++i) ASSERT_TRUE(measure(5.0F)) << daemon.log();
+  ASSERT_TRUE(wait_until([&] { return holding_i32(nc, kLength) == 0; }))
+      << holding_i32(nc, kLength) << "\n"
+      << daemon.log();
+  for (int i = 0; i < 5; ++i) ASSERT_TRUE(measure(8.0F)) << daemon.log();
+  ASSERT_TRUE(wait_until([&] { return holding_i32(nc, kLength) == 20; }))
+      << holding_i32(nc, kLength) << "\n"
+      << daemon.log();
+  CliRun st = nccomp_as_root(d, {"model", "status", "--socket", socket});
+  std::printf("%s", st.out.c_str());
+  EXPECT_EQ(st.out.rfind("ok model: " + a, 0), 0U) << st.out;
+  EXPECT_NE(st.out.find("previous (nccomp model rollback returns to it): " + b), std::string::npos)
+      << st.out;
+  EXPECT_NE(st.out.find("demoted by shadow rule: live " + b + ", other " + a +
+                        "; 5 parts: other better on 5, live better on 0, ties 0, p = 0.03125, "
+                        "rms live 3.000 um, other 2.000 um"),
+            std::string::npos)
+      << st.out;
+  EXPECT_NE(daemon.status().find("\"phase\":\"none\""), std::string::npos);
+  EXPECT_EQ(number(daemon.status(), "handovers"), 2.0);
+  EXPECT_EQ(daemon.stop(), 0) << daemon.log();
+}
+
 // promote = "operator": GIVEN the same daemon, WHEN B passes the rule, THEN it is only announced
 // (A stays live, the register stays), `model promote` before that was refused, and the operator's
 // `model promote` makes B live with the load's handover and records who did it.
