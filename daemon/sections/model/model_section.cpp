@@ -21,6 +21,12 @@ namespace fs = std::filesystem;
 namespace cm = core::model;
 using formats::TableReader;
 
+std::string fmt_alpha(double a) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%g", a);
+  return buf;
+}
+
 /// The value of column c the entry fixes (kind, point, tool, angle_deg), NaN when the loop
 /// gives it or the entry does not.
 double entry_value(int c, const core::model::ModelApply& apply) {
@@ -178,6 +184,29 @@ std::string loop_context_problem(const cm::Term& term, bool each_cycle, const cm
          "): it would contribute nothing";
 }
 
+/// [model.shadow]; read when absent too, so that its defaults are those documented.
+void parse_shadow(TableReader& r, ShadowOptions& o) {
+  static const toml::table kEmpty;
+  const toml::table* t = r.table("shadow");
+  TableReader q(t != nullptr ? *t : kEmpty, "model.shadow", r.diagnostics());
+  o.min_parts = static_cast<int>(q.integer("min_parts", 10, 1, 100000));
+  o.alpha = q.number("alpha", 0.05, 1e-6, 0.5);
+  o.margin_um = q.number("margin_um", 0.0, 0.0, 1000.0);
+  o.promote = q.pick<ShadowPromote>(
+      "promote", ShadowPromote::kAuto,
+      {{"auto", ShadowPromote::kAuto}, {"operator", ShadowPromote::kOperator}});
+  o.history_size = static_cast<int>(q.integer("history_size", 20, 1, 1000));
+  // The sign test's smallest p-value is 2^-min_parts (the candidate better on every part).
+  if (sign_test_p(o.min_parts, o.min_parts) > o.alpha) {
+    int needed = o.min_parts;
+    while (sign_test_p(needed, needed) > o.alpha) ++needed;
+    q.error("min_parts", "min_parts = " + std::to_string(o.min_parts) +
+                             " can never pass the sign test at alpha = " + fmt_alpha(o.alpha) +
+                             ": at least " + std::to_string(needed) + " parts are needed");
+  }
+  q.finish();
+}
+
 }  // namespace
 
 std::unique_ptr<ModelSection> parse_model_section(const toml::node& node,
@@ -332,6 +361,7 @@ std::unique_ptr<ModelSection> parse_model_section(const toml::node& node,
     }
     s->applies.push_back(std::move(a));
   }
+  parse_shadow(r, s->shadow);
   r.finish();
   return s;
 }

@@ -225,6 +225,13 @@ TEST(StatusMetrics, PromtoolCheckMetricsPasses) {
   StatusContext c = rig.context();
   c.buses.push_back({"second", &second});
   c.buses.push_back({"third", &third});
+  // A candidate in shadow: the live model scored on two parts, the candidate on none yet (NaN).
+  sections::ShadowStatus shadow;
+  shadow.phase = sections::ShadowPhase::kCandidate;
+  shadow.live.add_part(4.0, 3);
+  shadow.live.add_part(2.0, 1);
+  shadow.other_file = "/srv/cand.toml";
+  c.shadow = [shadow] { return shadow; };
   // Some latency samples first.
   for (int i = 0; i < 500 && rig.loop.latency().count() < 50; ++i) {
     std::this_thread::sleep_for(10ms);
@@ -257,6 +264,10 @@ TEST(StatusMetrics, PromtoolCheckMetricsPasses) {
             std::string::npos)
       << metrics;
   EXPECT_NE(metrics.find("nccompd_bus_offsets_pending{bus=\"second\"} 4\n"), std::string::npos);
+  EXPECT_NE(metrics.find("nccompd_shadow_mean_squared_error_square_meters{model=\"live\"} 3e-12\n"
+                         "nccompd_shadow_mean_squared_error_square_meters{model=\"other\"} NaN\n"),
+            std::string::npos)
+      << metrics;
   EXPECT_EQ(metrics.find("counter=\"offsets_pending\""), std::string::npos) << metrics;
   EXPECT_EQ(metrics.find("_ms"), std::string::npos) << metrics;
   EXPECT_EQ(metrics.find("_us"), std::string::npos) << metrics;

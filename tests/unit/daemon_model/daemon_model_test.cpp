@@ -275,6 +275,36 @@ TEST(ModelSection, SteppingAllocatesNothingEvenWhenEvaluatingEachCycle) {
   EXPECT_LT(sum_um, 0.0);
 }
 
+// [model.shadow]: the keys reach the options; a min_parts whose sign test can never pass at alpha
+// and an unknown promote are refused at their line with the key path.
+TEST(ModelSection, ShadowKeysAndAMinPartsThatCanNeverPass) {
+  TempDir d;
+  d.write("fit/model.toml", model_toml());
+  auto r = config::load_file(
+      d.write("a.toml", registers_toml() + kApply +
+                            "[model.shadow]\nmin_parts = 12\nalpha = 0.01\nmargin_um = 0.2\n"
+                            "promote = \"operator\"\nhistory_size = 50\n"));
+  ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+  const ShadowOptions& o = model_section(*r.config)->shadow;
+  EXPECT_EQ(o.min_parts, 12);
+  EXPECT_DOUBLE_EQ(o.alpha, 0.01);
+  EXPECT_DOUBLE_EQ(o.margin_um, 0.2);
+  EXPECT_EQ(o.promote, ShadowPromote::kOperator);
+  EXPECT_EQ(o.history_size, 50);
+  // 4 parts: the smallest p-value is 1/16 > 0.05.
+  auto bad = config::load_file(d.write(
+      "b.toml",
+      registers_toml() + kApply + "[model.shadow]\nmin_parts = 4\npromote = \"sometimes\"\n"));
+  ASSERT_FALSE(bad.config);
+  const std::string err = bad.diagnostics.to_string();
+  EXPECT_NE(err.find("b.toml:"), std::string::npos) << err;
+  EXPECT_NE(err.find("model.shadow.min_parts: min_parts = 4 can never pass the sign test at "
+                     "alpha = 0.05: at least 5 parts are needed"),
+            std::string::npos)
+      << err;
+  EXPECT_NE(err.find("model.shadow.promote"), std::string::npos) << err;
+}
+
 TEST(ModelSection, ErrorsNameFileLineAndKey) {
   TempDir d;
   d.write("fit/model.toml", model_toml());
