@@ -140,15 +140,14 @@ std::vector<FleetCoefficient> collect(const std::vector<MachineFit>& fits,
   return out;
 }
 
-/// Fills c.effect over the machines with an estimate (and not `skip`); BLUP NaN elsewhere.
-/// Returns the number of machines used.
-std::size_t shrink(FleetCoefficient& c,
-                   std::size_t skip = std::numeric_limits<std::size_t>::max()) {
+/// Fills c.effect over the machines with an estimate and not left out (`out[m]` != 0); BLUP NaN
+/// elsewhere. Returns the number of machines used.
+std::size_t shrink(FleetCoefficient& c, const std::vector<std::uint8_t>& out = {}) {
   std::vector<double> est;
   std::vector<double> var;
   std::vector<std::size_t> who;
   for (std::size_t m = 0; m < c.estimate.size(); ++m) {
-    if (m == skip || !usable_variance(c.variance[m])) continue;
+    if ((m < out.size() && out[m] != 0U) || !usable_variance(c.variance[m])) continue;
     est.push_back(c.estimate[m]);
     var.push_back(c.variance[m]);
     who.push_back(m);
@@ -185,11 +184,13 @@ double wald_p(const std::vector<double>& coef, const std::vector<double>& var, d
 /// (K, machines − 1), the small-sample reference of a mean whose variance includes an
 /// estimated τ².
 double type_mean_p(std::vector<FleetCoefficient> coefs, std::size_t skip) {
+  std::vector<std::uint8_t> out(coefs.empty() ? 0 : coefs[0].estimate.size(), 0);
+  if (skip < out.size()) out[skip] = 1;
   std::vector<double> mean;
   std::vector<double> var;
   std::size_t used = 0;
   for (FleetCoefficient& c : coefs) {
-    used = std::max(used, shrink(c, skip));
+    used = std::max(used, shrink(c, out));
     mean.push_back(c.effect.mean);
     var.push_back(c.effect.mean_variance);
   }
@@ -443,11 +444,15 @@ FleetResult analyze_fleet(const std::vector<FleetMachine>& machines, const Analy
   //    ones (a constant and a slope in temp_c far from 0 °C) and break the machine's fit.
   std::vector<std::vector<Term>> machine_terms(nm);
   std::vector<MachineFit> type_fits;
+  std::vector<std::uint8_t> has_own(nm, 0);
   for (std::size_t m = 0; m < nm; ++m) {
     std::vector<TermSpec> specs = config.declared;
     for (std::size_t t = nd; t < result.terms.size(); ++t) {
       const FleetTerm& ft = result.terms[t];
-      if (ft.role == FleetRole::kMachine && ft.owner == m) specs.push_back(ft.spec);
+      if (ft.role == FleetRole::kMachine && ft.owner == m) {
+        specs.push_back(ft.spec);
+        has_own[m] = 1;
+      }
     }
     machine_terms[m] = common_blup[m];
     if (specs.empty()) continue;
@@ -459,8 +464,12 @@ FleetResult analyze_fleet(const std::vector<FleetMachine>& machines, const Analy
   for (std::size_t t = 0; t < nd && !type_fits.empty(); ++t) {
     FleetTerm& ft = result.terms[t];
     ft.coefficients = collect(type_fits, std::vector<int>(nm, static_cast<int>(t)));
+    // A machine's own effect is not centred (a wear curve from path 0, a polynomial about its
+    // rows' mean): its constants carry part of it. The type's constants come from the other
+    // machines while at least two are left.
+    const auto plain = std::count(has_own.begin(), has_own.end(), 0);
     for (FleetCoefficient& c : ft.coefficients) {
-      shrink(c);
+      shrink(c, plain >= 2 ? has_own : std::vector<std::uint8_t>{});
       // Not shrunk: each machine's model has its own (step 4).
       std::fill(c.effect.blup.begin(), c.effect.blup.end(), kNaN);
       std::fill(c.effect.own_weight.begin(), c.effect.own_weight.end(), kNaN);

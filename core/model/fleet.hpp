@@ -11,11 +11,15 @@
 //      different from 0: that machine's own effect. Significant on two or more, or the type
 //      mean significant: common to the type. Otherwise (or collinear with the terms kept, e.g.
 //      an interaction whose main effect is kept): not supported by the fleet, dropped.
-//   3. Each machine is refitted with the declared, the common and its own terms. Per
-//      coefficient of a declared or common term, the machines' estimates β_i with variances
-//      v_i give the between-machine variance τ² (DerSimonian–Laird, method of moments), the
-//      type mean μ (weights 1 / (v_i + τ²)) and the BLUP μ + τ² / (τ² + v_i) · (β_i − μ).
-//      A machine's own effect keeps its own estimate (one machine says nothing about a spread).
+//   3. Each machine is fitted with the declared, the common and its own terms. Per coefficient
+//      of a common term, the machines' estimates β_i with variances v_i give the
+//      between-machine variance τ² (DerSimonian–Laird, method of moments), the type mean μ
+//      (weights 1 / (v_i + τ²)) and the BLUP μ + τ² / (τ² + v_i) · (β_i − μ).
+//   4. With the common effects held at its BLUP, each machine's declared terms (its set-up) and
+//      its own effects are refitted, not shrunk: they co-vary with the shrunk coefficients (a
+//      constant and a slope in temp_c far from 0 °C), and shrinking them one by one would spoil
+//      the machine's fit. The type's prior: the common effects at μ, the declared terms at the
+//      mean of the machines' values refitted with the common effects at μ.
 //
 // Balanced data (all v_i = v): τ² = max(0, s² − v) with s² the sample variance of the β_i, μ =
 // their mean, and every estimate moves toward μ by the same factor v / (τ² + v).
@@ -56,7 +60,7 @@ struct FleetMachine {
 };
 
 enum class FleetRole : std::uint8_t {
-  kDeclared = 0,     // declared by the config: fitted on every machine, shrunk
+  kDeclared = 0,     // declared by the config: on every machine, refitted given the common
   kCommon = 1,       // found, shared by the type: fitted on every machine, shrunk
   kMachine = 2,      // found, one machine's own: only in that machine's model, not shrunk
   kUnsupported = 3,  // found by a machine's search, not confirmed by the fleet fit: dropped
@@ -71,7 +75,8 @@ struct FleetCoefficient {
   /// (a group it never saw, a collinear coefficient).
   std::vector<double> estimate;
   std::vector<double> variance;
-  /// Over the machines that have it; blup / own_weight per machine (NaN where absent).
+  /// Over the machines that have it; blup / own_weight per machine (NaN where absent, and for
+  /// a declared term, which is not shrunk).
   RandomEffect effect;
 };
 

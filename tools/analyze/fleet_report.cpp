@@ -170,7 +170,8 @@ std::string fleet_report_markdown(const cm::FleetResult& r, const std::vector<st
   o << "\n## Coefficients: each machine, shrunk toward the type\n\n"
        "Per coefficient: the machines' estimates β ± sd, the between-machine spread τ "
        "(DerSimonian–Laird), the type mean μ, and each machine's BLUP μ + w (β − μ) with w = τ² / "
-       "(τ² + sd²).\n\n";
+       "(τ² + sd²). Declared terms are not shrunk: their values are each machine's given the "
+       "common effects at the type mean, and μ is the type's value (its prior).\n\n";
   for (const cm::FleetTerm& t : r.terms) {
     if (t.coefficients.empty()) continue;
     o << "### " << cm::effect_label(t.spec.name, t.spec.per, extras) << " ("
@@ -186,8 +187,9 @@ std::string fleet_report_markdown(const cm::FleetResult& r, const std::vector<st
         << num(std::sqrt(c.effect.tau2), 3) << " |";
       for (std::size_t m = 0; m < nm; ++m) {
         if (std::isfinite(c.estimate[m])) {
-          o << " " << num(c.estimate[m], 4) << " ± " << num(std::sqrt(c.variance[m]), 2) << " → "
-            << num(c.effect.blup[m], 4) << " |";
+          o << " " << num(c.estimate[m], 4) << " ± " << num(std::sqrt(c.variance[m]), 2);
+          if (std::isfinite(c.effect.blup[m])) o << " → " << num(c.effect.blup[m], 4);
+          o << " |";
         } else {
           o << " — |";
         }
