@@ -42,6 +42,11 @@ std::string group_text(const cm::TermSpec& spec, const std::array<double, 2>& g,
   return o.empty() ? "all" : o;
 }
 
+// A constant has no column.
+std::string column_text(const cm::TermSpec& spec, const std::vector<std::string>& extras) {
+  return spec.column < 0 ? "" : cm::term_column_name(spec, extras);
+}
+
 std::string machines_json(const cm::FleetResult& r, const std::vector<std::size_t>& which) {
   std::string o = "[";
   for (std::size_t i = 0; i < which.size(); ++i) {
@@ -74,7 +79,7 @@ std::string fleet_summary_json(const cm::FleetResult& r, const std::vector<std::
     const cm::FleetTerm& t = r.terms[i];
     o << (i ? "," : "") << "\n      {\"name\": " << json_string(t.spec.name)
       << ", \"label\": " << json_string(cm::effect_label(t.spec.name, t.spec.per, extras))
-      << ", \"column\": " << json_string(cm::term_column_name(t.spec, extras))
+      << ", \"column\": " << json_string(column_text(t.spec, extras))
       << ", \"form\": " << json_string(std::string(cm::form_name(t.spec.form)))
       << ", \"role\": " << json_string(std::string(cm::fleet_role_name(t.role)));
     if (t.role == cm::FleetRole::kMachine)
@@ -175,8 +180,8 @@ std::string fleet_report_markdown(const cm::FleetResult& r, const std::vector<st
   for (const cm::FleetTerm& t : r.terms) {
     if (t.coefficients.empty()) continue;
     o << "### " << cm::effect_label(t.spec.name, t.spec.per, extras) << " ("
-      << cm::term_column_name(t.spec, extras) << ", " << cm::form_name(t.spec.form) << ", "
-      << cm::fleet_role_name(t.role) << ")\n\n| group | basis | type mean μ | τ |";
+      << (t.spec.column < 0 ? "" : column_text(t.spec, extras) + ", ") << cm::form_name(t.spec.form)
+      << ", " << cm::fleet_role_name(t.role) << ")\n\n| group | basis | type mean μ | τ |";
     for (std::size_t m = 0; m < nm; ++m) o << " " << r.machines[m] << ": β ± sd → BLUP |";
     o << "\n| --- | --- | --- | --- |";
     for (std::size_t m = 0; m < nm; ++m) o << " --- |";
