@@ -60,7 +60,7 @@ struct FleetMachine {
 };
 
 enum class FleetRole : std::uint8_t {
-  kDeclared = 0,     // declared by the config: on every machine, refitted given the common
+  kDeclared = 0,     // declared: on every machine, refitted given the common effects
   kCommon = 1,       // found, shared by the type: fitted on every machine, shrunk
   kMachine = 2,      // found, one machine's own: only in that machine's model, not shrunk
   kUnsupported = 3,  // found by a machine's search, not confirmed by the fleet fit: dropped
