@@ -193,6 +193,13 @@ def main():
             c.that(0.8 * mean_slope < abs(mu) < 1.25 * mean_slope,
                    "type mean |%.3f| um/K within -20 %% / +25 %% of the mean slope %.2f" %
                    (abs(mu), mean_slope))
+    # Shrinking a machine's common coefficients must not spoil its fit (its constants and own
+    # effects are refitted given them): its fleet model as good as its own search alone.
+    for m in SLOPES:
+        f = fleet["fit"][m]
+        c.that(f["rms_own_model_um"] < 1.2 * f["rms_alone_um"],
+               "%s: RMS %.3f um with its fleet model, %.3f um with its own search alone" %
+               (m, f["rms_own_model_um"], f["rms_alone_um"]))
     for m in list(SLOPES) + ["type"]:
         path = os.path.join(out, "model-%s.toml" % m)
         c.that(os.path.exists(path), "wrote model-%s.toml" % m)
