@@ -11,6 +11,7 @@
 
 #include "core/model/analysis.hpp"
 #include "formats/model/model_io.hpp"
+#include "tools/analyze/fleet.hpp"
 #include "tools/analyze/report.hpp"
 #include "tools/nccomp/command.hpp"
 
@@ -43,7 +44,22 @@ std::string read_text(const std::string& path) {
   return ss.str();
 }
 
-void run(const Options& opt) {
+void run(const Options& given) {
+  Options opt = given;
+  if (opt.maps.empty()) {
+    // Logs of several machines (v2, or nccomp collect's directory): the fleet analysis.
+    std::vector<nccomp::tools::analyze::MachineLogs> fleet;
+    try {
+      fleet = nccomp::tools::analyze::group_logs(opt.logs);
+    } catch (const io::ModelIoError& e) {
+      throw CommandError(nccomp::tools::kExitInvalidInput, e.what());
+    }
+    if (fleet.size() > 1) {
+      nccomp::tools::analyze::run_fleet(fleet, opt.config, opt.out, opt.validate == "sessions");
+      return;
+    }
+    opt.logs = fleet.empty() ? opt.logs : fleet[0].files;
+  }
   if (!opt.maps.empty() && opt.maps.size() != 1 && opt.maps.size() != opt.logs.size()) {
     throw CommandError(nccomp::tools::kExitUsage,
                        "--map: give one mapping for all logs or one per --log");
@@ -150,7 +166,11 @@ void setup(CLI::App& app) {
       "analyze",
       "Fit the declared model to a measurement log, find and add the effect it lacks, report the "
       "error before and after");
-  sub->add_option("--log", opt->logs, "measurement log CSV (repeat for several files)")->required();
+  sub->add_option(
+         "--log", opt->logs,
+         "measurement log CSV, or a directory of them (repeat for several; logs of several "
+         "machines: the fleet analysis)")
+      ->required();
   sub->add_option("--config", opt->config, "TOML file with the [model] table")->required();
   sub->add_option("--map", opt->maps,
                   "column mapping TOML for a foreign CSV (one for all logs, or one per --log)");
