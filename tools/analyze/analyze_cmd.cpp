@@ -7,10 +7,12 @@
 #include <memory>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/model/analysis.hpp"
 #include "formats/model/model_io.hpp"
+#include "formats/toml/diagnostics.hpp"
 #include "tools/analyze/report.hpp"
 #include "tools/nccomp/command.hpp"
 
@@ -65,8 +67,10 @@ void run(const Options& opt) {
           if (k != c) continue;
           found = true;
           if (t != temperature) {
-            throw io::ModelIoError(opt.maps[i] + ": column_kind." + name +
-                                   ": declared otherwise in " + opt.config + " or another map");
+            nccomp::formats::Diagnostics diag;
+            diag.error(nccomp::formats::Where{opt.maps[i], 0, 0, "column_kind." + name},
+                       "declared otherwise in " + opt.config + " or another map");
+            throw nccomp::formats::DiagnosticsError(std::move(diag), opt.maps[i]);
           }
         }
         if (!found) kinds.emplace_back(c, temperature);
@@ -74,12 +78,12 @@ void run(const Options& opt) {
     }
     for (std::size_t i = 0; i < opt.logs.size(); ++i) {
       std::ifstream in(opt.logs[i], std::ios::binary);
-      if (!in) throw io::ModelIoError(opt.logs[i] + ": cannot open");
+      if (!in) throw CommandError(nccomp::tools::kExitInvalidInput, opt.logs[i] + ": cannot open");
       const io::Mapping none;
       const io::Mapping& m = maps.empty() ? none : maps[maps.size() == 1 ? 0 : i];
       io::read_log(in, opt.logs[i], m, data);
     }
-  } catch (const io::ModelIoError& e) {
+  } catch (const nccomp::formats::DiagnosticsError& e) {
     throw CommandError(nccomp::tools::kExitInvalidInput, e.what());
   }
   cfg.config.validate_sessions = opt.validate == "sessions";
