@@ -7,7 +7,6 @@
 #include <memory>
 #include <sstream>
 #include <string>
-#include <utility>
 #include <vector>
 
 #include "core/model/analysis.hpp"
@@ -67,10 +66,9 @@ void run(const Options& opt) {
           if (k != c) continue;
           found = true;
           if (t != temperature) {
-            nccomp::formats::Diagnostics diag;
-            diag.error(nccomp::formats::Where{opt.maps[i], 0, 0, "column_kind." + name},
-                       "declared otherwise in " + opt.config + " or another map");
-            throw nccomp::formats::DiagnosticsError(std::move(diag), opt.maps[i]);
+            throw CommandError(nccomp::tools::kExitInvalidInput,
+                               opt.maps[i] + ": column_kind." + name + ": declared otherwise in " +
+                                   opt.config + " or another map");
           }
         }
         if (!found) kinds.emplace_back(c, temperature);
