@@ -11,6 +11,7 @@
 
 #include "core/model/analysis.hpp"
 #include "formats/model/model_io.hpp"
+#include "formats/toml/diagnostics.hpp"
 #include "tools/analyze/fleet.hpp"
 #include "tools/analyze/report.hpp"
 #include "tools/nccomp/command.hpp"
@@ -51,7 +52,7 @@ void run(const Options& given) {
     std::vector<nccomp::tools::analyze::MachineLogs> fleet;
     try {
       fleet = nccomp::tools::analyze::group_logs(opt.logs);
-    } catch (const io::ModelIoError& e) {
+    } catch (const std::invalid_argument& e) {
       throw CommandError(nccomp::tools::kExitInvalidInput, e.what());
     }
     if (fleet.size() > 1) {
@@ -81,8 +82,9 @@ void run(const Options& given) {
           if (k != c) continue;
           found = true;
           if (t != temperature) {
-            throw io::ModelIoError(opt.maps[i] + ": column_kind." + name +
-                                   ": declared otherwise in " + opt.config + " or another map");
+            throw CommandError(nccomp::tools::kExitInvalidInput,
+                               opt.maps[i] + ": column_kind." + name + ": declared otherwise in " +
+                                   opt.config + " or another map");
           }
         }
         if (!found) kinds.emplace_back(c, temperature);
@@ -90,12 +92,12 @@ void run(const Options& given) {
     }
     for (std::size_t i = 0; i < opt.logs.size(); ++i) {
       std::ifstream in(opt.logs[i], std::ios::binary);
-      if (!in) throw io::ModelIoError(opt.logs[i] + ": cannot open");
+      if (!in) throw CommandError(nccomp::tools::kExitInvalidInput, opt.logs[i] + ": cannot open");
       const io::Mapping none;
       const io::Mapping& m = maps.empty() ? none : maps[maps.size() == 1 ? 0 : i];
       io::read_log(in, opt.logs[i], m, data);
     }
-  } catch (const io::ModelIoError& e) {
+  } catch (const nccomp::formats::DiagnosticsError& e) {
     throw CommandError(nccomp::tools::kExitInvalidInput, e.what());
   }
   cfg.config.validate_sessions = opt.validate == "sessions";

@@ -19,14 +19,15 @@ struct MachineLogs {
 };
 
 /// The `machine` of a v2 log: the cell of its first row, whose line goes to `line` ("" for a
-/// v1 log or a log without rows). Throws formats::model_io::ModelIoError when unreadable.
+/// v1 log or a log without rows). Throws std::invalid_argument when unreadable.
 std::string log_machine(const std::string& path, std::size_t* line = nullptr);
 
 /// `--log` arguments, a directory standing for the *.csv files under it (sorted by path),
 /// grouped by their machine in order of first appearance; one group of all files, in the
-/// order given, when they name at most one machine (v1 logs among them). Throws ModelIoError
-/// (file:line) when the logs name more than one machine and one has none, an id that is not 1–64 of
-/// A-Z a-z 0-9 . _ - starting with a letter or digit (it names a file), or "type".
+/// order given, when they name at most one machine (v1 logs among them). Throws
+/// std::invalid_argument (file:line) when the logs name more than one machine and one has none, an
+/// id that is not 1–64 of A-Z a-z 0-9 . _ - starting with a letter or digit (it names a file), or
+/// "type".
 std::vector<MachineLogs> group_logs(const std::vector<std::string>& logs);
 
 /// The fleet run: reads each machine's logs, analyze_fleet(), writes DIR/summary.json,

@@ -6,6 +6,7 @@
 #include <fstream>
 #include <iostream>
 #include <sstream>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -66,7 +67,7 @@ std::string read_text(const std::string& path) {
 
 std::string log_machine(const std::string& path, std::size_t* line) {
   std::ifstream in(path, std::ios::binary);
-  if (!in) throw io::ModelIoError(path + ": cannot open");
+  if (!in) throw std::invalid_argument(path + ": cannot open");
   std::string text;
   std::size_t line_no = 0;
   std::vector<std::string> header;
@@ -100,8 +101,8 @@ std::vector<MachineLogs> group_logs(const std::vector<std::string>& logs) {
     for (const auto& e : fs::recursive_directory_iterator(l, ec)) {
       if (e.is_regular_file() && e.path().extension() == ".csv") found.push_back(e.path().string());
     }
-    if (ec) throw io::ModelIoError(l + ": cannot read the directory: " + ec.message());
-    if (found.empty()) throw io::ModelIoError(l + ": no *.csv file in the directory");
+    if (ec) throw std::invalid_argument(l + ": cannot read the directory: " + ec.message());
+    if (found.empty()) throw std::invalid_argument(l + ": no *.csv file in the directory");
     std::sort(found.begin(), found.end());
     files.insert(files.end(), found.begin(), found.end());
   }
@@ -133,22 +134,24 @@ std::vector<MachineLogs> group_logs(const std::vector<std::string>& logs) {
     for (std::size_t i = 0; i < out.size(); ++i) {
       const MachineLogs& m = out[i];
       if (m.machine.empty()) {
-        throw io::ModelIoError(m.files[0] +
-                               ": no machine column (a v1 log, or no rows) among the logs of " +
-                               std::to_string(out.size() - 1) +
-                               " machines: a fleet analysis reads v2 logs (nccompd's "
-                               "measurement log, nccomp collect)");
+        throw std::invalid_argument(
+            m.files[0] + ": no machine column (a v1 log, or no rows) among the logs of " +
+            std::to_string(out.size() - 1) +
+            " machines: a fleet analysis reads v2 logs (nccompd's "
+            "measurement log, nccomp collect)");
       }
       // The id names the machine's model file.
       if (!valid_machine_id(m.machine)) {
-        throw io::ModelIoError(where[i] + "'" + m.machine +
-                               "' is not a machine id (1-64 of A-Z a-z 0-9 . _ -, starting with "
-                               "a letter or digit)");
+        throw std::invalid_argument(
+            where[i] + "'" + m.machine +
+            "' is not a machine id (1-64 of A-Z a-z 0-9 . _ -, starting with "
+            "a letter or digit)");
       }
       if (m.machine == "type") {
-        throw io::ModelIoError(where[i] +
-                               "'type' is reserved in a fleet analysis (model-type.toml is the "
-                               "type's prior)");
+        throw std::invalid_argument(
+            where[i] +
+            "'type' is reserved in a fleet analysis (model-type.toml is the "
+            "type's prior)");
       }
     }
   }
@@ -167,12 +170,12 @@ void run_fleet(const std::vector<MachineLogs>& fleet, const std::string& config_
       fm.data.extra_columns = cfg.extra_columns;
       for (const std::string& f : m.files) {
         std::ifstream in(f, std::ios::binary);
-        if (!in) throw io::ModelIoError(f + ": cannot open");
+        if (!in) throw std::invalid_argument(f + ": cannot open");
         io::read_log(in, f, io::Mapping{}, fm.data);
       }
       machines.push_back(std::move(fm));
     }
-  } catch (const io::ModelIoError& e) {
+  } catch (const std::invalid_argument& e) {
     throw CommandError(kExitInvalidInput, e.what());
   }
   cfg.config.validate_sessions = validate_sessions;

@@ -12,6 +12,7 @@
 #include "daemon/sections/calibration/calibration_section.hpp"
 #include "daemon/sections/model/context_section.hpp"
 #include "formats/model/model_io.hpp"
+#include "formats/toml/diagnostics.hpp"
 
 namespace nccomp::daemon::sections {
 
@@ -243,6 +244,15 @@ std::unique_ptr<ModelSection> parse_model_section(const toml::node& node,
         s->model = formats::model_io::load_model_file(s->file);
         s->loaded = true;
       }
+    } catch (const formats::DiagnosticsError& e) {
+      // At the file key, then every error of the model file at its own line.
+      diag.error(r.where("file"), "cannot load the model " + s->file +
+                                      (s->chosen ? " (nccomp model load)" : std::string()) + ": " +
+                                      (e.diagnostics().items().size() == 1
+                                           ? std::string("1 error in it, below")
+                                           : std::to_string(e.diagnostics().items().size()) +
+                                                 " errors in it, below"));
+      diag.append(e.diagnostics(), s->file);
     } catch (const std::exception& e) {
       diag.error(r.where("file"),
                  std::string("cannot load the model") +

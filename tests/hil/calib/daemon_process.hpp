@@ -20,6 +20,8 @@
 #include "client/protocol.hpp"
 #include "client/status_client.hpp"
 #include "tests/support/nccompd_process.hpp"
+#include "tests/support/status_json.hpp"
+#include "tests/support/temp_dir.hpp"
 #include "tests/unit/calib/sim_machine.hpp"
 #include "tests/unit/calib/test_config.hpp"
 
@@ -62,20 +64,7 @@ inline std::string config_text(const std::string& extra_calibration = "",
   return s.str();
 }
 
-struct TempDir {
-  TempDir() {
-    path = fs::temp_directory_path() /
-           ("nccompd_calib_" + std::to_string(::getpid()) + "_" + std::to_string(n++));
-    fs::remove_all(path);
-    fs::create_directories(path);
-  }
-  ~TempDir() { fs::remove_all(path); }
-  void write(const std::string& name, const std::string& text) const {
-    std::ofstream(path / name) << text;
-  }
-  static inline int n = 0;
-  fs::path path;
-};
+using test::TempDir;
 
 /// nccompd with the calibration: up once the calibration module answers; a sanitizer report in
 /// its log fails the test when it stops.
@@ -124,9 +113,7 @@ inline double register_output(const std::string& json, const std::string& name) 
 }
 
 inline double number(const std::string& json, const std::string& key) {
-  const std::regex re("\"" + key + "\":(-?[0-9.eE+-]+)");
-  std::smatch m;
-  return std::regex_search(json, m, re) ? std::stod(m[1]) : std::nan("");
+  return test::find_number(json, key).value_or(std::nan(""));
 }
 
 inline std::string text(const std::string& json, const std::string& key) {

@@ -22,8 +22,6 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
-#include <functional>
-#include <regex>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -33,24 +31,21 @@
 #include "sim/modbus_nc/nc_server.hpp"
 #include "tests/support/nccompd_process.hpp"
 #include "tests/support/run_as.hpp"
+#include "tests/support/status_json.hpp"
+#include "tests/support/temp_dir.hpp"
+#include "tests/support/wait.hpp"
 
 namespace {
+
+using nccomp::test::number;
+using nccomp::test::TempDir;
+using nccomp::test::wait_until;
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
 using nccomp::sim::modbus_nc::NcServer;
 using nccomp::sim::modbus_nc::ServerConfig;
 using nccomp::sim::modbus_nc::Tables;
-
-struct TempDir {
-  TempDir() {
-    path = fs::temp_directory_path() / ("nccompd_model_" + std::to_string(::getpid()));
-    fs::remove_all(path);
-    fs::create_directories(path);
-  }
-  ~TempDir() { fs::remove_all(path); }
-  fs::path path;
-};
 
 [[maybe_unused]] std::string slurp(const fs::path& p) {
   std::ifstream in(p);
@@ -63,21 +58,6 @@ class Daemon : public nccomp::test::NccompdProcess {
  public:
   explicit Daemon(fs::path dir) : NccompdProcess(std::move(dir), NCCOMPD_BIN) {}
 };
-
-double number(const std::string& json, const std::string& key) {
-  const std::regex re("\"" + key + "\":(-?[0-9.eE+-]+)");
-  std::smatch m;
-  return std::regex_search(json, m, re) ? std::stod(m[1]) : -1e300;
-}
-
-bool wait_until(const std::function<bool()>& f, std::chrono::milliseconds limit = 15000ms) {
-  const auto end = std::chrono::steady_clock::now() + limit;
-  while (std::chrono::steady_clock::now() < end) {
-    if (f()) return true;
-    std::this_thread::sleep_for(10ms);
-  }
-  return f();
-}
 
 constexpr std::uint16_t kLength = 200;  // T1_length_wear, int32, 0.1 µm
 
@@ -180,7 +160,8 @@ TEST(NccompModel, LoadRollbackAndRestartWithRefusals) {
   const std::string b = (d.path / "b" / "model.toml").string();
   Daemon daemon(d.path);
   ASSERT_TRUE(daemon.start());
-  ASSERT_TRUE(wait_until([&] { return number(daemon.status(), "cycles") >= 20; })) << daemon.log();
+  ASSERT_TRUE(wait_until([&] { return number(daemon.status(), "cycles") >= 20; }, 15s))
+      << daemon.log();
   // 5.0 µm of wear measured: −5.0 µm + the trim of model A (2.0) = −3.0 µm.
   nc.update([](Tables& t) {
     const float w = 5.0F;
@@ -191,7 +172,7 @@ TEST(NccompModel, LoadRollbackAndRestartWithRefusals) {
     t.input[103] = static_cast<std::uint16_t>(bits & 0xFFFF);
     t.input[100] = 1;
   });
-  ASSERT_TRUE(wait_until([&] { return holding_i32(nc, kLength) == -30; }))
+  ASSERT_TRUE(wait_until([&] { return holding_i32(nc, kLength) == -30; }, 15s))
       << holding_i32(nc, kLength) << "\n"
       << daemon.log();
 
@@ -215,7 +196,7 @@ TEST(NccompModel, LoadRollbackAndRestartWithRefusals) {
                           "trim change 4.000 um, 0.000 um through the limiter"),
             std::string::npos)
       << load.out;
-  ASSERT_TRUE(wait_until([&] { return holding_i32(nc, kLength) == 10; }))
+  ASSERT_TRUE(wait_until([&] { return holding_i32(nc, kLength) == 10; }, 15s))
       << holding_i32(nc, kLength) << "\n"
       << daemon.log();
   EXPECT_NE(daemon.log().find("operator command from uid 0 (root)"), std::string::npos);
@@ -273,13 +254,13 @@ TEST(NccompModel, LoadRollbackAndRestartWithRefusals) {
   EXPECT_NE(back.out.find("previous (nccomp model rollback returns to it): " + b),
             std::string::npos)
       << back.out;
-  ASSERT_TRUE(wait_until([&] { return holding_i32(nc, kLength) == -30; }))
+  ASSERT_TRUE(wait_until([&] { return holding_i32(nc, kLength) == -30; }, 15s))
       << holding_i32(nc, kLength);
 
   // A restart keeps the choice: A live, B kept for rollback.
   EXPECT_EQ(daemon.stop(), 0) << daemon.log();
   ASSERT_TRUE(daemon.start());
-  ASSERT_TRUE(wait_until([&] { return daemon.try_status().has_value(); })) << daemon.log();
+  ASSERT_TRUE(wait_until([&] { return daemon.try_status().has_value(); }, 15s)) << daemon.log();
   st = nccomp_as_root(d, {"model", "status", "--socket", socket});
   std::printf("%s", st.out.c_str());
   EXPECT_EQ(st.out.rfind("ok model: " + a + " (hash ", 0), 0U) << st.out;

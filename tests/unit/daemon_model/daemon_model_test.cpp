@@ -305,6 +305,27 @@ TEST(ModelSection, ShadowKeysAndAMinPartsThatCanNeverPass) {
   EXPECT_NE(err.find("model.shadow.promote"), std::string::npos) << err;
 }
 
+// Issue 18: a model file with several errors is refused at the file key, and each of its errors
+// is listed at its own line of the model file (the section kept only the first, inside one
+// message at the file key).
+TEST(ModelSection, EveryErrorOfTheModelFileIsListedAtItsLine) {
+  TempDir d;
+  const std::string model =
+      d.write("fit/model.toml",
+              "[model]\nalpha = 0.9\n[[model.term]]\nname = \"\"\nform = \"constant\"\n"
+              "groups = [[0, 0]]\ncoef_um = [1]\n");
+  auto r = config::load_file(d.write("a.toml", registers_toml() + kApply));
+  ASSERT_FALSE(r.config);
+  std::vector<int> lines;
+  for (const auto& item : r.diagnostics.items()) {
+    if (item.where.file == model) lines.push_back(item.where.line);
+  }
+  EXPECT_EQ(lines, (std::vector<int>{2, 4})) << r.diagnostics.to_string();
+  EXPECT_NE(r.diagnostics.to_string().find("model.file: cannot load the model " + model),
+            std::string::npos)
+      << r.diagnostics.to_string();
+}
+
 TEST(ModelSection, ErrorsNameFileLineAndKey) {
   TempDir d;
   d.write("fit/model.toml", model_toml());
