@@ -43,7 +43,8 @@ struct Dataset {
   std::vector<std::uint32_t> row_file;
   std::vector<std::uint32_t> row_line;
   /// The reader's session of each row: one per file, and a new one at each warm start of a v2
-  /// log (its `session` grows). Of another length than the rows: one session.
+  /// log (its `session` grows). Of another length than the rows: one session. row() gives it
+  /// as kSessionColumn (analyze() renumbers it as sessions_of() first).
   std::vector<std::uint32_t> row_session;
 
   Dataset();
@@ -129,6 +130,8 @@ struct FitStats {
   ErrorStats heldout;
   double rss{0.0};
   std::size_t parameters{0};
+  /// parameters, with a shrunk session term counted by its effective degrees of freedom.
+  double effective_parameters{0.0};
 };
 
 /// One effect added by the search.
@@ -176,6 +179,9 @@ struct FitInfo {
   /// Per coefficient (Model order), diagonal of the pseudo-inverse of X'X: its variance is this
   /// times the residual variance.
   std::vector<double> coef_variance;
+  /// parameters, with each shrunk (session) coefficient counted as its diagonal entry of the
+  /// hat matrix (X'X + Λ)⁻¹X'X: the effective degrees of freedom of a random effect.
+  double effective_parameters{0.0};
 };
 
 /// One fold of the leave-one-session-out validation: the session's rows predicted by the
@@ -235,7 +241,8 @@ double f_distribution_upper_tail(double f, double d1, double d2);
 Model fit_terms(const Dataset& data, const std::vector<TermSpec>& specs,
                 const std::vector<std::uint8_t>& use, FitInfo* info = nullptr);
 
-/// Residual target − prediction of every row (rows in order; lag filters run over all rows).
+/// Residual target − prediction of every row (rows in order; lag filters run over all rows; a
+/// session term learns a session it has no coefficient for from that session's earlier rows).
 std::vector<double> residuals(const Dataset& data, const Model& model);
 
 /// Noise floor [µm]: from successive differences of the residual within each (kind, point, tool)

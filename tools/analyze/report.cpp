@@ -107,6 +107,19 @@ std::string params_json(const cm::TermSpec& spec, const cm::Model& model,
       // coef_um: per (a − center_a), (b − center_b), (a − center_a)(b − center_b).
       o << "\"center_a\": " << num(spec.center, 8) << ", \"center_b\": " << num(spec.center_b, 8);
       break;
+    case cm::Form::kSession: {
+      // The random effect's variances and its shrunk offset (BLUP) of every fitted session,
+      // numbered from 1 as in the validation by session.
+      o << "\"between_session_sigma_um\": " << num(spec.scale)
+        << ", \"noise_sigma_um\": " << num(spec.center) << ", \"session_offsets\": [";
+      const cm::Term* st = find_term(model, spec);
+      for (std::size_t g = 0; st != nullptr && g < st->groups.size(); ++g) {
+        o << (g ? ", " : "") << "{\"session\": " << num(st->groups[g][0] + 1.0, 12)
+          << ", \"offset_um\": " << num(st->coef[g], 8) << "}";
+      }
+      o << "]";
+      break;
+    }
     default:
       break;
   }

@@ -179,7 +179,7 @@ TEST(ModelFile, RefusesBadTerms) {
   EXPECT_EQ(err("[model]\n"), "c.toml: model.term: declare at least one [[model.term]]");
   EXPECT_EQ(err("[[model.term]]\nname = \"a\"\nform = \"cubic\"\n"),
             "c.toml:3:8: model.term[0].form: unknown form 'cubic' (constant, linear, poly, "
-            "exp_rise, sine, step, lag, exp_growth, hinge, wear, interaction)");
+            "exp_rise, sine, step, lag, exp_growth, hinge, wear, interaction, session)");
   EXPECT_EQ(err("[[model.term]]\nname = \"a\"\nform = \"sine\"\ncolumn = \"x_mm\"\n"),
             "c.toml:1:1: model.term[0].scale: missing (form sine needs its scale / period / time "
             "constant)");
