@@ -169,7 +169,8 @@ std::size_t row_entries(const std::vector<TermSpec>& specs, const Layout& layout
 Eigen::VectorXd solve_normal(const Eigen::MatrixXd& a, const Eigen::VectorXd& rhs,
                              std::size_t* rank, std::vector<double>* variance,
                              const Eigen::VectorXd& penalty = {},
-                             std::vector<double>* hat_diag = nullptr) {
+                             std::vector<double>* hat_diag = nullptr,
+                             std::vector<double>* covariance = nullptr) {
   const Eigen::Index p = a.rows();
   Eigen::MatrixXd ap = a;
   if (penalty.size() == p) ap.diagonal() += penalty;
@@ -182,13 +183,22 @@ Eigen::VectorXd solve_normal(const Eigen::MatrixXd& a, const Eigen::VectorXd& rh
   cod.setThreshold(1e-11);
   const Eigen::VectorXd z = cod.solve(d.asDiagonal() * rhs);
   if (rank != nullptr) *rank = static_cast<std::size_t>(cod.rank());
-  if (variance != nullptr || hat_diag != nullptr) {
+  if (variance != nullptr || hat_diag != nullptr || covariance != nullptr) {
     // (X'X)⁺ = D (D X'X D)⁺ D.
     const Eigen::MatrixXd inv = cod.pseudoInverse();
     if (variance != nullptr) {
       variance->resize(static_cast<std::size_t>(p));
       for (Eigen::Index i = 0; i < p; ++i) {
         (*variance)[static_cast<std::size_t>(i)] = d(i) * d(i) * inv(i, i);
+      }
+    }
+    if (covariance != nullptr) {
+      const Eigen::MatrixXd full = d.asDiagonal() * inv * d.asDiagonal();
+      covariance->resize(static_cast<std::size_t>(p * p));
+      for (Eigen::Index i = 0; i < p; ++i) {
+        for (Eigen::Index j = 0; j < p; ++j) {
+          (*covariance)[static_cast<std::size_t>(i * p + j)] = full(i, j);
+        }
       }
     }
     if (hat_diag != nullptr) {
@@ -953,6 +963,113 @@ void set_confidence_intervals(const Dataset& data, const std::vector<TermSpec>& 
   }
 }
 
+// The final model's 95 % prediction interval on each held-out row, from the fit on the fitted
+// rows: t · sqrt(s² (1 + x'Cx ·(1 + ρ)/(1 − ρ)) + v), C = (X'X + Λ)⁺, s² the residual variance,
+// the coefficient part widened for an AR(1) residual as coef_ci95; v the variance of a learned
+// session offset (τ²σ² / (nτ² + σ²) after n of the session's rows), and its measured coverage.
+void set_prediction_interval(const Dataset& data, const std::vector<TermSpec>& specs,
+                             const std::vector<std::uint8_t>& use, const AnalysisConfig& config,
+                             AnalysisResult& result) {
+  FitInfo info;
+  info.want_covariance = true;
+  const Model m = fit_terms(data, specs, use, &info);
+  const std::vector<double> residual = residuals(data, m);
+  double rss = 0.0;
+  for (std::size_t i = 0; i < residual.size(); ++i) {
+    if (use[i] != 0U && std::isfinite(residual[i])) rss += residual[i] * residual[i];
+  }
+  const double df = dz(info.rows) - info.effective_parameters;
+  if (!(df >= 1.0)) return;
+  const double s2 = rss / df;
+  const double rho = config.ar1_correction
+                         ? std::clamp(lag1_autocorrelation(data, residual, use), 0.0, 0.999)
+                         : 0.0;
+  const double inflate = (1.0 + rho) / (1.0 - rho);
+  const double t = t95(df);
+  Layout layout;
+  layout.groups.resize(specs.size());
+  for (std::size_t k = 0; k < specs.size(); ++k) {
+    layout.groups[k] = m.terms()[k].groups;
+    layout.offset.push_back(layout.parameters);
+    layout.parameters += layout.groups[k].size() * basis_count(specs[k].form, specs[k].degree);
+  }
+  const std::size_t p = layout.parameters;
+  if (info.coef_covariance.size() != p * p) return;
+  const int st = m.session_term();
+  // A row of a session the fit did not see: its learned offset takes the level of the other
+  // terms too (their common shift against the fitted sessions' offsets), so their uncertainty
+  // is that of a fit without the session term.
+  std::vector<TermSpec> other_specs;
+  for (std::size_t k = 0; k < specs.size(); ++k) {
+    if (static_cast<int>(k) != st) other_specs.push_back(specs[k]);
+  }
+  FitInfo other_info;
+  other_info.want_covariance = true;
+  Model others;
+  Layout other_layout;
+  if (st >= 0 && !other_specs.empty()) {
+    others = fit_terms(data, other_specs, use, &other_info);
+    other_layout.groups.resize(other_specs.size());
+    for (std::size_t k = 0; k < other_specs.size(); ++k) {
+      other_layout.groups[k] = others.terms()[k].groups;
+      other_layout.offset.push_back(other_layout.parameters);
+      other_layout.parameters +=
+          other_layout.groups[k].size() * basis_count(other_specs[k].form, other_specs[k].degree);
+    }
+  }
+  const std::size_t po = other_layout.parameters;
+  EvalState other_state = others.make_state();
+  PredictionInterval& pi = result.prediction_interval;
+  EvalState state = m.make_state();
+  std::vector<Entry> x;
+  std::array<double, kMaxBasis> b{};
+  std::size_t covered = 0;
+  double sum_half = 0.0;
+  for (std::size_t i = 0; i < data.rows(); ++i) {
+    const Row row = data.row(i);
+    const double y = data.target_um[i];
+    const double prediction = m.evaluate(row, state);
+    if (st >= 0) others.evaluate(row, other_state);  // advances its lag filters
+    if (result.heldout[i] == 1U && std::isfinite(y) && std::isfinite(prediction)) {
+      const TermSpec* s = st >= 0 ? &specs[static_cast<std::size_t>(st)] : nullptr;
+      const bool unseen = s != nullptr && term_basis(*s, row, kUnknown, b) > 0 &&
+                          find_group(*s, layout.groups[static_cast<std::size_t>(st)], row) < 0;
+      const bool use_others = unseen && po > 0 && other_info.coef_covariance.size() == po * po;
+      EvalState aux = use_others ? other_state : state;  // kWear terms' basis in the lag slots
+      set_wear_aux(use_others ? other_specs : specs, row, use_others ? &others : &m, aux);
+      row_entries(use_others ? other_specs : specs, use_others ? other_layout : layout, row, aux,
+                  x);
+      const std::vector<double>& cov =
+          use_others ? other_info.coef_covariance : info.coef_covariance;
+      const std::size_t stride = use_others ? po : p;
+      double q = 0.0;
+      for (const Entry& u : x) {
+        for (const Entry& v : x) q += u.value * v.value * cov[u.index * stride + v.index];
+      }
+      double v_session = 0.0;
+      if (unseen) {
+        const bool same_session = std::isfinite(state.session.session) &&
+                                  !(state.session.session < row[kSessionColumn]) &&
+                                  !(row[kSessionColumn] < state.session.session);
+        const double n_s = same_session ? state.session.count : 0.0;
+        const double tau2 = s->scale * s->scale;
+        const double sigma2 = s->center * s->center;
+        v_session = tau2 * sigma2 / std::max(n_s * tau2 + sigma2, 1e-300);
+      }
+      const double half = t * std::sqrt(s2 * (1.0 + std::max(0.0, q) * inflate) + v_session);
+      ++pi.rows;
+      sum_half += half;
+      pi.half_width_max_um = std::max(pi.half_width_max_um, half);
+      if (std::fabs(y - prediction) <= half) ++covered;
+    }
+    m.observe(row, y, state);
+  }
+  if (pi.rows > 0) {
+    pi.half_width_mean_um = sum_half / dz(pi.rows);
+    pi.coverage = dz(covered) / dz(pi.rows);
+  }
+}
+
 // --validate sessions: each session's rows predicted by the declared and the final terms fitted
 // on the other sessions' rows (the outliers left out of every fit and figure, as elsewhere).
 void validate_sessions(const Dataset& data, const std::vector<TermSpec>& declared,
@@ -1114,12 +1231,16 @@ Model fit_terms(const Dataset& data, const std::vector<TermSpec>& specs,
   std::vector<double> variance;
   std::vector<double> hat;
   const bool want_variance = info != nullptr && info->want_variance;
+  const bool want_covariance = info != nullptr && info->want_covariance;
+  std::vector<double> covariance;
   const bool shrunk = penalty.size() == p;
-  const Eigen::VectorXd beta = solve_normal(a, rhs, &rank, want_variance ? &variance : nullptr,
-                                            penalty, shrunk ? &hat : nullptr);
+  const Eigen::VectorXd beta =
+      solve_normal(a, rhs, &rank, want_variance ? &variance : nullptr, penalty,
+                   shrunk ? &hat : nullptr, want_covariance ? &covariance : nullptr);
   if (info != nullptr) {
-    *info = FitInfo{fitted_rows,   layout.parameters,   rank,
-                    want_variance, std::move(variance), dz(layout.parameters)};
+    *info = FitInfo{fitted_rows,     layout.parameters,    rank,
+                    want_variance,   std::move(variance),  dz(layout.parameters),
+                    want_covariance, std::move(covariance)};
     for (std::size_t t = 0; t < specs.size() && shrunk; ++t) {
       if (specs[t].form != Form::kSession) continue;
       for (std::size_t k = 0; k < layout.groups[t].size(); ++k) {
@@ -1716,6 +1837,7 @@ AnalysisResult analyze_numbered(const Dataset& data, const AnalysisConfig& confi
   for (std::size_t i = 0; i < n; ++i) all_rows[i] = std::isfinite(data.target_um[i]) ? 1 : 0;
   result.fitted_model = model;
   set_confidence_intervals(data, specs, use, residual, config, result);
+  set_prediction_interval(data, specs, use, config, result);
   result.final_model = fit_terms(data, specs, all_rows);
   if (!result.effects.empty()) warn_fit(info, "the final model", result.warnings);
   result.session = sessions_of(data, config.session_gap_s);

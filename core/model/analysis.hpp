@@ -182,6 +182,11 @@ struct FitInfo {
   /// parameters, with each shrunk (session) coefficient counted as its diagonal entry of the
   /// hat matrix (X'X + Λ)⁻¹X'X: the effective degrees of freedom of a random effect.
   double effective_parameters{0.0};
+  /// Set by the caller to get coef_covariance.
+  bool want_covariance{false};
+  /// (X'X + Λ)⁺ in Model order, row-major (parameters²): times the residual variance, the
+  /// coefficients' covariance.
+  std::vector<double> coef_covariance;
 };
 
 /// One fold of the leave-one-session-out validation: the session's rows predicted by the
@@ -191,6 +196,17 @@ struct SessionFold {
   std::size_t first_row{0};  // its first row (Dataset::where)
   ErrorStats declared;
   ErrorStats final_model;
+};
+
+/// The final model's prediction interval on the held-out rows (fitted on the fitted rows, as the
+/// held-out figures) and how many held-out rows it covered.
+struct PredictionInterval {
+  double level{0.95};
+  std::size_t rows{0};  // held-out rows with a measurement and a prediction
+  double half_width_mean_um{0.0};
+  double half_width_max_um{0.0};
+  /// Share of those rows whose measurement is within its interval.
+  double coverage{0.0};
 };
 
 struct AnalysisResult {
@@ -219,6 +235,7 @@ struct AnalysisResult {
   /// over all their rows (empty / 0 rows when not asked for).
   std::vector<std::uint32_t> session;
   std::vector<SessionFold> session_folds;
+  PredictionInterval prediction_interval;
   ErrorStats sessions_declared;
   ErrorStats sessions_final;
 };
