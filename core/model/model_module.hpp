@@ -86,8 +86,6 @@ class ModelModule final : public core::engine::Module {
 
   /// The session term's current offset [µm] (its posterior mean; 0 without a session term).
   [[nodiscard]] double session_offset_um() const noexcept;
-  /// What the session term has learned: session (warm-start count), measurements, their sum.
-  [[nodiscard]] const SessionLearning& session_learning() const noexcept { return state_.session; }
 
   /// The trim last published for apply entry i [µm].
   [[nodiscard]] double trim_um(std::size_t i) const noexcept { return trims_um_[i]; }
