@@ -7,6 +7,7 @@
 #include <fstream>
 #include <optional>
 #include <sstream>
+#include <string_view>
 #include <utility>
 
 #include "formats/toml/guard.hpp"
@@ -253,7 +254,7 @@ void read_term(const toml::table& t, const std::string& key, bool require_fitted
                Diagnostics& diag) {
   check_keys(t, key,
              {"name", "form", "column", "per", "kinds", "degree", "center", "center_b", "scale",
-              "groups", "coef_um"},
+              "between_session_sigma_um", "noise_sigma_um", "groups", "coef_um"},
              diag);
   cm::TermSpec s;
   if (const auto* name = t.get("name"); name == nullptr) {
@@ -270,7 +271,7 @@ void read_term(const toml::table& t, const std::string& key, bool require_fitted
     diag.error(form, key + ".form",
                "unknown form '" + *fname +
                    "' (constant, linear, poly, exp_rise, sine, step, lag, exp_growth, hinge, "
-                   "wear, interaction)");
+                   "wear, interaction, session)");
     fname.reset();
   }
   if (const auto* p = t.get("per")) {
@@ -300,6 +301,40 @@ void read_term(const toml::table& t, const std::string& key, bool require_fitted
     // The rest depends on the form.
     return;
   }
+  if (s.form == cm::Form::kSession) {
+    // One offset per session, learned by the daemon from each session's first measurements.
+    for (const char* k : {"column", "per", "center", "scale", "degree"}) {
+      if (const auto* v = t.get(k)) {
+        diag.error(v, key + "." + k,
+                   "not for form = \"session\" (it is per session by definition; its variances "
+                   "are between_session_sigma_um and noise_sigma_um)");
+      }
+    }
+    for (const char* k : {"between_session_sigma_um", "noise_sigma_um"}) {
+      const bool between = std::string_view(k) == "between_session_sigma_um";
+      const auto* v = t.get(k);
+      if (v == nullptr) {
+        diag.error(&t, key + "." + k, "missing (form session)");
+      } else if (const auto x = get_number(*v, key + "." + k, diag)) {
+        if (!(between ? *x >= 0.0 : *x > 0.0) || !std::isfinite(*x)) {
+          diag.error(v, key + "." + k, between ? "must be ≥ 0 [µm]" : "must be > 0 [µm]");
+        } else {
+          (between ? s.scale : s.center) = *x;
+        }
+      }
+    }
+    for (const cm::TermSpec& other : out.config.declared) {
+      if (other.form == cm::Form::kSession) {
+        diag.error(form, key + ".form", "a model has at most one session term");
+      }
+    }
+    s.column = static_cast<int>(cm::kSessionColumn);
+    s.per = {static_cast<int>(cm::kSessionColumn), -1};
+  } else {
+    for (const char* k : {"between_session_sigma_um", "noise_sigma_um"}) {
+      if (const auto* v = t.get(k)) diag.error(v, key + "." + k, "only for form = \"session\"");
+    }
+  }
   if (const auto* c = t.get("column")) {
     if (const auto col = get_string(*c, key + ".column", diag)) {
       const auto star = col->find('*');
@@ -323,7 +358,7 @@ void read_term(const toml::table& t, const std::string& key, bool require_fitted
         s.column = resolve_column(*col, out.extra_columns, *c, key + ".column", diag).value_or(-1);
       }
     }
-  } else if (s.form != cm::Form::kConstant) {
+  } else if (s.form != cm::Form::kConstant && s.form != cm::Form::kSession) {
     diag.error(&t, key + ".column", "missing (form " + *fname + " needs a column)");
   }
   if (const auto* c = t.get("center_b")) {
@@ -578,9 +613,10 @@ std::string write_model_toml(const core::model::Model& model,
     o << "\n[[model.term]]\n";
     o << "name = " << quote(s.name) << "\n";
     o << "form = " << quote(cm::form_name(s.form)) << "\n";
-    if (s.form != cm::Form::kConstant)
+    const bool session = s.form == cm::Form::kSession;
+    if (s.form != cm::Form::kConstant && !session)
       o << "column = " << quote(cm::term_column_name(s, ex)) << "\n";
-    if (s.per[0] >= 0) {
+    if (s.per[0] >= 0 && !session) {
       o << "per = [" << quote(cm::column_name(s.per[0], ex));
       if (s.per[1] >= 0) o << ", " << quote(cm::column_name(s.per[1], ex));
       o << "]\n";
@@ -604,6 +640,14 @@ std::string write_model_toml(const core::model::Model& model,
     if (s.form == cm::Form::kPoly || cm::has_nonlinear_parameter(s.form)) {
       if (s.form != cm::Form::kStep && s.form != cm::Form::kHinge)
         o << "scale = " << fmt_double(s.scale) << "\n";
+    }
+    if (session) {
+      // No coefficients: the sessions of the log are over; every new one is learned from its
+      // own first measurements (the fitted offsets are in summary.json).
+      o << "between_session_sigma_um = " << fmt_double(s.scale) << "\n";
+      o << "noise_sigma_um = " << fmt_double(s.center) << "\n";
+      o << "groups = []\ncoef_um = []\n";
+      continue;
     }
     o << "groups = [";
     for (std::size_t g = 0; g < t.groups.size(); ++g) {

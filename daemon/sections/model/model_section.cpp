@@ -133,6 +133,8 @@ std::string loop_context_problem(const cm::Term& term, bool each_cycle, const cm
     }
   }
   for (const int c : cols) {
+    // The session is the loop's warm-start count: a session term learns each one.
+    if (c == static_cast<int>(cm::kSessionColumn)) continue;
     const std::string name = cm::column_name(c, extras);
     if (c == static_cast<int>(cm::Column::kAngle) && std::isnan(apply.angle_deg)) {
       return "depends on angle_deg, which the daemon's loop does not know: give the entry the "

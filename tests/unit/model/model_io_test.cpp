@@ -179,7 +179,7 @@ TEST(ModelFile, RefusesBadTerms) {
   EXPECT_EQ(err("[model]\n"), "c.toml: model.term: declare at least one [[model.term]]");
   EXPECT_EQ(err("[[model.term]]\nname = \"a\"\nform = \"cubic\"\n"),
             "c.toml:3:8: model.term[0].form: unknown form 'cubic' (constant, linear, poly, "
-            "exp_rise, sine, step, lag, exp_growth, hinge, wear, interaction)");
+            "exp_rise, sine, step, lag, exp_growth, hinge, wear, interaction, session)");
   EXPECT_EQ(err("[[model.term]]\nname = \"a\"\nform = \"sine\"\ncolumn = \"x_mm\"\n"),
             "c.toml:1:1: model.term[0].scale: missing (form sine needs its scale / period / time "
             "constant)");
@@ -209,16 +209,18 @@ TEST(ModelFile, ReportsEveryErrorOfTheFileAtOnce) {
   } catch (const std::exception& e) {
     what = e.what();
   }
-  EXPECT_EQ(what,
-            "c.toml:2:9: model.alpha: must be within (0, 0.5)\n"
-            "c.toml:3:15: model.max_effects: must be an integer within [0, 16]\n"
-            "c.toml:6:8: model.term[0].form: unknown form 'cubic' (constant, linear, poly, "
-            "exp_rise, sine, step, lag, exp_growth, hinge, wear, interaction)\n"
-            "c.toml:11:9: model.term[1].speed: unknown key (allowed: name, form, column, per, "
-            "kinds, degree, center, center_b, scale, groups, coef_um)\n"
-            "c.toml:8:8: model.term[1].name: must not be empty\n"
-            "c.toml:7:1: model.term[1].scale: missing (form sine needs its scale / period / time "
-            "constant)");
+  EXPECT_EQ(
+      what,
+      "c.toml:2:9: model.alpha: must be within (0, 0.5)\n"
+      "c.toml:3:15: model.max_effects: must be an integer within [0, 16]\n"
+      "c.toml:6:8: model.term[0].form: unknown form 'cubic' (constant, linear, poly, "
+      "exp_rise, sine, step, lag, exp_growth, hinge, wear, interaction, session)\n"
+      "c.toml:11:9: model.term[1].speed: unknown key (allowed: name, form, column, per, "
+      "kinds, degree, center, center_b, scale, between_session_sigma_um, noise_sigma_um, groups, "
+      "coef_um)\n"
+      "c.toml:8:8: model.term[1].name: must not be empty\n"
+      "c.toml:7:1: model.term[1].scale: missing (form sine needs its scale / period / time "
+      "constant)");
 }
 
 TEST(ReadMapping, ReportsEveryErrorOfTheFileAtOnce) {
