@@ -48,6 +48,9 @@
 #include "client/status_client.hpp"
 #include "daemon/lockstep.hpp"
 #include "tests/support/nccompd_process.hpp"
+#include "tests/support/status_json.hpp"
+#include "tests/support/temp_dir.hpp"
+#include "tests/support/wait.hpp"
 
 extern char** environ;
 
@@ -57,6 +60,9 @@ namespace fs = std::filesystem;
 using namespace std::chrono_literals;
 using nccomp::daemon::LockstepMessage;
 using nccomp::daemon::LockstepType;
+using nccomp::test::number;
+using nccomp::test::TempDir;
+using nccomp::test::wait_until;
 
 struct ConfigOptions {
   double rate_hz{200.0};
@@ -95,21 +101,6 @@ std::string config_text(double rate_hz) {
   o.rate_hz = rate_hz;
   return config_text(o);
 }
-
-struct TempDir {
-  TempDir() {
-    path = fs::temp_directory_path() /
-           ("nccompd_can_" + std::to_string(::getpid()) + "_" + std::to_string(n++));
-    fs::remove_all(path);
-    fs::create_directories(path);
-  }
-  ~TempDir() { fs::remove_all(path); }
-  void write(const std::string& name, const std::string& text) const {
-    std::ofstream(path / name) << text;
-  }
-  static inline int n = 0;
-  fs::path path;
-};
 
 class Daemon : public nccomp::test::NccompdProcess {
  public:
@@ -165,24 +156,6 @@ class Proc {
  private:
   pid_t pid_{-1};
 };
-
-template <typename Pred>
-bool wait_until(Pred pred, std::chrono::milliseconds limit = 10000ms) {
-  const auto end = std::chrono::steady_clock::now() + limit;
-  while (std::chrono::steady_clock::now() < end) {
-    if (pred()) {
-      return true;
-    }
-    std::this_thread::sleep_for(20ms);
-  }
-  return pred();
-}
-
-double number(const std::string& json, const std::string& key) {
-  const std::regex re("\"" + key + "\":(-?[0-9.eE+-]+)");
-  std::smatch m;
-  return std::regex_search(json, m, re) ? std::stod(m[1]) : -1e300;
-}
 
 // The NC's end of vcan0.
 class Nc {
@@ -410,9 +383,15 @@ class Acker {
 bool same(double a, double b) { return std::fabs(a - b) < 1e-9; }
 
 /// The value of a counter of the CAN driver in a status JSON ("counters":{...} of bus "can").
+/// A number of the bus named "can" in the status JSON (its counters among them); -1e300 if none.
 double can_counter(const std::string& json, const std::string& name) {
-  const auto at = json.find("{\"name\":\"can\"");
-  return at == std::string::npos ? -1e300 : number(json.substr(at), name);
+  const auto doc = nlohmann::ordered_json::parse(json, nullptr, false);
+  if (doc.is_discarded() || !doc.contains("buses")) return -1e300;
+  for (const auto& bus : doc["buses"]) {
+    if (bus.value("name", "") == "can")
+      return nccomp::test::status_json_detail::find_number(bus, name).value_or(-1e300);
+  }
+  return -1e300;
 }
 
 bool can_state(const std::string& json, const std::string& state) {
