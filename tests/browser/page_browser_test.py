@@ -15,7 +15,11 @@ its status socket. The test plays the laser over Modbus and checks, in the brows
      started with setpriv, so as root only) is refused with the reason and the daemon stays
      halted; cancelling the dialog sends nothing; acknowledge from this user's browser (root, or
      when not root the user's primary group as --admin-group), confirmed in the dialog, lifts the
-     halt (status and NC flag) and both logs name who did it.
+     halt (status and NC flag) and both logs name who did it;
+  5. the Model card (B loaded over A before the first measurement, C a candidate in shadow) shows
+     what the status JSON and `nccomp model status` say: live and rollback models, both scores,
+     the rule's state, the handovers; Roll back from nobody's browser is refused, from this
+     user's, confirmed, makes A live again (status shows it).
 Screenshots of the page go to WORK. Exit 77 (ctest SKIP_RETURN_CODE) when chromium,
 chromedriver or selenium is missing; 1 on a failed check.
 """
@@ -151,7 +155,22 @@ measurement_due_register = "measure_request"
 [creep.interval]
 basis = "time"
 interval_s = 1.0
+[model]
+file = "a/model.toml"
+update = "cycle"
+[[model.apply]]
+term = "offset"
+register = "T1_length_wear"
+gain = 1
+kind = "tool_wear"
 """
+
+
+def model_text(name, coef_um=0.0):
+    """A fitted model with one constant tool-wear term: A and B (0 um) move no offset when
+    changed; every tool measurement is scored (a part of its own)."""
+    return ("[model]\n[[model.term]]\nname = \"" + name + "\"\nform = \"constant\"\n"
+            "kinds = [\"tool_wear\"]\ngroups = [[0.0, 0.0]]\ncoef_um = [" + str(coef_um) + "]\n")
 
 
 class Nc:
@@ -269,9 +288,19 @@ def main():
     check(nc_port, "the Modbus NC server listens")
     with open(os.path.join(work, "nccompd.toml"), "w") as f:
         f.write(config_text(nc_port))
+    for d in ("a", "b", "c"):  # A live, B loaded later (A kept for rollback), C a candidate
+        os.makedirs(os.path.join(work, d))
+        with open(os.path.join(work, d, "model.toml"), "w") as f:
+            f.write(model_text("offset", 2.0 if d == "c" else 0.0))
+            f.write(f"# model {d}\n")
     daemon = start("nccompd", [ARGS.nccompd, "--config", "nccompd.toml"], work)
     check(wait_until(lambda: (s := status_json()) and s["buses"][0]["state"] == "up"
                      and s["loop"]["cycles"] >= 20, 20), "nccompd runs on the NC")
+    # The models before the first measurement, so that the measurements are scored: B live, A
+    # kept for rollback, C a candidate in shadow.
+    models = [os.path.join(work, d, "model.toml") for d in ("a", "b", "c")]
+    nccomp("model", "load", models[1])
+    nccomp("model", "candidate", models[2])
     # A copy, named relative to the page's directory (the screenshots show the name).
     report_dir = os.path.join(work, "analysis")
     shutil.copytree(os.path.join(ARGS.source, "bench/model/figures/fl_thermal_ch1"), report_dir)
@@ -375,6 +404,7 @@ def main():
             print("note: not root: the refused case (a browser run as nobody) is not run",
                   flush=True)
         acknowledged_by_this_user(root, page, daemon, url, work, nc)
+        model_card(root, drivers[1] if AS_ROOT else None, work)
     finally:
         for d in drivers:
             d.quit()
@@ -431,6 +461,87 @@ def acknowledged_by_this_user(root, page, daemon, url, work, nc):
     with urllib.request.urlopen(url + "api/status", timeout=10) as r:
         counters = json.loads(r.read())["page"]
     check(counters["bad_requests"] == 0, f"no bad requests from the browsers: {counters}")
+
+
+def nccomp(*args):
+    out = subprocess.run([ARGS.nccomp, *args, "--socket", SOCKET], capture_output=True, text=True,
+                         timeout=20)
+    check(out.returncode == 0, f"nccomp {' '.join(args)}: {out.stdout.strip()} {out.stderr.strip()}")
+    return out.stdout
+
+
+READ_MODEL = """
+const r = {};
+for (const td of document.querySelectorAll('#model td[data-name]')) r[td.dataset.name] = td.textContent;
+r.promote_disabled = document.getElementById('promote').disabled;
+r.rollback_disabled = document.getElementById('rollback').disabled;
+return r;
+"""
+
+
+def model_text_of(r):
+    return "none" if not r["file"] else (
+        f"{r['file']} (hash {r['hash']})" + (f", live since {r['since_utc']}" if r["since_utc"] else ""))
+
+
+def model_card(root, other, work):
+    """The Model card equals the status JSON; Roll back refused for nobody, done for this user."""
+    a, b, c = (os.path.join(work, d, "model.toml") for d in ("a", "b", "c"))
+    st = wait_until(lambda: (s := status_json()) and s["shadow"]["live"]["parts"] >= 1 and s, 5)
+    check(st and st["model"]["live"]["file"] == b and st["model"]["previous"]["file"] == a and
+          st["shadow"]["phase"] == "candidate" and st["shadow"]["other"]["file"] == c,
+          f"status JSON: B live, A kept for rollback, C in shadow, scored on "
+          f"{st and st['shadow']['live']['parts']} part(s)")
+    text_status = nccomp("model", "status")
+    check(f"ok model: {model_text_of(st['model']['live'])}\n" in text_status and
+          f"previous (nccomp model rollback returns to it): {model_text_of(st['model']['previous'])}"
+          in text_status, "nccomp model status names the same live and rollback models")
+    check(wait_until(lambda: (m := root.execute_script(READ_MODEL)).get("other") == c, 5),
+          "the Model card shows the candidate")
+    shown = root.execute_script(READ_MODEL)
+    st = status_json()
+    sh, h = st["shadow"], st["handover"]
+    check(shown["live"] == model_text_of(st["model"]["live"]),
+          f"live model: page '{shown['live']}' = status")
+    check(shown["previous"] == model_text_of(st["model"]["previous"]),
+          f"kept for rollback: page '{shown['previous']}' = status")
+    # One part scored (the 5.0 um measurement; the broken one waits for a next row): B predicts
+    # 0 um, C 2 um, so their squared errors are 25 and 9 um².
+    check(sh["live"]["parts"] == sh["other"]["parts"] == 1 and sh["live"]["mse_um2"] == 25.0 and
+          sh["other"]["mse_um2"] == 9.0, f"scores: live {sh['live']}, candidate {sh['other']}")
+    for key, m in (("live_score", sh["live"]), ("other_score", sh["other"])):
+        want = f"{m['parts']} parts, mean squared error {m['mse_um2']:.4f} µm²"
+        check(m["parts"] >= 1 and shown[key] == want, f"{key}: page '{shown[key]}' = status")
+    check(shown["phase"] == f"waiting: scoring the candidate (promote: auto, {sh['decisions']} "
+          "decision(s))", f"the rule's state: {shown['phase']}")
+    check(shown["handovers"].startswith(f"{h['handovers']} (registers rebased {h['rebased']}, "
+                                        f"not absorbed {h['unabsorbed']})"),
+          f"handovers: {shown['handovers']}")
+    check(shown["promote_disabled"] and not shown["rollback_disabled"],
+          "Promote disabled (nothing announced, promote auto), Roll back enabled")
+    root.find_element(By.ID, "model-card").screenshot(os.path.join(work, "page-model.png"))
+    if other is not None:
+        other.find_element(By.ID, "rollback").click()
+        other.find_element(By.ID, "model-confirm").click()
+        why = ("refused (HTTP 403): permission denied: nobody (uid 65534) is not root and not in "
+               "group 'adm' (--admin-group)")
+        check(wait_until(lambda: text(other, "#model-result") == why, 5),
+              "nobody's Roll back is refused: " + why)
+        check(status_json()["model"]["live"]["file"] == b, "after the refusal B is still live")
+    root.find_element(By.ID, "rollback").click()
+    check(root.execute_script("return document.getElementById('model-dialog').open") and
+          text(root, "#model-dialog-text").startswith(f"The live model {b} "),
+          "Roll back opens a confirmation dialog naming the live model")
+    root.find_element(By.ID, "model-confirm").click()
+    check(wait_until(lambda: (text(root, "#model-result") or "").startswith(
+        f"ok model rolled back to: {a} "), 10),
+          f"Roll back by {ME.pw_name}: {text(root, '#model-result')}")
+    st = status_json()
+    check(st["model"]["live"]["file"] == a and st["model"]["previous"]["file"] == b,
+          "status: A live again, B kept for rollback")
+    check(wait_until(lambda: root.execute_script(READ_MODEL)["live"] ==
+                     model_text_of(status_json()["model"]["live"]), 5),
+          "the Model card shows A live")
 
 
 if __name__ == "__main__":
