@@ -404,7 +404,7 @@ def main():
             print("note: not root: the refused case (a browser run as nobody) is not run",
                   flush=True)
         acknowledged_by_this_user(root, page, daemon, url, work, nc)
-        model_card(root, drivers[1] if AS_ROOT else None, work)
+        model_card(root, drivers[1] if AS_ROOT else None, page, work)
     finally:
         for d in drivers:
             d.quit()
@@ -484,7 +484,7 @@ def model_text_of(r):
         f"{r['file']} (hash {r['hash']})" + (f", live since {r['since_utc']}" if r["since_utc"] else ""))
 
 
-def model_card(root, other, work):
+def model_card(root, other, page, work):
     """The Model card equals the status JSON; Roll back refused for nobody, done for this user."""
     a, b, c = (os.path.join(work, d, "model.toml") for d in ("a", "b", "c"))
     st = wait_until(lambda: (s := status_json()) and s["shadow"]["live"]["parts"] >= 1 and s, 5)
@@ -519,7 +519,9 @@ def model_card(root, other, work):
           f"handovers: {shown['handovers']}")
     check(shown["promote_disabled"] and not shown["rollback_disabled"],
           "Promote disabled (nothing announced, promote auto), Roll back enabled")
-    root.find_element(By.ID, "model-card").screenshot(os.path.join(work, "page-model.png"))
+    card = root.find_element(By.ID, "model-card")
+    root.execute_script("arguments[0].scrollIntoView()", card)
+    card.screenshot(os.path.join(work, "page-model.png"))
     if other is not None:
         other.find_element(By.ID, "rollback").click()
         other.find_element(By.ID, "model-confirm").click()
@@ -542,6 +544,11 @@ def model_card(root, other, work):
     check(wait_until(lambda: root.execute_script(READ_MODEL)["live"] ==
                      model_text_of(status_json()["model"]["live"]), 5),
           "the Model card shows A live")
+    plog = open(page.log_path).read()
+    me = f"{ME.pw_name} (uid {ME.pw_uid})"
+    check(f"action model_rollback by {me}: ok model rolled back to: {a}" in plog and
+          (not other or "action refused: model_rollback by nobody (uid 65534)" in plog),
+          "the page's log names who rolled back and who was refused")
 
 
 if __name__ == "__main__":
