@@ -1043,6 +1043,10 @@ bool Daemon::start_status() {
   };
   sc_.state_problem = [problem = state_problem_] { return problem; };
   sc_.shadow = [this] { return shadow_.status(); };
+  sc_.model = [this] {
+    std::lock_guard<std::mutex> lock(model_mu_);
+    return model_state_;
+  };
   sc_.config_path = options_.config_path;
   sc_.state_path = state_path_;
   status_ = std::make_unique<StatusServer>(sc_);

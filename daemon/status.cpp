@@ -166,11 +166,26 @@ std::string render_json(const StatusContext& c) {
     << ",\"unabsorbed\":" << h.unabsorbed
     << ",\"last_trim_change_um\":" << num(h.last_trim_change_um)
     << ",\"last_unabsorbed_um\":" << num(h.last_unabsorbed_um) << "},";
+  if (c.model) {
+    // What `nccomp model status` names: the live model and the one rollback returns to.
+    const ModelState m = c.model();
+    const auto record = [&](const sections::ModelRecord& r) {
+      o << "{\"file\":\"" << json_escape(r.file) << "\",\"hash\":\"" << json_escape(r.hash)
+        << "\",\"since_utc\":\"" << json_escape(r.since_utc) << "\"}";
+    };
+    o << "\"model\":{\"live\":";
+    record(m.live);
+    o << ",\"previous\":";
+    record(m.previous);
+    o << ",\"chosen\":" << (m.chosen ? "true" : "false") << ",\"generation\":" << m.generation
+      << "},";
+  }
   if (c.shadow) {
     // docs/closing-the-loop.md, "A candidate in shadow".
     const sections::ShadowStatus sh = c.shadow();
-    o << "\"shadow\":{\"phase\":\"" << sections::phase_name(sh.phase) << "\",\"live\":{\"file\":\""
-      << json_escape(sh.live_file) << "\",\"parts\":" << sh.live.parts
+    o << "\"shadow\":{\"phase\":\"" << sections::phase_name(sh.phase) << "\",\"promote\":\""
+      << (sh.options.promote == sections::ShadowPromote::kAuto ? "auto" : "operator")
+      << "\",\"live\":{\"file\":\"" << json_escape(sh.live_file) << "\",\"parts\":" << sh.live.parts
       << ",\"mse_um2\":" << num(sh.live.mse_um2()) << "},\"other\":{\"file\":\""
       << json_escape(sh.other_file) << "\",\"parts\":" << sh.other.parts
       << ",\"mse_um2\":" << num(sh.other.mse_um2()) << "},\"paired_parts\":" << sh.window.parts

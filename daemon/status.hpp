@@ -58,6 +58,8 @@ struct StatusContext {
   std::function<std::string()> state_problem;  // empty when the state is fine
   /// The models' scores in shadow (unset: not shown).
   std::function<sections::ShadowStatus()> shadow;
+  /// The live model, the one kept for rollback (unset: not shown).
+  std::function<ModelState()> model;
   std::string config_path;
   std::string state_path;
   /// The server's own counters (set by StatusServer; null: not shown).

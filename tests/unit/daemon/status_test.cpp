@@ -194,6 +194,33 @@ TEST(StatusServer, AnswersTextJsonAndPrometheus) {
   EXPECT_FALSE(fs::exists(sock));
 }
 
+TEST(StatusJson, NamesTheLiveModelTheRollbackModelAndThePromoteRule) {
+  Rig rig;
+  StatusContext c = rig.context();
+  EXPECT_EQ(render_json(c).find("\"model\":"), std::string::npos);  // no provider: not shown
+  ModelState m;
+  m.has_section = true;
+  m.live = {"/srv/b.toml", "00000000000000bb", "2026-11-27T10:00:00Z"};
+  m.previous = {"/srv/a\"1.toml", "00000000000000aa", "2026-11-26T09:00:00Z"};
+  m.chosen = true;
+  m.generation = 3;
+  c.model = [m] { return m; };
+  sections::ShadowStatus shadow;
+  shadow.phase = sections::ShadowPhase::kAnnounced;
+  shadow.options.promote = sections::ShadowPromote::kOperator;
+  c.shadow = [shadow] { return shadow; };
+  const std::string json = render_json(c);
+  EXPECT_NE(json.find("\"model\":{\"live\":{\"file\":\"/srv/b.toml\",\"hash\":\"00000000000000bb\","
+                      "\"since_utc\":\"2026-11-27T10:00:00Z\"},\"previous\":{\"file\":"
+                      "\"/srv/a\\\"1.toml\",\"hash\":\"00000000000000aa\",\"since_utc\":"
+                      "\"2026-11-26T09:00:00Z\"},\"chosen\":true,\"generation\":3},"),
+            std::string::npos)
+      << json;
+  EXPECT_NE(json.find("\"shadow\":{\"phase\":\"announced\",\"promote\":\"operator\","),
+            std::string::npos)
+      << json;
+}
+
 TEST(StatusMetrics, LatencyEdgesAreBucketEdges) {
   const auto edges = prometheus_latency_edges_us();
   ASSERT_FALSE(edges.empty());
