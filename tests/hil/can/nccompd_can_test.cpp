@@ -328,6 +328,22 @@ TEST(NccompdCan, LockstepWritesPrecedeSyncAckOfTheirCycle) {
 
 // The NC's acknowledging end in a thread: echoes every offset write (0x300) on 0x380 and keeps
 // the last value [counts]. Survives the interface going down (the socket reports ENETDOWN once).
+/// A raw socket on vcan0 that receives only the offset frames (ID 0x300): the NC's end that
+/// acknowledges them.
+int open_offset_frames_socket() {
+  const int fd = ::socket(PF_CAN, SOCK_RAW | SOCK_CLOEXEC, CAN_RAW);
+  ifreq ifr{};
+  std::strncpy(ifr.ifr_name, "vcan0", IFNAMSIZ - 1);
+  (void)::ioctl(fd, SIOCGIFINDEX, &ifr);
+  can_filter flt{0x300, CAN_SFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG};
+  (void)::setsockopt(fd, SOL_CAN_RAW, CAN_RAW_FILTER, &flt, sizeof flt);
+  sockaddr_can a{};
+  a.can_family = AF_CAN;
+  a.can_ifindex = ifr.ifr_ifindex;
+  (void)::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a);
+  return fd;
+}
+
 class Acker {
  public:
   Acker() : thread_([this] { run(); }) {}
@@ -342,16 +358,7 @@ class Acker {
 
  private:
   void run() {
-    const int fd = ::socket(PF_CAN, SOCK_RAW | SOCK_CLOEXEC, CAN_RAW);
-    ifreq ifr{};
-    std::strncpy(ifr.ifr_name, "vcan0", IFNAMSIZ - 1);
-    (void)::ioctl(fd, SIOCGIFINDEX, &ifr);
-    can_filter flt{0x300, CAN_SFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG};
-    (void)::setsockopt(fd, SOL_CAN_RAW, CAN_RAW_FILTER, &flt, sizeof flt);
-    sockaddr_can a{};
-    a.can_family = AF_CAN;
-    a.can_ifindex = ifr.ifr_ifindex;
-    (void)::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a);
+    const int fd = open_offset_frames_socket();
     while (!stop_) {
       pollfd p{fd, POLLIN, 0};
       if (::poll(&p, 1, 50) != 1) {
@@ -640,16 +647,7 @@ class NcPump {
 
  private:
   void run() {
-    const int fd = ::socket(PF_CAN, SOCK_RAW | SOCK_CLOEXEC, CAN_RAW);
-    ifreq ifr{};
-    std::strncpy(ifr.ifr_name, "vcan0", IFNAMSIZ - 1);
-    (void)::ioctl(fd, SIOCGIFINDEX, &ifr);
-    can_filter flt{0x300, CAN_SFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG};
-    (void)::setsockopt(fd, SOL_CAN_RAW, CAN_RAW_FILTER, &flt, sizeof flt);
-    sockaddr_can a{};
-    a.can_family = AF_CAN;
-    a.can_ifindex = ifr.ifr_ifindex;
-    (void)::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a);
+    const int fd = open_offset_frames_socket();
     auto next_axis = std::chrono::steady_clock::now();
     while (!stop_) {
       if (std::chrono::steady_clock::now() >= next_axis) {
