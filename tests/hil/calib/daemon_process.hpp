@@ -17,6 +17,8 @@
 #include <string>
 #include <thread>
 
+#include <nlohmann/json.hpp>
+
 #include "client/protocol.hpp"
 #include "client/status_client.hpp"
 #include "tests/support/nccompd_process.hpp"
@@ -116,10 +118,17 @@ inline double number(const std::string& json, const std::string& key) {
   return test::find_number(json, key).value_or(std::nan(""));
 }
 
+/// A string of the calibration module's status (modules[name = "calibration"].status), "" if
+/// none: other objects of the status JSON have keys of the same name (the shadow's "phase").
 inline std::string text(const std::string& json, const std::string& key) {
-  const std::regex re("\"" + key + "\":\"([^\"]*)\"");
-  std::smatch m;
-  return std::regex_search(json, m, re) ? m[1].str() : "";
+  const auto doc = nlohmann::json::parse(json, nullptr, false);
+  if (doc.is_discarded() || !doc.contains("modules")) return "";
+  for (const auto& m : doc["modules"]) {
+    if (m.value("name", "") != "calibration" || !m.contains("status")) continue;
+    const auto& s = m["status"];
+    return s.contains(key) && s[key].is_string() ? s[key].get<std::string>() : "";
+  }
+  return "";
 }
 
 inline std::string touch_line(const core::CalibrationTouch& t) {

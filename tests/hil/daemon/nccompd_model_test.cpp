@@ -350,9 +350,12 @@ TEST(NccompModel, ACandidateInShadowIsPromotedByTheRuleAndTheHistoryPersists) {
             std::string::npos)
       << st.out;
   ASSERT_TRUE(measure(5.0F)) << daemon.log();
+  // The promotion's handover makes B live first and records the decision after it: wait for the
+  // record.
   ASSERT_TRUE(wait_until([&] {
-    return nccomp_as_root(d, {"model", "status", "--socket", socket})
-               .out.rfind("ok model: " + b, 0) == 0;
+    const std::string out = nccomp_as_root(d, {"model", "status", "--socket", socket}).out;
+    return out.rfind("ok model: " + b, 0) == 0 &&
+           out.find("promoted by shadow rule") != std::string::npos;
   })) << daemon.log();
   st = nccomp_as_root(d, {"model", "status", "--socket", socket});
   std::printf("%s", st.out.c_str());
