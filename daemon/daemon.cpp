@@ -43,6 +43,23 @@ namespace {
 namespace fs = std::filesystem;
 namespace cfg = config;
 
+/// The [model] section of the configuration file as it is now (a model verb checks against it);
+/// nullptr with the reason in `error` when the file does not load or has no [model].
+const sections::ModelSection* model_section_of(const cfg::LoadResult& current,
+                                               const std::string& path, std::string& error) {
+  if (!current.config) {
+    error = "the configuration file does not load:\n" + current.diagnostics.to_string();
+    return nullptr;
+  }
+  const auto* s = sections::model_section(*current.config);
+  if (s == nullptr) {
+    error = path +
+            ": no [model] section: its [[model.apply]] entries say which term goes onto "
+            "which register";
+  }
+  return s;
+}
+
 #if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__) || defined(NCCOMP_ASAN) || \
     defined(NCCOMP_TSAN)
 constexpr bool kSanitizerBuild = true;
@@ -513,18 +530,9 @@ ModelChange Daemon::take_candidate(const std::string& file, const std::string& w
         "writes";
     return out;
   }
-  auto current = cfg::load_file(options_.config_path);
-  if (!current.config) {
-    out.error = "the configuration file does not load:\n" + current.diagnostics.to_string();
-    return out;
-  }
-  const auto* s = sections::model_section(*current.config);
-  if (s == nullptr) {
-    out.error = options_.config_path +
-                ": no [model] section: its [[model.apply]] entries say which term goes onto "
-                "which register";
-    return out;
-  }
+  const auto current = cfg::load_file(options_.config_path);
+  const auto* s = model_section_of(current, options_.config_path, out.error);
+  if (s == nullptr) return out;
   // Parsed as a load would parse it: the candidate must be able to become live.
   const auto old = sections::model_choice();
   sections::ModelChoice trial;
@@ -610,18 +618,9 @@ void Daemon::serve_shadow() {
 
 ModelChange Daemon::load_or_roll_back(ModelAction action, const std::string& file) {
   ModelChange out;
-  auto current = cfg::load_file(options_.config_path);
-  if (!current.config) {
-    out.error = "the configuration file does not load:\n" + current.diagnostics.to_string();
-    return out;
-  }
-  const auto* s = sections::model_section(*current.config);
-  if (s == nullptr) {
-    out.error = options_.config_path +
-                ": no [model] section: its [[model.apply]] entries say which term goes onto "
-                "which register";
-    return out;
-  }
+  const auto current = cfg::load_file(options_.config_path);
+  const auto* s = model_section_of(current, options_.config_path, out.error);
+  if (s == nullptr) return out;
   const auto old = sections::model_choice();
   ModelState before;
   {
