@@ -1,7 +1,5 @@
 #include "core/creep/wear_compensator.hpp"
 
-#include "core/estimation/noise_adaptation.hpp"
-
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -9,6 +7,8 @@
 #include <stdexcept>
 #include <string>
 #include <variant>
+
+#include "core/estimation/noise_adaptation.hpp"
 
 namespace nccomp::core::creep {
 

@@ -187,12 +187,12 @@ class WearCompensator {
   void start_entry(double offset_um, double length_mm) noexcept;
   void retire_finished_creeps() noexcept;
   void fit_rates() noexcept;
-  /// After an accepted measurement with the estimator: adds its normalised innovations to the
-  /// tool's sums and raises kMeasurementNoiseInconsistent (once per tool) when their mean is
-  /// beyond 3 standard deviations of a χ²(1) mean from 1, after kNisMinCount measurements.
   /// With adapt_rate_noise, after an accepted measurement: moves the tool's rate_q by the mean
   /// NIS over the support points (estimation::adapt_process_noise()). Real-time safe.
   void adapt_rate_noise() noexcept;
+  /// After an accepted measurement with the estimator: adds its normalised innovations to the
+  /// tool's sums and raises kMeasurementNoiseInconsistent (once per tool) when their mean is
+  /// beyond 3 standard deviations of a χ²(1) mean from 1, after kNisMinCount measurements.
   void check_noise(TimeNs now_ns, StepOutput& out) noexcept;
   /// Process noise of the filter over d_mm of cut path (config wear noise, rate_q()).
   [[nodiscard]] Eigen::Matrix2d estimator_noise(double d_mm) const noexcept;
