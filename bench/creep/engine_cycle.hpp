@@ -19,8 +19,9 @@
 
 namespace nccomp::bench::creep {
 
-/// estimator: [creep.estimator] on as well (gate off, so that every measurement of the cycle,
-/// whose first ones jump, takes the accepted path with the filter's update).
+/// estimator: [creep.estimator] on as well, its rate noise adapted at every measurement (gate
+/// off, so that every measurement of the cycle, whose first ones jump, takes the accepted path
+/// with the filter's update).
 inline core::creep::CreepModuleConfig engine_cycle_module_config(bool estimator = false) {
   using namespace nccomp::core;
   using namespace nccomp::core::creep;
@@ -39,6 +40,7 @@ inline core::creep::CreepModuleConfig engine_cycle_module_config(bool estimator 
   c.predict.enabled = true;
   c.estimator.enabled = estimator;
   c.estimator.gate_sigmas = 0.0;
+  c.estimator.adapt_rate_noise = estimator;
   c.deflection = {{0, {0.0, 20.0, 50.0}, {0.0, 2.0, 6.0}, {0.0, 1.0, 4.0}}};
   c.tool_life.min_expected_increment_um = 100.0;
   m.registers.channel = {"X_wear", "Y_wear", "Z_wear", "", ""};

@@ -1,8 +1,10 @@
 // Surface quality of creeping wear correction (issue 3, "Measured"): a synthetic flat face and a
 // curved face, and the real PHM 2010 milling wear curves, each finished while the tool wears and
 // corrected by the real core with today's strategies and the estimator's (issue 22), its process
-// noise configured or learned from the two other PHM cutters (held out). Prints
-// markdown tables, or with --json one JSON object per PHM 2010 row and strategy (one a line).
+// noise configured, or learned from the two other PHM cutters (held out) and optionally adapted
+// within the tool's life; "measured when needed" also with a bound held out from the two other
+// cutters. Prints markdown tables, or with --json one JSON object per PHM 2010 row and strategy
+// (one a line).
 //
 //   bench_creep_surface [--json] [--wear-noise UM_PER_SQRT_M] [--rate-noise UM_PER_MM_PER_SQRT_M]
 //                       [--max-sigma UM]
@@ -248,55 +250,102 @@ int main(int argc, char** argv) {
     std::vector<Result> r;
   };
   std::vector<Row> summary;
+  const auto make_scenario = [&](const char* name, int k, int passes_l) {
+    const std::vector<double> v = vb[name];
+    Scenario sc;
+    sc.name = std::string("PHM 2010 ") + name + ", measured every " + std::to_string(k) +
+              " cuts, L = " + std::to_string(passes_l) + " passes";
+    sc.passes = static_cast<int>(v.size()) - 1;
+    sc.pass_length_mm = 108.0;
+    sc.ds_mm = 0.5;
+    sc.measure_every_passes = k;
+    sc.creep_length_mm = 108.0 * passes_l;
+    sc.tool_registers = true;
+    sc.noise_um = 1.0;
+    sc.seed = 2010;
+    sc.estimator = est;
+    sc.max_sigma_um = max_sigma_um;
+    const auto wear_of = [tan_g](const std::vector<double>& vb_c) {
+      return [vb_c, tan_g](double s) {
+        const double c = s / 108.0;  // cuts done since cut 1
+        const auto i = std::min(static_cast<std::size_t>(c), vb_c.size() - 2);
+        const double t = std::min(1.0, c - static_cast<double>(i));
+        return (vb_c[i] + t * (vb_c[i + 1] - vb_c[i]) - vb_c[0]) * tan_g;
+      };
+    };
+    const auto own = wear_of(v);
+    sc.wear_um = [own](double, double s) { return own(s); };
+    // The learned process noise is held out: learned from the two other cutters.
+    for (const char* other : {"c1", "c4", "c6"}) {
+      if (std::string(other) == name) continue;
+      sc.family.push_back(wear_of(vb[other]));
+      sc.family_length_mm.push_back(108.0 * static_cast<double>(vb[other].size() - 1));
+    }
+    return sc;
+  };
+  const auto print_json = [](const char* name, int k, int passes_l, const std::string& strategy,
+                             const Result& r, double max_sigma) {
+    std::printf(
+        "{\"cutter\": \"%s\", \"k\": %d, \"creep_length_passes\": %d, \"strategy\": "
+        "\"%s\", \"rms_second_half_um\": %.6f, \"max_step_along_pass_um\": %.6f, "
+        "\"measurements\": %d, \"refused\": %d, \"rate_noise_um_per_mm_per_sqrt_m\": "
+        "%.6g, \"rate_noise_end_um_per_mm_per_sqrt_m\": %.6g, "
+        "\"sigma_before_measurement_um\": %.6g, \"max_sigma_um\": %.6g}\n",
+        name, k, passes_l, strategy.c_str(), r.rms_second_half_um, r.max_step_along_um,
+        r.measurements, r.refused, r.rate_noise_um_per_mm_per_sqrt_m,
+        r.rate_noise_end_um_per_mm_per_sqrt_m,
+        std::isnan(r.sigma_before_measurement_um) ? -1.0 : r.sigma_before_measurement_um,
+        max_sigma);
+  };
   for (int k : {5, 10, 20}) {
     for (int passes_l : {2, 3}) {
       for (const char* name : {"c1", "c4", "c6"}) {
-        const std::vector<double> v = vb[name];
-        Scenario sc;
-        sc.name = std::string("PHM 2010 ") + name + ", measured every " + std::to_string(k) +
-                  " cuts, L = " + std::to_string(passes_l) + " passes";
-        sc.passes = static_cast<int>(v.size()) - 1;
-        sc.pass_length_mm = 108.0;
-        sc.ds_mm = 0.5;
-        sc.measure_every_passes = k;
-        sc.creep_length_mm = 108.0 * passes_l;
-        sc.tool_registers = true;
-        sc.noise_um = 1.0;
-        sc.seed = 2010;
-        sc.estimator = est;
-        sc.max_sigma_um = max_sigma_um;
-        const auto wear_of = [tan_g](const std::vector<double>& vb_c) {
-          return [vb_c, tan_g](double s) {
-            const double c = s / 108.0;  // cuts done since cut 1
-            const auto i = std::min(static_cast<std::size_t>(c), vb_c.size() - 2);
-            const double t = std::min(1.0, c - static_cast<double>(i));
-            return (vb_c[i] + t * (vb_c[i + 1] - vb_c[i]) - vb_c[0]) * tan_g;
-          };
-        };
-        const auto own = wear_of(v);
-        sc.wear_um = [own](double, double s) { return own(s); };
-        // The learned process noise is held out: learned from the two other cutters.
-        for (const char* other : {"c1", "c4", "c6"}) {
-          if (std::string(other) == name) continue;
-          sc.family.push_back(wear_of(vb[other]));
-          sc.family_length_mm.push_back(108.0 * static_cast<double>(vb[other].size() - 1));
-        }
+        const Scenario sc = make_scenario(name, k, passes_l);
         print_header(sc);
         auto all = print_rows(sc);
         const double h = all.front().max_increment_um;
         if (g_json) {
           for (std::size_t i = 0; i < all.size(); ++i) {
-            std::printf(
-                "{\"cutter\": \"%s\", \"k\": %d, \"creep_length_passes\": %d, \"strategy\": "
-                "\"%s\", \"rms_second_half_um\": %.6f, \"max_step_along_pass_um\": %.6f, "
-                "\"measurements\": %d, \"refused\": %d, \"rate_noise_um_per_mm_per_sqrt_m\": "
-                "%.6g}\n",
-                name, k, passes_l, strategies()[i].name.c_str(), all[i].rms_second_half_um,
-                all[i].max_step_along_um, all[i].measurements, all[i].refused,
-                all[i].rate_noise_um_per_mm_per_sqrt_m);
+            print_json(name, k, passes_l, strategies()[i].name, all[i], sc.max_sigma_um);
           }
         }
         summary.push_back({name, k, passes_l, h, h * sc.ds_mm / sc.creep_length_mm, all});
+      }
+    }
+  }
+  // Measured when needed with the bound an integrator can know before the tool (held out): the
+  // estimate's σ just before a measurement in the second half of the life, averaged over the two
+  // other cutters' runs measured every 10 cuts with the same strategy.
+  const std::size_t kLearned = 10, kLearnedOnRequest = 12, kAdapted = 13, kAdaptedOnRequest = 15;
+  struct Held {
+    std::string cutter;
+    int passes_l;
+    double max_sigma_learned;
+    double max_sigma_adapted;
+    Result learned;
+    Result adapted;
+  };
+  std::vector<Held> held;
+  for (const int passes_l : {2, 3}) {
+    for (const char* name : {"c1", "c4", "c6"}) {
+      double s_learned = 0.0;
+      double s_adapted = 0.0;
+      for (const auto& row : summary) {
+        if (row.k != 10 || row.passes_l != passes_l || row.cutter == name) continue;
+        s_learned += 0.5 * row.r[kLearned].sigma_before_measurement_um;
+        s_adapted += 0.5 * row.r[kAdapted].sigma_before_measurement_um;
+      }
+      Scenario sc = make_scenario(name, 10, passes_l);
+      sc.max_sigma_um = s_learned;
+      const Result rl = run(sc, strategies()[kLearnedOnRequest]);
+      sc.max_sigma_um = s_adapted;
+      const Result ra = run(sc, strategies()[kAdaptedOnRequest]);
+      held.push_back({name, passes_l, s_learned, s_adapted, rl, ra});
+      if (g_json) {
+        print_json(name, 10, passes_l, strategies()[kLearnedOnRequest].name + ", held-out bound",
+                   rl, s_learned);
+        print_json(name, 10, passes_l, strategies()[kAdaptedOnRequest].name + ", held-out bound",
+                   ra, s_adapted);
       }
     }
   }
@@ -304,7 +353,8 @@ int main(int argc, char** argv) {
   // strategies(): 0 none, 1 step, 2 creeping linear, 3 creeping cosine, 4 predictive,
   // 5 creeping + estimator, 6 predictive + estimator, 7 and 8 the same fed noise-free,
   // 9 predictive + estimator measured when needed; 10, 11, 12 the same as 6, 8, 9 with the
-  // process noise learned from the two other cutters.
+  // process noise learned from the two other cutters; 13, 14, 15 the same, adapted within the
+  // tool's life.
   std::printf(
       "\n### PHM 2010 summary (step = prior art, creep = creeping linear, pred = predictive "
       "creeping)\n\n"
@@ -421,6 +471,70 @@ int main(int argc, char** argv) {
         "| %s | %d | %.3f / %d | %.3f / %d | %.0f %% | %.4f |\n", row.cutter.c_str(), row.passes_l,
         r[10].rms_second_half_um, r[10].measurements, r[12].rms_second_half_um, r[12].measurements,
         100.0 * (1.0 - double(r[12].measurements) / r[10].measurements), r[12].max_step_along_um);
+  }
+  std::printf(
+      "\n### PHM 2010, learned q adapted within the tool's life (adapt_rate_noise, window %g, "
+      "%g..%g µm/mm/√m); limit A = the same strategy fed noise-free measurements, limit B = "
+      "learned q without adaptation fed noise-free measurements\n\n"
+      "| cutter | k | L [passes] | rate noise start / end [µm/mm/√m] | step | learned q | "
+      "learned q, adapted | limit A | ratio A | limit B | ratio B | step along a pass [µm] | "
+      "refused |\n"
+      "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
+      est.adapt_window_measurements, est.min_rate_noise_um_per_mm_per_sqrt_m,
+      est.max_rate_noise_um_per_mm_per_sqrt_m);
+  for (const int passes_l : {2, 3}) {
+    double sum_step = 0.0, sum_a = 0.0, worst_a = 0.0, worst_b = 0.0, along = 0.0;
+    int rows = 0, within_a = 0, within_b = 0;
+    for (const auto& row : summary) {
+      if (row.passes_l != passes_l) continue;
+      const auto& r = row.r;
+      const double ratio_a = r[13].rms_second_half_um / r[14].rms_second_half_um;
+      const double ratio_b = r[13].rms_second_half_um / r[11].rms_second_half_um;
+      std::printf(
+          "| %s | %d | %d | %.5f / %.5f | %.3f | %.3f | %.3f | %.3f | %.2f | %.3f | %.2f | %.4f | "
+          "%d |\n",
+          row.cutter.c_str(), row.k, row.passes_l, r[13].rate_noise_um_per_mm_per_sqrt_m,
+          r[13].rate_noise_end_um_per_mm_per_sqrt_m, r[1].rms_second_half_um,
+          r[10].rms_second_half_um, r[13].rms_second_half_um, r[14].rms_second_half_um, ratio_a,
+          r[11].rms_second_half_um, ratio_b, r[13].max_step_along_um, r[13].refused);
+      sum_step += r[1].rms_second_half_um;
+      sum_a += r[13].rms_second_half_um;
+      worst_a = std::max(worst_a, ratio_a);
+      worst_b = std::max(worst_b, ratio_b);
+      within_a += ratio_a <= 1.15 ? 1 : 0;
+      within_b += ratio_b <= 1.15 ? 1 : 0;
+      along = std::max(along, r[13].max_step_along_um);
+      ++rows;
+    }
+    std::printf(
+        "\nL = %d passes, %d rows, learned q adapted: worst ratio to limit A %.3f (%d rows within "
+        "1.15), to limit B %.3f (%d rows within 1.15); mean RMS / mean RMS of step %.3f (target "
+        "≤ 0.7); max step along a pass %.4f µm (target ≤ 0.02)\n",
+        passes_l, rows, worst_a, within_a, worst_b, within_b, sum_a / sum_step, along);
+  }
+  std::printf(
+      "\n### PHM 2010, measured when needed with a held-out bound (max_sigma_um = the σ before a "
+      "measurement of the two other cutters measured every 10 cuts, second half) against every "
+      "10 cuts\n\n"
+      "| cutter | L [passes] | strategy | max_sigma_um | every 10 cuts: RMS [µm] / measurements | "
+      "when needed: RMS [µm] / measurements (first 50 cuts) | fewer measurements | RMS ratio | "
+      "step along a pass [µm] |\n"
+      "| --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
+  for (const auto& h : held) {
+    const Row* every10 = nullptr;
+    for (const auto& row : summary) {
+      if (row.k == 10 && row.passes_l == h.passes_l && row.cutter == h.cutter) every10 = &row;
+    }
+    const auto line = [&](const char* what, double bound, const Result& fixed, const Result& rq) {
+      std::printf("| %s | %d | %s | %.3f | %.3f / %d | %.3f / %d (%d) | %.0f %% | %.2f | %.4f |\n",
+                  h.cutter.c_str(), h.passes_l, what, bound, fixed.rms_second_half_um,
+                  fixed.measurements, rq.rms_second_half_um, rq.measurements,
+                  rq.measurements_first_50_passes,
+                  100.0 * (1.0 - double(rq.measurements) / fixed.measurements),
+                  rq.rms_second_half_um / fixed.rms_second_half_um, rq.max_step_along_um);
+    };
+    line("learned q", h.max_sigma_learned, every10->r[kLearned], h.learned);
+    line("learned q, adapted", h.max_sigma_adapted, every10->r[kAdapted], h.adapted);
   }
   return 0;
 }

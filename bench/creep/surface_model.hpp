@@ -12,6 +12,7 @@
 #include <cmath>
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <random>
 #include <string>
 #include <vector>
@@ -76,6 +77,8 @@ struct Strategy {
   bool on_request{false};
   /// [creep.estimator] learn_rate_noise: the Scenario's family is cut first.
   bool learned{false};
+  /// [creep.estimator] adapt_rate_noise: the rate noise follows the innovations within the life.
+  bool adapted{false};
 };
 
 struct Result {
@@ -89,8 +92,15 @@ struct Result {
   double max_increment_um{0.0};
   int measurements{0};
   int refused{0};  // measurements refused (the estimator's gate, plausibility)
-  /// The rate noise the scored tool's filter runs with [µm/mm per sqrt(m)] (learned or config).
+  /// The rate noise the scored tool's filter starts with [µm/mm per sqrt(m)] (learned or
+  /// config), and ends with (adapted).
   double rate_noise_um_per_mm_per_sqrt_m{0.0};
+  double rate_noise_end_um_per_mm_per_sqrt_m{0.0};
+  /// The estimate's σ predicted to each measurement, just before it: mean over the measurements
+  /// in the second half of the life [µm] (NaN without the estimator).
+  double sigma_before_measurement_um{std::numeric_limits<double>::quiet_NaN()};
+  /// Measurements in the first 50 cuts of the scored tool.
+  int measurements_first_50_passes{0};
 };
 
 inline const std::vector<Strategy>& strategies() {
@@ -112,6 +122,12 @@ inline const std::vector<Strategy>& strategies() {
        true, true, false, true},
       {"predictive creeping, estimator, learned q, measured when needed", true,
        ProfileShape::kLinear, true, true, false, true, true},
+      {"predictive creeping, estimator, learned q, adapted", true, ProfileShape::kLinear, true,
+       true, false, false, true, true},
+      {"predictive creeping, estimator, learned q, adapted, noise-free", true,
+       ProfileShape::kLinear, true, true, true, false, true, true},
+      {"predictive creeping, estimator, learned q, adapted, measured when needed", true,
+       ProfileShape::kLinear, true, true, false, true, true, true},
   };
   return s;
 }
@@ -155,6 +171,7 @@ inline Result run(const Scenario& sc, const Strategy& st) {
     c.estimator.learn_rate_noise = true;
     c.estimator.family_min_tools = sc.family.size();
   }
+  c.estimator.adapt_rate_noise = st.adapted;
   WearCompensator comp;
   comp.configure(c);
   StepOutput out;
@@ -236,6 +253,8 @@ inline Result run(const Scenario& sc, const Strategy& st) {
   double sum_sq_after = 0.0;
   std::size_t count_after = 0;
   double inc_sum = 0.0;
+  double sigma_sum = 0.0;
+  int sigma_count = 0;
   for (int j = 0; j < sc.passes; ++j) {
     for (int i = 0; i < n; ++i) {
       const double x_local = (i + 0.5) * sc.ds_mm;
@@ -254,6 +273,13 @@ inline Result run(const Scenario& sc, const Strategy& st) {
       if (st.on_request ? comp.state().measurement_due_flag : s >= next_meas) {
         // The NC interrupts here; the laser measures; machining resumes at the same position.
         next_meas += interval_mm;
+        double w_est = 0.0;
+        double sigma = 0.0;
+        if (j >= sc.passes / 2 && comp.wear_estimate(0, w_est, sigma)) {
+          sigma_sum += sigma;
+          ++sigma_count;
+        }
+        if (j < 50) ++r.measurements_first_50_passes;
         ToolMeasurement m;
         m.time_ns = now;
         m.tool = tool;
@@ -327,6 +353,8 @@ inline Result run(const Scenario& sc, const Strategy& st) {
       count_after > 0 ? std::sqrt(sum_sq_after / static_cast<double>(count_after)) : 0.0;
   r.mean_increment_um = r.measurements > 0 ? inc_sum / r.measurements : 0.0;
   r.refused = static_cast<int>(comp.counters().measurements_refused - refused_before);
+  r.rate_noise_end_um_per_mm_per_sqrt_m = std::sqrt(comp.rate_q() * 1000.0);
+  if (sigma_count > 0) r.sigma_before_measurement_um = sigma_sum / sigma_count;
   return r;
 }
 

@@ -254,6 +254,21 @@ void validate(const CreepConfig& c) {
                                                      std::to_string(kMaxFamilyMinTools) + ", got " +
                                                      std::to_string(est.family_min_tools));
     }
+    if (est.adapt_rate_noise) {
+      if (!(est.adapt_window_measurements >= 1.0 && est.adapt_window_measurements <= 1000.0)) {
+        k.fail("creep.estimator.adapt_window_measurements",
+               "must be 1..1000, got " + num(est.adapt_window_measurements));
+      }
+      k.positive(est.min_rate_noise_um_per_mm_per_sqrt_m,
+                 "creep.estimator.min_rate_noise_um_per_mm_per_sqrt_m");
+      if (!(est.max_rate_noise_um_per_mm_per_sqrt_m >= est.min_rate_noise_um_per_mm_per_sqrt_m) ||
+          !std::isfinite(est.max_rate_noise_um_per_mm_per_sqrt_m)) {
+        k.fail("creep.estimator.max_rate_noise_um_per_mm_per_sqrt_m",
+               "must be finite and at least min_rate_noise_um_per_mm_per_sqrt_m (" +
+                   num(est.min_rate_noise_um_per_mm_per_sqrt_m) + "), got " +
+                   num(est.max_rate_noise_um_per_mm_per_sqrt_m));
+      }
+    }
   }
 
   k.non_negative(c.entry.sister_offset_um, "creep.entry.sister_offset_um");

@@ -224,6 +224,14 @@ struct EstimatorConfig {
   /// rate_noise_um_per_mm_per_sqrt_m until then.
   bool learn_rate_noise{false};
   std::size_t family_min_tools{3};
+  /// Adapt the rate's process noise within a tool's life from the filter's normalised innovation
+  /// squares (estimation::adapt_process_noise()): starts at the configured or learned value, moves
+  /// with an exponential window of adapt_window_measurements measurements, and stays within
+  /// [min_rate_noise_um_per_mm_per_sqrt_m, max_rate_noise_um_per_mm_per_sqrt_m].
+  bool adapt_rate_noise{false};
+  double adapt_window_measurements{20.0};
+  double min_rate_noise_um_per_mm_per_sqrt_m{0.00005};
+  double max_rate_noise_um_per_mm_per_sqrt_m{0.005};
 };
 
 /// [creep.entry]: tangential entry of a sister tool and retract / re-feed (claims 14, feature 11).

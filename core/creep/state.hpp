@@ -158,8 +158,9 @@ struct CreepState {
   // Version 5: the process noise learned from the tool family, and the check of σ against the
   // residuals (issue 22).
   /// Random-walk density of the wear rate this tool's filter uses [(µm/mm)² per mm]; NaN: the
-  /// configured rate_noise_um_per_mm_per_sqrt_m. Fixed when the tool starts (the family's
-  /// estimate then), so the filter of a tool does not change under it.
+  /// configured rate_noise_um_per_mm_per_sqrt_m. Set when the tool starts (the family's
+  /// estimate then); with adapt_rate_noise moved after each accepted measurement (its whole
+  /// adaptation state, so a restart continues it).
   double rate_q{kNaN};
   /// This tool's accepted measurements per support point: the sum of the normalised innovation
   /// squares ν²/S, and of ν² − H·P⁻·Hᵀ (an unbiased estimate of σ² each) [µm²].

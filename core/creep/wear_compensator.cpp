@@ -8,6 +8,8 @@
 #include <string>
 #include <variant>
 
+#include "core/estimation/noise_adaptation.hpp"
+
 namespace nccomp::core::creep {
 
 namespace {
@@ -1162,6 +1164,7 @@ void WearCompensator::on_measurement(TimeNs now_ns, const ToolMeasurement& m,
       const double s = kf.innovation_variance(h, r);
       nis_scratch_[i] = innovation * innovation / s;
       residual_scratch_[i] = innovation * innovation - (s - r);
+      prior_fraction_scratch_[i] = (s - r) / s;
       if (!kf.update(h, w[i], r, e.gate_sigmas).accepted) {
         gated = true;
         if (std::fabs(innovation) > std::fabs(worst_innovation_um)) {
@@ -1264,6 +1267,7 @@ void WearCompensator::on_measurement(TimeNs now_ns, const ToolMeasurement& m,
     s_.estimate_path_mm = s_.cut_path_mm;
     s_.estimate_valid = true;
     s_.rate_known = true;
+    adapt_rate_noise();
     update_uncertainty_interval();
     check_noise(now_ns, out);
   } else {
@@ -1278,6 +1282,24 @@ void WearCompensator::on_measurement(TimeNs now_ns, const ToolMeasurement& m,
     s_.tool_change_flag = true;
     out.alarm(now_ns, Severity::kWarning, AlarmCode::kToolLifeReached, s_.tool, max_wear);
   }
+}
+
+void WearCompensator::adapt_rate_noise() noexcept {
+  const auto& e = config_.estimator;
+  if (!e.adapt_rate_noise || points_ == 0) return;
+  double nis = 0.0;
+  double prior_fraction = 0.0;
+  for (std::size_t i = 0; i < points_; ++i) {
+    nis += nis_scratch_[i];
+    prior_fraction += prior_fraction_scratch_[i];
+  }
+  const double n = static_cast<double>(points_);
+  estimation::NoiseAdaptation a;
+  a.window = e.adapt_window_measurements;
+  // The keys are per sqrt(m), the filter's clock is mm.
+  a.q_min = e.min_rate_noise_um_per_mm_per_sqrt_m * e.min_rate_noise_um_per_mm_per_sqrt_m / 1000.0;
+  a.q_max = e.max_rate_noise_um_per_mm_per_sqrt_m * e.max_rate_noise_um_per_mm_per_sqrt_m / 1000.0;
+  s_.rate_q = estimation::adapt_process_noise(rate_q(), nis / n, prior_fraction / n, a);
 }
 
 void WearCompensator::check_noise(TimeNs now_ns, StepOutput& out) noexcept {

@@ -149,7 +149,8 @@ class WearCompensator {
   /// point i [µm] (0 if that mean is negative); NaN before the first measurement.
   [[nodiscard]] double measurement_sigma_estimate_um(std::size_t i) const noexcept;
   /// Random-walk density of the wear rate the active tool's filter uses [(µm/mm)² per mm]: the
-  /// family's when it started with it, else the configured rate_noise_um_per_mm_per_sqrt_m.
+  /// family's when it started with it, else the configured rate_noise_um_per_mm_per_sqrt_m;
+  /// with adapt_rate_noise, adapted since from the tool's innovations.
   [[nodiscard]] double rate_q() const noexcept;
   /// The family's estimate of that density (mean over its finished tools, ≥ 0); NaN without a
   /// finished tool.
@@ -186,6 +187,9 @@ class WearCompensator {
   void start_entry(double offset_um, double length_mm) noexcept;
   void retire_finished_creeps() noexcept;
   void fit_rates() noexcept;
+  /// With adapt_rate_noise, after an accepted measurement: moves the tool's rate_q by the mean
+  /// NIS over the support points (estimation::adapt_process_noise()). Real-time safe.
+  void adapt_rate_noise() noexcept;
   /// After an accepted measurement with the estimator: adds its normalised innovations to the
   /// tool's sums and raises kMeasurementNoiseInconsistent (once per tool) when their mean is
   /// beyond 3 standard deviations of a χ²(1) mean from 1, after kNisMinCount measurements.
@@ -254,9 +258,10 @@ class WearCompensator {
   CreepCounters counters_{};
   /// The estimators after the update of the measurement being judged (stored only if accepted).
   std::array<estimation::KalmanFilter<2>, kMaxEdgePoints> estimate_scratch_{};
-  /// Their ν²/S and ν² − H·P⁻·Hᵀ [µm²] (added to the state only if accepted).
+  /// Their ν²/S, ν² − H·P⁻·Hᵀ [µm²] and H·P⁻·Hᵀ/S (added to the state only if accepted).
   std::array<double, kMaxEdgePoints> nis_scratch_{};
   std::array<double, kMaxEdgePoints> residual_scratch_{};
+  std::array<double, kMaxEdgePoints> prior_fraction_scratch_{};
   std::array<OffsetLimiter, kChannelCount> limiters_{};
 
   // Kinematics of the last axis sample (not persisted: re-anchored by the first sample).

@@ -239,6 +239,13 @@ void parse_estimator(TableReader& r, cc::EstimatorConfig& e) {
   e.family_min_tools = static_cast<std::size_t>(
       r.integer("family_min_tools", static_cast<std::int64_t>(e.family_min_tools), 1,
                 static_cast<std::int64_t>(cc::kMaxFamilyMinTools)));
+  e.adapt_rate_noise = r.boolean("adapt_rate_noise", e.adapt_rate_noise);
+  e.adapt_window_measurements =
+      r.number("adapt_window_measurements", e.adapt_window_measurements, 1.0, 1000.0);
+  e.min_rate_noise_um_per_mm_per_sqrt_m = positive(r, "min_rate_noise_um_per_mm_per_sqrt_m",
+                                                   e.min_rate_noise_um_per_mm_per_sqrt_m, 1e3);
+  e.max_rate_noise_um_per_mm_per_sqrt_m = positive(r, "max_rate_noise_um_per_mm_per_sqrt_m",
+                                                   e.max_rate_noise_um_per_mm_per_sqrt_m, 1e3);
 }
 
 void parse_entry(TableReader& r, cc::EntryConfig& e) {

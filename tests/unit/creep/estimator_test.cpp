@@ -717,3 +717,152 @@ TEST(CreepEstimatorFamily, AStateOfLayoutVersion4IsConverted) {
 
 }  // namespace
 }  // namespace nccomp::core::creep
+
+namespace nccomp::core::creep {
+namespace {
+
+/// family_config() with the rate noise adapted within the tool's life: starts at 0.001 µm/mm/√m
+/// (q = 1e-9 per mm), window 5 measurements, bounds 0.0001..0.01.
+CreepConfig adapt_config() {
+  CreepConfig c = family_config();
+  c.estimator.rate_noise_um_per_mm_per_sqrt_m = 0.001;
+  c.estimator.adapt_rate_noise = true;
+  c.estimator.adapt_window_measurements = 5.0;
+  c.estimator.min_rate_noise_um_per_mm_per_sqrt_m = 0.0001;
+  c.estimator.max_rate_noise_um_per_mm_per_sqrt_m = 0.01;
+  return c;
+}
+
+/// The level + rate filter with process noise q written out in scalars, and the adaptation of
+/// docs/estimation.md: log q moves by (ν²/S − 1)·min(S/P⁻, 4)/window, clamped to ±1, q to
+/// [q_min, q_max].
+struct AdaptingReference {
+  double w{0.0}, r{0.0}, pww{1.0}, pwr{0.0}, prr{1e-4};
+  double q{1e-9};
+  double q_min{1e-11}, q_max{1e-7}, window{5.0};
+  void measure(double d, double z) {
+    w += r * d;
+    pww += 2.0 * d * pwr + d * d * prr + q * d * d * d / 3.0;
+    pwr += d * prr + q * d * d / 2.0;
+    prr += q * d;
+    const double s = pww + 1.0;
+    const double nu = z - w;
+    const double gain = std::min(s / pww, 4.0);
+    const double step = std::clamp((nu * nu / s - 1.0) * gain / window, -1.0, 1.0);
+    const double kw = pww / s;
+    const double kr = pwr / s;
+    w += kw * nu;
+    r += kr * nu;
+    const double pww0 = pww, pwr0 = pwr;
+    pww -= kw * pww0;
+    pwr -= kw * pwr0;
+    prr -= kr * pwr0;
+    q = std::clamp(q * std::exp(step), q_min, q_max);
+  }
+};
+
+TEST(CreepEstimatorAdapt, TheRateNoiseFollowsTheToolsInnovations) {
+  // GIVEN wear that accelerates (w = 1e-5·s² µm: the rate grows from 0 to 0.04 µm/mm over
+  // 2000 mm), measured exactly every 100 mm; the filter lags, its innovations exceed what it
+  // expects, so q rises. Every measurement's q against the scalar reference.
+  testing::Rig r(adapt_config());
+  AdaptingReference ref;
+  for (int j = 1; j <= 20; ++j) {
+    const double s = 100.0 * j;
+    r.run_to(s);
+    r.measure({1e-5 * s * s});
+    ref.measure(100.0, 1e-5 * s * s);
+    ASSERT_NEAR(r.comp.rate_q(), ref.q, 1e-9 * ref.q) << j;
+    EXPECT_NEAR(r.comp.state().estimate_wear_um[0], ref.w, 1e-9) << j;
+  }
+  EXPECT_GT(r.comp.rate_q(), 3e-9);
+  // A wear that grows exactly linearly is predicted better than the filter expects: q falls.
+  testing::Rig lin(adapt_config());
+  for (int j = 1; j <= 20; ++j) {
+    lin.run_to(100.0 * j);
+    lin.measure({0.01 * 100.0 * j});
+  }
+  EXPECT_LT(lin.comp.rate_q(), 1e-9);
+  EXPECT_GE(lin.comp.rate_q(), 1e-11);
+  // Without adapt_rate_noise the tool keeps the configured q.
+  CreepConfig off = adapt_config();
+  off.estimator.adapt_rate_noise = false;
+  testing::Rig fixed(off);
+  for (int j = 1; j <= 20; ++j) {
+    fixed.run_to(100.0 * j);
+    fixed.measure({1e-5 * 1e4 * j * j});
+  }
+  EXPECT_DOUBLE_EQ(fixed.comp.rate_q(), 1e-9);
+}
+
+TEST(CreepEstimatorAdapt, TheAdaptedNoiseSurvivesARestartAndANewToolStartsAfresh) {
+  // GIVEN an adapting run saved after 8 measurements; WHEN a fresh process loads it and both
+  // carry on with the same measurements; THEN the adapted q continues (not the configured one)
+  // and the two stay identical.
+  const CreepConfig c = adapt_config();
+  ModuleRig a(c);
+  for (int j = 1; j <= 8; ++j) {
+    a.run_to(100.0 * j);
+    a.measure(1e-5 * 1e4 * j * j);
+  }
+  const double adapted = a.module.compensator().rate_q();
+  ASSERT_GT(std::fabs(std::log(adapted / 1e-9)), 0.5);  // moved from the configured q
+  std::vector<std::byte> bytes(a.module.state_capacity());
+  ASSERT_EQ(a.module.save_state(bytes), bytes.size());
+  ModuleRig b(c);
+  ASSERT_TRUE(b.module.load_state(bytes));
+  EXPECT_EQ(b.module.compensator().rate_q(), adapted);
+  b.path = 3000.0;
+  b.advance(0.0);
+  for (int j = 9; j <= 12; ++j) {
+    for (int i = 0; i < 200; ++i) {
+      a.advance(0.5);
+      b.advance(0.5);
+    }
+    a.measure(1e-5 * 1e4 * j * j);
+    b.measure(1e-5 * 1e4 * j * j);
+    EXPECT_EQ(b.module.compensator().rate_q(), a.module.compensator().rate_q()) << j;
+  }
+  // A sister starts from the configured value again (no family here).
+  testing::Rig r(c);
+  for (int j = 1; j <= 8; ++j) {
+    r.run_to(100.0 * j);
+    r.measure({1e-5 * 1e4 * j * j});
+  }
+  ASSERT_GT(std::fabs(std::log(r.comp.rate_q() / 1e-9)), 0.5);
+  r.tool_change(2, true);
+  EXPECT_DOUBLE_EQ(r.comp.rate_q(), 1e-9);
+}
+
+TEST(CreepEstimatorAdapt, ConfigErrorsNameTheKey) {
+  CreepConfig c = adapt_config();
+  EXPECT_NO_THROW(validate(c));
+  c.estimator.min_rate_noise_um_per_mm_per_sqrt_m = 0.02;  // above the max
+  try {
+    validate(c);
+    ADD_FAILURE() << "min > max accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("creep.estimator.max_rate_noise_um_per_mm_per_sqrt_m: "
+                                         "must be finite and at least"),
+              std::string::npos)
+        << e.what();
+  }
+  c = adapt_config();
+  c.estimator.min_rate_noise_um_per_mm_per_sqrt_m = 0.0;
+  c.estimator.adapt_window_measurements = 0.5;
+  try {
+    validate(c);
+    ADD_FAILURE() << "accepted";
+  } catch (const std::invalid_argument& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("creep.estimator.min_rate_noise_um_per_mm_per_sqrt_m"), std::string::npos);
+    EXPECT_NE(m.find("creep.estimator.adapt_window_measurements: must be 1..1000, got 0.5"),
+              std::string::npos)
+        << m;
+  }
+  c.estimator.adapt_rate_noise = false;  // off: not judged
+  EXPECT_NO_THROW(validate(c));
+}
+
+}  // namespace
+}  // namespace nccomp::core::creep

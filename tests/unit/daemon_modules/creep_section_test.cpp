@@ -354,6 +354,10 @@ TEST(CreepSection, EstimatorKeysFromTheDocsExampleAndTheirErrors) {
   EXPECT_DOUBLE_EQ(est.gate_sigmas, 5.0);
   EXPECT_TRUE(est.learn_rate_noise);
   EXPECT_EQ(est.family_min_tools, 3U);
+  EXPECT_TRUE(est.adapt_rate_noise);
+  EXPECT_DOUBLE_EQ(est.adapt_window_measurements, 20.0);
+  EXPECT_DOUBLE_EQ(est.min_rate_noise_um_per_mm_per_sqrt_m, 0.00005);
+  EXPECT_DOUBLE_EQ(est.max_rate_noise_um_per_mm_per_sqrt_m, 0.005);
 
   const std::string text = std::string(kRegisters) + R"(
 [creep]
@@ -367,6 +371,7 @@ rate_noise_um_per_mm_per_sqrt_m = -0.1
 gate_sigmas = 1.5
 sigma_um = 1
 family_min_tools = 0
+adapt_window_measurements = 0
 )";
   const auto g = d.write("bad.toml", text);
   const std::string err = errors_of(g);
@@ -382,6 +387,10 @@ family_min_tools = 0
             std::string::npos)
       << err;
   EXPECT_NE(err.find(at(g, text, "family_min_tools = 0") + "creep.estimator.family_min_tools: "),
+            std::string::npos)
+      << err;
+  EXPECT_NE(err.find(at(g, text, "adapt_window_measurements = 0") +
+                     "creep.estimator.adapt_window_measurements: must be a number in [1, 1000]"),
             std::string::npos)
       << err;
   // The gate's own rule is core::creep::validate()'s, pointed at the key.
