@@ -128,9 +128,19 @@ std::optional<int> resolve_column(const std::string& name, std::vector<std::stri
   return cm::column_index(name, extras);
 }
 
-constexpr std::array<std::string_view, 12> kEffectNames = {
-    "thermal_drift", "level_change", "position_x", "position_y",     "position_z", "periodic_x",
-    "periodic_y",    "periodic_z",   "tool_wear",  "wear_nonlinear", "part_trend", "contact_angle"};
+constexpr std::array<std::string_view, 13> kEffectNames = {"thermal_drift",
+                                                           "level_change",
+                                                           "position_x",
+                                                           "position_y",
+                                                           "position_z",
+                                                           "periodic_x",
+                                                           "periodic_y",
+                                                           "periodic_z",
+                                                           "tool_wear",
+                                                           "wear_nonlinear",
+                                                           "part_trend",
+                                                           "contact_angle",
+                                                           "contact_angle*tool_wear"};
 
 // A `column_kind` table: column = "temperature" | "other" (how a linear effect in it is named).
 // Wrong entries are reported and left out.
@@ -338,11 +348,14 @@ void read_term(const toml::table& t, const std::string& key, bool require_fitted
   if (const auto* c = t.get("column")) {
     if (const auto col = get_string(*c, key + ".column", diag)) {
       const auto star = col->find('*');
-      if (s.form == cm::Form::kInteraction) {
+      if (cm::has_column_b(s.form)) {
         if (star == std::string::npos || star == 0 || star + 1 == col->size()) {
-          diag.error(
-              c, key + ".column",
-              "'" + *col + "': an interaction's column is two columns a*b (e.g. \"temp_c*x_mm\")");
+          const bool interaction = s.form == cm::Form::kInteraction;
+          diag.error(c, key + ".column",
+                     "'" + *col +
+                         "': " + (interaction ? "an interaction's" : "a profile_wear term's") +
+                         " column is two columns a*b (e.g. " +
+                         (interaction ? "\"temp_c*x_mm\")" : "\"angle_deg*path_mm\")"));
         } else {
           s.column =
               resolve_column(col->substr(0, star), out.extra_columns, *c, key + ".column", diag)
@@ -353,7 +366,8 @@ void read_term(const toml::table& t, const std::string& key, bool require_fitted
         }
       } else if (star != std::string::npos) {
         diag.error(c, key + ".column",
-                   "'" + *col + "': a product of columns needs form = \"interaction\"");
+                   "'" + *col +
+                       "': a product of columns needs form = \"interaction\" or \"profile_wear\"");
       } else {
         s.column = resolve_column(*col, out.extra_columns, *c, key + ".column", diag).value_or(-1);
       }
@@ -375,7 +389,7 @@ void read_term(const toml::table& t, const std::string& key, bool require_fitted
     }
   } else if (s.form == cm::Form::kExpRise || s.form == cm::Form::kSine ||
              s.form == cm::Form::kLag || s.form == cm::Form::kPoly ||
-             s.form == cm::Form::kExpGrowth) {
+             s.form == cm::Form::kExpGrowth || s.form == cm::Form::kProfileWear) {
     diag.error(&t, key + ".scale",
                "missing (form " + *fname + " needs its scale / period / time constant)");
   }
@@ -502,11 +516,13 @@ void read_search(const toml::node& sn, ModelFile& out, Diagnostics& diag) {
                         cm::column_index(name.substr(0, star), out.extra_columns) >= 0 &&
                         cm::column_index(name.substr(star + 1), out.extra_columns) >= 0);
       if (!known) {
-        diag.error(n, "model.search.exclude",
-                   "no effect is called '" + name +
-                       "' (thermal_drift, level_change, position_x|y|z, periodic_x|y|z, "
-                       "tool_wear, wear_nonlinear, part_trend, contact_angle, linear_<column> of "
-                       "linear_columns, a*b of an interaction)");
+        diag.error(
+            n, "model.search.exclude",
+            "no effect is called '" + name +
+                "' (thermal_drift, level_change, position_x|y|z, periodic_x|y|z, "
+                "tool_wear, wear_nonlinear, part_trend, contact_angle, contact_angle*tool_wear, "
+                "linear_<column> of "
+                "linear_columns, a*b of an interaction)");
       }
     }
   }
@@ -633,11 +649,12 @@ std::string write_model_toml(const core::model::Model& model,
     }
     if (s.form == cm::Form::kPoly) o << "degree = " << s.degree << "\n";
     if (s.form == cm::Form::kPoly || s.form == cm::Form::kStep || s.form == cm::Form::kHinge ||
-        s.form == cm::Form::kWear || s.form == cm::Form::kInteraction) {
+        s.form == cm::Form::kWear || cm::has_column_b(s.form)) {
       o << "center = " << fmt_double(s.center) << "\n";
     }
     if (s.form == cm::Form::kInteraction) o << "center_b = " << fmt_double(s.center_b) << "\n";
-    if (s.form == cm::Form::kPoly || cm::has_nonlinear_parameter(s.form)) {
+    if (s.form == cm::Form::kPoly || s.form == cm::Form::kProfileWear ||
+        cm::has_nonlinear_parameter(s.form)) {
       if (s.form != cm::Form::kStep && s.form != cm::Form::kHinge)
         o << "scale = " << fmt_double(s.scale) << "\n";
     }
