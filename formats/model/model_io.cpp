@@ -521,8 +521,7 @@ void read_search(const toml::node& sn, ModelFile& out, Diagnostics& diag) {
             "no effect is called '" + name +
                 "' (thermal_drift, level_change, position_x|y|z, periodic_x|y|z, "
                 "tool_wear, wear_nonlinear, part_trend, contact_angle, contact_angle*tool_wear, "
-                "linear_<column> of "
-                "linear_columns, a*b of an interaction)");
+                "linear_<column> of linear_columns, a*b of an interaction)");
       }
     }
   }
