@@ -1543,6 +1543,13 @@ std::vector<Candidate> make_candidates(const Dataset& data, const std::vector<st
     c.spec.center = angle.mean;
     c.spec.scale = angle.sd;
     add("contact_angle", Form::kPoly, static_cast<int>(Column::kAngle), 2, c);
+    if (varies(path)) {
+      // Edge wear concentrated at some engagement angles grows with the wear: the angle
+      // profile 1, u, u² times the cut path.
+      Candidate pw = c;
+      pw.spec.column_b = static_cast<int>(Column::kPath);
+      add("contact_angle*tool_wear", Form::kProfileWear, static_cast<int>(Column::kAngle), 1, pw);
+    }
   }
   // Per-group versions of every candidate (one coefficient set per axis, checkpoint, tool, …):
   // a rate of opposite signs per group averages out in the shared version.

@@ -7,9 +7,9 @@
 namespace nccomp::core::model {
 
 namespace {
-constexpr std::array<std::string_view, 12> kFormNames = {
-    "constant", "linear",     "poly",  "exp_rise", "sine",        "step",
-    "lag",      "exp_growth", "hinge", "wear",     "interaction", "session"};
+constexpr std::array<std::string_view, 13> kFormNames = {
+    "constant",   "linear", "poly", "exp_rise",    "sine",    "step",        "lag",
+    "exp_growth", "hinge",  "wear", "interaction", "session", "profile_wear"};
 
 bool same(double a, double b) noexcept {
   // Group keys are integers (tool, point, kind) stored as doubles; exact equality is intended.
@@ -45,6 +45,7 @@ std::size_t basis_count(Form f, int degree) noexcept {
     case Form::kSine:
       return 2;
     case Form::kInteraction:
+    case Form::kProfileWear:
       return 3;
     case Form::kPoly:
       return degree < 1 ? 1 : (degree > 3 ? 3 : static_cast<std::size_t>(degree));
@@ -119,6 +120,16 @@ std::size_t term_basis(const TermSpec& spec, const Row& row, double aux,
       out[0] = a;
       out[1] = b;
       out[2] = a * b;
+      return 3;
+    }
+    case Form::kProfileWear: {
+      if (spec.column_b < 0 || static_cast<std::size_t>(spec.column_b) >= row.size()) return 0;
+      const double w = row[static_cast<std::size_t>(spec.column_b)];
+      if (!std::isfinite(w)) return 0;
+      const double u = (v - spec.center) / spec.scale;
+      out[0] = w;
+      out[1] = u * w;
+      out[2] = u * u * w;
       return 3;
     }
     case Form::kSession:
@@ -275,7 +286,7 @@ int column_index(std::string_view name, const std::vector<std::string>& extras) 
 }
 
 std::string term_column_name(const TermSpec& spec, const std::vector<std::string>& extras) {
-  if (spec.form == Form::kInteraction) {
+  if (has_column_b(spec.form)) {
     return column_name(spec.column, extras) + "*" + column_name(spec.column_b, extras);
   }
   return column_name(spec.column, extras);

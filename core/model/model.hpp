@@ -85,6 +85,11 @@ enum class Form : std::uint8_t {
   // session the fit did not see is learned from its own measurements (Model::observe()): the
   // posterior mean scale² Σr / (n scale² + center²) of its first n residuals r.
   kSession = 11,
+  // [w, u·w, u²·w], u = (a − center) / scale, a = `column` (the engagement angle), w =
+  // `column_b` (the cut path): an angle profile 1, u, u² times the tool wear, which grows with
+  // the path (edge wear concentrated at some engagement angles grows with the wear). Written
+  // "a*b" like an interaction.
+  kProfileWear = 12,
 };
 
 std::string_view form_name(Form f) noexcept;
@@ -94,6 +99,10 @@ bool parse_form(std::string_view name, Form& out) noexcept;
 std::size_t basis_count(Form f, int degree) noexcept;
 /// True for forms whose `scale` / `center` is found by the non-linear search.
 bool has_nonlinear_parameter(Form f) noexcept;
+/// True for forms of two columns (`column_b`), written "a*b".
+constexpr bool has_column_b(Form f) noexcept {
+  return f == Form::kInteraction || f == Form::kProfileWear;
+}
 
 /// What a term is: fixed before the linear fit.
 struct TermSpec {
@@ -114,6 +123,7 @@ struct TermSpec {
   /// kSession: between-session standard deviation [µm] (`center`: the measurement noise [µm]).
   double scale{1.0};
   /// kInteraction: the second column b and its centre (`center` is that of `column`).
+  /// kProfileWear: the wear column (`center`, `scale`: of the angle's u).
   int column_b{-1};
   double center_b{0.0};
 };

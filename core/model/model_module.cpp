@@ -51,7 +51,7 @@ std::uint64_t identity_of(const Model& model, const std::vector<ModelApply>& app
     f.value(s.degree);
     f.value(s.center);
     f.value(s.scale);
-    if (s.form == Form::kInteraction) {  // only here: other models keep their identity
+    if (has_column_b(s.form)) {  // only here: other models keep their identity
       f.value(s.column_b);
       f.value(s.center_b);
     }

@@ -128,9 +128,19 @@ std::optional<int> resolve_column(const std::string& name, std::vector<std::stri
   return cm::column_index(name, extras);
 }
 
-constexpr std::array<std::string_view, 12> kEffectNames = {
-    "thermal_drift", "level_change", "position_x", "position_y",     "position_z", "periodic_x",
-    "periodic_y",    "periodic_z",   "tool_wear",  "wear_nonlinear", "part_trend", "contact_angle"};
+constexpr std::array<std::string_view, 13> kEffectNames = {"thermal_drift",
+                                                           "level_change",
+                                                           "position_x",
+                                                           "position_y",
+                                                           "position_z",
+                                                           "periodic_x",
+                                                           "periodic_y",
+                                                           "periodic_z",
+                                                           "tool_wear",
+                                                           "wear_nonlinear",
+                                                           "part_trend",
+                                                           "contact_angle",
+                                                           "contact_angle*tool_wear"};
 
 // A `column_kind` table: column = "temperature" | "other" (how a linear effect in it is named).
 // Wrong entries are reported and left out.
@@ -338,11 +348,14 @@ void read_term(const toml::table& t, const std::string& key, bool require_fitted
   if (const auto* c = t.get("column")) {
     if (const auto col = get_string(*c, key + ".column", diag)) {
       const auto star = col->find('*');
-      if (s.form == cm::Form::kInteraction) {
+      if (cm::has_column_b(s.form)) {
         if (star == std::string::npos || star == 0 || star + 1 == col->size()) {
-          diag.error(
-              c, key + ".column",
-              "'" + *col + "': an interaction's column is two columns a*b (e.g. \"temp_c*x_mm\")");
+          const bool interaction = s.form == cm::Form::kInteraction;
+          diag.error(c, key + ".column",
+                     "'" + *col +
+                         "': " + (interaction ? "an interaction's" : "a profile_wear term's") +
+                         " column is two columns a*b (e.g. " +
+                         (interaction ? "\"temp_c*x_mm\")" : "\"angle_deg*path_mm\")"));
         } else {
           s.column =
               resolve_column(col->substr(0, star), out.extra_columns, *c, key + ".column", diag)
@@ -353,7 +366,8 @@ void read_term(const toml::table& t, const std::string& key, bool require_fitted
         }
       } else if (star != std::string::npos) {
         diag.error(c, key + ".column",
-                   "'" + *col + "': a product of columns needs form = \"interaction\"");
+                   "'" + *col +
+                       "': a product of columns needs form = \"interaction\" or \"profile_wear\"");
       } else {
         s.column = resolve_column(*col, out.extra_columns, *c, key + ".column", diag).value_or(-1);
       }
@@ -375,7 +389,7 @@ void read_term(const toml::table& t, const std::string& key, bool require_fitted
     }
   } else if (s.form == cm::Form::kExpRise || s.form == cm::Form::kSine ||
              s.form == cm::Form::kLag || s.form == cm::Form::kPoly ||
-             s.form == cm::Form::kExpGrowth) {
+             s.form == cm::Form::kExpGrowth || s.form == cm::Form::kProfileWear) {
     diag.error(&t, key + ".scale",
                "missing (form " + *fname + " needs its scale / period / time constant)");
   }
@@ -502,11 +516,12 @@ void read_search(const toml::node& sn, ModelFile& out, Diagnostics& diag) {
                         cm::column_index(name.substr(0, star), out.extra_columns) >= 0 &&
                         cm::column_index(name.substr(star + 1), out.extra_columns) >= 0);
       if (!known) {
-        diag.error(n, "model.search.exclude",
-                   "no effect is called '" + name +
-                       "' (thermal_drift, level_change, position_x|y|z, periodic_x|y|z, "
-                       "tool_wear, wear_nonlinear, part_trend, contact_angle, linear_<column> of "
-                       "linear_columns, a*b of an interaction)");
+        diag.error(
+            n, "model.search.exclude",
+            "no effect is called '" + name +
+                "' (thermal_drift, level_change, position_x|y|z, periodic_x|y|z, "
+                "tool_wear, wear_nonlinear, part_trend, contact_angle, contact_angle*tool_wear, "
+                "linear_<column> of linear_columns, a*b of an interaction)");
       }
     }
   }
@@ -633,11 +648,12 @@ std::string write_model_toml(const core::model::Model& model,
     }
     if (s.form == cm::Form::kPoly) o << "degree = " << s.degree << "\n";
     if (s.form == cm::Form::kPoly || s.form == cm::Form::kStep || s.form == cm::Form::kHinge ||
-        s.form == cm::Form::kWear || s.form == cm::Form::kInteraction) {
+        s.form == cm::Form::kWear || cm::has_column_b(s.form)) {
       o << "center = " << fmt_double(s.center) << "\n";
     }
     if (s.form == cm::Form::kInteraction) o << "center_b = " << fmt_double(s.center_b) << "\n";
-    if (s.form == cm::Form::kPoly || cm::has_nonlinear_parameter(s.form)) {
+    if (s.form == cm::Form::kPoly || s.form == cm::Form::kProfileWear ||
+        cm::has_nonlinear_parameter(s.form)) {
       if (s.form != cm::Form::kStep && s.form != cm::Form::kHinge)
         o << "scale = " << fmt_double(s.scale) << "\n";
     }
@@ -708,7 +724,10 @@ std::string write_model_toml(const core::model::Model& model,
 Mapping read_mapping_text(std::string_view text, std::string_view source) {
   const toml::table root = parse_or_throw(text, source);
   Diagnostics diag;
-  check_keys(root, "", {"columns", "extra", "scale", "constant", "wide", "column_kind"}, diag);
+  check_keys(root, "",
+             {"columns", "extra", "scale", "constant", "wide", "column_kind", "ids", "restarts",
+              "header_rows", "names_row"},
+             diag);
   Mapping m;
   auto table = [&](const char* name) -> const toml::table* {
     const auto* n = root.get(name);
@@ -803,6 +822,90 @@ Mapping read_mapping_text(std::string_view text, std::string_view source) {
       }
     }
   }
+  // A column read from the file: mapped under [columns] (not the measurement) or [extra].
+  auto read_column = [&](const std::string& column) {
+    auto named = [&](const auto& list) {
+      return std::any_of(list.begin(), list.end(),
+                         [&](const auto& e) { return e.first == column; });
+    };
+    return column != "measured_um" && column != "applied_um" &&
+           (named(m.columns) || named(m.extra));
+  };
+  if (const auto* t = table("ids")) {
+    for (const auto& [k, v] : *t) {
+      const std::string column(k.str());
+      const std::string key = "ids." + column;
+      const bool group = column == "tool" || column == "point" || column == "part" ||
+                         std::any_of(m.extra.begin(), m.extra.end(),
+                                     [&](const auto& e) { return e.first == column; });
+      if (!group || !read_column(column)) {
+        diag.error(&v, key,
+                   "text ids are for tool, point or part mapped under [columns], or a column of "
+                   "[extra]");
+        continue;
+      }
+      Mapping::TextIds ids{column, false, {}};
+      if (v.is_string()) {
+        if (v.value_or(std::string()) != "digits") {
+          diag.error(&v, key, "must be \"digits\" or a table of text = number");
+          continue;
+        }
+        ids.digits = true;
+      } else if (const auto* texts = v.as_table(); texts != nullptr && !texts->empty()) {
+        for (const auto& [id_text, number] : *texts) {
+          const auto x = get_number(number, key + "." + std::string(id_text.str()), diag);
+          if (!x) continue;
+          if (std::floor(*x) < *x) {
+            diag.error(&number, key + "." + std::string(id_text.str()), "must be an integer");
+            continue;
+          }
+          ids.table.emplace_back(trim(std::string(id_text.str())), *x);
+        }
+      } else {
+        diag.error(&v, key, "must be \"digits\" or a table of text = number");
+        continue;
+      }
+      m.ids.push_back(std::move(ids));
+    }
+  }
+  if (const auto* t = table("restarts")) {
+    for (const auto& [k, v] : *t) {
+      const std::string column(k.str());
+      const std::string key = "restarts." + column;
+      const auto how = get_string(v, key, diag);
+      if (!how) continue;
+      if (*how != "per_file" && *how != "on_decrease") {
+        diag.error(&v, key, "'" + *how + "' is not per_file or on_decrease");
+      } else if (!read_column(column)) {
+        diag.error(&v, key, "not a column mapped under [columns] or [extra]");
+      } else if (!m.restart_column.empty()) {
+        diag.error(&v, key, "one counter only (already " + m.restart_column + ")");
+      } else if (std::any_of(m.ids.begin(), m.ids.end(),
+                             [&](const auto& i) { return i.column == column; })) {
+        diag.error(&v, key, "a column of text ids is no counter");
+      } else {
+        m.restart_column = column;
+        m.restart_per_file = *how == "per_file";
+      }
+    }
+  }
+  auto header_key = [&](const char* name, int fallback) {
+    const auto* n = root.get(name);
+    if (n == nullptr) return fallback;
+    const auto x = get_number(*n, name, diag);
+    if (!x) return fallback;
+    if (std::floor(*x) < *x || *x < 1.0 || *x > 100.0) {
+      diag.error(n, name, "must be an integer from 1 to 100");
+      return fallback;
+    }
+    return static_cast<int>(*x);
+  };
+  m.header_rows = header_key("header_rows", 1);
+  m.names_row = header_key("names_row", m.header_rows);
+  if (m.names_row > m.header_rows) {
+    diag.error(root.get("names_row"), "names_row",
+               "beyond header_rows = " + std::to_string(m.header_rows));
+  }
   // A scale applies to a column read from the file, once: one mapped under [columns] or
   // [extra], or measured_um read from [wide]. A scale of anything else would silently do nothing.
   for (const auto& [k, v] : m.scale) {
@@ -817,6 +920,9 @@ Mapping read_mapping_text(std::string_view text, std::string_view source) {
       diag.error(scales->get(column), "scale." + column,
                  named(m.constant) ? "a [constant] is not scaled (write it in the target unit)"
                                    : "not a column mapped under [columns], [extra] or [wide]");
+    } else if (std::any_of(m.ids.begin(), m.ids.end(),
+                           [&](const auto& i) { return i.column == column; })) {
+      diag.error(scales->get(column), "scale." + column, "a column of [ids] is not scaled");
     }
   }
   if (!diag.ok()) throw DiagnosticsError(std::move(diag), std::string(source));
@@ -876,7 +982,27 @@ struct Target {
   int source_field{-1};  // CSV field index
   double scale{1.0};
   std::string name;
+  const Mapping::TextIds* ids{nullptr};  // text ids of the column, if any
 };
+
+/// The group number of a text id: its entry in the table, or its one run of digits ("T12" →
+/// 12); nullopt if it has none.
+std::optional<double> text_id(std::string_view cell, const Mapping::TextIds& ids) {
+  if (!ids.digits) {
+    for (const auto& [text, number] : ids.table) {
+      if (text == cell) return number;
+    }
+    return std::nullopt;
+  }
+  constexpr std::string_view kDigits = "0123456789";
+  const auto b = cell.find_first_of(kDigits);
+  if (b == std::string_view::npos) return std::nullopt;
+  const auto e = std::min(cell.find_first_not_of(kDigits, b), cell.size());
+  if (cell.find_first_of(kDigits, e) != std::string_view::npos || e - b > 15) return std::nullopt;
+  double v = 0.0;
+  std::from_chars(cell.data() + b, cell.data() + e, v);
+  return v;
+}
 
 /// An error at a row (its line) and, where known, a field (0-based; -1 unknown) of the column
 /// named `column`.
@@ -892,12 +1018,26 @@ struct Target {
 void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
               core::model::Dataset& data) {
   std::string line;
-  std::size_t line_no = 1;
-  if (!std::getline(in, line)) csv_fail(source, 1, "", "empty file (no header row)");
-  if (line.size() >= 3 && line.compare(0, 3, "\xEF\xBB\xBF") == 0) line.erase(0, 3);
+  std::size_t line_no = 0;
+  // The column names are on one of the header's rows (a title above them, units below them).
+  const auto names_line = static_cast<std::size_t>(mapping.names_row);
+  std::string names;
+  while (line_no < static_cast<std::size_t>(mapping.header_rows)) {
+    if (!std::getline(in, line)) {
+      csv_fail(source, line_no + 1, "",
+               line_no == 0 ? "empty file (no header row)"
+                            : "the file ends within its " + std::to_string(mapping.header_rows) +
+                                  " header rows (header_rows)");
+    }
+    if (++line_no == 1 && line.size() >= 3 && line.compare(0, 3, "\xEF\xBB\xBF") == 0) {
+      line.erase(0, 3);
+    }
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (line_no == names_line) names = line;
+  }
   std::vector<std::string> fields;
-  std::size_t nf = split_csv(line, fields);
-  if (nf == 0) csv_fail(source, 1, "", "bad quoting in the header row");
+  std::size_t nf = split_csv(names, fields);
+  if (nf == 0) csv_fail(source, names_line, "", "bad quoting in the header row");
   std::vector<std::string> header;
   for (std::size_t i = 0; i < nf; ++i) header.push_back(trim(fields[i]));
   auto find = [&](const std::string& h) -> int {
@@ -919,10 +1059,14 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
                         int special) {
     const int f = find(header_name);
     if (f < 0) {
-      csv_fail(source, 1, header_name,
+      csv_fail(source, names_line, header_name,
                mapped ? "not in the header (mapped to '" + name + "')" : "required column missing");
     }
-    targets.push_back({column, special, f, scale_of(name), header_name});
+    const Mapping::TextIds* ids = nullptr;
+    for (const auto& i : mapping.ids) {
+      if (i.column == name) ids = &i;
+    }
+    targets.push_back({column, special, f, scale_of(name), header_name, ids});
   };
   if (data.columns.size() < cm::kStandardColumns + data.extra_columns.size()) {
     data.columns.resize(cm::kStandardColumns + data.extra_columns.size());
@@ -942,7 +1086,9 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
     bool have_measured = !mapping.wide_measured.empty();
     for (const auto& [name, h] : mapping.columns) {
       if (name == "measured_um") {
-        if (have_measured) csv_fail(source, 1, h, "measured_um mapped twice (columns and wide)");
+        if (have_measured) {
+          csv_fail(source, names_line, h, "measured_um mapped twice (columns and wide)");
+        }
         have_measured = true;
         add_target(name, h, -1, 1);
       } else if (name == "applied_um") {
@@ -951,7 +1097,9 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
         add_target(name, h, cm::column_index(name, {}), 0);
       }
     }
-    if (!have_measured) csv_fail(source, 1, "", "the mapping names no measured_um column");
+    if (!have_measured) {
+      csv_fail(source, names_line, "", "the mapping names no measured_um column");
+    }
     for (std::size_t e = 0; e < data.extra_columns.size(); ++e) {
       bool found = false;
       for (const auto& [name, h] : mapping.extra) {
@@ -961,7 +1109,7 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
         }
       }
       if (!found) {
-        csv_fail(source, 1, data.extra_columns[e],
+        csv_fail(source, names_line, data.extra_columns[e],
                  "the model uses this extra column but the mapping's [extra] does not name it");
       }
     }
@@ -983,7 +1131,7 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
   std::vector<int> wide_fields;
   for (const auto& h : mapping.wide_measured) {
     const int f = find(h);
-    if (f < 0) csv_fail(source, 1, h, "not in the header (mapping [wide])");
+    if (f < 0) csv_fail(source, names_line, h, "not in the header (mapping [wide])");
     wide_fields.push_back(f);
   }
   const double measured_scale = scale_of("measured_um");
@@ -1021,6 +1169,32 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
   std::sort(present.begin(), present.end());
   present.erase(std::unique(present.begin(), present.end()), present.end());
   for (std::size_t c : present) cols[c].resize(start_rows, cm::kUnknown);
+  // A counter that restarts ([restarts]): each restart starts a new run (session). time_s keeps
+  // its values (time since the run started, as in nccompd's log after a warm start) and the run
+  // is ordered after the rows before it; any other counter continues from the run before.
+  int restart_col = -1;
+  if (!mapping.restart_column.empty()) {
+    for (const Target& t : targets) {
+      if (t.column >= 0 && static_cast<std::size_t>(t.column) < cm::kStandardColumns &&
+          cm::kStandardColumnNames[static_cast<std::size_t>(t.column)] == mapping.restart_column) {
+        restart_col = t.column;
+      }
+    }
+    for (std::size_t e = 0; e < data.extra_columns.size(); ++e) {
+      if (data.extra_columns[e] == mapping.restart_column) {
+        restart_col = static_cast<int>(cm::kStandardColumns + e);
+      }
+    }
+  }
+  const bool time_restarts = restart_col == static_cast<int>(time_col);
+  double counter_offset = 0.0;
+  double counter_last = cm::kUnknown;    // the counter's value as read, in this file
+  double counter_before = cm::kUnknown;  // its last continued value, before this file
+  if (restart_col >= 0 && !time_restarts) {
+    for (double v : cols[static_cast<std::size_t>(restart_col)]) {
+      if (std::isfinite(v)) counter_before = v;
+    }
+  }
   // v2 (the header has machine, utc and session; architecture.md): time_s restarts at each warm
   // start, so it must only grow within a session, and a later session is ordered after the
   // rows before it. One machine per file.
@@ -1074,6 +1248,20 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
                      "'" + std::string(cell) + "' is not tool_wear, contour or calib",
                      t.source_field);
           v = k;
+        } else if (t.ids != nullptr) {
+          const auto id = text_id(cell, *t.ids);
+          if (!id) {
+            std::string known;
+            for (const auto& [text, number] : t.ids->table) {
+              known += (known.empty() ? "" : ", ") + text;
+            }
+            csv_fail(
+                source, line_no, t.name,
+                "'" + std::string(cell) + "' is not a text id of [ids] " +
+                    (t.ids->digits ? "(digits: one run of digits, e.g. T12)" : "(" + known + ")"),
+                t.source_field);
+          }
+          v = *id;
         } else {
           const char* b = cell.data();
           const char* e = b + cell.size();
@@ -1106,6 +1294,27 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
       csv_fail(source, line_no, "kind",
                mapped ? "no kind (map it or set [constant] kind)" : "empty",
                field_of(static_cast<std::size_t>(cm::Column::kKind)));
+    }
+    if (restart_col >= 0 && std::isfinite(values[static_cast<std::size_t>(restart_col)])) {
+      double& v = values[static_cast<std::size_t>(restart_col)];
+      if (std::isnan(counter_last)) {
+        // The file's first value: a new file is a new run already.
+        if (!time_restarts && std::isfinite(counter_before) &&
+            (mapping.restart_per_file || v < counter_before)) {
+          counter_offset = counter_before;
+        }
+      } else if (!mapping.restart_per_file && v < counter_last) {
+        ++reader_session;
+        if (time_restarts) {
+          last_time = -std::numeric_limits<double>::infinity();
+          previous_end = order_end;
+          order_offset = cm::kUnknown;
+        } else {
+          counter_offset += counter_last;
+        }
+      }
+      counter_last = v;
+      if (!time_restarts) v += counter_offset;
     }
     const double t_s = values[time_col];
     if (session_field >= 0) {
@@ -1151,7 +1360,8 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
       }
     }
     if (std::isfinite(t_s) && std::isnan(order_offset)) {
-      order_offset = !mapped && t_s <= previous_end ? previous_end + 1.0 - t_s : 0.0;
+      order_offset =
+          (!mapped || time_restarts) && t_s <= previous_end ? previous_end + 1.0 - t_s : 0.0;
     }
     if (std::isfinite(t_s)) {
       if (t_s < last_time) {

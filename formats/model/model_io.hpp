@@ -62,6 +62,22 @@ struct Mapping {
   std::vector<double> wide_points;
   /// Column → is a temperature (`[column_kind]`: how a linear effect in it is named).
   std::vector<std::pair<std::string, bool>> column_kind;
+  /// `[ids]`: a column whose cells are text ids (a tool "T12", a cutter "c4") turned into group
+  /// numbers, by a table of texts or by the digits of the text.
+  struct TextIds {
+    std::string column;
+    /// The number is the one digit run of the text ("T12" → 12); else `table`.
+    bool digits{false};
+    std::vector<std::pair<std::string, double>> table;
+  };
+  std::vector<TextIds> ids;
+  /// `[restarts]`: the one counter column whose restart starts a new run (session); empty if
+  /// none. per_file: at each file; otherwise when it decreases.
+  std::string restart_column;
+  bool restart_per_file{false};
+  /// Rows of the header (`header_rows`) and the one (1-based) holding the column names.
+  int header_rows{1};
+  int names_row{1};
   bool empty() const { return columns.empty() && extra.empty() && constant.empty(); }
 };
 

@@ -107,6 +107,10 @@ std::string params_json(const cm::TermSpec& spec, const cm::Model& model,
       // coef_um: per (a − center_a), (b − center_b), (a − center_a)(b − center_b).
       o << "\"center_a\": " << num(spec.center, 8) << ", \"center_b\": " << num(spec.center_b, 8);
       break;
+    case cm::Form::kProfileWear:
+      // coef_um: per w, u·w, u²·w; u = (a − center_a) / scale_a, w = b (the cut path).
+      o << "\"center_a\": " << num(spec.center, 8) << ", \"scale_a\": " << num(spec.scale, 8);
+      break;
     case cm::Form::kSession: {
       // The random effect's variances and its shrunk offset (BLUP) of every fitted session,
       // numbered from 1 as in the validation by session.

@@ -111,7 +111,7 @@ std::string loop_context_problem(const cm::Term& term, bool each_cycle, const cm
   }
   std::vector<int> cols;
   if (spec.form != cm::Form::kConstant) cols.push_back(spec.column);
-  if (spec.form == cm::Form::kInteraction) cols.push_back(spec.column_b);
+  if (cm::has_column_b(spec.form)) cols.push_back(spec.column_b);
   for (const int c : spec.per) {
     if (c >= 0) cols.push_back(c);
   }
@@ -123,7 +123,7 @@ std::string loop_context_problem(const cm::Term& term, bool each_cycle, const cm
         continue;
       }
       if (w.form != cm::Form::kConstant) cols.push_back(w.column);
-      if (w.form == cm::Form::kInteraction) cols.push_back(w.column_b);
+      if (cm::has_column_b(w.form)) cols.push_back(w.column_b);
       for (const int c : w.per) {
         if (c >= 0 && c != static_cast<int>(cm::Column::kKind) &&
             c != static_cast<int>(cm::Column::kPoint)) {

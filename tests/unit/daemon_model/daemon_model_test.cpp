@@ -732,6 +732,59 @@ TEST(ModelSection, AnInteractionWithAPositionNeedsUpdateCycleWhicheverColumnIsTh
   EXPECT_TRUE(by_column.config) << by_column.diagnostics.to_string();
 }
 
+// Issue 21: an angle profile × wear term (contact_angle*tool_wear, form profile_wear) needs the
+// entry's angle and, as its path grows within a part, update = "cycle".
+TEST(ModelSection, AnAngleProfileTimesWearNeedsTheEntrysAngleAndUpdateCycle) {
+  cm::Term t;
+  t.spec.name = "contact_angle*tool_wear";
+  t.spec.form = cm::Form::kProfileWear;
+  t.spec.column = static_cast<int>(cm::Column::kAngle);
+  t.spec.column_b = static_cast<int>(cm::Column::kPath);
+  t.spec.center = 30.0;
+  t.spec.scale = 20.0;
+  t.spec.kind_mask = 0x2;
+  t.groups = {{0.0, 0.0}};
+  t.coef = {0.002, 0.001, 0.0005};
+  TempDir d;
+  d.write("fit/model.toml",
+          formats::model_io::write_model_toml(cm::Model({}, {t}), cm::AnalysisConfig{}, {"test"}));
+  const auto text = [](const std::string& update, const std::string& angle) {
+    return registers_toml() + "[model]\nfile = \"fit/model.toml\"\nupdate = \"" + update +
+           "\"\n[[model.apply]]\nterm = \"contact_angle*tool_wear\"\nregister = "
+           "\"checkpoint_0\"\n" +
+           angle;
+  };
+  const std::string no_angle = text("cycle", "");
+  auto r = config::load_file(d.write("a.toml", no_angle));
+  EXPECT_FALSE(r.config);
+  EXPECT_NE(r.diagnostics.to_string().find(
+                term_where("a.toml", no_angle) +
+                "model.apply[0].term: term 'contact_angle*tool_wear' depends on angle_deg, which "
+                "the daemon's loop does not know"),
+            std::string::npos)
+      << r.diagnostics.to_string();
+  const std::string per_part = text("part", "angle_deg = 50\n");
+  r = config::load_file(d.write("b.toml", per_part));
+  EXPECT_FALSE(r.config);
+  EXPECT_NE(r.diagnostics.to_string().find(
+                term_where("b.toml", per_part) +
+                "model.apply[0].term: term 'contact_angle*tool_wear' depends on path_mm, which "
+                "changes within a part: set update = \"cycle\" in [model]"),
+            std::string::npos)
+      << r.diagnostics.to_string();
+  auto ok = config::load_file(d.write("c.toml", text("cycle", "angle_deg = 50\n")));
+  ASSERT_TRUE(ok.config) << ok.diagnostics.to_string();
+  auto e = config::build_engine(*ok.config);
+  const auto* m = static_cast<const ModelModule*>(&e->module(0));
+  core::StepOutput out;
+  // 101 cutting samples 1 mm apart: 100 mm of path. u = (50 − 30) / 20 = 1:
+  // (0.002 + 0.001 + 0.0005) × 100 = 0.35 µm, trim −0.35.
+  for (int k = 0; k <= 100; ++k) {
+    e->step((k + 1) * 1'000'000LL, std::vector<core::Event>{sample(k, 0.0, 1, true)}, out);
+  }
+  EXPECT_NEAR(m->trim_um(0), -0.35, 1e-12);
+}
+
 /// A term fitted on rows of one kind evaluates to 0 for every other kind (core/model/model.cpp):
 /// an entry of another kind must be refused, not accepted to apply nothing. thermal_drift of
 /// interaction_and_group_model() is fitted on calib rows only.
