@@ -331,6 +331,18 @@ FleetResult analyze_fleet(const std::vector<FleetMachine>& machines, const Analy
     }
   }
   const std::size_t nf = result.terms.size() - nd;
+  // A found linear term with a reference (a temperature's warm-start value) gets the type's:
+  // the warm starts of every machine, so that the prior's term is 0 where the type starts.
+  for (std::size_t t = nd; t < result.terms.size(); ++t) {
+    TermSpec& s = result.terms[t].spec;
+    if (s.form != Form::kLinear || !(std::abs(s.center) > 0.0)) continue;
+    std::vector<double> starts;
+    for (std::size_t m = 0; m < nm; ++m) {
+      const auto v = warm_start_values(machines[m].data, s.column, use[m], s.kind_mask);
+      starts.insert(starts.end(), v.begin(), v.end());
+    }
+    s.center = linear_reference(starts);
+  }
 
   // 2. Where each found effect is, one after the other (those found by more machines first):
   //    each fitted on every machine together with the terms that machine already has.

@@ -636,6 +636,10 @@ std::string write_model_toml(const core::model::Model& model,
         s.form == cm::Form::kWear || s.form == cm::Form::kInteraction) {
       o << "center = " << fmt_double(s.center) << "\n";
     }
+    // A linear term's reference value; 0 (the meaning before references existed) is not written.
+    if (s.form == cm::Form::kLinear && std::abs(s.center) > 0.0) {
+      o << "center = " << fmt_double(s.center) << "\n";
+    }
     if (s.form == cm::Form::kInteraction) o << "center_b = " << fmt_double(s.center_b) << "\n";
     if (s.form == cm::Form::kPoly || cm::has_nonlinear_parameter(s.form)) {
       if (s.form != cm::Form::kStep && s.form != cm::Form::kHinge)
