@@ -198,6 +198,68 @@ double type_mean_p(std::vector<FleetCoefficient> coefs, std::size_t skip) {
   return wald_p(mean, var, static_cast<double>(used - 1));
 }
 
+/// Every machine's rows in one data set, for the pooled search: an extra column holds the
+/// machine's index and splits each declared term per machine (its constants, its set-up, stay its
+/// own), and each machine's sessions stay sessions of their own.
+struct PooledRows {
+  Dataset data;
+  std::vector<TermSpec> declared;  // empty when a declared term has no free `per` slot
+};
+
+PooledRows pool(const std::vector<FleetMachine>& machines,
+                const std::vector<std::vector<std::uint8_t>>& use,
+                const std::vector<TermSpec>& declared) {
+  PooledRows p;
+  const std::vector<std::string>& extras = machines[0].data.extra_columns;
+  if (extras.size() >= kMaxExtraColumns) return p;
+  const int machine_column = static_cast<int>(kStandardColumns + extras.size());
+  for (TermSpec s : declared) {
+    if (s.form != Form::kSession) {
+      if (s.per[0] < 0) {
+        s.per[0] = machine_column;
+      } else if (s.per[1] < 0) {
+        s.per[1] = machine_column;
+      } else {
+        return PooledRows{};
+      }
+    }
+    p.declared.push_back(s);
+  }
+  Dataset& d = p.data;
+  d.extra_columns = extras;
+  d.extra_columns.push_back("fleet_machine");
+  d.columns.assign(kStandardColumns + d.extra_columns.size(), {});
+  std::uint32_t session_base = 0;
+  for (std::size_t m = 0; m < machines.size(); ++m) {
+    const Dataset& md = machines[m].data;
+    const std::size_t n = md.rows();
+    for (std::size_t c = 0; c + 1 < d.columns.size(); ++c) {
+      const std::vector<double>& col = md.column(static_cast<int>(c));
+      if (col.size() == n) {
+        d.columns[c].insert(d.columns[c].end(), col.begin(), col.end());
+      } else {
+        d.columns[c].insert(d.columns[c].end(), n, kNaN);
+      }
+    }
+    d.columns.back().insert(d.columns.back().end(), n, static_cast<double>(m));
+    // The rows the fleet fits leave out (a machine's outliers, other kinds) stay out.
+    for (std::size_t i = 0; i < n; ++i) {
+      d.target_um.push_back(use[m][i] != 0U ? md.target_um[i] : kNaN);
+    }
+    const auto& t =
+        md.order_s.size() == n ? md.order_s : md.column(static_cast<int>(Column::kTime));
+    for (std::size_t i = 0; i < n; ++i) d.order_s.push_back(t.size() == n ? t[i] : kNaN);
+    std::uint32_t sessions = 1;
+    for (std::size_t i = 0; i < n; ++i) {
+      const std::uint32_t s = md.row_session.size() == n ? md.row_session[i] : 0U;
+      d.row_session.push_back(session_base + s);
+      sessions = std::max(sessions, s + 1);
+    }
+    session_base += sessions;
+  }
+  return p;
+}
+
 ErrorStats rms_of(const Dataset& data, const Model& model, const std::vector<std::uint8_t>& use) {
   const std::vector<double> r = residuals(data, model);
   ErrorStats e;
@@ -289,9 +351,10 @@ FleetResult analyze_fleet(const std::vector<FleetMachine>& machines, const Analy
   result.alpha = config.alpha;
   const std::vector<std::string>& extras = machines[0].data.extra_columns;
 
-  // 1. Each machine searched on its own, at alpha / machines.
+  // 1. Each machine searched on its own, and the pooled rows, at alpha / (machines + 1).
   AnalysisConfig per_machine = config;
-  per_machine.alpha = config.alpha / static_cast<double>(nm);
+  result.machine_alpha = config.alpha / static_cast<double>(nm + 1);
+  per_machine.alpha = result.machine_alpha;
   std::vector<std::vector<std::uint8_t>> use(nm);
   for (std::size_t m = 0; m < nm; ++m) {
     result.machines.push_back(machines[m].id);
@@ -328,6 +391,37 @@ FleetResult analyze_fleet(const std::vector<FleetMachine>& machines, const Analy
         it->type_p_value = e.p_value;
       }
       if (it->found_on.empty() || it->found_on.back() != m) it->found_on.push_back(m);
+    }
+  }
+  const PooledRows pooled = pool(machines, use, config.declared);
+  if (pooled.declared.empty() && !config.declared.empty()) {
+    result.warnings.push_back(
+        {"fleet_pooled_skipped",
+         "a declared term is split by two columns already: the machine cannot be a third, so "
+         "the pooled rows were not searched (effects too weak for one machine are not found)"});
+  } else {
+    AnalysisConfig pooled_config = per_machine;
+    pooled_config.declared = pooled.declared;
+    try {
+      result.pooled = analyze(pooled.data, pooled_config);
+    } catch (const AnalysisError& e) {
+      throw AnalysisError(std::string("the pooled rows: ") + e.what());
+    }
+    result.pooled_searched = true;
+    for (const AddedEffect& e : result.pooled.effects) {
+      auto it =
+          std::find_if(result.terms.begin() + static_cast<std::ptrdiff_t>(nd), result.terms.end(),
+                       [&](const FleetTerm& t) { return same_effect(t.spec, e.spec); });
+      if (it == result.terms.end()) {
+        FleetTerm t;
+        t.spec = e.spec;
+        t.role = FleetRole::kUnsupported;
+        t.type_p_value = e.p_value;
+        result.terms.push_back(std::move(t));
+        it = result.terms.end() - 1;
+      }
+      it->pooled = true;
+      it->pooled_p_value = std::min(it->pooled_p_value, e.p_value);
     }
   }
   const std::size_t nf = result.terms.size() - nd;
@@ -397,7 +491,9 @@ FleetResult analyze_fleet(const std::vector<FleetMachine>& machines, const Analy
       ft.role = FleetRole::kMachine;
       ft.owner = where;
       kept[where].push_back(ft.spec);
-    } else if (significant >= 2 || type_mean) {
+    } else if (significant >= 2 || type_mean || (ft.pooled && collinear.empty())) {
+      // Found pooled with each machine's levels its own: shared by the type even where no
+      // machine reaches it alone (unless it overlaps a term the machines have already).
       ft.role = FleetRole::kCommon;
       for (auto& k : kept) k.push_back(ft.spec);
     } else {
