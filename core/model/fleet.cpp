@@ -200,10 +200,11 @@ double type_mean_p(std::vector<FleetCoefficient> coefs, std::size_t skip) {
 
 /// Every machine's rows in one data set, for the pooled search: an extra column holds the
 /// machine's index and splits each declared term per machine (its constants, its set-up, stay its
-/// own), and each machine's sessions stay sessions of their own.
+/// own), and each machine's sessions stay sessions of their own. A term split by two columns
+/// already has its second one replaced by a column of (value, machine) pairs.
 struct PooledRows {
   Dataset data;
-  std::vector<TermSpec> declared;  // empty when a declared term has no free `per` slot
+  std::vector<TermSpec> declared;  // empty when the columns would be too many
 };
 
 PooledRows pool(const std::vector<FleetMachine>& machines,
@@ -211,8 +212,20 @@ PooledRows pool(const std::vector<FleetMachine>& machines,
                 const std::vector<TermSpec>& declared) {
   PooledRows p;
   const std::vector<std::string>& extras = machines[0].data.extra_columns;
-  if (extras.size() >= kMaxExtraColumns) return p;
+  Dataset& d = p.data;
+  d.extra_columns = extras;
+  d.extra_columns.push_back("fleet_machine");
   const int machine_column = static_cast<int>(kStandardColumns + extras.size());
+  std::vector<int> paired;  // source columns of the pair columns, which follow fleet_machine
+  auto pair_column = [&](int source) {
+    auto it = std::find(paired.begin(), paired.end(), source);
+    if (it == paired.end()) {
+      paired.push_back(source);
+      d.extra_columns.push_back("fleet_machine_" + column_name(source, extras));
+      it = paired.end() - 1;
+    }
+    return machine_column + 1 + static_cast<int>(it - paired.begin());
+  };
   for (TermSpec s : declared) {
     if (s.form != Form::kSession) {
       if (s.per[0] < 0) {
@@ -220,20 +233,19 @@ PooledRows pool(const std::vector<FleetMachine>& machines,
       } else if (s.per[1] < 0) {
         s.per[1] = machine_column;
       } else {
-        return PooledRows{};
+        s.per[1] = pair_column(s.per[1]);
       }
     }
     p.declared.push_back(s);
   }
-  Dataset& d = p.data;
-  d.extra_columns = extras;
-  d.extra_columns.push_back("fleet_machine");
+  if (d.extra_columns.size() > kMaxExtraColumns) return PooledRows{};
   d.columns.assign(kStandardColumns + d.extra_columns.size(), {});
+  std::map<std::pair<double, std::size_t>, double> pair_index;
   std::uint32_t session_base = 0;
   for (std::size_t m = 0; m < machines.size(); ++m) {
     const Dataset& md = machines[m].data;
     const std::size_t n = md.rows();
-    for (std::size_t c = 0; c + 1 < d.columns.size(); ++c) {
+    for (std::size_t c = 0; c < static_cast<std::size_t>(machine_column); ++c) {
       const std::vector<double>& col = md.column(static_cast<int>(c));
       if (col.size() == n) {
         d.columns[c].insert(d.columns[c].end(), col.begin(), col.end());
@@ -241,7 +253,21 @@ PooledRows pool(const std::vector<FleetMachine>& machines,
         d.columns[c].insert(d.columns[c].end(), n, kNaN);
       }
     }
-    d.columns.back().insert(d.columns.back().end(), n, static_cast<double>(m));
+    d.columns[static_cast<std::size_t>(machine_column)].insert(
+        d.columns[static_cast<std::size_t>(machine_column)].end(), n, static_cast<double>(m));
+    for (std::size_t k = 0; k < paired.size(); ++k) {
+      const std::vector<double>& source = md.column(paired[k]);
+      auto& out = d.columns[static_cast<std::size_t>(machine_column) + 1 + k];
+      for (std::size_t i = 0; i < n; ++i) {
+        const double v = source.size() == n ? source[i] : kNaN;
+        if (!std::isfinite(v)) {
+          out.push_back(kNaN);
+          continue;
+        }
+        const auto next = static_cast<double>(pair_index.size());
+        out.push_back(pair_index.try_emplace({v, m}, next).first->second);
+      }
+    }
     // The rows the fleet fits leave out (a machine's outliers, other kinds) stay out.
     for (std::size_t i = 0; i < n; ++i) {
       d.target_um.push_back(use[m][i] != 0U ? md.target_um[i] : kNaN);
@@ -371,22 +397,26 @@ FleetResult analyze_fleet(const std::vector<FleetMachine>& machines, const Analy
     result.terms.push_back(std::move(t));
   }
   const std::size_t nd = result.terms.size();
+  // The fleet's term of a found effect, added when new (its role decided in step 2).
+  auto found_term = [&](const AddedEffect& e) {
+    auto it =
+        std::find_if(result.terms.begin() + static_cast<std::ptrdiff_t>(nd), result.terms.end(),
+                     [&](const FleetTerm& t) { return same_effect(t.spec, e.spec); });
+    if (it != result.terms.end()) return it;
+    FleetTerm t;
+    t.spec = e.spec;
+    t.role = FleetRole::kUnsupported;
+    t.type_p_value = e.p_value;  // the best p so far, replaced by the fleet's below
+    result.terms.push_back(std::move(t));
+    return result.terms.end() - 1;
+  };
   for (std::size_t m = 0; m < nm; ++m) {
     const AnalysisResult& search = result.searches[m];
     // The effect in the form and with the non-linear parameter of the search with the smallest
     // p-value.
     for (const AddedEffect& e : search.effects) {
-      auto it =
-          std::find_if(result.terms.begin() + static_cast<std::ptrdiff_t>(nd), result.terms.end(),
-                       [&](const FleetTerm& t) { return same_effect(t.spec, e.spec); });
-      if (it == result.terms.end()) {
-        FleetTerm t;
-        t.spec = e.spec;
-        t.role = FleetRole::kUnsupported;
-        t.type_p_value = e.p_value;  // the best p so far, replaced by the fleet's below
-        result.terms.push_back(std::move(t));
-        it = result.terms.end() - 1;
-      } else if (e.p_value < it->type_p_value) {
+      const auto it = found_term(e);
+      if (e.p_value < it->type_p_value) {
         it->spec = e.spec;
         it->type_p_value = e.p_value;
       }
@@ -397,8 +427,10 @@ FleetResult analyze_fleet(const std::vector<FleetMachine>& machines, const Analy
   if (pooled.declared.empty() && !config.declared.empty()) {
     result.warnings.push_back(
         {"fleet_pooled_skipped",
-         "a declared term is split by two columns already: the machine cannot be a third, so "
-         "the pooled rows were not searched (effects too weak for one machine are not found)"});
+         "the extra columns and the machine's would be more than " +
+             std::to_string(kMaxExtraColumns) +
+             ": the pooled rows were not searched (effects too weak for one machine are not "
+             "found)"});
   } else {
     AnalysisConfig pooled_config = per_machine;
     pooled_config.declared = pooled.declared;
@@ -409,17 +441,7 @@ FleetResult analyze_fleet(const std::vector<FleetMachine>& machines, const Analy
     }
     result.pooled_searched = true;
     for (const AddedEffect& e : result.pooled.effects) {
-      auto it =
-          std::find_if(result.terms.begin() + static_cast<std::ptrdiff_t>(nd), result.terms.end(),
-                       [&](const FleetTerm& t) { return same_effect(t.spec, e.spec); });
-      if (it == result.terms.end()) {
-        FleetTerm t;
-        t.spec = e.spec;
-        t.role = FleetRole::kUnsupported;
-        t.type_p_value = e.p_value;
-        result.terms.push_back(std::move(t));
-        it = result.terms.end() - 1;
-      }
+      const auto it = found_term(e);
       it->pooled = true;
       it->pooled_p_value = std::min(it->pooled_p_value, e.p_value);
     }

@@ -119,7 +119,8 @@ struct FleetResult {
   /// Each machine's own search (analyze() at machine_alpha).
   std::vector<AnalysisResult> searches;
   /// The search of the pooled rows (analyze() at machine_alpha), when it ran (`pooled_searched`;
-  /// not when a declared term is already split by two columns: warning fleet_pooled_skipped).
+  /// not when the machine's columns would exceed kMaxExtraColumns: warning
+  /// fleet_pooled_skipped).
   AnalysisResult pooled;
   bool pooled_searched{false};
   /// alpha / (machines + 1): each machine's search and the pooled one share the family's alpha.
