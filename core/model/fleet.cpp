@@ -199,7 +199,7 @@ double type_mean_p(std::vector<FleetCoefficient> coefs, std::size_t skip) {
 }
 
 /// Every machine's rows in one data set, for the pooled search: an extra column holds the
-/// machine's index and splits each declared term per machine (its constants, its set-up, stay its
+/// machine's index and splits each known term per machine (its constants, its set-up, stay its
 /// own), and each machine's sessions stay sessions of their own. A term split by two columns
 /// already has its second one replaced by a column of (value, machine) pairs.
 struct PooledRows {
@@ -423,8 +423,12 @@ FleetResult analyze_fleet(const std::vector<FleetMachine>& machines, const Analy
       if (it->found_on.empty() || it->found_on.back() != m) it->found_on.push_back(m);
     }
   }
-  const PooledRows pooled = pool(machines, use, config.declared);
-  if (pooled.declared.empty() && !config.declared.empty()) {
+  // The pooled rows' known part: the declared terms and every effect a machine's search found,
+  // each per machine, so that one machine's own effect does not hide what the type shares.
+  std::vector<TermSpec> known = config.declared;
+  for (std::size_t t = nd; t < result.terms.size(); ++t) known.push_back(result.terms[t].spec);
+  const PooledRows pooled = pool(machines, use, known);
+  if (pooled.declared.empty() && !known.empty()) {
     result.warnings.push_back(
         {"fleet_pooled_skipped",
          "the extra columns and the machine's would be more than " +

@@ -3,8 +3,9 @@
 // toward the type by the best linear unbiased predictor (BLUP). Pure: data in, numbers out.
 //
 //   1. Each machine's log is searched on its own (analyze()), and the pooled rows of all
-//      machines once more, each machine's declared terms (its constants) its own there, so that
-//      a difference between the machines' levels is never an effect. Each of these machines + 1
+//      machines once more, each machine's declared terms (its constants) and the effects the
+//      machines' searches found its own there, so that a difference between the machines'
+//      levels (or one machine's effect) is never a new effect. Each of these machines + 1
 //      searches runs at alpha / (machines + 1), so that the fleet keeps the family-wise level
 //      alpha. The pooled search finds effects shared by the type that are too weak for any one
 //      machine's rows.
