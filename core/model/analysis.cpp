@@ -320,6 +320,45 @@ std::size_t count_groups(const Dataset& data, int column, const std::vector<std:
   return static_cast<std::size_t>(std::unique(v.begin(), v.end()) - v.begin());
 }
 
+}  // namespace
+
+std::vector<double> warm_start_values(const Dataset& data, int column,
+                                      const std::vector<std::uint8_t>& use,
+                                      std::uint8_t kind_mask) {
+  const std::size_t n = data.rows();
+  const auto& c = data.column(column);
+  const auto& kind = data.column(static_cast<int>(Column::kKind));
+  const auto& t =
+      data.order_s.size() == n ? data.order_s : data.column(static_cast<int>(Column::kTime));
+  const bool sessions = data.row_session.size() == n;
+  // Session → (time, value) of its earliest row so far.
+  std::map<std::uint32_t, std::pair<double, double>> first;
+  if (c.size() != n) return {};
+  for (std::size_t i = 0; i < n; ++i) {
+    if (i >= use.size() || use[i] == 0U || !std::isfinite(c[i])) continue;
+    if (!kind.empty() && std::isfinite(kind[i]) && kind[i] >= 0.0 && kind[i] < 8.0 &&
+        (kind_mask & (1U << static_cast<unsigned>(kind[i]))) == 0U) {
+      continue;
+    }
+    const double t_s = t.size() == n && std::isfinite(t[i]) ? t[i] : static_cast<double>(i);
+    const std::uint32_t s = sessions ? data.row_session[i] : 0U;
+    const auto [it, inserted] = first.try_emplace(s, t_s, c[i]);
+    if (!inserted && t_s < it->second.first) it->second = {t_s, c[i]};
+  }
+  std::vector<double> out;
+  for (const auto& [s, tv] : first) out.push_back(tv.second);
+  return out;
+}
+
+double linear_reference(const std::vector<double>& warm_start) {
+  if (warm_start.empty()) return 0.0;
+  double sum = 0.0;
+  for (double v : warm_start) sum += v;
+  return sum / static_cast<double>(warm_start.size());
+}
+
+namespace {
+
 // Distinct sessions (Dataset::row_session) among the used rows of the kinds in kind_mask.
 std::size_t count_sessions(const Dataset& data, const std::vector<std::uint8_t>& use,
                            std::uint8_t kind_mask) {
@@ -1401,10 +1440,19 @@ std::vector<Candidate> make_candidates(const Dataset& data, const std::vector<st
     if (s.grid.size() >= 2) add("level_change", Form::kStep, static_cast<int>(Column::kTime), 1, s);
   }
   const Range temp = column_range(data, static_cast<int>(Column::kTemp), use, km);
-  if (varies(temp)) add("thermal_drift", Form::kLinear, static_cast<int>(Column::kTemp), 1, {});
+  // A temperature's 0 °C means nothing to the machine: its linear term is counted from the
+  // warm start, so that the term the daemon applies alone carries no intercept.
+  auto linear = [&](const std::string& name, int col) {
+    Candidate c;
+    if (is_temperature_column(col, data.extra_columns, options)) {
+      c.spec.center = linear_reference(warm_start_values(data, col, use, km));
+    }
+    add(name, Form::kLinear, col, 1, c);
+  };
+  if (varies(temp)) linear("thermal_drift", static_cast<int>(Column::kTemp));
   for (int col : options.linear_columns) {
     if (varies(column_range(data, col, use, km))) {
-      add(linear_effect_name(col, data.extra_columns, options), Form::kLinear, col, 1, {});
+      linear(linear_effect_name(col, data.extra_columns, options), col);
     }
   }
   for (int col : options.lag_columns) {

@@ -276,6 +276,17 @@ double lag1_autocorrelation(const Dataset& data, const std::vector<double>& resi
 bool is_temperature_column(int column, const std::vector<std::string>& extras,
                            const SearchOptions& options);
 
+/// The value of `column` at each session's warm start: its first used row of the kinds in
+/// kind_mask with a known value (earliest in order_s, else time_s), one per session
+/// (Dataset::row_session) in order of session number.
+std::vector<double> warm_start_values(const Dataset& data, int column,
+                                      const std::vector<std::uint8_t>& use, std::uint8_t kind_mask);
+
+/// The reference value of a linear term in a temperature column: the mean of its warm-start
+/// values (what the machine starts from), 0 when there is none. Its constant then holds the
+/// deviation at the warm start rather than an intercept at 0 °C.
+double linear_reference(const std::vector<double>& warm_start);
+
 /// The effect's name with its groups, as the reports show it: "thermal_drift" for a shared
 /// term, "thermal_drift per=point" (or "per=tool+point") for a per-group one.
 std::string effect_label(const std::string& name, const std::array<int, 2>& per,

@@ -198,6 +198,94 @@ double type_mean_p(std::vector<FleetCoefficient> coefs, std::size_t skip) {
   return wald_p(mean, var, static_cast<double>(used - 1));
 }
 
+/// Every machine's rows in one data set, for the pooled search: an extra column holds the
+/// machine's index and splits each known term per machine (its constants, its set-up, stay its
+/// own), and each machine's sessions stay sessions of their own. A term split by two columns
+/// already has its second one replaced by a column of (value, machine) pairs.
+struct PooledRows {
+  Dataset data;
+  std::vector<TermSpec> declared;  // empty when the columns would be too many
+};
+
+PooledRows pool(const std::vector<FleetMachine>& machines,
+                const std::vector<std::vector<std::uint8_t>>& use,
+                const std::vector<TermSpec>& declared) {
+  PooledRows p;
+  const std::vector<std::string>& extras = machines[0].data.extra_columns;
+  Dataset& d = p.data;
+  d.extra_columns = extras;
+  d.extra_columns.push_back("fleet_machine");
+  const int machine_column = static_cast<int>(kStandardColumns + extras.size());
+  std::vector<int> paired;  // source columns of the pair columns, which follow fleet_machine
+  auto pair_column = [&](int source) {
+    auto it = std::find(paired.begin(), paired.end(), source);
+    if (it == paired.end()) {
+      paired.push_back(source);
+      d.extra_columns.push_back("fleet_machine_" + column_name(source, extras));
+      it = paired.end() - 1;
+    }
+    return machine_column + 1 + static_cast<int>(it - paired.begin());
+  };
+  for (TermSpec s : declared) {
+    if (s.form != Form::kSession) {
+      if (s.per[0] < 0) {
+        s.per[0] = machine_column;
+      } else if (s.per[1] < 0) {
+        s.per[1] = machine_column;
+      } else {
+        s.per[1] = pair_column(s.per[1]);
+      }
+    }
+    p.declared.push_back(s);
+  }
+  if (d.extra_columns.size() > kMaxExtraColumns) return PooledRows{};
+  d.columns.assign(kStandardColumns + d.extra_columns.size(), {});
+  std::map<std::pair<double, std::size_t>, double> pair_index;
+  std::uint32_t session_base = 0;
+  for (std::size_t m = 0; m < machines.size(); ++m) {
+    const Dataset& md = machines[m].data;
+    const std::size_t n = md.rows();
+    for (std::size_t c = 0; c < static_cast<std::size_t>(machine_column); ++c) {
+      const std::vector<double>& col = md.column(static_cast<int>(c));
+      if (col.size() == n) {
+        d.columns[c].insert(d.columns[c].end(), col.begin(), col.end());
+      } else {
+        d.columns[c].insert(d.columns[c].end(), n, kNaN);
+      }
+    }
+    d.columns[static_cast<std::size_t>(machine_column)].insert(
+        d.columns[static_cast<std::size_t>(machine_column)].end(), n, static_cast<double>(m));
+    for (std::size_t k = 0; k < paired.size(); ++k) {
+      const std::vector<double>& source = md.column(paired[k]);
+      auto& out = d.columns[static_cast<std::size_t>(machine_column) + 1 + k];
+      for (std::size_t i = 0; i < n; ++i) {
+        const double v = source.size() == n ? source[i] : kNaN;
+        if (!std::isfinite(v)) {
+          out.push_back(kNaN);
+          continue;
+        }
+        const auto next = static_cast<double>(pair_index.size());
+        out.push_back(pair_index.try_emplace({v, m}, next).first->second);
+      }
+    }
+    // The rows the fleet fits leave out (a machine's outliers, other kinds) stay out.
+    for (std::size_t i = 0; i < n; ++i) {
+      d.target_um.push_back(use[m][i] != 0U ? md.target_um[i] : kNaN);
+    }
+    const auto& t =
+        md.order_s.size() == n ? md.order_s : md.column(static_cast<int>(Column::kTime));
+    for (std::size_t i = 0; i < n; ++i) d.order_s.push_back(t.size() == n ? t[i] : kNaN);
+    std::uint32_t sessions = 1;
+    for (std::size_t i = 0; i < n; ++i) {
+      const std::uint32_t s = md.row_session.size() == n ? md.row_session[i] : 0U;
+      d.row_session.push_back(session_base + s);
+      sessions = std::max(sessions, s + 1);
+    }
+    session_base += sessions;
+  }
+  return p;
+}
+
 ErrorStats rms_of(const Dataset& data, const Model& model, const std::vector<std::uint8_t>& use) {
   const std::vector<double> r = residuals(data, model);
   ErrorStats e;
@@ -289,9 +377,10 @@ FleetResult analyze_fleet(const std::vector<FleetMachine>& machines, const Analy
   result.alpha = config.alpha;
   const std::vector<std::string>& extras = machines[0].data.extra_columns;
 
-  // 1. Each machine searched on its own, at alpha / machines.
+  // 1. Each machine searched on its own, and the pooled rows, at alpha / (machines + 1).
   AnalysisConfig per_machine = config;
-  per_machine.alpha = config.alpha / static_cast<double>(nm);
+  result.machine_alpha = config.alpha / static_cast<double>(nm + 1);
+  per_machine.alpha = result.machine_alpha;
   std::vector<std::vector<std::uint8_t>> use(nm);
   for (std::size_t m = 0; m < nm; ++m) {
     result.machines.push_back(machines[m].id);
@@ -308,29 +397,72 @@ FleetResult analyze_fleet(const std::vector<FleetMachine>& machines, const Analy
     result.terms.push_back(std::move(t));
   }
   const std::size_t nd = result.terms.size();
+  // The fleet's term of a found effect, added when new (its role decided in step 2).
+  auto found_term = [&](const AddedEffect& e) {
+    auto it =
+        std::find_if(result.terms.begin() + static_cast<std::ptrdiff_t>(nd), result.terms.end(),
+                     [&](const FleetTerm& t) { return same_effect(t.spec, e.spec); });
+    if (it != result.terms.end()) return it;
+    FleetTerm t;
+    t.spec = e.spec;
+    t.role = FleetRole::kUnsupported;
+    t.type_p_value = e.p_value;  // the best p so far, replaced by the fleet's below
+    result.terms.push_back(std::move(t));
+    return result.terms.end() - 1;
+  };
   for (std::size_t m = 0; m < nm; ++m) {
     const AnalysisResult& search = result.searches[m];
     // The effect in the form and with the non-linear parameter of the search with the smallest
     // p-value.
     for (const AddedEffect& e : search.effects) {
-      auto it =
-          std::find_if(result.terms.begin() + static_cast<std::ptrdiff_t>(nd), result.terms.end(),
-                       [&](const FleetTerm& t) { return same_effect(t.spec, e.spec); });
-      if (it == result.terms.end()) {
-        FleetTerm t;
-        t.spec = e.spec;
-        t.role = FleetRole::kUnsupported;
-        t.type_p_value = e.p_value;  // the best p so far, replaced by the fleet's below
-        result.terms.push_back(std::move(t));
-        it = result.terms.end() - 1;
-      } else if (e.p_value < it->type_p_value) {
+      const auto it = found_term(e);
+      if (e.p_value < it->type_p_value) {
         it->spec = e.spec;
         it->type_p_value = e.p_value;
       }
       if (it->found_on.empty() || it->found_on.back() != m) it->found_on.push_back(m);
     }
   }
+  // The pooled rows' known part: the declared terms and every effect a machine's search found,
+  // each per machine, so that one machine's own effect does not hide what the type shares.
+  std::vector<TermSpec> known = config.declared;
+  for (std::size_t t = nd; t < result.terms.size(); ++t) known.push_back(result.terms[t].spec);
+  const PooledRows pooled = pool(machines, use, known);
+  if (pooled.declared.empty() && !known.empty()) {
+    result.warnings.push_back(
+        {"fleet_pooled_skipped",
+         "the extra columns and the machine's would be more than " +
+             std::to_string(kMaxExtraColumns) +
+             ": the pooled rows were not searched (effects too weak for one machine are not "
+             "found)"});
+  } else {
+    AnalysisConfig pooled_config = per_machine;
+    pooled_config.declared = pooled.declared;
+    try {
+      result.pooled = analyze(pooled.data, pooled_config);
+    } catch (const AnalysisError& e) {
+      throw AnalysisError(std::string("the pooled rows: ") + e.what());
+    }
+    result.pooled_searched = true;
+    for (const AddedEffect& e : result.pooled.effects) {
+      const auto it = found_term(e);
+      it->pooled = true;
+      it->pooled_p_value = std::min(it->pooled_p_value, e.p_value);
+    }
+  }
   const std::size_t nf = result.terms.size() - nd;
+  // A found linear term with a reference (a temperature's warm-start value) gets the type's:
+  // the warm starts of every machine, so that the prior's term is 0 where the type starts.
+  for (std::size_t t = nd; t < result.terms.size(); ++t) {
+    TermSpec& s = result.terms[t].spec;
+    if (s.form != Form::kLinear || !(std::abs(s.center) > 0.0)) continue;
+    std::vector<double> starts;
+    for (std::size_t m = 0; m < nm; ++m) {
+      const auto v = warm_start_values(machines[m].data, s.column, use[m], s.kind_mask);
+      starts.insert(starts.end(), v.begin(), v.end());
+    }
+    s.center = linear_reference(starts);
+  }
 
   // 2. Where each found effect is, one after the other (those found by more machines first):
   //    each fitted on every machine together with the terms that machine already has.
@@ -385,7 +517,9 @@ FleetResult analyze_fleet(const std::vector<FleetMachine>& machines, const Analy
       ft.role = FleetRole::kMachine;
       ft.owner = where;
       kept[where].push_back(ft.spec);
-    } else if (significant >= 2 || type_mean) {
+    } else if (significant >= 2 || type_mean || (ft.pooled && collinear.empty())) {
+      // Found pooled with each machine's levels its own: shared by the type even where no
+      // machine reaches it alone (unless it overlaps a term the machines have already).
       ft.role = FleetRole::kCommon;
       for (auto& k : kept) k.push_back(ft.spec);
     } else {

@@ -2,15 +2,21 @@
 // machine type shares, and each machine's deviation from the type as a random effect, shrunk
 // toward the type by the best linear unbiased predictor (BLUP). Pure: data in, numbers out.
 //
-//   1. Each machine's log is searched on its own (analyze()) at alpha / machines, so that the
-//      fleet as a whole keeps the family-wise level alpha.
+//   1. Each machine's log is searched on its own (analyze()), and the pooled rows of all
+//      machines once more, each machine's declared terms (its constants) and the effects the
+//      machines' searches found its own there, so that a difference between the machines'
+//      levels (or one machine's effect) is never a new effect. Each of these machines + 1
+//      searches runs at alpha / (machines + 1), so that the fleet keeps the family-wise level
+//      alpha. The pooled search finds effects shared by the type that are too weak for any one
+//      machine's rows.
 //   2. Every effect found on any machine, those found by more machines first, is fitted on
 //      every machine with the terms that machine has so far (declared, then the effects kept);
 //      a Wald F-test of its coefficients on each machine (Bonferroni over machines × effects)
 //      says where it is. Significant on one machine only, and the other machines' mean not
 //      different from 0: that machine's own effect. Significant on two or more, or the type
-//      mean significant: common to the type. Otherwise (or collinear with the terms kept, e.g.
-//      an interaction whose main effect is kept): not supported by the fleet, dropped.
+//      mean significant, or found by the pooled search: common to the type. Otherwise (or
+//      collinear with the terms kept, e.g. an interaction whose main effect is kept): not
+//      supported by the fleet, dropped.
 //   3. Each machine is fitted with the declared, the common and its own terms. Per coefficient
 //      of a common term, the machines' estimates β_i with variances v_i give the
 //      between-machine variance τ² (DerSimonian–Laird, method of moments), the type mean μ
@@ -87,6 +93,10 @@ struct FleetTerm {
   std::size_t owner{0};
   /// Machines whose own search added it.
   std::vector<std::size_t> found_on;
+  /// Added by the search of the pooled rows (every machine's, each with its own declared terms),
+  /// with its adjusted p-value there (1 when not).
+  bool pooled{false};
+  double pooled_p_value{1.0};
   /// Found terms, per machine: the Bonferroni-adjusted p-value of the Wald test of its
   /// coefficients in the joint fit (1 where not estimable), and whether it is below alpha.
   std::vector<double> p_value;
@@ -107,8 +117,15 @@ struct FleetFit {
 
 struct FleetResult {
   std::vector<std::string> machines;
-  /// Each machine's own search (analyze() at alpha / machines).
+  /// Each machine's own search (analyze() at machine_alpha).
   std::vector<AnalysisResult> searches;
+  /// The search of the pooled rows (analyze() at machine_alpha), when it ran (`pooled_searched`;
+  /// not when the machine's columns would exceed kMaxExtraColumns: warning
+  /// fleet_pooled_skipped).
+  AnalysisResult pooled;
+  bool pooled_searched{false};
+  /// alpha / (machines + 1): each machine's search and the pooled one share the family's alpha.
+  double machine_alpha{0.01};
   std::vector<FleetTerm> terms;
   /// Per machine: declared + common (BLUP) + its own terms. The type: declared + common at μ.
   std::vector<Model> machine_models;

@@ -75,7 +75,7 @@ std::size_t term_basis(const TermSpec& spec, const Row& row, double aux,
     case Form::kConstant:
       break;
     case Form::kLinear:
-      out[0] = v;
+      out[0] = v - spec.center;
       return 1;
     case Form::kPoly: {
       const double u = (v - spec.center) / spec.scale;

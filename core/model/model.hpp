@@ -63,8 +63,11 @@ Row unknown_row() noexcept;
 /// The shape of a term, i.e. its basis functions of the column value v.
 enum class Form : std::uint8_t {
   kConstant = 0,  // [1]
-  kLinear = 1,    // [v]
-  kPoly = 2,      // [u, u², …, u^degree], u = (v − center) / scale
+  // [v − center]: `center` is the reference value, where the term is 0 (0 in files written
+  // before it existed). The daemon applies a term without the model's constants, so a
+  // temperature's term is counted from the machine's warm-start value, not from 0 °C.
+  kLinear = 1,
+  kPoly = 2,  // [u, u², …, u^degree], u = (v − center) / scale
   kExpRise = 3,  // [1 − exp(−v / scale)] for v ≥ 0: first-order warm-up (time) or break-in (path)
   kSine = 4,       // [sin(2π v / scale), cos(2π v / scale)]: scale = period
   kStep = 5,       // [v ≥ center ? 1 : 0]: level change at `center`
@@ -117,7 +120,8 @@ struct TermSpec {
   std::uint8_t kind_mask{0x7};
   /// Polynomial degree (kPoly).
   int degree{1};
-  /// kPoly: centre of u. kStep, kHinge: the change point (in the column's unit).
+  /// kPoly: centre of u. kStep, kHinge: the change point (in the column's unit). kLinear: the
+  /// reference value.
   double center{0.0};
   /// kPoly: scale of u. kExpRise, kExpGrowth: scale length. kSine: period. kLag: time constant [s].
   /// kSession: between-session standard deviation [µm] (`center`: the measurement noise [µm]).

@@ -651,6 +651,10 @@ std::string write_model_toml(const core::model::Model& model,
         s.form == cm::Form::kWear || cm::has_column_b(s.form)) {
       o << "center = " << fmt_double(s.center) << "\n";
     }
+    // A linear term's reference value; 0 (the meaning before references existed) is not written.
+    if (s.form == cm::Form::kLinear && std::abs(s.center) > 0.0) {
+      o << "center = " << fmt_double(s.center) << "\n";
+    }
     if (s.form == cm::Form::kInteraction) o << "center_b = " << fmt_double(s.center_b) << "\n";
     if (s.form == cm::Form::kPoly || s.form == cm::Form::kProfileWear ||
         cm::has_nonlinear_parameter(s.form)) {

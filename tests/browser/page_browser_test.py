@@ -157,7 +157,7 @@ measurement_due_register = "measure_request"
 basis = "time"
 interval_s = 1.0
 [model]
-file = "a/model.toml"
+file = "a/model-a.toml"
 update = "cycle"
 [[model.apply]]
 term = "offset"
@@ -296,7 +296,7 @@ def main():
         f.write(config_text(nc_port))
     for d in ("a", "b", "c"):  # A live, B loaded later (A kept for rollback), C a candidate
         os.makedirs(os.path.join(work, d))
-        with open(os.path.join(work, d, "model.toml"), "w") as f:
+        with open(os.path.join(work, d, f"model-{d}.toml"), "w") as f:
             f.write(model_text("offset", 2.0 if d == "c" else 0.0))
             f.write(f"# model {d}\n")
     daemon = start("nccompd", [ARGS.nccompd, "--config", "nccompd.toml"], work)
@@ -304,7 +304,7 @@ def main():
                      and s["loop"]["cycles"] >= 20, 20), "nccompd runs on the NC")
     # The models before the first measurement, so that the measurements are scored: B live, A
     # kept for rollback, C a candidate in shadow.
-    models = [os.path.join(work, d, "model.toml") for d in ("a", "b", "c")]
+    models = [os.path.join(work, d, f"model-{d}.toml") for d in ("a", "b", "c")]
     nccomp("model", "load", models[1])
     nccomp("model", "candidate", models[2])
     # A copy, named relative to the page's directory (the screenshots show the name).
@@ -478,22 +478,31 @@ def nccomp(*args):
 
 READ_MODEL = """
 const r = {};
-for (const td of document.querySelectorAll('#model td[data-name]')) r[td.dataset.name] = td.textContent;
+for (const td of document.querySelectorAll('#model td[data-name]')) {
+  r[td.dataset.name] = td.textContent;
+  r[td.dataset.name + '_title'] = td.title;
+}
 r.promote_disabled = document.getElementById('promote').disabled;
 r.rollback_disabled = document.getElementById('rollback').disabled;
 return r;
 """
 
 
-def model_text_of(r):
+def model_text_of(r, name=lambda path: path):
     return "none" if not r["file"] else (
-        f"{r['file']} (hash {r['hash']})" + (f", live since {r['since_utc']}" if r["since_utc"] else ""))
+        f"{name(r['file'])} (hash {r['hash']})" +
+        (f", live since {r['since_utc']}" if r["since_utc"] else ""))
+
+
+def page_text_of(r):
+    """The page names a model by its file's name and hash (the path is the row's tooltip)."""
+    return model_text_of(r, os.path.basename)
 
 
 def model_card(root, other, page, work, nc):
     """The Model card equals the status JSON; Promote and Roll back refused for nobody; this user
     promotes C (announced by the rule) and rolls back to B, each confirmed."""
-    a, b, c = (os.path.join(work, d, "model.toml") for d in ("a", "b", "c"))
+    a, b, c = (os.path.join(work, d, f"model-{d}.toml") for d in ("a", "b", "c"))
     st = wait_until(lambda: (s := status_json()) and s["shadow"]["phase"] == "announced" and s, 5)
     check(st and st["model"]["live"]["file"] == b and st["model"]["previous"]["file"] == a and
           st["shadow"]["other"]["file"] == c,
@@ -502,14 +511,17 @@ def model_card(root, other, page, work, nc):
     check(f"ok model: {model_text_of(st['model']['live'])}\n" in text_status and
           f"previous (nccomp model rollback returns to it): {model_text_of(st['model']['previous'])}"
           in text_status, "nccomp model status names the same live and rollback models")
-    check(wait_until(lambda: (m := root.execute_script(READ_MODEL)).get("other") == c, 5),
+    check(wait_until(lambda: (m := root.execute_script(READ_MODEL)).get("other") ==
+                     os.path.basename(c) and m.get("other_title") == c, 5),
           "the Model card shows the candidate")
     shown = root.execute_script(READ_MODEL)
     st = status_json()
     sh, h = st["shadow"], st["handover"]
-    check(shown["live"] == model_text_of(st["model"]["live"]),
-          f"live model: page '{shown['live']}' = status")
-    check(shown["previous"] == model_text_of(st["model"]["previous"]),
+    check(shown["live"] == page_text_of(st["model"]["live"]) and
+          shown["live_title"] == st["model"]["live"]["file"],
+          f"live model: page '{shown['live']}' (path '{shown['live_title']}') = status")
+    check(shown["previous"] == page_text_of(st["model"]["previous"]) and
+          shown["previous_title"] == st["model"]["previous"]["file"],
           f"kept for rollback: page '{shown['previous']}' = status")
     # One part scored (the 5.0 um measurement; the broken one waits for a next row): B predicts
     # 0 um, C 2 um, so their squared errors are 25 and 9 um².
@@ -549,7 +561,8 @@ def model_card(root, other, page, work, nc):
         root.find_element(By.ID, "model-confirm").click()
         check(wait_until(lambda: (text(root, "#model-result") or "").startswith(answer_starts), 10),
               f"{button} by {ME.pw_name}: {text(root, '#model-result')}")
-    press("promote", f"The candidate {c} becomes the live model", f"ok model promoted: {c} ")
+    press("promote", f"The candidate {os.path.basename(c)} becomes the live model",
+          f"ok model promoted: {c} ")
     st = status_json()
     check(st["model"]["live"]["file"] == c and st["model"]["previous"]["file"] == b and
           st["shadow"]["phase"] == "watch", "status: C live, B kept for rollback and watched")
@@ -557,15 +570,15 @@ def model_card(root, other, page, work, nc):
     check(wait_until(lambda: nc.length_0p1um() == -30, 10), "-3.0 um on the NC after the promotion")
     check(wait_until(lambda: root.execute_script("return document.getElementById('promote').disabled")
                      and root.execute_script(READ_MODEL)["live"] ==
-                     model_text_of(status_json()["model"]["live"]), 5),
+                     page_text_of(status_json()["model"]["live"]), 5),
           "the Model card shows C live, Promote disabled")
-    press("rollback", f"The live model {c} ", f"ok model rolled back to: {b} ")
+    press("rollback", f"The live model {os.path.basename(c)} ", f"ok model rolled back to: {b} ")
     st = status_json()
     check(st["model"]["live"]["file"] == b and st["model"]["previous"]["file"] == c,
           "status: B live again, C kept for rollback")
     check(wait_until(lambda: nc.length_0p1um() == -50, 10), "-5.0 um on the NC after the rollback")
     check(wait_until(lambda: root.execute_script(READ_MODEL)["live"] ==
-                     model_text_of(status_json()["model"]["live"]), 5),
+                     page_text_of(status_json()["model"]["live"]), 5),
           "the Model card shows B live")
     plog = open(page.log_path).read()
     me = f"{ME.pw_name} (uid {ME.pw_uid})"

@@ -231,8 +231,9 @@ void run_fleet(const std::vector<MachineLogs>& fleet, const std::string& config_
   write_file(out / "report.md",
              fleet_report_markdown(result, cfg.extra_columns, fleet, config_path));
 
-  std::cout << "fleet of " << machines.size() << " machines (each searched at alpha "
-            << result.alpha / static_cast<double>(machines.size()) << ")\n";
+  std::cout << "fleet of " << machines.size() << " machines (each and the pooled rows searched at "
+            << "alpha " << result.machine_alpha
+            << (result.pooled_searched ? "" : "; the pooled search skipped") << ")\n";
   for (const cm::FleetTerm& t : result.terms) {
     if (t.role == cm::FleetRole::kDeclared) continue;
     std::cout << cm::fleet_role_name(t.role) << ": "
@@ -240,6 +241,7 @@ void run_fleet(const std::vector<MachineLogs>& fleet, const std::string& config_
               << cm::term_column_name(t.spec, cfg.extra_columns) << ", "
               << cm::form_name(t.spec.form) << ")";
     if (t.role == cm::FleetRole::kMachine) std::cout << " of " << result.machines[t.owner];
+    if (t.pooled) std::cout << ", found pooled";
     std::cout << ", significant on";
     for (std::size_t m = 0; m < t.significant.size(); ++m) {
       if (t.significant[m] != 0U) std::cout << " " << result.machines[m];

@@ -73,7 +73,8 @@ std::string fleet_summary_json(const cm::FleetResult& r, const std::vector<std::
   for (std::size_t m = 0; m < nm; ++m) all[m] = m;
   o << "{\n  \"fleet\": {\n    \"machines\": " << machines_json(r, all)
     << ",\n    \"alpha\": " << num(r.alpha, 4)
-    << ",\n    \"machine_alpha\": " << num(r.alpha / static_cast<double>(nm), 4)
+    << ",\n    \"machine_alpha\": " << num(r.machine_alpha, 4)
+    << ",\n    \"pooled_searched\": " << (r.pooled_searched ? "true" : "false")
     << ",\n    \"terms\": [";
   for (std::size_t i = 0; i < r.terms.size(); ++i) {
     const cm::FleetTerm& t = r.terms[i];
@@ -86,6 +87,8 @@ std::string fleet_summary_json(const cm::FleetResult& r, const std::vector<std::
       o << ", \"machine\": " << json_string(r.machines[t.owner]);
     if (t.role != cm::FleetRole::kDeclared) {
       o << ", \"found_on\": " << machines_json(r, t.found_on)
+        << ", \"found_pooled\": " << (t.pooled ? "true" : "false")
+        << ", \"pooled_p_value\": " << num(t.pooled_p_value, 4)
         << ", \"significant_on\": " << machines_json(r, significant_on(t)) << ", \"p_value\": {";
       for (std::size_t m = 0; m < t.p_value.size(); ++m) {
         o << (m ? ", " : "") << json_string(r.machines[m]) << ": " << num(t.p_value[m], 4);
@@ -150,12 +153,15 @@ std::string fleet_report_markdown(const cm::FleetResult& r, const std::vector<st
     for (const auto& f : m.files) o << " `" << f << "`";
     o << " ([its own search](machines/" << m.machine << "/report.md))\n";
   }
-  o << "\n## Fleet\n\nEach machine's log was searched on its own at alpha / " << nm << " = "
-    << num(r.alpha / static_cast<double>(nm), 3)
+  o << "\n## Fleet\n\nEach machine's log was searched on its own, and the pooled rows of all "
+       "machines (each machine's declared terms its own) once more, each search at alpha / "
+    << nm + 1 << " = " << num(r.machine_alpha, 3)
+    << (r.pooled_searched ? "" : " (the pooled search was skipped: see the warnings)")
     << "; every effect found was then fitted on every machine (Wald test, p-values multiplied "
        "by machines × effects). **common**: significant on two or more machines, or the type "
-       "mean is; **machine**: significant on one machine only, the others' mean not different "
-       "from 0; **unsupported**: not confirmed, left out of every model.\n\n";
+       "mean is, or found by the pooled search; **machine**: significant on one machine only, "
+       "the others' mean not different from 0; **unsupported**: not confirmed, left out of "
+       "every model.\n\n";
   o << "| effect | column | form | role | found by the search of | significant on | type mean "
        "p |\n| --- | --- | --- | --- | --- | --- | --- |\n";
   for (const cm::FleetTerm& t : r.terms) {
@@ -167,9 +173,11 @@ std::string fleet_report_markdown(const cm::FleetResult& r, const std::vector<st
     };
     std::string role(cm::fleet_role_name(t.role));
     if (t.role == cm::FleetRole::kMachine) role += " (" + r.machines[t.owner] + ")";
+    std::string found = list(t.found_on);
+    if (t.pooled) found = t.found_on.empty() ? "the pooled rows" : found + ", the pooled rows";
     o << "| " << cm::effect_label(t.spec.name, t.spec.per, extras) << " | "
       << cm::term_column_name(t.spec, extras) << " | " << cm::form_name(t.spec.form) << " | "
-      << role << " | " << list(t.found_on) << " | " << list(significant_on(t)) << " | "
+      << role << " | " << found << " | " << list(significant_on(t)) << " | "
       << num(t.type_p_value, 3) << " |\n";
   }
   o << "\n## Coefficients: each machine, shrunk toward the type\n\n"

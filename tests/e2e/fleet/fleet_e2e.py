@@ -10,7 +10,8 @@ wears 20 um per m of cut path; the others' do not wear). `nccomp analyze` over t
 a type mean near the machines' mean slope, the wear m4's own, and write five machine models and
 the type's prior. A sixth machine (slope in the middle of the type) then machines its first
 parts twice, without a model and with the prior's thermal_drift term applied as a trim on the
-radius wear register: the prior must make those parts better (ncsim's checkpoint errors).
+radius wear register: the prior must make those parts better (ncsim's checkpoint errors), the
+first one too (the term counts from the type's warm-start temperature).
 
   fleet_e2e.py --bin-dir BUILD --source SRC --work DIR [--parts N] [--figures]
 """
@@ -102,7 +103,8 @@ def predict(model_path, row):
         if t["form"] == "constant":
             y += coef[tuple(key)]
         elif t["form"] == "linear":
-            y += coef[tuple(key)] * float(row[t["column"]])
+            # Counted from its reference value (0 in a file without one).
+            y += coef[tuple(key)] * (float(row[t["column"]]) - t.get("center", 0.0))
         else:
             raise RuntimeError("%s: form %s not evaluated here" % (model_path, t["form"]))
     return y
@@ -241,14 +243,24 @@ def main():
     c.that(len(rows) == 4 * FIRST_PARTS and o1 < o0,
            "the type's prior predicts the first %d parts better than no model: %.3f < %.3f um" %
            (FIRST_PARTS, o1, o0))
-    # In the loop: its thermal_drift term as a trim on the radius wear register. The term is
-    # linear in temp_c (°C from 0), its intercept lives in the per-checkpoint constants, which the
-    # daemon does not apply (S1 learns them from the first probed part on): part 1 gets the
-    # term without its constant, the parts after it the drift S1 cannot follow.
+    # In the loop: its thermal_drift term as a trim on the radius wear register, without the
+    # per-checkpoint constants (S1 learns them from the first probed part on). The term counts
+    # from the type's warm-start temperature (its reference in model.toml), so part 1 gets the
+    # drift since the warm start, the parts after it the drift S1 cannot follow.
+    with open(prior, "rb") as f:
+        drift = [t for t in tomllib.load(f)["model"]["term"] if t["name"] == "thermal_drift"]
+    c.that(len(drift) == 1 and (drift[0]["form"] != "linear" or
+                                18.0 < drift[0].get("center", 0.0) < 35.0),
+           "the prior's thermal_drift counts from a warm-start temperature, not from 0 degC: %s" %
+           [(t["form"], t.get("center")) for t in drift])
     print("in the loop, checkpoint error RMS per part (ncsim's checkpoints.csv):")
     for p in sorted(first):
         print("  part %d: no model %.3f um, prior's thermal_drift applied %.3f um" %
               (p, checkpoint_rms(without, {p})[0], checkpoint_rms(with_prior, {p})[0]))
+    e0, _ = checkpoint_rms(without, {1})
+    e1, _ = checkpoint_rms(with_prior, {1})
+    c.that(e1 < e0, "in the loop, part 1 (before S1 has probed anything): %.3f um with the "
+           "prior's thermal_drift, %.3f um without" % (e1, e0))
     later = set(range(2, FIRST_PARTS + 1))
     e0, n0 = checkpoint_rms(without, later)
     e1, n1 = checkpoint_rms(with_prior, later)

@@ -240,13 +240,51 @@ TEST(Fleet, FindsTheSharedEffectAndTheOddMachine) {
   EXPECT_LT(r.fits[3].own.rms_um, 1.2 * r.fits[3].alone.rms_um);
 }
 
+// GIVEN eight machines with the same thermal slope, too weak for any one machine's search, and
+// each with checkpoint constants of its own (a between-machine level difference) WHEN the fleet
+// is analysed THEN no machine's search finds it, the pooled search does, and it is common to
+// the type with a type mean near the slope.
+TEST(Fleet, AnEffectTooWeakForEachMachineIsFoundPooled) {
+  // Each machine's best p for it is 0.03 … 1 against alpha / 9 = 0.0011; pooled 7e-7.
+  constexpr double kSlope = 0.08;
+  std::vector<cm::FleetMachine> fleet;
+  for (std::size_t m = 0; m < 8; ++m) {
+    cm::FleetMachine fm{"m" + std::to_string(m + 1), machine_log(300 + m, kSlope)};
+    // Each machine's own level: −17.5 … 17.5 µm on every checkpoint.
+    for (double& y : fm.data.target_um) y += 5.0 * (static_cast<double>(m) - 3.5);
+    fleet.push_back(std::move(fm));
+  }
+  const cm::FleetResult r = cm::analyze_fleet(fleet, synth::config());
+  ASSERT_TRUE(r.pooled_searched);
+  EXPECT_DOUBLE_EQ(r.machine_alpha, synth::config().alpha / 9.0);
+  for (std::size_t m = 0; m < fleet.size(); ++m) {
+    for (const auto& e : r.searches[m].effects) {
+      EXPECT_NE(e.spec.name, "thermal_drift") << r.machines[m] << " found it alone";
+    }
+  }
+  const cm::FleetTerm* t = find_term(r, "thermal_drift", kTemp);
+  ASSERT_NE(t, nullptr) << "the pooled search did not find the thermal effect";
+  EXPECT_TRUE(t->pooled);
+  EXPECT_TRUE(t->found_on.empty());
+  EXPECT_LT(t->pooled_p_value, r.machine_alpha);
+  EXPECT_EQ(t->role, cm::FleetRole::kCommon);
+  ASSERT_EQ(t->coefficients.size(), 1U);
+  EXPECT_NEAR(t->coefficients[0].effect.mean, kSlope, 0.025);
+  for (const auto& x : r.terms) {
+    if (&x != t && x.role != cm::FleetRole::kDeclared) {
+      EXPECT_EQ(x.role, cm::FleetRole::kUnsupported) << x.spec.name;
+    }
+  }
+}
+
 // GIVEN fleets of five machines without any undeclared effect (only their own checkpoint
 // constants and noise) WHEN analysed with 50 seeds THEN at most 5 % find an effect of one
-// machine's own.
-TEST(Fleet, NoEffectFleetFindsNothingPerMachineInFiftySeeds) {
+// machine's own, and at most 5 % an effect in the pooled rows.
+TEST(Fleet, NoEffectFleetFindsNothingPerMachineOrPooledInFiftySeeds) {
   constexpr int kSeeds = 50;
   int own = 0;
   int common = 0;
+  int pooled = 0;
   for (int seed = 1; seed <= kSeeds; ++seed) {
     std::vector<cm::FleetMachine> fleet;
     for (std::uint64_t m = 0; m < 5; ++m) {
@@ -255,6 +293,11 @@ TEST(Fleet, NoEffectFleetFindsNothingPerMachineInFiftySeeds) {
     }
     const cm::FleetResult r = cm::analyze_fleet(fleet, synth::config());
     bool any_own = false;
+    if (!r.pooled.effects.empty()) {
+      ++pooled;
+      std::printf("seed %d: pooled %s\n", seed, r.pooled.effects[0].spec.name.c_str());
+    }
+    EXPECT_TRUE(r.pooled_searched);
     for (const auto& t : r.terms) {
       if (t.role == cm::FleetRole::kMachine) {
         any_own = true;
@@ -264,7 +307,10 @@ TEST(Fleet, NoEffectFleetFindsNothingPerMachineInFiftySeeds) {
     }
     own += any_own ? 1 : 0;
   }
-  std::printf("fleets with an effect of one machine's own: %d of %d; common effects: %d\n", own,
-              kSeeds, common);
+  std::printf(
+      "fleets with an effect of one machine's own: %d of %d; found pooled: %d; common effects: "
+      "%d\n",
+      own, kSeeds, pooled, common);
   EXPECT_LE(own, kSeeds * 5 / 100);
+  EXPECT_LE(pooled, kSeeds * 5 / 100);
 }

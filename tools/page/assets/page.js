@@ -20,6 +20,7 @@ function row(cells) {
   for (const c of cells) {
     const td = el('td', c.text, c.cls);
     if (c.name) td.dataset.name = c.name;
+    if (c.title) td.title = c.title;
     tr.appendChild(td);
   }
   return tr;
@@ -133,9 +134,15 @@ function renderBuses(buses) {
   ])));
 }
 
+// A model is named by its file's name and its hash (what identifies it); the whole path, the
+// machine's own business, is the row's tooltip (and in `nccomp model status`).
+function fileName(path) {
+  return path ? path.slice(path.lastIndexOf('/') + 1) : path;
+}
+
 function modelText(r) {
   if (!r || !r.file) return 'none';
-  return r.file + ' (hash ' + (r.hash || 'unknown') + ')' +
+  return fileName(r.file) + ' (hash ' + (r.hash || 'unknown') + ')' +
     (r.since_utc ? ', live since ' + r.since_utc : '');
 }
 
@@ -154,15 +161,16 @@ function renderModel(st) {
   if (!m && !sh) return;
   const items = [];
   if (m) {
-    items.push(['live model', modelText(m.live), 'live']);
-    items.push(['kept for rollback', modelText(m.previous), 'previous']);
+    items.push(['live model', modelText(m.live), 'live', m.live && m.live.file]);
+    items.push(['kept for rollback', modelText(m.previous), 'previous', m.previous && m.previous.file]);
   }
   let announced = false;
   if (sh) {
     announced = sh.phase === 'announced' && sh.promote === 'operator';
     items.push(['live model\'s score', scoreText(sh.live), 'live_score']);
     const other = sh.phase === 'watch' ? 'model the promotion replaced (watched)' : 'candidate in shadow';
-    items.push([other, sh.phase === 'none' ? 'none' : sh.other.file, 'other']);
+    items.push([other, sh.phase === 'none' ? 'none' : fileName(sh.other.file), 'other',
+      sh.phase === 'none' ? '' : sh.other.file]);
     if (sh.phase !== 'none') {
       items.push([sh.phase === 'watch' ? 'its score' : 'candidate\'s score', scoreText(sh.other), 'other_score']);
       items.push(['paired parts', sh.paired_parts + ': other better on ' + sh.other_better +
@@ -181,12 +189,13 @@ function renderModel(st) {
   items.push(['handovers', h.handovers + ' (registers rebased ' + h.rebased + ', not absorbed ' +
     h.unabsorbed + '); last: largest trim change ' + fixed(h.last_trim_change_um, 3) + ' µm, ' +
     fixed(h.last_unabsorbed_um, 3) + ' µm through the limiter', 'handovers']);
-  fillBody($('model'), items.map(([k, v, name]) => row([{ text: k }, { text: v, name: name }])));
+  fillBody($('model'), items.map(([k, v, name, title]) =>
+    row([{ text: k }, { text: v, name: name, title: title }])));
   modelState = {
     promote: announced,
     rollback: !!(m && m.previous && m.previous.file),
     live: m ? modelText(m.live) : 'the live model',
-    candidate: sh && sh.phase !== 'none' ? sh.other.file : 'none',
+    candidate: sh && sh.phase !== 'none' ? fileName(sh.other.file) : 'none',
     previous: m ? modelText(m.previous) : 'the model kept for rollback',
   };
   $('promote').disabled = !actionsAllowed || !modelState.promote;
