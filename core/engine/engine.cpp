@@ -638,6 +638,34 @@ std::uint64_t Engine::trim_identity(std::size_t i) const noexcept {
   return id;
 }
 
+namespace {
+/// Register i's trims now, evaluated at another cut path, less its trims at the switch.
+class RegisterTrimChange final : public TrimChange {
+ public:
+  RegisterTrimChange(const std::vector<std::unique_ptr<Module>>& modules,
+                     const std::vector<double>& trims, std::size_t registers, std::size_t i,
+                     double old_um) noexcept
+      : modules_(modules), trims_(trims), n_(registers), i_(i), old_um_(old_um) {}
+  [[nodiscard]] double at_cut_path(std::int32_t tool, double path_mm) const noexcept override {
+    double sum_um = 0.0;
+    for (std::size_t m = 0; m < modules_.size(); ++m) {
+      if (std::isnan(trims_[m * n_ + i_])) continue;
+      const double t = modules_[m]->trim_at_cut_path(static_cast<std::uint16_t>(i_), tool, path_mm);
+      if (!std::isfinite(t)) return kNaN;
+      sum_um += t;
+    }
+    return sum_um - old_um_;
+  }
+
+ private:
+  const std::vector<std::unique_ptr<Module>>& modules_;
+  const std::vector<double>& trims_;
+  std::size_t n_;
+  std::size_t i_;
+  double old_um_;
+};
+}  // namespace
+
 void Engine::hand_over_trims(TimeNs now_ns) noexcept {
   handover_pending_ = false;
   bool any = false;
@@ -659,8 +687,9 @@ void Engine::hand_over_trims(TimeNs now_ns) noexcept {
     largest_um = std::max(largest_um, std::fabs(delta_um));
     const int w = writer_[i];
     if (w >= 0 && specs_[i].kind != RegisterKind::kFlag &&
-        modules_[static_cast<std::size_t>(w)]->rebase_output(static_cast<std::uint16_t>(i),
-                                                             -delta_um, now_ns)) {
+        modules_[static_cast<std::size_t>(w)]->rebase_output_along(
+            static_cast<std::uint16_t>(i), -delta_um,
+            RegisterTrimChange(modules_, trims_, regs_.size(), i, handover_trim_um_[i]), now_ns)) {
       r.target_um = (r.has_target ? r.target_um : 0.0) - delta_um;
       r.has_target = true;
       ++register_generation_;

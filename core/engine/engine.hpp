@@ -55,7 +55,9 @@
 //   something else (a model loaded, replaced or taken out) keeps its total: the difference
 //   new − old is taken off the writing module's state (Module::rebase_output()) and off the
 //   register's target, so the new trims predict and the writer learns what is left. The same
-//   trims as saved (a restart of the same configuration) are not rebased.
+//   trims as saved (a restart of the same configuration) are not rebased. A writer that learned
+//   from readings taken earlier along the tool's cut path gets the new trims evaluated at each
+//   reading's path as well (TrimChange, Module::rebase_output_along()).
 //
 // Lifecycle: configure() allocates and validates (throws std::invalid_argument naming what is
 // wrong); step(), export_state(), import_state() are real-time safe: no allocation, no locks, no
@@ -65,6 +67,7 @@
 #include <algorithm>
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <span>
@@ -147,6 +150,19 @@ inline constexpr std::size_t kMaxStatusValues = 20;
 
 /// A compensation module (S0 creep, S1 checkpoints, S2, S3, a model). Modules write absolute
 /// targets (OffsetWrite) for registers they were given at attach(); the engine limits them.
+/// Trim handover: the change of one register's trims (new − old) had the tool been at an earlier
+/// cut path, the rest of the context as now (the old trims: as they were at the switch, the
+/// module that computed them is gone). A writer whose state holds values measured earlier along
+/// the path (S1's last readings) takes each at its own path. Real-time safe.
+class TrimChange {
+ public:
+  /// [µm]; NaN: unknown (a trimming module that cannot evaluate at a path).
+  [[nodiscard]] virtual double at_cut_path(std::int32_t tool, double path_mm) const noexcept = 0;
+
+ protected:
+  ~TrimChange() = default;
+};
+
 class Module {
  public:
   virtual ~Module() = default;
@@ -223,6 +239,22 @@ class Module {
     (void)delta_um;
     (void)now_ns;
     return false;
+  }
+  /// Real-time safe. rebase_output() with the change evaluated along the path as well (see
+  /// TrimChange); the default ignores it.
+  virtual bool rebase_output_along(std::uint16_t register_index, double delta_um,
+                                   const TrimChange& change, TimeNs now_ns) noexcept {
+    (void)change;
+    return rebase_output(register_index, delta_um, now_ns);
+  }
+  /// Real-time safe. The trim this module would publish on register_index now had `tool` cut
+  /// path_mm (its other inputs as they are now) [µm]; NaN: it cannot say (the default).
+  [[nodiscard]] virtual double trim_at_cut_path(std::uint16_t register_index, std::int32_t tool,
+                                                double path_mm) const noexcept {
+    (void)register_index;
+    (void)tool;
+    (void)path_mm;
+    return std::numeric_limits<double>::quiet_NaN();
   }
 };
 
