@@ -911,6 +911,62 @@ std::uint64_t Engine::state_generation() const noexcept {
   return g + context_.generation() + cursors_.generation();
 }
 
+namespace {
+// Engine::export_motion(): records of [u64 key (fnv1a of the module's name, or of "@context")]
+// [u64 size][size bytes].
+constexpr std::size_t kMotionHeader = 16;
+}  // namespace
+
+std::size_t Engine::export_motion(std::span<std::byte> buf) const noexcept {
+  std::size_t at = 0;
+  const auto put = [&](std::uint64_t key, auto&& save) {
+    if (buf.size() < at + kMotionHeader) return false;
+    const std::uint64_t n = save(buf.subspan(at + kMotionHeader));
+    std::memcpy(buf.data() + at, &key, 8);
+    std::memcpy(buf.data() + at + 8, &n, 8);
+    at += kMotionHeader + n;
+    return true;
+  };
+  if (!put(fnv1a("@context"),
+           [&](std::span<std::byte> b) { return std::uint64_t{context_.save_motion(b)}; })) {
+    return 0;
+  }
+  for (const auto& m : modules_) {
+    if (!put(fnv1a(m->name()),
+             [&](std::span<std::byte> b) { return std::uint64_t{m->save_motion(b)}; })) {
+      return 0;
+    }
+  }
+  return at;
+}
+
+std::size_t Engine::import_motion(std::span<const std::byte> bytes) noexcept {
+  std::size_t at = 0;
+  std::size_t continued = 0;
+  const std::uint64_t context_key = fnv1a("@context");
+  while (bytes.size() >= at + kMotionHeader) {
+    std::uint64_t key = 0;
+    std::uint64_t n = 0;
+    std::memcpy(&key, bytes.data() + at, 8);
+    std::memcpy(&n, bytes.data() + at + 8, 8);
+    if (n > bytes.size() - at - kMotionHeader) break;
+    const auto part = bytes.subspan(at + kMotionHeader, static_cast<std::size_t>(n));
+    at += kMotionHeader + static_cast<std::size_t>(n);
+    if (n == 0) continue;
+    if (key == context_key) {
+      if (context_.load_motion(part)) ++continued;
+      continue;
+    }
+    for (auto& m : modules_) {
+      if (fnv1a(m->name()) == key) {
+        if (m->load_motion(part)) ++continued;
+        break;
+      }
+    }
+  }
+  return continued;
+}
+
 std::size_t Engine::export_state(std::span<std::byte> buf) const noexcept {
   Writer w(buf);
   w.put(kStateMagic);

@@ -247,6 +247,20 @@ class Module {
     (void)change;
     return rebase_output(register_index, delta_um, now_ns);
   }
+  /// Real-time safe. The motion of the tool as the module follows it between cycles (last axis
+  /// sample, feed direction, …): not state (a restart re-anchors on the first sample), but a
+  /// reload's new engine continues it (Engine::export_motion()), so no cycle of cut path or feed
+  /// direction is lost at the swap. Writes at most buf.size() bytes, 0 = nothing to carry.
+  virtual std::size_t save_motion(std::span<std::byte> buf) const noexcept {
+    (void)buf;
+    return 0;
+  }
+  /// Real-time safe. Continues save_motion()'s bytes of the same module in the engine before;
+  /// false (nothing changed) if they do not fit.
+  virtual bool load_motion(std::span<const std::byte> bytes) noexcept {
+    (void)bytes;
+    return false;
+  }
   /// Real-time safe. The trim this module would publish on register_index now had `tool` cut
   /// path_mm (its other inputs as they are now) [µm]; NaN: it cannot say (the default).
   [[nodiscard]] virtual double trim_at_cut_path(std::uint16_t register_index, std::int32_t tool,
@@ -257,6 +271,9 @@ class Module {
     return std::numeric_limits<double>::quiet_NaN();
   }
 };
+
+/// Bytes a buffer for Engine::export_motion() needs at most.
+inline constexpr std::size_t kMotionBytes = 8192;
 
 struct EngineOptions {
   /// Largest number of events one step accepts; extra events are counted and dropped.
@@ -466,6 +483,13 @@ class Engine {
                     std::size_t* skipped = nullptr) noexcept;
   /// Real-time safe. Advances when registers or module states changed.
   [[nodiscard]] std::uint64_t state_generation() const noexcept;
+  /// Real-time safe. A reload (the daemon's loop): the motion the context and the modules follow
+  /// (Module::save_motion()) into buf, for the next engine's import_motion() after its
+  /// import_state(). Returns bytes written, 0 if buf is too small (kMotionBytes suffices).
+  [[nodiscard]] std::size_t export_motion(std::span<std::byte> buf) const noexcept;
+  /// Real-time safe. Continues the motion of export_motion()'s bytes: the context's, and each
+  /// module's with a module of the same name here. Returns the number of parts continued.
+  std::size_t import_motion(std::span<const std::byte> bytes) noexcept;
 
   [[nodiscard]] std::size_t register_count() const noexcept { return specs_.size(); }
   [[nodiscard]] const RegisterSpec& register_spec(std::size_t i) const { return specs_[i]; }
