@@ -148,8 +148,6 @@ struct StatusValue {
 /// tools, three of its counters making room).
 inline constexpr std::size_t kMaxStatusValues = 20;
 
-/// A compensation module (S0 creep, S1 checkpoints, S2, S3, a model). Modules write absolute
-/// targets (OffsetWrite) for registers they were given at attach(); the engine limits them.
 /// Trim handover: the change of one register's trims (new − old) had the tool been at an earlier
 /// cut path, the rest of the context as now (the old trims: as they were at the switch, the
 /// module that computed them is gone). A writer whose state holds values measured earlier along
@@ -163,6 +161,8 @@ class TrimChange {
   ~TrimChange() = default;
 };
 
+/// A compensation module (S0 creep, S1 checkpoints, S2, S3, a model). Modules write absolute
+/// targets (OffsetWrite) for registers they were given at attach(); the engine limits them.
 class Module {
  public:
   virtual ~Module() = default;
