@@ -85,6 +85,7 @@ Loop::Loop(LoopOptions options, core::rt::ConfigSwap<Runtime>& swap,
       measurement_log_(measurement_log),
       period_ns_(static_cast<core::TimeNs>(std::llround(1e9 / options_.rate_hz))),
       carry_(options_.state_buffer_bytes),
+      motion_carry_(core::engine::kMotionBytes),
       anchor_(options_.state_buffer_bytes),
       alarms_(1024),
       notes_(1024) {
@@ -309,6 +310,7 @@ void Loop::cycle(core::TimeNs wake_ns, bool stamp) {
     const std::uint64_t old_sequence = old.engine->write_sequence();
     const core::engine::EngineCounters old_counters = old.engine->counters();
     const std::size_t n = old.engine->export_state(carry_);
+    const std::size_t motion = old.engine->export_motion(motion_carry_);
     if (n == 0 && old.engine->state_capacity() > 0) {
       note(wake_ns, NoteCode::kStateExportFailed,
            static_cast<std::int64_t>(old.engine->state_capacity()), 0.0);
@@ -334,6 +336,8 @@ void Loop::cycle(core::TimeNs wake_ns, bool stamp) {
       if (!carried.empty() && !rt.engine->import_state(carried, wake_ns)) {
         note(wake_ns, NoteCode::kStateCarryFailed, static_cast<std::int64_t>(rt.generation), 0.0);
       }
+      // The tool moves on through the swap: no cycle of cut path or feed direction is lost.
+      (void)rt.engine->import_motion(std::span<const std::byte>(motion_carry_.data(), motion));
       handover_base_ = add_handovers(handover_base_, old_counters);
       ++local_.reloads;
       local_.config_generation = rt.generation;

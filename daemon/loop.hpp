@@ -247,6 +247,9 @@ class Loop {
   std::vector<core::Event> events_;
   core::StepOutput out_{};
   std::vector<std::byte> carry_;
+  // A reload: the tool's motion the old engine followed (last sample, feed direction), for the
+  // new one (core::engine::Engine::export_motion()).
+  std::vector<std::byte> motion_carry_;
   // Dry run: the engine state as the NC has it (the last state whose writes really went out),
   // taken when the dry run began. The dry-run engine's registers advance as if written; on leaving
   // the dry run (reload) the new engine starts from this state, never from the dry run's values.

@@ -9,6 +9,7 @@
 
 #include "core/checkpoint/probe.hpp"
 #include "core/common/config_issue.hpp"
+#include "core/engine/engine.hpp"
 #include "core/estimation/kalman.hpp"
 
 namespace nccomp::core::checkpoint {
@@ -741,6 +742,12 @@ void CheckpointCompensator::on_sample(const AxisSample& s, StepOutput& out) noex
   if (next_ > passed_before) {
     focus_ = static_cast<std::int32_t>(next_ - 1);
   }
+  if (fresh) {
+    for (std::size_t i = passed_before; i < next_; ++i) {
+      points_[i].cut_path_mm = cut_path_mm_;
+      points_[i].cut_tool = cut_tool_;
+    }
+  }
   if (config_.active_register < 0) {
     live_target_um_ = target_value_um(s);
     return;
@@ -771,7 +778,7 @@ bool CheckpointCompensator::adopt_register_value(std::size_t i, double nc_value_
 }
 
 bool CheckpointCompensator::rebase(std::size_t first, std::size_t last, double delta_um,
-                                   TimeNs now_ns) noexcept {
+                                   TimeNs now_ns, const engine::TrimChange* along) noexcept {
   if (first > last || last >= points_.size() || !std::isfinite(delta_um)) {
     return false;
   }
@@ -790,7 +797,12 @@ bool CheckpointCompensator::rebase(std::size_t first, std::size_t last, double d
     if (mode_a && p.history_n > 0) {
       // The average lags a trend the trims now predict: the residual is the last part's error
       // less the new trim. Applied as an update is (feedback, dead band), at S1's next write.
-      p.learned_um = p.history[p.history_n - 1];
+      double at_cut_um = delta_um;
+      if (along != nullptr && std::isfinite(p.cut_path_mm)) {
+        const double change_um = along->at_cut_path(p.cut_tool, p.cut_path_mm);
+        if (std::isfinite(change_um)) at_cut_um = -change_um;
+      }
+      p.learned_um = p.history[p.history_n - 1] + delta_um - at_cut_um;
       const double candidate = p.offset_um + config_.feedback * (-p.learned_um - p.offset_um);
       if (std::fabs(candidate - p.offset_um) >= config_.dead_band_um &&
           limiter_.admissible(candidate)) {
@@ -816,7 +828,7 @@ bool CheckpointCompensator::rebase(std::size_t first, std::size_t last, double d
 }
 
 void CheckpointCompensator::export_state(CheckpointState& out) const {
-  out.version = 2;
+  out.version = 3;
   out.part_counter = part_counter_;
   out.part = part_;
   out.points.assign(points_.begin(), points_.end());
@@ -829,6 +841,9 @@ const char* CheckpointCompensator::invalid_point_reason(const LearnedPoint& p) c
   }
   if (p.variance_um2 < 0.0) {
     return "negative variance";
+  }
+  if (p.cut_path_mm < 0.0 || std::isinf(p.cut_path_mm)) {
+    return "cut path negative or infinite";
   }
   if (p.history_n > kHistoryDepth) {
     return "history longer than its capacity";
@@ -865,7 +880,7 @@ void CheckpointCompensator::restore_counters(std::int64_t part_counter,
 }
 
 void CheckpointCompensator::import_state(const CheckpointState& st) {
-  if (st.version != 1 && st.version != 2) {
+  if (st.version < 1 || st.version > 3) {
     throw std::invalid_argument("checkpoint state: unknown version " + std::to_string(st.version));
   }
   if (st.points.size() != plan_.size()) {
@@ -883,6 +898,10 @@ void CheckpointCompensator::import_state(const CheckpointState& st) {
     if (st.version == 1) {
       p.variance_um2 = 0.0;  // version 1 had no filter: it starts at the next reading
       p.filter_n = 0;
+    }
+    if (st.version <= 2) {
+      p.cut_path_mm = kNaN;
+      p.cut_tool = 0;
     }
     (void)restore_point(i, p);
   }

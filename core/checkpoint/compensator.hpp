@@ -27,6 +27,10 @@
 #include "core/common/profile.hpp"
 #include "core/common/types.hpp"
 
+namespace nccomp::core::engine {
+class TrimChange;
+}  // namespace nccomp::core::engine
+
 namespace nccomp::core::checkpoint {
 
 /// (A) learn from the previous part's finishing (push-off) → next part;
@@ -132,12 +136,18 @@ struct LearnedPoint {
   /// Accepted e values, oldest first; history_n valid entries.
   std::array<double, kHistoryDepth> history{};
   std::uint32_t history_n{0};
+  /// The tool and its cut path [mm] (the engine's machine context) when this checkpoint's wall
+  /// was last cut; NaN: not known (no context, or a state of version 2 or earlier). A trim
+  /// handover takes a model's trim at this path, where the last reading was cut.
+  double cut_path_mm{kNaN};
+  std::int32_t cut_tool{0};
 };
 
-/// Persisted state. version guards the layout (2: with the estimator's variance; 1 is converted:
-/// the filter starts at the next reading); checkpoint_count guards against a changed plan.
+/// Persisted state. version guards the layout (3: with the cut path of each checkpoint's last cut;
+/// 2 without it (not known); 1 without the estimator's variance too (the filter starts at the
+/// next reading)); checkpoint_count guards against a changed plan.
 struct CheckpointState {
-  std::uint32_t version{2};
+  std::uint32_t version{3};
   std::int64_t part_counter{0};
   std::int32_t part{0};
   std::vector<LearnedPoint> points;
@@ -223,8 +233,17 @@ class CheckpointCompensator {
   /// at S1's next write, through the limiter. The history is cleared and the next reading
   /// counts in full (as a first one): the errors before belong to another split of the
   /// compensation. False, nothing changed, if an offset would leave the absolute limit.
-  /// Real-time safe.
-  bool rebase(std::size_t first, std::size_t last, double delta_um, TimeNs now_ns) noexcept;
+  /// With `along` (mode A), the residual of a checkpoint whose last cut path is known takes the
+  /// change of trim at that path instead of delta_um: the trim follows the path, and the last
+  /// part's checkpoints were cut before the switch. Real-time safe.
+  bool rebase(std::size_t first, std::size_t last, double delta_um, TimeNs now_ns,
+              const engine::TrimChange* along = nullptr) noexcept;
+  /// The tool in the spindle and its cut path [mm] in this cycle (NaN: unknown), recorded for
+  /// each checkpoint the tool passes. Real-time safe.
+  void set_cut_path(std::int32_t tool, double path_mm) noexcept {
+    cut_tool_ = tool;
+    cut_path_mm_ = path_mm;
+  }
 
   /// The value of checkpoint i's register [µm] (after the repeatability rule).
   [[nodiscard]] double register_value_um(std::size_t i) const noexcept;
@@ -313,6 +332,8 @@ class CheckpointCompensator {
   AxisSample prev_{};
   /// Path travelled since the last trigger [mm] (trigger = position: the creep's progress).
   double travel_since_mm_{0.0};
+  std::int32_t cut_tool_{0};
+  double cut_path_mm_{kNaN};
   /// trigger = position: the level whose Z band the tool is in before that level's first
   /// checkpoint (kNone: none), and its XY travel since it entered the band [mm] (≈ the contour
   /// position on that level's pass).

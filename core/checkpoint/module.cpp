@@ -14,8 +14,9 @@ namespace nccomp::core::checkpoint {
 namespace {
 
 constexpr std::uint32_t kMagic = 0x31504B43;  // "CKP1"
-// 2: the estimator's variance and filter count per checkpoint. 1 is converted when loaded.
-constexpr std::uint32_t kVersion = 2;
+// 3: the tool and cut path of each checkpoint's last cut; 2: the estimator's variance and filter
+// count per checkpoint. 1 and 2 are converted when loaded.
+constexpr std::uint32_t kVersion = 3;
 
 struct Header {
   std::uint32_t magic;
@@ -41,8 +42,29 @@ struct Record {
   std::uint32_t reserved;
 };
 
-static_assert(std::is_trivially_copyable_v<Header> && std::is_trivially_copyable_v<Record>);
-static_assert(sizeof(RecordV1) == 160 && sizeof(Record) == 176, "the state file's layout");
+struct RecordV3 {
+  Record v2;
+  double cut_path_mm;
+  std::int32_t cut_tool;
+  std::uint32_t reserved;
+};
+
+static_assert(std::is_trivially_copyable_v<Header> && std::is_trivially_copyable_v<RecordV3>);
+static_assert(sizeof(RecordV1) == 160 && sizeof(Record) == 176 && sizeof(RecordV3) == 192,
+              "the state file's layout");
+
+std::size_t record_size(std::uint32_t version) {
+  switch (version) {
+    case 1:
+      return sizeof(RecordV1);
+    case 2:
+      return sizeof(Record);
+    case kVersion:
+      return sizeof(RecordV3);
+    default:
+      return 0;
+  }
+}
 
 }  // namespace
 
@@ -81,6 +103,10 @@ void CheckpointModule::attach(const engine::RegisterTable& registers) {
 
 void CheckpointModule::step(TimeNs now_ns, std::span<const Event> events,
                             StepOutput& out) noexcept {
+  if (context_ != nullptr) {
+    compensator_.set_cut_path(context_->tool(),
+                              context_->has_tool() ? context_->cut_path_mm() : kNaN);
+  }
   compensator_.step(now_ns, events, out);
 }
 
@@ -102,12 +128,23 @@ bool CheckpointModule::adopt_output(std::uint16_t register_index, double nc_valu
 
 bool CheckpointModule::rebase_output(std::uint16_t register_index, double delta_um,
                                      TimeNs now_ns) noexcept {
+  return rebase(register_index, delta_um, now_ns, nullptr);
+}
+
+bool CheckpointModule::rebase_output_along(std::uint16_t register_index, double delta_um,
+                                           const engine::TrimChange& change,
+                                           TimeNs now_ns) noexcept {
+  return rebase(register_index, delta_um, now_ns, &change);
+}
+
+bool CheckpointModule::rebase(std::uint16_t register_index, double delta_um, TimeNs now_ns,
+                              const engine::TrimChange* along) noexcept {
   const std::size_t n = compensator_.size();
   if (n == 0) {
     return false;
   }
   if (config_.active_register >= 0 && register_index == config_.active_register) {
-    return compensator_.rebase(0, n - 1, delta_um, now_ns);
+    return compensator_.rebase(0, n - 1, delta_um, now_ns, along);
   }
   if (register_index < config_.register_base) {
     return false;
@@ -116,11 +153,11 @@ bool CheckpointModule::rebase_output(std::uint16_t register_index, double delta_
   if (i >= n) {
     return false;
   }
-  return compensator_.rebase(i, i, delta_um, now_ns);
+  return compensator_.rebase(i, i, delta_um, now_ns, along);
 }
 
 std::size_t CheckpointModule::state_capacity() const noexcept {
-  return sizeof(Header) + plan_.size() * sizeof(Record);
+  return sizeof(Header) + plan_.size() * sizeof(RecordV3);
 }
 
 std::size_t CheckpointModule::save_state(std::span<std::byte> buf) const noexcept {
@@ -135,15 +172,17 @@ std::size_t CheckpointModule::save_state(std::span<std::byte> buf) const noexcep
   std::byte* p = buf.data() + sizeof h;
   for (std::size_t i = 0; i < plan_.size(); ++i) {
     const LearnedPoint& lp = compensator_.point(i);
-    Record r{};
-    r.v1.learned_um = lp.learned_um;
-    r.v1.offset_um = lp.offset_um;
-    r.v1.applied_um = lp.applied_um;
-    r.v1.count = lp.count;
-    r.v1.history_n = lp.history_n;
-    for (std::size_t k = 0; k < kHistoryDepth; ++k) r.v1.history[k] = lp.history[k];
-    r.variance_um2 = lp.variance_um2;
-    r.filter_n = lp.filter_n;
+    RecordV3 r{};
+    r.v2.v1.learned_um = lp.learned_um;
+    r.v2.v1.offset_um = lp.offset_um;
+    r.v2.v1.applied_um = lp.applied_um;
+    r.v2.v1.count = lp.count;
+    r.v2.v1.history_n = lp.history_n;
+    for (std::size_t k = 0; k < kHistoryDepth; ++k) r.v2.v1.history[k] = lp.history[k];
+    r.v2.variance_um2 = lp.variance_um2;
+    r.v2.filter_n = lp.filter_n;
+    r.cut_path_mm = lp.cut_path_mm;
+    r.cut_tool = lp.cut_tool;
     std::memcpy(p, &r, sizeof r);
     p += sizeof r;
   }
@@ -160,23 +199,27 @@ bool CheckpointModule::load_state(std::span<const std::byte> bytes) noexcept {
   }
   std::memcpy(&h, bytes.data(), sizeof h);
   // Version 1 has no filter: its checkpoints start the filter at the next reading from M.
-  const std::size_t record_size = h.version == 1 ? sizeof(RecordV1) : sizeof(Record);
-  if (h.magic != kMagic || (h.version != 1 && h.version != kVersion) || h.count != plan_.size() ||
-      bytes.size() != sizeof h + plan_.size() * record_size) {
+  // Versions 1 and 2 do not know where the last cuts were (NaN).
+  const std::size_t size = record_size(h.version);
+  if (h.magic != kMagic || size == 0 || h.count != plan_.size() ||
+      bytes.size() != sizeof h + plan_.size() * size) {
     return false;
   }
   const auto record = [&](std::size_t i) {
-    Record r{};
-    std::memcpy(&r, bytes.data() + sizeof h + i * record_size, record_size);
+    RecordV3 r{};
+    r.cut_path_mm = kNaN;
+    std::memcpy(&r, bytes.data() + sizeof h + i * size, size);
     LearnedPoint lp;
-    lp.learned_um = r.v1.learned_um;
-    lp.offset_um = r.v1.offset_um;
-    lp.applied_um = r.v1.applied_um;
-    lp.count = r.v1.count;
-    lp.history_n = r.v1.history_n;
-    for (std::size_t k = 0; k < kHistoryDepth; ++k) lp.history[k] = r.v1.history[k];
-    lp.variance_um2 = r.variance_um2;
-    lp.filter_n = r.filter_n;
+    lp.learned_um = r.v2.v1.learned_um;
+    lp.offset_um = r.v2.v1.offset_um;
+    lp.applied_um = r.v2.v1.applied_um;
+    lp.count = r.v2.v1.count;
+    lp.history_n = r.v2.v1.history_n;
+    for (std::size_t k = 0; k < kHistoryDepth; ++k) lp.history[k] = r.v2.v1.history[k];
+    lp.variance_um2 = r.v2.variance_um2;
+    lp.filter_n = r.v2.filter_n;
+    lp.cut_path_mm = r.cut_path_mm;
+    lp.cut_tool = r.cut_tool;
     return lp;
   };
   // All or nothing: check every record before changing anything.

@@ -55,6 +55,11 @@ class CheckpointModule final : public engine::Module {
   /// table register its checkpoint (CheckpointCompensator::rebase()). Real-time safe.
   bool rebase_output(std::uint16_t register_index, double delta_um,
                      TimeNs now_ns) noexcept override;
+  /// The same, each checkpoint's residual at the path of its last cut. Real-time safe.
+  bool rebase_output_along(std::uint16_t register_index, double delta_um,
+                           const engine::TrimChange& change, TimeNs now_ns) noexcept override;
+  /// Keeps the context: each checkpoint's cut path is recorded when the tool passes it.
+  void bind_context(const engine::MachineContext& context) override { context_ = &context; }
 
   [[nodiscard]] CheckpointCompensator& compensator() noexcept { return compensator_; }
   [[nodiscard]] const CheckpointCompensator& compensator() const noexcept { return compensator_; }
@@ -64,6 +69,9 @@ class CheckpointModule final : public engine::Module {
   std::vector<Checkpoint> plan_;
   std::string name_;
   CheckpointCompensator compensator_;
+  const engine::MachineContext* context_{nullptr};
+  bool rebase(std::uint16_t register_index, double delta_um, TimeNs now_ns,
+              const engine::TrimChange* along) noexcept;
 };
 
 }  // namespace nccomp::core::checkpoint

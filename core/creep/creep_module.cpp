@@ -240,7 +240,7 @@ bool CreepModule::rebase_output(std::uint16_t register_index, double delta_um,
   // register's total does not move.
   s.channel_output_um[ch] = output_um;
   const bool rearming = comp_.rearming();
-  if (!comp_.restore_state(s)) return false;
+  if (!comp_.rebase_state(s)) return false;  // the tool's motion goes on
   comp_.restore_adoption(a);
   if (rearming) comp_.rearm_request();
   ++generation_;

@@ -101,11 +101,19 @@ class CreepModule final : public engine::Module {
   /// the residual of a compensated part: a model's term on this register predicts what the
   /// creep does not see (the analysis fits the contour error after S0's correction), so the
   /// change is fed in, without a step. Started without state and not yet measured: the channel
-  /// is held at the shifted value until the next measurement. The kinematics re-anchor on the
-  /// next axis sample (the cut path of one cycle is not counted). False for a flag register or
-  /// a value beyond max_abs_um. Real-time safe.
+  /// is held at the shifted value until the next measurement. The tool's motion goes on (feed
+  /// direction, cut path: WearCompensator::rebase_state()). False for a flag register or a value
+  /// beyond max_abs_um. Real-time safe.
   bool rebase_output(std::uint16_t register_index, double delta_um,
                      TimeNs now_ns) noexcept override;
+  /// A reload carries the tool's motion into the next engine's creep (WearCompensator::
+  /// save_motion()). Real-time safe.
+  std::size_t save_motion(std::span<std::byte> buf) const noexcept override {
+    return comp_.save_motion(buf);
+  }
+  bool load_motion(std::span<const std::byte> bytes) noexcept override {
+    return comp_.load_motion(bytes);
+  }
 
   /// Operator acknowledgement (`nccomp acknowledge`: an OperatorCommand kAcknowledge in step(),
   /// taken before the cycle's other events): WearCompensator::clear_alarm() (halt, alarm and

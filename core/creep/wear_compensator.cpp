@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <numbers>
 #include <stdexcept>
@@ -163,14 +164,67 @@ StateProblem WearCompensator::check_state(const CreepState& st) const noexcept {
 }
 
 bool WearCompensator::restore_state(const CreepState& st) noexcept {
+  return replace_state(st, false);
+}
+
+bool WearCompensator::rebase_state(const CreepState& st) noexcept {
+  return replace_state(st, true);
+}
+
+namespace {
+/// WearCompensator::save_motion()'s bytes.
+struct Motion {
+  AxisSample last_sample;
+  std::array<double, 3> feed_dir;
+  TimeNs last_now_ns;
+  std::array<std::uint8_t, 8> flags;  // have_sample, cutting, interrupted, have_feed, have_now
+};
+}  // namespace
+
+std::size_t WearCompensator::save_motion(std::span<std::byte> buf) const noexcept {
+  if (buf.size() < sizeof(Motion)) return 0;
+  Motion m{};
+  m.last_sample = last_sample_;
+  m.feed_dir = feed_dir_;
+  m.last_now_ns = last_now_ns_;
+  m.flags = {have_sample_, cutting_, interrupted_, have_feed_, have_now_};
+  std::memcpy(buf.data(), &m, sizeof m);
+  return sizeof m;
+}
+
+bool WearCompensator::load_motion(std::span<const std::byte> bytes) noexcept {
+  if (bytes.size() != sizeof(Motion)) return false;
+  Motion m{};
+  std::memcpy(&m, bytes.data(), sizeof m);
+  for (const std::uint8_t f : m.flags) {
+    if (f > 1) return false;
+  }
+  for (const double v : m.feed_dir) {
+    if (!std::isfinite(v)) return false;
+  }
+  last_sample_ = m.last_sample;
+  feed_dir_ = m.feed_dir;
+  last_now_ns_ = m.last_now_ns;
+  have_sample_ = m.flags[0] == 1;
+  cutting_ = m.flags[1] == 1;
+  interrupted_ = m.flags[2] == 1;
+  have_feed_ = m.flags[3] == 1;
+  have_now_ = m.flags[4] == 1;
+  return true;
+}
+
+bool WearCompensator::replace_state(const CreepState& st, bool keep_motion) noexcept {
   if (check_state(st).field != nullptr) return false;
   s_ = st;
-  // Kinematics re-anchor on the first sample; every value is re-sent on the next step.
-  have_sample_ = false;
-  have_feed_ = false;
-  cutting_ = false;
-  interrupted_ = false;
-  have_now_ = false;
+  if (!keep_motion) {
+    // Kinematics re-anchor on the first sample.
+    have_sample_ = false;
+    have_feed_ = false;
+    cutting_ = false;
+    interrupted_ = false;
+    have_now_ = false;
+  }
+  // Every value is re-sent on the next step.
   written_once_.fill(false);
   flag_written_once_.fill(false);
   rearm_ = false;

@@ -374,4 +374,26 @@ bool MachineContext::load(std::span<const std::byte> bytes, TimeNs now_ns) noexc
   return true;
 }
 
+std::size_t MachineContext::save_motion(std::span<std::byte> buf) const noexcept {
+  if (buf.size() < kMotionSize) return 0;
+  std::memcpy(buf.data(), &last_sample_, sizeof(AxisSample));
+  const std::array<std::uint8_t, 8> flags{have_sample_ ? std::uint8_t{1} : std::uint8_t{0},
+                                          cutting_ ? std::uint8_t{1} : std::uint8_t{0},
+                                          interrupted_ ? std::uint8_t{1} : std::uint8_t{0}};
+  std::memcpy(buf.data() + sizeof(AxisSample), flags.data(), flags.size());
+  return kMotionSize;
+}
+
+bool MachineContext::load_motion(std::span<const std::byte> bytes) noexcept {
+  if (bytes.size() != kMotionSize) return false;
+  std::array<std::uint8_t, 8> flags{};
+  std::memcpy(flags.data(), bytes.data() + sizeof(AxisSample), flags.size());
+  if (flags[0] > 1 || flags[1] > 1 || flags[2] > 1) return false;
+  std::memcpy(&last_sample_, bytes.data(), sizeof(AxisSample));
+  have_sample_ = flags[0] == 1;
+  cutting_ = flags[1] == 1;
+  interrupted_ = flags[2] == 1;
+  return true;
+}
+
 }  // namespace nccomp::core::engine

@@ -112,6 +112,13 @@ class MachineContext {
   /// Real-time safe. Restores save()'s output at now_ns (see "Warm start" above for the
   /// downtime); false (and nothing changed) if the bytes are not a valid state.
   bool load(std::span<const std::byte> bytes, TimeNs now_ns) noexcept;
+  /// Real-time safe. The last axis sample and whether it was cutting (interrupted): what load()
+  /// forgets, carried by a reload into the next engine's context (Engine::export_motion()).
+  /// Returns kMotionSize, 0 if buf is too small.
+  static constexpr std::size_t kMotionSize = sizeof(AxisSample) + 8;
+  std::size_t save_motion(std::span<std::byte> buf) const noexcept;
+  /// Real-time safe. False (nothing changed) if the bytes are not save_motion()'s.
+  bool load_motion(std::span<const std::byte> bytes) noexcept;
   /// Advances on a warm start, a tool or part change, every 10 mm of cut path and every minute
   /// of activity (so that a crash loses little); not on every cycle.
   [[nodiscard]] std::uint64_t generation() const noexcept { return generation_; }

@@ -638,6 +638,34 @@ std::uint64_t Engine::trim_identity(std::size_t i) const noexcept {
   return id;
 }
 
+namespace {
+/// Register i's trims now, evaluated at another cut path, less its trims at the switch.
+class RegisterTrimChange final : public TrimChange {
+ public:
+  RegisterTrimChange(const std::vector<std::unique_ptr<Module>>& modules,
+                     const std::vector<double>& trims, std::size_t registers, std::size_t i,
+                     double old_um) noexcept
+      : modules_(modules), trims_(trims), n_(registers), i_(i), old_um_(old_um) {}
+  [[nodiscard]] double at_cut_path(std::int32_t tool, double path_mm) const noexcept override {
+    double sum_um = 0.0;
+    for (std::size_t m = 0; m < modules_.size(); ++m) {
+      if (std::isnan(trims_[m * n_ + i_])) continue;
+      const double t = modules_[m]->trim_at_cut_path(static_cast<std::uint16_t>(i_), tool, path_mm);
+      if (!std::isfinite(t)) return kNaN;
+      sum_um += t;
+    }
+    return sum_um - old_um_;
+  }
+
+ private:
+  const std::vector<std::unique_ptr<Module>>& modules_;
+  const std::vector<double>& trims_;
+  std::size_t n_;
+  std::size_t i_;
+  double old_um_;
+};
+}  // namespace
+
 void Engine::hand_over_trims(TimeNs now_ns) noexcept {
   handover_pending_ = false;
   bool any = false;
@@ -659,8 +687,9 @@ void Engine::hand_over_trims(TimeNs now_ns) noexcept {
     largest_um = std::max(largest_um, std::fabs(delta_um));
     const int w = writer_[i];
     if (w >= 0 && specs_[i].kind != RegisterKind::kFlag &&
-        modules_[static_cast<std::size_t>(w)]->rebase_output(static_cast<std::uint16_t>(i),
-                                                             -delta_um, now_ns)) {
+        modules_[static_cast<std::size_t>(w)]->rebase_output_along(
+            static_cast<std::uint16_t>(i), -delta_um,
+            RegisterTrimChange(modules_, trims_, regs_.size(), i, handover_trim_um_[i]), now_ns)) {
       r.target_um = (r.has_target ? r.target_um : 0.0) - delta_um;
       r.has_target = true;
       ++register_generation_;
@@ -880,6 +909,62 @@ std::uint64_t Engine::state_generation() const noexcept {
     g += m->state_generation();
   }
   return g + context_.generation() + cursors_.generation();
+}
+
+namespace {
+// Engine::export_motion(): records of [u64 key (fnv1a of the module's name, or of "@context")]
+// [u64 size][size bytes].
+constexpr std::size_t kMotionHeader = 16;
+}  // namespace
+
+std::size_t Engine::export_motion(std::span<std::byte> buf) const noexcept {
+  std::size_t at = 0;
+  const auto put = [&](std::uint64_t key, auto&& save) {
+    if (buf.size() < at + kMotionHeader) return false;
+    const std::uint64_t n = save(buf.subspan(at + kMotionHeader));
+    std::memcpy(buf.data() + at, &key, 8);
+    std::memcpy(buf.data() + at + 8, &n, 8);
+    at += kMotionHeader + n;
+    return true;
+  };
+  if (!put(fnv1a("@context"),
+           [&](std::span<std::byte> b) { return std::uint64_t{context_.save_motion(b)}; })) {
+    return 0;
+  }
+  for (const auto& m : modules_) {
+    if (!put(fnv1a(m->name()),
+             [&](std::span<std::byte> b) { return std::uint64_t{m->save_motion(b)}; })) {
+      return 0;
+    }
+  }
+  return at;
+}
+
+std::size_t Engine::import_motion(std::span<const std::byte> bytes) noexcept {
+  std::size_t at = 0;
+  std::size_t continued = 0;
+  const std::uint64_t context_key = fnv1a("@context");
+  while (bytes.size() >= at + kMotionHeader) {
+    std::uint64_t key = 0;
+    std::uint64_t n = 0;
+    std::memcpy(&key, bytes.data() + at, 8);
+    std::memcpy(&n, bytes.data() + at + 8, 8);
+    if (n > bytes.size() - at - kMotionHeader) break;
+    const auto part = bytes.subspan(at + kMotionHeader, static_cast<std::size_t>(n));
+    at += kMotionHeader + static_cast<std::size_t>(n);
+    if (n == 0) continue;
+    if (key == context_key) {
+      if (context_.load_motion(part)) ++continued;
+      continue;
+    }
+    for (auto& m : modules_) {
+      if (fnv1a(m->name()) == key) {
+        if (m->load_motion(part)) ++continued;
+        break;
+      }
+    }
+  }
+  return continued;
 }
 
 std::size_t Engine::export_state(std::span<std::byte> buf) const noexcept {

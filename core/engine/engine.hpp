@@ -55,7 +55,9 @@
 //   something else (a model loaded, replaced or taken out) keeps its total: the difference
 //   new − old is taken off the writing module's state (Module::rebase_output()) and off the
 //   register's target, so the new trims predict and the writer learns what is left. The same
-//   trims as saved (a restart of the same configuration) are not rebased.
+//   trims as saved (a restart of the same configuration) are not rebased. A writer that learned
+//   from readings taken earlier along the tool's cut path gets the new trims evaluated at each
+//   reading's path as well (TrimChange, Module::rebase_output_along()).
 //
 // Lifecycle: configure() allocates and validates (throws std::invalid_argument naming what is
 // wrong); step(), export_state(), import_state() are real-time safe: no allocation, no locks, no
@@ -65,6 +67,7 @@
 #include <algorithm>
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <span>
@@ -145,6 +148,19 @@ struct StatusValue {
 /// tools, three of its counters making room).
 inline constexpr std::size_t kMaxStatusValues = 20;
 
+/// Trim handover: the change of one register's trims (new − old) had the tool been at an earlier
+/// cut path, the rest of the context as now (the old trims: as they were at the switch, the
+/// module that computed them is gone). A writer whose state holds values measured earlier along
+/// the path (S1's last readings) takes each at its own path. Real-time safe.
+class TrimChange {
+ public:
+  /// [µm]; NaN: unknown (a trimming module that cannot evaluate at a path).
+  [[nodiscard]] virtual double at_cut_path(std::int32_t tool, double path_mm) const noexcept = 0;
+
+ protected:
+  ~TrimChange() = default;
+};
+
 /// A compensation module (S0 creep, S1 checkpoints, S2, S3, a model). Modules write absolute
 /// targets (OffsetWrite) for registers they were given at attach(); the engine limits them.
 class Module {
@@ -224,7 +240,40 @@ class Module {
     (void)now_ns;
     return false;
   }
+  /// Real-time safe. rebase_output() with the change evaluated along the path as well (see
+  /// TrimChange); the default ignores it.
+  virtual bool rebase_output_along(std::uint16_t register_index, double delta_um,
+                                   const TrimChange& change, TimeNs now_ns) noexcept {
+    (void)change;
+    return rebase_output(register_index, delta_um, now_ns);
+  }
+  /// Real-time safe. The motion of the tool as the module follows it between cycles (last axis
+  /// sample, feed direction, …): not state (a restart re-anchors on the first sample), but a
+  /// reload's new engine continues it (Engine::export_motion()), so no cycle of cut path or feed
+  /// direction is lost at the swap. Writes at most buf.size() bytes, 0 = nothing to carry.
+  virtual std::size_t save_motion(std::span<std::byte> buf) const noexcept {
+    (void)buf;
+    return 0;
+  }
+  /// Real-time safe. Continues save_motion()'s bytes of the same module in the engine before;
+  /// false (nothing changed) if they do not fit.
+  virtual bool load_motion(std::span<const std::byte> bytes) noexcept {
+    (void)bytes;
+    return false;
+  }
+  /// Real-time safe. The trim this module would publish on register_index now had `tool` cut
+  /// path_mm (its other inputs as they are now) [µm]; NaN: it cannot say (the default).
+  [[nodiscard]] virtual double trim_at_cut_path(std::uint16_t register_index, std::int32_t tool,
+                                                double path_mm) const noexcept {
+    (void)register_index;
+    (void)tool;
+    (void)path_mm;
+    return std::numeric_limits<double>::quiet_NaN();
+  }
 };
+
+/// Bytes a buffer for Engine::export_motion() needs at most.
+inline constexpr std::size_t kMotionBytes = 8192;
 
 struct EngineOptions {
   /// Largest number of events one step accepts; extra events are counted and dropped.
@@ -434,6 +483,13 @@ class Engine {
                     std::size_t* skipped = nullptr) noexcept;
   /// Real-time safe. Advances when registers or module states changed.
   [[nodiscard]] std::uint64_t state_generation() const noexcept;
+  /// Real-time safe. A reload (the daemon's loop): the motion the context and the modules follow
+  /// (Module::save_motion()) into buf, for the next engine's import_motion() after its
+  /// import_state(). Returns bytes written, 0 if buf is too small (kMotionBytes suffices).
+  [[nodiscard]] std::size_t export_motion(std::span<std::byte> buf) const noexcept;
+  /// Real-time safe. Continues the motion of export_motion()'s bytes: the context's, and each
+  /// module's with a module of the same name here. Returns the number of parts continued.
+  std::size_t import_motion(std::span<const std::byte> bytes) noexcept;
 
   [[nodiscard]] std::size_t register_count() const noexcept { return specs_.size(); }
   [[nodiscard]] const RegisterSpec& register_spec(std::size_t i) const { return specs_[i]; }

@@ -138,12 +138,12 @@ void ModelModule::step(core::TimeNs now_ns, std::span<const core::Event> events,
   }
 }
 
-void ModelModule::evaluate(core::TimeNs now_ns, core::StepOutput& out) noexcept {
+Row ModelModule::context_row(double time_s) const noexcept {
   // The context of "now"; unknown columns are NaN, and a term whose column is unknown
   // contributes nothing (e.g. part_trend before the first part start).
   const core::engine::MachineContext& c = *context_;
   Row row = unknown_row();
-  row[col(Column::kTime)] = c.machine_time_s(now_ns);
+  row[col(Column::kTime)] = time_s;
   if (c.has_part()) {
     row[col(Column::kPart)] = c.part();
   } else if (has_restored_part_) {
@@ -157,23 +157,47 @@ void ModelModule::evaluate(core::TimeNs now_ns, core::StepOutput& out) noexcept 
   for (const ModelInput& in : inputs_) {
     row[static_cast<std::size_t>(in.column)] = c.temperature_c(in.sensor);
   }
+  return row;
+}
+
+double ModelModule::apply_trim_um(std::size_t i, Row& row, double tool,
+                                  double path_mm) const noexcept {
+  const ModelApply& a = applies_[i];
+  row[col(Column::kKind)] = a.kind;
+  row[col(Column::kPoint)] = a.point;
+  row[col(Column::kAngle)] = a.angle_deg;
+  if (!std::isnan(a.tool) && (std::isnan(tool) || std::islessgreater(a.tool, tool))) {
+    // A term of one tool: its number and its own cut path (NaN until the context knows it).
+    row[col(Column::kTool)] = a.tool;
+    row[col(Column::kPath)] = context_->cut_path_mm(static_cast<std::int32_t>(a.tool));
+  } else {
+    row[col(Column::kTool)] = tool;
+    row[col(Column::kPath)] = path_mm;
+  }
+  return a.gain * model_.evaluate_term(a.term_index, row, state_);
+}
+
+double ModelModule::trim_at_cut_path(std::uint16_t register_index, std::int32_t tool,
+                                     double path_mm) const noexcept {
+  Row row = context_row(context_->machine_time_s());
+  bool any = false;
+  double sum_um = 0.0;
+  for (std::size_t i = 0; i < applies_.size(); ++i) {
+    if (applies_[i].register_index != register_index) continue;
+    any = true;
+    sum_um += apply_trim_um(i, row, static_cast<double>(tool), path_mm);
+  }
+  return any ? sum_um : kUnknown;
+}
+
+void ModelModule::evaluate(core::TimeNs now_ns, core::StepOutput& out) noexcept {
+  const core::engine::MachineContext& c = *context_;
+  Row row = context_row(c.machine_time_s(now_ns));
   advance_state(model_.specs(), row, state_);
   const double tool = c.has_tool() ? static_cast<double>(c.tool()) : kUnknown;
   const double path_mm = c.has_tool() ? c.cut_path_mm() : kUnknown;
   for (std::size_t i = 0; i < applies_.size(); ++i) {
-    const ModelApply& a = applies_[i];
-    row[col(Column::kKind)] = a.kind;
-    row[col(Column::kPoint)] = a.point;
-    row[col(Column::kAngle)] = a.angle_deg;
-    if (!std::isnan(a.tool)) {
-      // A term of one tool: its number and its own cut path (NaN until the context knows it).
-      row[col(Column::kTool)] = a.tool;
-      row[col(Column::kPath)] = c.cut_path_mm(static_cast<std::int32_t>(a.tool));
-    } else {
-      row[col(Column::kTool)] = tool;
-      row[col(Column::kPath)] = path_mm;
-    }
-    trims_um_[i] = a.gain * model_.evaluate_term(a.term_index, row, state_);
+    trims_um_[i] = apply_trim_um(i, row, tool, path_mm);
   }
   // One trim per register: the engine keeps one trim per module and register, so entries on
   // the same register are summed. A non-finite sum goes to the engine, which refuses it with

@@ -83,6 +83,11 @@ class ModelModule final : public core::engine::Module {
   /// or restart with another model hands the trims over (core/engine/engine.hpp, "Trim
   /// handover"), the same model does not. Real-time safe.
   [[nodiscard]] std::uint64_t trim_identity() const noexcept override { return identity_; }
+  /// The trim on register_index with `tool` at path_mm (its entries without a tool of their
+  /// own, and those of that tool), every other column as now. NaN: no entry on the register.
+  /// Real-time safe.
+  [[nodiscard]] double trim_at_cut_path(std::uint16_t register_index, std::int32_t tool,
+                                        double path_mm) const noexcept override;
 
   /// The session term's current offset [µm] (its posterior mean; 0 without a session term).
   [[nodiscard]] double session_offset_um() const noexcept;
@@ -94,6 +99,12 @@ class ModelModule final : public core::engine::Module {
 
  private:
   void evaluate(core::TimeNs now_ns, core::StepOutput& out) noexcept;
+  /// The context's row at machine time time_s, without the apply entries' columns.
+  [[nodiscard]] Row context_row(double time_s) const noexcept;
+  /// Apply entry i's trim on `row` for `tool` at path_mm (a fixed tool of another number: that
+  /// tool's own path now) [µm].
+  [[nodiscard]] double apply_trim_um(std::size_t i, Row& row, double tool,
+                                     double path_mm) const noexcept;
 
   Model model_;
   std::vector<ModelApply> applies_;

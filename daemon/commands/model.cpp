@@ -77,14 +77,20 @@ std::string shadow_lines(const sections::ShadowStatus& sh) {
   return s;
 }
 
-std::string status_answer(const ModelState& m, const HandoverStats& h) {
+}  // namespace
+
+std::string model_status_text(const ModelState& m, const HandoverStats& h) {
   std::string s = fmt::format("ok model: {}\n", describe(m.live));
   if (!m.has_section) {
     s += "  the configuration has no [model] section\n";
-  } else if (m.chosen) {
+  } else if (m.chosen && m.live.file != m.configured) {
     s += fmt::format(
         "  chosen by nccomp model load / rollback, in place of the configuration's {}\n",
         m.configured);
+  } else if (m.chosen) {
+    // A rollback (or a load) back to the configured file: the choice is still recorded, for the
+    // model it keeps to roll back to.
+    s += "  the configuration's [model] file, chosen again by nccomp model load / rollback\n";
   } else {
     s += "  the configuration's [model] file\n";
   }
@@ -92,8 +98,6 @@ std::string status_answer(const ModelState& m, const HandoverStats& h) {
   s += fmt::format("  configuration {}\n", m.generation);
   return s + handover_line(h) + shadow_lines(m.shadow);
 }
-
-}  // namespace
 
 CommandAccess model_access(std::string_view args) noexcept {
   // candidate changes no offset, but what may become live: the admin group's too.
@@ -105,7 +109,7 @@ std::string handle_model_command(std::string_view args, CommandContext& ctx) {
     return refuse(ctx, "this process takes no model commands");
   }
   if (args == "status") {
-    return status_answer(ctx.model_state(), ctx.loop->stats().handover);
+    return model_status_text(ctx.model_state(), ctx.loop->stats().handover);
   }
   ModelAction action = ModelAction::kRollback;
   std::string file;

@@ -14,12 +14,18 @@
 #include <string_view>
 
 #include "daemon/commands/command.hpp"
+#include "daemon/loop.hpp"
 
 namespace nccomp::daemon::commands {
 
 /// "model load PATH" | "model candidate PATH" | "model promote" | "model rollback" |
 /// "model status". Answers "ok ..." or "error: ...".
 std::string handle_model_command(std::string_view args, CommandContext& ctx);
+
+/// The answer to "model status": the live model and where it comes from (the configuration's
+/// file, or an operator's choice in its place), the one kept for rollback, the handovers and the
+/// shadow.
+std::string model_status_text(const ModelState& m, const HandoverStats& h);
 
 /// status is read-only; load, rollback (and anything malformed) change the machine.
 CommandAccess model_access(std::string_view args) noexcept;

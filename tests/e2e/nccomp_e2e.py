@@ -1270,8 +1270,8 @@ def scenario_model_handover(b, source, work):
     The swap lands in the first part of its run, before its first cut (checked: each part's
     approach is made 3 s long for that). Checks: the first part that starts after the new configuration runs is
     cut within 1.5x the checkpoint error (RMS) of the parts after it; the part the swap landed in
-    is cut with at most half the error of the last part before the load (S1 alone), and within
-    1.5x the later parts' error after the rollback, where no part may be worse than 1.5x the
+    is cut within 1.5x the later parts' error after the load and after the rollback, and after
+    the load with at most half the error of the last part before it (S1 alone), where no part may be worse than 1.5x the
     worst of parts 2-12 (S1 alone, before the model); no write of the radius register changes it
     by more than its max_step_um (20 um); no alarm."""
     sets = ["wear.enabled=true", "wear.rate_um_per_m=20"]
@@ -1352,6 +1352,11 @@ def scenario_model_handover(b, source, work):
                "%s: part %d within 1.5x the later parts' error: %.3f um against %.3f um" % (
                    label, p0, per_part[p0][0], later_rms))
         if label == "load":
+            # Issue 19: the part cut right after the load too (S1's residuals take the model's
+            # trim at each checkpoint's own cut path, not at the swap).
+            c.that(per_part[landed][0] <= 1.5 * later_rms,
+                   "load: part %d (the swap landed in it) within 1.5x the later parts' error: "
+                   "%.3f um against %.3f um" % (landed, per_part[landed][0], later_rms))
             last = before_parts[max(before_parts)][0]
             c.that(per_part[landed][0] <= 0.5 * last,
                    "load: part %d (the swap landed in it) at most half the error of part %d "

@@ -6,6 +6,7 @@
 #include <bit>
 #include <cmath>
 #include <cstddef>
+#include <cstring>
 #include <memory>
 #include <stdexcept>
 #include <string_view>
@@ -117,10 +118,10 @@ TEST(Module, LoadStateRefusesCorruptBytesAllOrNothing) {
   CheckpointModule fresh(module_config(), line_plan(2));
   fresh.attach(engine::RegisterTable(regs));
   std::vector<std::byte> bad = buf;
-  // The second record's offset becomes NaN (header 24 bytes, records 176 bytes: layout 2).
-  ASSERT_EQ(bad.size(), 24U + 2U * 176U);
+  // The second record's offset becomes NaN (header 24 bytes, records 192 bytes: layout 3).
+  ASSERT_EQ(bad.size(), 24U + 2U * 192U);
   const auto nan_bytes = std::bit_cast<std::array<std::byte, sizeof(double)>>(std::nan(""));
-  for (std::size_t k = 0; k < nan_bytes.size(); ++k) bad[24 + 176 + 8 + k] = nan_bytes[k];
+  for (std::size_t k = 0; k < nan_bytes.size(); ++k) bad[24 + 192 + 8 + k] = nan_bytes[k];
   EXPECT_FALSE(fresh.load_state(bad));
   EXPECT_DOUBLE_EQ(fresh.compensator().register_value_um(0), 0.0);  // nothing changed
   EXPECT_FALSE(fresh.load_state(std::span<const std::byte>(buf.data(), buf.size() - 1)));
@@ -277,6 +278,136 @@ TEST(Module, AModelTakingOverTheLiveRegisterLeavesTheTotalAndS1LearnsTheResidual
     b->step(t, ev, out);
     EXPECT_NEAR(total(), want, 1e-9) << x;
   }
+}
+
+}  // namespace
+}  // namespace nccomp::core::checkpoint
+
+namespace nccomp::core::checkpoint {
+namespace {
+
+// A model's path term on the live register: trim = slope × the tool's cut path, re-evaluated
+// every cycle (as `update = "cycle"` does).
+class PathTrim final : public engine::Module {
+ public:
+  explicit PathTrim(double slope_um_per_mm) : slope_(slope_um_per_mm) {}
+  std::string_view name() const noexcept override { return "model"; }
+  void attach(const engine::RegisterTable& /*registers*/) override {}
+  void bind_context(const engine::MachineContext& context) override { context_ = &context; }
+  void step(TimeNs now_ns, std::span<const Event> /*events*/, StepOutput& out) noexcept override {
+    out.trims.push(OffsetWrite{now_ns, 0, slope_ * context_->cut_path_mm()});
+  }
+  std::uint64_t trim_identity() const noexcept override { return 7; }
+  double trim_at_cut_path(std::uint16_t register_index, std::int32_t /*tool*/,
+                          double path_mm) const noexcept override {
+    return register_index == 0 ? slope_ * path_mm : kNaN;
+  }
+
+ private:
+  double slope_;
+  const engine::MachineContext* context_{nullptr};
+};
+
+AxisSample cutting(double x, TimeNs t_ns) {
+  AxisSample s = sample(x, 0, -5, x, 12, t_ns);
+  s.cutting = true;
+  return s;
+}
+
+// The wall's error without compensation grows with the tool's cut path p: e = 0.5 µm/mm × p.
+constexpr double kWearUmPerMm = 0.5;
+
+// GIVEN S1 alone cut part 1 (checkpoints at 10, 20, 30 mm of cut path) and probed it: it learned
+//      e = 5, 10, 15 µm, and the tool is at 40 mm when a model of the wear (trim −0.5 µm/mm × p)
+//      is loaded with S1's state
+// WHEN the handover rebases S1
+// THEN S1 keeps each checkpoint's residual at the path where it was cut (0: the model explains
+//      the whole error), not at the 40 mm of the switch (−15, −10, −5), and part 2 is cut with
+//      the whole compensation −e(p) at every checkpoint.
+TEST(Module, AHandoverTakesTheTrimAtEachCheckpointsOwnCutPath) {
+  auto a = make_engine(3);
+  StepOutput out;
+  TimeNs t = 0;
+  std::vector<Event> ev = {part_start(1)};
+  a->step(t += 1'000'000, ev, out);
+  for (int x = 0; x <= 40; ++x) {
+    ev = {cutting(x, t += 1'000'000)};
+    a->step(t, ev, out);
+  }
+  const auto& s1a = dynamic_cast<const CheckpointModule&>(a->module(0)).compensator();
+  for (std::size_t i = 0; i < 3; ++i) {
+    EXPECT_DOUBLE_EQ(s1a.point(i).cut_path_mm, 10.0 * static_cast<double>(i + 1)) << i;
+    EXPECT_EQ(s1a.point(i).cut_tool, 12);
+  }
+  ev = {probe(1, 0, kWearUmPerMm * 10.0), probe(1, 1, kWearUmPerMm * 20.0),
+        probe(1, 2, kWearUmPerMm * 30.0)};
+  a->step(t += 1'000'000, ev, out);
+  ASSERT_NEAR(s1a.register_value_um(2), -15.0, 1e-9);
+  std::vector<std::byte> buf(a->state_capacity());
+  buf.resize(a->export_state(buf));
+
+  auto b = std::make_unique<engine::Engine>();
+  std::vector<std::unique_ptr<engine::Module>> mods;
+  mods.push_back(std::make_unique<CheckpointModule>(module_config(), line_plan(3)));
+  mods.push_back(std::make_unique<PathTrim>(-kWearUmPerMm));
+  b->configure(registers(3), std::move(mods));
+  ASSERT_TRUE(b->import_state(buf, t));
+  b->step(t += 1'000'000, {}, out);  // the swap's cycle
+  ASSERT_EQ(b->counters().handover_rebases, 1U);
+  const auto& s1b = dynamic_cast<const CheckpointModule&>(b->module(0)).compensator();
+  for (std::size_t i = 0; i < 3; ++i) {
+    EXPECT_NEAR(s1b.learned_um(i), 0.0, 1e-9) << i;
+    EXPECT_NEAR(s1b.register_value_um(i), 0.0, 1e-9) << i;
+  }
+  ev = {part_start(2)};
+  b->step(t += 1'000'000, ev, out);
+  for (int x = 0; x <= 40; ++x) {
+    ev = {cutting(x, t += 1'000'000)};
+    b->step(t, ev, out);
+    if (x % 10 == 0 && x > 0 && x < 40) {
+      const engine::RegisterState r = b->register_state(0);
+      const double path_mm = b->context().cut_path_mm(12);
+      EXPECT_DOUBLE_EQ(path_mm, 40.0 + x);
+      EXPECT_NEAR(r.target_um + r.trim_um, -kWearUmPerMm * path_mm, 1e-9) << x;
+    }
+  }
+}
+
+// GIVEN the bytes of a layout-2 state (before the cut path)
+// THEN they load: the values as saved, the cut path unknown (a handover takes the trim at the
+//      switch for these checkpoints, as before).
+TEST(Module, AStateOfLayoutVersion2IsConverted) {
+  auto a = make_engine(2);
+  StepOutput out;
+  std::vector<Event> ev = {part_start(1)};
+  a->step(1, ev, out);
+  for (int x = 0; x <= 30; ++x) {
+    ev = {cutting(x, 2 + x)};
+    a->step(2 + x, ev, out);
+  }
+  ev = {probe(1, 0, 6.0), probe(1, 1, 3.0)};
+  a->step(40, ev, out);
+  const auto& m = dynamic_cast<const CheckpointModule&>(a->module(0));
+  std::vector<std::byte> v3(m.state_capacity());
+  ASSERT_EQ(m.save_state(v3), v3.size());
+  // Layout 2: the same header (version 2) and the first 176 bytes of each 192-byte record.
+  std::vector<std::byte> v2(24 + 2 * 176);
+  std::memcpy(v2.data(), v3.data(), 24);
+  const std::uint32_t version = 2;
+  std::memcpy(v2.data() + 4, &version, sizeof version);
+  for (std::size_t i = 0; i < 2; ++i) {
+    std::memcpy(v2.data() + 24 + i * 176, v3.data() + 24 + i * 192, 176);
+  }
+  CheckpointModule fresh(module_config(), line_plan(2));
+  fresh.attach(engine::RegisterTable(registers(2)));
+  ASSERT_TRUE(fresh.load_state(v2));
+  for (std::size_t i = 0; i < 2; ++i) {
+    EXPECT_EQ(fresh.compensator().register_value_um(i), m.compensator().register_value_um(i));
+    EXPECT_EQ(fresh.compensator().point(i).history_n, 1U);
+    EXPECT_TRUE(std::isnan(fresh.compensator().point(i).cut_path_mm));
+    EXPECT_DOUBLE_EQ(m.compensator().point(i).cut_path_mm, 10.0 * static_cast<double>(i + 1));
+  }
+  EXPECT_FALSE(fresh.load_state(std::span<const std::byte>(v2.data(), v2.size() - 1)));
 }
 
 }  // namespace

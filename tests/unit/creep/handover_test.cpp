@@ -56,11 +56,12 @@ struct Rig {
   double nc_z_um{0.0};
   double largest_z_change_um{0.0};
   std::vector<double> z_writes;
+  std::vector<double> y_writes;
 
-  explicit Rig(const TrimZ* model) {
+  explicit Rig(const TrimZ* model, const CreepModuleConfig& config = module_config()) {
     const LimiterConfig lim{100.0, 50.0, 1e5};
     std::vector<std::unique_ptr<engine::Module>> mods;
-    mods.push_back(std::make_unique<CreepModule>(module_config()));
+    mods.push_back(std::make_unique<CreepModule>(config));
     if (model != nullptr) mods.push_back(std::make_unique<TrimZ>(model->trim_, model->identity_));
     engine.configure({{"X_offset", RegisterKind::kAxisOffset, lim},
                       {"Y_offset", RegisterKind::kAxisOffset, lim},
@@ -71,6 +72,7 @@ struct Rig {
     engine.step(now, ev, out);
     ev.clear();
     for (const auto& w : out.writes) {
+      if (w.register_index == 1) y_writes.push_back(w.value_um);
       if (w.register_index != 2) continue;
       largest_z_change_um = std::max(largest_z_change_um, std::fabs(w.value_um - nc_z_um));
       nc_z_um = w.value_um;
@@ -83,6 +85,7 @@ struct Rig {
     AxisSample a;
     a.time_ns = now;
     a.program_path_mm = path;
+    a.position_mm = {path, 0.0, 0.0, 0.0, 0.0, 0.0};  // feed along +X
     a.tool = 1;
     ev.emplace_back(a);
     step();
@@ -200,6 +203,49 @@ TEST(CreepHandover, TheHandoverStepAllocatesNothing) {
     EXPECT_EQ(scope.frees(), 0U);
   }
   EXPECT_EQ(after.engine.counters().handover_rebases, 1U);
+}
+
+// GIVEN the creep compensates 12 µm of wear with a lateral deflection of 10 µm per 100 µm of
+//      wear toward the material on the right of the feed (feed +X: Y at −1.2 µm), cutting
+// WHEN a model is loaded into the running daemon (the reload's new engine takes the state and
+//      the tool's motion, Engine::export_motion(); the handover rebases the creep)
+// THEN Y stays at −1.2 µm in every cycle (the feed direction is not lost) and the cut path goes
+//      on by every cycle's 0.5 mm (no cycle's path lost).
+TEST(CreepHandover, TheToolsMotionGoesOnThroughTheSwapAndTheRebase) {
+  CreepModuleConfig config = module_config();
+  config.creep.edge.material_side = MaterialSide::kRight;
+  config.creep.deflection.push_back(DeflectionTable{0, {0.0, 100.0}, {0.0, 0.0}, {0.0, 10.0}});
+  Rig before(nullptr, config);
+  wear_in(before);
+  const double lateral_um = -12.0 * 10.0 / 100.0;
+  ASSERT_NEAR(before.engine.register_state(1).output_um, lateral_um, 1e-9);
+  const auto creep = [](const Rig& r) -> const WearCompensator& {
+    return dynamic_cast<const CreepModule&>(r.engine.module(0)).compensator();
+  };
+  const auto path_of = [&](const Rig& r) { return creep(r).state().cut_path_mm; };
+  const double path_before = path_of(before);
+
+  const TrimZ model(-10.0, 7);
+  Rig after(&model, config);
+  after.take_over(before);
+  std::vector<std::byte> motion(engine::kMotionBytes);
+  std::size_t carried = 0;
+  {
+    const test::AllocationScope scope;  // as on the loop thread at the swap
+    motion.resize(before.engine.export_motion(motion));
+    carried = after.engine.import_motion(motion);
+    EXPECT_EQ(scope.count() + scope.frees(), 0U);
+  }
+  EXPECT_EQ(carried, 2U);  // the context's and the creep's
+  for (int i = 0; i < 5; ++i) {
+    after.advance(0.5);
+    EXPECT_NEAR(creep(after).lateral_um(), -lateral_um, 1e-9) << i;
+    EXPECT_NEAR(after.engine.register_state(1).output_um, lateral_um, 1e-9) << i;
+  }
+  EXPECT_EQ(after.engine.counters().handover_rebases, 1U);
+  for (const double y : after.y_writes) EXPECT_NEAR(y, lateral_um, 1e-9);
+  EXPECT_NEAR(path_of(after), path_before + 5 * 0.5, 1e-9);
+  EXPECT_NEAR(after.engine.context().cut_path_mm(1), path_before + 5 * 0.5, 1e-9);
 }
 
 }  // namespace

@@ -19,6 +19,7 @@
 #include "core/engine/engine.hpp"
 #include "core/model/model.hpp"
 #include "core/model/model_module.hpp"
+#include "daemon/commands/model.hpp"
 #include "daemon/config/builtin_sections.hpp"
 #include "daemon/measurement_log.hpp"
 #include "daemon/sections/model/model_section.hpp"
@@ -1395,3 +1396,41 @@ TEST(ModelChoice, TheRecordRoundTripsAndRefusesWhatIsNotIt) {
 
 }  // namespace
 }  // namespace nccomp::daemon::sections
+
+namespace nccomp::daemon::commands {
+namespace {
+
+// GIVEN the configuration names A and the operator loaded B, then rolled back to A (the choice
+// is still recorded: B is kept to roll back to)
+// THEN `nccomp model status` says that A is the configuration's own file, chosen again; with B
+// live it says B runs in place of A; without a choice, that A is the configuration's file.
+TEST(ModelStatusText, SaysWhetherTheLiveModelIsTheConfigurationsOwnFile) {
+  ModelState m;
+  m.has_section = true;
+  m.configured = "/etc/nccompd/a/model.toml";
+  m.chosen = true;
+  m.live.file = "/etc/nccompd/a/model.toml";
+  m.previous.file = "/srv/fit/b/model.toml";
+  std::string text = model_status_text(m, HandoverStats{});
+  EXPECT_NE(text.find("\n  the configuration's [model] file, chosen again by nccomp model load / "
+                      "rollback\n"),
+            std::string::npos)
+      << text;
+  EXPECT_EQ(text.find("in place of"), std::string::npos) << text;
+
+  m.live.file = "/srv/fit/b/model.toml";
+  m.previous.file = "/etc/nccompd/a/model.toml";
+  text = model_status_text(m, HandoverStats{});
+  EXPECT_NE(text.find("\n  chosen by nccomp model load / rollback, in place of the "
+                      "configuration's /etc/nccompd/a/model.toml\n"),
+            std::string::npos)
+      << text;
+
+  m.chosen = false;
+  m.live.file = m.configured;
+  text = model_status_text(m, HandoverStats{});
+  EXPECT_NE(text.find("\n  the configuration's [model] file\n"), std::string::npos) << text;
+}
+
+}  // namespace
+}  // namespace nccomp::daemon::commands

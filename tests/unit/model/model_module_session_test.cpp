@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <memory>
 #include <vector>
@@ -139,4 +140,49 @@ TEST(SessionOffsetDaemon, TheModelModuleLearnsEachSessionFromItsRecordsAndAResta
   step(s2, {});
   step(s2, {});
   EXPECT_NEAR(s2.model->trim_um(0), 16.0 * 2.0 / 17.0, 1e-12);
+}
+
+// Trim handover along the path: GIVEN a tool_wear term linear in path_mm (0.021 µm/mm) applied
+// to register 0 with gain −1, tool 7 at 500 mm of cut path WHEN the engine asks for the trim at
+// 120 mm THEN it is the term at 120 mm (−2.52 µm), while the published trim is the one at 500 mm;
+// a register without an entry has none (NaN).
+TEST(ModelModuleTrimAtPath, EvaluatesTheTermAtTheGivenCutPathAndTheRestAsNow) {
+  cm::Term wear;
+  wear.spec.name = "tool_wear";
+  wear.spec.form = cm::Form::kLinear;
+  wear.spec.column = static_cast<int>(cm::Column::kPath);
+  wear.groups = {{0.0, 0.0}};
+  wear.coef = {0.021};
+  cm::ModelApply a;
+  a.register_index = 0;
+  a.gain = -1.0;
+  a.kind = 0.0;
+  auto m = std::make_unique<cm::ModelModule>(cm::Model({}, {wear}), std::vector{a}, true);
+  cm::ModelModule* model = m.get();
+  std::vector<std::unique_ptr<ce::Module>> mods;
+  mods.push_back(std::move(m));
+  ce::RegisterSpec reg;
+  reg.name = "T7_radius_wear";
+  reg.kind = ce::RegisterKind::kToolRadiusWear;
+  reg.limits.max_abs_um = 100.0;
+  reg.limits.max_step_um = 100.0;
+  reg.limits.max_rate_um_per_s = 1e6;
+  ce::RegisterSpec other = reg;
+  other.name = "T8_radius_wear";
+  ce::Engine engine;
+  engine.configure({reg, other}, std::move(mods), {});
+  core::StepOutput out;
+  std::int64_t t = 0;
+  for (int k = 0; k <= 500; ++k) {
+    core::AxisSample s;
+    s.time_ns = t += 1'000'000;
+    s.position_mm = {static_cast<double>(k), 0.0, 0.0, 0.0, 0.0, 0.0};
+    s.program_path_mm = k;
+    s.tool = 7;
+    engine.step(t, std::vector<core::Event>{s}, out);
+  }
+  ASSERT_DOUBLE_EQ(engine.context().cut_path_mm(7), 500.0);
+  EXPECT_NEAR(model->trim_um(0), -0.021 * 500.0, 1e-12);
+  EXPECT_NEAR(model->trim_at_cut_path(0, 7, 120.0), -0.021 * 120.0, 1e-12);
+  EXPECT_TRUE(std::isnan(model->trim_at_cut_path(1, 7, 120.0)));
 }
