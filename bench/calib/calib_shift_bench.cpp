@@ -120,9 +120,16 @@ struct Strategy {
   bool temperature_slope{false};  // estimator: also the t5 temperature slope
   double level_noise_um_per_h{6.0};
   double gate_sigmas{5.0};
+  double slope_sigma_um_per_c{1.0};
+  // Bound of the slope; with plausibility_um it bounds the temperature step the estimator
+  // takes (calibrator.cpp, temperature_delta).
+  double max_slope_um_per_c{20.0};
+  // > 0: the sensor is a first-order lag of the spindle speed [krpm] with this time constant
+  // [s], computed here from the data set's speed (what a speed-driven state would see).
+  double speed_lag_s{0.0};
 };
 
-const std::array<Strategy, 7> kStrategies{{
+const std::array<Strategy, 8> kStrategies{{
     {"none", false, nccomp::core::ProfileShape::kStep, Prediction::kNone},
     {"hourly, step", true, nccomp::core::ProfileShape::kStep, Prediction::kNone},
     {"hourly, creep", true, nccomp::core::ProfileShape::kCosine, Prediction::kNone},
@@ -133,6 +140,8 @@ const std::array<Strategy, 7> kStrategies{{
      Prediction::kEstimator},
     {"hourly, creep + estimator with temperature", true, nccomp::core::ProfileShape::kCosine,
      Prediction::kEstimator, true},
+    {"hourly, creep + estimator with temperature, slope bound 5 um/degC", true,
+     nccomp::core::ProfileShape::kCosine, Prediction::kEstimator, true, 6.0, 5.0, 1.0, 5.0},
 }};
 
 struct AxisStats {
@@ -166,7 +175,8 @@ std::array<AxisStats, 3> run_shift(const Strategy& s, const DriftFn& drift, cons
   cfg.estimator_touch_noise_um = 0.7;
   cfg.estimator_prior_gain_sigma = 0.5;
   cfg.estimator_prior_forgetting = 0.8;
-  cfg.estimator_slope_sigma_um_per_c = s.temperature_slope ? 1.0 : 0.0;
+  cfg.estimator_slope_sigma_um_per_c = s.temperature_slope ? s.slope_sigma_um_per_c : 0.0;
+  cfg.max_temperature_slope_um_per_c = s.max_slope_um_per_c;
   cfg.estimator_level_noise_um_per_h = s.level_noise_um_per_h;
   cfg.estimator_gate_sigmas = s.gate_sigmas;
   Calibrator c;
@@ -380,8 +390,17 @@ std::vector<Row> thermal_rows(const Thermal& d, const std::array<double, 5>& sta
         return std::array<double, 4>{dx, dx, interp(d.t_s, d.ch1, x) - zero[1],
                                      interp(d.t_s, d.ch5, x) - zero[2]};
       };
-      const TempFn temp = [&d, t_start](double t) {
-        return interp(d.t_s, d.t5, t_start + std::max(0.0, t));
+      std::vector<double> lagged;
+      if (s.speed_lag_s > 0.0) {
+        const double a = 1.0 - std::exp(-15.0 / s.speed_lag_s);  // the data's 15 s step
+        double y = 0.0;
+        for (const double rpm : d.rpm) {
+          y += a * (rpm / 1000.0 - y);
+          lagged.push_back(y);
+        }
+      }
+      const TempFn temp = [&d, &lagged, t_start](double t) {
+        return interp(d.t_s, lagged.empty() ? d.t5 : lagged, t_start + std::max(0.0, t));
       };
       res[k] = run_shift(s, drift, temp, 3600.0, 8.0, &carried);
     }
@@ -394,6 +413,52 @@ std::vector<Row> thermal_rows(const Thermal& d, const std::array<double, 5>& sta
     }
   }
   return rows;
+}
+
+// Which input drives the estimator's slope state: t5 with the slope bound of the config default
+// (20 um/degC) and of 5 um/degC, and a first-order lag of the spindle speed with several time
+// constants. Level noise 6 um/h, gate 5 sigma, the earlier shifts' mean drift as the prior.
+void input_table(const Thermal& d, const std::array<double, 5>& starts) {
+  std::printf(
+      "### Estimator: which input drives the slope state\n\n"
+      "Mean RMS over the five shifts / largest first-hour error [um]. Speed lag: the sensor is "
+      "a first-order lag of the spindle speed in krpm, computed by the bench from the data "
+      "set's speed (slope in um/krpm). Level noise 6 um/h, gate 5 sigma.\n\n"
+      "| input | slope bound | slope sigma | X | Y | Z |\n|---|---|---|---|---|---|\n");
+  std::vector<Strategy> variants;
+  for (const double lag : {0.0, 900.0, 1800.0, 3600.0, 5400.0}) {
+    for (const double bound : {20.0, 5.0}) {
+      if (lag > 0.0 && bound > 5.0) {
+        continue;  // the speed in krpm: the default bound would stop it at 2.5 krpm
+      }
+      for (const double sigma : {1.0, 5.0}) {
+        variants.push_back({"", true, nccomp::core::ProfileShape::kCosine, Prediction::kEstimator,
+                            true, 6.0, 5.0, sigma, bound, lag});
+      }
+    }
+  }
+  const std::vector<Row> rows = thermal_rows(d, starts, variants);
+  for (std::size_t i = 0; i < variants.size(); ++i) {
+    const auto& v = variants[i];
+    if (v.speed_lag_s > 0.0) {
+      std::printf("| speed lag %.0f min | %.0f | %.0f |", v.speed_lag_s / 60.0,
+                  v.max_slope_um_per_c, v.slope_sigma_um_per_c);
+    } else {
+      std::printf("| t5 | %.0f | %.0f |", v.max_slope_um_per_c, v.slope_sigma_um_per_c);
+    }
+    for (std::size_t a = 0; a < 3; ++a) {
+      const Row& r = rows[i * 3 + a];
+      double mean = 0.0;
+      double worst = 0.0;
+      for (const auto& st : r.shift) {
+        mean += st.rms_um / static_cast<double>(r.shift.size());
+        worst = std::max(worst, st.first_hour_max_um);
+      }
+      std::printf(" %.2f / %.2f |", mean, worst);
+    }
+    std::printf("\n");
+  }
+  std::printf("\n");
 }
 
 void thermal_tables(const std::string& path, bool json) {
@@ -509,6 +574,7 @@ void thermal_tables(const std::string& path, bool json) {
     std::printf("\n");
   }
   std::printf("\n");
+  input_table(d, starts);
 }
 
 }  // namespace
