@@ -499,6 +499,22 @@ std::vector<Row> thermal_rows(const Thermal& d, const std::array<double, 5>& sta
   return rows;
 }
 
+// The rest of a summary row: per axis of variant i, mean RMS over the shifts / largest
+// first-hour error.
+void print_summary(const std::vector<Row>& rows, std::size_t i) {
+  for (std::size_t a = 0; a < 3; ++a) {
+    const Row& r = rows[i * 3 + a];
+    double mean = 0.0;
+    double worst = 0.0;
+    for (const auto& st : r.shift) {
+      mean += st.rms_um / static_cast<double>(r.shift.size());
+      worst = std::max(worst, st.first_hour_max_um);
+    }
+    std::printf(" %.2f / %.2f |", mean, worst);
+  }
+  std::printf("\n");
+}
+
 // Which input drives the estimator's slope state: t5 with the slope bound of the config default
 // (20 um/degC) and of 5 um/degC, and a first-order lag of the spindle speed with several time
 // constants. Level noise 6 um/h, gate 5 sigma, the earlier shifts' mean drift as the prior.
@@ -530,17 +546,7 @@ void input_table(const Thermal& d, const std::array<double, 5>& starts) {
     } else {
       std::printf("| t5 | %.0f | %.0f |", v.max_slope_um_per_c, v.slope_sigma_um_per_c);
     }
-    for (std::size_t a = 0; a < 3; ++a) {
-      const Row& r = rows[i * 3 + a];
-      double mean = 0.0;
-      double worst = 0.0;
-      for (const auto& st : r.shift) {
-        mean += st.rms_um / static_cast<double>(r.shift.size());
-        worst = std::max(worst, st.first_hour_max_um);
-      }
-      std::printf(" %.2f / %.2f |", mean, worst);
-    }
-    std::printf("\n");
+    print_summary(rows, i);
   }
   std::printf("\n");
 }
@@ -655,17 +661,7 @@ void thermal_tables(const std::string& path, bool json) {
   for (std::size_t i = 0; i < variants.size(); ++i) {
     std::printf("| %s | %.0f | %s |", variants[i].temperature_slope ? "t5" : "-",
                 variants[i].level_noise_um_per_h, variants[i].gate_sigmas > 0.0 ? "5" : "off");
-    for (std::size_t a = 0; a < 3; ++a) {
-      const Row& r = sens[i * 3 + a];
-      double mean = 0.0;
-      double worst = 0.0;
-      for (const auto& st : r.shift) {
-        mean += st.rms_um / static_cast<double>(r.shift.size());
-        worst = std::max(worst, st.first_hour_max_um);
-      }
-      std::printf(" %.2f / %.2f |", mean, worst);
-    }
-    std::printf("\n");
+    print_summary(sens, i);
   }
   std::printf("\n");
   input_table(d, starts);
