@@ -434,8 +434,8 @@ void Calibrator::evaluate_nominals(double now_s, TimeNs now_ns, StepOutput& out)
   fold_shift(state_.shifts, config_.estimator_prior_forgetting);
   const bool with_prior = has_prior(state_.shifts);
   for (std::size_t s = 0; s < kSlotCount; ++s) {
-    // The temperature slope is a property of the machine: the one the last shift learned
-    // starts the next.
+    // The temperature slope is a property of the machine: a model's, or else the one the last
+    // shift learned, starts the next.
     const auto& last = state_.estimates[s];
     state_.estimates[s] = start_estimate(now_s, with_prior,
                                          start_slope(config_, s, last.valid == 1 ? last.x[2] : 0.0),
