@@ -201,7 +201,9 @@ def _figures(out_dir, sim_log):
 
 # The strategies of scenario_strategies: today's (prediction none / time / temperature) and the
 # drift estimator without and with ncsim's published spindle temperature (sensor 0). No earlier
-# shift: the estimator has no prior of its own here.
+# shift: the estimator has no earlier shift of its own here. The temperature rows bound the slope
+# at 10 um/degC: ncsim's X moves about 5 um per degC, and the default 20 would stop the
+# estimator's temperature term after 2.5 degC (plausibility_um / the bound).
 STRATEGIES = [
     ("creep", {"prediction": '"none"'}),
     ("creep + time model", {"prediction": '"time"'}),
@@ -209,8 +211,41 @@ STRATEGIES = [
     ("creep + estimator", {"prediction": '"estimator"'}),
     ("creep + estimator with temperature",
      {"prediction": '"estimator"', "temperature_sensor": "0",
-      "estimator_slope_sigma_um_per_c": "1.0"}),
+      "estimator_slope_sigma_um_per_c": "1.0", "max_temperature_slope_um_per_c": "10.0"}),
 ]
+# Last, the estimator with the temperature slopes fitted on the first run's measurement log as
+# its prior (an earlier shift of the same machine, never the shift scored).
+MODEL_LABEL = "creep + estimator, slopes of the first run as the prior"
+
+
+def _model_keys(run_dir):
+    """Per slot the least-squares slope (through 0) of the drift on the temperature change since
+    the nominals, from the calib records of a run's measurement log, and its standard error.
+    The log has points 0 (X), 1 (Y), 2 (Z): X axial takes X's."""
+    rows = []
+    with open(os.path.join(run_dir, "log", "measurements.csv")) as f:
+        lines = f.read().splitlines()
+    head = lines[0].split(",")
+    for line in lines[1:]:
+        v = dict(zip(head, line.split(",")))
+        if v.get("kind") == "calib":
+            rows.append((float(v["time_s"]), int(v["point"]), float(v["temp_c"]),
+                         float(v["measured_um"])))
+    t_nom = min(r[0] for r in rows)
+    temp_nom = [r[2] for r in rows if r[0] == t_nom][0]
+    slope, se = {}, {}
+    for point in (0, 1, 2):
+        xy = [(r[2] - temp_nom, r[3]) for r in rows if r[1] == point and r[0] > t_nom]
+        sxx = sum(x * x for x, _ in xy)
+        b = sum(x * y for x, y in xy) / sxx
+        res = sum((y - b * x) ** 2 for x, y in xy)
+        slope[point] = b
+        se[point] = math.sqrt(res / (len(xy) - 1) / sxx)
+    fmt = lambda d: "[%s]" % ", ".join("%.4f" % d[p] for p in (0, 0, 1, 2))
+    return {"prediction": '"estimator"', "temperature_sensor": "0",
+            "max_temperature_slope_um_per_c": "10.0",
+            "estimator_model_slope_um_per_c": fmt(slope),
+            "estimator_model_slope_sigma_um_per_c": fmt(se)}
 
 
 def scenario_strategies(e2e, b, source, work):
@@ -218,7 +253,11 @@ def scenario_strategies(e2e, b, source, work):
     recalibrated without an alarm."""
     c = e2e.Check("calib_strategies")
     results = []
-    for label, keys in STRATEGIES:
+    model = None
+    for label, keys in STRATEGIES + [(MODEL_LABEL, None)]:
+        if keys is None:
+            keys = _model_keys(model)
+            print("%s: %s" % (MODEL_LABEL, keys))
         name = "calib_strategy_" + re.sub(r"[^a-z]+", "_", label)
         run_dir, out_dir, sim_rc, daemon_rc, sim_log, daemon_log, _, wall_s = run(
             e2e, b, source, work, name, keys)
@@ -232,6 +271,7 @@ def scenario_strategies(e2e, b, source, work):
                   if mm.group(1) == "alarm"]
         c.that(not alarms, "%s: no alarm in the daemon's log %s" % (label, alarms))
         results.append((label, figures, wall_s))
+        model = model or run_dir
     print("| strategy | X RMS / max | Y RMS / max | Z RMS / max |")
     print("|---|---|---|---|")
     for label, f, wall_s in results:
