@@ -311,6 +311,7 @@ def scenario(e2e, b, source, work):
     c.that("recalibration requested" in text, "the on-demand recalibration was taken")
     t_warm, writes, figures = _figures(out_dir, sim_log)
     c.that(t_warm is not None, "ncsim logged the warm-up start")
+    t_warm = t_warm or 0.0
     for a in ("x", "y", "z"):
         print("axis %s over the 2 h warm-up: calibration only RMS %.2f max %.2f um; with "
               "recalibration RMS %.2f max %.2f um" % ((a.upper(),) + figures[a]))
