@@ -120,9 +120,24 @@ struct Strategy {
   bool temperature_slope{false};  // estimator: also the t5 temperature slope
   double level_noise_um_per_h{6.0};
   double gate_sigmas{5.0};
+  double slope_sigma_um_per_c{1.0};
+  // Bound of the slope; with plausibility_um it bounds the temperature step the estimator
+  // takes (calibrator.cpp, temperature_delta).
+  double max_slope_um_per_c{20.0};
+  // > 0: the sensor is a first-order lag of the spindle speed [krpm] with this time constant
+  // [s], computed here from the data set's speed (what a speed-driven state would see).
+  double speed_lag_s{0.0};
+  // The prior of each shift's slope: a model fitted on the earlier shifts only (model_prior()).
+  bool model_prior{false};
 };
 
-const std::array<Strategy, 7> kStrategies{{
+// A model's slopes per slot and their sigma (CalibrationConfig::estimator_model_slope_*).
+struct ModelPrior {
+  std::array<double, 4> slope_um_per_c{};
+  std::array<double, 4> sigma_um_per_c{};
+};
+
+const std::array<Strategy, 9> kStrategies{{
     {"none", false, nccomp::core::ProfileShape::kStep, Prediction::kNone},
     {"hourly, step", true, nccomp::core::ProfileShape::kStep, Prediction::kNone},
     {"hourly, creep", true, nccomp::core::ProfileShape::kCosine, Prediction::kNone},
@@ -133,6 +148,11 @@ const std::array<Strategy, 7> kStrategies{{
      Prediction::kEstimator},
     {"hourly, creep + estimator with temperature", true, nccomp::core::ProfileShape::kCosine,
      Prediction::kEstimator, true},
+    {"hourly, creep + estimator with temperature, slope bound 5 um/degC", true,
+     nccomp::core::ProfileShape::kCosine, Prediction::kEstimator, true, 6.0, 5.0, 1.0, 5.0},
+    {"hourly, creep + estimator with the earlier shifts' t5 model", true,
+     nccomp::core::ProfileShape::kCosine, Prediction::kEstimator, true, 6.0, 5.0, 1.0, 5.0, 0.0,
+     true},
 }};
 
 struct AxisStats {
@@ -151,7 +171,8 @@ using TempFn = std::function<double(double t_s)>;
 // (CalibState::shifts) outlives the new calibration at the shift start.
 std::array<AxisStats, 3> run_shift(const Strategy& s, const DriftFn& drift, const TempFn& temp,
                                    double tau_s, double hours,
-                                   nccomp::core::calib::CalibState* carried = nullptr) {
+                                   nccomp::core::calib::CalibState* carried = nullptr,
+                                   const ModelPrior* model = nullptr) {
   auto cfg = nccomp::test::calib::test_config();
   cfg.touches_per_axis = 1;
   cfg.creep_shape = s.shape;
@@ -166,7 +187,12 @@ std::array<AxisStats, 3> run_shift(const Strategy& s, const DriftFn& drift, cons
   cfg.estimator_touch_noise_um = 0.7;
   cfg.estimator_prior_gain_sigma = 0.5;
   cfg.estimator_prior_forgetting = 0.8;
-  cfg.estimator_slope_sigma_um_per_c = s.temperature_slope ? 1.0 : 0.0;
+  cfg.estimator_slope_sigma_um_per_c = s.temperature_slope ? s.slope_sigma_um_per_c : 0.0;
+  cfg.max_temperature_slope_um_per_c = s.max_slope_um_per_c;
+  if (model != nullptr) {
+    cfg.estimator_model_slope_um_per_c = model->slope_um_per_c;
+    cfg.estimator_model_slope_sigma_um_per_c = model->sigma_um_per_c;
+  }
   cfg.estimator_level_noise_um_per_h = s.level_noise_um_per_h;
   cfg.estimator_gate_sigmas = s.gate_sigmas;
   Calibrator c;
@@ -353,6 +379,61 @@ double interp(const std::vector<double>& t, const std::vector<double>& y, double
   return y[i - 1] + f * (y[i] - y[i - 1]);
 }
 
+// What nccomp analyze's thermal_drift term would give from the shifts before shift k: per axis
+// the least-squares slope of the drift on the temperature (both relative to the shift start,
+// every 15 s sample of shifts 0..k-1), clamped to the slope bound. Its sigma: the samples of
+// a shift are serially correlated, so the shifts are the independent units: the standard
+// deviation of the per-shift slopes times sqrt(1 + 1/n) (the spread of a new shift's slope);
+// with one earlier shift there is no spread and the configured sigma stays. Nothing of shift k
+// itself enters.
+ModelPrior model_prior(const Thermal& d, const std::array<double, 5>& starts, std::size_t k,
+                       double fallback_sigma, double bound) {
+  ModelPrior m;
+  const std::array<const std::vector<double>*, 3> ch{&d.ch3, &d.ch1, &d.ch5};
+  for (std::size_t a = 0; a < 3; ++a) {
+    double sxy = 0.0;
+    double sxx = 0.0;
+    std::vector<double> per_shift;
+    for (std::size_t j = 0; j < k; ++j) {
+      const auto i0 = static_cast<std::size_t>(
+          std::lower_bound(d.t_s.begin(), d.t_s.end(), starts[j] * 3600.0) - d.t_s.begin());
+      double jxy = 0.0;
+      double jxx = 0.0;
+      for (std::size_t i = i0; i < d.t_s.size() && d.t_s[i] < (starts[j] + 8.0) * 3600.0; ++i) {
+        const double x = d.t5[i] - d.t5[i0];
+        const double y = (*ch[a])[i] - (*ch[a])[i0];
+        jxy += x * y;
+        jxx += x * x;
+      }
+      sxy += jxy;
+      sxx += jxx;
+      per_shift.push_back(jxy / jxx);
+    }
+    const double b = std::clamp(sxy / sxx, -bound, bound);
+    double sigma = fallback_sigma;
+    if (per_shift.size() >= 2) {
+      const double n = static_cast<double>(per_shift.size());
+      double mean = 0.0;
+      for (const double v : per_shift) {
+        mean += v / n;
+      }
+      double ss = 0.0;
+      for (const double v : per_shift) {
+        ss += (v - mean) * (v - mean);
+      }
+      sigma = std::sqrt(ss / (n - 1.0)) * std::sqrt(1.0 + 1.0 / n);
+    }
+    const std::array<std::size_t, 3> first_slot{0, 2, 3};
+    m.slope_um_per_c[first_slot[a]] = b;
+    m.sigma_um_per_c[first_slot[a]] = sigma;
+    if (a == 0) {  // X axial: the same gauge as X lateral in this replay
+      m.slope_um_per_c[1] = b;
+      m.sigma_um_per_c[1] = sigma;
+    }
+  }
+  return m;
+}
+
 struct Row {
   const char* strategy;
   std::size_t axis;
@@ -360,6 +441,13 @@ struct Row {
 };
 
 constexpr std::array<const char*, 3> kAxisNames{"X (ch3)", "Y (ch1)", "Z (ch5)"};
+
+struct ModelLog {
+  const char* strategy;
+  std::size_t shift;
+  ModelPrior prior;
+};
+std::vector<ModelLog> model_log;  // the priors the model rows used, printed below them
 
 std::vector<Row> thermal_rows(const Thermal& d, const std::array<double, 5>& starts,
                               std::span<const Strategy> strategies) {
@@ -380,10 +468,25 @@ std::vector<Row> thermal_rows(const Thermal& d, const std::array<double, 5>& sta
         return std::array<double, 4>{dx, dx, interp(d.t_s, d.ch1, x) - zero[1],
                                      interp(d.t_s, d.ch5, x) - zero[2]};
       };
-      const TempFn temp = [&d, t_start](double t) {
-        return interp(d.t_s, d.t5, t_start + std::max(0.0, t));
+      std::vector<double> lagged;
+      if (s.speed_lag_s > 0.0) {
+        const double a = 1.0 - std::exp(-15.0 / s.speed_lag_s);  // the data's 15 s step
+        double y = 0.0;
+        for (const double rpm : d.rpm) {
+          y += a * (rpm / 1000.0 - y);
+          lagged.push_back(y);
+        }
+      }
+      const TempFn temp = [&d, &lagged, t_start](double t) {
+        return interp(d.t_s, lagged.empty() ? d.t5 : lagged, t_start + std::max(0.0, t));
       };
-      res[k] = run_shift(s, drift, temp, 3600.0, 8.0, &carried);
+      ModelPrior prior;
+      const bool with_model = s.model_prior && k > 0;
+      if (with_model) {
+        prior = model_prior(d, starts, k, s.slope_sigma_um_per_c, s.max_slope_um_per_c);
+        model_log.push_back({s.name, k, prior});
+      }
+      res[k] = run_shift(s, drift, temp, 3600.0, 8.0, &carried, with_model ? &prior : nullptr);
     }
     for (std::size_t a = 0; a < 3; ++a) {
       Row r{s.name, a, {}};
@@ -394,6 +497,58 @@ std::vector<Row> thermal_rows(const Thermal& d, const std::array<double, 5>& sta
     }
   }
   return rows;
+}
+
+// The rest of a summary row: per axis of variant i, mean RMS over the shifts / largest
+// first-hour error.
+void print_summary(const std::vector<Row>& rows, std::size_t i) {
+  for (std::size_t a = 0; a < 3; ++a) {
+    const Row& r = rows[i * 3 + a];
+    double mean = 0.0;
+    double worst = 0.0;
+    for (const auto& st : r.shift) {
+      mean += st.rms_um / static_cast<double>(r.shift.size());
+      worst = std::max(worst, st.first_hour_max_um);
+    }
+    std::printf(" %.2f / %.2f |", mean, worst);
+  }
+  std::printf("\n");
+}
+
+// Which input drives the estimator's slope state: t5 with the slope bound of the config default
+// (20 um/degC) and of 5 um/degC, and a first-order lag of the spindle speed with several time
+// constants. Level noise 6 um/h, gate 5 sigma, the earlier shifts' mean drift as the prior.
+void input_table(const Thermal& d, const std::array<double, 5>& starts) {
+  std::printf(
+      "### Estimator: which input drives the slope state\n\n"
+      "Mean RMS over the five shifts / largest first-hour error [um]. Speed lag: the sensor is "
+      "a first-order lag of the spindle speed in krpm, computed by the bench from the data "
+      "set's speed (slope in um/krpm). Level noise 6 um/h, gate 5 sigma.\n\n"
+      "| input | slope bound | slope sigma | X | Y | Z |\n|---|---|---|---|---|---|\n");
+  std::vector<Strategy> variants;
+  for (const double lag : {0.0, 900.0, 1800.0, 3600.0, 5400.0}) {
+    for (const double bound : {20.0, 5.0}) {
+      if (lag > 0.0 && bound > 5.0) {
+        continue;  // the speed in krpm: the default bound would stop it at 2.5 krpm
+      }
+      for (const double sigma : {1.0, 5.0}) {
+        variants.push_back({"", true, nccomp::core::ProfileShape::kCosine, Prediction::kEstimator,
+                            true, 6.0, 5.0, sigma, bound, lag});
+      }
+    }
+  }
+  const std::vector<Row> rows = thermal_rows(d, starts, variants);
+  for (std::size_t i = 0; i < variants.size(); ++i) {
+    const auto& v = variants[i];
+    if (v.speed_lag_s > 0.0) {
+      std::printf("| speed lag %.0f min | %.0f | %.0f |", v.speed_lag_s / 60.0,
+                  v.max_slope_um_per_c, v.slope_sigma_um_per_c);
+    } else {
+      std::printf("| t5 | %.0f | %.0f |", v.max_slope_um_per_c, v.slope_sigma_um_per_c);
+    }
+    print_summary(rows, i);
+  }
+  std::printf("\n");
 }
 
 void thermal_tables(const std::string& path, bool json) {
@@ -478,6 +633,16 @@ void thermal_tables(const std::string& path, bool json) {
     std::printf(" %.2f |\n", worst);
   }
   std::printf(
+      "\n### The model rows' prior: slope on t5 [um/degC] +- sigma, fitted on the shifts before\n"
+      "\n| shift | X | Y | Z |\n|---|---|---|---|\n");
+  for (const auto& m : model_log) {
+    std::printf("| %.0f-%.0f h |", starts[m.shift], starts[m.shift] + 8.0);
+    for (const std::size_t slot : {0U, 2U, 3U}) {
+      std::printf(" %+.2f +- %.2f |", m.prior.slope_um_per_c[slot], m.prior.sigma_um_per_c[slot]);
+    }
+    std::printf("\n");
+  }
+  std::printf(
       "\n### Estimator: sensitivity to the level noise and the gate\n\n"
       "The rows above use estimator_level_noise_um_per_h = 6, estimator_gate_sigmas = 5. "
       "Mean RMS over the five shifts / largest first-hour error [um].\n\n"
@@ -496,19 +661,10 @@ void thermal_tables(const std::string& path, bool json) {
   for (std::size_t i = 0; i < variants.size(); ++i) {
     std::printf("| %s | %.0f | %s |", variants[i].temperature_slope ? "t5" : "-",
                 variants[i].level_noise_um_per_h, variants[i].gate_sigmas > 0.0 ? "5" : "off");
-    for (std::size_t a = 0; a < 3; ++a) {
-      const Row& r = sens[i * 3 + a];
-      double mean = 0.0;
-      double worst = 0.0;
-      for (const auto& st : r.shift) {
-        mean += st.rms_um / static_cast<double>(r.shift.size());
-        worst = std::max(worst, st.first_hour_max_um);
-      }
-      std::printf(" %.2f / %.2f |", mean, worst);
-    }
-    std::printf("\n");
+    print_summary(sens, i);
   }
   std::printf("\n");
+  input_table(d, starts);
 }
 
 }  // namespace

@@ -30,9 +30,25 @@ constexpr double kMinTemperatureVariance = 0.01;
 // is then amplified at most 5 times.
 constexpr double kMinAsymptoteSpread = 0.2;
 
-EstimatorParams estimator_params(const CalibrationConfig& c) noexcept {
+static_assert(std::tuple_size_v<decltype(CalibrationConfig::estimator_model_slope_um_per_c)> ==
+              kSlotCount);
+
+EstimatorParams estimator_params(const CalibrationConfig& c, std::size_t slot) noexcept {
+  const double model_sigma = c.estimator_model_slope_sigma_um_per_c[slot];
   return {c.estimator_touch_noise_um, c.estimator_level_noise_um_per_h,
-          c.estimator_prior_gain_sigma, c.estimator_slope_sigma_um_per_c, c.estimator_gate_sigmas};
+          c.estimator_prior_gain_sigma,
+          std::isnan(model_sigma) ? c.estimator_slope_sigma_um_per_c : model_sigma,
+          c.estimator_gate_sigmas};
+}
+
+/// The slope a new shift's estimate starts at: the model's where set, else `learned` when the
+/// temperature is used, else 0.
+double start_slope(const CalibrationConfig& c, std::size_t slot, double learned) noexcept {
+  const double model = c.estimator_model_slope_um_per_c[slot];
+  if (!std::isnan(model)) {
+    return model;
+  }
+  return c.estimator_slope_sigma_um_per_c > 0.0 ? learned : 0.0;
 }
 
 }  // namespace
@@ -418,11 +434,12 @@ void Calibrator::evaluate_nominals(double now_s, TimeNs now_ns, StepOutput& out)
   fold_shift(state_.shifts, config_.estimator_prior_forgetting);
   const bool with_prior = has_prior(state_.shifts);
   for (std::size_t s = 0; s < kSlotCount; ++s) {
-    // The temperature slope is a property of the machine: the one the last shift learned
-    // starts the next.
+    // The temperature slope is a property of the machine: a model's, or else the one the last
+    // shift learned, starts the next.
     const auto& last = state_.estimates[s];
-    state_.estimates[s] = start_estimate(now_s, with_prior, last.valid == 1 ? last.x[2] : 0.0,
-                                         estimator_params(config_));
+    state_.estimates[s] = start_estimate(now_s, with_prior,
+                                         start_slope(config_, s, last.valid == 1 ? last.x[2] : 0.0),
+                                         estimator_params(config_, s));
     auto& n = state_.nominals[s];
     n.valid = 1;
     n.direction = set_.direction[s];
@@ -471,11 +488,12 @@ void Calibrator::evaluate_recalibration(double now_s, TimeNs now_ns, StepOutput&
   }
   std::array<DriftEstimate, kSlotCount> estimates = state_.estimates;
   if (plausible && config_.prediction == Prediction::kEstimator) {
-    const EstimatorParams p = estimator_params(config_);
     for (std::size_t s = 0; s < kSlotCount; ++s) {
+      const EstimatorParams p = estimator_params(config_, s);
       auto& e = estimates[s];
       if (e.valid != 1) {  // switched to the estimator after the nominals
-        e = start_estimate(state_.nominals[s].time_s, has_prior(state_.shifts), 0.0, p);
+        e = start_estimate(state_.nominals[s].time_s, has_prior(state_.shifts),
+                           start_slope(config_, s, 0.0), p);
       }
       const double prior = prior_drift_um(state_.shifts, s, now_s - state_.nominals[s].time_s);
       const auto r = update_estimate(e, prior, temperature_delta(s), now_s, drift[s], p);
@@ -609,7 +627,9 @@ double Calibrator::predict(std::size_t slot, double t_s) const noexcept {
 
 double Calibrator::temperature_delta(std::size_t slot) const noexcept {
   const double d = temp_c_ - state_.nominals[slot].temp_c;
-  if (!(config_.estimator_slope_sigma_um_per_c > 0.0) || !std::isfinite(d)) {
+  const bool used = config_.estimator_slope_sigma_um_per_c > 0.0 ||
+                    !std::isnan(config_.estimator_model_slope_um_per_c[slot]);
+  if (!used || !std::isfinite(d)) {
     return 0.0;
   }
   // Bounded like the temperature model: a broken sensor cannot move the axis by more than a
@@ -625,7 +645,7 @@ EstimatedDrift Calibrator::estimate(std::size_t slot, double t_s) const noexcept
   }
   const double prior = prior_drift_um(state_.shifts, slot, t_s - state_.nominals[slot].time_s);
   return predict_estimate(e, prior, temperature_delta(slot), std::max(t_s, e.time_s),
-                          estimator_params(config_));
+                          estimator_params(config_, slot));
 }
 
 EstimatedDrift Calibrator::estimated_drift(Slot slot, TimeNs now_ns) const noexcept {

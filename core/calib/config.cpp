@@ -95,6 +95,26 @@ void validate(const CalibrationConfig& c) {
     k.fail("temperature_sensor", "estimator_slope_sigma_um_per_c > 0 needs a mapped sensor",
            c.temperature_sensor);
   }
+  bool model_slope = false;
+  for (std::size_t i = 0; i < c.estimator_model_slope_um_per_c.size(); ++i) {
+    const double m = c.estimator_model_slope_um_per_c[i];
+    const double sd = c.estimator_model_slope_sigma_um_per_c[i];
+    if (std::isnan(m) != std::isnan(sd)) {
+      k.fail("estimator_model_slope_sigma_um_per_c",
+             "set for exactly the slots that have estimator_model_slope_um_per_c", sd);
+    } else if (!std::isnan(m)) {
+      model_slope = true;
+      if (!std::isfinite(m) || std::fabs(m) > c.max_temperature_slope_um_per_c) {
+        k.fail("estimator_model_slope_um_per_c", "must be within ± max_temperature_slope_um_per_c",
+               m);
+      }
+      k.non_negative(sd, "estimator_model_slope_sigma_um_per_c");
+    }
+  }
+  if (c.prediction == Prediction::kEstimator && model_slope && c.temperature_sensor < 0) {
+    k.fail("temperature_sensor", "estimator_model_slope_um_per_c needs a mapped sensor",
+           c.temperature_sensor);
+  }
   k.non_negative(c.estimator_gate_sigmas, "estimator_gate_sigmas");
   k.positive(c.write_period_s, "write_period_s");
   k.non_negative(c.write_deadband_um, "write_deadband_um");

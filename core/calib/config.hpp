@@ -4,7 +4,9 @@
 // each offending key by its TOML path ("calibration.blank_radius_mm") in a core::ConfigIssue.
 #pragma once
 
+#include <array>
 #include <cstdint>
+#include <limits>
 #include <string>
 
 #include "core/common/profile.hpp"
@@ -123,6 +125,17 @@ struct CalibrationConfig {
   double estimator_prior_forgetting{0.8};
   /// Prior standard deviation of the temperature slope [µm/°C]; 0 = temperature not used.
   double estimator_slope_sigma_um_per_c{0.0};
+  /// Per slot (X lateral, X axial, Y, Z): the temperature slope of a model fitted on earlier
+  /// shifts (nccomp analyze's thermal_drift coefficient) [µm/°C] and its standard deviation
+  /// (the 95 % interval's half-width / 1.96). Where set, every new shift's estimate starts
+  /// there instead of at the slope the shift before learned, with this σ instead of
+  /// estimator_slope_sigma_um_per_c (σ 0: the slope stays the model's). NaN = not set.
+  std::array<double, 4> estimator_model_slope_um_per_c{
+      std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::quiet_NaN(),
+      std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::quiet_NaN()};
+  std::array<double, 4> estimator_model_slope_sigma_um_per_c{
+      std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::quiet_NaN(),
+      std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::quiet_NaN()};
   /// A touch set beyond this many σ of the estimate's prediction changes nothing (alarm
   /// 'implausible'); 0 = no gate.
   double estimator_gate_sigmas{5.0};

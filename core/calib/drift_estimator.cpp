@@ -100,8 +100,7 @@ DriftEstimate start_estimate(double t_s, bool with_prior, double slope_um_per_c,
   DriftEstimate e;
   e.valid = 1;
   e.time_s = t_s;
-  const bool slope = p.slope_sigma_um_per_c > 0.0 && std::isfinite(slope_um_per_c);
-  e.x = {0.0, with_prior ? 1.0 : 0.0, slope ? slope_um_per_c : 0.0};
+  e.x = {0.0, with_prior ? 1.0 : 0.0, std::isfinite(slope_um_per_c) ? slope_um_per_c : 0.0};
   e.p = {};
   const double g = with_prior ? p.prior_gain_sigma : 0.0;
   constexpr std::size_t kDiag = kEstimatorStates + 1;  // row-major stride of the diagonal

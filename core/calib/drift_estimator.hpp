@@ -37,8 +37,8 @@ void add_shift_point(ShiftHistory& h, double since_s,
 void fold_shift(ShiftHistory& h, double forgetting) noexcept;
 
 /// The estimate at the nominals (time t_s): level 0 ± touch noise, gain 1 ± prior_gain_sigma
-/// when earlier shifts exist (else 0 ± 0), slope slope_um_per_c (what the shift before learned,
-/// 0 for none) ± slope_sigma_um_per_c. Real-time safe.
+/// when earlier shifts exist (else 0 ± 0), slope slope_um_per_c (a model's, what the shift before
+/// learned, or 0 for none; NaN = 0) ± slope_sigma_um_per_c. Real-time safe.
 DriftEstimate start_estimate(double t_s, bool with_prior, double slope_um_per_c,
                              const EstimatorParams& p) noexcept;
 

@@ -1,6 +1,8 @@
 #include "formats/calib/config_toml.hpp"
 
+#include <algorithm>
 #include <cstdint>
+#include <vector>
 
 #include "core/common/config_issue.hpp"
 #include "formats/toml/guard.hpp"
@@ -109,6 +111,17 @@ CalibrationConfig parse_calibration(const toml::node& calibration, Diagnostics& 
         r.number("estimator_prior_forgetting", c.estimator_prior_forgetting);
     c.estimator_slope_sigma_um_per_c =
         r.number("estimator_slope_sigma_um_per_c", c.estimator_slope_sigma_um_per_c);
+    // Per slot X lateral, X axial, Y, Z: all four or none.
+    const auto slots = [&](const char* key, double min, auto& out) {
+      const std::vector<double> v = r.number_list(key, min, 1e6);
+      if (v.size() == out.size()) {
+        std::copy(v.begin(), v.end(), out.begin());
+      } else if (r.node().get(key) != nullptr) {
+        r.error(key, "must have 4 values (X lateral, X axial, Y, Z)");
+      }
+    };
+    slots("estimator_model_slope_um_per_c", -1e6, c.estimator_model_slope_um_per_c);
+    slots("estimator_model_slope_sigma_um_per_c", 0.0, c.estimator_model_slope_sigma_um_per_c);
     c.estimator_gate_sigmas = r.number("estimator_gate_sigmas", c.estimator_gate_sigmas);
     c.write_period_s = r.number("write_period_s", c.write_period_s);
     c.write_deadband_um = r.number("write_deadband_um", c.write_deadband_um);

@@ -71,8 +71,25 @@ def _held(writes, register, t_s):
     return v
 
 
-def run(e2e, b, source, work):
-    name = "calib_touch"
+def _set_calibration(path, keys):
+    """Sets keys of the staged config's [calibration] table: replaces a key's line, or adds it
+    right after the table's header."""
+    with open(path) as f:
+        text = f.read()
+    for k, v in keys.items():
+        text, n = re.subn(r"(^\[calibration\]\s*$(?:(?!^\[).)*?^%s\s*=\s*)[^\n]*" % re.escape(k),
+                          lambda m: m.group(1) + v, text, count=1, flags=re.M | re.S)
+        if n == 0:
+            text, n = re.subn(r"^\[calibration\]\s*$", "[calibration]\n%s = %s" % (k, v), text,
+                              count=1, flags=re.M)
+        if n != 1:
+            raise RuntimeError("%s: cannot set calibration.%s" % (path, k))
+    with open(path, "w") as f:
+        f.write(text)
+
+
+def run(e2e, b, source, work, name="calib_touch", calibration=None):
+    """One shift; calibration: {key: TOML value} set in the daemon's [calibration]."""
     run_dir = os.path.join(work, name)
     shutil.rmtree(run_dir, ignore_errors=True)
     os.makedirs(run_dir)
@@ -89,6 +106,7 @@ def run(e2e, b, source, work):
     }
     daemon_path, ncsim_path = e2e.stage_configs(source, run_dir, "nccompd-touch.toml",
                                                 "ncsim-touch.toml", port, overrides)
+    _set_calibration(daemon_path, calibration or {})
     map_path = os.path.join(run_dir, "map.toml")
     with open(map_path) as f:
         text = f.read()
@@ -151,6 +169,119 @@ def run(e2e, b, source, work):
     return run_dir, out_dir, sim_rc, daemon_rc, sim.log(), daemon.log(), transcript, wall_s
 
 
+def _figures(out_dir, sim_log):
+    """(warm-up start, ncsim's writes, per axis (RMS, max) of the error with the calibration
+    only, then (RMS, max) with what the NC held) over the shift."""
+    mw = re.search(r"warm-up from ([0-9.]+) s", sim_log)
+    t_warm = float(mw.group(1)) if mw else None
+    writes = []
+    with open(os.path.join(out_dir, "writes.csv")) as f:
+        for line in f.read().splitlines()[1:]:
+            if line:
+                t, r, v, eff = line.split(",")
+                writes.append((float(t), int(r), float(v), float(eff)))
+    t0 = t_warm or 0.0
+    # Axis error = static + warm-up + offset held (ncsim: the tool sits at E + o).
+    held0 = {a: _held(writes, REG[a], t0) for a in ("x", "y", "z")}
+    figures = {}
+    for a in ("x", "y", "z"):
+        err_rec, err_none = [], []
+        t = t0
+        while t <= t0 + SHIFT_S:
+            th = GAIN_UM[a] * (1.0 - math.exp(-(t - t0) / TAU_S))
+            e = STATIC_UM[a] + th
+            err_rec.append(e + _held(writes, REG[a], t))
+            err_none.append(e + held0[a])
+            t += 10.0
+        rms = lambda v: math.sqrt(sum(x * x for x in v) / len(v))
+        figures[a] = (rms(err_none), max(abs(x) for x in err_none), rms(err_rec),
+                      max(abs(x) for x in err_rec))
+    return t_warm, writes, figures
+
+
+# The strategies of scenario_strategies: today's (prediction none / time / temperature) and the
+# drift estimator without and with ncsim's published spindle temperature (sensor 0). No earlier
+# shift: the estimator has no earlier shift of its own here. The temperature rows bound the slope
+# at 10 um/degC: ncsim's X moves about 5 um per degC, and the default 20 would stop the
+# estimator's temperature term after 2.5 degC (plausibility_um / the bound).
+STRATEGIES = [
+    ("creep", {"prediction": '"none"'}),
+    ("creep + time model", {"prediction": '"time"'}),
+    ("creep + temperature model", {"prediction": '"temperature"', "temperature_sensor": "0"}),
+    ("creep + estimator", {"prediction": '"estimator"'}),
+    ("creep + estimator with temperature",
+     {"prediction": '"estimator"', "temperature_sensor": "0",
+      "estimator_slope_sigma_um_per_c": "1.0", "max_temperature_slope_um_per_c": "10.0"}),
+]
+# Last, the estimator with the temperature slopes fitted on the first run's measurement log as
+# its prior (an earlier shift of the same machine, never the shift scored).
+MODEL_LABEL = "creep + estimator, slopes of the first run as the prior"
+
+
+def _model_keys(run_dir):
+    """Per slot the least-squares slope (through 0) of the drift on the temperature change since
+    the nominals, from the calib records of a run's measurement log, and its standard error.
+    The log has points 0 (X), 1 (Y), 2 (Z): X axial takes X's."""
+    rows = []
+    with open(os.path.join(run_dir, "log", "measurements.csv")) as f:
+        lines = f.read().splitlines()
+    head = lines[0].split(",")
+    for line in lines[1:]:
+        v = dict(zip(head, line.split(",")))
+        if v.get("kind") == "calib":
+            rows.append((float(v["time_s"]), int(v["point"]), float(v["temp_c"]),
+                         float(v["measured_um"])))
+    t_nom = min(r[0] for r in rows)
+    temp_nom = [r[2] for r in rows if r[0] == t_nom][0]
+    slope, se = {}, {}
+    for point in (0, 1, 2):
+        xy = [(r[2] - temp_nom, r[3]) for r in rows if r[1] == point and r[0] > t_nom]
+        sxx = sum(x * x for x, _ in xy)
+        b = sum(x * y for x, y in xy) / sxx
+        res = sum((y - b * x) ** 2 for x, y in xy)
+        slope[point] = b
+        se[point] = math.sqrt(res / (len(xy) - 1) / sxx)
+    fmt = lambda d: "[%s]" % ", ".join("%.4f" % d[p] for p in (0, 0, 1, 2))
+    return {"prediction": '"estimator"', "temperature_sensor": "0",
+            "max_temperature_slope_um_per_c": "10.0",
+            "estimator_model_slope_um_per_c": fmt(slope),
+            "estimator_model_slope_sigma_um_per_c": fmt(se)}
+
+
+def scenario_strategies(e2e, b, source, work):
+    """The same shift once per strategy; prints the axis error of each and checks that every run
+    recalibrated without an alarm."""
+    c = e2e.Check("calib_strategies")
+    results = []
+    model = None
+    for label, keys in STRATEGIES + [(MODEL_LABEL, None)]:
+        if keys is None:
+            keys = _model_keys(model)
+            print("%s: %s" % (MODEL_LABEL, keys))
+        name = "calib_strategy_" + re.sub(r"[^a-z]+", "_", label)
+        run_dir, out_dir, sim_rc, daemon_rc, sim_log, daemon_log, _, wall_s = run(
+            e2e, b, source, work, name, keys)
+        c.that(sim_rc == 0 and daemon_rc == 0, "%s: ncsim %s, nccompd %s" % (label, sim_rc,
+                                                                           daemon_rc))
+        t_warm, _, figures = _figures(out_dir, sim_log)
+        c.that(t_warm is not None, "%s: ncsim logged the warm-up start" % label)
+        applied = len(re.findall(r"recalibration_applied \(code 47\) subject 0", daemon_log))
+        c.that(applied >= 7, "%s: %d recalibrations applied" % (label, applied))
+        alarms = [mm.group(2) for mm in e2e.ALARM_LINE.finditer(daemon_log)
+                  if mm.group(1) == "alarm"]
+        c.that(not alarms, "%s: no alarm in the daemon's log %s" % (label, alarms))
+        results.append((label, figures, wall_s))
+        model = model or run_dir
+    print("| strategy | X RMS / max | Y RMS / max | Z RMS / max |")
+    print("|---|---|---|---|")
+    for label, f, wall_s in results:
+        print("| %s | %s |" % (label, " | ".join("%.2f / %.2f um" % (f[a][2], f[a][3])
+                                                for a in ("x", "y", "z"))))
+    print("calibration only: %s" % ", ".join("%s %.2f / %.2f um" % (a.upper(), f[a][0], f[a][1])
+                                             for a in ("x", "y", "z") for f in [results[0][1]]))
+    c.done()
+
+
 def scenario(e2e, b, source, work):
     run_dir, out_dir, sim_rc, daemon_rc, sim_log, daemon_log, transcript, wall_s = run(
         e2e, b, source, work)
@@ -178,30 +309,10 @@ def scenario(e2e, b, source, work):
         c.that(abs(pl + 4.0) < 0.7, "probe lateral %+.3f um = -pretravel (4 um)" % pl)
         c.that(max(grinds) <= 3, "test grinds %d + %d (exact rule: 1-3)" % grinds)
     c.that("recalibration requested" in text, "the on-demand recalibration was taken")
-    mw = re.search(r"warm-up from ([0-9.]+) s", sim_log)
-    c.that(mw is not None, "ncsim logged the warm-up start")
-    t_warm = float(mw.group(1)) if mw else 0.0
-    writes = []
-    with open(os.path.join(out_dir, "writes.csv")) as f:
-        for line in f.read().splitlines()[1:]:
-            if line:
-                t, r, v, eff = line.split(",")
-                writes.append((float(t), int(r), float(v), float(eff)))
-    # Axis error = static + warm-up + offset held (ncsim: the tool sits at E + o).
-    held0 = {a: _held(writes, REG[a], t_warm) for a in ("x", "y", "z")}
-    figures = {}
+    t_warm, writes, figures = _figures(out_dir, sim_log)
+    c.that(t_warm is not None, "ncsim logged the warm-up start")
+    t_warm = t_warm or 0.0
     for a in ("x", "y", "z"):
-        err_rec, err_none = [], []
-        t = t_warm
-        while t <= t_warm + SHIFT_S:
-            th = GAIN_UM[a] * (1.0 - math.exp(-(t - t_warm) / TAU_S))
-            e = STATIC_UM[a] + th
-            err_rec.append(e + _held(writes, REG[a], t))
-            err_none.append(e + held0[a])
-            t += 10.0
-        rms = lambda v: math.sqrt(sum(x * x for x in v) / len(v))
-        figures[a] = (rms(err_none), max(abs(x) for x in err_none), rms(err_rec),
-                      max(abs(x) for x in err_rec))
         print("axis %s over the 2 h warm-up: calibration only RMS %.2f max %.2f um; with "
               "recalibration RMS %.2f max %.2f um" % ((a.upper(),) + figures[a]))
     c.that(figures["x"][2] < 0.25 * figures["x"][0],

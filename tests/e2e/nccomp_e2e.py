@@ -1462,6 +1462,12 @@ def scenario_calib_touch(b, source, work):
     calib_e2e.scenario(sys.modules[__name__], b, source, work)
 
 
+def scenario_calib_strategies(b, source, work):
+    """S3: the calib_touch shift once per drift strategy, the estimator's among them."""
+    import calib_e2e
+    calib_e2e.scenario_strategies(sys.modules[__name__], b, source, work)
+
+
 SCENARIOS = {
     "modbus_modes": scenario_modbus_modes,
     "modbus_realtime": scenario_modbus_realtime,
@@ -1475,6 +1481,7 @@ SCENARIOS = {
     "model_handover": scenario_model_handover,
     "can_modes": scenario_can_modes,
     "calib_touch": scenario_calib_touch,
+    "calib_strategies": scenario_calib_strategies,
 }
 
 

@@ -392,6 +392,58 @@ TEST(DriftEstimator, StepIsAllocationFree) {
   EXPECT_GT(sigma, 0.0);
 }
 
+// GIVEN a model's slopes and σ per slot (the prior from nccomp analyze) WHEN new nominals are
+// taken THEN every slot's estimate starts at the model's slope with its σ (not at the slope the
+// shift before learned), the first hour's prediction is slope · ΔT before any touch, and a
+// slot with σ 0 keeps the model's slope through a touch set.
+TEST(DriftEstimator, ModelSlopeIsThePriorOfEveryShift) {
+  auto cfg = estimator_config();
+  cfg.temperature_sensor = 0;
+  cfg.estimator_slope_sigma_um_per_c = 1.0;  // the other slots' σ: replaced by the model's
+  cfg.estimator_model_slope_um_per_c = {2.0, 2.0, -1.0, 0.5};
+  cfg.estimator_model_slope_sigma_um_per_c = {0.3, 0.3, 0.0, 0.2};
+  Calibrator c;
+  c.configure(cfg);
+  SimMachine m(cfg, test_errors(), 0.0, 0.0, 0.1, 11);
+  TimeNs now = 0;
+  StepOutput out;
+  const auto feed = [&](double temp_c) {
+    const core::Event e = core::TemperatureSample{now, 0, temp_c};
+    out.clear();
+    c.step(now, {&e, 1}, out);
+  };
+  feed(20.0);
+  run_calibrated_shift(c, m, now, 5.0, 2);  // an earlier shift: its slopes are learned
+  feed(20.0);
+  m.set_drift([](double) { return std::array<double, 4>{}; });
+  ASSERT_TRUE(run_initial_calibration(c, m, now, out));
+  const CalibState st = c.export_state();
+  const std::array<double, 4> slope{2.0, 2.0, -1.0, 0.5};
+  const std::array<double, 4> sigma{0.3, 0.3, 0.0, 0.2};
+  for (std::size_t s = 0; s < 4; ++s) {
+    EXPECT_DOUBLE_EQ(st.estimates[s].x[2], slope[s]) << s;
+    EXPECT_DOUBLE_EQ(st.estimates[s].p[8], sigma[s] * sigma[s]) << s;
+  }
+  // Before the first touch: gain · prior + slope · ΔT; the prior is 0 at the nominals.
+  const double t_nom = c.nominal(Slot::kXLateral).time_s;
+  now = core::from_seconds(t_nom);
+  feed(22.0);
+  for (const Slot s : {Slot::kXLateral, Slot::kY, Slot::kZ}) {
+    EXPECT_NEAR(c.estimated_drift(s, now).mean_um, 2.0 * slope[static_cast<std::size_t>(s)], 1e-9);
+  }
+  // A touch set 1 h on reading 3 µm more than the model on Y: σ 0 keeps Y's slope.
+  const TimeNs t1 = now + core::from_seconds(3600.0);
+  m.set_drift([t_nom](double t) {
+    const double k = t > t_nom ? 1.0 : 0.0;
+    return std::array<double, 4>{4.0 * k, 4.0 * k, 1.0 * k, 1.0 * k};
+  });
+  now = t1;
+  out.clear();
+  run_touch_set(c, m, now, out);
+  EXPECT_DOUBLE_EQ(c.export_state().estimates[2].x[2], -1.0);
+  EXPECT_NE(c.export_state().estimates[3].x[2], 0.5);  // σ 0.2: Z's slope learns
+}
+
 TEST(DriftEstimator, ConfigKeysAreChecked) {
   auto cfg = estimator_config();
   cfg.estimator_touch_noise_um = 0.0;
@@ -399,6 +451,8 @@ TEST(DriftEstimator, ConfigKeysAreChecked) {
   cfg.estimator_level_noise_um_per_h = -1.0;
   cfg.estimator_slope_sigma_um_per_c = 1.0;  // with no sensor mapped
   cfg.estimator_gate_sigmas = std::nan("");
+  cfg.estimator_model_slope_um_per_c = {1.0, 1.0, 30.0, 0.0};  // Y beyond the slope bound 20
+  cfg.estimator_model_slope_sigma_um_per_c = {0.1, -0.1, 0.1, std::nan("")};
   try {
     core::calib::validate(cfg);
     FAIL() << "accepted";
@@ -407,7 +461,8 @@ TEST(DriftEstimator, ConfigKeysAreChecked) {
     for (const char* key :
          {"calibration.estimator_touch_noise_um", "calibration.estimator_prior_forgetting",
           "calibration.estimator_level_noise_um_per_h", "calibration.temperature_sensor",
-          "calibration.estimator_gate_sigmas"}) {
+          "calibration.estimator_gate_sigmas", "calibration.estimator_model_slope_um_per_c",
+          "calibration.estimator_model_slope_sigma_um_per_c"}) {
       EXPECT_NE(what.find(key), std::string::npos) << key << " in " << what;
     }
   }

@@ -84,7 +84,9 @@ TEST(CalibrationToml, ErrorsNameFileLineAndKey) {
       "[calibration]\nprediction = \"estimator\"\ntemperature_sensor = 2\n"
       "estimator_touch_noise_um = 0.4\nestimator_level_noise_um_per_h = 4.5\n"
       "estimator_prior_gain_sigma = 0.3\nestimator_prior_forgetting = 0.9\n"
-      "estimator_slope_sigma_um_per_c = 0.25\nestimator_gate_sigmas = 6\n",
+      "estimator_slope_sigma_um_per_c = 0.25\nestimator_gate_sigmas = 6\n"
+      "estimator_model_slope_um_per_c = [-4.5, -4.5, 0.8, 0]\n"
+      "estimator_model_slope_sigma_um_per_c = [1.2, 1.2, 0.1, 0]\n",
       "m.toml");
   EXPECT_EQ(est.prediction, core::calib::Prediction::kEstimator);
   EXPECT_DOUBLE_EQ(est.estimator_touch_noise_um, 0.4);
@@ -93,6 +95,11 @@ TEST(CalibrationToml, ErrorsNameFileLineAndKey) {
   EXPECT_DOUBLE_EQ(est.estimator_prior_forgetting, 0.9);
   EXPECT_DOUBLE_EQ(est.estimator_slope_sigma_um_per_c, 0.25);
   EXPECT_DOUBLE_EQ(est.estimator_gate_sigmas, 6.0);
+  EXPECT_EQ(est.estimator_model_slope_um_per_c, (std::array<double, 4>{-4.5, -4.5, 0.8, 0.0}));
+  EXPECT_EQ(est.estimator_model_slope_sigma_um_per_c, (std::array<double, 4>{1.2, 1.2, 0.1, 0.0}));
+  EXPECT_EQ(error_of("[calibration]\nestimator_model_slope_um_per_c = [1, 2]\n"),
+            "m.toml:2:34: calibration.estimator_model_slope_um_per_c: must have 4 values (X "
+            "lateral, X axial, Y, Z)");
   EXPECT_EQ(error_of("[calibration]\nestimator_touch_noise_um = \"x\"\n"),
             "m.toml:2:28: calibration.estimator_touch_noise_um: must be a finite number");
   EXPECT_NE(error_of("[calibration]\nestimator_prior_forgetting = 0\n")
