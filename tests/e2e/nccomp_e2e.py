@@ -1135,8 +1135,9 @@ def run_continued(b, source, work, name, daemon_cfg, daemon_overrides, parts, se
     lock-step, else real time with ncsim at that speed factor. model_load (real time): once the
     daemon serves its status socket, `nccomp model load MODEL_LOAD` puts that model into it (an
     operator's command; ncsim already machines: the swap lands in the first seconds of the run);
-    its answer is RunResult.model_load (exit status, output). reload_cfg: the daemon is started first, and
-    before ncsim ticks its config file is replaced by reload_cfg (staged with reload_overrides)
+    its answer is RunResult.model_load (exit status, output). reload_cfg: the daemon is started
+    first, and before ncsim ticks its config file is replaced by reload_cfg (staged with
+    reload_overrides)
     and it gets SIGHUP, so the RUNNING daemon swaps in the new configuration with its state at a
     cycle boundary (the reload is taken while ncsim already ticks: where it lands is read back).
     Returns (RunResult, swap_s): swap_s, the machine time [s] by which the new configuration ran
