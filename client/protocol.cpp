@@ -24,6 +24,12 @@ std::string model_rollback_request() { return std::string(kModelVerb) + " rollba
 
 std::string model_status_request() { return std::string(kModelVerb) + " status"; }
 
+std::string model_candidate_request(std::string_view path) {
+  return std::string(kModelVerb) + " candidate " + std::string(path);
+}
+
+std::string model_promote_request() { return std::string(kModelVerb) + " promote"; }
+
 bool is_error(std::string_view answer) noexcept { return answer.starts_with(kErrorPrefix); }
 
 std::string error_reason(std::string_view answer) {

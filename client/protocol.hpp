@@ -39,6 +39,9 @@ inline constexpr std::string_view kModelVerb = "model";
 [[nodiscard]] std::string model_load_request(std::string_view path);
 [[nodiscard]] std::string model_rollback_request();
 [[nodiscard]] std::string model_status_request();
+/// "model candidate PATH" (PATH absolute), "model promote": the candidate in shadow.
+[[nodiscard]] std::string model_candidate_request(std::string_view path);
+[[nodiscard]] std::string model_promote_request();
 
 /// The prefix of a refusal.
 inline constexpr std::string_view kErrorPrefix = "error: ";

@@ -59,14 +59,22 @@ std::string query(const std::string& socket_path, std::string_view request, doub
   // A request line is far smaller than the socket's buffer: send() does not block.
   const std::string line = std::string(request) + "\n";
   std::size_t off = 0;
+  // A server that turns a client away (busy) answers and closes at once, maybe before the request
+  // is sent: its answer is still to be read, so a closed peer ends the sending, not the query.
+  int send_error = 0;
   while (off < line.size()) {
     const ssize_t n = ::send(fd.get(), line.data() + off, line.size() - off, MSG_NOSIGNAL);
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0 && (errno == EPIPE || errno == ECONNRESET)) {
+      send_error = errno;
+      break;
+    }
     if (n <= 0) {
       throw std::runtime_error("cannot send to '" + socket_path + "': " + std::strerror(errno));
     }
     off += static_cast<std::size_t>(n);
   }
-  ::shutdown(fd.get(), SHUT_WR);
+  if (send_error == 0) ::shutdown(fd.get(), SHUT_WR);
   std::string out;
   char buf[4096];
   for (;;) {
@@ -85,6 +93,10 @@ std::string query(const std::string& socket_path, std::string_view request, doub
     out.append(buf, static_cast<std::size_t>(n));
   }
   if (out.empty()) {
+    if (send_error != 0) {
+      throw std::runtime_error("cannot send to '" + socket_path +
+                               "': " + std::strerror(send_error));
+    }
     throw std::runtime_error("'" + socket_path + "' closed without an answer");
   }
   return out;

@@ -43,6 +43,23 @@ namespace {
 namespace fs = std::filesystem;
 namespace cfg = config;
 
+/// The [model] section of the configuration file as it is now (a model verb checks against it);
+/// nullptr with the reason in `error` when the file does not load or has no [model].
+const sections::ModelSection* model_section_of(const cfg::LoadResult& current,
+                                               const std::string& path, std::string& error) {
+  if (!current.config) {
+    error = "the configuration file does not load:\n" + current.diagnostics.to_string();
+    return nullptr;
+  }
+  const auto* s = sections::model_section(*current.config);
+  if (s == nullptr) {
+    error = path +
+            ": no [model] section: its [[model.apply]] entries say which term goes onto "
+            "which register";
+  }
+  return s;
+}
+
 #if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__) || defined(NCCOMP_ASAN) || \
     defined(NCCOMP_TSAN)
 constexpr bool kSanitizerBuild = true;
@@ -280,7 +297,13 @@ class Daemon {
   void restore_model_choice();
   /// model_state_ from a configuration that runs (start-up, every accepted reload).
   void note_model(const cfg::Config& config);
-  ModelChange change_model(ModelAction action, const std::string& file);
+  ModelChange change_model(ModelAction action, const std::string& file, const std::string& who);
+  /// A load or rollback (the caller checked nothing else runs).
+  ModelChange load_or_roll_back(ModelAction action, const std::string& file);
+  ModelChange take_candidate(const std::string& file, const std::string& who);
+  /// The shadow's decisions: logged, carried out (promotion, demotion), recorded.
+  void serve_shadow();
+  void record_decision(sections::ShadowDecision d);
   void watch_buses(RunState& rs);
   void feed_watchdog(RunState& rs, std::chrono::steady_clock::time_point now);
   void update_status_line(RunState& rs, std::chrono::steady_clock::time_point now);
@@ -305,6 +328,9 @@ class Daemon {
   EventsWhileDownLog events_while_down_;
   std::size_t blob_bytes_{0};
   std::unique_ptr<StatePersister> persister_;
+  /// The candidate in shadow (before mlog_, whose thread feeds it) and its history file.
+  sections::Shadow shadow_;
+  std::string shadow_path_;
   std::unique_ptr<MeasurementLogWriter> mlog_;
   std::unique_ptr<core::rt::ConfigSwap<Runtime>> swap_;
   std::vector<drivers::Bus*> bus_ptrs_;
@@ -372,6 +398,17 @@ void Daemon::restore_model_choice() {
   const std::string state_dir = pick_dir(*config_, cfg::state_section(*config_).directory,
                                          "STATE_DIRECTORY", "/var/lib/nccompd");
   model_choice_path_ = state_dir + "/model-choice";
+  shadow_path_ = state_dir + "/model-shadow";
+  if (const StateFile h = read_state_file(shadow_path_); h.status != StateFileStatus::kAbsent) {
+    try {
+      if (h.status != StateFileStatus::kOk) throw std::invalid_argument(h.reason);
+      shadow_.set_history(sections::history_from_text(
+          std::string_view(reinterpret_cast<const char*>(h.payload.data()), h.payload.size())));
+    } catch (const std::exception& e) {
+      spdlog::error("model shadow history {} is unreadable ({}): starting a new one", shadow_path_,
+                    e.what());
+    }
+  }
   const StateFile f = read_state_file(model_choice_path_);
   if (f.status == StateFileStatus::kAbsent) return;
   sections::ModelChoice choice;
@@ -443,23 +480,147 @@ void Daemon::note_model(const cfg::Config& config) {
       }
     }
   }
+  std::vector<std::string> context_names;
+  for (const auto& c : cfg::measurement_log_section(config).context_columns) {
+    context_names.push_back(c.name);
+  }
+  shadow_.configure(s != nullptr ? s->shadow : sections::ShadowOptions{}, std::move(context_names));
+  shadow_.set_live(m.live.file, m.live.hash,
+                   s != nullptr && s->loaded && !s->disabled ? s->model : core::model::Model{});
   model_state_ = std::move(m);
 }
 
-ModelChange Daemon::change_model(ModelAction action, const std::string& file) {
+ModelChange Daemon::change_model(ModelAction action, const std::string& file,
+                                 const std::string& who) {
+  if (action == ModelAction::kCandidate) return take_candidate(file, who);
+  if (action != ModelAction::kPromote) return load_or_roll_back(action, file);
   ModelChange out;
-  auto current = cfg::load_file(options_.config_path);
-  if (!current.config) {
-    out.error = "the configuration file does not load:\n" + current.diagnostics.to_string();
+  const sections::ShadowStatus sh = shadow_.status();
+  if (sh.phase != sections::ShadowPhase::kAnnounced) {
+    out.error = sh.phase == sections::ShadowPhase::kCandidate
+                    ? fmt::format(
+                          "the candidate {} has not been found better yet ({} of {} parts "
+                          "scored)",
+                          sh.other_file, sh.window.parts, sh.options.min_parts)
+                    : "no candidate the rule found better (nccomp model status shows the shadow)";
     return out;
   }
-  const auto* s = sections::model_section(*current.config);
-  if (s == nullptr) {
-    out.error = options_.config_path +
-                ": no [model] section: its [[model.apply]] entries say which term goes onto "
-                "which register";
+  out = load_or_roll_back(ModelAction::kLoad, sh.other_file);
+  if (out.ok) {
+    shadow_.watch_previous();
+    sections::ShadowDecision d;
+    d.utc = sections::utc_now();
+    d.action = "promoted";
+    d.by = who.empty() ? "the operator" : who;
+    d.live_file = sh.live_file;
+    d.other_file = sh.other_file;
+    d.test = sh.window;
+    record_decision(std::move(d));
+    std::lock_guard<std::mutex> lock(model_mu_);
+    out.state.shadow = shadow_.status();
+  }
+  return out;
+}
+
+ModelChange Daemon::take_candidate(const std::string& file, const std::string& who) {
+  ModelChange out;
+  if (!mlog_) {
+    out.error =
+        "the measurement log is not running ([measurement_log]): the shadow scores the rows it "
+        "writes";
     return out;
   }
+  const auto current = cfg::load_file(options_.config_path);
+  const auto* s = model_section_of(current, options_.config_path, out.error);
+  if (s == nullptr) return out;
+  // Parsed as a load would parse it: the candidate must be able to become live.
+  const auto old = sections::model_choice();
+  sections::ModelChoice trial;
+  trial.configured = s->configured_file;
+  trial.live.file = file;
+  sections::set_model_choice(trial);
+  auto check = cfg::load_file(options_.config_path);
+  sections::set_model_choice(old);
+  if (!check.config) {
+    out.error = check.diagnostics.to_string();
+    return out;
+  }
+  const auto* cs = sections::model_section(*check.config);
+  if (cs == nullptr || !cs->loaded || cs->disabled) {
+    out.error = "cannot load the model " + file;
+    return out;
+  }
+  std::string hash;
+  try {
+    hash = sections::model_file_hash(file);
+  } catch (const std::exception& e) {
+    out.error = e.what();
+    return out;
+  }
+  shadow_.set_candidate(file, hash, cs->model);
+  sections::ShadowDecision d;
+  d.utc = sections::utc_now();
+  d.action = "candidate";
+  d.by = who.empty() ? "the operator" : who;
+  d.other_file = file;
+  {
+    std::lock_guard<std::mutex> lock(model_mu_);
+    d.live_file = model_state_.live.file;
+  }
+  record_decision(std::move(d));
+  out.ok = true;
+  std::lock_guard<std::mutex> lock(model_mu_);
+  out.state = model_state_;
+  out.state.shadow = shadow_.status();
+  return out;
+}
+
+void Daemon::record_decision(sections::ShadowDecision d) {
+  if (d.action == "candidate") {
+    spdlog::info("model shadow: {}", sections::describe(d));
+  } else {
+    spdlog::warn("model shadow: {}", sections::describe(d));
+  }
+  shadow_.record(std::move(d));
+  try {
+    const std::string text = sections::history_to_text(shadow_.history());
+    write_state_file(
+        shadow_path_,
+        std::span<const std::byte>(reinterpret_cast<const std::byte*>(text.data()), text.size()),
+        generation_);
+  } catch (const std::exception& e) {
+    spdlog::error("model shadow history not recorded: {}", e.what());
+  }
+}
+
+void Daemon::serve_shadow() {
+  auto d = shadow_.take_decision();
+  if (!d) return;
+  if (d->action == "promoted") {
+    const ModelChange c = load_or_roll_back(ModelAction::kLoad, d->other_file);
+    if (c.ok) {
+      shadow_.watch_previous();
+    } else {
+      d->action = "refused";
+      shadow_.clear();
+      spdlog::error("model shadow: the promotion of {} was refused: {}", d->other_file, c.error);
+    }
+  } else if (d->action == "demoted") {
+    const ModelChange c = load_or_roll_back(ModelAction::kRollback, "");
+    if (!c.ok) {
+      d->action = "refused";
+      spdlog::error("model shadow: the demotion of {} was refused: {}", d->live_file, c.error);
+    }
+    shadow_.clear();
+  }
+  record_decision(std::move(*d));
+}
+
+ModelChange Daemon::load_or_roll_back(ModelAction action, const std::string& file) {
+  ModelChange out;
+  const auto current = cfg::load_file(options_.config_path);
+  const auto* s = model_section_of(current, options_.config_path, out.error);
+  if (s == nullptr) return out;
   const auto old = sections::model_choice();
   ModelState before;
   {
@@ -763,6 +924,7 @@ void Daemon::start_persister_and_log() {
   mo.monotonic_record_clock = !lockstep_;  // the peer's TICKs are not CLOCK_MONOTONIC
   mo.fsync_interval_s = msec.fsync_interval_s;
   mlog_ = std::make_unique<MeasurementLogWriter>(std::move(mo));
+  mlog_->set_observer([this](const core::MeasurementRecord& r) { shadow_.observe(r); });
   try {
     mlog_->start();
     spdlog::info("measurement log: {} (machine {}, {} context column(s))", mlog_->current_path(),
@@ -879,17 +1041,24 @@ bool Daemon::start_status() {
     return *specs_;
   };
   sc_.state_problem = [problem = state_problem_] { return problem; };
-  sc_.config_path = options_.config_path;
-  sc_.state_path = state_path_;
-  status_ = std::make_unique<StatusServer>(sc_);
-  CommandContext cc{&commands_, loop_.get(), sc_.register_names, {}, {}};
-  cc.model_state = [this] {
+  sc_.shadow = [this] { return shadow_.status(); };
+  sc_.model = [this] {
     std::lock_guard<std::mutex> lock(model_mu_);
     return model_state_;
   };
-  cc.change_model = [this](ModelAction action, const std::string& file) {
+  sc_.config_path = options_.config_path;
+  sc_.state_path = state_path_;
+  status_ = std::make_unique<StatusServer>(sc_);
+  CommandContext cc{&commands_, loop_.get(), sc_.register_names, {}, {}, {}};
+  cc.model_state = [this] {
+    std::lock_guard<std::mutex> lock(model_mu_);
+    ModelState m = model_state_;
+    m.shadow = shadow_.status();
+    return m;
+  };
+  cc.change_model = [this](ModelAction action, const std::string& file, const std::string& who) {
     ModelChange change;
-    if (!main_calls_.run([&] { change = change_model(action, file); },
+    if (!main_calls_.run([&] { change = change_model(action, file, who); },
                          std::chrono::milliseconds(1000))) {
       change.error = "the daemon's main thread did not take the request within 1 s";
     }
@@ -985,6 +1154,7 @@ void Daemon::run_until_stopped() {
       break;
     }
     main_calls_.serve();
+    serve_shadow();
     swap_->reclaim();
     watch_buses(rs);
     const auto now = std::chrono::steady_clock::now();

@@ -226,6 +226,7 @@ void MeasurementLogWriter::run() {
       core::MeasurementRecord r;
       while (fd_ >= 0 && ring_.try_pop(r)) {
         write_row(r, offset_ns);
+        if (observer_) observer_(r);
         // A producer as fast as this thread would keep the loop going forever.
         if (batch_.size() >= kMaxBatchBytes) write_batch();
       }

@@ -27,9 +27,11 @@
 #include <array>
 #include <atomic>
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <string_view>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "core/common/types.hpp"
@@ -72,6 +74,12 @@ class MeasurementLogWriter {
   void start();
   /// Writes what is queued, closes the file. Idempotent.
   void stop();
+
+  /// Called on the writer thread with every record it writes (the candidate in shadow,
+  /// sections/model/shadow.hpp). Set before start().
+  void set_observer(std::function<void(const core::MeasurementRecord&)> observer) {
+    observer_ = std::move(observer);
+  }
 
   /// Real-time safe (loop thread): fills the record's context values from the machine context.
   void stamp(core::MeasurementRecord& r, const core::engine::MachineContext& c) const noexcept;
@@ -118,6 +126,7 @@ class MeasurementLogWriter {
   std::atomic<std::uint64_t> time_rotations_{0};
   std::atomic<std::uint64_t> errors_{0};
   std::atomic<std::uint64_t> rows_lost_{0};
+  std::function<void(const core::MeasurementRecord&)> observer_;
   std::thread thread_;
 };
 

@@ -166,6 +166,34 @@ std::string render_json(const StatusContext& c) {
     << ",\"unabsorbed\":" << h.unabsorbed
     << ",\"last_trim_change_um\":" << num(h.last_trim_change_um)
     << ",\"last_unabsorbed_um\":" << num(h.last_unabsorbed_um) << "},";
+  if (c.model) {
+    // What `nccomp model status` names: the live model and the one rollback returns to.
+    const ModelState m = c.model();
+    const auto record = [&](const sections::ModelRecord& r) {
+      o << "{\"file\":\"" << json_escape(r.file) << "\",\"hash\":\"" << json_escape(r.hash)
+        << "\",\"since_utc\":\"" << json_escape(r.since_utc) << "\"}";
+    };
+    o << "\"model\":{\"live\":";
+    record(m.live);
+    o << ",\"previous\":";
+    record(m.previous);
+    o << ",\"chosen\":" << (m.chosen ? "true" : "false") << ",\"generation\":" << m.generation
+      << "},";
+  }
+  if (c.shadow) {
+    // docs/closing-the-loop.md, "A candidate in shadow".
+    const sections::ShadowStatus sh = c.shadow();
+    o << "\"shadow\":{\"phase\":\"" << sections::phase_name(sh.phase) << "\",\"promote\":\""
+      << (sh.options.promote == sections::ShadowPromote::kAuto ? "auto" : "operator")
+      << "\",\"live\":{\"file\":\"" << json_escape(sh.live_file) << "\",\"parts\":" << sh.live.parts
+      << ",\"mse_um2\":" << num(sh.live.mse_um2()) << "},\"other\":{\"file\":\""
+      << json_escape(sh.other_file) << "\",\"parts\":" << sh.other.parts
+      << ",\"mse_um2\":" << num(sh.other.mse_um2()) << "},\"paired_parts\":" << sh.window.parts
+      << ",\"other_better\":" << sh.window.challenger_better
+      << ",\"live_better\":" << sh.window.incumbent_better << ",\"ties\":" << sh.window.ties
+      << ",\"p_value\":" << num(sh.window.p_value) << ",\"rows_scored\":" << sh.rows_scored
+      << ",\"rows_skipped\":" << sh.rows_skipped << ",\"decisions\":" << sh.history.size() << "},";
+  }
   o << "\"registers\":[";
   for (std::size_t i = 0; i < v.r.count; ++i) {
     const auto& r = v.r.regs[i];
@@ -307,6 +335,18 @@ std::string render_text(const StatusContext& c) {
                   static_cast<unsigned long long>(s.handover.unabsorbed),
                   s.handover.last_trim_change_um, s.handover.last_unabsorbed_um);
     o << buf;
+  }
+  if (c.shadow) {
+    const sections::ShadowStatus sh = c.shadow();
+    const auto mse = [](const sections::ModelScore& m) {
+      return m.parts == 0 ? std::string("-") : num(m.mse_um2()) + " um^2";
+    };
+    o << "model scores: live " << sh.live.parts << " parts, mse " << mse(sh.live);
+    if (sh.phase != sections::ShadowPhase::kNone) {
+      o << "; " << sections::phase_name(sh.phase) << " " << sh.other_file << " " << sh.other.parts
+        << " parts, mse " << mse(sh.other) << ", p " << num(sh.window.p_value);
+    }
+    o << "\n";
   }
   o << "registers:\n";
   for (std::size_t i = 0; i < v.r.count; ++i) {
@@ -469,6 +509,25 @@ std::string render_prometheus(const StatusContext& c) {
          "Largest change no module absorbed at the last handover.");
   o << "nccompd_last_handover_unabsorbed_meters " << prom_num(s.handover.last_unabsorbed_um * 1e-6)
     << "\n";
+  if (c.shadow) {
+    const sections::ShadowStatus sh = c.shadow();
+    family("shadow_parts_scored", "gauge",
+           "Parts scored by the live model (since it became live) and by the other model in "
+           "shadow (since it came in).");
+    o << "nccompd_shadow_parts_scored{model=\"live\"} " << sh.live.parts << "\n";
+    o << "nccompd_shadow_parts_scored{model=\"other\"} " << sh.other.parts << "\n";
+    family("shadow_mean_squared_error_square_meters", "gauge",
+           "Mean over parts of each part's mean squared prediction error.");
+    o << "nccompd_shadow_mean_squared_error_square_meters{model=\"live\"} "
+      << prom_num(sh.live.mse_um2() * 1e-12) << "\n";
+    o << "nccompd_shadow_mean_squared_error_square_meters{model=\"other\"} "
+      << prom_num(sh.other.mse_um2() * 1e-12) << "\n";
+    family("shadow_sign_test_p_value", "gauge",
+           "One-sided sign test of the other model against the live one over the paired parts.");
+    o << "nccompd_shadow_sign_test_p_value " << prom_num(sh.window.p_value) << "\n";
+    family("shadow_decisions", "gauge", "Decisions in the shadow's history.");
+    o << "nccompd_shadow_decisions " << sh.history.size() << "\n";
+  }
   if (c.server != nullptr) {
     counter("status_clients_timed_out_total", "Status clients cut off at their deadline.",
             c.server->timed_out.load());

@@ -31,6 +31,7 @@
 #include "daemon/logging.hpp"
 #include "daemon/loop.hpp"
 #include "daemon/measurement_log.hpp"
+#include "daemon/sections/model/shadow.hpp"
 #include "daemon/state_store.hpp"
 #include "drivers/bus.hpp"
 
@@ -55,6 +56,10 @@ struct StatusContext {
   /// Each register's kind and limiter limits, in index order (empty: not shown).
   std::function<std::vector<core::engine::RegisterSpec>()> register_specs;
   std::function<std::string()> state_problem;  // empty when the state is fine
+  /// The models' scores in shadow (unset: not shown).
+  std::function<sections::ShadowStatus()> shadow;
+  /// The live model, the one kept for rollback (unset: not shown).
+  std::function<ModelState()> model;
   std::string config_path;
   std::string state_path;
   /// The server's own counters (set by StatusServer; null: not shown).

@@ -18,9 +18,15 @@
 //          limiter (learning against the value the limiter let through).
 // Levels are joined by a plunge of one depth step at the seam point at 1 m/min (samples, not
 // wall).
-// Table 3: learning over 20 blanks with a per-blank hardness scatter: the EWMA weight k, and
-//          mode A against mode B (semi-finishing with the paired tool, then finishing).
+// Table 3: learning over 20 blanks with a per-blank hardness scatter: the EWMA weight k, the
+//          estimator ([checkpoints.estimator], part noise learned) and its probe-noise limit (the
+//          same filter told the true process: q = 0, a running mean), and mode A against mode B
+//          (semi-finishing with the paired tool, then finishing).
 // Table 4: cost of one step() [ns] (one axis sample) on this machine.
+// Table 5: learning a per-checkpoint deviation that drifts from part to part (a random walk of
+//          w µm per part at every checkpoint, linear along the wall between checkpoints) read
+//          with probe noise 0.7 µm: the EWMA weights, the estimator (part noise learned) and the
+//          probe-noise limit (the same filter told the true w and σ), over 4 series of 20 parts.
 //
 // The source compiles against the compensator before issue 4's level-aware creep too (no API
 // of it is used), so the seam figures of both can be measured with the same program.
@@ -109,6 +115,29 @@ struct Blank {
   }
 };
 
+// A per-checkpoint value at contour position s on level l, linear between the level's
+// checkpoints along the pass and through the seam (closed contour), as creep applies offsets.
+double between_checkpoints(const cp::Plan& plan, std::size_t l, double s, double length,
+                           const std::vector<double>& v) {
+  std::size_t first = plan.checkpoints.size();
+  std::size_t last = 0;
+  for (std::size_t i = 0; i < plan.checkpoints.size(); ++i) {
+    if (plan.checkpoints[i].level != static_cast<int>(l)) continue;
+    first = std::min(first, i);
+    last = i;
+  }
+  const auto& c = plan.checkpoints;
+  if (s < c[first].s_mm || s >= c[last].s_mm) {
+    const double span = length - c[last].s_mm + c[first].s_mm;
+    const double done = s >= c[last].s_mm ? s - c[last].s_mm : length - c[last].s_mm + s;
+    return v[last] + (v[first] - v[last]) * done / span;
+  }
+  std::size_t k = first;
+  while (k + 1 <= last && c[k + 1].s_mm <= s) ++k;
+  if (k == last) return v[last];
+  return v[k] + (v[k + 1] - v[k]) * (s - c[k].s_mm) / (c[k + 1].s_mm - c[k].s_mm);
+}
+
 // Push-off error [µm] at contour position s and height z for a given blank.
 double push_off_um(const Geometry& g, double s, double z, const Blank& blank) {
   const cp::Point2 q = g.at(s);
@@ -132,9 +161,10 @@ struct WallResult {
 // Finishes one part: returns the wall error statistics over every sample of every level, and
 // fills wall_at_cp with the wall error at each checkpoint. Each level's pass runs from s = 0 to
 // s = L inclusive (the closed contour's start point twice: the seam).
+// drift (optional): a further error per checkpoint, linear between checkpoints (Table 5).
 WallResult finish(cp::CheckpointCompensator& comp, const cp::Plan& plan, const Geometry& g,
                   const cp::PlanConfig& pc, const Blank& blank, std::vector<double>* wall_at_cp,
-                  int part = 1) {
+                  int part = 1, const std::vector<double>* drift = nullptr) {
   StepOutput out;
   const Event start = ProgramEvent{0, ProgramEventKind::kPartStart, part};
   comp.step(0, {&start, 1}, out);
@@ -181,7 +211,9 @@ WallResult finish(cp::CheckpointCompensator& comp, const cp::Plan& plan, const G
         }
       }
       const double c = std::isfinite(applied) ? applied : 0.0;
-      const double wall = push_off_um(g, s, z, blank) + c;
+      const double wall =
+          push_off_um(g, s, z, blank) + c +
+          (drift != nullptr ? between_checkpoints(plan, l, s, g.length, *drift) : 0.0);
       if (k < samples) {  // s = L is the start point again: counted once
         sum2 += wall * wall;
         ++n;
@@ -275,6 +307,18 @@ Blank random_blank(std::mt19937& rng, double sigma_hrc) {
     b.phase[k] = phase(rng);
   }
   return b;
+}
+
+// [checkpoints.estimator] as docs/estimation.md recommends: σ = the probe's repeatability.
+cp::CheckpointEstimatorConfig estimator(double sigma_um) {
+  cp::CheckpointEstimatorConfig e;
+  e.enabled = true;
+  e.measurement_sigma_um = sigma_um;
+  e.part_noise_um = 1.0;
+  e.learn_part_noise = true;
+  e.learn_min_parts = 5;
+  e.gate_sigmas = 5.0;
+  return e;
 }
 
 cp::CompensatorConfig config(cp::ApplyMode apply, nccomp::core::ProfileShape shape) {
@@ -406,18 +450,27 @@ int main() {
       "error of parts 6-20 [um]\n\n");
   std::printf(
       "| hardness scatter per blank [HRC per harmonic] | mode A k = 1 | mode A k = 3 | "
-      "mode A k = 6 | mode B (paired semi-finishing tool) |\n");
-  std::printf("| --- | --- | --- | --- | --- |\n");
+      "mode A k = 6 | mode B (paired semi-finishing tool) | mode A estimator | probe-noise limit "
+      "(filter, q = 0) | estimator / limit |\n");
+  std::printf("| --- | --- | --- | --- | --- | --- | --- | --- |\n");
   for (const double sigma : {0.7, 1.5, 2.5}) {
-    double result[4] = {0, 0, 0, 0};
+    double result[6] = {0, 0, 0, 0, 0, 0};
     const double ks[3] = {1.0, 3.0, 6.0};
-    for (int m = 0; m < 4; ++m) {
+    for (int m = 0; m < 6; ++m) {
       cp::CompensatorConfig c = config(cp::ApplyMode::kCreep, nccomp::core::ProfileShape::kLinear);
       if (m < 3) {
         c.ewma_weight = ks[m];
-      } else {
+      } else if (m == 3) {
         c.learning_mode = cp::LearningMode::kSemiFinishing;
         c.semi_finishing_tool = 11;
+      } else {
+        c.estimator = estimator(0.7);
+        // The limit knows the process: the blanks scatter around a fixed error, nothing carries
+        // over from one blank to the next (q = 0).
+        if (m == 5) {
+          c.estimator.learn_part_noise = false;
+          c.estimator.part_noise_um = 0.0;
+        }
       }
       c.outlier_sigma = 6.0;
       cp::CheckpointCompensator comp;
@@ -448,7 +501,7 @@ int main() {
         }
         std::vector<double> wall_cp;
         const WallResult r = finish(comp, plan, g, pc, b, &wall_cp, part);
-        if (m < 3) {
+        if (m != 3) {
           feed(comp, probe_readings(plan, pc, wall_cp, part, rng, noise));
         } else {
           for (std::size_t i = 0; i < wall_cp.size(); ++i) (void)noise(rng);  // same draws
@@ -457,8 +510,8 @@ int main() {
       }
       result[m] = rms_of(rms_parts);
     }
-    std::printf("| %.1f | %.2f | %.2f | %.2f | %.2f |\n", sigma, result[0], result[1], result[2],
-                result[3]);
+    std::printf("| %.1f | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f |\n", sigma, result[0],
+                result[1], result[2], result[3], result[4], result[5], result[4] / result[5]);
   }
 
   // --- Table 4 ---
@@ -497,6 +550,71 @@ int main() {
       std::printf("| %s | %s | %.0f |\n", cp::trigger_mode_name(trig), cp::apply_mode_name(apply),
                   ns);
     }
+  }
+
+  // --- Table 5 ---
+  // Per series: the nominal blank, a random walk of w µm per part at every checkpoint (the
+  // same walks and probe draws for every column), probe noise 0.7 µm, creep, seed limits.
+  std::printf(
+      "\n## 5. A per-checkpoint deviation drifting from part to part (random walk of w per "
+      "part), probe noise 0.7 um: RMS wall error of parts 6-20 over 4 series [um] (at the "
+      "checkpoints in brackets)\n\n");
+  std::printf(
+      "| w [um per part] | mode A k = 1 | mode A k = 3 | mode A k = 6 | mode A estimator | "
+      "probe-noise limit (filter, true w and sigma) | estimator / limit: wall | at checkpoints "
+      "|\n");
+  std::printf("| --- | --- | --- | --- | --- | --- | --- | --- |\n");
+  constexpr double kProbeSigma = 0.7;
+  for (const double w : {0.25, 0.5, 1.0, 2.0}) {
+    double wall2[5] = {0, 0, 0, 0, 0};
+    double cp2[5] = {0, 0, 0, 0, 0};
+    std::size_t parts = 0;
+    for (int series = 0; series < 4; ++series) {
+      for (int m = 0; m < 5; ++m) {
+        cp::CompensatorConfig c =
+            config(cp::ApplyMode::kCreep, nccomp::core::ProfileShape::kLinear);
+        c.outlier_sigma = 6.0;
+        const double ks[3] = {1.0, 3.0, 6.0};
+        if (m < 3) {
+          c.ewma_weight = ks[m];
+        } else {
+          c.estimator = estimator(kProbeSigma);
+          if (m == 4) {  // the limit: told the true process
+            c.estimator.learn_part_noise = false;
+            c.estimator.part_noise_um = w;
+          }
+        }
+        cp::CheckpointCompensator comp;
+        comp.configure(c, plan.checkpoints, seed_limits());
+        std::mt19937 rng(500 + static_cast<unsigned>(series));
+        std::normal_distribution<double> noise(0.0, kProbeSigma);
+        std::normal_distribution<double> step(0.0, w);
+        std::vector<double> drift(plan.checkpoints.size(), 0.0);
+        for (int part = 1; part <= 20; ++part) {
+          for (double& d : drift) d += step(rng);
+          std::vector<double> wall_cp;
+          const WallResult r = finish(comp, plan, g, pc, nominal, &wall_cp, part, &drift);
+          feed(comp, probe_readings(plan, pc, wall_cp, part, rng, noise));
+          if (part > 5) {
+            wall2[m] += r.rms_um * r.rms_um;
+            const double rc = rms_of(wall_cp);
+            cp2[m] += rc * rc;
+            if (m == 0) ++parts;
+          }
+        }
+      }
+    }
+    double wall[5];
+    double at_cp[5];
+    for (int m = 0; m < 5; ++m) {
+      wall[m] = std::sqrt(wall2[m] / static_cast<double>(parts));
+      at_cp[m] = std::sqrt(cp2[m] / static_cast<double>(parts));
+    }
+    std::printf(
+        "| %.2f | %.2f (%.2f) | %.2f (%.2f) | %.2f (%.2f) | %.2f (%.2f) | %.2f (%.2f) | %.2f | "
+        "%.2f |\n",
+        w, wall[0], at_cp[0], wall[1], at_cp[1], wall[2], at_cp[2], wall[3], at_cp[3], wall[4],
+        at_cp[4], wall[3] / wall[4], at_cp[3] / at_cp[4]);
   }
   return 0;
 }

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Runs `nccomp analyze` on the two real data sets of ../shared/data (beside the checkout; or
 # $NCCOMP_DATA) and copies the reports and
-# figures used by docs/closing-the-loop.md into bench/model/figures/.
+# figures of bench/results/model.md (and the plots docs/closing-the-loop.md shows) into
+# bench/model/figures/.
 #   bench/model/run_real_data.sh [path/to/nccomp]   (default: build/release/tools/nccomp)
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"

@@ -9,6 +9,7 @@
 
 #include "core/checkpoint/probe.hpp"
 #include "core/common/config_issue.hpp"
+#include "core/estimation/kalman.hpp"
 
 namespace nccomp::core::checkpoint {
 
@@ -37,6 +38,19 @@ constexpr double kHuge = 1e300;
 // A reading's α may differ from the plan's by the bus encoding's resolution (0.01° in the
 // reference profiles), not more.
 constexpr double kAlphaToleranceDeg = 0.02;
+
+// The part noise of a random walk read with noise σ, from the history e_1..e_n of accepted
+// readings: each difference Δ = e_k − e_{k−1} = w + v_k − v_{k−1} has E[Δ²] = q + 2σ², so
+// q = mean(Δ²) − 2σ² is unbiased; a negative estimate (the parts vary less than the probe) is 0.
+double learned_part_noise_um2(const LearnedPoint& p, double sigma_um) noexcept {
+  if (p.history_n < 2) return 0.0;
+  double sum2 = 0.0;
+  for (std::uint32_t k = 1; k < p.history_n; ++k) {
+    const double d = p.history[k] - p.history[k - 1];
+    sum2 += d * d;
+  }
+  return std::max(0.0, sum2 / static_cast<double>(p.history_n - 1) - 2.0 * sigma_um * sigma_um);
+}
 
 }  // namespace
 
@@ -76,6 +90,26 @@ void CheckpointCompensator::configure(const CompensatorConfig& c, std::vector<Ch
   require_range(issues, c.reconcile_tolerance_um, 0.0, kHuge, false, "reconcile_tolerance_um");
   require_range(issues, c.xy_tolerance_mm, 0.0, kHuge, true, "xy_tolerance_mm");
   require_range(issues, c.z_band_mm, 0.0, kHuge, true, "z_band_mm");
+  const CheckpointEstimatorConfig& est = c.estimator;
+  require_range(issues, est.measurement_sigma_um, 0.0, 1e3, true, "estimator.measurement_sigma_um");
+  require_range(issues, est.part_noise_um, 0.0, 1e3, false, "estimator.part_noise_um");
+  if (est.learn_min_parts < 3 || est.learn_min_parts > kHistoryDepth) {
+    issues.add("checkpoints.estimator.learn_min_parts",
+               "must be in [3, " + std::to_string(kHistoryDepth) + "], got " +
+                   std::to_string(est.learn_min_parts));
+  }
+  if (!std::isfinite(est.gate_sigmas) || est.gate_sigmas < 0.0 ||
+      (est.gate_sigmas > 0.0 && est.gate_sigmas < 2.0)) {
+    issues.add("checkpoints.estimator.gate_sigmas",
+               "must be 0 (no gate) or at least 2, got " + num(est.gate_sigmas));
+  }
+  if (est.enabled && c.learning_mode == LearningMode::kSemiFinishing) {
+    issues.add(
+        "checkpoints.estimator.enabled",
+        "not used with learning_mode = \"semi_finishing\": mode B applies each blank's own "
+        "reading, there is nothing to estimate across blanks; remove [checkpoints.estimator] "
+        "or set enabled = false");
+  }
   if (c.creep_shape == ProfileShape::kTable) {
     issues.add("checkpoints.creep_shape",
                "\"table\" is not available for checkpoints; use linear, cosine or "
@@ -373,7 +407,32 @@ void CheckpointCompensator::on_probe(const ProbeMeasurement& m, StepOutput& out)
   }
   const double e = corr.corrected_um - applied;
   LearnedPoint& p = points_[i];
-  if (p.history_n >= config_.outlier_min_history) {
+  const CheckpointEstimatorConfig& est = config_.estimator;
+  const bool filtered = est.enabled && mode_a;
+  double variance = p.variance_um2;
+  double filter_estimate = e;
+  if (filtered && p.count > 0) {
+    // One step of the random walk per part, then the reading; the gate replaces the history's
+    // outlier rule (both are k·σ tests, the filter's knows the part noise).
+    const double r = est.measurement_sigma_um * est.measurement_sigma_um;
+    estimation::KalmanFilter<1> kf;
+    kf.reset(estimation::KalmanFilter<1>::Vector::Constant(p.learned_um),
+             estimation::KalmanFilter<1>::Matrix::Constant(p.filter_n > 0 ? p.variance_um2 : r));
+    kf.predict(estimation::KalmanFilter<1>::Matrix::Identity(),
+               estimation::KalmanFilter<1>::Matrix::Constant(part_noise_var_um2(i)));
+    const estimation::UpdateResult u =
+        kf.update(estimation::KalmanFilter<1>::Row::Ones(), e, r, est.gate_sigmas);
+    if (!u.accepted) {
+      ++counters_.outliers;
+      out.alarm(m.time_ns, Severity::kWarning, AlarmCode::kProbeOutlier, m.checkpoint, e);
+      return;
+    }
+    filter_estimate = kf.state()(0);
+    variance = kf.covariance()(0, 0);
+  } else if (filtered) {
+    variance = est.measurement_sigma_um * est.measurement_sigma_um;  // the first reading
+  }
+  if (!filtered && p.history_n >= config_.outlier_min_history) {
     double mean = 0.0;
     for (std::uint32_t k = 0; k < p.history_n; ++k) mean += p.history[k];
     mean /= static_cast<double>(p.history_n);
@@ -393,8 +452,10 @@ void CheckpointCompensator::on_probe(const ProbeMeasurement& m, StepOutput& out)
   }
   // Mode B applies this blank's own semi-finishing error: an average over earlier blanks would
   // blend their hardness into this one's offsets, which is what mode B is there to avoid.
-  const double learned =
-      (!mode_a || p.count == 0) ? e : p.learned_um + (e - p.learned_um) / config_.ewma_weight;
+  const double learned = filtered ? filter_estimate
+                         : (!mode_a || p.count == 0)
+                             ? e
+                             : p.learned_um + (e - p.learned_um) / config_.ewma_weight;
   const double target = -learned;
   const double candidate =
       mode_a ? p.offset_um + config_.feedback * (target - p.offset_um) : config_.feedback * target;
@@ -407,6 +468,9 @@ void CheckpointCompensator::on_probe(const ProbeMeasurement& m, StepOutput& out)
   }
   p.learned_um = learned;
   ++p.count;
+  // Without the estimator the filter does not follow: switched on later, it starts from M.
+  p.variance_um2 = filtered ? variance : 0.0;
+  p.filter_n = filtered ? p.filter_n + 1 : 0;
   ++generation_;
   if (p.history_n < kHistoryDepth) {
     p.history[p.history_n++] = e;
@@ -737,6 +801,7 @@ bool CheckpointCompensator::rebase(std::size_t first, std::size_t last, double d
     // gave back): the next reading counts in full, and the outlier rule waits for new ones.
     p.count = 0;
     p.history_n = 0;
+    p.filter_n = 0;
     mark_dirty(i);
   }
   if (config_.active_register >= 0 && first == 0 && last + 1 == points_.size()) {
@@ -751,15 +816,19 @@ bool CheckpointCompensator::rebase(std::size_t first, std::size_t last, double d
 }
 
 void CheckpointCompensator::export_state(CheckpointState& out) const {
-  out.version = 1;
+  out.version = 2;
   out.part_counter = part_counter_;
   out.part = part_;
   out.points.assign(points_.begin(), points_.end());
 }
 
 const char* CheckpointCompensator::invalid_point_reason(const LearnedPoint& p) const noexcept {
-  if (!std::isfinite(p.learned_um) || !std::isfinite(p.offset_um) || !std::isfinite(p.applied_um)) {
+  if (!std::isfinite(p.learned_um) || !std::isfinite(p.offset_um) || !std::isfinite(p.applied_um) ||
+      !std::isfinite(p.variance_um2)) {
     return "non-finite value";
+  }
+  if (p.variance_um2 < 0.0) {
+    return "negative variance";
   }
   if (p.history_n > kHistoryDepth) {
     return "history longer than its capacity";
@@ -796,7 +865,7 @@ void CheckpointCompensator::restore_counters(std::int64_t part_counter,
 }
 
 void CheckpointCompensator::import_state(const CheckpointState& st) {
-  if (st.version != 1) {
+  if (st.version != 1 && st.version != 2) {
     throw std::invalid_argument("checkpoint state: unknown version " + std::to_string(st.version));
   }
   if (st.points.size() != plan_.size()) {
@@ -810,9 +879,41 @@ void CheckpointCompensator::import_state(const CheckpointState& st) {
     }
   }
   for (std::size_t i = 0; i < st.points.size(); ++i) {
-    (void)restore_point(i, st.points[i]);
+    LearnedPoint p = st.points[i];
+    if (st.version == 1) {
+      p.variance_um2 = 0.0;  // version 1 had no filter: it starts at the next reading
+      p.filter_n = 0;
+    }
+    (void)restore_point(i, p);
   }
   restore_counters(st.part_counter, st.part);
+}
+
+double CheckpointCompensator::part_noise_var_um2(std::size_t i) const noexcept {
+  const CheckpointEstimatorConfig& est = config_.estimator;
+  const LearnedPoint& p = points_[i];
+  if (est.learn_part_noise && p.history_n >= est.learn_min_parts) {
+    return learned_part_noise_um2(p, est.measurement_sigma_um);
+  }
+  return est.part_noise_um * est.part_noise_um;
+}
+
+double CheckpointCompensator::predicted_sigma_um(std::size_t i) const noexcept {
+  const CheckpointEstimatorConfig& est = config_.estimator;
+  const LearnedPoint& p = points_[i];
+  if (!est.enabled || p.count == 0) return kNaN;
+  const double r = est.measurement_sigma_um * est.measurement_sigma_um;
+  return std::sqrt((p.filter_n > 0 ? p.variance_um2 : r) + part_noise_var_um2(i));
+}
+
+double CheckpointCompensator::next_gain(std::size_t i) const noexcept {
+  const CheckpointEstimatorConfig& est = config_.estimator;
+  const LearnedPoint& p = points_[i];
+  if (!est.enabled) return kNaN;
+  if (p.count == 0) return 1.0;
+  const double r = est.measurement_sigma_um * est.measurement_sigma_um;
+  const double prior = (p.filter_n > 0 ? p.variance_um2 : r) + part_noise_var_um2(i);
+  return prior / (prior + r);
 }
 
 ReconcileReport CheckpointCompensator::reconcile(std::span<const double> nc_values_um) {

@@ -47,6 +47,27 @@ inline constexpr std::size_t kHistoryDepth = 16;
 /// Table registers written per step at most (StepOutput holds 128 writes shared with others).
 inline constexpr std::size_t kTableWritesPerStep = 32;
 
+/// `[checkpoints.estimator]` (docs/estimation.md, "S1"): mode A learns each checkpoint's
+/// deviation with a Kalman filter of a random walk instead of the fixed-weight EWMA, so the
+/// weight of a new reading (the gain) follows how much that checkpoint really varies from part to
+/// part.
+struct CheckpointEstimatorConfig {
+  bool enabled{false};
+  /// Standard deviation of one reading around the deviation that carries over to the next part
+  /// [µm]: the probe's repeatability, plus the part's own scatter where it does not carry over.
+  double measurement_sigma_um{1.0};
+  /// The deviation's random walk: standard deviation of its change from one part to the next
+  /// [µm]. Used until learned (or always, with learn_part_noise = false).
+  double part_noise_um{1.0};
+  /// Learn the part noise per checkpoint from its history: q = mean(Δe²) − 2σ², at least 0.
+  bool learn_part_noise{true};
+  /// Accepted readings in the checkpoint's history before the learned part noise is used.
+  std::uint32_t learn_min_parts{5};
+  /// A reading beyond gate_sigmas standard deviations of the predicted innovation is not learned
+  /// (warning 31); 0 = no gate.
+  double gate_sigmas{5.0};
+};
+
 /// The `[checkpoints]` keys of the daemon's config, one member per key (docs/checkpoints.md).
 /// The plan keys (contour, levels, …) are in PlanConfig.
 struct CompensatorConfig {
@@ -87,13 +108,19 @@ struct CompensatorConfig {
   /// Read-back agreement tolerance [µm] and the winner on disagreement.
   double reconcile_tolerance_um{0.5};
   ReconcilePrefer reconcile_prefer{ReconcilePrefer::kDaemon};
+  CheckpointEstimatorConfig estimator{};
 };
 
 /// Learned values of one checkpoint (plain data, for persistence).
 struct LearnedPoint {
-  /// EWMA M of the uncompensated error e [µm] and the number of measurements in it.
+  /// EWMA M (with the estimator: the filter's estimate) of the uncompensated error e [µm] and the
+  /// number of measurements in it.
   double learned_um{0.0};
   std::uint32_t count{0};
+  /// Estimator: the variance of learned_um [µm²] and the readings the filter absorbed since it
+  /// started (0: it starts at the next reading from learned_um with the variance σ²).
+  double variance_um2{0.0};
+  std::uint32_t filter_n{0};
   /// Offset c [µm] (before the repeatability rule).
   double offset_um{0.0};
   /// The offset the current part's wall was cut with at this checkpoint [µm]: the table value at
@@ -107,9 +134,10 @@ struct LearnedPoint {
   std::uint32_t history_n{0};
 };
 
-/// Persisted state. version guards the layout; checkpoint_count guards against a changed plan.
+/// Persisted state. version guards the layout (2: with the estimator's variance; 1 is converted:
+/// the filter starts at the next reading); checkpoint_count guards against a changed plan.
 struct CheckpointState {
-  std::uint32_t version{1};
+  std::uint32_t version{2};
   std::int64_t part_counter{0};
   std::int32_t part{0};
   std::vector<LearnedPoint> points;
@@ -224,6 +252,15 @@ class CheckpointCompensator {
   [[nodiscard]] std::int64_t part_counter() const noexcept { return part_counter_; }
   [[nodiscard]] std::int32_t part() const noexcept { return part_; }
   [[nodiscard]] const LearnedPoint& point(std::size_t i) const noexcept { return points_[i]; }
+  /// Estimator: the part-to-part variance q [µm²] checkpoint i's filter uses now (learned from
+  /// its history or part_noise_um²). Real-time safe.
+  [[nodiscard]] double part_noise_var_um2(std::size_t i) const noexcept;
+  /// Estimator: the standard deviation of learned_um as the prediction of the next part's error,
+  /// sqrt(P + q) [µm]; NaN before the first reading or with the estimator off. Real-time safe.
+  [[nodiscard]] double predicted_sigma_um(std::size_t i) const noexcept;
+  /// Estimator: the weight the next reading at checkpoint i gets, (P + q) / (P + q + σ²) (1 before
+  /// the first reading; NaN with the estimator off). Real-time safe.
+  [[nodiscard]] double next_gain(std::size_t i) const noexcept;
 
  private:
   void on_part_start(TimeNs now_ns, const ProgramEvent& ev) noexcept;

@@ -14,7 +14,8 @@ namespace nccomp::core::checkpoint {
 namespace {
 
 constexpr std::uint32_t kMagic = 0x31504B43;  // "CKP1"
-constexpr std::uint32_t kVersion = 1;
+// 2: the estimator's variance and filter count per checkpoint. 1 is converted when loaded.
+constexpr std::uint32_t kVersion = 2;
 
 struct Header {
   std::uint32_t magic;
@@ -24,7 +25,7 @@ struct Header {
   std::int64_t part_counter;
 };
 
-struct Record {
+struct RecordV1 {
   double learned_um;
   double offset_um;
   double applied_um;
@@ -33,7 +34,15 @@ struct Record {
   double history[kHistoryDepth];
 };
 
+struct Record {
+  RecordV1 v1;
+  double variance_um2;
+  std::uint32_t filter_n;
+  std::uint32_t reserved;
+};
+
 static_assert(std::is_trivially_copyable_v<Header> && std::is_trivially_copyable_v<Record>);
+static_assert(sizeof(RecordV1) == 160 && sizeof(Record) == 176, "the state file's layout");
 
 }  // namespace
 
@@ -127,12 +136,14 @@ std::size_t CheckpointModule::save_state(std::span<std::byte> buf) const noexcep
   for (std::size_t i = 0; i < plan_.size(); ++i) {
     const LearnedPoint& lp = compensator_.point(i);
     Record r{};
-    r.learned_um = lp.learned_um;
-    r.offset_um = lp.offset_um;
-    r.applied_um = lp.applied_um;
-    r.count = lp.count;
-    r.history_n = lp.history_n;
-    for (std::size_t k = 0; k < kHistoryDepth; ++k) r.history[k] = lp.history[k];
+    r.v1.learned_um = lp.learned_um;
+    r.v1.offset_um = lp.offset_um;
+    r.v1.applied_um = lp.applied_um;
+    r.v1.count = lp.count;
+    r.v1.history_n = lp.history_n;
+    for (std::size_t k = 0; k < kHistoryDepth; ++k) r.v1.history[k] = lp.history[k];
+    r.variance_um2 = lp.variance_um2;
+    r.filter_n = lp.filter_n;
     std::memcpy(p, &r, sizeof r);
     p += sizeof r;
   }
@@ -143,24 +154,29 @@ bool CheckpointModule::load_state(std::span<const std::byte> bytes) noexcept {
   if (bytes.empty()) {
     return true;  // no state yet: start fresh
   }
-  if (bytes.size() != state_capacity()) {
+  Header h{};
+  if (bytes.size() < sizeof h) {
     return false;
   }
-  Header h{};
   std::memcpy(&h, bytes.data(), sizeof h);
-  if (h.magic != kMagic || h.version != kVersion || h.count != plan_.size()) {
+  // Version 1 has no filter: its checkpoints start the filter at the next reading from M.
+  const std::size_t record_size = h.version == 1 ? sizeof(RecordV1) : sizeof(Record);
+  if (h.magic != kMagic || (h.version != 1 && h.version != kVersion) || h.count != plan_.size() ||
+      bytes.size() != sizeof h + plan_.size() * record_size) {
     return false;
   }
   const auto record = [&](std::size_t i) {
     Record r{};
-    std::memcpy(&r, bytes.data() + sizeof h + i * sizeof(Record), sizeof r);
+    std::memcpy(&r, bytes.data() + sizeof h + i * record_size, record_size);
     LearnedPoint lp;
-    lp.learned_um = r.learned_um;
-    lp.offset_um = r.offset_um;
-    lp.applied_um = r.applied_um;
-    lp.count = r.count;
-    lp.history_n = r.history_n;
-    for (std::size_t k = 0; k < kHistoryDepth; ++k) lp.history[k] = r.history[k];
+    lp.learned_um = r.v1.learned_um;
+    lp.offset_um = r.v1.offset_um;
+    lp.applied_um = r.v1.applied_um;
+    lp.count = r.v1.count;
+    lp.history_n = r.v1.history_n;
+    for (std::size_t k = 0; k < kHistoryDepth; ++k) lp.history[k] = r.v1.history[k];
+    lp.variance_um2 = r.variance_um2;
+    lp.filter_n = r.filter_n;
     return lp;
   };
   // All or nothing: check every record before changing anything.
@@ -221,9 +237,30 @@ std::size_t CheckpointModule::status(std::span<engine::StatusValue> out) const n
       {"checkpoint_count", has_focus ? static_cast<double>(c.learned_count(fi)) : kNaN, nullptr},
       {"checkpoint_offset_um", has_focus ? c.register_value_um(fi) : kNaN, nullptr},
   };
-  static_assert(std::size(values) <= engine::kMaxStatusValues);
   std::size_t w = 0;
   for (const auto& v : values) {
+    if (w == out.size()) break;
+    out[w++] = v;
+  }
+  if (!c.config().estimator.enabled) {
+    return w;
+  }
+  // The filter's uncertainty: the focus checkpoint's, and the largest over the table (a
+  // <stem>_sigma_um key is the standard deviation of <stem>_estimate_um: a metric of its own).
+  double sigma_max = kNaN;
+  for (std::size_t i = 0; i < c.size(); ++i) {
+    const double s = c.predicted_sigma_um(i);
+    if (std::isfinite(s) && !(s <= sigma_max)) sigma_max = s;
+  }
+  const bool est_focus = has_focus && c.learned_count(fi) > 0;
+  const engine::StatusValue est_values[] = {
+      {"checkpoint_estimate_um", est_focus ? c.learned_um(fi) : kNaN, nullptr},
+      {"checkpoint_sigma_um", has_focus ? c.predicted_sigma_um(fi) : kNaN, nullptr},
+      {"checkpoint_gain", has_focus ? c.next_gain(fi) : kNaN, nullptr},
+      {"sigma_max_um", sigma_max, nullptr},
+  };
+  static_assert(std::size(values) + std::size(est_values) <= engine::kMaxStatusValues);
+  for (const auto& v : est_values) {
     if (w == out.size()) break;
     out[w++] = v;
   }

@@ -522,6 +522,10 @@ void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out)
     }
   }
 
+  for (const MeasurementRecord& rec : out.records) {
+    for (auto& m : modules_) m->observe_record(rec);
+  }
+
   if (handover_pending_) {
     hand_over_trims(now_ns);
   }

@@ -162,6 +162,11 @@ class Module {
   /// appends targets / alarms / measurement records to out.
   virtual void step(TimeNs now_ns, std::span<const Event> events, StepOutput& out) noexcept = 0;
 
+  /// Real-time safe. Every measurement record of the cycle (any module's, stamped with the
+  /// machine context), after every module has stepped: a module that learns from measurements
+  /// it does not make (the model's session offset). Default: ignored.
+  virtual void observe_record(const MeasurementRecord& record) noexcept { (void)record; }
+
   /// Upper bound [bytes] of save_state()'s output; fixed after attach().
   [[nodiscard]] virtual std::size_t state_capacity() const noexcept { return 0; }
   /// Real-time safe. Serialises the state that must survive a restart; returns bytes written

@@ -19,6 +19,8 @@ namespace {
 constexpr std::size_t kMaxParameters = 600;
 constexpr std::size_t kMaxGroupsPerTerm = 512;
 constexpr std::size_t kRefitPerStep = 3;
+// Most sessions of a session_offset candidate (one coefficient each in the fit).
+constexpr std::size_t kMaxSessions = 256;
 
 std::size_t uz(int i) { return static_cast<std::size_t>(i); }
 double dz(std::size_t n) { return static_cast<double>(n); }
@@ -161,24 +163,49 @@ std::size_t row_entries(const std::vector<TermSpec>& specs, const Layout& layout
 
 // Minimum-norm least squares of the normal equations after equilibration (columns of very
 // different scale: seconds since warm start next to a constant).
+// `penalty` (empty = none): a ridge term added to the diagonal (the random effects of a session
+// term, Henderson's mixed-model equations); `hat_diag` then gets the diagonal of
+// (X'X + Λ)⁺ X'X, whose sum over a shrunk block is its effective number of parameters.
 Eigen::VectorXd solve_normal(const Eigen::MatrixXd& a, const Eigen::VectorXd& rhs,
-                             std::size_t* rank, std::vector<double>* variance) {
+                             std::size_t* rank, std::vector<double>* variance,
+                             const Eigen::VectorXd& penalty = {},
+                             std::vector<double>* hat_diag = nullptr,
+                             std::vector<double>* covariance = nullptr) {
   const Eigen::Index p = a.rows();
+  Eigen::MatrixXd ap = a;
+  if (penalty.size() == p) ap.diagonal() += penalty;
   Eigen::VectorXd d(p);
   for (Eigen::Index i = 0; i < p; ++i) {
-    d(i) = a(i, i) > 0.0 ? 1.0 / std::sqrt(a(i, i)) : 0.0;
+    d(i) = ap(i, i) > 0.0 ? 1.0 / std::sqrt(ap(i, i)) : 0.0;
   }
-  const Eigen::MatrixXd as = d.asDiagonal() * a * d.asDiagonal();
+  const Eigen::MatrixXd as = d.asDiagonal() * ap * d.asDiagonal();
   Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(as);
   cod.setThreshold(1e-11);
   const Eigen::VectorXd z = cod.solve(d.asDiagonal() * rhs);
   if (rank != nullptr) *rank = static_cast<std::size_t>(cod.rank());
-  if (variance != nullptr) {
+  if (variance != nullptr || hat_diag != nullptr || covariance != nullptr) {
     // (X'X)⁺ = D (D X'X D)⁺ D.
     const Eigen::MatrixXd inv = cod.pseudoInverse();
-    variance->resize(static_cast<std::size_t>(p));
-    for (Eigen::Index i = 0; i < p; ++i) {
-      (*variance)[static_cast<std::size_t>(i)] = d(i) * d(i) * inv(i, i);
+    if (variance != nullptr) {
+      variance->resize(static_cast<std::size_t>(p));
+      for (Eigen::Index i = 0; i < p; ++i) {
+        (*variance)[static_cast<std::size_t>(i)] = d(i) * d(i) * inv(i, i);
+      }
+    }
+    if (covariance != nullptr) {
+      const Eigen::MatrixXd full = d.asDiagonal() * inv * d.asDiagonal();
+      covariance->resize(static_cast<std::size_t>(p * p));
+      for (Eigen::Index i = 0; i < p; ++i) {
+        for (Eigen::Index j = 0; j < p; ++j) {
+          (*covariance)[static_cast<std::size_t>(i * p + j)] = full(i, j);
+        }
+      }
+    }
+    if (hat_diag != nullptr) {
+      // diag((A + Λ)⁺ A) = diag(D⁻¹ inv (D A D) D) = diag(inv (D A D)).
+      const Eigen::MatrixXd h = inv * (d.asDiagonal() * a * d.asDiagonal());
+      hat_diag->resize(static_cast<std::size_t>(p));
+      for (Eigen::Index i = 0; i < p; ++i) (*hat_diag)[static_cast<std::size_t>(i)] = h(i, i);
     }
   }
   return d.asDiagonal() * z;
@@ -220,6 +247,7 @@ FitStats stats_of(const Dataset& data, const Model& model, const std::vector<std
   s.heldout = error_stats(r, heldout, 1);
   s.rss = s.fitted.rms_um * s.fitted.rms_um * dz(s.fitted.rows);
   s.parameters = parameter_count(model);
+  s.effective_parameters = dz(s.parameters);
   if (!std::isfinite(s.rss) || !std::isfinite(s.heldout.rms_um)) {
     throw AnalysisError(what + ": the RMS is not a finite number (values too large)");
   }
@@ -290,6 +318,66 @@ std::size_t count_groups(const Dataset& data, int column, const std::vector<std:
   }
   std::sort(v.begin(), v.end());
   return static_cast<std::size_t>(std::unique(v.begin(), v.end()) - v.begin());
+}
+
+// Distinct sessions (Dataset::row_session) among the used rows of the kinds in kind_mask.
+std::size_t count_sessions(const Dataset& data, const std::vector<std::uint8_t>& use,
+                           std::uint8_t kind_mask) {
+  if (data.row_session.size() != data.rows()) return data.rows() > 0 ? 1 : 0;
+  const auto& kind = data.column(static_cast<int>(Column::kKind));
+  std::vector<std::uint32_t> v;
+  for (std::size_t i = 0; i < data.rows(); ++i) {
+    if (use[i] == 0U) continue;
+    if (!kind.empty() && std::isfinite(kind[i]) && kind[i] >= 0.0 && kind[i] < 8.0 &&
+        (kind_mask & (1U << static_cast<unsigned>(kind[i]))) == 0U) {
+      continue;
+    }
+    v.push_back(data.row_session[i]);
+  }
+  std::sort(v.begin(), v.end());
+  return static_cast<std::size_t>(std::unique(v.begin(), v.end()) - v.begin());
+}
+
+// Method of moments of the one-way random-effects model on the current residual e of the rows
+// the session term applies to: the within-session mean square estimates σ², the between-session
+// sum of squares B has E[B] = (S − 1) σ² + τ² (N − Σ n_s² / N) (unbalanced sessions). Sets
+// spec.center = σ and spec.scale = τ (0 when B is no more than the noise explains).
+void estimate_session_variances(const Dataset& data, const std::vector<std::uint8_t>& use,
+                                const std::vector<double>& residual, TermSpec& spec) {
+  std::map<double, std::array<double, 3>> acc;  // session → n, Σe, Σe²
+  std::array<double, kMaxBasis> b{};
+  for (std::size_t i = 0; i < data.rows(); ++i) {
+    if (use[i] == 0U || !std::isfinite(residual[i])) continue;
+    const Row row = data.row(i);
+    if (term_basis(spec, row, kUnknown, b) == 0) continue;
+    auto& a = acc[row[kSessionColumn]];
+    a[0] += 1.0;
+    a[1] += residual[i];
+    a[2] += residual[i] * residual[i];
+  }
+  double n = 0.0;
+  double sum = 0.0;
+  double within = 0.0;
+  double sum_n2 = 0.0;
+  for (const auto& [session, a] : acc) {
+    n += a[0];
+    sum += a[1];
+    within += std::max(0.0, a[2] - a[1] * a[1] / a[0]);
+    sum_n2 += a[0] * a[0];
+  }
+  const double groups = dz(acc.size());
+  spec.center = 0.0;
+  spec.scale = 0.0;
+  if (groups < 2.0 || n <= groups) return;
+  double between = 0.0;
+  for (const auto& [session, a] : acc) {
+    const double d = a[1] / a[0] - sum / n;
+    between += a[0] * d * d;
+  }
+  const double sigma2 = within / (n - groups);
+  const double tau2 = (between - (groups - 1.0) * sigma2) / (n - sum_n2 / n);
+  spec.center = std::sqrt(sigma2);
+  spec.scale = tau2 > 0.0 ? std::sqrt(tau2) : 0.0;
 }
 
 // The shared and the per-group version of an effect are one term: once either is in the
@@ -684,6 +772,7 @@ Row Dataset::row(std::size_t i) const {
   for (std::size_t c = 0; c < columns.size() && c < kMaxColumns; ++c) {
     if (!columns[c].empty()) r[c] = columns[c][i];
   }
+  r[kSessionColumn] = row_session.size() == rows() ? static_cast<double>(row_session[i]) : 0.0;
   return r;
 }
 
@@ -748,7 +837,8 @@ void leave_out_unseen_groups(const Dataset& data, const std::vector<TermSpec>& d
   std::size_t rows = 0;
   std::vector<std::uint8_t> unseen(data.rows(), 0);
   for (const TermSpec& s : declared) {
-    if (s.per[0] < 0 && s.per[1] < 0) continue;
+    // A session term learns an unseen session from its own rows (Model::observe()).
+    if ((s.per[0] < 0 && s.per[1] < 0) || s.form == Form::kSession) continue;
     std::map<std::array<double, 2>, int> fitted;  // 0 seen in fitted rows, 1 only held out
     for (int want : {0, 1}) {
       for (std::size_t i = 0; i < data.rows(); ++i) {
@@ -870,6 +960,113 @@ void set_confidence_intervals(const Dataset& data, const std::vector<TermSpec>& 
       }
     }
     offset += term.coef.size();
+  }
+}
+
+// The final model's 95 % prediction interval on each held-out row, from the fit on the fitted
+// rows: t · sqrt(s² (1 + x'Cx ·(1 + ρ)/(1 − ρ)) + v), C = (X'X + Λ)⁺, s² the residual variance,
+// the coefficient part widened for an AR(1) residual as coef_ci95; v the variance of a learned
+// session offset (τ²σ² / (nτ² + σ²) after n of the session's rows), and its measured coverage.
+void set_prediction_interval(const Dataset& data, const std::vector<TermSpec>& specs,
+                             const std::vector<std::uint8_t>& use, const AnalysisConfig& config,
+                             AnalysisResult& result) {
+  FitInfo info;
+  info.want_covariance = true;
+  const Model m = fit_terms(data, specs, use, &info);
+  const std::vector<double> residual = residuals(data, m);
+  double rss = 0.0;
+  for (std::size_t i = 0; i < residual.size(); ++i) {
+    if (use[i] != 0U && std::isfinite(residual[i])) rss += residual[i] * residual[i];
+  }
+  const double df = dz(info.rows) - info.effective_parameters;
+  if (!(df >= 1.0)) return;
+  const double s2 = rss / df;
+  const double rho = config.ar1_correction
+                         ? std::clamp(lag1_autocorrelation(data, residual, use), 0.0, 0.999)
+                         : 0.0;
+  const double inflate = (1.0 + rho) / (1.0 - rho);
+  const double t = t95(df);
+  Layout layout;
+  layout.groups.resize(specs.size());
+  for (std::size_t k = 0; k < specs.size(); ++k) {
+    layout.groups[k] = m.terms()[k].groups;
+    layout.offset.push_back(layout.parameters);
+    layout.parameters += layout.groups[k].size() * basis_count(specs[k].form, specs[k].degree);
+  }
+  const std::size_t p = layout.parameters;
+  if (info.coef_covariance.size() != p * p) return;
+  const int st = m.session_term();
+  // A row of a session the fit did not see: its learned offset takes the level of the other
+  // terms too (their common shift against the fitted sessions' offsets), so their uncertainty
+  // is that of a fit without the session term.
+  std::vector<TermSpec> other_specs;
+  for (std::size_t k = 0; k < specs.size(); ++k) {
+    if (static_cast<int>(k) != st) other_specs.push_back(specs[k]);
+  }
+  FitInfo other_info;
+  other_info.want_covariance = true;
+  Model others;
+  Layout other_layout;
+  if (st >= 0 && !other_specs.empty()) {
+    others = fit_terms(data, other_specs, use, &other_info);
+    other_layout.groups.resize(other_specs.size());
+    for (std::size_t k = 0; k < other_specs.size(); ++k) {
+      other_layout.groups[k] = others.terms()[k].groups;
+      other_layout.offset.push_back(other_layout.parameters);
+      other_layout.parameters +=
+          other_layout.groups[k].size() * basis_count(other_specs[k].form, other_specs[k].degree);
+    }
+  }
+  const std::size_t po = other_layout.parameters;
+  EvalState other_state = others.make_state();
+  PredictionInterval& pi = result.prediction_interval;
+  EvalState state = m.make_state();
+  std::vector<Entry> x;
+  std::array<double, kMaxBasis> b{};
+  std::size_t covered = 0;
+  double sum_half = 0.0;
+  for (std::size_t i = 0; i < data.rows(); ++i) {
+    const Row row = data.row(i);
+    const double y = data.target_um[i];
+    const double prediction = m.evaluate(row, state);
+    if (st >= 0) others.evaluate(row, other_state);  // advances its lag filters
+    if (result.heldout[i] == 1U && std::isfinite(y) && std::isfinite(prediction)) {
+      const TermSpec* s = st >= 0 ? &specs[static_cast<std::size_t>(st)] : nullptr;
+      const bool unseen = s != nullptr && term_basis(*s, row, kUnknown, b) > 0 &&
+                          find_group(*s, layout.groups[static_cast<std::size_t>(st)], row) < 0;
+      const bool use_others = unseen && po > 0 && other_info.coef_covariance.size() == po * po;
+      EvalState aux = use_others ? other_state : state;  // kWear terms' basis in the lag slots
+      set_wear_aux(use_others ? other_specs : specs, row, use_others ? &others : &m, aux);
+      row_entries(use_others ? other_specs : specs, use_others ? other_layout : layout, row, aux,
+                  x);
+      const std::vector<double>& cov =
+          use_others ? other_info.coef_covariance : info.coef_covariance;
+      const std::size_t stride = use_others ? po : p;
+      double q = 0.0;
+      for (const Entry& u : x) {
+        for (const Entry& v : x) q += u.value * v.value * cov[u.index * stride + v.index];
+      }
+      double v_session = 0.0;
+      if (unseen) {
+        const bool same_session = std::isfinite(state.session.session) &&
+                                  !(state.session.session < row[kSessionColumn]) &&
+                                  !(row[kSessionColumn] < state.session.session);
+        const double n_s = same_session ? state.session.count : 0.0;
+        const double tau2 = s->scale * s->scale;
+        const double sigma2 = s->center * s->center;
+        v_session = tau2 * sigma2 / std::max(n_s * tau2 + sigma2, 1e-300);
+      }
+      const double half = t * std::sqrt(s2 * (1.0 + std::max(0.0, q) * inflate) + v_session);
+      ++pi.rows;
+      sum_half += half;
+      pi.half_width_max_um = std::max(pi.half_width_max_um, half);
+      if (std::fabs(y - prediction) <= half) ++covered;
+    }
+    m.observe(row, y, state);
+  }
+  if (pi.rows > 0) {
+    pi.half_width_mean_um = sum_half / dz(pi.rows);
+    pi.coverage = dz(covered) / dz(pi.rows);
   }
 }
 
@@ -1015,12 +1212,41 @@ Model fit_terms(const Dataset& data, const std::vector<TermSpec>& specs,
     }
   }
   a.triangularView<Eigen::StrictlyLower>() = a.transpose().triangularView<Eigen::StrictlyLower>();
+  // Session terms are random effects: their coefficients shrunk toward 0 by the ridge
+  // λ = σ² / τ² (the BLUP for the term's noise σ and between-session τ).
+  Eigen::VectorXd penalty;
+  for (std::size_t t = 0; t < specs.size(); ++t) {
+    if (specs[t].form != Form::kSession) continue;
+    if (penalty.size() == 0) penalty = Eigen::VectorXd::Zero(p);
+    const double tau = specs[t].scale;
+    const double sigma = specs[t].center;
+    const std::size_t n = layout.groups[t].size();
+    for (std::size_t k = 0; k < n; ++k) {
+      const auto i = static_cast<Eigen::Index>(layout.offset[t] + k);
+      // τ = 0: no between-session variance, the offsets are held at 0.
+      penalty(i) = tau > 0.0 ? sigma * sigma / (tau * tau) : 1e12 * (1.0 + a(i, i));
+    }
+  }
   std::size_t rank = 0;
   std::vector<double> variance;
+  std::vector<double> hat;
   const bool want_variance = info != nullptr && info->want_variance;
-  const Eigen::VectorXd beta = solve_normal(a, rhs, &rank, want_variance ? &variance : nullptr);
+  const bool want_covariance = info != nullptr && info->want_covariance;
+  std::vector<double> covariance;
+  const bool shrunk = penalty.size() == p;
+  const Eigen::VectorXd beta =
+      solve_normal(a, rhs, &rank, want_variance ? &variance : nullptr, penalty,
+                   shrunk ? &hat : nullptr, want_covariance ? &covariance : nullptr);
   if (info != nullptr) {
-    *info = FitInfo{fitted_rows, layout.parameters, rank, want_variance, std::move(variance)};
+    *info = FitInfo{fitted_rows,     layout.parameters,    rank,
+                    want_variance,   std::move(variance),  dz(layout.parameters),
+                    want_covariance, std::move(covariance)};
+    for (std::size_t t = 0; t < specs.size() && shrunk; ++t) {
+      if (specs[t].form != Form::kSession) continue;
+      for (std::size_t k = 0; k < layout.groups[t].size(); ++k) {
+        info->effective_parameters -= 1.0 - std::clamp(hat[layout.offset[t] + k], 0.0, 1.0);
+      }
+    }
   }
   std::vector<Term> terms;
   for (std::size_t t = 0; t < specs.size(); ++t) {
@@ -1046,7 +1272,11 @@ std::vector<double> residuals(const Dataset& data, const Model& model) {
   std::vector<double> r(data.rows());
   EvalState state = model.make_state();
   for (std::size_t i = 0; i < data.rows(); ++i) {
-    r[i] = data.target_um[i] - model.evaluate(data.row(i), state);
+    const Row row = data.row(i);
+    r[i] = data.target_um[i] - model.evaluate(row, state);
+    // A session the fit did not see is predicted as the daemon would: learned from its own
+    // earlier rows, each row predicted before it is taken.
+    model.observe(row, data.target_um[i], state);
   }
   return r;
 }
@@ -1113,7 +1343,8 @@ bool is_temperature_column(int column, const std::vector<std::string>& extras,
 
 std::string effect_label(const std::string& name, const std::array<int, 2>& per,
                          const std::vector<std::string>& extras) {
-  if (per[0] < 0) return name;
+  // A session term is per session by what it is.
+  if (per[0] < 0 || per[0] == static_cast<int>(kSessionColumn)) return name;
   std::string out = name + " per=" + column_name(per[0], extras);
   if (per[1] >= 0) out += "+" + column_name(per[1], extras);
   return out;
@@ -1328,10 +1559,25 @@ std::vector<Candidate> make_candidates(const Dataset& data, const std::vector<st
       }
     }
   }
+  // One offset per session (a machine re-homed or warmed up each morning): a random effect,
+  // its variances estimated when it is tried (estimate_session_variances()).
+  const std::size_t sessions = count_sessions(data, use, km);
+  if (sessions >= 2 && sessions <= kMaxSessions && !excluded("session_offset")) {
+    Candidate c;
+    c.spec.name = "session_offset";
+    c.spec.form = Form::kSession;
+    c.spec.column = static_cast<int>(kSessionColumn);
+    c.spec.per = {static_cast<int>(kSessionColumn), -1};
+    c.spec.kind_mask = km;
+    c.spec.scale = 0.0;  // τ: not known before it is tried
+    out.push_back(std::move(c));
+  }
   return out;
 }
 
-AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
+namespace {
+
+AnalysisResult analyze_numbered(const Dataset& data, const AnalysisConfig& config) {
   const std::size_t n = data.rows();
   if (n < 10) throw AnalysisError("the log has " + std::to_string(n) + " rows; at least 10 needed");
   check_magnitudes(data);
@@ -1377,6 +1623,7 @@ AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
   warn_fit(info, "the declared model", result.warnings);
   std::vector<double> residual;
   FitStats current = stats_of(data, model, result.heldout, &residual, "the declared model");
+  current.effective_parameters = info.effective_parameters;
   result.declared = current;
   result.declared_residual_um = residual;
   if (current.heldout.rows == 0) {
@@ -1397,6 +1644,13 @@ AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
                                     std::to_string(groups) + " values among the fitted rows (2 … " +
                                     std::to_string(kMaxSearchGroups) +
                                     " needed): no per-group candidate of it was tried"});
+  }
+  if (const std::size_t sessions = count_sessions(data, use, config.search.kind_mask);
+      sessions > kMaxSessions) {
+    result.warnings.push_back(
+        {"session_offset_unused", "the fitted rows form " + std::to_string(sessions) +
+                                      " sessions, more than " + std::to_string(kMaxSessions) +
+                                      ": session_offset was not tried"});
   }
   struct Ranked {
     double bic;
@@ -1466,18 +1720,25 @@ AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
   };
   // Refits with one more term; nested F-test against `base`, Bonferroni-adjusted.
   auto trial = [&](const std::vector<TermSpec>& base_specs, const FitStats& base,
-                   const Candidate& c, std::size_t n_cands) {
+                   const std::vector<double>& base_residual, const Candidate& c,
+                   std::size_t n_cands) {
     Trial t;
     t.specs = base_specs;
     t.specs.push_back(c.spec);
+    if (c.spec.form == Form::kSession) {
+      estimate_session_variances(data, use, base_residual, t.specs.back());
+    }
     t.model = fit_terms(data, t.specs, use, &t.info);
     t.stats = stats_of(data, t.model, result.heldout, &t.residual,
                        "candidate '" + c.spec.name + "' (" +
                            term_column_name(c.spec, data.extra_columns) + ", " +
                            std::string(form_name(c.spec.form)) + ")");
-    const double extra = c.grid.empty() ? 0.0 : 1.0;
-    const double df1 =
-        dz(t.stats.parameters > base.parameters ? t.stats.parameters - base.parameters : 1) + extra;
+    t.stats.effective_parameters = t.info.effective_parameters;
+    // The non-linear parameter, or the session term's between-session variance, is one more.
+    const double extra = c.grid.empty() && c.spec.form != Form::kSession ? 0.0 : 1.0;
+    // A shrunk term adds its effective degrees of freedom (below its coefficient count).
+    const double gained = t.stats.effective_parameters - base.effective_parameters;
+    const double df1 = (gained > 0.0 ? gained : 1.0) + extra;
     // Rows sampled densely in time (a gauge every 15 s) have correlated residuals: the F-test
     // would count them as independent. Scale to the effective number of rows of an AR(1)
     // residual, n (1 − ρ) / (1 + ρ); independent rows (ρ ≈ 0) keep the plain test.
@@ -1485,7 +1746,7 @@ AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
                            ? std::clamp(lag1_autocorrelation(data, t.residual, use), 0.0, 0.999)
                            : 0.0;
     const double shrink = (1.0 - rho) / (1.0 + rho);
-    const double df2 = dz(t.stats.fitted.rows) * shrink - dz(t.stats.parameters) - extra;
+    const double df2 = dz(t.stats.fitted.rows) * shrink - t.stats.effective_parameters - extra;
     if (df2 > 0.0 && t.stats.rss < base.rss) {
       t.f = ((base.rss - t.stats.rss) / df1) / (std::max(t.stats.rss, 1e-300) / df2);
       const double p = f_distribution_upper_tail(t.f, df1, df2);
@@ -1512,7 +1773,7 @@ AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
       }
     }
     AddedEffect e;
-    e.spec = c.spec;
+    e.spec = t.specs.back();  // with what the trial estimated (a session term's variances)
     e.before = current;
     e.after = t.stats;
     e.p_value = t.p_adj;
@@ -1532,7 +1793,7 @@ AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
     bool added = false;
     for (std::size_t k = 0; k < std::min(kRefitPerStep, ranked.size()) && !added; ++k) {
       const Candidate c = cands[ranked[k].index];
-      const Trial t = trial(specs, current, c, cands.size());
+      const Trial t = trial(specs, current, residual, c, cands.size());
       const bool better = heldout_better(t.stats, current);
       tried[k].p_value = t.p_adj;
       tried[k].heldout_improved = better;
@@ -1553,7 +1814,7 @@ AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
       const std::vector<Ranked> ranked2 = rank(t.specs, t.model, t.residual, cands2, tried2);
       for (std::size_t k2 = 0; k2 < std::min(kRefitPerStep, ranked2.size()) && !added; ++k2) {
         const Candidate c2 = cands2[ranked2[k2].index];
-        const Trial t2 = trial(t.specs, t.stats, c2, cands2.size());
+        const Trial t2 = trial(t.specs, t.stats, t.residual, c2, cands2.size());
         tried2[k2].p_value = t2.p_adj;
         tried2[k2].heldout_improved = heldout_better(t2.stats, current);
         tried2[k2].refitted = true;
@@ -1576,11 +1837,28 @@ AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
   for (std::size_t i = 0; i < n; ++i) all_rows[i] = std::isfinite(data.target_um[i]) ? 1 : 0;
   result.fitted_model = model;
   set_confidence_intervals(data, specs, use, residual, config, result);
+  set_prediction_interval(data, specs, use, config, result);
   result.final_model = fit_terms(data, specs, all_rows);
   if (!result.effects.empty()) warn_fit(info, "the final model", result.warnings);
   result.session = sessions_of(data, config.session_gap_s);
   if (config.validate_sessions) validate_sessions(data, config.declared, specs, result);
   return result;
+}
+
+}  // namespace
+
+AnalysisResult analyze(const Dataset& data, const AnalysisConfig& config) {
+  // Rows carry their session (kSessionColumn) as sessions_of() numbers it: a copy of the rows
+  // only where that differs from the reader's numbering (a gap rule that splits a session).
+  std::vector<std::uint32_t> sessions = sessions_of(data, config.session_gap_s);
+  const bool same =
+      data.row_session.size() == data.rows()
+          ? data.row_session == sessions
+          : std::all_of(sessions.begin(), sessions.end(), [](std::uint32_t s) { return s == 0U; });
+  if (same) return analyze_numbered(data, config);
+  Dataset numbered = data;
+  numbered.row_session = std::move(sessions);
+  return analyze_numbered(numbered, config);
 }
 
 std::vector<std::uint32_t> sessions_of(const Dataset& data, double gap_s) {

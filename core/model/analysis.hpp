@@ -43,7 +43,8 @@ struct Dataset {
   std::vector<std::uint32_t> row_file;
   std::vector<std::uint32_t> row_line;
   /// The reader's session of each row: one per file, and a new one at each warm start of a v2
-  /// log (its `session` grows). Of another length than the rows: one session.
+  /// log (its `session` grows). Of another length than the rows: one session. row() gives it
+  /// as kSessionColumn (analyze() renumbers it as sessions_of() first).
   std::vector<std::uint32_t> row_session;
 
   Dataset();
@@ -129,6 +130,8 @@ struct FitStats {
   ErrorStats heldout;
   double rss{0.0};
   std::size_t parameters{0};
+  /// parameters, with a shrunk session term counted by its effective degrees of freedom.
+  double effective_parameters{0.0};
 };
 
 /// One effect added by the search.
@@ -176,6 +179,14 @@ struct FitInfo {
   /// Per coefficient (Model order), diagonal of the pseudo-inverse of X'X: its variance is this
   /// times the residual variance.
   std::vector<double> coef_variance;
+  /// parameters, with each shrunk (session) coefficient counted as its diagonal entry of the
+  /// hat matrix (X'X + Λ)⁻¹X'X: the effective degrees of freedom of a random effect.
+  double effective_parameters{0.0};
+  /// Set by the caller to get coef_covariance.
+  bool want_covariance{false};
+  /// (X'X + Λ)⁺ in Model order, row-major (parameters²): times the residual variance, the
+  /// coefficients' covariance.
+  std::vector<double> coef_covariance;
 };
 
 /// One fold of the leave-one-session-out validation: the session's rows predicted by the
@@ -185,6 +196,17 @@ struct SessionFold {
   std::size_t first_row{0};  // its first row (Dataset::where)
   ErrorStats declared;
   ErrorStats final_model;
+};
+
+/// The final model's prediction interval on the held-out rows (fitted on the fitted rows, as the
+/// held-out figures) and how many held-out rows it covered.
+struct PredictionInterval {
+  double level{0.95};
+  std::size_t rows{0};  // held-out rows with a measurement and a prediction
+  double half_width_mean_um{0.0};
+  double half_width_max_um{0.0};
+  /// Share of those rows whose measurement is within its interval.
+  double coverage{0.0};
 };
 
 struct AnalysisResult {
@@ -213,6 +235,7 @@ struct AnalysisResult {
   /// over all their rows (empty / 0 rows when not asked for).
   std::vector<std::uint32_t> session;
   std::vector<SessionFold> session_folds;
+  PredictionInterval prediction_interval;
   ErrorStats sessions_declared;
   ErrorStats sessions_final;
 };
@@ -235,7 +258,8 @@ double f_distribution_upper_tail(double f, double d1, double d2);
 Model fit_terms(const Dataset& data, const std::vector<TermSpec>& specs,
                 const std::vector<std::uint8_t>& use, FitInfo* info = nullptr);
 
-/// Residual target − prediction of every row (rows in order; lag filters run over all rows).
+/// Residual target − prediction of every row (rows in order; lag filters run over all rows; a
+/// session term learns a session it has no coefficient for from that session's earlier rows).
 std::vector<double> residuals(const Dataset& data, const Model& model);
 
 /// Noise floor [µm]: from successive differences of the residual within each (kind, point, tool)

@@ -7,13 +7,18 @@
 namespace nccomp::core::model {
 
 namespace {
-constexpr std::array<std::string_view, 11> kFormNames = {
-    "constant", "linear",     "poly",  "exp_rise", "sine",       "step",
-    "lag",      "exp_growth", "hinge", "wear",     "interaction"};
+constexpr std::array<std::string_view, 12> kFormNames = {
+    "constant", "linear",     "poly",  "exp_rise", "sine",        "step",
+    "lag",      "exp_growth", "hinge", "wear",     "interaction", "session"};
 
 bool same(double a, double b) noexcept {
   // Group keys are integers (tool, point, kind) stored as doubles; exact equality is intended.
   return !(a < b) && !(b < a);
+}
+
+// The session learned is the row's (never before the first one: NaN is no session).
+bool same_session(double learned, double row) noexcept {
+  return std::isfinite(learned) && same(learned, row);
 }
 }  // namespace
 
@@ -62,7 +67,7 @@ std::size_t term_basis(const TermSpec& spec, const Row& row, double aux,
     out[0] = 1.0;
     return 1;
   }
-  if (spec.column < 0 || static_cast<std::size_t>(spec.column) >= kMaxColumns) return 0;
+  if (spec.column < 0 || static_cast<std::size_t>(spec.column) >= row.size()) return 0;
   const double v = row[static_cast<std::size_t>(spec.column)];
   if (!std::isfinite(v)) return 0;
   switch (spec.form) {
@@ -106,7 +111,7 @@ std::size_t term_basis(const TermSpec& spec, const Row& row, double aux,
       out[0] = aux;
       return 1;
     case Form::kInteraction: {
-      if (spec.column_b < 0 || static_cast<std::size_t>(spec.column_b) >= kMaxColumns) return 0;
+      if (spec.column_b < 0 || static_cast<std::size_t>(spec.column_b) >= row.size()) return 0;
       const double w = row[static_cast<std::size_t>(spec.column_b)];
       if (!std::isfinite(w)) return 0;
       const double a = v - spec.center;
@@ -116,6 +121,9 @@ std::size_t term_basis(const TermSpec& spec, const Row& row, double aux,
       out[2] = a * b;
       return 3;
     }
+    case Form::kSession:
+      out[0] = 1.0;
+      return 1;
   }
   return 0;
 }
@@ -167,7 +175,38 @@ void advance_state(std::span<const TermSpec> specs, const Row& row, EvalState& s
 Model::Model(std::vector<std::string> extra_columns, std::vector<Term> terms)
     : extra_columns_(std::move(extra_columns)), terms_(std::move(terms)) {
   specs_.reserve(terms_.size());
-  for (const Term& t : terms_) specs_.push_back(t.spec);
+  for (const Term& t : terms_) {
+    if (t.spec.form == Form::kSession && session_term_ < 0) {
+      session_term_ = static_cast<int>(specs_.size());
+    }
+    specs_.push_back(t.spec);
+  }
+}
+
+double session_posterior_um(double count, double sum_um, double between_sigma_um,
+                            double noise_sigma_um) noexcept {
+  if (!(count > 0.0) || !(between_sigma_um > 0.0)) return 0.0;
+  const double tau2 = between_sigma_um * between_sigma_um;
+  return tau2 * sum_um / (count * tau2 + noise_sigma_um * noise_sigma_um);
+}
+
+void Model::observe(const Row& row, double target_um, EvalState& state) const noexcept {
+  if (session_term_ < 0 || !std::isfinite(target_um)) return;
+  const auto k = static_cast<std::size_t>(session_term_);
+  const Term& t = terms_[k];
+  std::array<double, kMaxBasis> b{};
+  if (term_basis(t.spec, row, kUnknown, b) == 0) return;
+  if (find_group(t.spec, t.groups, row) >= 0) return;  // fitted: nothing to learn
+  const double s = row[kSessionColumn];
+  if (!same_session(state.session.session, s)) state.session = SessionLearning{s, 0.0, 0.0};
+  double others_um = 0.0;
+  for (std::size_t i = 0; i < terms_.size(); ++i) {
+    if (i != k) others_um += evaluate_term(i, row, state);
+  }
+  const double r_um = target_um - others_um;
+  if (!std::isfinite(r_um)) return;
+  state.session.count += 1.0;
+  state.session.sum_um += r_um;
 }
 
 EvalState Model::make_state() const {
@@ -204,6 +243,12 @@ double Model::evaluate_term(std::size_t index, const Row& row,
   const std::size_t n = term_basis(t.spec, row, aux, b);
   if (n == 0) return 0.0;
   const int g = find_group(t.spec, t.groups, row);
+  if (g < 0 && t.spec.form == Form::kSession) {
+    // A session the fit did not see: what its own measurements have taught so far.
+    if (!same_session(state.session.session, row[kSessionColumn])) return 0.0;
+    return session_posterior_um(state.session.count, state.session.sum_um, t.spec.scale,
+                                t.spec.center);
+  }
   if (g < 0) return 0.0;
   const std::size_t stride = basis_count(t.spec.form, t.spec.degree);
   const double* c = t.coef.data() + static_cast<std::size_t>(g) * stride;
@@ -237,6 +282,7 @@ std::string term_column_name(const TermSpec& spec, const std::vector<std::string
 }
 
 std::string column_name(int index, const std::vector<std::string>& extras) {
+  if (index == static_cast<int>(kSessionColumn)) return "session";
   if (index >= 0 && static_cast<std::size_t>(index) < kStandardColumns) {
     return std::string(kStandardColumnNames[static_cast<std::size_t>(index)]);
   }

@@ -42,6 +42,9 @@ enum class Column : std::uint8_t {
 inline constexpr std::size_t kStandardColumns = 11;
 inline constexpr std::size_t kMaxColumns = 32;
 inline constexpr std::size_t kMaxExtraColumns = kMaxColumns - kStandardColumns;
+/// Row index of the session (warm start) the row belongs to, after the named columns: set by the
+/// analysis (sessions_of()) and by the daemon (its warm-start count), never read from a file.
+inline constexpr std::size_t kSessionColumn = kMaxColumns;
 /// Basis functions of one term (sine: 2, polynomial and interaction: up to 3).
 inline constexpr std::size_t kMaxBasis = 3;
 inline constexpr double kUnknown = std::numeric_limits<double>::quiet_NaN();
@@ -52,7 +55,7 @@ inline constexpr std::array<std::string_view, kStandardColumns> kStandardColumnN
     "y_mm",   "z_mm", "angle_deg", "path_mm", "temp_c"};
 
 /// One measurement's context; NaN = unknown (an empty CSV cell).
-using Row = std::array<double, kMaxColumns>;
+using Row = std::array<double, kMaxColumns + 1>;
 
 /// Row with every column unknown.
 Row unknown_row() noexcept;
@@ -77,6 +80,11 @@ enum class Form : std::uint8_t {
   // interaction with its main effects (ball-screw growth ∝ position × temperature rise, whatever
   // the screw's fixed end and reference temperature). Written "a*b".
   kInteraction = 10,
+  // [1] per session (kSessionColumn): one offset per session, a random effect shrunk toward 0
+  // (between-session standard deviation `scale` [µm], measurement noise `center` [µm]). A
+  // session the fit did not see is learned from its own measurements (Model::observe()): the
+  // posterior mean scale² Σr / (n scale² + center²) of its first n residuals r.
+  kSession = 11,
 };
 
 std::string_view form_name(Form f) noexcept;
@@ -103,6 +111,7 @@ struct TermSpec {
   /// kPoly: centre of u. kStep, kHinge: the change point (in the column's unit).
   double center{0.0};
   /// kPoly: scale of u. kExpRise, kExpGrowth: scale length. kSine: period. kLag: time constant [s].
+  /// kSession: between-session standard deviation [µm] (`center`: the measurement noise [µm]).
   double scale{1.0};
   /// kInteraction: the second column b and its centre (`center` is that of `column`).
   int column_b{-1};
@@ -133,13 +142,27 @@ std::size_t term_basis(const TermSpec& spec, const Row& row, double aux,
 int find_group(const TermSpec& spec, const std::vector<std::array<double, 2>>& groups,
                const Row& row) noexcept;
 
+/// What a session term has learned of the current session (Model::observe()).
+struct SessionLearning {
+  double session{kUnknown};  // the session learned (a Row's kSessionColumn value)
+  double count{0.0};         // residuals taken
+  double sum_um{0.0};        // their sum [µm]
+};
+
 /// Filter state of the lag terms; sized by Model::make_state(), advanced row by row.
 struct EvalState {
   std::vector<double> lag_value;  // per term (unused entries stay 0)
   std::vector<double> lag_input;  // the input held since the previous row
   double last_time_s{0.0};
   bool started{false};
+  SessionLearning session;
 };
+
+/// Posterior mean [µm] of the offset of a session with `count` residuals summing to `sum_um`,
+/// prior N(0, between_sigma_um²), measurement noise noise_sigma_um: the BLUP of one session.
+/// Real-time safe.
+double session_posterior_um(double count, double sum_um, double between_sigma_um,
+                            double noise_sigma_um) noexcept;
 
 /// Advances the lag filters of `terms` to the row's time (zero-order hold of the input).
 /// Restarts the filters when time goes backwards (a new log file). Real-time safe.
@@ -167,6 +190,15 @@ class Model {
   [[nodiscard]] double evaluate_term(std::size_t index, const Row& row,
                                      const EvalState& state) const noexcept;
 
+  /// Learns the row's session offset from its measured deviation `target_um` (measured_um +
+  /// applied_um), after evaluate() at that row: the residual of every other term goes into the
+  /// session term's posterior (a session with fitted coefficients is not learned; a new session
+  /// value starts from the prior, 0). No-op without a session term. Real-time safe.
+  void observe(const Row& row, double target_um, EvalState& state) const noexcept;
+
+  /// Index of the session term (kSession), or -1.
+  [[nodiscard]] int session_term() const noexcept { return session_term_; }
+
   /// The tool wear the model predicts at `row` [µm]: Σ of the terms that apply to tool_wear rows
   /// (kWear and kLag terms excepted), evaluated with kind = tool_wear and point = `point`. The
   /// basis of kWear terms. Real-time safe.
@@ -176,6 +208,7 @@ class Model {
   std::vector<std::string> extra_columns_;
   std::vector<Term> terms_;
   std::vector<TermSpec> specs_;  // copy of the terms' specs, contiguous for advance_state()
+  int session_term_{-1};
 };
 
 /// Column index for a name: a standard column, or an extra column in `extras`; -1 if unknown.

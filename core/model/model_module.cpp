@@ -10,7 +10,10 @@
 namespace nccomp::core::model {
 
 namespace {
-constexpr std::uint32_t kLegacyMagic = 0x4D4F444CU;  // "MODL": the state before the context
+constexpr std::uint32_t kLegacyMagic = 0x4D4F444CU;   // "MODL": the state before the context
+constexpr std::uint32_t kSessionMagic = 0x4D534553U;  // "MSES": what a session term learned
+constexpr std::uint32_t kSessionVersion = 1;
+constexpr std::size_t kSessionStateBytes = 8 + 3 * sizeof(double);
 constexpr std::size_t col(Column c) { return static_cast<std::size_t>(c); }
 
 /// FNV-1a over the bytes of what the trims are computed from.
@@ -150,6 +153,7 @@ void ModelModule::evaluate(core::TimeNs now_ns, core::StepOutput& out) noexcept 
   row[col(Column::kX)] = c.position_mm()[0];
   row[col(Column::kY)] = c.position_mm()[1];
   row[col(Column::kZ)] = c.position_mm()[2];
+  row[kSessionColumn] = static_cast<double>(c.warm_starts());
   for (const ModelInput& in : inputs_) {
     row[static_cast<std::size_t>(in.column)] = c.temperature_c(in.sensor);
   }
@@ -187,9 +191,79 @@ void ModelModule::evaluate(core::TimeNs now_ns, core::StepOutput& out) noexcept 
   }
 }
 
+void ModelModule::observe_record(const core::MeasurementRecord& record) noexcept {
+  if (model_.session_term() < 0) return;
+  // The record's row as the log has it (time since the warm start, its session), the extra
+  // columns from their sensors now.
+  Row row = unknown_row();
+  row[col(Column::kTime)] = static_cast<double>(record.time_ns) * 1e-9;
+  row[col(Column::kPart)] = record.part;
+  row[col(Column::kTool)] = record.tool;
+  row[col(Column::kKind)] = static_cast<double>(record.kind);
+  row[col(Column::kPoint)] = record.point;
+  row[col(Column::kX)] = record.position_mm[0];
+  row[col(Column::kY)] = record.position_mm[1];
+  row[col(Column::kZ)] = record.position_mm[2];
+  row[col(Column::kAngle)] = record.angle_deg;
+  row[col(Column::kPath)] = record.path_mm;
+  row[col(Column::kTemp)] = record.temp_c;
+  row[kSessionColumn] = static_cast<double>(record.session);
+  for (const ModelInput& in : inputs_) {
+    row[static_cast<std::size_t>(in.column)] = context_->temperature_c(in.sensor);
+  }
+  const double before = state_.session.count;
+  const double session_before = state_.session.session;
+  model_.observe(row, record.measured_um + record.applied_um, state_);
+  if (state_.session.count > before ||
+      std::memcmp(&state_.session.session, &session_before, sizeof(double)) != 0) {
+    ++generation_;
+    dirty_ = true;  // the trims change with the offset
+  }
+}
+
+double ModelModule::session_offset_um() const noexcept {
+  const int k = model_.session_term();
+  if (k < 0) return 0.0;
+  const TermSpec& s = model_.specs()[static_cast<std::size_t>(k)];
+  return session_posterior_um(state_.session.count, state_.session.sum_um, s.scale, s.center);
+}
+
+std::size_t ModelModule::state_capacity() const noexcept {
+  return model_.session_term() < 0 ? 0 : kSessionStateBytes;
+}
+
+std::size_t ModelModule::save_state(std::span<std::byte> buf) const noexcept {
+  if (model_.session_term() < 0 || buf.size() < kSessionStateBytes) return 0;
+  std::byte* p = buf.data();
+  std::memcpy(p, &kSessionMagic, 4);
+  std::memcpy(p + 4, &kSessionVersion, 4);
+  std::memcpy(p + 8, &state_.session.session, sizeof(double));
+  std::memcpy(p + 16, &state_.session.count, sizeof(double));
+  std::memcpy(p + 24, &state_.session.sum_um, sizeof(double));
+  return kSessionStateBytes;
+}
+
 bool ModelModule::load_state(std::span<const std::byte> bytes) noexcept {
   if (bytes.empty()) {
     dirty_ = true;  // the engine does not save trims: publish them again on the next step
+    return true;
+  }
+  if (bytes.size() == kSessionStateBytes) {
+    std::uint32_t magic = 0;
+    std::uint32_t version = 0;
+    SessionLearning l;
+    std::memcpy(&magic, bytes.data(), 4);
+    std::memcpy(&version, bytes.data() + 4, 4);
+    std::memcpy(&l.session, bytes.data() + 8, sizeof(double));
+    std::memcpy(&l.count, bytes.data() + 16, sizeof(double));
+    std::memcpy(&l.sum_um, bytes.data() + 24, sizeof(double));
+    if (magic != kSessionMagic || version != kSessionVersion || !(l.count >= 0.0) ||
+        !std::isfinite(l.count) || !std::isfinite(l.sum_um)) {
+      return false;
+    }
+    // A model without a session term (a reload that dropped it) has nothing to continue.
+    if (model_.session_term() >= 0) state_.session = l;
+    dirty_ = true;
     return true;
   }
   // An earlier version's state: magic, part, tool, flags (16 bytes), then the cut path (24).
@@ -221,6 +295,10 @@ std::size_t ModelModule::status(std::span<core::engine::StatusValue> out) const 
   put("machine_time_s", c.machine_time_s());
   put("cut_path_mm", c.cut_path_mm());
   if (!trims_um_.empty()) put("first_trim_um", trims_um_[0]);
+  if (model_.session_term() >= 0) {
+    put("session_offset_um", session_offset_um());
+    put("session_measurements", state_.session.count);
+  }
   return n;
 }
 

@@ -9,6 +9,12 @@
 // position, the cut path per tool, and the last value of every temperature sensor (extra model
 // columns mapped with [[model.inputs]]). So a term is evaluated on exactly the columns it was
 // fitted on. A module not attached to an engine (unit tests) follows its own context.
+//
+// A session term (session_offset, form "session") is learned: at a warm start (a new session)
+// its offset starts at 0, the prior mean, and each measurement record of the session the term
+// applies to moves it to the posterior mean of the session's offset (Model::observe(), with the
+// model's between-session and noise sigma). What it has learned is the module's state, so a
+// restart within the session continues it.
 #pragma once
 
 #include <array>
@@ -62,16 +68,24 @@ class ModelModule final : public core::engine::Module {
   /// Real-time safe: fixed-size Row, evaluation state sized in the constructor.
   void step(core::TimeNs now_ns, std::span<const core::Event> events,
             core::StepOutput& out) noexcept override;
-  /// The module keeps no state of its own (the context is saved by the engine). A state of an
-  /// earlier version (part, tool, flags[, cut path]) is still read: its part stands in until
-  /// the first part start.
+  /// Real-time safe: learns the session term's offset from the record (no-op without one).
+  void observe_record(const core::MeasurementRecord& record) noexcept override;
+  /// The state is what the session term has learned of the current session (the context is
+  /// saved by the engine). A state of an earlier version (part, tool, flags[, cut path]) is
+  /// still read: its part stands in until the first part start.
+  [[nodiscard]] std::size_t state_capacity() const noexcept override;
+  std::size_t save_state(std::span<std::byte> buf) const noexcept override;
   bool load_state(std::span<const std::byte> bytes) noexcept override;
+  [[nodiscard]] std::uint64_t state_generation() const noexcept override { return generation_; }
   std::size_t status(std::span<core::engine::StatusValue> out) const noexcept override;
 
   /// A hash of the model's terms and coefficients, the apply entries and the inputs: a reload
   /// or restart with another model hands the trims over (core/engine/engine.hpp, "Trim
   /// handover"), the same model does not. Real-time safe.
   [[nodiscard]] std::uint64_t trim_identity() const noexcept override { return identity_; }
+
+  /// The session term's current offset [µm] (its posterior mean; 0 without a session term).
+  [[nodiscard]] double session_offset_um() const noexcept;
 
   /// The trim last published for apply entry i [µm].
   [[nodiscard]] double trim_um(std::size_t i) const noexcept { return trims_um_[i]; }
@@ -100,6 +114,7 @@ class ModelModule final : public core::engine::Module {
   bool has_restored_part_{false};
   std::int32_t restored_part_{0};
   bool dirty_{true};  // publish on the first step (start-up, restart)
+  std::uint64_t generation_{0};
 };
 
 }  // namespace nccomp::core::model

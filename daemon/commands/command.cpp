@@ -223,6 +223,7 @@ bool dispatch_command(std::string_view line, const Caller& caller, const Command
       return true;
     }
     spdlog::info("operator command from {}: {}", who, shown(trim(line)));
+    ctx.who = who;
   }
   try {
     answer = entry.handler(args, ctx);

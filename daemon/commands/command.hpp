@@ -26,6 +26,7 @@
 
 #include "core/rt/spsc_ring.hpp"
 #include "daemon/sections/model/model_choice.hpp"
+#include "daemon/sections/model/shadow.hpp"
 #include "drivers/bus.hpp"
 
 namespace nccomp::daemon {
@@ -69,9 +70,13 @@ struct ModelState {
   sections::ModelRecord live;      // file "" = no model
   sections::ModelRecord previous;  // kept for rollback; file "" = none
   std::uint64_t generation{0};     // the configuration it runs in
+  /// The candidate in shadow, the scores and the history of decisions.
+  sections::ShadowStatus shadow;
 };
 
-enum class ModelAction { kLoad, kRollback };
+/// kCandidate: a model into the shadow (nothing on the machine changes); kPromote: the
+/// candidate the rule announced made live.
+enum class ModelAction { kLoad, kRollback, kCandidate, kPromote };
 
 /// What a model change did: refused (error, nothing changed), or accepted as state.generation.
 struct ModelChange {
@@ -90,7 +95,11 @@ struct CommandContext {
   /// The model verbs (daemon.cpp): the model in force, and a change of it, which the daemon
   /// runs as a reload on its main thread (never two reloads at once) and answers.
   std::function<ModelState()> model_state;
-  std::function<ModelChange(ModelAction action, const std::string& file)> change_model;
+  /// who: the caller as dispatch_command() logs it (for the shadow's history).
+  std::function<ModelChange(ModelAction action, const std::string& file, const std::string& who)>
+      change_model;
+  /// Set by dispatch_command() for a command that changes the machine: uid, user and pid.
+  std::string who;
 };
 
 /// Who sent a request: the connecting process's credentials as the kernel recorded them at

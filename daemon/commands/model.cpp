@@ -27,6 +27,56 @@ std::string handover_line(const HandoverStats& h) {
       h.handovers, h.rebases, h.unabsorbed, h.last_trim_change_um, h.last_unabsorbed_um);
 }
 
+std::string hash_or_unknown(const std::string& file) {
+  try {
+    return sections::model_file_hash(file);
+  } catch (const std::exception&) {
+    return "unknown";
+  }
+}
+
+std::string score_text(const sections::ModelScore& s) {
+  if (s.parts == 0) return "no part scored yet";
+  return fmt::format("{} parts ({} rows), mean squared error {:.4g} um^2 (rms {:.3f} um)", s.parts,
+                     s.rows, s.mse_um2(), s.rms_um());
+}
+
+std::string shadow_lines(const sections::ShadowStatus& sh) {
+  std::string s = fmt::format("  live model's score: {}\n", score_text(sh.live));
+  const auto& o = sh.options;
+  switch (sh.phase) {
+    case sections::ShadowPhase::kNone:
+      s += "  shadow: no candidate (nccomp model candidate FILE puts one beside the live model)\n";
+      break;
+    case sections::ShadowPhase::kCandidate:
+    case sections::ShadowPhase::kAnnounced:
+      s += fmt::format("  candidate{}: {}\n    score: {}\n",
+                       sh.phase == sections::ShadowPhase::kAnnounced
+                           ? " (better: nccomp model promote makes it live)"
+                           : "",
+                       sh.other_file, score_text(sh.other));
+      break;
+    case sections::ShadowPhase::kWatch:
+      s += fmt::format("  watching the model the promotion replaced: {}\n    score: {}\n",
+                       sh.other_file, score_text(sh.other));
+      break;
+  }
+  if (sh.phase != sections::ShadowPhase::kNone) {
+    const auto& w = sh.window;
+    s += fmt::format(
+        "    paired parts {} of {}: other better on {}, live better on {}, ties {}, sign test "
+        "p = {:.4g} (alpha {}), rms live {:.3f} um, other {:.3f} um\n",
+        w.parts, o.min_parts, w.challenger_better, w.incumbent_better, w.ties, w.p_value, o.alpha,
+        w.incumbent_rms_um, w.challenger_rms_um);
+  }
+  s += fmt::format("  rule: min_parts {}, alpha {}, margin_um {}, promote {}\n", o.min_parts,
+                   o.alpha, o.margin_um,
+                   o.promote == sections::ShadowPromote::kAuto ? "auto" : "operator");
+  s += fmt::format("  history ({} decisions):\n", sh.history.size());
+  for (const auto& d : sh.history) s += "    " + sections::describe(d) + "\n";
+  return s;
+}
+
 std::string status_answer(const ModelState& m, const HandoverStats& h) {
   std::string s = fmt::format("ok model: {}\n", describe(m.live));
   if (!m.has_section) {
@@ -40,12 +90,13 @@ std::string status_answer(const ModelState& m, const HandoverStats& h) {
   }
   s += fmt::format("  previous (nccomp model rollback returns to it): {}\n", describe(m.previous));
   s += fmt::format("  configuration {}\n", m.generation);
-  return s + handover_line(h);
+  return s + handover_line(h) + shadow_lines(m.shadow);
 }
 
 }  // namespace
 
 CommandAccess model_access(std::string_view args) noexcept {
+  // candidate changes no offset, but what may become live: the admin group's too.
   return args == "status" ? CommandAccess::kReadOnly : CommandAccess::kChangesMachine;
 }
 
@@ -58,33 +109,47 @@ std::string handle_model_command(std::string_view args, CommandContext& ctx) {
   }
   ModelAction action = ModelAction::kRollback;
   std::string file;
-  if (args.starts_with("load ")) {
-    action = ModelAction::kLoad;
-    file = std::string(args.substr(5));
+  const bool load = args.starts_with("load ");
+  if (load || args.starts_with("candidate ")) {
+    action = load ? ModelAction::kLoad : ModelAction::kCandidate;
+    file = std::string(args.substr(load ? 5 : 10));
     if (file.empty() || file.front() != '/') {
-      return refuse(ctx,
-                    "model load: the file must be an absolute path (nccomp model load makes "
-                    "it one), got '" +
-                        file.substr(0, 200) + "'");
+      return refuse(ctx, fmt::format("model {}: the file must be an absolute path (nccomp model {} "
+                                     "makes it one), got '{}'",
+                                     load ? "load" : "candidate", load ? "load" : "candidate",
+                                     file.substr(0, 200)));
     }
+  } else if (args == "promote") {
+    action = ModelAction::kPromote;
   } else if (args != "rollback") {
     const std::string shown(args.substr(0, 40));
     return refuse(ctx, "model: unknown request '" + shown + (args.size() > 40 ? "...'" : "'") +
-                           " (expected load PATH, rollback or status)");
+                           " (expected load PATH, candidate PATH, promote, rollback or status)");
   }
   const HandoverStats before = ctx.loop->stats().handover;
-  const ModelChange change = ctx.change_model(action, file);
-  const char* what = action == ModelAction::kLoad ? "load" : "rollback";
+  const ModelChange change = ctx.change_model(action, file, ctx.who);
+  const char* what = action == ModelAction::kLoad        ? "load"
+                     : action == ModelAction::kCandidate ? "candidate"
+                     : action == ModelAction::kPromote   ? "promote"
+                                                         : "rollback";
   if (!change.ok) {
     return refuse(ctx, fmt::format("model {}: refused, nothing changed:\n{}", what, change.error));
   }
   const ModelState& m = change.state;
-  spdlog::info("model {}: {} live as configuration {} (previous: {})", what, describe(m.live),
-               m.generation, describe(m.previous));
+  if (action == ModelAction::kCandidate) {  // logged by the daemon with the shadow's history
+    return fmt::format(
+        "ok model candidate: {} (hash {}) scored in shadow beside the live model {}\n  the rule "
+        "decides after {} parts scored by both\n",
+        file, hash_or_unknown(file), describe(m.live), m.shadow.options.min_parts);
+  }
+  spdlog::info("model {}: {} live as configuration {} (previous: {}; by {})", what,
+               describe(m.live), m.generation, describe(m.previous), ctx.who);
   std::string answer =
       fmt::format("ok model {}: {}\n  previous (nccomp model rollback returns to it): {}\n",
-                  action == ModelAction::kLoad ? "loaded" : "rolled back to", describe(m.live),
-                  describe(m.previous));
+                  action == ModelAction::kLoad      ? "loaded"
+                  : action == ModelAction::kPromote ? "promoted"
+                                                    : "rolled back to",
+                  describe(m.live), describe(m.previous));
   if (!change.record_error.empty()) {
     answer +=
         "  warning: not recorded in the state directory (a restart returns to the model "

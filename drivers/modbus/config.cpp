@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <fstream>
 #include <limits>
 #include <optional>
 #include <sstream>
@@ -204,77 +203,39 @@ double rtu_frame_gap_s(const ModbusConfig& c) noexcept {
   return c.baud > 19200 ? 0.00175 : 3.5 * rtu_char_time_s(c);
 }
 
-ConfigError::ConfigError(std::string file, int line, int column, std::string key_path,
-                         std::string message)
-    : std::runtime_error([&] {
-        std::ostringstream s;
-        s << file;
-        if (line > 0) {
-          s << ':' << line;
-        }
-        s << ": ";
-        if (!key_path.empty()) {
-          s << key_path << ": ";
-        }
-        s << message;
-        return s.str();
-      }()),
-      file_(std::move(file)),
-      line_(line),
-      column_(column),
-      key_path_(std::move(key_path)),
-      message_(std::move(message)) {}
+namespace {
 
-ConfigError::ConfigError(formats::Diagnostics diagnostics, std::string_view file)
-    : ConfigError(diagnostics.ok() ? formats::Diagnostic{{std::string(file), 0, 0, ""}, "refused"}
-                                   : diagnostics.items().front()) {
-  std::string all;
-  for (const formats::Diagnostic& d : diagnostics.items()) {
-    formats::Diagnostic named = d;
-    if (named.where.file.empty()) {
-      named.where.file = std::string(file);
-    }
-    if (!all.empty()) {
-      all += '\n';
-    }
-    all += formats::format(named);
+/// The [modbus] table of a parsed document.
+ModbusConfig parse_root(const toml::table& root, const std::string& file,
+                        const ParseOptions& options) {
+  const toml::node* mnode = root.get("modbus");
+  if (mnode == nullptr || !mnode->is_table()) {
+    Diagnostics diag;
+    diag.error(mnode != nullptr ? mnode : &root, "modbus", "missing [modbus] table");
+    throw formats::DiagnosticsError(std::move(diag), file);
   }
-  what_ = all;
-  diagnostics_ = std::move(diagnostics);
+  return parse_modbus_table(*mnode->as_table(), file, options);
 }
 
-ConfigError::ConfigError(const formats::Diagnostic& first)
-    : ConfigError(first.where.file, first.where.line, first.where.column, first.where.key_path,
-                  first.message) {}
+}  // namespace
 
-const char* ConfigError::what() const noexcept {
-  return what_.empty() ? std::runtime_error::what() : what_.c_str();
-}
-
-ModbusConfig parse_modbus_config(std::string_view toml_text, std::string_view file,
+ModbusConfig parse_modbus_config(std::string_view toml_text, const std::string& file,
                                  const ParseOptions& options) {
   toml::table root;
   try {
     root = formats::parse_toml(toml_text, file);
   } catch (const toml::parse_error& e) {
-    throw ConfigError(std::string(file), static_cast<int>(e.source().begin.line),
-                      static_cast<int>(e.source().begin.column), "", std::string(e.description()));
+    throw formats::DiagnosticsError(e, file);
   }
-  const toml::node* mnode = root.get("modbus");
-  if (mnode == nullptr || !mnode->is_table()) {
-    Diagnostics diag;
-    diag.error(mnode != nullptr ? mnode : &root, "modbus", "missing [modbus] table");
-    throw ConfigError(std::move(diag), file);
-  }
-  return parse_modbus_table(*mnode->as_table(), file, options);
+  return parse_root(root, file, options);
 }
 
-ModbusConfig parse_modbus_table(const toml::table& m, std::string_view file,
+ModbusConfig parse_modbus_table(const toml::table& m, const std::string& file,
                                 const ParseOptions& options) {
   Diagnostics diag;
   auto c = read_modbus_table(m, file, options, diag);
   if (!c) {
-    throw ConfigError(std::move(diag), file);
+    throw formats::DiagnosticsError(std::move(diag), file);
   }
   return std::move(*c);
 }
@@ -607,16 +568,8 @@ std::optional<ModbusConfig> read_modbus_table(const toml::table& m, std::string_
     c.verify_writes = r.boolean("verify_writes", false);
     c.alarm_after_s = r.number("alarm_after_s", 1.0, 0.0, 3600.0);
     c.degraded_alarm_after_s = r.number("degraded_alarm_after_s", 5.0, 0.01, 3600.0);
-    const auto pow2 = [&](std::string_view key, std::int64_t dflt) {
-      std::int64_t v = r.integer(key, dflt, 2, 1 << 20);
-      if ((v & (v - 1)) != 0) {
-        r.error(key, "must be a power of two");
-        v = dflt;
-      }
-      return static_cast<std::size_t>(v);
-    };
-    c.rx_capacity = pow2("rx_capacity", 1024);
-    c.tx_capacity = pow2("tx_capacity", 256);
+    c.rx_capacity = static_cast<std::size_t>(r.power_of_two("rx_capacity", 1024, 2, 1 << 20));
+    c.tx_capacity = static_cast<std::size_t>(r.power_of_two("tx_capacity", 256, 2, 1 << 20));
     c.merge_gap_registers = static_cast<std::uint32_t>(r.integer("merge_gap_registers", 0, 0, 125));
 
     // Real-time policy of the I/O thread (applied by the thread itself, see modbus_bus.hpp).
@@ -708,13 +661,7 @@ std::optional<ModbusConfig> read_modbus_table(const toml::table& m, std::string_
     check_map(m, mnode, mp, options, c, claims, diag);
   }
   // Tables built in memory carry no file name: the caller's.
-  for (const formats::Diagnostic& d : diag.items()) {
-    formats::Where w = d.where;
-    if (w.file.empty()) {
-      w.file = std::string(file);
-    }
-    out.error(std::move(w), d.message);
-  }
+  out.append(diag, file);
   if (!diag.ok()) {
     return std::nullopt;
   }
@@ -722,13 +669,13 @@ std::optional<ModbusConfig> read_modbus_table(const toml::table& m, std::string_
 }
 
 ModbusConfig load_modbus_config(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) {
-    throw ConfigError(path + ": cannot open");
+  toml::table root;
+  try {
+    root = formats::parse_toml_file(path);
+  } catch (const toml::parse_error& e) {
+    throw formats::DiagnosticsError(e, path);
   }
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  return parse_modbus_config(ss.str(), path);
+  return parse_root(root, path, {});
 }
 
 }  // namespace nccomp::drivers::modbus

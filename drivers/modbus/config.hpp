@@ -21,7 +21,6 @@
 #include <cstdint>
 #include <limits>
 #include <optional>
-#include <stdexcept>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -33,38 +32,6 @@
 #include "formats/toml/diagnostics.hpp"
 
 namespace nccomp::drivers::modbus {
-
-/// A refused config: what() is every error, one per line ("file:line:column: key.path:
-/// message"). The first error's parts are kept separately too, and every error as
-/// diagnostics().
-class ConfigError : public std::runtime_error {
- public:
-  using std::runtime_error::runtime_error;
-  ConfigError(std::string file, int line, int column, std::string key_path, std::string message);
-  /// Every error of a map read by read_modbus_table(); errors without a file name get `file`.
-  ConfigError(formats::Diagnostics diagnostics, std::string_view file);
-
-  [[nodiscard]] const char* what() const noexcept override;
-  [[nodiscard]] const formats::Diagnostics& diagnostics() const noexcept { return diagnostics_; }
-
-  [[nodiscard]] const std::string& file() const noexcept { return file_; }
-  /// 0 when the error has no single position (e.g. the whole map's bus budget).
-  [[nodiscard]] int line() const noexcept { return line_; }
-  [[nodiscard]] int column() const noexcept { return column_; }
-  [[nodiscard]] const std::string& key_path() const noexcept { return key_path_; }
-  /// The message without the position.
-  [[nodiscard]] const std::string& message() const noexcept { return message_; }
-
- private:
-  std::string file_;
-  int line_{0};
-  int column_{0};
-  std::string key_path_;
-  std::string message_;
-  explicit ConfigError(const formats::Diagnostic& first);
-  std::string what_;
-  formats::Diagnostics diagnostics_;
-};
 
 enum class Transport : std::uint8_t { kTcp, kRtu };
 
@@ -240,20 +207,20 @@ struct ParseOptions {
 };
 
 /// Parses the [modbus] table of a TOML document. `file` names the source in messages.
-/// Throws ConfigError. Not real-time.
-ModbusConfig parse_modbus_config(std::string_view toml_text, std::string_view file,
+/// Throws formats::DiagnosticsError (every error of the map). Not real-time.
+ModbusConfig parse_modbus_config(std::string_view toml_text, const std::string& file,
                                  const ParseOptions& options = {});
 /// Parses an already parsed [modbus] table (the daemon's config loader hands it over). Errors
 /// name the file the table's nodes were parsed from (their source path), else `file`, with line,
-/// column and key path. Throws ConfigError. Not real-time.
-ModbusConfig parse_modbus_table(const toml::table& modbus, std::string_view file,
+/// column and key path. Throws formats::DiagnosticsError. Not real-time.
+ModbusConfig parse_modbus_table(const toml::table& modbus, const std::string& file,
                                 const ParseOptions& options = {});
 /// The same, reporting every error of the map to `diag` (file:line:column, key path) instead of
 /// throwing; nullopt if there was one. The daemon's [modbus] section uses it. Not real-time.
 std::optional<ModbusConfig> read_modbus_table(const toml::table& modbus, std::string_view file,
                                               const ParseOptions& options,
                                               formats::Diagnostics& diag);
-/// Reads and parses a file. Throws ConfigError.
+/// Reads and parses a file. Throws formats::DiagnosticsError.
 ModbusConfig load_modbus_config(const std::string& path);
 
 /// RTU character time [s]: start + data + parity + stop bits at the baud rate.

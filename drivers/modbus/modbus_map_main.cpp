@@ -19,6 +19,7 @@
 
 #include "drivers/modbus/config.hpp"
 #include "drivers/modbus/modbus_bus.hpp"
+#include "formats/toml/diagnostics.hpp"
 #include "nccomp_version.hpp"
 
 namespace mb = nccomp::drivers::modbus;
@@ -231,7 +232,7 @@ int main(int argc, char** argv) {
   mb::ModbusConfig c;
   try {
     c = mb::load_modbus_config(argv[1]);
-  } catch (const mb::ConfigError& e) {
+  } catch (const nccomp::formats::DiagnosticsError& e) {
     std::fprintf(stderr, "modbus_map: %s\n", e.what());
     return 3;
   }

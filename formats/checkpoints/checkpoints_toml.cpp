@@ -231,6 +231,20 @@ CheckpointsConfig parse_checkpoints(const toml::table& table, const std::string&
         "reconcile_prefer", cp::ReconcilePrefer::kDaemon,
         {{"daemon", cp::ReconcilePrefer::kDaemon}, {"nc", cp::ReconcilePrefer::kNc}});
 
+    // --- [checkpoints.estimator] (mode A's Kalman filter; the core checks the combinations) ---
+    if (const toml::table* t = r.table("estimator")) {
+      TableReader e(*t, "checkpoints.estimator", diag);
+      cp::CheckpointEstimatorConfig& est = c.estimator;
+      est.enabled = e.boolean("enabled", est.enabled);
+      est.measurement_sigma_um =
+          e.number("measurement_sigma_um", est.measurement_sigma_um, 1e-6, 1e3);
+      est.part_noise_um = e.number("part_noise_um", est.part_noise_um, 0.0, 1e3);
+      est.learn_part_noise = e.boolean("learn_part_noise", est.learn_part_noise);
+      est.learn_min_parts = static_cast<std::uint32_t>(e.integer(
+          "learn_min_parts", est.learn_min_parts, 3, static_cast<std::int64_t>(cp::kHistoryDepth)));
+      est.gate_sigmas = e.number("gate_sigmas", est.gate_sigmas, 0.0, 1e3);
+    }
+
     // --- [checkpoints.gcode] ---
     if (const toml::table* t = r.table("gcode")) {
       {

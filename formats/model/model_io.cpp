@@ -5,7 +5,9 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <optional>
 #include <sstream>
+#include <string_view>
 #include <utility>
 
 #include "formats/toml/guard.hpp"
@@ -18,90 +20,109 @@ namespace {
 
 constexpr std::array<std::string_view, 3> kKindNames = {"tool_wear", "contour", "calib"};
 
-std::string where(std::string_view source, const toml::node& node, std::string_view key) {
-  std::ostringstream s;
-  s << source;
-  const auto& src = node.source();
-  if (src.begin.line > 0) s << ":" << src.begin.line << ":" << src.begin.column;
-  s << ": " << key;
-  return s.str();
+void check_keys(const toml::table& t, std::string_view path,
+                std::initializer_list<std::string_view> allowed, Diagnostics& diag) {
+  for (const auto& [k, v] : t) {
+    if (std::find(allowed.begin(), allowed.end(), k.str()) != allowed.end()) continue;
+    std::string a;
+    for (auto x : allowed) a += (a.empty() ? "" : ", ") + std::string(x);
+    diag.error(&v, std::string(path) + "." + std::string(k.str()),
+               "unknown key (allowed: " + a + ")");
+  }
 }
 
-[[noreturn]] void fail(const std::string& msg) { throw ModelIoError(msg); }
+std::optional<double> get_number(const toml::node& n, const std::string& key, Diagnostics& diag) {
+  if (auto d = n.value<double>(); d && (n.is_floating_point() || n.is_integer())) {
+    if (std::isfinite(*d)) return *d;
+    diag.error(&n, key, "must be a finite number");
+    return std::nullopt;
+  }
+  diag.error(&n, key, "must be a number");
+  return std::nullopt;
+}
 
-void check_keys(const toml::table& t, std::string_view source, std::string_view path,
-                std::initializer_list<std::string_view> allowed) {
-  for (const auto& [k, v] : t) {
-    if (std::find(allowed.begin(), allowed.end(), k.str()) == allowed.end()) {
-      fail(where(source, v, std::string(path) + "." + std::string(k.str())) +
-           ": unknown key (allowed: " +
-           [&] {
-             std::string a;
-             for (auto x : allowed) a += (a.empty() ? "" : ", ") + std::string(x);
-             return a;
-           }() +
-           ")");
+std::optional<std::string> get_string(const toml::node& n, const std::string& key,
+                                      Diagnostics& diag) {
+  if (auto s = n.value<std::string>(); s && n.is_string()) return *s;
+  diag.error(&n, key, "must be a string");
+  return std::nullopt;
+}
+
+/// nullopt if the array or any element is wrong (each reported).
+std::optional<std::vector<std::string>> get_strings(const toml::node& n, const std::string& key,
+                                                    Diagnostics& diag) {
+  const auto* arr = n.as_array();
+  if (arr == nullptr) {
+    diag.error(&n, key, "must be an array of strings");
+    return std::nullopt;
+  }
+  std::vector<std::string> out;
+  bool ok = true;
+  for (std::size_t i = 0; i < arr->size(); ++i) {
+    if (auto s = get_string(*arr->get(i), key + "[" + std::to_string(i) + "]", diag)) {
+      out.push_back(std::move(*s));
+    } else {
+      ok = false;
     }
   }
-}
-
-double get_number(const toml::node& n, std::string_view source, const std::string& key) {
-  if (auto d = n.value<double>(); d && (n.is_floating_point() || n.is_integer())) {
-    if (!std::isfinite(*d)) fail(where(source, n, key) + ": must be a finite number");
-    return *d;
-  }
-  fail(where(source, n, key) + ": must be a number");
-}
-
-std::string get_string(const toml::node& n, std::string_view source, const std::string& key) {
-  if (auto s = n.value<std::string>(); s && n.is_string()) return *s;
-  fail(where(source, n, key) + ": must be a string");
-}
-
-std::vector<std::string> get_strings(const toml::node& n, std::string_view source,
-                                     const std::string& key) {
-  const auto* arr = n.as_array();
-  if (arr == nullptr) fail(where(source, n, key) + ": must be an array of strings");
-  std::vector<std::string> out;
-  for (std::size_t i = 0; i < arr->size(); ++i) {
-    out.push_back(get_string(*arr->get(i), source, key + "[" + std::to_string(i) + "]"));
-  }
+  if (!ok) return std::nullopt;
   return out;
 }
 
-std::vector<double> get_numbers(const toml::node& n, std::string_view source,
-                                const std::string& key) {
+std::optional<std::vector<double>> get_numbers(const toml::node& n, const std::string& key,
+                                               Diagnostics& diag) {
   const auto* arr = n.as_array();
-  if (arr == nullptr) fail(where(source, n, key) + ": must be an array of numbers");
+  if (arr == nullptr) {
+    diag.error(&n, key, "must be an array of numbers");
+    return std::nullopt;
+  }
   std::vector<double> out;
+  bool ok = true;
   for (std::size_t i = 0; i < arr->size(); ++i) {
-    out.push_back(get_number(*arr->get(i), source, key + "[" + std::to_string(i) + "]"));
+    if (auto v = get_number(*arr->get(i), key + "[" + std::to_string(i) + "]", diag)) {
+      out.push_back(*v);
+    } else {
+      ok = false;
+    }
   }
+  if (!ok) return std::nullopt;
   return out;
 }
 
-std::uint8_t kinds_mask(const toml::node& n, std::string_view source, const std::string& key) {
+std::optional<std::uint8_t> kinds_mask(const toml::node& n, const std::string& key,
+                                       Diagnostics& diag) {
+  const auto names = get_strings(n, key, diag);
+  if (!names) return std::nullopt;
   std::uint8_t mask = 0;
-  for (const auto& k : get_strings(n, source, key)) {
+  bool ok = true;
+  for (const auto& k : *names) {
     const int i = kind_from_name(k);
-    if (i < 0)
-      fail(where(source, n, key) + ": unknown kind '" + k + "' (tool_wear, contour, calib)");
+    if (i < 0) {
+      diag.error(&n, key, "unknown kind '" + k + "' (tool_wear, contour, calib)");
+      ok = false;
+      continue;
+    }
     mask = static_cast<std::uint8_t>(mask | (1U << static_cast<unsigned>(i)));
   }
-  if (mask == 0) fail(where(source, n, key) + ": names no kind");
+  if (!ok) return std::nullopt;
+  if (mask == 0) {
+    diag.error(&n, key, "names no kind");
+    return std::nullopt;
+  }
   return mask;
 }
 
-int resolve_column(const std::string& name, std::vector<std::string>& extras, const toml::node& n,
-                   std::string_view source, const std::string& key) {
+std::optional<int> resolve_column(const std::string& name, std::vector<std::string>& extras,
+                                  const toml::node& n, const std::string& key, Diagnostics& diag) {
   int c = cm::column_index(name, extras);
   if (c >= 0) return c;
   if (name == "measured_um" || name == "applied_um" || name.empty()) {
-    fail(where(source, n, key) + ": '" + name + "' cannot be a term's column");
+    diag.error(&n, key, "'" + name + "' cannot be a term's column");
+    return std::nullopt;
   }
   if (extras.size() >= cm::kMaxExtraColumns) {
-    fail(where(source, n, key) + ": more than " + std::to_string(cm::kMaxExtraColumns) +
-         " extra columns");
+    diag.error(&n, key, "more than " + std::to_string(cm::kMaxExtraColumns) + " extra columns");
+    return std::nullopt;
   }
   extras.push_back(name);
   return cm::column_index(name, extras);
@@ -112,19 +133,25 @@ constexpr std::array<std::string_view, 12> kEffectNames = {
     "periodic_y",    "periodic_z",   "tool_wear",  "wear_nonlinear", "part_trend", "contact_angle"};
 
 // A `column_kind` table: column = "temperature" | "other" (how a linear effect in it is named).
+// Wrong entries are reported and left out.
 std::vector<std::pair<std::string, bool>> read_column_kinds(const toml::node& n,
-                                                            std::string_view source,
-                                                            const std::string& key) {
-  const auto* t = n.as_table();
-  if (t == nullptr) fail(where(source, n, key) + ": must be a table of column = \"temperature\"");
+                                                            const std::string& key,
+                                                            Diagnostics& diag) {
   std::vector<std::pair<std::string, bool>> out;
+  const auto* t = n.as_table();
+  if (t == nullptr) {
+    diag.error(&n, key, "must be a table of column = \"temperature\"");
+    return out;
+  }
   for (const auto& [k, v] : *t) {
     const std::string name(k.str());
-    const std::string kind = get_string(v, source, key + "." + name);
-    if (kind != "temperature" && kind != "other") {
-      fail(where(source, v, key + "." + name) + ": '" + kind + "' is not temperature or other");
+    const auto kind = get_string(v, key + "." + name, diag);
+    if (!kind) continue;
+    if (*kind != "temperature" && *kind != "other") {
+      diag.error(&v, key + "." + name, "'" + *kind + "' is not temperature or other");
+      continue;
     }
-    out.emplace_back(name, kind == "temperature");
+    out.emplace_back(name, *kind == "temperature");
   }
   return out;
 }
@@ -156,6 +183,363 @@ std::string_view trim_view(std::string_view s) {
 
 std::string trim(std::string_view s) { return std::string(trim_view(s)); }
 
+/// A number in a table, checked by `valid` (which names the rule in `rule`); nullopt if absent
+/// or wrong.
+template <typename Valid>
+std::optional<double> checked_number(const toml::table& t, std::string_view key,
+                                     const std::string& path, Valid valid, const char* rule,
+                                     Diagnostics& diag) {
+  const auto* n = t.get(key);
+  if (n == nullptr) return std::nullopt;
+  const auto v = get_number(*n, path, diag);
+  if (!v) return std::nullopt;
+  if (!valid(*v)) {
+    diag.error(n, path, rule);
+    return std::nullopt;
+  }
+  return v;
+}
+
+/// The analysis options of [model] (everything but the terms and the search).
+void read_options(const toml::table& model, cm::AnalysisConfig& cfg, Diagnostics& diag) {
+  for (const char* flag : {"ar1_correction", "lookahead"}) {
+    if (const auto* n = model.get(flag)) {
+      if (!n->is_boolean()) {
+        diag.error(n, std::string("model.") + flag, "must be true or false");
+        continue;
+      }
+      (std::string_view(flag) == "lookahead" ? cfg.lookahead : cfg.ar1_correction) =
+          n->value_or(true);
+    }
+  }
+  const auto integral = [](double v) { return !(std::floor(v) < v); };
+  if (const auto v = checked_number(
+          model, "heldout_fraction", "model.heldout_fraction",
+          [](double x) { return x >= 0.0 && x <= 0.5; }, "must be within [0, 0.5]", diag)) {
+    cfg.heldout_fraction = *v;
+  }
+  if (const auto v = checked_number(
+          model, "alpha", "model.alpha", [](double x) { return x > 0.0 && x < 0.5; },
+          "must be within (0, 0.5)", diag)) {
+    cfg.alpha = *v;
+  }
+  if (const auto v = checked_number(
+          model, "outlier_sigmas", "model.outlier_sigmas",
+          [](double x) { return !(x < 0.0 || (x > 0.0 && x < 3.0) || x > 1e3); },
+          "must be 0 (off) or within [3, 1000]", diag)) {
+    cfg.outlier_sigmas = *v;
+  }
+  if (const auto v = checked_number(
+          model, "session_gap_s", "model.session_gap_s", [](double x) { return x >= 0.0; },
+          "must be 0 (off) or a time > 0 [s]", diag)) {
+    cfg.session_gap_s = *v;
+  }
+  if (const auto v = checked_number(
+          model, "max_effects", "model.max_effects",
+          [&](double x) { return x >= 0.0 && x <= 16.0 && integral(x); },
+          "must be an integer within [0, 16]", diag)) {
+    cfg.max_effects = static_cast<std::size_t>(*v);
+  }
+  if (const auto v = checked_number(
+          model, "search_rows", "model.search_rows",
+          [&](double x) { return x >= 100.0 && x <= 1e6 && integral(x); },
+          "must be an integer within [100, 1e6]", diag)) {
+    cfg.search_rows = static_cast<std::size_t>(*v);
+  }
+}
+
+/// One [[model.term]]: its spec, and its fitted coefficients if it carries them. Every error is
+/// reported; those that depend on the form are judged only when the form is known.
+void read_term(const toml::table& t, const std::string& key, bool require_fitted, ModelFile& out,
+               Diagnostics& diag) {
+  check_keys(t, key,
+             {"name", "form", "column", "per", "kinds", "degree", "center", "center_b", "scale",
+              "between_session_sigma_um", "noise_sigma_um", "groups", "coef_um"},
+             diag);
+  cm::TermSpec s;
+  if (const auto* name = t.get("name"); name == nullptr) {
+    diag.error(&t, key + ".name", "missing");
+  } else if (const auto v = get_string(*name, key + ".name", diag)) {
+    s.name = *v;
+    if (s.name.empty()) diag.error(name, key + ".name", "must not be empty");
+  }
+  const auto* form = t.get("form");
+  std::optional<std::string> fname;
+  if (form == nullptr) {
+    diag.error(&t, key + ".form", "missing");
+  } else if ((fname = get_string(*form, key + ".form", diag)) && !cm::parse_form(*fname, s.form)) {
+    diag.error(form, key + ".form",
+               "unknown form '" + *fname +
+                   "' (constant, linear, poly, exp_rise, sine, step, lag, exp_growth, hinge, "
+                   "wear, interaction, session)");
+    fname.reset();
+  }
+  if (const auto* p = t.get("per")) {
+    if (const auto names = get_strings(*p, key + ".per", diag)) {
+      if (names->size() > 2) {
+        diag.error(p, key + ".per", "at most two columns");
+      } else {
+        for (std::size_t k = 0; k < names->size(); ++k) {
+          s.per[k] =
+              resolve_column((*names)[k], out.extra_columns, *p, key + ".per", diag).value_or(-1);
+        }
+      }
+    }
+  }
+  if (const auto* k = t.get("kinds")) {
+    s.kind_mask = kinds_mask(*k, key + ".kinds", diag).value_or(s.kind_mask);
+  }
+  if (const auto v = checked_number(
+          t, "degree", key + ".degree",
+          [](double x) { return x >= 1.0 && x <= 3.0 && !(std::floor(x) < x); },
+          "must be 1, 2 or 3", diag)) {
+    s.degree = static_cast<int>(*v);
+  }
+  if (const auto* c = t.get("center"))
+    s.center = get_number(*c, key + ".center", diag).value_or(0.0);
+  if (!fname) {
+    // The rest depends on the form.
+    return;
+  }
+  if (s.form == cm::Form::kSession) {
+    // One offset per session, learned by the daemon from each session's first measurements.
+    for (const char* k : {"column", "per", "center", "scale", "degree"}) {
+      if (const auto* v = t.get(k)) {
+        diag.error(v, key + "." + k,
+                   "not for form = \"session\" (it is per session by definition; its variances "
+                   "are between_session_sigma_um and noise_sigma_um)");
+      }
+    }
+    for (const char* k : {"between_session_sigma_um", "noise_sigma_um"}) {
+      const bool between = std::string_view(k) == "between_session_sigma_um";
+      const auto* v = t.get(k);
+      if (v == nullptr) {
+        diag.error(&t, key + "." + k, "missing (form session)");
+      } else if (const auto x = get_number(*v, key + "." + k, diag)) {
+        if (!(between ? *x >= 0.0 : *x > 0.0) || !std::isfinite(*x)) {
+          diag.error(v, key + "." + k, between ? "must be ≥ 0 [µm]" : "must be > 0 [µm]");
+        } else {
+          (between ? s.scale : s.center) = *x;
+        }
+      }
+    }
+    for (const cm::TermSpec& other : out.config.declared) {
+      if (other.form == cm::Form::kSession) {
+        diag.error(form, key + ".form", "a model has at most one session term");
+      }
+    }
+    s.column = static_cast<int>(cm::kSessionColumn);
+    s.per = {static_cast<int>(cm::kSessionColumn), -1};
+  } else {
+    for (const char* k : {"between_session_sigma_um", "noise_sigma_um"}) {
+      if (const auto* v = t.get(k)) diag.error(v, key + "." + k, "only for form = \"session\"");
+    }
+  }
+  if (const auto* c = t.get("column")) {
+    if (const auto col = get_string(*c, key + ".column", diag)) {
+      const auto star = col->find('*');
+      if (s.form == cm::Form::kInteraction) {
+        if (star == std::string::npos || star == 0 || star + 1 == col->size()) {
+          diag.error(
+              c, key + ".column",
+              "'" + *col + "': an interaction's column is two columns a*b (e.g. \"temp_c*x_mm\")");
+        } else {
+          s.column =
+              resolve_column(col->substr(0, star), out.extra_columns, *c, key + ".column", diag)
+                  .value_or(-1);
+          s.column_b =
+              resolve_column(col->substr(star + 1), out.extra_columns, *c, key + ".column", diag)
+                  .value_or(-1);
+        }
+      } else if (star != std::string::npos) {
+        diag.error(c, key + ".column",
+                   "'" + *col + "': a product of columns needs form = \"interaction\"");
+      } else {
+        s.column = resolve_column(*col, out.extra_columns, *c, key + ".column", diag).value_or(-1);
+      }
+    }
+  } else if (s.form != cm::Form::kConstant && s.form != cm::Form::kSession) {
+    diag.error(&t, key + ".column", "missing (form " + *fname + " needs a column)");
+  }
+  if (const auto* c = t.get("center_b")) {
+    if (s.form != cm::Form::kInteraction) {
+      diag.error(c, key + ".center_b", "only for form = \"interaction\"");
+    } else {
+      s.center_b = get_number(*c, key + ".center_b", diag).value_or(0.0);
+    }
+  }
+  if (t.get("scale") != nullptr) {
+    if (const auto v = checked_number(
+            t, "scale", key + ".scale", [](double x) { return x > 0.0; }, "must be > 0", diag)) {
+      s.scale = *v;
+    }
+  } else if (s.form == cm::Form::kExpRise || s.form == cm::Form::kSine ||
+             s.form == cm::Form::kLag || s.form == cm::Form::kPoly ||
+             s.form == cm::Form::kExpGrowth) {
+    diag.error(&t, key + ".scale",
+               "missing (form " + *fname + " needs its scale / period / time constant)");
+  }
+  if ((s.form == cm::Form::kStep || s.form == cm::Form::kHinge) && t.get("center") == nullptr) {
+    diag.error(&t, key + ".center", "missing (form " + *fname + " needs the change point)");
+  }
+  if (s.form == cm::Form::kWear && (s.kind_mask & 1U) != 0U) {
+    diag.error(&t, key + ".kinds",
+               "a term proportional to the tool wear (form wear) cannot apply to tool_wear rows; "
+               "set kinds = [\"contour\"] or [\"contour\", \"calib\"]");
+  }
+  const auto* g = t.get("groups");
+  const auto* c = t.get("coef_um");
+  if ((g == nullptr) != (c == nullptr)) {
+    diag.error(&t, key, "groups and coef_um go together");
+  } else if (g != nullptr) {
+    cm::Term term;
+    term.spec = s;
+    bool ok = true;
+    if (const auto* ga = g->as_array(); ga == nullptr) {
+      diag.error(g, key + ".groups", "must be an array of [a, b]");
+      ok = false;
+    } else {
+      for (std::size_t j = 0; j < ga->size(); ++j) {
+        const std::string gk = key + ".groups[" + std::to_string(j) + "]";
+        const auto v = get_numbers(*ga->get(j), gk, diag);
+        if (v && v->size() != 2) diag.error(ga->get(j), gk, "must have two numbers");
+        if (!v || v->size() != 2) {
+          ok = false;
+          continue;
+        }
+        term.groups.push_back({(*v)[0], (*v)[1]});
+      }
+    }
+    if (auto coef = get_numbers(*c, key + ".coef_um", diag)) {
+      term.coef = std::move(*coef);
+      const std::size_t expected = term.groups.size() * cm::basis_count(s.form, s.degree);
+      if (ok && term.coef.size() != expected) {
+        diag.error(c, key + ".coef_um",
+                   "expected " + std::to_string(expected) +
+                       " values (groups × basis functions), got " +
+                       std::to_string(term.coef.size()));
+      }
+    }
+    out.fitted_terms.push_back(std::move(term));
+  } else if (require_fitted) {
+    diag.error(&t, key, "no groups / coef_um: not a fitted model");
+  }
+  out.config.declared.push_back(s);
+}
+
+/// [model.search]: which effects the analysis looks for.
+void read_search(const toml::node& sn, ModelFile& out, Diagnostics& diag) {
+  const auto* st = sn.as_table();
+  if (st == nullptr) {
+    diag.error(&sn, "model.search", "must be a table");
+    return;
+  }
+  check_keys(*st, "model.search",
+             {"kinds", "exclude", "linear_columns", "lag_columns", "period_min_mm", "per",
+              "group_columns", "column_kind"},
+             diag);
+  cm::SearchOptions& so = out.config.search;
+  if (const auto* n = st->get("per")) {
+    if (const auto names = get_strings(*n, "model.search.per", diag)) {
+      if (names->size() > 2) {
+        diag.error(n, "model.search.per", "at most two columns");
+      } else {
+        for (std::size_t k = 0; k < names->size(); ++k) {
+          so.per[k] = resolve_column((*names)[k], out.extra_columns, *n, "model.search.per", diag)
+                          .value_or(-1);
+        }
+      }
+    }
+  }
+  if (const auto* n = st->get("kinds")) {
+    so.kind_mask = kinds_mask(*n, "model.search.kinds", diag).value_or(so.kind_mask);
+  }
+  if (const auto* n = st->get("exclude")) {
+    so.exclude = get_strings(*n, "model.search.exclude", diag).value_or(std::vector<std::string>{});
+  }
+  for (const auto* list : {"linear_columns", "lag_columns", "group_columns"}) {
+    const auto* n = st->get(list);
+    if (n == nullptr) continue;
+    const std::string key = std::string("model.search.") + list;
+    const std::string_view l(list);
+    std::vector<int>& cols = l == "linear_columns" ? so.linear_columns
+                             : l == "lag_columns"  ? so.lag_columns
+                                                   : so.group_columns;
+    for (const auto& name : get_strings(*n, key, diag).value_or(std::vector<std::string>{})) {
+      const auto c = resolve_column(name, out.extra_columns, *n, key, diag);
+      if (!c) continue;
+      if (l == "group_columns" && std::find(cols.begin(), cols.end(), *c) != cols.end()) {
+        diag.error(n, key, "'" + name + "' named twice");
+        continue;
+      }
+      cols.push_back(*c);
+    }
+  }
+  if (const auto* n = st->get("group_columns"); n != nullptr && so.per[0] >= 0) {
+    // per already splits every candidate: there is no shared version to set beside it.
+    diag.error(n, "model.search.group_columns",
+               "not together with model.search.per (which splits every candidate)");
+  }
+  if (const auto* n = st->get("column_kind")) {
+    for (const auto& [name, temperature] :
+         read_column_kinds(*n, "model.search.column_kind", diag)) {
+      if (const auto c = resolve_column(name, out.extra_columns, *n,
+                                        "model.search.column_kind." + name, diag)) {
+        so.column_is_temperature.emplace_back(*c, temperature);
+      }
+    }
+  }
+  if (const auto* n = st->get("exclude")) {
+    // A misspelt name would exclude nothing, silently.
+    for (const auto& name : so.exclude) {
+      bool known = std::find(kEffectNames.begin(), kEffectNames.end(), name) != kEffectNames.end();
+      for (int c : so.linear_columns) {
+        known = known || name == "linear_" + cm::column_name(c, out.extra_columns);
+      }
+      // An interaction a*b of two known columns.
+      const auto star = name.find('*');
+      known = known || (star != std::string::npos &&
+                        cm::column_index(name.substr(0, star), out.extra_columns) >= 0 &&
+                        cm::column_index(name.substr(star + 1), out.extra_columns) >= 0);
+      if (!known) {
+        diag.error(n, "model.search.exclude",
+                   "no effect is called '" + name +
+                       "' (thermal_drift, level_change, position_x|y|z, periodic_x|y|z, "
+                       "tool_wear, wear_nonlinear, part_trend, contact_angle, linear_<column> of "
+                       "linear_columns, a*b of an interaction)");
+      }
+    }
+  }
+  if (const auto v = checked_number(
+          *st, "period_min_mm", "model.search.period_min_mm", [](double x) { return x > 0.0; },
+          "must be > 0", diag)) {
+    so.period_min_mm = *v;
+  }
+}
+
+/// The text of a file; nullopt if it cannot be opened.
+std::optional<std::string> read_text(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return std::nullopt;
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+[[noreturn]] void cannot_open(const std::string& path) {
+  Diagnostics diag;
+  diag.error(Where{path, 0, 0, ""}, "cannot open");
+  throw DiagnosticsError(std::move(diag), path);
+}
+
+toml::table parse_or_throw(std::string_view text, std::string_view source) {
+  try {
+    return formats::parse_toml(text, source);
+  } catch (const toml::parse_error& e) {
+    throw DiagnosticsError(e, std::string(source));
+  }
+}
+
 }  // namespace
 
 int kind_from_name(std::string_view name) noexcept {
@@ -166,276 +550,46 @@ int kind_from_name(std::string_view name) noexcept {
 }
 
 ModelFile read_model_table(const toml::table& root, std::string_view source, bool require_fitted) {
-  const auto* model = root["model"].as_table();
-  if (model == nullptr) fail(std::string(source) + ": no [model] table");
-  check_keys(*model, source, "model",
-             {"heldout_fraction", "alpha", "max_effects", "search_rows", "ar1_correction",
-              "lookahead", "outlier_sigmas", "session_gap_s", "term", "search"});
+  Diagnostics diag;
   ModelFile out;
-  cm::AnalysisConfig& cfg = out.config;
-  for (const char* flag : {"ar1_correction", "lookahead"}) {
-    if (const auto* n = model->get(flag)) {
-      const std::string key = std::string("model.") + flag;
-      if (!n->is_boolean()) fail(where(source, *n, key) + ": must be true or false");
-      (std::string_view(flag) == "lookahead" ? cfg.lookahead : cfg.ar1_correction) =
-          n->value_or(true);
-    }
+  const auto* model = root["model"].as_table();
+  if (model == nullptr) {
+    diag.error(Where{}, "no [model] table");
+    throw DiagnosticsError(std::move(diag), std::string(source));
   }
-  if (const auto* n = model->get("heldout_fraction")) {
-    cfg.heldout_fraction = get_number(*n, source, "model.heldout_fraction");
-    if (cfg.heldout_fraction < 0.0 || cfg.heldout_fraction > 0.5) {
-      fail(where(source, *n, "model.heldout_fraction") + ": must be within [0, 0.5]");
-    }
-  }
-  if (const auto* n = model->get("alpha")) {
-    cfg.alpha = get_number(*n, source, "model.alpha");
-    if (!(cfg.alpha > 0.0 && cfg.alpha < 0.5)) {
-      fail(where(source, *n, "model.alpha") + ": must be within (0, 0.5)");
-    }
-  }
-  if (const auto* n = model->get("outlier_sigmas")) {
-    cfg.outlier_sigmas = get_number(*n, source, "model.outlier_sigmas");
-    const double v = cfg.outlier_sigmas;
-    if (v < 0.0 || (v > 0.0 && v < 3.0) || v > 1e3) {
-      fail(where(source, *n, "model.outlier_sigmas") + ": must be 0 (off) or within [3, 1000]");
-    }
-  }
-  if (const auto* n = model->get("session_gap_s")) {
-    cfg.session_gap_s = get_number(*n, source, "model.session_gap_s");
-    if (cfg.session_gap_s < 0.0) {
-      fail(where(source, *n, "model.session_gap_s") + ": must be 0 (off) or a time > 0 [s]");
-    }
-  }
-  if (const auto* n = model->get("max_effects")) {
-    const double v = get_number(*n, source, "model.max_effects");
-    if (v < 0.0 || v > 16.0 || std::floor(v) < v) {
-      fail(where(source, *n, "model.max_effects") + ": must be an integer within [0, 16]");
-    }
-    cfg.max_effects = static_cast<std::size_t>(v);
-  }
-  if (const auto* n = model->get("search_rows")) {
-    const double v = get_number(*n, source, "model.search_rows");
-    if (v < 100.0 || v > 1e6 || std::floor(v) < v) {
-      fail(where(source, *n, "model.search_rows") + ": must be an integer within [100, 1e6]");
-    }
-    cfg.search_rows = static_cast<std::size_t>(v);
-  }
+  check_keys(*model, "model",
+             {"heldout_fraction", "alpha", "max_effects", "search_rows", "ar1_correction",
+              "lookahead", "outlier_sigmas", "session_gap_s", "term", "search"},
+             diag);
+  read_options(*model, out.config, diag);
   const auto* terms = model->get("term");
   if (terms == nullptr || !terms->is_array_of_tables()) {
-    fail(std::string(source) + ": model.term: declare at least one [[model.term]]");
-  }
-  const auto& arr = *terms->as_array();
-  for (std::size_t i = 0; i < arr.size(); ++i) {
-    const auto& t = *arr.get(i)->as_table();
-    const std::string key = "model.term[" + std::to_string(i) + "]";
-    check_keys(t, source, key,
-               {"name", "form", "column", "per", "kinds", "degree", "center", "center_b", "scale",
-                "groups", "coef_um"});
-    cm::TermSpec s;
-    const auto* name = t.get("name");
-    if (name == nullptr) fail(where(source, t, key) + ".name: missing");
-    s.name = get_string(*name, source, key + ".name");
-    if (s.name.empty()) fail(where(source, *name, key + ".name") + ": must not be empty");
-    const auto* form = t.get("form");
-    if (form == nullptr) fail(where(source, t, key) + ".form: missing");
-    const std::string fname = get_string(*form, source, key + ".form");
-    if (!cm::parse_form(fname, s.form)) {
-      fail(where(source, *form, key + ".form") + ": unknown form '" + fname +
-           "' (constant, linear, poly, exp_rise, sine, step, lag, exp_growth, hinge, wear, "
-           "interaction)");
+    diag.error(where_of(terms, "model.term"), "declare at least one [[model.term]]");
+  } else {
+    const auto& arr = *terms->as_array();
+    std::size_t with_coef = 0;
+    for (std::size_t i = 0; i < arr.size(); ++i) {
+      const auto& t = *arr.get(i)->as_table();
+      if (t.get("groups") != nullptr && t.get("coef_um") != nullptr) ++with_coef;
+      read_term(t, "model.term[" + std::to_string(i) + "]", require_fitted, out, diag);
     }
-    if (const auto* c = t.get("column")) {
-      const std::string col = get_string(*c, source, key + ".column");
-      const auto star = col.find('*');
-      if (s.form == cm::Form::kInteraction) {
-        if (star == std::string::npos || star == 0 || star + 1 == col.size()) {
-          fail(where(source, *c, key + ".column") + ": '" + col +
-               "': an interaction's column is two columns a*b (e.g. \"temp_c*x_mm\")");
-        }
-        s.column =
-            resolve_column(col.substr(0, star), out.extra_columns, *c, source, key + ".column");
-        s.column_b =
-            resolve_column(col.substr(star + 1), out.extra_columns, *c, source, key + ".column");
-      } else {
-        if (star != std::string::npos) {
-          fail(where(source, *c, key + ".column") + ": '" + col +
-               "': a product of columns needs form = \"interaction\"");
-        }
-        s.column = resolve_column(col, out.extra_columns, *c, source, key + ".column");
-      }
-    } else if (s.form != cm::Form::kConstant) {
-      fail(where(source, t, key) + ".column: missing (form " + fname + " needs a column)");
-    }
-    if (const auto* p = t.get("per")) {
-      const auto names = get_strings(*p, source, key + ".per");
-      if (names.size() > 2) fail(where(source, *p, key + ".per") + ": at most two columns");
-      for (std::size_t k = 0; k < names.size(); ++k) {
-        s.per[k] = resolve_column(names[k], out.extra_columns, *p, source, key + ".per");
-      }
-    }
-    if (const auto* k = t.get("kinds")) s.kind_mask = kinds_mask(*k, source, key + ".kinds");
-    if (const auto* d = t.get("degree")) {
-      const double v = get_number(*d, source, key + ".degree");
-      if (v < 1.0 || v > 3.0 || std::floor(v) < v) {
-        fail(where(source, *d, key + ".degree") + ": must be 1, 2 or 3");
-      }
-      s.degree = static_cast<int>(v);
-    }
-    if (const auto* c = t.get("center")) s.center = get_number(*c, source, key + ".center");
-    if (const auto* c = t.get("center_b")) {
-      if (s.form != cm::Form::kInteraction) {
-        fail(where(source, *c, key + ".center_b") + ": only for form = \"interaction\"");
-      }
-      s.center_b = get_number(*c, source, key + ".center_b");
-    }
-    if (const auto* c = t.get("scale")) {
-      s.scale = get_number(*c, source, key + ".scale");
-      if (!(s.scale > 0.0)) fail(where(source, *c, key + ".scale") + ": must be > 0");
-    } else if (s.form == cm::Form::kExpRise || s.form == cm::Form::kSine ||
-               s.form == cm::Form::kLag || s.form == cm::Form::kPoly ||
-               s.form == cm::Form::kExpGrowth) {
-      fail(where(source, t, key) + ".scale: missing (form " + fname +
-           " needs its scale / period / time constant)");
-    }
-    if ((s.form == cm::Form::kStep || s.form == cm::Form::kHinge) && t.get("center") == nullptr) {
-      fail(where(source, t, key) + ".center: missing (form " + fname + " needs the change point)");
-    }
-    if (s.form == cm::Form::kWear && (s.kind_mask & 1U) != 0U) {
-      fail(where(source, t, key) +
-           ".kinds: a term proportional to the tool wear (form wear) "
-           "cannot apply to tool_wear rows; set kinds = [\"contour\"] or "
-           "[\"contour\", \"calib\"]");
-    }
-    const auto* g = t.get("groups");
-    const auto* c = t.get("coef_um");
-    if ((g == nullptr) != (c == nullptr)) {
-      fail(where(source, t, key) + ": groups and coef_um go together");
-    }
-    if (g != nullptr) {
-      cm::Term term;
-      term.spec = s;
-      const auto* ga = g->as_array();
-      if (ga == nullptr) fail(where(source, *g, key + ".groups") + ": must be an array of [a, b]");
-      for (std::size_t j = 0; j < ga->size(); ++j) {
-        const auto v = get_numbers(*ga->get(j), source, key + ".groups[" + std::to_string(j) + "]");
-        if (v.size() != 2) {
-          fail(where(source, *ga->get(j), key + ".groups[" + std::to_string(j) + "]") +
-               ": must have two numbers");
-        }
-        term.groups.push_back({v[0], v[1]});
-      }
-      term.coef = get_numbers(*c, source, key + ".coef_um");
-      if (term.coef.size() != term.groups.size() * cm::basis_count(s.form, s.degree)) {
-        fail(where(source, *c, key + ".coef_um") + ": expected " +
-             std::to_string(term.groups.size() * cm::basis_count(s.form, s.degree)) +
-             " values (groups × basis functions), got " + std::to_string(term.coef.size()));
-      }
-      out.fitted_terms.push_back(std::move(term));
-    } else if (require_fitted) {
-      fail(where(source, t, key) + ": no groups / coef_um: not a fitted model");
-    }
-    cfg.declared.push_back(s);
-  }
-  if (!out.fitted_terms.empty() && out.fitted_terms.size() != cfg.declared.size()) {
-    fail(std::string(source) + ": model.term: either every term or none carries coefficients");
-  }
-  if (const auto* sn = model->get("search")) {
-    const auto* st = sn->as_table();
-    if (st == nullptr) fail(where(source, *sn, "model.search") + ": must be a table");
-    check_keys(*st, source, "model.search",
-               {"kinds", "exclude", "linear_columns", "lag_columns", "period_min_mm", "per",
-                "group_columns", "column_kind"});
-    cm::SearchOptions& so = cfg.search;
-    if (const auto* n = st->get("per")) {
-      const auto names = get_strings(*n, source, "model.search.per");
-      if (names.size() > 2) fail(where(source, *n, "model.search.per") + ": at most two columns");
-      for (std::size_t k = 0; k < names.size(); ++k) {
-        so.per[k] = resolve_column(names[k], out.extra_columns, *n, source, "model.search.per");
-      }
-    }
-    if (const auto* n = st->get("kinds"))
-      so.kind_mask = kinds_mask(*n, source, "model.search.kinds");
-    if (const auto* n = st->get("exclude"))
-      so.exclude = get_strings(*n, source, "model.search.exclude");
-    for (const auto* list : {"linear_columns", "lag_columns", "group_columns"}) {
-      if (const auto* n = st->get(list)) {
-        const std::string key = std::string("model.search.") + list;
-        const std::string_view l(list);
-        std::vector<int>& cols = l == "linear_columns" ? so.linear_columns
-                                 : l == "lag_columns"  ? so.lag_columns
-                                                       : so.group_columns;
-        for (const auto& name : get_strings(*n, source, key)) {
-          const int c = resolve_column(name, out.extra_columns, *n, source, key);
-          if (l == "group_columns" && std::find(cols.begin(), cols.end(), c) != cols.end()) {
-            fail(where(source, *n, key) + ": '" + name + "' named twice");
-          }
-          cols.push_back(c);
-        }
-      }
-    }
-    if (const auto* n = st->get("group_columns"); n != nullptr && so.per[0] >= 0) {
-      // per already splits every candidate: there is no shared version to set beside it.
-      fail(where(source, *n, "model.search.group_columns") +
-           ": not together with model.search.per (which splits every candidate)");
-    }
-    if (const auto* n = st->get("column_kind")) {
-      for (const auto& [name, temperature] :
-           read_column_kinds(*n, source, "model.search.column_kind")) {
-        const int c =
-            resolve_column(name, out.extra_columns, *n, source, "model.search.column_kind." + name);
-        so.column_is_temperature.emplace_back(c, temperature);
-      }
-    }
-    if (const auto* n = st->get("exclude")) {
-      // A misspelt name would exclude nothing, silently.
-      for (const auto& name : so.exclude) {
-        bool known =
-            std::find(kEffectNames.begin(), kEffectNames.end(), name) != kEffectNames.end();
-        for (int c : so.linear_columns) {
-          known = known || name == "linear_" + cm::column_name(c, out.extra_columns);
-        }
-        // An interaction a*b of two known columns.
-        const auto star = name.find('*');
-        known = known || (star != std::string::npos &&
-                          cm::column_index(name.substr(0, star), out.extra_columns) >= 0 &&
-                          cm::column_index(name.substr(star + 1), out.extra_columns) >= 0);
-        if (!known) {
-          fail(where(source, *n, "model.search.exclude") + ": no effect is called '" + name +
-               "' (thermal_drift, level_change, position_x|y|z, periodic_x|y|z, tool_wear, "
-               "wear_nonlinear, part_trend, contact_angle, linear_<column> of linear_columns, "
-               "a*b of an interaction)");
-        }
-      }
-    }
-    if (const auto* n = st->get("period_min_mm")) {
-      so.period_min_mm = get_number(*n, source, "model.search.period_min_mm");
-      if (!(so.period_min_mm > 0.0)) {
-        fail(where(source, *n, "model.search.period_min_mm") + ": must be > 0");
-      }
+    if (with_coef != 0 && with_coef != arr.size()) {
+      diag.error(where_of(terms, "model.term"), "either every term or none carries coefficients");
     }
   }
+  if (const auto* sn = model->get("search")) read_search(*sn, out, diag);
+  if (!diag.ok()) throw DiagnosticsError(std::move(diag), std::string(source));
   return out;
 }
 
 ModelFile read_model_text(std::string_view text, std::string_view source, bool require_fitted) {
-  toml::table root;
-  try {
-    root = formats::parse_toml(text, source);
-  } catch (const toml::parse_error& e) {
-    std::ostringstream s;
-    s << source << ":" << e.source().begin.line << ":" << e.source().begin.column << ": "
-      << e.description();
-    throw ModelIoError(s.str());
-  }
-  return read_model_table(root, source, require_fitted);
+  return read_model_table(parse_or_throw(text, source), source, require_fitted);
 }
 
 core::model::Model load_model_file(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw ModelIoError(path + ": cannot open");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  ModelFile f = read_model_text(ss.str(), path, true);
+  const auto text = read_text(path);
+  if (!text) cannot_open(path);
+  ModelFile f = read_model_text(*text, path, true);
   return cm::Model(f.extra_columns, std::move(f.fitted_terms));
 }
 
@@ -459,9 +613,10 @@ std::string write_model_toml(const core::model::Model& model,
     o << "\n[[model.term]]\n";
     o << "name = " << quote(s.name) << "\n";
     o << "form = " << quote(cm::form_name(s.form)) << "\n";
-    if (s.form != cm::Form::kConstant)
+    const bool session = s.form == cm::Form::kSession;
+    if (s.form != cm::Form::kConstant && !session)
       o << "column = " << quote(cm::term_column_name(s, ex)) << "\n";
-    if (s.per[0] >= 0) {
+    if (s.per[0] >= 0 && !session) {
       o << "per = [" << quote(cm::column_name(s.per[0], ex));
       if (s.per[1] >= 0) o << ", " << quote(cm::column_name(s.per[1], ex));
       o << "]\n";
@@ -485,6 +640,14 @@ std::string write_model_toml(const core::model::Model& model,
     if (s.form == cm::Form::kPoly || cm::has_nonlinear_parameter(s.form)) {
       if (s.form != cm::Form::kStep && s.form != cm::Form::kHinge)
         o << "scale = " << fmt_double(s.scale) << "\n";
+    }
+    if (session) {
+      // No coefficients: the sessions of the log are over; every new one is learned from its
+      // own first measurements (the fitted offsets are in summary.json).
+      o << "between_session_sigma_um = " << fmt_double(s.scale) << "\n";
+      o << "noise_sigma_um = " << fmt_double(s.center) << "\n";
+      o << "groups = []\ncoef_um = []\n";
+      continue;
     }
     o << "groups = [";
     for (std::size_t g = 0; g < t.groups.size(); ++g) {
@@ -543,21 +706,17 @@ std::string write_model_toml(const core::model::Model& model,
 // Mapping files.
 
 Mapping read_mapping_text(std::string_view text, std::string_view source) {
-  toml::table root;
-  try {
-    root = formats::parse_toml(text, source);
-  } catch (const toml::parse_error& e) {
-    std::ostringstream s;
-    s << source << ":" << e.source().begin.line << ":" << e.source().begin.column << ": "
-      << e.description();
-    throw ModelIoError(s.str());
-  }
-  check_keys(root, source, "", {"columns", "extra", "scale", "constant", "wide", "column_kind"});
+  const toml::table root = parse_or_throw(text, source);
+  Diagnostics diag;
+  check_keys(root, "", {"columns", "extra", "scale", "constant", "wide", "column_kind"}, diag);
   Mapping m;
   auto table = [&](const char* name) -> const toml::table* {
     const auto* n = root.get(name);
     if (n == nullptr) return nullptr;
-    if (!n->is_table()) fail(where(source, *n, name) + ": must be a table");
+    if (!n->is_table()) {
+      diag.error(n, name, "must be a table");
+      return nullptr;
+    }
     return n->as_table();
   };
   auto is_target = [](const std::string& k) {
@@ -567,70 +726,85 @@ Mapping read_mapping_text(std::string_view text, std::string_view source) {
     for (const auto& [k, v] : *t) {
       const std::string key = "columns." + std::string(k.str());
       if (!is_target(std::string(k.str()))) {
-        fail(where(source, v, key) + ": not a measurement-log column");
+        diag.error(&v, key, "not a measurement-log column");
+      } else if (const auto h = get_string(v, key, diag)) {
+        m.columns.emplace_back(std::string(k.str()), trim(*h));
       }
-      m.columns.emplace_back(std::string(k.str()), trim(get_string(v, source, key)));
     }
   }
   if (const auto* t = table("extra")) {
     for (const auto& [k, v] : *t) {
       const std::string key = "extra." + std::string(k.str());
-      if (is_target(std::string(k.str()))) fail(where(source, v, key) + ": a standard column name");
-      m.extra.emplace_back(std::string(k.str()), trim(get_string(v, source, key)));
+      if (is_target(std::string(k.str()))) {
+        diag.error(&v, key, "a standard column name");
+      } else if (const auto h = get_string(v, key, diag)) {
+        m.extra.emplace_back(std::string(k.str()), trim(*h));
+      }
     }
   }
-  if (const auto* t = table("scale")) {
-    for (const auto& [k, v] : *t) {
-      m.scale.emplace_back(std::string(k.str()),
-                           get_number(v, source, "scale." + std::string(k.str())));
+  const auto* scales = table("scale");
+  if (scales != nullptr) {
+    for (const auto& [k, v] : *scales) {
+      if (const auto x = get_number(v, "scale." + std::string(k.str()), diag)) {
+        m.scale.emplace_back(std::string(k.str()), *x);
+      }
     }
   }
   if (const auto* t = table("constant")) {
     for (const auto& [k, v] : *t) {
       const std::string name(k.str());
       const std::string key = "constant." + name;
-      if (!is_target(name)) fail(where(source, v, key) + ": not a measurement-log column");
-      if (name == "kind") {
-        const std::string kind = get_string(v, source, key);
-        const int i = kind_from_name(kind);
-        if (i < 0) fail(where(source, v, key) + ": unknown kind '" + kind + "'");
-        m.constant.emplace_back(name, static_cast<double>(i));
-      } else {
-        m.constant.emplace_back(name, get_number(v, source, key));
+      if (!is_target(name)) {
+        diag.error(&v, key, "not a measurement-log column");
+      } else if (name == "kind") {
+        if (const auto kind = get_string(v, key, diag)) {
+          const int i = kind_from_name(*kind);
+          if (i < 0) {
+            diag.error(&v, key, "unknown kind '" + *kind + "'");
+          } else {
+            m.constant.emplace_back(name, static_cast<double>(i));
+          }
+        }
+      } else if (const auto x = get_number(v, key, diag)) {
+        m.constant.emplace_back(name, *x);
       }
     }
   }
   if (const auto* n = root.get("column_kind")) {
-    for (auto& [name, temperature] : read_column_kinds(*n, source, "column_kind")) {
+    for (auto& [name, temperature] : read_column_kinds(*n, "column_kind", diag)) {
       const std::string& column = name;  // clang 14 cannot capture a structured binding
       const bool mapped =
           is_target(column) || std::any_of(m.extra.begin(), m.extra.end(),
                                            [&](const auto& e) { return e.first == column; });
       if (!mapped) {
-        fail(where(source, *n->as_table()->get(column), "column_kind." + column) +
-             ": not a log column nor a column of [extra]");
+        diag.error(n->as_table()->get(column), "column_kind." + column,
+                   "not a log column nor a column of [extra]");
+        continue;
       }
       m.column_kind.emplace_back(name, temperature);
     }
   }
   if (const auto* t = table("wide")) {
-    check_keys(*t, source, "wide", {"measured_um", "points"});
+    check_keys(*t, "wide", {"measured_um", "points"}, diag);
     const auto* mu = t->get("measured_um");
     const auto* pts = t->get("points");
     if (mu == nullptr || pts == nullptr) {
-      fail(where(source, *t, "wide") + ": needs measured_um and points");
-    }
-    m.wide_measured = get_strings(*mu, source, "wide.measured_um");
-    for (auto& s : m.wide_measured) s = trim(s);
-    m.wide_points = get_numbers(*pts, source, "wide.points");
-    if (m.wide_measured.size() != m.wide_points.size() || m.wide_measured.empty()) {
-      fail(where(source, *t, "wide") +
-           ": measured_um and points must have the same, non-zero length");
+      diag.error(t, "wide", "needs measured_um and points");
+    } else {
+      const auto measured = get_strings(*mu, "wide.measured_um", diag);
+      const auto points = get_numbers(*pts, "wide.points", diag);
+      if (measured && points) {
+        m.wide_measured = *measured;
+        for (auto& s : m.wide_measured) s = trim(s);
+        m.wide_points = *points;
+        if (m.wide_measured.size() != m.wide_points.size() || m.wide_measured.empty()) {
+          diag.error(t, "wide", "measured_um and points must have the same, non-zero length");
+        }
+      }
     }
   }
   // A scale applies to a column read from the file, once: one mapped under [columns] or
   // [extra], or measured_um read from [wide]. A scale of anything else would silently do nothing.
-  const auto* scales = table("scale");
   for (const auto& [k, v] : m.scale) {
     const std::string& column = k;  // clang 14 cannot capture a structured binding
     auto named = [&](const auto& list) {
@@ -640,20 +814,19 @@ Mapping read_mapping_text(std::string_view text, std::string_view source) {
     const bool mapped =
         named(m.columns) || named(m.extra) || (column == "measured_um" && !m.wide_measured.empty());
     if (!mapped) {
-      fail(where(source, *scales->get(column), "scale." + column) +
-           (named(m.constant) ? ": a [constant] is not scaled (write it in the target unit)"
-                              : ": not a column mapped under [columns], [extra] or [wide]"));
+      diag.error(scales->get(column), "scale." + column,
+                 named(m.constant) ? "a [constant] is not scaled (write it in the target unit)"
+                                   : "not a column mapped under [columns], [extra] or [wide]");
     }
   }
+  if (!diag.ok()) throw DiagnosticsError(std::move(diag), std::string(source));
   return m;
 }
 
 Mapping read_mapping_file(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw ModelIoError(path + ": cannot open");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return read_mapping_text(ss.str(), path);
+  const auto text = read_text(path);
+  if (!text) cannot_open(path);
+  return read_mapping_text(*text, path);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -705,13 +878,13 @@ struct Target {
   std::string name;
 };
 
+/// An error at a row (its line) and, where known, a field (0-based; -1 unknown) of the column
+/// named `column`.
 [[noreturn]] void csv_fail(std::string_view source, std::size_t line, const std::string& column,
-                           const std::string& msg) {
-  std::ostringstream s;
-  s << source << ":" << line;
-  if (!column.empty()) s << ": column '" << column << "'";
-  s << ": " << msg;
-  throw ModelIoError(s.str());
+                           const std::string& msg, int field = -1) {
+  Diagnostics diag;
+  diag.error(Where{std::string(source), static_cast<int>(line), field + 1, column}, msg);
+  throw DiagnosticsError(std::move(diag), std::string(source));
 }
 
 }  // namespace
@@ -800,6 +973,13 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
       }
     }
   }
+  // The CSV field a column is read from, for errors; -1 where it is not read from one.
+  auto field_of = [&](std::size_t column) {
+    for (const Target& t : targets) {
+      if (t.column == static_cast<int>(column)) return t.source_field;
+    }
+    return -1;
+  };
   std::vector<int> wide_fields;
   for (const auto& h : mapping.wide_measured) {
     const int f = find(h);
@@ -881,7 +1061,8 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
       if (static_cast<std::size_t>(t.source_field) >= nf) {
         csv_fail(source, line_no, t.name,
                  "missing (the row has " + std::to_string(nf) + " fields, the header " +
-                     std::to_string(header.size()) + ")");
+                     std::to_string(header.size()) + ")",
+                 t.source_field);
       }
       const std::string_view cell = trim_view(fields[static_cast<std::size_t>(t.source_field)]);
       double v = cm::kUnknown;
@@ -890,7 +1071,8 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
           const int k = kind_from_name(cell);
           if (k < 0)
             csv_fail(source, line_no, t.name,
-                     "'" + std::string(cell) + "' is not tool_wear, contour or calib");
+                     "'" + std::string(cell) + "' is not tool_wear, contour or calib",
+                     t.source_field);
           v = k;
         } else {
           const char* b = cell.data();
@@ -898,7 +1080,8 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
           if (*b == '+') ++b;
           auto [p, ec] = std::from_chars(b, e, v);
           if (ec != std::errc() || p != e || !std::isfinite(v)) {
-            csv_fail(source, line_no, t.name, "'" + std::string(cell) + "' is not a finite number");
+            csv_fail(source, line_no, t.name, "'" + std::string(cell) + "' is not a finite number",
+                     t.source_field);
           }
           v *= t.scale;
         }
@@ -915,12 +1098,14 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
          {static_cast<std::size_t>(cm::Column::kPart), static_cast<std::size_t>(cm::Column::kTool),
           static_cast<std::size_t>(cm::Column::kPoint)}) {
       if (std::isfinite(values[c]) && std::floor(values[c]) < values[c]) {
-        csv_fail(source, line_no, std::string(cm::kStandardColumnNames[c]), "must be an integer");
+        csv_fail(source, line_no, std::string(cm::kStandardColumnNames[c]), "must be an integer",
+                 field_of(c));
       }
     }
     if (!std::isfinite(values[static_cast<std::size_t>(cm::Column::kKind)])) {
       csv_fail(source, line_no, "kind",
-               mapped ? "no kind (map it or set [constant] kind)" : "empty");
+               mapped ? "no kind (map it or set [constant] kind)" : "empty",
+               field_of(static_cast<std::size_t>(cm::Column::kKind)));
     }
     const double t_s = values[time_col];
     if (session_field >= 0) {
@@ -928,20 +1113,23 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
       const auto mf = static_cast<std::size_t>(machine_field);
       if (sf >= nf || mf >= nf) {
         csv_fail(source, line_no, sf >= nf ? "session" : "machine",
-                 "missing (the row has " + std::to_string(nf) + " fields)");
+                 "missing (the row has " + std::to_string(nf) + " fields)",
+                 sf >= nf ? session_field : machine_field);
       }
       const std::string_view cell = trim_view(fields[sf]);
       double v = -1.0;
       const auto [p, ec] = std::from_chars(cell.data(), cell.data() + cell.size(), v);
       if (ec != std::errc() || p != cell.data() + cell.size() || !(v >= 0.0) || std::floor(v) < v) {
         csv_fail(source, line_no, "session",
-                 "'" + std::string(cell) + "' is not a warm-start number (an integer >= 0)");
+                 "'" + std::string(cell) + "' is not a warm-start number (an integer >= 0)",
+                 session_field);
       }
       if (v < session) {
         csv_fail(source, line_no, "session",
                  "goes backwards (" + std::string(cell) + " after " +
                      std::to_string(static_cast<long long>(session)) +
-                     "); the log must be in time order");
+                     "); the log must be in time order",
+                 session_field);
       }
       if (v > session && session >= 0.0) {
         // A new warm start: its time_s counts from 0 again, after this file's rows so far.
@@ -958,7 +1146,8 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
       } else if (m != machine) {
         csv_fail(source, line_no, "machine",
                  "'" + m + "' in a log of '" + machine + "' (line " + std::to_string(machine_line) +
-                     "): analyze one machine's log at a time");
+                     "): analyze one machine's log at a time",
+                 machine_field);
       }
     }
     if (std::isfinite(t_s) && std::isnan(order_offset)) {
@@ -968,7 +1157,8 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
       if (t_s < last_time) {
         csv_fail(source, line_no, "time_s",
                  "goes backwards (" + std::to_string(t_s) + " after " + std::to_string(last_time) +
-                     "); the log must be in time order");
+                     "); the log must be in time order",
+                 field_of(time_col));
       }
       last_time = t_s;
     }
@@ -977,14 +1167,14 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
       double y = measured;
       if (!wide_fields.empty()) {
         const auto f = static_cast<std::size_t>(wide_fields[w]);
-        if (f >= nf) csv_fail(source, line_no, mapping.wide_measured[w], "missing");
+        if (f >= nf) csv_fail(source, line_no, mapping.wide_measured[w], "missing", wide_fields[w]);
         const std::string_view cell = trim_view(fields[f]);
         y = cm::kUnknown;
         if (!cell.empty()) {
           auto [p, ec] = std::from_chars(cell.data(), cell.data() + cell.size(), y);
           if (ec != std::errc() || p != cell.data() + cell.size() || !std::isfinite(y)) {
             csv_fail(source, line_no, mapping.wide_measured[w],
-                     "'" + std::string(cell) + "' is not a finite number");
+                     "'" + std::string(cell) + "' is not a finite number", wide_fields[w]);
           }
           // A measured_um under [columns] got its scale when read (its target's scale).
           y *= measured_scale;

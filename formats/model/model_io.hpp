@@ -2,12 +2,13 @@
 // `nccomp analyze`, model.toml loaded by the daemon's [model] section):
 //   - the `[model]` TOML table: declared terms, search options, fitted coefficients;
 //   - the measurement log CSV (architecture.md, v1) and foreign CSVs through a column mapping.
-// Every reader validates its input and throws ModelIoError naming the file, line / key and
-// column. Nothing here is real-time: these run when configuring, never in the loop.
+// Every reader validates its input and throws formats::DiagnosticsError: file:line:column and key
+// path for the TOML files, with every error of the file; file:row:field (1-based) and the column
+// name for a CSV, at its first bad row. Nothing here is real-time: these run when configuring,
+// never in the loop.
 #pragma once
 
 #include <istream>
-#include <stdexcept>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -16,13 +17,9 @@
 
 #include "core/model/analysis.hpp"
 #include "core/model/model.hpp"
+#include "formats/toml/diagnostics.hpp"
 
 namespace nccomp::formats::model_io {
-
-class ModelIoError : public std::runtime_error {
- public:
-  using std::runtime_error::runtime_error;
-};
 
 /// The `[model]` table of an analysis config or of a fitted model file.
 struct ModelFile {
@@ -33,8 +30,9 @@ struct ModelFile {
   std::vector<core::model::Term> fitted_terms;
 };
 
-/// Parses `[model]` of `root`. `source` names the file in errors. With require_fitted, every
-/// term must carry `groups` and `coef_um` (a file the daemon loads).
+/// Parses `[model]` of `root`. `source` names the file in errors (every error of the table, in
+/// one DiagnosticsError). With require_fitted, every term must carry `groups` and `coef_um` (a
+/// file the daemon loads).
 ModelFile read_model_table(const toml::table& root, std::string_view source, bool require_fitted);
 
 /// Parses TOML text and its `[model]` table (errors carry line and column).
@@ -74,7 +72,7 @@ Mapping read_mapping_file(const std::string& path);
 /// Reads a CSV (the v1 or v2 log when `mapping` is empty, else mapped) and appends its rows to
 /// `data`. In a v2 log (machine, utc and session columns) time_s restarts with each session.
 /// Only the extra columns named in data.extra_columns are kept. `source` names the stream in
-/// errors ("file:line: column 'x': …").
+/// errors ("file:line:field: column: …").
 void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
               core::model::Dataset& data);
 

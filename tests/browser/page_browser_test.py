@@ -15,7 +15,12 @@ its status socket. The test plays the laser over Modbus and checks, in the brows
      started with setpriv, so as root only) is refused with the reason and the daemon stays
      halted; cancelling the dialog sends nothing; acknowledge from this user's browser (root, or
      when not root the user's primary group as --admin-group), confirmed in the dialog, lifts the
-     halt (status and NC flag) and both logs name who did it.
+     halt (status and NC flag) and both logs name who did it;
+  5. the Model card (B loaded over A before the first measurement, C a candidate in shadow that
+     the rule announces after one part) shows what the status JSON and `nccomp model status`
+     say: live and rollback models, both scores, the rule's state, the handovers; Promote and
+     Roll back from nobody's browser are refused; from this user's, confirmed, Promote makes C
+     live (-3.0 um on the NC) and Roll back B again (-5.0 um), as status shows.
 Screenshots of the page go to WORK. Exit 77 (ctest SKIP_RETURN_CODE) when chromium,
 chromedriver or selenium is missing; 1 on a failed check.
 """
@@ -151,7 +156,27 @@ measurement_due_register = "measure_request"
 [creep.interval]
 basis = "time"
 interval_s = 1.0
+[model]
+file = "a/model.toml"
+update = "cycle"
+[[model.apply]]
+term = "offset"
+register = "T1_length_wear"
+gain = 1
+kind = "tool_wear"
+# One part decides (p = 1/2): the candidate better on the first part is announced.
+[model.shadow]
+min_parts = 1
+alpha = 0.5
+promote = "operator"
 """
+
+
+def model_text(name, coef_um=0.0):
+    """A fitted model with one constant tool-wear term: A and B (0 um) move no offset when
+    changed; every tool measurement is scored (a part of its own)."""
+    return ("[model]\n[[model.term]]\nname = \"" + name + "\"\nform = \"constant\"\n"
+            "kinds = [\"tool_wear\"]\ngroups = [[0.0, 0.0]]\ncoef_um = [" + str(coef_um) + "]\n")
 
 
 class Nc:
@@ -269,9 +294,19 @@ def main():
     check(nc_port, "the Modbus NC server listens")
     with open(os.path.join(work, "nccompd.toml"), "w") as f:
         f.write(config_text(nc_port))
+    for d in ("a", "b", "c"):  # A live, B loaded later (A kept for rollback), C a candidate
+        os.makedirs(os.path.join(work, d))
+        with open(os.path.join(work, d, "model.toml"), "w") as f:
+            f.write(model_text("offset", 2.0 if d == "c" else 0.0))
+            f.write(f"# model {d}\n")
     daemon = start("nccompd", [ARGS.nccompd, "--config", "nccompd.toml"], work)
     check(wait_until(lambda: (s := status_json()) and s["buses"][0]["state"] == "up"
                      and s["loop"]["cycles"] >= 20, 20), "nccompd runs on the NC")
+    # The models before the first measurement, so that the measurements are scored: B live, A
+    # kept for rollback, C a candidate in shadow.
+    models = [os.path.join(work, d, "model.toml") for d in ("a", "b", "c")]
+    nccomp("model", "load", models[1])
+    nccomp("model", "candidate", models[2])
     # A copy, named relative to the page's directory (the screenshots show the name).
     report_dir = os.path.join(work, "analysis")
     shutil.copytree(os.path.join(ARGS.source, "bench/model/figures/fl_thermal_ch1"), report_dir)
@@ -375,6 +410,7 @@ def main():
             print("note: not root: the refused case (a browser run as nobody) is not run",
                   flush=True)
         acknowledged_by_this_user(root, page, daemon, url, work, nc)
+        model_card(root, drivers[1] if AS_ROOT else None, page, work, nc)
     finally:
         for d in drivers:
             d.quit()
@@ -431,6 +467,112 @@ def acknowledged_by_this_user(root, page, daemon, url, work, nc):
     with urllib.request.urlopen(url + "api/status", timeout=10) as r:
         counters = json.loads(r.read())["page"]
     check(counters["bad_requests"] == 0, f"no bad requests from the browsers: {counters}")
+
+
+def nccomp(*args):
+    out = subprocess.run([ARGS.nccomp, *args, "--socket", SOCKET], capture_output=True, text=True,
+                         timeout=20)
+    check(out.returncode == 0, f"nccomp {' '.join(args)}: {out.stdout.strip()} {out.stderr.strip()}")
+    return out.stdout
+
+
+READ_MODEL = """
+const r = {};
+for (const td of document.querySelectorAll('#model td[data-name]')) r[td.dataset.name] = td.textContent;
+r.promote_disabled = document.getElementById('promote').disabled;
+r.rollback_disabled = document.getElementById('rollback').disabled;
+return r;
+"""
+
+
+def model_text_of(r):
+    return "none" if not r["file"] else (
+        f"{r['file']} (hash {r['hash']})" + (f", live since {r['since_utc']}" if r["since_utc"] else ""))
+
+
+def model_card(root, other, page, work, nc):
+    """The Model card equals the status JSON; Promote and Roll back refused for nobody; this user
+    promotes C (announced by the rule) and rolls back to B, each confirmed."""
+    a, b, c = (os.path.join(work, d, "model.toml") for d in ("a", "b", "c"))
+    st = wait_until(lambda: (s := status_json()) and s["shadow"]["phase"] == "announced" and s, 5)
+    check(st and st["model"]["live"]["file"] == b and st["model"]["previous"]["file"] == a and
+          st["shadow"]["other"]["file"] == c,
+          "status JSON: B live, A kept for rollback, C in shadow announced by the rule")
+    text_status = nccomp("model", "status")
+    check(f"ok model: {model_text_of(st['model']['live'])}\n" in text_status and
+          f"previous (nccomp model rollback returns to it): {model_text_of(st['model']['previous'])}"
+          in text_status, "nccomp model status names the same live and rollback models")
+    check(wait_until(lambda: (m := root.execute_script(READ_MODEL)).get("other") == c, 5),
+          "the Model card shows the candidate")
+    shown = root.execute_script(READ_MODEL)
+    st = status_json()
+    sh, h = st["shadow"], st["handover"]
+    check(shown["live"] == model_text_of(st["model"]["live"]),
+          f"live model: page '{shown['live']}' = status")
+    check(shown["previous"] == model_text_of(st["model"]["previous"]),
+          f"kept for rollback: page '{shown['previous']}' = status")
+    # One part scored (the 5.0 um measurement; the broken one waits for a next row): B predicts
+    # 0 um, C 2 um, so their squared errors are 25 and 9 um².
+    check(sh["live"]["parts"] == sh["other"]["parts"] == 1 and sh["live"]["mse_um2"] == 25.0 and
+          sh["other"]["mse_um2"] == 9.0, f"scores: live {sh['live']}, candidate {sh['other']}")
+    for key, m in (("live_score", sh["live"]), ("other_score", sh["other"])):
+        want = f"{m['parts']} parts, mean squared error {m['mse_um2']:.4f} µm²"
+        check(m["parts"] >= 1 and shown[key] == want, f"{key}: page '{shown[key]}' = status")
+    check(shown["phase"] == "announced: the candidate is better, Promote makes it live (promote: "
+          f"operator, {sh['decisions']} decision(s))", f"the rule's state: {shown['phase']}")
+    check(shown["handovers"].startswith(f"{h['handovers']} (registers rebased {h['rebased']}, "
+                                        f"not absorbed {h['unabsorbed']})"),
+          f"handovers: {shown['handovers']}")
+    check(not shown["promote_disabled"] and not shown["rollback_disabled"],
+          "Promote (candidate announced) and Roll back enabled")
+    card = root.find_element(By.ID, "model-card")
+    root.execute_script("arguments[0].scrollIntoView()", card)
+    card.screenshot(os.path.join(work, "page-model.png"))
+    if other is not None:
+        check(wait_until(lambda: not other.execute_script(
+            "return document.getElementById('promote').disabled"), 5), "nobody's page is current")
+        why = ("refused (HTTP 403): permission denied: nobody (uid 65534) is not root and not in "
+               "group 'adm' (--admin-group)")
+        for button in ("promote", "rollback"):
+            other.execute_script("document.getElementById('model-result').textContent = ''")
+            other.find_element(By.ID, button).click()
+            other.find_element(By.ID, "model-confirm").click()
+            check(wait_until(lambda: text(other, "#model-result") == why, 5),
+                  f"nobody's {button} is refused: " + why)
+        check(status_json()["model"]["live"]["file"] == b, "after the refusals B is still live")
+
+    def press(button, dialog_starts, answer_starts):
+        root.find_element(By.ID, button).click()
+        check(root.execute_script("return document.getElementById('model-dialog').open") and
+              text(root, "#model-dialog-text").startswith(dialog_starts),
+              f"{button} opens a confirmation dialog: {text(root, '#model-dialog-text')}")
+        root.find_element(By.ID, "model-confirm").click()
+        check(wait_until(lambda: (text(root, "#model-result") or "").startswith(answer_starts), 10),
+              f"{button} by {ME.pw_name}: {text(root, '#model-result')}")
+    press("promote", f"The candidate {c} becomes the live model", f"ok model promoted: {c} ")
+    st = status_json()
+    check(st["model"]["live"]["file"] == c and st["model"]["previous"]["file"] == b and
+          st["shadow"]["phase"] == "watch", "status: C live, B kept for rollback and watched")
+    # C predicts 2 um of wear: the length register goes from -5.0 to -5 + 2 = -3.0 um on the NC.
+    check(wait_until(lambda: nc.length_0p1um() == -30, 10), "-3.0 um on the NC after the promotion")
+    check(wait_until(lambda: root.execute_script("return document.getElementById('promote').disabled")
+                     and root.execute_script(READ_MODEL)["live"] ==
+                     model_text_of(status_json()["model"]["live"]), 5),
+          "the Model card shows C live, Promote disabled")
+    press("rollback", f"The live model {c} ", f"ok model rolled back to: {b} ")
+    st = status_json()
+    check(st["model"]["live"]["file"] == b and st["model"]["previous"]["file"] == c,
+          "status: B live again, C kept for rollback")
+    check(wait_until(lambda: nc.length_0p1um() == -50, 10), "-5.0 um on the NC after the rollback")
+    check(wait_until(lambda: root.execute_script(READ_MODEL)["live"] ==
+                     model_text_of(status_json()["model"]["live"]), 5),
+          "the Model card shows B live")
+    plog = open(page.log_path).read()
+    me = f"{ME.pw_name} (uid {ME.pw_uid})"
+    check(f"action model_promote by {me}: ok model promoted: {c}" in plog and
+          f"action model_rollback by {me}: ok model rolled back to: {b}" in plog and
+          (not other or "action refused: model_rollback by nobody (uid 65534)" in plog),
+          "the page's log names who promoted, rolled back, and who was refused")
 
 
 if __name__ == "__main__":

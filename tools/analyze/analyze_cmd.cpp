@@ -11,6 +11,8 @@
 
 #include "core/model/analysis.hpp"
 #include "formats/model/model_io.hpp"
+#include "formats/toml/diagnostics.hpp"
+#include "tools/analyze/fleet.hpp"
 #include "tools/analyze/report.hpp"
 #include "tools/nccomp/command.hpp"
 
@@ -43,7 +45,22 @@ std::string read_text(const std::string& path) {
   return ss.str();
 }
 
-void run(const Options& opt) {
+void run(const Options& given) {
+  Options opt = given;
+  if (opt.maps.empty()) {
+    // Logs of several machines (v2, or nccomp collect's directory): the fleet analysis.
+    std::vector<nccomp::tools::analyze::MachineLogs> fleet;
+    try {
+      fleet = nccomp::tools::analyze::group_logs(opt.logs);
+    } catch (const std::invalid_argument& e) {
+      throw CommandError(nccomp::tools::kExitInvalidInput, e.what());
+    }
+    if (fleet.size() > 1) {
+      nccomp::tools::analyze::run_fleet(fleet, opt.config, opt.out, opt.validate == "sessions");
+      return;
+    }
+    opt.logs = fleet.empty() ? opt.logs : fleet[0].files;
+  }
   if (!opt.maps.empty() && opt.maps.size() != 1 && opt.maps.size() != opt.logs.size()) {
     throw CommandError(nccomp::tools::kExitUsage,
                        "--map: give one mapping for all logs or one per --log");
@@ -65,8 +82,9 @@ void run(const Options& opt) {
           if (k != c) continue;
           found = true;
           if (t != temperature) {
-            throw io::ModelIoError(opt.maps[i] + ": column_kind." + name +
-                                   ": declared otherwise in " + opt.config + " or another map");
+            throw CommandError(nccomp::tools::kExitInvalidInput,
+                               opt.maps[i] + ": column_kind." + name + ": declared otherwise in " +
+                                   opt.config + " or another map");
           }
         }
         if (!found) kinds.emplace_back(c, temperature);
@@ -74,12 +92,12 @@ void run(const Options& opt) {
     }
     for (std::size_t i = 0; i < opt.logs.size(); ++i) {
       std::ifstream in(opt.logs[i], std::ios::binary);
-      if (!in) throw io::ModelIoError(opt.logs[i] + ": cannot open");
+      if (!in) throw CommandError(nccomp::tools::kExitInvalidInput, opt.logs[i] + ": cannot open");
       const io::Mapping none;
       const io::Mapping& m = maps.empty() ? none : maps[maps.size() == 1 ? 0 : i];
       io::read_log(in, opt.logs[i], m, data);
     }
-  } catch (const io::ModelIoError& e) {
+  } catch (const nccomp::formats::DiagnosticsError& e) {
     throw CommandError(nccomp::tools::kExitInvalidInput, e.what());
   }
   cfg.config.validate_sessions = opt.validate == "sessions";
@@ -150,7 +168,11 @@ void setup(CLI::App& app) {
       "analyze",
       "Fit the declared model to a measurement log, find and add the effect it lacks, report the "
       "error before and after");
-  sub->add_option("--log", opt->logs, "measurement log CSV (repeat for several files)")->required();
+  sub->add_option(
+         "--log", opt->logs,
+         "measurement log CSV, or a directory of them (repeat for several; logs of several "
+         "machines: the fleet analysis)")
+      ->required();
   sub->add_option("--config", opt->config, "TOML file with the [model] table")->required();
   sub->add_option("--map", opt->maps,
                   "column mapping TOML for a foreign CSV (one for all logs, or one per --log)");

@@ -107,6 +107,19 @@ std::string params_json(const cm::TermSpec& spec, const cm::Model& model,
       // coef_um: per (a − center_a), (b − center_b), (a − center_a)(b − center_b).
       o << "\"center_a\": " << num(spec.center, 8) << ", \"center_b\": " << num(spec.center_b, 8);
       break;
+    case cm::Form::kSession: {
+      // The random effect's variances and its shrunk offset (BLUP) of every fitted session,
+      // numbered from 1 as in the validation by session.
+      o << "\"between_session_sigma_um\": " << num(spec.scale)
+        << ", \"noise_sigma_um\": " << num(spec.center) << ", \"session_offsets\": [";
+      const cm::Term* st = find_term(model, spec);
+      for (std::size_t g = 0; st != nullptr && g < st->groups.size(); ++g) {
+        o << (g ? ", " : "") << "{\"session\": " << num(st->groups[g][0] + 1.0, 12)
+          << ", \"offset_um\": " << num(st->coef[g], 8) << "}";
+      }
+      o << "]";
+      break;
+    }
     default:
       break;
   }
@@ -188,6 +201,19 @@ std::string summary_json(const cm::Dataset& data, const cm::AnalysisResult& resu
         << ", \"final_max_um\": " << num(f.final_model.max_um) << "}";
     }
     o << "\n  ]},\n";
+  }
+  {
+    // The final model's 95 % prediction interval on the held-out rows and its coverage there.
+    const cm::PredictionInterval& pi = result.prediction_interval;
+    o << "  \"prediction_interval\": ";
+    if (pi.rows == 0) {
+      o << "null,\n";
+    } else {
+      o << "{\"level\": " << num(pi.level) << ", \"rows\": " << pi.rows
+        << ", \"half_width_um\": " << num(pi.half_width_mean_um)
+        << ", \"half_width_max_um\": " << num(pi.half_width_max_um)
+        << ", \"coverage\": " << num(pi.coverage) << "},\n";
+    }
   }
   o << "  \"warnings\": [";
   for (std::size_t i = 0; i < result.warnings.size(); ++i) {
@@ -337,6 +363,13 @@ std::string report_markdown(const cm::Dataset& data, const cm::AnalysisResult& r
   }
   o << "\nAn effect is added when its nested-model F-test p-value, multiplied by the number of "
        "candidates and by its search multiplicity, is below alpha, and the held-out RMS drops.\n";
+  if (result.prediction_interval.rows > 0) {
+    const cm::PredictionInterval& pi = result.prediction_interval;
+    o << "\nPrediction interval (" << num(100.0 * pi.level, 3) << " %) of the final model on the "
+      << pi.rows << " held-out rows: half-width " << num(pi.half_width_mean_um, 3)
+      << " µm on average (at most " << num(pi.half_width_max_um, 3) << " µm); it held "
+      << num(100.0 * pi.coverage, 3) << " % of them.\n";
+  }
   if (!result.session_folds.empty()) {
     o << "\n## Leave-one-session-out validation\n\n"
          "Each session held out in turn: its rows predicted by the declared and the final terms "

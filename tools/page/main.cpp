@@ -77,13 +77,14 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("-s,--socket", socket_path, "nccompd's status socket")->capture_default_str();
   app.add_option("--admin-group", options.admin_group,
-                 "Who may acknowledge through the page: root and this group (as nccompd's "
+                 "Who may act through the page (acknowledge, model promote / rollback): root and "
+                 "this group (as nccompd's "
                  "[status] admin_group)")
       ->capture_default_str();
   app.add_option("--report-dir", options.report_dir,
                  "The latest analysis report (nccomp analyze --out DIR) to show");
   app.add_flag("--remote-actions", options.remote_actions,
-               "Listening beyond this host: let clients on other hosts acknowledge (no user can "
+               "Listening beyond this host: let clients on other hosts act (no user can "
                "be checked for them)");
   app.add_option("--poll-interval-s", options.poll_interval_s,
                  "Status requests to nccompd while a page watches [s]")
@@ -144,13 +145,14 @@ int main(int argc, char** argv) {
   log_line("info", "nccomp-page listening on http://" + host + ":" + std::to_string(port) +
                        "/, nccompd's status socket " + socket_path);
   if (options.actions) {
-    log_line("info", loopback ? "acknowledge: root and group '" + admin_group +
-                                    "' (the user owning the browser's connection)"
-                              : "acknowledge: from any host (--remote-actions); users on this "
-                                "host: root and group '" +
-                                    admin_group + "'");
+    log_line("info", loopback
+                         ? "actions (acknowledge, model promote / rollback): root and group '" +
+                               admin_group + "' (the user owning the browser's connection)"
+                         : "actions: from any host (--remote-actions); users on this "
+                           "host: root and group '" +
+                               admin_group + "'");
   } else {
-    log_line("warning", "acknowledge is off: the page listens on " + host +
+    log_line("warning", "actions are off: the page listens on " + host +
                             ", beyond this host (--remote-actions turns it on)");
   }
 

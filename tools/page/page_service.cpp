@@ -69,6 +69,22 @@ std::optional<std::string> read_file(const fs::path& p, std::size_t max_bytes) {
   return s.str();
 }
 
+// The actions the page may send: each maps to one request of the status socket, whose own
+// permission check (the admin group) applies again in nccompd.
+struct KnownAction {
+  std::string_view name;
+  std::string (*request)();
+};
+constexpr KnownAction kActions[] = {{"acknowledge", client::acknowledge_request},
+                                    {"model_promote", client::model_promote_request},
+                                    {"model_rollback", client::model_rollback_request}};
+
+std::string known_actions() {
+  std::string s;
+  for (const auto& k : kActions) s += (s.empty() ? "" : ", ") + std::string(k.name);
+  return s;
+}
+
 constexpr std::size_t kMaxReportFileBytes = 8U << 20U;
 constexpr std::string_view kPlotPrefix = "/report/plots/";
 
@@ -187,8 +203,10 @@ HttpReply PageService::action(const HttpRequest& request) {
     return error(400, "\"action\" (a string) is missing");
   }
   const std::string name = a->get<std::string>();
-  if (name != client::kAcknowledgeVerb) {
-    return error(400, "unknown action '" + name + "' (known: acknowledge)");
+  const auto known = std::find_if(std::begin(kActions), std::end(kActions),
+                                  [&](const KnownAction& k) { return k.name == name; });
+  if (known == std::end(kActions)) {
+    return error(400, "unknown action '" + name + "' (known: " + known_actions() + ")");
   }
   const auto c = body.find("confirmed");
   if (c == body.end() || !c->is_boolean() || !c->get<bool>()) {
@@ -234,7 +252,7 @@ HttpReply PageService::action(const HttpRequest& request) {
                         ", sent to nccompd as the page's own user");
   std::string answer;
   try {
-    answer = deps_.query(client::acknowledge_request());
+    answer = deps_.query(known->request());
   } catch (const std::exception& e) {
     ++actions_refused_;
     deps_.log("warning", "action " + name + " by " + who + " failed: " + e.what());

@@ -1,8 +1,8 @@
 // nccomp-page's request handling, apart from the HTTP server (page_server.hpp) so that every
 // route is tested without sockets (docs/operator-page.md). It reads nccompd only through the
 // status socket (client::query): a snapshot of `status json` every poll interval while a page
-// is watching, and the acknowledge verb for an allowed user. Not real-time; every public member
-// may be called from any thread.
+// is watching, and the actions (acknowledge, model promote, model rollback) for an allowed user.
+// Not real-time; every public member may be called from any thread.
 #pragma once
 
 #include <sys/types.h>

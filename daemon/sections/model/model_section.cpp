@@ -9,8 +9,10 @@
 #include <utility>
 
 #include "daemon/config/builtin_sections.hpp"
+#include "daemon/sections/calibration/calibration_section.hpp"
 #include "daemon/sections/model/context_section.hpp"
 #include "formats/model/model_io.hpp"
+#include "formats/toml/diagnostics.hpp"
 
 namespace nccomp::daemon::sections {
 
@@ -19,6 +21,12 @@ namespace {
 namespace fs = std::filesystem;
 namespace cm = core::model;
 using formats::TableReader;
+
+std::string fmt_alpha(double a) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%g", a);
+  return buf;
+}
 
 /// The value of column c the entry fixes (kind, point, tool, angle_deg), NaN when the loop
 /// gives it or the entry does not.
@@ -87,6 +95,20 @@ std::string loop_context_problem(const cm::Term& term, bool each_cycle, const cm
                                  const core::model::ModelApply& apply) {
   const cm::TermSpec& spec = term.spec;
   const std::vector<std::string>& extras = model.extra_columns();
+  // A term is fitted on rows of some kinds only (kind_mask) and evaluates to 0 for the others:
+  // an entry of another kind would apply nothing, silently.
+  if (apply.kind >= 0.0 && apply.kind < 8.0 &&
+      (spec.kind_mask & (1U << static_cast<unsigned>(apply.kind))) == 0U) {
+    std::string fitted;
+    for (const char* k : {"tool_wear", "contour", "calib"}) {
+      const auto i = static_cast<unsigned>(formats::model_io::kind_from_name(k));
+      if ((spec.kind_mask & (1U << i)) != 0U) fitted += std::string(fitted.empty() ? "" : ", ") + k;
+    }
+    return "was fitted on " + fitted + " rows only and contributes nothing to kind = " +
+           key_value(static_cast<int>(cm::Column::kKind), apply.kind) +
+           ": give the entry the kind of the rows the term describes (kind = \"" +
+           fitted.substr(0, fitted.find(',')) + "\")";
+  }
   std::vector<int> cols;
   if (spec.form != cm::Form::kConstant) cols.push_back(spec.column);
   if (spec.form == cm::Form::kInteraction) cols.push_back(spec.column_b);
@@ -111,6 +133,8 @@ std::string loop_context_problem(const cm::Term& term, bool each_cycle, const cm
     }
   }
   for (const int c : cols) {
+    // The session is the loop's warm-start count: a session term learns each one.
+    if (c == static_cast<int>(cm::kSessionColumn)) continue;
     const std::string name = cm::column_name(c, extras);
     if (c == static_cast<int>(cm::Column::kAngle) && std::isnan(apply.angle_deg)) {
       return "depends on angle_deg, which the daemon's loop does not know: give the entry the "
@@ -163,6 +187,29 @@ std::string loop_context_problem(const cm::Term& term, bool each_cycle, const cm
          "): it would contribute nothing";
 }
 
+/// [model.shadow]; read when absent too, so that its defaults are those documented.
+void parse_shadow(TableReader& r, ShadowOptions& o) {
+  static const toml::table kEmpty;
+  const toml::table* t = r.table("shadow");
+  TableReader q(t != nullptr ? *t : kEmpty, "model.shadow", r.diagnostics());
+  o.min_parts = static_cast<int>(q.integer("min_parts", 10, 1, 100000));
+  o.alpha = q.number("alpha", 0.05, 1e-6, 0.5);
+  o.margin_um = q.number("margin_um", 0.0, 0.0, 1000.0);
+  o.promote = q.pick<ShadowPromote>(
+      "promote", ShadowPromote::kAuto,
+      {{"auto", ShadowPromote::kAuto}, {"operator", ShadowPromote::kOperator}});
+  o.history_size = static_cast<int>(q.integer("history_size", 20, 1, 1000));
+  // The sign test's smallest p-value is 2^-min_parts (the candidate better on every part).
+  if (sign_test_p(o.min_parts, o.min_parts) > o.alpha) {
+    int needed = o.min_parts;
+    while (sign_test_p(needed, needed) > o.alpha) ++needed;
+    q.error("min_parts", "min_parts = " + std::to_string(o.min_parts) +
+                             " can never pass the sign test at alpha = " + fmt_alpha(o.alpha) +
+                             ": at least " + std::to_string(needed) + " parts are needed");
+  }
+  q.finish();
+}
+
 }  // namespace
 
 std::unique_ptr<ModelSection> parse_model_section(const toml::node& node,
@@ -199,6 +246,15 @@ std::unique_ptr<ModelSection> parse_model_section(const toml::node& node,
         s->model = formats::model_io::load_model_file(s->file);
         s->loaded = true;
       }
+    } catch (const formats::DiagnosticsError& e) {
+      // At the file key, then every error of the model file at its own line.
+      diag.error(r.where("file"), "cannot load the model " + s->file +
+                                      (s->chosen ? " (nccomp model load)" : std::string()) + ": " +
+                                      (e.diagnostics().items().size() == 1
+                                           ? std::string("1 error in it, below")
+                                           : std::to_string(e.diagnostics().items().size()) +
+                                                 " errors in it, below"));
+      diag.append(e.diagnostics(), s->file);
     } catch (const std::exception& e) {
       diag.error(r.where("file"),
                  std::string("cannot load the model") +
@@ -317,6 +373,7 @@ std::unique_ptr<ModelSection> parse_model_section(const toml::node& node,
     }
     s->applies.push_back(std::move(a));
   }
+  parse_shadow(r, s->shadow);
   r.finish();
   return s;
 }
@@ -380,6 +437,11 @@ class ModelParser final : public config::SectionParser {
     std::vector<core::engine::RegisterSpec> specs;
     for (const auto& e : config::registers_section(config).registers) specs.push_back(e.spec);
     const core::engine::RegisterTable table(specs);
+    // S3 with touch_positions = "machine" measures the whole drift whatever the NC's offset
+    // holds: a trim on its register would be counted on top of it.
+    const auto* calibration = calibration_section(config);
+    const bool s3_whole_drift = calibration != nullptr && calibration->config.touch_positions ==
+                                                              core::calib::TouchPositions::kMachine;
     for (std::size_t i = 0; i < s->applies.size(); ++i) {
       const auto& a = s->applies[i];
       const int idx = table.find(a.register_name);
@@ -391,6 +453,14 @@ class ModelParser final : public config::SectionParser {
       } else if (specs[static_cast<std::size_t>(idx)].kind == core::engine::RegisterKind::kFlag) {
         diag.error(a.where, "model.apply[" + std::to_string(i) + "].register: '" + a.register_name +
                                 "' is a flag; a trim needs an offset register");
+      } else if (s3_whole_drift &&
+                 (idx == calibration->config.register_x || idx == calibration->config.register_y ||
+                  idx == calibration->config.register_z)) {
+        diag.error(a.where, "model.apply[" + std::to_string(i) + "].register: '" + a.register_name +
+                                "' takes [calibration]'s correction, which measures the whole "
+                                "drift with touch_positions = \"machine\": the term's trim would "
+                                "count it twice; set [calibration] touch_positions = \"program\" "
+                                "(the calibration then learns what the term leaves)");
       }
     }
   }

@@ -11,6 +11,7 @@
 #include "core/model/model_module.hpp"
 #include "daemon/config/config.hpp"
 #include "daemon/sections/model/model_choice.hpp"
+#include "daemon/sections/model/shadow.hpp"
 
 namespace nccomp::daemon::sections {
 
@@ -46,6 +47,8 @@ struct ModelSection final : config::Section {
   formats::Where temperature_where;
   std::vector<ModelApplyConfig> applies;
   std::vector<ModelInputConfig> inputs;
+  /// [model.shadow]: the rule for a candidate (`nccomp model candidate`).
+  ShadowOptions shadow;
   formats::Where where;
 };
 

@@ -1,10 +1,11 @@
-// Any bytes as a [modbus] config: either a validated config or a ConfigError, nothing else.
+// Any bytes as a [modbus] config: either a validated config or a DiagnosticsError, nothing else.
 #include <cstddef>
 #include <cstdint>
 #include <cstdlib>
 #include <string_view>
 
 #include "drivers/modbus/config.hpp"
+#include "formats/toml/diagnostics.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   const std::string_view text(reinterpret_cast<const char*>(data), size);
@@ -31,7 +32,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         std::abort();
       }
     }
-  } catch (const nccomp::drivers::modbus::ConfigError&) {
+  } catch (const nccomp::formats::DiagnosticsError&) {
   }
   return 0;
 }

@@ -1,11 +1,13 @@
 // Fuzz target: the measurement-log CSV reader (v1 and mapped). Any bytes must either parse or
-// raise ModelIoError; nothing may crash or trip a sanitizer. The first byte picks the mode.
+// raise formats::DiagnosticsError; nothing may crash or trip a sanitizer. The first byte picks the
+// mode.
 #include <cstddef>
 #include <cstdint>
 #include <sstream>
 #include <string>
 
 #include "formats/model/model_io.hpp"
+#include "formats/toml/diagnostics.hpp"
 
 namespace io = nccomp::formats::model_io;
 
@@ -33,7 +35,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     for (const auto& c : d.columns) {
       if (!c.empty() && c.size() != d.rows()) __builtin_trap();
     }
-  } catch (const io::ModelIoError&) {
+  } catch (const nccomp::formats::DiagnosticsError&) {
   }
   return 0;
 }

@@ -1,11 +1,12 @@
 // Fuzz target: mapping files and [model] tables (TOML). Any bytes must either parse or raise
-// ModelIoError; a model that parses as fitted must evaluate without crashing.
+// formats::DiagnosticsError; a model that parses as fitted must evaluate without crashing.
 #include <cstddef>
 #include <cstdint>
 #include <string>
 
 #include "core/model/model.hpp"
 #include "formats/model/model_io.hpp"
+#include "formats/toml/diagnostics.hpp"
 
 namespace io = nccomp::formats::model_io;
 namespace cm = nccomp::core::model;
@@ -14,7 +15,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   const std::string text(reinterpret_cast<const char*>(data), size);
   try {
     (void)io::read_mapping_text(text, "map.toml");
-  } catch (const io::ModelIoError&) {
+  } catch (const nccomp::formats::DiagnosticsError&) {
   }
   try {
     io::ModelFile f = io::read_model_text(text, "model.toml", true);
@@ -27,7 +28,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       r[static_cast<std::size_t>(cm::Column::kKind)] = static_cast<double>(i % 3);
       (void)m.evaluate(r, s);
     }
-  } catch (const io::ModelIoError&) {
+  } catch (const nccomp::formats::DiagnosticsError&) {
   }
   return 0;
 }

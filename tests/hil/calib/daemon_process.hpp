@@ -17,9 +17,13 @@
 #include <string>
 #include <thread>
 
+#include <nlohmann/json.hpp>
+
 #include "client/protocol.hpp"
 #include "client/status_client.hpp"
 #include "tests/support/nccompd_process.hpp"
+#include "tests/support/status_json.hpp"
+#include "tests/support/temp_dir.hpp"
 #include "tests/unit/calib/sim_machine.hpp"
 #include "tests/unit/calib/test_config.hpp"
 
@@ -62,20 +66,7 @@ inline std::string config_text(const std::string& extra_calibration = "",
   return s.str();
 }
 
-struct TempDir {
-  TempDir() {
-    path = fs::temp_directory_path() /
-           ("nccompd_calib_" + std::to_string(::getpid()) + "_" + std::to_string(n++));
-    fs::remove_all(path);
-    fs::create_directories(path);
-  }
-  ~TempDir() { fs::remove_all(path); }
-  void write(const std::string& name, const std::string& text) const {
-    std::ofstream(path / name) << text;
-  }
-  static inline int n = 0;
-  fs::path path;
-};
+using test::TempDir;
 
 /// nccompd with the calibration: up once the calibration module answers; a sanitizer report in
 /// its log fails the test when it stops.
@@ -124,15 +115,20 @@ inline double register_output(const std::string& json, const std::string& name) 
 }
 
 inline double number(const std::string& json, const std::string& key) {
-  const std::regex re("\"" + key + "\":(-?[0-9.eE+-]+)");
-  std::smatch m;
-  return std::regex_search(json, m, re) ? std::stod(m[1]) : std::nan("");
+  return test::find_number(json, key).value_or(std::nan(""));
 }
 
+/// A string of the calibration module's status (modules[name = "calibration"].status), "" if
+/// none: other objects of the status JSON have keys of the same name (the shadow's "phase").
 inline std::string text(const std::string& json, const std::string& key) {
-  const std::regex re("\"" + key + "\":\"([^\"]*)\"");
-  std::smatch m;
-  return std::regex_search(json, m, re) ? m[1].str() : "";
+  const auto doc = nlohmann::json::parse(json, nullptr, false);
+  if (doc.is_discarded() || !doc.contains("modules")) return "";
+  for (const auto& m : doc["modules"]) {
+    if (m.value("name", "") != "calibration" || !m.contains("status")) continue;
+    const auto& s = m["status"];
+    return s.contains(key) && s[key].is_string() ? s[key].get<std::string>() : "";
+  }
+  return "";
 }
 
 inline std::string touch_line(const core::CalibrationTouch& t) {

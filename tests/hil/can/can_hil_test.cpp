@@ -27,11 +27,13 @@
 #include "drivers/can/can_bus.hpp"
 #include "drivers/can/can_config.hpp"
 #include "sim/can_nc/can_nc.hpp"
+#include "tests/support/wait.hpp"
 
 namespace nccomp::drivers::can {
 namespace {
 
 using namespace std::chrono_literals;
+using nccomp::test::wait_until;
 
 const std::string kSource = NCCOMP_SOURCE_DIR;
 const std::string kIf = "vcan0";
@@ -96,17 +98,6 @@ std::string slurp(const std::string& path) {
   std::ostringstream s;
   s << in.rdbuf();
   return s.str();
-}
-
-bool wait_until(const std::function<bool()>& pred, std::chrono::milliseconds timeout = 10s) {
-  const auto end = std::chrono::steady_clock::now() + timeout;
-  while (std::chrono::steady_clock::now() < end) {
-    if (pred()) {
-      return true;
-    }
-    std::this_thread::sleep_for(2ms);
-  }
-  return pred();
 }
 
 CanConfig reference() {

@@ -13,6 +13,8 @@
 // - malformed frames counted per reason in status; a full-rate cangen flood on unmapped IDs never
 //   reaches the daemon (its loop figures are printed, not asserted: bench/results/can.md);
 // - an FD map on a classic-MTU vcan0: nccompd refuses to start, saying why.
+// - a model loaded and rolled back with `nccomp model load / rollback`: the creep's register takes
+//   the trim's change along the creep, not as a step (the bumpless handover over CAN).
 #include <fcntl.h>
 #include <gtest/gtest.h>
 #include <linux/can.h>
@@ -35,6 +37,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <mutex>
 #include <optional>
 #include <regex>
 #include <sstream>
@@ -45,6 +48,9 @@
 #include "client/status_client.hpp"
 #include "daemon/lockstep.hpp"
 #include "tests/support/nccompd_process.hpp"
+#include "tests/support/status_json.hpp"
+#include "tests/support/temp_dir.hpp"
+#include "tests/support/wait.hpp"
 
 extern char** environ;
 
@@ -54,6 +60,9 @@ namespace fs = std::filesystem;
 using namespace std::chrono_literals;
 using nccomp::daemon::LockstepMessage;
 using nccomp::daemon::LockstepType;
+using nccomp::test::number;
+using nccomp::test::TempDir;
+using nccomp::test::wait_until;
 
 struct ConfigOptions {
   double rate_hz{200.0};
@@ -92,21 +101,6 @@ std::string config_text(double rate_hz) {
   o.rate_hz = rate_hz;
   return config_text(o);
 }
-
-struct TempDir {
-  TempDir() {
-    path = fs::temp_directory_path() /
-           ("nccompd_can_" + std::to_string(::getpid()) + "_" + std::to_string(n++));
-    fs::remove_all(path);
-    fs::create_directories(path);
-  }
-  ~TempDir() { fs::remove_all(path); }
-  void write(const std::string& name, const std::string& text) const {
-    std::ofstream(path / name) << text;
-  }
-  static inline int n = 0;
-  fs::path path;
-};
 
 class Daemon : public nccomp::test::NccompdProcess {
  public:
@@ -162,24 +156,6 @@ class Proc {
  private:
   pid_t pid_{-1};
 };
-
-template <typename Pred>
-bool wait_until(Pred pred, std::chrono::milliseconds limit = 10000ms) {
-  const auto end = std::chrono::steady_clock::now() + limit;
-  while (std::chrono::steady_clock::now() < end) {
-    if (pred()) {
-      return true;
-    }
-    std::this_thread::sleep_for(20ms);
-  }
-  return pred();
-}
-
-double number(const std::string& json, const std::string& key) {
-  const std::regex re("\"" + key + "\":(-?[0-9.eE+-]+)");
-  std::smatch m;
-  return std::regex_search(json, m, re) ? std::stod(m[1]) : -1e300;
-}
 
 // The NC's end of vcan0.
 class Nc {
@@ -352,6 +328,22 @@ TEST(NccompdCan, LockstepWritesPrecedeSyncAckOfTheirCycle) {
 
 // The NC's acknowledging end in a thread: echoes every offset write (0x300) on 0x380 and keeps
 // the last value [counts]. Survives the interface going down (the socket reports ENETDOWN once).
+/// A raw socket on vcan0 that receives only the offset frames (ID 0x300): the NC's end that
+/// acknowledges them.
+int open_offset_frames_socket() {
+  const int fd = ::socket(PF_CAN, SOCK_RAW | SOCK_CLOEXEC, CAN_RAW);
+  ifreq ifr{};
+  std::strncpy(ifr.ifr_name, "vcan0", IFNAMSIZ - 1);
+  (void)::ioctl(fd, SIOCGIFINDEX, &ifr);
+  can_filter flt{0x300, CAN_SFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG};
+  (void)::setsockopt(fd, SOL_CAN_RAW, CAN_RAW_FILTER, &flt, sizeof flt);
+  sockaddr_can a{};
+  a.can_family = AF_CAN;
+  a.can_ifindex = ifr.ifr_ifindex;
+  (void)::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a);
+  return fd;
+}
+
 class Acker {
  public:
   Acker() : thread_([this] { run(); }) {}
@@ -366,16 +358,7 @@ class Acker {
 
  private:
   void run() {
-    const int fd = ::socket(PF_CAN, SOCK_RAW | SOCK_CLOEXEC, CAN_RAW);
-    ifreq ifr{};
-    std::strncpy(ifr.ifr_name, "vcan0", IFNAMSIZ - 1);
-    (void)::ioctl(fd, SIOCGIFINDEX, &ifr);
-    can_filter flt{0x300, CAN_SFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG};
-    (void)::setsockopt(fd, SOL_CAN_RAW, CAN_RAW_FILTER, &flt, sizeof flt);
-    sockaddr_can a{};
-    a.can_family = AF_CAN;
-    a.can_ifindex = ifr.ifr_ifindex;
-    (void)::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a);
+    const int fd = open_offset_frames_socket();
     while (!stop_) {
       pollfd p{fd, POLLIN, 0};
       if (::poll(&p, 1, 50) != 1) {
@@ -407,9 +390,15 @@ class Acker {
 bool same(double a, double b) { return std::fabs(a - b) < 1e-9; }
 
 /// The value of a counter of the CAN driver in a status JSON ("counters":{...} of bus "can").
+/// A number of the bus named "can" in the status JSON (its counters among them); -1e300 if none.
 double can_counter(const std::string& json, const std::string& name) {
-  const auto at = json.find("{\"name\":\"can\"");
-  return at == std::string::npos ? -1e300 : number(json.substr(at), name);
+  const auto doc = nlohmann::ordered_json::parse(json, nullptr, false);
+  if (doc.is_discarded() || !doc.contains("buses")) return -1e300;
+  for (const auto& bus : doc["buses"]) {
+    if (bus.value("name", "") == "can")
+      return nccomp::test::status_json_detail::find_number(bus, name).value_or(-1e300);
+  }
+  return -1e300;
 }
 
 bool can_state(const std::string& json, const std::string& state) {
@@ -623,6 +612,174 @@ TEST(NccompdCan, FdMapOnClassicMtuInterfaceRefusedAtStart) {
       << daemon.log();
   (void)sh("ip link set vcan0 down && ip link set vcan0 mtu " + mtu_before +
            " && ip link set vcan0 up");
+}
+
+// The bumpless model handover over SocketCAN (issue 19, the CAN case of the handover tests;
+// docs/closing-the-loop.md, "Loading a model into a running daemon"). GIVEN nccompd on vcan0 with
+// a [creep] module on T1_length_wear (tool register sign −1, linear creeps over 2 s) and a
+// [model] whose constant term `offset` is a trim on the same register (model A: 2.0 µm), the NC
+// sending its axis frame every 5 ms and acknowledging every offset frame, 5.0 µm of wear
+// measured: the NC holds −5.0 + 2.0 = −3.0 µm (−30 counts of 0.1 µm);
+// WHEN the operator loads model B (6.0 µm) with the real nccomp binary, THEN one handover with
+// the creep rebased: the register does not step by the trim's change (4 µm, within max_step 5,
+// so the limiter alone would let it through in one frame) but goes to −5 + 6 = +1.0 µm along
+// the creep, never beyond the two totals, each frame at most a quarter of the change from the
+// one before (a frame goes out when the last one is acknowledged: how many there are depends on
+// the VM's speed, so the bound leaves room for a stall of half a second);
+// WHEN the operator rolls back, THEN the same way back to −3.0 µm.
+class NcPump {
+ public:
+  NcPump() : thread_([this] { run(); }) {}
+  ~NcPump() {
+    stop_ = true;
+    thread_.join();
+  }
+  NcPump(const NcPump&) = delete;
+  NcPump& operator=(const NcPump&) = delete;
+  /// The values of the offset frames since the last call [counts].
+  std::vector<std::int32_t> take() {
+    const std::lock_guard lock(mutex_);
+    std::vector<std::int32_t> w;
+    w.swap(writes_);
+    return w;
+  }
+  std::int32_t last() const { return last_.load(); }
+
+ private:
+  void run() {
+    const int fd = open_offset_frames_socket();
+    auto next_axis = std::chrono::steady_clock::now();
+    while (!stop_) {
+      if (std::chrono::steady_clock::now() >= next_axis) {
+        // X = 10 mm (int32, 0.1 µm), tool 1 in the spindle.
+        can_frame axis{};
+        axis.can_id = 0x100;
+        axis.len = 6;
+        const std::uint32_t x = 100000;
+        for (int i = 0; i < 4; ++i) axis.data[i] = static_cast<std::uint8_t>(x >> (8 * i));
+        axis.data[4] = 1;
+        (void)!::write(fd, &axis, sizeof axis);
+        next_axis += 5ms;
+      }
+      pollfd p{fd, POLLIN, 0};
+      if (::poll(&p, 1, 2) != 1) continue;
+      can_frame f{};
+      if (::read(fd, &f, sizeof f) != static_cast<ssize_t>(sizeof f)) continue;
+      can_frame ack = f;
+      ack.can_id = 0x380;
+      (void)!::write(fd, &ack, sizeof ack);
+      std::uint32_t raw = 0;
+      for (int i = 3; i >= 0; --i) raw = (raw << 8) | f.data[i];
+      last_ = static_cast<std::int32_t>(raw);
+      const std::lock_guard lock(mutex_);
+      writes_.push_back(static_cast<std::int32_t>(raw));
+    }
+    ::close(fd);
+  }
+  std::atomic<bool> stop_{false};
+  std::atomic<std::int32_t> last_{0};
+  std::mutex mutex_;
+  std::vector<std::int32_t> writes_;
+  std::thread thread_;
+};
+
+std::string handover_config_text() {
+  std::ostringstream s;
+  s << "[daemon]\nrate_hz = 200\n"
+    << "[state]\ndirectory = \"state\"\nmin_interval_s = 0.05\n"
+    << "[measurement_log]\ndirectory = \"log\"\n"
+    << "[status]\nsocket_path = \"status.sock\"\n"
+    << "[can]\ninterface = \"vcan0\"\nack_timeout_s = 0.5\n"
+    << "[[can.rx]]\nid = 0x100\nlength_bytes = 6\nevent = \"axis_sample\"\n"
+    << "[[can.rx.signal]]\nname = \"x_mm\"\nstart_bit = 0\nlength_bits = 32\ntype = \"signed\"\n"
+    << "scale = 0.0001\n"
+    << "[[can.rx.signal]]\nname = \"tool\"\nstart_bit = 32\nlength_bits = 16\n"
+    << "[[can.rx]]\nid = 0x120\nlength_bytes = 8\nevent = \"tool_measurement\"\n"
+    << "[[can.rx.signal]]\nname = \"tool\"\nstart_bit = 0\nlength_bits = 8\n"
+    << "[[can.rx.signal]]\nname = \"wear_um\"\nstart_bit = 32\nlength_bits = 32\n"
+    << "type = \"float\"\nmin = -1000\nmax = 1000\n"
+    << "[[can.offset]]\nregister = 0\nid = 0x300\nlength_bytes = 4\nack_id = 0x380\n"
+    << "[can.offset.value]\nstart_bit = 0\nlength_bits = 32\ntype = \"signed\"\nscale = 0.1\n"
+    << "[[registers]]\nname = \"T1_length_wear\"\nkind = \"tool_length_wear\"\nbus = \"can\"\n"
+    << "max_abs_um = 200\nmax_step_um = 5\nmax_rate_um_per_s = 50\n"
+    << "[creep]\ncreep_basis = \"time\"\ncreep_time_s = 2\nprofile = \"linear\"\n"
+    << "[creep.edge]\ntool_shape = \"tip\"\nnormal_source = \"none\"\n"
+    << "fallback_channel = \"length\"\n"
+    << "[creep.output]\nmode = \"tool_registers\"\nlength_register = \"T1_length_wear\"\n"
+    << "[model]\nfile = \"a/model.toml\"\nupdate = \"cycle\"\n"
+    << "[[model.apply]]\nterm = \"offset\"\nregister = \"T1_length_wear\"\ngain = 1\n";
+  return s.str();
+}
+
+std::string constant_model_text(double coef_um) {
+  std::ostringstream s;
+  s << "[model]\n[[model.term]]\nname = \"offset\"\nform = \"constant\"\n"
+    << "kinds = [\"contour\"]\ngroups = [[0.0, 0.0]]\ncoef_um = [" << coef_um << "]\n";
+  return s.str();
+}
+
+/// The register's way from `from` to `to` [counts]: every frame within the two totals, each at
+/// most max_change from the one before, and at least 4 frames (fed in, not stepped).
+void expect_fed_in(const std::vector<std::int32_t>& w, std::int32_t from, std::int32_t to,
+                   std::int32_t max_change) {
+  ASSERT_FALSE(w.empty());
+  std::int32_t prev = from;
+  std::int32_t largest = 0;
+  for (const std::int32_t v : w) {
+    EXPECT_GE(v, std::min(from, to)) << "beyond the totals";
+    EXPECT_LE(v, std::max(from, to)) << "beyond the totals";
+    largest = std::max(largest, std::abs(v - prev));
+    prev = v;
+  }
+  EXPECT_LE(largest, max_change);
+  EXPECT_EQ(w.back(), to);
+  EXPECT_GE(w.size(), 4U);
+  std::printf("fed in from %d to %d counts over %zu frames, largest change %d counts\n", from, to,
+              w.size(), largest);
+}
+
+TEST(NccompdCan, ModelLoadAndRollbackHandOverOnTheCreepsRegisterWithoutAStep) {
+  TempDir d;
+  fs::create_directories(d.path / "a");
+  fs::create_directories(d.path / "b");
+  d.write("a/model.toml", constant_model_text(2.0));
+  d.write("b/model.toml", constant_model_text(6.0));
+  d.write("nccompd.toml", handover_config_text());
+  const std::string socket = (d.path / "status.sock").string();
+  NcPump nc;
+  Nc measure;
+  Daemon daemon(d.path);
+  ASSERT_TRUE(daemon.start());
+  ASSERT_TRUE(wait_until([&] { return number(daemon.status(), "cycles") >= 20; }, 20000ms))
+      << daemon.log();
+  // 5.0 µm of wear of tool 1 (float32 0x40A00000): −5.0 + 2.0 = −3.0 µm.
+  measure.send(0x120, 0x40A0000000000001ULL, 8);
+  ASSERT_TRUE(wait_until([&] { return nc.last() == -30; }, 20000ms)) << nc.last() << daemon.log();
+  std::this_thread::sleep_for(200ms);
+  (void)nc.take();
+
+  const std::string b = (d.path / "b" / "model.toml").string();
+  const std::string load =
+      run(std::string(NCCOMP_BIN) + " model load " + b + " --socket " + socket);
+  std::printf("%s", load.c_str());
+  EXPECT_NE(load.find("handovers: 1 (registers rebased 1, not absorbed 0); last: largest trim "
+                      "change 4.000 um, 0.000 um through the limiter"),
+            std::string::npos)
+      << load << daemon.log();
+  ASSERT_TRUE(wait_until([&] { return nc.last() == 10; }, 20000ms)) << nc.last() << daemon.log();
+  expect_fed_in(nc.take(), -30, 10, 10);
+
+  const std::string back = run(std::string(NCCOMP_BIN) + " model rollback --socket " + socket);
+  std::printf("%s", back.c_str());
+  EXPECT_NE(back.find("handovers: 2 (registers rebased 2, not absorbed 0)"), std::string::npos)
+      << back << daemon.log();
+  ASSERT_TRUE(wait_until([&] { return nc.last() == -30; }, 20000ms)) << nc.last() << daemon.log();
+  expect_fed_in(nc.take(), 10, -30, 10);
+  const std::string st = daemon.status();
+  EXPECT_EQ(number(st, "handovers"), 2.0) << st;
+  EXPECT_EQ(number(st, "unabsorbed"), 0.0) << st;
+  daemon.signal(SIGTERM);
+  EXPECT_EQ(daemon.wait(), 0) << daemon.log();
 }
 
 }  // namespace

@@ -17,34 +17,23 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
-#include <regex>
 #include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include "tests/support/status_json.hpp"
+#include "tests/support/temp_dir.hpp"
+
 extern char** environ;
 
 namespace {
 
+using nccomp::test::number;
+using nccomp::test::TempDir;
+
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
-
-struct TempDir {
-  TempDir() {
-    path = fs::temp_directory_path() /
-           ("nccomp_cli_" + std::to_string(::getpid()) + "_" + std::to_string(n++));
-    fs::remove_all(path);
-    fs::create_directories(path);
-  }
-  ~TempDir() { fs::remove_all(path); }
-  std::string write(const std::string& name, const std::string& text) const {
-    std::ofstream(path / name) << text;
-    return (path / name).string();
-  }
-  static inline int n = 0;
-  fs::path path;
-};
 
 std::string slurp(const fs::path& p) {
   std::ifstream in(p);
@@ -92,12 +81,6 @@ CliRun nccomp(const TempDir& d, const std::vector<std::string>& args) {
   r.out = slurp(out);
   r.err = slurp(err);
   return r;
-}
-
-double number(const std::string& json, const std::string& key) {
-  const std::regex re("\"" + key + "\":(-?[0-9.eE+-]+)");
-  std::smatch m;
-  return std::regex_search(json, m, re) ? std::stod(m[1]) : -1e300;
 }
 
 TEST(NccompCli, CheckConfigOfTheShippedConfigSucceeds) {

@@ -27,8 +27,6 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
-#include <functional>
-#include <regex>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -38,28 +36,23 @@
 #include "sim/modbus_nc/nc_server.hpp"
 #include "tests/support/nccompd_process.hpp"
 #include "tests/support/run_as.hpp"
+#include "tests/support/status_json.hpp"
+#include "tests/support/temp_dir.hpp"
+#include "tests/support/wait.hpp"
 
 extern char** environ;
 
 namespace {
+
+using nccomp::test::number;
+using nccomp::test::TempDir;
+using nccomp::test::wait_until;
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
 using nccomp::sim::modbus_nc::NcServer;
 using nccomp::sim::modbus_nc::ServerConfig;
 using nccomp::sim::modbus_nc::Tables;
-
-struct TempDir {
-  TempDir() {
-    path = fs::temp_directory_path() /
-           ("nccompd_ack_" + std::to_string(::getpid()) + "_" + std::to_string(n++));
-    fs::remove_all(path);
-    fs::create_directories(path);
-  }
-  ~TempDir() { fs::remove_all(path); }
-  static inline int n = 0;
-  fs::path path;
-};
 
 [[maybe_unused]] std::string slurp(const fs::path& p) {
   std::ifstream in(p);
@@ -123,22 +116,7 @@ class Daemon : public nccomp::test::NccompdProcess {
   explicit Daemon(fs::path dir) : NccompdProcess(std::move(dir), NCCOMPD_BIN) {}
 };
 
-double number(const std::string& json, const std::string& key) {
-  const std::regex re("\"" + key + "\":(-?[0-9.eE+-]+)");
-  std::smatch m;
-  return std::regex_search(json, m, re) ? std::stod(m[1]) : -1e300;
-}
-
 bool is(double v, double want) { return std::fabs(v - want) < 1e-9; }
-
-bool wait_until(const std::function<bool()>& f, std::chrono::milliseconds limit = 10000ms) {
-  const auto end = std::chrono::steady_clock::now() + limit;
-  while (std::chrono::steady_clock::now() < end) {
-    if (f()) return true;
-    std::this_thread::sleep_for(10ms);
-  }
-  return f();
-}
 
 constexpr std::uint16_t kLength = 200;   // T1_length_wear, int32, 0.1 µm (tool_register_sign -1)
 constexpr std::uint16_t kAlarm = 240;    // creep_alarm, uint16 flag

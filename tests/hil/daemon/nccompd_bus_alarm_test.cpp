@@ -20,7 +20,6 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
-#include <functional>
 #include <regex>
 #include <sstream>
 #include <string>
@@ -30,50 +29,32 @@
 #include "client/status_client.hpp"
 #include "sim/modbus_nc/nc_server.hpp"
 #include "tests/support/nccompd_process.hpp"
+#include "tests/support/status_json.hpp"
+#include "tests/support/temp_dir.hpp"
+#include "tests/support/wait.hpp"
 
 extern char** environ;
 
 namespace {
+
+using nccomp::test::number;
+using nccomp::test::TempDir;
+using nccomp::test::wait_until;
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
 using nccomp::sim::modbus_nc::NcServer;
 using nccomp::sim::modbus_nc::ServerConfig;
 
-struct TempDir {
-  TempDir() {
-    path = fs::temp_directory_path() / ("nccompd_busalarm_" + std::to_string(::getpid()));
-    fs::remove_all(path);
-    fs::create_directories(path);
-  }
-  ~TempDir() { fs::remove_all(path); }
-  fs::path path;
-};
-
 class Daemon : public nccomp::test::NccompdProcess {
  public:
   explicit Daemon(fs::path dir) : NccompdProcess(std::move(dir), NCCOMPD_BIN) {}
 };
 
-bool wait_until(const std::function<bool()>& f, std::chrono::milliseconds limit) {
-  const auto end = std::chrono::steady_clock::now() + limit;
-  while (std::chrono::steady_clock::now() < end) {
-    if (f()) return true;
-    std::this_thread::sleep_for(10ms);
-  }
-  return f();
-}
-
 std::size_t count(const std::string& text, const std::string& what) {
   std::size_t n = 0;
   for (auto p = text.find(what); p != std::string::npos; p = text.find(what, p + 1)) ++n;
   return n;
-}
-
-double number(const std::string& json, const std::string& key) {
-  const std::regex re("\"" + key + "\":(-?[0-9.eE+-]+)");
-  std::smatch m;
-  return std::regex_search(json, m, re) ? std::stod(m[1]) : -1e300;
 }
 
 std::string config_text(std::uint16_t port) {

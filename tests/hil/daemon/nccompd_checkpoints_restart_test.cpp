@@ -30,9 +30,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
-#include <functional>
 #include <optional>
-#include <regex>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -41,10 +39,17 @@
 #include "client/status_client.hpp"
 #include "sim/modbus_nc/nc_server.hpp"
 #include "tests/support/nccompd_process.hpp"
+#include "tests/support/status_json.hpp"
+#include "tests/support/temp_dir.hpp"
+#include "tests/support/wait.hpp"
 
 extern char** environ;
 
 namespace {
+
+using nccomp::test::number;
+using nccomp::test::TempDir;
+using nccomp::test::wait_until;
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
@@ -99,42 +104,12 @@ std::string config_text(std::uint16_t port, const char* prefer, double max_step_
   return s.str();
 }
 
-struct TempDir {
-  TempDir() {
-    path = fs::temp_directory_path() /
-           ("nccompd_ckpt_" + std::to_string(::getpid()) + "_" + std::to_string(n++));
-    fs::remove_all(path);
-    fs::create_directories(path);
-  }
-  ~TempDir() { fs::remove_all(path); }
-  void write(const std::string& name, const std::string& text) const {
-    std::ofstream(path / name) << text;
-  }
-  static inline int n = 0;
-  fs::path path;
-};
-
 class Daemon : public nccomp::test::NccompdProcess {
  public:
   explicit Daemon(fs::path dir) : NccompdProcess(std::move(dir), NCCOMPD_BIN) {}
 };
 
-double number(const std::string& json, const std::string& key) {
-  const std::regex re("\"" + key + "\":(-?[0-9.eE+-]+)");
-  std::smatch m;
-  return std::regex_search(json, m, re) ? std::stod(m[1]) : -1e300;
-}
-
 bool is(double v, double want) { return std::fabs(v - want) < 1e-9; }
-
-bool wait_until(const std::function<bool()>& f, std::chrono::milliseconds limit = 10000ms) {
-  const auto end = std::chrono::steady_clock::now() + limit;
-  while (std::chrono::steady_clock::now() < end) {
-    if (f()) return true;
-    std::this_thread::sleep_for(10ms);
-  }
-  return f();
-}
 
 std::int32_t holding_i32(NcServer& nc, std::uint16_t address) {
   const auto r = nc.holding(address, 2);

@@ -21,8 +21,6 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
-#include <functional>
-#include <regex>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -31,10 +29,17 @@
 #include "client/status_client.hpp"
 #include "sim/modbus_nc/nc_server.hpp"
 #include "tests/support/nccompd_process.hpp"
+#include "tests/support/status_json.hpp"
+#include "tests/support/temp_dir.hpp"
+#include "tests/support/wait.hpp"
 
 extern char** environ;
 
 namespace {
+
+using nccomp::test::number;
+using nccomp::test::TempDir;
+using nccomp::test::wait_until;
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
@@ -42,37 +47,10 @@ using nccomp::sim::modbus_nc::NcServer;
 using nccomp::sim::modbus_nc::ServerConfig;
 using nccomp::sim::modbus_nc::Tables;
 
-struct TempDir {
-  TempDir() {
-    path = fs::temp_directory_path() /
-           ("nccompd_events_" + std::to_string(::getpid()) + "_" + std::to_string(n++));
-    fs::remove_all(path);
-    fs::create_directories(path);
-  }
-  ~TempDir() { fs::remove_all(path); }
-  static inline int n = 0;
-  fs::path path;
-};
-
 class Daemon : public nccomp::test::NccompdProcess {
  public:
   explicit Daemon(fs::path dir) : NccompdProcess(std::move(dir), NCCOMPD_BIN) {}
 };
-
-double number(const std::string& json, const std::string& key) {
-  const std::regex re("\"" + key + "\":(-?[0-9.eE+-]+)");
-  std::smatch m;
-  return std::regex_search(json, m, re) ? std::stod(m[1]) : -1e300;
-}
-
-bool wait_until(const std::function<bool()>& f, std::chrono::milliseconds limit = 10000ms) {
-  const auto end = std::chrono::steady_clock::now() + limit;
-  while (std::chrono::steady_clock::now() < end) {
-    if (f()) return true;
-    std::this_thread::sleep_for(5ms);
-  }
-  return f();
-}
 
 constexpr std::uint16_t kLength = 200;   // T1_length_wear, int32, 0.1 µm (tool_register_sign -1)
 constexpr std::uint16_t kRequest = 242;  // measure_request, uint16 flag

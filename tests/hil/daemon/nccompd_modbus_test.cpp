@@ -36,7 +36,6 @@
 #include <fstream>
 #include <iostream>
 #include <optional>
-#include <regex>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -46,10 +45,15 @@
 #include "daemon/lockstep.hpp"
 #include "sim/modbus_nc/nc_server.hpp"
 #include "tests/support/nccompd_process.hpp"
+#include "tests/support/status_json.hpp"
+#include "tests/support/temp_dir.hpp"
 
 extern char** environ;
 
 namespace {
+
+using nccomp::test::number;
+using nccomp::test::TempDir;
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
@@ -82,31 +86,10 @@ std::string config_text(std::uint16_t port, double rate_hz) {
   return s.str();
 }
 
-struct TempDir {
-  TempDir() {
-    path = fs::temp_directory_path() /
-           ("nccompd_mb_" + std::to_string(::getpid()) + "_" + std::to_string(n++));
-    fs::remove_all(path);
-    fs::create_directories(path);
-  }
-  ~TempDir() { fs::remove_all(path); }
-  void write(const std::string& name, const std::string& text) const {
-    std::ofstream(path / name) << text;
-  }
-  static inline int n = 0;
-  fs::path path;
-};
-
 class Daemon : public nccomp::test::NccompdProcess {
  public:
   explicit Daemon(fs::path dir) : NccompdProcess(std::move(dir), NCCOMPD_BIN) {}
 };
-
-double number(const std::string& json, const std::string& key) {
-  const std::regex re("\"" + key + "\":(-?[0-9.eE+-]+)");
-  std::smatch m;
-  return std::regex_search(json, m, re) ? std::stod(m[1]) : -1e300;
-}
 
 std::int32_t holding_i32(NcServer& nc, std::uint16_t address) {
   const auto r = nc.holding(address, 2);

@@ -22,8 +22,6 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
-#include <functional>
-#include <regex>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -33,24 +31,21 @@
 #include "sim/modbus_nc/nc_server.hpp"
 #include "tests/support/nccompd_process.hpp"
 #include "tests/support/run_as.hpp"
+#include "tests/support/status_json.hpp"
+#include "tests/support/temp_dir.hpp"
+#include "tests/support/wait.hpp"
 
 namespace {
+
+using nccomp::test::number;
+using nccomp::test::TempDir;
+using nccomp::test::wait_until;
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
 using nccomp::sim::modbus_nc::NcServer;
 using nccomp::sim::modbus_nc::ServerConfig;
 using nccomp::sim::modbus_nc::Tables;
-
-struct TempDir {
-  TempDir() {
-    path = fs::temp_directory_path() / ("nccompd_model_" + std::to_string(::getpid()));
-    fs::remove_all(path);
-    fs::create_directories(path);
-  }
-  ~TempDir() { fs::remove_all(path); }
-  fs::path path;
-};
 
 [[maybe_unused]] std::string slurp(const fs::path& p) {
   std::ifstream in(p);
@@ -64,21 +59,6 @@ class Daemon : public nccomp::test::NccompdProcess {
   explicit Daemon(fs::path dir) : NccompdProcess(std::move(dir), NCCOMPD_BIN) {}
 };
 
-double number(const std::string& json, const std::string& key) {
-  const std::regex re("\"" + key + "\":(-?[0-9.eE+-]+)");
-  std::smatch m;
-  return std::regex_search(json, m, re) ? std::stod(m[1]) : -1e300;
-}
-
-bool wait_until(const std::function<bool()>& f, std::chrono::milliseconds limit = 15000ms) {
-  const auto end = std::chrono::steady_clock::now() + limit;
-  while (std::chrono::steady_clock::now() < end) {
-    if (f()) return true;
-    std::this_thread::sleep_for(10ms);
-  }
-  return f();
-}
-
 constexpr std::uint16_t kLength = 200;  // T1_length_wear, int32, 0.1 µm
 
 std::int32_t holding_i32(NcServer& nc, std::uint16_t address) {
@@ -86,7 +66,7 @@ std::int32_t holding_i32(NcServer& nc, std::uint16_t address) {
   return static_cast<std::int32_t>((std::uint32_t{r[0]} << 16) | r[1]);
 }
 
-std::string config_text(std::uint16_t port) {
+std::string config_text(std::uint16_t port, const std::string& extra = "") {
   std::ostringstream s;
   s << "[daemon]\nrate_hz = 200\n"
     << "[state]\ndirectory = \"state\"\nmin_interval_s = 0.05\n"
@@ -110,15 +90,16 @@ std::string config_text(std::uint16_t port) {
     << "fallback_channel = \"length\"\n"
     << "[creep.output]\nmode = \"tool_registers\"\nlength_register = \"T1_length_wear\"\n"
     << "[model]\nfile = \"a/model.toml\"\nupdate = \"cycle\"\n"
-    << "[[model.apply]]\nterm = \"offset\"\nregister = \"T1_length_wear\"\ngain = 1\n";
+    << "[[model.apply]]\nterm = \"offset\"\nregister = \"T1_length_wear\"\ngain = 1\n"
+    << extra;
   return s.str();
 }
 
 // A fitted model with one constant term (what nccomp analyze writes, reduced).
-std::string model_text(const char* name, double coef_um) {
+std::string model_text(const char* name, double coef_um, const char* kind = "contour") {
   std::ostringstream s;
   s << "[model]\n[[model.term]]\nname = \"" << name << "\"\nform = \"constant\"\n"
-    << "kinds = [\"contour\"]\ngroups = [[0.0, 0.0]]\ncoef_um = [" << coef_um << "]\n";
+    << "kinds = [\"" << kind << "\"]\ngroups = [[0.0, 0.0]]\ncoef_um = [" << coef_um << "]\n";
   return s.str();
 }
 
@@ -179,7 +160,8 @@ TEST(NccompModel, LoadRollbackAndRestartWithRefusals) {
   const std::string b = (d.path / "b" / "model.toml").string();
   Daemon daemon(d.path);
   ASSERT_TRUE(daemon.start());
-  ASSERT_TRUE(wait_until([&] { return number(daemon.status(), "cycles") >= 20; })) << daemon.log();
+  ASSERT_TRUE(wait_until([&] { return number(daemon.status(), "cycles") >= 20; }, 15s))
+      << daemon.log();
   // 5.0 µm of wear measured: −5.0 µm + the trim of model A (2.0) = −3.0 µm.
   nc.update([](Tables& t) {
     const float w = 5.0F;
@@ -190,7 +172,7 @@ TEST(NccompModel, LoadRollbackAndRestartWithRefusals) {
     t.input[103] = static_cast<std::uint16_t>(bits & 0xFFFF);
     t.input[100] = 1;
   });
-  ASSERT_TRUE(wait_until([&] { return holding_i32(nc, kLength) == -30; }))
+  ASSERT_TRUE(wait_until([&] { return holding_i32(nc, kLength) == -30; }, 15s))
       << holding_i32(nc, kLength) << "\n"
       << daemon.log();
 
@@ -214,7 +196,7 @@ TEST(NccompModel, LoadRollbackAndRestartWithRefusals) {
                           "trim change 4.000 um, 0.000 um through the limiter"),
             std::string::npos)
       << load.out;
-  ASSERT_TRUE(wait_until([&] { return holding_i32(nc, kLength) == 10; }))
+  ASSERT_TRUE(wait_until([&] { return holding_i32(nc, kLength) == 10; }, 15s))
       << holding_i32(nc, kLength) << "\n"
       << daemon.log();
   EXPECT_NE(daemon.log().find("operator command from uid 0 (root)"), std::string::npos);
@@ -272,18 +254,287 @@ TEST(NccompModel, LoadRollbackAndRestartWithRefusals) {
   EXPECT_NE(back.out.find("previous (nccomp model rollback returns to it): " + b),
             std::string::npos)
       << back.out;
-  ASSERT_TRUE(wait_until([&] { return holding_i32(nc, kLength) == -30; }))
+  ASSERT_TRUE(wait_until([&] { return holding_i32(nc, kLength) == -30; }, 15s))
       << holding_i32(nc, kLength);
 
   // A restart keeps the choice: A live, B kept for rollback.
   EXPECT_EQ(daemon.stop(), 0) << daemon.log();
   ASSERT_TRUE(daemon.start());
-  ASSERT_TRUE(wait_until([&] { return daemon.try_status().has_value(); })) << daemon.log();
+  ASSERT_TRUE(wait_until([&] { return daemon.try_status().has_value(); }, 15s)) << daemon.log();
   st = nccomp_as_root(d, {"model", "status", "--socket", socket});
   std::printf("%s", st.out.c_str());
   EXPECT_EQ(st.out.rfind("ok model: " + a + " (hash ", 0), 0U) << st.out;
   EXPECT_NE(st.out.find("chosen by nccomp model load / rollback"), std::string::npos) << st.out;
   EXPECT_NE(st.out.find("previous (nccomp model rollback returns to it): " + b), std::string::npos)
+      << st.out;
+  EXPECT_EQ(daemon.stop(), 0) << daemon.log();
+}
+
+// A candidate in shadow (docs/closing-the-loop.md, "A candidate in shadow"): GIVEN the daemon above
+// with model A live (tool wear predicted 0 µm) and [model.shadow] min_parts = 5, WHEN a non-admin
+// caller and a file that is not a model are refused, the operator makes B (5.0 µm) the candidate
+// and the NC measures 5.0 µm of wear five times (each tool measurement, without a part number, is
+// a part of its own), THEN the rule promotes B (5 of 5 parts, p = 1/32) with the handover of a
+// load (the register goes from −5.0 to 0.0 µm along the creep, A kept for rollback), the next
+// five parts confirm it, and a restart keeps the history.
+TEST(NccompModel, ACandidateInShadowIsPromotedByTheRuleAndTheHistoryPersists) {
+  TempDir d;
+  NcServer nc(ServerConfig{});
+  nc.start();
+  nc.update([](Tables& t) { t.input[8] = 1; });
+  fs::create_directories(d.path / "a");
+  fs::create_directories(d.path / "b");
+  std::ofstream(d.path / "a" / "model.toml") << model_text("offset", 0.0, "tool_wear");
+  std::ofstream(d.path / "b" / "model.toml") << model_text("offset", 5.0, "tool_wear");
+  std::ofstream(d.path / "b" / "garbage.toml") << "this is [not a model\n";
+  std::ofstream(d.path / "nccompd.toml") << config_text(
+      nc.port(), "kind = \"tool_wear\"\n[model.shadow]\nmin_parts = 5\nalpha = 0.05\n");
+  const std::string socket = (d.path / "status.sock").string();
+  const std::string a = (d.path / "a" / "model.toml").string();
+  const std::string b = (d.path / "b" / "model.toml").string();
+  Daemon daemon(d.path);
+  ASSERT_TRUE(daemon.start());
+  ASSERT_TRUE(wait_until([&] { return number(daemon.status(), "cycles") >= 20; })) << daemon.log();
+  std::uint16_t sequence = 0;
+  const auto measure = [&](float wear_um) {
+    ++sequence;
+    // One record per measurement: wait until the shadow has scored it.
+    const double before = number(daemon.status(), "rows_scored");
+    nc.update([&](Tables& t) {
+      std::uint32_t bits = 0;
+      std::memcpy(&bits, &wear_um, sizeof bits);
+      t.input[101] = 1;
+      t.input[102] = static_cast<std::uint16_t>(bits >> 16);
+      t.input[103] = static_cast<std::uint16_t>(bits & 0xFFFF);
+      t.input[100] = sequence;
+    });
+    return wait_until([&] { return number(daemon.status(), "rows_scored") > before; });
+  };
+  ASSERT_TRUE(measure(5.0F)) << daemon.log();
+  ASSERT_TRUE(wait_until([&] { return holding_i32(nc, kLength) == -50; }))
+      << holding_i32(nc, kLength) << "\n"
+      << daemon.log();
+
+  if (::geteuid() == 0) {
+    const auto users = nccomp::test::gid_of("users");
+    const auto nogroup = nccomp::test::gid_of("nogroup");
+    ASSERT_TRUE(users && nogroup) << "groups users, nogroup";
+    ASSERT_EQ(::chown(socket.c_str(), static_cast<uid_t>(-1), *users), 0);
+    const nccomp::test::Identity op{65534, *nogroup, {*users}};
+    const auto refused = nccomp::test::request_as(op, socket, "model candidate " + b);
+    EXPECT_EQ(refused.answer.rfind("error: permission denied: 'model' changes the machine", 0), 0U)
+        << refused.answer;
+    EXPECT_NE(
+        daemon.log().find("operator command refused: 'model candidate " + b + "' from uid 65534"),
+        std::string::npos)
+        << daemon.log();
+  }
+  const std::string garbage = (d.path / "b" / "garbage.toml").string();
+  CliRun bad = nccomp_as_root(d, {"model", "candidate", garbage, "--socket", socket});
+  EXPECT_EQ(bad.exit_code, 3) << bad.out << bad.err;
+  EXPECT_NE(bad.err.find("model candidate: refused, nothing changed"), std::string::npos)
+      << bad.err;
+  EXPECT_NE(bad.err.find("cannot load the model " + garbage), std::string::npos) << bad.err;
+  EXPECT_NE(daemon.status().find("\"phase\":\"none\""), std::string::npos) << daemon.status();
+
+  CliRun cand = nccomp_as_root(d, {"model", "candidate", b, "--socket", socket});
+  ASSERT_EQ(cand.exit_code, 0) << cand.out << cand.err << daemon.log();
+  std::printf("%s", cand.out.c_str());
+  EXPECT_EQ(cand.out.rfind("ok model candidate: " + b, 0), 0U) << cand.out;
+  EXPECT_NE(daemon.status().find("\"phase\":\"candidate\""), std::string::npos) << daemon.status();
+  for (int i = 0; i < 4; ++i) ASSERT_TRUE(measure(5.0F)) << daemon.log();
+  // Four parts: the rule waits for the fifth.
+  CliRun st = nccomp_as_root(d, {"model", "status", "--socket", socket});
+  EXPECT_EQ(st.out.rfind("ok model: " + a, 0), 0U) << st.out;
+  EXPECT_NE(st.out.find("paired parts 4 of 5: other better on 4, live better on 0"),
+            std::string::npos)
+      << st.out;
+  ASSERT_TRUE(measure(5.0F)) << daemon.log();
+  // The promotion's handover makes B live first and records the decision after it: wait for the
+  // record.
+  ASSERT_TRUE(wait_until([&] {
+    const std::string out = nccomp_as_root(d, {"model", "status", "--socket", socket}).out;
+    return out.rfind("ok model: " + b, 0) == 0 &&
+           out.find("promoted by shadow rule") != std::string::npos;
+  })) << daemon.log();
+  st = nccomp_as_root(d, {"model", "status", "--socket", socket});
+  std::printf("%s", st.out.c_str());
+  EXPECT_NE(st.out.find("previous (nccomp model rollback returns to it): " + a), std::string::npos)
+      << st.out;
+  EXPECT_NE(st.out.find("promoted by shadow rule: live " + a + ", other " + b +
+                        "; 5 parts: other better on 5, live better on 0, ties 0, p = 0.03125, "
+                        "rms live 5.000 um, other 0.000 um"),
+            std::string::npos)
+      << st.out;
+  EXPECT_NE(st.out.find("watching the model the promotion replaced: " + a), std::string::npos)
+      << st.out;
+  // The handover of a load: the trim's 5 µm fed in along the creep, −5.0 → 0.0 µm.
+  ASSERT_TRUE(wait_until([&] { return holding_i32(nc, kLength) == 0; }))
+      << holding_i32(nc, kLength) << "\n"
+      << daemon.log();
+  EXPECT_EQ(number(daemon.status(), "handovers"), 1.0);
+  // The model A replaced is not better over the next five parts: B stays.
+  for (int i = 0; i < 5; ++i) ASSERT_TRUE(measure(5.0F)) << daemon.log();
+  ASSERT_TRUE(measure(5.0F)) << daemon.log();
+  ASSERT_TRUE(wait_until([&] {
+    return nccomp_as_root(d, {"model", "status", "--socket", socket}).out.find("confirmed by") !=
+           std::string::npos;
+  })) << daemon.log();
+  EXPECT_NE(daemon.log().find("model shadow: "), std::string::npos);
+
+  // A restart keeps the history (the state directory's model-shadow) and B live.
+  EXPECT_EQ(daemon.stop(), 0) << daemon.log();
+  ASSERT_TRUE(daemon.start());
+  ASSERT_TRUE(wait_until([&] { return daemon.try_status().has_value(); })) << daemon.log();
+  st = nccomp_as_root(d, {"model", "status", "--socket", socket});
+  std::printf("%s", st.out.c_str());
+  EXPECT_EQ(st.out.rfind("ok model: " + b, 0), 0U) << st.out;
+  EXPECT_NE(st.out.find("history (3 decisions):"), std::string::npos) << st.out;
+  EXPECT_NE(st.out.find("candidate by uid 0 (root)"), std::string::npos) << st.out;
+  EXPECT_NE(st.out.find("promoted by shadow rule"), std::string::npos) << st.out;
+  EXPECT_NE(st.out.find("confirmed by shadow rule"), std::string::npos) << st.out;
+  EXPECT_EQ(daemon.stop(), 0) << daemon.log();
+}
+
+// Demotion: GIVEN model A live predicting 10 µm of wear (trim +10 µm) and B predicting 5 µm,
+// WHEN the NC measures 5.0 µm five times, THEN B is promoted (register −5 + 5 = 0.0 µm); WHEN the
+// wear then reads 8.0 µm five times (A's error 2 µm, B's 3 µm on every part), THEN the rule
+// demotes B: A is live again, B kept for rollback, the register at −8 + 10 = +2.0 µm through the
+// rollback's handover.
+TEST(NccompModel, APromotedModelIsDemotedWhenTheModelItReplacedDoesBetter) {
+  TempDir d;
+  NcServer nc(ServerConfig{});
+  nc.start();
+  nc.update([](Tables& t) { t.input[8] = 1; });
+  fs::create_directories(d.path / "a");
+  fs::create_directories(d.path / "b");
+  std::ofstream(d.path / "a" / "model.toml") << model_text("offset", 10.0, "tool_wear");
+  std::ofstream(d.path / "b" / "model.toml") << model_text("offset", 5.0, "tool_wear");
+  std::ofstream(d.path / "nccompd.toml")
+      << config_text(nc.port(), "kind = \"tool_wear\"\n[model.shadow]\nmin_parts = 5\n");
+  const std::string socket = (d.path / "status.sock").string();
+  const std::string a = (d.path / "a" / "model.toml").string();
+  const std::string b = (d.path / "b" / "model.toml").string();
+  Daemon daemon(d.path);
+  ASSERT_TRUE(daemon.start());
+  ASSERT_TRUE(wait_until([&] { return number(daemon.status(), "cycles") >= 20; })) << daemon.log();
+  std::uint16_t sequence = 0;
+  const auto measure = [&](float wear_um) {
+    ++sequence;
+    const double before = number(daemon.status(), "rows_scored");
+    nc.update([&](Tables& t) {
+      std::uint32_t bits = 0;
+      std::memcpy(&bits, &wear_um, sizeof bits);
+      t.input[101] = 1;
+      t.input[102] = static_cast<std::uint16_t>(bits >> 16);
+      t.input[103] = static_cast<std::uint16_t>(bits & 0xFFFF);
+      t.input[100] = sequence;
+    });
+    return wait_until([&] { return number(daemon.status(), "rows_scored") > before; });
+  };
+  ASSERT_TRUE(measure(5.0F)) << daemon.log();
+  ASSERT_TRUE(wait_until([&] { return holding_i32(nc, kLength) == 50; }))
+      << holding_i32(nc, kLength) << "\n"
+      << daemon.log();
+  CliRun cand = nccomp_as_root(d, {"model", "candidate", b, "--socket", socket});
+  ASSERT_EQ(cand.exit_code, 0) << cand.out << cand.err << daemon.log();
+  for (int i = 0; i < 5; ++i) ASSERT_TRUE(measure(5.0F)) << daemon.log();
+  ASSERT_TRUE(wait_until([&] { return holding_i32(nc, kLength) == 0; }))
+      << holding_i32(nc, kLength) << "\n"
+      << daemon.log();
+  for (int i = 0; i < 5; ++i) ASSERT_TRUE(measure(8.0F)) << daemon.log();
+  ASSERT_TRUE(wait_until([&] { return holding_i32(nc, kLength) == 20; }))
+      << holding_i32(nc, kLength) << "\n"
+      << daemon.log();
+  CliRun st = nccomp_as_root(d, {"model", "status", "--socket", socket});
+  std::printf("%s", st.out.c_str());
+  EXPECT_EQ(st.out.rfind("ok model: " + a, 0), 0U) << st.out;
+  EXPECT_NE(st.out.find("previous (nccomp model rollback returns to it): " + b), std::string::npos)
+      << st.out;
+  EXPECT_NE(st.out.find("demoted by shadow rule: live " + b + ", other " + a +
+                        "; 5 parts: other better on 5, live better on 0, ties 0, p = 0.03125, "
+                        "rms live 3.000 um, other 2.000 um"),
+            std::string::npos)
+      << st.out;
+  EXPECT_NE(daemon.status().find("\"phase\":\"none\""), std::string::npos);
+  EXPECT_EQ(number(daemon.status(), "handovers"), 2.0);
+  EXPECT_EQ(daemon.stop(), 0) << daemon.log();
+}
+
+// promote = "operator": GIVEN the same daemon, WHEN B passes the rule, THEN it is only announced
+// (A stays live, the register stays), `model promote` before that was refused, and the operator's
+// `model promote` makes B live with the load's handover and records who did it.
+TEST(NccompModel, WithPromoteOperatorTheRuleAnnouncesAndTheOperatorPromotes) {
+  TempDir d;
+  NcServer nc(ServerConfig{});
+  nc.start();
+  nc.update([](Tables& t) { t.input[8] = 1; });
+  fs::create_directories(d.path / "a");
+  fs::create_directories(d.path / "b");
+  std::ofstream(d.path / "a" / "model.toml") << model_text("offset", 0.0, "tool_wear");
+  std::ofstream(d.path / "b" / "model.toml") << model_text("offset", 5.0, "tool_wear");
+  std::ofstream(d.path / "nccompd.toml")
+      << config_text(nc.port(),
+                     "kind = \"tool_wear\"\n[model.shadow]\nmin_parts = 5\npromote = "
+                     "\"operator\"\n");
+  const std::string socket = (d.path / "status.sock").string();
+  const std::string a = (d.path / "a" / "model.toml").string();
+  const std::string b = (d.path / "b" / "model.toml").string();
+  Daemon daemon(d.path);
+  ASSERT_TRUE(daemon.start());
+  ASSERT_TRUE(wait_until([&] { return number(daemon.status(), "cycles") >= 20; })) << daemon.log();
+  std::uint16_t sequence = 0;
+  const auto measure = [&](float wear_um) {
+    ++sequence;
+    const double before = number(daemon.status(), "rows_scored");
+    nc.update([&](Tables& t) {
+      std::uint32_t bits = 0;
+      std::memcpy(&bits, &wear_um, sizeof bits);
+      t.input[101] = 1;
+      t.input[102] = static_cast<std::uint16_t>(bits >> 16);
+      t.input[103] = static_cast<std::uint16_t>(bits & 0xFFFF);
+      t.input[100] = sequence;
+    });
+    return wait_until([&] { return number(daemon.status(), "rows_scored") > before; });
+  };
+  ASSERT_TRUE(measure(5.0F)) << daemon.log();
+  ASSERT_TRUE(wait_until([&] { return holding_i32(nc, kLength) == -50; })) << daemon.log();
+  CliRun cand = nccomp_as_root(d, {"model", "candidate", b, "--socket", socket});
+  ASSERT_EQ(cand.exit_code, 0) << cand.out << cand.err << daemon.log();
+  CliRun early = nccomp_as_root(d, {"model", "promote", "--socket", socket});
+  EXPECT_EQ(early.exit_code, 3) << early.out << early.err;
+  EXPECT_NE(early.err.find("has not been found better yet (0 of 5 parts scored)"),
+            std::string::npos)
+      << early.err;
+  for (int i = 0; i < 5; ++i) ASSERT_TRUE(measure(5.0F)) << daemon.log();
+  ASSERT_TRUE(wait_until([&] {
+    return daemon.status().find("\"phase\":\"announced\"") != std::string::npos;
+  })) << daemon.status();
+  // Announced only: A live, the register where it was.
+  std::this_thread::sleep_for(300ms);
+  CliRun st = nccomp_as_root(d, {"model", "status", "--socket", socket});
+  EXPECT_EQ(st.out.rfind("ok model: " + a, 0), 0U) << st.out;
+  EXPECT_NE(st.out.find("announced by shadow rule"), std::string::npos) << st.out;
+  // nccomp status: A scored on the measurement before the candidate and the five with it.
+  const std::string text = nccomp::client::query(socket, "text");
+  EXPECT_NE(text.find("model scores: live 6 parts, mse 25 um^2; announced " + b +
+                      " 5 parts, mse 0 um^2, p 0.03125\n"),
+            std::string::npos)
+      << text;
+  EXPECT_EQ(holding_i32(nc, kLength), -50);
+  CliRun promote = nccomp_as_root(d, {"model", "promote", "--socket", socket});
+  ASSERT_EQ(promote.exit_code, 0) << promote.out << promote.err << daemon.log();
+  std::printf("%s", promote.out.c_str());
+  EXPECT_EQ(promote.out.rfind("ok model promoted: " + b, 0), 0U) << promote.out;
+  EXPECT_NE(promote.out.find("previous (nccomp model rollback returns to it): " + a),
+            std::string::npos)
+      << promote.out;
+  ASSERT_TRUE(wait_until([&] { return holding_i32(nc, kLength) == 0; }))
+      << holding_i32(nc, kLength) << "\n"
+      << daemon.log();
+  st = nccomp_as_root(d, {"model", "status", "--socket", socket});
+  EXPECT_NE(st.out.find("promoted by uid 0 (root)"), std::string::npos) << st.out;
+  EXPECT_NE(st.out.find("watching the model the promotion replaced: " + a), std::string::npos)
       << st.out;
   EXPECT_EQ(daemon.stop(), 0) << daemon.log();
 }

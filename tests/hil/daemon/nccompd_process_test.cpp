@@ -20,7 +20,6 @@
 #include <fstream>
 #include <mutex>
 #include <optional>
-#include <regex>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -33,10 +32,15 @@
 #include "daemon/config/config.hpp"
 #include "daemon/state_store.hpp"
 #include "tests/support/nccompd_process.hpp"
+#include "tests/support/status_json.hpp"
+#include "tests/support/temp_dir.hpp"
 
 extern char** environ;
 
 namespace {
+
+using nccomp::test::number;
+using nccomp::test::TempDir;
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
@@ -61,11 +65,6 @@ class Daemon : public nccomp::test::NccompdProcess {
   explicit Daemon(fs::path dir) : NccompdProcess(std::move(dir), NCCOMPD_BIN) {}
 };
 
-double number(const std::string& json, const std::string& key) {
-  const std::regex re("\"" + key + "\":(-?[0-9.eE+-]+)");
-  std::smatch m;
-  return std::regex_search(json, m, re) ? std::stod(m[1]) : -1e300;
-}
 bool flag(const std::string& json, const std::string& key) {
   return json.find("\"" + key + "\":true") != std::string::npos;
 }
@@ -83,21 +82,6 @@ double register_in_state(const std::vector<std::byte>& payload) {
   }
   return e.register_state(0).output_um;
 }
-
-struct TempDir {
-  TempDir() {
-    path = fs::temp_directory_path() /
-           ("nccompd_hil_" + std::to_string(::getpid()) + "_" + std::to_string(n++));
-    fs::remove_all(path);
-    fs::create_directories(path);
-  }
-  ~TempDir() { fs::remove_all(path); }
-  void write(const std::string& name, const std::string& text) const {
-    std::ofstream(path / name) << text;
-  }
-  static inline int n = 0;
-  fs::path path;
-};
 
 TEST(NccompdProcess, KillNineMidRampResumesWithoutDoubling) {
   TempDir d;

@@ -20,8 +20,6 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
-#include <functional>
-#include <regex>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -30,10 +28,17 @@
 #include "client/status_client.hpp"
 #include "sim/modbus_nc/nc_server.hpp"
 #include "tests/support/nccompd_process.hpp"
+#include "tests/support/status_json.hpp"
+#include "tests/support/temp_dir.hpp"
+#include "tests/support/wait.hpp"
 
 extern char** environ;
 
 namespace {
+
+using nccomp::test::number;
+using nccomp::test::TempDir;
+using nccomp::test::wait_until;
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
@@ -60,18 +65,6 @@ std::string config_text(std::uint16_t port) {
     << "max_abs_um = 200\nmax_step_um = 5\nmax_rate_um_per_s = 50\n";
   return s.str();
 }
-
-struct TempDir {
-  TempDir() {
-    path = fs::temp_directory_path() /
-           ("nccompd_warm_" + std::to_string(::getpid()) + "_" + std::to_string(n++));
-    fs::remove_all(path);
-    fs::create_directories(path);
-  }
-  ~TempDir() { fs::remove_all(path); }
-  static inline int n = 0;
-  fs::path path;
-};
 
 [[maybe_unused]] std::string slurp(const fs::path& p) {
   std::ifstream in(p);
@@ -138,22 +131,7 @@ class Daemon : public nccomp::test::NccompdProcess {
   explicit Daemon(fs::path dir) : NccompdProcess(std::move(dir), NCCOMPD_BIN) {}
 };
 
-double number(const std::string& json, const std::string& key) {
-  const std::regex re("\"" + key + "\":(-?[0-9.eE+-]+)");
-  std::smatch m;
-  return std::regex_search(json, m, re) ? std::stod(m[1]) : -1e300;
-}
-
 bool is(double v, double want) { return std::fabs(v - want) < 1e-9; }
-
-bool wait_until(const std::function<bool()>& f, std::chrono::milliseconds limit = 10000ms) {
-  const auto end = std::chrono::steady_clock::now() + limit;
-  while (std::chrono::steady_clock::now() < end) {
-    if (f()) return true;
-    std::this_thread::sleep_for(10ms);
-  }
-  return f();
-}
 
 // The NC moves X to x_mm (0.1 µm counts, int32 high word first).
 void move_x(NcServer& nc, double x_mm) {

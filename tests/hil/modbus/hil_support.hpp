@@ -26,19 +26,14 @@
 #include <thread>
 #include <vector>
 
+#include "tests/support/wait.hpp"
+
 namespace nccomp::test::modbus {
 
-/// Polls pred every 5 ms until it holds or timeout_s passed. Returns pred's last value.
+/// tests/support/wait.hpp's wait_until with the limit in seconds, as these tests give it.
 inline bool wait_until(const std::function<bool()>& pred, double timeout_s = 5.0) {
-  const auto end = std::chrono::steady_clock::now() +
-                   std::chrono::microseconds(static_cast<std::int64_t>(timeout_s * 1e6));
-  while (std::chrono::steady_clock::now() < end) {
-    if (pred()) {
-      return true;
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  }
-  return pred();
+  return test::wait_until(pred,
+                          std::chrono::milliseconds(static_cast<std::int64_t>(timeout_s * 1e3)));
 }
 
 /// One read of the relay: bytes travelling from a() to b() (from_a) or back, time-stamped with

@@ -28,7 +28,6 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
-#include <functional>
 #include <optional>
 #include <regex>
 #include <span>
@@ -39,6 +38,8 @@
 
 #include "client/status_client.hpp"
 #include "sim/modbus_nc/nc_server.hpp"
+#include "tests/support/temp_dir.hpp"
+#include "tests/support/wait.hpp"
 
 extern char** environ;
 
@@ -81,17 +82,7 @@ std::string config_text(std::uint16_t port, const std::string& realtime = "",
   return s.str();
 }
 
-struct TempDir {
-  TempDir() {
-    path = fs::temp_directory_path() / ("nccompd_mbc_" + std::to_string(::getpid()));
-    fs::remove_all(path);
-    fs::create_directories(path);
-  }
-  ~TempDir() { fs::remove_all(path); }
-  TempDir(const TempDir&) = delete;
-  TempDir& operator=(const TempDir&) = delete;
-  fs::path path;
-};
+using nccomp::test::TempDir;
 
 /// nccompd as a child process; SIGKILLed by the destructor if still running.
 class Daemon {
@@ -195,16 +186,7 @@ std::optional<std::uint64_t> counter(const std::string& counters, const std::str
   return std::stoull(m[1]);
 }
 
-bool wait_for(const std::function<bool()>& pred, std::chrono::milliseconds limit) {
-  const auto end = std::chrono::steady_clock::now() + limit;
-  while (std::chrono::steady_clock::now() < end) {
-    if (pred()) {
-      return true;
-    }
-    std::this_thread::sleep_for(20ms);
-  }
-  return pred();
-}
+using nccomp::test::wait_until;
 
 void set_i32(std::span<std::uint16_t> regs, std::size_t at, std::int32_t v) {
   const auto u = static_cast<std::uint32_t>(v);
@@ -233,9 +215,9 @@ TEST(ModbusNccompdCounters, FaultCountersOfTheDriverAreInTheDaemonsStatus) {
   Daemon daemon(d.path);
   daemon.start();
   // The ramp's 12.3 µm arrive (123 counts), verified by read-back.
-  ASSERT_TRUE(wait_for([&] { return holding_i32(nc, 200) == 123; }, 15000ms)) << daemon.log();
+  ASSERT_TRUE(wait_until([&] { return holding_i32(nc, 200) == 123; }, 15000ms)) << daemon.log();
   std::string json;
-  ASSERT_TRUE(wait_for(
+  ASSERT_TRUE(wait_until(
       [&] {
         json = daemon.status("json");
         return !bus_counters(json, "modbus").empty();
@@ -251,7 +233,7 @@ TEST(ModbusNccompdCounters, FaultCountersOfTheDriverAreInTheDaemonsStatus) {
   });
   nc.update([](Tables& t) { set_i32(t.input, 0, 20'000'000); });
   std::string c;
-  ASSERT_TRUE(wait_for(
+  ASSERT_TRUE(wait_until(
       [&] {
         json = daemon.status("json");
         c = bus_counters(json, "modbus");
@@ -321,7 +303,7 @@ TEST(ModbusNccompdCounters, IoThreadPolicyIsLoggedAndInTheStatus) {
                      "io_sched_fifo_priority = 20\nio_cpu_affinity = [0]\n");
   Daemon daemon(d.path);
   daemon.start();
-  ASSERT_TRUE(wait_for([&] { return holding_i32(nc, 200) == 123; }, 15000ms)) << daemon.log();
+  ASSERT_TRUE(wait_until([&] { return holding_i32(nc, 200) == 123; }, 15000ms)) << daemon.log();
   const std::string log = daemon.log();
   if (log.find("bus modbus: I/O thread: SCHED_FIFO priority 20 refused") != std::string::npos) {
     (void)daemon.terminate();
@@ -366,7 +348,7 @@ TEST(ModbusNccompdCounters, RefusedIoThreadPriorityIsAWarningAndTheDaemonRuns) {
       nc.port(), "[daemon.realtime]\nsched_fifo_priority = 30\n", "io_sched_fifo_priority = 20\n");
   Daemon daemon(d.path);
   daemon.start(/*without_realtime=*/true);
-  ASSERT_TRUE(wait_for([&] { return holding_i32(nc, 200) == 123; }, 15000ms)) << daemon.log();
+  ASSERT_TRUE(wait_until([&] { return holding_i32(nc, 200) == 123; }, 15000ms)) << daemon.log();
   const std::string log = daemon.log();
   EXPECT_NE(log.find("bus modbus: I/O thread: SCHED_FIFO priority 20 refused: Operation not "
                      "permitted (running SCHED_OTHER; SCHED_FIFO needs CAP_SYS_NICE or an "
@@ -378,7 +360,7 @@ TEST(ModbusNccompdCounters, RefusedIoThreadPriorityIsAWarningAndTheDaemonRuns) {
       << log;
   EXPECT_NE(log.find("loop thread: SCHED_FIFO priority 30 refused"), std::string::npos) << log;
   std::string c;
-  ASSERT_TRUE(wait_for(
+  ASSERT_TRUE(wait_until(
       [&] {
         c = bus_counters(daemon.status("json"), "modbus");
         return !c.empty();

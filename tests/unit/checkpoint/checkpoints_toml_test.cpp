@@ -261,3 +261,74 @@ TEST(CheckpointsToml, ContourOverrideReplacesTheFilesContour) {
 
 }  // namespace
 }  // namespace nccomp::tools::checkpoints
+
+namespace nccomp::tools::checkpoints {
+namespace {
+
+// The example of docs/estimation.md ("S1"), key for key, and the errors with their positions.
+TEST(CheckpointsToml, EstimatorKeysFromTheDocsExampleAndTheirErrors) {
+  const std::string contour = "[checkpoints]\ncontour = [[0,0],[100,0],[100,60],[0,60]]\n";
+  formats::Diagnostics diag;
+  const std::string text = contour +
+                           "[checkpoints.estimator]\n"
+                           "enabled = true\n"
+                           "measurement_sigma_um = 0.7\n"
+                           "part_noise_um = 1.0\n"
+                           "learn_part_noise = true\n"
+                           "learn_min_parts = 5\n"
+                           "gate_sigmas = 5\n";
+  const toml::table root = toml::parse(std::string_view(text), std::string_view("test.toml"));
+  const CheckpointsConfig c =
+      parse_checkpoints(*root["checkpoints"].as_table(), "test.toml", kData, diag);
+  EXPECT_TRUE(diag.items().empty());
+  const cp::CheckpointEstimatorConfig& e = c.compensator.estimator;
+  EXPECT_TRUE(e.enabled);
+  EXPECT_DOUBLE_EQ(e.measurement_sigma_um, 0.7);
+  EXPECT_DOUBLE_EQ(e.part_noise_um, 1.0);
+  EXPECT_TRUE(e.learn_part_noise);
+  EXPECT_EQ(e.learn_min_parts, 5U);
+  EXPECT_DOUBLE_EQ(e.gate_sigmas, 5.0);
+  // Off by default, today's EWMA.
+  EXPECT_FALSE(cp::CompensatorConfig{}.estimator.enabled);
+
+  auto issues = issues_of(contour + "[checkpoints.estimator]\nenabled = true\ngate_sigmas = 1\n");
+  ASSERT_EQ(issues.size(), 1U);
+  EXPECT_EQ(formats::format(issues[0]),
+            "test.toml:5:15: checkpoints.estimator.gate_sigmas: must be 0 (no gate) or at least "
+            "2, got 1");
+  issues = issues_of(contour + "[checkpoints.estimator]\nlearn_min_parts = 2\nsigma = 1\n");
+  ASSERT_EQ(issues.size(), 2U);
+  EXPECT_EQ(issues[0].where.key_path, "checkpoints.estimator.learn_min_parts");
+  EXPECT_EQ(issues[0].where.line, 4);
+  EXPECT_EQ(formats::format(issues[1]), "test.toml:5:9: checkpoints.estimator.sigma: unknown key");
+  issues = issues_of(contour +
+                     "learning_mode = \"semi_finishing\"\n[checkpoints.estimator]\n"
+                     "enabled = true\n");
+  ASSERT_EQ(issues.size(), 1U);
+  EXPECT_EQ(issues[0].where.key_path, "checkpoints.estimator.enabled");
+  EXPECT_EQ(issues[0].where.line, 5);
+}
+
+}  // namespace
+}  // namespace nccomp::tools::checkpoints
+
+namespace nccomp::tools::checkpoints {
+namespace {
+
+// The shipped S1 example (ncsim's side wall) carries the estimator's table, off: it loads, and
+// every key has the documented default.
+TEST(CheckpointsToml, TheShippedSideWallExampleHasTheEstimatorOffWithItsDefaults) {
+  const CheckpointsConfig c = load_checkpoints_file(
+      kData + "/../../../../sim/ncsim/config/side_wall_checkpoints.toml", std::nullopt);
+  const cp::CheckpointEstimatorConfig& e = c.compensator.estimator;
+  const cp::CheckpointEstimatorConfig defaults{};
+  EXPECT_FALSE(e.enabled);
+  EXPECT_DOUBLE_EQ(e.measurement_sigma_um, defaults.measurement_sigma_um);
+  EXPECT_DOUBLE_EQ(e.part_noise_um, defaults.part_noise_um);
+  EXPECT_EQ(e.learn_part_noise, defaults.learn_part_noise);
+  EXPECT_EQ(e.learn_min_parts, defaults.learn_min_parts);
+  EXPECT_DOUBLE_EQ(e.gate_sigmas, defaults.gate_sigmas);
+}
+
+}  // namespace
+}  // namespace nccomp::tools::checkpoints

@@ -117,10 +117,10 @@ TEST(Module, LoadStateRefusesCorruptBytesAllOrNothing) {
   CheckpointModule fresh(module_config(), line_plan(2));
   fresh.attach(engine::RegisterTable(regs));
   std::vector<std::byte> bad = buf;
-  // The second record's offset becomes NaN (header 24 bytes, records 160 bytes).
-  ASSERT_EQ(bad.size(), 24U + 2U * 160U);
+  // The second record's offset becomes NaN (header 24 bytes, records 176 bytes: layout 2).
+  ASSERT_EQ(bad.size(), 24U + 2U * 176U);
   const auto nan_bytes = std::bit_cast<std::array<std::byte, sizeof(double)>>(std::nan(""));
-  for (std::size_t k = 0; k < nan_bytes.size(); ++k) bad[24 + 160 + 8 + k] = nan_bytes[k];
+  for (std::size_t k = 0; k < nan_bytes.size(); ++k) bad[24 + 176 + 8 + k] = nan_bytes[k];
   EXPECT_FALSE(fresh.load_state(bad));
   EXPECT_DOUBLE_EQ(fresh.compensator().register_value_um(0), 0.0);  // nothing changed
   EXPECT_FALSE(fresh.load_state(std::span<const std::byte>(buf.data(), buf.size() - 1)));

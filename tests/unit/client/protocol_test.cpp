@@ -19,6 +19,9 @@ TEST(ClientProtocol, VerbRequestsAreTheLinesTheDaemonParses) {
   EXPECT_EQ(model_load_request("/srv/fit 2/model.toml"), "model load /srv/fit 2/model.toml");
   EXPECT_EQ(model_rollback_request(), "model rollback");
   EXPECT_EQ(model_status_request(), "model status");
+  EXPECT_EQ(model_candidate_request("/srv/fit 3/model.toml"),
+            "model candidate /srv/fit 3/model.toml");
+  EXPECT_EQ(model_promote_request(), "model promote");
 }
 
 TEST(ClientProtocol, ARefusalGivesItsReasonWithoutThePrefixAndLineBreaks) {

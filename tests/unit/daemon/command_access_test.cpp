@@ -66,7 +66,8 @@ TEST(OperatorCommands, EveryVerbButTheCalibrationStatusNeedsTheAdminGroup) {
         "warm-start at-next-motion", "calibrate begin", "calibrate discard",
         "calibrate recalibrate", "calibrate facets lateral 1.99 1.98",
         "calibrate touch machine x + lateral 10.0", "calibrate statusx", "calibrate status now",
-        "model load /srv/fit/model.toml", "model rollback", "model", "model status now"}) {
+        "model load /srv/fit/model.toml", "model rollback", "model", "model status now",
+        "model candidate /srv/fit/model.toml", "model promote"}) {
     EXPECT_TRUE(denied(send(line, op))) << line;
   }
   // The model's status is read-only too.

@@ -194,6 +194,33 @@ TEST(StatusServer, AnswersTextJsonAndPrometheus) {
   EXPECT_FALSE(fs::exists(sock));
 }
 
+TEST(StatusJson, NamesTheLiveModelTheRollbackModelAndThePromoteRule) {
+  Rig rig;
+  StatusContext c = rig.context();
+  EXPECT_EQ(render_json(c).find("\"model\":"), std::string::npos);  // no provider: not shown
+  ModelState m;
+  m.has_section = true;
+  m.live = {"/srv/b.toml", "00000000000000bb", "2026-11-27T10:00:00Z"};
+  m.previous = {"/srv/a\"1.toml", "00000000000000aa", "2026-11-26T09:00:00Z"};
+  m.chosen = true;
+  m.generation = 3;
+  c.model = [m] { return m; };
+  sections::ShadowStatus shadow;
+  shadow.phase = sections::ShadowPhase::kAnnounced;
+  shadow.options.promote = sections::ShadowPromote::kOperator;
+  c.shadow = [shadow] { return shadow; };
+  const std::string json = render_json(c);
+  EXPECT_NE(json.find("\"model\":{\"live\":{\"file\":\"/srv/b.toml\",\"hash\":\"00000000000000bb\","
+                      "\"since_utc\":\"2026-11-27T10:00:00Z\"},\"previous\":{\"file\":"
+                      "\"/srv/a\\\"1.toml\",\"hash\":\"00000000000000aa\",\"since_utc\":"
+                      "\"2026-11-26T09:00:00Z\"},\"chosen\":true,\"generation\":3},"),
+            std::string::npos)
+      << json;
+  EXPECT_NE(json.find("\"shadow\":{\"phase\":\"announced\",\"promote\":\"operator\","),
+            std::string::npos)
+      << json;
+}
+
 TEST(StatusMetrics, LatencyEdgesAreBucketEdges) {
   const auto edges = prometheus_latency_edges_us();
   ASSERT_FALSE(edges.empty());
@@ -225,6 +252,13 @@ TEST(StatusMetrics, PromtoolCheckMetricsPasses) {
   StatusContext c = rig.context();
   c.buses.push_back({"second", &second});
   c.buses.push_back({"third", &third});
+  // A candidate in shadow: the live model scored on two parts, the candidate on none yet (NaN).
+  sections::ShadowStatus shadow;
+  shadow.phase = sections::ShadowPhase::kCandidate;
+  shadow.live.add_part(4.0, 3);
+  shadow.live.add_part(2.0, 1);
+  shadow.other_file = "/srv/cand.toml";
+  c.shadow = [shadow] { return shadow; };
   // Some latency samples first.
   for (int i = 0; i < 500 && rig.loop.latency().count() < 50; ++i) {
     std::this_thread::sleep_for(10ms);
@@ -257,6 +291,10 @@ TEST(StatusMetrics, PromtoolCheckMetricsPasses) {
             std::string::npos)
       << metrics;
   EXPECT_NE(metrics.find("nccompd_bus_offsets_pending{bus=\"second\"} 4\n"), std::string::npos);
+  EXPECT_NE(metrics.find("nccompd_shadow_mean_squared_error_square_meters{model=\"live\"} 3e-12\n"
+                         "nccompd_shadow_mean_squared_error_square_meters{model=\"other\"} NaN\n"),
+            std::string::npos)
+      << metrics;
   EXPECT_EQ(metrics.find("counter=\"offsets_pending\""), std::string::npos) << metrics;
   EXPECT_EQ(metrics.find("_ms"), std::string::npos) << metrics;
   EXPECT_EQ(metrics.find("_us"), std::string::npos) << metrics;

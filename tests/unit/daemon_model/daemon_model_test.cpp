@@ -275,6 +275,57 @@ TEST(ModelSection, SteppingAllocatesNothingEvenWhenEvaluatingEachCycle) {
   EXPECT_LT(sum_um, 0.0);
 }
 
+// [model.shadow]: the keys reach the options; a min_parts whose sign test can never pass at alpha
+// and an unknown promote are refused at their line with the key path.
+TEST(ModelSection, ShadowKeysAndAMinPartsThatCanNeverPass) {
+  TempDir d;
+  d.write("fit/model.toml", model_toml());
+  auto r = config::load_file(
+      d.write("a.toml", registers_toml() + kApply +
+                            "[model.shadow]\nmin_parts = 12\nalpha = 0.01\nmargin_um = 0.2\n"
+                            "promote = \"operator\"\nhistory_size = 50\n"));
+  ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+  const ShadowOptions& o = model_section(*r.config)->shadow;
+  EXPECT_EQ(o.min_parts, 12);
+  EXPECT_DOUBLE_EQ(o.alpha, 0.01);
+  EXPECT_DOUBLE_EQ(o.margin_um, 0.2);
+  EXPECT_EQ(o.promote, ShadowPromote::kOperator);
+  EXPECT_EQ(o.history_size, 50);
+  // 4 parts: the smallest p-value is 1/16 > 0.05.
+  auto bad = config::load_file(d.write(
+      "b.toml",
+      registers_toml() + kApply + "[model.shadow]\nmin_parts = 4\npromote = \"sometimes\"\n"));
+  ASSERT_FALSE(bad.config);
+  const std::string err = bad.diagnostics.to_string();
+  EXPECT_NE(err.find("b.toml:"), std::string::npos) << err;
+  EXPECT_NE(err.find("model.shadow.min_parts: min_parts = 4 can never pass the sign test at "
+                     "alpha = 0.05: at least 5 parts are needed"),
+            std::string::npos)
+      << err;
+  EXPECT_NE(err.find("model.shadow.promote"), std::string::npos) << err;
+}
+
+// Issue 18: a model file with several errors is refused at the file key, and each of its errors
+// is listed at its own line of the model file (the section kept only the first, inside one
+// message at the file key).
+TEST(ModelSection, EveryErrorOfTheModelFileIsListedAtItsLine) {
+  TempDir d;
+  const std::string model =
+      d.write("fit/model.toml",
+              "[model]\nalpha = 0.9\n[[model.term]]\nname = \"\"\nform = \"constant\"\n"
+              "groups = [[0, 0]]\ncoef_um = [1]\n");
+  auto r = config::load_file(d.write("a.toml", registers_toml() + kApply));
+  ASSERT_FALSE(r.config);
+  std::vector<int> lines;
+  for (const auto& item : r.diagnostics.items()) {
+    if (item.where.file == model) lines.push_back(item.where.line);
+  }
+  EXPECT_EQ(lines, (std::vector<int>{2, 4})) << r.diagnostics.to_string();
+  EXPECT_NE(r.diagnostics.to_string().find("model.file: cannot load the model " + model),
+            std::string::npos)
+      << r.diagnostics.to_string();
+}
+
 TEST(ModelSection, ErrorsNameFileLineAndKey) {
   TempDir d;
   d.write("fit/model.toml", model_toml());
@@ -679,6 +730,86 @@ TEST(ModelSection, AnInteractionWithAPositionNeedsUpdateCycleWhicheverColumnIsTh
   auto by_column = config::load_file(
       d.write("c.toml", text("cycle") + "column = \"temp_c*x_mm\"\nform = \"interaction\"\n"));
   EXPECT_TRUE(by_column.config) << by_column.diagnostics.to_string();
+}
+
+/// A term fitted on rows of one kind evaluates to 0 for every other kind (core/model/model.cpp):
+/// an entry of another kind must be refused, not accepted to apply nothing. thermal_drift of
+/// interaction_and_group_model() is fitted on calib rows only.
+TEST(ModelSection, ATermFittedOnOtherKindsIsRefusedNotAppliedAsZero) {
+  TempDir d;
+  d.write("fit/model.toml", formats::model_io::write_model_toml(interaction_and_group_model(),
+                                                                cm::AnalysisConfig{}, {"test"}));
+  const auto text = [](const std::string& kind) {
+    return registers_toml() +
+           "[model]\nfile = \"fit/model.toml\"\nupdate = \"cycle\"\n[[model.apply]]\n"
+           "term = \"thermal_drift\"\nregister = \"checkpoint_0\"\npoint = 0\n" +
+           kind;
+  };
+  // No kind: the entry's default, contour.
+  const std::vector<std::pair<std::string, std::string>> refused = {
+      {"", "contour"},
+      {"kind = \"contour\"\n", "contour"},
+      {"kind = \"tool_wear\"\n", "tool_wear"}};
+  for (const auto& [key, named] : refused) {
+    auto r = config::load_file(d.write("a.toml", text(key)));
+    EXPECT_FALSE(r.config) << key;
+    const std::string err = r.diagnostics.to_string();
+    EXPECT_NE(err.find(term_where("a.toml", text(key)) +
+                       "model.apply[0].term: term 'thermal_drift' was fitted on calib rows only "
+                       "and contributes nothing to kind = " +
+                       named +
+                       ": give the entry the kind of the rows the term describes "
+                       "(kind = \"calib\")"),
+              std::string::npos)
+        << err;
+  }
+  auto ok = config::load_file(d.write("b.toml", text("kind = \"calib\"\n")));
+  EXPECT_TRUE(ok.config) << ok.diagnostics.to_string();
+}
+
+/// [calibration] with touch_positions = "machine" measures the whole drift into its X/Y/Z
+/// registers whatever the NC's offset holds (core/calib/calibrator.hpp): a model's trim on one of
+/// them would be counted on top of it, twice. With "program" the touches see the trim and S3
+/// learns what the term leaves: accepted. The [calibration] table is the documented example
+/// (registers 20..22), as given and with "program".
+TEST(ModelSection, ATrimOnACalibrationRegisterNeedsTouchPositionsProgram) {
+  TempDir d;
+  d.write("fit/model.toml", formats::model_io::write_model_toml(interaction_and_group_model(),
+                                                                cm::AnalysisConfig{}, {"test"}));
+  std::ifstream in(std::string(NCCOMP_SOURCE_DIR) + "/tools/calibrate/examples/machine.toml");
+  std::stringstream example;
+  example << in.rdbuf();
+  const std::string machine = example.str();
+  const std::string needle = "touch_positions = \"machine\"";
+  ASSERT_NE(machine.find(needle), std::string::npos);
+  std::string program = machine;
+  program.replace(program.find(needle), needle.size(), "touch_positions = \"program\"");
+  std::string registers = "[loopback]\n";
+  for (int i = 0; i < 23; ++i) {
+    registers += "[[registers]]\nname = \"r" + std::to_string(i) + "\"\nkind = \"" +
+                 (i >= 20 ? "axis_offset" : "tool_length_wear") +
+                 "\"\nbus = \"loopback\"\nmax_abs_um = 100\nmax_step_um = 50\n"
+                 "max_rate_um_per_s = 100000\n";
+  }
+  const std::string model =
+      "[model]\nfile = \"fit/model.toml\"\n[[model.apply]]\nterm = \"thermal_drift\"\n"
+      "register = \"r21\"\nkind = \"calib\"\npoint = 1\n";
+  auto r = config::load_file(d.write("a.toml", registers + machine + model));
+  EXPECT_FALSE(r.config);
+  const std::string err = r.diagnostics.to_string();
+  EXPECT_NE(err.find("model.apply[0].register: 'r21' takes [calibration]'s correction, which "
+                     "measures the whole drift with touch_positions = \"machine\": the term's "
+                     "trim would count it twice; set [calibration] touch_positions = "
+                     "\"program\" (the calibration then learns what the term leaves)"),
+            std::string::npos)
+      << err;
+  auto ok = config::load_file(d.write("b.toml", registers + program + model));
+  EXPECT_TRUE(ok.config) << ok.diagnostics.to_string();
+  // A register [calibration] does not write is no concern of it.
+  std::string other = model;
+  other.replace(other.find("r21"), 3, "r3");
+  auto r3 = config::load_file(d.write("c.toml", registers + machine + other));
+  EXPECT_TRUE(r3.config) << r3.diagnostics.to_string();
 }
 
 TEST(ModelSection, APerGroupTermNeedsItsGroupInEachEntry) {

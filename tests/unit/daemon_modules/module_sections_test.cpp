@@ -4,19 +4,26 @@
 // numbers.
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cmath>
 #include <fstream>
+#include <memory>
 #include <optional>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "core/checkpoint/module.hpp"
 #include "core/checkpoint/probe.hpp"
 #include "daemon/config/builtin_sections.hpp"
+#include "daemon/logging.hpp"
+#include "daemon/loop.hpp"
 #include "daemon/sections/calibration/calibration_section.hpp"
 #include "daemon/sections/checkpoints/checkpoints_section.hpp"
 #include "daemon/sections/checkpoints/startup.hpp"
+#include "daemon/status.hpp"
+#include "drivers/loopback/loopback_bus.hpp"
 #include "tests/unit/daemon_modules/temp_dir.hpp"
 
 namespace nccomp::daemon::sections {
@@ -476,6 +483,88 @@ register_z = 22
                  "engine: register 'r22' is written by module 'calibration' and by 'creep'; give "
                  "each module its own registers");
   }
+}
+
+}  // namespace
+}  // namespace nccomp::daemon::sections
+
+namespace nccomp::daemon::sections {
+namespace {
+
+// GIVEN the boss example with [checkpoints.estimator] on, nccompd's loop on a loopback bus
+// WHEN checkpoint 0 has been read once
+// THEN its σ is in the status (checkpoint_sigma_um = sqrt(σ² + q) = sqrt(1 + 1) µm with the
+//      defaults) and is its own metric in metres, nccompd_module_sigma_meters, under the key of
+//      its estimate.
+TEST(CheckpointsSection, TheEstimatorsSigmaIsInTheStatusAndAMetricInMetres) {
+  using namespace std::chrono_literals;
+  TempDir d;
+  // The example with its contour file named absolutely, and the estimator's table after it.
+  std::ifstream in(kBoss);
+  std::stringstream boss;
+  boss << in.rdbuf();
+  std::string text = boss.str();
+  const std::string csv = "contour_csv = \"boss_contour.csv\"";
+  const auto at = text.find(csv);
+  ASSERT_NE(at, std::string::npos);
+  text.replace(at, csv.size(),
+               "contour_csv = \"" + std::string(NCCOMP_SOURCE_DIR) +
+                   "/tests/unit/checkpoint/data/boss_contour.csv\"");
+  auto r = load_file(d.write(
+      "a.toml", text + "\n[checkpoints.estimator]\nenabled = true\n" + registers(76, 20, -1)));
+  ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+  auto rt = std::make_unique<Runtime>();
+  rt->engine = config::build_engine(*r.config);
+  std::vector<std::string> names;
+  for (const auto& e : config::registers_section(*r.config).registers) {
+    rt->register_bus.push_back(0);
+    names.push_back(e.spec.name);
+  }
+  core::rt::ConfigSwap<Runtime> swap(std::move(rt));
+  drivers::loopback::LoopbackBus bus(256, 256);
+  bus.start();
+  Loop loop(LoopOptions{}, swap, {&bus}, nullptr, nullptr);
+  EventLogger logger(loop);
+  logger.start();
+  loop.start();
+  StatusContext c;
+  c.loop = &loop;
+  c.buses = {{"loopback", &bus}};
+  c.logger = &logger;
+  c.register_names = [names] { return names; };
+  c.config_path = "a.toml";
+  c.state_path = "state.bin";
+  core::ProbeMeasurement m;
+  m.part = 1;
+  m.checkpoint = 0;
+  m.wall_angle_deg = 3.0;
+  m.ball_radius_mm = 2.0;
+  m.raw_deviation_um = 6.0 + core::checkpoint::probe_delta0_um(2.0, 3.0);
+  ASSERT_TRUE(bus.inject(m));
+  bool done = false;
+  for (int i = 0; i < 500 && !done; ++i) {
+    done = render_json(c).find("\"probe_readings\":1") != std::string::npos;
+    if (!done) std::this_thread::sleep_for(10ms);
+  }
+  ASSERT_TRUE(done) << render_json(c);
+  std::this_thread::sleep_for(50ms);  // the status is published every 10 cycles
+  const std::string json = render_json(c);
+  const std::string prom = render_prometheus(c);
+  loop.stop();
+  logger.stop();
+  bus.stop();
+  const auto number_after = [](const std::string& s, const std::string& key) {
+    const auto p = s.find(key);
+    return p == std::string::npos ? std::nan("") : std::stod(s.substr(p + key.size()));
+  };
+  EXPECT_NEAR(number_after(json, "\"checkpoint_estimate_um\":"), 6.0, 1e-9) << json;
+  const double sigma_um = number_after(json, "\"checkpoint_sigma_um\":");
+  EXPECT_NEAR(sigma_um, std::sqrt(2.0), 1e-5) << json;  // JSON: 6 digits
+  EXPECT_NEAR(number_after(prom,
+                           "nccompd_module_sigma_meters{module=\"checkpoints\",key=\""
+                           "checkpoint_estimate_um\"} "),
+              std::sqrt(2.0) * 1e-6, 1e-11)
+      << prom;
 }
 
 }  // namespace

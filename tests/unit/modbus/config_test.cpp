@@ -7,6 +7,8 @@
 #include <string>
 #include <vector>
 
+#include "formats/toml/diagnostics.hpp"
+
 namespace nccomp::drivers::modbus {
 namespace {
 
@@ -15,7 +17,7 @@ using ::testing::HasSubstr;
 std::string error_of(const std::string& text) {
   try {
     (void)parse_modbus_config(text, "t.toml");
-  } catch (const ConfigError& e) {
+  } catch (const formats::DiagnosticsError& e) {
     return e.what();
   }
   return "(accepted)";
@@ -376,10 +378,12 @@ x_mm = { table = "input", address = 0, type = "int32", scale = 0.001 }
   try {
     (void)parse_modbus_config(rate("2000"), "t.toml", loop);
     ADD_FAILURE() << "2000 Hz accepted with a 1000 Hz loop";
-  } catch (const ConfigError& e) {
-    EXPECT_EQ(e.line(), 4);
-    EXPECT_EQ(e.key_path(), "modbus.poll_rate_hz");
-    EXPECT_EQ(e.message(),
+  } catch (const formats::DiagnosticsError& e) {
+    ASSERT_EQ(e.diagnostics().items().size(), 1U);
+    const formats::Diagnostic& d = e.diagnostics().items().front();
+    EXPECT_EQ(d.where.line, 4);
+    EXPECT_EQ(d.where.key_path, "modbus.poll_rate_hz");
+    EXPECT_EQ(d.message,
               "2000 Hz is faster than the loop (daemon.rate_hz = 1000 Hz), which takes at most one "
               "sample per cycle: the extra polls only load the NC and the bus; at most 1000 Hz "
               "(leave poll_rate_hz out to poll at the loop rate)");
@@ -392,7 +396,7 @@ x_mm = { table = "input", address = 0, type = "int32", scale = 0.001 }
               "[modbus]\ntransport = \"rtu\"\ndevice = \"/dev/null\"\nbaud = 115200\n"
               "[modbus.axis]\nx_mm = { address = 0, type = \"int32\" }\n",
               "t.toml", loop);
-        } catch (const ConfigError& e) {
+        } catch (const formats::DiagnosticsError& e) {
           return std::string(e.what());
         }
         return std::string("(accepted)");
@@ -422,7 +426,7 @@ TEST(ModbusConfig, IoThreadPriorityAndAffinityAreValidatedAgainstTheLoop) {
   const auto error_with = [&](const std::string& keys, const ParseOptions& o = {}) {
     try {
       (void)parse_modbus_config(with(keys), "t.toml", o);
-    } catch (const ConfigError& e) {
+    } catch (const formats::DiagnosticsError& e) {
       return std::string(e.what());
     }
     return std::string("(accepted)");

@@ -10,6 +10,7 @@
 #include <variant>
 #include <vector>
 
+#include "formats/toml/diagnostics.hpp"
 #include "tests/support/alloc_counter.hpp"
 
 namespace nccomp::drivers::modbus {
@@ -767,7 +768,7 @@ TEST(ModbusDecoderProfile, CountOnlyOnTheWearProfileAndWithinLimits) {
   const auto err = [](const std::string& t) {
     try {
       (void)parse_modbus_config(t, "t.toml");
-    } catch (const ConfigError& e) {
+    } catch (const formats::DiagnosticsError& e) {
       return std::string(e.what());
     }
     return std::string("(accepted)");

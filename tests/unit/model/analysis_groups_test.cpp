@@ -15,6 +15,7 @@
 #include "core/model/analysis.hpp"
 #include "core/model/model_module.hpp"
 #include "formats/model/model_io.hpp"
+#include "formats/toml/diagnostics.hpp"
 #include "tests/support/alloc_counter.hpp"
 #include "tests/unit/model/synth.hpp"
 #include "tools/analyze/report.hpp"
@@ -192,7 +193,7 @@ TEST(PerGroupCandidates, GroupColumnsAndPerAreRefusedTogether) {
   try {
     io::read_model_text(text, "c.toml", false);
     ADD_FAILURE() << "accepted";
-  } catch (const io::ModelIoError& e) {
+  } catch (const nccomp::formats::DiagnosticsError& e) {
     EXPECT_NE(std::string(e.what()).find("c.toml:7:17: model.search.group_columns: not together"),
               std::string::npos)
         << e.what();

@@ -12,6 +12,7 @@
 #include "core/model/analysis.hpp"
 #include "core/model/model_module.hpp"
 #include "formats/model/model_io.hpp"
+#include "formats/toml/diagnostics.hpp"
 #include "tests/support/alloc_counter.hpp"
 #include "tests/unit/model/synth.hpp"
 #include "tools/analyze/report.hpp"
@@ -147,7 +148,7 @@ TEST(Interaction, ModelFileRefusesAProductWithoutTheFormAndAnInteractionWithOneC
   auto error = [](const std::string& term) {
     try {
       io::read_model_text("[model]\n[[model.term]]\nname = \"g\"\n" + term, "m.toml", false);
-    } catch (const io::ModelIoError& e) {
+    } catch (const nccomp::formats::DiagnosticsError& e) {
       return std::string(e.what());
     }
     return std::string();

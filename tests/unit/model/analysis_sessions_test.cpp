@@ -12,6 +12,7 @@
 
 #include "core/model/analysis.hpp"
 #include "formats/model/model_io.hpp"
+#include "formats/toml/diagnostics.hpp"
 #include "tests/unit/model/synth.hpp"
 #include "tools/analyze/report.hpp"
 
@@ -113,7 +114,7 @@ TEST(Sessions, SessionGapIsReadAndWrittenAndANegativeOneRefused) {
   try {
     io::read_model_text("[model]\nsession_gap_s = -1\n" + term, "c.toml", false);
     ADD_FAILURE() << "accepted";
-  } catch (const io::ModelIoError& e) {
+  } catch (const nccomp::formats::DiagnosticsError& e) {
     EXPECT_EQ(std::string(e.what()),
               "c.toml:2:17: model.session_gap_s: must be 0 (off) or a time > 0 [s]");
   }

@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "formats/model/model_io.hpp"
+#include "formats/toml/diagnostics.hpp"
 #include "tests/unit/model/synth.hpp"
 
 namespace cm = nccomp::core::model;
@@ -20,7 +21,7 @@ std::string error_of(const std::string& csv, const io::Mapping& m = {}) {
   cm::Dataset d;
   try {
     io::read_log(in, "log.csv", m, d);
-  } catch (const io::ModelIoError& e) {
+  } catch (const nccomp::formats::DiagnosticsError& e) {
     return e.what();
   }
   return "";
@@ -69,35 +70,34 @@ TEST(ReadLog, ReadsV2WhereTimeRestartsWithEachSessionAndKeepsTheContextColumns) 
   const std::string r = ",,,,,,,1.0,0,m1,2024-05-06T07:00:10.000Z,";
   // Within a session time_s still must not go back, nor the session itself.
   EXPECT_EQ(
-      error_of(h + "10,1,2,contour,4" + r + "4,1\n8,1,2,contour,4" + r + "4,1\n").substr(0, 38),
-      "log.csv:3: column 'time_s': goes backw");
+      error_of(h + "10,1,2,contour,4" + r + "4,1\n8,1,2,contour,4" + r + "4,1\n").substr(0, 35),
+      "log.csv:3:1: time_s: goes backwards");
   EXPECT_EQ(error_of(h + "10,1,2,contour,4" + r + "4,1\n8,1,2,contour,4" + r + "3,1\n"),
-            "log.csv:3: column 'session': goes backwards (3 after 4); the log must be in time "
-            "order");
+            "log.csv:3:16: session: goes backwards (3 after 4); the log must be in time order");
   EXPECT_EQ(error_of(h + "10,1,2,contour,4" + r + "x,1\n"),
-            "log.csv:2: column 'session': 'x' is not a warm-start number (an integer >= 0)");
+            "log.csv:2:16: session: 'x' is not a warm-start number (an integer >= 0)");
   EXPECT_EQ(
       error_of(h + "10,1,2,contour,4" + r + "4,1\n11,1,2,contour,4,,,,,,,1.0,0,m2,," + "4,1\n"),
-      "log.csv:3: column 'machine': 'm2' in a log of 'm1' (line 2): analyze one machine's "
-      "log at a time");
+      "log.csv:3:14: machine: 'm2' in a log of 'm1' (line 2): analyze one machine's log at a "
+      "time");
 }
 
 TEST(ReadLog, NamesFileLineAndColumnOfBadInput) {
   const std::string h = std::string(kHeader) + "\n";
   EXPECT_EQ(error_of(h + "1,1,1,contour,1,x,0,0,0,0,,1,0\n"),
-            "log.csv:2: column 'x_mm': 'x' is not a finite number");
+            "log.csv:2:6: x_mm: 'x' is not a finite number");
   EXPECT_EQ(error_of(h + "1,1,1,probe,1,0,0,0,0,0,,1,0\n"),
-            "log.csv:2: column 'kind': 'probe' is not tool_wear, contour or calib");
+            "log.csv:2:4: kind: 'probe' is not tool_wear, contour or calib");
   EXPECT_EQ(error_of(h + "5,1,1,contour,1,0,0,0,0,0,,1,0\n4,1,1,contour,1,0,0,0,0,0,,1,0\n")
-                .substr(0, 38),
-            "log.csv:3: column 'time_s': goes backw");
+                .substr(0, 35),
+            "log.csv:3:1: time_s: goes backwards");
   EXPECT_EQ(error_of(h + "1,1.5,1,contour,1,0,0,0,0,0,,1,0\n"),
-            "log.csv:2: column 'part': must be an integer");
-  EXPECT_EQ(error_of(h + "1,1,1,contour\n").substr(0, 33), "log.csv:2: column 'point': missin");
-  EXPECT_EQ(error_of("time_s,part\n1,2\n"), "log.csv:1: column 'tool': required column missing");
+            "log.csv:2:2: part: must be an integer");
+  EXPECT_EQ(error_of(h + "1,1,1,contour\n").substr(0, 29), "log.csv:2:5: point: missing (");
+  EXPECT_EQ(error_of("time_s,part\n1,2\n"), "log.csv:1: tool: required column missing");
   EXPECT_EQ(error_of(h), "log.csv:1: no data rows");
   EXPECT_EQ(error_of(h + "1,1,1,contour,1,0,0,0,0,0,,inf,0\n"),
-            "log.csv:2: column 'measured_um': 'inf' is not a finite number");
+            "log.csv:2:12: measured_um: 'inf' is not a finite number");
 }
 
 TEST(ReadLog, MapsAForeignUtf8WideCsv) {
@@ -135,7 +135,7 @@ TEST(ReadMapping, RefusesUnknownKeysAndColumns) {
   auto err = [](const char* text) {
     try {
       io::read_mapping_text(text, "map.toml");
-    } catch (const io::ModelIoError& e) {
+    } catch (const nccomp::formats::DiagnosticsError& e) {
       return std::string(e.what());
     }
     return std::string();
@@ -171,7 +171,7 @@ TEST(ModelFile, RefusesBadTerms) {
   auto err = [](const char* text, bool fitted = false) {
     try {
       io::read_model_text(text, "c.toml", fitted);
-    } catch (const io::ModelIoError& e) {
+    } catch (const nccomp::formats::DiagnosticsError& e) {
       return std::string(e.what());
     }
     return std::string();
@@ -179,7 +179,7 @@ TEST(ModelFile, RefusesBadTerms) {
   EXPECT_EQ(err("[model]\n"), "c.toml: model.term: declare at least one [[model.term]]");
   EXPECT_EQ(err("[[model.term]]\nname = \"a\"\nform = \"cubic\"\n"),
             "c.toml:3:8: model.term[0].form: unknown form 'cubic' (constant, linear, poly, "
-            "exp_rise, sine, step, lag, exp_growth, hinge, wear, interaction)");
+            "exp_rise, sine, step, lag, exp_growth, hinge, wear, interaction, session)");
   EXPECT_EQ(err("[[model.term]]\nname = \"a\"\nform = \"sine\"\ncolumn = \"x_mm\"\n"),
             "c.toml:1:1: model.term[0].scale: missing (form sine needs its scale / period / time "
             "constant)");
@@ -193,6 +193,68 @@ TEST(ModelFile, RefusesBadTerms) {
       "c.toml:5:11: model.term[0].coef_um: expected 1 values (groups × basis functions), got 2");
   EXPECT_EQ(err("[model]\nalpha = 0.9\n[[model.term]]\nname = \"a\"\nform = \"constant\"\n"),
             "c.toml:2:9: model.alpha: must be within (0, 0.5)");
+}
+
+// Issue 18: every error of a model.toml is reported at once, each at its own line and column
+// (the reader stopped at the first one). what() is the caught type's, so this test also ran on
+// the former reader.
+TEST(ModelFile, ReportsEveryErrorOfTheFileAtOnce) {
+  const std::string text =
+      "[model]\nalpha = 0.9\nmax_effects = 2.5\n"         // lines 2, 3
+      "[[model.term]]\nname = \"a\"\nform = \"cubic\"\n"  // line 6
+      "[[model.term]]\nname = \"\"\nform = \"sine\"\ncolumn = \"x_mm\"\nspeed = 1\n";
+  std::string what;
+  try {
+    (void)io::read_model_text(text, "c.toml", false);
+  } catch (const std::exception& e) {
+    what = e.what();
+  }
+  EXPECT_EQ(
+      what,
+      "c.toml:2:9: model.alpha: must be within (0, 0.5)\n"
+      "c.toml:3:15: model.max_effects: must be an integer within [0, 16]\n"
+      "c.toml:6:8: model.term[0].form: unknown form 'cubic' (constant, linear, poly, "
+      "exp_rise, sine, step, lag, exp_growth, hinge, wear, interaction, session)\n"
+      "c.toml:11:9: model.term[1].speed: unknown key (allowed: name, form, column, per, "
+      "kinds, degree, center, center_b, scale, between_session_sigma_um, noise_sigma_um, groups, "
+      "coef_um)\n"
+      "c.toml:8:8: model.term[1].name: must not be empty\n"
+      "c.toml:7:1: model.term[1].scale: missing (form sine needs its scale / period / time "
+      "constant)");
+}
+
+TEST(ReadMapping, ReportsEveryErrorOfTheFileAtOnce) {
+  std::string what;
+  try {
+    (void)io::read_mapping_text(
+        "[columns]\nspeed = \"x\"\n[constant]\nkind = \"probe\"\n[scale]\nx_mm = \"2\"\n",
+        "map.toml");
+  } catch (const nccomp::formats::DiagnosticsError& e) {
+    what = e.what();
+    EXPECT_EQ(e.diagnostics().items().size(), 3U);
+  }
+  EXPECT_EQ(what,
+            "map.toml:2:9: columns.speed: not a measurement-log column\n"
+            "map.toml:6:8: scale.x_mm: must be a number\n"
+            "map.toml:4:8: constant.kind: unknown kind 'probe'");
+}
+
+// A CSV error's place is structured: the row's line, the field (1-based) and the column's name.
+TEST(ReadLog, AnErrorCarriesLineFieldAndColumnName) {
+  std::istringstream in(std::string(kHeader) + "\n1,1,1,contour,1,0,0,0,0,0,,1,0\n" +
+                        "2,1,1,contour,1,0,0,zz,0,0,,1,0\n");
+  cm::Dataset d;
+  try {
+    io::read_log(in, "log.csv", {}, d);
+    ADD_FAILURE() << "accepted z_mm = zz";
+  } catch (const nccomp::formats::DiagnosticsError& e) {
+    ASSERT_EQ(e.diagnostics().items().size(), 1U);
+    const auto& w = e.diagnostics().items()[0].where;
+    EXPECT_EQ(w.file, "log.csv");
+    EXPECT_EQ(w.line, 3);
+    EXPECT_EQ(w.column, 8);  // time_s, part, tool, kind, point, x_mm, y_mm, z_mm
+    EXPECT_EQ(w.key_path, "z_mm");
+  }
 }
 
 // Issue 21: a [scale] on measured_um mapped under [columns] was applied twice (37.1 → 37 101).
@@ -240,7 +302,7 @@ TEST(ReadMapping, RefusesAScaleOfAColumnItDoesNotRead) {
   auto err = [](const std::string& text) {
     try {
       io::read_mapping_text(text, "map.toml");
-    } catch (const io::ModelIoError& e) {
+    } catch (const nccomp::formats::DiagnosticsError& e) {
       return std::string(e.what());
     }
     return std::string();
@@ -262,7 +324,7 @@ TEST(ModelFile, RefusesAnUnknownExcludeAndKeepsColumnKinds) {
   auto err = [](const std::string& text) {
     try {
       io::read_model_text(text, "c.toml", false);
-    } catch (const io::ModelIoError& e) {
+    } catch (const nccomp::formats::DiagnosticsError& e) {
       return std::string(e.what());
     }
     return std::string();
@@ -299,7 +361,7 @@ TEST(ModelFile, RefusesAnUnknownExcludeAndKeepsColumnKinds) {
     io::read_mapping_text("[columns]\nmeasured_um = \"d\"\n[column_kind]\nt3 = \"other\"\n",
                           "map.toml");
     ADD_FAILURE() << "t3 is not mapped";
-  } catch (const io::ModelIoError& e) {
+  } catch (const nccomp::formats::DiagnosticsError& e) {
     EXPECT_EQ(std::string(e.what()),
               "map.toml:4:6: column_kind.t3: not a log column nor a column of [extra]");
   }

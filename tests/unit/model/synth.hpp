@@ -37,7 +37,29 @@ struct Options {
   /// Serial correlation of the probe noise: each checkpoint's noise is an AR(1) series from part
   /// to part with this coefficient and standard deviation noise_um (0: independent noise).
   double noise_ar1_rho{0.0};
+  /// Sessions (warm starts): the parts split into this many consecutive blocks, each its own
+  /// Dataset::row_session (0: none, one session).
+  std::size_t sessions{0};
+  /// A different offset of the contour rows per session (a machine re-homed each morning),
+  /// drawn N(0, σ²) with this σ [µm] from the seed (0: none). session_offsets_um() gives them.
+  double session_sigma_um{0.0};
 };
+
+/// Session of part p (1-based) of `opt`.
+inline std::uint32_t session_of_part(const Options& opt, double part) {
+  return static_cast<std::uint32_t>((static_cast<std::size_t>(part) - 1) * opt.sessions /
+                                    opt.parts);
+}
+
+/// The true offset [µm] of each session of `opt` (its own random stream: the other draws of
+/// generate() do not change with it).
+inline std::vector<double> session_offsets_um(const Options& opt) {
+  std::mt19937_64 rng(opt.seed * 7919U + 17U);
+  std::normal_distribution<double> gauss(0.0, 1.0);
+  std::vector<double> out(opt.sessions, 0.0);
+  for (auto& v : out) v = opt.session_sigma_um * gauss(rng);
+  return out;
+}
 
 /// True wear [µm] of `tool` at edge point `point` after `path_mm` of cut: a break-in over 300 mm
 /// and a steady rate; each tool wears at its own rate.
@@ -179,6 +201,7 @@ inline cm::Dataset generate(const Options& opt) {
   std::vector<double> point_noise(opt.points_per_part, 0.0);  // AR(1) state per checkpoint
   std::vector<std::uint8_t> point_seen(opt.points_per_part, 0);
   const double innovation = std::sqrt(1.0 - opt.noise_ar1_rho * opt.noise_ar1_rho);
+  const std::vector<double> session_offset = session_offsets_um(opt);
   for (std::size_t i = 0; i < rows.size(); ++i) {
     const cm::Row& r = rows[i];
     if (i == 0) {
@@ -196,6 +219,7 @@ inline cm::Dataset generate(const Options& opt) {
       noise = point_seen[k] != 0U ? opt.noise_ar1_rho * noise + innovation * z : z;
       point_seen[k] = 1;
       y = point_offset[k] + noise;
+      if (opt.sessions > 0) y += session_offset[session_of_part(opt, r[1])];
       for (const auto& e : opt.effects) {
         y += e == "thermal_speed" ? kSpeedGainUmPerRpm * lag : effect_um(e, r, run_s);
       }
@@ -206,6 +230,7 @@ inline cm::Dataset generate(const Options& opt) {
       d.columns[cm::kStandardColumns].push_back(rpm[i]);
     }
     d.target_um.push_back(y);
+    if (opt.sessions > 0) d.row_session.push_back(session_of_part(opt, r[1]));
   }
   return d;
 }

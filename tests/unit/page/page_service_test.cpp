@@ -1,6 +1,6 @@
 // nccomp-page's request handling (tools/page/page_service.hpp) with a fake daemon, a fake
 // identity and a fake user database: every route, every bad input (a 4xx with the reason,
-// counted, the daemon never asked), the acknowledge rule and what is logged, the snapshots.
+// counted, the daemon never asked), the actions' rules and what is logged, the snapshots.
 #include "tools/page/page_service.hpp"
 
 #include <gtest/gtest.h>
@@ -36,6 +36,7 @@ struct Fake {
   std::vector<std::string> requests;  // what the daemon was asked
   std::vector<std::string> log;       // "level line"
   std::string answer_ack = "ok acknowledged: creep: nothing latched\n";
+  std::string answer_model = "ok model rollback: /srv/a.toml (hash 00000000000000aa)\n";
   bool daemon_down = false;
   std::optional<uid_t> uid = 1000;
   std::vector<uid_t> asked_uids;
@@ -46,7 +47,8 @@ struct Fake {
       const std::lock_guard l(m);
       requests.emplace_back(r);
       if (daemon_down) throw std::runtime_error("cannot connect to status.sock: No such file");
-      return r == "json" ? std::string(kStatus) + "\n" : answer_ack;
+      if (r == "json") return std::string(kStatus) + "\n";
+      return r.starts_with("model ") ? answer_model : answer_ack;
     };
     d.client_uid = [this](const Endpoint&, const Endpoint&) { return uid; };
     d.permission = [this](uid_t u) {
@@ -63,10 +65,11 @@ struct Fake {
     };
     return d;
   }
-  int acks() {
+  int asked(const std::string& request) {
     const std::lock_guard l(m);
-    return static_cast<int>(std::count(requests.begin(), requests.end(), "acknowledge"));
+    return static_cast<int>(std::count(requests.begin(), requests.end(), request));
   }
+  int acks() { return asked("acknowledge"); }
 };
 
 HttpRequest action(std::string body) {
@@ -166,7 +169,7 @@ TEST(PageService, EveryBadActionIsA4xxWithItsReasonAndTheDaemonIsNeverAsked) {
       {action(R"({"confirmed":true})"), 400, "\"action\" (a string) is missing"},
       {action(R"({"action":7,"confirmed":true})"), 400, "\"action\" (a string) is missing"},
       {action(R"({"action":"release","confirmed":true})"), 400,
-       "unknown action 'release' (known: acknowledge)"},
+       "unknown action 'release' (known: acknowledge, model_promote, model_rollback)"},
       {action(R"({"action":"acknowledge"})"), 400,
        "the action is not confirmed: \"confirmed\": true is required"},
       {action(R"({"action":"acknowledge","confirmed":"yes"})"), 400,
@@ -292,6 +295,54 @@ TEST(PageService, TheDaemonsRefusalOrAbsenceIsPassedOn) {
   EXPECT_EQ(error_of(r), "nccompd cannot be reached: cannot connect to status.sock: No such file");
   EXPECT_EQ(s.actions_done(), 0U);
   EXPECT_EQ(s.actions_refused(), 2U);
+}
+
+// The model's buttons go through the acknowledge path: each action becomes its own request.
+TEST(PageService, ModelPromoteAndRollbackAreCheckedLikeAcknowledge) {
+  for (const std::string name : {"model_promote", "model_rollback"}) {
+    SCOPED_TRACE(name);
+    const std::string request = name == "model_promote" ? "model promote" : "model rollback";
+    const std::string confirmed = R"({"action":")" + name + R"(","confirmed":true})";
+    Fake f;
+    PageService s(loopback_options(), f.deps());
+    // Not confirmed: refused before anyone is asked.
+    auto r = s.handle(action(R"({"action":")" + name + R"("})"));
+    EXPECT_EQ(r.status, 400);
+    EXPECT_EQ(error_of(r), "the action is not confirmed: \"confirmed\": true is required");
+    EXPECT_TRUE(f.asked_uids.empty());
+    // A user outside the admin group.
+    f.uid = 1001;
+    r = s.handle(action(confirmed));
+    EXPECT_EQ(r.status, 403);
+    EXPECT_EQ(error_of(r),
+              "permission denied: bob (uid 1001) is not root and not in group 'adm' "
+              "(--admin-group)");
+    ASSERT_EQ(f.log.size(), 1U);
+    EXPECT_EQ(f.log[0], "warning action refused: " + name +
+                            " by bob (uid 1001) from 127.0.0.1:54312: permission denied: bob (uid "
+                            "1001) is not root and not in group 'adm' (--admin-group)");
+    EXPECT_EQ(f.asked(request), 0);
+    // An allowed user: the daemon is sent the model request, its answer passed on.
+    f.uid = 1000;
+    r = s.handle(action(confirmed));
+    ASSERT_EQ(r.status, 200) << r.body;
+    EXPECT_EQ(json::parse(r.body).at("answer"), f.answer_model);
+    EXPECT_EQ(json::parse(r.body).at("by"), "alice (uid 1000)");
+    EXPECT_EQ(f.asked(request), 1);
+    EXPECT_EQ(f.log[1], "info action: " + name +
+                            " by alice (uid 1000) from 127.0.0.1:54312, sent to nccompd as the "
+                            "page's own user");
+    // The daemon refuses (no candidate announced, nothing kept for rollback): 409, counted.
+    f.answer_model = "error: model " + request.substr(6) + ": nothing to do\n";
+    r = s.handle(action(confirmed));
+    EXPECT_EQ(r.status, 409);
+    EXPECT_EQ(error_of(r), "nccompd refused: model " + request.substr(6) + ": nothing to do");
+    EXPECT_EQ(f.asked(request), 2);
+    EXPECT_EQ(f.acks(), 0);
+    EXPECT_EQ(s.actions_done(), 1U);
+    EXPECT_EQ(s.actions_refused(), 2U);
+    EXPECT_EQ(s.bad_requests(), 1U);
+  }
 }
 
 TEST(PageService, ASnapshotCarriesTheDaemonsStatusOrWhyNot) {

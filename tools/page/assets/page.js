@@ -133,6 +133,69 @@ function renderBuses(buses) {
   ])));
 }
 
+function modelText(r) {
+  if (!r || !r.file) return 'none';
+  return r.file + ' (hash ' + (r.hash || 'unknown') + ')' +
+    (r.since_utc ? ', live since ' + r.since_utc : '');
+}
+
+function scoreText(s) {
+  if (!s || !s.parts) return 'no part scored yet';
+  return s.parts + ' parts, mean squared error ' + fixed(s.mse_um2, 4) + ' µm²';
+}
+
+// What the model buttons may do now (set by renderModel, read by the dialog).
+let modelState = { promote: false, rollback: false, live: 'none', candidate: 'none', previous: 'none' };
+
+function renderModel(st) {
+  const m = st.model;
+  const sh = st.shadow;
+  $('model-card').hidden = !m && !sh;
+  if (!m && !sh) return;
+  const items = [];
+  if (m) {
+    items.push(['live model', modelText(m.live), 'live']);
+    items.push(['kept for rollback', modelText(m.previous), 'previous']);
+  }
+  let announced = false;
+  if (sh) {
+    announced = sh.phase === 'announced' && sh.promote === 'operator';
+    items.push(['live model\'s score', scoreText(sh.live), 'live_score']);
+    const other = sh.phase === 'watch' ? 'model the promotion replaced (watched)' : 'candidate in shadow';
+    items.push([other, sh.phase === 'none' ? 'none' : sh.other.file, 'other']);
+    if (sh.phase !== 'none') {
+      items.push([sh.phase === 'watch' ? 'its score' : 'candidate\'s score', scoreText(sh.other), 'other_score']);
+      items.push(['paired parts', sh.paired_parts + ': other better on ' + sh.other_better +
+        ', live better on ' + sh.live_better + ', ties ' + sh.ties + ', p = ' +
+        fixed(sh.p_value, 4), 'paired']);
+    }
+    const phases = {
+      none: 'no candidate', candidate: 'waiting: scoring the candidate',
+      announced: 'announced: the candidate is better, Promote makes it live',
+      watch: 'promoted: watching for a demotion',
+    };
+    items.push(['rule', (phases[sh.phase] || sh.phase) + ' (promote: ' + sh.promote + ', ' +
+      sh.decisions + ' decision(s))', 'phase']);
+  }
+  const h = st.handover || {};
+  items.push(['handovers', h.handovers + ' (registers rebased ' + h.rebased + ', not absorbed ' +
+    h.unabsorbed + '); last: largest trim change ' + fixed(h.last_trim_change_um, 3) + ' µm, ' +
+    fixed(h.last_unabsorbed_um, 3) + ' µm through the limiter', 'handovers']);
+  fillBody($('model'), items.map(([k, v, name]) => row([{ text: k }, { text: v, name: name }])));
+  modelState = {
+    promote: announced,
+    rollback: !!(m && m.previous && m.previous.file),
+    live: m ? modelText(m.live) : 'the live model',
+    candidate: sh && sh.phase !== 'none' ? sh.other.file : 'none',
+    previous: m ? modelText(m.previous) : 'the model kept for rollback',
+  };
+  $('promote').disabled = !actionsAllowed || !modelState.promote;
+  $('promote').title = modelState.promote ? '' :
+    'enabled when the rule announced a better candidate (promote = "operator")';
+  $('rollback').disabled = !actionsAllowed || !modelState.rollback;
+  $('rollback').title = modelState.rollback ? '' : 'no model kept for rollback';
+}
+
 let reportVersion = null;
 
 async function loadReport() {
@@ -170,8 +233,10 @@ function render(snap) {
   $('ack').title = actionsAllowed ? '' : 'actions are off on this page (listening beyond this host)';
   $('ack-who').textContent = 'Allowed: root and members of group ' + page.admin_group +
     ' (the user running this browser). nccomp-page and nccompd log who acknowledged.';
+  $('model-who').textContent = 'Allowed: root and members of group ' + page.admin_group +
+    ' (the user running this browser). nccomp-page and nccompd log who changed the model.';
   $('page-counters').textContent = 'nccomp-page: ' + page.actions_done + ' action(s) done, ' +
-    page.actions_refused + ' refused, ' + page.bad_requests + ' bad request(s); acknowledge: ' +
+    page.actions_refused + ' refused, ' + page.bad_requests + ' bad request(s); actions: ' +
     'root and group ' + page.admin_group;
   if (page.report && page.report_version !== reportVersion) {
     reportVersion = page.report_version;
@@ -202,6 +267,7 @@ function render(snap) {
   renderModules(st);
   renderAlarms(st.alarms || []);
   renderBuses(st.buses || []);
+  renderModel(st);
   document.body.dataset.cycles = st.loop ? st.loop.cycles : '';
 }
 
@@ -221,15 +287,14 @@ function connect() {
   };
 }
 
-async function acknowledge() {
-  const out = $('ack-result');
+async function sendAction(action, out) {
   out.className = 'result';
   out.textContent = 'sending…';
   try {
     const r = await fetch('/api/action', {
       method: 'POST',
       headers: { 'Content-Type': 'application/json' },
-      body: JSON.stringify({ action: 'acknowledge', confirmed: true }),
+      body: JSON.stringify({ action: action, confirmed: true }),
     });
     const body = await r.json();
     if (r.ok) {
@@ -252,7 +317,31 @@ document.addEventListener('DOMContentLoaded', () => {
     dialog.showModal();
   });
   dialog.addEventListener('close', () => {
-    if (dialog.returnValue === 'confirm') acknowledge();
+    if (dialog.returnValue === 'confirm') sendAction('acknowledge', $('ack-result'));
+  });
+  const modelDialog = $('model-dialog');
+  let modelAction = '';
+  const ask = (action) => {
+    if (!actionsAllowed) return;
+    modelAction = action;
+    if (action === 'model_promote') {
+      $('model-dialog-title').textContent = 'Promote the candidate?';
+      $('model-dialog-text').textContent = 'The candidate ' + modelState.candidate +
+        ' becomes the live model: every offset it computes is handed over through the limiter. ' +
+        'The live model ' + modelState.live + ' is kept for rollback and watched beside it.';
+    } else {
+      $('model-dialog-title').textContent = 'Roll back the live model?';
+      $('model-dialog-text').textContent = 'The live model ' + modelState.live +
+        ' is replaced by the model kept for rollback, ' + modelState.previous +
+        '; the offsets change to what that model computes, through the limiter.';
+    }
+    modelDialog.returnValue = '';
+    modelDialog.showModal();
+  };
+  $('promote').addEventListener('click', () => ask('model_promote'));
+  $('rollback').addEventListener('click', () => ask('model_rollback'));
+  modelDialog.addEventListener('close', () => {
+    if (modelDialog.returnValue === 'confirm') sendAction(modelAction, $('model-result'));
   });
   connect();
 });

@@ -1,0 +1,142 @@
+// Issue 21, session_offset in the daemon: GIVEN a model with a session term applied to a
+// register WHEN measurement records of the session arrive THEN the model module moves the trim to
+// −(posterior mean of the session's offset), allocation-free; a restart within the session
+// continues from the state file; a warm start is a new session that starts from the prior, 0.
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "core/engine/engine.hpp"
+#include "core/model/model.hpp"
+#include "core/model/model_module.hpp"
+#include "tests/support/alloc_counter.hpp"
+
+namespace cm = nccomp::core::model;
+namespace ce = nccomp::core::engine;
+namespace core = nccomp::core;
+
+namespace {
+
+/// Emits one contour measurement record (measured_um, applied 0) when one is pending: the
+/// measurements another module (S1) would log.
+class RecordModule final : public ce::Module {
+ public:
+  std::string_view name() const noexcept override { return "records"; }
+  void attach(const ce::RegisterTable&) override {}
+  void step(core::TimeNs now_ns, std::span<const core::Event>,
+            core::StepOutput& out) noexcept override {
+    if (!pending_) return;
+    core::MeasurementRecord r;
+    r.time_ns = now_ns;
+    r.kind = core::MeasurementKind::kContour;
+    r.measured_um = measured_um_;
+    out.records.push(r);
+    pending_ = false;
+  }
+  void measure(double um) {
+    measured_um_ = um;
+    pending_ = true;
+  }
+
+ private:
+  double measured_um_{0.0};
+  bool pending_{false};
+};
+
+struct SessionEngine {
+  std::unique_ptr<ce::Engine> engine;
+  cm::ModelModule* model{nullptr};
+  RecordModule* records{nullptr};
+};
+
+// session_offset (τ = 4 µm, σ = 1 µm, contour rows) applied to register 0 with gain −1.
+SessionEngine session_engine() {
+  cm::Term session;
+  session.spec.name = "session_offset";
+  session.spec.form = cm::Form::kSession;
+  session.spec.column = static_cast<int>(cm::kSessionColumn);
+  session.spec.per = {static_cast<int>(cm::kSessionColumn), -1};
+  session.spec.kind_mask = 0x2;
+  session.spec.scale = 4.0;
+  session.spec.center = 1.0;
+  cm::ModelApply a;
+  a.term_index = 0;
+  a.register_index = 0;
+  a.gain = -1.0;
+  SessionEngine s;
+  auto m = std::make_unique<cm::ModelModule>(cm::Model({}, {session}), std::vector{a}, false);
+  auto r = std::make_unique<RecordModule>();
+  s.model = m.get();
+  s.records = r.get();
+  std::vector<std::unique_ptr<ce::Module>> mods;
+  mods.push_back(std::move(r));
+  mods.push_back(std::move(m));
+  ce::RegisterSpec reg;
+  reg.name = "checkpoint_0";
+  reg.kind = ce::RegisterKind::kCheckpoint;
+  reg.limits.max_abs_um = 100.0;
+  reg.limits.max_step_um = 100.0;
+  reg.limits.max_rate_um_per_s = 1e6;
+  s.engine = std::make_unique<ce::Engine>();
+  s.engine->configure({reg}, std::move(mods), {});
+  return s;
+}
+
+}  // namespace
+
+// The daemon's side: the model module learns the session's offset from the cycle's measurement
+// records, allocation-free; the trim is −(posterior mean); the learning is its state, so a
+// restart within the session continues it; a warm start is a new session (back to 0).
+TEST(SessionOffsetDaemon, TheModelModuleLearnsEachSessionFromItsRecordsAndARestartContinues) {
+  SessionEngine s = session_engine();
+  core::StepOutput out;
+  std::int64_t t = 0;
+  std::size_t allocations = 0;
+  auto step = [&](SessionEngine& e, std::vector<core::Event> ev) {
+    const nccomp::test::AllocationScope scope;
+    e.engine->step(t += 1'000'000, ev, out);
+    allocations += scope.count() + scope.frees();
+  };
+  step(s, {});
+  EXPECT_DOUBLE_EQ(s.model->trim_um(0), 0.0);  // the prior mean
+  const std::array<double, 5> measured = {3.1, 2.6, 3.4, 2.9, 3.3};
+  std::array<double, 5> trims{};
+  for (std::size_t k = 0; k < measured.size(); ++k) {
+    s.records->measure(measured[k]);
+    step(s, {});  // the record is logged and observed
+    step(s, {});  // the trim follows
+    trims[k] = s.model->trim_um(0);
+  }
+  EXPECT_EQ(allocations, 0U);
+  EXPECT_NEAR(trims[0], -16.0 * 3.1 / 17.0, 1e-12);
+  EXPECT_NEAR(trims[1], -16.0 * 5.7 / 33.0, 1e-12);
+  EXPECT_NEAR(trims[4], -16.0 * 15.3 / 81.0, 1e-12);
+  EXPECT_NEAR(s.engine->register_state(0).output_um, trims[4], 1e-12);
+
+  // Restart within the session: the state file carries what was learned.
+  std::vector<std::byte> state(s.engine->state_capacity());
+  state.resize(s.engine->export_state(state));
+  SessionEngine s2 = session_engine();
+  ASSERT_TRUE(s2.engine->import_state(state, t + 1'000'000));
+  step(s2, {});
+  EXPECT_NEAR(s2.model->trim_um(0), trims[4], 1e-12);
+  s2.records->measure(2.7);
+  step(s2, {});
+  step(s2, {});
+  EXPECT_NEAR(s2.model->trim_um(0), -16.0 * 18.0 / 97.0, 1e-12);
+
+  // A warm start: a new session starts from the prior and learns from its own first record.
+  core::OperatorCommand warm;
+  warm.time_ns = t;
+  warm.sequence = 1;
+  warm.kind = core::OperatorCommandKind::kWarmStart;
+  step(s2, {warm});
+  EXPECT_DOUBLE_EQ(s2.model->trim_um(0), 0.0);
+  s2.records->measure(-2.0);
+  step(s2, {});
+  step(s2, {});
+  EXPECT_NEAR(s2.model->trim_um(0), 16.0 * 2.0 / 17.0, 1e-12);
+}
