@@ -60,7 +60,8 @@ class CreepModule final : public engine::Module, public engine::ToolWearTrimUser
     static constexpr std::uint32_t kVersion = 1;
     std::uint32_t version{kVersion};
     std::uint32_t reserved{0};
-    /// Per channel [µm]: added to the compensator's output (rebase_output(), bind_tool_wear_trims()).
+    /// Per channel [µm]: added to the compensator's output (rebase_output(),
+    /// bind_tool_wear_trims()).
     std::array<double, kChannelCount> shift_um{};
   };
 
@@ -126,10 +127,6 @@ class CreepModule final : public engine::Module, public engine::ToolWearTrimUser
   /// Without such trims it stays 0.
   void bind_tool_wear_trims(std::vector<const engine::ToolWearTrimSource*> sources) override {
     wear_sources_ = std::move(sources);
-  }
-  /// The residual shift of a channel [µm] (0 without trims).
-  [[nodiscard]] double residual_shift_um(Channel ch) const noexcept {
-    return residual_.shift_um[static_cast<std::size_t>(ch)];
   }
 
   /// Operator acknowledgement (`nccomp acknowledge`: an OperatorCommand kAcknowledge in step(),

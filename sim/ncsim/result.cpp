@@ -217,8 +217,10 @@ void write_result(const std::string& dir, const Simulation& sim, const RunInfo& 
     std::string indices;
     std::string values;
     for (const auto& [index, value] : sim.registers().held_values()) {
-      indices += (indices.empty() ? "" : ", ") + std::to_string(index);
-      values += (values.empty() ? "" : ", ") + num(value);
+      indices += indices.empty() ? "" : ", ";
+      indices += std::to_string(index);
+      values += values.empty() ? "" : ", ";
+      values += num(value);
     }
     e << "# Offset registers the NC held at the end (logical index, value [um]).\n"
       << "initial_register_indices = [" << indices << "]\ninitial_registers_um = [" << values
@@ -277,13 +279,15 @@ std::vector<std::string> continuation_overrides(const std::string& dir) {
       if (n->contains("initial_register_indices") || n->contains("initial_registers_um")) {
         std::string indices;
         for (const std::int64_t i : r.integer_list("initial_register_indices", 0, 65535)) {
-          indices += (indices.empty() ? "" : ",") + std::to_string(i);
+          indices += indices.empty() ? "" : ",";
+          indices += std::to_string(i);
         }
         std::string values;
         for (const double v : r.number_list("initial_registers_um", -1e6, 1e6)) {
           char b[64];
           std::snprintf(b, sizeof(b), "%.17g", v);
-          values += (values.empty() ? "" : ",") + std::string(b);
+          values += values.empty() ? "" : ",";
+          values += b;
         }
         out.push_back("ncsim.initial_register_indices=[" + indices + "]");
         out.push_back("ncsim.initial_registers_um=[" + values + "]");

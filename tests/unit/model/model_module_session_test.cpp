@@ -141,8 +141,8 @@ TEST(SessionOffsetDaemon, TheModelModuleLearnsEachSessionFromItsRecordsAndAResta
   EXPECT_NEAR(s2.model->trim_um(0), 16.0 * 2.0 / 17.0, 1e-12);
 }
 
-// The creep learns the residual of the trims the laser sees (CreepModule::bind_trims()): the
-// model module tells them apart by the entry's kind, per register.
+// The creep learns the residual of the trims the laser sees (CreepModule::bind_tool_wear_trims()):
+// the model module tells them apart by the entry's kind, per register.
 TEST(ModelModuleToolWearTrim, OnlyTheEntriesOfKindToolWearOnTheRegisterCount) {
   cm::Term offset;
   offset.spec.name = "offset";
