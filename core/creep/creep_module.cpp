@@ -223,7 +223,7 @@ double CreepModule::wear_trim_um(std::int32_t register_index) const noexcept {
   return sum_um;
 }
 
-void CreepModule::sync_residual() noexcept {
+void CreepModule::sync_residual(bool direct, TimeNs now_ns, StepOutput& out) noexcept {
   const auto& o = comp_.config().output;
   for (std::size_t ch = 0; ch < kChannelCount; ++ch) {
     const std::int32_t reg = o.channel_register[ch];
@@ -231,8 +231,14 @@ void CreepModule::sync_residual() noexcept {
     const double target_um = -wear_trim_um(reg);
     const double d_um = target_um - residual_.shift_um[ch];
     if (!std::isfinite(target_um) || !(std::fabs(d_um) > 0.0)) continue;
-    // The total stays where it is now and reaches the new shift along the creep profile.
-    if (fade_out_shift(ch, -d_um)) {
+    if (direct) {
+      // The register takes the new tool's value now (through the engine's limiter).
+      residual_.shift_um[ch] = target_um;
+      out.writes.push(OffsetWrite{now_ns, static_cast<std::uint16_t>(reg),
+                                  comp_.state().channel_output_um[ch] + target_um});
+      ++generation_;
+    } else if (fade_out_shift(ch, -d_um)) {
+      // The total stays where it is now and reaches the new shift along the creep profile.
       residual_.shift_um[ch] = target_um;
       ++generation_;
     }
@@ -346,11 +352,15 @@ void CreepModule::step(TimeNs now_ns, std::span<const Event> events, StepOutput&
   }
   const std::uint64_t accepted = comp_.counters().measurements_accepted;
   if (accepted != last_accepted_ || comp_.state().tool != tool_before) sync_steps_ = 2;
+  // Another tool: its own wear and the model's trim for it replace the old ones at once, so the
+  // shift does too (the old tool's share must not fade out over the new tool's cut).
+  if (comp_.state().tool != tool_before) sync_direct_ = true;
   last_accepted_ = accepted;
   if (sync_steps_ > 0 && !wear_sources_.empty()) {
     --sync_steps_;
-    sync_residual();
+    sync_residual(sync_direct_, now_ns, out);
   }
+  if (sync_steps_ == 0) sync_direct_ = false;
   // The cause of a flag that rose in this step: the first alarm (warning) the step raised (the
   // measurement's verdict comes before the limiter's alarms of the outputs). A flag restored
   // with a tool from the tool memory keeps the cause only if it is that tool's.

@@ -120,11 +120,12 @@ class CreepModule final : public engine::Module, public engine::ToolWearTrimUser
   bool rebase_output(std::uint16_t register_index, double delta_um,
                      TimeNs now_ns) noexcept override;
   /// The modules whose trims predict the tool's wear (engine::ToolWearTrimSource). At each
-  /// accepted measurement and tool change the residual shift of a channel is set to minus their
-  /// trims then in force on its register, so that the register holds the measured wear plus
-  /// what the trims predict since (the model predicts, the creep learns the residual); the
-  /// change enters without a step, fading in along the creep profile over one creep span.
-  /// Without such trims it stays 0.
+  /// accepted measurement the residual shift of a channel is set to minus their trims then in
+  /// force on its register, so that the register holds the measured wear plus what the trims
+  /// predict since (the model predicts, the creep learns the residual); the change enters
+  /// without a step, fading in along the creep profile over one creep span. At a tool change it
+  /// is set at once (the new tool's wear and trims replace the old ones). Without such trims it
+  /// stays 0.
   void bind_tool_wear_trims(std::vector<const engine::ToolWearTrimSource*> sources) override {
     wear_sources_ = std::move(sources);
   }
@@ -169,8 +170,9 @@ class CreepModule final : public engine::Module, public engine::ToolWearTrimUser
   /// adopted value does (AdoptedOutputs). Not yet measured after a start without state: held at
   /// the shifted value until the next measurement. False beyond max_abs_um.
   bool fade_out_shift(std::size_t ch, double delta_um) noexcept;
-  /// Sets the residual shifts to minus the tool wear trims in force (bind_tool_wear_trims()).
-  void sync_residual() noexcept;
+  /// Sets the residual shifts to minus the tool wear trims in force (bind_tool_wear_trims()),
+  /// faded in, or at once (direct: after a tool change).
+  void sync_residual(bool direct, TimeNs now_ns, StepOutput& out) noexcept;
   /// Σ of the sources' tool wear trims on a register [µm].
   [[nodiscard]] double wear_trim_um(std::int32_t register_index) const noexcept;
 
@@ -185,6 +187,7 @@ class CreepModule final : public engine::Module, public engine::ToolWearTrimUser
   /// Steps still to sync the residual after a measurement or tool change (the trimming module
   /// may step after this one: its new trim is seen one step later).
   int sync_steps_{0};
+  bool sync_direct_{false};
   std::uint64_t last_accepted_{0};
   std::uint64_t generation_{0};
   std::uint64_t last_events_{0};

@@ -47,8 +47,9 @@ class WearTrimZ final : public engine::Module, public engine::ToolWearTrimSource
   void step(TimeNs now_ns, std::span<const Event> events, StepOutput& out) noexcept override {
     for (const Event& e : events) {
       if (const auto* a = std::get_if<AxisSample>(&e)) path_ = a->program_path_mm;
+      if (std::holds_alternative<ToolChange>(e)) tool_start_ = path_;  // a new tool's path
     }
-    trim_ = -rate_ * path_;
+    trim_ = -rate_ * (path_ - tool_start_);
     out.trims.push(OffsetWrite{now_ns, 2, trim_});
   }
   std::uint64_t trim_identity() const noexcept override { return 11; }
@@ -57,6 +58,7 @@ class WearTrimZ final : public engine::Module, public engine::ToolWearTrimSource
   }
   double rate_;
   double path_{0.0};
+  double tool_start_{0.0};
   double trim_{0.0};
 };
 
@@ -81,6 +83,7 @@ struct Rig {
   double nc_z_um{0.0};
   double largest_z_change_um{0.0};
   std::vector<double> z_writes;
+  std::int32_t tool{1};
 
   explicit Rig(const TrimZ* model, const WearTrimZ* wear_model = nullptr) {
     const LimiterConfig lim{100.0, 50.0, 1e5};
@@ -109,13 +112,13 @@ struct Rig {
     AxisSample a;
     a.time_ns = now;
     a.program_path_mm = path;
-    a.tool = 1;
+    a.tool = tool;
     ev.emplace_back(a);
     step();
   }
   void measure(double w) {
     ToolMeasurement m;
-    m.tool = 1;
+    m.tool = tool;
     m.wear_um[0] = w;
     now += 1'000'000;
     ev.emplace_back(m);
@@ -273,6 +276,27 @@ TEST(CreepHandover, AToolWearTermIsNotCountedTwiceTheCreepLearnsItsResidual) {
   none.measure(kRate * 720.0);
   cut_to(none, 780.0);
   EXPECT_NEAR(none.z_um(), -72.0, 1e-9);
+}
+
+TEST(CreepHandover, AnotherToolStartsFromItsOwnWearAndTheModelsTrimForIt) {
+  // GIVEN the model from the start and tool 1 measured at 100 mm: Z holds the true wear.
+  const WearTrimZ model(kRate);
+  Rig r(nullptr, &model);
+  r.ev.emplace_back(ToolChange{r.now, 1, false});
+  cut_to(r, 100.0);
+  r.measure(kRate * 100.0);
+  cut_to(r, 160.0);
+  ASSERT_NEAR(r.z_um(), -16.0, 1e-9);
+  // WHEN a new tool comes in: THEN Z is the new tool's (no wear, no trim yet) at once, not the
+  // old tool's share of the model fading out over the new tool's cut...
+  r.tool = 2;
+  r.ev.emplace_back(ToolChange{r.now, 2, false});
+  r.advance(0.0);
+  r.advance(0.0);
+  EXPECT_NEAR(r.z_um(), 0.0, 1e-9);
+  // ...and the model predicts the new tool's wear from its first millimetre.
+  cut_to(r, 210.0);
+  EXPECT_NEAR(r.z_um(), -kRate * 50.0, 1e-9);
 }
 
 TEST(CreepHandover, TheHandoverStepAllocatesNothing) {
