@@ -199,6 +199,54 @@ bool CreepModule::rebase_output(std::uint16_t register_index, double delta_um,
     }
   }
   if (ch == kChannelCount || !std::isfinite(delta_um)) return false;
+  // The tool_wear trims now in force take the residual shift at once and for good (the laser
+  // sees what they predict); the rest of the change fades out as before (what it does not see).
+  const double wear_um = wear_trim_um(register_index);
+  if (!std::isfinite(wear_um)) return false;
+  const double shift_um = -wear_um;
+  const double fade_um = delta_um - (shift_um - residual_.shift_um[ch]);
+  if (!(std::fabs(comp_.state().channel_output_um[ch] + fade_um + shift_um) <=
+        c.limiter.max_abs_um)) {
+    return false;
+  }
+  if (std::fabs(fade_um) > 1e-12 && !fade_out_shift(ch, fade_um)) return false;
+  residual_.shift_um[ch] = shift_um;
+  ++generation_;
+  return true;
+}
+
+double CreepModule::wear_trim_um(std::int32_t register_index) const noexcept {
+  double sum_um = 0.0;
+  for (const auto* s : wear_sources_) {
+    sum_um += s->tool_wear_trim_um(static_cast<std::uint16_t>(register_index));
+  }
+  return sum_um;
+}
+
+void CreepModule::sync_residual(bool direct, TimeNs now_ns, StepOutput& out) noexcept {
+  const auto& o = comp_.config().output;
+  for (std::size_t ch = 0; ch < kChannelCount; ++ch) {
+    const std::int32_t reg = o.channel_register[ch];
+    if (reg < 0) continue;
+    const double target_um = -wear_trim_um(reg);
+    const double d_um = target_um - residual_.shift_um[ch];
+    if (!std::isfinite(target_um) || !(std::fabs(d_um) > 0.0)) continue;
+    if (direct) {
+      // The register takes the new tool's value now (through the engine's limiter).
+      residual_.shift_um[ch] = target_um;
+      out.writes.push(OffsetWrite{now_ns, static_cast<std::uint16_t>(reg),
+                                  comp_.state().channel_output_um[ch] + target_um});
+      ++generation_;
+    } else if (fade_out_shift(ch, -d_um)) {
+      // The total stays where it is now and reaches the new shift along the creep profile.
+      residual_.shift_um[ch] = target_um;
+      ++generation_;
+    }
+  }
+}
+
+bool CreepModule::fade_out_shift(std::size_t ch, double delta_um) noexcept {
+  const auto& c = comp_.config();
   CreepState s = comp_.export_state();
   const double output_um = s.channel_output_um[ch] + delta_um;
   if (!(std::fabs(output_um) <= c.limiter.max_abs_um)) return false;
@@ -243,7 +291,6 @@ bool CreepModule::rebase_output(std::uint16_t register_index, double delta_um,
   if (!comp_.rebase_state(s)) return false;  // the tool's motion goes on
   comp_.restore_adoption(a);
   if (rearming) comp_.rearm_request();
-  ++generation_;
   return true;
 }
 
@@ -291,7 +338,29 @@ void CreepModule::step(TimeNs now_ns, std::span<const Event> events, StepOutput&
   const bool alarm_before = comp_.state().alarm_flag;
   const bool warning_before = comp_.state().warning_flag;
   const std::size_t alarms_before = out.alarms.size();
+  const std::size_t writes_before = out.writes.size();
+  const std::int32_t tool_before = comp_.state().tool;
   comp_.step(now_ns, events, out);
+  // The channel registers get the residual shift on top of the compensator's output.
+  const auto& reg = comp_.config().output.channel_register;
+  for (std::size_t i = writes_before; i < out.writes.size(); ++i) {
+    for (std::size_t ch = 0; ch < kChannelCount; ++ch) {
+      if (reg[ch] >= 0 && out.writes[i].register_index == static_cast<std::uint16_t>(reg[ch])) {
+        out.writes[i].value_um += residual_.shift_um[ch];
+      }
+    }
+  }
+  const std::uint64_t accepted = comp_.counters().measurements_accepted;
+  if (accepted != last_accepted_ || comp_.state().tool != tool_before) sync_steps_ = 2;
+  // Another tool: its own wear and the model's trim for it replace the old ones at once, so the
+  // shift does too (the old tool's share must not fade out over the new tool's cut).
+  if (comp_.state().tool != tool_before) sync_direct_ = true;
+  last_accepted_ = accepted;
+  if (sync_steps_ > 0 && !wear_sources_.empty()) {
+    --sync_steps_;
+    sync_residual(sync_direct_, now_ns, out);
+  }
+  if (sync_steps_ == 0) sync_direct_ = false;
   // The cause of a flag that rose in this step: the first alarm (warning) the step raised (the
   // measurement's verdict comes before the limiter's alarms of the outputs). A flag restored
   // with a tool from the tool memory keeps the cause only if it is that tool's.
@@ -346,6 +415,8 @@ std::size_t CreepModule::save_state(std::span<std::byte> buf) const noexcept {
   std::memcpy(buf.data() + sizeof(CreepState), &comp_.tool_memory(), sizeof(ToolMemory));
   std::memcpy(buf.data() + sizeof(CreepState) + sizeof(ToolMemory), &comp_.adoption(),
               sizeof(AdoptedOutputs));
+  std::memcpy(buf.data() + sizeof(CreepState) + sizeof(ToolMemory) + sizeof(AdoptedOutputs),
+              &residual_, sizeof(ResidualShift));
   return state_capacity();
 }
 
@@ -433,6 +504,15 @@ static_assert(LayoutV4::kBytes != LayoutV1::kBytes && LayoutV4::kBytes != Layout
               LayoutV4::kBytes + kAdoption != kBytesWithoutAdoption &&
               LayoutV4::kBytes + kAdoption != kBytesWithoutAdoption + kAdoption);
 
+// With the residual shift: told apart from every older layout by its size too.
+constexpr std::size_t kBytesWithResidual =
+    kBytesWithoutAdoption + kAdoption + sizeof(CreepModule::ResidualShift);
+static_assert(kBytesWithResidual != LayoutV1::kBytes && kBytesWithResidual != LayoutV2::kBytes &&
+              kBytesWithResidual != LayoutV3::kBytes &&
+              kBytesWithResidual != LayoutV3::kBytes + kAdoption &&
+              kBytesWithResidual != LayoutV4::kBytes &&
+              kBytesWithResidual != LayoutV4::kBytes + kAdoption);
+
 }  // namespace
 
 template <class Layout>
@@ -480,6 +560,9 @@ bool CreepModule::load_state_old(std::span<const std::byte> bytes) noexcept {
   if (!comp_.restore_tool_memory(scratch_memory_)) return false;
   (void)comp_.restore_state(st);  // cannot fail: checked above
   comp_.restore_adoption(adoption);
+  residual_ = ResidualShift{};
+  last_accepted_ = comp_.counters().measurements_accepted;
+  sync_steps_ = 0;
   alarm_cause_ = AlarmCode::kNone;
   warning_cause_ = AlarmCode::kNone;
   ++generation_;
@@ -495,8 +578,18 @@ bool CreepModule::load_state(std::span<const std::byte> bytes) noexcept {
   if (bytes.size() == LayoutV4::kBytes || bytes.size() == LayoutV4::kBytes + kAdoption) {
     return load_state_old<LayoutV4>(bytes);
   }
-  AdoptedOutputs adoption{};
+  // A state written before the residual shift ends with the AdoptedOutputs.
+  ResidualShift residual{};
   if (bytes.size() == state_capacity()) {
+    std::memcpy(&residual, bytes.data() + kBytesWithoutAdoption + kAdoption, sizeof residual);
+    if (residual.version != ResidualShift::kVersion) return false;
+    for (const double v : residual.shift_um) {
+      if (!(std::fabs(v) <= comp_.config().limiter.max_abs_um)) return false;
+    }
+    bytes = bytes.first(kBytesWithoutAdoption + kAdoption);
+  }
+  AdoptedOutputs adoption{};
+  if (bytes.size() == kBytesWithoutAdoption + kAdoption) {
     if (!adoption_bytes_loadable(bytes.data() + kBytesWithoutAdoption, sizeof(AdoptedOutputs),
                                  adoption)) {
       return false;
@@ -516,6 +609,9 @@ bool CreepModule::load_state(std::span<const std::byte> bytes) noexcept {
   if (!comp_.restore_tool_memory(scratch_memory_)) return false;
   (void)comp_.restore_state(st);  // cannot fail: checked above
   comp_.restore_adoption(adoption);
+  residual_ = residual;
+  last_accepted_ = comp_.counters().measurements_accepted;
+  sync_steps_ = 0;
   // A flag of the restored state was raised by another process: its cause is not known here.
   alarm_cause_ = AlarmCode::kNone;
   warning_cause_ = AlarmCode::kNone;

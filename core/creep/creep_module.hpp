@@ -6,12 +6,14 @@
 #include <array>
 #include <cstdint>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/common/profile.hpp"
 #include "core/creep/config.hpp"
 #include "core/creep/wear_compensator.hpp"
 #include "core/engine/engine.hpp"
+#include "core/engine/tool_wear_trims.hpp"
 
 namespace nccomp::core::creep {
 
@@ -34,7 +36,7 @@ struct CreepModuleConfig {
   CreepConfig creep{};
 };
 
-class CreepModule final : public engine::Module {
+class CreepModule final : public engine::Module, public engine::ToolWearTrimUser {
  public:
   /// Not real-time. Stores the config; everything is validated at attach(), when the register
   /// names can be resolved.
@@ -53,12 +55,22 @@ class CreepModule final : public engine::Module {
   /// Real-time safe.
   void step(TimeNs now_ns, std::span<const Event> events, StepOutput& out) noexcept override;
 
+  /// The residual shift saved after the AdoptedOutputs (version 1).
+  struct ResidualShift {
+    static constexpr std::uint32_t kVersion = 1;
+    std::uint32_t version{kVersion};
+    std::uint32_t reserved{0};
+    /// Per channel [µm]: added to the compensator's output (rebase_output(),
+    /// bind_tool_wear_trims()).
+    std::array<double, kChannelCount> shift_um{};
+  };
+
   [[nodiscard]] std::size_t state_capacity() const noexcept override {
-    return sizeof(CreepState) + sizeof(ToolMemory) + sizeof(AdoptedOutputs);
+    return sizeof(CreepState) + sizeof(ToolMemory) + sizeof(AdoptedOutputs) + sizeof(ResidualShift);
   }
   /// Real-time safe: the plain-data CreepState of the active tool, then the ToolMemory of the
   /// tools out of the spindle, then what was adopted at a start without state (AdoptedOutputs),
-  /// byte for byte.
+  /// then the ResidualShift, byte for byte.
   std::size_t save_state(std::span<std::byte> buf) const noexcept override;
   /// Real-time safe: false if the bytes are not a state valid for this config (the module then
   /// keeps its fresh state). A state written by version 1 of the layout (before the eased
@@ -66,7 +78,7 @@ class CreepModule final : public engine::Module {
   /// (core/creep/state_v1.hpp, state_v2.hpp); version 3 (before the wear estimator) and 4
   /// (before the learned process noise) too, with or without their AdoptedOutputs
   /// (state_v3.hpp, state_v4.hpp); one without the AdoptedOutputs (before start-up
-  /// adoption) loads with nothing adopted.
+  /// adoption) loads with nothing adopted, one without the ResidualShift with none.
   bool load_state(std::span<const std::byte> bytes) noexcept override;
   /// Advances on every discrete change (measurement, tool change, halt), every 1 mm of cut
   /// path while creeps, entries or predictions are in progress, and when the held surface
@@ -95,17 +107,28 @@ class CreepModule final : public engine::Module {
   /// request and the restart path are recomputed (false).
   bool adopt_output(std::uint16_t register_index, double nc_value_um, TimeNs now_ns) override;
   /// Trim handover (core/engine/engine.hpp): a channel register's target moves by delta_um at
-  /// once (its value and limiter with it, the register's total stays), and the shift fades out
-  /// along the creep profile over one creep span from the current creep clock, as an adopted
-  /// value does (AdoptedOutputs, saved with the state). The laser measures the tool itself, not
-  /// the residual of a compensated part: a model's term on this register predicts what the
-  /// creep does not see (the analysis fits the contour error after S0's correction), so the
-  /// change is fed in, without a step. Started without state and not yet measured: the channel
-  /// is held at the shifted value until the next measurement. The tool's motion goes on (feed
-  /// direction, cut path: WearCompensator::rebase_state()). False for a flag register or a value
-  /// beyond max_abs_um. Real-time safe.
+  /// once (the register's total stays). The laser measures the tool's whole wear, so the part
+  /// of the new trims that predicts it (ToolWearTrimSource::tool_wear_trim_um(), a model's
+  /// tool_wear terms) must not be added to it a second time: the channel's residual shift (saved
+  /// with the state) becomes minus those trims, at once and for good. The rest of delta_um (the
+  /// change of trims the laser does not see, e.g. contour terms) moves the compensator's output and
+  /// fades out along the creep profile over one creep span from the current creep clock, as an
+  /// adopted value does (AdoptedOutputs): such a trim comes in without a step. Started without
+  /// state and not yet measured: that part is held until the next measurement. The tool's motion
+  /// goes on (feed direction, cut path: WearCompensator::rebase_state()). False for a flag
+  /// register or a value beyond max_abs_um. Real-time safe.
   bool rebase_output(std::uint16_t register_index, double delta_um,
                      TimeNs now_ns) noexcept override;
+  /// The modules whose trims predict the tool's wear (engine::ToolWearTrimSource). At each
+  /// accepted measurement the residual shift of a channel is set to minus their trims then in
+  /// force on its register, so that the register holds the measured wear plus what the trims
+  /// predict since (the model predicts, the creep learns the residual); the change enters
+  /// without a step, fading in along the creep profile over one creep span. At a tool change it
+  /// is set at once (the new tool's wear and trims replace the old ones). Without such trims it
+  /// stays 0.
+  void bind_tool_wear_trims(std::vector<const engine::ToolWearTrimSource*> sources) override {
+    wear_sources_ = std::move(sources);
+  }
   /// A reload carries the tool's motion into the next engine's creep (WearCompensator::
   /// save_motion()). Real-time safe.
   std::size_t save_motion(std::span<std::byte> buf) const noexcept override {
@@ -150,6 +173,16 @@ class CreepModule final : public engine::Module {
   /// A state of an older layout (LayoutV1, LayoutV2 in creep_module.cpp), converted.
   template <class Layout>
   bool load_state_old(std::span<const std::byte> bytes) noexcept;
+  /// Moves channel ch's output by delta_um at once (its value and limiter with it), the shift
+  /// fading out along the creep profile over one creep span from the current creep clock, as an
+  /// adopted value does (AdoptedOutputs). Not yet measured after a start without state: held at
+  /// the shifted value until the next measurement. False beyond max_abs_um.
+  bool fade_out_shift(std::size_t ch, double delta_um) noexcept;
+  /// Sets the residual shifts to minus the tool wear trims in force (bind_tool_wear_trims()),
+  /// faded in, or at once (direct: after a tool change).
+  void sync_residual(bool direct, TimeNs now_ns, StepOutput& out) noexcept;
+  /// Σ of the sources' tool wear trims on a register [µm].
+  [[nodiscard]] double wear_trim_um(std::int32_t register_index) const noexcept;
 
   CreepModuleConfig config_;
   WearCompensator comp_;
@@ -157,6 +190,13 @@ class CreepModule final : public engine::Module {
   ProfileTable fade_table_{};
   /// Where load_state() decodes the tool memory (56 kB: not on the loop thread's stack).
   ToolMemory scratch_memory_{};
+  std::vector<const engine::ToolWearTrimSource*> wear_sources_;
+  ResidualShift residual_{};
+  /// Steps still to sync the residual after a measurement or tool change (the trimming module
+  /// may step after this one: its new trim is seen one step later).
+  int sync_steps_{0};
+  bool sync_direct_{false};
+  std::uint64_t last_accepted_{0};
   std::uint64_t generation_{0};
   std::uint64_t last_events_{0};
   std::int32_t last_tool_{0};

@@ -9,6 +9,8 @@
 #include <type_traits>
 #include <utility>
 
+#include "core/engine/tool_wear_trims.hpp"
+
 namespace nccomp::core::engine {
 
 namespace {
@@ -313,6 +315,14 @@ void Engine::configure(std::vector<RegisterSpec> registers,
   valid_.clear();
   valid_.reserve(options.max_events_per_step);
   trims_.assign(modules_.size() * regs_.size(), std::numeric_limits<double>::quiet_NaN());
+  // The tool wear some trims predict, for the module that learns it from the tool measurement.
+  std::vector<const ToolWearTrimSource*> wear_sources;
+  for (const auto& m : modules_) {
+    if (const auto* s = dynamic_cast<const ToolWearTrimSource*>(m.get())) wear_sources.push_back(s);
+  }
+  for (auto& m : modules_) {
+    if (auto* u = dynamic_cast<ToolWearTrimUser*>(m.get())) u->bind_tool_wear_trims(wear_sources);
+  }
   handover_trim_um_.assign(regs_.size(), 0.0);
   handover_identity_.assign(regs_.size(), 0);
   handover_known_.assign(regs_.size(), 0);

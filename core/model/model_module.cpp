@@ -215,6 +215,16 @@ void ModelModule::evaluate(core::TimeNs now_ns, core::StepOutput& out) noexcept 
   }
 }
 
+double ModelModule::tool_wear_trim_um(std::uint16_t register_index) const noexcept {
+  double sum_um = 0.0;
+  for (std::size_t i = 0; i < applies_.size(); ++i) {
+    if (applies_[i].register_index == register_index && !(std::fabs(applies_[i].kind) > 0.0)) {
+      sum_um += trims_um_[i];
+    }
+  }
+  return sum_um;
+}
+
 void ModelModule::observe_record(const core::MeasurementRecord& record) noexcept {
   if (model_.session_term() < 0) return;
   // The record's row as the log has it (time since the warm start, its session), the extra

@@ -26,6 +26,7 @@
 
 #include "core/engine/context.hpp"
 #include "core/engine/engine.hpp"
+#include "core/engine/tool_wear_trims.hpp"
 #include "core/model/model.hpp"
 
 namespace nccomp::core::model {
@@ -51,7 +52,7 @@ struct ModelInput {
   int sensor{0};
 };
 
-class ModelModule final : public core::engine::Module {
+class ModelModule final : public core::engine::Module, public core::engine::ToolWearTrimSource {
  public:
   /// update_each_cycle: re-evaluate every cycle (time / temperature / position / path terms);
   /// otherwise at start-up, part start, tool change and warm start only (the trim is constant
@@ -62,6 +63,9 @@ class ModelModule final : public core::engine::Module {
   ModelModule& operator=(const ModelModule&) = delete;
 
   std::string_view name() const noexcept override { return "model"; }
+  /// Real-time safe. The sum of the last trims of the entries on register_index whose kind is
+  /// tool_wear (the laser's rows: it measures the wear they predict).
+  [[nodiscard]] double tool_wear_trim_um(std::uint16_t register_index) const noexcept override;
   /// Checks the register indices (offset registers only: a trim on a flag makes no sense).
   void attach(const core::engine::RegisterTable& registers) override;
   void bind_context(const core::engine::MachineContext& context) override;

@@ -55,6 +55,9 @@ class Reader {
       out = Vec3{v[0], v[1], v[2]};
     }
   }
+  [[nodiscard]] std::vector<double> numbers(std::string_view key, double lo, double hi) {
+    return r_.number_list(key, lo, hi);
+  }
   /// Register indices.
   void int_list(std::string_view key, std::vector<std::int32_t>& out) {
     const bool present = r_.node().contains(key);
@@ -543,6 +546,14 @@ SimConfig parse_sim_config(std::string_view text, const std::string& file,
     n.integer("parts", c.parts, 1, 100000);
     n.integer("first_part", c.first_part, 1, 1000000);
     n.number("tool_cut_path_mm", c.tool_cut_path_mm, 0.0, 1e9);
+    n.int_list("initial_register_indices", c.initial_register_indices);
+    c.initial_registers_um = n.numbers("initial_registers_um", -1e6, 1e6);
+    if (c.initial_registers_um.size() != c.initial_register_indices.size()) {
+      n.error("initial_registers_um", "has " + std::to_string(c.initial_registers_um.size()) +
+                                          " values for the " +
+                                          std::to_string(c.initial_register_indices.size()) +
+                                          " registers of initial_register_indices");
+    }
     // The maps' files: resolved against the config's folder, read unless only the text is checked.
     const auto read_map = [&](std::string_view key, std::string& f) {
       f = resolve(base_dir, f);

@@ -143,6 +143,19 @@ bool ModbusLink::filter(const modbus_nc::WriteRecord& w) {
   return true;
 }
 
+void ModbusLink::preset_offsets(const std::vector<std::pair<std::uint16_t, double>>& values) {
+  server_.update([&](Tables& t) {
+    for (const auto& [index, value] : values) {
+      for (const mb::OffsetMap& om : map_.offsets) {
+        if (om.register_index == index) {
+          (void)mb::encode(value, om.encoding,
+                           t.holding.subspan(om.address, mb::width(om.encoding.type)));
+        }
+      }
+    }
+  });
+}
+
 std::vector<ReceivedOffset> ModbusLink::take_writes() {
   const std::lock_guard<std::mutex> lock(mutex_);
   std::vector<ReceivedOffset> out;

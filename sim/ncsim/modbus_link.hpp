@@ -40,6 +40,8 @@ class ModbusLink final : public NcLink {
   bool after_done(std::uint64_t /*cycle*/, double /*timeout_s*/) override { return true; }
   /// Offset writes accepted since the last call, in arrival order.
   std::vector<ReceivedOffset> take_writes() override;
+  /// The holding registers of the preset offsets, encoded as the daemon writes them.
+  void preset_offsets(const std::vector<std::pair<std::uint16_t, double>>& values) override;
   /// Events not mapped in the register map (never published).
   [[nodiscard]] std::uint64_t events_unmapped() const noexcept { return unmapped_; }
   [[nodiscard]] std::uint64_t writes_refused() const override;

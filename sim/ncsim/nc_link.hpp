@@ -32,6 +32,11 @@ class NcLink {
   virtual bool after_done(std::uint64_t cycle, double timeout_s) = 0;
   /// Accepted offset writes since the last call, in arrival order.
   virtual std::vector<ReceivedOffset> take_writes() = 0;
+  /// Before start(): the offset registers the NC holds when the run starts, so that a daemon
+  /// reading them back sees them (a continued run). Default: the bus has no read-back.
+  virtual void preset_offsets(const std::vector<std::pair<std::uint16_t, double>>& values) {
+    (void)values;
+  }
   /// Writes refused by the NC's range check on the bus side.
   [[nodiscard]] virtual std::uint64_t writes_refused() const = 0;
   /// Events still waiting to be published.

@@ -51,6 +51,27 @@ bool OffsetRegisters::known(std::int32_t register_index) const {
          known_[static_cast<std::size_t>(register_index)];
 }
 
+bool OffsetRegisters::preset(std::uint16_t register_index, double value_um) {
+  if (!known_[register_index] || !std::isfinite(value_um) || std::fabs(value_um) > limit_um_) {
+    return false;
+  }
+  value_[register_index] = value_um;
+  last_written_[register_index] = value_um;
+  preset_.push_back(register_index);
+  return true;
+}
+
+std::vector<std::pair<std::uint16_t, double>> OffsetRegisters::held_values() const {
+  std::vector<bool> seen(kRegisterSpace, false);
+  for (const std::uint16_t i : preset_) seen[i] = true;
+  for (const WriteRow& w : log_) seen[w.register_index] = true;
+  std::vector<std::pair<std::uint16_t, double>> out;
+  for (std::size_t i = 0; i < kRegisterSpace; ++i) {
+    if (seen[i]) out.emplace_back(static_cast<std::uint16_t>(i), last_written_[i]);
+  }
+  return out;
+}
+
 std::vector<std::pair<std::uint16_t, double>> OffsetRegisters::last_values() const {
   std::vector<std::pair<std::uint16_t, double>> out;
   std::vector<bool> seen(kRegisterSpace, false);

@@ -33,6 +33,12 @@ class OffsetRegisters {
   /// The value in force (after advance()); 0 for an unknown register.
   [[nodiscard]] double value(std::int32_t register_index) const;
   [[nodiscard]] bool known(std::int32_t register_index) const;
+  /// The value the register holds when the run starts (not a write: not logged). False for an
+  /// unknown register or a value out of range.
+  bool preset(std::uint16_t register_index, double value_um);
+  /// Every known register that was preset or written, with its last value (in force or
+  /// pending), by index.
+  [[nodiscard]] std::vector<std::pair<std::uint16_t, double>> held_values() const;
   /// Every accepted write, in order.
   [[nodiscard]] const std::vector<WriteRow>& log() const noexcept { return log_; }
   [[nodiscard]] std::size_t refused() const noexcept { return refused_; }
@@ -51,6 +57,7 @@ class OffsetRegisters {
   std::vector<double> last_written_;
   std::deque<Pending> pending_;  // ordered by effective time (latency is constant)
   std::vector<WriteRow> log_;
+  std::vector<std::uint16_t> preset_;
   double limit_um_;
   double latency_s_;
   std::size_t refused_{0};

@@ -213,6 +213,18 @@ void write_result(const std::string& dir, const Simulation& sim, const RunInfo& 
       << "` starts the next run here.\n[ncsim]\n# The next part's number.\nfirst_part = "
       << end.next_part << "\n# Cut path of the tool in the spindle [mm] (its wear continues).\n"
       << "tool_cut_path_mm = " << std::fixed << end.tool_cut_path_mm << '\n';
+    // The NC keeps its offset registers: the continued run starts with them in force.
+    std::string indices;
+    std::string values;
+    for (const auto& [index, value] : sim.registers().held_values()) {
+      indices += indices.empty() ? "" : ", ";
+      indices += std::to_string(index);
+      values += values.empty() ? "" : ", ";
+      values += num(value);
+    }
+    e << "# Offset registers the NC held at the end (logical index, value [um]).\n"
+      << "initial_register_indices = [" << indices << "]\ninitial_registers_um = [" << values
+      << "]\n";
     e.close();
     if (!e) {
       throw std::runtime_error("write failed: " + (d / "end_state.toml").string());
@@ -263,6 +275,22 @@ std::vector<std::string> continuation_overrides(const std::string& dir) {
           val += ".0";
         }
         out.push_back("ncsim.tool_cut_path_mm=" + val);
+      }
+      if (n->contains("initial_register_indices") || n->contains("initial_registers_um")) {
+        std::string indices;
+        for (const std::int64_t i : r.integer_list("initial_register_indices", 0, 65535)) {
+          indices += indices.empty() ? "" : ",";
+          indices += std::to_string(i);
+        }
+        std::string values;
+        for (const double v : r.number_list("initial_registers_um", -1e6, 1e6)) {
+          char b[64];
+          std::snprintf(b, sizeof(b), "%.17g", v);
+          values += values.empty() ? "" : ",";
+          values += b;
+        }
+        out.push_back("ncsim.initial_register_indices=[" + indices + "]");
+        out.push_back("ncsim.initial_registers_um=[" + values + "]");
       }
     } else if (!t.contains("ncsim")) {
       top.error("ncsim", "missing [ncsim] table");

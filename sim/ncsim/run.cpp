@@ -75,6 +75,7 @@ RunSummary run(const SimConfig& config, const RunOptions& options) {
   std::unique_ptr<NcLink> link_ptr = make_link(config, options.bus, known, poll_rate_hz);
   NcLink& link = *link_ptr;
   Simulation sim(config, options.program, known);
+  link.preset_offsets(sim.registers().held_values());
   link.start();
   const auto period_ns =
       static_cast<core::TimeNs>(std::llround(core::kNsPerS / config.lockstep_rate_hz));

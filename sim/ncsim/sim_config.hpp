@@ -170,6 +170,10 @@ struct SimConfig {
   /// continues from there).
   std::int32_t first_part{1};
   double tool_cut_path_mm{0.0};
+  /// Offset registers in force at the start (a continued run: what the NC held at the end of
+  /// the run it continues), by logical index; the two lists have the same length.
+  std::vector<std::int32_t> initial_register_indices;
+  std::vector<double> initial_registers_um;
   NcConfig nc{};
   EffectsConfig effects{};
   MouldFaceConfig mould_face{};

@@ -530,6 +530,15 @@ Simulation::Simulation(const SimConfig& config, ProgramKind program,
     : config_(config),
       model_(config.effects, config.seed),
       registers_(known_registers, config.nc.offset_limit_um, config.nc.latency_s) {
+  for (std::size_t k = 0; k < config.initial_register_indices.size(); ++k) {
+    const std::int32_t i = config.initial_register_indices[k];
+    if (!registers_.preset(static_cast<std::uint16_t>(i), config.initial_registers_um[k])) {
+      throw std::runtime_error("ncsim.initial_registers_um: register " + std::to_string(i) +
+                               " is not an offset register of the bus map, or " +
+                               std::to_string(config.initial_registers_um[k]) +
+                               " um is beyond nc.offset_limit_um");
+    }
+  }
   switch (program) {
     case ProgramKind::kMouldFace:
       program_ = std::make_unique<MouldFace>(config_);

@@ -10,6 +10,8 @@ directory with `nccomp report --json`.
 
   nccomp_e2e.py --bin-dir BUILD --source SRC --work DIR scenario NAME
   nccomp_e2e.py --bin-dir BUILD --source SRC --work DIR demo [--realtime SPEED]
+
+demo: the four modes, the loop (run_demo) and WORK/summary.json.
 """
 
 import argparse
@@ -94,7 +96,7 @@ def free_port():
 # ---------------------------------------------------------------------------------------------
 # Configs
 
-PATH_KEYS = re.compile(r'^(\s*(?:[a-z_]*bus_map|[a-z_]*_file)\s*=\s*)"([^"]*)"', re.M)
+PATH_KEYS = re.compile(r'^(\s*(?:[a-z_]*bus_map|(?:[a-z_]*_)?file)\s*=\s*)"([^"]*)"', re.M)
 # Keys that hold a list of files: the daemon's include, ncsim's extra map files.
 PATH_LISTS = re.compile(r'^(\s*(?:include|bus_map_extra|can_bus_map_extra)\s*=\s*)\[([^\]]*)\]',
                         re.M)
@@ -456,10 +458,13 @@ def run_modes(b, source, work, echo=print, speed=None, prefix="", seed=1, parall
 
 
 def modes_table(results):
+    """The table of the modes in results (MODES' order, then the demo's model row)."""
     lines = ["| mode | max step within a pass [um] | largest offset change [um] | "
              "form error RMS [um] | form error max [um] | offset writes |",
              "| --- | --- | --- | --- | --- | --- |"]
-    for key, label, _ in MODES:
+    for key, label in [(k, l) for k, l, _ in MODES] + [LOOP_MODE]:
+        if key not in results:
+            continue
         r = results[key].report
         s = r["surface"]
         lines.append("| %s | %.3f | %.3f | %.3f | %.3f | %d |" % (
@@ -1123,11 +1128,16 @@ def scenario_model_loop(b, source, work):
 
 def run_continued(b, source, work, name, daemon_cfg, daemon_overrides, parts, sets,
                   continue_from, state_from, reload_cfg=None, reload_overrides=None,
-                  timeout_s=240.0):
-    """Lock-step over Modbus: ncsim continues the run in continue_from (`--continue`) for `parts`
-    more side walls, and nccompd starts from the state of the run in state_from (its state/
-    directory, as after a restart of the daemon). reload_cfg: the daemon is started first, and
-    before ncsim ticks its config file is replaced by reload_cfg (staged with reload_overrides)
+                  timeout_s=240.0, program="side_wall", model_load=None, speed=None):
+    """Over Modbus: ncsim continues the run in continue_from (`--continue`; None: a new run, e.g.
+    with a new tool) for `parts` more parts of `program`, and nccompd starts from the state of the
+    run in state_from (its state/ directory, as after a restart of the daemon). speed=None:
+    lock-step, else real time with ncsim at that speed factor. model_load (real time): once the
+    daemon serves its status socket, `nccomp model load MODEL_LOAD` puts that model into it (an
+    operator's command; ncsim already machines: the swap lands in the first seconds of the run);
+    its answer is RunResult.model_load (exit status, output). reload_cfg: the daemon is started
+    first, and before ncsim ticks its config file is replaced by reload_cfg (staged with
+    reload_overrides)
     and it gets SIGHUP, so the RUNNING daemon swaps in the new configuration with its state at a
     cycle boundary (the reload is taken while ncsim already ticks: where it lands is read back).
     Returns (RunResult, swap_s): swap_s, the machine time [s] by which the new configuration ran
@@ -1151,18 +1161,45 @@ def run_continued(b, source, work, name, daemon_cfg, daemon_overrides, parts, se
 
     daemon_path, ncsim_path = staged(daemon_cfg, daemon_overrides, run_dir)
     shutil.copytree(os.path.join(state_from, "state"), os.path.join(run_dir, "state"))
-    sim_argv = [b.ncsim, "--config", ncsim_path, "--program", "side_wall", "--bus", "modbus",
-                "--out", out_dir, "--seed", "1", "--parts", str(parts), "--continue",
-                continue_from, "--lockstep", sock]
+    sim_argv = [b.ncsim, "--config", ncsim_path, "--program", program, "--bus", "modbus",
+                "--out", out_dir, "--seed", "1", "--parts", str(parts)]
+    if continue_from is not None:
+        sim_argv += ["--continue", continue_from]
     for x in sets:
         sim_argv += ["--set", x]
-    daemon_argv = [b.nccompd, "--config", daemon_path, "--lockstep", sock]
+    daemon_argv = [b.nccompd, "--config", daemon_path]
+    if speed is None:
+        sim_argv += ["--lockstep", sock]
+        daemon_argv += ["--lockstep", sock]
+    else:
+        sim_argv += ["--speed", str(speed)]
     t0 = time.monotonic()
-    sim = daemon = None
+    sim = daemon = loader = None
     swap_s = None
     handover = None
+    load_answer = None
     try:
+        if speed is not None:
+            # Real time: the daemon connects to the NC's Modbus port, so ncsim serves first.
+            sim = Proc("ncsim", sim_argv, os.path.join(run_dir, "ncsim.log"), run_dir)
+            deadline = time.monotonic() + 30.0
+            while "ncsim: " not in sim.log() and sim.running() and time.monotonic() < deadline:
+                time.sleep(0.02)
         daemon = Proc("nccompd", daemon_argv, os.path.join(run_dir, "nccompd.log"), run_dir)
+        if model_load is not None:
+            if speed is None:
+                raise RuntimeError("model_load: real time only (in lock-step the status socket "
+                                   "comes once ncsim ticks: use reload_cfg)")
+            # The load is answered once the loop runs the new configuration.
+            deadline = time.monotonic() + 30.0
+            while not os.path.exists(status_sock) and daemon.running():
+                if time.monotonic() > deadline:
+                    raise RuntimeError("%s: no status socket\n%s" % (name, daemon.log()[-3000:]))
+                time.sleep(0.02)
+            loader = subprocess.Popen([b.nccomp, "model", "load", model_load, "--socket",
+                                       status_sock], stdout=subprocess.PIPE,
+                                      stderr=subprocess.STDOUT, text=True)
+            load_answer = (loader.wait(60), loader.stdout.read())
         if reload_cfg is not None:
             deadline = time.monotonic() + 30.0
             while "lock-step: connecting" not in daemon.log() and daemon.running():
@@ -1174,7 +1211,8 @@ def run_continued(b, source, work, name, daemon_cfg, daemon_overrides, parts, se
             reload_path, _ = staged(reload_cfg, reload_overrides, os.path.join(run_dir, "reload"))
             shutil.copyfile(reload_path, daemon_path)
             os.kill(daemon.p.pid, signal.SIGHUP)
-        sim = Proc("ncsim", sim_argv, os.path.join(run_dir, "ncsim.log"), run_dir)
+        if sim is None:
+            sim = Proc("ncsim", sim_argv, os.path.join(run_dir, "ncsim.log"), run_dir)
         if reload_cfg is not None:
             deadline = time.monotonic() + timeout_s
             while ("configuration 2 is running" not in daemon.log() and daemon.running() and
@@ -1204,24 +1242,32 @@ def run_continued(b, source, work, name, daemon_cfg, daemon_overrides, parts, se
         if sim_rc is None:
             raise RuntimeError("%s: ncsim did not finish within %.0f s\nncsim:\n%s\nnccompd:\n%s" %
                                (name, timeout_s, sim.log()[-3000:], daemon.log()[-3000:]))
+        # Lock-step: BYE ends the daemon (exit 0). Real time: the operator's SIGTERM.
+        if speed is not None:
+            daemon.stop()
         daemon_rc = daemon.wait(15.0)
         if daemon_rc is None:
             daemon_rc = daemon.stop()
             raise RuntimeError("%s: nccompd did not end after ncsim's BYE\n%s" %
                                (name, daemon.log()[-3000:]))
     finally:
+        if loader is not None and loader.poll() is None:
+            loader.kill()
+            loader.wait()
         for p in (daemon, sim):
             if p is not None:
                 p.stop()
         shutil.rmtree(sock_dir, ignore_errors=True)
-    rep = subprocess.run([b.nccomp, "report", out_dir, "--json"], capture_output=True, text=True,
-                         timeout=120)
+    svg = ["--svg", os.path.join(out_dir, "error.svg")] if program == "mould_face" else []
+    rep = subprocess.run([b.nccomp, "report", out_dir, "--json"] + svg, capture_output=True,
+                         text=True, timeout=120)
     if rep.returncode != 0:
         raise RuntimeError("%s: nccomp report failed (%d): %s" % (name, rep.returncode,
                                                                   rep.stderr))
     result = RunResult(name, run_dir, out_dir, sim_rc, daemon_rc, sim.log(), daemon.log(),
                        json.loads(rep.stdout), time.monotonic() - t0)
     result.handover = handover
+    result.model_load = load_answer
     print("%s: ncsim %d, nccompd %d, %.1f s wall%s" % (
         name, sim_rc, daemon_rc, result.wall_s,
         "" if swap_s is None else "; new configuration running by t = %.2f s" % swap_s))
@@ -1456,6 +1502,72 @@ def scenario_can_modes(b, source, work):
     c.done()
 
 
+def scenario_demo_loop(b, source, work):
+    """scripts/demo in lock-step (issue 19 item 4): the four modes with the assertions of
+    modbus_modes, then the loop: the loop daemon's first batch, `nccomp analyze` on its log, the
+    model into the daemon (its [model] file and SIGHUP, the reload `nccomp model load` runs), the
+    second batch with it, and summary.json. Checks: the analysis finds the wear ncsim adds
+    (tool_wear, linear in path_mm, its rate within 15 % of ncsim's wear.rate_um_per_m); the
+    running daemon swaps the model in (one handover, nothing unabsorbed: `nccomp status --json`);
+    the five rows and summary.json (a list of five objects with exactly mode, max_step_um,
+    form_rms_um, form_max_um, the modes in order, each figure the one of `nccomp report` of its
+    run)."""
+    import tomllib
+    res, analysis = run_demo(b, source, work)
+    print(modes_table(res))
+    c = Check("demo_loop")
+    check_modes(c, res, LASER_INTERVAL_MM, LASER_TRIP_S, min_step_um=2.0)
+    with open(os.path.join(source, "config", "demo", "ncsim-demo.toml"), "rb") as f:
+        rate_um_per_mm = tomllib.load(f)["effects"]["wear"]["rate_um_per_m"] / 1000.0
+    wear = [e for e in analysis.get("effects", []) if e["name"] == "tool_wear"]
+    c.that(len(wear) == 1 and wear[0]["column"] == "path_mm" and wear[0]["form"] == "linear",
+           "analyze added tool_wear (path_mm, linear): %s" % [
+               (e["name"], e["column"], e["form"]) for e in analysis.get("effects", [])])
+    if wear:
+        coef = wear[0]["params"]["coef_um"][0]
+        c.that(abs(coef - rate_um_per_mm) <= 0.15 * rate_um_per_mm,
+               "its rate %.5f um/mm is ncsim's wear rate %.5f um/mm (within 15 %%)" % (
+                   coef, rate_um_per_mm))
+    m = res["model"]
+    h = m.handover or {}
+    c.that("configuration 2 is running" in m.daemon_log and h.get("handovers") == 1 and
+           h.get("unabsorbed") == 0,
+           "model: the running daemon swapped the model in, one handover, nothing unabsorbed: %s"
+           % h)
+    c.that(m.ncsim_rc == 0 and m.daemon_rc == 0 and not m.alarms("alarm"),
+           "model: ncsim exit %d, nccompd exit %d, no alarm (%s)" % (
+               m.ncsim_rc, m.daemon_rc, m.alarms("alarm")))
+    table = modes_table(res).splitlines()
+    c.that(len(table) == 7 and table[-1].startswith("| %s |" % LOOP_MODE[1]),
+           "the table has the five rows, the model last: %s" % [l.split("|")[1] for l in table[2:]])
+    with open(os.path.join(work, "summary.json")) as f:
+        summary = json.load(f)
+    modes = [k for k, _, _ in MODES] + [LOOP_MODE[0]]
+    c.that(isinstance(summary, list) and [r.get("mode") for r in summary] == modes and
+           all(sorted(r) == sorted(SUMMARY_KEYS) for r in summary),
+           "summary.json: %d rows, modes %s, keys %s" % (
+               len(summary), [r.get("mode") for r in summary],
+               sorted({k for r in summary for k in r})))
+    for row in summary if isinstance(summary, list) else []:
+        rep = res[row["mode"]].report["surface"]
+        want = (rep["max_step_um"], rep["form"]["rms_um"], rep["form"]["max_abs_um"])
+        got = tuple(row.get(k) for k in SUMMARY_KEYS[1:])
+        c.that(all(isinstance(g, float) and math.isfinite(g) and g == w
+                   for g, w in zip(got, want)),
+               "summary.json %s: %s = nccomp report's %s" % (row["mode"], got, want))
+    # The loop pays: the model predicts the wear between the laser's measurements and S0 learns
+    # only the residual (not the wear a second time), so the part with the model is better
+    # than creeping alone, and the continued NC keeps its registers (no step at the start).
+    creep_s, model_s = res["creep"].report["surface"], m.report["surface"]
+    c.that(model_s["form"]["rms_um"] < creep_s["form"]["rms_um"],
+           "the model row's form RMS %.3f um is below the creep row's %.3f um" % (
+               model_s["form"]["rms_um"], creep_s["form"]["rms_um"]))
+    c.that(model_s["max_step_um"] <= 1.5 * creep_s["max_step_um"],
+           "the model row's largest step %.3f um is within 1.5x the creep row's %.3f um" % (
+               model_s["max_step_um"], creep_s["max_step_um"]))
+    c.done()
+
+
 def scenario_calib_touch(b, source, work):
     """S3: ncsim's touch program + nccompd, calibrated over the command channel (calib_e2e.py)."""
     import calib_e2e  # tests/e2e/calib_e2e.py, next to this file
@@ -1482,6 +1594,7 @@ SCENARIOS = {
     "can_modes": scenario_can_modes,
     "calib_touch": scenario_calib_touch,
     "calib_strategies": scenario_calib_strategies,
+    "demo_loop": scenario_demo_loop,
 }
 
 
@@ -1489,20 +1602,116 @@ SCENARIOS = {
 # The demo (scripts/demo)
 
 
+# The demo's loop (issue 19 item 4). First batch: the loop daemon (nccompd-loop.toml:
+# nccompd-creep.toml plus a [model] section with nothing fitted yet, so it cuts as the creep row)
+# machines LOOP_FIRST_BATCH parts with one tool (one part gives the analysis four laser
+# measurements: too few to tell a line from a curve). `nccomp analyze` fits
+# model-face-declared.toml to that daemon's measurement log; the daemon, started again on the
+# first batch's state, gets the analysis's model.toml, and the second batch, one more part with
+# the same tool (ncsim --continue), is machined with it.
+LOOP_MODE = ("model", "creeping + the model from the analysis")
+LOOP_CONFIG = "nccompd-loop.toml"
+LOOP_FIRST_BATCH = 2
+SUMMARY_KEYS = ("mode", "max_step_um", "form_rms_um", "form_max_um")
+
+
+def run_first_batch(b, source, work, speed=None, echo=print):
+    """The loop daemon on LOOP_FIRST_BATCH parts; real time: ncsim at speed x LOOP_FIRST_BATCH,
+    so that the batch takes one part's time (the wear follows the cut path, not the clock)."""
+    return run_machining(b, source, work, "batch1", LOOP_CONFIG, "ncsim-demo.toml",
+                         parts=LOOP_FIRST_BATCH, echo=echo,
+                         speed=None if speed is None else speed * LOOP_FIRST_BATCH)
+
+
+def run_loop(b, source, work, first, speed=None, echo=print):
+    """After the first batch: the analysis, the model into the daemon, the second batch. Lock-step
+    (deterministic): the daemon's [model] file is pointed at the model and it gets SIGHUP before
+    ncsim ticks (the reload `nccomp model load` runs); real time: `nccomp model load FILE` on its
+    status socket. Returns (RunResult of the second batch, the analysis's summary.json)."""
+    log = os.path.join(first.run_dir, "log", "measurements.csv")
+    out = os.path.join(work, "analysis")
+    shutil.rmtree(out, ignore_errors=True)
+    a = subprocess.run([b.nccomp, "analyze", "--log", log, "--config",
+                        os.path.join(source, "config", "demo", "model-face-declared.toml"),
+                        "--out", out], capture_output=True, text=True, timeout=300)
+    echo("nccomp analyze --log %s: exit %d\n%s" % (log, a.returncode, a.stdout.rstrip()))
+    if a.returncode != 0:
+        raise RuntimeError("nccomp analyze failed (%d): %s" % (a.returncode, a.stderr[-2000:]))
+    with open(os.path.join(out, "summary.json")) as f:
+        analysis = json.load(f)
+    model = os.path.join(out, "model.toml")
+    initial = {"model.file": '"%s"' % os.path.join(source, "config", "demo",
+                                                   "model-face-initial.toml")}
+    if speed is None:
+        second, _ = run_continued(b, source, work, "model", LOOP_CONFIG, initial, 1, [],
+                                  first.out_dir, first.run_dir, program="mould_face",
+                                  reload_cfg=LOOP_CONFIG,
+                                  reload_overrides={"model.file": '"%s"' % model})
+        second.model_load = None
+        echo("the daemon's [model] file set to %s, SIGHUP: %s" % (
+            model, json.dumps(second.handover)))
+    else:
+        second, _ = run_continued(b, source, work, "model", LOOP_CONFIG, initial, 1, [],
+                                  first.out_dir, first.run_dir, program="mould_face",
+                                  model_load=model, speed=speed)
+        rc, answer = second.model_load
+        echo("nccomp model load %s: exit %d\n%s" % (model, rc, answer.rstrip()))
+    echo("%s: %s" % (second.name, summary_line(second.report)))
+    return second, analysis
+
+
+def summary_rows(res):
+    """summary.json: one row per mode, the figures of `nccomp report` of its run."""
+    rows = []
+    for key in [k for k, _, _ in MODES] + [LOOP_MODE[0]]:
+        s = res[key].report["surface"]
+        rows.append(dict(zip(SUMMARY_KEYS, (key, s["max_step_um"], s["form"]["rms_um"],
+                                            s["form"]["max_abs_um"]))))
+    return rows
+
+
+def run_demo(b, source, work, speed=None, echo=print):
+    """The four modes and the loop; returns ({mode: RunResult}, analysis summary)."""
+    if speed is None:
+        # Lock-step is deterministic whatever runs beside it: two runs at a time (each pair of
+        # processes keeps about one CPU busy), the two-part first batch first.
+        import concurrent.futures
+        with concurrent.futures.ThreadPoolExecutor(max_workers=2) as pool:
+            batch = pool.submit(run_first_batch, b, source, work, None, echo)
+            modes = {key: pool.submit(run_machining, b, source, work, key, cfg, "ncsim-demo.toml",
+                                      echo=echo, sets=MODE_SETS.get(key, []))
+                     for key, _, cfg in MODES}
+            res = {key: f.result() for key, f in modes.items()}
+            first = batch.result()
+    else:
+        import concurrent.futures
+        with concurrent.futures.ThreadPoolExecutor(max_workers=1) as pool:
+            batch = pool.submit(run_first_batch, b, source, work, speed, echo)
+            res = run_modes(b, source, work, speed=speed, parallel=True, echo=echo)
+            first = batch.result()
+    res["model"], analysis = run_loop(b, source, work, first, speed=speed, echo=echo)
+    with open(os.path.join(work, "summary.json"), "w") as f:
+        json.dump(summary_rows(res), f, indent=1)
+        f.write("\n")
+    return res, analysis
+
+
 def demo(b, source, work, speed):
     os.makedirs(work, exist_ok=True)
     mode = "lock-step" if speed is None else "real time, ncsim at x%g" % speed
-    print("demo: machining the mould face (part a) four times over Modbus TCP on 127.0.0.1, %s"
-          % mode, flush=True)
-    res = run_modes(b, source, work, speed=speed, parallel=speed is not None,
-                    echo=lambda s: print("  " + s, flush=True))
+    print("demo: machining the mould face (part a) four times over Modbus TCP on 127.0.0.1, %s; "
+          "the loop: %d parts with creeping, nccomp analyze on that daemon's log, the model into "
+          "the daemon, one more part" % (mode, LOOP_FIRST_BATCH), flush=True)
+    res, _ = run_demo(b, source, work, speed=speed,
+                      echo=lambda s: print("  " + s.replace("\n", "\n  "), flush=True))
     print()
     print(modes_table(res))
     print()
-    for key, label, _ in MODES:
+    for key, label in [(k, l) for k, l, _ in MODES] + [LOOP_MODE]:
         r = res[key]
-        print("%-22s report: nccomp report %s   plot: %s" % (
+        print("%-40s report: nccomp report %s   plot: %s" % (
             label, r.out_dir, os.path.join(r.out_dir, "error.svg")))
+    print("summary: %s" % os.path.join(work, "summary.json"))
     with open(os.path.join(work, "table.md"), "w") as f:
         f.write(modes_table(res) + "\n")
     bad = [k for k, r in res.items() if r.ncsim_rc != 0 or r.daemon_rc != 0]

@@ -4,6 +4,8 @@
 // into the running engine THEN Z does not move at the switch and the trim comes in along the
 // creep profile: −12 − 10 · s / 50 after s mm of cut, −22 from 50 mm on; a restart in the middle
 // with the same model continues the fade; taking the model out fades it back out the same way.
+// A term the laser sees (kind tool_wear) is not faded in on top of the measured wear: the creep
+// keeps only the residual of it, at each measurement (AToolWearTermIsNotCountedTwice...).
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -35,6 +37,31 @@ class TrimZ final : public engine::Module {
   std::uint64_t identity_;
 };
 
+// A model's tool_wear term on Z: the wear it predicts at the program path, rate × path, as a
+// trim of the sign the creep writes (−), all of it seen by the laser (tool_wear_trim_um()).
+class WearTrimZ final : public engine::Module, public engine::ToolWearTrimSource {
+ public:
+  explicit WearTrimZ(double rate_um_per_mm) : rate_(rate_um_per_mm) {}
+  std::string_view name() const noexcept override { return "model"; }
+  void attach(const engine::RegisterTable& /*registers*/) override {}
+  void step(TimeNs now_ns, std::span<const Event> events, StepOutput& out) noexcept override {
+    for (const Event& e : events) {
+      if (const auto* a = std::get_if<AxisSample>(&e)) path_ = a->program_path_mm;
+      if (std::holds_alternative<ToolChange>(e)) tool_start_ = path_;  // a new tool's path
+    }
+    trim_ = -rate_ * (path_ - tool_start_);
+    out.trims.push(OffsetWrite{now_ns, 2, trim_});
+  }
+  std::uint64_t trim_identity() const noexcept override { return 11; }
+  double tool_wear_trim_um(std::uint16_t register_index) const noexcept override {
+    return register_index == 2 ? trim_ : 0.0;
+  }
+  double rate_;
+  double path_{0.0};
+  double tool_start_{0.0};
+  double trim_{0.0};
+};
+
 CreepModuleConfig module_config() {
   CreepModuleConfig m;
   m.creep = testing::base_config();  // axes, Z fallback sign −1, 50 mm linear creeps
@@ -57,12 +84,16 @@ struct Rig {
   double largest_z_change_um{0.0};
   std::vector<double> z_writes;
   std::vector<double> y_writes;
+  std::int32_t tool{1};
 
-  explicit Rig(const TrimZ* model, const CreepModuleConfig& config = module_config()) {
+  Rig(const TrimZ* model, const CreepModuleConfig& config) : Rig(model, nullptr, config) {}
+  explicit Rig(const TrimZ* model, const WearTrimZ* wear_model = nullptr,
+               const CreepModuleConfig& config = module_config()) {
     const LimiterConfig lim{100.0, 50.0, 1e5};
     std::vector<std::unique_ptr<engine::Module>> mods;
     mods.push_back(std::make_unique<CreepModule>(config));
     if (model != nullptr) mods.push_back(std::make_unique<TrimZ>(model->trim_, model->identity_));
+    if (wear_model != nullptr) mods.push_back(std::make_unique<WearTrimZ>(wear_model->rate_));
     engine.configure({{"X_offset", RegisterKind::kAxisOffset, lim},
                       {"Y_offset", RegisterKind::kAxisOffset, lim},
                       {"Z_offset", RegisterKind::kAxisOffset, lim}},
@@ -86,13 +117,13 @@ struct Rig {
     a.time_ns = now;
     a.program_path_mm = path;
     a.position_mm = {path, 0.0, 0.0, 0.0, 0.0, 0.0};  // feed along +X
-    a.tool = 1;
+    a.tool = tool;
     ev.emplace_back(a);
     step();
   }
   void measure(double w) {
     ToolMeasurement m;
-    m.tool = 1;
+    m.tool = tool;
     m.wear_um[0] = w;
     now += 1'000'000;
     ev.emplace_back(m);
@@ -183,6 +214,94 @@ TEST(CreepHandover, ARestartInTheMiddleContinuesTheFadeAndRollbackFadesItOut) {
   EXPECT_NEAR(none.z_um(), -17.0, 1e-9);
   for (int i = 0; i < 60; ++i) none.advance(0.5);
   EXPECT_NEAR(none.z_um(), -12.0, 1e-9);
+}
+
+// The tool wears 0.1 µm per mm of path; the laser measures the true wear every 100 mm.
+constexpr double kRate = 0.1;
+void cut_to(Rig& r, double path_mm) {
+  while (r.path < path_mm - 1e-9) r.advance(0.5);
+}
+
+TEST(CreepHandover, AToolWearTermIsNotCountedTwiceTheCreepLearnsItsResidual) {
+  // GIVEN the creep alone, the wear measured at 120 mm (12 µm) and crept in.
+  Rig before(nullptr);
+  before.ev.emplace_back(ToolChange{before.now, 1, false});
+  cut_to(before, 120.0);
+  before.measure(kRate * 120.0);
+  cut_to(before, 175.0);
+  ASSERT_NEAR(before.z_um(), -12.0, 1e-9);
+  // WHEN a model predicting the wear (−0.1 µm/mm × path on Z, a tool_wear term) is loaded.
+  const WearTrimZ model(kRate);
+  Rig after(nullptr, &model);
+  after.take_over(before);
+  for (int i = 0; i < 5; ++i) after.advance(0.0);
+  // THEN Z does not move at the switch (the creep takes the model's −17.5 µm)...
+  EXPECT_LT(after.largest_z_change_um, 1e-9);
+  EXPECT_NEAR(after.z_um(), -12.0, 1e-9);
+  EXPECT_EQ(after.engine.counters().handover_rebases, 1U);
+  EXPECT_DOUBLE_EQ(after.engine.register_state(2).trim_um, -17.5);
+  // ...the model predicts the wear from there, and after each measurement the register holds
+  // the true wear (−rate × path), not the measured wear and the model's again (twice it).
+  cut_to(after, 260.0);
+  EXPECT_NEAR(after.z_um(), -12.0 - kRate * (260.0 - 175.0), 1e-9);
+  for (const double at : {260.0, 360.0, 460.0}) {
+    after.measure(kRate * at);
+    cut_to(after, at + 60.0);  // the creep's 50 mm
+    EXPECT_NEAR(after.z_um(), -kRate * (at + 60.0), 1e-9)
+        << "60 mm after the measurement at " << at << " mm";
+    cut_to(after, at + 100.0);
+    EXPECT_NEAR(after.z_um(), -kRate * (at + 100.0), 1e-9) << "before the next measurement";
+  }
+  EXPECT_LT(after.largest_z_change_um, 0.21);  // every change crept in 0.5 mm steps
+
+  // A restart with the same model in the middle of a creep: nothing moves, the same totals.
+  after.measure(kRate * 560.0);
+  cut_to(after, 580.0);
+  Rig restarted(nullptr, &model);
+  restarted.take_over(after);
+  const double at_restart_um = after.z_um();
+  restarted.advance(0.0);
+  restarted.advance(0.0);
+  EXPECT_EQ(restarted.engine.counters().handover_rebases, 0U);
+  EXPECT_NEAR(restarted.z_um(), at_restart_um, 1e-9);
+  cut_to(restarted, 660.0);
+  EXPECT_NEAR(restarted.z_um(), -kRate * 660.0, 1e-9);
+
+  // Rollback: the model's share goes back to the creep without a step, which then holds the
+  // last measured wear (56 µm) as it did before the model.
+  Rig none(nullptr);
+  none.take_over(restarted);
+  none.largest_z_change_um = 0.0;
+  for (int i = 0; i < 5; ++i) none.advance(0.0);
+  EXPECT_LT(none.largest_z_change_um, 1e-9);
+  EXPECT_NEAR(none.z_um(), -66.0, 1e-9);
+  EXPECT_EQ(none.engine.counters().handover_rebases, 1U);
+  cut_to(none, 720.0);
+  EXPECT_NEAR(none.z_um(), -56.0, 1e-9);
+  none.measure(kRate * 720.0);
+  cut_to(none, 780.0);
+  EXPECT_NEAR(none.z_um(), -72.0, 1e-9);
+}
+
+TEST(CreepHandover, AnotherToolStartsFromItsOwnWearAndTheModelsTrimForIt) {
+  // GIVEN the model from the start and tool 1 measured at 100 mm: Z holds the true wear.
+  const WearTrimZ model(kRate);
+  Rig r(nullptr, &model);
+  r.ev.emplace_back(ToolChange{r.now, 1, false});
+  cut_to(r, 100.0);
+  r.measure(kRate * 100.0);
+  cut_to(r, 160.0);
+  ASSERT_NEAR(r.z_um(), -16.0, 1e-9);
+  // WHEN a new tool comes in: THEN Z is the new tool's (no wear, no trim yet) at once, not the
+  // old tool's share of the model fading out over the new tool's cut...
+  r.tool = 2;
+  r.ev.emplace_back(ToolChange{r.now, 2, false});
+  r.advance(0.0);
+  r.advance(0.0);
+  EXPECT_NEAR(r.z_um(), 0.0, 1e-9);
+  // ...and the model predicts the new tool's wear from its first millimetre.
+  cut_to(r, 210.0);
+  EXPECT_NEAR(r.z_um(), -kRate * 50.0, 1e-9);
 }
 
 TEST(CreepHandover, TheHandoverStepAllocatesNothing) {

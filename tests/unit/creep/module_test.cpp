@@ -170,6 +170,13 @@ TEST(CreepEngineModule, LoadStateRefusesForeignBytes) {
   const AdoptedOutputs nothing_adopted{};
   std::memcpy(bytes.data() + sizeof(CreepState) + sizeof(ToolMemory), &nothing_adopted,
               sizeof(nothing_adopted));
+  const std::size_t residual_at = sizeof(CreepState) + sizeof(ToolMemory) + sizeof(AdoptedOutputs);
+  CreepModule::ResidualShift residual{};
+  residual.shift_um[0] = kNaN;
+  std::memcpy(bytes.data() + residual_at, &residual, sizeof(residual));
+  EXPECT_FALSE(m.load_state(bytes));  // a residual shift that is not a number
+  residual.shift_um[0] = 0.0;
+  std::memcpy(bytes.data() + residual_at, &residual, sizeof(residual));
   // A bool byte that is neither 0 nor 1 (corrupt file) is refused before it is loaded.
   bytes[offsetof(CreepState, halted)] = std::byte{7};
   EXPECT_FALSE(m.load_state(bytes));

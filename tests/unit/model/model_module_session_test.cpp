@@ -186,3 +186,39 @@ TEST(ModelModuleTrimAtPath, EvaluatesTheTermAtTheGivenCutPathAndTheRestAsNow) {
   EXPECT_NEAR(model->trim_at_cut_path(0, 7, 120.0), -0.021 * 120.0, 1e-12);
   EXPECT_TRUE(std::isnan(model->trim_at_cut_path(1, 7, 120.0)));
 }
+
+// The creep learns the residual of the trims the laser sees (CreepModule::bind_tool_wear_trims()):
+// the model module tells them apart by the entry's kind, per register.
+TEST(ModelModuleToolWearTrim, OnlyTheEntriesOfKindToolWearOnTheRegisterCount) {
+  cm::Term offset;
+  offset.spec.name = "offset";
+  offset.spec.form = cm::Form::kConstant;
+  offset.spec.kind_mask = 0x3;  // tool_wear and contour rows
+  offset.groups = {{0.0, 0.0}};
+  offset.coef = {2.5};
+  std::vector<cm::ModelApply> applies(3);
+  applies[0].register_index = 0;
+  applies[0].gain = -1.0;
+  applies[0].kind = 0.0;  // tool_wear
+  applies[1].register_index = 0;
+  applies[1].gain = 2.0;
+  applies[1].kind = 1.0;  // contour
+  applies[2].register_index = 1;
+  applies[2].gain = 3.0;
+  applies[2].kind = 0.0;
+  cm::ModelModule m(cm::Model({}, {offset}), applies, false);
+  ce::RegisterSpec reg;
+  reg.kind = ce::RegisterKind::kCheckpoint;
+  reg.limits = {100.0, 100.0, 1e6};
+  reg.name = "r0";
+  std::vector<ce::RegisterSpec> regs{reg, reg};
+  regs[1].name = "r1";
+  m.attach(ce::RegisterTable(regs));
+  core::StepOutput out;
+  m.step(1'000'000, {}, out);
+  ASSERT_EQ(out.trims.size(), 2U);
+  EXPECT_DOUBLE_EQ(out.trims[0].value_um, -2.5 + 5.0);
+  EXPECT_DOUBLE_EQ(m.tool_wear_trim_um(0), -2.5);
+  EXPECT_DOUBLE_EQ(m.tool_wear_trim_um(1), 7.5);
+  EXPECT_DOUBLE_EQ(m.tool_wear_trim_um(2), 0.0);
+}

@@ -164,6 +164,38 @@ TEST(NcsimConfig, BusMapExtraFilesAreAppended) {
             std::string::npos);
 }
 
+// A continued run starts with the offsets the NC held at the end of the run it continues (a real
+// NC keeps its registers): not 0, and not as writes of the new run.
+TEST(NcsimConfig, ContinueKeepsTheOffsetRegistersOfTheNc) {
+  const std::vector<std::uint16_t> known{0, 1, 2, 3, 4, 5, 6, 7, 8};
+  const SimConfig c = load_sim_config(kConfig, {}, ProgramKind::kSideWall);
+  Simulation first(c, ProgramKind::kSideWall, known);
+  (void)first.write_offset(0.0, 0, -20.0);
+  (void)first.write_offset(1.0, 0, -26.25);
+  (void)first.write_offset(1.0, 6, 3.5);
+  first.advance_to(core::from_seconds(1000.0));
+  ASSERT_TRUE(first.done());
+  const std::string dir = ::testing::TempDir() + "/ncsim_continue_registers";
+  write_result(dir, first, RunInfo{ProgramKind::kSideWall, BusKind::kModbus, 0});
+  const SimConfig next =
+      load_sim_config(kConfig, continuation_overrides(dir), ProgramKind::kSideWall);
+  Simulation second(next, ProgramKind::kSideWall, known);
+  EXPECT_DOUBLE_EQ(second.reg(0), -26.25);
+  EXPECT_DOUBLE_EQ(second.reg(6), 3.5);
+  EXPECT_DOUBLE_EQ(second.reg(1), 0.0);
+  EXPECT_TRUE(second.registers().log().empty());
+  // A run continued from one that wrote nothing still has them.
+  second.advance_to(core::from_seconds(1000.0));
+  const std::string dir2 = dir + "_2";
+  write_result(dir2, second, RunInfo{ProgramKind::kSideWall, BusKind::kModbus, 0});
+  const SimConfig third =
+      load_sim_config(kConfig, continuation_overrides(dir2), ProgramKind::kSideWall);
+  EXPECT_DOUBLE_EQ(Simulation(third, ProgramKind::kSideWall, known).reg(0), -26.25);
+  EXPECT_NE(error_of(header() + "initial_register_indices = [0, 6]\ninitial_registers_um = [1.0]\n")
+                .find("ncsim.initial_registers_um: has 1 values for the 2 registers"),
+            std::string::npos);
+}
+
 // `ncsim --continue DIR`: the end state a run writes is what the next run starts from.
 TEST(NcsimConfig, ContinueReadsTheEndStateOfARun) {
   SimConfig c =
@@ -175,9 +207,11 @@ TEST(NcsimConfig, ContinueReadsTheEndStateOfARun) {
   const std::string dir = ::testing::TempDir() + "/ncsim_continue";
   write_result(dir, sim, RunInfo{ProgramKind::kSideWall, BusKind::kModbus, 0});
   const auto sets = continuation_overrides(dir);
-  ASSERT_EQ(sets.size(), 2U);
+  ASSERT_EQ(sets.size(), 4U);
   EXPECT_EQ(sets[0], "ncsim.first_part=3");
   EXPECT_EQ(sets[1].rfind("ncsim.tool_cut_path_mm=", 0), 0U);
+  EXPECT_EQ(sets[2], "ncsim.initial_register_indices=[]");  // no daemon wrote to this NC
+  EXPECT_EQ(sets[3], "ncsim.initial_registers_um=[]");
   const SimConfig next = load_sim_config(kConfig, sets, ProgramKind::kSideWall);
   EXPECT_EQ(next.first_part, 3);
   EXPECT_NEAR(next.tool_cut_path_mm, sim.end_state().tool_cut_path_mm, 1e-6);

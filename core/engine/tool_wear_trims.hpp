@@ -1,0 +1,29 @@
+// Trims a tool measurement sees (core/engine/engine.hpp, "Trims"): a module whose trims include
+// a prediction of the tool's wear (a model's terms of kind tool_wear) is a ToolWearTrimSource;
+// a module that learns the wear from the tool measurement (S0) is a ToolWearTrimUser and learns
+// only the residual of those trims, so the wear is not compensated twice. The engine connects
+// them at configure().
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+namespace nccomp::core::engine {
+
+class ToolWearTrimSource {
+ public:
+  virtual ~ToolWearTrimSource() = default;
+  /// Real-time safe. The part of the trim this module published for register_index in its last
+  /// step that predicts what a tool measurement sees [µm] (0: none).
+  [[nodiscard]] virtual double tool_wear_trim_um(std::uint16_t register_index) const noexcept = 0;
+};
+
+class ToolWearTrimUser {
+ public:
+  virtual ~ToolWearTrimUser() = default;
+  /// Not real-time (configure(), after attach()): the engine's other modules that are sources;
+  /// they live as long as the engine.
+  virtual void bind_tool_wear_trims(std::vector<const ToolWearTrimSource*> sources) = 0;
+};
+
+}  // namespace nccomp::core::engine
