@@ -317,8 +317,12 @@ void Engine::configure(std::vector<RegisterSpec> registers,
   trims_.assign(modules_.size() * regs_.size(), std::numeric_limits<double>::quiet_NaN());
   // The tool wear some trims predict, for the module that learns it from the tool measurement.
   std::vector<const ToolWearTrimSource*> wear_sources;
-  for (const auto& m : modules_) {
-    if (const auto* s = dynamic_cast<const ToolWearTrimSource*>(m.get())) wear_sources.push_back(s);
+  wear_source_of_.assign(modules_.size(), nullptr);
+  for (std::size_t k = 0; k < modules_.size(); ++k) {
+    if (auto* s = dynamic_cast<ToolWearTrimSource*>(modules_[k].get())) {
+      wear_sources.push_back(s);
+      wear_source_of_[k] = s;
+    }
   }
   for (auto& m : modules_) {
     if (auto* u = dynamic_cast<ToolWearTrimUser*>(m.get())) u->bind_tool_wear_trims(wear_sources);
@@ -448,6 +452,7 @@ void Engine::accept_trim(std::size_t module, const OffsetWrite& w, TimeNs now_ns
   slot = w.value_um;
   r.trim_um = sum_um;
   r.has_trim = true;
+  if (wear_source_of_[module] != nullptr) wear_source_of_[module]->trim_in_force(w.register_index);
 }
 
 void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out) noexcept {

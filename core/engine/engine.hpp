@@ -80,6 +80,7 @@
 #include "core/common/types.hpp"
 #include "core/engine/context.hpp"
 #include "core/engine/cursors.hpp"
+#include "core/engine/tool_wear_trims.hpp"
 
 namespace nccomp::core::engine {
 
@@ -547,6 +548,8 @@ class Engine {
   std::vector<Event> valid_;
   /// modules × registers: each module's trim of each register [µm]; NaN = none published.
   std::vector<double> trims_;
+  /// Per module: itself as a ToolWearTrimSource (told which of its trims are in force), or null.
+  std::vector<ToolWearTrimSource*> wear_source_of_;
   StepOutput scratch_{};
   MachineContext context_{};
   EventCursors cursors_{};

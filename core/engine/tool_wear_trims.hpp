@@ -13,9 +13,14 @@ namespace nccomp::core::engine {
 class ToolWearTrimSource {
  public:
   virtual ~ToolWearTrimSource() = default;
-  /// Real-time safe. The part of the trim this module published for register_index in its last
-  /// step that predicts what a tool measurement sees [µm] (0: none).
+  /// Real-time safe. The part of this module's trim in force on register_index (the last one the
+  /// engine accepted, see trim_in_force()) that predicts what a tool measurement sees [µm] (0:
+  /// none). A trim the engine refused (beyond the register's limit: alarm) is not in force, so
+  /// the learning module must not take it out of what it measured.
   [[nodiscard]] virtual double tool_wear_trim_um(std::uint16_t register_index) const noexcept = 0;
+  /// Real-time safe. Called by the engine in step() when it accepts the trim this module
+  /// published on register_index in the same step.
+  virtual void trim_in_force(std::uint16_t register_index) noexcept = 0;
 };
 
 class ToolWearTrimUser {

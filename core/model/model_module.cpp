@@ -114,6 +114,7 @@ void ModelModule::attach(const core::engine::RegisterTable& registers) {
                                   "' is a flag; a model trim needs an offset register");
     }
   }
+  wear_in_force_um_.assign(registers.size(), 0.0);
 }
 
 void ModelModule::bind_context(const core::engine::MachineContext& context) {
@@ -216,13 +217,18 @@ void ModelModule::evaluate(core::TimeNs now_ns, core::StepOutput& out) noexcept 
 }
 
 double ModelModule::tool_wear_trim_um(std::uint16_t register_index) const noexcept {
+  return register_index < wear_in_force_um_.size() ? wear_in_force_um_[register_index] : 0.0;
+}
+
+void ModelModule::trim_in_force(std::uint16_t register_index) noexcept {
+  if (register_index >= wear_in_force_um_.size()) return;
   double sum_um = 0.0;
   for (std::size_t i = 0; i < applies_.size(); ++i) {
     if (applies_[i].register_index == register_index && !(std::fabs(applies_[i].kind) > 0.0)) {
       sum_um += trims_um_[i];
     }
   }
-  return sum_um;
+  wear_in_force_um_[register_index] = sum_um;
 }
 
 void ModelModule::observe_record(const core::MeasurementRecord& record) noexcept {

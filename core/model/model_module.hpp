@@ -63,9 +63,12 @@ class ModelModule final : public core::engine::Module, public core::engine::Tool
   ModelModule& operator=(const ModelModule&) = delete;
 
   std::string_view name() const noexcept override { return "model"; }
-  /// Real-time safe. The sum of the last trims of the entries on register_index whose kind is
-  /// tool_wear (the laser's rows: it measures the wear they predict).
+  /// Real-time safe. The sum of the trims in force (the last the engine accepted) of the entries
+  /// on register_index whose kind is tool_wear (the laser's rows: it measures the wear they
+  /// predict).
   [[nodiscard]] double tool_wear_trim_um(std::uint16_t register_index) const noexcept override;
+  /// Real-time safe: the engine accepted this step's trim on register_index.
+  void trim_in_force(std::uint16_t register_index) noexcept override;
   /// Checks the register indices (offset registers only: a trim on a flag makes no sense).
   void attach(const core::engine::RegisterTable& registers) override;
   void bind_context(const core::engine::MachineContext& context) override;
@@ -114,6 +117,9 @@ class ModelModule final : public core::engine::Module, public core::engine::Tool
   std::vector<ModelApply> applies_;
   std::vector<ModelInput> inputs_;
   std::vector<double> trims_um_;
+  /// Per register: the tool_wear entries' share of the trim the engine last accepted (sized in
+  /// attach()).
+  std::vector<double> wear_in_force_um_;
   EvalState state_;
   bool each_cycle_;
   std::uint64_t identity_{0};

@@ -54,12 +54,16 @@ class WearTrimZ final : public engine::Module, public engine::ToolWearTrimSource
   }
   std::uint64_t trim_identity() const noexcept override { return 11; }
   double tool_wear_trim_um(std::uint16_t register_index) const noexcept override {
-    return register_index == 2 ? trim_ : 0.0;
+    return register_index == 2 ? in_force_ : 0.0;
+  }
+  void trim_in_force(std::uint16_t register_index) noexcept override {
+    if (register_index == 2) in_force_ = trim_;
   }
   double rate_;
   double path_{0.0};
   double tool_start_{0.0};
   double trim_{0.0};
+  double in_force_{0.0};
 };
 
 CreepModuleConfig module_config() {

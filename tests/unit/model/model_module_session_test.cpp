@@ -218,7 +218,55 @@ TEST(ModelModuleToolWearTrim, OnlyTheEntriesOfKindToolWearOnTheRegisterCount) {
   m.step(1'000'000, {}, out);
   ASSERT_EQ(out.trims.size(), 2U);
   EXPECT_DOUBLE_EQ(out.trims[0].value_um, -2.5 + 5.0);
+  // Published, not yet accepted by an engine: nothing is in force.
+  EXPECT_DOUBLE_EQ(m.tool_wear_trim_um(0), 0.0);
+  m.trim_in_force(0);
+  m.trim_in_force(1);
+  m.trim_in_force(2);
   EXPECT_DOUBLE_EQ(m.tool_wear_trim_um(0), -2.5);
   EXPECT_DOUBLE_EQ(m.tool_wear_trim_um(1), 7.5);
   EXPECT_DOUBLE_EQ(m.tool_wear_trim_um(2), 0.0);
+}
+
+// GIVEN a tool_wear term of 0.021 µm/mm of cut path on a register limited to 5 µm WHEN the tool
+// has cut 500 mm (the model's trim, −10.5 µm, is refused by the engine with an alarm from
+// 239 mm on) THEN the wear share the creep takes out of its laser measurement is the trim in force
+// (−0.021 × 238 µm), not the refused one: the register would otherwise hold less than the wear.
+TEST(ModelModuleToolWearTrim, ARefusedTrimIsNotTheWearShareInForce) {
+  cm::Term wear;
+  wear.spec.name = "tool_wear";
+  wear.spec.form = cm::Form::kLinear;
+  wear.spec.column = static_cast<int>(cm::Column::kPath);
+  wear.groups = {{0.0, 0.0}};
+  wear.coef = {0.021};
+  cm::ModelApply a;
+  a.register_index = 0;
+  a.gain = -1.0;
+  a.kind = 0.0;
+  auto m = std::make_unique<cm::ModelModule>(cm::Model({}, {wear}), std::vector{a}, true);
+  cm::ModelModule* model = m.get();
+  std::vector<std::unique_ptr<ce::Module>> mods;
+  mods.push_back(std::move(m));
+  ce::RegisterSpec reg;
+  reg.name = "T7_radius_wear";
+  reg.kind = ce::RegisterKind::kToolRadiusWear;
+  reg.limits.max_abs_um = 5.0;
+  reg.limits.max_step_um = 100.0;
+  reg.limits.max_rate_um_per_s = 1e6;
+  ce::Engine engine;
+  engine.configure({reg}, std::move(mods), {});
+  core::StepOutput out;
+  std::int64_t t = 0;
+  for (int k = 0; k <= 500; ++k) {
+    core::AxisSample s;
+    s.time_ns = t += 1'000'000;
+    s.position_mm = {static_cast<double>(k), 0.0, 0.0, 0.0, 0.0, 0.0};
+    s.program_path_mm = k;
+    s.tool = 7;
+    engine.step(t, std::vector<core::Event>{s}, out);
+  }
+  ASSERT_DOUBLE_EQ(engine.context().cut_path_mm(7), 500.0);
+  EXPECT_NEAR(model->trim_um(0), -0.021 * 500.0, 1e-12);
+  EXPECT_GT(engine.counters().writes_rejected, 0U);
+  EXPECT_NEAR(model->tool_wear_trim_um(0), -0.021 * 238.0, 1e-9);
 }
