@@ -12,9 +12,14 @@
 #include <cmath>
 #include <cstdio>
 #include <ctime>
+#include <fstream>
+#include <memory>
+#include <sstream>
+#include <stdexcept>
 #include <string>
 
 #include "client/status_client.hpp"
+#include "formats/model/model_io.hpp"
 #include "formats/toml/diagnostics.hpp"
 #include "nccomp_version.hpp"
 #include "tools/analyzed/analyzed_config.hpp"
@@ -62,7 +67,8 @@ int main(int argc, char** argv) {
   bool check = false;
   bool once = false;
   app.add_option("-c,--config", config_path, "The configuration")->capture_default_str();
-  app.add_flag("--check", check, "Check the configuration and exit");
+  app.add_flag("--check", check,
+               "Check the configuration and the analysis's model config, and exit");
   app.add_flag("--once", once, "Take the new rows, run if enough came in, and exit");
   try {
     app.parse(argc, argv);
@@ -76,6 +82,17 @@ int main(int argc, char** argv) {
     return 3;
   }
   if (check) {
+    // The analysis's model config is read again at every run (the operator may edit it).
+    try {
+      std::ifstream in(config->analysis_config, std::ios::binary);
+      if (!in) throw std::runtime_error(config->analysis_config + ": cannot open");
+      std::stringstream text;
+      text << in.rdbuf();
+      (void)nccomp::formats::model_io::read_model_text(text.str(), config->analysis_config, false);
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "%s\n", e.what());
+      return 3;
+    }
     std::printf("%s: ok\n", config_path.c_str());
     return 0;
   }

@@ -448,7 +448,7 @@ RunOutcome Service::run() {
   d["decision"] = out.decision;
   d["reason"] = out.reason;
   try {
-    write_file(dir / "decision.json", d.dump(2) + "\n");
+    write_atomic(dir / "decision.json", d.dump(2) + "\n");
     save_state();
   } catch (const std::exception& e) {
     deps_.log("error", e.what());
