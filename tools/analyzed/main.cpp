@@ -11,6 +11,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <ctime>
 #include <fstream>
 #include <memory>
@@ -27,9 +28,16 @@
 
 namespace {
 
-// One line per event on stderr: the journal under systemd.
+// One line per event on stderr: the journal under systemd, which takes the sd-daemon(3) prefix
+// as the line's priority (journalctl -p warning shows the warnings and errors).
 void log_line(std::string_view level, const std::string& line) {
-  std::fprintf(stderr, "%.*s %s\n", static_cast<int>(level.size()), level.data(), line.c_str());
+  static const bool journal = std::getenv("JOURNAL_STREAM") != nullptr;
+  const char* prefix = !journal             ? ""
+                       : level == "error"   ? "<3>"
+                       : level == "warning" ? "<4>"
+                                            : "<6>";
+  std::fprintf(stderr, "%s%.*s %s\n", prefix, static_cast<int>(level.size()), level.data(),
+               line.c_str());
   std::fflush(stderr);
 }
 
