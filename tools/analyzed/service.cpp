@@ -380,12 +380,14 @@ RunOutcome Service::run() {
         out.reason = "the daemon's status is not JSON";
       } else if (live_file.empty()) {
         out.live_rms_um = rms_um(cm::residuals(data, cm::Model(data.extra_columns, {})));
+        out.live_known = true;
       } else {
         try {
           const cm::Model live = io::load_model_file(live_file);
           // A model of other extra columns cannot be evaluated on these rows: taken as different.
           comparable = live.extra_columns() == data.extra_columns;
           if (comparable) out.live_rms_um = rms_um(cm::residuals(data, live));
+          out.live_known = comparable;
         } catch (const std::exception& e) {
           out.decision = "failed";
           out.reason = "cannot read the live model " + live_file + ": " + e.what();
@@ -442,7 +444,7 @@ RunOutcome Service::run() {
   d["new_rows"] = new_rows;
   d["analysed"] = out.analysed;
   d["effects_added"] = out.effects_added;
-  d["live_rms_um"] = out.live_rms_um;
+  d["live_rms_um"] = out.live_known ? nlohmann::ordered_json(out.live_rms_um) : nullptr;
   d["new_rms_um"] = out.new_rms_um;
   d["min_improvement_um"] = config_.min_improvement_um;
   d["decision"] = out.decision;
@@ -454,12 +456,14 @@ RunOutcome Service::run() {
     deps_.log("error", e.what());
   }
   const bool bad = out.decision == "failed" || out.decision == "refused";
-  deps_.log(bad ? "error" : "info",
-            "run " + std::string(number) + ": " + out.decision +
-                (out.analysed ? " (RMS on the analysed rows: live " + fmt(out.live_rms_um) +
-                                    " um, new " + fmt(out.new_rms_um) + " um)"
-                              : std::string()) +
-                ": " + out.reason);
+  deps_.log(
+      bad ? "error" : "info",
+      "run " + std::string(number) + ": " + out.decision +
+          (out.analysed ? " (RMS on the analysed rows:" +
+                              (out.live_known ? " live " + fmt(out.live_rms_um) + " um," : "") +
+                              " new " + fmt(out.new_rms_um) + " um)"
+                        : std::string()) +
+          ": " + out.reason);
   prune_runs();
   return out;
 }

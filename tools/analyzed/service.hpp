@@ -48,7 +48,9 @@ struct RunOutcome {
   std::string directory;
   std::size_t rows{0};
   bool analysed{false};
-  /// RMS error [µm] on the analysed rows: the live model's (as it is), the new model's.
+  /// RMS error [µm] on the analysed rows: the live model's (as it is; known once the daemon
+  /// named it and it could be evaluated on these rows), the new model's.
+  bool live_known{false};
   double live_rms_um{0.0};
   double new_rms_um{0.0};
   std::size_t effects_added{0};

@@ -143,6 +143,7 @@ TEST_F(AnalyzedService, RunsOncePerMinNewRowsAndSubmitsABetterModel) {
     sum2 += measured_um(i) * measured_um(i);
   }
   const double mean = sum / 20.0;
+  EXPECT_TRUE(o.live_known);
   EXPECT_NEAR(o.live_rms_um, std::sqrt(sum2 / 20.0), 1e-9);
   EXPECT_NEAR(o.new_rms_um, std::sqrt(sum2 / 20.0 - mean * mean), 1e-9);
   EXPECT_EQ(o.effects_added, 0U);
@@ -310,6 +311,7 @@ TEST_F(AnalyzedService, TheDaemonAwayOrRefusingIsCountedAndTheServiceGoesOn) {
             std::string::npos)
       << s.outcomes()[0].reason;
   EXPECT_TRUE(fs::exists(fs::path(s.outcomes()[0].directory) / "model.toml"));
+  EXPECT_FALSE(s.outcomes()[0].live_known);
   EXPECT_EQ(s.submit_errors(), 1U);
   daemon.away = false;
   daemon.candidate_answer = "error: permission denied: 'model' changes the machine\n";
