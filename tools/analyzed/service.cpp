@@ -33,6 +33,7 @@ namespace io = nccomp::formats::model_io;
 namespace {
 
 constexpr std::size_t kMaxRowsPerPoll = 50'000;
+constexpr std::size_t kBatchFailed = static_cast<std::size_t>(-1);
 
 std::system_error sys_error(const std::string& what) {
   return std::system_error(errno, std::generic_category(), what);
@@ -260,13 +261,26 @@ void Service::take_rows(std::vector<mqtt::LogRow>& rows) {
 }
 
 void Service::poll() {
+  // Everything there is, in batches: a run counts every row that is already in the files.
+  for (;;) {
+    const std::size_t taken = take_batch();
+    if (taken == kBatchFailed) return;
+    if (taken < kMaxRowsPerPoll) break;
+  }
+  if (state_.rows_total - state_.rows_at_last_run >=
+      static_cast<std::uint64_t>(config_.min_new_rows)) {
+    outcomes_.push_back(run());
+  }
+}
+
+std::size_t Service::take_batch() {
   std::vector<mqtt::LogProblem> problems;
   std::vector<mqtt::LogRow> rows;
   try {
     rows = source_.poll(kMaxRowsPerPoll, problems);
   } catch (const std::exception& e) {
     deps_.log("error", e.what());
-    return;
+    return kBatchFailed;
   }
   for (const auto& p : problems) {
     ++state_.rows_skipped;
@@ -282,12 +296,9 @@ void Service::poll() {
     // Nothing is lost: the state still names the rows before these, which are read again.
     deps_.log("error", std::string(e.what()) + ": the rows are read again at the next poll");
     source_.set_cursor(state_.cursor);
-    return;
+    return kBatchFailed;
   }
-  if (state_.rows_total - state_.rows_at_last_run >=
-      static_cast<std::uint64_t>(config_.min_new_rows)) {
-    outcomes_.push_back(run());
-  }
+  return rows.size();
 }
 
 RunOutcome Service::run() {

@@ -86,6 +86,8 @@ class Service {
   [[nodiscard]] std::string rows_path() const;
 
  private:
+  /// Rows taken from the log in one batch (saved with the state), or kBatchFailed.
+  std::size_t take_batch();
   void take_rows(std::vector<mqtt::LogRow>& rows);
   void save_state();
   RunOutcome run();
