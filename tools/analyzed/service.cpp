@@ -484,11 +484,29 @@ void Service::prune_runs() {
   std::vector<fs::path> runs;
   std::error_code ec;
   for (const auto& e : fs::directory_iterator(fs::path(config_.work_directory) / "runs", ec)) {
-    if (e.is_directory()) runs.push_back(e.path());
+    if (e.is_directory()) runs.push_back(fs::absolute(e.path()).lexically_normal());
+  }
+  const std::size_t keep = static_cast<std::size_t>(config_.keep_runs);
+  if (runs.size() <= keep) return;
+  // A promoted run's model.toml is the daemon's live model (or the one rollback returns to, or
+  // the candidate): its folder stays, or a restart of the daemon could not load it. Without the
+  // daemon's word nothing is removed.
+  std::vector<std::string> in_use;
+  try {
+    const auto j = nlohmann::json::parse(deps_.query(client::kStatusJson));
+    for (const char* k : {"/model/live/file", "/model/previous/file", "/shadow/other/file"}) {
+      in_use.push_back(j.value(nlohmann::json::json_pointer(k), std::string()));
+    }
+  } catch (const std::exception&) {
+    return;
   }
   std::sort(runs.begin(), runs.end());  // numbered: oldest first
-  const std::size_t keep = static_cast<std::size_t>(config_.keep_runs);
-  for (std::size_t i = 0; i + keep < runs.size(); ++i) fs::remove_all(runs[i], ec);
+  for (std::size_t i = 0; i + keep < runs.size(); ++i) {
+    const std::string model = (runs[i] / "model.toml").string();
+    if (std::find(in_use.begin(), in_use.end(), model) == in_use.end()) {
+      fs::remove_all(runs[i], ec);
+    }
+  }
 }
 
 }  // namespace nccomp::tools::analyzed

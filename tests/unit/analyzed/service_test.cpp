@@ -340,6 +340,33 @@ TEST_F(AnalyzedService, AnAnalysisThatFailsIsCountedAndTheRowsAreKept) {
   EXPECT_TRUE(daemon.requests.empty());
 }
 
+// keep_runs = 1: old run folders go, but never the one whose model the daemon runs (a restart
+// of the daemon loads it again) nor any while the daemon cannot say which that is.
+TEST_F(AnalyzedService, OldRunsAreRemovedButNotTheLiveModels) {
+  config.keep_runs = 1;
+  config.submit = false;
+  Service s(config, deps());
+  append(rows(1, 20));
+  s.poll();
+  ASSERT_EQ(s.outcomes().size(), 1U);
+  const fs::path first = s.outcomes()[0].directory;
+  daemon.live_file = (first / "model.toml").string();
+  append(rows(21, 40));
+  s.poll();
+  append(rows(41, 60));
+  s.poll();
+  ASSERT_EQ(s.outcomes().size(), 3U);
+  EXPECT_TRUE(fs::exists(first / "model.toml"));
+  EXPECT_FALSE(fs::exists(s.outcomes()[1].directory));
+  EXPECT_TRUE(fs::exists(s.outcomes()[2].directory));
+  daemon.away = true;
+  append(rows(61, 80));
+  s.poll();
+  ASSERT_EQ(s.outcomes().size(), 4U);
+  EXPECT_TRUE(fs::exists(s.outcomes()[2].directory));
+  EXPECT_TRUE(fs::exists(s.outcomes()[3].directory));
+}
+
 TEST(AnalyzedState, RoundTripsAndRefusesADamagedFile) {
   nccomp::tools::analyzed::ServiceState s;
   s.cursor = {12, 345, 678};
