@@ -34,6 +34,7 @@ namespace {
 
 constexpr std::size_t kMaxRowsPerPoll = 50'000;
 constexpr std::size_t kBatchFailed = static_cast<std::size_t>(-1);
+constexpr std::size_t kOutcomesKept = 100;
 
 std::system_error sys_error(const std::string& what) {
   return std::system_error(errno, std::generic_category(), what);
@@ -199,10 +200,18 @@ Service::Service(AnalyzedConfig config, ServiceDeps deps)
                            "): the rows taken so far are dropped, the log is followed on");
     state_.rows_bytes = state_.rows_total = state_.rows_at_last_run = 0;
   }
+  cut_back_rows();
+  if (state_.cursor.inode == 0) state_.cursor = oldest_file(config_.log_directory);
+  source_.set_cursor(state_.cursor);
+}
+
+void Service::cut_back_rows() {
   // Rows appended after the last state was written are read from the log again.
+  const std::string rows = rows_path();
   if (::truncate(rows.c_str(), static_cast<off_t>(state_.rows_bytes)) != 0 && errno != ENOENT) {
-    throw sys_error(rows.string() + ": cannot truncate");
+    throw sys_error(rows + ": cannot truncate");
   }
+  header_.clear();
   if (state_.rows_bytes > 0) {
     std::ifstream in(rows);
     std::string line;
@@ -210,8 +219,6 @@ Service::Service(AnalyzedConfig config, ServiceDeps deps)
     std::istringstream cells(line);
     for (std::string c; std::getline(cells, c, ',');) header_.push_back(c);
   }
-  if (state_.cursor.inode == 0) state_.cursor = oldest_file(config_.log_directory);
-  source_.set_cursor(state_.cursor);
 }
 
 std::string Service::rows_path() const {
@@ -270,6 +277,7 @@ void Service::poll() {
   if (state_.rows_total - state_.rows_at_last_run >=
       static_cast<std::uint64_t>(config_.min_new_rows)) {
     outcomes_.push_back(run());
+    if (outcomes_.size() > kOutcomesKept) outcomes_.erase(outcomes_.begin());
   }
 }
 
@@ -296,6 +304,11 @@ std::size_t Service::take_batch() {
     // Nothing is lost: the state still names the rows before these, which are read again.
     deps_.log("error", std::string(e.what()) + ": the rows are read again at the next poll");
     source_.set_cursor(state_.cursor);
+    try {
+      cut_back_rows();
+    } catch (const std::exception& e2) {
+      deps_.log("error", e2.what());
+    }
     return kBatchFailed;
   }
   return rows.size();
@@ -330,6 +343,7 @@ RunOutcome Service::run() {
       write_atomic(rows_path(), csv);
       state_.rows_bytes = csv.size();
       state_.rows_total = state_.rows_at_last_run = keep;
+      save_state();
     }
 
     const io::ModelFile cfg =

@@ -81,6 +81,7 @@ class Service {
   [[nodiscard]] std::uint64_t failed_runs() const noexcept { return failed_runs_; }
   /// Candidates the daemon refused or could not be asked (it is away).
   [[nodiscard]] std::uint64_t submit_errors() const noexcept { return submit_errors_; }
+  /// The latest runs (up to 100), oldest first.
   [[nodiscard]] const std::vector<RunOutcome>& outcomes() const noexcept { return outcomes_; }
   /// The rows taken so far (rows.csv), header first.
   [[nodiscard]] std::string rows_path() const;
@@ -90,8 +91,9 @@ class Service {
   std::size_t take_batch();
   void take_rows(std::vector<mqtt::LogRow>& rows);
   void save_state();
+  /// rows.csv cut back to the length the state names, its header read again.
+  void cut_back_rows();
   RunOutcome run();
-  void decide(RunOutcome& out, const std::string& model_path, std::uint64_t model_hash);
   void prune_runs();
 
   AnalyzedConfig config_;
