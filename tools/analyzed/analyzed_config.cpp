@@ -22,11 +22,7 @@ std::optional<AnalyzedConfig> load_analyzed_config(const std::string& path,
   try {
     root = formats::parse_toml_file(path);
   } catch (const toml::parse_error& e) {
-    nccomp::formats::Where w;
-    w.file = path;
-    w.line = static_cast<int>(e.source().begin.line);
-    w.column = static_cast<int>(e.source().begin.column);
-    diag.error(w, std::string(e.description()));
+    diag.append(nccomp::formats::DiagnosticsError(e, path).diagnostics(), path);
     return std::nullopt;
   }
   const std::string base = std::filesystem::absolute(path).parent_path().string();

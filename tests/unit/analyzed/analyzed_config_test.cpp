@@ -52,6 +52,14 @@ TEST(AnalyzedConfig, ErrorsNameFileLineColumnAndKey) {
   EXPECT_NE(e.find("extra: unknown section"), std::string::npos) << e;
 }
 
+TEST(AnalyzedConfig, ATomlSyntaxErrorNamesItsLineAndColumn) {
+  nccomp::test::TempDir d;
+  const std::string path = d.write("a.toml", "[analysis]\nconfig = \"m.toml\"\n[daemon\n");
+  nccomp::formats::Diagnostics diag;
+  EXPECT_FALSE(load_analyzed_config(path, diag));
+  EXPECT_EQ(diag.to_string().rfind(path + ":3:8: ", 0), 0U) << diag.to_string();
+}
+
 TEST(AnalyzedConfig, TheAnalysisSectionAndItsConfigAreRequired) {
   nccomp::test::TempDir d;
   nccomp::formats::Diagnostics diag;
