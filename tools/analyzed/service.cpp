@@ -292,8 +292,10 @@ std::size_t Service::take_batch() {
   }
   for (const auto& p : problems) {
     ++state_.rows_skipped;
-    deps_.log("warning", "log " + p.file + (p.line > 0 ? ":" + std::to_string(p.line) : "") + ": " +
-                             p.message);
+    // Appended, not "…" + std::to_string(…): GCC 12 at -O3 reports a false -Wrestrict there.
+    std::string where = "log " + p.file;
+    if (p.line > 0) where.append(":").append(std::to_string(p.line));
+    deps_.log("warning", where + ": " + p.message);
   }
   const bool moved = !(source_.cursor() == state_.cursor);
   try {
