@@ -11,6 +11,9 @@
 #   /lib/systemd/system/nccomp-publish.service, /usr/lib/sysusers.d/nccomp-publish.conf,
 #   /usr/lib/tmpfiles.d/nccomp-publish.conf, /etc/nccomp/nccomp-publish.toml (the MQTT
 #   publisher, docs/mqtt.md)
+#   /usr/bin/nccomp-analyzed, /lib/systemd/system/nccomp-analyzed.service,
+#   /usr/lib/sysusers.d/nccomp-analyzed.conf, /etc/nccompd/nccomp-analyzed.toml (the continuous
+#   analysis, docs/analyzed.md)
 #   /etc/nccompd/nccompd.toml, reference-nc-modbus.toml
 #   /usr/share/doc/nccomp/*.md, examples/*.toml; /usr/share/man/man{1,5,8}
 #   /usr/share/bash-completion/completions/nccomp
@@ -46,10 +49,14 @@ install(FILES systemd/nccomp-publish.sysusers.conf DESTINATION "${NCCOMP_SYSUSER
         RENAME nccomp-publish.conf)
 install(FILES systemd/nccomp-publish.tmpfiles.conf DESTINATION "${NCCOMP_TMPFILESDIR}"
         RENAME nccomp-publish.conf)
+install(FILES systemd/nccomp-analyzed.service DESTINATION "${NCCOMP_SYSTEMD_UNITDIR}")
+install(FILES systemd/nccomp-analyzed.sysusers.conf DESTINATION "${NCCOMP_SYSUSERSDIR}"
+        RENAME nccomp-analyzed.conf)
 
 # The operator's configuration (conffiles in the package). Readable by the service through
 # tmpfiles.d (root:nccomp 0640), applied after the user exists: systemd-tmpfiles --create.
-install(FILES config/nccompd.toml config/reference-nc-modbus.toml
+# nccomp-analyzed's lives beside them: its user is in group nccomp.
+install(FILES config/nccompd.toml config/reference-nc-modbus.toml config/nccomp-analyzed.toml
         DESTINATION "${CMAKE_INSTALL_FULL_SYSCONFDIR}/nccompd")
 # The MQTT publisher's (nccomp-publish.service): root:nccomp-publish 0640 through its tmpfiles.d.
 install(FILES config/nccomp-publish.toml DESTINATION "${CMAKE_INSTALL_FULL_SYSCONFDIR}/nccomp")
@@ -57,13 +64,13 @@ install(FILES config/nccomp-publish.toml DESTINATION "${CMAKE_INSTALL_FULL_SYSCO
 install(FILES README.md docs/calibration.md docs/can.md docs/checkpoints.md
               docs/closing-the-loop.md docs/config.md docs/creep.md docs/daemon.md docs/grinding.md
               docs/modbus.md docs/report.md docs/operator-page.md docs/mqtt.md
-              docs/estimation.md
+              docs/estimation.md docs/analyzed.md
         DESTINATION "${CMAKE_INSTALL_DOCDIR}")
 install(FILES docs/images/operator-page-alarm.png docs/images/operator-page-report.png
         DESTINATION "${CMAKE_INSTALL_DOCDIR}/images")
 install(FILES config/nccompd.toml config/nccompd-loopback.toml config/reference-nc-modbus.toml
               config/reference-nc-can.toml config/reference-nc-can-fd.toml
-              config/nccomp-publish.toml
+              config/nccomp-publish.toml config/nccomp-analyzed.toml
         DESTINATION "${CMAKE_INSTALL_DOCDIR}/examples")
 # The drop-in for [can] restart = "daemon" (docs/can.md): an example, never active by itself.
 install(FILES systemd/nccompd-can-restart.conf DESTINATION "${CMAKE_INSTALL_DOCDIR}/examples")

@@ -149,6 +149,39 @@ else
   fi
 fi
 
+# --- analyzed: nccomp-analyzed's user, config and unit; started beside the running daemon ------
+if ! $running; then
+  fail analyzed "skipped: the service is not running"
+elif ! getent passwd nccomp-analyzed >/dev/null; then
+  fail analyzed "no user nccomp-analyzed after install"
+else
+  groups=$(id -nG nccomp-analyzed)
+  file=$(stat -c '%U:%G %a' /etc/nccompd/nccomp-analyzed.toml)
+  # The operator's step (docs/analyzed.md): the model the analysis fits, beside the config.
+  printf '[model]\n[[model.term]]\nname = "offset"\nform = "constant"\n' >/etc/nccompd/model.toml
+  chown root:nccomp /etc/nccompd/model.toml && chmod 0640 /etc/nccompd/model.toml
+  if [[ " $groups " != *" nccomp "* ]] || [[ " $groups " != *" nccomp-admin "* ]]; then
+    fail analyzed "user nccomp-analyzed is in '$groups', not in nccomp and nccomp-admin"
+  elif [ "$file" != "root:nccomp 640" ]; then
+    fail analyzed "/etc/nccompd/nccomp-analyzed.toml $file (want root:nccomp 640)"
+  elif ! msg=$(runuser -u nccomp-analyzed -- nccomp-analyzed --check 2>&1); then
+    fail analyzed "user nccomp-analyzed cannot load its config: $msg"
+  elif ! systemd-analyze verify nccomp-analyzed.service >"$out/analyzed-verify.txt" 2>&1; then
+    fail analyzed "systemd-analyze verify: $(head -3 "$out/analyzed-verify.txt" | tr '\n' ' ')"
+  elif ! systemctl start nccomp-analyzed 2>"$out/analyzed-start.err" ||
+       ! wait_for 10 bash -c 'journalctl -u nccomp-analyzed -o cat | grep -q "^info following"'; then
+    fail analyzed "start: $(cat "$out/analyzed-start.err") $(journalctl -u nccomp-analyzed -o cat | tail -3 | tr '\n' ' ')"
+  else
+    policy=$(chrt -p "$(systemctl show -p MainPID --value nccomp-analyzed)" | head -1)
+    systemctl stop nccomp-analyzed
+    if [[ $policy != *SCHED_IDLE* ]]; then
+      fail analyzed "scheduling: '$policy' (want SCHED_IDLE)"
+    else
+      pass analyzed "groups '$groups'; config $file; --check as nccomp-analyzed: OK; unit verifies; started: $(journalctl -u nccomp-analyzed -o cat | grep -m1 '^info following' | cut -c1-60)...; $policy"
+    fi
+  fi
+fi
+
 # --- reload: systemctl reload applies a changed config (the generation goes up) --------------
 if ! $running; then
   fail reload "skipped: the service is not running"

@@ -11,7 +11,7 @@ here=$(dirname "$(realpath "$0")")
 debs=$(realpath -m "$1")
 workdir=$(realpath -m "$2")
 process_test=${3:+$(realpath "$3")}
-checks=(install config_permissions publisher_config start_ready status_access reload realtime process_test
+checks=(install config_permissions publisher_config start_ready status_access analyzed reload realtime process_test
         journal watchdog security remove source_install)
 
 if ! ls "$debs"/nccomp_*.deb "$debs"/nccomp-sim_*.deb >/dev/null 2>&1; then

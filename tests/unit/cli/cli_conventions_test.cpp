@@ -1,5 +1,5 @@
 // GIVEN every binary the packages install (nccompd, nccomp, ncsim, ncsim_peer, modbus_nc,
-// can_nc, modbus_map, nccomp-page), WHEN each runs as a process:
+// can_nc, modbus_map, nccomp-page, nccomp-analyzed), WHEN each runs as a process:
 // - with --help, THEN exit 0 and a help text on stdout;
 // - with --version, THEN exit 0 and "<name> <version>" where the version is the newest entry of
 //   debian/changelog (read here, independently of the build's generated header);
@@ -103,10 +103,15 @@ struct Binary {
 };
 
 const std::vector<Binary>& binaries() {
-  static const std::vector<Binary> b = {
-      {"nccompd", NCCOMPD_BIN},       {"nccomp", NCCOMP_BIN},          {"ncsim", NCSIM_BIN},
-      {"ncsim_peer", NCSIM_PEER_BIN}, {"modbus_nc", MODBUS_NC_BIN},    {"can_nc", CAN_NC_BIN},
-      {"modbus_map", MODBUS_MAP_BIN}, {"nccomp-page", NCCOMP_PAGE_BIN}};
+  static const std::vector<Binary> b = {{"nccompd", NCCOMPD_BIN},
+                                        {"nccomp", NCCOMP_BIN},
+                                        {"ncsim", NCSIM_BIN},
+                                        {"ncsim_peer", NCSIM_PEER_BIN},
+                                        {"modbus_nc", MODBUS_NC_BIN},
+                                        {"can_nc", CAN_NC_BIN},
+                                        {"modbus_map", MODBUS_MAP_BIN},
+                                        {"nccomp-page", NCCOMP_PAGE_BIN},
+                                        {"nccomp-analyzed", NCCOMP_ANALYZED_BIN}};
   return b;
 }
 
@@ -194,6 +199,7 @@ TEST_F(CliConventions, AnInvalidInputFileExitsWith3) {
   const std::string out = (dir_ / "out").string();
   const std::vector<std::vector<std::string>> cases = {
       {NCCOMPD_BIN, "--config", bad},
+      {NCCOMP_ANALYZED_BIN, "--config", bad},
       {NCCOMP_BIN, "check-config", bad},
       {NCCOMP_BIN, "plan", bad},
       {NCCOMP_BIN, "calibrate", "--config", bad, "--script", bad},
