@@ -2,12 +2,14 @@
 // together, and the outputs written.
 #include <algorithm>
 #include <cctype>
+#include <cstdint>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "formats/model/model_io.hpp"
@@ -97,14 +99,36 @@ std::vector<MachineLogs> group_logs(const std::vector<std::string>& logs) {
       files.push_back(l);
       continue;
     }
-    std::vector<std::string> found;
+    // *.csv and nccompd's rotated files *.csv.N (N = 1 the newest): each log's rotated files
+    // oldest first, then the log itself, so that its rows keep their order.
+    std::vector<std::pair<std::string, std::uint64_t>> found;  // (the log's path, N; 0 = itself)
     for (const auto& e : fs::recursive_directory_iterator(l, ec)) {
-      if (e.is_regular_file() && e.path().extension() == ".csv") found.push_back(e.path().string());
+      if (!e.is_regular_file()) continue;
+      const std::string path = e.path().string();
+      if (e.path().extension() == ".csv") {
+        found.emplace_back(path, 0);
+        continue;
+      }
+      const std::size_t dot = path.rfind('.');
+      const std::string digits = path.substr(dot + 1);
+      if (dot == std::string::npos || digits.empty() || digits.size() > 9 ||
+          digits.find_first_not_of("0123456789") != std::string::npos ||
+          fs::path(path.substr(0, dot)).extension() != ".csv") {
+        continue;
+      }
+      found.emplace_back(path.substr(0, dot), std::stoull(digits));
     }
     if (ec) throw std::invalid_argument(l + ": cannot read the directory: " + ec.message());
     if (found.empty()) throw std::invalid_argument(l + ": no *.csv file in the directory");
-    std::sort(found.begin(), found.end());
-    files.insert(files.end(), found.begin(), found.end());
+    std::sort(found.begin(), found.end(), [](const auto& a, const auto& b) {
+      if (a.first != b.first) return a.first < b.first;
+      // The log itself (0) last, its rotated files from the highest number (the oldest) down.
+      if ((a.second == 0) != (b.second == 0)) return b.second == 0;
+      return a.second > b.second;
+    });
+    for (const auto& [path, n] : found) {
+      files.push_back(n == 0 ? path : path + "." + std::to_string(n));
+    }
   }
   std::vector<MachineLogs> out;
   std::vector<std::string> where;  // file:line of each machine's first row

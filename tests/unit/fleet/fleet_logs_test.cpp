@@ -72,6 +72,21 @@ TEST_F(FleetLogs, GroupsByMachine) {
   EXPECT_EQ(g[1].files, (std::vector<std::string>{b}));
 }
 
+// GIVEN a directory as nccompd leaves it (measurements.csv and its rotated files .1 the newest
+// to .11 the oldest) WHEN grouped THEN every file is read, oldest first and the current one last
+// (only *.csv were read before: the rotated rows were silently left out).
+TEST_F(FleetLogs, ADirectoryTakesTheRotatedFilesOldestFirst) {
+  fs::create_directories(dir_ / "log");
+  const std::string cur = log("log/measurements.csv", "mill-1");
+  const std::string r1 = log("log/measurements.csv.1", "mill-1");
+  const std::string r2 = log("log/measurements.csv.2", "mill-1");
+  const std::string r11 = log("log/measurements.csv.11", "mill-1");
+  log("log/notes.txt.1", "mill-1");  // not a log
+  const auto g = an::group_logs({(dir_ / "log").string()});
+  ASSERT_EQ(g.size(), 1U);
+  EXPECT_EQ(g[0].files, (std::vector<std::string>{r11, r2, r1, cur}));
+}
+
 // GIVEN one machine's v2 logs with a v1 log between them WHEN grouped THEN one group of all
 // files in the order given (no fleet: a single machine's analysis as before).
 TEST_F(FleetLogs, OneMachineWithAV1LogIsNoFleet) {
