@@ -71,7 +71,7 @@ int main(int argc, char** argv) {
       "nccomp-analyzed — continuous analysis of nccompd's log, candidates in shadow "
       "(docs/analyzed.md)"};
   app.set_version_flag("--version", std::string("nccomp-analyzed ") + nccomp::kVersion);
-  std::string config_path = "/etc/nccomp/nccomp-analyzed.toml";
+  std::string config_path = "/etc/nccompd/nccomp-analyzed.toml";
   bool check = false;
   bool once = false;
   app.add_option("-c,--config", config_path, "The configuration")->capture_default_str();
