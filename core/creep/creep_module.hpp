@@ -114,8 +114,8 @@ class CreepModule final : public engine::Module, public engine::ToolWearTrimUser
   /// change of trims the laser does not see, e.g. contour terms) moves the compensator's output and
   /// fades out along the creep profile over one creep span from the current creep clock, as an
   /// adopted value does (AdoptedOutputs): such a trim comes in without a step. Started without
-  /// state and not yet measured: that part is held until the next measurement. The tool's motion
-  /// goes on (feed direction, cut path: WearCompensator::rebase_state()). False for a flag
+  /// state and not yet measured: that part is held until the next measurement. The kinematics
+  /// re-anchor on the next axis sample (one cycle's cut path is not counted). False for a flag
   /// register or a value beyond max_abs_um. Real-time safe.
   bool rebase_output(std::uint16_t register_index, double delta_um,
                      TimeNs now_ns) noexcept override;
