@@ -288,9 +288,9 @@ bool CreepModule::fade_out_shift(std::size_t ch, double delta_um) noexcept {
   // register's total does not move.
   s.channel_output_um[ch] = output_um;
   const bool rearming = comp_.rearming();
-  // restore_state, not rebase_state: keeping the tool's motion through the rebase made the CAN
-  // VM's handover step 1.7-2.0 um between two frames (NccompdCan.ModelLoadAndRollback…); the
-  // kinematics re-anchor on the next axis sample, as before.
+  // The kinematics re-anchor on the next axis sample: keeping the tool's motion through the
+  // rebase made the CAN VM's handover step 1.7-2.0 um between two frames
+  // (NccompdCan.ModelLoadAndRollbackHandOverOnTheCreepsRegisterWithoutAStep).
   if (!comp_.restore_state(s)) return false;
   comp_.restore_adoption(a);
   if (rearming) comp_.rearm_request();

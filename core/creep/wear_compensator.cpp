@@ -164,11 +164,20 @@ StateProblem WearCompensator::check_state(const CreepState& st) const noexcept {
 }
 
 bool WearCompensator::restore_state(const CreepState& st) noexcept {
-  return replace_state(st, false);
-}
-
-bool WearCompensator::rebase_state(const CreepState& st) noexcept {
-  return replace_state(st, true);
+  if (check_state(st).field != nullptr) return false;
+  s_ = st;
+  // Kinematics re-anchor on the first sample.
+  have_sample_ = false;
+  have_feed_ = false;
+  cutting_ = false;
+  interrupted_ = false;
+  have_now_ = false;
+  // Every value is re-sent on the next step.
+  written_once_.fill(false);
+  flag_written_once_.fill(false);
+  rearm_ = false;
+  select_tool_tables();
+  return true;
 }
 
 namespace {
@@ -210,25 +219,6 @@ bool WearCompensator::load_motion(std::span<const std::byte> bytes) noexcept {
   interrupted_ = m.flags[2] == 1;
   have_feed_ = m.flags[3] == 1;
   have_now_ = m.flags[4] == 1;
-  return true;
-}
-
-bool WearCompensator::replace_state(const CreepState& st, bool keep_motion) noexcept {
-  if (check_state(st).field != nullptr) return false;
-  s_ = st;
-  if (!keep_motion) {
-    // Kinematics re-anchor on the first sample.
-    have_sample_ = false;
-    have_feed_ = false;
-    cutting_ = false;
-    interrupted_ = false;
-    have_now_ = false;
-  }
-  // Every value is re-sent on the next step.
-  written_once_.fill(false);
-  flag_written_once_.fill(false);
-  rearm_ = false;
-  select_tool_tables();
   return true;
 }
 

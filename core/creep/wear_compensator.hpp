@@ -76,11 +76,6 @@ class WearCompensator {
   /// The same without exceptions: false (and the state unchanged) if check_state() finds a
   /// problem. Real-time safe.
   bool restore_state(const CreepState& state) noexcept;
-  /// restore_state() for a trim handover's rebase (CreepModule::rebase_output()): the state is
-  /// replaced and every value re-sent, but the tool's motion (last sample, feed direction,
-  /// cutting, interruption) goes on, so the lateral deflection and the cycle's cut path are not
-  /// lost. Real-time safe.
-  bool rebase_state(const CreepState& state) noexcept;
   /// The tool's motion between cycles (not state: a restart re-anchors on the first sample), for
   /// a reload's next engine (engine::Module::save_motion()). Bytes written: kMotionBytes, 0 if
   /// buf is too small. Real-time safe.
@@ -275,8 +270,6 @@ class WearCompensator {
   std::array<double, kMaxEdgePoints> residual_scratch_{};
   std::array<double, kMaxEdgePoints> prior_fraction_scratch_{};
   std::array<OffsetLimiter, kChannelCount> limiters_{};
-
-  bool replace_state(const CreepState& state, bool keep_motion) noexcept;
 
   // Kinematics of the last axis sample (not persisted: re-anchored by the first sample; a reload
   // carries them, save_motion()).
