@@ -996,7 +996,15 @@ TEST(CreepEstimatorFamilyPrior, ATightFamilyPriorDelaysANewToolsFirstRequest) {
   measure_every_100_mm(r, 0.0, 4, [](int j) { return 0.05 * 100.0 * j; });
   r.tool_change(2, true);
   measure_every_100_mm(r, 400.0, 4, [](int j) { return 0.06 * 100.0 * j; });
-  r.tool_change(3, true);
+  {
+    // The fold and the new prior at the tool change allocate nothing (real-time safe).
+    const std::array<Event, 1> change{ToolChange{r.now_ns, 3, true}};
+    StepOutput out;
+    nccomp::test::AllocationScope scope;
+    r.comp.step(r.now_ns, change, out);
+    EXPECT_EQ(scope.count(), 0U);
+  }
+  r.tool = 3;
   // Sample standard deviation of {0.05, 0.06}: 0.01/√2; the spread of a third: ·sqrt(3/2).
   const double sr = 0.01 / std::sqrt(2.0) * std::sqrt(1.5);
   EXPECT_NEAR(r.comp.state().rate_prior_um_per_mm[0], 0.055, 1e-15);
