@@ -162,6 +162,12 @@ class WearCompensator {
   /// The family's estimate of that density (mean over its finished tools, ≥ 0); NaN without a
   /// finished tool.
   [[nodiscard]] double family_rate_q() const noexcept;
+  /// The family's prior of a new tool's rate at support point i [µm/mm]: the mean of its
+  /// finished tools' start rates and the spread of one more tool, s·sqrt(1 + 1/n) (s their
+  /// sample standard deviation, n ≥ 2 tools); false (both NaN) with fewer than two tools or a
+  /// spread of 0.
+  bool family_rate_prior(std::size_t i, double& mean_um_per_mm,
+                         double& sigma_um_per_mm) const noexcept;
   /// One finished tool's estimate of that density from its remembered measurements: the
   /// least-squares rate r at its last measurement, L mm into its life, (r² − σ²/Sxx)/L; NaN
   /// with fewer than three measurements. Real-time safe (at most kMaxRateWindow per point).
