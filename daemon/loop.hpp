@@ -2,7 +2,8 @@
 // logging, no allocation, no locks, no I/O per cycle).
 //
 // Each cycle: sleep to the absolute deadline (clock_nanosleep TIMER_ABSTIME) → record the
-// wake-up latency → pick up a new configuration at the cycle boundary (state carried over) →
+// wake-up latency → pick up a new configuration at the cycle boundary once no write is in flight
+// (state carried over) →
 // the buses' receipts of the writes in flight to the engine → drain events from every bus's RX
 // ring → engine.step() → offset writes to the buses' TX rings (nothing in dry-run; a write a bus
 // does not confirm counts as on the NC once queued, a dropped one as refused) → alarms, notes
@@ -240,7 +241,7 @@ class Loop {
   void cycle(core::TimeNs wake_ns, bool stamp = false);
   /// The buses' receipts of rt's writes in flight to its engine. Real-time safe.
   void take_receipts(const Runtime& rt, core::TimeNs wake_ns) noexcept;
-  /// The swap of a pending configuration (cycle()'s first part).
+  /// The swap of a pending configuration (cycle()'s first part). Real-time safe.
   void swap_in(core::TimeNs wake_ns);
   void note(core::TimeNs t, NoteCode code, std::int64_t a, double b) noexcept;
 
