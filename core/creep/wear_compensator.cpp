@@ -231,6 +231,13 @@ bool WearCompensator::load_motion(std::span<const std::byte> bytes) noexcept {
   interrupted_ = m.flags[2] == 1;
   have_feed_ = m.flags[3] == 1;
   have_now_ = m.flags[4] == 1;
+  if (have_now_) {
+    // step() resets the limiters only without a last step: they go on from the values the old
+    // engine's limiters let through at its last step (the state), not from 0 by max_step_um.
+    for (std::size_t ch = 0; ch < kChannelCount; ++ch) {
+      limiters_[ch].reset(s_.channel_output_um[ch], last_now_ns_);
+    }
+  }
   return true;
 }
 

@@ -80,8 +80,9 @@ class WearCompensator {
   /// a reload's next engine (engine::Module::save_motion()). Bytes written: kMotionBytes, 0 if
   /// buf is too small. Real-time safe.
   std::size_t save_motion(std::span<std::byte> buf) const noexcept;
-  /// Continues save_motion()'s bytes; false (nothing changed) if they are not valid. Real-time
-  /// safe.
+  /// Continues save_motion()'s bytes; false (nothing changed) if they are not valid. Called
+  /// after restore_state() of the same engine's state: the channels' limiters go on from its
+  /// channel outputs at the last step's time. Real-time safe.
   bool load_motion(std::span<const std::byte> bytes) noexcept;
 
   /// Checks a state against the current config. Real-time safe.
