@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <initializer_list>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -67,6 +68,39 @@ TimeNs run_calibrated_shift(Calibrator& c, SimMachine& m, TimeNs& now, double ra
     EXPECT_TRUE(has_alarm(out, AlarmCode::kRecalibrationApplied)) << h;
   }
   return t_nom;
+}
+
+// The X, Y, Z offset registers 0, 1, 2 (a RegisterTable points to them: keep them alive).
+std::vector<core::engine::RegisterSpec> xyz_specs() {
+  std::vector<core::engine::RegisterSpec> specs(3);
+  for (std::size_t i = 0; i < 3; ++i) {
+    specs[i].name = i == 0 ? "X_offset" : (i == 1 ? "Y_offset" : "Z_offset");
+    specs[i].kind = core::engine::RegisterKind::kAxisOffset;
+  }
+  return specs;
+}
+
+// The text form of s as an older version writes it: that version's header, without the keys
+// that start with one of the newer prefixes.
+std::string older_text(const CalibState& s, int version,
+                       std::initializer_list<const char*> newer_prefixes) {
+  const std::string text = core::calib::to_text(s);
+  std::string out;
+  std::size_t pos = 0;
+  while (pos < text.size()) {
+    const std::size_t nl = text.find('\n', pos);
+    const std::string line = text.substr(pos, nl - pos);
+    pos = nl + 1;
+    if (std::any_of(newer_prefixes.begin(), newer_prefixes.end(),
+                    [&line](const char* p) { return line.rfind(p, 0) == 0; })) {
+      continue;
+    }
+    out +=
+        (line.rfind("nccomp_calib_state", 0) == 0 ? "nccomp_calib_state " + std::to_string(version)
+                                                  : line) +
+        "\n";
+  }
+  return out;
 }
 
 TEST(DriftEstimator, EarlierShiftsGiveTheMeanDriftAtTheKnots) {
@@ -300,16 +334,7 @@ TEST(DriftEstimator, VersionOneStatesAreConverted) {
   v1.estimates = {};
   v1.shifts = {};
   // Text: the version-1 keys only.
-  std::string text = core::calib::to_text(v1);
-  std::string v1_text;
-  std::size_t pos = 0;
-  while (pos < text.size()) {
-    const std::size_t nl = text.find('\n', pos);
-    const std::string line = text.substr(pos, nl - pos);
-    pos = nl + 1;
-    if (line.rfind("estimate.", 0) == 0 || line.rfind("shifts.", 0) == 0) continue;
-    v1_text += (line.rfind("nccomp_calib_state", 0) == 0 ? "nccomp_calib_state 1" : line) + "\n";
-  }
+  const std::string v1_text = older_text(v1, 1, {"estimate.", "shifts."});
   const CalibState from_text = core::calib::from_text(v1_text);
   EXPECT_EQ(from_text.version, CalibState::kVersion);
   // Touch sets at 1 h (6 µm) and 2 h (12 µm): knots 0.5 .. 2 h.
@@ -317,11 +342,7 @@ TEST(DriftEstimator, VersionOneStatesAreConverted) {
   EXPECT_NEAR(from_text.shifts.current_um[0][0], 3.0, 1e-6);
   EXPECT_NEAR(from_text.shifts.current_um[0][3], 12.0, 1e-6);
   // The module's bytes, with and without the three written values.
-  std::vector<core::engine::RegisterSpec> specs(3);
-  for (std::size_t i = 0; i < 3; ++i) {
-    specs[i].name = i == 0 ? "X_offset" : (i == 1 ? "Y_offset" : "Z_offset");
-    specs[i].kind = core::engine::RegisterKind::kAxisOffset;
-  }
+  const auto specs = xyz_specs();
   const core::engine::RegisterTable table(specs);
   for (const bool written : {false, true}) {
     std::vector<std::byte> bytes(core::calib::kCalibStateV1Bytes + (written ? 24 : 0));
@@ -365,30 +386,16 @@ TEST(DriftEstimator, VersionTwoStatesAreConverted) {
   ASSERT_TRUE(run_initial_calibration(c, m, now, out));  // folds the first shift
   const CalibState v3 = c.export_state();
   ASSERT_GT(v3.shifts.increment_weight, 0.0);
-  std::string v2_text;
-  const std::string text = core::calib::to_text(v3);
-  std::size_t pos = 0;
-  while (pos < text.size()) {
-    const std::size_t nl = text.find('\n', pos);
-    const std::string line = text.substr(pos, nl - pos);
-    pos = nl + 1;
-    if (line.rfind("shifts.increment_", 0) == 0) continue;
-    v2_text += (line.rfind("nccomp_calib_state", 0) == 0 ? "nccomp_calib_state 2" : line) + "\n";
-  }
-  const CalibState t = core::calib::from_text(v2_text);
+  const CalibState t = core::calib::from_text(older_text(v3, 2, {"shifts.increment_"}));
   EXPECT_EQ(t.version, 3);
   EXPECT_EQ(t.shifts.increment_weight, 0.0);
   EXPECT_EQ(t.shifts.shifts, v3.shifts.shifts);
   EXPECT_EQ(t.shifts.sum_um, v3.shifts.sum_um);
   // The version-3 keys under a version-2 header are unknown.
-  std::string mixed = text;
+  std::string mixed = core::calib::to_text(v3);
   mixed.replace(0, mixed.find('\n'), "nccomp_calib_state 2");
   EXPECT_THROW(core::calib::from_text(mixed), std::invalid_argument);
-  std::vector<core::engine::RegisterSpec> specs(3);
-  for (std::size_t i = 0; i < 3; ++i) {
-    specs[i].name = i == 0 ? "X_offset" : (i == 1 ? "Y_offset" : "Z_offset");
-    specs[i].kind = core::engine::RegisterKind::kAxisOffset;
-  }
+  const auto specs = xyz_specs();
   const core::engine::RegisterTable table(specs);
   CalibState v2 = v3;
   v2.version = 2;
