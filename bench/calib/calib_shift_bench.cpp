@@ -115,7 +115,9 @@ void facet_table() {
 // The estimator's temperature input: t5, or chosen before each shift by the fit on the earlier
 // shifts: the best of the 16 FL sensors for X (ch3), t5 through a first-order lag with a fitted
 // time constant, or both (sensor and lag).
-enum class InputMode { kT5, kBestSensor, kT5Lag, kBestSensorLag };
+// kValidated: sensor and lag, chosen by how well each earlier shift j >= 1 was predicted from
+// the shifts before j (tried after the first run, see bench/results/calib.md).
+enum class InputMode { kT5, kBestSensor, kT5Lag, kBestSensorLag, kValidated };
 
 struct Strategy {
   const char* name;
@@ -434,9 +436,13 @@ struct InputChoice {
 // the smallest residual: R² = 1 − Σ(y − b·x)² / Σy².
 InputChoice choose_input(const Thermal& d, const std::array<double, 5>& starts, std::size_t k,
                          InputMode mode) {
-  const bool any_sensor = mode == InputMode::kBestSensor || mode == InputMode::kBestSensorLag;
-  const bool any_lag = mode == InputMode::kT5Lag || mode == InputMode::kBestSensorLag;
+  const bool validated = mode == InputMode::kValidated && k >= 2;
+  const bool any_sensor = mode == InputMode::kBestSensor || mode == InputMode::kBestSensorLag ||
+                          mode == InputMode::kValidated;
+  const bool any_lag = mode == InputMode::kT5Lag || mode == InputMode::kBestSensorLag ||
+                       mode == InputMode::kValidated;
   InputChoice best{4, 0.0, -1e300};
+  double best_sse = 1e300;
   for (std::size_t sensor = 0; sensor < d.t.size(); ++sensor) {
     if (!any_sensor && sensor != 4) {
       continue;
@@ -449,23 +455,35 @@ InputChoice choose_input(const Thermal& d, const std::array<double, 5>& starts, 
       double sxy = 0.0;
       double sxx = 0.0;
       double syy = 0.0;
+      double sse = 0.0;  // validated: shift j predicted with the slope of shifts 0..j-1
       for (std::size_t j = 0; j < k; ++j) {
+        const double b_before = sxx > 0.0 ? sxy / sxx : 0.0;
+        double jxy = 0.0;
+        double jxx = 0.0;
+        double jyy = 0.0;
         const auto i0 = static_cast<std::size_t>(
             std::lower_bound(d.t_s.begin(), d.t_s.end(), starts[j] * 3600.0) - d.t_s.begin());
         for (std::size_t i = i0; i < d.t_s.size() && d.t_s[i] < (starts[j] + 8.0) * 3600.0; ++i) {
           const double xi = x[i] - x[i0];
           const double yi = d.ch3[i] - d.ch3[i0];
-          sxy += xi * yi;
-          sxx += xi * xi;
-          syy += yi * yi;
+          jxy += xi * yi;
+          jxx += xi * xi;
+          jyy += yi * yi;
         }
+        if (j > 0) {
+          sse += jyy - 2.0 * b_before * jxy + b_before * b_before * jxx;
+        }
+        sxy += jxy;
+        sxx += jxx;
+        syy += jyy;
       }
       if (!(sxx > 0.0) || !(syy > 0.0)) {
         continue;
       }
       const double r2 = sxy * sxy / (sxx * syy);  // = 1 − Σ(y − b·x)² / Σy² at b = sxy / sxx
-      if (r2 > best.r2) {
+      if (validated ? sse < best_sse : r2 > best.r2) {
         best = {sensor, tau_min * 60.0, r2};
+        best_sse = sse;
       }
     }
   }
@@ -692,10 +710,11 @@ void x_table(const Thermal& d, const std::array<double, 5>& starts) {
       names.emplace_back("shape (no temperature)");
     }
   }
-  const std::array<std::pair<InputMode, const char*>, 3> inputs{
+  const std::array<std::pair<InputMode, const char*>, 4> inputs{
       {{InputMode::kBestSensor, "best sensor for ch3"},
        {InputMode::kT5Lag, "t5 with a fitted lag"},
-       {InputMode::kBestSensorLag, "best sensor and lag"}}};
+       {InputMode::kBestSensorLag, "best sensor and lag"},
+       {InputMode::kValidated, "sensor and lag that predicted each earlier shift best"}}};
   for (const auto& [mode, name] : inputs) {
     for (const bool learn : {false, true}) {
       v.push_back({"input", true, ProfileShape::kCosine, Prediction::kEstimator, true, 6.0, 5.0,
