@@ -1792,6 +1792,7 @@ AnalysisResult analyze_numbered(const Dataset& data, const AnalysisConfig& confi
       t_out.column = term_column_name(c.spec, data.extra_columns);
       t_out.per = c.spec.per;
       t_out.form = c.spec.form;
+      t_out.degree = c.spec.degree;
       t_out.parameter =
           c.spec.form == Form::kStep || c.spec.form == Form::kHinge || c.spec.form == Form::kWear
               ? c.spec.center

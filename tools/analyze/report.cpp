@@ -401,10 +401,14 @@ std::string report_markdown(const cm::Dataset& data, const cm::AnalysisResult& r
          "SS removed | p (adjusted) | held-out better |\n| --- | --- | --- | "
          "--- | --- | --- | --- |\n";
     for (const auto& c : result.steps[s]) {
+      // Which power of its column a polynomial or a lag takes is part of what was tried.
+      const bool degree = c.form == cm::Form::kPoly || c.form == cm::Form::kLag;
       o << "| " << cm::effect_label(c.name, c.per, ex) << " | " << c.column << " | "
-        << cm::form_name(c.form) << " | " << num(c.parameter, 5) << " | "
-        << num(c.rss_reduction_fraction, 3) << " | " << (c.refitted ? num(c.p_value, 3) : "—")
-        << " | " << (c.refitted ? (c.heldout_improved ? "yes" : "no") : "—") << " |\n";
+        << cm::form_name(c.form)
+        << (degree ? " (degree " + std::to_string(c.degree) + ")" : std::string()) << " | "
+        << num(c.parameter, 5) << " | " << num(c.rss_reduction_fraction, 3) << " | "
+        << (c.refitted ? num(c.p_value, 3) : "—") << " | "
+        << (c.refitted ? (c.heldout_improved ? "yes" : "no") : "—") << " |\n";
     }
     o << "\n";
   }
