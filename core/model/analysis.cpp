@@ -1126,6 +1126,11 @@ void validate_sessions(const Dataset& data, const std::vector<TermSpec>& declare
   }
   std::vector<std::uint8_t> outlier(n, 0);
   for (const std::size_t i : result.outliers) outlier[i] = 1;
+  const auto& kind = data.column(static_cast<int>(Column::kKind));
+  auto kind_applies = [&](const TermSpec& t, std::size_t i) {
+    return kind.empty() || !std::isfinite(kind[i]) || kind[i] < 0.0 || kind[i] > 7.0 ||
+           (t.kind_mask & (1U << static_cast<unsigned>(kind[i]))) != 0U;
+  };
   double ss_declared = 0.0;
   double ss_final = 0.0;
   for (std::uint32_t s = 0; s < count; ++s) {
@@ -1143,6 +1148,47 @@ void validate_sessions(const Dataset& data, const std::vector<TermSpec>& declare
       }
     }
     if (!any) continue;
+    // Groups of a per-group term that only this session has: fitted on the other sessions, the
+    // term predicts 0 there, and the session's figure measures the missing group, not the model.
+    std::size_t unseen_rows = 0;
+    std::size_t listed = 0;
+    std::string groups;
+    std::vector<std::uint8_t> unseen(n, 0);
+    for (const TermSpec& t : final_specs) {
+      // A session term learns an unseen session from its own rows (Model::observe()).
+      if ((t.per[0] < 0 && t.per[1] < 0) || t.form == Form::kSession) continue;
+      std::map<std::array<double, 2>, bool> groups_of;  // true: in the other sessions' rows
+      for (int pass : {0, 1}) {
+        for (std::size_t i = 0; i < n; ++i) {
+          if ((pass == 0 ? use[i] : mask[i]) == 0U || !kind_applies(t, i)) continue;
+          bool ok = false;
+          const auto key = group_key(t, data.row(i), ok);
+          if (!ok) continue;
+          const auto [it, added] = groups_of.emplace(key, pass == 0);
+          if (it->second) continue;
+          if (unseen[i] == 0U) ++unseen_rows;
+          unseen[i] = 1;
+          if (added && listed++ < 5) {
+            groups += std::string(groups.empty() ? "" : ", ") + t.name + " " +
+                      column_name(t.per[0], data.extra_columns) + " " + fmt_g(key[0]);
+            if (t.per[1] >= 0) {
+              groups += " " + column_name(t.per[1], data.extra_columns) + " " + fmt_g(key[1]);
+            }
+          }
+        }
+      }
+    }
+    if (unseen_rows > 0) {
+      result.warnings.push_back(
+          {"heldout_unseen_group",
+           "--validate sessions: session " + std::to_string(s + 1) + " (from " +
+               data.where(f.first_row) + ") held out: " + std::to_string(unseen_rows) +
+               " of its rows belong to " + std::to_string(listed) +
+               (listed == 1 ? " group" : " groups") + " no other session has (" + groups +
+               (listed > 5 ? ", …" : "") +
+               "): fitted on the other sessions, the model predicts nothing for them, so this "
+               "session's figures measure the missing groups, not the model"});
+    }
     try {
       f.declared = error_stats(residuals(data, fit_terms(data, declared, use)), mask, 1);
       f.final_model = error_stats(residuals(data, fit_terms(data, final_specs, use)), mask, 1);
@@ -1746,6 +1792,7 @@ AnalysisResult analyze_numbered(const Dataset& data, const AnalysisConfig& confi
       t_out.column = term_column_name(c.spec, data.extra_columns);
       t_out.per = c.spec.per;
       t_out.form = c.spec.form;
+      t_out.degree = c.spec.degree;
       t_out.parameter =
           c.spec.form == Form::kStep || c.spec.form == Form::kHinge || c.spec.form == Form::kWear
               ? c.spec.center

@@ -153,6 +153,7 @@ struct TriedCandidate {
   /// The candidate's per columns (-1 unused): set for a per-group version.
   std::array<int, 2> per{-1, -1};
   Form form{Form::kLinear};
+  int degree{1};  // TermSpec::degree (the report shows it for kPoly and kLag)
   double parameter{0.0};
   double rss_reduction_fraction{0.0};  // on the search rows
   double p_value{1.0};                 // adjusted; 1 when not refitted
