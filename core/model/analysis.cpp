@@ -1937,6 +1937,7 @@ AnalysisResult analyze_numbered(const Dataset& data, const AnalysisConfig& confi
   result.noise_floor_um = noise_floor_um(data, residual, use);
   std::vector<std::uint8_t> all_rows(n);
   for (std::size_t i = 0; i < n; ++i) all_rows[i] = std::isfinite(data.target_um[i]) ? 1 : 0;
+  for (const std::size_t i : result.outliers) all_rows[i] = 0;  // reported, never fitted
   result.fitted_model = model;
   set_confidence_intervals(data, specs, use, residual, config, result);
   set_prediction_interval(data, specs, use, config, result);
