@@ -54,6 +54,11 @@ struct MouldFaceConfig {
   double laser_trip_s{4.0};
   /// Laser position [mm] (where the axes are during the trip).
   Vec3 laser_position_mm{-50.0, 0.0, 50.0};
+  /// In-process gauging after each part: the probe touches this many points of the finished
+  /// face (0 = no probe cycle), at mid-X on passes spread evenly from the first to the last.
+  std::int32_t probe_points{0};
+  /// Time per probed point [s].
+  double probe_time_s{1.0};
 };
 
 /// [program.side_wall]: a side wall finished level by level, probed at the checkpoints of the

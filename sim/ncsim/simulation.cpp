@@ -43,6 +43,14 @@ class MouldFace final : public Program {
         cut_path_mm_(c.tool_cut_path_mm),
         last_measure_mm_(c.tool_cut_path_mm) {
     passes_ = static_cast<std::int32_t>(std::floor(c_.size_y_mm / c_.stepover_mm + 1e-9)) + 1;
+    const auto n = static_cast<std::size_t>(c_.probe_points);
+    probes_.resize(n);
+    for (std::size_t j = 0; j < n; ++j) {
+      probes_[j].pass = n == 1 ? passes_ / 2
+                               : static_cast<std::int32_t>(std::lround(
+                                     static_cast<double>(j) * static_cast<double>(passes_ - 1) /
+                                     (static_cast<double>(n) - 1.0)));
+    }
   }
   [[nodiscard]] double max_step_s() const override {
     return step_mm_ / (c_.feed_mm_per_min / 60.0);
@@ -89,6 +97,9 @@ class MouldFace final : public Program {
       case Phase::kTrip:
         trip(sim, h_s);
         return true;
+      case Phase::kProbe:
+        probe(sim, h_s);
+        return true;
       case Phase::kDone:
         return false;
     }
@@ -96,7 +107,15 @@ class MouldFace final : public Program {
   }
 
  private:
-  enum class Phase : std::uint8_t { kStart, kCut, kLink, kTrip, kDone };
+  enum class Phase : std::uint8_t { kStart, kCut, kLink, kTrip, kProbe, kDone };
+
+  /// A point of the probe cycle: the face at mid-X of one pass, and its error as cut.
+  struct ProbePoint {
+    std::int32_t pass{0};
+    double dx_mm{1e300};  // distance from mid-X of the sample the error is from
+    Vec3 p_mm{};
+    double error_um{0.0};
+  };
 
   double d_link_done() const { return c_.stepover_mm - link_left_mm_; }
   double pass_y() const {
@@ -131,23 +150,67 @@ class MouldFace final : public Program {
         if (link_left_mm_ <= 1e-12) {
           link_left_mm_ = 1e-9;
         }
+      } else if (!probes_.empty()) {
+        phase_ = Phase::kProbe;
+        probe_index_ = 0;
+        probe_s_ = 0.0;
       } else {
-        sim.emit(ProgramEvent{sim.now_ns(), ProgramEventKind::kPartEnd, part_});
-        total_passes_ += passes_;
-        if (part_ < last_part_) {
-          ++part_;
-          pass_ = 0;
-          dir_ = 1;
-          u_mm_ = 0.0;
-          path_mm_ = 0.0;
-          phase_ = Phase::kStart;
-        } else {
-          phase_ = Phase::kDone;
-          sim.mutable_axis().cutting = false;
-        }
+        end_part(sim);
       }
     }
     maybe_measure(sim);
+  }
+
+  void end_part(Simulation& sim) {
+    sim.emit(ProgramEvent{sim.now_ns(), ProgramEventKind::kPartEnd, part_});
+    total_passes_ += passes_;
+    if (part_ < last_part_) {
+      ++part_;
+      pass_ = 0;
+      dir_ = 1;
+      u_mm_ = 0.0;
+      path_mm_ = 0.0;
+      phase_ = Phase::kStart;
+      for (ProbePoint& q : probes_) {
+        q.dx_mm = 1e300;
+      }
+    } else {
+      phase_ = Phase::kDone;
+      sim.mutable_axis().cutting = false;
+    }
+  }
+
+  // The probe touches the finished face along its normal (no wall angle, so no δ0): it reads
+  // the face's deviation as cut, push-off included, which the laser never sees.
+  void probe(Simulation& sim, double h_s) {
+    AxisSample& a = sim.mutable_axis();
+    a.cutting = false;
+    a.has_normal = false;
+    if (probe_index_ >= probes_.size()) {
+      end_part(sim);
+      return;
+    }
+    const ProbePoint& q = probes_[probe_index_];
+    set_position(a, q.p_mm, axis_offsets_um(sim));
+    probe_s_ += h_s;
+    if (probe_s_ < c_.probe_time_s) {
+      return;
+    }
+    probe_s_ = 0.0;
+    const double raw = q.error_um + sim.model().probe_noise_um();
+    core::ProbeMeasurement pm{};
+    pm.time_ns = sim.now_ns();
+    pm.part = part_;
+    pm.checkpoint = static_cast<std::int32_t>(probe_index_);
+    pm.raw_deviation_um = raw;
+    pm.wall_angle_deg = 0.0;
+    pm.ball_radius_mm = c_.ball_radius_mm;
+    pm.position_mm = q.p_mm;
+    sim.emit(pm);
+    sim.mutable_results().measurements.push_back({sim.time_s(), MeasurementKind::kProbe, part_,
+                                                  pm.checkpoint, cut_path_mm_, q.error_um, raw,
+                                                  false});
+    ++probe_index_;
   }
 
   void record(Simulation& sim, double x, double y) {
@@ -164,6 +227,14 @@ class MouldFace final : public Program {
                         sim.reg(nc.tool_radius_register) * sin_theta;
     sim.mutable_results().surface.push_back(
         {total_passes_ + pass_, path_mm_, p[0], p[1], p[2], e_machine + comp, 0.0 - comp});
+    for (ProbePoint& q : probes_) {
+      const double dx = std::fabs(x - 0.5 * c_.size_x_mm);
+      if (q.pass == pass_ && dx < q.dx_mm) {
+        q.dx_mm = dx;
+        q.p_mm = p;
+        q.error_um = e_machine + comp;
+      }
+    }
   }
 
   void maybe_measure(Simulation& sim) {
@@ -231,6 +302,9 @@ class MouldFace final : public Program {
   Phase resume_phase_{Phase::kCut};
   double trip_s_{0.0};
   bool measured_{false};
+  std::vector<ProbePoint> probes_;
+  std::size_t probe_index_{0};
+  double probe_s_{0.0};
 };
 
 // ---------------------------------------------------------------------------------------------

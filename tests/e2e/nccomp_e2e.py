@@ -1251,8 +1251,8 @@ def run_continued(b, source, work, name, daemon_cfg, daemon_overrides, parts, se
             reload_path, _ = staged(reload_cfg, reload_overrides, os.path.join(run_dir, "reload"))
             shutil.copyfile(reload_path, daemon_path)
             # NCCOMP_E2E_LATE_HUP=1: the SIGHUP only after the daemon's first poll of the
-            # continued NC, so that the swap lands later (reproduces the swap cycle's spike
-            # recorded in bench/results/e2e.md, an open defect of the handover).
+            # continued NC, so that the swap lands later (the case of the swap cycle's spike
+            # recorded in bench/results/e2e.md, fixed: the step assertion below covers it).
             if os.environ.get("NCCOMP_E2E_LATE_HUP"):
                 if sim is None:
                     sim = Proc("ncsim", sim_argv, os.path.join(run_dir, "ncsim.log"), run_dir)
@@ -1615,6 +1615,12 @@ def scenario_demo_loop(b, source, work):
     c.that(model_s["max_step_um"] <= 1.5 * creep_s["max_step_um"],
            "the model row's largest step %.3f um is within 1.5x the creep row's %.3f um" % (
                model_s["max_step_um"], creep_s["max_step_um"]))
+    # Issue 19's target is 1.5 um; without a measurement of the finished face the push-off the
+    # laser never sees (4.8-5.7 um on this part) stays: 6.24 um is what the loop reaches, and
+    # this bound holds it there (the same part with the initial model, nothing fitted: 8.72 um).
+    c.that(model_s["form"]["rms_um"] <= MODEL_ROW_RMS_BOUND_UM,
+           "the model row's form RMS %.3f um is at most %.2f um (a regression bound; the issue's "
+           "target: 1.5 um)" % (model_s["form"]["rms_um"], MODEL_ROW_RMS_BOUND_UM))
     c.done()
 
 
@@ -1757,14 +1763,23 @@ LOOP_MODE = ("model", "creeping + the model from the analysis")
 LOOP_CONFIG = "nccompd-loop.toml"
 LOOP_FIRST_BATCH = 2
 SUMMARY_KEYS = ("mode", "max_step_um", "form_rms_um", "form_max_um")
+# The model row's form RMS in lock-step [um]: 6.24 reached (bench/results/e2e.md), with room for
+# the last digits the reload's landing cycle moves.
+MODEL_ROW_RMS_BOUND_UM = 6.5
+
+
+# Real time: the loop's parts run this much faster than the four modes (the wear follows the
+# cut path, not the clock), so that the first batch, the analysis and the part with the model
+# take about one part's time of the four modes and run beside them.
+LOOP_SPEEDUP = 2.0
 
 
 def run_first_batch(b, source, work, speed=None, echo=print):
-    """The loop daemon on LOOP_FIRST_BATCH parts; real time: ncsim at speed x LOOP_FIRST_BATCH,
-    so that the batch takes one part's time (the wear follows the cut path, not the clock)."""
+    """The loop daemon on LOOP_FIRST_BATCH parts; real time: ncsim at speed x LOOP_SPEEDUP x
+    LOOP_FIRST_BATCH, so that the batch takes half a part's time of the four modes."""
     return run_machining(b, source, work, "batch1", LOOP_CONFIG, "ncsim-demo.toml",
                          parts=LOOP_FIRST_BATCH, echo=echo,
-                         speed=None if speed is None else speed * LOOP_FIRST_BATCH)
+                         speed=None if speed is None else speed * LOOP_SPEEDUP * LOOP_FIRST_BATCH)
 
 
 def run_loop(b, source, work, first, speed=None, echo=print):
@@ -1797,7 +1812,7 @@ def run_loop(b, source, work, first, speed=None, echo=print):
     else:
         second, _ = run_continued(b, source, work, "model", LOOP_CONFIG, initial, 1, [],
                                   first.out_dir, first.run_dir, program="mould_face",
-                                  model_load=model, speed=speed)
+                                  model_load=model, speed=speed * LOOP_SPEEDUP)
         rc, answer = second.model_load
         echo("nccomp model load %s: exit %d\n%s" % (model, rc, answer.rstrip()))
     echo("%s: %s" % (second.name, summary_line(second.report)))
@@ -1815,25 +1830,30 @@ def summary_rows(res):
 
 
 def run_demo(b, source, work, speed=None, echo=print):
-    """The four modes and the loop; returns ({mode: RunResult}, analysis summary)."""
+    """The four modes and the loop; returns ({mode: RunResult}, analysis summary). The loop (first
+    batch, analysis, the part with the model) depends on none of the four modes, so it runs
+    beside them: lock-step, two runs at a time (each pair of processes keeps about one CPU busy;
+    lock-step is deterministic whatever runs beside it), the loop on one worker and the four
+    modes one after the other on the other; real time, the four modes side by side and the loop
+    (LOOP_SPEEDUP faster) beside them."""
+    import concurrent.futures
+
+    def loop():
+        return run_loop(b, source, work, run_first_batch(b, source, work, speed, echo),
+                        speed=speed, echo=echo)
     if speed is None:
-        # Lock-step is deterministic whatever runs beside it: two runs at a time (each pair of
-        # processes keeps about one CPU busy), the two-part first batch first.
-        import concurrent.futures
         with concurrent.futures.ThreadPoolExecutor(max_workers=2) as pool:
-            batch = pool.submit(run_first_batch, b, source, work, None, echo)
+            looped = pool.submit(loop)
             modes = {key: pool.submit(run_machining, b, source, work, key, cfg, "ncsim-demo.toml",
                                       echo=echo, sets=MODE_SETS.get(key, []))
                      for key, _, cfg in MODES}
             res = {key: f.result() for key, f in modes.items()}
-            first = batch.result()
+            res["model"], analysis = looped.result()
     else:
-        import concurrent.futures
         with concurrent.futures.ThreadPoolExecutor(max_workers=1) as pool:
-            batch = pool.submit(run_first_batch, b, source, work, speed, echo)
+            looped = pool.submit(loop)
             res = run_modes(b, source, work, speed=speed, parallel=True, echo=echo)
-            first = batch.result()
-    res["model"], analysis = run_loop(b, source, work, first, speed=speed, echo=echo)
+            res["model"], analysis = looped.result()
     with open(os.path.join(work, "summary.json"), "w") as f:
         json.dump(summary_rows(res), f, indent=1)
         f.write("\n")

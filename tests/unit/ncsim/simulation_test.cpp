@@ -75,6 +75,64 @@ TEST(NcsimMouldFace, ErrorIsTheWearAlongThePathAndEveryRowIsFine) {
   EXPECT_NEAR(rows[200].y_mm, 1.0, 1e-12);
 }
 
+// The probe cycle after each part reads the finished face at mid-X of passes spread from the
+// first to the last: the wear at the cut path where the point was cut plus the push-off there
+// (which a laser measurement of the tool never shows), then the part ends.
+TEST(NcsimMouldFace, ProbeCycleReadsTheFinishedFaceWithItsPushoff) {
+  SimConfig c = quiet_config();
+  c.effects.wear.enabled = true;
+  c.effects.wear.rate_um_per_m = 100.0;  // 0.1 µm per mm of cut
+  c.effects.pushoff.enabled = true;
+  c.mould_face.probe_points = 2;
+  c.mould_face.probe_time_s = 0.5;
+  c.parts = 2;
+  Simulation sim(c, ProgramKind::kMouldFace, kKnown);
+  std::vector<core::ProbeMeasurement> probes;
+  std::vector<double> part_end_s;
+  for (int k = 1; k <= 20000 && !sim.done(); ++k) {
+    sim.advance_to(core::from_seconds(0.001 * k));
+    for (const auto& e : sim.take_events()) {
+      if (const auto* pm = std::get_if<core::ProbeMeasurement>(&e)) {
+        probes.push_back(*pm);
+      } else if (const auto* pe = std::get_if<core::ProgramEvent>(&e)) {
+        if (pe->kind == core::ProgramEventKind::kPartEnd) {
+          part_end_s.push_back(core::seconds(pe->time_ns));
+          EXPECT_EQ(probes.size(), 2U * part_end_s.size());  // the probe cycle, then the end
+        }
+      }
+    }
+  }
+  ASSERT_TRUE(sim.done());
+  ASSERT_EQ(probes.size(), 4U);
+  ASSERT_EQ(part_end_s.size(), 2U);
+  // 3 passes of 1 s, 2 links of 0.1 s, 2 probed points of 0.5 s.
+  EXPECT_NEAR(part_end_s[0], 4.2, 0.011);
+  const PushoffConfig& po = c.effects.pushoff;
+  const auto& m = sim.results().measurements;
+  ASSERT_EQ(m.size(), 4U);
+  for (std::size_t i = 0; i < probes.size(); ++i) {
+    const int part = static_cast<int>(i / 2);
+    const int pass = i % 2 == 0 ? 0 : 2;  // 2 points on 3 passes: the first and the last
+    const double y = pass * 1.0;
+    const double z = mould_face_z_mm(c.mould_face, 5.0, y);
+    const double cut_mm = 30.0 * part + 10.0 * pass + 5.0;
+    const double wear = 0.1 * cut_mm;
+    const double pushoff = po.base_um * (1.0 + po.wear_gain_per_um * wear) * (z - po.clamp_z_mm) /
+                           po.reference_lever_mm;
+    EXPECT_EQ(probes[i].part, part + 1) << i;
+    EXPECT_EQ(probes[i].checkpoint, static_cast<std::int32_t>(i % 2)) << i;
+    EXPECT_EQ(probes[i].wall_angle_deg, 0.0);
+    EXPECT_EQ(probes[i].ball_radius_mm, c.mould_face.ball_radius_mm);
+    EXPECT_NEAR(probes[i].position_mm[0], 5.0, 0.026) << i;
+    EXPECT_NEAR(probes[i].position_mm[1], y, 1e-12) << i;
+    EXPECT_NEAR(probes[i].raw_deviation_um, wear + pushoff, 0.005) << i;
+    EXPECT_EQ(m[i].kind, MeasurementKind::kProbe);
+    EXPECT_EQ(m[i].checkpoint, probes[i].checkpoint);
+    EXPECT_DOUBLE_EQ(m[i].reading_um, probes[i].raw_deviation_um);  // no probe noise
+    EXPECT_NEAR(m[i].cut_path_mm, 30.0 * (part + 1), 1e-9);         // probed after the part
+  }
+}
+
 TEST(NcsimMouldFace, AxisAndToolOffsetsActAfterTheLatency) {
   SimConfig c = quiet_config();
   c.effects.wear.enabled = true;
