@@ -187,3 +187,28 @@ TEST(Sessions, AHeldOutSessionsGroupNoOtherSessionHasIsAWarning) {
   for (auto& v : tool) v = 1.0;
   EXPECT_TRUE(session_warnings(cm::analyze(d, c)).empty());
 }
+
+// A log recorded in one piece (FL_THERMAL: 46 h, no warm start) has no session to hold out:
+// validate_block_s cuts it into blocks of that length from its first time instead.
+TEST(Sessions, ValidateBlockSHoldsOutBlocksOfTimeFromTheFirstRow) {
+  synth::Options opt;
+  opt.parts = 40;
+  cm::Dataset d = synth::generate(opt);
+  const auto& t = d.column(static_cast<int>(cm::Column::kTime));
+  ASSERT_EQ(t.size(), d.rows());
+  const double t0 = *std::min_element(t.begin(), t.end());
+  const double t1 = *std::max_element(t.begin(), t.end());
+  ASSERT_GT(t1, t0);
+  const double block_s = (t1 - t0) / 3.5;  // blocks 0, 1, 2, 3 (the last one half)
+  std::vector<std::size_t> rows(4, 0);
+  for (const double v : t) ++rows[static_cast<std::size_t>(std::floor((v - t0) / block_s))];
+  cm::AnalysisConfig c = synth::config();
+  c.validate_sessions = true;
+  c.validate_block_s = block_s;
+  const cm::AnalysisResult r = cm::analyze(d, c);
+  ASSERT_EQ(r.session_folds.size(), 4U);
+  for (std::size_t s = 0; s < 4; ++s) {
+    EXPECT_EQ(r.session_folds[s].session, s);
+    EXPECT_EQ(r.session_folds[s].final_model.rows, rows[s]) << s;
+  }
+}
