@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Runs `nccomp analyze` on the two real data sets of ../shared/data (beside the checkout; or
-# $NCCOMP_DATA) and copies the reports and
+# $NCCOMP_DATA) and on the ACE spindle thermal set of bench/data, and copies the reports and
 # figures of bench/results/model.md (and the plots docs/closing-the-loop.md shows) into
 # bench/model/figures/.
 #   bench/model/run_real_data.sh [path/to/nccomp]   (default: build/release/tools/nccomp)
@@ -27,6 +27,12 @@ for ch in 1 3 5; do
       --validate sessions --out "$out/${cfg}_ch$ch"
   done
 done
+# ACE spindle thermal set: 18 days, one file (session) each, read with one map as converted;
+# --validate sessions holds out each day in turn.
+ace_logs=()
+for f in bench/data/ace_spindle_thermal/day*.csv; do ace_logs+=(--log "$f"); done
+"$nccomp" analyze "${ace_logs[@]}" --map bench/model/ace_thermal/ace.map.toml \
+  --config bench/model/ace_thermal/ace.toml --validate sessions --out "$out/ace_thermal"
 rm -rf "$here/figures"
 mkdir -p "$here/figures"
 # Reports of every run; of the figures only those docs/closing-the-loop.md shows (the others are
@@ -43,4 +49,5 @@ copy fl_thermal_ch1 time_s spindle_rpm t1_c
 copy fl_thermal_ch3 time_s
 copy fl_thermal_ch5 time_s
 for ch in 1 3 5; do copy "fl_thermal_ranked_ch$ch" time_s; done
+copy ace_thermal time_s spindle_rear_c
 echo "figures in $here/figures"
