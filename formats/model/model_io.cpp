@@ -128,7 +128,7 @@ std::optional<int> resolve_column(const std::string& name, std::vector<std::stri
   return cm::column_index(name, extras);
 }
 
-constexpr std::array<std::string_view, 13> kEffectNames = {"thermal_drift",
+constexpr std::array<std::string_view, 14> kEffectNames = {"thermal_drift",
                                                            "level_change",
                                                            "position_x",
                                                            "position_y",
@@ -140,7 +140,8 @@ constexpr std::array<std::string_view, 13> kEffectNames = {"thermal_drift",
                                                            "wear_nonlinear",
                                                            "part_trend",
                                                            "contact_angle",
-                                                           "contact_angle*tool_wear"};
+                                                           "contact_angle*tool_wear",
+                                                           "session_offset"};
 
 // A `column_kind` table: column = "temperature" | "other" (how a linear effect in it is named).
 // Wrong entries are reported and left out.
@@ -532,6 +533,7 @@ void read_search(const toml::node& sn, ModelFile& out, Diagnostics& diag) {
             "no effect is called '" + name +
                 "' (thermal_drift, level_change, position_x|y|z, periodic_x|y|z, "
                 "tool_wear, wear_nonlinear, part_trend, contact_angle, contact_angle*tool_wear, "
+                "session_offset, "
                 "linear_<column> of linear_columns, a*b of an interaction)");
       }
     }

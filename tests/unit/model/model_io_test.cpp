@@ -332,6 +332,8 @@ TEST(ModelFile, RefusesAnUnknownExcludeAndKeepsColumnKinds) {
   EXPECT_EQ(err(head + "exclude = [\"thermal_drfit\"]\n").substr(0, 76),
             "c.toml:5:11: model.search.exclude: no effect is called 'thermal_drfit' (ther");
   EXPECT_EQ(err(head + "linear_columns = [\"depth_mm\"]\nexclude = [\"linear_depth_mm\"]\n"), "");
+  // docs/analyze.md names it; the analysis honours it (core/model/analysis.cpp).
+  EXPECT_EQ(err(head + "exclude = [\"session_offset\"]\n"), "");
   EXPECT_EQ(err(head + "exclude = [\"linear_depth_mm\"]\n").substr(0, 71),
             "c.toml:5:11: model.search.exclude: no effect is called 'linear_depth_mm");
   EXPECT_EQ(err(head + "column_kind = { t2 = \"warm\" }\n"),
