@@ -29,9 +29,7 @@ for ch in 1 3 5; do
 done
 # ACE spindle thermal set: 18 days, one file (session) each, read with one map as converted;
 # --validate sessions holds out each day in turn.
-ace_logs=()
-for f in bench/data/ace_spindle_thermal/day*.csv; do ace_logs+=(--log "$f"); done
-"$nccomp" analyze "${ace_logs[@]}" --map bench/model/ace_thermal/ace.map.toml \
+"$nccomp" analyze --log bench/data/ace_spindle_thermal --map bench/model/ace_thermal/ace.map.toml \
   --config bench/model/ace_thermal/ace.toml --validate sessions --out "$out/ace_thermal"
 rm -rf "$here/figures"
 mkdir -p "$here/figures"

@@ -106,6 +106,19 @@ def main():
         elif len(session[0]["params"]["session_offsets"]) != fitted_days:
             failures.append("%d session offsets, expected one per fitted day (%d)" %
                             (len(session[0]["params"]["session_offsets"]), fitted_days))
+
+    # The directory read with the same map: the same files in name order, the same analysis.
+    out_dir = out + "_dir"
+    shutil.rmtree(out_dir, ignore_errors=True)
+    cmd_dir = [args.nccomp, "analyze", "--log", "bench/data/ace_spindle_thermal"] + \
+        cmd[cmd.index("--map"):-1] + [out_dir]
+    run_dir = subprocess.run(cmd_dir, cwd=args.source, capture_output=True, text=True)
+    if run_dir.returncode != 0:
+        failures.append("--log DIR --map: exit %d: %s" % (run_dir.returncode, run_dir.stderr))
+    else:
+        with open(os.path.join(out_dir, "summary.json"), encoding="utf-8") as f:
+            if json.load(f) != summary:
+                failures.append("--log DIR: summary.json differs from the files listed one by one")
     for f in failures:
         print("FAIL:", f)
     if failures:

@@ -1,6 +1,7 @@
 // `nccomp analyze --log LOG.csv --config CONF.toml --out DIR [--map MAP.toml]`: fits the declared
 // model to the measurement log, searches the residual for the effect the model lacks, and writes
 // DIR/summary.json, DIR/report.md (+ DIR/plots/*.svg) and DIR/model.toml (issue 11).
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -45,6 +46,24 @@ std::string read_text(const std::string& path) {
   return ss.str();
 }
 
+// A foreign log given as a directory: its *.csv files in name order (day01.csv, day02.csv, ...),
+// each read with the directory's mapping. Files are returned as given.
+std::vector<std::string> csv_files_of(const std::string& log) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (!fs::is_directory(log, ec)) return {log};
+  std::vector<std::string> files;
+  for (const auto& e : fs::directory_iterator(log, ec)) {
+    if (e.is_regular_file(ec) && e.path().extension() == ".csv") files.push_back(e.path().string());
+  }
+  if (ec) throw CommandError(nccomp::tools::kExitInvalidInput, log + ": " + ec.message());
+  if (files.empty()) {
+    throw CommandError(nccomp::tools::kExitInvalidInput, log + ": no *.csv file in the directory");
+  }
+  std::sort(files.begin(), files.end());
+  return files;
+}
+
 void run(const Options& given) {
   Options opt = given;
   if (opt.maps.empty()) {
@@ -64,6 +83,19 @@ void run(const Options& given) {
   if (!opt.maps.empty() && opt.maps.size() != 1 && opt.maps.size() != opt.logs.size()) {
     throw CommandError(nccomp::tools::kExitUsage,
                        "--map: give one mapping for all logs or one per --log");
+  }
+  if (!opt.maps.empty()) {
+    // A directory of foreign CSVs: each of its files with that --log's mapping.
+    std::vector<std::string> logs;
+    std::vector<std::string> maps;
+    for (std::size_t i = 0; i < opt.logs.size(); ++i) {
+      for (auto& f : csv_files_of(opt.logs[i])) {
+        logs.push_back(std::move(f));
+        maps.push_back(opt.maps[opt.maps.size() == 1 ? 0 : i]);
+      }
+    }
+    opt.logs = std::move(logs);
+    if (opt.maps.size() != 1) opt.maps = std::move(maps);
   }
   io::ModelFile cfg;
   std::vector<io::Mapping> maps;
