@@ -12,8 +12,9 @@ nccomp="build/release/tools/nccomp"
 # inputs as ../shared/data/... and bench/model/..., not as this machine's directories.
 cd "$here/../.."
 data="${NCCOMP_DATA:-../shared/data}"
-out="${TMPDIR:-/tmp}/nccomp_closing_the_loop"
-rm -rf "$out"
+# A directory of its own, so that two runs at once do not write into each other's.
+out="$(mktemp -d "${TMPDIR:-/tmp}/nccomp_closing_the_loop.XXXXXX")"
+trap 'rm -rf "$out"' EXIT
 "$nccomp" analyze \
   --log "$data/phm2010_milling_wear/c4_wear.csv" --map bench/model/phm2010/c4.map.toml \
   --log "$data/phm2010_milling_wear/c6_wear.csv" --map bench/model/phm2010/c6.map.toml \
