@@ -70,6 +70,18 @@ std::int32_t holding_i32(NcServer& nc, std::uint16_t address) {
   return static_cast<std::int32_t>((std::uint32_t{r[0]} << 16) | r[1]);
 }
 
+// The NC's tool measurement: tool 1, wear_um, measurement number sequence.
+void measure_wear(NcServer& nc, float wear_um, std::uint16_t sequence) {
+  nc.update([&](Tables& t) {
+    std::uint32_t bits = 0;
+    std::memcpy(&bits, &wear_um, sizeof bits);
+    t.input[101] = 1;
+    t.input[102] = static_cast<std::uint16_t>(bits >> 16);
+    t.input[103] = static_cast<std::uint16_t>(bits & 0xFFFF);
+    t.input[100] = sequence;
+  });
+}
+
 std::string config_text(std::uint16_t port, const std::string& extra = "") {
   std::ostringstream s;
   s << "[daemon]\nrate_hz = 200\n"
@@ -167,15 +179,7 @@ TEST(NccompModel, LoadRollbackAndRestartWithRefusals) {
   ASSERT_TRUE(wait_until([&] { return number(daemon.status(), "cycles") >= 20; }, 15s))
       << daemon.log();
   // 5.0 µm of wear measured: −5.0 µm + the trim of model A (2.0) = −3.0 µm.
-  nc.update([](Tables& t) {
-    const float w = 5.0F;
-    std::uint32_t bits = 0;
-    std::memcpy(&bits, &w, sizeof bits);
-    t.input[101] = 1;
-    t.input[102] = static_cast<std::uint16_t>(bits >> 16);
-    t.input[103] = static_cast<std::uint16_t>(bits & 0xFFFF);
-    t.input[100] = 1;
-  });
+  measure_wear(nc, 5.0F, 1);
   ASSERT_TRUE(wait_until([&] { return holding_i32(nc, kLength) == -30; }, 15s))
       << holding_i32(nc, kLength) << "\n"
       << daemon.log();
@@ -606,15 +610,7 @@ TEST(NccompModel, AModelIsPendingUntilTheLoopSwapsItIn) {
   ASSERT_TRUE(wait_until([&] { return number(daemon.status(), "cycles") >= 20; }, 15s))
       << daemon.log();
   hang.store(true);
-  nc.update([](Tables& t) {
-    const float w = 5.0F;
-    std::uint32_t bits = 0;
-    std::memcpy(&bits, &w, sizeof bits);
-    t.input[101] = 1;
-    t.input[102] = static_cast<std::uint16_t>(bits >> 16);
-    t.input[103] = static_cast<std::uint16_t>(bits & 0xFFFF);
-    t.input[100] = 1;
-  });
+  measure_wear(nc, 5.0F, 1);
   // nc.update() / holding() would wait for the hung write from here on.
   ASSERT_TRUE(wait_until([&] { return hung.load(); }, 15s)) << daemon.log();
 
