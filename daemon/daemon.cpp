@@ -346,7 +346,13 @@ class Daemon {
   MainThreadCalls main_calls_;
   std::string model_choice_path_;
   std::mutex model_mu_;
-  ModelState model_state_;  // under model_mu_
+  ModelState model_state_;  // under model_mu_: the last accepted configuration's
+  /// The model the loop runs (under model_mu_): model_state_'s once the loop swapped in its
+  /// generation.
+  sections::ModelRecord running_model_;
+  std::uint64_t running_generation_{0};
+  /// model_state_ as the loop runs it: a model not swapped in yet is pending. Any thread.
+  ModelState model_view();
 };
 
 // Signals are blocked before any thread exists, so every thread inherits the mask and the main
@@ -487,7 +493,37 @@ void Daemon::note_model(const cfg::Config& config) {
   shadow_.configure(s != nullptr ? s->shadow : sections::ShadowOptions{}, std::move(context_names));
   shadow_.set_live(m.live.file, m.live.hash,
                    s != nullptr && s->loaded && !s->disabled ? s->model : core::model::Model{});
+  if (!loop_) {  // start-up: the loop starts with this configuration
+    running_model_ = m.live;
+    running_generation_ = m.generation;
+  }
   model_state_ = std::move(m);
+}
+
+ModelState Daemon::model_view() {
+  const LoopStats ls = loop_ ? loop_->stats() : LoopStats{};
+  std::lock_guard<std::mutex> lock(model_mu_);
+  const bool same = running_model_.file == model_state_.live.file &&
+                    running_model_.hash == model_state_.live.hash;
+  if (ls.cycles == 0 || ls.config_generation >= model_state_.generation) {
+    if (running_generation_ < model_state_.generation) {
+      // Seen within the main thread's 0.1 s poll of the swap: the model is live from here.
+      if (!same) model_state_.live.since_utc = sections::utc_now();
+      running_model_ = model_state_.live;
+      running_generation_ = model_state_.generation;
+    }
+    return model_state_;
+  }
+  if (same) return model_state_;  // a reload that keeps the model
+  ModelState m = model_state_;
+  m.pending = true;
+  m.pending_model = m.live;
+  m.pending_model.since_utc.clear();
+  m.pending_generation = m.generation;
+  m.pending_cycles = ls.swap_waiting;
+  m.live = running_model_;
+  m.generation = ls.config_generation;
+  return m;
 }
 
 ModelChange Daemon::change_model(ModelAction action, const std::string& file,
@@ -1042,17 +1078,13 @@ bool Daemon::start_status() {
   };
   sc_.state_problem = [problem = state_problem_] { return problem; };
   sc_.shadow = [this] { return shadow_.status(); };
-  sc_.model = [this] {
-    std::lock_guard<std::mutex> lock(model_mu_);
-    return model_state_;
-  };
+  sc_.model = [this] { return model_view(); };
   sc_.config_path = options_.config_path;
   sc_.state_path = state_path_;
   status_ = std::make_unique<StatusServer>(sc_);
   CommandContext cc{&commands_, loop_.get(), sc_.register_names, {}, {}, {}};
   cc.model_state = [this] {
-    std::lock_guard<std::mutex> lock(model_mu_);
-    ModelState m = model_state_;
+    ModelState m = model_view();
     m.shadow = shadow_.status();
     return m;
   };
@@ -1155,6 +1187,7 @@ void Daemon::run_until_stopped() {
     }
     main_calls_.serve();
     serve_shadow();
+    (void)model_view();  // stamps a model live when the loop has swapped it in
     swap_->reclaim();
     watch_buses(rs);
     const auto now = std::chrono::steady_clock::now();

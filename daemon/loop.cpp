@@ -326,10 +326,12 @@ void Loop::swap_in(core::TimeNs wake_ns) {
   }
   if (in_flight && swap_waited_ < options_.swap_wait_max_cycles) {
     ++swap_waited_;
+    local_.swap_waiting = swap_waited_;
     return;
   }
   const double waited = static_cast<double>(swap_waited_);
   swap_waited_ = 0;
+  local_.swap_waiting = 0;
   const bool was_dry = old.dry_run;
   const std::uint64_t old_generation = old.engine->state_generation();
   const std::uint64_t old_sequence = old.engine->write_sequence();

@@ -142,7 +142,9 @@ struct LoopStats {
   std::uint64_t state_exports{0};
   std::uint64_t state_export_busy{0};  // persister behind: export postponed
   std::uint64_t state_export_failed{0};
-  std::uint64_t config_generation{0};
+  std::uint64_t config_generation{0};  // the configuration the loop runs (swapped in)
+  /// Cycles the published configuration has waited for the bus's receipts (0: none waits).
+  std::uint64_t swap_waiting{0};
   std::uint64_t reloads{0};
   std::int64_t minor_faults_after_warmup{-1};  // -1 until the baseline is taken
   std::int64_t major_faults_after_warmup{-1};

@@ -130,7 +130,8 @@ std::string render_json(const StatusContext& c) {
   const auto& s = v.s;
   std::ostringstream o;
   o << "{\"daemon\":{\"pid\":" << ::getpid() << ",\"config\":\"" << json_escape(c.config_path)
-    << "\",\"config_generation\":" << s.config_generation << ",\"reloads\":" << s.reloads
+    << "\",\"config_generation\":" << s.config_generation
+    << ",\"swap_waiting_cycles\":" << s.swap_waiting << ",\"reloads\":" << s.reloads
     << ",\"dry_run\":" << (s.dry_run ? "true" : "false")
     << ",\"hold\":" << (s.hold ? "true" : "false")
     << ",\"state_problem\":" << string_or_null(v.problem) << "},";
@@ -177,6 +178,15 @@ std::string render_json(const StatusContext& c) {
     record(m.live);
     o << ",\"previous\":";
     record(m.previous);
+    // Accepted, not swapped in by the loop yet (live is the model still in force).
+    o << ",\"pending\":";
+    if (m.pending) {
+      record(m.pending_model);
+    } else {
+      o << "null";
+    }
+    o << ",\"pending_generation\":" << m.pending_generation
+      << ",\"pending_cycles\":" << m.pending_cycles;
     o << ",\"chosen\":" << (m.chosen ? "true" : "false") << ",\"generation\":" << m.generation
       << "},";
   }
@@ -501,6 +511,10 @@ std::string render_prometheus(const StatusContext& c) {
   counter("handover_unabsorbed_total",
           "Registers whose total moved by a handover's change, through the limiter.",
           s.handover.unabsorbed);
+  family("config_swap_waiting_cycles", "gauge",
+         "Cycles an accepted configuration (a model loaded, promoted, rolled back) has waited "
+         "for the bus to confirm every write in flight before the loop swaps it in (0: none).");
+  o << "nccompd_config_swap_waiting_cycles " << s.swap_waiting << "\n";
   family("last_handover_trim_change_meters", "gauge",
          "Largest change of a register's trims at the last handover.");
   o << "nccompd_last_handover_trim_change_meters "

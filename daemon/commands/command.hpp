@@ -70,6 +70,12 @@ struct ModelState {
   sections::ModelRecord live;      // file "" = no model
   sections::ModelRecord previous;  // kept for rollback; file "" = none
   std::uint64_t generation{0};     // the configuration it runs in
+  /// A model accepted (load, promote, rollback) that the loop has not swapped in yet: it waits
+  /// for a cycle in which the bus has confirmed every write. live is the model still in force.
+  bool pending{false};
+  sections::ModelRecord pending_model;  // file "" = taking the model out
+  std::uint64_t pending_generation{0};
+  std::uint64_t pending_cycles{0};  // cycles it has waited so far
   /// The candidate in shadow, the scores and the history of decisions.
   sections::ShadowStatus shadow;
 };

@@ -81,9 +81,18 @@ std::string shadow_lines(const sections::ShadowStatus& sh) {
 
 std::string model_status_text(const ModelState& m, const HandoverStats& h) {
   std::string s = fmt::format("ok model: {}\n", describe(m.live));
+  if (m.pending) {
+    s += fmt::format(
+        "  pending: {} (configuration {}), not live yet: the loop swaps it in at a cycle in "
+        "which the bus has confirmed every write in flight; waited {} cycles\n",
+        m.pending_model.file.empty() ? std::string("no model") : describe(m.pending_model),
+        m.pending_generation, m.pending_cycles);
+  }
+  // Where the newest model (the pending one, if any) comes from.
+  const std::string& newest = m.pending ? m.pending_model.file : m.live.file;
   if (!m.has_section) {
     s += "  the configuration has no [model] section\n";
-  } else if (m.chosen && m.live.file != m.configured) {
+  } else if (m.chosen && newest != m.configured) {
     s += fmt::format(
         "  chosen by nccomp model load / rollback, in place of the configuration's {}\n",
         m.configured);
@@ -146,33 +155,39 @@ std::string handle_model_command(std::string_view args, CommandContext& ctx) {
         "decides after {} parts scored by both\n",
         file, hash_or_unknown(file), describe(m.live), m.shadow.options.min_parts);
   }
-  spdlog::info("model {}: {} live as configuration {} (previous: {}; by {})", what,
-               describe(m.live), m.generation, describe(m.previous), ctx.who);
+  // The loop swaps the configuration in at a cycle in which the bus has confirmed every write
+  // in flight, and hands the trims over there; until then the model is pending (3 s here, less
+  // than the client's 5 s).
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(3);
+  LoopStats st = ctx.loop->stats();
+  while (st.config_generation < m.generation && std::chrono::steady_clock::now() <= deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    st = ctx.loop->stats();
+  }
+  const bool swapped = st.config_generation >= m.generation;
+  // Once swapped, the view carries the time of the swap.
+  sections::ModelRecord shown = swapped ? ctx.model_state().live : m.live;
+  if (!swapped) shown.since_utc.clear();
+  spdlog::info("model {}: {} {} as configuration {} (previous: {}; by {})", what, describe(shown),
+               swapped ? "live" : "pending", m.generation, describe(m.previous), ctx.who);
   std::string answer =
       fmt::format("ok model {}: {}\n  previous (nccomp model rollback returns to it): {}\n",
                   action == ModelAction::kLoad      ? "loaded"
                   : action == ModelAction::kPromote ? "promoted"
                                                     : "rolled back to",
-                  describe(m.live), describe(m.previous));
+                  describe(shown), describe(m.previous));
   if (!change.record_error.empty()) {
     answer +=
         "  warning: not recorded in the state directory (a restart returns to the model "
         "before): " +
         change.record_error + "\n";
   }
-  // The loop swaps the configuration in at its next cycle and hands the trims over there; 3 s in
-  // all, less than the client's 5 s.
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(3);
-  LoopStats st = ctx.loop->stats();
-  while (st.config_generation < m.generation) {
-    if (std::chrono::steady_clock::now() > deadline) {
-      return answer + fmt::format(
-                          "  configuration {} accepted; the loop has not swapped it in within 3 s "
-                          "(in lock-step, waiting for the NC?): see nccomp model status\n",
-                          m.generation);
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(1));
-    st = ctx.loop->stats();
+  if (!swapped) {
+    return answer + fmt::format(
+                        "  configuration {} accepted, pending: the loop has not swapped it in "
+                        "within 3 s ({} cycles waiting for the bus to confirm the writes in "
+                        "flight; in lock-step, for the NC): see nccomp model status\n",
+                        m.generation, st.swap_waiting);
   }
   answer += fmt::format("  configuration {} running\n", m.generation);
   if (st.handover.handovers > before.handovers) {

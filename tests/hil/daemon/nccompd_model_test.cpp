@@ -17,15 +17,19 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
+
+#include <nlohmann/json.hpp>
 
 #include "client/status_client.hpp"
 #include "sim/modbus_nc/nc_server.hpp"
@@ -64,6 +68,18 @@ constexpr std::uint16_t kLength = 200;  // T1_length_wear, int32, 0.1 µm
 std::int32_t holding_i32(NcServer& nc, std::uint16_t address) {
   const auto r = nc.holding(address, 2);
   return static_cast<std::int32_t>((std::uint32_t{r[0]} << 16) | r[1]);
+}
+
+// The NC's tool measurement: tool 1, wear_um, measurement number sequence.
+void measure_wear(NcServer& nc, float wear_um, std::uint16_t sequence) {
+  nc.update([&](Tables& t) {
+    std::uint32_t bits = 0;
+    std::memcpy(&bits, &wear_um, sizeof bits);
+    t.input[101] = 1;
+    t.input[102] = static_cast<std::uint16_t>(bits >> 16);
+    t.input[103] = static_cast<std::uint16_t>(bits & 0xFFFF);
+    t.input[100] = sequence;
+  });
 }
 
 std::string config_text(std::uint16_t port, const std::string& extra = "") {
@@ -163,15 +179,7 @@ TEST(NccompModel, LoadRollbackAndRestartWithRefusals) {
   ASSERT_TRUE(wait_until([&] { return number(daemon.status(), "cycles") >= 20; }, 15s))
       << daemon.log();
   // 5.0 µm of wear measured: −5.0 µm + the trim of model A (2.0) = −3.0 µm.
-  nc.update([](Tables& t) {
-    const float w = 5.0F;
-    std::uint32_t bits = 0;
-    std::memcpy(&bits, &w, sizeof bits);
-    t.input[101] = 1;
-    t.input[102] = static_cast<std::uint16_t>(bits >> 16);
-    t.input[103] = static_cast<std::uint16_t>(bits & 0xFFFF);
-    t.input[100] = 1;
-  });
+  measure_wear(nc, 5.0F, 1);
   ASSERT_TRUE(wait_until([&] { return holding_i32(nc, kLength) == -30; }, 15s))
       << holding_i32(nc, kLength) << "\n"
       << daemon.log();
@@ -559,6 +567,103 @@ TEST(NccompModel, WithPromoteOperatorTheRuleAnnouncesAndTheOperatorPromotes) {
   EXPECT_NE(st.out.find("promoted by uid 0 (root)"), std::string::npos) << st.out;
   EXPECT_NE(st.out.find("watching the model the promotion replaced: " + a), std::string::npos)
       << st.out;
+  EXPECT_EQ(daemon.stop(), 0) << daemon.log();
+}
+
+// The model shown is the one the loop runs: GIVEN the daemon above at 20 Hz with model A live and
+// an NC that hangs on the creep's next write (5.0 µm of wear measured), so that the loop holds the
+// swap back (it swaps at a cycle in which the bus has confirmed every write, at most 250 cycles:
+// 12.5 s), WHEN the operator loads B, THEN the answer says B is pending and `model status` (text
+// and JSON) shows A live, B pending with the cycles it waited and no handover; WHEN the NC answers
+// again, THEN the loop swaps B in: B is live since the swap (not since the load, 4.5 s before).
+TEST(NccompModel, AModelIsPendingUntilTheLoopSwapsItIn) {
+  TempDir d;
+  NcServer nc(ServerConfig{});
+  std::atomic<bool> hang{false};
+  std::atomic<bool> hung{false};
+  nc.set_write_filter([&](const nccomp::sim::modbus_nc::WriteRecord&) {
+    while (hang.load()) {
+      hung.store(true);
+      std::this_thread::sleep_for(1ms);
+    }
+    return true;
+  });
+  nc.start();
+  nc.update([](Tables& t) { t.input[8] = 1; });
+  fs::create_directories(d.path / "a");
+  fs::create_directories(d.path / "b");
+  std::ofstream(d.path / "a" / "model.toml") << model_text("offset", 2.0);
+  std::ofstream(d.path / "b" / "model.toml") << model_text("offset", 6.0);
+  std::string config = config_text(nc.port());
+  const std::string fast = "[daemon]\nrate_hz = 200\n";
+  ASSERT_EQ(config.rfind(fast, 0), 0U);
+  config.replace(0, fast.size(), "[daemon]\nrate_hz = 20\n");
+  const std::string poll = "poll_rate_hz = 200\n";
+  ASSERT_NE(config.find(poll), std::string::npos);
+  config.replace(config.find(poll), poll.size(), "poll_rate_hz = 20\n");
+  std::ofstream(d.path / "nccompd.toml") << config;
+  const std::string socket = (d.path / "status.sock").string();
+  const std::string a = (d.path / "a" / "model.toml").string();
+  const std::string b = (d.path / "b" / "model.toml").string();
+  Daemon daemon(d.path);
+  ASSERT_TRUE(daemon.start());
+  ASSERT_TRUE(wait_until([&] { return number(daemon.status(), "cycles") >= 20; }, 15s))
+      << daemon.log();
+  hang.store(true);
+  measure_wear(nc, 5.0F, 1);
+  // nc.update() / holding() would wait for the hung write from here on.
+  ASSERT_TRUE(wait_until([&] { return hung.load(); }, 15s)) << daemon.log();
+
+  CliRun load = nccomp_as_root(d, {"model", "load", b, "--socket", socket});
+  ASSERT_EQ(load.exit_code, 0) << load.out << load.err << daemon.log();
+  std::printf("%s", load.out.c_str());
+  EXPECT_EQ(load.out.rfind("ok model loaded: " + b + " (hash ", 0), 0U) << load.out;
+  EXPECT_EQ(load.out.substr(0, load.out.find('\n')).find("live since"), std::string::npos)
+      << load.out;
+  EXPECT_NE(load.out.find("  configuration 2 accepted, pending: the loop has not swapped it in "
+                          "within 3 s"),
+            std::string::npos)
+      << load.out;
+
+  CliRun st = nccomp_as_root(d, {"model", "status", "--socket", socket});
+  ASSERT_EQ(st.exit_code, 0) << st.out << st.err;
+  std::printf("%s", st.out.c_str());
+  EXPECT_EQ(st.out.rfind("ok model: " + a + " (hash ", 0), 0U) << st.out;
+  EXPECT_NE(st.out.find("  configuration 1\n"), std::string::npos) << st.out;
+  EXPECT_NE(st.out.find("  pending: " + b + " (hash "), std::string::npos) << st.out;
+  const auto json = nlohmann::ordered_json::parse(daemon.status());
+  EXPECT_EQ(json["model"]["live"]["file"], a) << json.dump();
+  EXPECT_EQ(json["model"]["pending"]["file"], b) << json.dump();
+  EXPECT_EQ(json["model"]["pending_generation"], 2) << json.dump();
+  // At least the 3 s (60 cycles) the load waited for the swap.
+  EXPECT_GE(json["model"]["pending_cycles"].get<double>(), 50.0) << json.dump();
+  EXPECT_EQ(json["model"]["generation"], 1) << json.dump();
+  EXPECT_EQ(json["handover"]["handovers"], 0) << json.dump();
+
+  std::this_thread::sleep_for(1500ms);
+  std::string released(32, '\0');
+  {
+    const std::time_t t = std::time(nullptr);
+    std::tm tm{};
+    ::gmtime_r(&t, &tm);
+    released.resize(std::strftime(released.data(), released.size(), "%Y-%m-%dT%H:%M:%SZ", &tm));
+  }
+  hang.store(false);
+  ASSERT_TRUE(wait_until([&] { return number(daemon.status(), "handovers") >= 1.0; }, 15s))
+      << daemon.log();
+  st = nccomp_as_root(d, {"model", "status", "--socket", socket});
+  std::printf("%s", st.out.c_str());
+  EXPECT_EQ(st.out.rfind("ok model: " + b + " (hash ", 0), 0U) << st.out;
+  EXPECT_EQ(st.out.find("pending:"), std::string::npos) << st.out;
+  const auto after = nlohmann::ordered_json::parse(daemon.status());
+  EXPECT_EQ(after["model"]["live"]["file"], b) << after.dump();
+  EXPECT_TRUE(after["model"]["pending"].is_null()) << after.dump();
+  EXPECT_EQ(after["model"]["previous"]["file"], a) << after.dump();
+  // ISO 8601 with seconds: compared as text.
+  EXPECT_GE(after["model"]["live"]["since_utc"].get<std::string>(), released) << after.dump();
+  // −5 µm of wear + B's 6 µm.
+  EXPECT_TRUE(wait_until([&] { return holding_i32(nc, kLength) == 10; }, 15s))
+      << holding_i32(nc, kLength);
   EXPECT_EQ(daemon.stop(), 0) << daemon.log();
 }
 

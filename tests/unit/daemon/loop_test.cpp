@@ -571,7 +571,8 @@ class ManualBus final : public drivers::Bus {
 //      and wait for that one's receipt: one more bus round trip in which the register does not
 //      move, which in real time the register caught up with in one write), then the new engine
 //      writes the next value at once; with a bus that never confirms, the swap comes after
-//      swap_wait_max_cycles and the value in flight is sent again as it is.
+//      swap_wait_max_cycles and the value in flight is sent again as it is; the loop publishes
+//      how many cycles the configuration waited, and 0 once it is swapped in.
 TEST(Loop, AReloadSwapsWhenTheBusHasConfirmedTheWritesInFlight) {
   for (const bool confirmed : {true, false}) {
     ManualBus bus;
@@ -586,6 +587,8 @@ TEST(Loop, AReloadSwapsWhenTheBusHasConfirmedTheWritesInFlight) {
     if (confirmed) {
       std::this_thread::sleep_for(100ms);  // 100 cycles at 1 kHz
       EXPECT_EQ(loop.stats().config_generation, 1U) << "swapped with a write in flight";
+      // What `nccomp model status` shows as the pending configuration's wait.
+      EXPECT_GE(loop.stats().swap_waiting, 50U);
       bus.confirm(first->sequence);
     }
     const auto end = std::chrono::steady_clock::now() + 5s;
@@ -593,6 +596,7 @@ TEST(Loop, AReloadSwapsWhenTheBusHasConfirmedTheWritesInFlight) {
       std::this_thread::sleep_for(1ms);
     }
     EXPECT_EQ(loop.stats().config_generation, 2U);
+    EXPECT_EQ(loop.stats().swap_waiting, 0U);
     const auto after = bus.next_write();
     loop.stop();
     ASSERT_TRUE(after.has_value());

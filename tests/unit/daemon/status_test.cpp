@@ -213,9 +213,21 @@ TEST(StatusJson, NamesTheLiveModelTheRollbackModelAndThePromoteRule) {
   EXPECT_NE(json.find("\"model\":{\"live\":{\"file\":\"/srv/b.toml\",\"hash\":\"00000000000000bb\","
                       "\"since_utc\":\"2026-11-27T10:00:00Z\"},\"previous\":{\"file\":"
                       "\"/srv/a\\\"1.toml\",\"hash\":\"00000000000000aa\",\"since_utc\":"
-                      "\"2026-11-26T09:00:00Z\"},\"chosen\":true,\"generation\":3},"),
+                      "\"2026-11-26T09:00:00Z\"},\"pending\":null,\"pending_generation\":0,"
+                      "\"pending_cycles\":0,\"chosen\":true,\"generation\":3},"),
             std::string::npos)
       << json;
+  // A model accepted that the loop has not swapped in: live is still the one in force.
+  m.pending = true;
+  m.pending_model = {"/srv/c.toml", "00000000000000cc", ""};
+  m.pending_generation = 4;
+  m.pending_cycles = 17;
+  c.model = [m] { return m; };
+  const std::string pending = render_json(c);
+  EXPECT_NE(pending.find("\"pending\":{\"file\":\"/srv/c.toml\",\"hash\":\"00000000000000cc\","
+                         "\"since_utc\":\"\"},\"pending_generation\":4,\"pending_cycles\":17,"),
+            std::string::npos)
+      << pending;
   EXPECT_NE(json.find("\"shadow\":{\"phase\":\"announced\",\"promote\":\"operator\","),
             std::string::npos)
       << json;

@@ -1434,5 +1434,36 @@ TEST(ModelStatusText, SaysWhetherTheLiveModelIsTheConfigurationsOwnFile) {
   EXPECT_NE(text.find("\n  the configuration's [model] file\n"), std::string::npos) << text;
 }
 
+// GIVEN model B live and a rollback to no model accepted that the loop has not swapped in yet
+// (a write in flight for 12 cycles)
+// THEN `nccomp model status` names B first (it still acts), the rollback as pending with its
+// configuration and wait, and the choice line speaks of the pending one.
+TEST(ModelStatusText, NamesTheModelInForceAndThePendingOne) {
+  ModelState m;
+  m.has_section = true;
+  m.configured = "/etc/nccompd/a/model.toml";
+  m.chosen = true;
+  m.live.file = "/srv/fit/b/model.toml";
+  m.live.hash = "0123";
+  m.live.since_utc = "2026-11-28T06:00:00Z";
+  m.generation = 3;
+  m.pending = true;
+  m.pending_generation = 4;
+  m.pending_cycles = 12;
+  const std::string text = model_status_text(m, HandoverStats{});
+  EXPECT_EQ(text.rfind("ok model: /srv/fit/b/model.toml (hash 0123), live since "
+                       "2026-11-28T06:00:00Z\n  pending: no model (configuration 4), not live "
+                       "yet: the loop swaps it in at a cycle in which the bus has confirmed "
+                       "every write in flight; waited 12 cycles\n",
+                       0),
+            0U)
+      << text;
+  EXPECT_NE(text.find("\n  chosen by nccomp model load / rollback, in place of the "
+                      "configuration's /etc/nccompd/a/model.toml\n"),
+            std::string::npos)
+      << text;
+  EXPECT_NE(text.find("\n  configuration 3\n"), std::string::npos) << text;
+}
+
 }  // namespace
 }  // namespace nccomp::daemon::commands
