@@ -235,6 +235,9 @@ class Loop {
   void finish_cycle() noexcept;
   /// stamp: lock-step, every drained event gets wake_ns as its time.
   void cycle(core::TimeNs wake_ns, bool stamp = false);
+  /// Real-time safe: the cycle's events through the face probe's capture
+  /// (measurement_log_probe.hpp); a probe reading's row goes to the measurement log.
+  void log_face_probe(const core::engine::Engine& engine) noexcept;
   void note(core::TimeNs t, NoteCode code, std::int64_t a, double b) noexcept;
 
   LoopOptions options_;
