@@ -322,7 +322,14 @@ void EventLogger::drain() {
         }
         break;
       case NoteCode::kConfigSwapped:
-        spdlog::info("configuration {} is running (swapped in at a cycle boundary)", n.a);
+        if (n.b > 0.0) {
+          spdlog::info(
+              "configuration {} is running (swapped in at a cycle boundary, {:.0f} cycle(s) "
+              "after the reload, waiting for the bus's receipts of the writes in flight)",
+              n.a, n.b);
+        } else {
+          spdlog::info("configuration {} is running (swapped in at a cycle boundary)", n.a);
+        }
         break;
       case NoteCode::kStateCarryFailed:
         spdlog::error("configuration {} could not take over the running state; it starts fresh",

@@ -326,61 +326,8 @@ void Loop::finish_cycle() noexcept {
   heartbeat_.fetch_add(1, std::memory_order_release);
 }
 
-void Loop::cycle(core::TimeNs wake_ns, bool stamp) {
-  ++local_.cycles;
-  // A reload: export the running engine's state first (the retired configuration may be freed
-  // by the reclaiming thread as soon as pickup() returns), then hand it to the new engine.
-  if (swap_.pending()) {
-    const Runtime& old = swap_.current();
-    const bool was_dry = old.dry_run;
-    const std::uint64_t old_generation = old.engine->state_generation();
-    const std::uint64_t old_sequence = old.engine->write_sequence();
-    const core::engine::EngineCounters old_counters = old.engine->counters();
-    const std::size_t n = old.engine->export_state(carry_);
-    const std::size_t motion = old.engine->export_motion(motion_carry_);
-    if (n == 0 && old.engine->state_capacity() > 0) {
-      note(wake_ns, NoteCode::kStateExportFailed,
-           static_cast<std::int64_t>(old.engine->state_capacity()), 0.0);
-    } else if (swap_.pickup()) {
-      // `old` may be freed by the reclaiming thread from here on: only rt is used below.
-      const Runtime& rt = swap_.current();
-      // The buses may still report the old engine's writes: the new one numbers its own after.
-      rt.engine->continue_write_sequence(old_sequence);
-      std::span<const std::byte> carried(carry_.data(), n);
-      if (!was_dry && rt.dry_run) {
-        // Entering dry run: what the NC has now is kept aside (and persisted soon, unless the
-        // file holds it already); the dry run itself carries on from the same state.
-        std::copy_n(carry_.data(), n, anchor_.data());
-        anchor_size_ = n;
-        anchor_persisted_ = old_generation == persisted_generation_;
-        note(wake_ns, NoteCode::kDryRunEntered, static_cast<std::int64_t>(rt.generation), 0.0);
-      } else if (was_dry && !rt.dry_run) {
-        // Leaving dry run: the dry run's register values were never sent. The new engine starts
-        // from the state as the NC has it, and its limiters from those values.
-        carried = std::span<const std::byte>(anchor_.data(), anchor_size_);
-        note(wake_ns, NoteCode::kDryRunLeft, static_cast<std::int64_t>(rt.generation), 0.0);
-      }
-      if (!carried.empty() && !rt.engine->import_state(carried, wake_ns)) {
-        note(wake_ns, NoteCode::kStateCarryFailed, static_cast<std::int64_t>(rt.generation), 0.0);
-      }
-      // The tool moves on through the swap: no cycle of cut path or feed direction is lost.
-      (void)rt.engine->import_motion(std::span<const std::byte>(motion_carry_.data(), motion));
-      handover_base_ = add_handovers(handover_base_, old_counters);
-      ++local_.reloads;
-      local_.config_generation = rt.generation;
-      persisted_generation_ = ~std::uint64_t{0};  // persist under the new configuration soon
-      note(wake_ns, NoteCode::kConfigSwapped, static_cast<std::int64_t>(rt.generation), 0.0);
-    }
-  }
-  const Runtime& rt = swap_.current();
+void Loop::take_receipts(const Runtime& rt, core::TimeNs wake_ns) noexcept {
   core::engine::Engine& engine = *rt.engine;
-  const bool hold = hold_.load(std::memory_order_relaxed);
-  engine.set_hold(hold);
-  local_.hold = hold;
-  local_.dry_run = rt.dry_run;
-  // The limiter bounds what reaches the NC: each register's next write waits for the bus's
-  // receipt of the last one (core/engine/engine.hpp, "Write receipts").
-  engine.set_write_receipts(true);
   for (std::size_t i = 0; i < engine.register_count(); ++i) {
     if (engine.write_in_flight(i) == 0) {
       continue;
@@ -391,6 +338,83 @@ void Loop::cycle(core::TimeNs wake_ns, bool stamp) {
       engine.write_receipt(i, bus.write_receipt(static_cast<std::uint16_t>(i)), wake_ns);
     }
   }
+}
+
+void Loop::swap_in(core::TimeNs wake_ns) {
+  const Runtime& old = swap_.current();
+  // A write still in flight would reach the new engine as "the NC holds it or the value
+  // before", sent again as it is: one more bus round trip in which the register does not move
+  // (in real time it then caught up by two or three counts). The swap waits for a cycle in which
+  // the bus has confirmed every write, at most swap_wait_max_cycles.
+  take_receipts(old, wake_ns);
+  bool in_flight = false;
+  for (std::size_t i = 0; i < old.engine->register_count() && !in_flight; ++i) {
+    in_flight = old.engine->write_in_flight(i) != 0;
+  }
+  if (in_flight && swap_waited_ < options_.swap_wait_max_cycles) {
+    ++swap_waited_;
+    return;
+  }
+  const double waited = static_cast<double>(swap_waited_);
+  swap_waited_ = 0;
+  const bool was_dry = old.dry_run;
+  const std::uint64_t old_generation = old.engine->state_generation();
+  const std::uint64_t old_sequence = old.engine->write_sequence();
+  const core::engine::EngineCounters old_counters = old.engine->counters();
+  const std::size_t n = old.engine->export_state(carry_);
+  const std::size_t motion = old.engine->export_motion(motion_carry_);
+  if (n == 0 && old.engine->state_capacity() > 0) {
+    note(wake_ns, NoteCode::kStateExportFailed,
+         static_cast<std::int64_t>(old.engine->state_capacity()), 0.0);
+  } else if (swap_.pickup()) {
+    // `old` may be freed by the reclaiming thread from here on: only rt is used below.
+    const Runtime& rt = swap_.current();
+    // The buses may still report the old engine's writes: the new one numbers its own after.
+    rt.engine->continue_write_sequence(old_sequence);
+    std::span<const std::byte> carried(carry_.data(), n);
+    if (!was_dry && rt.dry_run) {
+      // Entering dry run: what the NC has now is kept aside (and persisted soon, unless the
+      // file holds it already); the dry run itself carries on from the same state.
+      std::copy_n(carry_.data(), n, anchor_.data());
+      anchor_size_ = n;
+      anchor_persisted_ = old_generation == persisted_generation_;
+      note(wake_ns, NoteCode::kDryRunEntered, static_cast<std::int64_t>(rt.generation), 0.0);
+    } else if (was_dry && !rt.dry_run) {
+      // Leaving dry run: the dry run's register values were never sent. The new engine starts
+      // from the state as the NC has it, and its limiters from those values.
+      carried = std::span<const std::byte>(anchor_.data(), anchor_size_);
+      note(wake_ns, NoteCode::kDryRunLeft, static_cast<std::int64_t>(rt.generation), 0.0);
+    }
+    if (!carried.empty() && !rt.engine->import_state(carried, wake_ns)) {
+      note(wake_ns, NoteCode::kStateCarryFailed, static_cast<std::int64_t>(rt.generation), 0.0);
+    }
+    // The tool moves on through the swap: no cycle of cut path or feed direction is lost.
+    (void)rt.engine->import_motion(std::span<const std::byte>(motion_carry_.data(), motion));
+    handover_base_ = add_handovers(handover_base_, old_counters);
+    ++local_.reloads;
+    local_.config_generation = rt.generation;
+    persisted_generation_ = ~std::uint64_t{0};  // persist under the new configuration soon
+    note(wake_ns, NoteCode::kConfigSwapped, static_cast<std::int64_t>(rt.generation), waited);
+  }
+}
+
+void Loop::cycle(core::TimeNs wake_ns, bool stamp) {
+  ++local_.cycles;
+  // A reload: export the running engine's state first (the retired configuration may be freed
+  // by the reclaiming thread as soon as pickup() returns), then hand it to the new engine.
+  if (swap_.pending()) {
+    swap_in(wake_ns);
+  }
+  const Runtime& rt = swap_.current();
+  core::engine::Engine& engine = *rt.engine;
+  const bool hold = hold_.load(std::memory_order_relaxed);
+  engine.set_hold(hold);
+  local_.hold = hold;
+  local_.dry_run = rt.dry_run;
+  // The limiter bounds what reaches the NC: each register's next write waits for the bus's
+  // receipt of the last one (core/engine/engine.hpp, "Write receipts").
+  engine.set_write_receipts(true);
+  take_receipts(rt, wake_ns);
 
   events_.clear();
   for (std::size_t b = 0; b < buses_.size(); ++b) {

@@ -2,7 +2,8 @@
 // logging, no allocation, no locks, no I/O per cycle).
 //
 // Each cycle: sleep to the absolute deadline (clock_nanosleep TIMER_ABSTIME) → record the
-// wake-up latency → pick up a new configuration at the cycle boundary (state carried over) →
+// wake-up latency → pick up a new configuration at the cycle boundary once no write is in flight
+// (state carried over) →
 // the buses' receipts of the writes in flight to the engine → drain events from every bus's RX
 // ring → engine.step() → offset writes to the buses' TX rings (nothing in dry-run; a write a bus
 // does not confirm counts as on the NC once queued, a dropped one as refused) → alarms, notes
@@ -46,7 +47,7 @@ struct Runtime {
 /// Things the loop wants logged; the logger thread turns them into messages.
 enum class NoteCode : std::uint8_t {
   kOverrun = 0,            // a = missed deadlines, b = lateness [µs]
-  kConfigSwapped = 1,      // a = new generation
+  kConfigSwapped = 1,      // a = new generation, b = cycles it waited for the bus's receipts
   kStateCarryFailed = 2,   // a = new generation: the new config could not take the old state
   kStateExportFailed = 3,  // a = bytes needed
   kWriteDropped = 4,       // a = register index (TX ring full or no bus)
@@ -86,6 +87,9 @@ struct LoopOptions {
   /// Lock-step: longest wait in one bus's sync() or flush() [ns]; a timeout is counted and the
   /// cycle completes anyway (no deadlock with the peer).
   core::TimeNs lockstep_bus_timeout_ns{2'000'000'000};
+  /// Longest a reload waits for a cycle without a write in flight [cycles] (then it swaps
+  /// anyway, and the new engine sends those registers' values again).
+  std::uint64_t swap_wait_max_cycles{250};
   /// Test hook (NCCOMPD_TEST_STALL_AFTER_CYCLES): after this many cycles the loop thread stops
   /// cycling and only waits for stop(), like a loop stuck in a blocking call, so the process
   /// tests can show that the systemd watchdog is then no longer fed. 0 = never (production).
@@ -238,6 +242,10 @@ class Loop {
   /// Real-time safe: the cycle's events through the face probe's capture
   /// (measurement_log_probe.hpp); a probe reading's row goes to the measurement log.
   void log_face_probe(const core::engine::Engine& engine) noexcept;
+  /// The buses' receipts of rt's writes in flight to its engine. Real-time safe.
+  void take_receipts(const Runtime& rt, core::TimeNs wake_ns) noexcept;
+  /// The swap of a pending configuration (cycle()'s first part). Real-time safe.
+  void swap_in(core::TimeNs wake_ns);
   void note(core::TimeNs t, NoteCode code, std::int64_t a, double b) noexcept;
 
   LoopOptions options_;
@@ -267,6 +275,7 @@ class Loop {
   core::rt::Seqlock<ModulesSnapshot> modules_;
   LoopStats local_{};
   std::uint64_t persisted_generation_{~std::uint64_t{0}};
+  std::uint64_t swap_waited_{0};  // cycles a pending configuration waited for receipts
   core::TimeNs last_export_ns_{0};
   /// The handovers of the configurations before the running one.
   HandoverStats handover_base_{};

@@ -112,6 +112,13 @@ void facet_table() {
 // ---------------------------------------------------------------------------------------------
 // Shift simulation.
 
+// The estimator's temperature input: t5, or chosen before each shift by the fit on the earlier
+// shifts: the best of the 16 FL sensors for X (ch3), t5 through a first-order lag with a fitted
+// time constant, or both (sensor and lag).
+// kValidated: sensor and lag, chosen by how well each earlier shift j >= 1 was predicted from
+// the shifts before j (tried after the first run, see bench/results/calib.md).
+enum class InputMode { kT5, kBestSensor, kT5Lag, kBestSensorLag, kValidated };
+
 struct Strategy {
   const char* name;
   bool recalibrate;
@@ -129,15 +136,22 @@ struct Strategy {
   double speed_lag_s{0.0};
   // The prior of each shift's slope: a model fitted on the earlier shifts only (model_prior()).
   bool model_prior{false};
+  // Which temperature input, chosen per shift on the earlier shifts only (choose_input()).
+  InputMode input{InputMode::kT5};
+  bool learn_level_noise{false};  // estimator_learn_level_noise (bounds 3..20 um/h)
+  double gain_sigma{0.5};         // estimator_prior_gain_sigma: the shape's per-shift gain
+  double forgetting{0.8};         // estimator_prior_forgetting: weight of older shifts' shape
 };
 
 // A model's slopes per slot and their sigma (CalibrationConfig::estimator_model_slope_*).
 struct ModelPrior {
   std::array<double, 4> slope_um_per_c{};
   std::array<double, 4> sigma_um_per_c{};
+  // > 0: max_temperature_slope_um_per_c for this shift (set with the fitted slopes).
+  double max_slope_um_per_c{0.0};
 };
 
-const std::array<Strategy, 9> kStrategies{{
+const std::array<Strategy, 11> kStrategies{{
     {"none", false, nccomp::core::ProfileShape::kStep, Prediction::kNone},
     {"hourly, step", true, nccomp::core::ProfileShape::kStep, Prediction::kNone},
     {"hourly, creep", true, nccomp::core::ProfileShape::kCosine, Prediction::kNone},
@@ -153,6 +167,12 @@ const std::array<Strategy, 9> kStrategies{{
     {"hourly, creep + estimator with the earlier shifts' t5 model", true,
      nccomp::core::ProfileShape::kCosine, Prediction::kEstimator, true, 6.0, 5.0, 1.0, 5.0, 0.0,
      true},
+    {"hourly, creep + estimator, level noise learned from the earlier shifts", true,
+     nccomp::core::ProfileShape::kCosine, Prediction::kEstimator, false, 6.0, 5.0, 1.0, 20.0, 0.0,
+     false, InputMode::kT5, true},
+    {"hourly, creep + estimator with the sensor and lag fitted on the earlier shifts", true,
+     nccomp::core::ProfileShape::kCosine, Prediction::kEstimator, true, 6.0, 5.0, 1.0, 5.0, 0.0,
+     true, InputMode::kBestSensorLag},
 }};
 
 struct AxisStats {
@@ -185,10 +205,14 @@ std::array<AxisStats, 3> run_shift(const Strategy& s, const DriftFn& drift, cons
   // Estimator noises chosen a priori (docs/calibration.md), not fitted to these data: touch
   // σ 0.5 µm on the touch and on the nominal, so about 0.7 µm on the drift.
   cfg.estimator_touch_noise_um = 0.7;
-  cfg.estimator_prior_gain_sigma = 0.5;
-  cfg.estimator_prior_forgetting = 0.8;
+  cfg.estimator_prior_gain_sigma = s.gain_sigma;
+  cfg.estimator_prior_forgetting = s.forgetting;
+  cfg.estimator_learn_level_noise = s.learn_level_noise;
   cfg.estimator_slope_sigma_um_per_c = s.temperature_slope ? s.slope_sigma_um_per_c : 0.0;
   cfg.max_temperature_slope_um_per_c = s.max_slope_um_per_c;
+  if (model != nullptr && model->max_slope_um_per_c > 0.0) {
+    cfg.max_temperature_slope_um_per_c = model->max_slope_um_per_c;
+  }
   if (model != nullptr) {
     cfg.estimator_model_slope_um_per_c = model->slope_um_per_c;
     cfg.estimator_model_slope_sigma_um_per_c = model->sigma_um_per_c;
@@ -313,6 +337,7 @@ void first_order_table() {
 
 struct Thermal {
   std::vector<double> t_s, ch1, ch3, ch5, t5, rpm;
+  std::array<std::vector<double>, 16> t;  // t1..t16
 };
 
 Thermal load_thermal(const std::string& path) {
@@ -362,6 +387,9 @@ Thermal load_thermal(const std::string& path) {
     d.ch3.push_back(v[4]);
     d.ch5.push_back(v[6]);
     d.t5.push_back(v[11]);  // t5(°C): column 12 (time, rpm, ch1..ch5, t1..t16)
+    for (std::size_t i = 0; i < d.t.size(); ++i) {
+      d.t[i].push_back(v[7 + i]);
+    }
   }
   return d;
 }
@@ -379,6 +407,89 @@ double interp(const std::vector<double>& t, const std::vector<double>& y, double
   return y[i - 1] + f * (y[i] - y[i - 1]);
 }
 
+// A first-order lag of x (the data's 15 s step) with time constant tau_s, from x's first value;
+// tau_s 0: x itself. Causal: each value depends on the past only.
+std::vector<double> lag_series(const std::vector<double>& x, double tau_s) {
+  if (!(tau_s > 0.0)) {
+    return x;
+  }
+  const double a = 1.0 - std::exp(-15.0 / tau_s);
+  std::vector<double> y;
+  y.reserve(x.size());
+  double v = x.front();
+  for (const double xi : x) {
+    v += a * (xi - v);
+    y.push_back(v);
+  }
+  return y;
+}
+
+struct InputChoice {
+  std::size_t sensor{4};  // index into Thermal::t (4 = t5)
+  double tau_s{0.0};
+  double r2{0.0};
+};
+
+// The temperature input for X, chosen on the shifts before shift k only: among the sensors and
+// lags the mode allows, the one whose least-squares line through 0 (drift of ch3 on the change
+// of the input, both relative to the shift start, every 15 s sample of shifts 0..k-1) leaves
+// the smallest residual: R² = 1 − Σ(y − b·x)² / Σy².
+InputChoice choose_input(const Thermal& d, const std::array<double, 5>& starts, std::size_t k,
+                         InputMode mode) {
+  const bool validated = mode == InputMode::kValidated && k >= 2;
+  const bool any_sensor = mode == InputMode::kBestSensor || mode == InputMode::kBestSensorLag ||
+                          mode == InputMode::kValidated;
+  const bool any_lag = mode == InputMode::kT5Lag || mode == InputMode::kBestSensorLag ||
+                       mode == InputMode::kValidated;
+  InputChoice best{4, 0.0, -1e300};
+  double best_sse = 1e300;
+  for (std::size_t sensor = 0; sensor < d.t.size(); ++sensor) {
+    if (!any_sensor && sensor != 4) {
+      continue;
+    }
+    for (const double tau_min : {0.0, 15.0, 30.0, 60.0, 90.0, 120.0, 180.0, 240.0}) {
+      if (!any_lag && tau_min > 0.0) {
+        continue;
+      }
+      const std::vector<double> x = lag_series(d.t[sensor], tau_min * 60.0);
+      double sxy = 0.0;
+      double sxx = 0.0;
+      double syy = 0.0;
+      double sse = 0.0;  // validated: shift j predicted with the slope of shifts 0..j-1
+      for (std::size_t j = 0; j < k; ++j) {
+        const double b_before = sxx > 0.0 ? sxy / sxx : 0.0;
+        double jxy = 0.0;
+        double jxx = 0.0;
+        double jyy = 0.0;
+        const auto i0 = static_cast<std::size_t>(
+            std::lower_bound(d.t_s.begin(), d.t_s.end(), starts[j] * 3600.0) - d.t_s.begin());
+        for (std::size_t i = i0; i < d.t_s.size() && d.t_s[i] < (starts[j] + 8.0) * 3600.0; ++i) {
+          const double xi = x[i] - x[i0];
+          const double yi = d.ch3[i] - d.ch3[i0];
+          jxy += xi * yi;
+          jxx += xi * xi;
+          jyy += yi * yi;
+        }
+        if (j > 0) {
+          sse += jyy - 2.0 * b_before * jxy + b_before * b_before * jxx;
+        }
+        sxy += jxy;
+        sxx += jxx;
+        syy += jyy;
+      }
+      if (!(sxx > 0.0) || !(syy > 0.0)) {
+        continue;
+      }
+      const double r2 = sxy * sxy / (sxx * syy);  // = 1 − Σ(y − b·x)² / Σy² at b = sxy / sxx
+      if (validated ? sse < best_sse : r2 > best.r2) {
+        best = {sensor, tau_min * 60.0, r2};
+        best_sse = sse;
+      }
+    }
+  }
+  return best;
+}
+
 // What nccomp analyze's thermal_drift term would give from the shifts before shift k: per axis
 // the least-squares slope of the drift on the temperature (both relative to the shift start,
 // every 15 s sample of shifts 0..k-1), clamped to the slope bound. Its sigma: the samples of
@@ -386,8 +497,9 @@ double interp(const std::vector<double>& t, const std::vector<double>& y, double
 // deviation of the per-shift slopes times sqrt(1 + 1/n) (the spread of a new shift's slope);
 // with one earlier shift there is no spread and the configured sigma stays. Nothing of shift k
 // itself enters.
-ModelPrior model_prior(const Thermal& d, const std::array<double, 5>& starts, std::size_t k,
-                       double fallback_sigma, double bound) {
+ModelPrior model_prior(const Thermal& d, const std::vector<double>& input,
+                       const std::array<double, 5>& starts, std::size_t k, double fallback_sigma,
+                       double bound) {
   ModelPrior m;
   const std::array<const std::vector<double>*, 3> ch{&d.ch3, &d.ch1, &d.ch5};
   for (std::size_t a = 0; a < 3; ++a) {
@@ -400,7 +512,7 @@ ModelPrior model_prior(const Thermal& d, const std::array<double, 5>& starts, st
       double jxy = 0.0;
       double jxx = 0.0;
       for (std::size_t i = i0; i < d.t_s.size() && d.t_s[i] < (starts[j] + 8.0) * 3600.0; ++i) {
-        const double x = d.t5[i] - d.t5[i0];
+        const double x = input[i] - input[i0];
         const double y = (*ch[a])[i] - (*ch[a])[i0];
         jxy += x * y;
         jxx += x * x;
@@ -449,6 +561,14 @@ struct ModelLog {
 };
 std::vector<ModelLog> model_log;  // the priors the model rows used, printed below them
 
+struct InputLog {
+  std::string strategy;
+  std::size_t shift;
+  InputChoice choice;
+  ModelPrior prior;
+};
+std::vector<InputLog> input_log;  // the inputs the fitted-input rows chose, per shift
+
 std::vector<Row> thermal_rows(const Thermal& d, const std::array<double, 5>& starts,
                               std::span<const Strategy> strategies) {
   std::vector<Row> rows;
@@ -469,7 +589,21 @@ std::vector<Row> thermal_rows(const Thermal& d, const std::array<double, 5>& sta
                                      interp(d.t_s, d.ch5, x) - zero[2]};
       };
       std::vector<double> lagged;
-      if (s.speed_lag_s > 0.0) {
+      ModelPrior prior;
+      const bool fitted_input = s.input != InputMode::kT5 && k > 0;
+      if (fitted_input) {
+        // Sensor and lag from the earlier shifts, the model's slopes on that input from them
+        // too; the slope bound 1.25 x the largest fitted slope (at least the row's bound).
+        const InputChoice ch = choose_input(d, starts, k, s.input);
+        lagged = lag_series(d.t[ch.sensor], ch.tau_s);
+        prior = model_prior(d, lagged, starts, k, s.slope_sigma_um_per_c, 1e9);
+        double largest = 0.0;
+        for (const double b : prior.slope_um_per_c) {
+          largest = std::max(largest, std::fabs(b));
+        }
+        prior.max_slope_um_per_c = std::max(s.max_slope_um_per_c, 1.25 * largest);
+        input_log.push_back({s.name, k, ch, prior});
+      } else if (s.speed_lag_s > 0.0) {
         const double a = 1.0 - std::exp(-15.0 / s.speed_lag_s);  // the data's 15 s step
         double y = 0.0;
         for (const double rpm : d.rpm) {
@@ -480,10 +614,9 @@ std::vector<Row> thermal_rows(const Thermal& d, const std::array<double, 5>& sta
       const TempFn temp = [&d, &lagged, t_start](double t) {
         return interp(d.t_s, lagged.empty() ? d.t5 : lagged, t_start + std::max(0.0, t));
       };
-      ModelPrior prior;
       const bool with_model = s.model_prior && k > 0;
-      if (with_model) {
-        prior = model_prior(d, starts, k, s.slope_sigma_um_per_c, s.max_slope_um_per_c);
+      if (with_model && !fitted_input) {
+        prior = model_prior(d, d.t5, starts, k, s.slope_sigma_um_per_c, s.max_slope_um_per_c);
         model_log.push_back({s.name, k, prior});
       }
       res[k] = run_shift(s, drift, temp, 3600.0, 8.0, &carried, with_model ? &prior : nullptr);
@@ -547,6 +680,71 @@ void input_table(const Thermal& d, const std::array<double, 5>& starts) {
       std::printf("| t5 | %.0f | %.0f |", v.max_slope_um_per_c, v.slope_sigma_um_per_c);
     }
     print_summary(rows, i);
+  }
+  std::printf("\n");
+}
+
+// X (issue 22 item 3): what a thermal engineer would try, each fitted on the earlier shifts
+// only. The shape: the earlier shifts' mean drift since the nominals (the shifts start with the
+// spindle's warm start) times a per-shift gain the touches learn, with the gain's prior σ and
+// the older shifts' weight varied. A second temperature: the FL sensor that explains ch3 best on
+// the earlier shifts. A first-order thermal lag: of t5 or of any sensor, its time constant
+// fitted on the earlier shifts.
+void x_table(const Thermal& d, const std::array<double, 5>& starts) {
+  std::printf(
+      "### X: the shape, a second temperature, a thermal lag (fitted on the earlier shifts only)\n"
+      "\nMean RMS over the five shifts / largest first-hour error [um]. Level noise 6 um/h "
+      "unless learned, gate 5 sigma. Fitted inputs: before each shift k >= 1 the sensor (t1..t16) "
+      "and / or the lag (0, 15, 30, 60, 90, 120, 180, 240 min) with the best R^2 for ch3 on shifts "
+      "0..k-1, the model's slopes on it as the prior (sigma from the per-shift spread), the slope "
+      "bound 1.25 x the largest fitted slope; shift 0-8 h runs with t5.\n\n"
+      "| variant | gain sigma | forgetting | X | Y | Z |\n|---|---|---|---|---|---|\n");
+  using nccomp::core::ProfileShape;
+  std::vector<Strategy> v;
+  std::vector<std::string> names;
+  for (const double forgetting : {0.8, 1.0, 0.5}) {
+    for (const double gain : {0.5, 1.0, 2.0}) {
+      v.push_back({"shape", true, ProfileShape::kCosine, Prediction::kEstimator});
+      v.back().gain_sigma = gain;
+      v.back().forgetting = forgetting;
+      names.emplace_back("shape (no temperature)");
+    }
+  }
+  const std::array<std::pair<InputMode, const char*>, 4> inputs{
+      {{InputMode::kBestSensor, "best sensor for ch3"},
+       {InputMode::kT5Lag, "t5 with a fitted lag"},
+       {InputMode::kBestSensorLag, "best sensor and lag"},
+       {InputMode::kValidated, "sensor and lag that predicted each earlier shift best"}}};
+  for (const auto& [mode, name] : inputs) {
+    for (const bool learn : {false, true}) {
+      v.push_back({"input", true, ProfileShape::kCosine, Prediction::kEstimator, true, 6.0, 5.0,
+                   1.0, 5.0, 0.0, true, mode, learn});
+      names.push_back(std::string(name) + (learn ? ", level noise learned" : ""));
+    }
+  }
+  v.push_back({"shape", true, ProfileShape::kCosine, Prediction::kEstimator, false, 6.0, 5.0, 1.0,
+               20.0, 0.0, false, InputMode::kT5, true});
+  names.emplace_back("shape, level noise learned");
+  const std::vector<Row> rows = thermal_rows(d, starts, v);
+  for (std::size_t i = 0; i < v.size(); ++i) {
+    std::printf("| %s | %.1f | %.1f |", names[i].c_str(), v[i].gain_sigma, v[i].forgetting);
+    print_summary(rows, i);
+  }
+  std::printf(
+      "\n### The fitted inputs of the row \"%s\"\n\n"
+      "| shift | sensor | lag [min] | R^2 on the earlier shifts | X slope [um/degC] | Y | Z | "
+      "slope bound |\n|---|---|---|---|---|---|---|---|\n",
+      kStrategies.back().name);
+  for (const auto& l : input_log) {
+    if (l.strategy != kStrategies.back().name) {
+      continue;
+    }
+    std::printf("| %.0f-%.0f h | t%zu | %.0f | %.3f |", starts[l.shift], starts[l.shift] + 8.0,
+                l.choice.sensor + 1, l.choice.tau_s / 60.0, l.choice.r2);
+    for (const std::size_t slot : {0U, 2U, 3U}) {
+      std::printf(" %+.2f +- %.2f |", l.prior.slope_um_per_c[slot], l.prior.sigma_um_per_c[slot]);
+    }
+    std::printf(" %.2f |\n", l.prior.max_slope_um_per_c);
   }
   std::printf("\n");
 }
@@ -665,6 +863,7 @@ void thermal_tables(const std::string& path, bool json) {
   }
   std::printf("\n");
   input_table(d, starts);
+  x_table(d, starts);
 }
 
 }  // namespace

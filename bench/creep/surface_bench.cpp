@@ -2,13 +2,15 @@
 // curved face, and the real PHM 2010 milling wear curves, each finished while the tool wears and
 // corrected by the real core with today's strategies and the estimator's (issue 22), its process
 // noise configured, or learned from the two other PHM cutters (held out) and optionally adapted
-// within the tool's life; "measured when needed" also with a bound held out from the two other
-// cutters. Prints markdown tables, or with --json one JSON object per PHM 2010 row and strategy
+// within the tool's life, with the rate prior learned from them too or not; "measured when
+// needed" also with a bound held out from the two other cutters. Prints markdown tables, or with --json one JSON object per PHM 2010 row and strategy
 // (one a line).
 //
 //   bench_creep_surface [--json] [--wear-noise UM_PER_SQRT_M] [--rate-noise UM_PER_MM_PER_SQRT_M]
 //                       [--max-sigma UM]
 //                       [PHM_DIR]
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -290,12 +292,13 @@ int main(int argc, char** argv) {
         "\"%s\", \"rms_second_half_um\": %.6f, \"max_step_along_pass_um\": %.6f, "
         "\"measurements\": %d, \"refused\": %d, \"rate_noise_um_per_mm_per_sqrt_m\": "
         "%.6g, \"rate_noise_end_um_per_mm_per_sqrt_m\": %.6g, "
-        "\"sigma_before_measurement_um\": %.6g, \"max_sigma_um\": %.6g}\n",
+        "\"sigma_before_measurement_um\": %.6g, \"max_sigma_um\": %.6g, "
+        "\"rate_prior_um_per_mm\": %.6g, \"rate_prior_sigma_um_per_mm\": %.6g}\n",
         name, k, passes_l, strategy.c_str(), r.rms_second_half_um, r.max_step_along_um,
         r.measurements, r.refused, r.rate_noise_um_per_mm_per_sqrt_m,
         r.rate_noise_end_um_per_mm_per_sqrt_m,
-        std::isnan(r.sigma_before_measurement_um) ? -1.0 : r.sigma_before_measurement_um,
-        max_sigma);
+        std::isnan(r.sigma_before_measurement_um) ? -1.0 : r.sigma_before_measurement_um, max_sigma,
+        r.rate_prior_um_per_mm, r.rate_prior_sigma_um_per_mm);
   };
   for (int k : {5, 10, 20}) {
     for (int passes_l : {2, 3}) {
@@ -316,37 +319,43 @@ int main(int argc, char** argv) {
   // Measured when needed with the bound an integrator can know before the tool (held out): the
   // estimate's σ just before a measurement in the second half of the life, averaged over the two
   // other cutters' runs measured every 10 cuts with the same strategy.
-  const std::size_t kLearned = 10, kLearnedOnRequest = 12, kAdapted = 13, kAdaptedOnRequest = 15;
+  // Pairs of strategies() (measured every k cuts, measured when needed): learned q, adapted, and
+  // the same with the rate prior learned from the family.
+  struct HeldPair {
+    const char* label;
+    std::size_t fixed;
+    std::size_t on_request;
+  };
+  const std::array<HeldPair, 4> pairs{{{"learned q", 10, 12},
+                                       {"learned q, adapted", 13, 15},
+                                       {"learned q and rate prior", 16, 18},
+                                       {"learned q and rate prior, adapted", 19, 21}}};
   struct Held {
     std::string cutter;
     int passes_l;
-    double max_sigma_learned;
-    double max_sigma_adapted;
-    Result learned;
-    Result adapted;
+    std::array<double, 4> max_sigma;
+    std::array<Result, 4> r;
   };
   std::vector<Held> held;
   for (const int passes_l : {2, 3}) {
     for (const char* name : {"c1", "c4", "c6"}) {
-      double s_learned = 0.0;
-      double s_adapted = 0.0;
-      for (const auto& row : summary) {
-        if (row.k != 10 || row.passes_l != passes_l || row.cutter == name) continue;
-        s_learned += 0.5 * row.r[kLearned].sigma_before_measurement_um;
-        s_adapted += 0.5 * row.r[kAdapted].sigma_before_measurement_um;
+      Held h{name, passes_l, {}, {}};
+      for (std::size_t p = 0; p < pairs.size(); ++p) {
+        double bound = 0.0;
+        for (const auto& row : summary) {
+          if (row.k != 10 || row.passes_l != passes_l || row.cutter == name) continue;
+          bound += 0.5 * row.r[pairs[p].fixed].sigma_before_measurement_um;
+        }
+        Scenario sc = make_scenario(name, 10, passes_l);
+        sc.max_sigma_um = bound;
+        h.max_sigma[p] = bound;
+        h.r[p] = run(sc, strategies()[pairs[p].on_request]);
+        if (g_json) {
+          print_json(name, 10, passes_l,
+                     strategies()[pairs[p].on_request].name + ", held-out bound", h.r[p], bound);
+        }
       }
-      Scenario sc = make_scenario(name, 10, passes_l);
-      sc.max_sigma_um = s_learned;
-      const Result rl = run(sc, strategies()[kLearnedOnRequest]);
-      sc.max_sigma_um = s_adapted;
-      const Result ra = run(sc, strategies()[kAdaptedOnRequest]);
-      held.push_back({name, passes_l, s_learned, s_adapted, rl, ra});
-      if (g_json) {
-        print_json(name, 10, passes_l, strategies()[kLearnedOnRequest].name + ", held-out bound",
-                   rl, s_learned);
-        print_json(name, 10, passes_l, strategies()[kAdaptedOnRequest].name + ", held-out bound",
-                   ra, s_adapted);
-      }
+      held.push_back(h);
     }
   }
   if (g_json) return 0;
@@ -354,7 +363,7 @@ int main(int argc, char** argv) {
   // 5 creeping + estimator, 6 predictive + estimator, 7 and 8 the same fed noise-free,
   // 9 predictive + estimator measured when needed; 10, 11, 12 the same as 6, 8, 9 with the
   // process noise learned from the two other cutters; 13, 14, 15 the same, adapted within the
-  // tool's life.
+  // tool's life; 16..21 the same as 10..15 with the rate prior learned from the family too.
   std::printf(
       "\n### PHM 2010 summary (step = prior art, creep = creeping linear, pred = predictive "
       "creeping)\n\n"
@@ -533,8 +542,56 @@ int main(int argc, char** argv) {
                   100.0 * (1.0 - double(rq.measurements) / fixed.measurements),
                   rq.rms_second_half_um / fixed.rms_second_half_um, rq.max_step_along_um);
     };
-    line("learned q", h.max_sigma_learned, every10->r[kLearned], h.learned);
-    line("learned q, adapted", h.max_sigma_adapted, every10->r[kAdapted], h.adapted);
+    for (std::size_t p = 0; p < pairs.size(); ++p) {
+      line(pairs[p].label, h.max_sigma[p], every10->r[pairs[p].fixed], h.r[p]);
+    }
+  }
+  std::printf(
+      "\n### PHM 2010, rate prior learned from the tool family (learn_rate_prior, held out: each "
+      "cutter's prior from the two others' start rates over family_prior_path_mm = %g mm); limit "
+      "= the same strategy fed noise-free measurements (A), for the adapted one also learned q "
+      "and rate prior without adaptation fed noise-free measurements (B)\n\n"
+      "| cutter | k | L [passes] | rate prior [µm/mm] | step | learned q | learned q and prior | "
+      "limit | ratio | + adapted | limit A | ratio A | ratio B | step along a pass [µm] | "
+      "refused |\n"
+      "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- "
+      "|\n",
+      est.family_prior_path_mm);
+  for (const int passes_l : {2, 3}) {
+    double sum_step = 0.0, sum_p = 0.0, sum_pa = 0.0, worst = 0.0, worst_a = 0.0, along = 0.0;
+    int rows = 0, within = 0, within_a = 0;
+    for (const auto& row : summary) {
+      if (row.passes_l != passes_l) continue;
+      const auto& r = row.r;
+      const double ratio = r[16].rms_second_half_um / r[17].rms_second_half_um;
+      const double ratio_a = r[19].rms_second_half_um / r[20].rms_second_half_um;
+      const double ratio_b = r[19].rms_second_half_um / r[17].rms_second_half_um;
+      std::printf(
+          "| %s | %d | %d | %.4f ± %.4f | %.3f | %.3f | %.3f | %.3f | %.2f | %.3f | %.3f | %.2f | "
+          "%.2f | %.4f | %d |\n",
+          row.cutter.c_str(), row.k, row.passes_l, r[16].rate_prior_um_per_mm,
+          r[16].rate_prior_sigma_um_per_mm, r[1].rms_second_half_um, r[10].rms_second_half_um,
+          r[16].rms_second_half_um, r[17].rms_second_half_um, ratio, r[19].rms_second_half_um,
+          r[20].rms_second_half_um, ratio_a, ratio_b,
+          std::max(r[16].max_step_along_um, r[19].max_step_along_um),
+          r[16].refused + r[19].refused);
+      sum_step += r[1].rms_second_half_um;
+      sum_p += r[16].rms_second_half_um;
+      sum_pa += r[19].rms_second_half_um;
+      worst = std::max(worst, ratio);
+      worst_a = std::max(worst_a, std::max(ratio_a, ratio_b));
+      within += ratio <= 1.15 ? 1 : 0;
+      within_a += std::max(ratio_a, ratio_b) <= 1.15 ? 1 : 0;
+      along = std::max({along, r[16].max_step_along_um, r[19].max_step_along_um});
+      ++rows;
+    }
+    std::printf(
+        "\nL = %d passes, %d rows: learned q and prior: worst ratio to its limit %.3f (%d rows "
+        "within 1.15), mean RMS / mean RMS of step %.3f; adapted: worst of ratios A and B %.3f (%d "
+        "rows within 1.15), mean RMS / mean RMS of step %.3f (targets ≤ 1.15, ≤ 0.7); max step "
+        "along a pass %.4f µm (target ≤ 0.02)\n",
+        passes_l, rows, worst, within, sum_p / sum_step, worst_a, within_a, sum_pa / sum_step,
+        along);
   }
   return 0;
 }

@@ -79,6 +79,9 @@ struct Strategy {
   bool learned{false};
   /// [creep.estimator] adapt_rate_noise: the rate noise follows the innovations within the life.
   bool adapted{false};
+  /// [creep.estimator] learn_rate_prior (with learned): the scored tool's rate prior is the
+  /// family's.
+  bool learned_prior{false};
 };
 
 struct Result {
@@ -101,6 +104,10 @@ struct Result {
   double sigma_before_measurement_um{std::numeric_limits<double>::quiet_NaN()};
   /// Measurements in the first 50 cuts of the scored tool.
   int measurements_first_50_passes{0};
+  /// The scored tool's rate prior [µm/mm], mean and σ (0 ± initial_rate_sigma_um_per_mm unless
+  /// learned from the family).
+  double rate_prior_um_per_mm{0.0};
+  double rate_prior_sigma_um_per_mm{0.0};
 };
 
 inline const std::vector<Strategy>& strategies() {
@@ -128,6 +135,18 @@ inline const std::vector<Strategy>& strategies() {
        ProfileShape::kLinear, true, true, true, false, true, true},
       {"predictive creeping, estimator, learned q, adapted, measured when needed", true,
        ProfileShape::kLinear, true, true, false, true, true, true},
+      {"predictive creeping, estimator, learned q and rate prior", true, ProfileShape::kLinear,
+       true, true, false, false, true, false, true},
+      {"predictive creeping, estimator, learned q and rate prior, noise-free", true,
+       ProfileShape::kLinear, true, true, true, false, true, false, true},
+      {"predictive creeping, estimator, learned q and rate prior, measured when needed", true,
+       ProfileShape::kLinear, true, true, false, true, true, false, true},
+      {"predictive creeping, estimator, learned q and rate prior, adapted", true,
+       ProfileShape::kLinear, true, true, false, false, true, true, true},
+      {"predictive creeping, estimator, learned q and rate prior, adapted, noise-free", true,
+       ProfileShape::kLinear, true, true, true, false, true, true, true},
+      {"predictive creeping, estimator, learned q and rate prior, adapted, measured when needed",
+       true, ProfileShape::kLinear, true, true, false, true, true, true, true},
   };
   return s;
 }
@@ -170,6 +189,7 @@ inline Result run(const Scenario& sc, const Strategy& st) {
   if (learn) {
     c.estimator.learn_rate_noise = true;
     c.estimator.family_min_tools = sc.family.size();
+    c.estimator.learn_rate_prior = st.learned_prior;
   }
   c.estimator.adapt_rate_noise = st.adapted;
   WearCompensator comp;
@@ -248,6 +268,10 @@ inline Result run(const Scenario& sc, const Strategy& st) {
   };
   Result r;
   r.rate_noise_um_per_mm_per_sqrt_m = std::sqrt(comp.rate_q() * 1000.0);
+  const double prior_sigma = comp.state().rate_prior_sigma_um_per_mm[0];
+  r.rate_prior_um_per_mm = prior_sigma > 0.0 ? comp.state().rate_prior_um_per_mm[0] : 0.0;
+  r.rate_prior_sigma_um_per_mm =
+      prior_sigma > 0.0 ? prior_sigma : c.estimator.initial_rate_sigma_um_per_mm;
   double sum_sq = 0.0;
   std::size_t count = 0;
   double sum_sq_after = 0.0;

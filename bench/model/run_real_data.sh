@@ -18,10 +18,14 @@ rm -rf "$out"
   --log "$data/phm2010_milling_wear/c4_wear.csv" --map bench/model/phm2010/c4.map.toml \
   --log "$data/phm2010_milling_wear/c6_wear.csv" --map bench/model/phm2010/c6.map.toml \
   --config bench/model/phm2010/phm.toml --out "$out/phm2010"
+# FL_THERMAL: ranked by the fit (fl_thermal.toml) and by the rolling-origin error
+# (fl_thermal_ranked.toml); --validate sessions holds out 8 h blocks (validate_block_s).
 for ch in 1 3 5; do
-  "$nccomp" analyze --log "$data/fl_thermal_spindle_drift/data.csv" \
-    --map "bench/model/fl_thermal/ch$ch.map.toml" --config bench/model/fl_thermal/fl_thermal.toml \
-    --out "$out/fl_thermal_ch$ch"
+  for cfg in fl_thermal fl_thermal_ranked; do
+    "$nccomp" analyze --log "$data/fl_thermal_spindle_drift/data.csv" \
+      --map "bench/model/fl_thermal/ch$ch.map.toml" --config "bench/model/fl_thermal/$cfg.toml" \
+      --validate sessions --out "$out/${cfg}_ch$ch"
+  done
 done
 rm -rf "$here/figures"
 mkdir -p "$here/figures"
@@ -38,4 +42,5 @@ copy phm2010 path_mm
 copy fl_thermal_ch1 time_s spindle_rpm t1_c
 copy fl_thermal_ch3 time_s
 copy fl_thermal_ch5 time_s
+for ch in 1 3 5; do copy "fl_thermal_ranked_ch$ch" time_s; done
 echo "figures in $here/figures"

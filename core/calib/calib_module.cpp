@@ -226,17 +226,26 @@ bool CalibrationModule::load_state(std::span<const std::byte> bytes) noexcept {
   if (bytes.empty()) {
     return true;
   }
-  // Version 2, version 1 (a prefix of version 2's bytes), each with or without the values
-  // written.
+  // Version 3, versions 1 and 2 (prefixes of version 3's bytes), each with or without the
+  // values written.
   constexpr std::size_t kWrittenBytes = 3 * sizeof(double);
   const bool v1 =
       bytes.size() == kCalibStateV1Bytes || bytes.size() == kCalibStateV1Bytes + kWrittenBytes;
-  if (bytes.size() != sizeof(CalibState) && bytes.size() != kStateBytes && !v1) {
+  const bool v2 =
+      bytes.size() == kCalibStateV2Bytes || bytes.size() == kCalibStateV2Bytes + kWrittenBytes;
+  if (bytes.size() != sizeof(CalibState) && bytes.size() != kStateBytes && !v1 && !v2) {
     return false;
   }
-  const std::size_t state_bytes = v1 ? kCalibStateV1Bytes : sizeof(CalibState);
+  const std::size_t state_bytes =
+      v1 ? kCalibStateV1Bytes : (v2 ? kCalibStateV2Bytes : sizeof(CalibState));
   CalibState s;
   std::memcpy(&s, bytes.data(), state_bytes);
+  if (v2) {
+    if (s.version != 2) {
+      return false;
+    }
+    convert_from_v2(s);
+  }
   if (v1) {
     if (s.version != 1) {
       return false;

@@ -33,10 +33,16 @@ constexpr double kMinAsymptoteSpread = 0.2;
 static_assert(std::tuple_size_v<decltype(CalibrationConfig::estimator_model_slope_um_per_c)> ==
               kSlotCount);
 
-EstimatorParams estimator_params(const CalibrationConfig& c, std::size_t slot) noexcept {
+EstimatorParams estimator_params(const CalibrationConfig& c, std::size_t slot,
+                                 const ShiftHistory& shifts) noexcept {
   const double model_sigma = c.estimator_model_slope_sigma_um_per_c[slot];
-  return {c.estimator_touch_noise_um, c.estimator_level_noise_um_per_h,
-          c.estimator_prior_gain_sigma,
+  const double level =
+      c.estimator_learn_level_noise
+          ? learned_level_noise_um_per_h(shifts, slot, c.estimator_level_noise_um_per_h,
+                                         c.estimator_min_level_noise_um_per_h,
+                                         c.estimator_max_level_noise_um_per_h)
+          : c.estimator_level_noise_um_per_h;
+  return {c.estimator_touch_noise_um, level, c.estimator_prior_gain_sigma,
           std::isnan(model_sigma) ? c.estimator_slope_sigma_um_per_c : model_sigma,
           c.estimator_gate_sigmas};
 }
@@ -439,7 +445,7 @@ void Calibrator::evaluate_nominals(double now_s, TimeNs now_ns, StepOutput& out)
     const auto& last = state_.estimates[s];
     state_.estimates[s] = start_estimate(now_s, with_prior,
                                          start_slope(config_, s, last.valid == 1 ? last.x[2] : 0.0),
-                                         estimator_params(config_, s));
+                                         estimator_params(config_, s, state_.shifts));
     auto& n = state_.nominals[s];
     n.valid = 1;
     n.direction = set_.direction[s];
@@ -489,7 +495,7 @@ void Calibrator::evaluate_recalibration(double now_s, TimeNs now_ns, StepOutput&
   std::array<DriftEstimate, kSlotCount> estimates = state_.estimates;
   if (plausible && config_.prediction == Prediction::kEstimator) {
     for (std::size_t s = 0; s < kSlotCount; ++s) {
-      const EstimatorParams p = estimator_params(config_, s);
+      const EstimatorParams p = estimator_params(config_, s, state_.shifts);
       auto& e = estimates[s];
       if (e.valid != 1) {  // switched to the estimator after the nominals
         e = start_estimate(state_.nominals[s].time_s, has_prior(state_.shifts),
@@ -645,7 +651,7 @@ EstimatedDrift Calibrator::estimate(std::size_t slot, double t_s) const noexcept
   }
   const double prior = prior_drift_um(state_.shifts, slot, t_s - state_.nominals[slot].time_s);
   return predict_estimate(e, prior, temperature_delta(slot), std::max(t_s, e.time_s),
-                          estimator_params(config_, slot));
+                          estimator_params(config_, slot, state_.shifts));
 }
 
 EstimatedDrift Calibrator::estimated_drift(Slot slot, TimeNs now_ns) const noexcept {

@@ -84,6 +84,12 @@ void validate(const CalibrationConfig& c) {
   k.positive(c.max_temperature_slope_um_per_c, "max_temperature_slope_um_per_c");
   k.positive(c.estimator_touch_noise_um, "estimator_touch_noise_um");
   k.non_negative(c.estimator_level_noise_um_per_h, "estimator_level_noise_um_per_h");
+  k.positive(c.estimator_min_level_noise_um_per_h, "estimator_min_level_noise_um_per_h");
+  if (!(c.estimator_max_level_noise_um_per_h >= c.estimator_min_level_noise_um_per_h) ||
+      !std::isfinite(c.estimator_max_level_noise_um_per_h)) {
+    k.fail("estimator_max_level_noise_um_per_h", "must be finite and >= the minimum",
+           c.estimator_max_level_noise_um_per_h);
+  }
   k.non_negative(c.estimator_prior_gain_sigma, "estimator_prior_gain_sigma");
   if (!std::isfinite(c.estimator_prior_forgetting) || c.estimator_prior_forgetting <= 0.0 ||
       c.estimator_prior_forgetting > 1.0) {

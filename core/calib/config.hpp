@@ -119,6 +119,12 @@ struct CalibrationConfig {
   double estimator_touch_noise_um{0.7};
   /// Standard deviation of the level's random walk over one hour [µm]; it grows with √hours.
   double estimator_level_noise_um_per_h{6.0};
+  /// true: per slot, the level noise is the RMS of the earlier shifts' hourly drift increments
+  /// (learned_level_noise_um_per_h), within the bounds below; the configured value until an
+  /// earlier shift has an hour of drift.
+  bool estimator_learn_level_noise{false};
+  double estimator_min_level_noise_um_per_h{3.0};
+  double estimator_max_level_noise_um_per_h{20.0};
   /// Prior standard deviation of the gain on the earlier shifts' mean drift (prior gain 1).
   double estimator_prior_gain_sigma{0.5};
   /// Weight kept per shift by the earlier shifts' mean drift, in (0, 1].

@@ -75,6 +75,20 @@ void add_shift_point(ShiftHistory& h, double since_s,
 
 void fold_shift(ShiftHistory& h, double forgetting) noexcept {
   if (h.current_knots > 0) {
+    // Increments over each whole hour (knots two apart, from the shift start at 0: the knots on
+    // the hour are the hourly touch sets themselves), weighted like the mean.
+    h.increment_weight *= forgetting;
+    for (std::size_t s = 0; s < kSlotCount; ++s) {
+      h.increment_sq_sum_um2[s] *= forgetting;
+    }
+    for (std::size_t m = 0; m + 2 <= static_cast<std::size_t>(h.current_knots); m += 2) {
+      for (std::size_t s = 0; s < kSlotCount; ++s) {
+        const double from = m == 0 ? 0.0 : h.current_um[s][m - 1];
+        const double d = h.current_um[s][m + 1] - from;
+        h.increment_sq_sum_um2[s] += d * d;
+      }
+      h.increment_weight += 1.0;
+    }
     for (std::size_t j = 0; j < kPriorKnots; ++j) {
       h.weight[j] *= forgetting;
       for (std::size_t s = 0; s < kSlotCount; ++s) {
@@ -93,6 +107,15 @@ void fold_shift(ShiftHistory& h, double forgetting) noexcept {
   h.current_um = {};
   h.last_since_s = 0.0;
   h.last_drift_um = {};
+}
+
+double learned_level_noise_um_per_h(const ShiftHistory& h, std::size_t slot, double configured,
+                                    double min_um_per_h, double max_um_per_h) noexcept {
+  if (!(h.increment_weight > 0.0) || slot >= kSlotCount) {
+    return configured;
+  }
+  const double rms = std::sqrt(std::max(0.0, h.increment_sq_sum_um2[slot] / h.increment_weight));
+  return std::clamp(rms, min_um_per_h, max_um_per_h);
 }
 
 DriftEstimate start_estimate(double t_s, bool with_prior, double slope_um_per_c,

@@ -32,9 +32,16 @@ bool has_prior(const ShiftHistory& h) noexcept;
 /// safe.
 void add_shift_point(ShiftHistory& h, double since_s,
                      const std::array<double, kSlotCount>& drift_um) noexcept;
-/// New nominals: the shift in progress (if it passed a knot) joins the earlier shifts, weights
-/// of the older ones times `forgetting`; a new shift starts. Real-time safe.
+/// New nominals: the shift in progress (if it passed a knot) joins the earlier shifts (its mean
+/// drift and its hourly increments), weights of the older ones times `forgetting`; a new shift
+/// starts. Real-time safe.
 void fold_shift(ShiftHistory& h, double forgetting) noexcept;
+
+/// The level noise learned from the earlier shifts: the RMS of their hourly drift increments
+/// (ShiftHistory::increment_*) clamped to [min, max] [µm/h]; `configured` while no earlier shift
+/// has an hour of drift. Real-time safe.
+double learned_level_noise_um_per_h(const ShiftHistory& h, std::size_t slot, double configured,
+                                    double min_um_per_h, double max_um_per_h) noexcept;
 
 /// The estimate at the nominals (time t_s): level 0 ± touch noise, gain 1 ± prior_gain_sigma
 /// when earlier shifts exist (else 0 ± 0), slope slope_um_per_c (a model's, what the shift before

@@ -127,10 +127,16 @@ struct ShiftHistory {
   std::array<std::array<double, kPriorKnots>, kSlotCount> current_um{};
   double last_since_s{0.0};
   std::array<double, kSlotCount> last_drift_um{};
+  // --- version 3 (appended) ---
+  /// Increments of the earlier shifts' drift over each whole hour since their nominals (knot
+  /// 2i + 1 minus knot 2i − 1, the shift start being 0), weighted like sum_um: the sum of their
+  /// squares per slot, and their weight.
+  std::array<double, kSlotCount> increment_sq_sum_um2{};
+  double increment_weight{0.0};
 };
 
 struct CalibState {
-  static constexpr std::int32_t kVersion = 2;
+  static constexpr std::int32_t kVersion = 3;
   std::int32_t version{kVersion};
   Phase phase{Phase::kUncalibrated};
   CalibrationResult result{};
@@ -151,11 +157,19 @@ struct CalibState {
 static_assert(std::is_trivially_copyable_v<CalibState>);
 /// Bytes of a version-1 CalibState (everything before `estimates`).
 inline constexpr std::size_t kCalibStateV1Bytes = offsetof(CalibState, estimates);
+/// Bytes of a version-2 CalibState (everything before the hourly increments).
+inline constexpr std::size_t kCalibStateV2Bytes =
+    offsetof(CalibState, shifts) + offsetof(ShiftHistory, increment_sq_sum_um2);
+static_assert(kCalibStateV2Bytes + 5 * sizeof(double) == sizeof(CalibState));
 
 /// Converts a version-1 state (version 1, version-2 fields at their defaults): the drift
 /// history since the nominals becomes the shift in progress, so that it is folded into the
-/// earlier shifts' drift at the next nominals. Sets version 2. Real-time safe.
+/// earlier shifts' drift at the next nominals. Sets the current version. Real-time safe.
 void convert_from_v1(CalibState& state) noexcept;
+
+/// Converts a version-2 state: no hourly increments known yet (the learned level noise starts
+/// with the next shift that ends). Sets version 3. Real-time safe.
+void convert_from_v2(CalibState& state) noexcept;
 
 /// Adds delta_s to every time field (monotonic ↔ wall clock).
 void shift_times(CalibState& state, double delta_s) noexcept;

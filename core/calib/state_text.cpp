@@ -111,6 +111,13 @@ void visit_fields(State& s, std::int64_t version, F&& f) {
       f(n + "current_um." + std::to_string(k), h.current_um[k][j]);
     }
   }
+  if (version < 3) {
+    return;
+  }
+  f(std::string("shifts.increment_weight"), h.increment_weight);
+  for (std::size_t k = 0; k < kSlotCount; ++k) {
+    f("shifts.increment_sq_sum_um2." + std::to_string(k), h.increment_sq_sum_um2[k]);
+  }
 }
 
 std::string format_double(double v) {
@@ -214,6 +221,12 @@ void convert_from_v1(CalibState& s) noexcept {
   }
 }
 
+void convert_from_v2(CalibState& s) noexcept {
+  s.version = CalibState::kVersion;
+  s.shifts.increment_sq_sum_um2 = {};
+  s.shifts.increment_weight = 0.0;
+}
+
 std::string to_text(const CalibState& state) {
   std::ostringstream out;
   out << kHeader << ' ' << CalibState::kVersion << '\n';
@@ -259,7 +272,7 @@ CalibState from_text(std::string_view text) {
         fail(line_no, key, "not a calibration state (expected header 'nccomp_calib_state')");
       }
       version = parse_int(value, line_no, key);
-      if (version != 1 && version != CalibState::kVersion) {
+      if (version < 1 || version > CalibState::kVersion) {
         fail(line_no, key, "unsupported version '" + std::string(value) + "'");
       }
       header = true;
@@ -314,6 +327,8 @@ CalibState from_text(std::string_view text) {
     if (state_problem_v1(s) == nullptr) {
       convert_from_v1(s);
     }
+  } else if (version == 2) {
+    convert_from_v2(s);
   }
   validate(s);
   return s;
@@ -419,6 +434,13 @@ const char* state_problem(const CalibState& s) noexcept {
   }
   if (!finite) {
     return "shifts: weights (>= 0), sums, drifts and last_since_s (>= 0) must be finite";
+  }
+  bool increments = std::isfinite(h.increment_weight) && h.increment_weight >= 0.0;
+  for (const double v : h.increment_sq_sum_um2) {
+    increments = increments && std::isfinite(v) && v >= 0.0;
+  }
+  if (!increments) {
+    return "shifts.increment_*: must be finite and >= 0";
   }
   return nullptr;
 }

@@ -742,11 +742,10 @@ void CheckpointCompensator::on_sample(const AxisSample& s, StepOutput& out) noex
   if (next_ > passed_before) {
     focus_ = static_cast<std::int32_t>(next_ - 1);
   }
+  cut_first_ = cut_last_ = 0;
   if (fresh) {
-    for (std::size_t i = passed_before; i < next_; ++i) {
-      points_[i].cut_path_mm = cut_path_mm_;
-      points_[i].cut_tool = cut_tool_;
-    }
+    cut_first_ = passed_before;
+    cut_last_ = next_;
   }
   if (config_.active_register < 0) {
     live_target_um_ = target_value_um(s);
@@ -778,7 +777,8 @@ bool CheckpointCompensator::adopt_register_value(std::size_t i, double nc_value_
 }
 
 bool CheckpointCompensator::rebase(std::size_t first, std::size_t last, double delta_um,
-                                   TimeNs now_ns, const engine::TrimChange* along) noexcept {
+                                   TimeNs now_ns, const engine::TrimChange* along,
+                                   bool cut_trim_known) noexcept {
   if (first > last || last >= points_.size() || !std::isfinite(delta_um)) {
     return false;
   }
@@ -798,8 +798,11 @@ bool CheckpointCompensator::rebase(std::size_t first, std::size_t last, double d
       // The average lags a trend the trims now predict: the residual is the last part's error
       // less the new trim. Applied as an update is (feedback, dead band), at S1's next write.
       double at_cut_um = delta_um;
-      if (along != nullptr && std::isfinite(p.cut_path_mm)) {
-        const double change_um = along->at_cut_path(p.cut_tool, p.cut_path_mm);
+      if (along != nullptr && std::isfinite(p.cut_inputs.path_mm)) {
+        const double old_um = cut_trim_known && std::isfinite(p.cut_trim_um)
+                                  ? p.cut_trim_um
+                                  : along->old_at_switch_um();
+        const double change_um = along->new_at(p.cut_inputs) - old_um;
         if (std::isfinite(change_um)) at_cut_um = -change_um;
       }
       p.learned_um = p.history[p.history_n - 1] + delta_um - at_cut_um;
@@ -828,7 +831,7 @@ bool CheckpointCompensator::rebase(std::size_t first, std::size_t last, double d
 }
 
 void CheckpointCompensator::export_state(CheckpointState& out) const {
-  out.version = 3;
+  out.version = 4;
   out.part_counter = part_counter_;
   out.part = part_;
   out.points.assign(points_.begin(), points_.end());
@@ -842,8 +845,11 @@ const char* CheckpointCompensator::invalid_point_reason(const LearnedPoint& p) c
   if (p.variance_um2 < 0.0) {
     return "negative variance";
   }
-  if (p.cut_path_mm < 0.0 || std::isinf(p.cut_path_mm)) {
-    return "cut path negative or infinite";
+  if (const char* why = p.cut_inputs.invalid_reason()) {
+    return why;
+  }
+  if (std::isinf(p.cut_trim_um)) {
+    return "cut trim infinite";
   }
   if (p.history_n > kHistoryDepth) {
     return "history longer than its capacity";
@@ -880,7 +886,7 @@ void CheckpointCompensator::restore_counters(std::int64_t part_counter,
 }
 
 void CheckpointCompensator::import_state(const CheckpointState& st) {
-  if (st.version < 1 || st.version > 3) {
+  if (st.version < 1 || st.version > 4) {
     throw std::invalid_argument("checkpoint state: unknown version " + std::to_string(st.version));
   }
   if (st.points.size() != plan_.size()) {
@@ -900,8 +906,10 @@ void CheckpointCompensator::import_state(const CheckpointState& st) {
       p.filter_n = 0;
     }
     if (st.version <= 2) {
-      p.cut_path_mm = kNaN;
-      p.cut_tool = 0;
+      p.cut_inputs = engine::InputSnapshot{};
+    }
+    if (st.version <= 3) {
+      p.cut_trim_um = kNaN;
     }
     (void)restore_point(i, p);
   }

@@ -26,6 +26,7 @@
 #include "core/common/output.hpp"
 #include "core/common/profile.hpp"
 #include "core/common/types.hpp"
+#include "core/engine/input_snapshot.hpp"
 
 namespace nccomp::core::engine {
 class TrimChange;
@@ -136,18 +137,21 @@ struct LearnedPoint {
   /// Accepted e values, oldest first; history_n valid entries.
   std::array<double, kHistoryDepth> history{};
   std::uint32_t history_n{0};
-  /// The tool and its cut path [mm] (the engine's machine context) when this checkpoint's wall
-  /// was last cut; NaN: not known (no context, or a state of version 2 or earlier). A trim
-  /// handover takes a model's trim at this path, where the last reading was cut.
-  double cut_path_mm{kNaN};
-  std::int32_t cut_tool{0};
+  /// The model inputs (the engine's machine context: tool, cut path, time, temperatures,
+  /// position) when this checkpoint's wall was last cut, and the trims on the register it was
+  /// cut with then [µm]; NaN: not known (no context, no trim source, or a state of an earlier
+  /// layout: 3 has the tool and cut path only). A trim handover takes the change of trim at
+  /// these inputs, where the last reading was cut.
+  engine::InputSnapshot cut_inputs{};
+  double cut_trim_um{kNaN};
 };
 
-/// Persisted state. version guards the layout (3: with the cut path of each checkpoint's last cut;
-/// 2 without it (not known); 1 without the estimator's variance too (the filter starts at the
-/// next reading)); checkpoint_count guards against a changed plan.
+/// Persisted state. version guards the layout (4: with the inputs and trims of each checkpoint's
+/// last cut; 3 with its tool and cut path only; 2 without them (not known); 1 without the
+/// estimator's variance too (the filter starts at the next reading)); checkpoint_count guards
+/// against a changed plan.
 struct CheckpointState {
-  std::uint32_t version{3};
+  std::uint32_t version{4};
   std::int64_t part_counter{0};
   std::int32_t part{0};
   std::vector<LearnedPoint> points;
@@ -233,16 +237,21 @@ class CheckpointCompensator {
   /// at S1's next write, through the limiter. The history is cleared and the next reading
   /// counts in full (as a first one): the errors before belong to another split of the
   /// compensation. False, nothing changed, if an offset would leave the absolute limit.
-  /// With `along` (mode A), the residual of a checkpoint whose last cut path is known takes the
-  /// change of trim at that path instead of delta_um: the trim follows the path, and the last
-  /// part's checkpoints were cut before the switch. Real-time safe.
+  /// With `along` (mode A), the residual of a checkpoint whose last cut inputs are known takes
+  /// the change of trim at those inputs instead of delta_um: the new trims at cut_inputs less
+  /// the trims it was cut with (cut_trim_um if cut_trim_known, else the old trims at the
+  /// switch). The last part's checkpoints were cut before the switch, at another path,
+  /// temperature and time. Real-time safe.
   bool rebase(std::size_t first, std::size_t last, double delta_um, TimeNs now_ns,
-              const engine::TrimChange* along = nullptr) noexcept;
-  /// The tool in the spindle and its cut path [mm] in this cycle (NaN: unknown), recorded for
-  /// each checkpoint the tool passes. Real-time safe.
-  void set_cut_path(std::int32_t tool, double path_mm) noexcept {
-    cut_tool_ = tool;
-    cut_path_mm_ = path_mm;
+              const engine::TrimChange* along = nullptr, bool cut_trim_known = false) noexcept;
+  /// The checkpoints [first, last) the last step() saw the tool cut (not those counted at a
+  /// part's first sample or after a program restart). Real-time safe.
+  [[nodiscard]] std::size_t cut_first() const noexcept { return cut_first_; }
+  [[nodiscard]] std::size_t cut_last() const noexcept { return cut_last_; }
+  /// Records checkpoint i's cut: the inputs and the trims it was cut with. Real-time safe.
+  void record_cut(std::size_t i, const engine::InputSnapshot& inputs, double trim_um) noexcept {
+    points_[i].cut_inputs = inputs;
+    points_[i].cut_trim_um = trim_um;
   }
 
   /// The value of checkpoint i's register [µm] (after the repeatability rule).
@@ -332,8 +341,8 @@ class CheckpointCompensator {
   AxisSample prev_{};
   /// Path travelled since the last trigger [mm] (trigger = position: the creep's progress).
   double travel_since_mm_{0.0};
-  std::int32_t cut_tool_{0};
-  double cut_path_mm_{kNaN};
+  std::size_t cut_first_{0};
+  std::size_t cut_last_{0};
   /// trigger = position: the level whose Z band the tool is in before that level's first
   /// checkpoint (kNone: none), and its XY travel since it entered the band [mm] (≈ the contour
   /// position on that level's pass).

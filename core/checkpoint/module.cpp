@@ -14,9 +14,9 @@ namespace nccomp::core::checkpoint {
 namespace {
 
 constexpr std::uint32_t kMagic = 0x31504B43;  // "CKP1"
-// 3: the tool and cut path of each checkpoint's last cut; 2: the estimator's variance and filter
-// count per checkpoint. 1 and 2 are converted when loaded.
-constexpr std::uint32_t kVersion = 3;
+// 4: the model inputs and the trims of each checkpoint's last cut; 3: its tool and cut path only;
+// 2: the estimator's variance and filter count per checkpoint. 1 to 3 are converted when loaded.
+constexpr std::uint32_t kVersion = 4;
 
 struct Header {
   std::uint32_t magic;
@@ -49,8 +49,15 @@ struct RecordV3 {
   std::uint32_t reserved;
 };
 
-static_assert(std::is_trivially_copyable_v<Header> && std::is_trivially_copyable_v<RecordV3>);
-static_assert(sizeof(RecordV1) == 160 && sizeof(Record) == 176 && sizeof(RecordV3) == 192,
+struct RecordV4 {
+  Record v2;
+  engine::InputSnapshot cut_inputs;
+  double cut_trim_um;
+};
+
+static_assert(std::is_trivially_copyable_v<Header> && std::is_trivially_copyable_v<RecordV4>);
+static_assert(sizeof(RecordV1) == 160 && sizeof(Record) == 176 && sizeof(RecordV3) == 192 &&
+                  sizeof(engine::InputSnapshot) == 152 && sizeof(RecordV4) == 336,
               "the state file's layout");
 
 std::size_t record_size(std::uint32_t version) {
@@ -59,8 +66,10 @@ std::size_t record_size(std::uint32_t version) {
       return sizeof(RecordV1);
     case 2:
       return sizeof(Record);
-    case kVersion:
+    case 3:
       return sizeof(RecordV3);
+    case kVersion:
+      return sizeof(RecordV4);
     default:
       return 0;
   }
@@ -103,11 +112,22 @@ void CheckpointModule::attach(const engine::RegisterTable& registers) {
 
 void CheckpointModule::step(TimeNs now_ns, std::span<const Event> events,
                             StepOutput& out) noexcept {
-  if (context_ != nullptr) {
-    compensator_.set_cut_path(context_->tool(),
-                              context_->has_tool() ? context_->cut_path_mm() : kNaN);
-  }
   compensator_.step(now_ns, events, out);
+  if (context_ == nullptr || compensator_.cut_first() == compensator_.cut_last()) {
+    return;
+  }
+  const engine::InputSnapshot inputs = engine::snapshot(*context_);
+  for (std::size_t i = compensator_.cut_first(); i < compensator_.cut_last(); ++i) {
+    // The register the wall is cut with: the live one, else the checkpoint's own.
+    const auto reg = static_cast<std::uint16_t>(
+        config_.active_register >= 0 ? static_cast<std::size_t>(config_.active_register)
+                                     : config_.register_base + i);
+    double trim_um = 0.0;
+    for (const engine::ToolWearTrimSource* src : trim_sources_) {
+      trim_um += src->trim_in_force_um(reg);
+    }
+    compensator_.record_cut(i, inputs, trim_um);
+  }
 }
 
 bool CheckpointModule::adopt_output(std::uint16_t register_index, double nc_value_um,
@@ -144,7 +164,7 @@ bool CheckpointModule::rebase(std::uint16_t register_index, double delta_um, Tim
     return false;
   }
   if (config_.active_register >= 0 && register_index == config_.active_register) {
-    return compensator_.rebase(0, n - 1, delta_um, now_ns, along);
+    return compensator_.rebase(0, n - 1, delta_um, now_ns, along, true);
   }
   if (register_index < config_.register_base) {
     return false;
@@ -153,11 +173,12 @@ bool CheckpointModule::rebase(std::uint16_t register_index, double delta_um, Tim
   if (i >= n) {
     return false;
   }
-  return compensator_.rebase(i, i, delta_um, now_ns, along);
+  // A table register's trims cut the wall only without a live register.
+  return compensator_.rebase(i, i, delta_um, now_ns, along, config_.active_register < 0);
 }
 
 std::size_t CheckpointModule::state_capacity() const noexcept {
-  return sizeof(Header) + plan_.size() * sizeof(RecordV3);
+  return sizeof(Header) + plan_.size() * sizeof(RecordV4);
 }
 
 std::size_t CheckpointModule::save_state(std::span<std::byte> buf) const noexcept {
@@ -172,7 +193,7 @@ std::size_t CheckpointModule::save_state(std::span<std::byte> buf) const noexcep
   std::byte* p = buf.data() + sizeof h;
   for (std::size_t i = 0; i < plan_.size(); ++i) {
     const LearnedPoint& lp = compensator_.point(i);
-    RecordV3 r{};
+    RecordV4 r{};
     r.v2.v1.learned_um = lp.learned_um;
     r.v2.v1.offset_um = lp.offset_um;
     r.v2.v1.applied_um = lp.applied_um;
@@ -181,8 +202,8 @@ std::size_t CheckpointModule::save_state(std::span<std::byte> buf) const noexcep
     for (std::size_t k = 0; k < kHistoryDepth; ++k) r.v2.v1.history[k] = lp.history[k];
     r.v2.variance_um2 = lp.variance_um2;
     r.v2.filter_n = lp.filter_n;
-    r.cut_path_mm = lp.cut_path_mm;
-    r.cut_tool = lp.cut_tool;
+    r.cut_inputs = lp.cut_inputs;
+    r.cut_trim_um = lp.cut_trim_um;
     std::memcpy(p, &r, sizeof r);
     p += sizeof r;
   }
@@ -199,16 +220,26 @@ bool CheckpointModule::load_state(std::span<const std::byte> bytes) noexcept {
   }
   std::memcpy(&h, bytes.data(), sizeof h);
   // Version 1 has no filter: its checkpoints start the filter at the next reading from M.
-  // Versions 1 and 2 do not know where the last cuts were (NaN).
+  // Versions 1 and 2 do not know where the last cuts were (NaN), version 3 only their tool and
+  // cut path (the other inputs and the trims: NaN).
   const std::size_t size = record_size(h.version);
   if (h.magic != kMagic || size == 0 || h.count != plan_.size() ||
       bytes.size() != sizeof h + plan_.size() * size) {
     return false;
   }
   const auto record = [&](std::size_t i) {
-    RecordV3 r{};
-    r.cut_path_mm = kNaN;
-    std::memcpy(&r, bytes.data() + sizeof h + i * size, size);
+    RecordV4 r{};
+    r.cut_trim_um = kNaN;
+    const std::byte* at = bytes.data() + sizeof h + i * size;
+    if (h.version == 3) {
+      RecordV3 v3{};
+      std::memcpy(&v3, at, size);
+      r.v2 = v3.v2;
+      r.cut_inputs.path_mm = v3.cut_path_mm;
+      if (std::isfinite(v3.cut_path_mm)) r.cut_inputs.tool = v3.cut_tool;
+    } else {
+      std::memcpy(&r, at, size);
+    }
     LearnedPoint lp;
     lp.learned_um = r.v2.v1.learned_um;
     lp.offset_um = r.v2.v1.offset_um;
@@ -218,8 +249,8 @@ bool CheckpointModule::load_state(std::span<const std::byte> bytes) noexcept {
     for (std::size_t k = 0; k < kHistoryDepth; ++k) lp.history[k] = r.v2.v1.history[k];
     lp.variance_um2 = r.v2.variance_um2;
     lp.filter_n = r.v2.filter_n;
-    lp.cut_path_mm = r.cut_path_mm;
-    lp.cut_tool = r.cut_tool;
+    lp.cut_inputs = r.cut_inputs;
+    lp.cut_trim_um = r.cut_trim_um;
     return lp;
   };
   // All or nothing: check every record before changing anything.

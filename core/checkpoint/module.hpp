@@ -11,6 +11,7 @@
 #include <span>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "core/checkpoint/compensator.hpp"
@@ -18,7 +19,7 @@
 
 namespace nccomp::core::checkpoint {
 
-class CheckpointModule final : public engine::Module {
+class CheckpointModule final : public engine::Module, public engine::ToolWearTrimUser {
  public:
   /// Not real-time. The plan and config are validated in attach().
   CheckpointModule(CompensatorConfig config, std::vector<Checkpoint> plan,
@@ -55,11 +56,16 @@ class CheckpointModule final : public engine::Module {
   /// table register its checkpoint (CheckpointCompensator::rebase()). Real-time safe.
   bool rebase_output(std::uint16_t register_index, double delta_um,
                      TimeNs now_ns) noexcept override;
-  /// The same, each checkpoint's residual at the path of its last cut. Real-time safe.
+  /// The same, each checkpoint's residual at the inputs of its last cut, less the trims it was
+  /// cut with. Real-time safe.
   bool rebase_output_along(std::uint16_t register_index, double delta_um,
                            const engine::TrimChange& change, TimeNs now_ns) noexcept override;
-  /// Keeps the context: each checkpoint's cut path is recorded when the tool passes it.
+  /// Keeps the context: each checkpoint's inputs are recorded when the tool passes it.
   void bind_context(const engine::MachineContext& context) override { context_ = &context; }
+  /// Keeps the modules that trim: each checkpoint's trims are recorded when the tool passes it.
+  void bind_tool_wear_trims(std::vector<const engine::ToolWearTrimSource*> sources) override {
+    trim_sources_ = std::move(sources);
+  }
 
   [[nodiscard]] CheckpointCompensator& compensator() noexcept { return compensator_; }
   [[nodiscard]] const CheckpointCompensator& compensator() const noexcept { return compensator_; }
@@ -70,6 +76,7 @@ class CheckpointModule final : public engine::Module {
   std::string name_;
   CheckpointCompensator compensator_;
   const engine::MachineContext* context_{nullptr};
+  std::vector<const engine::ToolWearTrimSource*> trim_sources_;
   bool rebase(std::uint16_t register_index, double delta_um, TimeNs now_ns,
               const engine::TrimChange* along) noexcept;
 };

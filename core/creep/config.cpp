@@ -249,6 +249,7 @@ void validate(const CreepConfig& c) {
       k.fail("creep.estimator.gate_sigmas",
              "must be 0 (no gate) or a finite number >= 2, got " + num(est.gate_sigmas));
     }
+    k.positive(est.family_prior_path_mm, "creep.estimator.family_prior_path_mm");
     if (est.family_min_tools < 1 || est.family_min_tools > kMaxFamilyMinTools) {
       k.fail("creep.estimator.family_min_tools", "must be 1.." +
                                                      std::to_string(kMaxFamilyMinTools) + ", got " +

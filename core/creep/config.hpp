@@ -224,6 +224,12 @@ struct EstimatorConfig {
   /// rate_noise_um_per_mm_per_sqrt_m until then.
   bool learn_rate_noise{false};
   std::size_t family_min_tools{3};
+  /// Learn a new tool's rate prior from the family: each finished tool adds its start rate (the
+  /// least-squares line through the origin over its measurements within family_prior_path_mm
+  /// of cut path, at least its first); a new tool's filter starts from their mean and spread
+  /// instead of 0 ± initial_rate_sigma_um_per_mm once family_min_tools (at least 2) are finished.
+  bool learn_rate_prior{false};
+  double family_prior_path_mm{1000.0};
   /// Adapt the rate's process noise within a tool's life from the filter's normalised innovation
   /// squares (estimation::adapt_process_noise()): starts at the configured or learned value, moves
   /// with an exponential window of adapt_window_measurements measurements, and stays within

@@ -15,6 +15,7 @@
 #include "core/creep/state_v2.hpp"
 #include "core/creep/state_v3.hpp"
 #include "core/creep/state_v4.hpp"
+#include "core/creep/state_v5.hpp"
 
 namespace nccomp::core::creep {
 
@@ -480,6 +481,15 @@ struct LayoutV4 {
     v4::upgrade(o, removal, n);
   }
 };
+struct LayoutV5 {
+  using State = v5::CreepState;
+  using Memory = v5::ToolMemory;
+  static constexpr std::size_t kBytes = v5::kModuleStateBytes;
+  static bool loadable(const std::byte* p) noexcept { return v5::state_bytes_loadable(p); }
+  static void upgrade(const State& o, double removal, CreepState& n) noexcept {
+    v5::upgrade(o, removal, n);
+  }
+};
 /// The current layout without the AdoptedOutputs (written before start-up adoption existed).
 constexpr std::size_t kBytesWithoutAdoption = sizeof(CreepState) + sizeof(ToolMemory);
 constexpr std::size_t kAdoption = sizeof(AdoptedOutputs);
@@ -515,6 +525,23 @@ static_assert(kBytesWithResidual != LayoutV1::kBytes && kBytesWithResidual != La
               kBytesWithResidual != LayoutV3::kBytes + kAdoption &&
               kBytesWithResidual != LayoutV4::kBytes &&
               kBytesWithResidual != LayoutV4::kBytes + kAdoption);
+// Version 5 (the learned process noise), with its AdoptedOutputs and residual shift or without.
+constexpr std::size_t kV5WithResidual =
+    LayoutV5::kBytes + kAdoption + sizeof(CreepModule::ResidualShift);
+constexpr bool v5_sizes_distinct() {
+  const std::array<std::size_t, 9> others{LayoutV1::kBytes,      LayoutV2::kBytes,
+                                          LayoutV3::kBytes,      LayoutV3::kBytes + kAdoption,
+                                          LayoutV4::kBytes,      LayoutV4::kBytes + kAdoption,
+                                          kBytesWithoutAdoption, kBytesWithoutAdoption + kAdoption,
+                                          kBytesWithResidual};
+  for (const std::size_t v5 : {LayoutV5::kBytes, LayoutV5::kBytes + kAdoption, kV5WithResidual}) {
+    for (const std::size_t o : others) {
+      if (v5 == o) return false;
+    }
+  }
+  return true;
+}
+static_assert(v5_sizes_distinct());
 
 }  // namespace
 
@@ -572,6 +599,15 @@ bool CreepModule::load_state_old(std::span<const std::byte> bytes) noexcept {
   return true;
 }
 
+bool CreepModule::residual_loadable(const std::byte* p, ResidualShift& out) const noexcept {
+  std::memcpy(&out, p, sizeof out);
+  if (out.version != ResidualShift::kVersion) return false;
+  for (const double v : out.shift_um) {
+    if (!(std::fabs(v) <= comp_.config().limiter.max_abs_um)) return false;
+  }
+  return true;
+}
+
 bool CreepModule::load_state(std::span<const std::byte> bytes) noexcept {
   if (bytes.size() == LayoutV1::kBytes) return load_state_old<LayoutV1>(bytes);
   if (bytes.size() == LayoutV2::kBytes) return load_state_old<LayoutV2>(bytes);
@@ -581,13 +617,20 @@ bool CreepModule::load_state(std::span<const std::byte> bytes) noexcept {
   if (bytes.size() == LayoutV4::kBytes || bytes.size() == LayoutV4::kBytes + kAdoption) {
     return load_state_old<LayoutV4>(bytes);
   }
-  // A state written before the residual shift ends with the AdoptedOutputs.
+  if (bytes.size() == LayoutV5::kBytes || bytes.size() == LayoutV5::kBytes + kAdoption) {
+    return load_state_old<LayoutV5>(bytes);
+  }
   ResidualShift residual{};
+  if (bytes.size() == kV5WithResidual) {
+    if (!residual_loadable(bytes.data() + LayoutV5::kBytes + kAdoption, residual)) return false;
+    if (!load_state_old<LayoutV5>(bytes.first(LayoutV5::kBytes + kAdoption))) return false;
+    residual_ = residual;
+    return true;
+  }
+  // A state written before the residual shift ends with the AdoptedOutputs.
   if (bytes.size() == state_capacity()) {
-    std::memcpy(&residual, bytes.data() + kBytesWithoutAdoption + kAdoption, sizeof residual);
-    if (residual.version != ResidualShift::kVersion) return false;
-    for (const double v : residual.shift_um) {
-      if (!(std::fabs(v) <= comp_.config().limiter.max_abs_um)) return false;
+    if (!residual_loadable(bytes.data() + kBytesWithoutAdoption + kAdoption, residual)) {
+      return false;
     }
     bytes = bytes.first(kBytesWithoutAdoption + kAdoption);
   }

@@ -77,8 +77,9 @@ class CreepModule final : public engine::Module, public engine::ToolWearTrimUser
   /// superposition) or version 2 (before the held normal and the request hold) is converted
   /// (core/creep/state_v1.hpp, state_v2.hpp); version 3 (before the wear estimator) and 4
   /// (before the learned process noise) too, with or without their AdoptedOutputs
-  /// (state_v3.hpp, state_v4.hpp); one without the AdoptedOutputs (before start-up
-  /// adoption) loads with nothing adopted, one without the ResidualShift with none.
+  /// (state_v3.hpp, state_v4.hpp), and 5 (before the learned rate prior) with or without its
+  /// AdoptedOutputs and ResidualShift (state_v5.hpp); one without the AdoptedOutputs (before
+  /// start-up adoption) loads with nothing adopted, one without the ResidualShift with none.
   bool load_state(std::span<const std::byte> bytes) noexcept override;
   /// Advances on every discrete change (measurement, tool change, halt), every 1 mm of cut
   /// path while creeps, entries or predictions are in progress, and when the held surface
@@ -173,6 +174,8 @@ class CreepModule final : public engine::Module, public engine::ToolWearTrimUser
   /// A state of an older layout (LayoutV1, LayoutV2 in creep_module.cpp), converted.
   template <class Layout>
   bool load_state_old(std::span<const std::byte> bytes) noexcept;
+  /// True if p holds a ResidualShift of this version within the limiter's bound (copied to out).
+  bool residual_loadable(const std::byte* p, ResidualShift& out) const noexcept;
   /// Moves channel ch's output by delta_um at once (its value and limiter with it), the shift
   /// fading out along the creep profile over one creep span from the current creep clock, as an
   /// adopted value does (AdoptedOutputs). Not yet measured after a start without state: held at

@@ -67,8 +67,19 @@ struct FamilyNoise {
   double rate_q_sum{0.0};
 };
 
+/// The tool family's learned prior of a new tool's wear rate (issue 22, version 6): every
+/// finished tool adds its start rate (CreepState::start_sxw / start_sxx) per support point,
+/// Welford's running mean and sum of squared deviations.
+struct FamilyRate {
+  /// Finished tools that gave a start rate.
+  std::uint32_t tools{0};
+  /// Mean of their start rates [µm/mm] and the sum of squared deviations from it [(µm/mm)²].
+  std::array<double, kMaxEdgePoints> rate_mean_um_per_mm{};
+  std::array<double, kMaxEdgePoints> rate_m2{};
+};
+
 struct CreepState {
-  static constexpr std::uint32_t kVersion = 5;
+  static constexpr std::uint32_t kVersion = 6;
   std::uint32_t version{kVersion};
   /// Edge support points the state was built with (must match the config on import).
   std::uint32_t edge_points{1};
@@ -171,6 +182,20 @@ struct CreepState {
   bool noise_warned{false};
   /// The family's statistics (carried across tool changes, the current ones in force).
   FamilyNoise family{};
+
+  // Version 6: the rate prior learned from the tool family (issue 22).
+  /// This tool's start rate: the least-squares line through the origin over its accepted
+  /// measurements within family_prior_path_mm of cut path (at least its first), as sums
+  /// Σ s·w per point [µm·mm] and Σ s² [mm²]; start_sxx 0: none yet.
+  std::array<double, kMaxEdgePoints> start_sxw{};
+  double start_sxx{0.0};
+  /// Prior of this tool's rate at its start [µm/mm] and its standard deviation per point, set
+  /// when the tool starts (the family's then); a sigma of 0: the configured prior, 0 ±
+  /// initial_rate_sigma_um_per_mm.
+  std::array<double, kMaxEdgePoints> rate_prior_um_per_mm{};
+  std::array<double, kMaxEdgePoints> rate_prior_sigma_um_per_mm{};
+  /// The family's statistics of start rates (carried across tool changes like family).
+  FamilyRate family_rate{};
 };
 
 static_assert(std::is_trivially_copyable_v<CreepState>);
@@ -233,12 +258,11 @@ inline bool adoption_bytes_loadable(const std::byte* bytes, std::size_t size,
   return true;
 }
 
-/// True if bytes can be copied into a CreepState: the right size and every bool byte 0 or 1
-/// (loading any other value into a bool is undefined behaviour, and a corrupt state file can
-/// hold anything). Values are checked afterwards by WearCompensator::check_state(). Real-time
+/// True if every bool byte of the CreepState at bytes is 0 or 1 (loading any other value into a
+/// bool is undefined behaviour, and a corrupt state file can hold anything). Every bool lies
+/// before the fields version 6 appended, so a version-5 state is checked by it too. Real-time
 /// safe.
-inline bool state_bytes_loadable(const std::byte* bytes, std::size_t size) noexcept {
-  if (size != sizeof(CreepState)) return false;
+inline bool state_bools_valid(const std::byte* bytes) noexcept {
   const auto is_bool = [bytes](std::size_t offset) {
     return std::to_integer<unsigned>(bytes[offset]) <= 1U;
   };
@@ -261,6 +285,12 @@ inline bool state_bytes_loadable(const std::byte* bytes, std::size_t size) noexc
          is_bool(offsetof(CreepState, request_held)) &&
          is_bool(offsetof(CreepState, estimate_valid)) &&
          is_bool(offsetof(CreepState, noise_warned));
+}
+
+/// True if bytes can be copied into a CreepState: the right size and state_bools_valid(). Values
+/// are checked afterwards by WearCompensator::check_state(). Real-time safe.
+inline bool state_bytes_loadable(const std::byte* bytes, std::size_t size) noexcept {
+  return size == sizeof(CreepState) && state_bools_valid(bytes);
 }
 
 /// The same for a ToolMemory (every remembered state). Real-time safe.

@@ -145,6 +145,18 @@ StateProblem WearCompensator::check_state(const CreepState& st) const noexcept {
     }
   }
   if (bad(st.family.rate_q_sum)) return {"family", -1};
+  if (bad(st.start_sxx) || st.start_sxx < 0.0) return {"start_sxx", -1};
+  for (std::size_t i = 0; i < points_; ++i) {
+    if (bad(st.start_sxw[i])) return {"start_sxw", static_cast<int>(i)};
+    if (bad(st.rate_prior_um_per_mm[i])) return {"rate_prior_um_per_mm", static_cast<int>(i)};
+    if (bad(st.rate_prior_sigma_um_per_mm[i]) || st.rate_prior_sigma_um_per_mm[i] < 0.0) {
+      return {"rate_prior_sigma_um_per_mm", static_cast<int>(i)};
+    }
+    if (bad(st.family_rate.rate_mean_um_per_mm[i]) || bad(st.family_rate.rate_m2[i]) ||
+        st.family_rate.rate_m2[i] < 0.0) {
+      return {"family_rate", static_cast<int>(i)};
+    }
+  }
   if (st.estimate_valid) {
     if (bad(st.estimate_path_mm) || st.estimate_path_mm < 0.0 ||
         st.estimate_path_mm > st.cut_path_mm + kTiny) {
@@ -219,6 +231,13 @@ bool WearCompensator::load_motion(std::span<const std::byte> bytes) noexcept {
   interrupted_ = m.flags[2] == 1;
   have_feed_ = m.flags[3] == 1;
   have_now_ = m.flags[4] == 1;
+  if (have_now_) {
+    // step() resets the limiters only without a last step: they go on from the values the old
+    // engine's limiters let through at its last step (the state), not from 0 by max_step_um.
+    for (std::size_t ch = 0; ch < kChannelCount; ++ch) {
+      limiters_[ch].reset(s_.channel_output_um[ch], last_now_ns_);
+    }
+  }
   return true;
 }
 
@@ -464,9 +483,14 @@ estimation::KalmanFilter<2> WearCompensator::estimator_at(std::size_t i,
   // estimator on neither resets the wear nor applies it twice.
   const auto& e = config_.estimator;
   const double sw = e.measurement_sigma_um;
-  const double sr = e.initial_rate_sigma_um_per_mm;
+  // A new tool (no fitted rate) starts from the family's rate prior when it was given one.
+  const bool family_prior = !s_.rate_known && s_.rate_prior_sigma_um_per_mm[i] > 0.0;
+  const double sr =
+      family_prior ? s_.rate_prior_sigma_um_per_mm[i] : e.initial_rate_sigma_um_per_mm;
+  const double r0 =
+      s_.rate_known ? s_.rate_um_per_mm[i] : (family_prior ? s_.rate_prior_um_per_mm[i] : 0.0);
   p << sw * sw, 0.0, 0.0, sr * sr;
-  kf.reset(Eigen::Vector2d(s_.measured_um[i], s_.rate_known ? s_.rate_um_per_mm[i] : 0.0), p);
+  kf.reset(Eigen::Vector2d(s_.measured_um[i], r0), p);
   path_mm = s_.last_measurement_cut_path_mm;
   return kf;
 }
@@ -515,6 +539,20 @@ double WearCompensator::finished_tool_rate_q(const CreepState& st) const noexcep
     q += (slope * slope - sigma * sigma / sxx) / length_mm;
   }
   return q / static_cast<double>(points_);
+}
+
+bool WearCompensator::family_rate_prior(std::size_t i, double& mean_um_per_mm,
+                                        double& sigma_um_per_mm) const noexcept {
+  mean_um_per_mm = kNaN;
+  sigma_um_per_mm = kNaN;
+  const auto& f = s_.family_rate;
+  if (i >= points_ || f.tools < 2) return false;
+  const double n = static_cast<double>(f.tools);
+  // The predictive spread of one more tool: the tools' sample variance and that of their mean.
+  const double var = f.rate_m2[i] / (n - 1.0) * (1.0 + 1.0 / n);
+  mean_um_per_mm = f.rate_mean_um_per_mm[i];
+  sigma_um_per_mm = std::sqrt(var);
+  return sigma_um_per_mm > 0.0 && std::isfinite(sigma_um_per_mm);
 }
 
 double WearCompensator::family_rate_q() const noexcept {
@@ -1296,6 +1334,12 @@ void WearCompensator::on_measurement(TimeNs now_ns, const ToolMeasurement& m,
   auto& h = s_.history[s_.history_count++];
   h.cut_path_mm = s_.cut_path_mm;
   h.wear_um = w;
+  // The tool's start rate for the family: its first measurement, and every one within
+  // family_prior_path_mm of its life.
+  if (s_.measurements == 1 || s_.cut_path_mm <= config_.estimator.family_prior_path_mm) {
+    for (std::size_t i = 0; i < points_; ++i) s_.start_sxw[i] += s_.cut_path_mm * w[i];
+    s_.start_sxx += s_.cut_path_mm * s_.cut_path_mm;
+  }
   fit_rates();
   if (config_.estimator.enabled) {
     for (std::size_t i = 0; i < points_; ++i) {
@@ -1542,11 +1586,23 @@ void WearCompensator::on_tool_change(TimeNs /*now_ns*/, const ToolChange& c,
   // The family outlives its tools; a tool replaced by its sister is finished and adds its
   // estimate of the rate's process noise.
   FamilyNoise family = s_.family;
+  FamilyRate family_rate = s_.family_rate;
   if (c.sister && s_.tool != 0 && config_.estimator.enabled) {
     const double q = finished_tool_rate_q(s_);
     if (std::isfinite(q)) {
       ++family.tools;
       family.rate_q_sum += q;
+    }
+    if (s_.start_sxx > 0.0) {
+      // Welford's update of the start rates' mean and sum of squared deviations.
+      ++family_rate.tools;
+      const double n = static_cast<double>(family_rate.tools);
+      for (std::size_t i = 0; i < points_; ++i) {
+        const double r = s_.start_sxw[i] / s_.start_sxx;
+        const double d = r - family_rate.rate_mean_um_per_mm[i];
+        family_rate.rate_mean_um_per_mm[i] += d / n;
+        family_rate.rate_m2[i] += d * (r - family_rate.rate_mean_um_per_mm[i]);
+      }
     }
   }
   if (s_.tool != 0) {
@@ -1593,10 +1649,22 @@ void WearCompensator::on_tool_change(TimeNs /*now_ns*/, const ToolChange& c,
     s_ = fresh;
   }
   s_.family = family;
+  s_.family_rate = family_rate;
   if (!restored) {
-    // A new tool's filter runs with the family's process noise once enough tools are finished.
+    // A new tool's filter runs with the family's process noise and rate prior once enough tools
+    // are finished.
     const auto& e = config_.estimator;
     s_.rate_q = e.learn_rate_noise && family.tools >= e.family_min_tools ? family_rate_q() : kNaN;
+    if (e.learn_rate_prior && family_rate.tools >= e.family_min_tools) {
+      for (std::size_t i = 0; i < points_; ++i) {
+        double mean = 0.0;
+        double sigma = 0.0;
+        if (family_rate_prior(i, mean, sigma)) {
+          s_.rate_prior_um_per_mm[i] = mean;
+          s_.rate_prior_sigma_um_per_mm[i] = sigma;
+        }
+      }
+    }
   }
   s_.channel_output_um = held_um;
   s_.held_normal = held_normal;

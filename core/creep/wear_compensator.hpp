@@ -80,8 +80,9 @@ class WearCompensator {
   /// a reload's next engine (engine::Module::save_motion()). Bytes written: kMotionBytes, 0 if
   /// buf is too small. Real-time safe.
   std::size_t save_motion(std::span<std::byte> buf) const noexcept;
-  /// Continues save_motion()'s bytes; false (nothing changed) if they are not valid. Real-time
-  /// safe.
+  /// Continues save_motion()'s bytes; false (nothing changed) if they are not valid. Called
+  /// after restore_state() of the same engine's state: the channels' limiters go on from its
+  /// channel outputs at the last step's time. Real-time safe.
   bool load_motion(std::span<const std::byte> bytes) noexcept;
 
   /// Checks a state against the current config. Real-time safe.
@@ -162,6 +163,12 @@ class WearCompensator {
   /// The family's estimate of that density (mean over its finished tools, ≥ 0); NaN without a
   /// finished tool.
   [[nodiscard]] double family_rate_q() const noexcept;
+  /// The family's prior of a new tool's rate at support point i [µm/mm]: the mean of its
+  /// finished tools' start rates and the spread of one more tool, s·sqrt(1 + 1/n) (s their
+  /// sample standard deviation, n ≥ 2 tools); false (both NaN) with fewer than two tools or a
+  /// spread of 0.
+  bool family_rate_prior(std::size_t i, double& mean_um_per_mm,
+                         double& sigma_um_per_mm) const noexcept;
   /// One finished tool's estimate of that density from its remembered measurements: the
   /// least-squares rate r at its last measurement, L mm into its life, (r² − σ²/Sxx)/L; NaN
   /// with fewer than three measurements. Real-time safe (at most kMaxRateWindow per point).

@@ -654,23 +654,24 @@ std::uint64_t Engine::trim_identity(std::size_t i) const noexcept {
 }
 
 namespace {
-/// Register i's trims now, evaluated at another cut path, less its trims at the switch.
+/// Register i's trims now, evaluated at other inputs, and as they were at the switch.
 class RegisterTrimChange final : public TrimChange {
  public:
   RegisterTrimChange(const std::vector<std::unique_ptr<Module>>& modules,
                      const std::vector<double>& trims, std::size_t registers, std::size_t i,
                      double old_um) noexcept
       : modules_(modules), trims_(trims), n_(registers), i_(i), old_um_(old_um) {}
-  [[nodiscard]] double at_cut_path(std::int32_t tool, double path_mm) const noexcept override {
+  [[nodiscard]] double new_at(const InputSnapshot& inputs) const noexcept override {
     double sum_um = 0.0;
     for (std::size_t m = 0; m < modules_.size(); ++m) {
       if (std::isnan(trims_[m * n_ + i_])) continue;
-      const double t = modules_[m]->trim_at_cut_path(static_cast<std::uint16_t>(i_), tool, path_mm);
+      const double t = modules_[m]->trim_at_inputs(static_cast<std::uint16_t>(i_), inputs);
       if (!std::isfinite(t)) return kNaN;
       sum_um += t;
     }
-    return sum_um - old_um_;
+    return sum_um;
   }
+  [[nodiscard]] double old_at_switch_um() const noexcept override { return old_um_; }
 
  private:
   const std::vector<std::unique_ptr<Module>>& modules_;

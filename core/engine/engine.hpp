@@ -56,8 +56,9 @@
 //   new − old is taken off the writing module's state (Module::rebase_output()) and off the
 //   register's target, so the new trims predict and the writer learns what is left. The same
 //   trims as saved (a restart of the same configuration) are not rebased. A writer that learned
-//   from readings taken earlier along the tool's cut path gets the new trims evaluated at each
-//   reading's path as well (TrimChange, Module::rebase_output_along()).
+//   from readings cut at other inputs (earlier along the tool's cut path, at another temperature
+//   or time) gets the new trims evaluated at each reading's inputs as well (TrimChange,
+//   Module::rebase_output_along()).
 //
 // Lifecycle: configure() allocates and validates (throws std::invalid_argument naming what is
 // wrong); step(), export_state(), import_state() are real-time safe: no allocation, no locks, no
@@ -80,6 +81,7 @@
 #include "core/common/types.hpp"
 #include "core/engine/context.hpp"
 #include "core/engine/cursors.hpp"
+#include "core/engine/input_snapshot.hpp"
 #include "core/engine/tool_wear_trims.hpp"
 
 namespace nccomp::core::engine {
@@ -149,14 +151,19 @@ struct StatusValue {
 /// tools, three of its counters making room).
 inline constexpr std::size_t kMaxStatusValues = 20;
 
-/// Trim handover: the change of one register's trims (new − old) had the tool been at an earlier
-/// cut path, the rest of the context as now (the old trims: as they were at the switch, the
-/// module that computed them is gone). A writer whose state holds values measured earlier along
-/// the path (S1's last readings) takes each at its own path. Real-time safe.
+/// Trim handover: one register's trims, new and old, for a writer whose state holds values
+/// measured at earlier inputs (S1's last readings, each cut at its own temperature, time and
+/// cut path): it takes each reading's change of trim at the inputs it was cut with. The old
+/// trims' module is gone (a rollback, a restart): the writer keeps what they were at each cut
+/// (ToolWearTrimSource::trim_in_force_um()), else takes them as they were at the switch.
+/// Real-time safe.
 class TrimChange {
  public:
-  /// [µm]; NaN: unknown (a trimming module that cannot evaluate at a path).
-  [[nodiscard]] virtual double at_cut_path(std::int32_t tool, double path_mm) const noexcept = 0;
+  /// The new trims at `inputs` [µm] (an input it does not hold: as now); NaN: unknown (a
+  /// trimming module that cannot evaluate at given inputs).
+  [[nodiscard]] virtual double new_at(const InputSnapshot& inputs) const noexcept = 0;
+  /// The old trims as they were at the switch (saved with the state) [µm].
+  [[nodiscard]] virtual double old_at_switch_um() const noexcept = 0;
 
  protected:
   ~TrimChange() = default;
@@ -262,13 +269,12 @@ class Module {
     (void)bytes;
     return false;
   }
-  /// Real-time safe. The trim this module would publish on register_index now had `tool` cut
-  /// path_mm (its other inputs as they are now) [µm]; NaN: it cannot say (the default).
-  [[nodiscard]] virtual double trim_at_cut_path(std::uint16_t register_index, std::int32_t tool,
-                                                double path_mm) const noexcept {
+  /// Real-time safe. The trim this module would publish on register_index had the context been
+  /// `inputs` (an input they do not hold: as now) [µm]; NaN: it cannot say (the default).
+  [[nodiscard]] virtual double trim_at_inputs(std::uint16_t register_index,
+                                              const InputSnapshot& inputs) const noexcept {
     (void)register_index;
-    (void)tool;
-    (void)path_mm;
+    (void)inputs;
     return std::numeric_limits<double>::quiet_NaN();
   }
 };

@@ -1,11 +1,12 @@
 // Trims a tool measurement sees (core/engine/engine.hpp, "Trims"): a module whose trims include
 // a prediction of the tool's wear (a model's terms of kind tool_wear) is a ToolWearTrimSource;
 // a module that learns the wear from the tool measurement (S0) is a ToolWearTrimUser and learns
-// only the residual of those trims, so the wear is not compensated twice. The engine connects
-// them at configure().
+// only the residual of those trims, so the wear is not compensated twice. S1 is a user too: it
+// keeps the trims each checkpoint was cut with. The engine connects them at configure().
 #pragma once
 
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 namespace nccomp::core::engine {
@@ -21,6 +22,12 @@ class ToolWearTrimSource {
   /// Real-time safe. Called by the engine in step() when it accepts the trim this module
   /// published on register_index in the same step.
   virtual void trim_in_force(std::uint16_t register_index) noexcept = 0;
+  /// Real-time safe. This module's whole trim in force on register_index [µm], what a part is
+  /// cut with (S1 keeps it per checkpoint for a later trim handover); NaN: not known.
+  [[nodiscard]] virtual double trim_in_force_um(std::uint16_t register_index) const noexcept {
+    (void)register_index;
+    return std::numeric_limits<double>::quiet_NaN();
+  }
 };
 
 class ToolWearTrimUser {

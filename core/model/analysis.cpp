@@ -19,6 +19,8 @@ namespace {
 constexpr std::size_t kMaxParameters = 600;
 constexpr std::size_t kMaxGroupsPerTerm = 512;
 constexpr std::size_t kRefitPerStep = 3;
+// Candidates (best by BIC) put in the order of their rolling-origin error (rank_folds).
+constexpr std::size_t kRankPool = 6;
 // Most sessions of a session_offset candidate (one coefficient each in the fit).
 constexpr std::size_t kMaxSessions = 256;
 
@@ -802,6 +804,95 @@ std::vector<double> equivalent_periods(const Dataset& data, const SearchSet& set
   return out;
 }
 
+// Block of each row for --validate sessions with validate_block_s: whole blocks of block_s from
+// the first known time (in the order over files); a row without a time keeps the block before it.
+std::vector<std::uint32_t> time_blocks(const Dataset& data, double block_s) {
+  const std::size_t n = data.rows();
+  const auto& t =
+      data.order_s.size() == n ? data.order_s : data.column(static_cast<int>(Column::kTime));
+  std::vector<std::uint32_t> out(n, 0);
+  if (t.size() != n) return out;
+  double first = kUnknown;
+  for (const double v : t) {
+    if (std::isfinite(v) && !(v >= first)) first = v;
+  }
+  std::uint32_t block = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (std::isfinite(t[i]))
+      block = static_cast<std::uint32_t>(std::floor((t[i] - first) / block_s));
+    out[i] = block;
+  }
+  return out;
+}
+
+// Search rows in time order (order over files when the reader gave one), for the rolling origin.
+std::vector<Eigen::Index> search_rows_by_time(const Dataset& data, const SearchSet& set) {
+  const std::size_t n = data.rows();
+  const auto& t =
+      data.order_s.size() == n ? data.order_s : data.column(static_cast<int>(Column::kTime));
+  std::vector<Eigen::Index> order;
+  if (t.size() != n) return order;
+  for (std::size_t j = 0; j < set.rows.size(); ++j) {
+    if (!std::isfinite(t[set.rows[j]])) return {};  // no time order to validate in
+    order.push_back(static_cast<Eigen::Index>(j));
+  }
+  std::stable_sort(order.begin(), order.end(), [&](Eigen::Index a, Eigen::Index b) {
+    return t[set.rows[static_cast<std::size_t>(a)]] < t[set.rows[static_cast<std::size_t>(b)]];
+  });
+  return order;
+}
+
+// Rolling-origin validation of the current model plus the columns b on the search rows: the rows
+// in time order are cut into folds + 1 blocks of equal count, and block f (1 … folds) is
+// predicted by a fit to the blocks before it. Returns the summed squared prediction error.
+// The target is the residual ⟂ q: it differs from the measurement by a vector of q's span, so
+// the errors are those of refitting the measurement on the model's columns and b.
+double rolling_origin_ss(const SearchSet& set, const std::vector<Eigen::Index>& order,
+                         Eigen::MatrixXd b, std::size_t folds) {
+  const auto n = static_cast<Eigen::Index>(order.size());
+  const Eigen::Index p = set.q.cols();
+  // Unit columns: the rank test of the QR compares pivots, and a column of rpm² (10⁷) would make
+  // the model's unit columns look negligible.
+  for (Eigen::Index c = 0; c < b.cols(); ++c) {
+    const double norm = b.col(c).norm();
+    if (norm > 0.0) b.col(c) /= norm;
+  }
+  Eigen::MatrixXd x(n, p + b.cols());
+  Eigen::VectorXd y(n);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const Eigen::Index j = order[static_cast<std::size_t>(i)];
+    x.row(i) << set.q.row(j), b.row(j);
+    y(i) = set.r(j);
+  }
+  double ss = 0.0;
+  const auto blocks = static_cast<Eigen::Index>(folds + 1);
+  for (Eigen::Index f = 1; f < blocks; ++f) {
+    const Eigen::Index from = n * f / blocks;
+    const Eigen::Index to = n * (f + 1) / blocks;
+    if (from == 0 || to <= from) continue;
+    // Columns zero on the earlier blocks (a group or a level not seen yet) get no coefficient.
+    Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(x.topRows(from));
+    qr.setThreshold(1e-9);
+    const Eigen::VectorXd coef = qr.solve(y.head(from));
+    ss += (y.segment(from, to - from) - x.middleRows(from, to - from) * coef).squaredNorm();
+  }
+  return ss;
+}
+
+// Rolling-origin errors (rolling_origin_ss) of the candidates `which`, their non-linear parameter
+// as the search set it; empty when the search rows have no time order.
+std::vector<double> validation_errors(const Dataset& data, const SearchSet& set,
+                                      const std::vector<Candidate>& cands,
+                                      const std::vector<std::size_t>& which, std::size_t folds) {
+  const std::vector<Eigen::Index> order = search_rows_by_time(data, set);
+  std::vector<double> out;
+  if (order.empty()) return out;
+  for (const std::size_t c : which) {
+    out.push_back(rolling_origin_ss(set, order, candidate_basis(data, set, cands[c].spec), folds));
+  }
+  return out;
+}
+
 }  // namespace
 
 Dataset::Dataset() : columns(kStandardColumns) {}
@@ -1126,6 +1217,11 @@ void validate_sessions(const Dataset& data, const std::vector<TermSpec>& declare
   }
   std::vector<std::uint8_t> outlier(n, 0);
   for (const std::size_t i : result.outliers) outlier[i] = 1;
+  const auto& kind = data.column(static_cast<int>(Column::kKind));
+  auto kind_applies = [&](const TermSpec& t, std::size_t i) {
+    return kind.empty() || !std::isfinite(kind[i]) || kind[i] < 0.0 || kind[i] > 7.0 ||
+           (t.kind_mask & (1U << static_cast<unsigned>(kind[i]))) != 0U;
+  };
   double ss_declared = 0.0;
   double ss_final = 0.0;
   for (std::uint32_t s = 0; s < count; ++s) {
@@ -1143,6 +1239,47 @@ void validate_sessions(const Dataset& data, const std::vector<TermSpec>& declare
       }
     }
     if (!any) continue;
+    // Groups of a per-group term that only this session has: fitted on the other sessions, the
+    // term predicts 0 there, and the session's figure measures the missing group, not the model.
+    std::size_t unseen_rows = 0;
+    std::size_t listed = 0;
+    std::string groups;
+    std::vector<std::uint8_t> unseen(n, 0);
+    for (const TermSpec& t : final_specs) {
+      // A session term learns an unseen session from its own rows (Model::observe()).
+      if ((t.per[0] < 0 && t.per[1] < 0) || t.form == Form::kSession) continue;
+      std::map<std::array<double, 2>, bool> groups_of;  // true: in the other sessions' rows
+      for (int pass : {0, 1}) {
+        for (std::size_t i = 0; i < n; ++i) {
+          if ((pass == 0 ? use[i] : mask[i]) == 0U || !kind_applies(t, i)) continue;
+          bool ok = false;
+          const auto key = group_key(t, data.row(i), ok);
+          if (!ok) continue;
+          const auto [it, added] = groups_of.emplace(key, pass == 0);
+          if (it->second) continue;
+          if (unseen[i] == 0U) ++unseen_rows;
+          unseen[i] = 1;
+          if (added && listed++ < 5) {
+            groups += std::string(groups.empty() ? "" : ", ") + t.name + " " +
+                      column_name(t.per[0], data.extra_columns) + " " + fmt_g(key[0]);
+            if (t.per[1] >= 0) {
+              groups += " " + column_name(t.per[1], data.extra_columns) + " " + fmt_g(key[1]);
+            }
+          }
+        }
+      }
+    }
+    if (unseen_rows > 0) {
+      result.warnings.push_back(
+          {"heldout_unseen_group",
+           "--validate sessions: session " + std::to_string(s + 1) + " (from " +
+               data.where(f.first_row) + ") held out: " + std::to_string(unseen_rows) +
+               " of its rows belong to " + std::to_string(listed) +
+               (listed == 1 ? " group" : " groups") + " no other session has (" + groups +
+               (listed > 5 ? ", …" : "") +
+               "): fitted on the other sessions, the model predicts nothing for them, so this "
+               "session's figures measure the missing groups, not the model"});
+    }
     try {
       f.declared = error_stats(residuals(data, fit_terms(data, declared, use)), mask, 1);
       f.final_model = error_stats(residuals(data, fit_terms(data, final_specs, use)), mask, 1);
@@ -1711,6 +1848,7 @@ AnalysisResult analyze_numbered(const Dataset& data, const AnalysisConfig& confi
     double bic;
     std::size_t index;
     double reduction;
+    double validation{0.0};  // rolling-origin squared error (rank_folds), 0 when not computed
   };
   // Ranks the candidates not yet in the model by BIC on the search rows.
   auto rank = [&](const std::vector<TermSpec>& in_model, const Model& m,
@@ -1739,6 +1877,18 @@ AnalysisResult analyze_numbered(const Dataset& data, const AnalysisConfig& confi
     }
     std::sort(ranked.begin(), ranked.end(),
               [](const Ranked& a, const Ranked& b) { return a.bic < b.bic; });
+    // The best few by BIC in the order of their error on later hours predicted from earlier ones
+    // (rank_folds): a candidate that fits the past but extrapolates badly is refitted last.
+    if (config.rank_folds > 0) {
+      const std::size_t pool = std::min(kRankPool, ranked.size());
+      std::vector<std::size_t> which;
+      for (std::size_t k = 0; k < pool; ++k) which.push_back(ranked[k].index);
+      const std::vector<double> err = validation_errors(data, set, cands, which, config.rank_folds);
+      for (std::size_t k = 0; k < err.size(); ++k) ranked[k].validation = err[k];
+      std::stable_sort(
+          ranked.begin(), ranked.begin() + static_cast<std::ptrdiff_t>(err.size()),
+          [](const Ranked& a, const Ranked& b) { return a.validation < b.validation; });
+    }
     for (const Ranked& rk : ranked) {
       const Candidate& c = cands[rk.index];
       TriedCandidate t_out;
@@ -1746,6 +1896,7 @@ AnalysisResult analyze_numbered(const Dataset& data, const AnalysisConfig& confi
       t_out.column = term_column_name(c.spec, data.extra_columns);
       t_out.per = c.spec.per;
       t_out.form = c.spec.form;
+      t_out.degree = c.spec.degree;
       t_out.parameter =
           c.spec.form == Form::kStep || c.spec.form == Form::kHinge || c.spec.form == Form::kWear
               ? c.spec.center
@@ -1890,12 +2041,14 @@ AnalysisResult analyze_numbered(const Dataset& data, const AnalysisConfig& confi
   result.noise_floor_um = noise_floor_um(data, residual, use);
   std::vector<std::uint8_t> all_rows(n);
   for (std::size_t i = 0; i < n; ++i) all_rows[i] = std::isfinite(data.target_um[i]) ? 1 : 0;
+  for (const std::size_t i : result.outliers) all_rows[i] = 0;  // reported, never fitted
   result.fitted_model = model;
   set_confidence_intervals(data, specs, use, residual, config, result);
   set_prediction_interval(data, specs, use, config, result);
   result.final_model = fit_terms(data, specs, all_rows);
   if (!result.effects.empty()) warn_fit(info, "the final model", result.warnings);
-  result.session = sessions_of(data, config.session_gap_s);
+  result.session = config.validate_block_s > 0.0 ? time_blocks(data, config.validate_block_s)
+                                                 : sessions_of(data, config.session_gap_s);
   if (config.validate_sessions) validate_sessions(data, config.declared, specs, result);
   return result;
 }

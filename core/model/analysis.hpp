@@ -108,6 +108,12 @@ struct AnalysisConfig {
   bool ar1_correction{true};
   /// Rows used for the non-linear grid search (the fits use all rows).
   std::size_t search_rows{10000};
+  /// Rolling-origin validation inside the fitted rows: the search rows in time order are cut into
+  /// rank_folds + 1 blocks, each later block predicted from the blocks before it, and the best
+  /// candidates by BIC are refitted (F-tested) in the order of that error. 0 = BIC order only
+  /// (the default: a session_offset or a per-group term of groups not yet seen cannot be
+  /// predicted from earlier hours, and would rank last).
+  std::size_t rank_folds{0};
   /// A row is an outlier when it differs from both neighbours of its (kind, point, tool) series
   /// by more than this many noise standard deviations (robust, from the median absolute
   /// successive difference), in the same direction; 0 = no outlier rule.
@@ -117,6 +123,10 @@ struct AnalysisConfig {
   double session_gap_s{0.0};
   /// Leave-one-session-out validation of the declared and the final model (--validate sessions).
   bool validate_sessions{false};
+  /// --validate sessions on one continuous recording: blocks of this length [s] from its first
+  /// row's time (in the order over files) are held out in turn instead of the sessions; 0 = the
+  /// sessions (files, warm starts, session_gap_s).
+  double validate_block_s{0.0};
 };
 
 struct ErrorStats {
@@ -153,6 +163,7 @@ struct TriedCandidate {
   /// The candidate's per columns (-1 unused): set for a per-group version.
   std::array<int, 2> per{-1, -1};
   Form form{Form::kLinear};
+  int degree{1};  // TermSpec::degree (the report shows it for kPoly and kLag)
   double parameter{0.0};
   double rss_reduction_fraction{0.0};  // on the search rows
   double p_value{1.0};                 // adjusted; 1 when not refitted

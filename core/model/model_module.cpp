@@ -115,6 +115,7 @@ void ModelModule::attach(const core::engine::RegisterTable& registers) {
     }
   }
   wear_in_force_um_.assign(registers.size(), 0.0);
+  in_force_um_.assign(registers.size(), 0.0);
 }
 
 void ModelModule::bind_context(const core::engine::MachineContext& context) {
@@ -178,17 +179,36 @@ double ModelModule::apply_trim_um(std::size_t i, Row& row, double tool,
   return a.gain * model_.evaluate_term(a.term_index, row, state_);
 }
 
-double ModelModule::trim_at_cut_path(std::uint16_t register_index, std::int32_t tool,
-                                     double path_mm) const noexcept {
-  Row row = context_row(context_->machine_time_s());
+double ModelModule::trim_at_inputs(std::uint16_t register_index,
+                                   const core::engine::InputSnapshot& inputs) const noexcept {
+  const core::engine::MachineContext& c = *context_;
+  const auto known = [](double held, double now) { return std::isnan(held) ? now : held; };
+  Row row = context_row(known(inputs.time_s, c.machine_time_s()));
+  row[col(Column::kPart)] = known(inputs.part, row[col(Column::kPart)]);
+  row[col(Column::kTemp)] = known(inputs.temp_c, row[col(Column::kTemp)]);
+  for (std::size_t k = 0; k < 3; ++k) {
+    row[col(Column::kX) + k] = known(inputs.position_mm[k], row[col(Column::kX) + k]);
+  }
+  row[kSessionColumn] = known(inputs.session, row[kSessionColumn]);
+  for (const ModelInput& in : inputs_) {
+    const auto i = static_cast<std::size_t>(in.column);
+    row[i] = known(inputs.temperature_c(in.sensor), row[i]);
+  }
+  const bool has_tool = !std::isnan(inputs.tool);
+  const double tool = has_tool ? inputs.tool : c.has_tool() ? c.tool() : kUnknown;
+  const double path_mm = has_tool ? inputs.path_mm : c.has_tool() ? c.cut_path_mm() : kUnknown;
   bool any = false;
   double sum_um = 0.0;
   for (std::size_t i = 0; i < applies_.size(); ++i) {
     if (applies_[i].register_index != register_index) continue;
     any = true;
-    sum_um += apply_trim_um(i, row, static_cast<double>(tool), path_mm);
+    sum_um += apply_trim_um(i, row, tool, path_mm);
   }
   return any ? sum_um : kUnknown;
+}
+
+double ModelModule::trim_in_force_um(std::uint16_t register_index) const noexcept {
+  return register_index < in_force_um_.size() ? in_force_um_[register_index] : 0.0;
 }
 
 void ModelModule::evaluate(core::TimeNs now_ns, core::StepOutput& out) noexcept {
@@ -222,13 +242,15 @@ double ModelModule::tool_wear_trim_um(std::uint16_t register_index) const noexce
 
 void ModelModule::trim_in_force(std::uint16_t register_index) noexcept {
   if (register_index >= wear_in_force_um_.size()) return;
+  double wear_um = 0.0;
   double sum_um = 0.0;
   for (std::size_t i = 0; i < applies_.size(); ++i) {
-    if (applies_[i].register_index == register_index && !(std::fabs(applies_[i].kind) > 0.0)) {
-      sum_um += trims_um_[i];
-    }
+    if (applies_[i].register_index != register_index) continue;
+    sum_um += trims_um_[i];
+    if (!(std::fabs(applies_[i].kind) > 0.0)) wear_um += trims_um_[i];
   }
-  wear_in_force_um_[register_index] = sum_um;
+  wear_in_force_um_[register_index] = wear_um;
+  in_force_um_[register_index] = sum_um;
 }
 
 void ModelModule::observe_record(const core::MeasurementRecord& record) noexcept {

@@ -90,11 +90,15 @@ class ModelModule final : public core::engine::Module, public core::engine::Tool
   /// or restart with another model hands the trims over (core/engine/engine.hpp, "Trim
   /// handover"), the same model does not. Real-time safe.
   [[nodiscard]] std::uint64_t trim_identity() const noexcept override { return identity_; }
-  /// The trim on register_index with `tool` at path_mm (its entries without a tool of their
-  /// own, and those of that tool), every other column as now. NaN: no entry on the register.
-  /// Real-time safe.
-  [[nodiscard]] double trim_at_cut_path(std::uint16_t register_index, std::int32_t tool,
-                                        double path_mm) const noexcept override;
+  /// The trim on register_index at `inputs` (engine/input_snapshot.hpp): every column the
+  /// snapshot holds as it holds it (time, session, part, tool and its cut path, temp_c, position,
+  /// the sensors of the mapped inputs), the others as now; the lag terms' filters as now. NaN:
+  /// no entry on the register. Real-time safe.
+  [[nodiscard]] double trim_at_inputs(
+      std::uint16_t register_index,
+      const core::engine::InputSnapshot& inputs) const noexcept override;
+  /// Real-time safe. The sum of all trims in force on register_index (0: none).
+  [[nodiscard]] double trim_in_force_um(std::uint16_t register_index) const noexcept override;
 
   /// The session term's current offset [µm] (its posterior mean; 0 without a session term).
   [[nodiscard]] double session_offset_um() const noexcept;
@@ -117,9 +121,10 @@ class ModelModule final : public core::engine::Module, public core::engine::Tool
   std::vector<ModelApply> applies_;
   std::vector<ModelInput> inputs_;
   std::vector<double> trims_um_;
-  /// Per register: the tool_wear entries' share of the trim the engine last accepted (sized in
-  /// attach()).
+  /// Per register: the tool_wear entries' share of the trim the engine last accepted, and the
+  /// whole of it (sized in attach()).
   std::vector<double> wear_in_force_um_;
+  std::vector<double> in_force_um_;
   EvalState state_;
   bool each_cycle_;
   std::uint64_t identity_{0};

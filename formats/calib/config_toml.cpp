@@ -105,6 +105,12 @@ CalibrationConfig parse_calibration(const toml::node& calibration, Diagnostics& 
     c.estimator_touch_noise_um = r.number("estimator_touch_noise_um", c.estimator_touch_noise_um);
     c.estimator_level_noise_um_per_h =
         r.number("estimator_level_noise_um_per_h", c.estimator_level_noise_um_per_h);
+    c.estimator_learn_level_noise =
+        r.boolean("estimator_learn_level_noise", c.estimator_learn_level_noise);
+    c.estimator_min_level_noise_um_per_h =
+        r.number("estimator_min_level_noise_um_per_h", c.estimator_min_level_noise_um_per_h);
+    c.estimator_max_level_noise_um_per_h =
+        r.number("estimator_max_level_noise_um_per_h", c.estimator_max_level_noise_um_per_h);
     c.estimator_prior_gain_sigma =
         r.number("estimator_prior_gain_sigma", c.estimator_prior_gain_sigma);
     c.estimator_prior_forgetting =

@@ -156,4 +156,27 @@ std::string read_at(int fd, std::uint64_t offset, std::size_t n) {
   return s;
 }
 
+long rotation_number(std::string_view file_name, std::string& log) {
+  constexpr std::string_view kCsv = ".csv";
+  const auto ends_with_csv = [&](std::string_view n) {
+    return n.size() > kCsv.size() && n.substr(n.size() - kCsv.size()) == kCsv;
+  };
+  if (ends_with_csv(file_name)) {
+    log = std::string(file_name);
+    return 0;
+  }
+  const std::size_t dot = file_name.rfind('.');
+  if (dot == std::string_view::npos) return -1;
+  const std::string_view digits = file_name.substr(dot + 1);
+  const std::string_view base = file_name.substr(0, dot);
+  if (digits.empty() || digits.size() > 9 || digits.front() == '0' ||
+      digits.find_first_not_of("0123456789") != std::string_view::npos || !ends_with_csv(base)) {
+    return -1;
+  }
+  long n = 0;
+  for (const char c : digits) n = n * 10 + (c - '0');
+  log = std::string(base);
+  return n;
+}
+
 }  // namespace nccomp::formats::measurement_log

@@ -57,6 +57,12 @@ struct ContextColumn {
 /// that are no row). Any bytes are accepted.
 [[nodiscard]] double last_row_time_s(std::string_view tail, bool whole) noexcept;
 
+/// Where a file name stands in nccompd's log rotation: 0 for a log itself (`<name>.csv`), N for
+/// its rotated file `<name>.csv.N` (N = 1 the newest, 1 … 999 999 999), −1 for any other name.
+/// `log` receives the log's own name (`<name>.csv`) for 0 and N. A log's files read oldest first
+/// are the highest N first and the log itself last.
+[[nodiscard]] long rotation_number(std::string_view file_name, std::string& log);
+
 /// Up to `n` bytes of the open file `fd` at `offset` (fewer at its end or on a read error).
 [[nodiscard]] std::string read_at(int fd, std::uint64_t offset, std::size_t n);
 

@@ -256,6 +256,17 @@ void read_options(const toml::table& model, cm::AnalysisConfig& cfg, Diagnostics
           "must be an integer within [100, 1e6]", diag)) {
     cfg.search_rows = static_cast<std::size_t>(*v);
   }
+  if (const auto v = checked_number(
+          model, "validate_block_s", "model.validate_block_s", [](double x) { return x >= 0.0; },
+          "must be 0 (off) or a time > 0 [s]", diag)) {
+    cfg.validate_block_s = *v;
+  }
+  if (const auto v = checked_number(
+          model, "rank_folds", "model.rank_folds",
+          [&](double x) { return x >= 0.0 && x <= 10.0 && integral(x); },
+          "must be 0 (off) or an integer within [1, 10]", diag)) {
+    cfg.rank_folds = static_cast<std::size_t>(*v);
+  }
 }
 
 /// One [[model.term]]: its spec, and its fitted coefficients if it carries them. Every error is
@@ -572,10 +583,11 @@ ModelFile read_model_table(const toml::table& root, std::string_view source, boo
     diag.error(Where{}, "no [model] table");
     throw DiagnosticsError(std::move(diag), std::string(source));
   }
-  check_keys(*model, "model",
-             {"heldout_fraction", "alpha", "max_effects", "search_rows", "ar1_correction",
-              "lookahead", "outlier_sigmas", "session_gap_s", "term", "search"},
-             diag);
+  check_keys(
+      *model, "model",
+      {"heldout_fraction", "alpha", "max_effects", "search_rows", "ar1_correction", "lookahead",
+       "outlier_sigmas", "session_gap_s", "rank_folds", "validate_block_s", "term", "search"},
+      diag);
   read_options(*model, out.config, diag);
   const auto* terms = model->get("term");
   if (terms == nullptr || !terms->is_array_of_tables()) {
@@ -619,10 +631,12 @@ std::string write_model_toml(const core::model::Model& model,
   o << "alpha = " << fmt_double(config.alpha) << "\n";
   o << "max_effects = " << config.max_effects << "\n";
   o << "search_rows = " << config.search_rows << "\n";
+  o << "rank_folds = " << config.rank_folds << "\n";
   o << "ar1_correction = " << (config.ar1_correction ? "true" : "false") << "\n";
   o << "lookahead = " << (config.lookahead ? "true" : "false") << "\n";
   o << "outlier_sigmas = " << fmt_double(config.outlier_sigmas) << "\n";
   o << "session_gap_s = " << fmt_double(config.session_gap_s) << "\n";
+  o << "validate_block_s = " << fmt_double(config.validate_block_s) << "\n";
   for (const cm::Term& t : model.terms()) {
     const cm::TermSpec& s = t.spec;
     o << "\n[[model.term]]\n";

@@ -554,17 +554,26 @@ def model_card(root, other, page, work, nc):
                   f"nobody's {button} is refused: " + why)
         check(status_json()["model"]["live"]["file"] == b, "after the refusals B is still live")
 
-    def press(button, dialog_starts, answer_starts):
+    def press(button, dialog_starts, now, before):
         root.find_element(By.ID, button).click()
         check(root.execute_script("return document.getElementById('model-dialog').open") and
               text(root, "#model-dialog-text").startswith(dialog_starts),
               f"{button} opens a confirmation dialog: {text(root, '#model-dialog-text')}")
         root.find_element(By.ID, "model-confirm").click()
-        check(wait_until(lambda: (text(root, "#model-result") or "").startswith(answer_starts), 10),
+        # The daemon's answer names the models by path: the line shows their file names, its
+        # tooltip the answer with the paths.
+        answer = (f"ok model {'promoted' if button == 'promote' else 'rolled back to'}: "
+                  "{} (hash ")
+        again = "previous (nccomp model rollback returns to it): {} (hash "
+        check(wait_until(lambda: (text(root, "#model-result") or "").startswith(
+            answer.format(os.path.basename(now))), 10) and
+              again.format(os.path.basename(before)) in text(root, "#model-result"),
               f"{button} by {ME.pw_name}: {text(root, '#model-result')}")
+        title = root.execute_script("return document.getElementById('model-result').title")
+        check(title.startswith(answer.format(now)) and again.format(before) in title,
+              f"{button}: the answer with the models' paths is the line's tooltip: {title}")
     handovers = status_json()["handover"]["handovers"]
-    press("promote", f"The candidate {os.path.basename(c)} becomes the live model",
-          f"ok model promoted: {c} ")
+    press("promote", f"The candidate {os.path.basename(c)} becomes the live model", c, b)
     st = status_json()
     check(st["model"]["live"]["file"] == c and st["model"]["previous"]["file"] == b and
           st["shadow"]["phase"] == "watch", "status: C live, B kept for rollback and watched")
@@ -579,7 +588,7 @@ def model_card(root, other, page, work, nc):
                      and root.execute_script(READ_MODEL)["live"] ==
                      page_text_of(status_json()["model"]["live"]), 5),
           "the Model card shows C live, Promote disabled")
-    press("rollback", f"The live model {os.path.basename(c)} ", f"ok model rolled back to: {b} ")
+    press("rollback", f"The live model {os.path.basename(c)} ", b, c)
     st = status_json()
     check(st["model"]["live"]["file"] == b and st["model"]["previous"]["file"] == c,
           "status: B live again, C kept for rollback")

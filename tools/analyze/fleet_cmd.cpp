@@ -12,6 +12,7 @@
 #include <utility>
 #include <vector>
 
+#include "formats/measurement_log/measurement_log.hpp"
 #include "formats/model/model_io.hpp"
 #include "tools/analyze/fleet.hpp"
 #include "tools/analyze/report.hpp"
@@ -24,6 +25,7 @@ namespace {
 namespace cm = core::model;
 namespace io = formats::model_io;
 namespace fs = std::filesystem;
+namespace ml = formats::measurement_log;
 
 std::vector<std::string> split_header(const std::string& line) {
   std::vector<std::string> out(1);
@@ -104,19 +106,9 @@ std::vector<MachineLogs> group_logs(const std::vector<std::string>& logs) {
     std::vector<std::pair<std::string, std::uint64_t>> found;  // (the log's path, N; 0 = itself)
     for (const auto& e : fs::recursive_directory_iterator(l, ec)) {
       if (!e.is_regular_file()) continue;
-      const std::string path = e.path().string();
-      if (e.path().extension() == ".csv") {
-        found.emplace_back(path, 0);
-        continue;
-      }
-      const std::size_t dot = path.rfind('.');
-      const std::string digits = path.substr(dot + 1);
-      if (dot == std::string::npos || digits.empty() || digits.size() > 9 ||
-          digits.find_first_not_of("0123456789") != std::string::npos ||
-          fs::path(path.substr(0, dot)).extension() != ".csv") {
-        continue;
-      }
-      found.emplace_back(path.substr(0, dot), std::stoull(digits));
+      std::string log;
+      const long n = ml::rotation_number(e.path().filename().string(), log);
+      if (n >= 0) found.emplace_back((e.path().parent_path() / log).string(), n);
     }
     if (ec) throw std::invalid_argument(l + ": cannot read the directory: " + ec.message());
     if (found.empty()) throw std::invalid_argument(l + ": no *.csv file in the directory");

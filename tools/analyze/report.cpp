@@ -99,6 +99,11 @@ std::string params_json(const cm::TermSpec& spec, const cm::Model& model,
       o << "\"degree\": " << spec.degree << ", \"center" << unit << "\": " << num(spec.center)
         << ", \"scale" << unit << "\": " << num(spec.scale);
       break;
+    case cm::Form::kLinear:
+      // The column's reference (coef_um per column − center), as model.toml writes it: 0 (the
+      // meaning before references existed) is not written.
+      if (std::abs(spec.center) > 0.0) o << "\"center" << unit << "\": " << num(spec.center, 8);
+      break;
     case cm::Form::kWear:
       // coef_um: µm of error per µm of predicted wear at this edge support point.
       o << "\"wear_point\": " << num(spec.center);
@@ -129,8 +134,7 @@ std::string params_json(const cm::TermSpec& spec, const cm::Model& model,
   }
   const cm::Term* t = find_term(model, spec);
   if (t != nullptr) {
-    const bool first = spec.form == cm::Form::kConstant || spec.form == cm::Form::kLinear;
-    o << (first ? "" : ", ") << "\"coef_um\": [";
+    o << (o.tellp() > 1 ? ", " : "") << "\"coef_um\": [";
     for (std::size_t i = 0; i < t->coef.size(); ++i) o << (i ? ", " : "") << num(t->coef[i], 8);
     o << "]";
     if (spec.per[0] >= 0) {
@@ -397,10 +401,14 @@ std::string report_markdown(const cm::Dataset& data, const cm::AnalysisResult& r
          "SS removed | p (adjusted) | held-out better |\n| --- | --- | --- | "
          "--- | --- | --- | --- |\n";
     for (const auto& c : result.steps[s]) {
+      // Which power of its column a polynomial or a lag takes is part of what was tried.
+      const bool degree = c.form == cm::Form::kPoly || c.form == cm::Form::kLag;
       o << "| " << cm::effect_label(c.name, c.per, ex) << " | " << c.column << " | "
-        << cm::form_name(c.form) << " | " << num(c.parameter, 5) << " | "
-        << num(c.rss_reduction_fraction, 3) << " | " << (c.refitted ? num(c.p_value, 3) : "—")
-        << " | " << (c.refitted ? (c.heldout_improved ? "yes" : "no") : "—") << " |\n";
+        << cm::form_name(c.form)
+        << (degree ? " (degree " + std::to_string(c.degree) + ")" : std::string()) << " | "
+        << num(c.parameter, 5) << " | " << num(c.rss_reduction_fraction, 3) << " | "
+        << (c.refitted ? num(c.p_value, 3) : "—") << " | "
+        << (c.refitted ? (c.heldout_improved ? "yes" : "no") : "—") << " |\n";
     }
     o << "\n";
   }

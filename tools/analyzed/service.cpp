@@ -20,6 +20,7 @@
 
 #include "client/protocol.hpp"
 #include "core/model/analysis.hpp"
+#include "formats/measurement_log/measurement_log.hpp"
 #include "formats/model/model_io.hpp"
 #include "formats/toml/diagnostics.hpp"
 #include "tools/analyze/report.hpp"
@@ -29,6 +30,7 @@ namespace nccomp::tools::analyzed {
 namespace fs = std::filesystem;
 namespace cm = nccomp::core::model;
 namespace io = nccomp::formats::model_io;
+namespace ml = nccomp::formats::measurement_log;
 
 namespace {
 
@@ -108,16 +110,9 @@ mqtt::LogCursor oldest_file(const std::string& directory) {
   std::error_code ec;
   for (const auto& e : fs::directory_iterator(directory, ec)) {
     const std::string name = e.path().filename().string();
-    long rank = -1;
-    if (name == "measurements.csv") {
-      rank = 0;
-    } else if (name.rfind("measurements.csv.", 0) == 0) {
-      const std::string n = name.substr(17);
-      long v = 0;
-      const auto [p, ec2] = std::from_chars(n.data(), n.data() + n.size(), v);
-      if (ec2 == std::errc() && p == n.data() + n.size() && v > 0) rank = v;
-    }
-    if (rank > best) {
+    std::string log;
+    const long rank = ml::rotation_number(name, log);
+    if (log == "measurements.csv" && rank > best) {
       best = rank;
       best_path = e.path();
     }

@@ -17,6 +17,7 @@
 namespace nccomp::tools::mqtt {
 
 namespace fs = std::filesystem;
+namespace ml = nccomp::formats::measurement_log;
 using formats::measurement_log::read_at;
 
 namespace {
@@ -142,16 +143,9 @@ std::vector<LogSource::File> LogSource::list() const {
   }
   for (const auto& e : it) {
     const std::string name = e.path().filename().string();
-    long rank = -1;
-    if (name == "measurements.csv") {
-      rank = 0;
-    } else if (name.rfind("measurements.csv.", 0) == 0) {
-      const std::string n = name.substr(17);
-      long v = 0;
-      const auto [p, ec2] = std::from_chars(n.data(), n.data() + n.size(), v);
-      if (ec2 == std::errc() && p == n.data() + n.size() && v > 0) rank = v;
-    }
-    if (rank < 0) continue;
+    std::string log;
+    const long rank = ml::rotation_number(name, log);
+    if (rank < 0 || log != "measurements.csv") continue;
     struct stat st {};
     if (::stat(e.path().c_str(), &st) != 0 || !S_ISREG(st.st_mode)) continue;
     found.push_back({rank, File{e.path().string(), static_cast<std::uint64_t>(st.st_ino),

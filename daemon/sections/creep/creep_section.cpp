@@ -239,6 +239,8 @@ void parse_estimator(TableReader& r, cc::EstimatorConfig& e) {
   e.family_min_tools = static_cast<std::size_t>(
       r.integer("family_min_tools", static_cast<std::int64_t>(e.family_min_tools), 1,
                 static_cast<std::int64_t>(cc::kMaxFamilyMinTools)));
+  e.learn_rate_prior = r.boolean("learn_rate_prior", e.learn_rate_prior);
+  e.family_prior_path_mm = positive(r, "family_prior_path_mm", e.family_prior_path_mm, 1e7);
   e.adapt_rate_noise = r.boolean("adapt_rate_noise", e.adapt_rate_noise);
   e.adapt_window_measurements =
       r.number("adapt_window_measurements", e.adapt_window_measurements, 1.0, 1000.0);

@@ -376,6 +376,9 @@ TEST(NccompModel, ACandidateInShadowIsPromotedByTheRuleAndTheHistoryPersists) {
       << st.out;
   // The handover of a load: B's +5 µm is the creep's residual's share, the register stays at
   // −5.0 µm (with the trim added to the measured wear it would creep to 0.0 µm within 0.6 s).
+  // The loop swaps in a cycle without a write in flight (up to 250 cycles after the reload
+  // that made B the live model): wait for it.
+  EXPECT_TRUE(wait_until([&] { return number(daemon.status(), "handovers") >= 1.0; }, 15s));
   EXPECT_EQ(number(daemon.status(), "handovers"), 1.0);
   std::this_thread::sleep_for(1500ms);
   EXPECT_EQ(holding_i32(nc, kLength), -50) << daemon.log();
@@ -475,6 +478,7 @@ TEST(NccompModel, APromotedModelIsDemotedWhenTheModelItReplacedDoesBetter) {
             std::string::npos)
       << st.out;
   EXPECT_NE(daemon.status().find("\"phase\":\"none\""), std::string::npos);
+  EXPECT_TRUE(wait_until([&] { return number(daemon.status(), "handovers") >= 2.0; }, 15s));
   EXPECT_EQ(number(daemon.status(), "handovers"), 2.0);
   EXPECT_EQ(daemon.stop(), 0) << daemon.log();
 }

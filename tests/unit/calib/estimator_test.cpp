@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <initializer_list>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -67,6 +68,39 @@ TimeNs run_calibrated_shift(Calibrator& c, SimMachine& m, TimeNs& now, double ra
     EXPECT_TRUE(has_alarm(out, AlarmCode::kRecalibrationApplied)) << h;
   }
   return t_nom;
+}
+
+// The X, Y, Z offset registers 0, 1, 2 (a RegisterTable points to them: keep them alive).
+std::vector<core::engine::RegisterSpec> xyz_specs() {
+  std::vector<core::engine::RegisterSpec> specs(3);
+  for (std::size_t i = 0; i < 3; ++i) {
+    specs[i].name = i == 0 ? "X_offset" : (i == 1 ? "Y_offset" : "Z_offset");
+    specs[i].kind = core::engine::RegisterKind::kAxisOffset;
+  }
+  return specs;
+}
+
+// The text form of s as an older version writes it: that version's header, without the keys
+// that start with one of the newer prefixes.
+std::string older_text(const CalibState& s, int version,
+                       std::initializer_list<const char*> newer_prefixes) {
+  const std::string text = core::calib::to_text(s);
+  std::string out;
+  std::size_t pos = 0;
+  while (pos < text.size()) {
+    const std::size_t nl = text.find('\n', pos);
+    const std::string line = text.substr(pos, nl - pos);
+    pos = nl + 1;
+    if (std::any_of(newer_prefixes.begin(), newer_prefixes.end(),
+                    [&line](const char* p) { return line.rfind(p, 0) == 0; })) {
+      continue;
+    }
+    out +=
+        (line.rfind("nccomp_calib_state", 0) == 0 ? "nccomp_calib_state " + std::to_string(version)
+                                                  : line) +
+        "\n";
+  }
+  return out;
 }
 
 TEST(DriftEstimator, EarlierShiftsGiveTheMeanDriftAtTheKnots) {
@@ -300,28 +334,15 @@ TEST(DriftEstimator, VersionOneStatesAreConverted) {
   v1.estimates = {};
   v1.shifts = {};
   // Text: the version-1 keys only.
-  std::string text = core::calib::to_text(v1);
-  std::string v1_text;
-  std::size_t pos = 0;
-  while (pos < text.size()) {
-    const std::size_t nl = text.find('\n', pos);
-    const std::string line = text.substr(pos, nl - pos);
-    pos = nl + 1;
-    if (line.rfind("estimate.", 0) == 0 || line.rfind("shifts.", 0) == 0) continue;
-    v1_text += (line.rfind("nccomp_calib_state", 0) == 0 ? "nccomp_calib_state 1" : line) + "\n";
-  }
+  const std::string v1_text = older_text(v1, 1, {"estimate.", "shifts."});
   const CalibState from_text = core::calib::from_text(v1_text);
-  EXPECT_EQ(from_text.version, 2);
+  EXPECT_EQ(from_text.version, CalibState::kVersion);
   // Touch sets at 1 h (6 µm) and 2 h (12 µm): knots 0.5 .. 2 h.
   EXPECT_EQ(from_text.shifts.current_knots, 4);
   EXPECT_NEAR(from_text.shifts.current_um[0][0], 3.0, 1e-6);
   EXPECT_NEAR(from_text.shifts.current_um[0][3], 12.0, 1e-6);
   // The module's bytes, with and without the three written values.
-  std::vector<core::engine::RegisterSpec> specs(3);
-  for (std::size_t i = 0; i < 3; ++i) {
-    specs[i].name = i == 0 ? "X_offset" : (i == 1 ? "Y_offset" : "Z_offset");
-    specs[i].kind = core::engine::RegisterKind::kAxisOffset;
-  }
+  const auto specs = xyz_specs();
   const core::engine::RegisterTable table(specs);
   for (const bool written : {false, true}) {
     std::vector<std::byte> bytes(core::calib::kCalibStateV1Bytes + (written ? 24 : 0));
@@ -334,7 +355,7 @@ TEST(DriftEstimator, VersionOneStatesAreConverted) {
     mod.attach(table);
     ASSERT_TRUE(mod.load_state(bytes)) << written;
     const CalibState s = mod.calibrator().export_state();
-    EXPECT_EQ(s.version, 2);
+    EXPECT_EQ(s.version, CalibState::kVersion);
     EXPECT_EQ(s.shifts.current_knots, 4);
     EXPECT_NEAR(mod.calibrator().target_um(0, now), c.target_um(0, now), 1e-9);
   }
@@ -345,6 +366,144 @@ TEST(DriftEstimator, VersionOneStatesAreConverted) {
   core::calib::CalibrationModule mod(cfg);
   mod.attach(table);
   EXPECT_FALSE(mod.load_state(bad));
+}
+
+// GIVEN a version-2 state (text and the module's bytes) WHEN it is loaded THEN it is version 3
+// with no hourly increments (the configured level noise until the next shift ends) and the
+// same shifts.
+TEST(DriftEstimator, VersionTwoStatesAreConverted) {
+  auto cfg = estimator_config();
+  cfg.register_x = 0;
+  cfg.register_y = 1;
+  cfg.register_z = 2;
+  Calibrator c;
+  c.configure(cfg);
+  SimMachine m(cfg, test_errors(), 0.0, 0.0, 0.1, 5);
+  TimeNs now = 0;
+  run_calibrated_shift(c, m, now, 6.0, 2);
+  StepOutput out;
+  m.set_drift([](double) { return std::array<double, 4>{}; });
+  ASSERT_TRUE(run_initial_calibration(c, m, now, out));  // folds the first shift
+  const CalibState v3 = c.export_state();
+  ASSERT_GT(v3.shifts.increment_weight, 0.0);
+  const CalibState t = core::calib::from_text(older_text(v3, 2, {"shifts.increment_"}));
+  EXPECT_EQ(t.version, 3);
+  EXPECT_EQ(t.shifts.increment_weight, 0.0);
+  EXPECT_EQ(t.shifts.shifts, v3.shifts.shifts);
+  EXPECT_EQ(t.shifts.sum_um, v3.shifts.sum_um);
+  // The version-3 keys under a version-2 header are unknown.
+  std::string mixed = core::calib::to_text(v3);
+  mixed.replace(0, mixed.find('\n'), "nccomp_calib_state 2");
+  EXPECT_THROW(core::calib::from_text(mixed), std::invalid_argument);
+  const auto specs = xyz_specs();
+  const core::engine::RegisterTable table(specs);
+  CalibState v2 = v3;
+  v2.version = 2;
+  std::vector<std::byte> bytes(core::calib::kCalibStateV2Bytes);
+  std::memcpy(bytes.data(), &v2, bytes.size());
+  core::calib::CalibrationModule mod(cfg);
+  mod.attach(table);
+  ASSERT_TRUE(mod.load_state(bytes));
+  const CalibState b = mod.calibrator().export_state();
+  EXPECT_EQ(b.version, 3);
+  EXPECT_EQ(b.shifts.increment_weight, 0.0);
+  EXPECT_EQ(b.shifts.sum_um, v3.shifts.sum_um);
+  // Version-3 bytes cut to version 2's length but still saying 3 are refused.
+  std::memcpy(bytes.data(), &v3, bytes.size());
+  core::calib::CalibrationModule mod3(cfg);
+  mod3.attach(table);
+  EXPECT_FALSE(mod3.load_state(bytes));
+}
+
+// GIVEN shifts whose drift is a random walk of σ 5 µm per hour, touched every hour WHEN they are
+// folded one after the other THEN the learned level noise is the RMS of the hourly increments
+// (computed here from the generated steps), approaches σ, is clamped to the bounds, and is the
+// configured value before any shift ended.
+TEST(DriftEstimator, LevelNoiseIsLearnedFromTheEarlierShiftsHourlyIncrements) {
+  ShiftHistory h;
+  EXPECT_DOUBLE_EQ(core::calib::learned_level_noise_um_per_h(h, 0, 6.0, 1.0, 20.0), 6.0);
+  std::uint64_t state = 12345;
+  const auto gauss = [&state]() {  // Box-Muller on a 64-bit LCG
+    const auto uniform = [&state]() {
+      state = state * 6364136223846793005ULL + 1442695040888963407ULL;
+      return (static_cast<double>(state >> 11) + 0.5) / 9007199254740992.0;
+    };
+    const double u1 = uniform();
+    const double u2 = uniform();
+    return std::sqrt(-2.0 * std::log(u1)) * std::cos(6.283185307179586 * u2);
+  };
+  constexpr double kSigma = 5.0;
+  double sum_sq = 0.0;
+  double n = 0.0;
+  for (int shift = 0; shift < 50; ++shift) {
+    std::array<double, 4> d{};
+    for (int hour = 1; hour <= 8; ++hour) {
+      for (std::size_t s = 0; s < 4; ++s) {
+        const double step = (s == 2 ? 0.5 : 1.0) * kSigma * gauss();
+        d[s] += step;
+        if (s == 0) {
+          sum_sq += step * step;
+        }
+      }
+      n += 1.0;
+      core::calib::add_shift_point(h, 3600.0 * hour, d);
+    }
+    core::calib::fold_shift(h, 1.0);
+    if (shift == 0) {
+      EXPECT_NEAR(core::calib::learned_level_noise_um_per_h(h, 0, 6.0, 0.1, 100.0),
+                  std::sqrt(sum_sq / n), 1e-9);
+    }
+  }
+  const double learned = core::calib::learned_level_noise_um_per_h(h, 0, 6.0, 0.1, 100.0);
+  EXPECT_NEAR(learned, std::sqrt(sum_sq / n), 1e-9);
+  EXPECT_NEAR(learned, kSigma, 0.1 * kSigma);  // 400 increments: about 3.5 % standard error
+  EXPECT_NEAR(core::calib::learned_level_noise_um_per_h(h, 2, 6.0, 0.1, 100.0), 0.5 * kSigma,
+              0.1 * kSigma);
+  EXPECT_DOUBLE_EQ(core::calib::learned_level_noise_um_per_h(h, 0, 6.0, 0.1, 3.0), 3.0);
+  EXPECT_DOUBLE_EQ(core::calib::learned_level_noise_um_per_h(h, 0, 6.0, 8.0, 20.0), 8.0);
+  // Forgetting weighs the increments like the mean: one shift of +2 µm/h after one of +4 µm/h
+  // with forgetting 0.5 gives (0.5 · 2 · 16 + 2 · 4) / (0.5 · 2 + 2) over two hours each.
+  ShiftHistory g;
+  core::calib::add_shift_point(g, 3600.0, {4.0, 0.0, 0.0, 0.0});
+  core::calib::add_shift_point(g, 7200.0, {8.0, 0.0, 0.0, 0.0});
+  core::calib::fold_shift(g, 0.5);
+  core::calib::add_shift_point(g, 3600.0, {2.0, 0.0, 0.0, 0.0});
+  core::calib::add_shift_point(g, 7200.0, {4.0, 0.0, 0.0, 0.0});
+  core::calib::fold_shift(g, 0.5);
+  EXPECT_NEAR(core::calib::learned_level_noise_um_per_h(g, 0, 6.0, 0.1, 100.0),
+              std::sqrt((0.5 * 2.0 * 16.0 + 2.0 * 4.0) / 3.0), 1e-12);
+}
+
+// GIVEN estimator_learn_level_noise WHEN the first shift runs THEN its estimate grows by the
+// configured level noise; WHEN the next shift starts THEN it grows by the RMS of the first
+// shift's hourly increments (X 6 µm/h, Y 3 µm/h), each slot its own.
+TEST(DriftEstimator, CalibratorUsesTheLearnedLevelNoiseFromTheSecondShift) {
+  auto cfg = estimator_config();
+  cfg.estimator_learn_level_noise = true;
+  cfg.estimator_level_noise_um_per_h = 10.0;
+  cfg.estimator_min_level_noise_um_per_h = 1.0;
+  Calibrator c;
+  c.configure(cfg);
+  SimMachine m(cfg, test_errors(), 0.0, 0.0, 0.1, 7);
+  TimeNs now = 0;
+  StepOutput out;
+  m.set_drift([](double) { return std::array<double, 4>{}; });
+  ASSERT_TRUE(run_initial_calibration(c, m, now, out));
+  TimeNs t_nom = core::from_seconds(c.nominal(Slot::kXLateral).time_s);
+  const double touch2 = cfg.estimator_touch_noise_um * cfg.estimator_touch_noise_um;
+  // First shift: no earlier shift, gain 0 ± 0, slope 0 ± 0: σ² = touch² + 10² · 1 h.
+  EXPECT_NEAR(c.estimated_drift(Slot::kXLateral, t_nom + core::from_seconds(3600.0)).sigma_um,
+              std::sqrt(touch2 + 100.0), 1e-9);
+  t_nom = run_calibrated_shift(c, m, now, 6.0, 4);
+  m.set_drift([](double) { return std::array<double, 4>{}; });
+  ASSERT_TRUE(run_initial_calibration(c, m, now, out));
+  t_nom = core::from_seconds(c.nominal(Slot::kXLateral).time_s);
+  const TimeNs t1 = t_nom + core::from_seconds(3600.0);
+  // Second shift at 1 h: prior(1 h) = 6 µm (X) and 3 µm (Y) with gain σ 0.5, level 6 and 3 µm/h.
+  const double g2 = cfg.estimator_prior_gain_sigma * cfg.estimator_prior_gain_sigma;
+  EXPECT_NEAR(c.estimated_drift(Slot::kXLateral, t1).sigma_um, std::sqrt(touch2 + 36.0 * g2 + 36.0),
+              1e-6);
+  EXPECT_NEAR(c.estimated_drift(Slot::kY, t1).sigma_um, std::sqrt(touch2 + 9.0 * g2 + 9.0), 1e-6);
 }
 
 TEST(DriftEstimator, StepIsAllocationFree) {
@@ -449,6 +608,8 @@ TEST(DriftEstimator, ConfigKeysAreChecked) {
   cfg.estimator_touch_noise_um = 0.0;
   cfg.estimator_prior_forgetting = 1.5;
   cfg.estimator_level_noise_um_per_h = -1.0;
+  cfg.estimator_min_level_noise_um_per_h = 0.0;
+  cfg.estimator_max_level_noise_um_per_h = -1.0;
   cfg.estimator_slope_sigma_um_per_c = 1.0;  // with no sensor mapped
   cfg.estimator_gate_sigmas = std::nan("");
   cfg.estimator_model_slope_um_per_c = {1.0, 1.0, 30.0, 0.0};  // Y beyond the slope bound 20
@@ -461,7 +622,9 @@ TEST(DriftEstimator, ConfigKeysAreChecked) {
     for (const char* key :
          {"calibration.estimator_touch_noise_um", "calibration.estimator_prior_forgetting",
           "calibration.estimator_level_noise_um_per_h", "calibration.temperature_sensor",
-          "calibration.estimator_gate_sigmas", "calibration.estimator_model_slope_um_per_c",
+          "calibration.estimator_min_level_noise_um_per_h",
+          "calibration.estimator_max_level_noise_um_per_h", "calibration.estimator_gate_sigmas",
+          "calibration.estimator_model_slope_um_per_c",
           "calibration.estimator_model_slope_sigma_um_per_c"}) {
       EXPECT_NE(what.find(key), std::string::npos) << key << " in " << what;
     }

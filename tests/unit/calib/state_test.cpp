@@ -72,7 +72,7 @@ TEST(State, CorruptTextIsRefusedWithLineAndKey) {
   };
   expect_error("", "no header");
   expect_error("something 1\n", "not a calibration state");
-  expect_error("nccomp_calib_state 3\n", "unsupported version");
+  expect_error("nccomp_calib_state 4\n", "unsupported version");
   std::string missing = good;
   missing.erase(missing.find("grinds 0\n"), 9);
   expect_error(missing, "grinds");

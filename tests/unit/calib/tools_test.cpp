@@ -83,6 +83,8 @@ TEST(CalibrationToml, ErrorsNameFileLineAndKey) {
   const auto est = load_calibration_config_text(
       "[calibration]\nprediction = \"estimator\"\ntemperature_sensor = 2\n"
       "estimator_touch_noise_um = 0.4\nestimator_level_noise_um_per_h = 4.5\n"
+      "estimator_learn_level_noise = true\nestimator_min_level_noise_um_per_h = 2.5\n"
+      "estimator_max_level_noise_um_per_h = 12\n"
       "estimator_prior_gain_sigma = 0.3\nestimator_prior_forgetting = 0.9\n"
       "estimator_slope_sigma_um_per_c = 0.25\nestimator_gate_sigmas = 6\n"
       "estimator_model_slope_um_per_c = [-4.5, -4.5, 0.8, 0]\n"
@@ -91,6 +93,9 @@ TEST(CalibrationToml, ErrorsNameFileLineAndKey) {
   EXPECT_EQ(est.prediction, core::calib::Prediction::kEstimator);
   EXPECT_DOUBLE_EQ(est.estimator_touch_noise_um, 0.4);
   EXPECT_DOUBLE_EQ(est.estimator_level_noise_um_per_h, 4.5);
+  EXPECT_TRUE(est.estimator_learn_level_noise);
+  EXPECT_DOUBLE_EQ(est.estimator_min_level_noise_um_per_h, 2.5);
+  EXPECT_DOUBLE_EQ(est.estimator_max_level_noise_um_per_h, 12.0);
   EXPECT_DOUBLE_EQ(est.estimator_prior_gain_sigma, 0.3);
   EXPECT_DOUBLE_EQ(est.estimator_prior_forgetting, 0.9);
   EXPECT_DOUBLE_EQ(est.estimator_slope_sigma_um_per_c, 0.25);

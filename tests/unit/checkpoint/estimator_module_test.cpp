@@ -129,7 +129,7 @@ TEST(CheckpointEstimatorModule, AStateOfLayoutVersion1IsConvertedAndTheFilterSta
 
 // GIVEN a module after 6 parts with the estimator, its state saved (layout 2)
 // WHEN a fresh module loads the bytes (a restart) and both see part 7
-// THEN they agree exactly (the filter continued), and the bytes name layout 3.
+// THEN they agree exactly (the filter continued), and the bytes name layout 4.
 TEST(CheckpointEstimatorModule, TheFiltersStateSurvivesARestartThroughTheBytes) {
   auto a = attached(2);
   for (int n = 1; n <= 6; ++n) part(*a, n, {2.0 + 0.5 * n, -3.0 + (n % 2)});
@@ -137,7 +137,7 @@ TEST(CheckpointEstimatorModule, TheFiltersStateSurvivesARestartThroughTheBytes) 
   ASSERT_EQ(a->save_state(buf), buf.size());
   std::uint32_t version = 0;
   std::memcpy(&version, buf.data() + 4, sizeof version);
-  EXPECT_EQ(version, 3U);
+  EXPECT_EQ(version, 4U);
   auto b = attached(2);
   ASSERT_TRUE(b->load_state(buf));
   for (std::size_t i = 0; i < 2; ++i) {

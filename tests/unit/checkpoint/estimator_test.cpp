@@ -188,7 +188,7 @@ TEST(CheckpointEstimator, TheStateRoundTripContinuesTheFilter) {
   for (int n = 1; n <= 8; ++n) part(a, n, {1.0 * n, -0.5 * n * (n % 3)});
   CheckpointState st;
   a.export_state(st);
-  EXPECT_EQ(st.version, 3U);
+  EXPECT_EQ(st.version, 4U);
   CheckpointCompensator b;
   b.configure(estimator_config(1.0, 0.5, true), line_plan(2), wide_limits());
   b.import_state(st);

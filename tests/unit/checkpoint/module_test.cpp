@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstring>
+#include <limits>
 #include <memory>
 #include <stdexcept>
 #include <string_view>
@@ -118,10 +119,10 @@ TEST(Module, LoadStateRefusesCorruptBytesAllOrNothing) {
   CheckpointModule fresh(module_config(), line_plan(2));
   fresh.attach(engine::RegisterTable(regs));
   std::vector<std::byte> bad = buf;
-  // The second record's offset becomes NaN (header 24 bytes, records 192 bytes: layout 3).
-  ASSERT_EQ(bad.size(), 24U + 2U * 192U);
+  // The second record's offset becomes NaN (header 24 bytes, records 336 bytes: layout 4).
+  ASSERT_EQ(bad.size(), 24U + 2U * 336U);
   const auto nan_bytes = std::bit_cast<std::array<std::byte, sizeof(double)>>(std::nan(""));
-  for (std::size_t k = 0; k < nan_bytes.size(); ++k) bad[24 + 192 + 8 + k] = nan_bytes[k];
+  for (std::size_t k = 0; k < nan_bytes.size(); ++k) bad[24 + 336 + 8 + k] = nan_bytes[k];
   EXPECT_FALSE(fresh.load_state(bad));
   EXPECT_DOUBLE_EQ(fresh.compensator().register_value_um(0), 0.0);  // nothing changed
   EXPECT_FALSE(fresh.load_state(std::span<const std::byte>(buf.data(), buf.size() - 1)));
@@ -298,9 +299,9 @@ class PathTrim final : public engine::Module {
     out.trims.push(OffsetWrite{now_ns, 0, slope_ * context_->cut_path_mm()});
   }
   std::uint64_t trim_identity() const noexcept override { return 7; }
-  double trim_at_cut_path(std::uint16_t register_index, std::int32_t /*tool*/,
-                          double path_mm) const noexcept override {
-    return register_index == 0 ? slope_ * path_mm : kNaN;
+  double trim_at_inputs(std::uint16_t register_index,
+                        const engine::InputSnapshot& inputs) const noexcept override {
+    return register_index == 0 ? slope_ * inputs.path_mm : kNaN;
   }
 
  private:
@@ -336,8 +337,8 @@ TEST(Module, AHandoverTakesTheTrimAtEachCheckpointsOwnCutPath) {
   }
   const auto& s1a = dynamic_cast<const CheckpointModule&>(a->module(0)).compensator();
   for (std::size_t i = 0; i < 3; ++i) {
-    EXPECT_DOUBLE_EQ(s1a.point(i).cut_path_mm, 10.0 * static_cast<double>(i + 1)) << i;
-    EXPECT_EQ(s1a.point(i).cut_tool, 12);
+    EXPECT_DOUBLE_EQ(s1a.point(i).cut_inputs.path_mm, 10.0 * static_cast<double>(i + 1)) << i;
+    EXPECT_EQ(s1a.point(i).cut_inputs.tool, 12.0);
   }
   ev = {probe(1, 0, kWearUmPerMm * 10.0), probe(1, 1, kWearUmPerMm * 20.0),
         probe(1, 2, kWearUmPerMm * 30.0)};
@@ -373,30 +374,48 @@ TEST(Module, AHandoverTakesTheTrimAtEachCheckpointsOwnCutPath) {
   }
 }
 
-// GIVEN the bytes of a layout-2 state (before the cut path)
-// THEN they load: the values as saved, the cut path unknown (a handover takes the trim at the
-//      switch for these checkpoints, as before).
-TEST(Module, AStateOfLayoutVersion2IsConverted) {
+// The state of `a` (n checkpoints cut along 0…30 mm at 21 °C and probed) in layout 4.
+std::vector<std::byte> layout4_state(const engine::Engine& a) {
+  const auto& m = dynamic_cast<const CheckpointModule&>(a.module(0));
+  std::vector<std::byte> v4(m.state_capacity());
+  EXPECT_EQ(m.save_state(v4), v4.size());
+  return v4;
+}
+
+std::unique_ptr<engine::Engine> cut_and_probe_two() {
   auto a = make_engine(2);
   StepOutput out;
   std::vector<Event> ev = {part_start(1)};
   a->step(1, ev, out);
   for (int x = 0; x <= 30; ++x) {
-    ev = {cutting(x, 2 + x)};
+    ev = {TemperatureSample{2 + x, 0, 21.0}, cutting(x, 2 + x)};
     a->step(2 + x, ev, out);
   }
   ev = {probe(1, 0, 6.0), probe(1, 1, 3.0)};
   a->step(40, ev, out);
+  return a;
+}
+
+constexpr std::size_t kHeaderBytes = 24;
+constexpr std::size_t kV2Record = 176;
+constexpr std::size_t kV4Record = 336;
+
+// GIVEN the bytes of a layout-2 state (before the cut inputs)
+// THEN they load: the values as saved, the cut inputs unknown (a handover takes the trim at the
+//      switch for these checkpoints, as before).
+TEST(Module, AStateOfLayoutVersion2IsConverted) {
+  auto a = cut_and_probe_two();
   const auto& m = dynamic_cast<const CheckpointModule&>(a->module(0));
-  std::vector<std::byte> v3(m.state_capacity());
-  ASSERT_EQ(m.save_state(v3), v3.size());
-  // Layout 2: the same header (version 2) and the first 176 bytes of each 192-byte record.
-  std::vector<std::byte> v2(24 + 2 * 176);
-  std::memcpy(v2.data(), v3.data(), 24);
+  const std::vector<std::byte> v4 = layout4_state(*a);
+  ASSERT_EQ(v4.size(), kHeaderBytes + 2 * kV4Record);
+  // Layout 2: the same header (version 2) and the first 176 bytes of each record.
+  std::vector<std::byte> v2(kHeaderBytes + 2 * kV2Record);
+  std::memcpy(v2.data(), v4.data(), kHeaderBytes);
   const std::uint32_t version = 2;
   std::memcpy(v2.data() + 4, &version, sizeof version);
   for (std::size_t i = 0; i < 2; ++i) {
-    std::memcpy(v2.data() + 24 + i * 176, v3.data() + 24 + i * 192, 176);
+    std::memcpy(v2.data() + kHeaderBytes + i * kV2Record, v4.data() + kHeaderBytes + i * kV4Record,
+                kV2Record);
   }
   CheckpointModule fresh(module_config(), line_plan(2));
   fresh.attach(engine::RegisterTable(registers(2)));
@@ -404,10 +423,64 @@ TEST(Module, AStateOfLayoutVersion2IsConverted) {
   for (std::size_t i = 0; i < 2; ++i) {
     EXPECT_EQ(fresh.compensator().register_value_um(i), m.compensator().register_value_um(i));
     EXPECT_EQ(fresh.compensator().point(i).history_n, 1U);
-    EXPECT_TRUE(std::isnan(fresh.compensator().point(i).cut_path_mm));
-    EXPECT_DOUBLE_EQ(m.compensator().point(i).cut_path_mm, 10.0 * static_cast<double>(i + 1));
+    EXPECT_TRUE(std::isnan(fresh.compensator().point(i).cut_inputs.path_mm));
+    EXPECT_DOUBLE_EQ(m.compensator().point(i).cut_inputs.path_mm,
+                     10.0 * static_cast<double>(i + 1));
   }
   EXPECT_FALSE(fresh.load_state(std::span<const std::byte>(v2.data(), v2.size() - 1)));
+}
+
+// GIVEN the bytes of a layout-3 state (the tool and cut path of each checkpoint's last cut)
+// THEN they load: the tool and path as saved, the other inputs and the trims unknown (a
+//      handover takes them as at the switch for these checkpoints, as before).
+TEST(Module, AStateOfLayoutVersion3IsConverted) {
+  auto a = cut_and_probe_two();
+  const auto& m = dynamic_cast<const CheckpointModule&>(a->module(0));
+  const std::vector<std::byte> v4 = layout4_state(*a);
+  // Layout 3: each record is the 176 bytes of layout 2, the cut path, the tool and 4 spare bytes.
+  constexpr std::size_t kV3Record = 192;
+  std::vector<std::byte> v3(kHeaderBytes + 2 * kV3Record);
+  std::memcpy(v3.data(), v4.data(), kHeaderBytes);
+  const std::uint32_t version = 3;
+  std::memcpy(v3.data() + 4, &version, sizeof version);
+  for (std::size_t i = 0; i < 2; ++i) {
+    std::byte* r = v3.data() + kHeaderBytes + i * kV3Record;
+    std::memcpy(r, v4.data() + kHeaderBytes + i * kV4Record, kV2Record);
+    const double path_mm = 10.0 * static_cast<double>(i + 1);
+    const std::int32_t tool = 12;
+    std::memcpy(r + kV2Record, &path_mm, sizeof path_mm);
+    std::memcpy(r + kV2Record + 8, &tool, sizeof tool);
+  }
+  CheckpointModule fresh(module_config(), line_plan(2));
+  fresh.attach(engine::RegisterTable(registers(2)));
+  ASSERT_TRUE(fresh.load_state(v3));
+  for (std::size_t i = 0; i < 2; ++i) {
+    const LearnedPoint& p = fresh.compensator().point(i);
+    EXPECT_EQ(fresh.compensator().register_value_um(i), m.compensator().register_value_um(i));
+    EXPECT_DOUBLE_EQ(p.cut_inputs.path_mm, 10.0 * static_cast<double>(i + 1));
+    EXPECT_EQ(p.cut_inputs.tool, 12.0);
+    EXPECT_TRUE(std::isnan(p.cut_inputs.time_s));
+    EXPECT_TRUE(std::isnan(p.cut_inputs.temp_c));
+    EXPECT_TRUE(std::isnan(p.cut_trim_um));
+    // Layout 4 kept them: 21 °C, and the trims (none: 0).
+    EXPECT_DOUBLE_EQ(m.compensator().point(i).cut_inputs.temp_c, 21.0);
+    EXPECT_EQ(m.compensator().point(i).cut_trim_um, 0.0);
+  }
+  EXPECT_FALSE(fresh.load_state(std::span<const std::byte>(v3.data(), v3.size() - 1)));
+}
+
+// GIVEN a layout-4 state whose checkpoint 1 says it was cut at an infinite temperature
+// THEN it is refused whole (nothing changes).
+TEST(Module, AStateWithAnInfiniteCutInputIsRefused) {
+  auto a = cut_and_probe_two();
+  std::vector<std::byte> v4 = layout4_state(*a);
+  const double inf = std::numeric_limits<double>::infinity();
+  // temp_c: the sixth double of the snapshot, after the 176 bytes of layout 2.
+  std::memcpy(v4.data() + kHeaderBytes + kV4Record + kV2Record + 5 * 8, &inf, sizeof inf);
+  CheckpointModule fresh(module_config(), line_plan(2));
+  fresh.attach(engine::RegisterTable(registers(2)));
+  EXPECT_FALSE(fresh.load_state(v4));
+  EXPECT_EQ(fresh.compensator().point(0).history_n, 0U);
 }
 
 }  // namespace

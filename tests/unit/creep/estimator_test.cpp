@@ -19,6 +19,7 @@
 #include "core/creep/creep_module.hpp"
 #include "core/creep/state_v3.hpp"
 #include "core/creep/state_v4.hpp"
+#include "core/creep/state_v5.hpp"
 #include "tests/support/alloc_counter.hpp"
 #include "tests/unit/creep/rig.hpp"
 
@@ -862,6 +863,288 @@ TEST(CreepEstimatorAdapt, ConfigErrorsNameTheKey) {
   }
   c.estimator.adapt_rate_noise = false;  // off: not judged
   EXPECT_NO_THROW(validate(c));
+}
+
+}  // namespace
+}  // namespace nccomp::core::creep
+
+namespace nccomp::core::creep {
+namespace {
+
+/// family_config() learning the rate prior from finished tools (at least 2).
+CreepConfig prior_config() {
+  CreepConfig c = family_config();
+  c.estimator.learn_rate_prior = true;
+  c.estimator.family_min_tools = 2;
+  c.estimator.family_prior_path_mm = 1000.0;
+  return c;
+}
+
+TEST(CreepEstimatorFamilyPrior, AFirstToolAndAFamilyOfOneStartFromTheConfiguredPrior) {
+  // GIVEN an empty family: the first tool's filter is today's (0 ± 0.01 µm/mm): 6 µm measured
+  // at 100 mm gives wear 4 µm and rate 0.02 µm/mm (CreepEstimator's first test).
+  testing::Rig r(prior_config());
+  EXPECT_EQ(r.comp.state().rate_prior_sigma_um_per_mm[0], 0.0);
+  r.run_to(100.0);
+  r.measure({6.0});
+  EXPECT_NEAR(r.comp.state().estimate_wear_um[0], 4.0, 1e-12);
+  EXPECT_NEAR(r.comp.state().estimate_rate_um_per_mm[0], 0.02, 1e-14);
+  // Its start rate: through the origin, 6/100 µm/mm.
+  EXPECT_NEAR(r.comp.state().start_sxw[0] / r.comp.state().start_sxx, 0.06, 1e-15);
+  // WHEN a sister replaces it, the family knows one tool: no spread yet, the sister starts from
+  // the configured prior too.
+  r.tool_change(2, true);
+  EXPECT_EQ(r.comp.state().family_rate.tools, 1U);
+  EXPECT_NEAR(r.comp.state().family_rate.rate_mean_um_per_mm[0], 0.06, 1e-15);
+  double mean = 0.0;
+  double sigma = 0.0;
+  EXPECT_FALSE(r.comp.family_rate_prior(0, mean, sigma));
+  EXPECT_EQ(r.comp.state().rate_prior_sigma_um_per_mm[0], 0.0);
+  EXPECT_EQ(r.comp.state().start_sxx, 0.0);
+}
+
+TEST(CreepEstimatorFamilyPrior, TheFamilysStatisticsConvergeOnGeneratedToolLives) {
+  // GIVEN 300 tools whose start rates are drawn from N(0.05, 0.01²) µm/mm, each measured at
+  // 100..400 mm (σ = 1 µm) and replaced by its sister. One tool's start rate is Σs·w/Σs²
+  // (Σs² = 300000 mm²), so the family's spread is sqrt(0.01² + 1/300000).
+  CreepConfig c = prior_config();
+  testing::Rig r(c);
+  std::mt19937_64 rng(22);
+  std::normal_distribution<double> start_rate(0.05, 0.01);
+  std::normal_distribution<double> noise(0.0, 1.0);
+  const int tools = 300;
+  std::vector<double> fitted;  // each tool's start rate, computed here independently
+  double from_mm = 0.0;
+  for (int t = 0; t < tools; ++t) {
+    const double a = start_rate(rng);
+    double sxw = 0.0;
+    for (int j = 1; j <= 4; ++j) {
+      r.run_to(from_mm + 100.0 * j, 5.0);
+      const double w = a * 100.0 * j + noise(rng);
+      r.measure({w});
+      sxw += 100.0 * j * w;
+    }
+    fitted.push_back(sxw / 300000.0);
+    from_mm += 400.0;
+    r.tool_change(t + 2, true);
+  }
+  ASSERT_EQ(r.comp.counters().measurements_accepted, 4U * tools);
+  const auto& f = r.comp.state().family_rate;
+  ASSERT_EQ(f.tools, static_cast<std::uint32_t>(tools));
+  // THEN the running statistics are those of the tools' start rates (two-pass here) ...
+  double mean = 0.0;
+  for (const double x : fitted) mean += x / tools;
+  double ss = 0.0;
+  for (const double x : fitted) ss += (x - mean) * (x - mean);
+  EXPECT_NEAR(f.rate_mean_um_per_mm[0], mean, 1e-12);
+  EXPECT_NEAR(f.rate_m2[0], ss, 1e-9 * ss);
+  // ... which converge on the generating distribution: the mean within 4 standard errors, the
+  // spread within 20 % (its standard error is about 4 % at 300 tools).
+  const double spread = std::sqrt(0.01 * 0.01 + 1.0 / 300000.0);
+  EXPECT_NEAR(f.rate_mean_um_per_mm[0], 0.05, 4.0 * spread / std::sqrt(tools));
+  double prior_mean = 0.0;
+  double prior_sigma = 0.0;
+  ASSERT_TRUE(r.comp.family_rate_prior(0, prior_mean, prior_sigma));
+  EXPECT_NEAR(prior_sigma, spread, 0.2 * spread);
+  EXPECT_NEAR(prior_sigma, std::sqrt(ss / (tools - 1) * (1.0 + 1.0 / tools)), 1e-15);
+  // AND the new tool's filter starts from that prior: P = diag(1, σp²), x = (0, μ); over 100 mm
+  // P⁻ = [[1 + 100²σp², 100σp²], [·, σp²]], so 7 µm measured there moves the wear from 100μ by
+  // the gain P⁻_ww/(P⁻_ww + 1).
+  EXPECT_EQ(r.comp.state().rate_prior_um_per_mm[0], prior_mean);
+  EXPECT_EQ(r.comp.state().rate_prior_sigma_um_per_mm[0], prior_sigma);
+  r.run_to(from_mm + 100.0, 5.0);
+  r.measure({7.0});
+  const double v = prior_sigma * prior_sigma;
+  const double pww = 1.0 + 1e4 * v;
+  const double pwr = 100.0 * v;
+  const double nu = 7.0 - 100.0 * prior_mean;
+  EXPECT_NEAR(r.comp.state().estimate_wear_um[0], 100.0 * prior_mean + pww / (pww + 1.0) * nu,
+              1e-12);
+  EXPECT_NEAR(r.comp.state().estimate_rate_um_per_mm[0], prior_mean + pwr / (pww + 1.0) * nu,
+              1e-14);
+}
+
+TEST(CreepEstimatorFamilyPrior, AStartRateCountsOnlyTheFirstStretchOfALife) {
+  // GIVEN family_prior_path_mm = 250: the measurements at 100 and 200 mm count, 300 does not.
+  CreepConfig c = prior_config();
+  c.estimator.family_prior_path_mm = 250.0;
+  testing::Rig r(c);
+  measure_every_100_mm(r, 0.0, 3, [](int j) { return j == 3 ? 100.0 : 5.0 * j; });
+  EXPECT_NEAR(r.comp.state().start_sxx, 100.0 * 100.0 + 200.0 * 200.0, 1e-9);
+  EXPECT_NEAR(r.comp.state().start_sxw[0] / r.comp.state().start_sxx, 0.05, 1e-15);
+  // A tool first measured beyond it still gives its first measurement.
+  testing::Rig late(c);
+  late.run_to(500.0);
+  late.measure({10.0});
+  late.run_to(600.0);
+  late.measure({12.0});
+  EXPECT_NEAR(late.comp.state().start_sxw[0] / late.comp.state().start_sxx, 10.0 / 500.0, 1e-15);
+}
+
+TEST(CreepEstimatorFamilyPrior, ATightFamilyPriorDelaysANewToolsFirstRequest) {
+  // GIVEN two finished tools with start rates 0.05 and 0.06 µm/mm (noise-free, measured at
+  // 100..400 mm) and measured when needed (max_sigma_um = 2, q = 0): a new tool's σ after d mm
+  // is sqrt(1 + d²·σr²), so its first request falls at d = sqrt(2² − 1)/σr.
+  CreepConfig c = prior_config();
+  c.interval.basis = IntervalBasis::kUncertainty;
+  c.interval.max_sigma_um = 2.0;
+  c.interval.min_interval_mm = 10.0;
+  c.interval.max_interval_mm = 5000.0;
+  testing::Rig r(c);
+  // Today's prior (σr = 0.01) asks at sqrt(3)/0.01 mm.
+  EXPECT_NEAR(r.comp.next_measurement_path_mm(), std::sqrt(3.0) / 0.01, 1e-3);
+  measure_every_100_mm(r, 0.0, 4, [](int j) { return 0.05 * 100.0 * j; });
+  r.tool_change(2, true);
+  measure_every_100_mm(r, 400.0, 4, [](int j) { return 0.06 * 100.0 * j; });
+  {
+    // The fold and the new prior at the tool change allocate nothing (real-time safe).
+    const std::array<Event, 1> change{ToolChange{r.now_ns, 3, true}};
+    StepOutput out;
+    nccomp::test::AllocationScope scope;
+    r.comp.step(r.now_ns, change, out);
+    EXPECT_EQ(scope.count(), 0U);
+  }
+  r.tool = 3;
+  // Sample standard deviation of {0.05, 0.06}: 0.01/√2; the spread of a third: ·sqrt(3/2).
+  const double sr = 0.01 / std::sqrt(2.0) * std::sqrt(1.5);
+  EXPECT_NEAR(r.comp.state().rate_prior_um_per_mm[0], 0.055, 1e-15);
+  EXPECT_NEAR(r.comp.state().rate_prior_sigma_um_per_mm[0], sr, 1e-15);
+  EXPECT_NEAR(r.comp.next_measurement_path_mm(), std::sqrt(3.0) / sr, 1e-3);
+  // Without learning the prior the same family leaves today's schedule.
+  CreepConfig off = c;
+  off.estimator.learn_rate_prior = false;
+  testing::Rig o(off);
+  measure_every_100_mm(o, 0.0, 4, [](int j) { return 0.05 * 100.0 * j; });
+  o.tool_change(2, true);
+  measure_every_100_mm(o, 400.0, 4, [](int j) { return 0.06 * 100.0 * j; });
+  o.tool_change(3, true);
+  EXPECT_EQ(o.comp.state().family_rate.tools, 2U);
+  EXPECT_NEAR(o.comp.next_measurement_path_mm(), std::sqrt(3.0) / 0.01, 1e-3);
+}
+
+TEST(CreepEstimatorFamilyPrior, TheFamilyAndTheToolsPriorSurviveARestart) {
+  CreepConfig c = prior_config();
+  testing::Rig r(c);
+  measure_every_100_mm(r, 0.0, 4, [](int j) { return 0.05 * 100.0 * j; });
+  r.tool_change(2, true);
+  measure_every_100_mm(r, 400.0, 4, [](int j) { return 0.06 * 100.0 * j; });
+  r.tool_change(3, true);
+  r.run_to(900.0);
+  r.measure({5.0});  // the new tool has a start sum of its own
+  const CreepState saved = r.comp.export_state();
+  WearCompensator b;
+  b.configure(c);
+  b.import_state(saved);
+  EXPECT_EQ(b.state().family_rate.tools, 2U);
+  EXPECT_EQ(b.state().family_rate.rate_mean_um_per_mm[0], saved.family_rate.rate_mean_um_per_mm[0]);
+  EXPECT_EQ(b.state().family_rate.rate_m2[0], saved.family_rate.rate_m2[0]);
+  EXPECT_EQ(b.state().rate_prior_sigma_um_per_mm[0], saved.rate_prior_sigma_um_per_mm[0]);
+  EXPECT_EQ(b.state().start_sxx, 100.0 * 100.0);
+  // Corrupt statistics are refused with the state, naming the field.
+  CreepState bad = saved;
+  bad.family_rate.rate_m2[0] = -1.0;
+  EXPECT_EQ(std::string_view(b.check_state(bad).field), "family_rate");
+  bad = saved;
+  bad.rate_prior_sigma_um_per_mm[0] = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_EQ(std::string_view(b.check_state(bad).field), "rate_prior_sigma_um_per_mm");
+  bad = saved;
+  bad.start_sxx = -1.0;
+  EXPECT_EQ(std::string_view(b.check_state(bad).field), "start_sxx");
+}
+
+TEST(CreepEstimatorFamilyPrior, AStateOfLayoutVersion5IsConverted) {
+  // A version-5 state (the current one up to the family's noise) with its adoption and residual
+  // shift, and without them: the filter, the family's noise and the remembered tools are kept;
+  // the rate prior's fields start empty.
+  CreepConfig c = prior_config();
+  c.estimator.learn_rate_noise = true;
+  ModuleRig m(c);
+  CreepState s;
+  s.edge_points = 1;
+  s.tool = 1;
+  s.cut_path_mm = 130.0;
+  s.creep_path_mm = 130.0;
+  s.committed_um[0] = 22.0;
+  s.measured_um[0] = 22.0;
+  s.measurements = 2;
+  s.last_measurement_cut_path_mm = 120.0;
+  s.last_measurement_creep_path_mm = 120.0;
+  s.estimate_wear_um[0] = 21.5;
+  s.estimate_rate_um_per_mm[0] = 0.1;
+  s.estimate_p_ww[0] = 0.5;
+  s.estimate_p_wr[0] = 0.001;
+  s.estimate_p_rr[0] = 1e-5;
+  s.estimate_path_mm = 120.0;
+  s.estimate_valid = true;
+  s.rate_q = 3e-10;
+  s.family.tools = 2;
+  s.family.rate_q_sum = 5e-10;
+  s.version = 5;
+  CreepState remembered;
+  remembered.edge_points = 1;
+  remembered.tool = 4;
+  remembered.measured_um[0] = 9.0;
+  remembered.version = 5;
+  v5::ToolMemory mem;
+  mem.tool[1] = 4;
+  mem.last_use[1] = 1;
+  mem.use_counter = 1;
+  std::memcpy(mem.state[1].bytes.data(), &remembered, v5::kStateBytes);
+  CreepModule::ResidualShift residual;
+  residual.shift_um[3] = 1.5;
+  AdoptedOutputs none;
+  std::vector<std::byte> bytes(v5::kModuleStateBytes + sizeof none + sizeof residual);
+  std::memcpy(bytes.data(), &s, v5::kStateBytes);
+  std::memcpy(bytes.data() + v5::kStateBytes, &mem, sizeof mem);
+  std::memcpy(bytes.data() + v5::kModuleStateBytes, &none, sizeof none);
+  std::memcpy(bytes.data() + v5::kModuleStateBytes + sizeof none, &residual, sizeof residual);
+  ASSERT_NE(bytes.size(), m.module.state_capacity());
+  {
+    nccomp::test::AllocationScope scope;
+    ASSERT_TRUE(m.module.load_state(bytes));
+    EXPECT_EQ(scope.count(), 0U);
+  }
+  const auto& st = m.module.compensator().state();
+  EXPECT_EQ(st.version, CreepState::kVersion);
+  EXPECT_TRUE(st.estimate_valid);
+  EXPECT_EQ(st.estimate_wear_um[0], 21.5);
+  EXPECT_EQ(st.rate_q, 3e-10);
+  EXPECT_EQ(st.family.tools, 2U);
+  EXPECT_EQ(st.family.rate_q_sum, 5e-10);
+  EXPECT_EQ(st.start_sxx, 0.0);
+  EXPECT_EQ(st.rate_prior_sigma_um_per_mm[0], 0.0);
+  EXPECT_EQ(st.family_rate.tools, 0U);
+  EXPECT_EQ(m.module.compensator().tool_memory().state[1].measured_um[0], 9.0);
+  EXPECT_EQ(m.module.compensator().tool_memory().state[1].version, CreepState::kVersion);
+  // The residual shift came along: saved again, it is in the current layout's bytes.
+  std::vector<std::byte> again(m.module.state_capacity());
+  ASSERT_EQ(m.module.save_state(again), again.size());
+  CreepModule::ResidualShift back;
+  std::memcpy(&back, again.data() + again.size() - sizeof back, sizeof back);
+  EXPECT_EQ(back.shift_um[3], 1.5);
+  // Without the residual shift, and without the adoption, too.
+  ModuleRig m2(c);
+  EXPECT_TRUE(m2.module.load_state(std::span(bytes).first(v5::kModuleStateBytes + sizeof none)));
+  ModuleRig m3(c);
+  EXPECT_TRUE(m3.module.load_state(std::span(bytes).first(v5::kModuleStateBytes)));
+  EXPECT_EQ(m3.module.compensator().state().family.tools, 2U);
+  // A corrupt bool is refused, nothing changes.
+  ModuleRig fresh(c);
+  bytes[offsetof(CreepState, estimate_valid)] = std::byte{2};
+  EXPECT_FALSE(fresh.module.load_state(bytes));
+  EXPECT_EQ(fresh.module.compensator().state().measurements, 0U);
+}
+
+TEST(CreepEstimatorFamilyPrior, ItsPathIsChecked) {
+  CreepConfig c = prior_config();
+  c.estimator.family_prior_path_mm = 0.0;
+  try {
+    validate(c);
+    FAIL() << "accepted family_prior_path_mm = 0";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("creep.estimator.family_prior_path_mm"), std::string::npos)
+        << e.what();
+  }
 }
 
 }  // namespace

@@ -95,9 +95,10 @@ struct Rig {
   std::int32_t tool{1};
 
   Rig(const TrimZ* model, const CreepModuleConfig& config) : Rig(model, nullptr, config) {}
+  // lim: every register's limits, and so the creep's own limiter (CreepModule::attach()).
   explicit Rig(const TrimZ* model, const WearTrimZ* wear_model = nullptr,
-               const CreepModuleConfig& config = module_config()) {
-    const LimiterConfig lim{100.0, 50.0, 1e5};
+               const CreepModuleConfig& config = module_config(),
+               const LimiterConfig& lim = {100.0, 50.0, 1e5}) {
     std::vector<std::unique_ptr<engine::Module>> mods;
     mods.push_back(std::make_unique<CreepModule>(config));
     if (model != nullptr) mods.push_back(std::make_unique<TrimZ>(model->trim_, model->identity_));
@@ -407,6 +408,36 @@ TEST(CreepHandover, TheToolsMotionGoesOnThroughTheSwap) {
   for (const double y : after.y_writes) EXPECT_NEAR(y, lateral_um, 1e-9);
   EXPECT_NEAR(path_of(after), path_before + 5 * 0.5, 1e-9);
   EXPECT_NEAR(after.engine.context().cut_path_mm(1), path_before + 5 * 0.5, 1e-9);
+}
+
+// GIVEN the creep holds Z at −12 µm, cutting, the registers' limiter (and so the creep's own) at
+//      most 5 µm per write: less than the value in force, as the demo's 20 µm against 26 µm of
+//      wear
+// WHEN the running daemon reloads (state and the tool's motion into the new engine), with no
+//      model change, or with a model whose tool_wear term takes the whole wear (the demo's load:
+//      the rebase leaves the creep's channel as it is, so no re-anchoring)
+// THEN Z goes on from −12 µm in the first cycle after the swap: the creep's limiter continues
+//      from the value in force, not from 0 (before: −12 → −7 → −12, a one-cycle spike of 5 µm).
+TEST(CreepHandover, TheCreepsLimiterGoesOnFromTheValueInForceThroughTheSwap) {
+  const CreepModuleConfig config = module_config();
+  const LimiterConfig lim{100.0, 5.0, 1e5};
+  const WearTrimZ wear_model(0.2);  // 0.2 µm/mm: −11.2 µm at the swap's 56 mm of cut path
+  for (const WearTrimZ* model : {static_cast<const WearTrimZ*>(nullptr), &wear_model}) {
+    Rig before(nullptr, nullptr, config, lim);
+    wear_in(before);
+    Rig after(nullptr, model, config, lim);
+    after.take_over(before);
+    std::vector<std::byte> motion(engine::kMotionBytes);
+    motion.resize(before.engine.export_motion(motion));
+    ASSERT_EQ(after.engine.import_motion(motion), 2U);
+    for (int i = 0; i < 5; ++i) after.advance(0.5);
+    const char* what = model == nullptr ? "reload" : "model load";
+    // The model's trim grows by 0.1 µm per 0.5 mm after the swap's cycle; the creep's channel
+    // holds the wear.
+    EXPECT_LT(after.largest_z_change_um, 0.1 + 1e-9) << what;
+    EXPECT_NEAR(after.z_um(), model == nullptr ? -12.0 : -12.0 - 0.2 * 4 * 0.5, 1e-9) << what;
+    EXPECT_EQ(after.engine.counters().handover_rebases, model == nullptr ? 0U : 1U) << what;
+  }
 }
 
 }  // namespace

@@ -532,5 +532,80 @@ TEST(Loop, ASlowBusNeverStepsTheNcPastMaxStep) {
   EXPECT_EQ(s.frees_after_warmup, 0) << "the loop thread freed after warm-up";
 }
 
+// A bus whose receipts the test gives: what the loop queues stays in flight until confirm().
+class ManualBus final : public drivers::Bus {
+ public:
+  ManualBus() : rx_(16), tx_(256), receipts_(1) {}
+  void start() override {}
+  void stop() override {}
+  core::rt::SpscRing<core::Event>& rx() override { return rx_; }
+  core::rt::SpscRing<core::OffsetWrite>& tx() override { return tx_; }
+  [[nodiscard]] drivers::BusStatus status() const override { return {}; }
+  [[nodiscard]] bool confirms_writes() const noexcept override { return true; }
+  [[nodiscard]] core::WriteReceipt write_receipt(std::uint16_t r) const noexcept override {
+    return r == 0 ? receipts_.load(0) : drivers::kUnmappedReceipt;
+  }
+  /// The next write the loop queued (waits up to 5 s).
+  std::optional<core::OffsetWrite> next_write() {
+    const auto end = std::chrono::steady_clock::now() + 5s;
+    core::OffsetWrite w;
+    while (std::chrono::steady_clock::now() < end) {
+      if (tx_.try_pop(w)) return w;
+      std::this_thread::sleep_for(1ms);
+    }
+    return std::nullopt;
+  }
+  void confirm(std::uint64_t sequence) {
+    receipts_.publish(0, sequence, core::WriteOutcome::kReached);
+  }
+
+ private:
+  core::rt::SpscRing<core::Event> rx_;
+  core::rt::SpscRing<core::OffsetWrite> tx_;
+  drivers::WriteReceipts receipts_;
+};
+
+// GIVEN a ramp whose write is in flight (the bus has not confirmed it)
+// WHEN a reload is published
+// THEN the swap waits for the receipt (the new engine would otherwise send the same value again
+//      and wait for that one's receipt: one more bus round trip in which the register does not
+//      move, which in real time the register caught up with in one write), then the new engine
+//      writes the next value at once; with a bus that never confirms, the swap comes after
+//      swap_wait_max_cycles and the value in flight is sent again as it is.
+TEST(Loop, AReloadSwapsWhenTheBusHasConfirmedTheWritesInFlight) {
+  for (const bool confirmed : {true, false}) {
+    ManualBus bus;
+    core::rt::ConfigSwap<Runtime> swap(make_runtime(100.0, 100.0, false, 1));
+    LoopOptions o;
+    o.swap_wait_max_cycles = confirmed ? 1'000'000 : 50;
+    Loop loop(o, swap, {&bus}, nullptr, nullptr);
+    loop.start();
+    const auto first = bus.next_write();
+    ASSERT_TRUE(first.has_value());
+    swap.publish(make_runtime(100.0, 100.0, false, 2));
+    if (confirmed) {
+      std::this_thread::sleep_for(100ms);  // 100 cycles at 1 kHz
+      EXPECT_EQ(loop.stats().config_generation, 1U) << "swapped with a write in flight";
+      bus.confirm(first->sequence);
+    }
+    const auto end = std::chrono::steady_clock::now() + 5s;
+    while (loop.stats().config_generation != 2 && std::chrono::steady_clock::now() < end) {
+      std::this_thread::sleep_for(1ms);
+    }
+    EXPECT_EQ(loop.stats().config_generation, 2U);
+    const auto after = bus.next_write();
+    loop.stop();
+    ASSERT_TRUE(after.has_value());
+    EXPECT_GT(after->sequence, first->sequence);
+    if (confirmed) {
+      // The ramp moved on while the write was in flight: a new value, through the limiter.
+      EXPECT_GT(after->value_um, first->value_um);
+      EXPECT_LE(after->value_um - first->value_um, 5.0 + 1e-9);
+    } else {
+      EXPECT_DOUBLE_EQ(after->value_um, first->value_um);  // the NC holds it or the one before
+    }
+  }
+}
+
 }  // namespace
 }  // namespace nccomp::daemon

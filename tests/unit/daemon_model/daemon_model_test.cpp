@@ -1272,7 +1272,9 @@ TEST(ModelInputs, TheFlThermalModelRunsInTheLoopWithItsExtraColumnsOnSensors) {
   const double tau_s = fitted.terms()[2].spec.scale;
   e->step(2 * kS + static_cast<std::int64_t>(tau_s * 1e9), {}, out);
   EXPECT_NEAR(m->trim_um(0), -fitted.terms()[2].coef[0] * 5000.0 * (1.0 - std::exp(-1.0)), 1e-6);
-  EXPECT_NEAR(m->trim_um(1), -fitted.terms()[3].coef[0] * 19.5, 1e-9);
+  // t1's term counts from its reference (model.toml's center).
+  EXPECT_NEAR(m->trim_um(1), -fitted.terms()[3].coef[0] * (19.5 - fitted.terms()[3].spec.center),
+              1e-9);
   EXPECT_NEAR(m->trim_um(2), -fitted.terms()[1].coef[0] * 31.0, 1e-9);
   // 5000 rpm for one time constant: about 15 µm of the 23.5 µm the speed term predicts at rest.
   EXPECT_GT(std::fabs(m->trim_um(0)), 10.0);

@@ -354,6 +354,8 @@ TEST(CreepSection, EstimatorKeysFromTheDocsExampleAndTheirErrors) {
   EXPECT_DOUBLE_EQ(est.gate_sigmas, 5.0);
   EXPECT_TRUE(est.learn_rate_noise);
   EXPECT_EQ(est.family_min_tools, 3U);
+  EXPECT_TRUE(est.learn_rate_prior);
+  EXPECT_DOUBLE_EQ(est.family_prior_path_mm, 1000.0);
   EXPECT_TRUE(est.adapt_rate_noise);
   EXPECT_DOUBLE_EQ(est.adapt_window_measurements, 20.0);
   EXPECT_DOUBLE_EQ(est.min_rate_noise_um_per_mm_per_sqrt_m, 0.00005);
@@ -371,6 +373,7 @@ rate_noise_um_per_mm_per_sqrt_m = -0.1
 gate_sigmas = 1.5
 sigma_um = 1
 family_min_tools = 0
+family_prior_path_mm = 0
 adapt_window_measurements = 0
 )";
   const auto g = d.write("bad.toml", text);
@@ -387,6 +390,10 @@ adapt_window_measurements = 0
             std::string::npos)
       << err;
   EXPECT_NE(err.find(at(g, text, "family_min_tools = 0") + "creep.estimator.family_min_tools: "),
+            std::string::npos)
+      << err;
+  EXPECT_NE(err.find(at(g, text, "family_prior_path_mm = 0") +
+                     "creep.estimator.family_prior_path_mm: must be"),
             std::string::npos)
       << err;
   EXPECT_NE(err.find(at(g, text, "adapt_window_measurements = 0") +

@@ -68,5 +68,24 @@ TEST(MeasurementLogFormat, LastRowTimeIsTheLastCompleteRowsFirstCell) {
   EXPECT_LT(last_row_time_s("", true), 0.0);
 }
 
+// GIVEN the names a log directory may hold WHEN ranked in the rotation THEN the log itself is 0,
+// its rotated files their number, and every other name -1 (nothing half-parsed).
+TEST(MeasurementLogFormat, RotationNumberRanksALogsOwnFilesOnly) {
+  std::string log;
+  EXPECT_EQ(rotation_number("measurements.csv", log), 0);
+  EXPECT_EQ(log, "measurements.csv");
+  EXPECT_EQ(rotation_number("measurements.csv.1", log), 1);
+  EXPECT_EQ(log, "measurements.csv");
+  EXPECT_EQ(rotation_number("m2.csv.999999999", log), 999999999);
+  EXPECT_EQ(log, "m2.csv");
+  log = "unchanged";
+  for (const char* other : {"measurements.csv.0", "measurements.csv.01", "measurements.csv.",
+                            "measurements.csv.1x", "measurements.csv.1000000000", ".csv",
+                            "measurements.txt.1", "measurements.csv.bak", "notes", ".csv.3"}) {
+    EXPECT_EQ(rotation_number(other, log), -1) << other;
+  }
+  EXPECT_EQ(log, "unchanged");
+}
+
 }  // namespace
 }  // namespace nccomp::formats::measurement_log

@@ -5,6 +5,7 @@
 // the final ones.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 #include <string>
@@ -124,4 +125,90 @@ TEST(Sessions, SessionGapIsReadAndWrittenAndANegativeOneRefused) {
   t.coef = {1.0};
   const std::string text = io::write_model_toml(cm::Model({}, {t}), f.config, {});
   EXPECT_NE(text.find("session_gap_s = 7200.0\n"), std::string::npos) << text;
+}
+
+TEST(Sessions, AHeldOutSessionsGroupNoOtherSessionHasIsAWarning) {
+  synth::Options opt;
+  opt.seed = 31;
+  opt.parts = 60;
+  opt.points_per_part = 12;
+  opt.noise_um = 0.5;
+  cm::Dataset d = synth::generate(opt);
+  // Four sessions of 15 parts; the last one cut with tool 9, which no other session used.
+  auto& tool = d.columns[static_cast<std::size_t>(cm::Column::kTool)];
+  const auto& part = d.column(static_cast<int>(cm::Column::kPart));
+  std::size_t last_rows = 0;
+  std::size_t last_first = d.rows();
+  for (std::size_t i = 0; i < d.rows(); ++i) {
+    const auto s = static_cast<std::uint32_t>((part[i] - 1.0) / 15.0);
+    d.row_session.push_back(s);
+    tool[i] = s == 3 ? 9.0 : 1.0;
+    if (s == 3) {
+      ++last_rows;
+      last_first = std::min(last_first, i);
+    }
+  }
+  cm::AnalysisConfig c = synth::config();
+  c.validate_sessions = true;
+  cm::TermSpec per_tool;
+  per_tool.name = "tool_offset";
+  per_tool.form = cm::Form::kConstant;
+  per_tool.per = {static_cast<int>(cm::Column::kTool), -1};
+  c.declared.push_back(per_tool);
+  auto session_warnings = [](const cm::AnalysisResult& r) {
+    std::vector<std::string> out;
+    for (const auto& w : r.warnings) {
+      if (w.code == "heldout_unseen_group" && w.message.rfind("--validate sessions", 0) == 0) {
+        out.push_back(w.message);
+      }
+    }
+    return out;
+  };
+  const cm::AnalysisResult r = cm::analyze(d, c);
+  ASSERT_EQ(r.session_folds.size(), 4U);
+  const auto w = session_warnings(r);
+  ASSERT_EQ(w.size(), 1U);
+  EXPECT_EQ(
+      w[0].rfind("--validate sessions: session 4 (from row " + std::to_string(last_first + 1) +
+                     ") held out: " + std::to_string(last_rows) +
+                     " of its rows belong to 1 group no other session has (tool_offset "
+                     "tool 9)",
+                 0),
+      0U)
+      << w[0];
+  // It is in summary.json's warnings.
+  const std::string j = nccomp::tools::analyze::summary_json(d, r);
+  EXPECT_NE(j.find("{\"code\": \"heldout_unseen_group\", \"message\": \"--validate sessions: "
+                   "session 4"),
+            std::string::npos)
+      << j;
+
+  // Every session with tool 1: every group is in the other sessions, no warning.
+  for (auto& v : tool) v = 1.0;
+  EXPECT_TRUE(session_warnings(cm::analyze(d, c)).empty());
+}
+
+// A log recorded in one piece (FL_THERMAL: 46 h, no warm start) has no session to hold out:
+// validate_block_s cuts it into blocks of that length from its first time instead.
+TEST(Sessions, ValidateBlockSHoldsOutBlocksOfTimeFromTheFirstRow) {
+  synth::Options opt;
+  opt.parts = 40;
+  cm::Dataset d = synth::generate(opt);
+  const auto& t = d.column(static_cast<int>(cm::Column::kTime));
+  ASSERT_EQ(t.size(), d.rows());
+  const double t0 = *std::min_element(t.begin(), t.end());
+  const double t1 = *std::max_element(t.begin(), t.end());
+  ASSERT_GT(t1, t0);
+  const double block_s = (t1 - t0) / 3.5;  // blocks 0, 1, 2, 3 (the last one half)
+  std::vector<std::size_t> rows(4, 0);
+  for (const double v : t) ++rows[static_cast<std::size_t>(std::floor((v - t0) / block_s))];
+  cm::AnalysisConfig c = synth::config();
+  c.validate_sessions = true;
+  c.validate_block_s = block_s;
+  const cm::AnalysisResult r = cm::analyze(d, c);
+  ASSERT_EQ(r.session_folds.size(), 4U);
+  for (std::size_t s = 0; s < 4; ++s) {
+    EXPECT_EQ(r.session_folds[s].session, s);
+    EXPECT_EQ(r.session_folds[s].final_model.rows, rows[s]) << s;
+  }
 }

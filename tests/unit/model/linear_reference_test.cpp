@@ -17,6 +17,7 @@
 #include "core/model/model_module.hpp"
 #include "formats/model/model_io.hpp"
 #include "tests/unit/model/synth.hpp"
+#include "tools/analyze/report.hpp"
 
 namespace cm = nccomp::core::model;
 namespace io = nccomp::formats::model_io;
@@ -148,6 +149,13 @@ TEST(LinearReference, TheDaemonsTrimAtTheFirstPartIsTheDriftSinceTheWarmStart) {
   const io::ModelFile f = io::read_model_text(text, "model.toml", true);
   const cm::Model back(f.extra_columns, f.fitted_terms);
   EXPECT_NEAR(daemon_trim_um(back, first_part_c), trim, 1e-9);
+
+  // summary.json gives the effect's reference beside its coefficient.
+  const std::string j = nccomp::tools::analyze::summary_json(log.data, r);
+  const std::string key = "\"form\": \"linear\", \"params\": {\"center_c\": ";
+  const std::size_t at = j.find(key);
+  ASSERT_NE(at, std::string::npos) << j;
+  EXPECT_NEAR(std::stod(j.substr(at + key.size())), reference_c, 1e-6) << j;
 }
 
 // A model file of an earlier version (no reference): the term counts from 0, as it did.

@@ -183,8 +183,13 @@ TEST(ModelModuleTrimAtPath, EvaluatesTheTermAtTheGivenCutPathAndTheRestAsNow) {
   }
   ASSERT_DOUBLE_EQ(engine.context().cut_path_mm(7), 500.0);
   EXPECT_NEAR(model->trim_um(0), -0.021 * 500.0, 1e-12);
-  EXPECT_NEAR(model->trim_at_cut_path(0, 7, 120.0), -0.021 * 120.0, 1e-12);
-  EXPECT_TRUE(std::isnan(model->trim_at_cut_path(1, 7, 120.0)));
+  ce::InputSnapshot at;
+  at.tool = 7;
+  at.path_mm = 120.0;
+  EXPECT_NEAR(model->trim_at_inputs(0, at), -0.021 * 120.0, 1e-12);
+  EXPECT_TRUE(std::isnan(model->trim_at_inputs(1, at)));
+  // Inputs the snapshot does not hold are taken as now: the tool's 500 mm.
+  EXPECT_NEAR(model->trim_at_inputs(0, ce::InputSnapshot{}), -0.021 * 500.0, 1e-12);
 }
 
 // The creep learns the residual of the trims the laser sees (CreepModule::bind_tool_wear_trims()):

@@ -51,3 +51,27 @@ TEST(Report, FiguresAreCompleteSvgWithOnePointPerRow) {
   }
   EXPECT_EQ(circles, 2 * d.rows());  // before and after panels
 }
+
+TEST(Report, TheCandidatesTriedShowAPolynomialsAndALagsDegree) {
+  synth::Options opt;
+  opt.parts = 30;
+  opt.effects = {"position_x"};
+  opt.speed_column = true;
+  const cm::Dataset d = synth::generate(opt);
+  const cm::AnalysisResult r = cm::analyze(d, synth::config(opt));
+  const std::string md = nccomp::tools::analyze::report_markdown(d, r, {"log.csv"}, {});
+  // The candidates: position_x|y|z and wear_nonlinear are polynomials of degree 2, the speed's
+  // thermal_drift a first-order lag of the speed itself (core/model/analysis.cpp).
+  const std::string tried = md.substr(md.find("## Candidates tried"));
+  const std::regex row(R"(\n\| [^|]+ \| [^|]+ \| (poly|lag)([^|]*) \|)");
+  std::size_t poly = 0;
+  std::size_t lag = 0;
+  for (auto it = std::sregex_iterator(tried.begin(), tried.end(), row);
+       it != std::sregex_iterator(); ++it) {
+    const std::string form = (*it)[1];
+    EXPECT_EQ((*it)[2].str(), form == "poly" ? " (degree 2)" : " (degree 1)") << (*it)[0];
+    ++(form == "poly" ? poly : lag);
+  }
+  EXPECT_GT(poly, 0U) << tried;
+  EXPECT_GT(lag, 0U) << tried;
+}

@@ -296,9 +296,16 @@ function connect() {
   };
 }
 
+// The daemon's answer names models by their whole path: the line shows their file names (as
+// the Model card does), its tooltip the answer as given.
+function shortPaths(text) {
+  return text.replace(/(^|[\s(:])(\/[^\s()]+)/g, (m, before, path) => before + fileName(path));
+}
+
 async function sendAction(action, out) {
   out.className = 'result';
   out.textContent = 'sending…';
+  out.title = '';
   try {
     const r = await fetch('/api/action', {
       method: 'POST',
@@ -307,7 +314,8 @@ async function sendAction(action, out) {
     });
     const body = await r.json();
     if (r.ok) {
-      out.textContent = body.answer;
+      out.textContent = shortPaths(body.answer);
+      out.title = body.answer;
     } else {
       out.className = 'result bad';
       out.textContent = 'refused (HTTP ' + r.status + '): ' + body.error;
