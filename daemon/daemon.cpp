@@ -929,6 +929,7 @@ void Daemon::start_persister_and_log() {
     std::copy(msec.face_probe_points_mm.begin(), msec.face_probe_points_mm.end(),
               fp.point_mm.begin());
     fp.capture_radius_mm = msec.face_probe_capture_radius_mm;
+    fp.ball_radius_mm = msec.face_probe_ball_radius_mm;
     // The names were checked against [[registers]] (cross_check): the engine's indices.
     const auto& regs = cfg::registers_section(*config_).registers;
     for (std::size_t i = 0; i < regs.size(); ++i) {

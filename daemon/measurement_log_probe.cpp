@@ -13,9 +13,11 @@ void FaceProbeCapture::on_axis(const core::AxisSample& a, double length_um, doub
                                double cut_path_mm) noexcept {
   if (a.has_normal) normal_ = a.normal;
   if (!a.cutting || a.axis_count < 3) return;
+  const double r = config_.ball_radius_mm;
+  const double cx = a.position_mm[0] - r * normal_[0];
+  const double cy = a.position_mm[1] - r * normal_[1];
   for (std::size_t k = 0; k < config_.count; ++k) {
-    const double d = std::hypot(a.position_mm[0] - config_.point_mm[k][0],
-                                a.position_mm[1] - config_.point_mm[k][1]);
+    const double d = std::hypot(cx - config_.point_mm[k][0], cy - config_.point_mm[k][1]);
     Cut& c = cuts_[k];
     // Written so that a NaN position captures nothing.
     if (!(d <= config_.capture_radius_mm) || (c.valid && !(d < c.distance_mm))) continue;
@@ -26,7 +28,6 @@ void FaceProbeCapture::on_axis(const core::AxisSample& a, double length_um, doub
     c.valid = true;
     c.distance_mm = d;
     c.tool = a.tool;
-    c.position_mm = {a.position_mm[0], a.position_mm[1], a.position_mm[2]};
     c.applied_um = 0.0 - (length_um * nz + radius_um * sin_theta);
     c.path_mm = cut_path_mm;
   }

@@ -21,8 +21,12 @@ struct FaceProbeConfig {
   /// The probe points (x, y) [mm]; the probe's checkpoint number k reads point k. 0 = off.
   std::size_t count{0};
   std::array<std::array<double, 2>, kMaxFaceProbePoints> point_mm{};
-  /// A sample is the cut of point k if its (x, y) is within this distance (the nearest counts).
+  /// A sample is the cut of point k if its contact point's (x, y) is within this distance (the
+  /// nearest counts).
   double capture_radius_mm{1.0};
+  /// The ball-end mill's radius [mm]: the NC reports the ball's centre, which on a sloped face
+  /// lies r·n off the point it cuts (contact = centre − r·n).
+  double ball_radius_mm{0.0};
   /// The tool's length and radius wear registers (engine indices).
   std::size_t length_register{0};
   std::size_t radius_register{0};
@@ -54,7 +58,6 @@ class FaceProbeCapture {
     bool valid{false};
     double distance_mm{0.0};
     std::int32_t tool{0};
-    std::array<double, 3> position_mm{};
     double applied_um{0.0};
     double path_mm{0.0};
   };

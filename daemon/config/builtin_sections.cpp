@@ -181,6 +181,7 @@ class MeasurementLogParser final : public SectionParser {
           }
         }
         s->face_probe_capture_radius_mm = f.number("capture_radius_mm", 1.0, 1e-3, 100.0);
+        s->face_probe_ball_radius_mm = f.number("ball_radius_mm", 0.0, 0.0, 100.0);
         s->face_probe_length_register = f.string("length_register", std::nullopt);
         s->face_probe_radius_register = f.string("radius_register", std::nullopt);
         s->face_probe_length_where = f.where("length_register");

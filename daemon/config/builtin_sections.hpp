@@ -63,6 +63,7 @@ struct MeasurementLogSection final : Section {
   bool has_face_probe{false};
   std::vector<std::array<double, 2>> face_probe_points_mm;
   double face_probe_capture_radius_mm{1.0};
+  double face_probe_ball_radius_mm{0.0};
   std::string face_probe_length_register;
   std::string face_probe_radius_register;
   formats::Where face_probe_length_where;

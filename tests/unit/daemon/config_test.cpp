@@ -144,6 +144,7 @@ TEST(ConfigLoader, MeasurementLogFaceProbeIsReadAndItsMistakesAreNamed) {
 points_x_mm = [30.0, 30]
 points_y_mm = [0.0, 8.0]
 capture_radius_mm = 0.5
+ball_radius_mm = 3.0
 length_register = "T1_length_wear"
 radius_register = "T1_length_wear"
 )") + kRegisters));
@@ -153,6 +154,7 @@ radius_register = "T1_length_wear"
   EXPECT_DOUBLE_EQ(m.face_probe_points_mm[1][0], 30.0);
   EXPECT_DOUBLE_EQ(m.face_probe_points_mm[1][1], 8.0);
   EXPECT_DOUBLE_EQ(m.face_probe_capture_radius_mm, 0.5);
+  EXPECT_DOUBLE_EQ(m.face_probe_ball_radius_mm, 3.0);
   EXPECT_EQ(m.face_probe_length_register, "T1_length_wear");
 
   r = load_file(d.write("b.toml", std::string(R"([measurement_log.face_probe]

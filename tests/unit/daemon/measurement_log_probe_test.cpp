@@ -79,6 +79,46 @@ TEST(FaceProbeCapture, ARowCarriesTheCompensationAndCutPathWhereThePointWasCut) 
   EXPECT_EQ(fp.rejected(), 0U);
 }
 
+// ncsim's mould face at its edge passes: z = 1.5 mm · (1 − v²), v = 2y/30 − 1, so at y = 0 the
+// slope dz/dy is 0.2 and the normal (0, −0.2, 1)/√1.04; the NC reports the 3 mm ball's centre,
+// 3 · 0.2/√1.04 = 0.588 mm off the cut point, beyond a capture radius under half the 1 mm
+// stepover. The capture takes the contact point (centre − r·n): the edge points get their rows,
+// and the neighbouring pass (y = 1, whose centre lies 0.45 mm from y = 0) is not taken for them.
+TEST(FaceProbeCapture, TheEdgePassesOfASlopedFaceAreCapturedAtTheBallsContactPoint) {
+  FaceProbeConfig c;
+  c.count = 2;
+  c.point_mm[0] = {30.0, 0.0};
+  c.point_mm[1] = {30.0, 30.0};
+  c.capture_radius_mm = 0.4;
+  c.ball_radius_mm = 3.0;
+  c.length_register = 0;
+  c.radius_register = 1;
+  FaceProbeCapture fp(c);
+  fp.on_part_start();
+  const auto pass = [&](double y, double slope, double length_um, double path_mm) {
+    const double norm = std::sqrt(1.0 + slope * slope);
+    core::AxisSample a;
+    a.tool = 1;
+    a.has_normal = true;
+    a.normal = {0.0, -slope / norm, 1.0 / norm};
+    a.position_mm = {30.0, y + 3.0 * a.normal[1], 3.0 * a.normal[2], 0.0, 0.0, 0.0};
+    fp.on_axis(a, length_um, 0.0, path_mm);
+  };
+  pass(0.0, 0.2, -10.0, 100.0);
+  pass(1.0, 0.2 * (1.0 - 2.0 / 30.0), -11.0, 160.0);
+  pass(29.0, -0.2 * (1.0 - 2.0 / 30.0), -40.0, 1840.0);
+  pass(30.0, -0.2, -41.0, 1900.0);
+
+  core::MeasurementRecord r;
+  ASSERT_TRUE(fp.on_probe(probe(0, 30.0, 0.0, 3.0), r));
+  EXPECT_DOUBLE_EQ(r.path_mm, 100.0);
+  EXPECT_NEAR(r.applied_um, 10.0 / std::sqrt(1.04), 1e-12);  // −L·n_z
+  ASSERT_TRUE(fp.on_probe(probe(1, 30.0, 30.0, 3.0), r));
+  EXPECT_DOUBLE_EQ(r.path_mm, 1900.0);
+  EXPECT_NEAR(r.applied_um, 41.0 / std::sqrt(1.04), 1e-12);
+  EXPECT_EQ(fp.rejected(), 0U);
+}
+
 TEST(FaceProbeCapture, ReadingsOfNoPointOrAnotherPlaceOrAnUncutPointAreCountedNotLogged) {
   FaceProbeCapture fp(two_points());
   fp.on_part_start();
