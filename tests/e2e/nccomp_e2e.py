@@ -1576,6 +1576,15 @@ def scenario_demo_loop(b, source, work):
         c.that(abs(coef - rate_um_per_mm) <= 0.15 * rate_um_per_mm,
                "its rate %.5f um/mm is ncsim's wear rate %.5f um/mm (within 15 %%)" % (
                    coef, rate_um_per_mm))
+    # Every probe reading of the first batch is a contour row, the face's edge passes (y = 0 and
+    # 30 mm, where the ball's centre lies 0.59 mm off the cut point) included.
+    probed = sorted((int(r["part"]), int(r["point"])) for r in read_csv_rows(
+        os.path.join(work, "batch1", "log", "measurements.csv")) if r["kind"] == "contour")
+    parts = sorted({p for p, _ in probed})
+    c.that(len(parts) == LOOP_FIRST_BATCH and
+           probed == [(p, k) for p in parts for k in range(LOOP_PROBE_POINTS)],
+           "first batch: %d contour rows, one per probed point of each part (%d x %d): %s" % (
+               len(probed), LOOP_FIRST_BATCH, LOOP_PROBE_POINTS, probed))
     m = res["model"]
     h = m.handover or {}
     c.that("configuration 2 is running" in m.daemon_log and h.get("handovers") == 1 and
@@ -1762,6 +1771,10 @@ SCENARIOS = {
 LOOP_MODE = ("model", "creeping + the model from the analysis")
 LOOP_CONFIG = "nccompd-loop.toml"
 LOOP_FIRST_BATCH = 2
+# The first batch's probe cycle of the finished face (ncsim; nccompd-loop.toml's
+# [measurement_log.face_probe] logs each reading as a contour row): mid-X of passes 0, 8, 15,
+# 23 and 30.
+LOOP_PROBE_POINTS = 5
 SUMMARY_KEYS = ("mode", "max_step_um", "form_rms_um", "form_max_um")
 # The model row's form RMS in lock-step [um]: 6.24 reached (bench/results/e2e.md), with room for
 # the last digits the reload's landing cycle moves.
@@ -1779,6 +1792,7 @@ def run_first_batch(b, source, work, speed=None, echo=print):
     LOOP_FIRST_BATCH, so that the batch takes half a part's time of the four modes."""
     return run_machining(b, source, work, "batch1", LOOP_CONFIG, "ncsim-demo.toml",
                          parts=LOOP_FIRST_BATCH, echo=echo,
+                         sets=["program.mould_face.probe_points=%d" % LOOP_PROBE_POINTS],
                          speed=None if speed is None else speed * LOOP_SPEEDUP * LOOP_FIRST_BATCH)
 
 
