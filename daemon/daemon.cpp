@@ -959,6 +959,20 @@ void Daemon::start_persister_and_log() {
   mo.context_columns = msec.context_columns;
   mo.monotonic_record_clock = !lockstep_;  // the peer's TICKs are not CLOCK_MONOTONIC
   mo.fsync_interval_s = msec.fsync_interval_s;
+  if (!msec.face_probe_points_mm.empty()) {
+    FaceProbeConfig& fp = mo.face_probe;
+    fp.count = msec.face_probe_points_mm.size();
+    std::copy(msec.face_probe_points_mm.begin(), msec.face_probe_points_mm.end(),
+              fp.point_mm.begin());
+    fp.capture_radius_mm = msec.face_probe_capture_radius_mm;
+    fp.ball_radius_mm = msec.face_probe_ball_radius_mm;
+    // The names were checked against [[registers]] (cross_check): the engine's indices.
+    const auto& regs = cfg::registers_section(*config_).registers;
+    for (std::size_t i = 0; i < regs.size(); ++i) {
+      if (regs[i].spec.name == msec.face_probe_length_register) fp.length_register = i;
+      if (regs[i].spec.name == msec.face_probe_radius_register) fp.radius_register = i;
+    }
+  }
   mlog_ = std::make_unique<MeasurementLogWriter>(std::move(mo));
   mlog_->set_observer([this](const core::MeasurementRecord& r) { shadow_.observe(r); });
   try {

@@ -129,6 +129,33 @@ std::size_t Loop::final_state(std::span<std::byte> buf) const {
   return anchor_size_;
 }
 
+void Loop::log_face_probe(const core::engine::Engine& engine) noexcept {
+  FaceProbeCapture& fp = measurement_log_->face_probe();
+  const FaceProbeConfig& c = fp.config();
+  if (c.length_register >= engine.register_count() ||
+      c.radius_register >= engine.register_count()) {
+    return;  // a reload with fewer registers: the capture waits for a restart
+  }
+  for (const core::Event& e : events_) {
+    const core::EventOrigin* o = core::origin_of(e);
+    if (o != nullptr && o->counter_only) continue;  // not an event (the bus's first read)
+    if (const auto* a = std::get_if<core::AxisSample>(&e)) {
+      fp.on_axis(*a, engine.register_state(c.length_register).output_um,
+                 engine.register_state(c.radius_register).output_um,
+                 engine.context().cut_path_mm(a->tool));
+    } else if (const auto* p = std::get_if<core::ProgramEvent>(&e)) {
+      if (p->kind == core::ProgramEventKind::kPartStart) fp.on_part_start();
+    } else if (const auto* m = std::get_if<core::ProbeMeasurement>(&e)) {
+      core::MeasurementRecord r;
+      if (!fp.on_probe(*m, r)) continue;
+      ++local_.records;
+      engine.context().annotate(r);  // session, machine time, temperature: as the engine's rows
+      measurement_log_->stamp(r, engine.context());
+      if (!measurement_log_->ring().try_push(r)) ++local_.records_dropped;
+    }
+  }
+}
+
 void Loop::note(core::TimeNs t, NoteCode code, std::int64_t a, double b) noexcept {
   if (!notes_.try_push(LoopNote{t, code, a, b})) {
     ++local_.notes_dropped;
@@ -462,6 +489,9 @@ void Loop::cycle(core::TimeNs wake_ns, bool stamp) {
     if (measurement_log_ == nullptr || !measurement_log_->ring().try_push(r)) {
       ++local_.records_dropped;
     }
+  }
+  if (measurement_log_ != nullptr && measurement_log_->face_probe().enabled()) {
+    log_face_probe(engine);
   }
 
   // State: export when it changed, at most every state_min_interval_s, never in hold mode (the

@@ -241,6 +241,9 @@ class Loop {
   void finish_cycle() noexcept;
   /// stamp: lock-step, every drained event gets wake_ns as its time.
   void cycle(core::TimeNs wake_ns, bool stamp = false);
+  /// Real-time safe: the cycle's events through the face probe's capture
+  /// (measurement_log_probe.hpp); a probe reading's row goes to the measurement log.
+  void log_face_probe(const core::engine::Engine& engine) noexcept;
   /// The buses' receipts of rt's writes in flight to its engine. Real-time safe.
   void take_receipts(const Runtime& rt, core::TimeNs wake_ns) noexcept;
   /// The swap of a pending configuration (cycle()'s first part). Real-time safe.

@@ -44,7 +44,8 @@ MeasurementLogWriter::MeasurementLogWriter(MeasurementLogOptions options)
     : options_(std::move(options)),
       directory_(options_.directory),
       header_(ml::csv_header(options_.context_columns)),
-      ring_(options_.ring_capacity) {
+      ring_(options_.ring_capacity),
+      face_probe_(options_.face_probe) {
   if (options_.context_columns.size() > core::kMaxContextValues) {
     throw std::invalid_argument("measurement log: at most " +
                                 std::to_string(core::kMaxContextValues) + " context columns");
@@ -58,7 +59,8 @@ MeasurementLogWriter::MeasurementLogWriter(MeasurementLogOptions options)
 MeasurementLogWriter::MeasurementLogWriter(std::string directory, std::uint64_t max_file_bytes,
                                            int keep_files, std::size_t ring_capacity)
     : MeasurementLogWriter(MeasurementLogOptions{
-          std::move(directory), max_file_bytes, keep_files, ring_capacity, {}, {}, true, 1.0}) {}
+          std::move(directory), max_file_bytes, keep_files, ring_capacity, {}, {}, true, 1.0, {}}) {
+}
 
 MeasurementLogWriter::~MeasurementLogWriter() { stop(); }
 

@@ -37,6 +37,7 @@
 #include "core/common/types.hpp"
 #include "core/engine/context.hpp"
 #include "core/rt/spsc_ring.hpp"
+#include "daemon/measurement_log_probe.hpp"
 #include "formats/measurement_log/measurement_log.hpp"
 
 namespace nccomp::daemon {
@@ -58,6 +59,8 @@ struct MeasurementLogOptions {
   bool monotonic_record_clock{true};
   /// Rows are flushed to the disk (fdatasync) at least this often [s]; 0 = after every batch.
   double fsync_interval_s{1.0};
+  /// Probe readings of the finished face as contour rows (measurement_log_probe.hpp).
+  FaceProbeConfig face_probe;
 };
 
 class MeasurementLogWriter {
@@ -85,6 +88,8 @@ class MeasurementLogWriter {
   void stamp(core::MeasurementRecord& r, const core::engine::MachineContext& c) const noexcept;
   /// Loop thread (producer).
   core::rt::SpscRing<core::MeasurementRecord>& ring() noexcept { return ring_; }
+  /// Loop thread: the face probe's capture (disabled unless configured).
+  FaceProbeCapture& face_probe() noexcept { return face_probe_; }
 
   [[nodiscard]] std::string current_path() const { return directory_ + "/measurements.csv"; }
   [[nodiscard]] const std::string& header() const noexcept { return header_; }
@@ -112,6 +117,7 @@ class MeasurementLogWriter {
   std::array<int, core::kMaxContextValues> sensors_{};
   std::size_t context_count_{0};
   core::rt::SpscRing<core::MeasurementRecord> ring_;
+  FaceProbeCapture face_probe_;
   int fd_{-1};
   std::uint64_t file_bytes_{0};
   std::string batch_;

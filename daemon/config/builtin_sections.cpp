@@ -6,6 +6,7 @@
 #include <utility>
 #include <vector>
 
+#include "daemon/measurement_log_probe.hpp"
 #include "drivers/loopback/loopback_bus.hpp"
 
 namespace nccomp::daemon::config {
@@ -164,8 +165,44 @@ class MeasurementLogParser final : public SectionParser {
           s->context_columns.push_back(col);
         }
       }
+      if (const toml::table* fp = r.table("face_probe")) {
+        TableReader f(*fp, "measurement_log.face_probe", diag);
+        s->has_face_probe = true;
+        const std::vector<double> xs = f.number_list("points_x_mm", -1e6, 1e6);
+        const std::vector<double> ys = f.number_list("points_y_mm", -1e6, 1e6);
+        if (xs.size() != ys.size() || xs.empty() || xs.size() > kMaxFaceProbePoints) {
+          diag.error(f.where("points_y_mm"),
+                     "points_x_mm and points_y_mm must list as many values, 1 to " +
+                         std::to_string(kMaxFaceProbePoints) + " (got " +
+                         std::to_string(xs.size()) + " and " + std::to_string(ys.size()) + ")");
+        } else {
+          for (std::size_t i = 0; i < xs.size(); ++i) {
+            s->face_probe_points_mm.push_back({xs[i], ys[i]});
+          }
+        }
+        s->face_probe_capture_radius_mm = f.number("capture_radius_mm", 1.0, 1e-3, 100.0);
+        s->face_probe_ball_radius_mm = f.number("ball_radius_mm", 0.0, 0.0, 100.0);
+        s->face_probe_length_register = f.string("length_register", std::nullopt);
+        s->face_probe_radius_register = f.string("radius_register", std::nullopt);
+        s->face_probe_length_where = f.where("length_register");
+        s->face_probe_radius_where = f.where("radius_register");
+      }
     }
     return s;
+  }
+  void cross_check(const Config& config, Diagnostics& diag) const override {
+    const MeasurementLogSection& s = measurement_log_section(config);
+    if (!s.has_face_probe) return;
+    const auto& regs = registers_section(config).registers;
+    const std::pair<const std::string*, const Where*> refs[] = {
+        {&s.face_probe_length_register, &s.face_probe_length_where},
+        {&s.face_probe_radius_register, &s.face_probe_radius_where}};
+    for (const auto& [name, where] : refs) {
+      if (name->empty()) continue;  // missing: reported by the parser
+      bool found = false;
+      for (const auto& r : regs) found = found || r.spec.name == *name;
+      if (!found) diag.error(*where, "no register named '" + *name + "' in [[registers]]");
+    }
   }
 };
 

@@ -3,6 +3,7 @@
 // comment above each, in config/nccompd.toml.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -57,6 +58,16 @@ struct MeasurementLogSection final : Section {
   std::string machine_id;
   /// Context columns after the v2 columns: a name and the sensor channel whose value is logged.
   std::vector<formats::measurement_log::ContextColumn> context_columns;
+  /// [measurement_log.face_probe]: probe readings of the finished face as contour rows. Empty
+  /// points = off; the registers are resolved by name when the daemon starts.
+  bool has_face_probe{false};
+  std::vector<std::array<double, 2>> face_probe_points_mm;
+  double face_probe_capture_radius_mm{1.0};
+  double face_probe_ball_radius_mm{0.0};
+  std::string face_probe_length_register;
+  std::string face_probe_radius_register;
+  formats::Where face_probe_length_where;
+  formats::Where face_probe_radius_where;
 };
 
 struct StatusSection final : Section {

@@ -1576,6 +1576,15 @@ def scenario_demo_loop(b, source, work):
         c.that(abs(coef - rate_um_per_mm) <= 0.15 * rate_um_per_mm,
                "its rate %.5f um/mm is ncsim's wear rate %.5f um/mm (within 15 %%)" % (
                    coef, rate_um_per_mm))
+    # Every probe reading of the first batch is a contour row, the face's edge passes (y = 0 and
+    # 30 mm, where the ball's centre lies 0.59 mm off the cut point) included.
+    probed = sorted((int(r["part"]), int(r["point"])) for r in read_csv_rows(
+        os.path.join(work, "batch1", "log", "measurements.csv")) if r["kind"] == "contour")
+    parts = sorted({p for p, _ in probed})
+    c.that(len(parts) == LOOP_FIRST_BATCH and
+           probed == [(p, k) for p in parts for k in range(LOOP_PROBE_POINTS)],
+           "first batch: %d contour rows, one per probed point of each part (%d x %d): %s" % (
+               len(probed), LOOP_FIRST_BATCH, LOOP_PROBE_POINTS, probed))
     m = res["model"]
     h = m.handover or {}
     c.that("configuration 2 is running" in m.daemon_log and h.get("handovers") == 1 and
@@ -1615,9 +1624,10 @@ def scenario_demo_loop(b, source, work):
     c.that(model_s["max_step_um"] <= 1.5 * creep_s["max_step_um"],
            "the model row's largest step %.3f um is within 1.5x the creep row's %.3f um" % (
                model_s["max_step_um"], creep_s["max_step_um"]))
-    # Issue 19's target is 1.5 um; without a measurement of the finished face the push-off the
-    # laser never sees (4.8-5.7 um on this part) stays: 6.24 um is what the loop reaches, and
-    # this bound holds it there (the same part with the initial model, nothing fitted: 8.72 um).
+    # Issue 19's target is 1.5 um. The push-off the laser never sees (4.8-5.7 um on this part) is
+    # fitted to the first batch's face probe rows (pushoff + pushoff_wear, kind contour, on the
+    # length wear register): 1.84 um is what the loop reaches (6.24 um without them), and this
+    # bound holds it there (the same part with the initial model, nothing fitted: 8.72 um).
     c.that(model_s["form"]["rms_um"] <= MODEL_ROW_RMS_BOUND_UM,
            "the model row's form RMS %.3f um is at most %.2f um (a regression bound; the issue's "
            "target: 1.5 um)" % (model_s["form"]["rms_um"], MODEL_ROW_RMS_BOUND_UM))
@@ -1762,10 +1772,15 @@ SCENARIOS = {
 LOOP_MODE = ("model", "creeping + the model from the analysis")
 LOOP_CONFIG = "nccompd-loop.toml"
 LOOP_FIRST_BATCH = 2
+# The first batch's probe cycle of the finished face (ncsim; nccompd-loop.toml's
+# [measurement_log.face_probe] logs each reading as a contour row): mid-X of passes 0, 8, 15,
+# 23 and 30.
+LOOP_PROBE_POINTS = 5
 SUMMARY_KEYS = ("mode", "max_step_um", "form_rms_um", "form_max_um")
-# The model row's form RMS in lock-step [um]: 6.24 reached (bench/results/e2e.md), with room for
-# the last digits the reload's landing cycle moves.
-MODEL_ROW_RMS_BOUND_UM = 6.5
+# The model row's form RMS in lock-step [um]: 1.84 reached with the push-off fitted to the face
+# probe's rows (bench/results/e2e.md), with room for the last digits the reload's landing cycle
+# moves. Issue 19's target, 1.5 um, is not reached.
+MODEL_ROW_RMS_BOUND_UM = 1.95
 
 
 # Real time: the loop's parts run this much faster than the four modes (the wear follows the
@@ -1779,6 +1794,7 @@ def run_first_batch(b, source, work, speed=None, echo=print):
     LOOP_FIRST_BATCH, so that the batch takes half a part's time of the four modes."""
     return run_machining(b, source, work, "batch1", LOOP_CONFIG, "ncsim-demo.toml",
                          parts=LOOP_FIRST_BATCH, echo=echo,
+                         sets=["program.mould_face.probe_points=%d" % LOOP_PROBE_POINTS],
                          speed=None if speed is None else speed * LOOP_SPEEDUP * LOOP_FIRST_BATCH)
 
 

@@ -38,10 +38,13 @@ class TrimZ final : public engine::Module {
 };
 
 // A model's tool_wear term on Z: the wear it predicts at the program path, rate × path, as a
-// trim of the sign the creep writes (−), all of it seen by the laser (tool_wear_trim_um()).
+// trim of the sign the creep writes (−), all of it seen by the laser (tool_wear_trim_um()); and
+// optionally a contour term (kind contour: the push-off a probe of the part sees), added to the
+// same trim but not seen by the laser, so not part of tool_wear_trim_um().
 class WearTrimZ final : public engine::Module, public engine::ToolWearTrimSource {
  public:
-  explicit WearTrimZ(double rate_um_per_mm) : rate_(rate_um_per_mm) {}
+  explicit WearTrimZ(double rate_um_per_mm, double contour_um = 0.0)
+      : rate_(rate_um_per_mm), contour_(contour_um) {}
   std::string_view name() const noexcept override { return "model"; }
   void attach(const engine::RegisterTable& /*registers*/) override {}
   void step(TimeNs now_ns, std::span<const Event> events, StepOutput& out) noexcept override {
@@ -50,7 +53,7 @@ class WearTrimZ final : public engine::Module, public engine::ToolWearTrimSource
       if (std::holds_alternative<ToolChange>(e)) tool_start_ = path_;  // a new tool's path
     }
     trim_ = -rate_ * (path_ - tool_start_);
-    out.trims.push(OffsetWrite{now_ns, 2, trim_});
+    out.trims.push(OffsetWrite{now_ns, 2, trim_ + contour_});
   }
   std::uint64_t trim_identity() const noexcept override { return 11; }
   double tool_wear_trim_um(std::uint16_t register_index) const noexcept override {
@@ -60,6 +63,7 @@ class WearTrimZ final : public engine::Module, public engine::ToolWearTrimSource
     if (register_index == 2) in_force_ = trim_;
   }
   double rate_;
+  double contour_;
   double path_{0.0};
   double tool_start_{0.0};
   double trim_{0.0};
@@ -98,7 +102,8 @@ struct Rig {
     std::vector<std::unique_ptr<engine::Module>> mods;
     mods.push_back(std::make_unique<CreepModule>(config));
     if (model != nullptr) mods.push_back(std::make_unique<TrimZ>(model->trim_, model->identity_));
-    if (wear_model != nullptr) mods.push_back(std::make_unique<WearTrimZ>(wear_model->rate_));
+    if (wear_model != nullptr)
+      mods.push_back(std::make_unique<WearTrimZ>(wear_model->rate_, wear_model->contour_));
     engine.configure({{"X_offset", RegisterKind::kAxisOffset, lim},
                       {"Y_offset", RegisterKind::kAxisOffset, lim},
                       {"Z_offset", RegisterKind::kAxisOffset, lim}},
@@ -286,6 +291,39 @@ TEST(CreepHandover, AToolWearTermIsNotCountedTwiceTheCreepLearnsItsResidual) {
   none.measure(kRate * 720.0);
   cut_to(none, 780.0);
   EXPECT_NEAR(none.z_um(), -72.0, 1e-9);
+}
+
+TEST(CreepHandover, AContourTermOnTheWearRegisterIsAddedOnTopAndNotLearnedAway) {
+  // GIVEN the creep alone, the wear measured at 120 mm (12 µm) and crept in.
+  Rig before(nullptr);
+  before.ev.emplace_back(ToolChange{before.now, 1, false});
+  cut_to(before, 120.0);
+  before.measure(kRate * 120.0);
+  cut_to(before, 175.0);
+  ASSERT_NEAR(before.z_um(), -12.0, 1e-9);
+  // WHEN a model with the wear term and a contour term of −3 µm on Z (the push-off, which the
+  // laser does not see: kind contour) is loaded.
+  constexpr double kContour = -3.0;
+  const WearTrimZ model(kRate, kContour);
+  Rig after(nullptr, &model);
+  after.take_over(before);
+  for (int i = 0; i < 5; ++i) after.advance(0.0);
+  EXPECT_LT(after.largest_z_change_um, 1e-9);
+  EXPECT_NEAR(after.z_um(), -12.0, 1e-9);
+  EXPECT_DOUBLE_EQ(after.engine.register_state(2).trim_um, -17.5 + kContour);
+  // THEN after each laser measurement the register holds the true wear plus the contour term:
+  // the creep takes only the tool_wear share as its own, the −3 µm stays on top.
+  for (const double at : {260.0, 360.0, 460.0}) {
+    cut_to(after, at);
+    after.measure(kRate * at);
+    cut_to(after, at + 60.0);
+    EXPECT_NEAR(after.z_um(), -kRate * (at + 60.0) + kContour, 1e-9)
+        << "60 mm after the measurement at " << at << " mm";
+    cut_to(after, at + 100.0);
+    EXPECT_NEAR(after.z_um(), -kRate * (at + 100.0) + kContour, 1e-9)
+        << "before the next measurement";
+  }
+  EXPECT_LT(after.largest_z_change_um, 0.21);  // the contour term crept in, no step
 }
 
 TEST(CreepHandover, AnotherToolStartsFromItsOwnWearAndTheModelsTrimForIt) {

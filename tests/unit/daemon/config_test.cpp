@@ -138,6 +138,52 @@ context_columns = [
   EXPECT_EQ(items[6].where.line, 9);
 }
 
+TEST(ConfigLoader, MeasurementLogFaceProbeIsReadAndItsMistakesAreNamed) {
+  TempDir d;
+  auto r = load_file(d.write("a.toml", std::string(R"([measurement_log.face_probe]
+points_x_mm = [30.0, 30]
+points_y_mm = [0.0, 8.0]
+capture_radius_mm = 0.5
+ball_radius_mm = 3.0
+length_register = "T1_length_wear"
+radius_register = "T1_length_wear"
+)") + kRegisters));
+  ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+  const auto& m = measurement_log_section(*r.config);
+  ASSERT_EQ(m.face_probe_points_mm.size(), 2U);
+  EXPECT_DOUBLE_EQ(m.face_probe_points_mm[1][0], 30.0);
+  EXPECT_DOUBLE_EQ(m.face_probe_points_mm[1][1], 8.0);
+  EXPECT_DOUBLE_EQ(m.face_probe_capture_radius_mm, 0.5);
+  EXPECT_DOUBLE_EQ(m.face_probe_ball_radius_mm, 3.0);
+  EXPECT_EQ(m.face_probe_length_register, "T1_length_wear");
+
+  r = load_file(d.write("b.toml", std::string(R"([measurement_log.face_probe]
+points_x_mm = [30.0, 30.0]
+points_y_mm = [0.0]
+length_register = "T1_length_wear"
+radius_register = "T1_length_wear"
+)") + kRegisters));
+  ASSERT_FALSE(r.config);
+  ASSERT_EQ(r.diagnostics.items().size(), 1U) << r.diagnostics.to_string();
+  EXPECT_EQ(r.diagnostics.items()[0].where.key_path, "measurement_log.face_probe.points_y_mm");
+  EXPECT_NE(r.diagnostics.items()[0].message.find("got 2 and 1"), std::string::npos);
+
+  // The register names are checked once every section parsed.
+  r = load_file(d.write("c.toml", std::string(R"([measurement_log.face_probe]
+points_x_mm = [30.0]
+points_y_mm = [0.0]
+length_register = "T1_length_wear"
+radius_register = "T1_radius_wear"
+)") + kRegisters));
+  ASSERT_FALSE(r.config);
+  const auto& items = r.diagnostics.items();
+  ASSERT_EQ(items.size(), 1U) << r.diagnostics.to_string();
+  EXPECT_EQ(items[0].where.key_path, "measurement_log.face_probe.radius_register");
+  EXPECT_EQ(items[0].where.line, 5);
+  EXPECT_NE(items[0].message.find("no register named 'T1_radius_wear'"), std::string::npos)
+      << items[0].message;
+}
+
 TEST(ConfigLoader, UnknownKeyNamesFileLineAndKeyPath) {
   TempDir d;
   const auto f =
