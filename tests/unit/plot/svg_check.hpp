@@ -38,23 +38,49 @@ inline std::string decode(std::string s) {
   return s;
 }
 
-/// Every element (opening or self-closing tag), in document order.
+/// Every element (opening or self-closing tag), in document order. A scan, not std::regex:
+/// libstdc++'s regex recurses once per character of a repeat, and a long path's `d` overflowed
+/// the stack in the ASan build at -O1.
 inline std::vector<Element> parse(const std::string& svg) {
   std::vector<Element> out;
-  static const std::regex tag(R"(<([a-z]+)((?:\s+[A-Za-z0-9:-]+="[^"]*")*)\s*(/?)>)");
-  static const std::regex attr(R"re(([A-Za-z0-9:-]+)="([^"]*)")re");
-  for (auto it = std::sregex_iterator(svg.begin(), svg.end(), tag); it != std::sregex_iterator();
-       ++it) {
+  const std::size_t n = svg.size();
+  auto space = [](char c) { return c == ' ' || c == '\t' || c == '\n' || c == '\r'; };
+  auto name_char = [](char c) {
+    return (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == ':' ||
+           c == '-';
+  };
+  for (std::size_t i = svg.find('<'); i != std::string::npos; i = svg.find('<', i + 1)) {
+    std::size_t p = i + 1;
+    while (p < n && svg[p] >= 'a' && svg[p] <= 'z') ++p;
+    if (p == i + 1) continue;
     Element e;
-    e.tag = (*it)[1];
-    const std::string attrs = (*it)[2];
-    for (auto a = std::sregex_iterator(attrs.begin(), attrs.end(), attr);
-         a != std::sregex_iterator(); ++a) {
-      e.attr[(*a)[1]] = (*a)[2];
+    e.tag = svg.substr(i + 1, p - i - 1);
+    bool closed = false;
+    bool self_closing = false;
+    while (p < n) {
+      std::size_t q = p;
+      while (q < n && space(svg[q])) ++q;
+      if (q < n && svg[q] == '>') {
+        closed = true;
+        p = q + 1;
+        break;
+      }
+      if (q + 1 < n && svg[q] == '/' && svg[q + 1] == '>') {
+        closed = self_closing = true;
+        p = q + 2;
+        break;
+      }
+      std::size_t k = q;
+      while (k < n && name_char(svg[k])) ++k;
+      if (q == p || k == q || k + 1 >= n || svg[k] != '=' || svg[k + 1] != '"') break;
+      const std::size_t value_end = svg.find('"', k + 2);
+      if (value_end == std::string::npos) break;
+      e.attr[svg.substr(q, k - q)] = svg.substr(k + 2, value_end - k - 2);
+      p = value_end + 1;
     }
-    if (e.tag == "text" && (*it)[3].length() == 0) {
-      const auto start = static_cast<std::size_t>(it->position() + it->length());
-      e.text = decode(svg.substr(start, svg.find("</text>", start) - start));
+    if (!closed) continue;
+    if (e.tag == "text" && !self_closing) {
+      e.text = decode(svg.substr(p, svg.find("</text>", p) - p));
     }
     out.push_back(std::move(e));
   }
