@@ -7,12 +7,14 @@
 // --json one JSON object per PHM 2010 row and strategy (one a line).
 //
 //   bench_creep_surface [--json] [--wear-noise UM_PER_SQRT_M] [--rate-noise UM_PER_MM_PER_SQRT_M]
-//                       [--max-sigma UM] [--sweep [--seeds N]]
+//                       [--max-sigma UM] [--adapt-window MEASUREMENTS]
+//                       [--sweep [--seeds N] [--min-interval-cuts CUTS]]
 //                       [PHM_DIR]
 // --sweep prints only the curve "measurements against RMS (second half)" of PHM c1, c4, c6
 // (L = 2 passes) as JSON rows: measured every k = 5..20 cuts, and measured when needed over a
 // range of bounds max_sigma_um, for three estimator strategies; each point the mean over N noise
-// draws (default 1: seed 2010, the seed of every other table).
+// draws (default 1: seed 2010, the seed of every other table); --min-interval-cuts sets the
+// lower limit of the interval measured when needed (default 1 cut, 108 mm).
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -155,6 +157,7 @@ int main(int argc, char** argv) {
   // estimate is no better than one measurement).
   double max_sigma_um = 1.0;
   int sweep_seeds = 1;
+  double min_interval_cuts = 1.0;
   for (int a = 1; a < argc; ++a) {
     const std::string arg = argv[a];
     if (arg == "--json") {
@@ -164,6 +167,10 @@ int main(int argc, char** argv) {
       g_sweep = true;
     } else if (arg == "--seeds" && a + 1 < argc) {
       sweep_seeds = std::max(1, std::stoi(argv[++a]));
+    } else if (arg == "--min-interval-cuts" && a + 1 < argc) {
+      min_interval_cuts = std::stod(argv[++a]);
+    } else if (arg == "--adapt-window" && a + 1 < argc) {
+      est.adapt_window_measurements = std::stod(argv[++a]);
     } else if (arg == "--wear-noise" && a + 1 < argc) {
       est.wear_noise_um_per_sqrt_m = std::stod(argv[++a]);
     } else if (arg == "--max-sigma" && a + 1 < argc) {
@@ -171,9 +178,11 @@ int main(int argc, char** argv) {
     } else if (arg == "--rate-noise" && a + 1 < argc) {
       est.rate_noise_um_per_mm_per_sqrt_m = std::stod(argv[++a]);
     } else if (arg.starts_with("-")) {
-      std::fprintf(stderr,
-                   "usage: bench_creep_surface [--json] [--wear-noise X] [--rate-noise X] "
-                   "[--max-sigma X] [--sweep [--seeds N]] [PHM_DIR]\n");
+      std::fprintf(
+          stderr,
+          "usage: bench_creep_surface [--json] [--wear-noise X] [--rate-noise X] "
+          "[--max-sigma X] [--adapt-window N] [--sweep [--seeds N] [--min-interval-cuts N]] "
+          "[PHM_DIR]\n");
       return 2;
     } else {
       phm_dir = arg;
@@ -302,8 +311,8 @@ int main(int argc, char** argv) {
     // Pairs of strategies() (measured every k cuts, measured when needed). One noise draw decides
     // where a schedule's measurements fall against the noise, so each point is the mean over
     // sweep_seeds draws (seeds 2010, 2011, ...).
-    const std::array<std::pair<std::size_t, std::size_t>, 3> sweep_pairs{
-        {{6, 9}, {10, 12}, {13, 15}}};
+    const std::array<std::pair<std::size_t, std::size_t>, 5> sweep_pairs{
+        {{6, 9}, {10, 12}, {13, 15}, {16, 18}, {19, 21}}};
     const auto mean_run = [&](Scenario sc, const Strategy& st, double& rms, double& meas,
                               double& step) {
       rms = meas = step = 0.0;
@@ -329,6 +338,7 @@ int main(int argc, char** argv) {
         for (int b = 6; b <= 30; ++b) {
           Scenario sc = make_scenario(name, 10, 2);
           sc.max_sigma_um = 0.1 * b;
+          sc.min_interval_mm = 108.0 * min_interval_cuts;
           mean_run(sc, strategies()[on_request], rms, meas, step);
           std::printf(
               "{\"cutter\": \"%s\", \"strategy\": \"%s\", \"schedule\": \"when needed\", "
