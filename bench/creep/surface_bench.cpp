@@ -3,12 +3,18 @@
 // corrected by the real core with today's strategies and the estimator's (issue 22), its process
 // noise configured, or learned from the two other PHM cutters (held out) and optionally adapted
 // within the tool's life, with the rate prior learned from them too or not; "measured when
-// needed" also with a bound held out from the two other cutters. Prints markdown tables, or with --json one JSON object per PHM 2010 row and strategy
-// (one a line).
+// needed" also with a bound held out from the two other cutters. Prints markdown tables, or with
+// --json one JSON object per PHM 2010 row and strategy (one a line).
 //
 //   bench_creep_surface [--json] [--wear-noise UM_PER_SQRT_M] [--rate-noise UM_PER_MM_PER_SQRT_M]
-//                       [--max-sigma UM]
+//                       [--max-sigma UM] [--adapt-window MEASUREMENTS]
+//                       [--sweep [--seeds N] [--min-interval-cuts CUTS]]
 //                       [PHM_DIR]
+// --sweep prints only the curve "measurements against RMS (second half)" of PHM c1, c4, c6
+// (L = 2 passes) as JSON rows: measured every k = 5..20 cuts, and measured when needed over a
+// range of bounds max_sigma_um, for three estimator strategies; each point the mean over N noise
+// draws (default 1: seed 2010, the seed of every other table); --min-interval-cuts sets the
+// lower limit of the interval measured when needed (default 1 cut, 108 mm).
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -27,6 +33,7 @@ namespace {
 using namespace nccomp::bench::creep;
 
 bool g_json = false;
+bool g_sweep = false;
 
 void print_header(const Scenario& sc) {
   if (g_json) return;
@@ -149,10 +156,21 @@ int main(int argc, char** argv) {
   // "Measured when needed": the bound on the estimate's σ (the laser's σ: measure when the
   // estimate is no better than one measurement).
   double max_sigma_um = 1.0;
+  int sweep_seeds = 1;
+  double min_interval_cuts = 1.0;
   for (int a = 1; a < argc; ++a) {
     const std::string arg = argv[a];
     if (arg == "--json") {
       g_json = true;
+    } else if (arg == "--sweep") {
+      g_json = true;
+      g_sweep = true;
+    } else if (arg == "--seeds" && a + 1 < argc) {
+      sweep_seeds = std::max(1, std::stoi(argv[++a]));
+    } else if (arg == "--min-interval-cuts" && a + 1 < argc) {
+      min_interval_cuts = std::stod(argv[++a]);
+    } else if (arg == "--adapt-window" && a + 1 < argc) {
+      est.adapt_window_measurements = std::stod(argv[++a]);
     } else if (arg == "--wear-noise" && a + 1 < argc) {
       est.wear_noise_um_per_sqrt_m = std::stod(argv[++a]);
     } else if (arg == "--max-sigma" && a + 1 < argc) {
@@ -160,50 +178,54 @@ int main(int argc, char** argv) {
     } else if (arg == "--rate-noise" && a + 1 < argc) {
       est.rate_noise_um_per_mm_per_sqrt_m = std::stod(argv[++a]);
     } else if (arg.starts_with("-")) {
-      std::fprintf(stderr,
-                   "usage: bench_creep_surface [--json] [--wear-noise X] [--rate-noise X] "
-                   "[--max-sigma X] [PHM_DIR]\n");
+      std::fprintf(
+          stderr,
+          "usage: bench_creep_surface [--json] [--wear-noise X] [--rate-noise X] "
+          "[--max-sigma X] [--adapt-window N] [--sweep [--seeds N] [--min-interval-cuts N]] "
+          "[PHM_DIR]\n");
       return 2;
     } else {
       phm_dir = arg;
     }
   }
-  if (!g_json) {
+  if (!g_sweep && !g_json) {
     std::printf(
         "## Synthetic faces\n\nTrue wear g(s) = 8·(1 − exp(−s/300 mm)) + 0.004·s µm "
         "(break-in, then linear); on the curved face w(θ, s) = g(s)·(0.6 + 0.8·sin θ) at "
         "engagement angle θ.\n");
   }
-  Scenario flat;
-  flat.name = "Flat face (tool axis normal to the face, wear at the tip, Z offset)";
-  flat.wear_um = [](double, double s) { return 8.0 * (1.0 - std::exp(-s / 300.0)) + 0.004 * s; };
-  print_header(flat);
-  print_rows(flat);
+  if (!g_sweep) {
+    Scenario flat;
+    flat.name = "Flat face (tool axis normal to the face, wear at the tip, Z offset)";
+    flat.wear_um = [](double, double s) { return 8.0 * (1.0 - std::exp(-s / 300.0)) + 0.004 * s; };
+    print_header(flat);
+    print_rows(flat);
 
-  Scenario flat_long = flat;
-  flat_long.name = "Flat face, creep length = measurement interval (L = 600 mm)";
-  flat_long.creep_length_mm = 600.0;
-  print_header(flat_long);
-  print_rows(flat_long);
+    Scenario flat_long = flat;
+    flat_long.name = "Flat face, creep length = measurement interval (L = 600 mm)";
+    flat_long.creep_length_mm = 600.0;
+    print_header(flat_long);
+    print_rows(flat_long);
 
-  Scenario flat_exact = flat;
-  flat_exact.name = "Flat face, noise-free measurement (σ = 0)";
-  flat_exact.noise_um = 0.0;
-  print_header(flat_exact);
-  print_rows(flat_exact);
+    Scenario flat_exact = flat;
+    flat_exact.name = "Flat face, noise-free measurement (σ = 0)";
+    flat_exact.noise_um = 0.0;
+    print_header(flat_exact);
+    print_rows(flat_exact);
 
-  Scenario curved = flat;
-  curved.name =
-      "Curved face (cylinder R 50 mm, normal ±60°, ball-end mill, 7 support points "
-      "0–90°, X/Z along the normal)";
-  curved.curved = true;
-  curved.edge_points = 7;
-  curved.wear_um = [](double theta_deg, double s) {
-    const double g = 8.0 * (1.0 - std::exp(-s / 300.0)) + 0.004 * s;
-    return g * (0.6 + 0.8 * std::sin(theta_deg * std::numbers::pi / 180.0));
-  };
-  print_header(curved);
-  print_rows(curved);
+    Scenario curved = flat;
+    curved.name =
+        "Curved face (cylinder R 50 mm, normal ±60°, ball-end mill, 7 support points "
+        "0–90°, X/Z along the normal)";
+    curved.curved = true;
+    curved.edge_points = 7;
+    curved.wear_um = [](double theta_deg, double s) {
+      const double g = 8.0 * (1.0 - std::exp(-s / 300.0)) + 0.004 * s;
+      return g * (0.6 + 0.8 * std::sin(theta_deg * std::numbers::pi / 180.0));
+    };
+    print_header(curved);
+    print_rows(curved);
+  }
 
   // ---- PHM 2010 -------------------------------------------------------------------------
   const double gamma_deg = 10.0;
@@ -285,6 +307,50 @@ int main(int argc, char** argv) {
     }
     return sc;
   };
+  if (g_sweep) {
+    // Pairs of strategies() (measured every k cuts, measured when needed). One noise draw decides
+    // where a schedule's measurements fall against the noise, so each point is the mean over
+    // sweep_seeds draws (seeds 2010, 2011, ...).
+    const std::array<std::pair<std::size_t, std::size_t>, 5> sweep_pairs{
+        {{6, 9}, {10, 12}, {13, 15}, {16, 18}, {19, 21}}};
+    const auto mean_run = [&](Scenario sc, const Strategy& st, double& rms, double& meas,
+                              double& step) {
+      rms = meas = step = 0.0;
+      for (int i = 0; i < sweep_seeds; ++i) {
+        sc.seed = 2010 + static_cast<std::uint64_t>(i);
+        const Result r = run(sc, st);
+        rms += r.rms_second_half_um / sweep_seeds;
+        meas += static_cast<double>(r.measurements) / sweep_seeds;
+        step = std::max(step, r.max_step_along_um);
+      }
+    };
+    for (const char* name : {"c1", "c4", "c6"}) {
+      for (const auto& [fixed, on_request] : sweep_pairs) {
+        double rms = 0.0, meas = 0.0, step = 0.0;
+        for (int k = 5; k <= 20; ++k) {
+          mean_run(make_scenario(name, k, 2), strategies()[fixed], rms, meas, step);
+          std::printf(
+              "{\"cutter\": \"%s\", \"strategy\": \"%s\", \"schedule\": \"every k cuts\", "
+              "\"k\": %d, \"seeds\": %d, \"rms_second_half_um\": %.6f, \"measurements\": %.2f, "
+              "\"max_step_along_pass_um\": %.6f}\n",
+              name, strategies()[fixed].name.c_str(), k, sweep_seeds, rms, meas, step);
+        }
+        for (int b = 6; b <= 30; ++b) {
+          Scenario sc = make_scenario(name, 10, 2);
+          sc.max_sigma_um = 0.1 * b;
+          sc.min_interval_mm = 108.0 * min_interval_cuts;
+          mean_run(sc, strategies()[on_request], rms, meas, step);
+          std::printf(
+              "{\"cutter\": \"%s\", \"strategy\": \"%s\", \"schedule\": \"when needed\", "
+              "\"max_sigma_um\": %.2f, \"seeds\": %d, \"rms_second_half_um\": %.6f, "
+              "\"measurements\": %.2f, \"max_step_along_pass_um\": %.6f}\n",
+              name, strategies()[fixed].name.c_str(), sc.max_sigma_um, sweep_seeds, rms, meas,
+              step);
+        }
+      }
+    }
+    return 0;
+  }
   const auto print_json = [](const char* name, int k, int passes_l, const std::string& strategy,
                              const Result& r, double max_sigma) {
     std::printf(

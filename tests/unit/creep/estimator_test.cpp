@@ -796,6 +796,41 @@ TEST(CreepEstimatorAdapt, TheRateNoiseFollowsTheToolsInnovations) {
   EXPECT_DOUBLE_EQ(fixed.comp.rate_q(), 1e-9);
 }
 
+/// Measures whenever the module asks (interval basis uncertainty, bound 1.5 µm, 50..1000 mm)
+/// from 0 to 6000 mm of cut path, with the exact wear; the number of measurements taken.
+std::size_t measurements_when_needed(const CreepConfig& base, double (*wear_um)(double)) {
+  CreepConfig c = base;
+  c.interval.basis = IntervalBasis::kUncertainty;
+  c.interval.max_sigma_um = 1.5;
+  c.interval.min_interval_mm = 50.0;
+  c.interval.max_interval_mm = 1000.0;
+  testing::Rig r(c);
+  for (double s = r.comp.next_measurement_path_mm(); s <= 6000.0;
+       s = r.comp.next_measurement_path_mm()) {
+    r.run_to(std::ceil(s));
+    r.measure({wear_um(r.program_path_mm)});
+  }
+  return r.comp.counters().measurements_accepted;
+}
+
+TEST(CreepEstimatorAdapt, WhenNeededMeasuresLessWhereTheWearIsSteadyThanWhereItAccelerates) {
+  // GIVEN two tools worn 60 µm over the same 6000 mm, measured exactly when the module asks at
+  // the same bound: one at a steady 0.01 µm/mm, one whose rate grows from 0 to 0.02 µm/mm
+  // (w = 60·(s/6000)²). The steady tool's innovations are below what the filter expects (q
+  // falls, the intervals reach the 1000 mm limit), the accelerating one's grow beyond it once
+  // the lag builds up (q rises, the intervals shrink).
+  const auto steady = [](double s) { return 0.01 * s; };
+  const auto accelerating = [](double s) { return 60.0 * (s / 6000.0) * (s / 6000.0); };
+  const std::size_t n_steady = measurements_when_needed(adapt_config(), steady);
+  const std::size_t n_accel = measurements_when_needed(adapt_config(), accelerating);
+  EXPECT_LT(n_steady, n_accel);
+  // With a fixed q the filter's covariance does not depend on the measured values: the same
+  // schedule for both tools, which is what the adaptation changes.
+  CreepConfig fixed = adapt_config();
+  fixed.estimator.adapt_rate_noise = false;
+  EXPECT_EQ(measurements_when_needed(fixed, steady), measurements_when_needed(fixed, accelerating));
+}
+
 TEST(CreepEstimatorAdapt, TheAdaptedNoiseSurvivesARestartAndANewToolStartsAfresh) {
   // GIVEN an adapting run saved after 8 measurements; WHEN a fresh process loads it and both
   // carry on with the same measurements; THEN the adapted q continues (not the configured one)
