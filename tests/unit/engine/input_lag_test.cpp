@@ -10,6 +10,7 @@
 #include <stdexcept>
 #include <vector>
 
+#include "core/engine/engine.hpp"
 #include "core/model/model.hpp"
 #include "tests/support/alloc_counter.hpp"
 
@@ -151,6 +152,75 @@ TEST(InputLag, UpdateIsAllocationFree) {
   (void)lags.save(buf);
   (void)lags.load(buf, from_seconds(200.0));
   EXPECT_EQ(scope.count(), 0U);
+}
+
+// A module that keeps the last sample of one sensor it was handed (what S3 or the model sees).
+class SensorWatcher final : public Module {
+ public:
+  explicit SensorWatcher(std::uint8_t sensor) : sensor_(sensor) {}
+  std::string_view name() const noexcept override { return "watcher"; }
+  void attach(const RegisterTable& /*registers*/) override {}
+  void step(TimeNs /*now_ns*/, std::span<const Event> events,
+            StepOutput& /*out*/) noexcept override {
+    for (const Event& e : events) {
+      if (const auto* t = std::get_if<TemperatureSample>(&e); t && t->sensor == sensor_) {
+        last = t->temperature_c;
+      }
+    }
+  }
+  double last{std::nan("")};
+
+ private:
+  std::uint8_t sensor_;
+};
+
+std::unique_ptr<Engine> lag_engine(double tau_s, SensorWatcher*& watcher) {
+  auto e = std::make_unique<Engine>();
+  auto w = std::make_unique<SensorWatcher>(40);
+  watcher = w.get();
+  std::vector<std::unique_ptr<Module>> mods;
+  mods.push_back(std::move(w));
+  EngineOptions options;
+  options.lags = {{5, 40, tau_s}};
+  e->configure({}, std::move(mods), options);
+  return e;
+}
+
+TEST(InputLagEngine, ModulesAndTheContextSeeTheLagAndARestartContinuesIt) {
+  const double tau = 900.0;
+  SensorWatcher* w1 = nullptr;
+  auto e1 = lag_engine(tau, w1);
+  InputLags reference = one_lag(tau);
+  StepOutput out;
+  double y = 0.0;
+  for (int k = 0; k <= 20; ++k) {
+    const double t = 60.0 * k;
+    const std::vector<Event> in{sample(t, 5, 20.0 + 0.5 * k)};
+    e1->step(from_seconds(t), in, out);
+    y = cycle(reference, t, in, 40);
+    ASSERT_DOUBLE_EQ(w1->last, y) << k;
+    ASSERT_DOUBLE_EQ(e1->context().temperature_c(40), y) << k;
+  }
+  EXPECT_DOUBLE_EQ(e1->input_lags().value(0), y);
+
+  std::vector<std::byte> buf(e1->state_capacity());
+  const std::size_t n = e1->export_state(buf);
+  ASSERT_GT(n, 0U);
+  SensorWatcher* w2 = nullptr;
+  auto e2 = lag_engine(tau, w2);
+  std::size_t skipped = 99;
+  ASSERT_TRUE(
+      e2->import_state(std::span<const std::byte>(buf.data(), n), from_seconds(1500.0), &skipped));
+  EXPECT_EQ(skipped, 0U);
+  e2->step(from_seconds(1500.0), {}, out);
+  EXPECT_DOUBLE_EQ(w2->last, cycle(reference, 1500.0, {}, 40));  // continued, not restarted
+}
+
+TEST(InputLagEngine, ConfigureRefusesABadLag) {
+  Engine e;
+  EngineOptions options;
+  options.lags = {{5, 40, 0.0}};
+  EXPECT_THROW(e.configure({}, {}, options), std::invalid_argument);
 }
 
 }  // namespace
