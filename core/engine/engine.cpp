@@ -29,6 +29,9 @@ constexpr std::string_view kHoldsEntry = "@holds";
 constexpr double kNoOffsetUm = 0.1;
 /// The event cursors' entry (cursors.hpp); an engine without cursors skips it as unknown.
 constexpr std::string_view kCursorsEntry = "@cursors";
+/// The derived lag inputs (input_lag.hpp). A state without it (an older daemon): each lag
+/// starts at its input's next value; an older engine skips it as unknown.
+constexpr std::string_view kLagsEntry = "@lags";
 /// Registers whose write was in flight (write receipts), by name: u32 count, then name and u8
 /// (1 = in flight) per register, a fixed size like "@holds". An older engine skips it.
 constexpr std::string_view kInFlightEntry = "@inflight";
@@ -258,6 +261,8 @@ void Engine::configure(std::vector<RegisterSpec> registers,
   }
   capacity += sizeof(std::uint16_t) + kCursorsEntry.size() + sizeof(std::uint32_t) +
               EventCursors::kStateBytes;
+  capacity +=
+      sizeof(std::uint16_t) + kLagsEntry.size() + sizeof(std::uint32_t) + InputLags::kStateBytes;
   capacity += sizeof(std::uint16_t) + kInFlightEntry.size() + 2 * sizeof(std::uint32_t);
   for (const auto& r : specs_) {
     capacity += sizeof(std::uint16_t) + r.name.size() + sizeof(std::uint8_t);
@@ -287,6 +292,12 @@ void Engine::configure(std::vector<RegisterSpec> registers,
   } catch (const std::invalid_argument& e) {
     throw std::invalid_argument(std::string("engine: measurement context: ") + e.what());
   }
+  InputLags lags;
+  try {
+    lags.configure(options.lags);
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(std::string("engine: input ") + e.what());
+  }
   // One writer per register: two modules on one register would overwrite each other's target
   // every cycle (an oscillating offset on the machine).
   std::vector<int> writer(specs_.size(), -1);
@@ -313,7 +324,8 @@ void Engine::configure(std::vector<RegisterSpec> registers,
   cursors_ = EventCursors{};
   for (auto& m : modules_) m->bind_context(context_);
   valid_.clear();
-  valid_.reserve(options.max_events_per_step);
+  lags_ = lags;
+  valid_.reserve(options.max_events_per_step + kMaxInputLags);
   trims_.assign(modules_.size() * regs_.size(), std::numeric_limits<double>::quiet_NaN());
   // The tool wear some trims predict, for the module that learns it from the tool measurement.
   std::vector<const ToolWearTrimSource*> wear_sources;
@@ -511,6 +523,12 @@ void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out)
       counters_.last_release_sequence = c->sequence;
       counters_.last_release_count = released;
     }
+  }
+  {
+    // The lags' samples after the cycle's events (capacity reserved in configure()).
+    const std::size_t n = valid_.size();
+    valid_.resize(n + lags_.size());
+    valid_.resize(lags_.update(now_ns, std::span<const Event>(valid_.data(), n), valid_, n));
   }
   const std::span<const Event> accepted(valid_.data(), valid_.size());
   // The context first: modules that evaluate it see this cycle's samples.
@@ -995,7 +1013,7 @@ std::size_t Engine::export_state(std::span<std::byte> buf) const noexcept {
     w.put(r.target_um);
     w.put(static_cast<std::uint8_t>(r.has_target ? 1 : 0));
   }
-  w.put(static_cast<std::uint32_t>(modules_.size() + 5));
+  w.put(static_cast<std::uint32_t>(modules_.size() + 6));
   w.put_name(kContextEntry);
   w.put(static_cast<std::uint32_t>(MachineContext::kStateBytes));
   if (!w.ok() || w.rest().size() < MachineContext::kStateBytes) {
@@ -1064,6 +1082,12 @@ std::size_t Engine::export_state(std::span<std::byte> buf) const noexcept {
     return 0;
   }
   w.skip(cursors_.save(w.rest()));
+  w.put_name(kLagsEntry);
+  w.put(static_cast<std::uint32_t>(InputLags::kStateBytes));
+  if (!w.ok() || w.rest().size() < InputLags::kStateBytes) {
+    return 0;
+  }
+  w.skip(lags_.save(w.rest()));
   for (const auto& m : modules_) {
     w.put_name(m->name());
     const std::span<std::byte> len_at = w.rest();
@@ -1152,6 +1176,12 @@ bool Engine::import_state(std::span<const std::byte> bytes, TimeNs now_ns,
       }
       if (name == kCursorsEntry) {
         if (pass == 1 && !cursors_.load(blob)) {
+          ++skip_count;
+        }
+        continue;
+      }
+      if (name == kLagsEntry) {
+        if (pass == 1 && !lags_.load(blob, now_ns)) {
           ++skip_count;
         }
         continue;

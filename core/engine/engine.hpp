@@ -81,6 +81,7 @@
 #include "core/common/types.hpp"
 #include "core/engine/context.hpp"
 #include "core/engine/cursors.hpp"
+#include "core/engine/input_lag.hpp"
 #include "core/engine/input_snapshot.hpp"
 #include "core/engine/tool_wear_trims.hpp"
 
@@ -287,6 +288,9 @@ struct EngineOptions {
   std::size_t max_events_per_step{256};
   /// The machine context's options, unless a module sets them (Module::context_options()).
   ContextOptions context{};
+  /// Derived lag inputs (input_lag.hpp): each cycle, after the validated events, one
+  /// TemperatureSample per lag on its output sensor; saved with the state (entry "@lags").
+  std::vector<InputLagSpec> lags{};
 };
 
 struct EngineCounters {
@@ -512,6 +516,8 @@ class Engine {
   [[nodiscard]] const EngineCounters& counters() const noexcept { return counters_; }
   /// The machine context (see the file comment). Real-time safe.
   [[nodiscard]] const MachineContext& context() const noexcept { return context_; }
+  /// The derived lag inputs (EngineOptions::lags). Real-time safe.
+  [[nodiscard]] const InputLags& input_lags() const noexcept { return lags_; }
   /// The event cursors (see the file comment). Real-time safe.
   [[nodiscard]] const EventCursors& event_cursors() const noexcept { return cursors_; }
 
@@ -559,6 +565,7 @@ class Engine {
   StepOutput scratch_{};
   MachineContext context_{};
   EventCursors cursors_{};
+  InputLags lags_{};
   EngineOptions options_{};
   EngineCounters counters_{};
   std::size_t state_capacity_{0};

@@ -1,5 +1,7 @@
 #include "daemon/config/builtin_sections.hpp"
 
+#include <cmath>
+#include <limits>
 #include <set>
 #include <stdexcept>
 #include <string>
@@ -356,6 +358,97 @@ class RampParser final : public SectionParser {
   }
 };
 
+// Reports each lag's current value (the last sample on its output sensor) on the status socket.
+class InputLagsModule final : public core::engine::Module {
+ public:
+  explicit InputLagsModule(const std::vector<InputLagEntry>& lags) {
+    for (const auto& e : lags) {
+      keys_.push_back("sensor_" + std::to_string(e.spec.output_sensor) + "_lag");
+      sensors_.push_back(e.spec.output_sensor);
+    }
+    values_.assign(lags.size(), std::numeric_limits<double>::quiet_NaN());
+  }
+  std::string_view name() const noexcept override { return "input_lags"; }
+  void attach(const core::engine::RegisterTable& /*registers*/) override {}
+  /// Real-time safe.
+  void step(core::TimeNs /*now_ns*/, std::span<const core::Event> events,
+            core::StepOutput& /*out*/) noexcept override {
+    for (const auto& e : events) {
+      const auto* t = std::get_if<core::TemperatureSample>(&e);
+      if (t == nullptr) continue;
+      for (std::size_t i = 0; i < sensors_.size(); ++i) {
+        if (sensors_[i] == t->sensor) values_[i] = t->temperature_c;
+      }
+    }
+  }
+  /// Real-time safe.
+  std::size_t status(std::span<core::engine::StatusValue> out) const noexcept override {
+    std::size_t n = 0;
+    for (std::size_t i = 0; i < keys_.size() && n < out.size(); ++i) {
+      if (std::isfinite(values_[i])) out[n++] = {keys_[i].c_str(), values_[i], nullptr};
+    }
+    return n;
+  }
+
+ private:
+  std::vector<std::string> keys_;
+  std::vector<std::uint8_t> sensors_;
+  std::vector<double> values_;
+};
+
+class InputLagsParser final : public SectionParser {
+ public:
+  std::string_view name() const noexcept override { return "input_lags"; }
+  std::unique_ptr<Section> parse(const toml::node& node, Diagnostics& diag) const override {
+    auto s = std::make_unique<InputLagsSection>();
+    const auto* arr = node.as_array();
+    if (arr == nullptr || !arr->is_array_of_tables()) {
+      diag.error(&node, "input_lags", "must be an array of tables ([[input_lags]])");
+      return s;
+    }
+    if (arr->size() > core::engine::kMaxInputLags) {
+      diag.error(&node, "input_lags",
+                 "at most " + std::to_string(core::engine::kMaxInputLags) + " entries");
+      return s;
+    }
+    for (std::size_t i = 0; i < arr->size(); ++i) {
+      const auto& t = *arr->get(i)->as_table();
+      const std::string path = "input_lags[" + std::to_string(i) + "]";
+      TableReader r(t, path, diag);
+      InputLagEntry e;
+      e.where = where_of(&t, path);
+      e.spec.output_sensor = static_cast<std::uint8_t>(r.integer("sensor", std::nullopt, 0, 255));
+      e.spec.input_sensor =
+          static_cast<std::uint8_t>(r.integer("input_sensor", std::nullopt, 0, 255));
+      e.spec.tau_s = r.number("tau_s", std::nullopt, 1e-3, 1e7);
+      if (e.spec.output_sensor == e.spec.input_sensor) {
+        diag.error(r.where("sensor"), "equals input_sensor: the lag needs a sensor of its own");
+      }
+      for (std::size_t j = 0; j < s->lags.size(); ++j) {
+        const auto& o = s->lags[j].spec;
+        if (o.output_sensor == e.spec.output_sensor) {
+          diag.error(r.where("sensor"), "sensor " + std::to_string(e.spec.output_sensor) +
+                                            " is already the lag of input_lags[" +
+                                            std::to_string(j) + "]");
+        }
+        if (o.input_sensor == e.spec.output_sensor || o.output_sensor == e.spec.input_sensor) {
+          diag.error(r.where("sensor"), "a lag of a lag (input_lags[" + std::to_string(j) +
+                                            "]): lag the sensor itself");
+        }
+      }
+      r.finish();
+      s->lags.push_back(std::move(e));
+    }
+    return s;
+  }
+  void add_modules(const Config& config,
+                   std::vector<std::unique_ptr<core::engine::Module>>& modules) const override {
+    if (const auto* s = config.find<InputLagsSection>("input_lags")) {
+      modules.push_back(std::make_unique<InputLagsModule>(s->lags));
+    }
+  }
+};
+
 class LoopbackParser final : public SectionParser {
  public:
   std::string_view name() const noexcept override { return "loopback"; }
@@ -394,6 +487,7 @@ void register_builtin_sections() {
   register_section(std::make_unique<RegistersParser>());
   register_section(std::make_unique<RampParser>());
   register_section(std::make_unique<LoopbackParser>());
+  register_section(std::make_unique<InputLagsParser>());
 }
 
 const DaemonSection& daemon_section(const Config& c) { return typed<DaemonSection>(c, "daemon"); }
@@ -418,9 +512,12 @@ std::unique_ptr<core::engine::Engine> build_engine(const Config& c) {
       p->add_modules(c, modules);
     }
   }
+  core::engine::EngineOptions options{daemon_section(c).max_events_per_cycle};
+  if (const auto* s = c.find<InputLagsSection>("input_lags")) {
+    for (const auto& e : s->lags) options.lags.push_back(e.spec);
+  }
   auto engine = std::make_unique<core::engine::Engine>();
-  engine->configure(std::move(regs), std::move(modules),
-                    core::engine::EngineOptions{daemon_section(c).max_events_per_cycle});
+  engine->configure(std::move(regs), std::move(modules), options);
   return engine;
 }
 

@@ -105,6 +105,16 @@ struct RampSection final : Section {
   std::vector<RampEntry> ramps;
 };
 
+struct InputLagEntry {
+  core::engine::InputLagSpec spec;
+  formats::Where where;
+};
+
+/// [[input_lags]]: derived sensors, the first-order lag of a sensor (core/engine/input_lag.hpp).
+struct InputLagsSection final : Section {
+  std::vector<InputLagEntry> lags;
+};
+
 struct LoopbackSection final : Section {
   std::size_t rx_capacity{1024};
   std::size_t tx_capacity{1024};

@@ -578,6 +578,74 @@ rate_um_per_s = 1
   EXPECT_EQ(e->module(0).name(), "ramp/commissioning");
 }
 
+TEST(ConfigLoader, InputLagsBuildTheEngineLagsAndAStatusModule) {
+  TempDir d;
+  const auto f = d.write("a.toml", std::string(kRegisters) + R"(
+[[input_lags]]
+sensor = 40
+input_sensor = 5
+tau_s = 1800
+)");
+  auto r = load_file(f);
+  ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+  auto e = build_engine(*r.config);
+  ASSERT_EQ(e->input_lags().size(), 1U);
+  EXPECT_EQ(e->input_lags().spec(0).input_sensor, 5);
+  EXPECT_EQ(e->input_lags().spec(0).output_sensor, 40);
+  EXPECT_DOUBLE_EQ(e->input_lags().spec(0).tau_s, 1800.0);
+  ASSERT_EQ(e->module_count(), 1U);
+  EXPECT_EQ(e->module(0).name(), "input_lags");
+  // Its status: the lag's value once its input has a sample.
+  core::StepOutput out;
+  const std::vector<core::Event> in{core::TemperatureSample{0, 5, 21.5}};
+  e->step(0, in, out);
+  std::array<core::engine::StatusValue, 4> st{};
+  ASSERT_EQ(e->module(0).status(st), 1U);
+  EXPECT_STREQ(st[0].key, "sensor_40_lag");
+  EXPECT_DOUBLE_EQ(st[0].value, 21.5);
+}
+
+TEST(ConfigLoader, InputLagErrorsNameFileLineAndKey) {
+  TempDir d;
+  const auto f = d.write("a.toml", std::string(kRegisters) + R"(
+[[input_lags]]
+sensor = 40
+input_sensor = 5
+tau_s = 0
+
+[[input_lags]]
+sensor = 40
+input_sensor = 6
+tau_s = 60
+
+[[input_lags]]
+sensor = 7
+input_sensor = 7
+tau_s = nan
+
+[[input_lags]]
+sensor = 41
+input_sensor = 40
+tau_s = 60
+)");
+  auto r = load_file(f);
+  const auto& items = r.diagnostics.items();
+  // Sensor 40 is the lag of both earlier entries: two errors for input_lags[3].
+  ASSERT_EQ(items.size(), 6U) << r.diagnostics.to_string();
+  EXPECT_EQ(items[0].where.key_path, "input_lags[0].tau_s");
+  EXPECT_EQ(items[0].where.line, 15);
+  EXPECT_EQ(items[1].where.key_path, "input_lags[1].sensor");
+  EXPECT_NE(items[1].message.find("already the lag of input_lags[0]"), std::string::npos);
+  EXPECT_EQ(items[2].where.key_path, "input_lags[2].tau_s");
+  EXPECT_EQ(items[3].where.key_path, "input_lags[2].sensor");
+  EXPECT_NE(items[3].message.find("equals input_sensor"), std::string::npos);
+  EXPECT_EQ(items[4].where.key_path, "input_lags[3].sensor");
+  EXPECT_NE(items[4].message.find("a lag of a lag"), std::string::npos);
+  EXPECT_EQ(items[5].where.key_path, "input_lags[3].sensor");
+  EXPECT_NE(r.diagnostics.to_string().find("a.toml:28:10: input_lags[3].sensor"), std::string::npos)
+      << r.diagnostics.to_string();
+}
+
 // The shipped examples load, with the bus sections registered (daemon/sections/modbus, can).
 TEST(ConfigExamples, ShippedConfigsLoad) {
   auto loop = load_file(std::string(NCCOMP_SOURCE_DIR) + "/config/nccompd-loopback.toml");
