@@ -132,6 +132,10 @@ def run(e2e, b, source, work, name="calib_touch", calibration=None):
         deadline = time.monotonic() + 30.0
         while time.monotonic() < deadline and not os.path.exists(ssock):
             time.sleep(0.05)
+        # The status socket answers before the loop's first cycle has published the calibration
+        # module's state; until then the daemon refuses calibrate ("its loop has not started").
+        while time.monotonic() < deadline and _phase(b, ssock)[0] == "?":
+            time.sleep(0.05)
         # 1. begin; ncsim touches the reference disk on the request.
         transcript.append(_calibrate(e2e, b, ssock, ["begin", "await test-grind-lateral 120"],
                                      run_dir))
