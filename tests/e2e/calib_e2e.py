@@ -38,7 +38,14 @@ REG = {"x": 6, "y": 7, "z": 8, "request": 5}
 
 
 def _calibrate(e2e, b, sock, script_lines, cwd, timeout_s=60.0):
-    """Runs `nccomp calibrate --daemon sock --script -` with these lines; returns its output."""
+    """Runs `nccomp calibrate --daemon sock --script -` with these lines; returns its output.
+    The client's own `await PHASE S` lines wait up to S seconds each: the process gets those on
+    top of timeout_s, so that a slow machine fails on the client's await, which names the phase,
+    and never on this wrapper's timeout first."""
+    for line in script_lines:
+        parts = line.split()
+        if len(parts) == 3 and parts[0] == "await":
+            timeout_s += float(parts[2])
     p = subprocess.run([b.nccomp, "calibrate", "--daemon", sock, "--script", "-"],
                        input="\n".join(script_lines) + "\n", capture_output=True, text=True,
                        timeout=timeout_s, cwd=cwd)
@@ -56,8 +63,13 @@ def _rows(path):
 
 
 def _phase(b, sock):
-    p = subprocess.run([b.nccomp, "calibrate", "--daemon", sock, "--script", "-"],
-                       input="status\n", capture_output=True, text=True, timeout=30)
+    """The calibration's phase from `calibrate status` ("?" when the daemon did not answer with
+    one: not started yet, or the client timed out on a loaded machine; callers poll)."""
+    try:
+        p = subprocess.run([b.nccomp, "calibrate", "--daemon", sock, "--script", "-"],
+                           input="status\n", capture_output=True, text=True, timeout=30)
+    except subprocess.TimeoutExpired:
+        return "?", ""
     m = re.search(r"\] phase ([a-z-]+)", p.stdout)
     return (m.group(1) if m else "?"), p.stdout
 
@@ -122,12 +134,31 @@ def run(e2e, b, source, work, name="calib_touch", calibration=None):
     t0 = time.monotonic()
     sim = daemon = None
     try:
-        sim = e2e.Proc("ncsim", sim_argv, os.path.join(run_dir, "ncsim.log"), run_dir)
-        deadline = time.monotonic() + 30.0
-        while time.monotonic() < deadline and sim.running() and not os.path.exists(lsock):
-            time.sleep(0.02)
-        if not sim.running():
-            raise RuntimeError("ncsim ended at start:\n%s" % sim.log())
+        for attempt in range(3):
+            sim = e2e.Proc("ncsim", sim_argv, os.path.join(run_dir, "ncsim.log"), run_dir)
+            deadline = time.monotonic() + 30.0
+            while time.monotonic() < deadline and sim.running() and not os.path.exists(lsock):
+                time.sleep(0.02)
+            if sim.running():
+                break
+            # The port free_port() found can be taken by another test's process before ncsim
+            # binds it (tests run two at a time): start again on a new port, never otherwise.
+            log = sim.log()
+            sim.stop()
+            if os.path.exists(lsock):
+                os.unlink(lsock)
+            if "in use" not in log or attempt == 2:
+                raise RuntimeError("ncsim ended at start:\n%s" % log)
+            print("%s: ncsim's port %d was taken before it bound it; again on a new one" %
+                  (name, port))
+            old_port, port = port, e2e.free_port()
+            with open(map_path) as f:
+                text = f.read()
+            text, n = re.subn(r"^port = %d$" % old_port, "port = %d" % port, text, flags=re.M)
+            if n != 1:
+                raise RuntimeError("map.toml: expected one 'port = %d' line" % old_port)
+            with open(map_path, "w") as f:
+                f.write(text)
         daemon = e2e.Proc("nccompd", daemon_argv, os.path.join(run_dir, "nccompd.log"), run_dir)
         deadline = time.monotonic() + 30.0
         while time.monotonic() < deadline and not os.path.exists(ssock):
@@ -158,10 +189,12 @@ def run(e2e, b, source, work, name="calib_touch", calibration=None):
         sim_rc = sim.wait(600.0)
         if sim_rc is None:
             raise RuntimeError("ncsim did not finish within 600 s\n%s" % daemon.log()[-3000:])
-        daemon_rc = daemon.wait(15.0)
+        # nccompd ends on ncsim's BYE; under ASan its exit (leak check, state file) can take
+        # some seconds on a loaded machine.
+        daemon_rc = daemon.wait(60.0)
         if daemon_rc is None:
             daemon_rc = daemon.stop()
-            raise RuntimeError("nccompd did not end after ncsim's BYE")
+            raise RuntimeError("nccompd did not end within 60 s of ncsim's BYE")
     finally:
         for p in (daemon, sim):
             if p is not None:
