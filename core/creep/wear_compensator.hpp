@@ -186,6 +186,12 @@ class WearCompensator {
   /// Program path where a sister tool should restart [mm] (NaN if unknown).
   [[nodiscard]] double restart_program_path_mm() const noexcept;
   [[nodiscard]] bool halted() const noexcept { return s_.halted; }
+  /// True if the last axis sample said the tool is cutting (and no interruption since); false
+  /// also before the first sample after a restore (motion_known()).
+  [[nodiscard]] bool cutting() const noexcept { return cutting_; }
+  /// True once an axis sample has come since the state was restored (configure(),
+  /// restore_state()): only then does cutting() tell what the tool does.
+  [[nodiscard]] bool motion_known() const noexcept { return have_sample_; }
   [[nodiscard]] const CreepState& state() const noexcept { return s_; }
   [[nodiscard]] const CreepCounters& counters() const noexcept { return counters_; }
   [[nodiscard]] const CreepConfig& config() const noexcept { return config_; }
