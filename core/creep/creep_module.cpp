@@ -293,12 +293,14 @@ bool CreepModule::fade_out_shift(std::size_t ch, double delta_um, bool handover)
   // register's total does not move.
   s.channel_output_um[ch] = output_um;
   const bool rearming = comp_.rearming();
+  const bool between_parts = comp_.between_parts();
   // The kinematics re-anchor on the next axis sample: keeping the tool's motion through the
   // rebase made the CAN VM's handover step 1.7-2.0 um between two frames
   // (NccompdCan.ModelLoadAndRollbackHandOverOnTheCreepsRegisterWithoutAStep).
   if (!comp_.restore_state(s)) return false;
   comp_.restore_adoption(a);
   if (rearming) comp_.rearm_request();
+  comp_.restore_between_parts(between_parts);
   return true;
 }
 
@@ -311,13 +313,17 @@ void CreepModule::finish_handover_fade(TimeNs now_ns) noexcept {
     handover_fade_um_.fill(0.0);  // over (or cleared by a tool change)
     return;
   }
-  // A surface is cut only while the tool cuts: with the tool known to stand or move in the air,
-  // the fade has nothing to keep free of steps. Not known (no sample since a restore), halted
-  // (the creep holds what the NC has), held (the fade has not started): it goes on as it is.
+  // Between two parts (a part ended, or one started and its first cut has not come yet) no
+  // surface is being cut: the fade has nothing to keep free of steps. Between two passes or at
+  // the laser within a part it has: the passes side by side are one surface, and a change
+  // between them is a ridge (what the creep avoids by spreading its changes over passes). Not
+  // known (no part event since a restore), the tool cutting or its motion not known (no sample
+  // since a restore), halted (the creep holds what the NC has), held (the fade has not started):
+  // it goes on as it is.
   bool held = false;
   for (const auto h : a.held) held = held || h != 0;
-  if (!comp_.motion_known() || comp_.cutting() || comp_.halted() || held || !have_last_step_ ||
-      now_ns <= last_step_ns_) {
+  if (!comp_.between_parts() || !comp_.motion_known() || comp_.cutting() || comp_.halted() ||
+      held || !have_last_step_ || now_ns <= last_step_ns_) {
     return;
   }
   const auto& c = comp_.config();
@@ -399,9 +405,14 @@ void CreepModule::step(TimeNs now_ns, std::span<const Event> events, StepOutput&
   const std::size_t alarms_before = out.alarms.size();
   const std::size_t writes_before = out.writes.size();
   const std::int32_t tool_before = comp_.state().tool;
-  // What is left of a trim handover's fade comes in at once while the tool does not cut (as of
-  // the last sample), in this step's targets.
-  finish_handover_fade(now_ns);
+  // What is left of a trim handover's fade comes in at once between parts (as of the last step;
+  // not if a sample of this step cuts), in this step's targets.
+  bool cuts_now = false;
+  for (const Event& e : events) {
+    const auto* a = std::get_if<AxisSample>(&e);
+    cuts_now = cuts_now || (a != nullptr && a->cutting);
+  }
+  if (!cuts_now) finish_handover_fade(now_ns);
   last_step_ns_ = now_ns;
   have_last_step_ = true;
   comp_.step(now_ns, events, out);

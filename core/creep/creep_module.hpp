@@ -115,12 +115,12 @@ class CreepModule final : public engine::Module, public engine::ToolWearTrimUser
   /// change of trims the laser does not see, e.g. contour terms) moves the compensator's output and
   /// fades out along the creep profile over one creep span from the current creep clock, as an
   /// adopted value does (AdoptedOutputs): such a trim comes in without a step. That fade is only
-  /// needed while a surface is being cut: from the next step on, whenever an axis sample says
-  /// the tool is not cutting (between passes, parts, at the laser), what is left of it comes in
-  /// at once, as fast as the creep's limiter lets it (finish_handover_fade()); while cutting it
-  /// goes on along the creep. Started without state and not yet measured: that part is held
-  /// until the next measurement. The kinematics re-anchor on the next axis sample (one cycle's
-  /// cut path is not counted). False for a flag register or a value beyond max_abs_um.
+  /// needed while a surface is being cut: between parts (a part start or end since the last
+  /// cutting sample, the tool not cutting), what is left of it comes in at once, as fast as the
+  /// creep's limiter lets it (finish_handover_fade()); within a part (cutting, between passes,
+  /// at the laser) it goes on along the creep. Started without state and not yet measured: that
+  /// part is held until the next measurement. The kinematics re-anchor on the next axis sample (one
+  /// cycle's cut path is not counted). False for a flag register or a value beyond max_abs_um.
   /// Real-time safe.
   bool rebase_output(std::uint16_t register_index, double delta_um,
                      TimeNs now_ns) noexcept override;
@@ -187,7 +187,7 @@ class CreepModule final : public engine::Module, public engine::ToolWearTrimUser
   /// (rebase_output()), counted in handover_fade_um_; else a residual sync's, which pairs with
   /// the creep of the measurement and must fade. False beyond max_abs_um.
   bool fade_out_shift(std::size_t ch, double delta_um, bool handover) noexcept;
-  /// While the tool is known not to cut (an axis sample since the last restore said so): takes
+  /// Between parts (WearCompensator::between_parts(), the last axis sample not cutting): takes
   /// what is left of the handovers' share of the fade (handover_fade_um_) out of the fade, so
   /// that it is in force at once, by at most half of what the creep's limiter lets through in
   /// one cycle (max_step_um, max_rate_um_per_s over the last cycle's time) per channel and step:

@@ -457,21 +457,22 @@ TEST(CreepHandover, TheCreepsLimiterGoesOnFromTheValueInForceThroughTheSwap) {
 namespace nccomp::core::creep {
 namespace {
 
-// Between cuts (the model swap comes between parts or passes) there is no surface to keep free
-// of steps: a handover's fade comes in at once while the tool does not cut, through the
-// limiter; while cutting it fades as before.
+// Between parts there is no surface to keep free of steps: a handover's fade comes in at once
+// while the tool does not cut between two parts, through the limiter; within a part (cutting,
+// between passes) it fades as before.
 
-// GIVEN the creep holds Z at −12 µm, the tool standing out of the cut
+// GIVEN the creep holds Z at −12 µm, a part started and the tool not cutting yet
 // WHEN a model whose trim on Z is −10 µm is loaded
 // THEN Z goes to −22 µm at once (one write, the cycle after the rebase's sample), and stays
 //      there when the cut starts (nothing fades in over it any more)
-TEST(CreepHandover, ATrimLoadedBetweenCutsIsInForceAtOnce) {
+TEST(CreepHandover, ATrimLoadedBetweenPartsIsInForceAtOnce) {
   Rig before(nullptr);
   wear_in(before);
   const TrimZ model(-10.0, 7);
   Rig after(&model);
   after.take_over(before);
   after.cutting = false;
+  after.ev.emplace_back(ProgramEvent{after.now, ProgramEventKind::kPartStart, 2});
   after.advance(0.0);  // the switch: the register keeps its total
   EXPECT_NEAR(after.z_um(), -12.0, 1e-9);
   after.advance(0.0);  // the kinematics re-anchor: not cutting
@@ -493,10 +494,34 @@ TEST(CreepHandover, ATrimLoadedBetweenCutsIsInForceAtOnce) {
   EXPECT_NEAR(after.z_um(), -25.0, 1e-9);
 }
 
+// GIVEN a part started, the tool not cutting yet
+// WHEN the running daemon reloads with the model (the reload's new engine takes the state and
+//      the tool's motion, which carries "between parts")
+// THEN the trim is in force before the cut, as without the reload
+TEST(CreepHandover, AReloadBetweenPartsCarriesItIntoTheNewEngine) {
+  Rig before(nullptr);
+  wear_in(before);
+  before.cutting = false;
+  before.ev.emplace_back(ProgramEvent{before.now, ProgramEventKind::kPartStart, 2});
+  before.advance(0.0);
+  ASSERT_TRUE(before.creep().compensator().between_parts());
+  const TrimZ model(-10.0, 7);
+  Rig after(&model);
+  after.take_over(before);
+  after.cutting = false;
+  std::vector<std::byte> motion(engine::kMotionBytes);
+  motion.resize(before.engine.export_motion(motion));
+  ASSERT_EQ(after.engine.import_motion(motion), 2U);
+  for (int i = 0; i < 3; ++i) after.advance(0.0);
+  EXPECT_NEAR(after.z_um(), -22.0, 1e-9);
+  EXPECT_EQ(after.slewed, 0);
+}
+
 // GIVEN the trim of −10 µm fading in along the cut (half of it in after 25 of 50 mm)
-// WHEN the cut ends
-// THEN the other half comes in at once; the next cut starts at −22 µm
-TEST(CreepHandover, AFadeInProgressWhenTheCutEndsIsFinishedAtOnce) {
+// WHEN the cut ends between two passes: THEN the fade waits (the next pass lies beside the last:
+//      one surface, no ridge between them); WHEN the part ends: THEN the other half comes in at
+//      once, and the next part's cut starts at −22 µm
+TEST(CreepHandover, AFadeInProgressWhenThePartEndsIsFinishedAtOnce) {
   Rig before(nullptr);
   wear_in(before);
   const TrimZ model(-10.0, 7);
@@ -508,8 +533,11 @@ TEST(CreepHandover, AFadeInProgressWhenTheCutEndsIsFinishedAtOnce) {
   ASSERT_NEAR(after.z_um(), -17.0, 1e-9);
   EXPECT_LT(after.largest_z_change_um, 0.21);  // crept while cutting
   after.cutting = false;
-  after.advance(0.0);
-  after.advance(0.0);
+  for (int i = 0; i < 5; ++i) after.advance(0.5);  // the link to the next pass
+  EXPECT_NEAR(after.z_um(), -17.0, 1e-9);
+  after.ev.emplace_back(ProgramEvent{after.now, ProgramEventKind::kPartEnd, 1});
+  after.advance(0.0);  // the part end
+  after.advance(0.0);  // the fade's rest comes in
   EXPECT_NEAR(after.z_um(), -22.0, 1e-9);
   after.cutting = true;
   for (int i = 0; i < 60; ++i) after.advance(0.5);
@@ -518,7 +546,7 @@ TEST(CreepHandover, AFadeInProgressWhenTheCutEndsIsFinishedAtOnce) {
 }
 
 // GIVEN a trim loaded while cutting, 25 of its 50 mm faded in (−17 µm)
-// WHEN the daemon restarts (same model: no handover) with the tool out of the cut
+// WHEN the daemon restarts (same model: no handover) and the next part starts
 // THEN what is left of the fade goes on along the creep from −17 µm (the restarted process does
 //      not know it was a handover's: it is not applied at once) and ends at −22 µm, never beyond;
 //      AND a trim finished at once before a restart is not applied again after it
@@ -536,6 +564,7 @@ TEST(CreepHandover, ARestartDoesNotApplyTheHandoverTwice) {
   Rig restarted(&model);
   restarted.take_over(loaded);
   restarted.cutting = false;
+  restarted.ev.emplace_back(ProgramEvent{restarted.now, ProgramEventKind::kPartStart, 2});
   for (int i = 0; i < 5; ++i) restarted.advance(0.0);
   EXPECT_EQ(restarted.engine.counters().handover_rebases, 0U);
   EXPECT_NEAR(restarted.z_um(), -17.0, 1e-9);
@@ -546,15 +575,17 @@ TEST(CreepHandover, ARestartDoesNotApplyTheHandoverTwice) {
   }
   EXPECT_NEAR(restarted.z_um(), -22.0, 1e-9);
 
-  // Finished at once between cuts, then a restart: −22 µm stays, cut or not.
+  // Finished at once between parts, then a restart: −22 µm stays, cut or not.
   Rig at_once(&model);
   at_once.take_over(before);
   at_once.cutting = false;
+  at_once.ev.emplace_back(ProgramEvent{at_once.now, ProgramEventKind::kPartStart, 2});
   for (int i = 0; i < 3; ++i) at_once.advance(0.0);
   ASSERT_NEAR(at_once.z_um(), -22.0, 1e-9);
   Rig again(&model);
   again.take_over(at_once);
   again.cutting = false;
+  again.ev.emplace_back(ProgramEvent{again.now, ProgramEventKind::kPartStart, 3});
   for (int i = 0; i < 5; ++i) again.advance(0.0);
   EXPECT_NEAR(again.z_um(), -22.0, 1e-9);
   again.cutting = true;
@@ -565,7 +596,7 @@ TEST(CreepHandover, ARestartDoesNotApplyTheHandoverTwice) {
 }
 
 // GIVEN the registers' limiter (and so the creep's) at 5 µm per write, or at 200 µm/s (2 µm per
-//      10 ms cycle), the tool out of the cut
+//      10 ms cycle), between parts
 // WHEN the −10 µm trim is loaded
 // THEN it comes in at half of what one write may move per cycle (2.5 µm, 1 µm): no write beyond
 //      the limits and none slewed; −22 µm in the end
@@ -579,6 +610,7 @@ TEST(CreepHandover, TheLimiterBoundsATrimInForceAtOnce) {
     Rig after(&model, nullptr, module_config(), lim);
     after.take_over(before);
     after.cutting = false;
+    after.ev.emplace_back(ProgramEvent{after.now, ProgramEventKind::kPartStart, 2});
     after.largest_z_change_um = 0.0;
     int steps = 0;
     for (; steps < 40 && std::fabs(after.z_um() + 22.0) > 1e-9; ++steps) after.advance(0.0);
