@@ -182,6 +182,7 @@ void CreepModule::attach(const engine::RegisterTable& registers) {
     }
   }
   comp_.configure(c);  // validates: core::ConfigInvalid naming the keys
+  handover_fade_um_.fill(0.0);
   fade_table_ = ProfileTable{};
   if (c.profile == ProfileShape::kTable) {
     std::copy(c.profile_table.begin(), c.profile_table.end(), fade_table_.f.begin());
@@ -210,7 +211,7 @@ bool CreepModule::rebase_output(std::uint16_t register_index, double delta_um,
         c.limiter.max_abs_um)) {
     return false;
   }
-  if (std::fabs(fade_um) > 1e-12 && !fade_out_shift(ch, fade_um)) return false;
+  if (std::fabs(fade_um) > 1e-12 && !fade_out_shift(ch, fade_um, true)) return false;
   residual_.shift_um[ch] = shift_um;
   ++generation_;
   return true;
@@ -238,7 +239,7 @@ void CreepModule::sync_residual(bool direct, TimeNs now_ns, StepOutput& out) noe
       out.writes.push(OffsetWrite{now_ns, static_cast<std::uint16_t>(reg),
                                   comp_.state().channel_output_um[ch] + target_um});
       ++generation_;
-    } else if (fade_out_shift(ch, -d_um)) {
+    } else if (fade_out_shift(ch, -d_um, false)) {
       // The total stays where it is now and reaches the new shift along the creep profile.
       residual_.shift_um[ch] = target_um;
       ++generation_;
@@ -246,7 +247,7 @@ void CreepModule::sync_residual(bool direct, TimeNs now_ns, StepOutput& out) noe
   }
 }
 
-bool CreepModule::fade_out_shift(std::size_t ch, double delta_um) noexcept {
+bool CreepModule::fade_out_shift(std::size_t ch, double delta_um, bool handover) noexcept {
   const auto& c = comp_.config();
   CreepState s = comp_.export_state();
   const double output_um = s.channel_output_um[ch] + delta_um;
@@ -275,6 +276,9 @@ bool CreepModule::fade_out_shift(std::size_t ch, double delta_um) noexcept {
     for (std::size_t k = 0; k < kChannelCount; ++k) {
       a.fade_um[k] = (a.fading != 0 ? rest * a.fade_um[k] : 0.0) + (k == ch ? delta_um : 0.0);
       largest = std::max(largest, std::fabs(a.fade_um[k]));
+      // The handovers' share goes on with the same rest (the sum of the shares is fade_um).
+      handover_fade_um_[k] = (a.fading != 0 ? rest * handover_fade_um_[k] : 0.0) +
+                             (handover && k == ch ? delta_um : 0.0);
     }
     double span = c.creep_length_mm;
     if (c.creep_basis == CreepBasis::kTime) span = c.creep_time_s;
@@ -289,13 +293,70 @@ bool CreepModule::fade_out_shift(std::size_t ch, double delta_um) noexcept {
   // register's total does not move.
   s.channel_output_um[ch] = output_um;
   const bool rearming = comp_.rearming();
+  const bool between_parts = comp_.between_parts();
   // The kinematics re-anchor on the next axis sample: keeping the tool's motion through the
   // rebase made the CAN VM's handover step 1.7-2.0 um between two frames
   // (NccompdCan.ModelLoadAndRollbackHandOverOnTheCreepsRegisterWithoutAStep).
   if (!comp_.restore_state(s)) return false;
   comp_.restore_adoption(a);
   if (rearming) comp_.rearm_request();
+  comp_.restore_between_parts(between_parts);
   return true;
+}
+
+void CreepModule::finish_handover_fade(TimeNs now_ns) noexcept {
+  bool any = false;
+  for (const double h : handover_fade_um_) any = any || std::fabs(h) > 0.0;
+  if (!any) return;
+  AdoptedOutputs a = comp_.adoption();
+  if (a.fading == 0) {
+    handover_fade_um_.fill(0.0);  // over (or cleared by a tool change)
+    return;
+  }
+  // Between two parts (a part ended, or one started and its first cut has not come yet) no
+  // surface is being cut: the fade has nothing to keep free of steps. Between two passes or at
+  // the laser within a part it has: the passes side by side are one surface, and a change
+  // between them is a ridge (what the creep avoids by spreading its changes over passes). Not
+  // known (no part event since a restore), the tool cutting or its motion not known (no sample
+  // since a restore), halted (the creep holds what the NC has), held (the fade has not started):
+  // it goes on as it is.
+  bool held = false;
+  for (const auto h : a.held) held = held || h != 0;
+  if (!comp_.between_parts() || !comp_.motion_known() || comp_.cutting() || comp_.halted() ||
+      held || !have_last_step_ || now_ns <= last_step_ns_) {
+    return;
+  }
+  const auto& c = comp_.config();
+  const CreepState& s = comp_.state();
+  const double clock = a.fade_path_based != 0 ? s.creep_path_mm : s.creep_time_s;
+  const double u = a.fade_span > 0.0 ? (clock - a.fade_start) / a.fade_span : 1.0;
+  const double rest = 1.0 - profile_fraction(c.profile, u, &fade_table_);
+  if (!(rest > 0.0)) return;  // apply_adoption() ends it in this step
+  // The creep's limiter lets min(max_step_um, max_rate_um_per_s · Δt) through in one write
+  // (Δt this step's cycle): half of it per step, so that the write passes as it is even if the
+  // rest of the target moves too (the register's own limits are at least the creep's).
+  const double allowed_um =
+      0.5 * std::min(c.limiter.max_step_um,
+                     c.limiter.max_rate_um_per_s * seconds(now_ns - last_step_ns_));
+  if (!(allowed_um > 0.0)) return;
+  bool fading = false;
+  for (std::size_t ch = 0; ch < kChannelCount; ++ch) {
+    const double h = handover_fade_um_[ch];
+    if (std::fabs(h) > 0.0) {
+      // In force now: rest · h of the channel's target; take up to allowed_um of it out.
+      const double in_fade_um = rest * h;
+      const double left_um = std::fabs(in_fade_um) <= allowed_um
+                                 ? 0.0
+                                 : in_fade_um - std::copysign(allowed_um, in_fade_um);
+      const double h_new = left_um / rest;
+      a.fade_um[ch] += h_new - h;
+      handover_fade_um_[ch] = h_new;
+    }
+    fading = fading || std::fabs(a.fade_um[ch]) > 0.0;
+  }
+  if (!fading) a.fading = 0;
+  comp_.restore_adoption(a);
+  ++generation_;  // the state file gets the fade as it is now
 }
 
 void CreepModule::clear_alarm() noexcept {
@@ -344,6 +405,16 @@ void CreepModule::step(TimeNs now_ns, std::span<const Event> events, StepOutput&
   const std::size_t alarms_before = out.alarms.size();
   const std::size_t writes_before = out.writes.size();
   const std::int32_t tool_before = comp_.state().tool;
+  // What is left of a trim handover's fade comes in at once between parts (as of the last step;
+  // not if a sample of this step cuts), in this step's targets.
+  bool cuts_now = false;
+  for (const Event& e : events) {
+    const auto* a = std::get_if<AxisSample>(&e);
+    cuts_now = cuts_now || (a != nullptr && a->cutting);
+  }
+  if (!cuts_now) finish_handover_fade(now_ns);
+  last_step_ns_ = now_ns;
+  have_last_step_ = true;
   comp_.step(now_ns, events, out);
   // The channel registers get the residual shift on top of the compensator's output.
   const auto& reg = comp_.config().output.channel_register;
@@ -591,6 +662,7 @@ bool CreepModule::load_state_old(std::span<const std::byte> bytes) noexcept {
   (void)comp_.restore_state(st);  // cannot fail: checked above
   comp_.restore_adoption(adoption);
   residual_ = ResidualShift{};
+  handover_fade_um_.fill(0.0);
   last_accepted_ = comp_.counters().measurements_accepted;
   sync_steps_ = 0;
   alarm_cause_ = AlarmCode::kNone;
@@ -656,6 +728,7 @@ bool CreepModule::load_state(std::span<const std::byte> bytes) noexcept {
   (void)comp_.restore_state(st);  // cannot fail: checked above
   comp_.restore_adoption(adoption);
   residual_ = residual;
+  handover_fade_um_.fill(0.0);
   last_accepted_ = comp_.counters().measurements_accepted;
   sync_steps_ = 0;
   // A flag of the restored state was raised by another process: its cause is not known here.

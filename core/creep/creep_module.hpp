@@ -114,10 +114,14 @@ class CreepModule final : public engine::Module, public engine::ToolWearTrimUser
   /// with the state) becomes minus those trims, at once and for good. The rest of delta_um (the
   /// change of trims the laser does not see, e.g. contour terms) moves the compensator's output and
   /// fades out along the creep profile over one creep span from the current creep clock, as an
-  /// adopted value does (AdoptedOutputs): such a trim comes in without a step. Started without
-  /// state and not yet measured: that part is held until the next measurement. The kinematics
-  /// re-anchor on the next axis sample (one cycle's cut path is not counted). False for a flag
-  /// register or a value beyond max_abs_um. Real-time safe.
+  /// adopted value does (AdoptedOutputs): such a trim comes in without a step. That fade is only
+  /// needed while a surface is being cut: between parts (a part start or end since the last
+  /// cutting sample, the tool not cutting), what is left of it comes in at once, as fast as the
+  /// creep's limiter lets it (finish_handover_fade()); within a part (cutting, between passes,
+  /// at the laser) it goes on along the creep. Started without state and not yet measured: that
+  /// part is held until the next measurement. The kinematics re-anchor on the next axis sample (one
+  /// cycle's cut path is not counted). False for a flag register or a value beyond max_abs_um.
+  /// Real-time safe.
   bool rebase_output(std::uint16_t register_index, double delta_um,
                      TimeNs now_ns) noexcept override;
   /// The modules whose trims predict the tool's wear (engine::ToolWearTrimSource). At each
@@ -179,8 +183,16 @@ class CreepModule final : public engine::Module, public engine::ToolWearTrimUser
   /// Moves channel ch's output by delta_um at once (its value and limiter with it), the shift
   /// fading out along the creep profile over one creep span from the current creep clock, as an
   /// adopted value does (AdoptedOutputs). Not yet measured after a start without state: held at
-  /// the shifted value until the next measurement. False beyond max_abs_um.
-  bool fade_out_shift(std::size_t ch, double delta_um) noexcept;
+  /// the shifted value until the next measurement. handover: the shift is a trim handover's
+  /// (rebase_output()), counted in handover_fade_um_; else a residual sync's, which pairs with
+  /// the creep of the measurement and must fade. False beyond max_abs_um.
+  bool fade_out_shift(std::size_t ch, double delta_um, bool handover) noexcept;
+  /// Between parts (WearCompensator::between_parts(), the last axis sample not cutting): takes
+  /// what is left of the handovers' share of the fade (handover_fade_um_) out of the fade, so
+  /// that it is in force at once, by at most half of what the creep's limiter lets through in
+  /// one cycle (max_step_um, max_rate_um_per_s over the last cycle's time) per channel and step:
+  /// the write is never slewed. Real-time safe.
+  void finish_handover_fade(TimeNs now_ns) noexcept;
   /// Sets the residual shifts to minus the tool wear trims in force (bind_tool_wear_trims()),
   /// faded in, or at once (direct: after a tool change).
   void sync_residual(bool direct, TimeNs now_ns, StepOutput& out) noexcept;
@@ -195,6 +207,13 @@ class CreepModule final : public engine::Module, public engine::ToolWearTrimUser
   ToolMemory scratch_memory_{};
   std::vector<const engine::ToolWearTrimSource*> wear_sources_;
   ResidualShift residual_{};
+  /// The trim handovers' share of the adoption's fade_um per channel (fade_out_shift(); the rest
+  /// is the residual syncs'). Not saved: after a restart what is left of it fades out along the
+  /// creep as before (the saved fade_um holds it once; nothing is applied twice).
+  std::array<double, kChannelCount> handover_fade_um_{};
+  /// The time of the last step (the cycle's length for finish_handover_fade()).
+  TimeNs last_step_ns_{0};
+  bool have_last_step_{false};
   /// Steps still to sync the residual after a measurement or tool change (the trimming module
   /// may step after this one: its new trim is seen one step later).
   int sync_steps_{0};

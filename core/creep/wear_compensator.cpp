@@ -68,6 +68,7 @@ void WearCompensator::configure(const CreepConfig& config) {
   have_feed_ = false;
   cutting_ = false;
   interrupted_ = false;
+  between_parts_ = false;
   have_now_ = false;
   rearm_ = false;
   written_once_.fill(false);
@@ -183,6 +184,7 @@ bool WearCompensator::restore_state(const CreepState& st) noexcept {
   have_feed_ = false;
   cutting_ = false;
   interrupted_ = false;
+  between_parts_ = false;
   have_now_ = false;
   // Every value is re-sent on the next step.
   written_once_.fill(false);
@@ -198,7 +200,8 @@ struct Motion {
   AxisSample last_sample;
   std::array<double, 3> feed_dir;
   TimeNs last_now_ns;
-  std::array<std::uint8_t, 8> flags;  // have_sample, cutting, interrupted, have_feed, have_now
+  // have_sample, cutting, interrupted, have_feed, have_now, between_parts
+  std::array<std::uint8_t, 8> flags;
 };
 }  // namespace
 
@@ -208,7 +211,7 @@ std::size_t WearCompensator::save_motion(std::span<std::byte> buf) const noexcep
   m.last_sample = last_sample_;
   m.feed_dir = feed_dir_;
   m.last_now_ns = last_now_ns_;
-  m.flags = {have_sample_, cutting_, interrupted_, have_feed_, have_now_};
+  m.flags = {have_sample_, cutting_, interrupted_, have_feed_, have_now_, between_parts_};
   std::memcpy(buf.data(), &m, sizeof m);
   return sizeof m;
 }
@@ -231,6 +234,7 @@ bool WearCompensator::load_motion(std::span<const std::byte> bytes) noexcept {
   interrupted_ = m.flags[2] == 1;
   have_feed_ = m.flags[3] == 1;
   have_now_ = m.flags[4] == 1;
+  between_parts_ = m.flags[5] == 1;
   if (have_now_) {
     // step() resets the limiters only without a last step: they go on from the values the old
     // engine's limiters let through at its last step (the state), not from 0 by max_step_um.
@@ -326,8 +330,10 @@ void WearCompensator::step(TimeNs now_ns, std::span<const Event> events, StepOut
       switch (p->kind) {
         case ProgramEventKind::kPartStart:
           s_.part = p->part;
+          between_parts_ = true;
           break;
         case ProgramEventKind::kPartEnd:
+          between_parts_ = true;
           break;
         case ProgramEventKind::kInterruption:
           interrupted_ = true;
@@ -382,6 +388,7 @@ void WearCompensator::on_axis_sample(TimeNs now_ns, const AxisSample& a, StepOut
   last_sample_ = a;
   have_sample_ = true;
   cutting_ = cut;
+  if (a.cutting) between_parts_ = false;
   if (s_.tool == 0 && a.tool != 0) {
     s_.tool = a.tool;
     select_tool_tables();

@@ -186,6 +186,19 @@ class WearCompensator {
   /// Program path where a sister tool should restart [mm] (NaN if unknown).
   [[nodiscard]] double restart_program_path_mm() const noexcept;
   [[nodiscard]] bool halted() const noexcept { return s_.halted; }
+  /// True if the last axis sample said the tool is cutting (and no interruption since); false
+  /// also before the first sample after a restore (motion_known()).
+  [[nodiscard]] bool cutting() const noexcept { return cutting_; }
+  /// True once an axis sample has come since the state was restored (configure(),
+  /// restore_state()): only then does cutting() tell what the tool does.
+  [[nodiscard]] bool motion_known() const noexcept { return have_sample_; }
+  /// True from a part start or end (ProgramEvent) until the next axis sample that cuts: no
+  /// surface of a part is being cut. False after a restore until the next part event; a reload
+  /// carries it (save_motion()).
+  [[nodiscard]] bool between_parts() const noexcept { return between_parts_; }
+  /// Sets it again after a restore_state() within the running process (the module's rebase,
+  /// CreepModule::fade_out_shift(): the NC is still where it was). Real-time safe.
+  void restore_between_parts(bool between) noexcept { between_parts_ = between; }
   [[nodiscard]] const CreepState& state() const noexcept { return s_; }
   [[nodiscard]] const CreepCounters& counters() const noexcept { return counters_; }
   [[nodiscard]] const CreepConfig& config() const noexcept { return config_; }
@@ -283,6 +296,7 @@ class WearCompensator {
   bool have_sample_{false};
   bool cutting_{false};
   bool interrupted_{false};
+  bool between_parts_{false};
   AxisSample last_sample_{};
   std::array<double, 3> feed_dir_{};
   bool have_feed_{false};

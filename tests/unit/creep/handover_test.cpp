@@ -8,7 +8,9 @@
 // keeps only the residual of it, at each measurement (AToolWearTermIsNotCountedTwice...).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <initializer_list>
 #include <memory>
 #include <vector>
 
@@ -93,6 +95,10 @@ struct Rig {
   std::vector<double> z_writes;
   std::vector<double> y_writes;
   std::int32_t tool{1};
+  // What the axis samples say (false: the tool stands or moves in the air).
+  bool cutting{true};
+  // Slew warnings of the engine's and the creep's limiters, over all steps.
+  int slewed{0};
 
   Rig(const TrimZ* model, const CreepModuleConfig& config) : Rig(model, nullptr, config) {}
   // lim: every register's limits, and so the creep's own limiter (CreepModule::attach()).
@@ -112,6 +118,7 @@ struct Rig {
   void step() {
     engine.step(now, ev, out);
     ev.clear();
+    for (const auto& a : out.alarms) slewed += a.code == AlarmCode::kOffsetSlewLimited ? 1 : 0;
     for (const auto& w : out.writes) {
       if (w.register_index == 1) y_writes.push_back(w.value_um);
       if (w.register_index != 2) continue;
@@ -128,6 +135,7 @@ struct Rig {
     a.program_path_mm = path;
     a.position_mm = {path, 0.0, 0.0, 0.0, 0.0, 0.0};  // feed along +X
     a.tool = tool;
+    a.cutting = cutting;
     ev.emplace_back(a);
     step();
   }
@@ -148,6 +156,9 @@ struct Rig {
     ASSERT_TRUE(engine.import_state(buf, now));
   }
   [[nodiscard]] double z_um() const { return engine.register_state(2).output_um; }
+  [[nodiscard]] const CreepModule& creep() const {
+    return dynamic_cast<const CreepModule&>(engine.module(0));
+  }
 };
 
 // 12 µm of wear measured and crept in: Z at −12.
@@ -437,6 +448,176 @@ TEST(CreepHandover, TheCreepsLimiterGoesOnFromTheValueInForceThroughTheSwap) {
     EXPECT_LT(after.largest_z_change_um, 0.1 + 1e-9) << what;
     EXPECT_NEAR(after.z_um(), model == nullptr ? -12.0 : -12.0 - 0.2 * 4 * 0.5, 1e-9) << what;
     EXPECT_EQ(after.engine.counters().handover_rebases, model == nullptr ? 0U : 1U) << what;
+  }
+}
+
+}  // namespace
+}  // namespace nccomp::core::creep
+
+namespace nccomp::core::creep {
+namespace {
+
+// Between parts there is no surface to keep free of steps: a handover's fade comes in at once
+// while the tool does not cut between two parts, through the limiter; within a part (cutting,
+// between passes) it fades as before.
+
+// GIVEN the creep holds Z at −12 µm, a part started and the tool not cutting yet
+// WHEN a model whose trim on Z is −10 µm is loaded
+// THEN Z goes to −22 µm at once (one write, the cycle after the rebase's sample), and stays
+//      there when the cut starts (nothing fades in over it any more)
+TEST(CreepHandover, ATrimLoadedBetweenPartsIsInForceAtOnce) {
+  Rig before(nullptr);
+  wear_in(before);
+  const TrimZ model(-10.0, 7);
+  Rig after(&model);
+  after.take_over(before);
+  after.cutting = false;
+  after.ev.emplace_back(ProgramEvent{after.now, ProgramEventKind::kPartStart, 2});
+  after.advance(0.0);  // the switch: the register keeps its total
+  EXPECT_NEAR(after.z_um(), -12.0, 1e-9);
+  after.advance(0.0);  // the kinematics re-anchor: not cutting
+  after.advance(0.0);  // the fade's rest comes in
+  EXPECT_NEAR(after.z_um(), -22.0, 1e-9);
+  EXPECT_EQ(after.engine.counters().handover_rebases, 1U);
+  EXPECT_EQ(after.creep().compensator().adoption().fading, 0);
+  EXPECT_EQ(after.slewed, 0);
+  after.cutting = true;
+  const std::size_t writes = after.z_writes.size();
+  for (int i = 0; i < 110; ++i) after.advance(0.5);
+  EXPECT_NEAR(after.z_um(), -22.0, 1e-9);
+  for (std::size_t i = writes; i < after.z_writes.size(); ++i) {
+    EXPECT_NEAR(after.z_writes[i], -22.0, 1e-9) << i;  // no step, no fade in the cut
+  }
+  // The wear measured stays the creep's: a further 3 µm creep in on top.
+  after.measure(15.0);
+  for (int i = 0; i < 110; ++i) after.advance(0.5);
+  EXPECT_NEAR(after.z_um(), -25.0, 1e-9);
+}
+
+// GIVEN a part started, the tool not cutting yet
+// WHEN the running daemon reloads with the model (the reload's new engine takes the state and
+//      the tool's motion, which carries "between parts")
+// THEN the trim is in force before the cut, as without the reload
+TEST(CreepHandover, AReloadBetweenPartsCarriesItIntoTheNewEngine) {
+  Rig before(nullptr);
+  wear_in(before);
+  before.cutting = false;
+  before.ev.emplace_back(ProgramEvent{before.now, ProgramEventKind::kPartStart, 2});
+  before.advance(0.0);
+  ASSERT_TRUE(before.creep().compensator().between_parts());
+  const TrimZ model(-10.0, 7);
+  Rig after(&model);
+  after.take_over(before);
+  after.cutting = false;
+  std::vector<std::byte> motion(engine::kMotionBytes);
+  motion.resize(before.engine.export_motion(motion));
+  ASSERT_EQ(after.engine.import_motion(motion), 2U);
+  for (int i = 0; i < 3; ++i) after.advance(0.0);
+  EXPECT_NEAR(after.z_um(), -22.0, 1e-9);
+  EXPECT_EQ(after.slewed, 0);
+}
+
+// GIVEN the trim of −10 µm fading in along the cut (half of it in after 25 of 50 mm)
+// WHEN the cut ends between two passes: THEN the fade waits (the next pass lies beside the last:
+//      one surface, no ridge between them); WHEN the part ends: THEN the other half comes in at
+//      once, and the next part's cut starts at −22 µm
+TEST(CreepHandover, AFadeInProgressWhenThePartEndsIsFinishedAtOnce) {
+  Rig before(nullptr);
+  wear_in(before);
+  const TrimZ model(-10.0, 7);
+  Rig after(&model);
+  after.take_over(before);
+  after.advance(0.0);  // the switch, cutting
+  after.advance(0.0);
+  for (int i = 0; i < 50; ++i) after.advance(0.5);
+  ASSERT_NEAR(after.z_um(), -17.0, 1e-9);
+  EXPECT_LT(after.largest_z_change_um, 0.21);  // crept while cutting
+  after.cutting = false;
+  for (int i = 0; i < 5; ++i) after.advance(0.5);  // the link to the next pass
+  EXPECT_NEAR(after.z_um(), -17.0, 1e-9);
+  after.ev.emplace_back(ProgramEvent{after.now, ProgramEventKind::kPartEnd, 1});
+  after.advance(0.0);  // the part end
+  after.advance(0.0);  // the fade's rest comes in
+  EXPECT_NEAR(after.z_um(), -22.0, 1e-9);
+  after.cutting = true;
+  for (int i = 0; i < 60; ++i) after.advance(0.5);
+  EXPECT_NEAR(after.z_um(), -22.0, 1e-9);
+  EXPECT_EQ(after.slewed, 0);
+}
+
+// GIVEN a trim loaded while cutting, 25 of its 50 mm faded in (−17 µm)
+// WHEN the daemon restarts (same model: no handover) and the next part starts
+// THEN what is left of the fade goes on along the creep from −17 µm (the restarted process does
+//      not know it was a handover's: it is not applied at once) and ends at −22 µm, never beyond;
+//      AND a trim finished at once before a restart is not applied again after it
+TEST(CreepHandover, ARestartDoesNotApplyTheHandoverTwice) {
+  Rig before(nullptr);
+  wear_in(before);
+  const TrimZ model(-10.0, 7);
+  Rig loaded(&model);
+  loaded.take_over(before);
+  loaded.advance(0.0);
+  loaded.advance(0.0);
+  for (int i = 0; i < 50; ++i) loaded.advance(0.5);
+  ASSERT_NEAR(loaded.z_um(), -17.0, 1e-9);
+
+  Rig restarted(&model);
+  restarted.take_over(loaded);
+  restarted.cutting = false;
+  restarted.ev.emplace_back(ProgramEvent{restarted.now, ProgramEventKind::kPartStart, 2});
+  for (int i = 0; i < 5; ++i) restarted.advance(0.0);
+  EXPECT_EQ(restarted.engine.counters().handover_rebases, 0U);
+  EXPECT_NEAR(restarted.z_um(), -17.0, 1e-9);
+  restarted.cutting = true;
+  for (int i = 0; i < 60; ++i) {
+    restarted.advance(0.5);
+    EXPECT_GE(restarted.z_um(), -22.0 - 1e-9) << i;
+  }
+  EXPECT_NEAR(restarted.z_um(), -22.0, 1e-9);
+
+  // Finished at once between parts, then a restart: −22 µm stays, cut or not.
+  Rig at_once(&model);
+  at_once.take_over(before);
+  at_once.cutting = false;
+  at_once.ev.emplace_back(ProgramEvent{at_once.now, ProgramEventKind::kPartStart, 2});
+  for (int i = 0; i < 3; ++i) at_once.advance(0.0);
+  ASSERT_NEAR(at_once.z_um(), -22.0, 1e-9);
+  Rig again(&model);
+  again.take_over(at_once);
+  again.cutting = false;
+  again.ev.emplace_back(ProgramEvent{again.now, ProgramEventKind::kPartStart, 3});
+  for (int i = 0; i < 5; ++i) again.advance(0.0);
+  EXPECT_NEAR(again.z_um(), -22.0, 1e-9);
+  again.cutting = true;
+  for (int i = 0; i < 110; ++i) again.advance(0.5);
+  EXPECT_NEAR(again.z_um(), -22.0, 1e-9);
+  EXPECT_LT(again.largest_z_change_um, 1e-9);
+  EXPECT_EQ(again.engine.counters().handover_rebases, 0U);
+}
+
+// GIVEN the registers' limiter (and so the creep's) at 5 µm per write, or at 200 µm/s (2 µm per
+//      10 ms cycle), between parts
+// WHEN the −10 µm trim is loaded
+// THEN it comes in at half of what one write may move per cycle (2.5 µm, 1 µm): no write beyond
+//      the limits and none slewed; −22 µm in the end
+TEST(CreepHandover, TheLimiterBoundsATrimInForceAtOnce) {
+  const TrimZ model(-10.0, 7);
+  for (const LimiterConfig lim :
+       {LimiterConfig{100.0, 5.0, 1e5}, LimiterConfig{100.0, 50.0, 200.0}}) {
+    const double per_cycle_um = 0.5 * std::min(lim.max_step_um, lim.max_rate_um_per_s * 0.01);
+    Rig before(nullptr, nullptr, module_config(), lim);
+    wear_in(before);
+    Rig after(&model, nullptr, module_config(), lim);
+    after.take_over(before);
+    after.cutting = false;
+    after.ev.emplace_back(ProgramEvent{after.now, ProgramEventKind::kPartStart, 2});
+    after.largest_z_change_um = 0.0;
+    int steps = 0;
+    for (; steps < 40 && std::fabs(after.z_um() + 22.0) > 1e-9; ++steps) after.advance(0.0);
+    EXPECT_NEAR(after.z_um(), -22.0, 1e-9) << lim.max_step_um;
+    EXPECT_LE(after.largest_z_change_um, per_cycle_um + 1e-9) << lim.max_step_um;
+    EXPECT_GE(steps, static_cast<int>(10.0 / per_cycle_um)) << lim.max_step_um;
+    EXPECT_EQ(after.slewed, 0) << lim.max_step_um;
   }
 }
 
