@@ -476,7 +476,47 @@ std::string prom_num(double v) {
 constexpr std::array<std::uint64_t, 14> kLatencyEdgesUs = {
     10, 20, 50, 100, 200, 500, 1000, 2000, 4000, 8000, 16000, 32000, 64000, 128000};
 
+// A label value in the Prometheus text format: backslash, double quote and newline escaped.
+std::string prom_label(std::string_view v) {
+  std::string out;
+  out.reserve(v.size());
+  for (const char ch : v) {
+    if (ch == '\\' || ch == '"') {
+      out += '\\';
+      out += ch;
+    } else if (ch == '\n') {
+      out += "\\n";
+    } else {
+      out += ch;
+    }
+  }
+  return out;
+}
+
 }  // namespace
+
+std::string sigma_estimate_key(std::string_view key) {
+  constexpr std::string_view kEstimateSigma = "_estimate_sigma_um";
+  constexpr std::string_view kSigma = "_sigma_um";
+  if (key.size() > kEstimateSigma.size() && key.ends_with(kEstimateSigma)) {
+    return std::string(key.substr(0, key.size() - kEstimateSigma.size())) + "_estimate_um";
+  }
+  if (key.size() > kSigma.size() && key.ends_with(kSigma)) {
+    return std::string(key.substr(0, key.size() - kSigma.size())) + "_estimate_um";
+  }
+  return {};
+}
+
+std::pair<std::string, std::string> input_lag_key(std::string_view key) {
+  constexpr std::string_view kPrefix = "sensor_";
+  if (!key.starts_with(kPrefix)) return {};
+  key.remove_prefix(kPrefix.size());
+  const std::size_t digits = key.find_first_not_of("0123456789");
+  if (digits == 0 || digits == std::string_view::npos || key[digits] != '_') return {};
+  const std::string_view what = key.substr(digits + 1);
+  if (what != "lag" && what != "input") return {};
+  return {std::string(key.substr(0, digits)), std::string(what)};
+}
 
 std::span<const std::uint64_t> prometheus_latency_edges_us() { return kLatencyEdgesUs; }
 
@@ -591,23 +631,66 @@ std::string render_prometheus(const StatusContext& c) {
       }
     }
   }
-  // The uncertainty of an estimated compensation value: a status key <stem>_sigma_um is the
-  // standard deviation of <stem>_estimate_um (S0: wear_sigma_um of wear_estimate_um), in metres
-  // as the registers' outputs.
-  family("module_sigma_meters", "gauge",
-         "Standard deviation of a module's estimated compensation value (the key).");
-  constexpr std::string_view kSigmaSuffix = "_sigma_um";
+  // A text value (a phase, a mode, where a value comes from) is a label of a gauge that is 1.
+  family("module_text", "gauge",
+         "A compensation module's status text (the label text; the value is always 1).");
   for (std::size_t i = 0; i < v.m.count; ++i) {
     const auto& m = v.m.modules[i];
     for (std::size_t k = 0; k < m.count; ++k) {
       const auto& sv = m.values[k];
-      const std::string_view key(sv.key);
-      if (sv.text == nullptr && std::isfinite(sv.value) && key.size() > kSigmaSuffix.size() &&
-          key.ends_with(kSigmaSuffix)) {
-        o << "nccompd_module_sigma_meters{module=\"" << m.name.data() << "\",key=\""
-          << key.substr(0, key.size() - kSigmaSuffix.size()) << "_estimate_um\"} "
-          << prom_num(sv.value * 1e-6) << "\n";
+      if (sv.text != nullptr) {
+        o << "nccompd_module_text{module=\"" << m.name.data() << "\",key=\"" << sv.key
+          << "\",text=\"" << prom_label(sv.text) << "\"} 1\n";
       }
+    }
+  }
+  // The uncertainty of an estimated compensation value: a status key <stem>_sigma_um is the
+  // standard deviation of <stem>_estimate_um (S0: wear_sigma_um of wear_estimate_um), and
+  // <stem>_estimate_sigma_um that of <stem>_estimate_um (S3: x_estimate_sigma_um of
+  // x_estimate_um), in metres as the registers' outputs.
+  family("module_sigma_meters", "gauge",
+         "Standard deviation of a module's estimated compensation value (the key).");
+  for (std::size_t i = 0; i < v.m.count; ++i) {
+    const auto& m = v.m.modules[i];
+    for (std::size_t k = 0; k < m.count; ++k) {
+      const auto& sv = m.values[k];
+      const std::string estimate_key = sigma_estimate_key(sv.key);
+      if (sv.text == nullptr && std::isfinite(sv.value) && !estimate_key.empty()) {
+        o << "nccompd_module_sigma_meters{module=\"" << m.name.data() << "\",key=\"" << estimate_key
+          << "\"} " << prom_num(sv.value * 1e-6) << "\n";
+      }
+    }
+  }
+  // [[input_lags]]: each lag's value and its input's, labelled by the lag's sensor (the module's
+  // keys sensor_N_lag and sensor_N_input), in the input's unit.
+  {
+    std::string lag_values;
+    std::string lag_inputs;
+    for (std::size_t i = 0; i < v.m.count; ++i) {
+      const auto& m = v.m.modules[i];
+      if (std::string_view(m.name.data()) != "input_lags") continue;
+      for (std::size_t k = 0; k < m.count; ++k) {
+        const auto& sv = m.values[k];
+        if (sv.text != nullptr || !std::isfinite(sv.value)) continue;
+        const auto [sensor, what] = input_lag_key(sv.key);
+        if (sensor.empty()) continue;
+        (what == "lag" ? lag_values : lag_inputs) +=
+            std::string(what == "lag" ? "nccompd_input_lag_value"
+                                      : "nccompd_input_lag_input_value") +
+            "{sensor=\"" + sensor + "\"} " + prom_num(sv.value) + "\n";
+      }
+    }
+    if (!lag_values.empty()) {
+      family("input_lag_value", "gauge",
+             "An [[input_lags]] lag's value now (labelled by the sensor it is published on), in "
+             "its input's unit.");
+      o << lag_values;
+    }
+    if (!lag_inputs.empty()) {
+      family("input_lag_input_value", "gauge",
+             "The last sample of an [[input_lags]] lag's input sensor (labelled by the lag's "
+             "sensor).");
+      o << lag_inputs;
     }
   }
   family("bus_up", "gauge", "1 while the bus link is up.");

@@ -22,6 +22,7 @@
 #include <mutex>
 #include <span>
 #include <string>
+#include <string_view>
 #include <thread>
 #include <utility>
 #include <vector>
@@ -84,6 +85,14 @@ struct StatusServerOptions {
 [[nodiscard]] std::string render_text(const StatusContext& c);
 /// The Prometheus text format (version 0.0.4); `promtool check metrics` passes on it.
 [[nodiscard]] std::string render_prometheus(const StatusContext& c);
+/// The estimate key a status key `<stem>_sigma_um` is the σ of in nccompd_module_sigma_meters:
+/// `<stem>_estimate_um` (S0's wear_sigma_um: wear_estimate_um), and for a stem that already ends
+/// in `_estimate` the stem with `_um` (S3's x_estimate_sigma_um: x_estimate_um); empty for
+/// another key (exposed for tests).
+[[nodiscard]] std::string sigma_estimate_key(std::string_view key);
+/// The input_lags module's key `sensor_N_lag` / `sensor_N_input`: {"N", "lag" or "input"};
+/// empty strings for another key (exposed for tests).
+[[nodiscard]] std::pair<std::string, std::string> input_lag_key(std::string_view key);
 /// The `le` edges [µs] of nccompd_loop_wake_latency_seconds (exposed for tests).
 [[nodiscard]] std::span<const std::uint64_t> prometheus_latency_edges_us();
 [[nodiscard]] const char* link_state_name(drivers::LinkState s);

@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <iterator>
 #include <stdexcept>
 #include <utility>
 #include <variant>
@@ -293,8 +294,17 @@ std::size_t CalibrationModule::status(std::span<engine::StatusValue> out) const 
       {"y_estimate_sigma_um", est[1].sigma_um, nullptr},
       {"z_estimate_um", est[2].mean_um, nullptr},
       {"z_estimate_sigma_um", est[2].sigma_um, nullptr},
+      // The estimator's level noise per axis (its measuring slot) and where it comes from.
+      {"level_noise", 0.0,
+       c.config().prediction != Prediction::kEstimator
+           ? "unused"
+           : (c.level_noise_learned() ? "learned" : "configured")},
+      {"x_level_noise_um_per_h", c.level_noise_um_per_h(Slot::kXLateral), nullptr},
+      {"y_level_noise_um_per_h", c.level_noise_um_per_h(Slot::kY), nullptr},
+      {"z_level_noise_um_per_h", c.level_noise_um_per_h(Slot::kZ), nullptr},
       {"commands_refused", static_cast<double>(snapshot_.commands_refused), nullptr},
   };
+  static_assert(std::size(values) <= engine::kMaxStatusValues);
   std::size_t w = 0;
   for (const auto& v : values) {
     if (w == out.size()) break;

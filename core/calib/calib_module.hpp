@@ -62,7 +62,8 @@ class CalibrationModule final : public engine::Module {
   /// Where snapshots go (nullptr = nowhere). Not real-time; before the loop steps the module.
   void set_snapshot_sink(SnapshotSink* sink) noexcept { sink_ = sink; }
   /// Real-time safe: phase, the corrections written [µm] and the last measured drift [µm] per
-  /// axis.
+  /// axis, the drift estimator's estimate and σ per axis, its level noise per axis [µm/h] and
+  /// whether that is learned (`level_noise`: learned, configured, unused).
   std::size_t status(std::span<engine::StatusValue> out) const noexcept override;
   /// register_x, register_y, register_z.
   [[nodiscard]] std::vector<std::uint16_t> written_registers() const override {

@@ -658,6 +658,21 @@ EstimatedDrift Calibrator::estimated_drift(Slot slot, TimeNs now_ns) const noexc
   return estimate(static_cast<std::size_t>(slot), seconds(now_ns));
 }
 
+double Calibrator::level_noise_um_per_h(Slot slot) const noexcept {
+  if (config_.prediction != Prediction::kEstimator) {
+    return kNaN;
+  }
+  return estimator_params(config_, static_cast<std::size_t>(slot), state_.shifts)
+      .level_noise_um_per_h;
+}
+
+bool Calibrator::level_noise_learned() const noexcept {
+  // learned_level_noise_um_per_h() gives the configured value while no earlier shift has an
+  // hour of drift (no increment weight).
+  return config_.prediction == Prediction::kEstimator && config_.estimator_learn_level_noise &&
+         state_.shifts.increment_weight > 0.0;
+}
+
 double Calibrator::correction(std::size_t slot, double t_s) const noexcept {
   const auto& m = state_.models[slot];
   if (m.anchored != 1) {

@@ -138,6 +138,14 @@ class Calibrator {
   /// The drift estimator's estimate of a slot at now_ns and its σ [µm] (NaN unless the
   /// estimator has a state: prediction = "estimator", nominals taken).
   [[nodiscard]] EstimatedDrift estimated_drift(Slot slot, TimeNs now_ns) const noexcept;
+  /// The level noise the drift estimator uses for a slot now [µm/h]: learned from the earlier
+  /// shifts' hourly increments (estimator_learn_level_noise, once an earlier shift has an hour
+  /// of drift; clamped to the bounds), else estimator_level_noise_um_per_h. NaN unless
+  /// prediction = "estimator". Real-time safe.
+  [[nodiscard]] double level_noise_um_per_h(Slot slot) const noexcept;
+  /// True when level_noise_um_per_h() is the learned value, false when it is the configured one
+  /// (or prediction is not the estimator). Real-time safe.
+  [[nodiscard]] bool level_noise_learned() const noexcept;
   /// Time of the last step() [ns] (0 before the first).
   [[nodiscard]] TimeNs last_step_ns() const noexcept { return last_step_ns_; }
   /// Register target of axis 0..2 (base + drift correction) [µm]; NaN before calibration.

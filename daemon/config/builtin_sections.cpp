@@ -358,7 +358,10 @@ class RampParser final : public SectionParser {
   }
 };
 
-// Reports each lag's current value (the last sample on its output sensor) on the status socket.
+// Reports each lag's current value (the last sample on its output sensor) and its input's (the
+// last sample of the lagged sensor) on the status socket: the lags first (sensor_N_lag), then
+// their inputs (sensor_N_input, N the lag's sensor), so that with more lags than the status
+// holds the inputs of the last ones are left out, never a lag.
 class InputLagsModule final : public core::engine::Module {
  public:
   explicit InputLagsModule(const std::vector<InputLagEntry>& lags) {
@@ -366,7 +369,12 @@ class InputLagsModule final : public core::engine::Module {
       keys_.push_back("sensor_" + std::to_string(e.spec.output_sensor) + "_lag");
       sensors_.push_back(e.spec.output_sensor);
     }
+    for (const auto& e : lags) {
+      input_keys_.push_back("sensor_" + std::to_string(e.spec.output_sensor) + "_input");
+      input_sensors_.push_back(e.spec.input_sensor);
+    }
     values_.assign(lags.size(), std::numeric_limits<double>::quiet_NaN());
+    inputs_.assign(lags.size(), std::numeric_limits<double>::quiet_NaN());
   }
   std::string_view name() const noexcept override { return "input_lags"; }
   void attach(const core::engine::RegisterTable& /*registers*/) override {}
@@ -378,6 +386,7 @@ class InputLagsModule final : public core::engine::Module {
       if (t == nullptr) continue;
       for (std::size_t i = 0; i < sensors_.size(); ++i) {
         if (sensors_[i] == t->sensor) values_[i] = t->temperature_c;
+        if (input_sensors_[i] == t->sensor) inputs_[i] = t->temperature_c;
       }
     }
   }
@@ -387,6 +396,9 @@ class InputLagsModule final : public core::engine::Module {
     for (std::size_t i = 0; i < keys_.size() && n < out.size(); ++i) {
       if (std::isfinite(values_[i])) out[n++] = {keys_[i].c_str(), values_[i], nullptr};
     }
+    for (std::size_t i = 0; i < input_keys_.size() && n < out.size(); ++i) {
+      if (std::isfinite(inputs_[i])) out[n++] = {input_keys_[i].c_str(), inputs_[i], nullptr};
+    }
     return n;
   }
 
@@ -394,6 +406,9 @@ class InputLagsModule final : public core::engine::Module {
   std::vector<std::string> keys_;
   std::vector<std::uint8_t> sensors_;
   std::vector<double> values_;
+  std::vector<std::string> input_keys_;
+  std::vector<std::uint8_t> input_sensors_;
+  std::vector<double> inputs_;
 };
 
 class InputLagsParser final : public SectionParser {

@@ -100,8 +100,32 @@ def _set_calibration(path, keys):
         f.write(text)
 
 
-def run(e2e, b, source, work, name="calib_touch", calibration=None):
-    """One shift; calibration: {key: TOML value} set in the daemon's [calibration]."""
+def _status(b, sock, *flags):
+    """`nccomp status [flags]` on the daemon's socket ("" if it does not answer)."""
+    p = subprocess.run([b.nccomp, "status"] + list(flags) + ["--socket", sock],
+                       capture_output=True, text=True, timeout=30)
+    return p.stdout if p.returncode == 0 else ""
+
+
+def _module_values(status_text, module):
+    """{key: value} of a `module NAME:` line of `nccomp status` (numbers only)."""
+    m = re.search(r"^module %s: (.*)$" % re.escape(module), status_text, flags=re.M)
+    values = {}
+    for item in (m.group(1).split(", ") if m else []):
+        key, _, value = item.partition(" ")
+        try:
+            values[key] = float(value)
+        except ValueError:
+            pass
+    return values
+
+
+def run(e2e, b, source, work, name="calib_touch", calibration=None, input_lags=None):
+    """One shift; calibration: {key: TOML value} set in the daemon's [calibration]; input_lags:
+    [(sensor, input_sensor, tau_s)] appended to the daemon's config as [[input_lags]] tables,
+    and then the daemon's status is taken every 2 s while ncsim runs: the texts that show the
+    input_lags module go to run_dir/status.txt (separated by a line "----"), the last metrics
+    with them to run_dir/metrics.txt."""
     run_dir = os.path.join(work, name)
     shutil.rmtree(run_dir, ignore_errors=True)
     os.makedirs(run_dir)
@@ -119,6 +143,11 @@ def run(e2e, b, source, work, name="calib_touch", calibration=None):
     daemon_path, ncsim_path = e2e.stage_configs(source, run_dir, "nccompd-touch.toml",
                                                 "ncsim-touch.toml", port, overrides)
     _set_calibration(daemon_path, calibration or {})
+    if input_lags:
+        with open(daemon_path, "a") as f:
+            for sensor, input_sensor, tau_s in input_lags:
+                f.write("\n[[input_lags]]\nsensor = %d\ninput_sensor = %d\ntau_s = %s\n" %
+                        (sensor, input_sensor, tau_s))
     map_path = os.path.join(run_dir, "map.toml")
     with open(map_path) as f:
         text = f.read()
@@ -186,7 +215,23 @@ def run(e2e, b, source, work, name="calib_touch", calibration=None):
         # 3. The nominals, then one recalibration on demand.
         transcript.append(_calibrate(e2e, b, ssock, ["await ready 120", "recalibrate"], run_dir))
         transcript.append(_phase(b, ssock)[1])
-        sim_rc = sim.wait(600.0)
+        if input_lags:
+            # The daemon's status while the shift runs (lock-step: ncsim sets the pace).
+            texts, metrics = [], ""
+            deadline = time.monotonic() + 600.0
+            sim_rc = None
+            while sim_rc is None and time.monotonic() < deadline:
+                text = _status(b, ssock)
+                if "module input_lags:" in text:
+                    texts.append(text)
+                    metrics = _status(b, ssock, "--metrics") or metrics
+                sim_rc = sim.wait(2.0)
+            with open(os.path.join(run_dir, "status.txt"), "w") as f:
+                f.write("----\n".join(texts))
+            with open(os.path.join(run_dir, "metrics.txt"), "w") as f:
+                f.write(metrics)
+        else:
+            sim_rc = sim.wait(600.0)
         if sim_rc is None:
             raise RuntimeError("ncsim did not finish within 600 s\n%s" % daemon.log()[-3000:])
         # nccompd ends on ncsim's BYE; under ASan its exit (leak check, state file) can take
@@ -249,6 +294,13 @@ STRATEGIES = [
     ("creep + estimator with temperature",
      {"prediction": '"estimator"', "temperature_sensor": "0",
       "estimator_slope_sigma_um_per_c": "1.0", "max_temperature_slope_um_per_c": "10.0"}),
+    # The estimator with the spindle temperature through the daemon's own first-order lag
+    # ([[input_lags]]: LAG_SENSOR = lag of sensor 0, tau LAG_TAU_S), the lag's sensor as
+    # temperature_sensor: the path a lag fitted by `nccomp analyze` takes to S3.
+    ("creep + estimator with the lagged temperature",
+     {"prediction": '"estimator"', "temperature_sensor": "40",
+      "estimator_slope_sigma_um_per_c": "1.0", "max_temperature_slope_um_per_c": "10.0"},
+     [(40, 0, 300.0)]),
 ]
 # Last, the estimator with the temperature slopes fitted on the first run's measurement log as
 # its prior (an earlier shift of the same machine, never the shift scored).
@@ -285,19 +337,69 @@ def _model_keys(run_dir):
             "estimator_model_slope_sigma_um_per_c": fmt(se)}
 
 
+def _check_lags(c, label, run_dir, lags):
+    """The lag reached S3: the daemon's status showed each lag and its input while the shift
+    ran, the lag below its warming input and moving; the metrics had both; the temperature the
+    calibration logged with its touch sets (the lag's sensor) rose over the shift."""
+    with open(os.path.join(run_dir, "status.txt")) as f:
+        texts = [t for t in f.read().split("----\n") if t.strip()]
+    with open(os.path.join(run_dir, "metrics.txt")) as f:
+        metrics = f.read()
+    c.that(len(texts) >= 2, "%s: %d status texts with the input_lags module" % (label,
+                                                                              len(texts)))
+    for sensor, input_sensor, tau_s in lags:
+        key = "sensor_%d_lag" % sensor
+        seen = [_module_values(t, "input_lags") for t in texts]
+        pairs = [(v[key], v["sensor_%d_input" % sensor]) for v in seen
+                 if key in v and "sensor_%d_input" % sensor in v]
+        c.that(len(pairs) == len(texts), "%s: every status showed %s and its input (%d of %d)" %
+               (label, key, len(pairs), len(texts)))
+        if pairs:
+            lag_values = [p[0] for p in pairs]
+            print("%s: %s (lag of sensor %d, tau %g s) in status from %.2f to %.2f degC, input "
+                  "%.2f to %.2f degC" % (label, key, input_sensor, tau_s, lag_values[0],
+                                         lag_values[-1], pairs[0][1], pairs[-1][1]))
+            c.that(lag_values[-1] - lag_values[0] > 0.5,
+                   "%s: %s moved %.2f degC while the shift ran (> 0.5)" %
+                   (label, key, lag_values[-1] - lag_values[0]))
+            c.that(all(lag <= inp + 1e-9 for lag, inp in pairs) and
+                   any(lag < inp - 0.05 for lag, inp in pairs),
+                   "%s: %s stays below its warming input (by up to %.2f degC)" %
+                   (label, key, max(inp - lag for lag, inp in pairs)))
+        for family in ("nccompd_input_lag_value", "nccompd_input_lag_input_value"):
+            c.that(re.search(r"^%s\{sensor=\"%d\"\} [-+0-9.e]+$" % (family, sensor), metrics,
+                             flags=re.M) is not None,
+                   "%s: the metrics have %s{sensor=\"%d\"}" % (label, family, sensor))
+    # The calibration's own temperature: the calib rows of the measurement log (temp_c, the
+    # lag's sensor) over the shift.
+    temps = []
+    with open(os.path.join(run_dir, "log", "measurements.csv")) as f:
+        lines = f.read().splitlines()
+    head = lines[0].split(",")
+    for line in lines[1:]:
+        v = dict(zip(head, line.split(",")))
+        if v.get("kind") == "calib" and v.get("temp_c") not in (None, "", "nan"):
+            temps.append(float(v["temp_c"]))
+    c.that(len(temps) >= 8 and max(temps) - min(temps) > 2.0,
+           "%s: the touch sets' logged temperature (the lag) spans %.2f degC over %d records" %
+           (label, (max(temps) - min(temps)) if temps else float("nan"), len(temps)))
+
+
 def scenario_strategies(e2e, b, source, work):
     """The same shift once per strategy; prints the axis error of each and checks that every run
     recalibrated without an alarm."""
     c = e2e.Check("calib_strategies")
     results = []
     model = None
-    for label, keys in STRATEGIES + [(MODEL_LABEL, None)]:
+    for row in STRATEGIES + [(MODEL_LABEL, None)]:
+        label, keys = row[0], row[1]
+        lags = row[2] if len(row) > 2 else None
         if keys is None:
             keys = _model_keys(model)
             print("%s: %s" % (MODEL_LABEL, keys))
         name = "calib_strategy_" + re.sub(r"[^a-z]+", "_", label)
         run_dir, out_dir, sim_rc, daemon_rc, sim_log, daemon_log, _, wall_s = run(
-            e2e, b, source, work, name, keys)
+            e2e, b, source, work, name, keys, lags)
         c.that(sim_rc == 0 and daemon_rc == 0, "%s: ncsim %s, nccompd %s" % (label, sim_rc,
                                                                            daemon_rc))
         t_warm, _, figures = _figures(out_dir, sim_log)
@@ -307,6 +409,8 @@ def scenario_strategies(e2e, b, source, work):
         alarms = [mm.group(2) for mm in e2e.ALARM_LINE.finditer(daemon_log)
                   if mm.group(1) == "alarm"]
         c.that(not alarms, "%s: no alarm in the daemon's log %s" % (label, alarms))
+        if lags:
+            _check_lags(c, label, run_dir, lags)
         results.append((label, figures, wall_s))
         model = model or run_dir
     print("| strategy | X RMS / max | Y RMS / max | Z RMS / max |")

@@ -595,14 +595,16 @@ tau_s = 1800
   EXPECT_DOUBLE_EQ(e->input_lags().spec(0).tau_s, 1800.0);
   ASSERT_EQ(e->module_count(), 1U);
   EXPECT_EQ(e->module(0).name(), "input_lags");
-  // Its status: the lag's value once its input has a sample.
+  // Its status: the lag's value once its input has a sample, then its input's.
   core::StepOutput out;
   const std::vector<core::Event> in{core::TemperatureSample{0, 5, 21.5}};
   e->step(0, in, out);
   std::array<core::engine::StatusValue, 4> st{};
-  ASSERT_EQ(e->module(0).status(st), 1U);
+  ASSERT_EQ(e->module(0).status(st), 2U);
   EXPECT_STREQ(st[0].key, "sensor_40_lag");
   EXPECT_DOUBLE_EQ(st[0].value, 21.5);
+  EXPECT_STREQ(st[1].key, "sensor_40_input");
+  EXPECT_DOUBLE_EQ(st[1].value, 21.5);
 }
 
 TEST(ConfigLoader, InputLagErrorsNameFileLineAndKey) {
