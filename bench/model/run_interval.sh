@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # The prediction interval's coverage on real held-out rows, both scales (docs/analyze.md, "The
-# prediction interval"): `nccomp analyze` on PHM 2010 (c4 + c6 per flute; c1, c4, c6 per cut)
-# and FL_THERMAL ch1, ch3, ch5 as bench/model/run_real_data.sh runs them, once with
-# interval = "in_sample" and once with "validation", and a table of the summary.json figures.
+# prediction interval"): `nccomp analyze` on PHM 2010 (c4 + c6 per flute; c1, c4, c6 per cut),
+# FL_THERMAL ch1, ch3, ch5 and ACE spindle thermal as bench/model/run_real_data.sh runs them,
+# once with interval = "in_sample" and once with "validation", and a table of the summary.json
+# figures.
 #   bench/model/run_interval.sh [path/to/nccomp]   (default: build/release/tools/nccomp)
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
@@ -34,11 +35,15 @@ for m in in_sample validation; do
       --config "$(with_interval bench/model/fl_thermal/fl_thermal.toml $m)" \
       --out "$out/$m/fl_thermal_ch$ch" >/dev/null
   done
+  "$nccomp" analyze --log bench/data/ace_spindle_thermal --map bench/model/ace_thermal/ace.map.toml \
+    --config "$(with_interval bench/model/ace_thermal/ace.toml $m)" --out "$out/$m/ace_thermal" \
+    >/dev/null
 done
 /usr/bin/python3 - "$out" <<'PY'
 import json, os, sys
 out = sys.argv[1]
-runs = ["phm2010_c4_c6", "phm2010_c1_c4_c6", "fl_thermal_ch1", "fl_thermal_ch3", "fl_thermal_ch5"]
+runs = ["phm2010_c4_c6", "phm2010_c1_c4_c6", "fl_thermal_ch1", "fl_thermal_ch3", "fl_thermal_ch5",
+        "ace_thermal"]
 print("| run | held-out rows | held-out RMS [µm] | method | s [µm] | validation RMS [µm] (rows) "
       "| mean / max half-width [µm] | coverage |")
 print("| --- | --- | --- | --- | --- | --- | --- | --- |")
