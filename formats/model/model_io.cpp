@@ -596,12 +596,11 @@ ModelFile read_model_table(const toml::table& root, std::string_view source, boo
     diag.error(Where{}, "no [model] table");
     throw DiagnosticsError(std::move(diag), std::string(source));
   }
-  check_keys(
-      *model, "model",
-      {"heldout_fraction", "alpha", "max_effects", "search_rows", "ar1_correction", "lookahead",
-       "outlier_sigmas", "session_gap_s", "rank_folds", "validate_block_s", "interval", "term",
-       "search"},
-      diag);
+  check_keys(*model, "model",
+             {"heldout_fraction", "alpha", "max_effects", "search_rows", "ar1_correction",
+              "lookahead", "outlier_sigmas", "session_gap_s", "rank_folds", "validate_block_s",
+              "interval", "term", "search"},
+             diag);
   read_options(*model, out.config, diag);
   const auto* terms = model->get("term");
   if (terms == nullptr || !terms->is_array_of_tables()) {

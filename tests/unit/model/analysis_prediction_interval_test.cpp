@@ -80,8 +80,7 @@ TEST(PredictionInterval, ItsCoverageOfGaussianHeldOutRowsIsWithinTheBinomialBand
       EXPECT_NE(j.find(R"("prediction_interval": {"level": 0.95, "rows": )"), std::string::npos)
           << j;
       EXPECT_NE(j.find(R"(, "coverage": )"), std::string::npos) << j;
-      EXPECT_NE(j.find(std::string(R"("method": ")") + name_of(method) + "\""),
-                std::string::npos)
+      EXPECT_NE(j.find(std::string(R"("method": ")") + name_of(method) + "\""), std::string::npos)
           << j;
     }
     const double n = static_cast<double>(rows);
@@ -105,12 +104,10 @@ TEST(PredictionInterval, TheValidationScaleDoesNotWidenItOnStationaryLogs) {
     opt.noise_um = seed % 2 == 0 ? 0.3 : 1.0;
     opt.effects = {"position_x"};
     const cm::Dataset d = synth::generate(opt);
-    const double in =
-        cm::analyze(d, config_with(opt, cm::IntervalMethod::kInSample)).prediction_interval
-            .half_width_mean_um;
-    const double val =
-        cm::analyze(d, config_with(opt, cm::IntervalMethod::kValidation)).prediction_interval
-            .half_width_mean_um;
+    const double in = cm::analyze(d, config_with(opt, cm::IntervalMethod::kInSample))
+                          .prediction_interval.half_width_mean_um;
+    const double val = cm::analyze(d, config_with(opt, cm::IntervalMethod::kValidation))
+                           .prediction_interval.half_width_mean_um;
     EXPECT_GE(val, in);  // max(s, validation)
     EXPECT_LT(val, 1.10 * in);
     sum_in += in;
@@ -170,9 +167,10 @@ TEST(PredictionInterval, ALogWithADriftTheModelLacksRaisesTheValidationCoverageT
     half_val += val.half_width_mean_um;
   }
   const double n = static_cast<double>(rows);
-  std::printf("drift, pooled over %zu rows: in_sample %.4f (half-width %.4f µm), validation %.4f "
-              "(half-width %.4f µm)\n",
-              rows, covered_in / n, half_in / 5.0, covered_val / n, half_val / 5.0);
+  std::printf(
+      "drift, pooled over %zu rows: in_sample %.4f (half-width %.4f µm), validation %.4f "
+      "(half-width %.4f µm)\n",
+      rows, covered_in / n, half_in / 5.0, covered_val / n, half_val / 5.0);
   // The setting is one where the in-sample interval promises too much (below the binomial band,
   // 3 standard deviations, of 95 % over the pooled rows) ...
   EXPECT_LT(covered_in / n, 0.95 - 3.0 * std::sqrt(0.95 * 0.05 / n));

@@ -393,7 +393,8 @@ TEST(ModelFile, ReadsAndWritesTheIntervalMethod) {
   opt.effects = {"part_trend"};
   const cm::AnalysisResult r =
       cm::analyze(nccomp::test::synth::generate(opt), nccomp::test::synth::config());
-  for (const cm::IntervalMethod m : {cm::IntervalMethod::kInSample, cm::IntervalMethod::kValidation}) {
+  for (const cm::IntervalMethod m :
+       {cm::IntervalMethod::kInSample, cm::IntervalMethod::kValidation}) {
     cm::AnalysisConfig c = nccomp::test::synth::config();
     c.interval = m;
     const std::string text = io::write_model_toml(r.final_model, c, {"t"});
