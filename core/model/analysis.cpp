@@ -1093,8 +1093,73 @@ void set_confidence_intervals(const Dataset& data, const std::vector<TermSpec>& 
   }
 }
 
+// The validation error of the prediction interval (IntervalMethod::kValidation): the fitted rows
+// cut by time (the order over files, else time_s) into kIntervalFolds + 1 blocks of equal count,
+// as the held-out split is cut; for each of the latest kIntervalFoldsUsed blocks, the terms are
+// refitted on the fitted rows before it and its rows are predicted (lag filters over all rows,
+// a session the fit lacks learned from its earlier rows, as for the held-out rows). Rows of a
+// group that fit has not seen (a per-group term's checkpoint or tool first met in the block) are
+// left out, as heldout_unseen_group leaves them out of the held-out figures. Returns the summed
+// squared prediction error and its rows ({0, 0} when there is no time order or no fold fits).
+std::pair<double, std::size_t> interval_validation_error(const Dataset& data,
+                                                         const std::vector<TermSpec>& specs,
+                                                         const std::vector<std::uint8_t>& use) {
+  const std::size_t n = data.rows();
+  const auto& tc =
+      data.order_s.size() == n ? data.order_s : data.column(static_cast<int>(Column::kTime));
+  if (tc.size() != n) return {0.0, 0};
+  std::vector<double> times;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (use[i] != 0U && std::isfinite(tc[i])) times.push_back(tc[i]);
+  }
+  constexpr std::size_t kBlocks = kIntervalFolds + 1;
+  if (times.size() < kBlocks) return {0.0, 0};
+  std::sort(times.begin(), times.end());
+  const auto& kind = data.column(static_cast<int>(Column::kKind));
+  auto applies = [&](const TermSpec& s, std::size_t i) {
+    return kind.empty() || !std::isfinite(kind[i]) || kind[i] < 0.0 || kind[i] > 7.0 ||
+           (s.kind_mask & (1U << static_cast<unsigned>(kind[i]))) != 0U;
+  };
+  double ss = 0.0;
+  std::size_t rows = 0;
+  for (std::size_t f = kBlocks - kIntervalFoldsUsed; f < kBlocks; ++f) {
+    const double from = times[times.size() * f / kBlocks];
+    const double to = f + 1 < kBlocks ? times[times.size() * (f + 1) / kBlocks]
+                                      : std::numeric_limits<double>::infinity();
+    std::vector<std::uint8_t> earlier(n, 0);
+    for (std::size_t i = 0; i < n; ++i) {
+      earlier[i] = use[i] != 0U && std::isfinite(tc[i]) && tc[i] < from ? 1 : 0;
+    }
+    Model m;
+    try {
+      m = fit_terms(data, specs, earlier);
+    } catch (const AnalysisError&) {
+      continue;  // too few earlier rows for these terms: this fold says nothing
+    }
+    const std::vector<double> r = residuals(data, m);
+    for (std::size_t i = 0; i < n; ++i) {
+      if (use[i] == 0U || !std::isfinite(tc[i]) || tc[i] < from || !(tc[i] < to)) continue;
+      if (!std::isfinite(r[i])) continue;
+      const Row row = data.row(i);
+      bool unseen = false;
+      for (const Term& t : m.terms()) {
+        const TermSpec& s = t.spec;
+        if ((s.per[0] < 0 && s.per[1] < 0) || s.form == Form::kSession || !applies(s, i)) continue;
+        bool ok = false;
+        group_key(s, row, ok);
+        if (ok && find_group(s, t.groups, row) < 0) unseen = true;
+      }
+      if (unseen) continue;
+      ss += r[i] * r[i];
+      ++rows;
+    }
+  }
+  return {ss, rows};
+}
+
 // The final model's 95 % prediction interval on each held-out row, from the fit on the fitted
-// rows: t · sqrt(s² (1 + x'Cx ·(1 + ρ)/(1 − ρ)) + v), C = (X'X + Λ)⁺, s² the residual variance,
+// rows: t · sqrt(s² (1 + x'Cx ·(1 + ρ)/(1 − ρ)) + v), C = (X'X + Λ)⁺, s² the residual variance
+// (IntervalMethod::kValidation: or the mean squared error of interval_validation_error if larger),
 // the coefficient part widened for an AR(1) residual as coef_ci95; v the variance of a learned
 // session offset (τ²σ² / (nτ² + σ²) after n of the session's rows), and its measured coverage.
 void set_prediction_interval(const Dataset& data, const std::vector<TermSpec>& specs,
@@ -1110,7 +1175,18 @@ void set_prediction_interval(const Dataset& data, const std::vector<TermSpec>& s
   }
   const double df = dz(info.rows) - info.effective_parameters;
   if (!(df >= 1.0)) return;
-  const double s2 = rss / df;
+  PredictionInterval& pi = result.prediction_interval;
+  double s2 = rss / df;
+  pi.sigma_in_sample_um = std::sqrt(s2);
+  if (config.interval == IntervalMethod::kValidation) {
+    const auto [ss, rows] = interval_validation_error(data, specs, use);
+    if (rows > 0) {
+      pi.method = IntervalMethod::kValidation;
+      pi.validation_rows = rows;
+      pi.validation_rms_um = std::sqrt(ss / dz(rows));
+      s2 = std::max(s2, ss / dz(rows));
+    }
+  }
   const double rho = config.ar1_correction
                          ? std::clamp(lag1_autocorrelation(data, residual, use), 0.0, 0.999)
                          : 0.0;
@@ -1149,7 +1225,6 @@ void set_prediction_interval(const Dataset& data, const std::vector<TermSpec>& s
   }
   const std::size_t po = other_layout.parameters;
   EvalState other_state = others.make_state();
-  PredictionInterval& pi = result.prediction_interval;
   EvalState state = m.make_state();
   std::vector<Entry> x;
   std::array<double, kMaxBasis> b{};

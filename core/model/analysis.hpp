@@ -92,6 +92,20 @@ struct SearchOptions {
   double period_min_mm{2.0};
 };
 
+/// The residual scale of the final model's prediction interval on the held-out rows.
+enum class IntervalMethod : std::uint8_t {
+  /// The residual standard deviation of the fit on the fitted rows: right when the later hours
+  /// behave like the fitted ones (no drift the model lacks).
+  kInSample,
+  /// The larger of that and the RMS error of predicting later fitted rows from earlier ones:
+  /// the fitted rows in time order cut into kIntervalFolds + 1 blocks of equal count, the final
+  /// terms refitted on the blocks before block f and block f predicted, for the latest
+  /// kIntervalFoldsUsed folds (the blocks nearest the held-out rows, each fitted on most rows).
+  kValidation,
+};
+inline constexpr std::size_t kIntervalFolds = 4;
+inline constexpr std::size_t kIntervalFoldsUsed = 2;
+
 struct AnalysisConfig {
   std::vector<TermSpec> declared;
   SearchOptions search;
@@ -123,6 +137,8 @@ struct AnalysisConfig {
   double session_gap_s{0.0};
   /// Leave-one-session-out validation of the declared and the final model (--validate sessions).
   bool validate_sessions{false};
+  /// How the scale of the prediction interval (PredictionInterval) is measured.
+  IntervalMethod interval{IntervalMethod::kValidation};
   /// --validate sessions on one continuous recording: blocks of this length [s] from its first
   /// row's time (in the order over files) are held out in turn instead of the sessions; 0 = the
   /// sessions (files, warm starts, session_gap_s).
@@ -218,6 +234,15 @@ struct PredictionInterval {
   double half_width_max_um{0.0};
   /// Share of those rows whose measurement is within its interval.
   double coverage{0.0};
+  /// The method that set the scale: kValidation only when the validation blocks gave an error
+  /// (validation_rows > 0), else kInSample.
+  IntervalMethod method{IntervalMethod::kInSample};
+  /// The fit's residual standard deviation [µm] (s).
+  double sigma_in_sample_um{0.0};
+  /// RMS error [µm] of the later fitted blocks predicted from the earlier ones, and the rows it
+  /// is over (0: not measured). The interval's scale is max(s, this).
+  double validation_rms_um{0.0};
+  std::size_t validation_rows{0};
 };
 
 struct AnalysisResult {

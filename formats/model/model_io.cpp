@@ -268,6 +268,17 @@ void read_options(const toml::table& model, cm::AnalysisConfig& cfg, Diagnostics
           "must be 0 (off) or an integer within [1, 10]", diag)) {
     cfg.rank_folds = static_cast<std::size_t>(*v);
   }
+  if (const auto* n = model.get("interval")) {
+    if (const auto v = get_string(*n, "model.interval", diag)) {
+      if (*v == "validation") {
+        cfg.interval = cm::IntervalMethod::kValidation;
+      } else if (*v == "in_sample") {
+        cfg.interval = cm::IntervalMethod::kInSample;
+      } else {
+        diag.error(n, "model.interval", "'" + *v + "' is not validation or in_sample");
+      }
+    }
+  }
 }
 
 /// One [[model.term]]: its spec, and its fitted coefficients if it carries them. Every error is
@@ -585,11 +596,11 @@ ModelFile read_model_table(const toml::table& root, std::string_view source, boo
     diag.error(Where{}, "no [model] table");
     throw DiagnosticsError(std::move(diag), std::string(source));
   }
-  check_keys(
-      *model, "model",
-      {"heldout_fraction", "alpha", "max_effects", "search_rows", "ar1_correction", "lookahead",
-       "outlier_sigmas", "session_gap_s", "rank_folds", "validate_block_s", "term", "search"},
-      diag);
+  check_keys(*model, "model",
+             {"heldout_fraction", "alpha", "max_effects", "search_rows", "ar1_correction",
+              "lookahead", "outlier_sigmas", "session_gap_s", "rank_folds", "validate_block_s",
+              "interval", "term", "search"},
+             diag);
   read_options(*model, out.config, diag);
   const auto* terms = model->get("term");
   if (terms == nullptr || !terms->is_array_of_tables()) {
@@ -639,6 +650,9 @@ std::string write_model_toml(const core::model::Model& model,
   o << "outlier_sigmas = " << fmt_double(config.outlier_sigmas) << "\n";
   o << "session_gap_s = " << fmt_double(config.session_gap_s) << "\n";
   o << "validate_block_s = " << fmt_double(config.validate_block_s) << "\n";
+  o << "interval = "
+    << (config.interval == cm::IntervalMethod::kInSample ? "\"in_sample\"" : "\"validation\"")
+    << "\n";
   for (const cm::Term& t : model.terms()) {
     const cm::TermSpec& s = t.spec;
     o << "\n[[model.term]]\n";

@@ -220,7 +220,16 @@ std::string summary_json(const cm::Dataset& data, const cm::AnalysisResult& resu
       o << "{\"level\": " << num(pi.level) << ", \"rows\": " << pi.rows
         << ", \"half_width_um\": " << num(pi.half_width_mean_um)
         << ", \"half_width_max_um\": " << num(pi.half_width_max_um)
-        << ", \"coverage\": " << num(pi.coverage) << "},\n";
+        << ", \"coverage\": " << num(pi.coverage) << ", \"method\": "
+        << (pi.method == cm::IntervalMethod::kValidation ? "\"validation\"" : "\"in_sample\"")
+        << ", \"sigma_in_sample_um\": " << num(pi.sigma_in_sample_um)
+        << ", \"validation_rms_um\": ";
+      if (pi.validation_rows > 0) {
+        o << num(pi.validation_rms_um);
+      } else {
+        o << "null";
+      }
+      o << ", \"validation_rows\": " << pi.validation_rows << "},\n";
     }
   }
   o << "  \"warnings\": [";
@@ -376,7 +385,15 @@ std::string report_markdown(const cm::Dataset& data, const cm::AnalysisResult& r
     o << "\nPrediction interval (" << num(100.0 * pi.level, 3) << " %) of the final model on the "
       << pi.rows << " held-out rows: half-width " << num(pi.half_width_mean_um, 3)
       << " µm on average (at most " << num(pi.half_width_max_um, 3) << " µm); it held "
-      << num(100.0 * pi.coverage, 3) << " % of them.\n";
+      << num(100.0 * pi.coverage, 3) << " % of them. Its scale: ";
+    if (pi.method == cm::IntervalMethod::kValidation) {
+      o << "the larger of the fit's residual standard deviation, " << num(pi.sigma_in_sample_um, 3)
+        << " µm, and the RMS error of the latest fitted hours predicted from the earlier ones, "
+        << num(pi.validation_rms_um, 3) << " µm over " << pi.validation_rows << " rows.\n";
+    } else {
+      o << "the fit's residual standard deviation, " << num(pi.sigma_in_sample_um, 3)
+        << " µm (in_sample: it assumes the held-out hours behave like the fitted ones).\n";
+    }
   }
   if (!result.session_folds.empty()) {
     o << "\n## Leave-one-session-out validation\n\n"

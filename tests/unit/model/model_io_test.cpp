@@ -368,3 +368,36 @@ TEST(ModelFile, RefusesAnUnknownExcludeAndKeepsColumnKinds) {
               "map.toml:4:6: column_kind.t3: not a log column nor a column of [extra]");
   }
 }
+
+// Issue 21, item 2: [model] interval chooses the prediction interval's scale; model.toml carries
+// it, and another value is refused with its place.
+TEST(ModelFile, ReadsAndWritesTheIntervalMethod) {
+  const std::string term = "[[model.term]]\nname = \"a\"\nform = \"constant\"\n";
+  EXPECT_EQ(io::read_model_text("[model]\n" + term, "c.toml", false).config.interval,
+            cm::IntervalMethod::kValidation);
+  const io::ModelFile in =
+      io::read_model_text("[model]\ninterval = \"in_sample\"\n" + term, "c.toml", false);
+  EXPECT_EQ(in.config.interval, cm::IntervalMethod::kInSample);
+  EXPECT_EQ(io::read_model_text("[model]\ninterval = \"validation\"\n" + term, "c.toml", false)
+                .config.interval,
+            cm::IntervalMethod::kValidation);
+  try {
+    (void)io::read_model_text("[model]\ninterval = \"bootstrap\"\n" + term, "c.toml", false);
+    ADD_FAILURE() << "accepted interval = \"bootstrap\"";
+  } catch (const nccomp::formats::DiagnosticsError& e) {
+    EXPECT_EQ(std::string(e.what()),
+              "c.toml:2:12: model.interval: 'bootstrap' is not validation or in_sample");
+  }
+  nccomp::test::synth::Options opt;
+  opt.parts = 20;
+  opt.effects = {"part_trend"};
+  const cm::AnalysisResult r =
+      cm::analyze(nccomp::test::synth::generate(opt), nccomp::test::synth::config());
+  for (const cm::IntervalMethod m :
+       {cm::IntervalMethod::kInSample, cm::IntervalMethod::kValidation}) {
+    cm::AnalysisConfig c = nccomp::test::synth::config();
+    c.interval = m;
+    const std::string text = io::write_model_toml(r.final_model, c, {"t"});
+    EXPECT_EQ(io::read_model_text(text, "model.toml", true).config.interval, m) << text;
+  }
+}

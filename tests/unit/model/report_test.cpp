@@ -21,7 +21,7 @@ TEST(Report, SummaryJsonHasExactlyTheIssueKeys) {
   const std::string j = nccomp::tools::analyze::summary_json(d, r);
   // Top-level keys in order, and nothing else at the top level.
   const std::regex top(
-      R"(^\{\n  "declared_rms_um": [-0-9.e]+,\n  "effects": \[\n    \{.*\}\n  \],\n  "final_rms_um": [-0-9.e]+,\n  "noise_floor_um": [-0-9.e]+,\n  "outliers": \[\],\n  "prediction_interval": \{"level": 0\.95, "rows": [0-9]+, "half_width_um": [0-9.e-]+, "half_width_max_um": [0-9.e-]+, "coverage": [0-9.e-]+\},\n  "warnings": \[\]\n\}\n$)");
+      R"(^\{\n  "declared_rms_um": [-0-9.e]+,\n  "effects": \[\n    \{.*\}\n  \],\n  "final_rms_um": [-0-9.e]+,\n  "noise_floor_um": [-0-9.e]+,\n  "outliers": \[\],\n  "prediction_interval": \{"level": 0\.95, "rows": [0-9]+, "half_width_um": [0-9.e-]+, "half_width_max_um": [0-9.e-]+, "coverage": [0-9.e-]+, "method": "validation", "sigma_in_sample_um": [0-9.e-]+, "validation_rms_um": [0-9.e-]+, "validation_rows": [0-9]+\},\n  "warnings": \[\]\n\}\n$)");
   EXPECT_TRUE(std::regex_match(j, top)) << j;
   const std::regex effect(
       R"re(\{"name": "part_trend", "label": "part_trend", "per": \[\], "column": "part", "form": "linear", "params": \{"coef_um": \[[-0-9.e]+\]\}, "rms_before_um": [-0-9.e]+, "rms_after_um": [-0-9.e]+, "heldout_rms_before_um": [-0-9.e]+, "heldout_rms_after_um": [-0-9.e]+, "p_value": [-0-9.e]+, "coef_ci95": \[\[[-0-9.e]+, [-0-9.e]+\]\]\})re");
