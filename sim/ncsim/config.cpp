@@ -613,6 +613,7 @@ SimConfig parse_sim_config(std::string_view text, const std::string& file,
       m.vec3("laser_position_mm", f.laser_position_mm, -1e5, 1e5);
       m.integer("probe_points", f.probe_points, 0, 64);
       m.number("probe_time_s", f.probe_time_s, 0.0, 3600.0);
+      m.number("approach_s", f.approach_s, 0.0, 3600.0);
       m.finish();
     }
     {

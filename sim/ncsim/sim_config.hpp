@@ -59,6 +59,9 @@ struct MouldFaceConfig {
   std::int32_t probe_points{0};
   /// Time per probed point [s].
   double probe_time_s{1.0};
+  /// At each part start the tool waits this long at the first pass's start, not cutting (the
+  /// approach), before the first cut [s]; 0 = the first cut starts with the part.
+  double approach_s{0.0};
 };
 
 /// [program.side_wall]: a side wall finished level by level, probed at the checkpoints of the

@@ -73,8 +73,18 @@ class MouldFace final : public Program {
         }
         sim.emit(ProgramEvent{sim.now_ns(), ProgramEventKind::kPartStart, part_});
         sim.model().set_part(part_);
-        phase_ = Phase::kCut;
+        approach_left_s_ = c_.approach_s;
+        phase_ = approach_left_s_ > 0.0 ? Phase::kApproach : Phase::kCut;
         return step(sim, h_s);
+      case Phase::kApproach:
+        // At the first pass's start, not cutting, for approach_s (the tool comes down to the
+        // face; the daemon sees the part start before the first cut).
+        publish(sim, dir_ > 0 ? 0.0 : c_.size_x_mm, pass_y(), false);
+        approach_left_s_ -= h_s;
+        if (approach_left_s_ <= 1e-12) {
+          phase_ = Phase::kCut;
+        }
+        return true;
       case Phase::kCut:
         cut(sim, d_mm);
         return true;
@@ -107,7 +117,7 @@ class MouldFace final : public Program {
   }
 
  private:
-  enum class Phase : std::uint8_t { kStart, kCut, kLink, kTrip, kProbe, kDone };
+  enum class Phase : std::uint8_t { kStart, kApproach, kCut, kLink, kTrip, kProbe, kDone };
 
   /// A point of the probe cycle: the face at mid-X of one pass, and its error as cut.
   struct ProbePoint {
@@ -295,6 +305,7 @@ class MouldFace final : public Program {
   std::int32_t total_passes_{0};
   int dir_{1};
   double u_mm_{0.0};
+  double approach_left_s_{0.0};
   double link_left_mm_{0.0};
   double path_mm_{0.0};
   bool request_seen_{false};

@@ -75,6 +75,52 @@ TEST(NcsimMouldFace, ErrorIsTheWearAlongThePathAndEveryRowIsFine) {
   EXPECT_NEAR(rows[200].y_mm, 1.0, 1e-12);
 }
 
+// approach_s: after each part start the tool waits at the first pass's start without cutting,
+// then the part is cut as without it (the same rows, approach_s later).
+TEST(NcsimMouldFace, ApproachWaitsAtTheFirstPassStartWithoutCutting) {
+  SimConfig c = quiet_config();
+  c.effects.wear.enabled = true;
+  c.effects.wear.rate_um_per_m = 100.0;
+  c.mould_face.approach_s = 0.5;
+  c.parts = 2;
+  Simulation sim(c, ProgramKind::kMouldFace, kKnown);
+  std::vector<double> part_start_s;
+  double first_cut_s = -1.0;
+  std::size_t samples_before_cut = 0;
+  for (int k = 1; k <= 20000 && !sim.done(); ++k) {
+    sim.advance_to(core::from_seconds(0.001 * k));
+    for (const auto& e : sim.take_events()) {
+      if (const auto* pe = std::get_if<core::ProgramEvent>(&e)) {
+        if (pe->kind == core::ProgramEventKind::kPartStart) {
+          part_start_s.push_back(core::seconds(pe->time_ns));
+        }
+      }
+    }
+    const core::AxisSample& a = sim.axis();
+    if (first_cut_s < 0.0 && !part_start_s.empty()) {
+      if (a.cutting) {
+        first_cut_s = core::seconds(a.time_ns);
+      } else {
+        ++samples_before_cut;
+        EXPECT_NEAR(a.position_mm[0], 0.0 + c.mould_face.ball_radius_mm *
+                                                mould_face_normal(c.mould_face, 0.0, 0.0)[0],
+                    1e-9);
+      }
+    }
+  }
+  ASSERT_TRUE(sim.done());
+  ASSERT_EQ(part_start_s.size(), 2U);
+  EXPECT_NEAR(first_cut_s - part_start_s[0], 0.5, 0.011);
+  EXPECT_GT(samples_before_cut, 50U);
+  // 3 passes of 1 s and 2 links of 0.1 s after the approach: the second part starts 3.7 s in.
+  EXPECT_NEAR(part_start_s[1] - part_start_s[0], 3.7, 0.011);
+  const auto& rows = sim.results().surface;
+  // Steps of 1 ms, 0.01 mm: 2 parts of 3 passes of 1000 rows, as without the approach (it cuts
+  // nothing, so the wear at the first part's end is that of its 30 mm).
+  ASSERT_EQ(rows.size(), 6000U);
+  EXPECT_NEAR(rows[2999].error_um, 0.1 * 30.0, 1e-9);
+}
+
 // The probe cycle after each part reads the finished face at mid-X of passes spread from the
 // first to the last: the wear at the cut path where the point was cut plus the push-off there
 // (which a laser measurement of the tool never shows), then the part ends.
