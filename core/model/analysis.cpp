@@ -952,16 +952,20 @@ void check_magnitudes(const Dataset& data) {
   }
 }
 
+// Whether a term applies to row i by its kinds (kind_mask; a row without a valid kind: every
+// term). kind: the dataset's kind column (empty: none).
+bool term_applies(const TermSpec& s, const std::vector<double>& kind, std::size_t i) {
+  return kind.empty() || !std::isfinite(kind[i]) || kind[i] < 0.0 || kind[i] > 7.0 ||
+         (s.kind_mask & (1U << static_cast<unsigned>(kind[i]))) != 0U;
+}
+
 // Held-out rows of a group (of a declared term's `per` columns) that no fitted row has: the
 // model fitted on the earlier rows predicts 0 for that term there, and the held-out error would
 // measure the missing group, not the model. They are set to 2 (in neither part) and reported.
 void leave_out_unseen_groups(const Dataset& data, const std::vector<TermSpec>& declared,
                              std::vector<std::uint8_t>& heldout, std::vector<Warning>& out) {
   const auto& kind = data.column(static_cast<int>(Column::kKind));
-  auto applies = [&](const TermSpec& s, std::size_t i) {
-    return kind.empty() || !std::isfinite(kind[i]) || kind[i] < 0.0 || kind[i] > 7.0 ||
-           (s.kind_mask & (1U << static_cast<unsigned>(kind[i]))) != 0U;
-  };
+  auto applies = [&](const TermSpec& s, std::size_t i) { return term_applies(s, kind, i); };
   std::string groups;
   std::size_t listed = 0;
   std::size_t rows = 0;
@@ -1116,10 +1120,7 @@ std::pair<double, std::size_t> interval_validation_error(const Dataset& data,
   if (times.size() < kBlocks) return {0.0, 0};
   std::sort(times.begin(), times.end());
   const auto& kind = data.column(static_cast<int>(Column::kKind));
-  auto applies = [&](const TermSpec& s, std::size_t i) {
-    return kind.empty() || !std::isfinite(kind[i]) || kind[i] < 0.0 || kind[i] > 7.0 ||
-           (s.kind_mask & (1U << static_cast<unsigned>(kind[i]))) != 0U;
-  };
+  auto applies = [&](const TermSpec& s, std::size_t i) { return term_applies(s, kind, i); };
   double ss = 0.0;
   std::size_t rows = 0;
   for (std::size_t f = kBlocks - kIntervalFoldsUsed; f < kBlocks; ++f) {
@@ -1293,10 +1294,7 @@ void validate_sessions(const Dataset& data, const std::vector<TermSpec>& declare
   std::vector<std::uint8_t> outlier(n, 0);
   for (const std::size_t i : result.outliers) outlier[i] = 1;
   const auto& kind = data.column(static_cast<int>(Column::kKind));
-  auto kind_applies = [&](const TermSpec& t, std::size_t i) {
-    return kind.empty() || !std::isfinite(kind[i]) || kind[i] < 0.0 || kind[i] > 7.0 ||
-           (t.kind_mask & (1U << static_cast<unsigned>(kind[i]))) != 0U;
-  };
+  auto kind_applies = [&](const TermSpec& t, std::size_t i) { return term_applies(t, kind, i); };
   double ss_declared = 0.0;
   double ss_final = 0.0;
   for (std::uint32_t s = 0; s < count; ++s) {
