@@ -9,8 +9,9 @@
 //   - a character U+00A1..U+0499, U+2C5E..U+2FFF, U+3001..U+3057 or U+FB26..U+FEFE (é, µ, °,
 //     U+FE00 ...) where toml++ asks whether it is whitespace: outside strings and comments, and
 //     in a multi-line "..." string right after a backslash or after a line-ending backslash;
-//     also after a quote that directly follows a bare key or value (`i = 5"°`), where toml++
-//     reads on to the end of the bad token.
+//     also after a quote that directly follows a bare key or value (`i = 5"°`), and anywhere in
+//     a value that begins with a digit or a sign up to the next whitespace, ']', '}', ',' or '#'
+//     (`a = 1[["°"]]`), where toml++ reads on to the end of the bad token.
 //     Its lookup table reaches __builtin_unreachable() there: undefined behaviour (upstream
 //     issues 190 and 295, pull request 305).
 // Debian's library is built without assertions and by GCC (no assumption), so there the first
@@ -57,6 +58,12 @@ constexpr bool undefined_whitespace(char32_t c) noexcept {
 constexpr bool non_ascii_whitespace(char32_t c) noexcept {
   return c == 0xA0 || c == 0x1680 || c == 0x180E || (c >= 0x2000 && c <= 0x200B) || c == 0x202F ||
          c == 0x205F || c == 0x2060 || c == 0x3000 || c == 0xFEFF;
+}
+
+/// toml++'s is_value_terminator() for the characters it answers: whitespace, ']', '}', ',', '#'.
+constexpr bool value_terminator(char32_t c) noexcept {
+  return c == ' ' || c == '\t' || (c >= '\n' && c <= '\r') || c == ']' || c == '}' || c == ',' ||
+         c == '#' || c == 0x85 || c == 0x2028 || c == 0x2029 || non_ascii_whitespace(c);
 }
 
 constexpr bool key_start(char32_t c) noexcept {
@@ -269,6 +276,24 @@ inline std::optional<TomlDefect> find_toml_defect(std::string_view text) {
     // A quote right after a bare key or value character (`i = 5"x`) opens no string: toml++
     // reads on to the end of the bad token and asks "whitespace?" of every character there.
     const bool in_token = bare;
+    if (mode == Mode::kValue && !in_token && ((c >= '0' && c <= '9') || c == '+' || c == '-')) {
+      // A value that begins with a digit or a sign (a number, date or time): toml++'s
+      // parse_value() scans it up to a value terminator, whatever lies between (brackets and
+      // quotes too: `a = 1[["x"]]`), and asks "whitespace?" of every character.
+      array_slot = false;
+      bare = false;
+      char32_t n = 0;
+      std::size_t len = 0;
+      while (r.peek(n, len) && !value_terminator(n)) {
+        r.next(c);
+        if (undefined_whitespace(c)) {
+          return defect_at(r, "unexpected character " + code_point_name(c) +
+                                  " in a number, date or time value");
+        }
+      }
+      if (!r.peek(n, len)) return std::nullopt;  // the end, or malformed UTF-8: toml++ stops
+      continue;
+    }
     bare = (mode == Mode::kKey || mode == Mode::kValue) &&
            ((c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') ||
             c == '_' || c == '-' || c == '+' || c == ':' || c >= 0x80 ||

@@ -95,6 +95,19 @@ TEST(TomlGuard, AQuoteRightAfterABareTokenOpensNoString) {
   EXPECT_EQ(v.line, 1U);
   EXPECT_LE(v.column, 5U);
   EXPECT_EQ(refusal("ab\"\xC2\xB0\" = 1").line, 1U);
+  // Found by the coverage-guided run of fuzz_daemon_config (minimized): a value that begins
+  // with a digit or a sign is scanned by toml++ up to a value terminator, brackets and quotes
+  // included, so the quotes there open no string either.
+  const auto b = refusal("a = 1[[\"\xC2\xB0\"]]\n");
+  EXPECT_EQ(b.line, 1U);
+  EXPECT_LE(b.column, 9U);
+  EXPECT_EQ(refusal("a = [-2{\"\xD2\x8E\"}]").line, 1U);
+  EXPECT_EQ(refusal("rahz = 1[-\x18" "a[[-se_0[[\"x\xD2\x8Eoml\"a").line, 1U);
+  // After a terminator a string is a string: in arrays, inline tables, after a comment.
+  EXPECT_NO_THROW((void)parse_toml("a = [1, \"\xC2\xB0\", -2,\"\xC2\xB5\"]\n"
+                                   "b = {x = 1, y = \"\xC2\xB0\"}\nc = 3 # \xC2\xB0" "C\n"
+                                   "d = 1979-05-27T07:32:00Z\ne = [+1.5e3]",
+                                   "t.toml"));
   // A quoted key after a dot and a string value after '=' are strings as before.
   EXPECT_NO_THROW((void)parse_toml("a.\"t2(\xC2\xB0" "C)\" = \"\xC2\xB0\"", "t.toml"));
 }
