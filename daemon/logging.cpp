@@ -1,4 +1,5 @@
 #include "daemon/logging.hpp"
+#include "daemon/measurement_log_probe.hpp"
 #include "daemon/status.hpp"
 
 #include <spdlog/sinks/stdout_color_sinks.h>
@@ -358,6 +359,14 @@ void EventLogger::drain() {
             "dry run's offsets were never sent), through the limiters",
             n.a);
         break;
+      case NoteCode::kFaceProbeRejected: {
+        const std::int64_t reason = ((n.a % 8) + 8) % 8;
+        spdlog::warn(
+            "[measurement_log.face_probe]: the probe reading of point {} ({} um) gives no "
+            "measurement row: {}",
+            (n.a - reason) / 8, n.b, to_string(static_cast<FaceProbeReject>(reason)));
+        break;
+      }
     }
   }
 }

@@ -147,7 +147,14 @@ void Loop::log_face_probe(const core::engine::Engine& engine) noexcept {
       if (p->kind == core::ProgramEventKind::kPartStart) fp.on_part_start();
     } else if (const auto* m = std::get_if<core::ProbeMeasurement>(&e)) {
       core::MeasurementRecord r;
-      if (!fp.on_probe(*m, r)) continue;
+      if (!fp.on_probe(*m, r)) {
+        ++local_.face_probe_rejected;
+        note(m->time_ns, NoteCode::kFaceProbeRejected,
+             static_cast<std::int64_t>(m->checkpoint) * 8 +
+                 static_cast<std::int64_t>(fp.last_reject()),
+             m->raw_deviation_um);
+        continue;
+      }
       ++local_.records;
       engine.context().annotate(r);  // session, machine time, temperature: as the engine's rows
       measurement_log_->stamp(r, engine.context());

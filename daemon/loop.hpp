@@ -53,6 +53,7 @@ enum class NoteCode : std::uint8_t {
   kWriteDropped = 4,       // a = register index (TX ring full or no bus)
   kDryRunEntered = 5,      // a = new generation: the state as the NC has it is kept aside
   kDryRunLeft = 6,         // a = new generation: it starts from the state before the dry run
+  kFaceProbeRejected = 7,  // a = point · 8 + FaceProbeReject, b = the reading [µm]
 };
 
 struct LoopNote {
@@ -139,6 +140,7 @@ struct LoopStats {
   std::uint64_t notes_dropped{0};
   std::uint64_t records{0};
   std::uint64_t records_dropped{0};  // measurement ring full or no writer
+  std::uint64_t face_probe_rejected{0};  // face probe readings that gave no row
   std::uint64_t state_exports{0};
   std::uint64_t state_export_busy{0};  // persister behind: export postponed
   std::uint64_t state_export_failed{0};

@@ -149,7 +149,8 @@ std::string render_json(const StatusContext& c) {
     << ",\"writes_sent\":" << s.writes_sent << ",\"writes_dry_run\":" << s.writes_dry_run
     << ",\"writes_dropped\":" << s.writes_dropped << ",\"alarms\":" << s.alarms
     << ",\"alarms_dropped\":" << s.alarms_dropped << ",\"records\":" << s.records
-    << ",\"records_dropped\":" << s.records_dropped << ",\"state_exports\":" << s.state_exports
+    << ",\"records_dropped\":" << s.records_dropped
+    << ",\"face_probe_rejected\":" << s.face_probe_rejected << ",\"state_exports\":" << s.state_exports
     << ",\"state_export_busy\":" << s.state_export_busy
     << ",\"state_export_failed\":" << s.state_export_failed << "},";
   const auto& e = s.engine;
@@ -437,7 +438,11 @@ std::string render_text(const StatusContext& c) {
   o << "\n";
   if (c.measurement_log != nullptr) {
     o << "measurements: " << c.measurement_log->current_path() << ", " << c.measurement_log->rows()
-      << " rows, " << s.records_dropped << " dropped\n";
+      << " rows, " << s.records_dropped << " dropped";
+    if (s.face_probe_rejected > 0) {
+      o << ", " << s.face_probe_rejected << " face probe reading(s) without a row";
+    }
+    o << "\n";
   }
   if (c.server != nullptr) {
     o << "clients: " << c.server->clients.load() << " served, " << c.server->timed_out.load()
@@ -537,6 +542,9 @@ std::string render_prometheus(const StatusContext& c) {
   counter("loop_missed_deadlines_total", "Deadlines skipped after overruns.", s.missed_deadlines);
   counter("offset_writes_total", "Offset writes queued to a bus.", s.writes_sent);
   counter("offset_writes_dropped_total", "Offset writes the bus could not take.", s.writes_dropped);
+  counter("face_probe_rejected_total",
+          "Face probe readings that gave no measurement row ([measurement_log.face_probe]).",
+          s.face_probe_rejected);
   counter("engine_events_invalid_total", "Events rejected by validation.", s.engine.events_invalid);
   counter("engine_writes_rejected_total", "Targets refused by a limiter.",
           s.engine.writes_rejected);

@@ -48,8 +48,9 @@ core::ProbeMeasurement probe(std::int32_t k, double x, double y, double reading_
 TEST(FaceProbeCapture, ARowCarriesTheCompensationAndCutPathWhereThePointWasCut) {
   FaceProbeCapture fp(two_points());
   fp.on_part_start();
-  // Along pass 0 the length register grows with the wear: −20 µm at x = 29.8, −20.1 at 29.95
-  // (the nearest sample to point 0), −20.2 at 30.1; the normal tilts 0.8 / 0.6.
+  // Along pass 0 the length register grows with the wear: −20 µm at x = 29.8, −20.1 at 29.95,
+  // −20.2 at 30.1; the normal tilts 0.8 / 0.6. Point 0 (x = 30) lies a third of the way from
+  // the second sample to the third: compensation and cut path are interpolated there.
   fp.on_axis(sample(29.8, 0.0, 0.8), -20.0, -1.0, 100.0);
   fp.on_axis(sample(29.95, 0.0, 0.8), -20.1, -1.5, 100.15);
   fp.on_axis(sample(30.1, 0.0, 0.6), -20.2, -2.0, 100.3);
@@ -68,10 +69,11 @@ TEST(FaceProbeCapture, ARowCarriesTheCompensationAndCutPathWhereThePointWasCut) 
   EXPECT_EQ(r.tool, 1);
   EXPECT_EQ(r.point, 0);
   EXPECT_DOUBLE_EQ(r.measured_um, 7.5);
-  EXPECT_DOUBLE_EQ(r.path_mm, 100.15);
-  // −(−20.1 · 0.8 + −1.5 · 0.6) = 16.98 µm compensated: the error before it was 24.48 µm.
-  EXPECT_NEAR(r.applied_um, 16.98, 1e-12);
-  EXPECT_NEAR(r.measured_um + r.applied_um, 24.48, 1e-12);
+  EXPECT_NEAR(r.path_mm, 100.2, 1e-12);
+  // −(−20.1 · 0.8 + −1.5 · 0.6) = 16.98 µm compensated at x = 29.95, −(−20.2 · 0.6 + −2 · 0.8) =
+  // 13.72 at 30.1; at x = 30: 16.98 − (16.98 − 13.72) / 3 = 15.8933, the error before it 23.3933.
+  EXPECT_NEAR(r.applied_um, 16.98 - (16.98 - 13.72) / 3.0, 1e-12);
+  EXPECT_NEAR(r.measured_um + r.applied_um, 7.5 + 16.98 - (16.98 - 13.72) / 3.0, 1e-12);
 
   ASSERT_TRUE(fp.on_probe(probe(1, 30.0, 10.2, 5.0), r));
   EXPECT_DOUBLE_EQ(r.path_mm, 400.0);
@@ -117,6 +119,51 @@ TEST(FaceProbeCapture, TheEdgePassesOfASlopedFaceAreCapturedAtTheBallsContactPoi
   EXPECT_DOUBLE_EQ(r.path_mm, 1900.0);
   EXPECT_NEAR(r.applied_um, 41.0 / std::sqrt(1.04), 1e-12);
   EXPECT_EQ(fp.rejected(), 0U);
+}
+
+// A fast feed or a coarse sampling (the daemon in real time beside ncsim at x4: 0.55 mm of path
+// per cycle) puts the samples farther apart than the capture radius: the point lies between two
+// of them, 0.5 mm from each. Its cut is the place on the segment between them.
+TEST(FaceProbeCapture, APointBetweenTwoSamplesFartherApartThanTheRadiusIsCapturedOnTheSegment) {
+  FaceProbeConfig c = two_points();
+  c.capture_radius_mm = 0.4;
+  FaceProbeCapture fp(c);
+  fp.on_part_start();
+  fp.on_axis(sample(29.5, 0.1, 1.0), -20.0, 0.0, 100.0);
+  fp.on_axis(sample(30.5, 0.1, 1.0), -21.0, 0.0, 101.0);
+  core::MeasurementRecord r;
+  ASSERT_TRUE(fp.on_probe(probe(0, 30.0, 0.0, 2.0), r));
+  EXPECT_NEAR(r.path_mm, 100.5, 1e-12);
+  EXPECT_NEAR(r.applied_um, 20.5, 1e-12);
+  // The point's nearest place along the segment, not the nearer end: a later segment that
+  // passes farther (0.3 mm) does not replace it.
+  fp.on_axis(sample(29.0, 0.3, 1.0), -30.0, 0.0, 200.0);
+  fp.on_axis(sample(31.0, 0.3, 1.0), -30.0, 0.0, 202.0);
+  ASSERT_TRUE(fp.on_probe(probe(0, 30.0, 0.0, 2.0), r));
+  EXPECT_NEAR(r.path_mm, 100.5, 1e-12);
+  // A jump longer than 10 capture radii (one pass's end to the next one's start while the NC
+  // says "cutting") is no segment: point 1, passed 0.1 mm off by the straight line from
+  // (20, 10.1) to (40, 10.1), is not cut.
+  fp.on_axis(sample(20.0, 10.1, 1.0), -30.0, 0.0, 300.0);
+  fp.on_axis(sample(40.0, 10.1, 1.0), -30.0, 0.0, 320.0);
+  EXPECT_FALSE(fp.on_probe(probe(1, 30.0, 10.0, 2.0), r));
+  // A segment between two tools is none either.
+  fp.on_axis(sample(29.5, 10.1, 1.0), -30.0, 0.0, 400.0);
+  core::AxisSample other = sample(30.5, 10.1, 1.0);
+  other.tool = 2;
+  fp.on_axis(other, -30.0, 0.0, 5.0);
+  EXPECT_FALSE(fp.on_probe(probe(1, 30.0, 10.0, 2.0), r));
+  // The tool lifted to the laser at x = 29.6 and came back to cut at x = 30.4: the places
+  // between were cut (before it left, after it came back); the samples while it was away,
+  // not cutting, are not the cut.
+  fp.on_axis(sample(29.6, 10.1, 1.0), -30.0, 0.0, 500.0);
+  core::AxisSample lifted = sample(30.0, 10.0, 1.0);
+  lifted.cutting = false;
+  fp.on_axis(lifted, -99.0, 0.0, 500.0);
+  fp.on_axis(sample(30.4, 10.1, 1.0), -32.0, 0.0, 500.8);
+  ASSERT_TRUE(fp.on_probe(probe(1, 30.0, 10.0, 2.0), r));
+  EXPECT_NEAR(r.path_mm, 500.4, 1e-12);
+  EXPECT_NEAR(r.applied_um, 31.0, 1e-12);
 }
 
 TEST(FaceProbeCapture, ReadingsOfNoPointOrAnotherPlaceOrAnUncutPointAreCountedNotLogged) {
