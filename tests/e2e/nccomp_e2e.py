@@ -1172,13 +1172,14 @@ def run_continued(b, source, work, name, daemon_cfg, daemon_overrides, parts, se
     """Over Modbus: ncsim continues the run in continue_from (`--continue`; None: a new run, e.g.
     with a new tool) for `parts` more parts of `program`, and nccompd starts from the state of the
     run in state_from (its state/ directory, as after a restart of the daemon). speed=None:
-    lock-step, else real time with ncsim at that speed factor. model_load (real time): once the
-    daemon serves its status socket, `nccomp model load MODEL_LOAD` puts that model into it (an
-    operator's command; ncsim already machines: the swap lands in the first seconds of the run);
-    its answer is RunResult.model_load (exit status, output). reload_cfg: the daemon is started
-    first, and before ncsim ticks its config file is replaced by reload_cfg (staged with
-    reload_overrides)
-    and it gets SIGHUP, so the RUNNING daemon swaps in the new configuration with its state at a
+    lock-step, else real time with ncsim at that speed factor. model_load (real time): the daemon
+    is started first, on the state of the batch before, while the NC is not machining (its bus
+    is down: it keeps reconnecting); once it serves its status socket, `nccomp model load
+    MODEL_LOAD` puts that model into it (an operator's command between two batches), and ncsim
+    starts when the load has been answered, so the model is in force from the batch's first
+    part; the load's answer is RunResult.model_load (exit status, output). reload_cfg: the
+    daemon is started first, and before ncsim ticks its config file is replaced by reload_cfg
+    (staged with reload_overrides) and it gets SIGHUP, so the RUNNING daemon swaps in the new configuration with its state at a
     cycle boundary (the reload is taken while ncsim already ticks: where it lands is read back).
     Returns (RunResult, swap_s): swap_s, the machine time [s] by which the new configuration ran
     (an upper bound: the loop's cycles when the daemon's log said so), None without reload; with
@@ -1219,7 +1220,7 @@ def run_continued(b, source, work, name, daemon_cfg, daemon_overrides, parts, se
     handover = None
     load_answer = None
     try:
-        if speed is not None:
+        if speed is not None and model_load is None:
             # Real time: the daemon connects to the NC's Modbus port, so ncsim serves first.
             sim = Proc("ncsim", sim_argv, os.path.join(run_dir, "ncsim.log"), run_dir)
             deadline = time.monotonic() + 30.0
@@ -1240,6 +1241,8 @@ def run_continued(b, source, work, name, daemon_cfg, daemon_overrides, parts, se
                                        status_sock], stdout=subprocess.PIPE,
                                       stderr=subprocess.STDOUT, text=True)
             load_answer = (loader.wait(60), loader.stdout.read())
+            # The NC starts the next batch now; the daemon's reconnect back-off (at most
+            # reconnect_max_s, 5 s) is within ncsim's --wait-client (10 s).
         if reload_cfg is not None:
             deadline = time.monotonic() + 30.0
             while "lock-step: connecting" not in daemon.log() and daemon.running():
