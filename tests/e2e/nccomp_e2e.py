@@ -1795,9 +1795,12 @@ LOOP_SECOND_SETS = ["program.mould_face.approach_s=0.5"]
 MODEL_ROW_RMS_BOUND_UM = 1.5
 
 
-# Real time: the loop's parts run this much faster than the four modes (the wear follows the
-# cut path, not the clock), so that the first batch, the analysis and the part with the model
-# take about one part's time of the four modes and run beside them.
+# Real time: the first batch's parts run this much faster than the four modes (the wear follows
+# the cut path, not the clock), so that the batch takes half a part's time of the four modes.
+# The part with the model runs at the modes' speed: the daemon's writes then come as densely in
+# machine time as in the rows it is compared with (at x2 the radius register's fast changes along
+# a pass came two quanta per write, and the max step reached 0.155 um in 3 of 6 runs;
+# bench/results/handover.md). Faster first batches lose the face probe's rows (x8: 4 of 10).
 LOOP_SPEEDUP = 2.0
 
 
@@ -1840,7 +1843,7 @@ def run_loop(b, source, work, first, speed=None, echo=print):
     else:
         second, _ = run_continued(b, source, work, "model", LOOP_CONFIG, initial, 1,
                                   LOOP_SECOND_SETS, first.out_dir, first.run_dir,
-                                  program="mould_face", model_load=model, speed=speed * LOOP_SPEEDUP)
+                                  program="mould_face", model_load=model, speed=speed)
         rc, answer = second.model_load
         echo("nccomp model load %s: exit %d\n%s" % (model, rc, answer.rstrip()))
     echo("%s: %s" % (second.name, summary_line(second.report)))
@@ -1863,7 +1866,7 @@ def run_demo(b, source, work, speed=None, echo=print):
     beside them: lock-step, two runs at a time (each pair of processes keeps about one CPU busy;
     lock-step is deterministic whatever runs beside it), the loop on one worker and the four
     modes one after the other on the other; real time, the four modes side by side and the loop
-    (LOOP_SPEEDUP faster) beside them."""
+    beside them (its first batch LOOP_SPEEDUP x LOOP_FIRST_BATCH faster)."""
     import concurrent.futures
 
     def loop():
