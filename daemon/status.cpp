@@ -150,7 +150,8 @@ std::string render_json(const StatusContext& c) {
     << ",\"writes_dropped\":" << s.writes_dropped << ",\"alarms\":" << s.alarms
     << ",\"alarms_dropped\":" << s.alarms_dropped << ",\"records\":" << s.records
     << ",\"records_dropped\":" << s.records_dropped
-    << ",\"face_probe_rejected\":" << s.face_probe_rejected << ",\"state_exports\":" << s.state_exports
+    << ",\"face_probe_rejected\":" << s.face_probe_rejected
+    << ",\"state_exports\":" << s.state_exports
     << ",\"state_export_busy\":" << s.state_export_busy
     << ",\"state_export_failed\":" << s.state_export_failed << "},";
   const auto& e = s.engine;

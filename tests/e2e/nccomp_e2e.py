@@ -1179,8 +1179,9 @@ def run_continued(b, source, work, name, daemon_cfg, daemon_overrides, parts, se
     starts when the load has been answered, so the model is in force from the batch's first
     part; the load's answer is RunResult.model_load (exit status, output). reload_cfg: the
     daemon is started first, and before ncsim ticks its config file is replaced by reload_cfg
-    (staged with reload_overrides) and it gets SIGHUP, so the RUNNING daemon swaps in the new configuration with its state at a
-    cycle boundary (the reload is taken while ncsim already ticks: where it lands is read back).
+    (staged with reload_overrides) and it gets SIGHUP, so the RUNNING daemon swaps in the new
+    configuration with its state at a cycle boundary (the reload is taken while ncsim already
+    ticks: where it lands is read back).
     Returns (RunResult, swap_s): swap_s, the machine time [s] by which the new configuration ran
     (an upper bound: the loop's cycles when the daemon's log said so), None without reload; with
     a reload, RunResult.handover is `nccomp status --json`'s "handover" object once it counts
