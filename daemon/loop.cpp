@@ -148,7 +148,7 @@ void Loop::log_face_probe(const core::engine::Engine& engine) noexcept {
     } else if (const auto* m = std::get_if<core::ProbeMeasurement>(&e)) {
       core::MeasurementRecord r;
       if (!fp.on_probe(*m, r)) {
-        ++local_.face_probe_rejected;
+        local_.face_probe_rejected = fp.rejected();  // the capture counts them
         note(m->time_ns, NoteCode::kFaceProbeRejected,
              static_cast<std::int64_t>(m->checkpoint) * 8 +
                  static_cast<std::int64_t>(fp.last_reject()),
