@@ -1159,10 +1159,11 @@ std::pair<double, std::size_t> interval_validation_error(const Dataset& data,
 }
 
 // The final model's 95 % prediction interval on each held-out row, from the fit on the fitted
-// rows: t · sqrt(s² (1 + x'Cx ·(1 + ρ)/(1 − ρ)) + v), C = (X'X + Λ)⁺, s² the residual variance
-// (IntervalMethod::kValidation: or the mean squared error of interval_validation_error if larger),
-// the coefficient part widened for an AR(1) residual as coef_ci95; v the variance of a learned
-// session offset (τ²σ² / (nτ² + σ²) after n of the session's rows), and its measured coverage.
+// rows: t · sqrt(max(s² (1 + x'Cx ·(1 + ρ)/(1 − ρ)), e²) + v), C = (X'X + Λ)⁺, s² the
+// residual variance, the coefficient part widened for an AR(1) residual as coef_ci95; e² the
+// mean squared error of interval_validation_error (IntervalMethod::kValidation; else 0); v the
+// variance of a learned session offset (τ²σ² / (nτ² + σ²) after n of the session's rows), and
+// its measured coverage.
 void set_prediction_interval(const Dataset& data, const std::vector<TermSpec>& specs,
                              const std::vector<std::uint8_t>& use, const AnalysisConfig& config,
                              AnalysisResult& result) {
@@ -1177,15 +1178,18 @@ void set_prediction_interval(const Dataset& data, const std::vector<TermSpec>& s
   const double df = dz(info.rows) - info.effective_parameters;
   if (!(df >= 1.0)) return;
   PredictionInterval& pi = result.prediction_interval;
-  double s2 = rss / df;
+  const double s2 = rss / df;
   pi.sigma_in_sample_um = std::sqrt(s2);
+  // The validation error's mean square: it already holds its refits' coefficient error, so it is
+  // compared with the whole in-sample prediction variance of a row, not widened by x'Cx again.
+  double v2 = 0.0;
   if (config.interval == IntervalMethod::kValidation) {
     const auto [ss, rows] = interval_validation_error(data, specs, use);
     if (rows > 0) {
       pi.method = IntervalMethod::kValidation;
       pi.validation_rows = rows;
       pi.validation_rms_um = std::sqrt(ss / dz(rows));
-      s2 = std::max(s2, ss / dz(rows));
+      v2 = ss / dz(rows);
     }
   }
   const double rho = config.ar1_correction
@@ -1262,7 +1266,8 @@ void set_prediction_interval(const Dataset& data, const std::vector<TermSpec>& s
         const double sigma2 = s->center * s->center;
         v_session = tau2 * sigma2 / std::max(n_s * tau2 + sigma2, 1e-300);
       }
-      const double half = t * std::sqrt(s2 * (1.0 + std::max(0.0, q) * inflate) + v_session);
+      const double half =
+          t * std::sqrt(std::max(s2 * (1.0 + std::max(0.0, q) * inflate), v2) + v_session);
       ++pi.rows;
       sum_half += half;
       pi.half_width_max_um = std::max(pi.half_width_max_um, half);

@@ -179,6 +179,37 @@ TEST(PredictionInterval, ALogWithADriftTheModelLacksRaisesTheValidationCoverageT
   EXPECT_GT(covered_val / n, 0.80);
 }
 
+// The validation error comes from refits on fewer rows and so already holds their coefficients'
+// error: it is compared with a row's whole in-sample prediction variance s²(1 + x'Cx), not
+// widened by x'Cx once more. Where it is well above s (the drift logs of seeds 71–73: 1.3–1.9 s)
+// every held-out row's half-width is t × the validation error, t of 1 600 degrees of freedom
+// (1.9615); widened again it was 1.3–1.8 % more and differed from row to row.
+TEST(PredictionInterval, AValidationErrorAboveThePredictionErrorIsNotWidenedAgainByTheLeverage) {
+  for (std::uint64_t seed = 71; seed <= 73; ++seed) {
+    SCOPED_TRACE(seed);
+    synth::Options opt;
+    opt.seed = seed;
+    opt.parts = 100;
+    opt.points_per_part = 20;
+    opt.noise_um = 0.5;
+    opt.effects = {"position_x"};
+    cm::Dataset d = synth::generate(opt);
+    std::mt19937_64 rng(seed * 31U + 7U);
+    std::normal_distribution<double> step(0.0, 0.25);
+    std::vector<double> walk(opt.parts + 2, 0.0);
+    for (std::size_t p = 1; p < walk.size(); ++p) walk[p] = walk[p - 1] + step(rng);
+    for (std::size_t i = 0; i < d.rows(); ++i) {
+      d.target_um[i] += walk[static_cast<std::size_t>(d.row(i)[1])];
+    }
+    const cm::PredictionInterval val =
+        cm::analyze(d, config_with(opt, cm::IntervalMethod::kValidation)).prediction_interval;
+    ASSERT_EQ(val.method, cm::IntervalMethod::kValidation);
+    ASSERT_GT(val.validation_rms_um, 1.3 * val.sigma_in_sample_um);
+    EXPECT_NEAR(val.half_width_mean_um / val.validation_rms_um, 1.9615, 0.001);
+    EXPECT_NEAR(val.half_width_max_um, val.half_width_mean_um, 1e-9);
+  }
+}
+
 // A log whose last sessions the fit never saw: their offsets are learned row by row, and the
 // interval widens by the learned offset's variance, so it still holds about 95 %.
 TEST(PredictionInterval, NewSessionsLearnedRowByRowKeepTheCoverage) {
