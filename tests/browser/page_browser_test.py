@@ -236,10 +236,9 @@ def browser(work, user=None):
     home = tempfile.mkdtemp(dir=work, prefix="home-" + user + "-")
     os.chown(home, pw.pw_uid, pw.pw_gid)
     opts.add_argument("--user-data-dir=" + os.path.join(home, "chrome"))
-    s = socket.socket()
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
+    sys.path.insert(0, os.path.join(ARGS.source, "tests", "e2e"))
+    import nccomp_e2e  # free_port(): below the kernel's ephemeral range
+    port = nccomp_e2e.free_port()
     driver_proc = start("chromedriver-" + user,
                         ["setpriv", f"--reuid={pw.pw_uid}", f"--regid={pw.pw_gid}",
                          "--clear-groups", "env", "HOME=" + home, "XDG_CONFIG_HOME=" + home,

@@ -18,6 +18,7 @@ import argparse
 import json
 import math
 import os
+import random
 import re
 import shutil
 import signal
@@ -87,10 +88,27 @@ class Proc:
 
 
 def free_port():
-    """A TCP port nobody listens on right now (the kernel's choice for port 0)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+    """A TCP port nobody listens on right now, for a server a test starts later. Drawn below the
+    kernel's ephemeral range (net.ipv4.ip_local_port_range): the kernel's own choice for port 0
+    comes from that range, so a client's source port (this test's or another's, two tests run at
+    once) could take it between this call and the server's bind; below the range only another
+    test's draw can, one in ~12 000."""
+    try:
+        with open("/proc/sys/net/ipv4/ip_local_port_range") as f:
+            low = int(f.read().split()[0])
+    except (OSError, ValueError, IndexError):
+        low = 32768
+    top = max(low, 20001)
+    rng = random.SystemRandom()
+    for _ in range(200):
+        port = rng.randrange(max(1024, top - 12000), top)
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            return port
+    raise RuntimeError("no free TCP port below %d after 200 draws" % top)
 
 
 # ---------------------------------------------------------------------------------------------
