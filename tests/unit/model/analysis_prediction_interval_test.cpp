@@ -32,6 +32,27 @@ const char* name_of(cm::IntervalMethod m) {
   return m == cm::IntervalMethod::kValidation ? "validation" : "in_sample";
 }
 
+// A drift the search cannot follow: a random walk of the contour's level from part to part
+// (steps of 0.25 µm, N(0, 0.25²) per part: about 2.5 µm after 100 parts) on top of noise 0.5 µm.
+// The fit follows the walk on the fitted parts with what it finds (steps, warm-ups, trends), and
+// the held-out parts wander off: the in-sample residual scale is too small for them.
+cm::Dataset drift_log(std::uint64_t seed, synth::Options& opt) {
+  opt.seed = seed;
+  opt.parts = 100;
+  opt.points_per_part = 20;
+  opt.noise_um = 0.5;
+  opt.effects = {"position_x"};
+  cm::Dataset d = synth::generate(opt);
+  std::mt19937_64 rng(seed * 31U + 7U);
+  std::normal_distribution<double> step(0.0, 0.25);
+  std::vector<double> walk(opt.parts + 2, 0.0);
+  for (std::size_t p = 1; p < walk.size(); ++p) walk[p] = walk[p - 1] + step(rng);
+  for (std::size_t i = 0; i < d.rows(); ++i) {
+    d.target_um[i] += walk[static_cast<std::size_t>(d.row(i)[1])];
+  }
+  return d;
+}
+
 }  // namespace
 
 TEST(PredictionInterval, TheDefaultScaleIsTheValidationOne) {
@@ -118,10 +139,7 @@ TEST(PredictionInterval, TheValidationScaleDoesNotWidenItOnStationaryLogs) {
   EXPECT_LT(sum_val, 1.05 * sum_in);
 }
 
-// A drift the search cannot follow: a random walk of the contour's level from part to part
-// (steps of 0.25 µm, N(0, 0.25²) per part: about 2.5 µm after 100 parts) on top of noise 0.5 µm.
-// The fit follows the walk on the fitted parts with what it finds (steps, warm-ups, trends), and
-// the held-out parts wander off: the in-sample residual scale is too small for them.
+// The drift logs (drift_log above).
 TEST(PredictionInterval, ALogWithADriftTheModelLacksRaisesTheValidationCoverageToward95Percent) {
   std::size_t rows = 0;
   double covered_in = 0.0;
@@ -131,19 +149,7 @@ TEST(PredictionInterval, ALogWithADriftTheModelLacksRaisesTheValidationCoverageT
   for (std::uint64_t seed = 71; seed <= 75; ++seed) {
     SCOPED_TRACE(seed);
     synth::Options opt;
-    opt.seed = seed;
-    opt.parts = 100;
-    opt.points_per_part = 20;
-    opt.noise_um = 0.5;
-    opt.effects = {"position_x"};
-    cm::Dataset d = synth::generate(opt);
-    std::mt19937_64 rng(seed * 31U + 7U);
-    std::normal_distribution<double> step(0.0, 0.25);
-    std::vector<double> walk(opt.parts + 2, 0.0);
-    for (std::size_t p = 1; p < walk.size(); ++p) walk[p] = walk[p - 1] + step(rng);
-    for (std::size_t i = 0; i < d.rows(); ++i) {
-      d.target_um[i] += walk[static_cast<std::size_t>(d.row(i)[1])];
-    }
+    const cm::Dataset d = drift_log(seed, opt);
     const cm::PredictionInterval in =
         cm::analyze(d, config_with(opt, cm::IntervalMethod::kInSample)).prediction_interval;
     const cm::PredictionInterval val =
@@ -188,19 +194,7 @@ TEST(PredictionInterval, AValidationErrorAboveThePredictionErrorIsNotWidenedAgai
   for (std::uint64_t seed = 71; seed <= 73; ++seed) {
     SCOPED_TRACE(seed);
     synth::Options opt;
-    opt.seed = seed;
-    opt.parts = 100;
-    opt.points_per_part = 20;
-    opt.noise_um = 0.5;
-    opt.effects = {"position_x"};
-    cm::Dataset d = synth::generate(opt);
-    std::mt19937_64 rng(seed * 31U + 7U);
-    std::normal_distribution<double> step(0.0, 0.25);
-    std::vector<double> walk(opt.parts + 2, 0.0);
-    for (std::size_t p = 1; p < walk.size(); ++p) walk[p] = walk[p - 1] + step(rng);
-    for (std::size_t i = 0; i < d.rows(); ++i) {
-      d.target_um[i] += walk[static_cast<std::size_t>(d.row(i)[1])];
-    }
+    const cm::Dataset d = drift_log(seed, opt);
     const cm::PredictionInterval val =
         cm::analyze(d, config_with(opt, cm::IntervalMethod::kValidation)).prediction_interval;
     ASSERT_EQ(val.method, cm::IntervalMethod::kValidation);
