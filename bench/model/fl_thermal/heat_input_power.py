@@ -1,12 +1,13 @@
 #!/usr/bin/python3
 """FL_THERMAL: would the spindle speed squared, as the heat input of a first-order lag, close the
 gap to issue 21's goal (held-out error -80 %)? An exploration outside nccomp analyze (the same
-candidate inside the search was tried and not kept: bench/results/model.md): the declared model (constant + t5 linear) fitted on the first 80 % of the
-rows, held out the last 20 % (as bench/model/fl_thermal/fl_thermal.toml), four terms added
-greedily from: first-order lags of speed^p (p as offered, tau on a log grid of 25 values from
-300 s to 40 000 s) and t1, t2, t9 linear. Two rules pick each step: the best fitted RMS (as the
-search's BIC), and the six best by fitted RMS re-ranked by a rolling-origin error on the fitted
-rows (4 time blocks, each of the last 3 predicted from those before it; as rank_folds = 3).
+candidate inside the search was tried and not kept: bench/results/model.md). The declared model
+(constant + t5 linear) is fitted on the first 80 % of the rows and the last 20 % are held out
+(as bench/model/fl_thermal/fl_thermal.toml). Four terms are added greedily from first-order lags
+of speed^p (p as offered, tau on a log grid of 25 values from 300 s to 40 000 s) and t1, t2, t9
+linear. Two rules pick each step: the best fitted RMS (as the search's BIC), and the six best by
+fitted RMS re-ranked by a rolling-origin error on the fitted rows (4 time blocks, each of the
+last 3 predicted from those before it; as rank_folds = 3).
 Prints one line per gauge, power set and rule: the held-out RMS after each step.
   /usr/bin/python3 bench/model/fl_thermal/heat_input_power.py [data.csv]
 """
