@@ -60,8 +60,8 @@ def rolling(cols, y):
 
 
 taus = np.geomspace(300.0, 40000.0, 25)
-print("| gauge | speed powers offered | rule | declared held-out [µm] | steps: added, held-out RMS "
-      "[µm] | final change |")
+print("| gauge | speed powers offered | rule | declared held-out [µm] "
+      "| steps: added, held-out RMS [µm] | final change |")
 print("| --- | --- | --- | --- | --- | --- |")
 for gauge in ("ch1", "ch3", "ch5"):
     y = col(gauge + "(um)")
