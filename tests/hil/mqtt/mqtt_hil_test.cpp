@@ -81,8 +81,7 @@ bool wait_for(const std::function<bool()>& ok, std::chrono::milliseconds timeout
 int free_port() {
   int top = 32768;
   std::ifstream range("/proc/sys/net/ipv4/ip_local_port_range");
-  if (int low = 0; range >> low && low > 20001) top = low;
-  if (top < 20001) top = 20001;
+  if (int low = 0; range >> low) top = std::max(low, 20001);
   std::random_device seed;
   std::mt19937 rng(seed());
   std::uniform_int_distribution<int> pick(std::max(1024, top - 12000), top - 1);
