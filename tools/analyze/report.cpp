@@ -387,8 +387,11 @@ std::string report_markdown(const cm::Dataset& data, const cm::AnalysisResult& r
       << " µm on average (at most " << num(pi.half_width_max_um, 3) << " µm); it held "
       << num(100.0 * pi.coverage, 3) << " % of them. Its scale: ";
     if (pi.method == cm::IntervalMethod::kValidation) {
-      o << "the larger of the fit's residual standard deviation, " << num(pi.sigma_in_sample_um, 3)
-        << " µm, and the RMS error of the latest fitted hours predicted from the earlier ones, "
+      o << "at each row the larger of the fit's prediction error there (its residual standard "
+           "deviation, "
+        << num(pi.sigma_in_sample_um, 3)
+        << " µm, widened by the coefficients' error at the row) and the RMS error of the latest "
+           "fitted hours predicted from the earlier ones, "
         << num(pi.validation_rms_um, 3) << " µm over " << pi.validation_rows << " rows.\n";
     } else {
       o << "the fit's residual standard deviation, " << num(pi.sigma_in_sample_um, 3)
