@@ -10,32 +10,14 @@ of every lambda is printed beside it for reading, not for choosing. The declared
 + t5) is the reference.
   /usr/bin/python3 bench/model/fl_thermal/ridge_all_inputs.py [data.csv]
 """
-import csv
-import sys
-
 import numpy as np
 
-path = sys.argv[1] if len(sys.argv) > 1 else "../shared/data/fl_thermal_spindle_drift/data.csv"
-rows = list(csv.reader(open(path, encoding="utf-8")))
-head = [c.strip() for c in rows[0]]
-d = np.array([[float(x) for x in r] for r in rows[1:]])
-col = lambda name: d[:, head.index(name)]  # noqa: E731
-t = col("時間(s)")
-rpm = col("spindle(RPM)")
-temps = np.column_stack([col("t%d(°C)" % i) for i in range(1, 17)])
-n = len(t)
-cut = int(0.8 * n)
+from fl_thermal_data import load
+
+data = load()
+cut = data.cut
 fitted = np.arange(cut)
-
-
-def lag(x, tau):
-    """First-order lag of x (zero at the start), exact for x held over each sample interval."""
-    y = np.zeros_like(x)
-    a = 0.0
-    for i in range(1, n):
-        a += (1.0 - np.exp(-(t[i] - t[i - 1]) / tau)) * (x[i - 1] - a)
-        y[i] = a
-    return y
+temps = np.column_stack([data.temp(i) for i in range(1, 17)])
 
 
 def ridge(x, y, lam, rows):
@@ -49,14 +31,7 @@ def ridge(x, y, lam, rows):
 
 
 def rolling(x, y, lam):
-    edge = np.linspace(0, cut, 5).astype(int)
-    ss, m = 0.0, 0
-    for k in range(1, 4):
-        p = ridge(x, y, lam, np.arange(edge[k]))
-        r = y[edge[k]: edge[k + 1]] - p[edge[k]: edge[k + 1]]
-        ss += float(np.sum(r * r))
-        m += len(r)
-    return np.sqrt(ss / m)
+    return data.rolling(lambda rows: ridge(x, y, lam, rows), y)
 
 
 def heldout(y, p):
@@ -64,13 +39,13 @@ def heldout(y, p):
 
 
 lams = [0.0, 1e-4, 1e-3, 1e-2, 1e-1, 1.0]
-speed_lags = np.column_stack([lag(rpm, tau) for tau in (900.0, 2700.0, 8100.0, 24300.0)])
+speed_lags = np.column_stack([data.lag(data.rpm, tau) for tau in (900.0, 2700.0, 8100.0, 24300.0)])
 print("| gauge | inputs | declared held-out [µm] | lambda (rolling-origin) | held-out [µm] "
       "| change | held-out at lambda 0 / 1e-4 / 1e-3 / 1e-2 / 0.1 / 1 [µm] |")
 print("| --- | --- | --- | --- | --- | --- | --- |")
 for gauge in ("ch1", "ch3", "ch5"):
-    y = col(gauge + "(um)")
-    declared = heldout(y, ridge(col("t5(°C)")[:, None], y, 0.0, fitted))
+    y = data.col(gauge + "(um)")
+    declared = heldout(y, ridge(data.temp(5)[:, None], y, 0.0, fitted))
     for name, x in (("16 temperatures", temps),
                     ("16 temperatures + 4 speed lags", np.column_stack([temps, speed_lags]))):
         lam = min((rolling(x, y, v), v) for v in lams)[1]
