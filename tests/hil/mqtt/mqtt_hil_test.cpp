@@ -74,6 +74,19 @@ bool wait_for(const std::function<bool()>& ok, std::chrono::milliseconds timeout
   return ok();
 }
 
+// A new TCP socket bound (::bind) or connected (::connect) to 127.0.0.1:port, then closed:
+// whether that succeeded.
+bool on_loopback(int port, int (*op)(int, const sockaddr*, socklen_t)) {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  a.sin_port = htons(static_cast<std::uint16_t>(port));
+  const bool ok = op(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0;
+  ::close(fd);
+  return ok;
+}
+
 // A TCP port nobody listens on now, for a broker started (and restarted) on it later. Drawn
 // below the kernel's ephemeral range (net.ipv4.ip_local_port_range), where a client's source
 // port (the daemon's reconnects while the broker is down, another test's) can never take it
@@ -87,29 +100,13 @@ int free_port() {
   std::uniform_int_distribution<int> pick(std::max(1024, top - 12000), top - 1);
   for (int attempt = 0; attempt < 200; ++attempt) {
     const int port = pick(rng);
-    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-    sockaddr_in a{};
-    a.sin_family = AF_INET;
-    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    a.sin_port = htons(static_cast<std::uint16_t>(port));
-    const bool ok = ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0;
-    ::close(fd);
-    if (ok) return port;
+    if (on_loopback(port, ::bind)) return port;
   }
   ADD_FAILURE() << "no free TCP port below " << top << " after 200 draws";
   return 0;
 }
 
-bool port_open(int port) {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  a.sin_port = htons(static_cast<std::uint16_t>(port));
-  const bool ok = ::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0;
-  ::close(fd);
-  return ok;
-}
+bool port_open(int port) { return on_loopback(port, ::connect); }
 
 /// A child process with stdout and stderr in `log` (appended).
 class Process {
