@@ -23,6 +23,7 @@
 
 #include "core/calib/calibrator.hpp"
 #include "core/calib/facet.hpp"
+#include "core/model/ridge.hpp"
 #include "tests/unit/calib/sim_machine.hpp"
 #include "tests/unit/calib/test_config.hpp"
 
@@ -117,7 +118,10 @@ void facet_table() {
 // time constant, or both (sensor and lag).
 // kValidated: sensor and lag, chosen by how well each earlier shift j >= 1 was predicted from
 // the shifts before j (tried after the first run, see bench/results/calib.md).
-enum class InputMode { kT5, kBestSensor, kT5Lag, kBestSensorLag, kValidated };
+// kShrunk: per axis a shrunk (ridge) model of the drift on every sensor and four lags of the
+// spindle speed, fitted on the earlier shifts (shrunk_inputs()); each slot's estimator input is
+// its axis's model (estimator_input_sensors), slope 1 +- 0.5 a priori.
+enum class InputMode { kT5, kBestSensor, kT5Lag, kBestSensorLag, kValidated, kShrunk };
 
 struct Strategy {
   const char* name;
@@ -151,7 +155,7 @@ struct ModelPrior {
   double max_slope_um_per_c{0.0};
 };
 
-const std::array<Strategy, 11> kStrategies{{
+const std::array<Strategy, 12> kStrategies{{
     {"none", false, nccomp::core::ProfileShape::kStep, Prediction::kNone},
     {"hourly, step", true, nccomp::core::ProfileShape::kStep, Prediction::kNone},
     {"hourly, creep", true, nccomp::core::ProfileShape::kCosine, Prediction::kNone},
@@ -170,6 +174,9 @@ const std::array<Strategy, 11> kStrategies{{
     {"hourly, creep + estimator, level noise learned from the earlier shifts", true,
      nccomp::core::ProfileShape::kCosine, Prediction::kEstimator, false, 6.0, 5.0, 1.0, 20.0, 0.0,
      false, InputMode::kT5, true},
+    {"hourly, creep + estimator with a shrunk model of every sensor fitted on the earlier shifts",
+     true, nccomp::core::ProfileShape::kCosine, Prediction::kEstimator, false, 6.0, 5.0, 1.0, 20.0,
+     0.0, false, InputMode::kShrunk},
     {"hourly, creep + estimator with the sensor and lag fitted on the earlier shifts", true,
      nccomp::core::ProfileShape::kCosine, Prediction::kEstimator, true, 6.0, 5.0, 1.0, 5.0, 0.0,
      true, InputMode::kBestSensorLag},
@@ -185,6 +192,9 @@ struct AxisStats {
 
 using DriftFn = std::function<std::array<double, 4>(double t_s)>;  // from shift start
 using TempFn = std::function<double(double t_s)>;
+// Per axis (X, Y, Z) an estimator input of its own, on sensors 1, 2, 3 (X lateral and axial
+// share X's): CalibrationConfig::estimator_input_sensors.
+using AxisInputs = std::array<TempFn, 3>;
 
 // carried: the calibration state the machine ends its previous shift with; it is replaced by
 // this shift's final state. Only the earlier shifts' drift in it
@@ -192,7 +202,8 @@ using TempFn = std::function<double(double t_s)>;
 std::array<AxisStats, 3> run_shift(const Strategy& s, const DriftFn& drift, const TempFn& temp,
                                    double tau_s, double hours,
                                    nccomp::core::calib::CalibState* carried = nullptr,
-                                   const ModelPrior* model = nullptr) {
+                                   const ModelPrior* model = nullptr,
+                                   const AxisInputs* inputs = nullptr) {
   auto cfg = nccomp::test::calib::test_config();
   cfg.touches_per_axis = 1;
   cfg.creep_shape = s.shape;
@@ -219,6 +230,10 @@ std::array<AxisStats, 3> run_shift(const Strategy& s, const DriftFn& drift, cons
   }
   cfg.estimator_level_noise_um_per_h = s.level_noise_um_per_h;
   cfg.estimator_gate_sigmas = s.gate_sigmas;
+  if (inputs != nullptr) {
+    cfg.estimator_input_sensors = {1, 1, 2, 3};
+    cfg.estimator_shift_prior = false;
+  }
   Calibrator c;
   c.configure(cfg);
   if (carried != nullptr) {
@@ -233,6 +248,14 @@ std::array<AxisStats, 3> run_shift(const Strategy& s, const DriftFn& drift, cons
       const Event e = nccomp::core::TemperatureSample{now, 0, temp(t_shift_s)};
       out.clear();
       c.step(now, {&e, 1}, out);
+    }
+    if (inputs != nullptr) {
+      for (std::uint8_t a = 0; a < 3; ++a) {
+        const Event e = nccomp::core::TemperatureSample{
+            now, static_cast<std::uint8_t>(a + 1), (*inputs)[a](t_shift_s)};
+        out.clear();
+        c.step(now, {&e, 1}, out);
+      }
     }
   };
   feed_temp(0.0);
@@ -256,7 +279,7 @@ std::array<AxisStats, 3> run_shift(const Strategy& s, const DriftFn& drift, cons
   for (long k = 0; k < steps; ++k) {
     const double t = static_cast<double>(k);
     now = from_seconds(t0 + t);
-    if (temp && k % 15 == 0) {
+    if ((temp || inputs != nullptr) && k % 15 == 0) {
       feed_temp(t);  // the sensor is sampled like the data set: every 15 s
     }
     out.clear();
@@ -546,6 +569,67 @@ ModelPrior model_prior(const Thermal& d, const std::vector<double>& input,
   return m;
 }
 
+// The shrunk model of InputMode::kShrunk for shift k: per axis (ch3, ch1, ch5) a ridge fit
+// (core/model/ridge.hpp) of the gauge on the 16 temperatures and four first-order lags of the
+// spindle speed [krpm] (tau 15, 45, 135, 405 min), on every 15 s sample of shifts 0..k-1 only;
+// lambda among 1e-4..1 by the rolling-origin error over 4 blocks of those samples. Returns the
+// model's value at every sample of the data set (what a derived sensor, [[input_sums]] over the
+// sensors and [[input_lags]] of the speed, would publish).
+struct ShrunkInputs {
+  std::array<std::vector<double>, 3> value;
+  std::array<double, 3> lambda{};
+  std::array<double, 3> rolling_rms_um{};
+};
+
+ShrunkInputs shrunk_inputs(const Thermal& d, const std::array<double, 5>& starts, std::size_t k) {
+  constexpr std::array<double, 4> kSpeedLagsS{900.0, 2700.0, 8100.0, 24300.0};
+  constexpr std::array<double, 5> kLambdas{1e-4, 1e-3, 1e-2, 1e-1, 1.0};
+  const std::size_t inputs = d.t.size() + kSpeedLagsS.size();
+  std::vector<double> krpm;
+  krpm.reserve(d.rpm.size());
+  for (const double r : d.rpm) {
+    krpm.push_back(r / 1000.0);
+  }
+  std::vector<std::vector<double>> columns(d.t.begin(), d.t.end());
+  for (const double tau : kSpeedLagsS) {
+    columns.push_back(lag_series(krpm, tau));
+  }
+  const auto n = static_cast<Eigen::Index>(d.t_s.size());
+  Eigen::MatrixXd all(n, static_cast<Eigen::Index>(inputs));
+  for (std::size_t j = 0; j < inputs; ++j) {
+    for (Eigen::Index i = 0; i < n; ++i) {
+      all(i, static_cast<Eigen::Index>(j)) = columns[j][static_cast<std::size_t>(i)];
+    }
+  }
+  const auto fitted = static_cast<Eigen::Index>(
+      std::lower_bound(d.t_s.begin(), d.t_s.end(), starts[k] * 3600.0) - d.t_s.begin());
+  const std::array<const std::vector<double>*, 3> ch{&d.ch3, &d.ch1, &d.ch5};
+  ShrunkInputs out;
+  for (std::size_t a = 0; a < 3; ++a) {
+    const Eigen::Map<const Eigen::VectorXd> y(ch[a]->data(), fitted);
+    const auto f = nccomp::core::model::fit_ridge_rolling(all.topRows(fitted), y, kLambdas, 4);
+    out.lambda[a] = f.lambda;
+    out.rolling_rms_um[a] = *std::min_element(f.rolling_rms.begin(), f.rolling_rms.end());
+    out.value[a].reserve(static_cast<std::size_t>(n));
+    std::vector<double> row(inputs);
+    for (Eigen::Index i = 0; i < n; ++i) {
+      for (std::size_t j = 0; j < inputs; ++j) {
+        row[j] = all(i, static_cast<Eigen::Index>(j));
+      }
+      out.value[a].push_back(f.predict(row));
+    }
+  }
+  return out;
+}
+
+struct ShrunkLog {
+  std::string strategy;
+  std::size_t shift;
+  std::array<double, 3> lambda;
+  std::array<double, 3> rolling_rms_um;
+};
+std::vector<ShrunkLog> shrunk_log;  // the fits the shrunk-model rows used, per shift
+
 struct Row {
   const char* strategy;
   std::size_t axis;
@@ -590,7 +674,27 @@ std::vector<Row> thermal_rows(const Thermal& d, const std::array<double, 5>& sta
       };
       std::vector<double> lagged;
       ModelPrior prior;
-      const bool fitted_input = s.input != InputMode::kT5 && k > 0;
+      const bool shrunk = s.input == InputMode::kShrunk && k > 0;
+      const bool fitted_input = s.input != InputMode::kT5 && s.input != InputMode::kShrunk && k > 0;
+      ShrunkInputs model_inputs;
+      AxisInputs axis_inputs;
+      if (shrunk) {
+        // Slope 1 +- 0.5 on each axis's model (a priori: the model predicts the drift in um, and
+        // 0.5 is the gain sigma of the other rows), bound 1: the model's term moves an axis at
+        // most plausibility_um from its nominal, like a temperature term at its bound. The
+        // earlier shifts' mean drift is not a regressor (estimator_shift_prior = false): the
+        // model predicts the shape.
+        model_inputs = shrunk_inputs(d, starts, k);
+        prior.slope_um_per_c = {1.0, 1.0, 1.0, 1.0};
+        prior.sigma_um_per_c = {0.5, 0.5, 0.5, 0.5};
+        prior.max_slope_um_per_c = 1.0;
+        for (std::size_t a = 0; a < 3; ++a) {
+          axis_inputs[a] = [&d, &model_inputs, a, t_start](double t) {
+            return interp(d.t_s, model_inputs.value[a], t_start + std::max(0.0, t));
+          };
+        }
+        shrunk_log.push_back({s.name, k, model_inputs.lambda, model_inputs.rolling_rms_um});
+      }
       if (fitted_input) {
         // Sensor and lag from the earlier shifts, the model's slopes on that input from them
         // too; the slope bound 1.25 x the largest fitted slope (at least the row's bound).
@@ -611,15 +715,19 @@ std::vector<Row> thermal_rows(const Thermal& d, const std::array<double, 5>& sta
           lagged.push_back(y);
         }
       }
-      const TempFn temp = [&d, &lagged, t_start](double t) {
+      TempFn temp = [&d, &lagged, t_start](double t) {
         return interp(d.t_s, lagged.empty() ? d.t5 : lagged, t_start + std::max(0.0, t));
       };
+      if (s.input == InputMode::kShrunk && !s.temperature_slope) {
+        temp = nullptr;  // shift 0: the estimator without a temperature, as "hourly, creep + estimator"
+      }
       const bool with_model = s.model_prior && k > 0;
       if (with_model && !fitted_input) {
         prior = model_prior(d, d.t5, starts, k, s.slope_sigma_um_per_c, s.max_slope_um_per_c);
         model_log.push_back({s.name, k, prior});
       }
-      res[k] = run_shift(s, drift, temp, 3600.0, 8.0, &carried, with_model ? &prior : nullptr);
+      res[k] = run_shift(s, drift, temp, 3600.0, 8.0, &carried,
+                         with_model || shrunk ? &prior : nullptr, shrunk ? &axis_inputs : nullptr);
     }
     for (std::size_t a = 0; a < 3; ++a) {
       Row r{s.name, a, {}};
@@ -837,6 +945,17 @@ void thermal_tables(const std::string& path, bool json) {
     std::printf("| %.0f-%.0f h |", starts[m.shift], starts[m.shift] + 8.0);
     for (const std::size_t slot : {0U, 2U, 3U}) {
       std::printf(" %+.2f +- %.2f |", m.prior.slope_um_per_c[slot], m.prior.sigma_um_per_c[slot]);
+    }
+    std::printf("\n");
+  }
+  std::printf(
+      "\n### The shrunk models of the row \"%s\": lambda / rolling-origin RMS on the earlier "
+      "shifts [um]\n\n| shift | X (ch3) | Y (ch1) | Z (ch5) |\n|---|---|---|---|\n",
+      kStrategies[kStrategies.size() - 2].name);
+  for (const auto& l : shrunk_log) {
+    std::printf("| %.0f-%.0f h |", starts[l.shift], starts[l.shift] + 8.0);
+    for (std::size_t a = 0; a < 3; ++a) {
+      std::printf(" %g / %.2f |", l.lambda[a], l.rolling_rms_um[a]);
     }
     std::printf("\n");
   }

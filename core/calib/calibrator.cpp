@@ -81,6 +81,12 @@ void Calibrator::configure(const CalibrationConfig& config) {
   for (auto& l : limiters_) {
     l.configure(limits);
   }
+  for (std::size_t s = 0; s < kSlotCount; ++s) {
+    // A slot whose input is now another sensor waits for that sensor's first sample.
+    if (!configured_ || estimator_input_sensor(config_, s) != estimator_input_sensor(config, s)) {
+      input_[s] = kNaN;
+    }
+  }
   config_ = config;
   configured_ = true;
 }
@@ -438,7 +444,7 @@ void Calibrator::evaluate_reference(TimeNs now_ns, StepOutput& out) noexcept {
 void Calibrator::evaluate_nominals(double now_s, TimeNs now_ns, StepOutput& out) noexcept {
   // New nominals start a new shift: the one before joins the estimator's prior.
   fold_shift(state_.shifts, config_.estimator_prior_forgetting);
-  const bool with_prior = has_prior(state_.shifts);
+  const bool with_prior = config_.estimator_shift_prior && has_prior(state_.shifts);
   for (std::size_t s = 0; s < kSlotCount; ++s) {
     // The temperature slope is a property of the machine: a model's, or else the one the last
     // shift learned, starts the next.
@@ -451,7 +457,7 @@ void Calibrator::evaluate_nominals(double now_s, TimeNs now_ns, StepOutput& out)
     n.direction = set_.direction[s];
     n.position_mm = mean(s) / kUmPerMm;
     n.time_s = now_s;
-    n.temp_c = temp_c_;
+    n.temp_c = input_[s];
     // The nominal is drift zero: the first point of every drift model.
     update_model(s, now_s, 0.0);
     state_.creeps[s] = Creep{now_s, 0.0};
@@ -632,7 +638,7 @@ double Calibrator::predict(std::size_t slot, double t_s) const noexcept {
 }
 
 double Calibrator::temperature_delta(std::size_t slot) const noexcept {
-  const double d = temp_c_ - state_.nominals[slot].temp_c;
+  const double d = input_[slot] - state_.nominals[slot].temp_c;
   const bool used = config_.estimator_slope_sigma_um_per_c > 0.0 ||
                     !std::isnan(config_.estimator_model_slope_um_per_c[slot]);
   if (!used || !std::isfinite(d)) {
@@ -723,9 +729,21 @@ void Calibrator::step(TimeNs now_ns, std::span<const Event> events, StepOutput& 
     if (const auto* touch = std::get_if<CalibrationTouch>(&e)) {
       handle_touch(*touch, now_s, now_ns, out);
     } else if (const auto* temp = std::get_if<TemperatureSample>(&e)) {
-      if (static_cast<std::int32_t>(temp->sensor) == config_.temperature_sensor) {
+      const auto sensor = static_cast<std::int32_t>(temp->sensor);
+      bool used = false;
+      for (std::size_t s = 0; s < kSlotCount; ++s) {
+        used = used || estimator_input_sensor(config_, s) == sensor;
+      }
+      if (sensor == config_.temperature_sensor || used) {
         if (std::isfinite(temp->temperature_c)) {
-          temp_c_ = temp->temperature_c;
+          if (sensor == config_.temperature_sensor) {
+            temp_c_ = temp->temperature_c;
+          }
+          for (std::size_t s = 0; s < kSlotCount; ++s) {
+            if (estimator_input_sensor(config_, s) == sensor) {
+              input_[s] = temp->temperature_c;
+            }
+          }
         } else {
           out.alarm(now_ns, Severity::kWarning, AlarmCode::kCalibrationInvalidInput, -1,
                     temp->temperature_c);

@@ -202,6 +202,9 @@ class Calibrator {
   TouchSet set_{};
   double clock_offset_s_{0.0};
   double temp_c_{kNaN};
+  /// Each slot's estimator input (estimator_input_sensor()): temp_c_'s sensor unless the slot
+  /// has its own.
+  std::array<double, kSlotCount> input_{kNaN, kNaN, kNaN, kNaN};
   TimeNs last_step_ns_{0};
   std::array<OffsetLimiter, kAxisCount> limiters_{};
   std::array<double, kAxisCount> written_um_{kNaN, kNaN, kNaN};

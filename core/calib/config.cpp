@@ -35,6 +35,13 @@ class Checker {
 
 }  // namespace
 
+std::int32_t estimator_input_sensor(const CalibrationConfig& config, std::size_t slot) noexcept {
+  const std::int32_t own = slot < config.estimator_input_sensors.size()
+                               ? config.estimator_input_sensors[slot]
+                               : -1;
+  return own >= 0 ? own : config.temperature_sensor;
+}
+
 void validate(const CalibrationConfig& c) {
   Checker k;
   if (c.register_x == c.register_y || c.register_x == c.register_z ||
@@ -96,12 +103,26 @@ void validate(const CalibrationConfig& c) {
     k.fail("estimator_prior_forgetting", "must be in (0, 1]", c.estimator_prior_forgetting);
   }
   k.non_negative(c.estimator_slope_sigma_um_per_c, "estimator_slope_sigma_um_per_c");
-  if (c.prediction == Prediction::kEstimator && c.estimator_slope_sigma_um_per_c > 0.0 &&
-      c.temperature_sensor < 0) {
-    k.fail("temperature_sensor", "estimator_slope_sigma_um_per_c > 0 needs a mapped sensor",
+  bool inputs_valid = true;
+  for (const std::int32_t s : c.estimator_input_sensors) {
+    if (s < -1 || s > 255) {
+      k.fail("estimator_input_sensors", "must be -1 (temperature_sensor) or a sensor index 0..255",
+             s);
+      inputs_valid = false;
+    }
+  }
+  bool every_slot_has_input = true;
+  for (std::size_t i = 0; i < c.estimator_input_sensors.size(); ++i) {
+    every_slot_has_input = every_slot_has_input && estimator_input_sensor(c, i) >= 0;
+  }
+  if (inputs_valid && c.prediction == Prediction::kEstimator &&
+      c.estimator_slope_sigma_um_per_c > 0.0 && !every_slot_has_input) {
+    k.fail("temperature_sensor",
+           "estimator_slope_sigma_um_per_c > 0 needs a mapped sensor (or estimator_input_sensors "
+           "for every slot)",
            c.temperature_sensor);
   }
-  bool model_slope = false;
+  bool model_slope_without_input = false;
   for (std::size_t i = 0; i < c.estimator_model_slope_um_per_c.size(); ++i) {
     const double m = c.estimator_model_slope_um_per_c[i];
     const double sd = c.estimator_model_slope_sigma_um_per_c[i];
@@ -109,7 +130,7 @@ void validate(const CalibrationConfig& c) {
       k.fail("estimator_model_slope_sigma_um_per_c",
              "set for exactly the slots that have estimator_model_slope_um_per_c", sd);
     } else if (!std::isnan(m)) {
-      model_slope = true;
+      model_slope_without_input = model_slope_without_input || estimator_input_sensor(c, i) < 0;
       if (!std::isfinite(m) || std::fabs(m) > c.max_temperature_slope_um_per_c) {
         k.fail("estimator_model_slope_um_per_c", "must be within ± max_temperature_slope_um_per_c",
                m);
@@ -117,8 +138,10 @@ void validate(const CalibrationConfig& c) {
       k.non_negative(sd, "estimator_model_slope_sigma_um_per_c");
     }
   }
-  if (c.prediction == Prediction::kEstimator && model_slope && c.temperature_sensor < 0) {
-    k.fail("temperature_sensor", "estimator_model_slope_um_per_c needs a mapped sensor",
+  if (inputs_valid && c.prediction == Prediction::kEstimator && model_slope_without_input) {
+    k.fail("temperature_sensor",
+           "estimator_model_slope_um_per_c needs a mapped sensor (or the slot's "
+           "estimator_input_sensors)",
            c.temperature_sensor);
   }
   k.non_negative(c.estimator_gate_sigmas, "estimator_gate_sigmas");

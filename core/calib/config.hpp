@@ -125,6 +125,10 @@ struct CalibrationConfig {
   bool estimator_learn_level_noise{false};
   double estimator_min_level_noise_um_per_h{3.0};
   double estimator_max_level_noise_um_per_h{20.0};
+  /// false: the earlier shifts' mean drift is not a regressor (its gain stays 0), e.g. when
+  /// each slot's input is a drift model that already predicts the shift's shape
+  /// (estimator_input_sensors); the earlier shifts still give the learned level noise.
+  bool estimator_shift_prior{true};
   /// Prior standard deviation of the gain on the earlier shifts' mean drift (prior gain 1).
   double estimator_prior_gain_sigma{0.5};
   /// Weight kept per shift by the earlier shifts' mean drift, in (0, 1].
@@ -142,6 +146,11 @@ struct CalibrationConfig {
   std::array<double, 4> estimator_model_slope_sigma_um_per_c{
       std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::quiet_NaN(),
       std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::quiet_NaN()};
+  /// Per slot (X lateral, X axial, Y, Z): the sensor whose samples are that slot's estimator
+  /// input instead of temperature_sensor's, e.g. a drift model's prediction that nccompd computes
+  /// from many sensors ([[input_sums]]); −1 = temperature_sensor. The slope's unit is then µm
+  /// per unit of that sensor (1 for a model that predicts the drift in µm).
+  std::array<std::int32_t, 4> estimator_input_sensors{-1, -1, -1, -1};
   /// A touch set beyond this many σ of the estimate's prediction changes nothing (alarm
   /// 'implausible'); 0 = no gate.
   double estimator_gate_sigmas{5.0};
@@ -164,6 +173,10 @@ struct CalibrationConfig {
   /// than the calibration the daemon holds (relative to the config file). Empty = none.
   std::string state_file{};
 };
+
+/// The sensor that is slot `slot`'s estimator input: estimator_input_sensors[slot], or
+/// temperature_sensor where that is −1 (−1: none). Real-time safe.
+std::int32_t estimator_input_sensor(const CalibrationConfig& config, std::size_t slot) noexcept;
 
 /// Throws core::ConfigInvalid (a std::invalid_argument) with every offending key
 /// ("calibration.<key>") and why, with its value.

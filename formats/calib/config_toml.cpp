@@ -111,6 +111,7 @@ CalibrationConfig parse_calibration(const toml::node& calibration, Diagnostics& 
         r.number("estimator_min_level_noise_um_per_h", c.estimator_min_level_noise_um_per_h);
     c.estimator_max_level_noise_um_per_h =
         r.number("estimator_max_level_noise_um_per_h", c.estimator_max_level_noise_um_per_h);
+    c.estimator_shift_prior = r.boolean("estimator_shift_prior", c.estimator_shift_prior);
     c.estimator_prior_gain_sigma =
         r.number("estimator_prior_gain_sigma", c.estimator_prior_gain_sigma);
     c.estimator_prior_forgetting =
@@ -128,6 +129,16 @@ CalibrationConfig parse_calibration(const toml::node& calibration, Diagnostics& 
     };
     slots("estimator_model_slope_um_per_c", -1e6, c.estimator_model_slope_um_per_c);
     slots("estimator_model_slope_sigma_um_per_c", 0.0, c.estimator_model_slope_sigma_um_per_c);
+    {
+      const std::vector<std::int64_t> v = r.integer_list("estimator_input_sensors", -1, 255);
+      if (v.size() == c.estimator_input_sensors.size()) {
+        for (std::size_t i = 0; i < v.size(); ++i) {
+          c.estimator_input_sensors[i] = static_cast<std::int32_t>(v[i]);
+        }
+      } else if (r.node().get("estimator_input_sensors") != nullptr) {
+        r.error("estimator_input_sensors", "must have 4 values (X lateral, X axial, Y, Z)");
+      }
+    }
     c.estimator_gate_sigmas = r.number("estimator_gate_sigmas", c.estimator_gate_sigmas);
     c.write_period_s = r.number("write_period_s", c.write_period_s);
     c.write_deadband_um = r.number("write_deadband_um", c.write_deadband_um);

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <initializer_list>
 #include <stdexcept>
@@ -601,6 +602,81 @@ TEST(DriftEstimator, ModelSlopeIsThePriorOfEveryShift) {
   run_touch_set(c, m, now, out);
   EXPECT_DOUBLE_EQ(c.export_state().estimates[2].x[2], -1.0);
   EXPECT_NE(c.export_state().estimates[3].x[2], 0.5);  // σ 0.2: Z's slope learns
+}
+
+// GIVEN each slot's own input sensor (a drift model's prediction in µm, slope 1; Y's on the
+// temperature sensor, slope 2) and the earlier shifts' mean drift switched off WHEN the next
+// shift starts THEN each slot follows its own sensor from the nominals, the earlier shift's drift
+// adds nothing, and a non-finite sample of a slot's sensor is refused with an alarm.
+TEST(DriftEstimator, EachSlotTakesItsOwnInputSensorAndTheShiftPriorCanBeOff) {
+  auto cfg = estimator_config();
+  cfg.temperature_sensor = 0;
+  cfg.estimator_input_sensors = {5, 5, -1, 7};
+  cfg.max_temperature_slope_um_per_c = 2.0;  // an input step counts up to plausibility_um / 2
+  cfg.estimator_model_slope_um_per_c = {1.0, 1.0, 2.0, 1.0};
+  cfg.estimator_model_slope_sigma_um_per_c = {0.0, 0.0, 0.0, 0.0};
+  for (const bool shift_prior : {true, false}) {
+    cfg.estimator_shift_prior = shift_prior;
+    Calibrator c;
+    c.configure(cfg);
+    SimMachine m(cfg, test_errors(), 0.0, 0.0, 0.1, 13);
+    TimeNs now = 0;
+    StepOutput out;
+    const auto feed = [&](std::uint8_t sensor, double value) {
+      const core::Event e = core::TemperatureSample{now, sensor, value};
+      out.clear();
+      c.step(now, {&e, 1}, out);
+    };
+    feed(0, 20.0);
+    feed(5, 100.0);
+    feed(7, -3.0);
+    run_calibrated_shift(c, m, now, 6.0, 3);  // an earlier shift: 6 µm/h on X
+    now += core::from_seconds(8.0 * 3600.0);
+    m.set_drift([](double) { return std::array<double, 4>{}; });
+    ASSERT_TRUE(run_initial_calibration(c, m, now, out));
+    const double t_nom = c.nominal(Slot::kXLateral).time_s;
+    EXPECT_DOUBLE_EQ(c.nominal(Slot::kXLateral).temp_c, 100.0);
+    EXPECT_DOUBLE_EQ(c.nominal(Slot::kY).temp_c, 20.0);
+    EXPECT_DOUBLE_EQ(c.nominal(Slot::kZ).temp_c, -3.0);
+    now = core::from_seconds(t_nom + 1800.0);
+    // The inputs as at the nominals: only the earlier shift's mean drift (3 µm at 0.5 h on X).
+    EXPECT_NEAR(c.estimated_drift(Slot::kXLateral, now).mean_um, shift_prior ? 3.0 : 0.0, 1e-9);
+    feed(5, 110.0);
+    feed(0, 21.0);
+    feed(7, -1.0);
+    const double shape = shift_prior ? 3.0 : 0.0;
+    EXPECT_NEAR(c.estimated_drift(Slot::kXLateral, now).mean_um, shape + 10.0, 1e-9);
+    EXPECT_NEAR(c.estimated_drift(Slot::kXAxial, now).mean_um, shape + 10.0, 1e-9);
+    EXPECT_NEAR(c.estimated_drift(Slot::kY, now).mean_um, shape / 2.0 + 2.0, 1e-9);
+    EXPECT_NEAR(c.estimated_drift(Slot::kZ, now).mean_um, shape + 2.0, 1e-9);
+    feed(7, std::nan(""));
+    EXPECT_TRUE(has_alarm(out, AlarmCode::kCalibrationInvalidInput));
+    EXPECT_NEAR(c.estimated_drift(Slot::kZ, now).mean_um, shape + 2.0, 1e-9);
+  }
+}
+
+TEST(DriftEstimator, InputSensorsAreChecked) {
+  auto cfg = estimator_config();
+  cfg.estimator_model_slope_um_per_c = {1.0, 1.0, 1.0, 1.0};
+  cfg.estimator_model_slope_sigma_um_per_c = {0.5, 0.5, 0.5, 0.5};
+  cfg.estimator_input_sensors = {3, 3, 4, 5};  // every slot has a sensor: no temperature needed
+  EXPECT_NO_THROW(core::calib::validate(cfg));
+  cfg.estimator_input_sensors = {3, 3, -1, 5};  // Y has a model slope but no sensor
+  try {
+    core::calib::validate(cfg);
+    FAIL() << "accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("calibration.temperature_sensor"), std::string::npos)
+        << e.what();
+  }
+  cfg.estimator_input_sensors = {3, 3, 300, -2};
+  try {
+    core::calib::validate(cfg);
+    FAIL() << "accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("calibration.estimator_input_sensors"), std::string::npos)
+        << e.what();
+  }
 }
 
 TEST(DriftEstimator, ConfigKeysAreChecked) {

@@ -88,8 +88,11 @@ TEST(CalibrationToml, ErrorsNameFileLineAndKey) {
       "estimator_prior_gain_sigma = 0.3\nestimator_prior_forgetting = 0.9\n"
       "estimator_slope_sigma_um_per_c = 0.25\nestimator_gate_sigmas = 6\n"
       "estimator_model_slope_um_per_c = [-4.5, -4.5, 0.8, 0]\n"
-      "estimator_model_slope_sigma_um_per_c = [1.2, 1.2, 0.1, 0]\n",
+      "estimator_model_slope_sigma_um_per_c = [1.2, 1.2, 0.1, 0]\n"
+      "estimator_input_sensors = [40, 40, -1, 41]\nestimator_shift_prior = false\n",
       "m.toml");
+  EXPECT_EQ(est.estimator_input_sensors, (std::array<std::int32_t, 4>{40, 40, -1, 41}));
+  EXPECT_FALSE(est.estimator_shift_prior);
   EXPECT_EQ(est.prediction, core::calib::Prediction::kEstimator);
   EXPECT_DOUBLE_EQ(est.estimator_touch_noise_um, 0.4);
   EXPECT_DOUBLE_EQ(est.estimator_level_noise_um_per_h, 4.5);
@@ -105,6 +108,12 @@ TEST(CalibrationToml, ErrorsNameFileLineAndKey) {
   EXPECT_EQ(error_of("[calibration]\nestimator_model_slope_um_per_c = [1, 2]\n"),
             "m.toml:2:34: calibration.estimator_model_slope_um_per_c: must have 4 values (X "
             "lateral, X axial, Y, Z)");
+  EXPECT_EQ(error_of("[calibration]\nestimator_input_sensors = [1, 2, 3]\n"),
+            "m.toml:2:27: calibration.estimator_input_sensors: must have 4 values (X lateral, X "
+            "axial, Y, Z)");
+  EXPECT_NE(error_of("[calibration]\nestimator_input_sensors = [1, 2, 3, 256]\n")
+                .find("calibration.estimator_input_sensors"),
+            std::string::npos);
   EXPECT_EQ(error_of("[calibration]\nestimator_touch_noise_um = \"x\"\n"),
             "m.toml:2:28: calibration.estimator_touch_noise_um: must be a finite number");
   EXPECT_NE(error_of("[calibration]\nestimator_prior_forgetting = 0\n")
