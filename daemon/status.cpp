@@ -513,15 +513,29 @@ std::string sigma_estimate_key(std::string_view key) {
   return {};
 }
 
-std::pair<std::string, std::string> input_lag_key(std::string_view key) {
+namespace {
+
+/// A derived sensor's status key `sensor_N_<what>`: {"N", what}; empty strings for another key.
+std::pair<std::string, std::string> derived_sensor_key(std::string_view key) {
   constexpr std::string_view kPrefix = "sensor_";
   if (!key.starts_with(kPrefix)) return {};
   key.remove_prefix(kPrefix.size());
   const std::size_t digits = key.find_first_not_of("0123456789");
   if (digits == 0 || digits == std::string_view::npos || key[digits] != '_') return {};
-  const std::string_view what = key.substr(digits + 1);
-  if (what != "lag" && what != "input") return {};
-  return {std::string(key.substr(0, digits)), std::string(what)};
+  return {std::string(key.substr(0, digits)), std::string(key.substr(digits + 1))};
+}
+
+}  // namespace
+
+std::pair<std::string, std::string> input_lag_key(std::string_view key) {
+  auto k = derived_sensor_key(key);
+  if (k.second != "lag" && k.second != "input") return {};
+  return k;
+}
+
+std::string input_sum_key(std::string_view key) {
+  auto k = derived_sensor_key(key);
+  return k.second == "sum" ? k.first : std::string();
 }
 
 std::span<const std::uint64_t> prometheus_latency_edges_us() { return kLatencyEdgesUs; }
@@ -700,6 +714,28 @@ std::string render_prometheus(const StatusContext& c) {
              "The last sample of an [[input_lags]] lag's input sensor (labelled by the lag's "
              "sensor).");
       o << lag_inputs;
+    }
+  }
+  // [[input_sums]]: each sum's value, labelled by its sensor (the module's keys sensor_N_sum).
+  {
+    std::string sum_values;
+    for (std::size_t i = 0; i < v.m.count; ++i) {
+      const auto& m = v.m.modules[i];
+      if (std::string_view(m.name.data()) != "input_sums") continue;
+      for (std::size_t k = 0; k < m.count; ++k) {
+        const auto& sv = m.values[k];
+        if (sv.text != nullptr || !std::isfinite(sv.value)) continue;
+        const std::string sensor = input_sum_key(sv.key);
+        if (sensor.empty()) continue;
+        sum_values +=
+            "nccompd_input_sum_value{sensor=\"" + sensor + "\"} " + prom_num(sv.value) + "\n";
+      }
+    }
+    if (!sum_values.empty()) {
+      family("input_sum_value", "gauge",
+             "An [[input_sums]] sum's value now, offset + the weighted sum of its inputs "
+             "(labelled by the sensor it is published on).");
+      o << sum_values;
     }
   }
   family("bus_up", "gauge", "1 while the bus link is up.");

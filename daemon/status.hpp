@@ -93,6 +93,8 @@ struct StatusServerOptions {
 /// The input_lags module's key `sensor_N_lag` / `sensor_N_input`: {"N", "lag" or "input"};
 /// empty strings for another key (exposed for tests).
 [[nodiscard]] std::pair<std::string, std::string> input_lag_key(std::string_view key);
+/// The input_sums module's key `sensor_N_sum`: "N"; empty for another key (exposed for tests).
+[[nodiscard]] std::string input_sum_key(std::string_view key);
 /// The `le` edges [µs] of nccompd_loop_wake_latency_seconds (exposed for tests).
 [[nodiscard]] std::span<const std::uint64_t> prometheus_latency_edges_us();
 [[nodiscard]] const char* link_state_name(drivers::LinkState s);

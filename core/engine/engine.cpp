@@ -298,6 +298,12 @@ void Engine::configure(std::vector<RegisterSpec> registers,
   } catch (const std::invalid_argument& e) {
     throw std::invalid_argument(std::string("engine: input ") + e.what());
   }
+  InputSums sums;
+  try {
+    sums.configure(options.sums, options.lags);
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(std::string("engine: input ") + e.what());
+  }
   // One writer per register: two modules on one register would overwrite each other's target
   // every cycle (an oscillating offset on the machine).
   std::vector<int> writer(specs_.size(), -1);
@@ -325,7 +331,8 @@ void Engine::configure(std::vector<RegisterSpec> registers,
   for (auto& m : modules_) m->bind_context(context_);
   valid_.clear();
   lags_ = lags;
-  valid_.reserve(options.max_events_per_step + kMaxInputLags);
+  sums_ = sums;
+  valid_.reserve(options.max_events_per_step + kMaxInputLags + kMaxInputSums);
   trims_.assign(modules_.size() * regs_.size(), std::numeric_limits<double>::quiet_NaN());
   // The tool wear some trims predict, for the module that learns it from the tool measurement.
   std::vector<const ToolWearTrimSource*> wear_sources;
@@ -529,6 +536,10 @@ void Engine::step(TimeNs now_ns, std::span<const Event> events, StepOutput& out)
     const std::size_t n = valid_.size();
     valid_.resize(n + lags_.size());
     valid_.resize(lags_.update(now_ns, std::span<const Event>(valid_.data(), n), valid_, n));
+    // The sums' samples after the lags': a sum of a lag's output takes its value of this cycle.
+    const std::size_t m = valid_.size();
+    valid_.resize(m + sums_.size());
+    valid_.resize(sums_.update(now_ns, std::span<const Event>(valid_.data(), m), valid_, m));
   }
   const std::span<const Event> accepted(valid_.data(), valid_.size());
   // The context first: modules that evaluate it see this cycle's samples.

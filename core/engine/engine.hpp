@@ -83,6 +83,7 @@
 #include "core/engine/cursors.hpp"
 #include "core/engine/input_lag.hpp"
 #include "core/engine/input_snapshot.hpp"
+#include "core/engine/input_sum.hpp"
 #include "core/engine/tool_wear_trims.hpp"
 
 namespace nccomp::core::engine {
@@ -291,6 +292,9 @@ struct EngineOptions {
   /// Derived lag inputs (input_lag.hpp): each cycle, after the validated events, one
   /// TemperatureSample per lag on its output sensor; saved with the state (entry "@lags").
   std::vector<InputLagSpec> lags{};
+  /// Derived sum inputs (input_sum.hpp): each cycle, after the lags (whose samples of the cycle
+  /// they see), one TemperatureSample per complete sum on its output sensor; not saved.
+  std::vector<InputSumSpec> sums{};
 };
 
 struct EngineCounters {
@@ -518,6 +522,8 @@ class Engine {
   [[nodiscard]] const MachineContext& context() const noexcept { return context_; }
   /// The derived lag inputs (EngineOptions::lags). Real-time safe.
   [[nodiscard]] const InputLags& input_lags() const noexcept { return lags_; }
+  /// The derived sum inputs (EngineOptions::sums). Real-time safe.
+  [[nodiscard]] const InputSums& input_sums() const noexcept { return sums_; }
   /// The event cursors (see the file comment). Real-time safe.
   [[nodiscard]] const EventCursors& event_cursors() const noexcept { return cursors_; }
 
@@ -566,6 +572,7 @@ class Engine {
   MachineContext context_{};
   EventCursors cursors_{};
   InputLags lags_{};
+  InputSums sums_{};
   EngineOptions options_{};
   EngineCounters counters_{};
   std::size_t state_capacity_{0};

@@ -1,5 +1,6 @@
 #include "daemon/config/builtin_sections.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <set>
@@ -464,6 +465,151 @@ class InputLagsParser final : public SectionParser {
   }
 };
 
+// Reports each sum's current value (the last sample on its output sensor) on the status socket
+// as sensor_N_sum, N the sum's sensor, once it has one.
+class InputSumsModule final : public core::engine::Module {
+ public:
+  explicit InputSumsModule(const std::vector<InputSumEntry>& sums) {
+    for (const auto& e : sums) {
+      keys_.push_back("sensor_" + std::to_string(e.spec.output_sensor) + "_sum");
+      sensors_.push_back(e.spec.output_sensor);
+    }
+    values_.assign(sums.size(), std::numeric_limits<double>::quiet_NaN());
+  }
+  std::string_view name() const noexcept override { return "input_sums"; }
+  void attach(const core::engine::RegisterTable& /*registers*/) override {}
+  /// Real-time safe.
+  void step(core::TimeNs /*now_ns*/, std::span<const core::Event> events,
+            core::StepOutput& /*out*/) noexcept override {
+    for (const auto& e : events) {
+      const auto* t = std::get_if<core::TemperatureSample>(&e);
+      if (t == nullptr) continue;
+      for (std::size_t i = 0; i < sensors_.size(); ++i) {
+        if (sensors_[i] == t->sensor) values_[i] = t->temperature_c;
+      }
+    }
+  }
+  /// Real-time safe.
+  std::size_t status(std::span<core::engine::StatusValue> out) const noexcept override {
+    std::size_t n = 0;
+    for (std::size_t i = 0; i < keys_.size() && n < out.size(); ++i) {
+      if (std::isfinite(values_[i])) out[n++] = {keys_[i].c_str(), values_[i], nullptr};
+    }
+    return n;
+  }
+
+ private:
+  std::vector<std::string> keys_;
+  std::vector<std::uint8_t> sensors_;
+  std::vector<double> values_;
+};
+
+class InputSumsParser final : public SectionParser {
+ public:
+  std::string_view name() const noexcept override { return "input_sums"; }
+  std::unique_ptr<Section> parse(const toml::node& node, Diagnostics& diag) const override {
+    auto s = std::make_unique<InputSumsSection>();
+    const auto* arr = node.as_array();
+    if (arr == nullptr || !arr->is_array_of_tables()) {
+      diag.error(&node, "input_sums", "must be an array of tables ([[input_sums]])");
+      return s;
+    }
+    if (arr->size() > core::engine::kMaxInputSums) {
+      diag.error(&node, "input_sums",
+                 "at most " + std::to_string(core::engine::kMaxInputSums) + " entries");
+      return s;
+    }
+    for (std::size_t i = 0; i < arr->size(); ++i) {
+      const auto& t = *arr->get(i)->as_table();
+      const std::string path = "input_sums[" + std::to_string(i) + "]";
+      TableReader r(t, path, diag);
+      InputSumEntry e;
+      e.where = where_of(&t, path);
+      e.sensor_where = r.where("sensor");
+      e.spec.output_sensor = static_cast<std::uint8_t>(r.integer("sensor", std::nullopt, 0, 255));
+      e.spec.offset = r.number("offset", 0.0, -1e12, 1e12);
+      const std::size_t before = diag.items().size();
+      for (const auto v : r.integer_list("inputs", 0, 255)) {
+        e.spec.inputs.push_back(static_cast<std::uint8_t>(v));
+      }
+      e.spec.weights = r.number_list("weights", -1e12, 1e12);
+      const bool lists_ok = diag.items().size() == before;
+      if (!t.contains("inputs")) r.error("inputs", "missing required key");
+      if (!t.contains("weights")) r.error("weights", "missing required key");
+      if (lists_ok && t.contains("inputs") && t.contains("weights")) {
+        const std::size_t n = e.spec.inputs.size();
+        if (n == 0 || n > core::engine::kMaxSumInputs) {
+          r.error("inputs", "must name 1 to " + std::to_string(core::engine::kMaxSumInputs) +
+                                " sensors, got " + std::to_string(n));
+        }
+        if (e.spec.weights.size() != n) {
+          r.error("weights", std::to_string(e.spec.weights.size()) + " weights for " +
+                                 std::to_string(n) + " inputs: one weight per input");
+        }
+      }
+      for (std::size_t k = 0; k < e.spec.inputs.size(); ++k) {
+        const std::uint8_t in = e.spec.inputs[k];
+        for (std::size_t m = 0; m < k; ++m) {
+          if (e.spec.inputs[m] == in) {
+            r.error("inputs", "sensor " + std::to_string(in) + " is listed twice (inputs[" +
+                                  std::to_string(m) + "] and inputs[" + std::to_string(k) +
+                                  "]): add the weights");
+          }
+        }
+        if (in == e.spec.output_sensor) {
+          r.error("sensor", "is one of its inputs (inputs[" + std::to_string(k) +
+                                "]): the sum needs a sensor of its own");
+        }
+      }
+      for (std::size_t j = 0; j < s->sums.size(); ++j) {
+        const auto& o = s->sums[j].spec;
+        const std::string other = "input_sums[" + std::to_string(j) + "]";
+        if (o.output_sensor == e.spec.output_sensor) {
+          r.error("sensor", "sensor " + std::to_string(e.spec.output_sensor) +
+                                " is already the sum of " + other);
+        }
+        const auto has = [](const std::vector<std::uint8_t>& v, std::uint8_t x) {
+          return std::find(v.begin(), v.end(), x) != v.end();
+        };
+        if (has(o.inputs, e.spec.output_sensor) || has(e.spec.inputs, o.output_sensor)) {
+          r.error("sensor", "a sum of a sum (" + other + "): sum the sensors themselves");
+        }
+      }
+      r.finish();
+      s->sums.push_back(std::move(e));
+    }
+    return s;
+  }
+  // The lags are computed before the sums: a sum may take a lag's output, but not publish on a
+  // lag's sensor nor be a lag's input.
+  void cross_check(const Config& config, Diagnostics& diag) const override {
+    const auto* s = config.find<InputSumsSection>("input_sums");
+    const auto* lags = config.find<InputLagsSection>("input_lags");
+    if (s == nullptr || lags == nullptr) return;
+    for (const auto& e : s->sums) {
+      for (std::size_t j = 0; j < lags->lags.size(); ++j) {
+        const auto& l = lags->lags[j].spec;
+        const std::string other = "input_lags[" + std::to_string(j) + "]";
+        if (l.output_sensor == e.spec.output_sensor) {
+          diag.error(e.sensor_where, "sensor " + std::to_string(e.spec.output_sensor) +
+                                         " is already the lag of " + other);
+        }
+        if (l.input_sensor == e.spec.output_sensor) {
+          diag.error(e.sensor_where,
+                     "a lag of a sum (" + other +
+                         "): the lags are computed before the sums, lag the sensors instead");
+        }
+      }
+    }
+  }
+  void add_modules(const Config& config,
+                   std::vector<std::unique_ptr<core::engine::Module>>& modules) const override {
+    if (const auto* s = config.find<InputSumsSection>("input_sums")) {
+      modules.push_back(std::make_unique<InputSumsModule>(s->sums));
+    }
+  }
+};
+
 class LoopbackParser final : public SectionParser {
  public:
   std::string_view name() const noexcept override { return "loopback"; }
@@ -503,6 +649,7 @@ void register_builtin_sections() {
   register_section(std::make_unique<RampParser>());
   register_section(std::make_unique<LoopbackParser>());
   register_section(std::make_unique<InputLagsParser>());
+  register_section(std::make_unique<InputSumsParser>());
 }
 
 const DaemonSection& daemon_section(const Config& c) { return typed<DaemonSection>(c, "daemon"); }
@@ -530,6 +677,9 @@ std::unique_ptr<core::engine::Engine> build_engine(const Config& c) {
   core::engine::EngineOptions options{daemon_section(c).max_events_per_cycle};
   if (const auto* s = c.find<InputLagsSection>("input_lags")) {
     for (const auto& e : s->lags) options.lags.push_back(e.spec);
+  }
+  if (const auto* s = c.find<InputSumsSection>("input_sums")) {
+    for (const auto& e : s->sums) options.sums.push_back(e.spec);
   }
   auto engine = std::make_unique<core::engine::Engine>();
   engine->configure(std::move(regs), std::move(modules), options);

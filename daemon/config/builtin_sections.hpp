@@ -115,6 +115,18 @@ struct InputLagsSection final : Section {
   std::vector<InputLagEntry> lags;
 };
 
+struct InputSumEntry {
+  core::engine::InputSumSpec spec;
+  formats::Where where;
+  formats::Where sensor_where;
+};
+
+/// [[input_sums]]: derived sensors, offset + a weighted sum of sensors
+/// (core/engine/input_sum.hpp).
+struct InputSumsSection final : Section {
+  std::vector<InputSumEntry> sums;
+};
+
 struct LoopbackSection final : Section {
   std::size_t rx_capacity{1024};
   std::size_t tx_capacity{1024};

@@ -648,6 +648,151 @@ tau_s = 60
       << r.diagnostics.to_string();
 }
 
+TEST(ConfigLoader, InputSumsBuildTheEngineSumsAndAStatusModule) {
+  TempDir d;
+  const auto f = d.write("a.toml", std::string(kRegisters) + R"(
+[[input_lags]]
+sensor = 40
+input_sensor = 5
+tau_s = 1800
+
+[[input_sums]]
+sensor = 60
+offset = -12.5
+inputs = [1, 2, 40]
+weights = [0.8, -1.2, 3]
+
+[[input_sums]]
+sensor = 61
+inputs = [5]
+weights = [2]
+)");
+  auto r = load_file(f);
+  ASSERT_TRUE(r.config) << r.diagnostics.to_string();
+  auto e = build_engine(*r.config);
+  const auto& sums = e->input_sums();
+  ASSERT_EQ(sums.size(), 2U);
+  EXPECT_EQ(sums.output_sensor(0), 60);
+  EXPECT_DOUBLE_EQ(sums.offset(0), -12.5);
+  ASSERT_EQ(sums.input_count(0), 3U);
+  EXPECT_EQ(sums.input_sensor(0, 2), 40);
+  EXPECT_DOUBLE_EQ(sums.weight(0, 1), -1.2);
+  EXPECT_DOUBLE_EQ(sums.weight(0, 2), 3.0);
+  EXPECT_EQ(sums.output_sensor(1), 61);
+  EXPECT_DOUBLE_EQ(sums.offset(1), 0.0);  // the default
+  ASSERT_EQ(e->module_count(), 2U);
+  EXPECT_EQ(e->module(1).name(), "input_sums");
+  // Its status: each sum's value once every input has a sample (sensor 40, the lag of sensor 5,
+  // starts at 5's first value in the same cycle).
+  core::StepOutput out;
+  std::array<core::engine::StatusValue, 4> st{};
+  e->step(0, std::vector<core::Event>{core::TemperatureSample{0, 5, 21.0}}, out);
+  ASSERT_EQ(e->module(1).status(st), 1U);
+  EXPECT_STREQ(st[0].key, "sensor_61_sum");
+  EXPECT_DOUBLE_EQ(st[0].value, 42.0);
+  e->step(1,
+          std::vector<core::Event>{core::TemperatureSample{1, 1, 20.0},
+                                   core::TemperatureSample{1, 2, 10.0}},
+          out);
+  ASSERT_EQ(e->module(1).status(st), 2U);
+  EXPECT_STREQ(st[0].key, "sensor_60_sum");
+  EXPECT_NEAR(st[0].value, -12.5 + 16.0 - 12.0 + 3.0 * 21.0, 1e-9);
+  EXPECT_STREQ(st[1].key, "sensor_61_sum");
+}
+
+TEST(ConfigLoader, InputSumErrorsNameFileLineAndKey) {
+  TempDir d;
+  const auto f = d.write("a.toml", std::string(kRegisters) + R"(
+[[input_sums]]
+sensor = 60
+inputs = [1, 2]
+weights = [1.0]
+
+[[input_sums]]
+sensor = 61
+inputs = [1, 61, 1]
+weights = [1, 2, 3]
+offset = nan
+
+[[input_sums]]
+sensor = 60
+inputs = []
+weights = []
+
+[[input_sums]]
+sensor = 62
+inputs = [60, "x"]
+weights = [1, inf]
+
+[[input_sums]]
+sensor = 40
+weights = [1]
+
+[[input_sums]]
+sensor = 5
+inputs = [1]
+weights = [1]
+gain = 2
+
+[[input_lags]]
+sensor = 40
+input_sensor = 5
+tau_s = 60
+)");
+  auto r = load_file(f);
+  EXPECT_FALSE(r.config);
+  const std::string all = r.diagnostics.to_string();
+  // Each expected error once, at its file:line:column and key; nothing else.
+  const std::vector<std::string> expected{
+      "a.toml:15:11: input_sums[0].weights: 1 weights for 2 inputs",
+      "a.toml:21:10: input_sums[1].offset: must be a number",
+      "a.toml:18:10: input_sums[1].sensor: is one of its inputs (inputs[1])",
+      "a.toml:19:10: input_sums[1].inputs: sensor 1 is listed twice (inputs[0] and inputs[2])",
+      "a.toml:25:10: input_sums[2].inputs: must name 1 to 32 sensors, got 0",
+      "a.toml:24:10: input_sums[2].sensor: sensor 60 is already the sum of input_sums[0]",
+      "a.toml:30:15: input_sums[3].inputs[1]: must be an integer",
+      "a.toml:31:15: input_sums[3].weights[1]: must be a number",
+      "a.toml:29:10: input_sums[3].sensor: a sum of a sum (input_sums[0])",
+      "a.toml:29:10: input_sums[3].sensor: a sum of a sum (input_sums[2])",
+      "a.toml:33:1: input_sums[4].inputs: missing required key",
+      "a.toml:41:8: input_sums[5].gain: unknown key",
+  };
+  for (const auto& x : expected) {
+    EXPECT_NE(all.find(x), std::string::npos) << "missing: " << x << "\nin:\n" << all;
+  }
+  EXPECT_EQ(r.diagnostics.items().size(), expected.size()) << all;
+
+  // Against [[input_lags]] (checked once every section parsed): a sum on a lag's sensor, and a
+  // lag of a sum (the lags are computed first). A sum of a lag is fine (the test above).
+  const auto g = d.write("b.toml", std::string(kRegisters) + R"(
+[[input_sums]]
+sensor = 40
+inputs = [1]
+weights = [1]
+
+[[input_sums]]
+sensor = 5
+inputs = [1, 2]
+weights = [1, 2]
+
+[[input_lags]]
+sensor = 40
+input_sensor = 5
+tau_s = 60
+)");
+  auto r2 = load_file(g);
+  EXPECT_FALSE(r2.config);
+  const std::string all2 = r2.diagnostics.to_string();
+  ASSERT_EQ(r2.diagnostics.items().size(), 2U) << all2;
+  EXPECT_NE(all2.find("b.toml:13:10: input_sums[0].sensor: sensor 40 is already the lag of "
+                      "input_lags[0]"),
+            std::string::npos)
+      << all2;
+  EXPECT_NE(all2.find("b.toml:18:10: input_sums[1].sensor: a lag of a sum (input_lags[0])"),
+            std::string::npos)
+      << all2;
+}
+
 // The shipped examples load, with the bus sections registered (daemon/sections/modbus, can).
 TEST(ConfigExamples, ShippedConfigsLoad) {
   auto loop = load_file(std::string(NCCOMP_SOURCE_DIR) + "/config/nccompd-loopback.toml");
