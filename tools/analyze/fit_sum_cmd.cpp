@@ -1,5 +1,5 @@
 // `nccomp fit-sum --log LOG.csv [--map MAP.toml] --input COL=SENSOR ... [--lag COL:TAU_S=SENSOR ...]
-// --sensor N [--before TIME_S] [--kind KIND]`: fits the log's measured deviation (measured_um +
+// --sensor N [--before TIME_S] [--kind KIND] [--point P]`: fits the log's measured deviation (measured_um +
 // applied_um, as `nccomp analyze` reads it) as one shrunk (ridge) linear model of many columns
 // and first-order lags of them (core/model/ridge.hpp: the weight λ chosen by a rolling-origin
 // error on the rows), and prints the nccompd tables that compute it as a sensor: the
@@ -39,6 +39,7 @@ struct Options {
   int sensor{-1};
   double before_s{std::nan("")};
   std::string kind;
+  std::vector<double> points;
   std::vector<double> lambdas{1e-4, 1e-3, 1e-2, 1e-1, 1.0};
   int blocks{4};
 };
@@ -209,6 +210,15 @@ void run(const Options& opt) {
                        static_cast<int>(kinds[i]) == kind)) {
       continue;
     }
+    if (!opt.points.empty()) {
+      const auto& point = data.column(static_cast<int>(cm::Column::kPoint));
+      bool match = false;
+      for (const double p : opt.points) {
+        match = match || (point.size() == n && std::isfinite(point[i]) &&
+                          std::fabs(point[i] - p) < 0.5);
+      }
+      if (!match) continue;
+    }
     if (std::isfinite(opt.before_s) && !(time.size() == n && time[i] < opt.before_s)) continue;
     bool ok = std::isfinite(data.target_um[i]);
     for (const double v : x[i]) ok = ok && std::isfinite(v);
@@ -300,6 +310,8 @@ void setup(CLI::App& app) {
   sub->add_option("--before", opt->before_s,
                   "fit only rows with time_s before this (e.g. the earlier shifts)");
   sub->add_option("--kind", opt->kind, "fit only rows of this kind (tool_wear, contour, calib)");
+  sub->add_option("--point", opt->points,
+                  "fit only rows of this point (an axis of the calibration: 0 X, 1 Y, 2 Z; repeat)");
   sub->add_option("--lambda", opt->lambdas, "the ridge weights to choose from (repeat)")
       ->check(CLI::PositiveNumber);
   sub->add_option("--blocks", opt->blocks, "blocks of the rolling-origin error")

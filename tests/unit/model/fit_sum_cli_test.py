@@ -21,6 +21,7 @@ MAP = """
 [columns]
 time_s = "t"
 measured_um = "y"
+point = "p"
 [constant]
 kind = "calib"
 [extra]
@@ -52,10 +53,10 @@ class Case(unittest.TestCase):
                   + rng.normal(0, 0.1, n))
         self.log = os.path.join(self.dir.name, "log.csv")
         with open(self.log, "w") as f:
-            f.write("t,y,a,b,speed\n")
-            for row in zip(self.t, self.y, self.a, self.b, self.speed):
-                f.write(",".join("%.6f" % v for v in row) + "\n")
-            f.write("%.1f,,1,1,1\n" % (n * 15.0))  # a row without a measurement
+            f.write("t,y,a,b,speed,p\n")
+            for i, row in enumerate(zip(self.t, self.y, self.a, self.b, self.speed)):
+                f.write(",".join("%.6f" % v for v in row) + ",%d\n" % (i % 3))
+            f.write("%.1f,,1,1,1,0\n" % (n * 15.0))  # a row without a measurement
         self.map = os.path.join(self.dir.name, "m.toml")
         with open(self.map, "w") as f:
             f.write(MAP)
@@ -94,6 +95,12 @@ class FitSum(Case):
         code, out, err = self.run_fit("--input", "a=1", "--sensor", "50", "--before", "15000")
         self.assertEqual(code, 0, err)
         self.assertIn("on 1000 rows", out)
+
+    def test_point_fits_that_point_only(self):
+        code, out, err = self.run_fit("--input", "a=1", "--sensor", "50", "--point", "1",
+                                      "--before", "15000")
+        self.assertEqual(code, 0, err)
+        self.assertIn("on 333 rows", out)
 
 
 class BadInput(Case):
