@@ -120,12 +120,14 @@ def _module_values(status_text, module):
     return values
 
 
-def run(e2e, b, source, work, name="calib_touch", calibration=None, input_lags=None):
+def run(e2e, b, source, work, name="calib_touch", calibration=None, input_lags=None,
+        extra_tables=None, watch_module=None):
     """One shift; calibration: {key: TOML value} set in the daemon's [calibration]; input_lags:
-    [(sensor, input_sensor, tau_s)] appended to the daemon's config as [[input_lags]] tables,
-    and then the daemon's status is taken every 2 s while ncsim runs: the texts that show the
-    input_lags module go to run_dir/status.txt (separated by a line "----"), the last metrics
-    with them to run_dir/metrics.txt."""
+    [(sensor, input_sensor, tau_s)] appended to the daemon's config as [[input_lags]] tables;
+    extra_tables: TOML text appended to it. With input_lags (or watch_module) the daemon's
+    status is taken every 2 s while ncsim runs: the texts that show the input_lags module (or
+    watch_module) go to run_dir/status.txt (separated by a line "----"), the last metrics with
+    them to run_dir/metrics.txt."""
     run_dir = os.path.join(work, name)
     shutil.rmtree(run_dir, ignore_errors=True)
     os.makedirs(run_dir)
@@ -148,6 +150,11 @@ def run(e2e, b, source, work, name="calib_touch", calibration=None, input_lags=N
             for sensor, input_sensor, tau_s in input_lags:
                 f.write("\n[[input_lags]]\nsensor = %d\ninput_sensor = %d\ntau_s = %s\n" %
                         (sensor, input_sensor, tau_s))
+    if extra_tables:
+        with open(daemon_path, "a") as f:
+            f.write("\n" + extra_tables)
+    if input_lags and not watch_module:
+        watch_module = "input_lags"
     map_path = os.path.join(run_dir, "map.toml")
     with open(map_path) as f:
         text = f.read()
@@ -215,14 +222,14 @@ def run(e2e, b, source, work, name="calib_touch", calibration=None, input_lags=N
         # 3. The nominals, then one recalibration on demand.
         transcript.append(_calibrate(e2e, b, ssock, ["await ready 120", "recalibrate"], run_dir))
         transcript.append(_phase(b, ssock)[1])
-        if input_lags:
+        if watch_module:
             # The daemon's status while the shift runs (lock-step: ncsim sets the pace).
             texts, metrics = [], ""
             deadline = time.monotonic() + 600.0
             sim_rc = None
             while sim_rc is None and time.monotonic() < deadline:
                 text = _status(b, ssock)
-                if "module input_lags:" in text:
+                if "module %s:" % watch_module in text:
                     texts.append(text)
                     metrics = _status(b, ssock, "--metrics") or metrics
                 sim_rc = sim.wait(2.0)
@@ -305,6 +312,57 @@ STRATEGIES = [
 # Last, the estimator with the temperature slopes fitted on the first run's measurement log as
 # its prior (an earlier shift of the same machine, never the shift scored).
 MODEL_LABEL = "creep + estimator, slopes of the first run as the prior"
+# And each axis's drift as a model sum nccompd computes ([[input_sums]] sensors 50, 51, 52 over
+# ncsim's temperature, sensor 0), fitted on the first run's log by `nccomp fit-sum`, each slot's
+# estimator input (estimator_input_sensors), slope 1: the path of a many-sensor model to S3.
+SUM_LABEL = "creep + estimator, a model sum per axis fitted on the first run"
+SUM_SENSORS = (50, 51, 52)
+
+
+def _sum_tables(c, b, run_dir):
+    """`nccomp fit-sum` per axis (point 0 X, 1 Y, 2 Z) on the calib rows of a run's log: the
+    [[input_sums]] tables, and the calibration keys that feed them to the estimator."""
+    tables = []
+    for point, sensor in enumerate(SUM_SENSORS):
+        p = subprocess.run([b.nccomp, "fit-sum", "--log",
+                            os.path.join(run_dir, "log", "measurements.csv"), "--kind", "calib",
+                            "--point", str(point), "--input", "temp_c=0", "--sensor", str(sensor)],
+                           capture_output=True, text=True, timeout=120)
+        c.that(p.returncode == 0, "fit-sum point %d: exit %d %s" % (point, p.returncode, p.stderr))
+        weight = re.search(r"^weights = \[([-+0-9.e]+)\]$", p.stdout, flags=re.M)
+        c.that(weight is not None, "fit-sum point %d printed one weight:\n%s" % (point, p.stdout))
+        if weight:
+            print("fit-sum point %d: %s um/degC on the temperature" % (point, weight.group(1)))
+        tables.append(p.stdout)
+    keys = {"prediction": '"estimator"',
+            "estimator_input_sensors": "[%d, %d, %d, %d]" % (SUM_SENSORS[0], SUM_SENSORS[0],
+                                                             SUM_SENSORS[1], SUM_SENSORS[2]),
+            "estimator_shift_prior": "false", "max_temperature_slope_um_per_c": "1.0",
+            "estimator_model_slope_um_per_c": "[1.0, 1.0, 1.0, 1.0]",
+            "estimator_model_slope_sigma_um_per_c": "[0.2, 0.2, 0.2, 0.2]"}
+    return "\n".join(tables), keys
+
+
+def _check_sums(c, label, run_dir):
+    """The sums reached S3: every status while the shift ran showed each sum, the sums moved with
+    the warming machine, the metrics had them."""
+    with open(os.path.join(run_dir, "status.txt")) as f:
+        texts = [t for t in f.read().split("----\n") if t.strip()]
+    with open(os.path.join(run_dir, "metrics.txt")) as f:
+        metrics = f.read()
+    c.that(len(texts) >= 2, "%s: %d status texts with the input_sums module" % (label, len(texts)))
+    for sensor in SUM_SENSORS:
+        key = "sensor_%d_sum" % sensor
+        values = [v[key] for v in (_module_values(t, "input_sums") for t in texts) if key in v]
+        c.that(len(values) == len(texts), "%s: every status showed %s (%d of %d)" %
+               (label, key, len(values), len(texts)))
+        if values:
+            print("%s: %s from %.2f to %.2f um" % (label, key, values[0], values[-1]))
+            c.that(abs(values[-1] - values[0]) > 1.0, "%s: %s moved %.2f um while the shift ran"
+                   % (label, key, values[-1] - values[0]))
+        c.that(re.search(r"^nccompd_input_sum_value\{sensor=\"%d\"\} [-+0-9.e]+$" % sensor,
+                         metrics, flags=re.M) is not None,
+               "%s: the metrics have nccompd_input_sum_value{sensor=\"%d\"}" % (label, sensor))
 
 
 def _model_keys(run_dir):
@@ -391,15 +449,19 @@ def scenario_strategies(e2e, b, source, work):
     c = e2e.Check("calib_strategies")
     results = []
     model = None
-    for row in STRATEGIES + [(MODEL_LABEL, None)]:
+    for row in STRATEGIES + [(MODEL_LABEL, None), (SUM_LABEL, None)]:
         label, keys = row[0], row[1]
         lags = row[2] if len(row) > 2 else None
-        if keys is None:
+        tables, watch = None, None
+        if label == MODEL_LABEL:
             keys = _model_keys(model)
             print("%s: %s" % (MODEL_LABEL, keys))
+        elif label == SUM_LABEL:
+            tables, keys = _sum_tables(c, b, model)
+            watch = "input_sums"
         name = "calib_strategy_" + re.sub(r"[^a-z]+", "_", label)
         run_dir, out_dir, sim_rc, daemon_rc, sim_log, daemon_log, _, wall_s = run(
-            e2e, b, source, work, name, keys, lags)
+            e2e, b, source, work, name, keys, lags, tables, watch)
         c.that(sim_rc == 0 and daemon_rc == 0, "%s: ncsim %s, nccompd %s" % (label, sim_rc,
                                                                            daemon_rc))
         t_warm, _, figures = _figures(out_dir, sim_log)
@@ -411,6 +473,8 @@ def scenario_strategies(e2e, b, source, work):
         c.that(not alarms, "%s: no alarm in the daemon's log %s" % (label, alarms))
         if lags:
             _check_lags(c, label, run_dir, lags)
+        if label == SUM_LABEL:
+            _check_sums(c, label, run_dir)
         results.append((label, figures, wall_s))
         model = model or run_dir
     print("| strategy | X RMS / max | Y RMS / max | Z RMS / max |")
