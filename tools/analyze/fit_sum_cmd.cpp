@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "core/engine/input_lag.hpp"
+#include "core/engine/input_sum.hpp"
 #include "core/model/analysis.hpp"
 #include "core/model/ridge.hpp"
 #include "formats/model/model_io.hpp"
@@ -143,6 +144,16 @@ void run(const Options& opt) {
     inputs.push_back(in);
   }
 
+  if (inputs.size() > nccomp::core::engine::kMaxSumInputs) {
+    throw CommandError(kExitUsage, std::to_string(inputs.size()) +
+                                       " inputs and lags: an [[input_sums]] takes at most " +
+                                       std::to_string(nccomp::core::engine::kMaxSumInputs));
+  }
+  if (inputs.size() - direct > nccomp::core::engine::kMaxInputLags) {
+    throw CommandError(kExitUsage, std::to_string(inputs.size() - direct) +
+                                       " lags: nccompd computes at most " +
+                                       std::to_string(nccomp::core::engine::kMaxInputLags));
+  }
   cm::Dataset data;
   for (std::size_t i = 0; i < direct; ++i) {
     if (cm::column_index(inputs[i].column, {}) < 0) data.extra_columns.push_back(inputs[i].column);

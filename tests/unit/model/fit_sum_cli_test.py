@@ -120,6 +120,11 @@ class BadInput(Case):
         self.check(2, "expected COLUMN:TAU_S=SENSOR with TAU_S > 0", "--input", "a=1",
                    "--source", "speed=9", "--lag", "speed:-5=40", "--sensor", "50")
         self.check(2, "the sensor must be a number 0..255", "--input", "a=300", "--sensor", "50")
+        many = []
+        for k in range(33):
+            many += ["--lag", "speed:%d=%d" % (100 + k, 100 + k)]
+        self.check(2, "34 inputs and lags: an [[input_sums]] takes at most 32", "--input", "a=1",
+                   "--source", "speed=9", *many, "--sensor", "50")
         self.check(3, "at least 8 needed", "--input", "a=1", "--sensor", "50", "--before", "60")
 
 
