@@ -402,6 +402,7 @@ void Loop::swap_in(core::TimeNs wake_ns) {
     handover_base_ = add_handovers(handover_base_, old_counters);
     ++local_.reloads;
     local_.config_generation = rt.generation;
+    local_.config_since_cycle = local_.cycles;
     persisted_generation_ = ~std::uint64_t{0};  // persist under the new configuration soon
     note(wake_ns, NoteCode::kConfigSwapped, static_cast<std::int64_t>(rt.generation), waited);
   }

@@ -145,6 +145,9 @@ struct LoopStats {
   std::uint64_t state_export_busy{0};  // persister behind: export postponed
   std::uint64_t state_export_failed{0};
   std::uint64_t config_generation{0};  // the configuration the loop runs (swapped in)
+  /// The cycle (the count in `cycles`) in which the loop swapped that configuration in; 0 when it
+  /// runs since the start.
+  std::uint64_t config_since_cycle{0};
   /// Cycles the published configuration has waited for the bus's receipts (0: none waits).
   std::uint64_t swap_waiting{0};
   std::uint64_t reloads{0};

@@ -131,6 +131,7 @@ std::string render_json(const StatusContext& c) {
   std::ostringstream o;
   o << "{\"daemon\":{\"pid\":" << ::getpid() << ",\"config\":\"" << json_escape(c.config_path)
     << "\",\"config_generation\":" << s.config_generation
+    << ",\"config_since_cycle\":" << s.config_since_cycle
     << ",\"swap_waiting_cycles\":" << s.swap_waiting << ",\"reloads\":" << s.reloads
     << ",\"dry_run\":" << (s.dry_run ? "true" : "false")
     << ",\"hold\":" << (s.hold ? "true" : "false")

@@ -1200,8 +1200,9 @@ def run_continued(b, source, work, name, daemon_cfg, daemon_overrides, parts, se
     (staged with reload_overrides) and it gets SIGHUP, so the RUNNING daemon swaps in the new
     configuration with its state at a cycle boundary (the reload is taken while ncsim already
     ticks: where it lands is read back).
-    Returns (RunResult, swap_s): swap_s, the machine time [s] by which the new configuration ran
-    (an upper bound: the loop's cycles when the daemon's log said so), None without reload; with
+    Returns (RunResult, swap_s): swap_s, the machine time [s] at which the new configuration was
+    swapped in (`nccomp status --json`'s daemon.config_since_cycle: the cycle of the swap itself,
+    not of the query, during which ncsim ticks on), None without reload; with
     a reload, RunResult.handover is `nccomp status --json`'s "handover" object once it counts
     the handover (or as it was after 10 s)."""
     run_dir = os.path.join(work, name)
@@ -1291,7 +1292,8 @@ def run_continued(b, source, work, name, daemon_cfg, daemon_overrides, parts, se
             st = subprocess.run([b.nccomp, "status", "--json", "--socket", status_sock],
                                 capture_output=True, text=True, timeout=30)
             try:
-                swap_s = json.loads(st.stdout)["loop"]["cycles"] / 250.0
+                # The cycle of the swap itself (ncsim ticks on while this query runs).
+                swap_s = json.loads(st.stdout)["daemon"]["config_since_cycle"] / 250.0
             except (ValueError, KeyError):
                 swap_s = None
             # The handover runs in the swap's cycle; its counters are published at the cycle's
@@ -1340,7 +1342,7 @@ def run_continued(b, source, work, name, daemon_cfg, daemon_overrides, parts, se
     result.model_load = load_answer
     print("%s: ncsim %d, nccompd %d, %.1f s wall%s" % (
         name, sim_rc, daemon_rc, result.wall_s,
-        "" if swap_s is None else "; new configuration running by t = %.2f s" % swap_s))
+        "" if swap_s is None else "; new configuration running from t = %.2f s" % swap_s))
     return result, swap_s
 
 
@@ -1441,7 +1443,7 @@ def scenario_model_handover(b, source, work):
                    "%s: nccomp status --json shows the handover: %s" % (label, h))
             print("%s: nccomp status --json handover %s" % (label, json.dumps(h)))
             c.that(swap_s is not None and swap_s < approach_s,
-                   "%s: the swap ran before the first part's first cut (by t = %s s, the cut "
+                   "%s: the swap ran before the first part's first cut (at t = %s s, the cut "
                    "starts at %g s)" % (label, swap_s, approach_s))
         times = part_times(r)
         parts = sorted(times)

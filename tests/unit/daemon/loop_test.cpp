@@ -175,8 +175,14 @@ TEST(Loop, ReloadSwapsAtACycleBoundaryAndCarriesTheState) {
   ASSERT_TRUE(rig.wait_for([&] { return rig.loop->registers().regs[0].output_um >= 100.0; }));
   // New configuration: same register, the ramp heads slowly (1 µm/s) for -50 µm instead. With
   // the state carried over it starts at 100 µm; a fresh engine would start its ramp at 0.
+  const auto first = rig.loop->stats();
+  EXPECT_EQ(first.config_since_cycle, 0U) << "the first configuration runs since the start";
   rig.swap.publish(make_runtime(-50.0, 1.0, false, 2));
   ASSERT_TRUE(rig.wait_for([&] { return rig.loop->stats().config_generation == 2; }));
+  const auto swapped_in = rig.loop->stats();
+  // The cycle of the swap: after the publish, and at most the cycles run when it was seen.
+  EXPECT_GT(swapped_in.config_since_cycle, first.cycles);
+  EXPECT_LE(swapped_in.config_since_cycle, swapped_in.cycles);
   std::this_thread::sleep_for(200ms);
   const double after = rig.loop->registers().regs[0].output_um;
   rig.loop->stop();
