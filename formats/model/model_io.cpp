@@ -4,6 +4,7 @@
 #include <charconv>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <optional>
 #include <sstream>
@@ -580,6 +581,22 @@ toml::table parse_or_throw(std::string_view text, std::string_view source) {
 }
 
 }  // namespace
+
+void read_log_file(const std::string& path, const Mapping& mapping, core::model::Dataset& data) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) {
+    Diagnostics diag;
+    const std::filesystem::path inside = std::filesystem::path(path) / "measurements.csv";
+    diag.error(Where{path, 0, 0, ""},
+               std::filesystem::exists(inside, ec)
+                   ? "is a directory: give the log file in it, " + inside.string()
+                   : std::string("is a directory, not a log file"));
+    throw DiagnosticsError(std::move(diag), path);
+  }
+  std::ifstream in(path, std::ios::binary);
+  if (!in) cannot_open(path);
+  read_log(in, path, mapping, data);
+}
 
 int kind_from_name(std::string_view name) noexcept {
   for (std::size_t i = 0; i < kKindNames.size(); ++i) {

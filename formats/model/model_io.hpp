@@ -92,6 +92,11 @@ Mapping read_mapping_file(const std::string& path);
 void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
               core::model::Dataset& data);
 
+/// read_log() of the file at `path` (named `path` in errors). A path that cannot be opened, or
+/// that is a directory (nccompd's log directory rather than its measurements.csv), is an error
+/// naming the path.
+void read_log_file(const std::string& path, const Mapping& mapping, core::model::Dataset& data);
+
 /// Measurement kind from its log name (tool_wear / contour / calib); -1 if unknown.
 int kind_from_name(std::string_view name) noexcept;
 

@@ -123,11 +123,9 @@ void run(const Options& given) {
       }
     }
     for (std::size_t i = 0; i < opt.logs.size(); ++i) {
-      std::ifstream in(opt.logs[i], std::ios::binary);
-      if (!in) throw CommandError(nccomp::tools::kExitInvalidInput, opt.logs[i] + ": cannot open");
       const io::Mapping none;
       const io::Mapping& m = maps.empty() ? none : maps[maps.size() == 1 ? 0 : i];
-      io::read_log(in, opt.logs[i], m, data);
+      io::read_log_file(opt.logs[i], m, data);
     }
   } catch (const nccomp::formats::DiagnosticsError& e) {
     throw CommandError(nccomp::tools::kExitInvalidInput, e.what());

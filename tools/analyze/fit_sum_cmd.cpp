@@ -7,7 +7,6 @@
 // model of many sensors, per slot").
 #include <cmath>
 #include <cstdio>
-#include <fstream>
 #include <iostream>
 #include <memory>
 #include <set>
@@ -165,9 +164,7 @@ void run(const Options& opt) {
     io::Mapping mapping;
     if (!opt.map.empty()) mapping = io::read_mapping_file(opt.map);
     for (const auto& log : opt.logs) {
-      std::ifstream f(log, std::ios::binary);
-      if (!f) throw CommandError(kExitInvalidInput, log + ": cannot open");
-      io::read_log(f, log, mapping, data);
+      io::read_log_file(log, mapping, data);
     }
   } catch (const nccomp::formats::DiagnosticsError& e) {
     throw CommandError(kExitInvalidInput, e.what());

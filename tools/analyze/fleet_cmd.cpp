@@ -185,9 +185,7 @@ void run_fleet(const std::vector<MachineLogs>& fleet, const std::string& config_
       fm.id = m.machine;
       fm.data.extra_columns = cfg.extra_columns;
       for (const std::string& f : m.files) {
-        std::ifstream in(f, std::ios::binary);
-        if (!in) throw std::invalid_argument(f + ": cannot open");
-        io::read_log(in, f, io::Mapping{}, fm.data);
+        io::read_log_file(f, io::Mapping{}, fm.data);
       }
       machines.push_back(std::move(fm));
     }

@@ -347,10 +347,7 @@ RunOutcome Service::run() {
         io::read_model_text(read_text(config_.analysis_config), config_.analysis_config, false);
     cm::Dataset data;
     data.extra_columns = cfg.extra_columns;
-    {
-      std::ifstream log(dir / "measurements.csv", std::ios::binary);
-      io::read_log(log, (dir / "measurements.csv").string(), io::Mapping{}, data);
-    }
+    io::read_log_file((dir / "measurements.csv").string(), io::Mapping{}, data);
     const cm::AnalysisResult result = cm::analyze(data, cfg.config);
     namespace an = nccomp::tools::analyze;
     write_file(dir / "summary.json", an::summary_json(data, result));

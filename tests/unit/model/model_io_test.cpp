@@ -2,6 +2,8 @@
 // bad input is refused with its file, line and column named.
 #include <gtest/gtest.h>
 
+#include <filesystem>
+#include <fstream>
 #include <sstream>
 
 #include "formats/model/model_io.hpp"
@@ -129,6 +131,37 @@ points = [1, 2]
   EXPECT_DOUBLE_EQ(d.column(11)[3], 21.0);
   EXPECT_DOUBLE_EQ(d.target_um[1], 11.0);
   EXPECT_TRUE(std::isnan(d.target_um[3]));
+}
+
+// GIVEN nccompd's log directory, a missing path, or the log file itself WHEN read as a log THEN
+// the first two are errors naming the path (a directory is not reported as an empty file) and
+// the third is read.
+TEST(ReadLogFile, ADirectoryOrAMissingPathIsAnErrorNamingThePath) {
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::path(::testing::TempDir()) / "read_log_file_test";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const auto error_of_file = [](const fs::path& p) -> std::string {
+    cm::Dataset d;
+    try {
+      io::read_log_file(p.string(), {}, d);
+    } catch (const nccomp::formats::DiagnosticsError& e) {
+      return e.what();
+    }
+    return "";
+  };
+  EXPECT_EQ(error_of_file(dir), dir.string() + ": is a directory, not a log file");
+  EXPECT_EQ(error_of_file(dir / "missing.csv"), (dir / "missing.csv").string() + ": cannot open");
+  {
+    std::ofstream f(dir / "measurements.csv");
+    f << kHeader << "\n1,1,1,contour,1,0,0,0,0,0,,1.5,0\n";
+  }
+  EXPECT_EQ(error_of_file(dir), dir.string() + ": is a directory: give the log file in it, " +
+                                    (dir / "measurements.csv").string());
+  cm::Dataset d;
+  io::read_log_file((dir / "measurements.csv").string(), {}, d);
+  ASSERT_EQ(d.rows(), 1U);
+  fs::remove_all(dir);
 }
 
 TEST(ReadMapping, RefusesUnknownKeysAndColumns) {
