@@ -24,16 +24,13 @@ export SYSTEMD_PAGER= SYSTEMD_COLORS=0 DEBIAN_FRONTEND=noninteractive
 
 # The console line of a check ends with the seconds since the previous check ended.
 check_start=$SECONDS
-pass() {
-  echo "PASS $2" >"$results/$1"
-  echo "check $1: PASS $2 [$((SECONDS - check_start)) s]"
+report() {
+  echo "$2 $3" >"$results/$1"
+  echo "check $1: $2 $3 [$((SECONDS - check_start)) s]"
   check_start=$SECONDS
 }
-fail() {
-  echo "FAIL $2" >"$results/$1"
-  echo "check $1: FAIL $2 [$((SECONDS - check_start)) s]"
-  check_start=$SECONDS
-}
+pass() { report "$1" PASS "$2"; }
+fail() { report "$1" FAIL "$2"; }
 # Polls a command (up to $1 s) until it succeeds.
 wait_for() {
   local limit=$1
