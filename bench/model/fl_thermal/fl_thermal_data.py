@@ -6,10 +6,11 @@ import sys
 
 import numpy as np
 
+DEFAULT_PATH = "../shared/data/fl_thermal_spindle_drift/data.csv"
+
 
 class Data:
-    def __init__(self, argv):
-        path = argv[1] if len(argv) > 1 else "../shared/data/fl_thermal_spindle_drift/data.csv"
+    def __init__(self, path):
         rows = list(csv.reader(open(path, encoding="utf-8")))
         self._head = [c.strip() for c in rows[0]]
         self._d = np.array([[float(x) for x in r] for r in rows[1:]])
@@ -46,5 +47,9 @@ class Data:
         return np.sqrt(ss / m)
 
 
-def load():
-    return Data(sys.argv)
+def load(path=None):
+    """The data file given, else the first argument, else the shared data folder beside the
+    checkout."""
+    if path is None:
+        path = sys.argv[1] if len(sys.argv) > 1 else DEFAULT_PATH
+    return Data(path)

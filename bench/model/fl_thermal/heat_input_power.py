@@ -10,12 +10,25 @@ fitted RMS re-ranked by a rolling-origin error on the fitted rows (4 time blocks
 last 3 predicted from those before it; as rank_folds = 3).
 Prints one line per gauge, power set and rule: the held-out RMS after each step.
   /usr/bin/python3 bench/model/fl_thermal/heat_input_power.py [data.csv]
+      [--powers "1;1,2;2"] [--rerank 6]
+--powers: the sets of speed powers offered, one run of the search each (';' between sets, ','
+within one; a power may be a fraction such as 5/3). --rerank: how many of the best by fitted
+RMS the rolling rule re-ranks (0: every candidate).
 """
+import argparse
+from fractions import Fraction
+
 import numpy as np
 
-from fl_thermal_data import load
+from fl_thermal_data import DEFAULT_PATH, load
 
-data = load()
+parser = argparse.ArgumentParser()
+parser.add_argument("data", nargs="?", default=DEFAULT_PATH)
+parser.add_argument("--powers", default="1;1,2;2")
+parser.add_argument("--rerank", type=int, default=6)
+args = parser.parse_args()
+power_sets = [tuple(Fraction(p) for p in s.split(",")) for s in args.powers.split(";")]
+data = load(args.data)
 n = data.n
 cut = data.cut
 rpm = data.rpm
@@ -45,12 +58,12 @@ print("| gauge | speed powers offered | rule | declared held-out [µm] "
 print("| --- | --- | --- | --- | --- | --- |")
 for gauge in ("ch1", "ch3", "ch5"):
     y = data.col(gauge + "(um)")
-    for powers in ((1,), (1, 2), (2,)):
+    for powers in power_sets:
         cands = {}
         for p in powers:
             for tau in taus:
-                heat = rpm ** p / 5000.0 ** (p - 1)
-                cands["lag(rpm^%d, %.0f s)" % (p, tau)] = data.lag(heat, tau)
+                heat = rpm ** float(p) / 5000.0 ** float(p - 1)
+                cands["lag(rpm^%s, %.0f s)" % (p, tau)] = data.lag(heat, tau)
         for i in (1, 2, 9):
             cands["t%d" % i] = temp[i]
         for rule in ("fitted", "rolling"):
@@ -62,12 +75,13 @@ for gauge in ("ch1", "ch3", "ch5"):
                 ranked = sorted((fit(x + [v], y)[0], k) for k, v in cands.items()
                                 if k not in chosen)
                 if rule == "rolling":
-                    ranked = sorted((rolling(x + [cands[k]], y), k) for _, k in ranked[:6])
+                    ranked = sorted((rolling(x + [cands[k]], y), k) for _, k in (ranked[:args.rerank] if args.rerank > 0 else ranked))
                 k = ranked[0][1]
                 chosen.append(k)
                 x = x + [cands[k]]
                 steps.append("%s %.2f" % (k, fit(x, y)[1]))
             final = fit(x, y)[1]
             print("| %s | %s | %s | %.2f | %s | %+.0f %% |" % (
-                gauge, ", ".join(map(str, powers)), rule, declared, "; ".join(steps),
+                gauge, ", ".join(map(str, powers)), rule if rule == "fitted" or args.rerank == 6
+                else "%s (%s)" % (rule, args.rerank or "all"), declared, "; ".join(steps),
                 100.0 * (final / declared - 1.0)))
