@@ -1,6 +1,7 @@
 #include "formats/model/model_io.hpp"
 
 #include <algorithm>
+#include <array>
 #include <charconv>
 #include <cmath>
 #include <cstdio>
@@ -777,7 +778,7 @@ Mapping read_mapping_text(std::string_view text, std::string_view source) {
   Diagnostics diag;
   check_keys(root, "",
              {"columns", "extra", "scale", "constant", "wide", "column_kind", "ids", "restarts",
-              "header_rows", "names_row"},
+              "header_rows", "names_row", "separator", "decimal"},
              diag);
   Mapping m;
   auto table = [&](const char* name) -> const toml::table* {
@@ -957,6 +958,25 @@ Mapping read_mapping_text(std::string_view text, std::string_view source) {
     diag.error(root.get("names_row"), "names_row",
                "beyond header_rows = " + std::to_string(m.header_rows));
   }
+  // The field separator and the decimal mark: one character each, from a short list.
+  auto char_key = [&](const char* name, char fallback, std::string_view allowed,
+                      const char* rule) {
+    const auto* n = root.get(name);
+    if (n == nullptr) return fallback;
+    const auto v = get_string(*n, name, diag);
+    if (!v) return fallback;
+    if (v->size() != 1 || allowed.find((*v)[0]) == std::string_view::npos) {
+      diag.error(n, name, rule);
+      return fallback;
+    }
+    return (*v)[0];
+  };
+  m.separator = char_key("separator", ',', ",;\t", "must be \",\", \";\" or \"\\t\" (a tab)");
+  m.decimal = char_key("decimal", '.', ".,", "must be \".\" or \",\"");
+  if (m.decimal == m.separator) {
+    diag.error(root.get("decimal"), "decimal",
+               "\",\" is the field separator too: set separator = \";\" (or \"\\t\")");
+  }
   // A scale applies to a column read from the file, once: one mapped under [columns] or
   // [extra], or measured_um read from [wide]. A scale of anything else would silently do nothing.
   for (const auto& [k, v] : m.scale) {
@@ -991,9 +1011,10 @@ Mapping read_mapping_file(const std::string& path) {
 
 namespace {
 
-// Splits one CSV line (RFC 4180 quotes, no embedded newlines) into `fields`, reusing their
-// storage from line to line. Returns the field count, or 0 on a bad quote.
-std::size_t split_csv(std::string_view line, std::vector<std::string>& fields) {
+// Splits one CSV line (RFC 4180 quotes, no embedded newlines; fields separated by `sep`) into
+// `fields`, reusing their storage from line to line. Returns the field count, or 0 on a bad
+// quote.
+std::size_t split_csv(std::string_view line, std::vector<std::string>& fields, char sep) {
   std::size_t n = 0;
   std::size_t i = 0;
   while (true) {
@@ -1015,16 +1036,45 @@ std::size_t split_csv(std::string_view line, std::vector<std::string>& fields) {
         }
         f += line[i++];
       }
-      if (i < line.size() && line[i] != ',') return 0;
+      if (i < line.size() && line[i] != sep) return 0;
     } else {
-      const std::size_t e = std::min(line.find(',', i), line.size());
+      const std::size_t e = std::min(line.find(sep, i), line.size());
       f.assign(line.substr(i, e - i));
       i = e;
     }
     if (i >= line.size()) break;
-    ++i;  // the comma
+    ++i;  // the separator
   }
   return n;
+}
+
+// A cell's number, written with `decimal` as its decimal mark and an optional leading '+';
+// nullopt if it is not one finite number. With a decimal comma a '.' is refused: it is a
+// thousands separator there ("1.234,5"), or a file written in another locale.
+std::optional<double> cell_number(std::string_view cell, char decimal) {
+  if (!cell.empty() && cell.front() == '+') cell.remove_prefix(1);
+  std::array<char, 128> buf{};
+  if (decimal != '.') {
+    // A number of more than 128 characters is no measurement.
+    if (cell.size() > buf.size() || cell.find('.') != std::string_view::npos) return std::nullopt;
+    std::replace_copy(cell.begin(), cell.end(), buf.begin(), decimal, '.');
+    cell = std::string_view(buf.data(), cell.size());
+  }
+  double v = 0.0;
+  const auto [p, ec] = std::from_chars(cell.data(), cell.data() + cell.size(), v);
+  if (ec != std::errc() || p != cell.data() + cell.size() || !std::isfinite(v)) {
+    return std::nullopt;
+  }
+  return v;
+}
+
+// The error for a cell that is not a number: with a decimal comma, one with a '.' says why.
+std::string not_a_number(std::string_view cell, char decimal) {
+  std::string msg = "'" + std::string(cell) + "' is not a finite number";
+  if (decimal == ',' && cell.find('.') != std::string_view::npos) {
+    msg += " (the map's decimal mark is ',': no '.', no thousands separators)";
+  }
+  return msg;
 }
 
 struct Target {
@@ -1087,7 +1137,8 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
     if (line_no == names_line) names = line;
   }
   std::vector<std::string> fields;
-  std::size_t nf = split_csv(names, fields);
+  const char sep = mapping.separator;
+  std::size_t nf = split_csv(names, fields, sep);
   if (nf == 0) csv_fail(source, names_line, "", "bad quoting in the header row");
   std::vector<std::string> header;
   for (std::size_t i = 0; i < nf; ++i) header.push_back(trim(fields[i]));
@@ -1261,14 +1312,16 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
     ++line_no;
     if (!line.empty() && line.back() == '\r') line.pop_back();
     if (trim(line).empty()) continue;
-    nf = split_csv(line, fields);
+    nf = split_csv(line, fields, sep);
     if (nf == 0) csv_fail(source, line_no, "", "bad quoting");
     if (nf > header.size()) {
       // Reading on would shift every column after the extra field (e.g. a decimal comma).
       csv_fail(source, line_no, "",
                "the row has " + std::to_string(nf) + " fields, the header " +
                    std::to_string(header.size()) +
-                   " (a decimal comma or an unquoted comma in a field?)");
+                   (sep == ','   ? " (a decimal comma or an unquoted comma in a field?)"
+                    : sep == ';' ? " (an unquoted ';' in a field?)"
+                                 : " (a tab in a field?)"));
     }
     values.fill(cm::kUnknown);
     double measured = cm::kUnknown;
@@ -1314,15 +1367,12 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
           }
           v = *id;
         } else {
-          const char* b = cell.data();
-          const char* e = b + cell.size();
-          if (*b == '+') ++b;
-          auto [p, ec] = std::from_chars(b, e, v);
-          if (ec != std::errc() || p != e || !std::isfinite(v)) {
-            csv_fail(source, line_no, t.name, "'" + std::string(cell) + "' is not a finite number",
+          const auto number = cell_number(cell, mapping.decimal);
+          if (!number) {
+            csv_fail(source, line_no, t.name, not_a_number(cell, mapping.decimal),
                      t.source_field);
           }
-          v *= t.scale;
+          v = *number * t.scale;
         }
       }
       if (t.special == 1) {
@@ -1432,13 +1482,13 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
         const std::string_view cell = trim_view(fields[f]);
         y = cm::kUnknown;
         if (!cell.empty()) {
-          auto [p, ec] = std::from_chars(cell.data(), cell.data() + cell.size(), y);
-          if (ec != std::errc() || p != cell.data() + cell.size() || !std::isfinite(y)) {
+          const auto number = cell_number(cell, mapping.decimal);
+          if (!number) {
             csv_fail(source, line_no, mapping.wide_measured[w],
-                     "'" + std::string(cell) + "' is not a finite number", wide_fields[w]);
+                     not_a_number(cell, mapping.decimal), wide_fields[w]);
           }
           // A measured_um under [columns] got its scale when read (its target's scale).
-          y *= measured_scale;
+          y = *number * measured_scale;
         }
         values[static_cast<std::size_t>(cm::Column::kPoint)] = mapping.wide_points[w];
       }

@@ -78,6 +78,10 @@ struct Mapping {
   /// Rows of the header (`header_rows`) and the one (1-based) holding the column names.
   int header_rows{1};
   int names_row{1};
+  /// The file's field separator (`separator`: ',', ';' or a tab) and decimal mark (`decimal`:
+  /// '.' or ','): a spreadsheet saved in a German or French locale writes `1,5;20,3`.
+  char separator{','};
+  char decimal{'.'};
   bool empty() const { return columns.empty() && extra.empty() && constant.empty(); }
 };
 

@@ -1,7 +1,8 @@
 // Fuzz target: the measurement-log CSV reader (v1 and mapped). Any bytes must either parse or
 // raise formats::DiagnosticsError; nothing may crash or trip a sanitizer. The first byte picks the
 // mode: mapped, wide, text ids, a restarting counter (time or path, on decrease or per file),
-// several header rows, the text read as two files.
+// several header rows, the text read as two files. In mapped mode the input's length picks the
+// separator and decimal mark (size % 4: ",.", ";.", ";,", tab and ",").
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -42,6 +43,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       mapping.header_rows = 2;
       mapping.names_row = 1 + (data[0] >> 7U);
     }
+    constexpr char kSeparators[] = {',', ';', ';', '\t'};
+    constexpr char kDecimals[] = {'.', '.', ',', ','};
+    mapping.separator = kSeparators[size % 4];
+    mapping.decimal = kDecimals[size % 4];
   }
   const int files = (data[0] & 128U) != 0U ? 2 : 1;
   try {

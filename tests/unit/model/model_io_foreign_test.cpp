@@ -169,6 +169,67 @@ TEST(ReadForeign, SeveralHeaderRowsTakeTheNamesFromTheChosenRow) {
   EXPECT_DOUBLE_EQ(d2.target_um[0], 7.0);
 }
 
+// A spreadsheet saved in a German or French locale: fields separated by ';', a decimal comma.
+TEST(ReadForeign, ASemicolonFileWithADecimalCommaIsReadAsWritten) {
+  const io::Mapping m = io::read_mapping_text(
+      "separator = \";\"\ndecimal = \",\"\n" + std::string(kBase) +
+          "time_s = \"Zeit (s)\"\n[extra]\nt1_c = \"Temp; Bett\"\n[scale]\nmeasured_um = 1000.0\n",
+      "map.toml");
+  std::istringstream in(
+      "Zeit (s);vb;\"Temp; Bett\"\r\n0;0,0125;20,5\r\n15;+0,013;-1,25e1\r\n30;;21\r\n");
+  cm::Dataset d;
+  d.extra_columns = {"t1_c"};
+  io::read_log(in, "export.csv", m, d);
+  ASSERT_EQ(d.rows(), 3U);
+  EXPECT_DOUBLE_EQ(d.column(kTime)[1], 15.0);
+  EXPECT_DOUBLE_EQ(d.target_um[0], 12.5);
+  EXPECT_DOUBLE_EQ(d.target_um[1], 13.0);
+  EXPECT_TRUE(std::isnan(d.target_um[2]));
+  EXPECT_DOUBLE_EQ(d.column(cm::kStandardColumns)[0], 20.5);
+  EXPECT_DOUBLE_EQ(d.column(cm::kStandardColumns)[1], -12.5);
+
+  // A '.' in a decimal-comma file is a thousands separator or another locale's number: refused
+  // at its cell, never read as 1.2345 or 12345.
+  EXPECT_EQ(log_error("Zeit (s);vb;\"Temp; Bett\"\n0;1.234,5;20\n", m, d),
+            "log.csv:2:2: vb: '1.234,5' is not a finite number (the map's decimal mark is ',': "
+            "no '.', no thousands separators)");
+  EXPECT_EQ(log_error("Zeit (s);vb;\"Temp; Bett\"\n0;0.5;20\n", m, d).substr(0, 45),
+            "log.csv:2:2: vb: '0.5' is not a finite number");
+  // An unquoted separator in a field would shift the columns after it.
+  EXPECT_EQ(log_error("Zeit (s);vb;\"Temp; Bett\"\n0;1;2;3\n", m, d),
+            "log.csv:2: the row has 4 fields, the header 3 (an unquoted ';' in a field?)");
+
+  // Tab-separated, decimal point; a wide file with a decimal comma.
+  const io::Mapping tab = io::read_mapping_text(
+      "separator = \"\\t\"\n" + std::string(kBase) + "time_s = \"t\"\n", "map.toml");
+  std::istringstream in2("t\tvb\n0\t1.5\n1\t2.5\n");
+  cm::Dataset d2;
+  io::read_log(in2, "tab.tsv", tab, d2);
+  ASSERT_EQ(d2.rows(), 2U);
+  EXPECT_DOUBLE_EQ(d2.target_um[1], 2.5);
+  const io::Mapping wide = io::read_mapping_text(
+      "separator = \";\"\ndecimal = \",\"\n[constant]\nkind = \"tool_wear\"\n[columns]\n"
+      "time_s = \"cut\"\n[wide]\nmeasured_um = [\"f1\", \"f2\"]\npoints = [1, 2]\n",
+      "map.toml");
+  std::istringstream in3("cut;f1;f2\n1;31,5;19,25\n");
+  cm::Dataset d3;
+  io::read_log(in3, "wide.csv", wide, d3);
+  ASSERT_EQ(d3.rows(), 2U);
+  EXPECT_DOUBLE_EQ(d3.target_um[0], 31.5);
+  EXPECT_DOUBLE_EQ(d3.target_um[1], 19.25);
+  EXPECT_EQ(log_error("cut;f1;f2\n1;31.5;19\n", wide, d3).substr(0, 46),
+            "log.csv:2:2: f1: '31.5' is not a finite number");
+
+  // The settings themselves.
+  EXPECT_EQ(map_error("decimal = \",\"\n" + std::string(kBase)),
+            "map.toml:1:11: decimal: \",\" is the field separator too: set separator = \";\" "
+            "(or \"\\t\")");
+  EXPECT_EQ(map_error("separator = \"|\"\n" + std::string(kBase)),
+            "map.toml:1:13: separator: must be \",\", \";\" or \"\\t\" (a tab)");
+  EXPECT_EQ(map_error("decimal = \"·\"\nseparator = \";\"\n" + std::string(kBase)),
+            "map.toml:1:11: decimal: must be \".\" or \",\"");
+}
+
 TEST(ReadForeign, RefusesBadSettingsWithFileLineAndColumn) {
   const std::string b = kBase;
   EXPECT_EQ(map_error(b + "x_mm = \"x\"\n[ids]\nx_mm = \"digits\"\n"),
