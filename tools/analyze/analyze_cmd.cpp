@@ -46,24 +46,6 @@ std::string read_text(const std::string& path) {
   return ss.str();
 }
 
-// A foreign log given as a directory: its *.csv files in name order (day01.csv, day02.csv, ...),
-// each read with the directory's mapping. Files are returned as given.
-std::vector<std::string> csv_files_of(const std::string& log) {
-  namespace fs = std::filesystem;
-  std::error_code ec;
-  if (!fs::is_directory(log, ec)) return {log};
-  std::vector<std::string> files;
-  for (const auto& e : fs::directory_iterator(log, ec)) {
-    if (e.is_regular_file(ec) && e.path().extension() == ".csv") files.push_back(e.path().string());
-  }
-  if (ec) throw CommandError(nccomp::tools::kExitInvalidInput, log + ": " + ec.message());
-  if (files.empty()) {
-    throw CommandError(nccomp::tools::kExitInvalidInput, log + ": no *.csv file in the directory");
-  }
-  std::sort(files.begin(), files.end());
-  return files;
-}
-
 void run(const Options& given) {
   Options opt = given;
   if (opt.maps.empty()) {
@@ -89,7 +71,13 @@ void run(const Options& given) {
     std::vector<std::string> logs;
     std::vector<std::string> maps;
     for (std::size_t i = 0; i < opt.logs.size(); ++i) {
-      for (auto& f : csv_files_of(opt.logs[i])) {
+      std::vector<std::string> files;
+      try {
+        files = nccomp::tools::analyze::foreign_log_files(opt.logs[i]);
+      } catch (const std::invalid_argument& e) {
+        throw CommandError(nccomp::tools::kExitInvalidInput, e.what());
+      }
+      for (auto& f : files) {
         logs.push_back(std::move(f));
         maps.push_back(opt.maps[opt.maps.size() == 1 ? 0 : i]);
       }

@@ -20,6 +20,7 @@
 #include "core/model/ridge.hpp"
 #include "formats/model/model_io.hpp"
 #include "formats/toml/diagnostics.hpp"
+#include "tools/analyze/fleet.hpp"
 #include "tools/nccomp/command.hpp"
 
 namespace {
@@ -161,11 +162,29 @@ void run(const Options& opt) {
     if (cm::column_index(src.column, {}) < 0) data.extra_columns.push_back(src.column);
   }
   try {
+    // The logs as `nccomp analyze` takes them: a directory of nccompd's logs stands for its
+    // logs with their rotated files, oldest first (one machine's); with --map, a directory
+    // stands for its *.csv files in name order.
+    std::vector<std::string> files;
     io::Mapping mapping;
-    if (!opt.map.empty()) mapping = io::read_mapping_file(opt.map);
-    for (const auto& log : opt.logs) {
-      io::read_log_file(log, mapping, data);
+    if (opt.map.empty()) {
+      const auto machines = nccomp::tools::analyze::group_logs(opt.logs);
+      if (machines.size() > 1) {
+        std::string names;
+        for (const auto& m : machines) names += (names.empty() ? "" : ", ") + m.machine;
+        throw CommandError(kExitInvalidInput, "the logs are of " +
+                                                  std::to_string(machines.size()) +
+                                                  " machines (" + names +
+                                                  "): fit-sum fits one machine's log");
+      }
+      files = machines.empty() ? opt.logs : machines[0].files;
+    } else {
+      mapping = io::read_mapping_file(opt.map);
+      for (const auto& log : opt.logs) {
+        for (auto& f : nccomp::tools::analyze::foreign_log_files(log)) files.push_back(std::move(f));
+      }
     }
+    for (const auto& f : files) io::read_log_file(f, mapping, data);
   } catch (const nccomp::formats::DiagnosticsError& e) {
     throw CommandError(kExitInvalidInput, e.what());
   } catch (const std::invalid_argument& e) {
@@ -301,7 +320,8 @@ void setup(CLI::App& app) {
       "fit-sum",
       "Fit a log's measured deviation as one shrunk linear model of many columns and lags of "
       "them; print the [[input_lags]] and [[input_sums]] that make nccompd compute it as a sensor");
-  sub->add_option("--log", opt->logs, "measurement log CSV (repeat for several, oldest first)")
+  sub->add_option("--log", opt->logs,
+                  "measurement log CSV, or a directory of them (repeat for several, oldest first)")
       ->required();
   sub->add_option("--map", opt->map, "column mapping TOML for a foreign CSV");
   sub->add_option("--input", opt->inputs,

@@ -30,6 +30,11 @@ std::string log_machine(const std::string& path, std::size_t* line = nullptr);
 /// "type".
 std::vector<MachineLogs> group_logs(const std::vector<std::string>& logs);
 
+/// A foreign log's `--log` argument (read with a --map): a directory stands for its *.csv files
+/// in name order (day01.csv, day02.csv, ...); a file is returned as given. Throws
+/// std::invalid_argument for a directory without *.csv files or one that cannot be read.
+std::vector<std::string> foreign_log_files(const std::string& log);
+
 /// The fleet run: reads each machine's logs, analyze_fleet(), writes DIR/summary.json,
 /// DIR/report.md, DIR/model-<machine>.toml, DIR/model-type.toml and each machine's own search
 /// under DIR/machines/<machine>/. Throws tools::CommandError.

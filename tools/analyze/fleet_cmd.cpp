@@ -93,6 +93,19 @@ std::string log_machine(const std::string& path, std::size_t* line) {
   return "";
 }
 
+std::vector<std::string> foreign_log_files(const std::string& log) {
+  std::error_code ec;
+  if (!fs::is_directory(log, ec)) return {log};
+  std::vector<std::string> files;
+  for (const auto& e : fs::directory_iterator(log, ec)) {
+    if (e.is_regular_file(ec) && e.path().extension() == ".csv") files.push_back(e.path().string());
+  }
+  if (ec) throw std::invalid_argument(log + ": cannot read the directory: " + ec.message());
+  if (files.empty()) throw std::invalid_argument(log + ": no *.csv file in the directory");
+  std::sort(files.begin(), files.end());
+  return files;
+}
+
 std::vector<MachineLogs> group_logs(const std::vector<std::string>& logs) {
   std::vector<std::string> files;
   for (const std::string& l : logs) {

@@ -103,6 +103,49 @@ class FitSum(Case):
         self.assertIn("on 333 rows", out)
 
 
+class Directories(Case):
+    """--log DIR as `nccomp analyze` takes it."""
+
+    def sum_of(self, log, *extra):
+        p = subprocess.run([NCCOMP, "fit-sum", "--log", log, *extra, "--input", "a=1",
+                            "--input", "b=2", "--sensor", "50"],
+                           capture_output=True, text=True, timeout=120)
+        self.assertEqual(p.returncode, 0, p.stderr)
+        return p.stdout
+
+    def test_a_directory_of_foreign_logs_is_its_csv_files_in_name_order(self):
+        whole = self.sum_of(self.log, "--map", self.map)
+        d = os.path.join(self.dir.name, "days")
+        os.mkdir(d)
+        with open(self.log) as f:
+            lines = f.readlines()
+        for name, part in (("day1.csv", lines[1:1201]), ("day2.csv", lines[1201:])):
+            with open(os.path.join(d, name), "w") as f:
+                f.write(lines[0] + "".join(part))
+        with open(os.path.join(d, "notes.txt"), "w") as f:
+            f.write("not a log\n")
+        self.assertEqual(self.sum_of(d, "--map", self.map), whole)
+
+    def test_a_directory_of_nccompd_logs_is_its_logs_with_their_rotated_files_oldest_first(self):
+        # nccompd's log (v1 columns): rotated into measurements.csv.1, then the current file.
+        header = ("time_s,part,tool,kind,point,x_mm,y_mm,z_mm,angle_deg,path_mm,temp_c,"
+                  "measured_um,applied_um,a,b\n")
+        rows = ["%.6f,,,calib,0,,,,,,,%.6f,0,%.6f,%.6f\n" % (t, y, a, b)
+                for t, y, a, b in zip(self.t, self.y, self.a, self.b)]
+        single = os.path.join(self.dir.name, "single.csv")
+        with open(single, "w") as f:
+            f.write(header + "".join(rows))
+        d = os.path.join(self.dir.name, "log")
+        os.mkdir(d)
+        with open(os.path.join(d, "measurements.csv.1"), "w") as f:
+            f.write(header + "".join(rows[:1500]))
+        with open(os.path.join(d, "measurements.csv"), "w") as f:
+            f.write(header + "".join(rows[1500:]))
+        whole = self.sum_of(single)
+        self.assertIn("on 2400 rows", whole)
+        self.assertEqual(self.sum_of(d).replace(d, single), whole)
+
+
 class BadInput(Case):
     def check(self, code_expected, text, *args):
         code, out, err = self.run_fit(*args)
@@ -126,6 +169,24 @@ class BadInput(Case):
         self.check(2, "34 inputs and lags: an [[input_sums]] takes at most 32", "--input", "a=1",
                    "--source", "speed=9", *many, "--sensor", "50")
         self.check(3, "at least 8 needed", "--input", "a=1", "--sensor", "50", "--before", "60")
+
+    def test_logs_of_two_machines_are_refused_naming_them(self):
+        d = os.path.join(self.dir.name, "fleet")
+        os.mkdir(d)
+        for m in ("m1", "m2"):
+            with open(os.path.join(d, m + ".csv"), "w") as f:
+                f.write("machine,utc,session,time_s,measured_um\n%s,2026-11-29T00:00:00Z,0,0,1\n" % m)
+        p = subprocess.run([NCCOMP, "fit-sum", "--log", d, "--input", "a=1", "--sensor", "50"],
+                           capture_output=True, text=True, timeout=120)
+        self.assertEqual(p.returncode, 3, p.stdout + p.stderr)
+        self.assertIn("the logs are of 2 machines (m1, m2): fit-sum fits one machine's log",
+                      p.stderr)
+
+    def test_a_directory_without_logs_is_named(self):
+        empty = os.path.join(self.dir.name, "empty")
+        os.mkdir(empty)
+        self.check(3, empty + ": no *.csv file in the directory", "--input", "a=1",
+                   "--sensor", "50", "--log", empty)
 
 
 if __name__ == "__main__":
