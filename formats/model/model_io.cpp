@@ -959,8 +959,7 @@ Mapping read_mapping_text(std::string_view text, std::string_view source) {
                "beyond header_rows = " + std::to_string(m.header_rows));
   }
   // The field separator and the decimal mark: one character each, from a short list.
-  auto char_key = [&](const char* name, char fallback, std::string_view allowed,
-                      const char* rule) {
+  auto char_key = [&](const char* name, char fallback, std::string_view allowed, const char* rule) {
     const auto* n = root.get(name);
     if (n == nullptr) return fallback;
     const auto v = get_string(*n, name, diag);
@@ -1068,6 +1067,22 @@ std::optional<double> cell_number(std::string_view cell, char decimal) {
   return v;
 }
 
+// A hint for a header that was split at the wrong character: a header of one field holding
+// another separator (a semicolon or tab export read with the default ',').
+std::string separator_hint(const std::vector<std::string>& header, char sep) {
+  if (header.size() != 1) return "";
+  for (const char other : {';', '\t', ','}) {
+    if (other != sep && header[0].find(other) != std::string::npos) {
+      return other == ';'
+                 ? " (the header is one field holding ';': set separator = \";\" in the map)"
+             : other == '\t'
+                 ? " (the header is one field holding tabs: set separator = \"\\t\" in the map)"
+                 : " (the header is one field holding ',': is separator right?)";
+    }
+  }
+  return "";
+}
+
 // The error for a cell that is not a number: with a decimal comma, one with a '.' says why.
 std::string not_a_number(std::string_view cell, char decimal) {
   std::string msg = "'" + std::string(cell) + "' is not a finite number";
@@ -1162,7 +1177,9 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
     const int f = find(header_name);
     if (f < 0) {
       csv_fail(source, names_line, header_name,
-               mapped ? "not in the header (mapped to '" + name + "')" : "required column missing");
+               (mapped ? "not in the header (mapped to '" + name + "')"
+                       : std::string("required column missing")) +
+                   separator_hint(header, sep));
     }
     const Mapping::TextIds* ids = nullptr;
     for (const auto& i : mapping.ids) {
@@ -1233,7 +1250,10 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
   std::vector<int> wide_fields;
   for (const auto& h : mapping.wide_measured) {
     const int f = find(h);
-    if (f < 0) csv_fail(source, names_line, h, "not in the header (mapping [wide])");
+    if (f < 0) {
+      csv_fail(source, names_line, h,
+               "not in the header (mapping [wide])" + separator_hint(header, sep));
+    }
     wide_fields.push_back(f);
   }
   const double measured_scale = scale_of("measured_um");
@@ -1369,8 +1389,7 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
         } else {
           const auto number = cell_number(cell, mapping.decimal);
           if (!number) {
-            csv_fail(source, line_no, t.name, not_a_number(cell, mapping.decimal),
-                     t.source_field);
+            csv_fail(source, line_no, t.name, not_a_number(cell, mapping.decimal), t.source_field);
           }
           v = *number * t.scale;
         }
@@ -1484,8 +1503,8 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
         if (!cell.empty()) {
           const auto number = cell_number(cell, mapping.decimal);
           if (!number) {
-            csv_fail(source, line_no, mapping.wide_measured[w],
-                     not_a_number(cell, mapping.decimal), wide_fields[w]);
+            csv_fail(source, line_no, mapping.wide_measured[w], not_a_number(cell, mapping.decimal),
+                     wide_fields[w]);
           }
           // A measured_um under [columns] got its scale when read (its target's scale).
           y = *number * measured_scale;

@@ -220,6 +220,15 @@ TEST(ReadForeign, ASemicolonFileWithADecimalCommaIsReadAsWritten) {
   EXPECT_EQ(log_error("cut;f1;f2\n1;31.5;19\n", wide, d3).substr(0, 46),
             "log.csv:2:2: f1: '31.5' is not a finite number");
 
+  // The same file read without the settings: its header is one field, and the error says so.
+  const io::Mapping plain = io::read_mapping_text(std::string(kBase), "map.toml");
+  EXPECT_EQ(log_error("Zeit (s);vb\n0;1,5\n", plain),
+            "log.csv:1: vb: not in the header (mapped to 'measured_um') (the header is one field "
+            "holding ';': set separator = \";\" in the map)");
+  EXPECT_EQ(log_error("t\tvb\n0\t1.5\n", plain),
+            "log.csv:1: vb: not in the header (mapped to 'measured_um') (the header is one field "
+            "holding tabs: set separator = \"\\t\" in the map)");
+
   // The settings themselves.
   EXPECT_EQ(map_error("decimal = \",\"\n" + std::string(kBase)),
             "map.toml:1:11: decimal: \",\" is the field separator too: set separator = \";\" "
