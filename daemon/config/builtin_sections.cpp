@@ -29,6 +29,31 @@ const toml::table* as_table(const toml::node& node, std::string_view name, Diagn
   return t;
 }
 
+// The tables of an array of tables `[[name]]`, each with its key path ("name[i]"); none, and an
+// error, when the node is not one or has more than `max` entries.
+struct TableEntry {
+  const toml::table* table;
+  std::string path;
+};
+std::vector<TableEntry> array_of_tables(const toml::node& node, const std::string& name,
+                                        Diagnostics& diag,
+                                        std::size_t max = std::numeric_limits<std::size_t>::max()) {
+  const auto* arr = node.as_array();
+  if (arr == nullptr || !arr->is_array_of_tables()) {
+    diag.error(&node, name, "must be an array of tables ([[" + name + "]])");
+    return {};
+  }
+  if (arr->size() > max) {
+    diag.error(&node, name, "at most " + std::to_string(max) + " entries");
+    return {};
+  }
+  std::vector<TableEntry> out;
+  for (std::size_t i = 0; i < arr->size(); ++i) {
+    out.push_back({arr->get(i)->as_table(), name + "[" + std::to_string(i) + "]"});
+  }
+  return out;
+}
+
 // What useradd / systemd-sysusers accept as a group name.
 bool valid_group_name(const std::string& n) {
   const auto alpha = [](char c) { return (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z'); };
@@ -242,15 +267,10 @@ class RegistersParser final : public SectionParser {
   std::unique_ptr<Section> absent() const override { return std::make_unique<RegistersSection>(); }
   std::unique_ptr<Section> parse(const toml::node& node, Diagnostics& diag) const override {
     auto s = std::make_unique<RegistersSection>();
-    const auto* arr = node.as_array();
-    if (arr == nullptr || !arr->is_array_of_tables()) {
-      diag.error(&node, "registers", "must be an array of tables ([[registers]])");
-      return s;
-    }
     std::set<std::string> names;
-    for (std::size_t i = 0; i < arr->size(); ++i) {
-      const auto& t = *arr->get(i)->as_table();
-      const std::string path = "registers[" + std::to_string(i) + "]";
+    for (const auto& entry : array_of_tables(node, "registers", diag)) {
+      const auto& t = *entry.table;
+      const std::string& path = entry.path;
       TableReader r(t, path, diag);
       RegisterEntry e;
       e.where = where_of(&t, path);
@@ -306,15 +326,10 @@ class RampParser final : public SectionParser {
   std::string_view name() const noexcept override { return "ramp"; }
   std::unique_ptr<Section> parse(const toml::node& node, Diagnostics& diag) const override {
     auto s = std::make_unique<RampSection>();
-    const auto* arr = node.as_array();
-    if (arr == nullptr || !arr->is_array_of_tables()) {
-      diag.error(&node, "ramp", "must be an array of tables ([[ramp]])");
-      return s;
-    }
     std::set<std::string> names;
-    for (std::size_t i = 0; i < arr->size(); ++i) {
-      const auto& t = *arr->get(i)->as_table();
-      const std::string path = "ramp[" + std::to_string(i) + "]";
+    for (const auto& entry : array_of_tables(node, "ramp", diag)) {
+      const auto& t = *entry.table;
+      const std::string& path = entry.path;
       TableReader r(t, path, diag);
       RampEntry e;
       e.where = where_of(&t, path);
@@ -359,25 +374,21 @@ class RampParser final : public SectionParser {
   }
 };
 
-// Reports each lag's current value (the last sample on its output sensor) and its input's (the
-// last sample of the lagged sensor) on the status socket: the lags first (sensor_N_lag), then
-// their inputs (sensor_N_input, N the lag's sensor), so that with more lags than the status
-// holds the inputs of the last ones are left out, never a lag.
-class InputLagsModule final : public core::engine::Module {
+// Reports the last sample of each of its sensors on the status socket under its key, in order,
+// once the sensor has one. For the lags: each lag's value (sensor_N_lag), then their inputs'
+// (sensor_N_input, N the lag's sensor), so that with more lags than the status holds the inputs
+// of the last ones are left out, never a lag. For the sums: each sum's value (sensor_N_sum).
+class SensorSamplesModule final : public core::engine::Module {
  public:
-  explicit InputLagsModule(const std::vector<InputLagEntry>& lags) {
-    for (const auto& e : lags) {
-      keys_.push_back("sensor_" + std::to_string(e.spec.output_sensor) + "_lag");
-      sensors_.push_back(e.spec.output_sensor);
+  SensorSamplesModule(std::string name, std::vector<std::pair<std::string, std::uint8_t>> keyed)
+      : name_(std::move(name)) {
+    for (auto& [key, sensor] : keyed) {
+      keys_.push_back(std::move(key));
+      sensors_.push_back(sensor);
     }
-    for (const auto& e : lags) {
-      input_keys_.push_back("sensor_" + std::to_string(e.spec.output_sensor) + "_input");
-      input_sensors_.push_back(e.spec.input_sensor);
-    }
-    values_.assign(lags.size(), std::numeric_limits<double>::quiet_NaN());
-    inputs_.assign(lags.size(), std::numeric_limits<double>::quiet_NaN());
+    values_.assign(sensors_.size(), std::numeric_limits<double>::quiet_NaN());
   }
-  std::string_view name() const noexcept override { return "input_lags"; }
+  std::string_view name() const noexcept override { return name_; }
   void attach(const core::engine::RegisterTable& /*registers*/) override {}
   /// Real-time safe.
   void step(core::TimeNs /*now_ns*/, std::span<const core::Event> events,
@@ -387,7 +398,6 @@ class InputLagsModule final : public core::engine::Module {
       if (t == nullptr) continue;
       for (std::size_t i = 0; i < sensors_.size(); ++i) {
         if (sensors_[i] == t->sensor) values_[i] = t->temperature_c;
-        if (input_sensors_[i] == t->sensor) inputs_[i] = t->temperature_c;
       }
     }
   }
@@ -397,19 +407,14 @@ class InputLagsModule final : public core::engine::Module {
     for (std::size_t i = 0; i < keys_.size() && n < out.size(); ++i) {
       if (std::isfinite(values_[i])) out[n++] = {keys_[i].c_str(), values_[i], nullptr};
     }
-    for (std::size_t i = 0; i < input_keys_.size() && n < out.size(); ++i) {
-      if (std::isfinite(inputs_[i])) out[n++] = {input_keys_[i].c_str(), inputs_[i], nullptr};
-    }
     return n;
   }
 
  private:
+  std::string name_;
   std::vector<std::string> keys_;
   std::vector<std::uint8_t> sensors_;
   std::vector<double> values_;
-  std::vector<std::string> input_keys_;
-  std::vector<std::uint8_t> input_sensors_;
-  std::vector<double> inputs_;
 };
 
 class InputLagsParser final : public SectionParser {
@@ -417,19 +422,10 @@ class InputLagsParser final : public SectionParser {
   std::string_view name() const noexcept override { return "input_lags"; }
   std::unique_ptr<Section> parse(const toml::node& node, Diagnostics& diag) const override {
     auto s = std::make_unique<InputLagsSection>();
-    const auto* arr = node.as_array();
-    if (arr == nullptr || !arr->is_array_of_tables()) {
-      diag.error(&node, "input_lags", "must be an array of tables ([[input_lags]])");
-      return s;
-    }
-    if (arr->size() > core::engine::kMaxInputLags) {
-      diag.error(&node, "input_lags",
-                 "at most " + std::to_string(core::engine::kMaxInputLags) + " entries");
-      return s;
-    }
-    for (std::size_t i = 0; i < arr->size(); ++i) {
-      const auto& t = *arr->get(i)->as_table();
-      const std::string path = "input_lags[" + std::to_string(i) + "]";
+    for (const auto& entry :
+         array_of_tables(node, "input_lags", diag, core::engine::kMaxInputLags)) {
+      const auto& t = *entry.table;
+      const std::string& path = entry.path;
       TableReader r(t, path, diag);
       InputLagEntry e;
       e.where = where_of(&t, path);
@@ -460,48 +456,18 @@ class InputLagsParser final : public SectionParser {
   void add_modules(const Config& config,
                    std::vector<std::unique_ptr<core::engine::Module>>& modules) const override {
     if (const auto* s = config.find<InputLagsSection>("input_lags")) {
-      modules.push_back(std::make_unique<InputLagsModule>(s->lags));
-    }
-  }
-};
-
-// Reports each sum's current value (the last sample on its output sensor) on the status socket
-// as sensor_N_sum, N the sum's sensor, once it has one.
-class InputSumsModule final : public core::engine::Module {
- public:
-  explicit InputSumsModule(const std::vector<InputSumEntry>& sums) {
-    for (const auto& e : sums) {
-      keys_.push_back("sensor_" + std::to_string(e.spec.output_sensor) + "_sum");
-      sensors_.push_back(e.spec.output_sensor);
-    }
-    values_.assign(sums.size(), std::numeric_limits<double>::quiet_NaN());
-  }
-  std::string_view name() const noexcept override { return "input_sums"; }
-  void attach(const core::engine::RegisterTable& /*registers*/) override {}
-  /// Real-time safe.
-  void step(core::TimeNs /*now_ns*/, std::span<const core::Event> events,
-            core::StepOutput& /*out*/) noexcept override {
-    for (const auto& e : events) {
-      const auto* t = std::get_if<core::TemperatureSample>(&e);
-      if (t == nullptr) continue;
-      for (std::size_t i = 0; i < sensors_.size(); ++i) {
-        if (sensors_[i] == t->sensor) values_[i] = t->temperature_c;
+      std::vector<std::pair<std::string, std::uint8_t>> keyed;
+      for (const auto& e : s->lags) {
+        keyed.emplace_back("sensor_" + std::to_string(e.spec.output_sensor) + "_lag",
+                           e.spec.output_sensor);
       }
+      for (const auto& e : s->lags) {
+        keyed.emplace_back("sensor_" + std::to_string(e.spec.output_sensor) + "_input",
+                           e.spec.input_sensor);
+      }
+      modules.push_back(std::make_unique<SensorSamplesModule>("input_lags", std::move(keyed)));
     }
   }
-  /// Real-time safe.
-  std::size_t status(std::span<core::engine::StatusValue> out) const noexcept override {
-    std::size_t n = 0;
-    for (std::size_t i = 0; i < keys_.size() && n < out.size(); ++i) {
-      if (std::isfinite(values_[i])) out[n++] = {keys_[i].c_str(), values_[i], nullptr};
-    }
-    return n;
-  }
-
- private:
-  std::vector<std::string> keys_;
-  std::vector<std::uint8_t> sensors_;
-  std::vector<double> values_;
 };
 
 class InputSumsParser final : public SectionParser {
@@ -509,19 +475,10 @@ class InputSumsParser final : public SectionParser {
   std::string_view name() const noexcept override { return "input_sums"; }
   std::unique_ptr<Section> parse(const toml::node& node, Diagnostics& diag) const override {
     auto s = std::make_unique<InputSumsSection>();
-    const auto* arr = node.as_array();
-    if (arr == nullptr || !arr->is_array_of_tables()) {
-      diag.error(&node, "input_sums", "must be an array of tables ([[input_sums]])");
-      return s;
-    }
-    if (arr->size() > core::engine::kMaxInputSums) {
-      diag.error(&node, "input_sums",
-                 "at most " + std::to_string(core::engine::kMaxInputSums) + " entries");
-      return s;
-    }
-    for (std::size_t i = 0; i < arr->size(); ++i) {
-      const auto& t = *arr->get(i)->as_table();
-      const std::string path = "input_sums[" + std::to_string(i) + "]";
+    for (const auto& entry :
+         array_of_tables(node, "input_sums", diag, core::engine::kMaxInputSums)) {
+      const auto& t = *entry.table;
+      const std::string& path = entry.path;
       TableReader r(t, path, diag);
       InputSumEntry e;
       e.where = where_of(&t, path);
@@ -605,7 +562,12 @@ class InputSumsParser final : public SectionParser {
   void add_modules(const Config& config,
                    std::vector<std::unique_ptr<core::engine::Module>>& modules) const override {
     if (const auto* s = config.find<InputSumsSection>("input_sums")) {
-      modules.push_back(std::make_unique<InputSumsModule>(s->sums));
+      std::vector<std::pair<std::string, std::uint8_t>> keyed;
+      for (const auto& e : s->sums) {
+        keyed.emplace_back("sensor_" + std::to_string(e.spec.output_sensor) + "_sum",
+                           e.spec.output_sensor);
+      }
+      modules.push_back(std::make_unique<SensorSamplesModule>("input_sums", std::move(keyed)));
     }
   }
 };

@@ -11,6 +11,7 @@
 #include <fstream>
 #include <string>
 
+#include "core/engine/input_lag.hpp"
 #include "daemon/config/builtin_sections.hpp"
 #include "daemon/sections/creep/creep_section.hpp"
 
@@ -645,6 +646,31 @@ tau_s = 60
   EXPECT_NE(items[4].message.find("a lag of a lag"), std::string::npos);
   EXPECT_EQ(items[5].where.key_path, "input_lags[3].sensor");
   EXPECT_NE(r.diagnostics.to_string().find("a.toml:28:10: input_lags[3].sensor"), std::string::npos)
+      << r.diagnostics.to_string();
+}
+
+// Every [[section]] of the daemon's config is an array of tables: a plain table, or more
+// entries than the engine computes, is refused naming the section and its line.
+TEST(ConfigLoader, ArraysOfTablesRefuseAPlainTableAndTooManyEntries) {
+  TempDir d;
+  for (const std::string section : {"registers", "ramp", "input_lags", "input_sums"}) {
+    const auto f = d.write(section + ".toml", "[" + section + "]\nsensor = 40\n");
+    const auto r = load_file(f);
+    EXPECT_NE(r.diagnostics.to_string().find(section + ".toml:1:1: " + section +
+                                             ": must be an array of tables ([[" + section + "]])"),
+              std::string::npos)
+        << r.diagnostics.to_string();
+  }
+  std::string lags = kRegisters;
+  for (std::size_t i = 0; i <= nccomp::core::engine::kMaxInputLags; ++i) {
+    lags +=
+        "[[input_lags]]\nsensor = " + std::to_string(100 + i) + "\ninput_sensor = 5\ntau_s = 60\n";
+  }
+  const auto r = load_file(d.write("lags.toml", lags));
+  EXPECT_NE(r.diagnostics.to_string().find("input_lags: at most " +
+                                           std::to_string(nccomp::core::engine::kMaxInputLags) +
+                                           " entries"),
+            std::string::npos)
       << r.diagnostics.to_string();
 }
 
