@@ -168,8 +168,8 @@ TEST(NccompAnalyzed, EnoughNewRowsPutTheAnalysedModelInShadowWithTheFiguresOfNcc
   EXPECT_NE(slurp(model_status).find((run / "model.toml").string()), std::string::npos)
       << slurp(model_status);
 
-  // The same rows analysed directly, from the daemon's own files, oldest first (`--log DIR`
-  // takes *.csv only, not the rotated measurements.csv.N).
+  // The same rows analysed directly, from the daemon's own files given one by one, oldest
+  // first (the order in which `--log DIR` reads a log and its rotated measurements.csv.N).
   std::vector<std::string> args{"analyze"};
   for (int n = 8; n >= 0; --n) {
     const fs::path f =
