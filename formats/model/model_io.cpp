@@ -1067,6 +1067,16 @@ std::optional<double> cell_number(std::string_view cell, char decimal) {
   return v;
 }
 
+// The largest |time_s| read (see read_log).
+constexpr double kMaxTimeS = 1e12;
+
+// A number as %.9g.
+std::string number_text(double v) {
+  std::array<char, 32> buf{};
+  std::snprintf(buf.data(), buf.size(), "%.9g", v);
+  return buf.data();
+}
+
 // A hint for a header that was split at the wrong character: a header of one field holding
 // another separator (a semicolon or tab export read with the default ',').
 std::string separator_hint(const std::vector<std::string>& header, char sep) {
@@ -1440,6 +1450,16 @@ void read_log(std::istream& in, std::string_view source, const Mapping& mapping,
       if (!time_restarts) v += counter_offset;
     }
     const double t_s = values[time_col];
+    // Beyond ±1e12 s (31 700 years) a time is a date or a counter read as seconds, and the
+    // order over files and runs (time + an offset) would lose its last digits: 1e12 keeps it to
+    // a millisecond.
+    if (std::isfinite(t_s) && std::fabs(t_s) > kMaxTimeS) {
+      csv_fail(source, line_no, "time_s",
+               number_text(t_s) +
+                   " s is beyond ±1e12 s: map seconds (a date or a counter in ms or µs needs a "
+                   "[scale])",
+               field_of(time_col));
+    }
     if (session_field >= 0) {
       const auto sf = static_cast<std::size_t>(session_field);
       const auto mf = static_cast<std::size_t>(machine_field);
