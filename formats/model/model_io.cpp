@@ -1051,7 +1051,10 @@ std::size_t split_csv(std::string_view line, std::vector<std::string>& fields, c
 // nullopt if it is not one finite number. With a decimal comma a '.' is refused: it is a
 // thousands separator there ("1.234,5"), or a file written in another locale.
 std::optional<double> cell_number(std::string_view cell, char decimal) {
-  if (!cell.empty() && cell.front() == '+') cell.remove_prefix(1);
+  if (!cell.empty() && cell.front() == '+') {
+    cell.remove_prefix(1);
+    if (!cell.empty() && (cell.front() == '-' || cell.front() == '+')) return std::nullopt;
+  }
   std::array<char, 128> buf{};
   if (decimal != '.') {
     // A number of more than 128 characters is no measurement.

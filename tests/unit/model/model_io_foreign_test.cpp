@@ -193,6 +193,8 @@ TEST(ReadForeign, ASemicolonFileWithADecimalCommaIsReadAsWritten) {
   EXPECT_EQ(log_error("Zeit (s);vb;\"Temp; Bett\"\n0;1.234,5;20\n", m, d),
             "log.csv:2:2: vb: '1.234,5' is not a finite number (the map's decimal mark is ',': "
             "no '.', no thousands separators)");
+  EXPECT_EQ(log_error("Zeit (s);vb;\"Temp; Bett\"\n0;+-1,5;20\n", m, d),
+            "log.csv:2:2: vb: '+-1,5' is not a finite number");
   EXPECT_EQ(log_error("Zeit (s);vb;\"Temp; Bett\"\n0;0.5;20\n", m, d).substr(0, 45),
             "log.csv:2:2: vb: '0.5' is not a finite number");
   // An unquoted separator in a field would shift the columns after it.
