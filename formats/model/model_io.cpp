@@ -1104,6 +1104,8 @@ std::string not_a_number(std::string_view cell, char decimal) {
   msg += "' is not a finite number";
   if (decimal == ',' && cell.find('.') != std::string_view::npos) {
     msg += " (the map's decimal mark is ',': no '.', no thousands separators)";
+  } else if (decimal == '.' && cell.find(',') != std::string_view::npos) {
+    msg += " (a decimal comma? set decimal = \",\" in the map)";
   }
   return msg;
 }

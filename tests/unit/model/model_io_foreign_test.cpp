@@ -231,6 +231,12 @@ TEST(ReadForeign, ASemicolonFileWithADecimalCommaIsReadAsWritten) {
             "log.csv:1: vb: not in the header (mapped to 'measured_um') (the header is one field "
             "holding tabs: set separator = \"\\t\" in the map)");
 
+  // A decimal comma in a quoted cell of a comma-separated file.
+  EXPECT_EQ(
+      log_error("t,vb\n0,\"1,5\"\n", plain),
+      "log.csv:2:2: vb: '1,5' is not a finite number (a decimal comma? set decimal = \",\" in "
+      "the map)");
+
   // The settings themselves.
   EXPECT_EQ(map_error("decimal = \",\"\n" + std::string(kBase)),
             "map.toml:1:11: decimal: \",\" is the field separator too: set separator = \";\" "
